@@ -1,0 +1,63 @@
+//! Writing artifacts (an IO edge): every file goes to a temporary name and is renamed into place,
+//! only when its bytes changed; `manifest.json` lists each artifact with its hash and the
+//! revision that produced it.
+
+use std::collections::BTreeMap;
+use std::io::Write;
+use std::path::{Path, PathBuf};
+
+use serde::{Deserialize, Serialize};
+
+/// Writes `bytes` to `path` atomically unless the file already holds exactly these bytes.
+/// Returns whether the file changed.
+pub fn write_if_changed(path: &Path, bytes: &[u8]) -> std::io::Result<bool> {
+    if let Ok(existing) = std::fs::read(path) {
+        if existing == bytes {
+            return Ok(false);
+        }
+    }
+    let folder = path.parent().unwrap_or(Path::new("."));
+    std::fs::create_dir_all(folder)?;
+    let mut temporary = tempfile::Builder::new()
+        .prefix(".cirrus-tmp-")
+        .tempfile_in(folder)?;
+    temporary.write_all(bytes)?;
+    temporary.as_file().sync_data()?;
+    temporary.persist(path).map_err(|error| error.error)?;
+    Ok(true)
+}
+
+/// One artifact in the manifest.
+#[derive(Clone, Debug, PartialEq, Eq, Serialize, Deserialize)]
+pub struct ManifestEntry {
+    pub asset: String,
+    /// blake3 hex digest of the file.
+    pub hash: String,
+    /// The revision that last changed the file's bytes.
+    pub revision: u64,
+}
+
+/// `<output>/manifest.json`: paths are relative to the project folder, with `/` separators.
+#[derive(Clone, Debug, Default, PartialEq, Eq, Serialize, Deserialize)]
+pub struct Manifest {
+    pub revision: u64,
+    pub artifacts: BTreeMap<String, ManifestEntry>,
+}
+
+pub fn manifest_path(output_dir: &Path) -> PathBuf {
+    output_dir.join("manifest.json")
+}
+
+/// The manifest of the last build, or an empty one.
+pub fn load_manifest(output_dir: &Path) -> Manifest {
+    std::fs::read(manifest_path(output_dir))
+        .ok()
+        .and_then(|bytes| serde_json::from_slice(&bytes).ok())
+        .unwrap_or_default()
+}
+
+pub fn save_manifest(output_dir: &Path, manifest: &Manifest) -> std::io::Result<bool> {
+    let mut bytes = serde_json::to_vec_pretty(manifest).expect("manifest serialises");
+    bytes.push(b'\n');
+    write_if_changed(&manifest_path(output_dir), &bytes)
+}

@@ -1,0 +1,180 @@
+//! The command line: `cirrus build` and `cirrus check`, their options, output and exit codes
+//! (0: every asset baked, 1: some asset failed, 2: usage or configuration error).
+
+use std::io::IsTerminal;
+use std::path::PathBuf;
+use std::process::ExitCode;
+
+use clap::{Parser, Subcommand, ValueEnum};
+
+use crate::bake::{BuildOptions, Progress, Project, ProjectOptions};
+use crate::config::load_pipeline;
+
+#[derive(Debug, Parser)]
+#[command(
+    name = "cirrus",
+    version,
+    about = "Incremental asset pipeline: billboard-cloud LODs and baked, block-compressed materials"
+)]
+pub struct Cli {
+    /// More log output (-v: info, -vv: debug, -vvv: trace). RUST_LOG overrides it.
+    #[arg(short, long, action = clap::ArgAction::Count, global = true)]
+    pub verbose: u8,
+    #[command(subcommand)]
+    pub command: Command,
+}
+
+#[derive(Debug, Subcommand)]
+pub enum Command {
+    /// Bake every asset (or those named) once; unchanged inputs do no work.
+    Build {
+        /// The pipeline file.
+        #[arg(long, default_value = "pipeline.ron")]
+        pipeline: PathBuf,
+        /// Bake only this asset (repeatable).
+        #[arg(long = "asset", value_name = "NAME")]
+        assets: Vec<String>,
+        /// How to print the result on stdout.
+        #[arg(long, value_enum, default_value_t = SummaryFormat::Text)]
+        summary: SummaryFormat,
+    },
+    /// Validate the pipeline and every asset's sources without baking.
+    Check {
+        /// The pipeline file.
+        #[arg(long, default_value = "pipeline.ron")]
+        pipeline: PathBuf,
+    },
+}
+
+#[derive(Clone, Copy, Debug, PartialEq, Eq, ValueEnum)]
+pub enum SummaryFormat {
+    Text,
+    Json,
+}
+
+pub const EXIT_ASSET_FAILED: u8 = 1;
+pub const EXIT_USAGE: u8 = 2;
+
+pub fn init_logging(verbose: u8) {
+    let default = match verbose {
+        0 => "warn",
+        1 => "info",
+        2 => "debug",
+        _ => "trace",
+    };
+    let filter = tracing_subscriber::EnvFilter::try_from_default_env()
+        .unwrap_or_else(|_| tracing_subscriber::EnvFilter::new(format!("{default},salsa=warn")));
+    let _ = tracing_subscriber::fmt()
+        .with_env_filter(filter)
+        .with_writer(std::io::stderr)
+        .with_target(false)
+        .try_init();
+}
+
+pub fn run(cli: Cli) -> anyhow::Result<ExitCode> {
+    init_logging(cli.verbose);
+    match cli.command {
+        Command::Build {
+            pipeline,
+            assets,
+            summary,
+        } => build(pipeline, assets, summary),
+        Command::Check { pipeline } => check(pipeline),
+    }
+}
+
+fn build(
+    pipeline: PathBuf,
+    assets: Vec<String>,
+    format: SummaryFormat,
+) -> anyhow::Result<ExitCode> {
+    let config = match load_pipeline(&pipeline) {
+        Ok(config) => config,
+        Err(error) => {
+            eprintln!("{error}");
+            return Ok(ExitCode::from(EXIT_USAGE));
+        }
+    };
+    let mut project = Project::open(config, ProjectOptions::default());
+    let bar = std::io::stderr().is_terminal().then(|| {
+        let bar = indicatif::ProgressBar::new(0);
+        bar.set_style(
+            indicatif::ProgressStyle::with_template(
+                "{spinner} [{elapsed_precise}] {bar:30} {pos}/{len} {wide_msg}",
+            )
+            .expect("valid progress template"),
+        );
+        bar
+    });
+    let report_progress = |progress: Progress| match &bar {
+        Some(bar) => {
+            bar.set_length(progress.total as u64);
+            bar.set_position(progress.done as u64);
+            bar.set_message(progress.item);
+        }
+        None => tracing::info!(
+            "baked {} ({}/{})",
+            progress.item,
+            progress.done,
+            progress.total
+        ),
+    };
+    let result = project.build(
+        &BuildOptions {
+            only_assets: assets,
+        },
+        &report_progress,
+    );
+    if let Some(bar) = &bar {
+        bar.finish_and_clear();
+    }
+    let summary = match result {
+        Ok(summary) => summary,
+        Err(error) => {
+            eprintln!("error: {error}");
+            return Ok(ExitCode::from(EXIT_USAGE));
+        }
+    };
+    match format {
+        SummaryFormat::Json => println!("{}", summary.to_json()),
+        SummaryFormat::Text => print!("{}", summary.to_text()),
+    }
+    Ok(if summary.all_ok() {
+        ExitCode::SUCCESS
+    } else {
+        ExitCode::from(EXIT_ASSET_FAILED)
+    })
+}
+
+fn check(pipeline: PathBuf) -> anyhow::Result<ExitCode> {
+    let config = match load_pipeline(&pipeline) {
+        Ok(config) => config,
+        Err(error) => {
+            eprintln!("{error}");
+            return Ok(ExitCode::from(EXIT_USAGE));
+        }
+    };
+    let project = Project::open(
+        config,
+        ProjectOptions {
+            persistent_cache: false,
+        },
+    );
+    let problems = project.check();
+    for (asset, diagnostics) in &problems {
+        for diagnostic in diagnostics {
+            println!("{asset}: {diagnostic}");
+        }
+    }
+    let assets = project.asset_list().len();
+    let failed = problems
+        .iter()
+        .filter(|(_, diagnostics)| !diagnostics.is_empty())
+        .count();
+    println!("{assets} assets checked, {failed} with problems");
+    Ok(if failed == 0 {
+        ExitCode::SUCCESS
+    } else {
+        ExitCode::from(EXIT_ASSET_FAILED)
+    })
+}

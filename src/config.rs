@@ -1,0 +1,722 @@
+//! `pipeline.ron`: parsed in two levels, a serde mirror of the file (`raw`) and then validated,
+//! resolved per-asset settings (`PipelineConfig`). Every error names the file, line and column.
+
+use std::collections::BTreeSet;
+use std::net::SocketAddr;
+use std::path::{Component, Path, PathBuf};
+
+use serde::{Deserialize, Serialize};
+
+use crate::diagnostic::{Diagnostic, TextPosition};
+
+/// A block-compression format.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Hash, Serialize, Deserialize)]
+pub enum BlockFormat {
+    Bc1,
+    Bc3,
+    Bc4,
+    Bc5,
+    Bc7,
+}
+
+/// The file format textures are written in.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Hash, Serialize, Deserialize)]
+pub enum Container {
+    Ktx2,
+    Dds,
+    Pvr,
+}
+
+impl Container {
+    pub fn extension(self) -> &'static str {
+        match self {
+            Container::Ktx2 => "ktx2",
+            Container::Dds => "dds",
+            Container::Pvr => "pvr",
+        }
+    }
+}
+
+/// Speed/quality trade-off of the block encoder.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Hash, Serialize, Deserialize)]
+pub enum EncodeQuality {
+    UltraFast,
+    VeryFast,
+    Fast,
+    Basic,
+    Slow,
+}
+
+#[derive(Clone, Debug, PartialEq, Serialize)]
+pub struct BillboardSettings {
+    pub epsilon: f32,
+    pub max_planes: Option<u32>,
+    pub texel_density: Option<f32>,
+    pub alpha_cutoff: f32,
+}
+
+#[derive(Clone, Debug, PartialEq, Eq, Hash, Serialize)]
+pub struct AtlasSettings {
+    pub max_size: u32,
+    pub padding: u32,
+    pub power_of_two: bool,
+}
+
+#[derive(Clone, Debug, PartialEq, Eq, Hash, Serialize)]
+pub struct EncodeSettings {
+    pub albedo: BlockFormat,
+    pub mra: BlockFormat,
+    pub normal: BlockFormat,
+    pub height: BlockFormat,
+    pub mips: bool,
+    pub container: Container,
+    /// zstd supercompression level for KTX2 (`None`: no supercompression).
+    pub zstd: Option<i32>,
+    pub quality: EncodeQuality,
+}
+
+/// Every setting of one asset, defaults and overrides merged.
+#[derive(Clone, Debug, PartialEq, Serialize)]
+pub struct Settings {
+    pub billboard: BillboardSettings,
+    pub atlas: AtlasSettings,
+    pub encode: EncodeSettings,
+}
+
+impl Default for Settings {
+    fn default() -> Settings {
+        Settings {
+            billboard: BillboardSettings {
+                epsilon: 0.02,
+                max_planes: None,
+                texel_density: None,
+                alpha_cutoff: 0.5,
+            },
+            atlas: AtlasSettings {
+                max_size: 2048,
+                padding: 4,
+                power_of_two: true,
+            },
+            encode: EncodeSettings {
+                albedo: BlockFormat::Bc7,
+                mra: BlockFormat::Bc1,
+                normal: BlockFormat::Bc5,
+                height: BlockFormat::Bc4,
+                mips: true,
+                container: Container::Ktx2,
+                zstd: None,
+                quality: EncodeQuality::Basic,
+            },
+        }
+    }
+}
+
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Hash, Serialize, Deserialize)]
+pub enum AssetKindName {
+    Material,
+    BillboardCloud,
+}
+
+/// What an asset is made from.
+#[derive(Clone, Debug, PartialEq, Eq, Hash)]
+pub enum AssetSource {
+    /// A `.mymaterial` file, relative to the source folder.
+    Material { material: PathBuf },
+    /// An OBJ mesh, relative to the source folder.
+    BillboardCloud { mesh: PathBuf },
+}
+
+impl AssetSource {
+    pub fn kind(&self) -> AssetKindName {
+        match self {
+            AssetSource::Material { .. } => AssetKindName::Material,
+            AssetSource::BillboardCloud { .. } => AssetKindName::BillboardCloud,
+        }
+    }
+
+    pub fn main_file(&self) -> &Path {
+        match self {
+            AssetSource::Material { material } => material,
+            AssetSource::BillboardCloud { mesh } => mesh,
+        }
+    }
+}
+
+#[derive(Clone, Debug, PartialEq)]
+pub struct AssetConfig {
+    pub name: String,
+    pub source: AssetSource,
+    pub settings: Settings,
+}
+
+/// A glob over the source folder whose matches become assets.
+#[derive(Clone, Debug)]
+pub struct Rule {
+    pub glob: String,
+    pub matcher: globset::GlobMatcher,
+    pub kind: AssetKindName,
+}
+
+/// The validated pipeline.
+#[derive(Clone, Debug)]
+pub struct PipelineConfig {
+    /// The `pipeline.ron` file itself.
+    pub file: PathBuf,
+    /// The folder holding `pipeline.ron`; every other path is inside it.
+    pub root: PathBuf,
+    /// The watched source folder, relative to `root`.
+    pub source: PathBuf,
+    /// The artifact folder, relative to `root`.
+    pub output: PathBuf,
+    pub server: Option<SocketAddr>,
+    pub defaults: Settings,
+    pub assets: Vec<AssetConfig>,
+    pub rules: Vec<Rule>,
+}
+
+impl PipelineConfig {
+    pub fn source_dir(&self) -> PathBuf {
+        self.root.join(&self.source)
+    }
+
+    pub fn output_dir(&self) -> PathBuf {
+        self.root.join(&self.output)
+    }
+
+    /// The asset that a source file (relative to the source folder) becomes under `rules`,
+    /// unless an explicit asset already uses it.
+    pub fn asset_for_rule_match(&self, relative: &Path) -> Option<AssetConfig> {
+        if self
+            .assets
+            .iter()
+            .any(|asset| asset.source.main_file() == relative)
+        {
+            return None;
+        }
+        let rule = self
+            .rules
+            .iter()
+            .find(|rule| rule.matcher.is_match(relative))?;
+        let name = crate::diagnostic::display_path(&relative.with_extension(""));
+        let source = match rule.kind {
+            AssetKindName::Material => AssetSource::Material {
+                material: relative.to_path_buf(),
+            },
+            AssetKindName::BillboardCloud => AssetSource::BillboardCloud {
+                mesh: relative.to_path_buf(),
+            },
+        };
+        Some(AssetConfig {
+            name,
+            source,
+            settings: self.defaults.clone(),
+        })
+    }
+}
+
+/// Reading or validating `pipeline.ron` failed; every problem found is listed.
+#[derive(Debug, thiserror::Error)]
+#[error("{}", .diagnostics.iter().map(|d| d.to_string()).collect::<Vec<_>>().join("\n"))]
+pub struct ConfigError {
+    pub diagnostics: Vec<Diagnostic>,
+}
+
+/// The serde mirror of `pipeline.ron`: exactly what the file says, nothing resolved.
+mod raw {
+    use serde::{Deserialize, Deserializer};
+
+    use super::{AssetKindName, BlockFormat, Container, EncodeQuality};
+
+    #[derive(Deserialize)]
+    #[serde(deny_unknown_fields)]
+    pub struct Pipeline {
+        pub source: String,
+        pub output: String,
+        #[serde(default)]
+        pub server: Option<String>,
+        #[serde(default)]
+        pub defaults: SettingsOverrides,
+        #[serde(default)]
+        pub assets: Vec<Asset>,
+        #[serde(default)]
+        pub rules: Vec<Rule>,
+    }
+
+    #[derive(Deserialize, Default)]
+    #[serde(deny_unknown_fields)]
+    pub struct SettingsOverrides {
+        #[serde(default)]
+        pub billboard: BillboardOverrides,
+        #[serde(default)]
+        pub atlas: AtlasOverrides,
+        #[serde(default)]
+        pub encode: EncodeOverrides,
+    }
+
+    /// `Some(None)` is an explicit `None` in the file; `None` is "not given".
+    fn explicit<'de, D, T>(deserializer: D) -> Result<Option<Option<T>>, D::Error>
+    where
+        D: Deserializer<'de>,
+        T: Deserialize<'de>,
+    {
+        Option::<T>::deserialize(deserializer).map(Some)
+    }
+
+    #[derive(Deserialize, Default, Clone)]
+    #[serde(deny_unknown_fields)]
+    pub struct BillboardOverrides {
+        pub epsilon: Option<f32>,
+        #[serde(default, deserialize_with = "explicit")]
+        pub max_planes: Option<Option<u32>>,
+        #[serde(default, deserialize_with = "explicit")]
+        pub texel_density: Option<Option<f32>>,
+        pub alpha_cutoff: Option<f32>,
+    }
+
+    #[derive(Deserialize, Default, Clone)]
+    #[serde(deny_unknown_fields)]
+    pub struct AtlasOverrides {
+        pub max_size: Option<u32>,
+        pub padding: Option<u32>,
+        pub power_of_two: Option<bool>,
+    }
+
+    #[derive(Deserialize, Default, Clone)]
+    #[serde(deny_unknown_fields)]
+    pub struct EncodeOverrides {
+        pub albedo: Option<BlockFormat>,
+        pub mra: Option<BlockFormat>,
+        pub normal: Option<BlockFormat>,
+        pub height: Option<BlockFormat>,
+        pub mips: Option<bool>,
+        pub container: Option<Container>,
+        #[serde(default, deserialize_with = "explicit")]
+        pub zstd: Option<Option<i32>>,
+        pub quality: Option<EncodeQuality>,
+    }
+
+    #[derive(Deserialize)]
+    #[serde(deny_unknown_fields)]
+    pub enum Asset {
+        Material {
+            name: String,
+            material: String,
+            #[serde(default)]
+            billboard: BillboardOverrides,
+            #[serde(default)]
+            atlas: AtlasOverrides,
+            #[serde(default)]
+            encode: EncodeOverrides,
+        },
+        BillboardCloud {
+            name: String,
+            mesh: String,
+            #[serde(default)]
+            billboard: BillboardOverrides,
+            #[serde(default)]
+            atlas: AtlasOverrides,
+            #[serde(default)]
+            encode: EncodeOverrides,
+        },
+    }
+
+    #[derive(Deserialize)]
+    #[serde(deny_unknown_fields)]
+    pub struct Rule {
+        pub glob: String,
+        pub kind: AssetKindName,
+    }
+}
+
+/// Reads and validates `pipeline.ron` at `file`.
+pub fn load_pipeline(file: &Path) -> Result<PipelineConfig, ConfigError> {
+    let text = std::fs::read_to_string(file).map_err(|error| ConfigError {
+        diagnostics: vec![Diagnostic::new(
+            file,
+            format!("cannot read the pipeline file: {error}"),
+        )],
+    })?;
+    parse_pipeline(file, &text)
+}
+
+/// Parses and validates the text of a `pipeline.ron` that lives at `file`.
+pub fn parse_pipeline(file: &Path, text: &str) -> Result<PipelineConfig, ConfigError> {
+    let options =
+        ron::Options::default().with_default_extension(ron::extensions::Extensions::IMPLICIT_SOME);
+    let raw: raw::Pipeline = options.from_str(text).map_err(|error| ConfigError {
+        diagnostics: vec![Diagnostic::at(
+            file,
+            TextPosition {
+                line: error.position.line as u32,
+                column: error.position.col as u32,
+            },
+            error.code.to_string(),
+        )],
+    })?;
+    let root = file.parent().map(Path::to_path_buf).unwrap_or_default();
+    let root = if root.as_os_str().is_empty() {
+        PathBuf::from(".")
+    } else {
+        root
+    };
+    Validator {
+        file,
+        text,
+        diagnostics: Vec::new(),
+    }
+    .validate(raw, root)
+}
+
+struct Validator<'a> {
+    file: &'a Path,
+    text: &'a str,
+    diagnostics: Vec<Diagnostic>,
+}
+
+impl Validator<'_> {
+    fn validate(
+        mut self,
+        raw: raw::Pipeline,
+        root: PathBuf,
+    ) -> Result<PipelineConfig, ConfigError> {
+        let source = self
+            .project_path(&raw.source, "source", 0)
+            .unwrap_or_default();
+        let output = self
+            .project_path(&raw.output, "output", 0)
+            .unwrap_or_default();
+        if !output.as_os_str().is_empty() && (source.starts_with(&output) || output == source) {
+            self.error_at_value(
+                &raw.output,
+                0,
+                "the output folder must not be the source folder or contain it",
+            );
+        }
+        let server = raw
+            .server
+            .as_ref()
+            .and_then(|address| match address.parse::<SocketAddr>() {
+                Ok(address) => Some(address),
+                Err(_) => {
+                    self.error_at_value(
+                        address,
+                        0,
+                        &format!("`{address}` is not a socket address like 127.0.0.1:7878"),
+                    );
+                    None
+                }
+            });
+        let defaults = self.merge_settings(&Settings::default(), &raw.defaults, 0);
+
+        let mut assets = Vec::new();
+        let mut names = BTreeSet::new();
+        for asset in &raw.assets {
+            let (name, path, overrides, kind) = match asset {
+                raw::Asset::Material {
+                    name,
+                    material,
+                    billboard,
+                    atlas,
+                    encode,
+                } => (
+                    name,
+                    material,
+                    (billboard, atlas, encode),
+                    AssetKindName::Material,
+                ),
+                raw::Asset::BillboardCloud {
+                    name,
+                    mesh,
+                    billboard,
+                    atlas,
+                    encode,
+                } => (
+                    name,
+                    mesh,
+                    (billboard, atlas, encode),
+                    AssetKindName::BillboardCloud,
+                ),
+            };
+            let anchor = self.offset_of_value(name, 0).unwrap_or(0);
+            if !valid_asset_name(name) {
+                self.error_at_value(name, 0, &format!("asset name `{name}` must be non-empty and use only letters, digits, `_`, `-`, `.` and `/`"));
+            }
+            if !names.insert(name.clone()) {
+                let second = self
+                    .offset_of_value(name, anchor + name.len() + 2)
+                    .unwrap_or(anchor);
+                self.error_at_value(name, second, &format!("asset name `{name}` is used twice"));
+            }
+            let Some(relative) = self.source_path(path, anchor) else {
+                continue;
+            };
+            let overrides = raw::SettingsOverrides {
+                billboard: overrides.0.clone(),
+                atlas: overrides.1.clone(),
+                encode: overrides.2.clone(),
+            };
+            let settings = self.merge_settings(&defaults, &overrides, anchor);
+            let source = match kind {
+                AssetKindName::Material => AssetSource::Material { material: relative },
+                AssetKindName::BillboardCloud => AssetSource::BillboardCloud { mesh: relative },
+            };
+            assets.push(AssetConfig {
+                name: name.clone(),
+                source,
+                settings,
+            });
+        }
+
+        let mut rules = Vec::new();
+        for rule in &raw.rules {
+            match globset::GlobBuilder::new(&rule.glob)
+                .literal_separator(true)
+                .build()
+            {
+                Ok(glob) => rules.push(Rule {
+                    glob: rule.glob.clone(),
+                    matcher: glob.compile_matcher(),
+                    kind: rule.kind,
+                }),
+                Err(error) => {
+                    self.error_at_value(&rule.glob, 0, &format!("bad glob: {}", error.kind()))
+                }
+            }
+        }
+
+        if self.diagnostics.is_empty() {
+            Ok(PipelineConfig {
+                file: self.file.to_path_buf(),
+                root,
+                source,
+                output,
+                server,
+                defaults,
+                assets,
+                rules,
+            })
+        } else {
+            Err(ConfigError {
+                diagnostics: self.diagnostics,
+            })
+        }
+    }
+
+    fn merge_settings(
+        &mut self,
+        base: &Settings,
+        overrides: &raw::SettingsOverrides,
+        anchor: usize,
+    ) -> Settings {
+        let mut settings = base.clone();
+        let billboard = &overrides.billboard;
+        if let Some(epsilon) = billboard.epsilon {
+            if !(epsilon > 0.0 && epsilon < 1.0) {
+                self.error_at_key(
+                    "epsilon",
+                    anchor,
+                    "epsilon must be in (0, 1): it is a fraction of the bounding-sphere radius",
+                );
+            }
+            settings.billboard.epsilon = epsilon;
+        }
+        if let Some(max_planes) = billboard.max_planes {
+            if max_planes == Some(0) {
+                self.error_at_key("max_planes", anchor, "max_planes must be at least 1");
+            }
+            settings.billboard.max_planes = max_planes;
+        }
+        if let Some(density) = billboard.texel_density {
+            if density.is_some_and(|d| !(d > 0.0 && d.is_finite())) {
+                self.error_at_key(
+                    "texel_density",
+                    anchor,
+                    "texel_density must be a positive number of texels per world unit",
+                );
+            }
+            settings.billboard.texel_density = density;
+        }
+        if let Some(cutoff) = billboard.alpha_cutoff {
+            if !(0.0..=1.0).contains(&cutoff) {
+                self.error_at_key("alpha_cutoff", anchor, "alpha_cutoff must be in [0, 1]");
+            }
+            settings.billboard.alpha_cutoff = cutoff;
+        }
+        let atlas = &overrides.atlas;
+        if let Some(max_size) = atlas.max_size {
+            if !(16..=16384).contains(&max_size) || max_size % 4 != 0 {
+                self.error_at_key(
+                    "max_size",
+                    anchor,
+                    "max_size must be a multiple of 4 between 16 and 16384",
+                );
+            }
+            settings.atlas.max_size = max_size;
+        }
+        if let Some(padding) = atlas.padding {
+            if padding > 64 {
+                self.error_at_key("padding", anchor, "padding must be at most 64 texels");
+            }
+            settings.atlas.padding = padding;
+        }
+        if let Some(power_of_two) = atlas.power_of_two {
+            settings.atlas.power_of_two = power_of_two;
+        }
+        let encode = &overrides.encode;
+        let surfaces: [(&str, Option<BlockFormat>, &[BlockFormat], &mut BlockFormat); 4] = [
+            (
+                "albedo",
+                encode.albedo,
+                &[BlockFormat::Bc7, BlockFormat::Bc3, BlockFormat::Bc1],
+                &mut settings.encode.albedo,
+            ),
+            (
+                "mra",
+                encode.mra,
+                &[BlockFormat::Bc1, BlockFormat::Bc7],
+                &mut settings.encode.mra,
+            ),
+            (
+                "normal",
+                encode.normal,
+                &[BlockFormat::Bc5, BlockFormat::Bc7],
+                &mut settings.encode.normal,
+            ),
+            (
+                "height",
+                encode.height,
+                &[BlockFormat::Bc4],
+                &mut settings.encode.height,
+            ),
+        ];
+        let mut format_errors = Vec::new();
+        for (key, value, allowed, target) in surfaces {
+            if let Some(format) = value {
+                if !allowed.contains(&format) {
+                    format_errors.push((
+                        key,
+                        format!("{format:?} cannot hold the {key} surface; use one of {allowed:?}"),
+                    ));
+                }
+                *target = format;
+            }
+        }
+        for (key, message) in format_errors {
+            self.error_at_key(key, anchor, &message);
+        }
+        if let Some(mips) = encode.mips {
+            settings.encode.mips = mips;
+        }
+        if let Some(container) = encode.container {
+            settings.encode.container = container;
+        }
+        if let Some(zstd) = encode.zstd {
+            if zstd.is_some_and(|level| !(1..=22).contains(&level)) {
+                self.error_at_key("zstd", anchor, "zstd level must be between 1 and 22");
+            }
+            settings.encode.zstd = zstd;
+        }
+        if let Some(quality) = encode.quality {
+            settings.encode.quality = quality;
+        }
+        settings
+    }
+
+    /// A path relative to the project folder that must stay inside it.
+    fn project_path(&mut self, value: &str, what: &str, anchor: usize) -> Option<PathBuf> {
+        match normalize_relative_path(Path::new(value)) {
+            Some(path) => Some(path),
+            None => {
+                self.error_at_value(value, anchor, &format!("the {what} path `{value}` must be relative and stay inside the folder of the pipeline file"));
+                None
+            }
+        }
+    }
+
+    /// A path relative to the source folder that must stay inside it.
+    fn source_path(&mut self, value: &str, anchor: usize) -> Option<PathBuf> {
+        match normalize_relative_path(Path::new(value)) {
+            Some(path) if !path.as_os_str().is_empty() => Some(path),
+            _ => {
+                self.error_at_value(value, anchor, &format!("the asset path `{value}` must be a relative file path inside the source folder"));
+                None
+            }
+        }
+    }
+
+    fn offset_of_value(&self, value: &str, from: usize) -> Option<usize> {
+        let quoted = format!("\"{value}\"");
+        self.text
+            .get(from..)?
+            .find(&quoted)
+            .map(|index| index + from)
+    }
+
+    fn error_at_value(&mut self, value: &str, from: usize, message: &str) {
+        let offset = self.offset_of_value(value, from);
+        self.push(offset, message);
+    }
+
+    fn error_at_key(&mut self, key: &str, from: usize, message: &str) {
+        let offset = self
+            .text
+            .get(from..)
+            .and_then(|rest| find_key(rest, key))
+            .map(|index| index + from);
+        self.push(offset, message);
+    }
+
+    fn push(&mut self, offset: Option<usize>, message: &str) {
+        let diagnostic = match offset {
+            Some(offset) => Diagnostic::at(
+                self.file,
+                TextPosition::of_byte_offset(self.text, offset),
+                message,
+            ),
+            None => Diagnostic::new(self.file, message),
+        };
+        self.diagnostics.push(diagnostic);
+    }
+}
+
+/// The offset of `key:` as a field name in `text` (not as a substring of another name).
+fn find_key(text: &str, key: &str) -> Option<usize> {
+    let bytes = text.as_bytes();
+    let mut start = 0;
+    while let Some(found) = text[start..].find(key) {
+        let index = start + found;
+        let before_ok =
+            index == 0 || !(bytes[index - 1].is_ascii_alphanumeric() || bytes[index - 1] == b'_');
+        let after = text[index + key.len()..].trim_start();
+        if before_ok && after.starts_with(':') {
+            return Some(index);
+        }
+        start = index + key.len();
+    }
+    None
+}
+
+fn valid_asset_name(name: &str) -> bool {
+    !name.is_empty()
+        && name
+            .chars()
+            .all(|c| c.is_ascii_alphanumeric() || matches!(c, '_' | '-' | '.' | '/'))
+        && normalize_relative_path(Path::new(name)).is_some_and(|path| path == Path::new(name))
+}
+
+/// Resolves `.` and `..` lexically; `None` when the path is absolute or climbs out of its base.
+pub fn normalize_relative_path(path: &Path) -> Option<PathBuf> {
+    let text = path.to_string_lossy().replace('\\', "/");
+    let mut parts: Vec<String> = Vec::new();
+    for component in Path::new(&text).components() {
+        match component {
+            Component::CurDir => {}
+            Component::ParentDir => {
+                parts.pop()?;
+            }
+            Component::Normal(part) => parts.push(part.to_string_lossy().into_owned()),
+            Component::RootDir | Component::Prefix(_) => return None,
+        }
+    }
+    Some(parts.iter().collect())
+}

@@ -1,0 +1,608 @@
+//! The salsa glue, all of it: inputs (source files, assets, stage keys), the tracked stage
+//! functions that call the pure stages, the persistent cache boundary, and the database with its
+//! event log. Stages themselves live in their own modules and know nothing of salsa.
+
+use std::collections::BTreeMap;
+use std::fmt;
+use std::path::PathBuf;
+use std::sync::{Arc, Mutex};
+use std::time::Instant;
+
+use salsa::plumbing::AsId;
+
+use crate::cache::{CacheEntry, CacheKey, CacheKeyBuilder, DiskCache};
+use crate::config::{BlockFormat, Container, EncodeQuality, Settings};
+use crate::container::write_container;
+use crate::diagnostic::Diagnostic;
+use crate::encode::{encode_levels, BlockEncodeSettings, EncodedTexture};
+use crate::material_definition::{
+    parse_material_file, MaterialConstants, MaterialFile, TextureReference,
+};
+use crate::mips::{mip_chain, MipSettings};
+use crate::preview::preview_png;
+use crate::quality::{decode_blocks, psnr};
+use crate::surface::{has_transparency, pack_surface, SurfaceKind};
+use crate::texture::{decode_texture, Texture};
+
+/// The bytes of a source file and their blake3 hash. Equality is by hash.
+#[derive(Clone)]
+pub struct FileContents {
+    pub bytes: Arc<[u8]>,
+    pub hash: blake3::Hash,
+}
+
+impl FileContents {
+    pub fn new(bytes: Vec<u8>) -> FileContents {
+        let hash = blake3::hash(&bytes);
+        FileContents {
+            bytes: bytes.into(),
+            hash,
+        }
+    }
+}
+
+impl PartialEq for FileContents {
+    fn eq(&self, other: &Self) -> bool {
+        self.hash == other.hash
+    }
+}
+
+impl Eq for FileContents {}
+
+impl fmt::Debug for FileContents {
+    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
+        write!(
+            f,
+            "FileContents({} bytes, {})",
+            self.bytes.len(),
+            &self.hash.to_hex()[..12]
+        )
+    }
+}
+
+/// A file's contents, or why it could not be read.
+pub type FileRead = Result<FileContents, String>;
+
+/// A source file; `path` is relative to the folder of `pipeline.ron`.
+#[salsa::input(debug)]
+pub struct SourceFile {
+    #[returns(ref)]
+    pub path: PathBuf,
+    #[returns(ref)]
+    pub contents: FileRead,
+}
+
+/// A `Material` asset: one `.mymaterial` file and the texture files it references.
+#[salsa::input(debug)]
+pub struct MaterialAsset {
+    #[returns(ref)]
+    pub name: String,
+    /// The source folder (relative to the project) that texture paths must stay inside.
+    #[returns(ref)]
+    pub source_root: PathBuf,
+    #[returns(copy)]
+    pub file: SourceFile,
+    #[returns(ref)]
+    pub settings: Settings,
+    /// Every texture the material file references, by project-relative path.
+    #[returns(ref)]
+    pub textures: Arc<BTreeMap<PathBuf, SourceFile>>,
+}
+
+/// One surface of one material of a `Material` asset: the key of the per-surface stages.
+#[salsa::input(debug)]
+pub struct SurfaceKey {
+    #[returns(copy)]
+    pub asset: MaterialAsset,
+    #[returns(ref)]
+    pub material: String,
+    #[returns(copy)]
+    pub surface: SurfaceKind,
+}
+
+/// The user-facing stages, in pipeline order.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Hash, PartialOrd, Ord)]
+pub enum Stage {
+    Parse,
+    Decode,
+    Pack,
+    Mips,
+    Encode,
+    Write,
+}
+
+impl Stage {
+    pub fn name(self) -> &'static str {
+        match self {
+            Stage::Parse => "parse",
+            Stage::Decode => "decode",
+            Stage::Pack => "pack",
+            Stage::Mips => "mips",
+            Stage::Encode => "encode",
+            Stage::Write => "write",
+        }
+    }
+
+    /// The stage of a tracked function, by the function's name.
+    pub fn of_function(function: &str) -> Option<Stage> {
+        Some(match function {
+            "material_file" => Stage::Parse,
+            "decoded_texture" => Stage::Decode,
+            "packed_surface" => Stage::Pack,
+            "mip_levels" => Stage::Mips,
+            "encoded_surface" => Stage::Encode,
+            "surface_artifacts" => Stage::Write,
+            _ => return None,
+        })
+    }
+
+    /// Bumped whenever the stage's output for the same inputs changes; part of cache keys.
+    pub fn version(self) -> u32 {
+        1
+    }
+}
+
+/// One execution of a stage body in this process.
+#[derive(Clone, Debug, PartialEq)]
+pub struct StageRun {
+    pub stage: Stage,
+    pub key: salsa::Id,
+    pub ms: f64,
+    /// The result came from the persistent cache; the stage itself did no work.
+    pub from_cache: bool,
+}
+
+/// A tracked function that salsa executed (from its event log).
+#[derive(Clone, Debug, PartialEq, Eq)]
+pub struct ExecutedFunction {
+    pub function: String,
+    pub key: salsa::Id,
+}
+
+#[derive(Default)]
+struct Logs {
+    executed: Mutex<Vec<ExecutedFunction>>,
+    runs: Mutex<Vec<StageRun>>,
+}
+
+#[salsa::db]
+pub trait Db: salsa::Database {
+    fn disk_cache(&self) -> Option<&DiskCache>;
+    fn record_run(&self, run: StageRun);
+}
+
+#[salsa::db]
+#[derive(Clone)]
+pub struct Database {
+    storage: salsa::Storage<Self>,
+    cache: Option<DiskCache>,
+    logs: Arc<Logs>,
+}
+
+impl Database {
+    pub fn new(cache: Option<DiskCache>) -> Database {
+        let logs = Arc::new(Logs::default());
+        let event_logs = logs.clone();
+        let storage = salsa::Storage::new(Some(Box::new(move |event: salsa::Event| {
+            if let salsa::EventKind::WillExecute { database_key } = event.kind {
+                let text = format!("{database_key:?}");
+                let function = text.split('(').next().unwrap_or_default().to_string();
+                event_logs
+                    .executed
+                    .lock()
+                    .expect("log lock")
+                    .push(ExecutedFunction {
+                        function,
+                        key: database_key.key_index(),
+                    });
+            }
+        })));
+        Database {
+            storage,
+            cache,
+            logs,
+        }
+    }
+
+    /// The tracked functions salsa executed since the last call (its `WillExecute` events).
+    pub fn take_executed(&self) -> Vec<ExecutedFunction> {
+        std::mem::take(&mut *self.logs.executed.lock().expect("log lock"))
+    }
+
+    /// The stage bodies that ran since the last call, with their durations.
+    pub fn take_runs(&self) -> Vec<StageRun> {
+        std::mem::take(&mut *self.logs.runs.lock().expect("log lock"))
+    }
+}
+
+#[salsa::db]
+impl salsa::Database for Database {}
+
+#[salsa::db]
+impl Db for Database {
+    fn disk_cache(&self) -> Option<&DiskCache> {
+        self.cache.as_ref()
+    }
+
+    fn record_run(&self, run: StageRun) {
+        self.logs.runs.lock().expect("log lock").push(run);
+    }
+}
+
+/// Runs a stage body, timing it and recording the run.
+fn timed<T>(db: &dyn Db, stage: Stage, key: impl AsId, body: impl FnOnce() -> T) -> T {
+    let start = Instant::now();
+    let result = body();
+    db.record_run(StageRun {
+        stage,
+        key: key.as_id(),
+        ms: start.elapsed().as_secs_f64() * 1000.0,
+        from_cache: false,
+    });
+    result
+}
+
+fn record_cache_hit(db: &dyn Db, stage: Stage, key: impl AsId) {
+    db.record_run(StageRun {
+        stage,
+        key: key.as_id(),
+        ms: 0.0,
+        from_cache: true,
+    });
+}
+
+fn read_contents<'db>(db: &'db dyn Db, file: SourceFile) -> Result<&'db FileContents, Diagnostic> {
+    file.contents(db)
+        .as_ref()
+        .map_err(|error| Diagnostic::new(file.path(db), error.clone()))
+}
+
+// ---------------------------------------------------------------------------------------------
+// parse
+
+/// The `.mymaterial` file of an asset, parsed (cached on disk by content).
+#[salsa::tracked(returns(clone))]
+pub fn material_file(db: &dyn Db, asset: MaterialAsset) -> Result<Arc<MaterialFile>, Diagnostic> {
+    let file = asset.file(db);
+    let contents = read_contents(db, file)?;
+    let path = file.path(db);
+    let source_root = asset.source_root(db);
+    let key = CacheKeyBuilder::new("parse", Stage::Parse.version())
+        .bytes(contents.hash.as_bytes())
+        .debug(path)
+        .debug(source_root)
+        .finish();
+    if let Some(parsed) = load_cached(db, "parse", key, |entry| {
+        serde_json::from_value::<MaterialFile>(entry.metadata).ok()
+    }) {
+        record_cache_hit(db, Stage::Parse, asset);
+        return Ok(Arc::new(parsed));
+    }
+    let parsed = timed(db, Stage::Parse, asset, || {
+        parse_material_file(path, &contents.bytes, source_root)
+    })?;
+    store_cached(db, "parse", key, || CacheEntry {
+        metadata: serde_json::to_value(&parsed).expect("material files serialise"),
+        blobs: Vec::new(),
+    });
+    Ok(Arc::new(parsed))
+}
+
+// ---------------------------------------------------------------------------------------------
+// decode
+
+/// A source texture decoded to RGBA8.
+#[salsa::tracked(returns(clone))]
+pub fn decoded_texture(db: &dyn Db, file: SourceFile) -> Result<Arc<Texture>, Diagnostic> {
+    let contents = read_contents(db, file)?;
+    timed(db, Stage::Decode, file, || {
+        decode_texture(file.path(db), &contents.bytes).map(Arc::new)
+    })
+}
+
+// ---------------------------------------------------------------------------------------------
+// per-surface inputs and settings (cheap; they exist so that unrelated edits cut off early)
+
+/// What one surface is made of: its source files (one per slot) and constants.
+#[derive(Clone, Debug, PartialEq)]
+pub struct SurfaceRecipe {
+    pub material_file: PathBuf,
+    pub sources: Vec<Option<(TextureReference, SourceFile)>>,
+    pub constants: MaterialConstants,
+}
+
+#[salsa::tracked(returns(clone))]
+pub fn surface_recipe(db: &dyn Db, key: SurfaceKey) -> Result<Arc<SurfaceRecipe>, Diagnostic> {
+    let asset = key.asset(db);
+    let parsed = material_file(db, asset)?;
+    let material_path = asset.file(db).path(db).clone();
+    let Some(material) = parsed
+        .materials
+        .iter()
+        .find(|material| &material.name == key.material(db))
+    else {
+        return Err(Diagnostic::new(
+            &material_path,
+            format!("no material named `{}` any more", key.material(db)),
+        ));
+    };
+    let textures = asset.textures(db);
+    let mut sources = Vec::new();
+    for slot in key.surface(db).slots() {
+        let Some(reference) = material.textures.get(slot) else {
+            sources.push(None);
+            continue;
+        };
+        let Some(&file) = textures.get(&reference.path) else {
+            return Err(Diagnostic::at(
+                &material_path,
+                reference.position,
+                format!("texture \"{}\" was not read", reference.written),
+            ));
+        };
+        if let Err(error) = file.contents(db) {
+            return Err(Diagnostic::at(
+                &material_path,
+                reference.position,
+                format!(
+                    "{} texture \"{}\" ({}): {error}",
+                    slot.name(),
+                    reference.written,
+                    crate::diagnostic::display_path(&reference.path)
+                ),
+            ));
+        }
+        sources.push(Some((reference.clone(), file)));
+    }
+    Ok(Arc::new(SurfaceRecipe {
+        material_file: material_path,
+        sources,
+        constants: material.constants.clone(),
+    }))
+}
+
+/// The settings that shape the mip chain of one surface.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct MipStageSettings {
+    pub mips: bool,
+    /// The alpha-test cutoff, for albedo only.
+    pub alpha_cutoff: Option<f32>,
+}
+
+#[salsa::tracked(returns(copy))]
+pub fn mip_settings(db: &dyn Db, key: SurfaceKey) -> MipStageSettings {
+    let settings = key.asset(db).settings(db);
+    let alpha_cutoff = match (key.surface(db), surface_recipe(db, key)) {
+        (SurfaceKind::Albedo, Ok(recipe)) => Some(
+            recipe
+                .constants
+                .alpha_cutoff
+                .unwrap_or(settings.billboard.alpha_cutoff),
+        ),
+        _ => None,
+    };
+    MipStageSettings {
+        mips: settings.encode.mips,
+        alpha_cutoff,
+    }
+}
+
+#[salsa::tracked(returns(copy))]
+pub fn block_settings(db: &dyn Db, key: SurfaceKey) -> (BlockFormat, EncodeQuality) {
+    let encode = &key.asset(db).settings(db).encode;
+    let format = match key.surface(db) {
+        SurfaceKind::Albedo => encode.albedo,
+        SurfaceKind::Mra => encode.mra,
+        SurfaceKind::Normal => encode.normal,
+    };
+    (format, encode.quality)
+}
+
+#[salsa::tracked(returns(copy))]
+pub fn file_settings(db: &dyn Db, key: SurfaceKey) -> (Container, Option<i32>) {
+    let encode = &key.asset(db).settings(db).encode;
+    (encode.container, encode.zstd)
+}
+
+// ---------------------------------------------------------------------------------------------
+// pack, mips, encode, write
+
+#[salsa::tracked(returns(clone))]
+pub fn packed_surface(db: &dyn Db, key: SurfaceKey) -> Result<Arc<Texture>, Diagnostic> {
+    let recipe = surface_recipe(db, key)?;
+    let mut decoded = Vec::new();
+    for source in &recipe.sources {
+        decoded.push(match source {
+            Some((_, file)) => Some(decoded_texture(db, *file)?),
+            None => None,
+        });
+    }
+    timed(db, Stage::Pack, key, || {
+        let sources: Vec<Option<&Texture>> =
+            decoded.iter().map(|texture| texture.as_deref()).collect();
+        Ok(Arc::new(pack_surface(
+            key.surface(db),
+            &sources,
+            &recipe.constants,
+        )))
+    })
+}
+
+/// The mip chain of a surface, and whether its alpha is tested (albedo with transparency).
+#[derive(Clone, Debug, PartialEq)]
+pub struct MipLevels {
+    pub levels: Vec<Texture>,
+    pub alpha_tested: bool,
+}
+
+#[salsa::tracked(returns(clone))]
+pub fn mip_levels(db: &dyn Db, key: SurfaceKey) -> Result<Arc<MipLevels>, Diagnostic> {
+    let packed = packed_surface(db, key)?;
+    let settings = mip_settings(db, key);
+    timed(db, Stage::Mips, key, || {
+        let alpha_tested = key.surface(db) == SurfaceKind::Albedo && has_transparency(&packed);
+        let levels = if settings.mips {
+            let alpha_cutoff = if alpha_tested {
+                settings.alpha_cutoff
+            } else {
+                None
+            };
+            mip_chain(
+                &packed,
+                MipSettings {
+                    kind: key.surface(db),
+                    alpha_cutoff,
+                },
+            )
+        } else {
+            vec![(*packed).clone()]
+        };
+        Ok(Arc::new(MipLevels {
+            levels,
+            alpha_tested,
+        }))
+    })
+}
+
+/// A block-compressed surface and its measured quality.
+#[derive(Clone, Debug, PartialEq)]
+pub struct EncodedSurface {
+    pub texture: EncodedTexture,
+    /// PSNR of level 0 decoded against the uncompressed level 0, over the surface's channels.
+    pub psnr_db: f64,
+    pub alpha_tested: bool,
+}
+
+#[salsa::tracked(returns(clone))]
+pub fn encoded_surface(db: &dyn Db, key: SurfaceKey) -> Result<Arc<EncodedSurface>, Diagnostic> {
+    let mips = mip_levels(db, key)?;
+    let (format, quality) = block_settings(db, key);
+    let surface = key.surface(db);
+    timed(db, Stage::Encode, key, || {
+        let alpha = surface == SurfaceKind::Albedo && has_transparency(&mips.levels[0]);
+        let settings = BlockEncodeSettings {
+            format,
+            quality,
+            alpha,
+            srgb: surface.is_srgb(),
+        };
+        let texture = encode_levels(&mips.levels, settings);
+        let level0 = &mips.levels[0];
+        let decoded = decode_blocks(format, &texture.levels[0], level0.width, level0.height);
+        let psnr_db = psnr(level0, &decoded, surface.channels());
+        Ok(Arc::new(EncodedSurface {
+            texture,
+            psnr_db,
+            alpha_tested: mips.alpha_tested,
+        }))
+    })
+}
+
+/// What one surface is written as, with the figures its report needs.
+#[derive(Clone, Debug, PartialEq, serde::Serialize, serde::Deserialize)]
+pub struct SurfaceInfo {
+    pub surface: SurfaceKind,
+    pub format: BlockFormat,
+    pub srgb: bool,
+    pub container: Container,
+    pub width: u32,
+    pub height: u32,
+    pub levels: u32,
+    pub bytes: u64,
+    pub psnr_db: f64,
+    pub alpha_tested: bool,
+}
+
+/// The files of one surface: the texture container and a PNG preview of the packed surface.
+#[derive(Clone, Debug, PartialEq)]
+pub struct SurfaceArtifacts {
+    pub info: SurfaceInfo,
+    pub texture_file: Arc<[u8]>,
+    pub preview_png: Arc<[u8]>,
+}
+
+/// The artifacts of a surface: from the persistent cache when its inputs were baked before.
+#[salsa::tracked(returns(clone))]
+pub fn surface_artifacts(
+    db: &dyn Db,
+    key: SurfaceKey,
+) -> Result<Arc<SurfaceArtifacts>, Diagnostic> {
+    let recipe = surface_recipe(db, key)?;
+    let mip_settings = mip_settings(db, key);
+    let block_settings = block_settings(db, key);
+    let file_settings = file_settings(db, key);
+    let mut cache_key = CacheKeyBuilder::new("surface", 1)
+        .debug(&[Stage::Pack, Stage::Mips, Stage::Encode, Stage::Write].map(Stage::version))
+        .debug(&key.surface(db))
+        .debug(&recipe.constants)
+        .debug(&mip_settings)
+        .debug(&block_settings)
+        .debug(&file_settings);
+    for source in &recipe.sources {
+        cache_key = match source {
+            Some((_, file)) => cache_key.bytes(read_contents(db, *file)?.hash.as_bytes()),
+            None => cache_key.bytes(b"none"),
+        };
+    }
+    let cache_key = cache_key.finish();
+    if let Some(artifacts) = load_cached(db, "surface", cache_key, artifacts_from_entry) {
+        record_cache_hit(db, Stage::Write, key);
+        return Ok(Arc::new(artifacts));
+    }
+    let encoded = encoded_surface(db, key)?;
+    let packed = packed_surface(db, key)?;
+    let artifacts = timed(db, Stage::Write, key, || {
+        let (container, zstd) = file_settings;
+        let texture_file: Arc<[u8]> = write_container(&encoded.texture, container, zstd).into();
+        let info = SurfaceInfo {
+            surface: key.surface(db),
+            format: encoded.texture.format,
+            srgb: encoded.texture.srgb,
+            container,
+            width: encoded.texture.width,
+            height: encoded.texture.height,
+            levels: encoded.texture.levels.len() as u32,
+            bytes: texture_file.len() as u64,
+            psnr_db: (encoded.psnr_db * 100.0).round() / 100.0,
+            alpha_tested: encoded.alpha_tested,
+        };
+        SurfaceArtifacts {
+            info,
+            texture_file,
+            preview_png: preview_png(&packed).into(),
+        }
+    });
+    store_cached(db, "surface", cache_key, || CacheEntry {
+        metadata: serde_json::to_value(&artifacts.info).expect("surface info serialises"),
+        blobs: vec![
+            artifacts.texture_file.to_vec(),
+            artifacts.preview_png.to_vec(),
+        ],
+    });
+    Ok(Arc::new(artifacts))
+}
+
+fn artifacts_from_entry(entry: CacheEntry) -> Option<SurfaceArtifacts> {
+    let info = serde_json::from_value(entry.metadata).ok()?;
+    let [texture_file, preview_png]: [Vec<u8>; 2] = entry.blobs.try_into().ok()?;
+    Some(SurfaceArtifacts {
+        info,
+        texture_file: texture_file.into(),
+        preview_png: preview_png.into(),
+    })
+}
+
+fn load_cached<T>(
+    db: &dyn Db,
+    stage: &str,
+    key: CacheKey,
+    decode: impl FnOnce(CacheEntry) -> Option<T>,
+) -> Option<T> {
+    db.disk_cache()?.load(stage, key).and_then(decode)
+}
+
+fn store_cached(db: &dyn Db, stage: &str, key: CacheKey, entry: impl FnOnce() -> CacheEntry) {
+    if let Some(cache) = db.disk_cache() {
+        cache.store(stage, key, &entry());
+    }
+}

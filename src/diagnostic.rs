@@ -1,0 +1,89 @@
+//! Diagnostics: a problem with an input, carrying the file and, where the format has them, the
+//! line and column. Every stage reports bad input as a `Diagnostic`, never as a panic.
+
+use std::fmt;
+use std::path::{Path, PathBuf};
+
+use serde::{Deserialize, Serialize};
+
+/// A position in a text file, 1-based.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Hash, PartialOrd, Ord, Serialize, Deserialize)]
+pub struct TextPosition {
+    pub line: u32,
+    pub column: u32,
+}
+
+impl TextPosition {
+    /// The position of byte `offset` in `text` (1-based line and column, column in characters).
+    pub fn of_byte_offset(text: &str, offset: usize) -> TextPosition {
+        let offset = offset.min(text.len());
+        let before = &text[..floor_char_boundary(text, offset)];
+        let line = before.matches('\n').count() as u32 + 1;
+        let line_start = before.rfind('\n').map_or(0, |index| index + 1);
+        let column = before[line_start..].chars().count() as u32 + 1;
+        TextPosition { line, column }
+    }
+}
+
+fn floor_char_boundary(text: &str, mut offset: usize) -> usize {
+    while offset > 0 && !text.is_char_boundary(offset) {
+        offset -= 1;
+    }
+    offset
+}
+
+/// One problem with one input file.
+#[derive(Clone, Debug, PartialEq, Eq, Hash, Serialize, Deserialize)]
+pub struct Diagnostic {
+    /// The file at fault, relative to the project folder where it lies inside it.
+    pub file: PathBuf,
+    pub position: Option<TextPosition>,
+    pub message: String,
+}
+
+impl Diagnostic {
+    pub fn new(file: impl Into<PathBuf>, message: impl Into<String>) -> Diagnostic {
+        Diagnostic {
+            file: file.into(),
+            position: None,
+            message: message.into(),
+        }
+    }
+
+    pub fn at(
+        file: impl Into<PathBuf>,
+        position: TextPosition,
+        message: impl Into<String>,
+    ) -> Diagnostic {
+        Diagnostic {
+            file: file.into(),
+            position: Some(position),
+            message: message.into(),
+        }
+    }
+
+    pub fn line(&self) -> Option<u32> {
+        self.position.map(|position| position.line)
+    }
+
+    pub fn column(&self) -> Option<u32> {
+        self.position.map(|position| position.column)
+    }
+}
+
+impl fmt::Display for Diagnostic {
+    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
+        write!(f, "{}", display_path(&self.file))?;
+        if let Some(position) = self.position {
+            write!(f, ":{}:{}", position.line, position.column)?;
+        }
+        write!(f, ": {}", self.message)
+    }
+}
+
+impl std::error::Error for Diagnostic {}
+
+/// A path as users read it: forward slashes on every platform.
+pub fn display_path(path: &Path) -> String {
+    path.to_string_lossy().replace('\\', "/")
+}

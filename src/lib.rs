@@ -1,0 +1,28 @@
+//! cirrus: an incremental asset-pipeline daemon that bakes meshes into billboard-cloud LODs and
+//! texture sets into block-compressed GPU materials. Modules are listed in pipeline order.
+
+// Shell: configuration and diagnostics.
+pub mod config;
+pub mod diagnostic;
+
+// Stages, in pipeline order: pure functions over plain data.
+pub mod container;
+pub mod encode;
+pub mod material_definition;
+pub mod mips;
+pub mod openddl;
+pub mod preview;
+pub mod quality;
+pub mod surface;
+pub mod texture;
+
+// Salsa glue and the edges: persistent cache.
+pub mod cache;
+pub mod db;
+
+// The edges and the driver.
+pub mod artifacts;
+pub mod bake;
+pub mod cli;
+pub mod sources;
+pub mod summary;

@@ -1,0 +1,156 @@
+//! What a build reports: the `build --summary json` contract of DESIGN §6, its text rendering,
+//! and the per-asset `report.json`.
+
+use std::fmt::Write;
+
+use serde::Serialize;
+
+use crate::db::SurfaceInfo;
+use crate::diagnostic::{display_path, Diagnostic};
+
+#[derive(Clone, Debug, PartialEq, Serialize)]
+pub struct BuildSummary {
+    pub revision: u64,
+    pub assets: Vec<AssetSummary>,
+}
+
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Serialize)]
+#[serde(rename_all = "lowercase")]
+pub enum AssetStatus {
+    Ok,
+    Failed,
+}
+
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Serialize)]
+#[serde(rename_all = "lowercase")]
+pub enum StageStatus {
+    Ran,
+    Cached,
+    Failed,
+}
+
+#[derive(Clone, Debug, PartialEq, Serialize)]
+pub struct StageSummary {
+    pub stage: &'static str,
+    pub instance: String,
+    pub status: StageStatus,
+    pub ms: f64,
+}
+
+#[derive(Clone, Debug, PartialEq, Eq, Serialize)]
+pub struct ArtifactSummary {
+    /// Relative to the folder of `pipeline.ron`.
+    pub path: String,
+    /// blake3 hex digest.
+    pub hash: String,
+}
+
+#[derive(Clone, Debug, PartialEq, Eq, Serialize)]
+pub struct ErrorSummary {
+    pub file: String,
+    pub line: Option<u32>,
+    pub column: Option<u32>,
+    pub message: String,
+}
+
+impl From<&Diagnostic> for ErrorSummary {
+    fn from(diagnostic: &Diagnostic) -> Self {
+        ErrorSummary {
+            file: display_path(&diagnostic.file),
+            line: diagnostic.line(),
+            column: diagnostic.column(),
+            message: diagnostic.message.clone(),
+        }
+    }
+}
+
+#[derive(Clone, Debug, PartialEq, Serialize)]
+pub struct AssetSummary {
+    pub name: String,
+    pub kind: &'static str,
+    pub status: AssetStatus,
+    pub stages: Vec<StageSummary>,
+    pub artifacts: Vec<ArtifactSummary>,
+    pub errors: Vec<ErrorSummary>,
+}
+
+impl BuildSummary {
+    pub fn all_ok(&self) -> bool {
+        self.assets
+            .iter()
+            .all(|asset| asset.status == AssetStatus::Ok)
+    }
+
+    pub fn to_json(&self) -> String {
+        serde_json::to_string(self).expect("summaries serialise")
+    }
+
+    /// A human-readable summary: one line per asset, its errors indented below.
+    pub fn to_text(&self) -> String {
+        let mut text = String::new();
+        for asset in &self.assets {
+            let count = |status: StageStatus| {
+                asset
+                    .stages
+                    .iter()
+                    .filter(|stage| stage.status == status)
+                    .count()
+            };
+            let ms = asset
+                .stages
+                .iter()
+                .fold(0.0, |total, stage| total + stage.ms);
+            let status = match asset.status {
+                AssetStatus::Ok => "ok",
+                AssetStatus::Failed => "FAILED",
+            };
+            let _ = writeln!(
+                text,
+                "{status:<6} {} ({}): {} stages ran, {} cached, {} failed; {} artifacts; {ms:.0} ms of stage work",
+                asset.name,
+                asset.kind,
+                count(StageStatus::Ran),
+                count(StageStatus::Cached),
+                count(StageStatus::Failed),
+                asset.artifacts.len(),
+            );
+            for error in &asset.errors {
+                let position = match (error.line, error.column) {
+                    (Some(line), Some(column)) => format!(":{line}:{column}"),
+                    (Some(line), None) => format!(":{line}"),
+                    _ => String::new(),
+                };
+                let _ = writeln!(text, "       {}{position}: {}", error.file, error.message);
+            }
+        }
+        let _ = writeln!(text, "revision {}", self.revision);
+        text
+    }
+}
+
+/// `<output>/<asset>/report.json` of a `Material` asset: deterministic (no timings), so that it
+/// only changes when the artifacts do.
+#[derive(Clone, Debug, PartialEq, Serialize)]
+pub struct MaterialReport {
+    pub asset: String,
+    pub kind: &'static str,
+    pub file: String,
+    pub materials: Vec<MaterialReportEntry>,
+    pub warnings: Vec<ErrorSummary>,
+    pub errors: Vec<ErrorSummary>,
+}
+
+#[derive(Clone, Debug, PartialEq, Serialize)]
+pub struct MaterialReportEntry {
+    pub name: String,
+    pub display_name: Option<String>,
+    pub surfaces: Vec<SurfaceReport>,
+}
+
+#[derive(Clone, Debug, PartialEq, Serialize)]
+pub struct SurfaceReport {
+    pub path: String,
+    pub preview: String,
+    #[serde(flatten)]
+    pub info: SurfaceInfo,
+}

@@ -1,0 +1,246 @@
+//! Packed surfaces: the five source maps packed into the three GPU textures of a baked material
+//! (albedo+opacity, metallic/roughness/AO, normal XY), each at the largest size of its sources,
+//! smaller sources resampled with a Catmull-Rom filter, constants where a map is missing.
+
+use serde::{Deserialize, Serialize};
+
+use crate::material_definition::{MaterialConstants, TextureSlot};
+use crate::texture::Texture;
+
+/// The three textures of a baked material.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Hash, PartialOrd, Ord, Serialize, Deserialize)]
+pub enum SurfaceKind {
+    Albedo,
+    Mra,
+    Normal,
+}
+
+impl SurfaceKind {
+    pub const ALL: [SurfaceKind; 3] = [SurfaceKind::Albedo, SurfaceKind::Mra, SurfaceKind::Normal];
+
+    pub fn name(self) -> &'static str {
+        match self {
+            SurfaceKind::Albedo => "albedo",
+            SurfaceKind::Mra => "mra",
+            SurfaceKind::Normal => "normal",
+        }
+    }
+
+    /// The source maps this surface is packed from.
+    pub fn slots(self) -> &'static [TextureSlot] {
+        match self {
+            SurfaceKind::Albedo => &[TextureSlot::Albedo, TextureSlot::Opacity],
+            SurfaceKind::Mra => &[
+                TextureSlot::Metallic,
+                TextureSlot::Roughness,
+                TextureSlot::Ao,
+            ],
+            SurfaceKind::Normal => &[TextureSlot::Normal],
+        }
+    }
+
+    /// How many channels (from R) carry data: the channels that quality is measured on.
+    pub fn channels(self) -> usize {
+        match self {
+            SurfaceKind::Albedo => 4,
+            SurfaceKind::Mra => 3,
+            SurfaceKind::Normal => 2,
+        }
+    }
+
+    pub fn is_srgb(self) -> bool {
+        self == SurfaceKind::Albedo
+    }
+}
+
+/// Size of a surface with no source map at all: one BC block.
+const CONSTANT_SURFACE_SIDE: u32 = 4;
+
+/// Packs `kind` from its source maps (`None` where the material has no such map).
+/// `sources` must hold one entry per slot of `kind.slots()`, in that order.
+pub fn pack_surface(
+    kind: SurfaceKind,
+    sources: &[Option<&Texture>],
+    constants: &MaterialConstants,
+) -> Texture {
+    assert_eq!(sources.len(), kind.slots().len(), "one source per slot");
+    let width = sources
+        .iter()
+        .flatten()
+        .map(|texture| texture.width)
+        .max()
+        .unwrap_or(CONSTANT_SURFACE_SIDE);
+    let height = sources
+        .iter()
+        .flatten()
+        .map(|texture| texture.height)
+        .max()
+        .unwrap_or(CONSTANT_SURFACE_SIDE);
+    let resampled: Vec<Option<Vec<u8>>> = sources
+        .iter()
+        .zip(kind.slots())
+        .map(|(source, slot)| {
+            source.map(|texture| resample_rgba8(texture, width, height, slot.is_srgb()))
+        })
+        .collect();
+    let texel_count = (width * height) as usize;
+    let mut pixels = vec![0u8; texel_count * 4];
+    match kind {
+        SurfaceKind::Albedo => {
+            let constant = constants.albedo.map(|c| c.clamp(0.0, 1.0));
+            let constant_rgba = [
+                linear_to_srgb_u8(constant[0]),
+                linear_to_srgb_u8(constant[1]),
+                linear_to_srgb_u8(constant[2]),
+                unorm_u8(constant[3]),
+            ];
+            for (index, texel) in pixels.chunks_exact_mut(4).enumerate() {
+                let mut rgba = match &resampled[0] {
+                    Some(albedo) => [
+                        albedo[index * 4],
+                        albedo[index * 4 + 1],
+                        albedo[index * 4 + 2],
+                        albedo[index * 4 + 3],
+                    ],
+                    None => constant_rgba,
+                };
+                if let Some(opacity) = &resampled[1] {
+                    rgba[3] = ((rgba[3] as u32 * opacity[index * 4] as u32 + 127) / 255) as u8;
+                }
+                texel.copy_from_slice(&rgba);
+            }
+        }
+        SurfaceKind::Mra => {
+            let constant = [constants.metallic, constants.roughness, constants.ao].map(unorm_u8);
+            for (index, texel) in pixels.chunks_exact_mut(4).enumerate() {
+                for channel in 0..3 {
+                    texel[channel] = resampled[channel]
+                        .as_ref()
+                        .map_or(constant[channel], |map| map[index * 4]);
+                }
+                texel[3] = 255;
+            }
+        }
+        SurfaceKind::Normal => {
+            for (index, texel) in pixels.chunks_exact_mut(4).enumerate() {
+                let normal = match &resampled[0] {
+                    Some(map) => normalize_tangent_normal(decode_normal([
+                        map[index * 4],
+                        map[index * 4 + 1],
+                        map[index * 4 + 2],
+                    ])),
+                    None => [0.0, 0.0, 1.0],
+                };
+                texel.copy_from_slice(&encode_normal(normal));
+            }
+        }
+    }
+    Texture::new(width, height, pixels)
+}
+
+/// True when some texel of an albedo surface is not fully opaque.
+pub fn has_transparency(albedo: &Texture) -> bool {
+    albedo.pixels.chunks_exact(4).any(|texel| texel[3] < 255)
+}
+
+/// Resamples to `width` × `height` (Catmull-Rom; colour maps in linear light) as RGBA8.
+fn resample_rgba8(texture: &Texture, width: u32, height: u32, srgb: bool) -> Vec<u8> {
+    if texture.width == width && texture.height == height {
+        return texture.pixels.to_vec();
+    }
+    let floats: Vec<f32> = texture
+        .pixels
+        .chunks_exact(4)
+        .flat_map(|texel| {
+            let decode = |c: u8| {
+                if srgb {
+                    srgb_u8_to_linear(c)
+                } else {
+                    c as f32 / 255.0
+                }
+            };
+            [
+                decode(texel[0]),
+                decode(texel[1]),
+                decode(texel[2]),
+                texel[3] as f32 / 255.0,
+            ]
+        })
+        .collect();
+    let source =
+        image::Rgba32FImage::from_raw(texture.width, texture.height, floats).expect("sized above");
+    let resized = image::imageops::resize(
+        &source,
+        width,
+        height,
+        image::imageops::FilterType::CatmullRom,
+    );
+    resized
+        .into_raw()
+        .chunks_exact(4)
+        .flat_map(|texel| {
+            let encode = |c: f32| {
+                if srgb {
+                    linear_to_srgb_u8(c)
+                } else {
+                    unorm_u8(c)
+                }
+            };
+            [
+                encode(texel[0]),
+                encode(texel[1]),
+                encode(texel[2]),
+                unorm_u8(texel[3]),
+            ]
+        })
+        .collect()
+}
+
+pub fn unorm_u8(value: f32) -> u8 {
+    (value.clamp(0.0, 1.0) * 255.0 + 0.5) as u8
+}
+
+pub fn srgb_u8_to_linear(value: u8) -> f32 {
+    SRGB_TO_LINEAR[value as usize]
+}
+
+pub fn linear_to_srgb_u8(linear: f32) -> u8 {
+    let linear = linear.clamp(0.0, 1.0);
+    let srgb = if linear <= 0.003_130_8 {
+        linear * 12.92
+    } else {
+        1.055 * linear.powf(1.0 / 2.4) - 0.055
+    };
+    unorm_u8(srgb)
+}
+
+static SRGB_TO_LINEAR: std::sync::LazyLock<[f32; 256]> = std::sync::LazyLock::new(|| {
+    std::array::from_fn(|index| {
+        let c = index as f32 / 255.0;
+        if c <= 0.04045 {
+            c / 12.92
+        } else {
+            ((c + 0.055) / 1.055).powf(2.4)
+        }
+    })
+});
+
+pub fn decode_normal(rgb: [u8; 3]) -> [f32; 3] {
+    rgb.map(|c| c as f32 / 255.0 * 2.0 - 1.0)
+}
+
+pub fn encode_normal(normal: [f32; 3]) -> [u8; 4] {
+    let [x, y, z] = normal.map(|c| unorm_u8(c * 0.5 + 0.5));
+    [x, y, z, 255]
+}
+
+/// Unit length, facing out of the surface (z ≥ 0); a degenerate normal becomes flat.
+pub fn normalize_tangent_normal([x, y, z]: [f32; 3]) -> [f32; 3] {
+    let z = z.max(0.0);
+    let length = (x * x + y * y + z * z).sqrt();
+    if length < 1e-6 {
+        [0.0, 0.0, 1.0]
+    } else {
+        [x / length, y / length, z / length]
+    }
+}

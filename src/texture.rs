@@ -1,0 +1,144 @@
+//! Decoded source textures: PNG, JPEG, TGA, BMP or GIF bytes to RGBA8 pixels, with size limits
+//! so that a decompression bomb is an error, not an out-of-memory crash.
+
+use std::fmt;
+use std::io::Cursor;
+use std::path::Path;
+use std::sync::Arc;
+
+use crate::diagnostic::Diagnostic;
+
+/// Largest accepted width or height.
+pub const MAX_TEXTURE_SIDE: u32 = 16384;
+/// Largest accepted decoder allocation.
+pub const MAX_DECODE_BYTES: u64 = 1 << 30;
+
+/// An RGBA8 image, shared without copying. Equality is by content hash.
+#[derive(Clone)]
+pub struct Texture {
+    pub width: u32,
+    pub height: u32,
+    pub pixels: Arc<[u8]>,
+    pub hash: blake3::Hash,
+}
+
+impl Texture {
+    pub fn new(width: u32, height: u32, pixels: Vec<u8>) -> Texture {
+        assert_eq!(
+            pixels.len(),
+            (width * height * 4) as usize,
+            "RGBA8 pixel count"
+        );
+        let hash = blake3::hash(&pixels);
+        Texture {
+            width,
+            height,
+            pixels: pixels.into(),
+            hash,
+        }
+    }
+
+    /// A one-colour texture of `width` × `height`.
+    pub fn constant(width: u32, height: u32, rgba: [u8; 4]) -> Texture {
+        Texture::new(width, height, rgba.repeat((width * height) as usize))
+    }
+
+    pub fn texel(&self, x: u32, y: u32) -> [u8; 4] {
+        let index = ((y * self.width + x) * 4) as usize;
+        [
+            self.pixels[index],
+            self.pixels[index + 1],
+            self.pixels[index + 2],
+            self.pixels[index + 3],
+        ]
+    }
+}
+
+impl PartialEq for Texture {
+    fn eq(&self, other: &Self) -> bool {
+        self.width == other.width && self.height == other.height && self.hash == other.hash
+    }
+}
+
+impl Eq for Texture {}
+
+impl fmt::Debug for Texture {
+    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
+        write!(
+            f,
+            "Texture({}x{}, {})",
+            self.width,
+            self.height,
+            &self.hash.to_hex()[..12]
+        )
+    }
+}
+
+/// Reads only the header of the image `bytes`: its size, or why it cannot be decoded.
+pub fn probe_texture(file: &Path, bytes: &[u8]) -> Result<(u32, u32), Diagnostic> {
+    let reader = image_reader(file, bytes)?;
+    let (width, height) = reader
+        .into_dimensions()
+        .map_err(|error| Diagnostic::new(file, format!("cannot read the image header: {error}")))?;
+    if width > MAX_TEXTURE_SIDE || height > MAX_TEXTURE_SIDE {
+        return Err(Diagnostic::new(file, format!("the image is {width}×{height}, larger than the decoder limit of {MAX_TEXTURE_SIDE}² texels")));
+    }
+    Ok((width, height))
+}
+
+/// Decodes the image `bytes` read from `file`; the format comes from the bytes, else the extension.
+pub fn decode_texture(file: &Path, bytes: &[u8]) -> Result<Texture, Diagnostic> {
+    let mut reader = image_reader(file, bytes)?;
+    let mut limits = image::Limits::default();
+    limits.max_image_width = Some(MAX_TEXTURE_SIDE);
+    limits.max_image_height = Some(MAX_TEXTURE_SIDE);
+    limits.max_alloc = Some(MAX_DECODE_BYTES);
+    reader.limits(limits);
+    let image = reader.decode().map_err(|error| {
+        let message = match error {
+            image::ImageError::Limits(_) => format!(
+                "the image is larger than the decoder limits ({MAX_TEXTURE_SIDE}² texels, {} MiB)",
+                MAX_DECODE_BYTES >> 20
+            ),
+            other => format!("cannot decode the image: {other}"),
+        };
+        Diagnostic::new(file, message)
+    })?;
+    if image.width() == 0 || image.height() == 0 {
+        return Err(Diagnostic::new(file, "the image is empty"));
+    }
+    let rgba = image.into_rgba8();
+    Ok(Texture::new(rgba.width(), rgba.height(), rgba.into_raw()))
+}
+
+fn image_reader<'a>(
+    file: &Path,
+    bytes: &'a [u8],
+) -> Result<image::ImageReader<Cursor<&'a [u8]>>, Diagnostic> {
+    let mut reader = image::ImageReader::new(Cursor::new(bytes))
+        .with_guessed_format()
+        .map_err(|error| Diagnostic::new(file, format!("cannot read the image: {error}")))?;
+    if reader.format().is_none() {
+        reader.set_format(
+            image::ImageFormat::from_path(file)
+                .map_err(|_| Diagnostic::new(file, "not a PNG, JPEG, TGA, BMP or GIF image"))?,
+        );
+    }
+    let format = reader.format();
+    if !matches!(
+        format,
+        Some(
+            image::ImageFormat::Png
+                | image::ImageFormat::Jpeg
+                | image::ImageFormat::Tga
+                | image::ImageFormat::Bmp
+                | image::ImageFormat::Gif
+        )
+    ) {
+        return Err(Diagnostic::new(
+            file,
+            "not a PNG, JPEG, TGA, BMP or GIF image",
+        ));
+    }
+    Ok(reader)
+}

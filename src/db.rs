@@ -15,9 +15,7 @@ use crate::config::{BlockFormat, Container, EncodeQuality, Settings};
 use crate::container::write_container;
 use crate::diagnostic::Diagnostic;
 use crate::encode::{encode_levels, BlockEncodeSettings, EncodedTexture};
-use crate::material_definition::{
-    parse_material_file, MaterialConstants, MaterialFile, TextureReference,
-};
+use crate::material_definition::{parse_material_file, MaterialConstants, MaterialFile};
 use crate::mips::{mip_chain, MipSettings};
 use crate::preview::preview_png;
 use crate::quality::{decode_blocks, psnr};
@@ -307,7 +305,8 @@ pub fn decoded_texture(db: &dyn Db, file: SourceFile) -> Result<Arc<Texture>, Di
 #[derive(Clone, Debug, PartialEq)]
 pub struct SurfaceRecipe {
     pub material_file: PathBuf,
-    pub sources: Vec<Option<(TextureReference, SourceFile)>>,
+    /// One entry per slot of the surface; `None` where the material has no such map.
+    pub sources: Vec<Option<SourceFile>>,
     pub constants: MaterialConstants,
 }
 
@@ -352,7 +351,7 @@ pub fn surface_recipe(db: &dyn Db, key: SurfaceKey) -> Result<Arc<SurfaceRecipe>
                 ),
             ));
         }
-        sources.push(Some((reference.clone(), file)));
+        sources.push(Some(file));
     }
     Ok(Arc::new(SurfaceRecipe {
         material_file: material_path,
@@ -413,7 +412,7 @@ pub fn packed_surface(db: &dyn Db, key: SurfaceKey) -> Result<Arc<Texture>, Diag
     let mut decoded = Vec::new();
     for source in &recipe.sources {
         decoded.push(match source {
-            Some((_, file)) => Some(decoded_texture(db, *file)?),
+            Some(file) => Some(decoded_texture(db, *file)?),
             None => None,
         });
     }
@@ -540,7 +539,7 @@ pub fn surface_artifacts(
         .debug(&file_settings);
     for source in &recipe.sources {
         cache_key = match source {
-            Some((_, file)) => cache_key.bytes(read_contents(db, *file)?.hash.as_bytes()),
+            Some(file) => cache_key.bytes(read_contents(db, *file)?.hash.as_bytes()),
             None => cache_key.bytes(b"none"),
         };
     }

@@ -1,0 +1,159 @@
+//! Benchmark (`cargo bench`): material-bake throughput next to the raw encoder's on the same
+//! maps, and a no-op rebuild and a warm restart next to a full bake. Prints figures.
+
+use std::path::Path;
+use std::time::Instant;
+
+use cirrus::bake::{BuildOptions, Project, ProjectOptions};
+use cirrus::config::{load_pipeline, BlockFormat, EncodeQuality};
+use cirrus::encode::{encode_levels, BlockEncodeSettings};
+use cirrus::mips::{mip_chain, MipSettings};
+use cirrus::surface::SurfaceKind;
+use cirrus::texture::Texture;
+
+fn main() {
+    let repository = Path::new(env!("CARGO_MANIFEST_DIR"));
+    let corpus = repository.join("../shared/assets");
+    let mut sources = vec![(
+        "bundled examples",
+        repository.join("examples/assets"),
+        "materials/*.mymaterial",
+    )];
+    if corpus.join("materials").is_dir() {
+        sources.push(("corpus", corpus, "materials/*.mymaterial"));
+    }
+    for (label, source, glob) in sources {
+        bench_project(label, &source.canonicalize().expect("source folder"), glob);
+    }
+}
+
+fn bench_project(label: &str, source: &Path, glob: &str) {
+    let dir = tempfile::tempdir().expect("temporary folder");
+    std::os::unix::fs::symlink(source, dir.path().join("assets")).expect("link sources");
+    let pipeline = dir.path().join("pipeline.ron");
+    std::fs::write(&pipeline, format!(r#"Pipeline(source: "assets", output: "baked", rules: [(glob: "{glob}", kind: Material)])"#)).unwrap();
+    let open = || {
+        Project::open(
+            load_pipeline(&pipeline).expect("pipeline"),
+            ProjectOptions::default(),
+        )
+    };
+
+    let mut project = open();
+    let start = Instant::now();
+    let summary = project
+        .build(&BuildOptions::default(), &|_| {})
+        .expect("build");
+    let full = start.elapsed().as_secs_f64();
+    assert!(summary.all_ok(), "{}", summary.to_text());
+    let start = Instant::now();
+    project
+        .build(&BuildOptions::default(), &|_| {})
+        .expect("build");
+    let no_op = start.elapsed().as_secs_f64();
+    drop(project);
+    let start = Instant::now();
+    let warm = open()
+        .build(&BuildOptions::default(), &|_| {})
+        .expect("build");
+    let restart = start.elapsed().as_secs_f64();
+    assert!(warm.assets.iter().all(|asset| asset
+        .stages
+        .iter()
+        .all(|stage| stage.status == cirrus::summary::StageStatus::Cached)));
+
+    // The raw encoder on the same packed surfaces (mips prepared outside the timing).
+    let mut chains = Vec::new();
+    for report in glob_reports(&dir.path().join("baked")) {
+        let report: serde_json::Value =
+            serde_json::from_slice(&std::fs::read(report).unwrap()).unwrap();
+        for material in report["materials"].as_array().unwrap() {
+            for surface in material["surfaces"].as_array().unwrap() {
+                let preview = image::open(dir.path().join(surface["preview"].as_str().unwrap()))
+                    .unwrap()
+                    .into_rgba8();
+                let texture = Texture::new(preview.width(), preview.height(), preview.into_raw());
+                let kind = match surface["surface"].as_str().unwrap() {
+                    "Albedo" => SurfaceKind::Albedo,
+                    "Mra" => SurfaceKind::Mra,
+                    _ => SurfaceKind::Normal,
+                };
+                let format: BlockFormat =
+                    serde_json::from_value(surface["format"].clone()).unwrap();
+                let alpha = surface["alpha_tested"].as_bool().unwrap();
+                let levels = mip_chain(
+                    &texture,
+                    MipSettings {
+                        kind,
+                        alpha_cutoff: alpha.then_some(0.5),
+                    },
+                );
+                chains.push((
+                    levels,
+                    BlockEncodeSettings {
+                        format,
+                        quality: EncodeQuality::Basic,
+                        alpha,
+                        srgb: kind.is_srgb(),
+                    },
+                ));
+            }
+        }
+    }
+    let texels: f64 = chains
+        .iter()
+        .flat_map(|(levels, _)| {
+            levels
+                .iter()
+                .map(|level| (level.width * level.height) as f64)
+        })
+        .sum();
+    let start = Instant::now();
+    for (levels, settings) in &chains {
+        std::hint::black_box(encode_levels(levels, *settings));
+    }
+    let raw = start.elapsed().as_secs_f64();
+    let bake_rate = texels / full / 1e6;
+    let raw_rate = texels / raw / 1e6;
+    println!(
+        "{label}: {} surfaces, {:.1} Mpix encoded (all mip levels)",
+        chains.len(),
+        texels / 1e6
+    );
+    println!("  full bake        {:>8.1} ms  {bake_rate:>6.2} Mpix/s (decode + pack + mips + encode + write)", full * 1e3);
+    println!(
+        "  raw encoder      {:>8.1} ms  {raw_rate:>6.2} Mpix/s (intel_tex_2 on the same levels)",
+        raw * 1e3
+    );
+    println!(
+        "  bake / raw       {:>8.2} ×   (bar ≥ 0.8)",
+        bake_rate / raw_rate
+    );
+    println!(
+        "  no-op rebuild    {:>8.1} ms  {:>6.1} % of the full bake (bar ≤ 5 %)",
+        no_op * 1e3,
+        100.0 * no_op / full
+    );
+    println!(
+        "  warm restart     {:>8.1} ms  {:>6.1} % of the full bake (bar ≤ 5 %)",
+        restart * 1e3,
+        100.0 * restart / full
+    );
+}
+
+fn glob_reports(folder: &Path) -> Vec<std::path::PathBuf> {
+    let mut found = Vec::new();
+    let mut folders = vec![folder.to_path_buf()];
+    while let Some(folder) = folders.pop() {
+        for entry in std::fs::read_dir(folder).unwrap().flatten() {
+            let path = entry.path();
+            if path.is_dir() {
+                folders.push(path);
+            } else if path.file_name().is_some_and(|name| name == "report.json") {
+                found.push(path);
+            }
+        }
+    }
+    found.sort();
+    found
+}

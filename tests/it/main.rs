@@ -1,0 +1,9 @@
+//! The integration tests of cirrus: one binary, one module per concern.
+
+mod support;
+
+mod bake;
+mod cli;
+mod config;
+mod incremental;
+mod material_files;

@@ -1,0 +1,167 @@
+//! Test support: temporary projects with generated textures, builds through the library and the
+//! binary, and readers for the written containers.
+
+use std::path::{Path, PathBuf};
+
+use cirrus::bake::{BuildOptions, Project, ProjectOptions};
+use cirrus::config::load_pipeline;
+use cirrus::summary::BuildSummary;
+use cirrus::texture::Texture;
+
+/// A project in a temporary folder: `pipeline.ron` at its root, sources under `assets/`.
+pub struct TempProject {
+    pub dir: tempfile::TempDir,
+}
+
+impl TempProject {
+    pub fn new(pipeline: &str) -> TempProject {
+        let dir = tempfile::tempdir().expect("temporary folder");
+        std::fs::write(dir.path().join("pipeline.ron"), pipeline).expect("write pipeline");
+        TempProject { dir }
+    }
+
+    pub fn root(&self) -> &Path {
+        self.dir.path()
+    }
+
+    pub fn path(&self, relative: &str) -> PathBuf {
+        self.dir.path().join(relative)
+    }
+
+    pub fn write(&self, relative: &str, bytes: impl AsRef<[u8]>) {
+        let path = self.path(relative);
+        std::fs::create_dir_all(path.parent().expect("has a folder")).expect("create folder");
+        std::fs::write(path, bytes).expect("write file");
+    }
+
+    pub fn read(&self, relative: &str) -> Vec<u8> {
+        std::fs::read(self.path(relative))
+            .unwrap_or_else(|error| panic!("read {relative}: {error}"))
+    }
+
+    pub fn open(&self) -> Project {
+        let config = load_pipeline(&self.path("pipeline.ron")).expect("valid pipeline");
+        Project::open(config, ProjectOptions::default())
+    }
+
+    /// Runs the `cirrus` binary in the project folder.
+    pub fn run_cli(&self, arguments: &[&str]) -> std::process::Output {
+        std::process::Command::new(env!("CARGO_BIN_EXE_cirrus"))
+            .args(arguments)
+            .current_dir(self.root())
+            .output()
+            .expect("run cirrus")
+    }
+}
+
+pub fn build(project: &mut Project) -> BuildSummary {
+    project
+        .build(&BuildOptions::default(), &|_| {})
+        .expect("build runs")
+}
+
+/// A deterministic RGBA8 PNG: smooth gradients plus a pattern, seeded by `seed`.
+pub fn pattern_png(width: u32, height: u32, seed: u32) -> Vec<u8> {
+    let mut pixels = Vec::with_capacity((width * height * 4) as usize);
+    for y in 0..height {
+        for x in 0..width {
+            let fx = x as f32 / width as f32;
+            let fy = y as f32 / height as f32;
+            let s = seed as f32;
+            let r = 0.5 + 0.4 * (fx * 6.0 + s).sin() * (fy * 3.0).cos();
+            let g = 0.5 + 0.4 * (fy * 5.0 + s * 0.7).sin();
+            let b = 0.5 + 0.4 * ((fx + fy) * 4.0 + s * 1.3).cos();
+            pixels.extend_from_slice(&[r, g, b].map(|c| (c * 255.0) as u8));
+            pixels.push(255);
+        }
+    }
+    png_bytes(width, height, &pixels)
+}
+
+/// An RGBA8 PNG with an alpha-tested mask: soft-edged discs and thin semi-opaque lines (the thin
+/// features that plain box-filtered mips lose).
+pub fn cutout_png(width: u32, height: u32) -> Vec<u8> {
+    let mut pixels = Vec::with_capacity((width * height * 4) as usize);
+    for y in 0..height {
+        for x in 0..width {
+            let (cx, cy) = ((x % 32) as f32 - 15.5, (y % 32) as f32 - 15.5);
+            let disc = ((9.0 - (cx * cx + cy * cy).sqrt()) / 3.0 + 0.5).clamp(0.0, 1.0);
+            let varying = 0.6 + 0.3 * ((x * 7 + y * 13) % 17) as f32 / 16.0;
+            let line = if x % 32 == 30 || y % 16 == 7 {
+                varying
+            } else {
+                0.0
+            };
+            let alpha = (disc.max(line) * 255.0) as u8;
+            pixels.extend_from_slice(&[40, (120 + x % 100) as u8, 30, alpha]);
+        }
+    }
+    png_bytes(width, height, &pixels)
+}
+
+pub fn png_bytes(width: u32, height: u32, rgba: &[u8]) -> Vec<u8> {
+    let mut bytes = Vec::new();
+    image::ImageEncoder::write_image(
+        image::codecs::png::PngEncoder::new(&mut bytes),
+        rgba,
+        width,
+        height,
+        image::ExtendedColorType::Rgba8,
+    )
+    .expect("encode PNG");
+    bytes
+}
+
+pub fn decode_png(bytes: &[u8]) -> Texture {
+    let image = image::load_from_memory(bytes)
+        .expect("decode PNG")
+        .into_rgba8();
+    Texture::new(image.width(), image.height(), image.into_raw())
+}
+
+/// The fields of a KTX2 file that tests check.
+#[derive(Debug)]
+pub struct Ktx2 {
+    pub vk_format: u32,
+    pub width: u32,
+    pub height: u32,
+    pub supercompression: u32,
+    /// (offset, length, uncompressed length) per level, level 0 first.
+    pub levels: Vec<(u64, u64, u64)>,
+    pub dfd: Vec<u8>,
+}
+
+pub fn read_ktx2(bytes: &[u8]) -> Ktx2 {
+    assert_eq!(
+        &bytes[..12],
+        &cirrus::container::KTX2_IDENTIFIER,
+        "KTX2 identifier"
+    );
+    let u32_at = |offset: usize| u32::from_le_bytes(bytes[offset..offset + 4].try_into().unwrap());
+    let u64_at = |offset: usize| u64::from_le_bytes(bytes[offset..offset + 8].try_into().unwrap());
+    let level_count = u32_at(40).max(1) as usize;
+    let levels = (0..level_count).map(|level| {
+        let at = 80 + level * 24;
+        (u64_at(at), u64_at(at + 8), u64_at(at + 16))
+    });
+    let (dfd_offset, dfd_length) = (u32_at(48) as usize, u32_at(52) as usize);
+    Ktx2 {
+        vk_format: u32_at(12),
+        width: u32_at(20),
+        height: u32_at(24),
+        supercompression: u32_at(44),
+        levels: levels.collect(),
+        dfd: bytes[dfd_offset..dfd_offset + dfd_length].to_vec(),
+    }
+}
+
+/// The block data of one KTX2 level (decompressed when the file is zstd-supercompressed).
+pub fn ktx2_level(bytes: &[u8], ktx2: &Ktx2, level: usize) -> Vec<u8> {
+    let (offset, length, uncompressed) = ktx2.levels[level];
+    let data = &bytes[offset as usize..(offset + length) as usize];
+    if ktx2.supercompression == 2 {
+        zstd::bulk::decompress(data, uncompressed as usize).expect("zstd level")
+    } else {
+        data.to_vec()
+    }
+}

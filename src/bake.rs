@@ -11,7 +11,7 @@ use std::sync::{Arc, Mutex};
 use salsa::plumbing::AsId;
 use salsa::Setter;
 
-use crate::artifacts::{load_manifest, save_manifest, write_if_changed, ManifestEntry};
+use crate::artifacts::{load_manifest, save_manifest, write_if_changed, Manifest, ManifestEntry};
 use crate::cache::DiskCache;
 use crate::config::{AssetConfig, AssetSource, PipelineConfig, Settings};
 use crate::db::{
@@ -165,8 +165,8 @@ impl Project {
         let mut results = results.into_iter();
         for plan in &mut plans {
             let surface_results: Vec<_> = results.by_ref().take(plan.surfaces.len()).collect();
-            let mut produced = BTreeSet::new();
-            let asset_name = plan.config.name.clone();
+            // Project-relative artifact path → blake3 hex of what this build wrote there.
+            let mut produced = BTreeMap::new();
             for result in &surface_results {
                 if let Err(diagnostic) = result {
                     if !plan.errors.contains(diagnostic) {
@@ -174,18 +174,7 @@ impl Project {
                     }
                 }
             }
-            let report =
-                self.write_surfaces(plan, &surface_results, &mut produced, &mut |path, bytes| {
-                    record_artifact(
-                        &mut manifest,
-                        &mut changed,
-                        next_revision,
-                        &asset_name,
-                        path,
-                        bytes,
-                    )
-                });
-            if let Some(report) = report {
+            if let Some(report) = self.write_surfaces(plan, &surface_results, &mut produced) {
                 let mut bytes = serde_json::to_vec_pretty(&report).expect("reports serialise");
                 bytes.push(b'\n');
                 let path = self
@@ -193,55 +182,28 @@ impl Project {
                     .output
                     .join(&plan.config.name)
                     .join("report.json");
-                self.write_artifact(
-                    &path,
-                    &bytes,
-                    &mut plan.errors,
-                    &mut produced,
-                    &mut |path, bytes| {
-                        record_artifact(
-                            &mut manifest,
-                            &mut changed,
-                            next_revision,
-                            &asset_name,
-                            path,
-                            bytes,
-                        )
-                    },
-                );
+                self.write_artifact(&path, &bytes, &mut plan.errors, &mut produced);
+            }
+            for (path, hash) in &produced {
+                changed |=
+                    record_artifact(&mut manifest, next_revision, &plan.config.name, path, hash);
             }
             if plan.errors.is_empty() {
                 // A fully baked asset owns exactly what it produced: drop stale artifacts.
-                let stale: Vec<String> = manifest
-                    .artifacts
-                    .iter()
-                    .filter(|(path, entry)| {
-                        entry.asset == plan.config.name && !produced.contains(*path)
-                    })
-                    .map(|(path, _)| path.clone())
-                    .collect();
-                for path in stale {
-                    let _ = std::fs::remove_file(self.config.root.join(&path));
-                    manifest.artifacts.remove(&path);
-                    changed = true;
-                }
+                let name = &plan.config.name;
+                changed |= remove_artifacts(&self.config.root, &mut manifest, |path, entry| {
+                    &entry.asset == name && !produced.contains_key(path)
+                });
             }
             summaries.push(self.asset_summary(plan, &surface_results, &runs, &manifest));
         }
         if options.only_assets.is_empty() {
+            // Artifacts of assets that left the pipeline.
             let names: BTreeSet<&str> =
                 all_assets.iter().map(|asset| asset.name.as_str()).collect();
-            let removed: Vec<String> = manifest
-                .artifacts
-                .iter()
-                .filter(|(_, entry)| !names.contains(entry.asset.as_str()))
-                .map(|(path, _)| path.clone())
-                .collect();
-            for path in removed {
-                let _ = std::fs::remove_file(self.config.root.join(&path));
-                manifest.artifacts.remove(&path);
-                changed = true;
-            }
+            changed |= remove_artifacts(&self.config.root, &mut manifest, |_, entry| {
+                !names.contains(entry.asset.as_str())
+            });
         }
         if changed {
             manifest.revision = next_revision;
@@ -522,8 +484,7 @@ impl Project {
         &self,
         plan: &mut AssetPlan,
         results: &[Result<Arc<SurfaceArtifacts>, Diagnostic>],
-        produced: &mut BTreeSet<String>,
-        record: &mut dyn FnMut(&Path, &[u8]),
+        produced: &mut BTreeMap<String, String>,
     ) -> Option<MaterialReport> {
         let parsed = plan.parsed.clone()?;
         let asset_dir = self.config.output.join(&plan.config.name);
@@ -547,14 +508,12 @@ impl Project {
                     &artifacts.texture_file,
                     &mut plan.errors,
                     produced,
-                    record,
                 );
                 self.write_artifact(
                     &preview_path,
                     &artifacts.preview_png,
                     &mut plan.errors,
                     produced,
-                    record,
                 );
                 surfaces.push(SurfaceReport {
                     path: display_path(&texture_path),
@@ -578,19 +537,17 @@ impl Project {
         })
     }
 
-    /// Writes one artifact (project-relative `path`) if its bytes changed and records it.
+    /// Writes one artifact (project-relative `path`) if its bytes changed and records its hash.
     fn write_artifact(
         &self,
         path: &Path,
         bytes: &[u8],
         errors: &mut Vec<Diagnostic>,
-        produced: &mut BTreeSet<String>,
-        record: &mut dyn FnMut(&Path, &[u8]),
+        produced: &mut BTreeMap<String, String>,
     ) {
         match write_if_changed(&self.config.root.join(path), bytes) {
             Ok(_) => {
-                produced.insert(display_path(path));
-                record(path, bytes);
+                produced.insert(display_path(path), blake3::hash(bytes).to_hex().to_string());
             }
             Err(error) => errors.push(Diagnostic::new(
                 path,
@@ -604,7 +561,7 @@ impl Project {
         plan: &AssetPlan,
         results: &[Result<Arc<SurfaceArtifacts>, Diagnostic>],
         runs: &[StageRun],
-        manifest: &crate::artifacts::Manifest,
+        manifest: &Manifest,
     ) -> AssetSummary {
         let status_of = |stage: Stage, id: salsa::Id, failed: bool| -> (StageStatus, f64) {
             if failed {
@@ -680,29 +637,46 @@ impl Project {
     }
 }
 
+/// Records an artifact in the manifest; true when the entry is new or its bytes changed.
 fn record_artifact(
-    manifest: &mut crate::artifacts::Manifest,
-    changed: &mut bool,
+    manifest: &mut Manifest,
     revision: u64,
     asset: &str,
-    path: &Path,
-    bytes: &[u8],
-) {
-    let hash = blake3::hash(bytes).to_hex().to_string();
-    let key = display_path(path);
+    path: &str,
+    hash: &str,
+) -> bool {
     let unchanged = manifest
         .artifacts
-        .get(&key)
+        .get(path)
         .is_some_and(|entry| entry.hash == hash && entry.asset == asset);
     if !unchanged {
         manifest.artifacts.insert(
-            key,
+            path.to_string(),
             ManifestEntry {
                 asset: asset.to_string(),
-                hash,
+                hash: hash.to_string(),
                 revision,
             },
         );
-        *changed = true;
     }
+    !unchanged
+}
+
+/// Deletes the artifacts `doomed` selects, file and manifest entry; true when any was removed.
+fn remove_artifacts(
+    root: &Path,
+    manifest: &mut Manifest,
+    doomed: impl Fn(&str, &ManifestEntry) -> bool,
+) -> bool {
+    let paths: Vec<String> = manifest
+        .artifacts
+        .iter()
+        .filter(|(path, entry)| doomed(path, entry))
+        .map(|(path, _)| path.clone())
+        .collect();
+    for path in &paths {
+        let _ = std::fs::remove_file(root.join(path));
+        manifest.artifacts.remove(path);
+    }
+    !paths.is_empty()
 }

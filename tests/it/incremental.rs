@@ -6,6 +6,21 @@ use expect_test::expect;
 
 use crate::support::{build, pattern_png, TempProject};
 
+/// `asset: stage(instance)` of every stage the build summary says ran.
+fn ran_stages(summary: &cirrus::summary::BuildSummary) -> Vec<String> {
+    summary
+        .assets
+        .iter()
+        .flat_map(|asset| {
+            let ran = asset
+                .stages
+                .iter()
+                .filter(|stage| stage.status == StageStatus::Ran);
+            ran.map(|stage| format!("{}: {}({})", asset.name, stage.stage, stage.instance))
+        })
+        .collect()
+}
+
 /// Two assets; `ao_a.png` feeds `first/one` and `second/three`, `ao_b.png` feeds `first/two`.
 fn two_asset_project(albedo_format: &str) -> TempProject {
     let project = TempProject::new(&format!(
@@ -63,17 +78,7 @@ fn editing_an_ao_map_reencodes_only_the_mra_surfaces_that_use_it() {
         ]
     "#]]
     .assert_debug_eq(&cirrus.take_executed_stages());
-    let ran: Vec<String> = summary
-        .assets
-        .iter()
-        .flat_map(|asset| {
-            asset
-                .stages
-                .iter()
-                .filter(|stage| stage.status == StageStatus::Ran)
-                .map(move |stage| format!("{} {} {}", asset.name, stage.stage, stage.instance))
-        })
-        .collect();
+    let ran = ran_stages(&summary);
     assert_eq!(ran.len(), 10, "the summary agrees with the event log (the shared decode is listed under both assets): {ran:?}");
 }
 
@@ -177,24 +182,14 @@ fn a_restart_with_unchanged_sources_runs_no_stage() {
     project.write("assets/ao_b.png", pattern_png(32, 32, 77));
     let mut again = project.open();
     let summary = build(&mut again);
-    let ran: Vec<String> = summary
-        .assets
-        .iter()
-        .flat_map(|asset| {
-            asset
-                .stages
-                .iter()
-                .filter(|stage| stage.status == StageStatus::Ran)
-                .map(|stage| format!("{}({})", stage.stage, stage.instance))
-        })
-        .collect();
+    let ran = ran_stages(&summary);
     expect![[r#"
         [
-            "decode(assets/ao_b.png)",
-            "pack(two/mra)",
-            "mips(two/mra)",
-            "encode(two/mra)",
-            "write(two/mra)",
+            "first: decode(assets/ao_b.png)",
+            "first: pack(two/mra)",
+            "first: mips(two/mra)",
+            "first: encode(two/mra)",
+            "first: write(two/mra)",
         ]
     "#]]
     .assert_debug_eq(&ran);

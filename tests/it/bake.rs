@@ -285,4 +285,17 @@ fn report_json_lists_every_surface_with_its_measured_psnr() {
             .as_str()
     );
     assert_eq!(entry["revision"], 1);
+    #[cfg(unix)]
+    {
+        use std::os::unix::fs::PermissionsExt;
+        let mode = std::fs::metadata(project.path("baked/bark/oak_bark/albedo.ktx2"))
+            .unwrap()
+            .permissions()
+            .mode();
+        assert_eq!(
+            mode & 0o644,
+            0o644,
+            "artifacts are readable by other users: {mode:o}"
+        );
+    }
 }

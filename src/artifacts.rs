@@ -21,6 +21,15 @@ pub fn write_if_changed(path: &Path, bytes: &[u8]) -> std::io::Result<bool> {
     let mut temporary = tempfile::Builder::new()
         .prefix(".cirrus-tmp-")
         .tempfile_in(folder)?;
+    #[cfg(unix)]
+    {
+        // Artifacts are read by engines and tools running as other users: rw-r--r--, not the
+        // temporary file's private default.
+        use std::os::unix::fs::PermissionsExt;
+        temporary
+            .as_file()
+            .set_permissions(std::fs::Permissions::from_mode(0o644))?;
+    }
     temporary.write_all(bytes)?;
     temporary.as_file().sync_data()?;
     temporary.persist(path).map_err(|error| error.error)?;

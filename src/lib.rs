@@ -9,6 +9,7 @@ pub mod diagnostic;
 pub mod container;
 pub mod encode;
 pub mod material_definition;
+pub mod mesh;
 pub mod mips;
 pub mod openddl;
 pub mod preview;

@@ -86,3 +86,140 @@ fn every_corpus_material_bakes_and_meets_the_psnr_bars() {
     assert_eq!(figures.len(), 18, "six materials, three surfaces each");
     println!("{}", figures.join("\n"));
 }
+
+/// Loads `relative` (inside the corpus) the way the driver does: MTL files served by path.
+fn load_corpus_mesh(
+    relative: &str,
+) -> Result<(cirrus::mesh::Mesh, Vec<cirrus::diagnostic::Diagnostic>), cirrus::diagnostic::Diagnostic>
+{
+    let root = corpus();
+    let path = Path::new(relative);
+    let bytes = std::fs::read(root.join(path)).expect("read OBJ");
+    let libraries = cirrus::mesh::material_libraries(path, &bytes)
+        .into_iter()
+        .map(|library| {
+            let bytes = std::fs::read(root.join(&library)).ok();
+            (library, bytes)
+        })
+        .collect();
+    cirrus::mesh::load_mesh(path, &bytes, &libraries, Path::new(""))
+}
+
+#[test]
+fn every_obj_conformance_file_loads_or_fails_cleanly() {
+    let root = corpus();
+    let mut files = Vec::new();
+    let mut folders = vec![root.join("obj_conformance")];
+    while let Some(folder) = folders.pop() {
+        for entry in std::fs::read_dir(folder).expect("folder").flatten() {
+            let path = entry.path();
+            if path.is_dir() {
+                folders.push(path);
+            } else if path
+                .extension()
+                .is_some_and(|extension| extension.eq_ignore_ascii_case("obj"))
+            {
+                files.push(
+                    path.strip_prefix(&root)
+                        .unwrap()
+                        .to_string_lossy()
+                        .into_owned(),
+                );
+            }
+        }
+    }
+    files.sort();
+    assert!(
+        files.len() >= 100,
+        "the conformance suite has its files: {}",
+        files.len()
+    );
+    let (mut loaded, mut failed) = (0, Vec::new());
+    for file in &files {
+        match std::panic::catch_unwind(|| load_corpus_mesh(file)) {
+            Err(_) => panic!("{file}: the loader panicked"),
+            Ok(Ok((mesh, _))) => {
+                loaded += 1;
+                assert_eq!(
+                    mesh.triangles.len(),
+                    mesh.triangle_materials.len(),
+                    "{file}"
+                );
+                assert!(
+                    mesh.normals.iter().all(|n| n.iter().all(|c| c.is_finite())),
+                    "{file}: finite normals"
+                );
+                assert!(
+                    mesh.triangles
+                        .iter()
+                        .flatten()
+                        .all(|&index| (index as usize) < mesh.positions.len()),
+                    "{file}"
+                );
+            }
+            Ok(Err(diagnostic)) => {
+                assert!(
+                    diagnostic
+                        .file
+                        .to_string_lossy()
+                        .contains(Path::new(file).file_name().unwrap().to_str().unwrap()),
+                    "{diagnostic} names the file"
+                );
+                failed.push(diagnostic.to_string());
+            }
+        }
+    }
+    println!(
+        "{loaded} loaded, {} failed cleanly:\n{}",
+        failed.len(),
+        failed.join("\n")
+    );
+    assert!(loaded >= 60, "most of the suite is valid: {loaded} loaded");
+}
+
+#[test]
+fn corpus_meshes_load_with_their_documented_triangle_counts_and_maps() {
+    use cirrus::material_definition::TextureSlot;
+    for (file, triangles, with_uvs) in [
+        ("trees/oak_medium.obj", 13_806, true),
+        ("trees/ash_small.obj", 11_072, true),
+        ("trees/bush_2.obj", 4_760, true),
+        ("meshes/spot/spot_triangulated_with_mtl.obj", 5_856, true),
+        ("meshes/flight_helmet/FlightHelmet.obj", 94_722, true),
+    ] {
+        let Ok((mesh, warnings)) = load_corpus_mesh(file) else {
+            panic!("{file} loads")
+        };
+        assert_eq!(mesh.triangles.len(), triangles, "{file}");
+        assert_eq!(mesh.uvs.is_some(), with_uvs, "{file}");
+        assert!(warnings.is_empty(), "{file}: {warnings:?}");
+    }
+    let (oak, _) = load_corpus_mesh("trees/oak_medium.obj").unwrap();
+    let bark = oak
+        .materials
+        .iter()
+        .find(|material| material.maps.contains_key(&TextureSlot::Normal))
+        .expect("a bark material");
+    for slot in [
+        TextureSlot::Albedo,
+        TextureSlot::Normal,
+        TextureSlot::Roughness,
+        TextureSlot::Ao,
+    ] {
+        assert!(
+            bark.maps.contains_key(&slot),
+            "bark has {slot:?}: {:?}",
+            bark.maps
+        );
+    }
+    let leaves = oak
+        .materials
+        .iter()
+        .find(|material| material.maps.contains_key(&TextureSlot::Opacity))
+        .expect("a leaf material");
+    assert_eq!(
+        leaves.maps[&TextureSlot::Albedo],
+        leaves.maps[&TextureSlot::Opacity],
+        "palette PNG as map_Kd and map_d"
+    );
+}

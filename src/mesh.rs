@@ -1,0 +1,350 @@
+//! Meshes: OBJ + MTL (through `tobj`) turned into one triangle list with positions, normals
+//! (computed where missing), optional UVs and a material per triangle, each material with the
+//! maps of DESIGN §2.2 and constant fallbacks. Pure: the driver serves the MTL bytes.
+
+use std::collections::BTreeMap;
+use std::io::BufReader;
+use std::path::{Path, PathBuf};
+
+use serde::{Deserialize, Serialize};
+
+use crate::config::normalize_relative_path;
+use crate::diagnostic::Diagnostic;
+use crate::material_definition::TextureSlot;
+
+/// One material of a mesh.
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+pub struct MeshMaterial {
+    pub name: String,
+    /// `Kd`: multiplies the albedo map, or is the albedo without one (linear RGB).
+    pub albedo_factor: [f32; 3],
+    /// `d`: constant opacity.
+    pub opacity: f32,
+    pub metallic: f32,
+    pub roughness: f32,
+    /// Texture maps, project-relative paths.
+    pub maps: BTreeMap<TextureSlot, PathBuf>,
+}
+
+impl Default for MeshMaterial {
+    fn default() -> Self {
+        MeshMaterial {
+            name: "default".into(),
+            albedo_factor: [0.8; 3],
+            opacity: 1.0,
+            metallic: 0.0,
+            roughness: 1.0,
+            maps: BTreeMap::new(),
+        }
+    }
+}
+
+/// A triangle mesh with one index per corner into shared vertex arrays.
+#[derive(Clone, Debug, PartialEq, Default)]
+pub struct Mesh {
+    pub positions: Vec<[f32; 3]>,
+    pub normals: Vec<[f32; 3]>,
+    /// Per vertex; `None` when the file has no texture coordinates (constant colours are baked).
+    pub uvs: Option<Vec<[f32; 2]>>,
+    pub triangles: Vec<[u32; 3]>,
+    /// Index into `materials` per triangle.
+    pub triangle_materials: Vec<u32>,
+    pub materials: Vec<MeshMaterial>,
+}
+
+/// The `mtllib` files an OBJ names, resolved (project-relative) next to it.
+pub fn material_libraries(obj_file: &Path, obj_bytes: &[u8]) -> Vec<PathBuf> {
+    let text = String::from_utf8_lossy(obj_bytes);
+    let folder = obj_file.parent().unwrap_or(Path::new(""));
+    let mut libraries = Vec::new();
+    for line in text.lines() {
+        let line = line.trim_start();
+        if let Some(rest) = line.strip_prefix("mtllib") {
+            if rest.starts_with(char::is_whitespace) {
+                if let Some(path) =
+                    normalize_relative_path(&folder.join(rest.trim().replace('\\', "/")))
+                {
+                    if !libraries.contains(&path) {
+                        libraries.push(path);
+                    }
+                }
+            }
+        }
+    }
+    libraries
+}
+
+/// Loads the OBJ `obj_bytes` read from `obj_file`; `libraries` serves the bytes of the MTL files
+/// that `material_libraries` named (a missing one is `None`: its materials fall back to
+/// defaults with a warning). Texture paths must stay inside `source_root`.
+pub fn load_mesh(
+    obj_file: &Path,
+    obj_bytes: &[u8],
+    libraries: &BTreeMap<PathBuf, Option<Vec<u8>>>,
+    source_root: &Path,
+) -> Result<(Mesh, Vec<Diagnostic>), Diagnostic> {
+    let text = decode_text(obj_file, obj_bytes)?;
+    let folder = obj_file.parent().unwrap_or(Path::new("")).to_path_buf();
+    let warnings = std::cell::RefCell::new(Vec::new());
+    let options = tobj::LoadOptions {
+        single_index: true,
+        triangulate: true,
+        ignore_points: true,
+        ignore_lines: true,
+    };
+    let loader = |name: &Path| -> tobj::MTLLoadResult {
+        let Some(path) =
+            normalize_relative_path(&folder.join(name.to_string_lossy().replace('\\', "/")))
+        else {
+            return Err(tobj::LoadError::OpenFileFailed);
+        };
+        match libraries.get(&path) {
+            Some(Some(bytes)) => {
+                let text = String::from_utf8_lossy(bytes);
+                tobj::load_mtl_buf(&mut BufReader::new(text.as_bytes())).inspect_err(|error| {
+                    warnings.borrow_mut().push(Diagnostic::new(
+                        &path,
+                        format!("malformed MTL ({error}); its materials use defaults"),
+                    ));
+                })
+            }
+            _ => {
+                warnings.borrow_mut().push(Diagnostic::new(
+                    obj_file,
+                    format!(
+                        "material library {} not found; default materials used",
+                        crate::diagnostic::display_path(&path)
+                    ),
+                ));
+                Err(tobj::LoadError::OpenFileFailed)
+            }
+        }
+    };
+    let loaded = std::panic::catch_unwind(std::panic::AssertUnwindSafe(|| {
+        tobj::load_obj_buf(&mut BufReader::new(text.as_bytes()), &options, loader)
+    }));
+    let (models, materials) = match loaded {
+        Ok(Ok(result)) => result,
+        Ok(Err(error)) => return Err(Diagnostic::new(obj_file, format!("malformed OBJ: {error}"))),
+        Err(_) => {
+            return Err(Diagnostic::new(
+                obj_file,
+                "malformed OBJ: the parser failed on this file",
+            ))
+        }
+    };
+    let mut warnings = warnings.into_inner();
+    let tobj_materials = materials.unwrap_or_default();
+    let mut materials: Vec<MeshMaterial> = Vec::new();
+    for material in &tobj_materials {
+        materials.push(mesh_material(material, &folder, source_root, &mut warnings));
+    }
+    let default_material = materials.len() as u32;
+    materials.push(MeshMaterial::default());
+
+    let mut mesh = Mesh {
+        uvs: Some(Vec::new()),
+        ..Mesh::default()
+    };
+    let mut all_normals = true;
+    for model in &models {
+        let source = &model.mesh;
+        let base = mesh.positions.len() as u32;
+        let vertex_count = source.positions.len() / 3;
+        for (index, position) in source.positions.chunks_exact(3).enumerate() {
+            if position.iter().any(|c| !c.is_finite()) {
+                return Err(Diagnostic::new(
+                    obj_file,
+                    format!(
+                        "object `{}`: vertex {} has a non-finite position",
+                        model.name,
+                        index + 1
+                    ),
+                ));
+            }
+            mesh.positions.push([position[0], position[1], position[2]]);
+        }
+        let has_normals = source.normals.len() == source.positions.len();
+        all_normals &= has_normals;
+        if has_normals {
+            mesh.normals
+                .extend(source.normals.chunks_exact(3).map(|n| [n[0], n[1], n[2]]));
+        } else {
+            mesh.normals
+                .extend(std::iter::repeat_n([0.0; 3], vertex_count));
+        }
+        match (&mut mesh.uvs, source.texcoords.len() == vertex_count * 2) {
+            (Some(uvs), true) => {
+                uvs.extend(source.texcoords.chunks_exact(2).map(|uv| [uv[0], uv[1]]))
+            }
+            (uvs, _) => *uvs = None,
+        }
+        let material = source
+            .material_id
+            .map_or(default_material, |id| (id as u32).min(default_material));
+        for triangle in source.indices.chunks_exact(3) {
+            if triangle.iter().any(|&index| index as usize >= vertex_count) {
+                return Err(Diagnostic::new(
+                    obj_file,
+                    format!("object `{}`: a face index is out of range", model.name),
+                ));
+            }
+            mesh.triangles
+                .push([base + triangle[0], base + triangle[1], base + triangle[2]]);
+            mesh.triangle_materials.push(material);
+        }
+    }
+    if mesh.triangles.is_empty() {
+        return Err(Diagnostic::new(obj_file, "the OBJ has no faces"));
+    }
+    if !all_normals
+        || mesh
+            .normals
+            .iter()
+            .any(|n| !n.iter().all(|c| c.is_finite()) || n == &[0.0; 3])
+    {
+        compute_normals(&mut mesh);
+    }
+    if mesh.uvs.as_ref().is_some_and(|uvs| {
+        uvs.iter()
+            .any(|uv| !uv[0].is_finite() || !uv[1].is_finite())
+    }) {
+        warnings.push(Diagnostic::new(
+            obj_file,
+            "non-finite texture coordinates: the mesh bakes constant colours",
+        ));
+        mesh.uvs = None;
+    }
+    mesh.materials = materials;
+    Ok((mesh, warnings))
+}
+
+fn decode_text<'a>(file: &Path, bytes: &'a [u8]) -> Result<std::borrow::Cow<'a, str>, Diagnostic> {
+    // UTF-16 with a byte-order mark (some exporters write it).
+    if bytes.len() >= 2 && (bytes[..2] == [0xFE, 0xFF] || bytes[..2] == [0xFF, 0xFE]) {
+        let big_endian = bytes[0] == 0xFE;
+        let units: Vec<u16> = bytes[2..]
+            .chunks_exact(2)
+            .map(|pair| {
+                if big_endian {
+                    u16::from_be_bytes([pair[0], pair[1]])
+                } else {
+                    u16::from_le_bytes([pair[0], pair[1]])
+                }
+            })
+            .collect();
+        return String::from_utf16(&units)
+            .map(std::borrow::Cow::Owned)
+            .map_err(|_| Diagnostic::new(file, "invalid UTF-16 text"));
+    }
+    let bytes = bytes.strip_prefix(&[0xEF, 0xBB, 0xBF]).unwrap_or(bytes);
+    Ok(String::from_utf8_lossy(bytes))
+}
+
+fn mesh_material(
+    material: &tobj::Material,
+    folder: &Path,
+    source_root: &Path,
+    warnings: &mut Vec<Diagnostic>,
+) -> MeshMaterial {
+    let mut result = MeshMaterial {
+        name: material.name.clone(),
+        ..MeshMaterial::default()
+    };
+    if let Some(diffuse) = material.diffuse {
+        result.albedo_factor = diffuse.map(|c| c.clamp(0.0, 1.0));
+    }
+    if let Some(dissolve) = material.dissolve {
+        result.opacity = dissolve.clamp(0.0, 1.0);
+    }
+    let unknown = |key: &str| material.unknown_param.get(key).cloned();
+    if let Some(value) = unknown("Pm").and_then(|v| v.trim().parse::<f32>().ok()) {
+        result.metallic = value.clamp(0.0, 1.0);
+    }
+    if let Some(value) = unknown("Pr").and_then(|v| v.trim().parse::<f32>().ok()) {
+        result.roughness = value.clamp(0.0, 1.0);
+    }
+    let statements = [
+        (TextureSlot::Albedo, material.diffuse_texture.clone()),
+        (TextureSlot::Opacity, material.dissolve_texture.clone()),
+        (
+            TextureSlot::Normal,
+            unknown("norm").or_else(|| material.normal_texture.clone()),
+        ),
+        (TextureSlot::Metallic, unknown("map_Pm")),
+        (TextureSlot::Roughness, unknown("map_Pr")),
+        (
+            TextureSlot::Ao,
+            unknown("map_ao").or_else(|| unknown("map_AO")),
+        ),
+    ];
+    for (slot, statement) in statements {
+        let Some(statement) = statement else { continue };
+        let Some(file) = texture_file_from_statement(&statement) else {
+            continue;
+        };
+        match normalize_relative_path(&folder.join(file.replace('\\', "/"))) {
+            Some(path) if path.starts_with(source_root) => {
+                result.maps.insert(slot, path);
+            }
+            _ => warnings.push(Diagnostic::new(
+                folder.join("(mtl)"),
+                format!(
+                    "material `{}`: texture \"{file}\" leaves the source folder; ignored",
+                    material.name
+                ),
+            )),
+        }
+    }
+    result
+}
+
+/// The file name of an MTL texture statement, after its options (`-bm 0.5`, `-s 1 1 1`, …).
+pub fn texture_file_from_statement(statement: &str) -> Option<String> {
+    let arguments = |option: &str| -> usize {
+        match option {
+            "-blendu" | "-blendv" | "-cc" | "-clamp" | "-imfchan" | "-texres" | "-bm"
+            | "-boost" | "-type" => 1,
+            "-mm" => 2,
+            "-o" | "-s" | "-t" => 3,
+            _ => 0,
+        }
+    };
+    let words: Vec<&str> = statement.split_whitespace().collect();
+    let mut index = 0;
+    while index < words.len()
+        && words[index].starts_with('-')
+        && words[index].len() > 1
+        && !words[index][1..].starts_with(|c: char| c.is_ascii_digit())
+    {
+        let count = arguments(words[index]);
+        index += 1;
+        // Options with a variable number of numbers (-o, -s, -t take 1 to 3).
+        let mut taken = 0;
+        while taken < count
+            && index < words.len() - 1
+            && (count == 1 || words[index].parse::<f32>().is_ok())
+        {
+            index += 1;
+            taken += 1;
+        }
+    }
+    let file = words.get(index..)?.join(" ");
+    (!file.is_empty()).then_some(file)
+}
+
+/// Area-weighted vertex normals.
+fn compute_normals(mesh: &mut Mesh) {
+    let mut normals = vec![glam::Vec3::ZERO; mesh.positions.len()];
+    for triangle in &mesh.triangles {
+        let [a, b, c] = triangle.map(|index| glam::Vec3::from(mesh.positions[index as usize]));
+        let face = (b - a).cross(c - a);
+        for &index in triangle {
+            normals[index as usize] += face;
+        }
+    }
+    mesh.normals = normals
+        .into_iter()
+        .map(|n| n.try_normalize().unwrap_or(glam::Vec3::Z).to_array())
+        .collect();
+}

@@ -20,10 +20,80 @@ fn main() {
         "materials/*.mymaterial",
     )];
     if corpus.join("materials").is_dir() {
-        sources.push(("corpus", corpus, "materials/*.mymaterial"));
+        sources.push(("corpus", corpus.clone(), "materials/*.mymaterial"));
     }
     for (label, source, glob) in sources {
         bench_project(label, &source.canonicalize().expect("source folder"), glob);
+    }
+    if corpus.join("meshes").is_dir() {
+        bench_planes(&corpus);
+    }
+}
+
+/// Plane selection: faces per second on the flight helmet, plane counts of the trees per ε.
+fn bench_planes(corpus: &Path) {
+    use cirrus::planes::{select_planes, PlaneSettings};
+    let load = |file: &str| {
+        let bytes = std::fs::read(corpus.join(file)).expect("mesh");
+        let libraries = cirrus::mesh::material_libraries(Path::new(file), &bytes)
+            .into_iter()
+            .map(|library| {
+                let bytes = std::fs::read(corpus.join(&library)).ok();
+                (library, bytes)
+            })
+            .collect();
+        cirrus::mesh::load_mesh(Path::new(file), &bytes, &libraries, Path::new(""))
+            .expect("mesh loads")
+            .0
+    };
+    let helmet = load("meshes/flight_helmet/FlightHelmet.obj");
+    let start = Instant::now();
+    let set = select_planes(
+        &helmet.positions,
+        &helmet.triangles,
+        PlaneSettings {
+            epsilon: 0.02,
+            max_planes: None,
+        },
+    );
+    let seconds = start.elapsed().as_secs_f64();
+    println!(
+        "planes: flight helmet, {} faces → {} planes in {:.0} ms: {:.0} faces/s (bar ≥ 100k)",
+        set.face_count,
+        set.planes.len(),
+        seconds * 1e3,
+        set.face_count as f64 / seconds
+    );
+    for tree in [
+        "trees/oak_medium.obj",
+        "trees/ash_small.obj",
+        "trees/bush_2.obj",
+    ] {
+        let mesh = load(tree);
+        let counts: Vec<String> = [0.01, 0.02, 0.04]
+            .iter()
+            .map(|&epsilon| {
+                let start = Instant::now();
+                let set = select_planes(
+                    &mesh.positions,
+                    &mesh.triangles,
+                    PlaneSettings {
+                        epsilon,
+                        max_planes: None,
+                    },
+                );
+                format!(
+                    "ε {epsilon}: {} planes ({:.0} ms)",
+                    set.planes.len(),
+                    start.elapsed().as_secs_f64() * 1e3
+                )
+            })
+            .collect();
+        println!(
+            "planes: {tree} ({} faces): {}",
+            mesh.triangles.len(),
+            counts.join(", ")
+        );
     }
 }
 

@@ -12,6 +12,7 @@ pub mod material_definition;
 pub mod mesh;
 pub mod mips;
 pub mod openddl;
+pub mod planes;
 pub mod preview;
 pub mod quality;
 pub mod surface;

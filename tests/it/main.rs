@@ -7,3 +7,4 @@ mod cli;
 mod config;
 mod incremental;
 mod material_files;
+mod planes;

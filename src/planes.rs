@@ -1,0 +1,560 @@
+//! Billboard-cloud planes (Décoret, Durand, Sillion, Dorsey, SIGGRAPH 2003): a greedy,
+//! density-based choice of planes in discretised (θ, φ, ρ) space such that every face lies
+//! within ε of the plane it is assigned to. No face is ever dropped.
+
+use glam::Vec3;
+use rayon::prelude::*;
+
+/// Plane-selection settings.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct PlaneSettings {
+    /// ε as a fraction of the bounding-sphere radius.
+    pub epsilon: f32,
+    pub max_planes: Option<u32>,
+}
+
+/// One plane: points `x` with `normal · x = distance`, and the faces assigned to it.
+#[derive(Clone, Debug, PartialEq)]
+pub struct Plane {
+    pub normal: [f32; 3],
+    pub distance: f32,
+    pub faces: Vec<u32>,
+}
+
+/// The result of plane selection.
+#[derive(Clone, Debug, PartialEq)]
+pub struct PlaneSet {
+    pub planes: Vec<Plane>,
+    /// ε in world units.
+    pub epsilon: f32,
+    /// The largest distance of a vertex of an assigned face from its plane (≤ ε unless capped).
+    pub max_error: f32,
+    pub face_count: usize,
+}
+
+const THETA_BINS: usize = 24;
+const PHI_BINS: usize = 12;
+const PENALTY: f32 = 10.0;
+const REFINEMENT_STEPS: usize = 6;
+/// Faces a refinement evaluates candidate directions on (the final offset uses them all).
+const REFINEMENT_SAMPLE: usize = 768;
+
+/// The plane-space grid: directions over the upper hemisphere (a plane and its flip are one
+/// plane), offsets ρ over [-R, R] around the bounding-sphere centre.
+struct Grid {
+    center: Vec3,
+    radius: f32,
+    epsilon: f32,
+    rho_bins: usize,
+    /// Corner directions, (THETA_BINS + 1) × (PHI_BINS + 1).
+    corners: Vec<Vec3>,
+    /// Centre direction of each direction bin, THETA_BINS × PHI_BINS.
+    centers: Vec<Vec3>,
+}
+
+/// A region of plane space: θ, φ and ρ ranges.
+#[derive(Clone, Copy, Debug)]
+struct Region {
+    theta: (f32, f32),
+    phi: (f32, f32),
+    rho: (f32, f32),
+}
+
+fn direction(theta: f32, phi: f32) -> Vec3 {
+    Vec3::new(phi.sin() * theta.cos(), phi.sin() * theta.sin(), phi.cos())
+}
+
+impl Region {
+    fn corners(&self) -> [Vec3; 4] {
+        [
+            direction(self.theta.0, self.phi.0),
+            direction(self.theta.1, self.phi.0),
+            direction(self.theta.0, self.phi.1),
+            direction(self.theta.1, self.phi.1),
+        ]
+    }
+}
+
+/// A face relative to the grid centre: vertices, area and unit normal.
+#[derive(Clone, Copy)]
+struct Face {
+    vertices: [Vec3; 3],
+    area: f32,
+    normal: Vec3,
+}
+
+impl Face {
+    /// The interval of plane offsets ρ for which a plane of direction in `corners` can hold
+    /// all three vertices within ε (`None` when empty).
+    fn valid_rho(&self, corners: &[Vec3; 4], epsilon: f32) -> Option<(f32, f32)> {
+        let mut low = f32::NEG_INFINITY;
+        let mut high = f32::INFINITY;
+        for vertex in &self.vertices {
+            let dots = corners.map(|corner| vertex.dot(corner));
+            let (min, max) = dots
+                .iter()
+                .fold((f32::INFINITY, f32::NEG_INFINITY), |(a, b), &d| {
+                    (a.min(d), b.max(d))
+                });
+            low = low.max(min - epsilon);
+            high = high.min(max + epsilon);
+        }
+        (low <= high).then_some((low, high))
+    }
+
+    fn distance_to(&self, normal: Vec3, rho: f32) -> f32 {
+        self.vertices
+            .iter()
+            .map(|vertex| (vertex.dot(normal) - rho).abs())
+            .fold(0.0, f32::max)
+    }
+}
+
+impl Grid {
+    fn new(positions: &[[f32; 3]], epsilon_fraction: f32) -> Grid {
+        let (min, max) = positions.iter().fold(
+            (Vec3::splat(f32::INFINITY), Vec3::splat(f32::NEG_INFINITY)),
+            |(min, max), &p| (min.min(Vec3::from(p)), max.max(Vec3::from(p))),
+        );
+        let center = 0.5 * (min + max);
+        let radius = positions
+            .iter()
+            .map(|&p| Vec3::from(p).distance(center))
+            .fold(0.0, f32::max)
+            .max(1e-6);
+        let epsilon = epsilon_fraction * radius;
+        let rho_bins = ((2.0 * radius / epsilon).ceil() as usize).clamp(16, 256);
+        let mut corners = Vec::with_capacity((THETA_BINS + 1) * (PHI_BINS + 1));
+        for t in 0..=THETA_BINS {
+            for p in 0..=PHI_BINS {
+                corners.push(direction(Grid::theta(t), Grid::phi(p)));
+            }
+        }
+        let mut centers = Vec::with_capacity(THETA_BINS * PHI_BINS);
+        for t in 0..THETA_BINS {
+            for p in 0..PHI_BINS {
+                centers.push(direction(
+                    Grid::theta(t) + 0.5 * Grid::theta(1),
+                    Grid::phi(p) + 0.5 * Grid::phi(1),
+                ));
+            }
+        }
+        Grid {
+            center,
+            radius,
+            epsilon,
+            rho_bins,
+            corners,
+            centers,
+        }
+    }
+
+    fn theta(index: usize) -> f32 {
+        index as f32 * std::f32::consts::TAU / THETA_BINS as f32
+    }
+
+    fn phi(index: usize) -> f32 {
+        index as f32 * std::f32::consts::FRAC_PI_2 / PHI_BINS as f32
+    }
+
+    fn rho_of(&self, bin: usize) -> f32 {
+        -self.radius + (bin as f32) * 2.0 * self.radius / self.rho_bins as f32
+    }
+
+    fn rho_bin(&self, rho: f32) -> isize {
+        ((rho + self.radius) * self.rho_bins as f32 / (2.0 * self.radius)).floor() as isize
+    }
+
+    fn bins(&self) -> usize {
+        THETA_BINS * PHI_BINS * self.rho_bins
+    }
+
+    fn region(&self, bin: usize) -> Region {
+        let direction_bin = bin / self.rho_bins;
+        let rho_bin = bin % self.rho_bins;
+        let (t, p) = (direction_bin / PHI_BINS, direction_bin % PHI_BINS);
+        Region {
+            theta: (Grid::theta(t), Grid::theta(t + 1)),
+            phi: (Grid::phi(p), Grid::phi(p + 1)),
+            rho: (self.rho_of(rho_bin), self.rho_of(rho_bin + 1)),
+        }
+    }
+
+    /// Adds `sign` × the density contribution of `face`: area × |cos| to every bin where a valid
+    /// plane exists (`density.valid`), and that to the bins just in front of the face
+    /// (`density.front`, weighted by PENALTY when scoring).
+    fn contribute(&self, face: &Face, sign: f32, density: &mut Density) {
+        if face.area <= 0.0 {
+            return;
+        }
+        let last = self.rho_bins as isize - 1;
+        // Each vertex's offset along every corner direction, computed once.
+        let dots: [Vec<f32>; 3] = face.vertices.map(|vertex| {
+            self.corners
+                .iter()
+                .map(|corner| vertex.dot(*corner))
+                .collect()
+        });
+        for t in 0..THETA_BINS {
+            for p in 0..PHI_BINS {
+                let index = |t: usize, p: usize| t * (PHI_BINS + 1) + p;
+                let corner_indices = [
+                    index(t, p),
+                    index(t + 1, p),
+                    index(t, p + 1),
+                    index(t + 1, p + 1),
+                ];
+                let (mut low, mut high) = (f32::NEG_INFINITY, f32::INFINITY);
+                for vertex_dots in &dots {
+                    let values = corner_indices.map(|corner| vertex_dots[corner]);
+                    low =
+                        low.max(values.iter().fold(f32::INFINITY, |a, &d| a.min(d)) - self.epsilon);
+                    high = high.min(
+                        values.iter().fold(f32::NEG_INFINITY, |a, &d| a.max(d)) + self.epsilon,
+                    );
+                }
+                if low > high {
+                    continue;
+                }
+                let cosine = face.normal.dot(self.centers[t * PHI_BINS + p]);
+                let weight = sign * face.area * cosine.abs();
+                let base = (t * PHI_BINS + p) * self.rho_bins;
+                let (first, end) = (
+                    self.rho_bin(low).clamp(0, last),
+                    self.rho_bin(high).clamp(0, last),
+                );
+                for bin in first..=end {
+                    density.valid[base + bin as usize] += weight;
+                }
+                // In front of the face: the side its normal points to along this direction.
+                let (front_low, front_high) = if cosine >= 0.0 {
+                    (high, high + self.epsilon)
+                } else {
+                    (low - self.epsilon, low)
+                };
+                let (front_first, front_end) = (
+                    self.rho_bin(front_low).clamp(0, last),
+                    self.rho_bin(front_high).clamp(0, last),
+                );
+                for bin in front_first..=front_end {
+                    if bin < first || bin > end {
+                        density.front[base + bin as usize] += weight;
+                    }
+                }
+            }
+        }
+    }
+}
+
+/// Per bin: the area of faces a plane in the bin can hold, and of faces it would lie just in
+/// front of.
+#[derive(Clone)]
+struct Density {
+    valid: Vec<f32>,
+    front: Vec<f32>,
+}
+
+impl Density {
+    fn zero(bins: usize) -> Density {
+        Density {
+            valid: vec![0.0; bins],
+            front: vec![0.0; bins],
+        }
+    }
+
+    fn add(mut self, other: Density) -> Density {
+        self.valid
+            .iter_mut()
+            .zip(&other.valid)
+            .for_each(|(a, b)| *a += b);
+        self.front
+            .iter_mut()
+            .zip(&other.front)
+            .for_each(|(a, b)| *a += b);
+        self
+    }
+
+    /// The densest bin: valid area minus the near-tangent penalty; where every bin is
+    /// penalised below zero (dense foliage), the bin with the most valid area.
+    fn best_bin(&self) -> Option<usize> {
+        let argmax = |score: &dyn Fn(usize) -> f32| {
+            (0..self.valid.len()).max_by(|&a, &b| score(a).total_cmp(&score(b)).then(b.cmp(&a)))
+        };
+        let penalised = |bin: usize| self.valid[bin] - PENALTY * self.front[bin];
+        let best = argmax(&penalised)?;
+        if penalised(best) > 0.0 {
+            return Some(best);
+        }
+        let best = argmax(&|bin| self.valid[bin])?;
+        (self.valid[best] > 1e-12).then_some(best)
+    }
+
+    /// The density of `faces` (with `sign`), in parallel.
+    fn of_faces(grid: &Grid, faces: &[Face], sign: f32) -> Density {
+        if faces.len() < 64 {
+            let mut density = Density::zero(grid.bins());
+            faces
+                .iter()
+                .for_each(|face| grid.contribute(face, sign, &mut density));
+            return density;
+        }
+        faces
+            .par_iter()
+            .with_min_len(64)
+            .fold(
+                || Density::zero(grid.bins()),
+                |mut density, face| {
+                    grid.contribute(face, sign, &mut density);
+                    density
+                },
+            )
+            .reduce(|| Density::zero(grid.bins()), Density::add)
+    }
+}
+
+/// Chooses planes for the triangles of a mesh. Deterministic for the same input.
+pub fn select_planes(
+    positions: &[[f32; 3]],
+    triangles: &[[u32; 3]],
+    settings: PlaneSettings,
+) -> PlaneSet {
+    let grid = Grid::new(positions, settings.epsilon);
+    let faces: Vec<Face> = triangles
+        .iter()
+        .map(|triangle| {
+            let vertices =
+                triangle.map(|index| Vec3::from(positions[index as usize]) - grid.center);
+            let cross = (vertices[1] - vertices[0]).cross(vertices[2] - vertices[0]);
+            Face {
+                vertices,
+                area: 0.5 * cross.length(),
+                normal: cross.normalize_or_zero(),
+            }
+        })
+        .collect();
+
+    let mut density = Density::of_faces(&grid, &faces, 1.0);
+
+    let mut assigned = vec![false; faces.len()];
+    let mut remaining: Vec<u32> = (0..faces.len() as u32)
+        .filter(|&index| faces[index as usize].area > 0.0)
+        .collect();
+    let mut planes: Vec<(Vec3, f32, Vec<u32>)> = Vec::new();
+    let cap = settings.max_planes.map_or(usize::MAX, |cap| cap as usize);
+    while !remaining.is_empty() && planes.len() < cap {
+        let region = density.best_bin().map(|bin| grid.region(bin));
+        let (normal, rho) = region
+            .and_then(|region| refine(&grid, &faces, &remaining, region))
+            .unwrap_or_else(|| largest_face_plane(&faces, &remaining));
+        let holds = |(normal, rho): (Vec3, f32)| -> Vec<u32> {
+            remaining
+                .par_iter()
+                .copied()
+                .filter(|&index| faces[index as usize].distance_to(normal, rho) <= grid.epsilon)
+                .collect()
+        };
+        let (mut normal, mut rho) = (normal, rho);
+        let mut members = holds((normal, rho));
+        if members.is_empty() {
+            // Numerical corner case: the refined plane holds nothing; use a face's own plane.
+            (normal, rho) = largest_face_plane(&faces, &remaining);
+            members = holds((normal, rho));
+        }
+        planes.push((normal, rho, Vec::new()));
+        let removed: Vec<Face> = members.iter().map(|&index| faces[index as usize]).collect();
+        density = density.add(Density::of_faces(&grid, &removed, -1.0));
+        for &index in &members {
+            assigned[index as usize] = true;
+        }
+        planes.last_mut().expect("just pushed").2 = members;
+        remaining.retain(|&index| !assigned[index as usize]);
+    }
+
+    // Faces left over (degenerate ones, or beyond `max_planes`): to the plane that moves them least.
+    if planes.is_empty() {
+        planes.push(largest_face_plane_any(&faces));
+    }
+    for index in 0..faces.len() as u32 {
+        if assigned[index as usize] {
+            continue;
+        }
+        let face = &faces[index as usize];
+        let best = (0..planes.len())
+            .min_by(|&a, &b| {
+                face.distance_to(planes[a].0, planes[a].1)
+                    .total_cmp(&face.distance_to(planes[b].0, planes[b].1))
+            })
+            .expect("at least one plane");
+        planes[best].2.push(index);
+    }
+
+    let mut max_error = 0.0f32;
+    let planes = planes
+        .into_iter()
+        .filter(|(_, _, members)| !members.is_empty())
+        .map(|(normal, rho, mut members)| {
+            members.sort_unstable();
+            for &index in &members {
+                max_error = max_error.max(faces[index as usize].distance_to(normal, rho));
+            }
+            Plane {
+                normal: normal.to_array(),
+                distance: rho + normal.dot(grid.center),
+                faces: members,
+            }
+        })
+        .collect();
+    PlaneSet {
+        planes,
+        epsilon: grid.epsilon,
+        max_error,
+        face_count: faces.len(),
+    }
+}
+
+/// Refines a dense region to the best plane near it: candidate directions around the region's
+/// centre (narrowing each round) and, per direction, the offset ρ covered by the most face area
+/// with exact validity (every vertex within ε), less the near-tangent penalty.
+fn refine(grid: &Grid, faces: &[Face], remaining: &[u32], region: Region) -> Option<(Vec3, f32)> {
+    // The validity set of the region and its neighbours (loose test: hull over the corners).
+    let grown = Region {
+        theta: (
+            region.theta.0 - 0.5 * (region.theta.1 - region.theta.0),
+            region.theta.1 + 0.5 * (region.theta.1 - region.theta.0),
+        ),
+        phi: (
+            (region.phi.0 - 0.5 * (region.phi.1 - region.phi.0)).max(0.0),
+            region.phi.1 + 0.5 * (region.phi.1 - region.phi.0),
+        ),
+        rho: (region.rho.0 - grid.epsilon, region.rho.1 + grid.epsilon),
+    };
+    let corners = grown.corners();
+    let set: Vec<u32> = remaining
+        .par_iter()
+        .copied()
+        .filter(|&index| {
+            faces[index as usize]
+                .valid_rho(&corners, grid.epsilon)
+                .is_some_and(|(low, high)| low <= grown.rho.1 && high >= grown.rho.0)
+        })
+        .collect();
+    if set.is_empty() {
+        return None;
+    }
+    // Directions are searched on an evenly strided sample of large sets.
+    let stride = set.len().div_ceil(REFINEMENT_SAMPLE);
+    let sample: Vec<u32> = set.iter().copied().step_by(stride).collect();
+    let (mut theta, mut phi) = (
+        0.5 * (region.theta.0 + region.theta.1),
+        0.5 * (region.phi.0 + region.phi.1),
+    );
+    let (mut step_theta, mut step_phi) = (
+        0.5 * (region.theta.1 - region.theta.0),
+        0.5 * (region.phi.1 - region.phi.0),
+    );
+    let mut best: Option<(f32, Vec3, f32)> = None;
+    let mut events = Vec::with_capacity(set.len() * 4);
+    for _ in 0..REFINEMENT_STEPS {
+        let (center_theta, center_phi) = (theta, phi);
+        let candidates: Vec<(f32, f32)> = (-1..=1)
+            .flat_map(|dt| (-1..=1).map(move |dp| (dt, dp)))
+            .map(|(dt, dp)| {
+                (
+                    center_theta + dt as f32 * step_theta,
+                    (center_phi + dp as f32 * step_phi).clamp(0.0, std::f32::consts::FRAC_PI_2),
+                )
+            })
+            .collect();
+        let scored: Vec<Option<(f32, f32, f32)>> = candidates
+            .par_iter()
+            .map_init(Vec::new, |events, &(candidate_theta, candidate_phi)| {
+                let normal = direction(candidate_theta, candidate_phi);
+                best_offset(faces, &sample, normal, grid.epsilon, events)
+                    .map(|(score, _)| (score, candidate_theta, candidate_phi))
+            })
+            .collect();
+        // In candidate order, so ties resolve the same way on every run.
+        for (score, candidate_theta, candidate_phi) in scored.into_iter().flatten() {
+            if best.is_none_or(|(best_score, _, _)| score > best_score) {
+                best = Some((score, direction(candidate_theta, candidate_phi), 0.0));
+                (theta, phi) = (candidate_theta, candidate_phi);
+            }
+        }
+        step_theta *= 0.5;
+        step_phi *= 0.5;
+    }
+    let (_, normal, _) = best?;
+    best_offset(faces, &set, normal, grid.epsilon, &mut events).map(|(_, rho)| (normal, rho))
+}
+
+/// For planes of direction `normal`: the offset with the largest covered area (exact validity)
+/// minus the penalty of faces it lies just in front of, and that score. `None` when no face of
+/// `set` can lie on such a plane.
+fn best_offset(
+    faces: &[Face],
+    set: &[u32],
+    normal: Vec3,
+    epsilon: f32,
+    events: &mut Vec<(f32, f32)>,
+) -> Option<(f32, f32)> {
+    events.clear();
+    for &index in set {
+        let face = &faces[index as usize];
+        let dots = face.vertices.map(|vertex| vertex.dot(normal));
+        let low = dots.iter().fold(f32::NEG_INFINITY, |a, &d| a.max(d)) - epsilon;
+        let high = dots.iter().fold(f32::INFINITY, |a, &d| a.min(d)) + epsilon;
+        if low > high {
+            continue;
+        }
+        let cosine = face.normal.dot(normal);
+        let weight = face.area * cosine.abs();
+        events.push((low, weight));
+        events.push((high, -weight));
+        let (front_low, front_high) = if cosine >= 0.0 {
+            (high, high + epsilon)
+        } else {
+            (low - epsilon, low)
+        };
+        events.push((front_low, -PENALTY * weight));
+        events.push((front_high, PENALTY * weight));
+    }
+    if events.is_empty() {
+        return None;
+    }
+    // Openings before closings at the same offset, so touching intervals overlap.
+    events.sort_by(|a, b| a.0.total_cmp(&b.0).then(b.1.total_cmp(&a.1)));
+    let (mut sum, mut best) = (0.0f32, None::<(f32, f32)>);
+    for (offset, delta) in events.iter() {
+        sum += delta;
+        if best.is_none_or(|(score, _)| sum > score) {
+            best = Some((sum, *offset));
+        }
+    }
+    best.filter(|(score, _)| *score > 0.0)
+}
+
+/// The supporting plane of the largest remaining face (always valid for it).
+fn largest_face_plane(faces: &[Face], remaining: &[u32]) -> (Vec3, f32) {
+    let index = remaining
+        .iter()
+        .copied()
+        .max_by(|&a, &b| {
+            faces[a as usize]
+                .area
+                .total_cmp(&faces[b as usize].area)
+                .then(b.cmp(&a))
+        })
+        .expect("non-empty");
+    let face = &faces[index as usize];
+    (face.normal, face.vertices[0].dot(face.normal))
+}
+
+fn largest_face_plane_any(faces: &[Face]) -> (Vec3, f32, Vec<u32>) {
+    let all: Vec<u32> = (0..faces.len() as u32).collect();
+    let (normal, rho) = if faces.iter().any(|face| face.area > 0.0) {
+        largest_face_plane(faces, &all)
+    } else {
+        (Vec3::Z, 0.0)
+    };
+    (normal, rho, Vec::new())
+}

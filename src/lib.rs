@@ -8,6 +8,8 @@ pub mod diagnostic;
 // Stages, in pipeline order: pure functions over plain data.
 pub mod container;
 pub mod encode;
+pub mod layout;
+pub mod lod_mesh;
 pub mod material_definition;
 pub mod mesh;
 pub mod mips;
@@ -15,6 +17,7 @@ pub mod openddl;
 pub mod planes;
 pub mod preview;
 pub mod quality;
+pub mod rectangles;
 pub mod surface;
 pub mod texture;
 

@@ -6,5 +6,6 @@ mod bake;
 mod cli;
 mod config;
 mod incremental;
+mod layout;
 mod material_files;
 mod planes;

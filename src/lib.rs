@@ -8,6 +8,7 @@ pub mod diagnostic;
 // Stages, in pipeline order: pure functions over plain data.
 pub mod container;
 pub mod encode;
+pub mod gpu;
 pub mod layout;
 pub mod lod_mesh;
 pub mod material_definition;

@@ -5,6 +5,7 @@ mod support;
 mod bake;
 mod cli;
 mod config;
+mod gpu;
 mod incremental;
 mod layout;
 mod material_files;

@@ -1,0 +1,623 @@
+//! The GPU: the only holder of the wgpu device (created once, lazily, so material-only builds
+//! need no adapter), and the per-plane texture renderer of billboard clouds.
+
+use std::collections::HashMap;
+use std::sync::{Arc, Mutex, OnceLock};
+
+use bytemuck::{Pod, Zeroable};
+use glam::{Vec2, Vec3};
+
+use crate::mips::{mip_chain, MipSettings};
+use crate::rectangles::PlaneRectangle;
+use crate::surface::SurfaceKind;
+use crate::texture::Texture;
+
+#[derive(Clone, Debug, PartialEq, Eq, thiserror::Error)]
+pub enum GpuError {
+    #[error("no GPU adapter: wgpu found no Vulkan, Metal, DX12 or GL device ({0}). Billboard clouds render their textures on the GPU; on Linux without a GPU install a software Vulkan driver, e.g. `apt-get install mesa-vulkan-drivers` (llvmpipe)")]
+    NoAdapter(String),
+    #[error("the GPU device could not be created: {0}")]
+    Device(String),
+    #[error("GPU rendering failed: {0}")]
+    Render(String),
+}
+
+/// The device and everything created once for it.
+pub struct Gpu {
+    device: wgpu::Device,
+    queue: wgpu::Queue,
+    pub adapter_name: String,
+    pipeline: wgpu::RenderPipeline,
+    frame_layout: wgpu::BindGroupLayout,
+    material_layout: wgpu::BindGroupLayout,
+    sampler: wgpu::Sampler,
+    white: wgpu::TextureView,
+    /// Uploaded source textures by content hash and colour space.
+    uploads: Mutex<HashMap<(blake3::Hash, bool), Arc<wgpu::TextureView>>>,
+}
+
+static GPU: OnceLock<Result<Gpu, GpuError>> = OnceLock::new();
+
+/// The shared GPU, created on first use.
+pub fn gpu() -> Result<&'static Gpu, GpuError> {
+    GPU.get_or_init(|| pollster::block_on(Gpu::new()))
+        .as_ref()
+        .map_err(Clone::clone)
+}
+
+const ALBEDO_FORMAT: wgpu::TextureFormat = wgpu::TextureFormat::Rgba8UnormSrgb;
+const DATA_FORMAT: wgpu::TextureFormat = wgpu::TextureFormat::Rgba8Unorm;
+const DEPTH_FORMAT: wgpu::TextureFormat = wgpu::TextureFormat::Depth32Float;
+
+#[repr(C)]
+#[derive(Clone, Copy, Pod, Zeroable)]
+struct FrameUniform {
+    origin: [f32; 4],
+    x_axis: [f32; 4],
+    y_axis: [f32; 4],
+    normal: [f32; 4],
+    size: [f32; 4],
+}
+
+#[repr(C)]
+#[derive(Clone, Copy, Pod, Zeroable)]
+struct MaterialUniform {
+    albedo: [f32; 4],
+    params: [f32; 4],
+    has_a: [f32; 4],
+    has_b: [f32; 4],
+}
+
+/// One vertex of a plane's faces.
+#[repr(C)]
+#[derive(Clone, Copy, Debug, PartialEq, Pod, Zeroable)]
+pub struct RenderVertex {
+    pub position: [f32; 3],
+    pub normal: [f32; 3],
+    pub uv: [f32; 2],
+    pub tangent: [f32; 4],
+}
+
+/// A material as the renderer sees it: decoded maps (any may be missing) and constants.
+#[derive(Clone, Debug, Default)]
+pub struct RenderMaterial {
+    pub albedo: Option<Arc<Texture>>,
+    pub opacity: Option<Arc<Texture>>,
+    pub normal: Option<Arc<Texture>>,
+    pub metallic: Option<Arc<Texture>>,
+    pub roughness: Option<Arc<Texture>>,
+    pub ao: Option<Arc<Texture>>,
+    /// Linear RGB factor and constant opacity.
+    pub albedo_factor: [f32; 4],
+    pub metallic_value: f32,
+    pub roughness_value: f32,
+    pub ao_value: f32,
+}
+
+/// What one plane render needs: its faces (three vertices each) grouped by material.
+#[derive(Clone, Debug)]
+pub struct PlaneRenderInput<'a> {
+    pub rectangle: PlaneRectangle,
+    pub epsilon: f32,
+    pub alpha_cutoff: f32,
+    pub width: u32,
+    pub height: u32,
+    /// (material index, that material's triangles' vertices).
+    pub batches: Vec<(usize, Vec<RenderVertex>)>,
+    pub materials: &'a [RenderMaterial],
+}
+
+/// The four images of one plane, RGBA8, rows from the top (the plane's +Y edge).
+#[derive(Clone, Debug, PartialEq)]
+pub struct PlaneImages {
+    pub width: u32,
+    pub height: u32,
+    /// sRGB-encoded colour; alpha 1 where a face covers the texel, 0 elsewhere.
+    pub albedo: Vec<u8>,
+    pub normal: Vec<u8>,
+    pub mra: Vec<u8>,
+    pub height_map: Vec<u8>,
+}
+
+impl Gpu {
+    async fn new() -> Result<Gpu, GpuError> {
+        let instance = wgpu::Instance::new(wgpu::InstanceDescriptor::new_without_display_handle());
+        let adapter = instance
+            .request_adapter(&wgpu::RequestAdapterOptions {
+                power_preference: wgpu::PowerPreference::HighPerformance,
+                ..Default::default()
+            })
+            .await
+            .map_err(|error| GpuError::NoAdapter(error.to_string()))?;
+        let adapter_name = format!(
+            "{} ({:?})",
+            adapter.get_info().name,
+            adapter.get_info().backend
+        );
+        let (device, queue) = adapter
+            .request_device(&wgpu::DeviceDescriptor {
+                label: Some("cirrus"),
+                required_features: wgpu::Features::empty(),
+                required_limits: wgpu::Limits::downlevel_defaults()
+                    .using_resolution(adapter.limits()),
+                ..Default::default()
+            })
+            .await
+            .map_err(|error| GpuError::Device(error.to_string()))?;
+        let shader = device.create_shader_module(wgpu::ShaderModuleDescriptor {
+            label: Some("plane.wgsl"),
+            source: wgpu::ShaderSource::Wgsl(include_str!("../shaders/plane.wgsl").into()),
+        });
+        let uniform_entry = |binding| wgpu::BindGroupLayoutEntry {
+            binding,
+            visibility: wgpu::ShaderStages::VERTEX_FRAGMENT,
+            ty: wgpu::BindingType::Buffer {
+                ty: wgpu::BufferBindingType::Uniform,
+                has_dynamic_offset: false,
+                min_binding_size: None,
+            },
+            count: None,
+        };
+        let frame_layout = device.create_bind_group_layout(&wgpu::BindGroupLayoutDescriptor {
+            label: Some("frame"),
+            entries: &[uniform_entry(0)],
+        });
+        let mut material_entries = vec![
+            uniform_entry(0),
+            wgpu::BindGroupLayoutEntry {
+                binding: 1,
+                visibility: wgpu::ShaderStages::FRAGMENT,
+                ty: wgpu::BindingType::Sampler(wgpu::SamplerBindingType::Filtering),
+                count: None,
+            },
+        ];
+        for binding in 2..8 {
+            material_entries.push(wgpu::BindGroupLayoutEntry {
+                binding,
+                visibility: wgpu::ShaderStages::FRAGMENT,
+                ty: wgpu::BindingType::Texture {
+                    sample_type: wgpu::TextureSampleType::Float { filterable: true },
+                    view_dimension: wgpu::TextureViewDimension::D2,
+                    multisampled: false,
+                },
+                count: None,
+            });
+        }
+        let material_layout = device.create_bind_group_layout(&wgpu::BindGroupLayoutDescriptor {
+            label: Some("material"),
+            entries: &material_entries,
+        });
+        let layout = device.create_pipeline_layout(&wgpu::PipelineLayoutDescriptor {
+            label: Some("plane"),
+            bind_group_layouts: &[Some(&frame_layout), Some(&material_layout)],
+            ..Default::default()
+        });
+        let attributes = wgpu::vertex_attr_array![0 => Float32x3, 1 => Float32x3, 2 => Float32x2, 3 => Float32x4];
+        let targets: Vec<Option<wgpu::ColorTargetState>> =
+            [ALBEDO_FORMAT, DATA_FORMAT, DATA_FORMAT, DATA_FORMAT]
+                .iter()
+                .map(|&format| Some(format.into()))
+                .collect();
+        let pipeline = device.create_render_pipeline(&wgpu::RenderPipelineDescriptor {
+            label: Some("plane"),
+            layout: Some(&layout),
+            vertex: wgpu::VertexState {
+                module: &shader,
+                entry_point: Some("vs_main"),
+                compilation_options: Default::default(),
+                buffers: &[Some(wgpu::VertexBufferLayout {
+                    array_stride: std::mem::size_of::<RenderVertex>() as u64,
+                    step_mode: wgpu::VertexStepMode::Vertex,
+                    attributes: &attributes,
+                })],
+            },
+            fragment: Some(wgpu::FragmentState {
+                module: &shader,
+                entry_point: Some("fs_main"),
+                compilation_options: Default::default(),
+                targets: &targets,
+            }),
+            primitive: wgpu::PrimitiveState {
+                cull_mode: None,
+                ..Default::default()
+            },
+            depth_stencil: Some(wgpu::DepthStencilState {
+                format: DEPTH_FORMAT,
+                depth_write_enabled: Some(true),
+                depth_compare: Some(wgpu::CompareFunction::LessEqual),
+                stencil: Default::default(),
+                bias: Default::default(),
+            }),
+            multisample: wgpu::MultisampleState::default(),
+            multiview_mask: None,
+            cache: None,
+        });
+        let sampler = device.create_sampler(&wgpu::SamplerDescriptor {
+            label: Some("trilinear repeat"),
+            address_mode_u: wgpu::AddressMode::Repeat,
+            address_mode_v: wgpu::AddressMode::Repeat,
+            mag_filter: wgpu::FilterMode::Linear,
+            min_filter: wgpu::FilterMode::Linear,
+            mipmap_filter: wgpu::MipmapFilterMode::Linear,
+            ..Default::default()
+        });
+        let white = upload(
+            &device,
+            &queue,
+            &[Texture::constant(1, 1, [255; 4])],
+            DATA_FORMAT,
+        );
+        Ok(Gpu {
+            device,
+            queue,
+            adapter_name,
+            pipeline,
+            frame_layout,
+            material_layout,
+            sampler,
+            white,
+            uploads: Mutex::new(HashMap::new()),
+        })
+    }
+
+    /// A source texture on the GPU with its mip chain (uploaded once per content).
+    fn texture_view(&self, texture: &Texture, kind: SurfaceKind) -> Arc<wgpu::TextureView> {
+        let srgb = kind == SurfaceKind::Albedo;
+        let key = (texture.hash, srgb);
+        if let Some(view) = self.uploads.lock().expect("upload cache").get(&key) {
+            return view.clone();
+        }
+        let levels = mip_chain(
+            texture,
+            MipSettings {
+                kind,
+                alpha_cutoff: None,
+            },
+        );
+        let view = Arc::new(upload(
+            &self.device,
+            &self.queue,
+            &levels,
+            if srgb { ALBEDO_FORMAT } else { DATA_FORMAT },
+        ));
+        self.uploads
+            .lock()
+            .expect("upload cache")
+            .insert(key, view.clone());
+        view
+    }
+
+    /// Renders one plane's four images.
+    pub fn render_plane(&self, input: &PlaneRenderInput) -> Result<PlaneImages, GpuError> {
+        let (width, height) = (input.width.max(1), input.height.max(1));
+        let rectangle = &input.rectangle;
+        let frame = FrameUniform {
+            origin: extend(rectangle.origin),
+            x_axis: extend(rectangle.x_axis),
+            y_axis: extend(rectangle.y_axis),
+            normal: extend(rectangle.normal),
+            size: [
+                rectangle.width.max(1e-6),
+                rectangle.height.max(1e-6),
+                input.epsilon.max(1e-6),
+                input.alpha_cutoff,
+            ],
+        };
+        let frame_buffer = self.uniform_buffer(bytemuck::bytes_of(&frame));
+        let frame_group = self.device.create_bind_group(&wgpu::BindGroupDescriptor {
+            label: Some("frame"),
+            layout: &self.frame_layout,
+            entries: &[wgpu::BindGroupEntry {
+                binding: 0,
+                resource: frame_buffer.as_entire_binding(),
+            }],
+        });
+        let targets: Vec<wgpu::Texture> = [ALBEDO_FORMAT, DATA_FORMAT, DATA_FORMAT, DATA_FORMAT]
+            .iter()
+            .map(|&format| self.target(width, height, format))
+            .collect();
+        let views: Vec<wgpu::TextureView> = targets
+            .iter()
+            .map(|texture| texture.create_view(&Default::default()))
+            .collect();
+        let depth = self
+            .target(width, height, DEPTH_FORMAT)
+            .create_view(&Default::default());
+
+        let mut draws = Vec::new();
+        for (material_index, vertices) in &input.batches {
+            if vertices.is_empty() {
+                continue;
+            }
+            let material = &input.materials[*material_index];
+            let buffer = self.device.create_buffer(&wgpu::BufferDescriptor {
+                label: Some("vertices"),
+                size: std::mem::size_of_val(vertices.as_slice()) as u64,
+                usage: wgpu::BufferUsages::VERTEX | wgpu::BufferUsages::COPY_DST,
+                mapped_at_creation: false,
+            });
+            self.queue
+                .write_buffer(&buffer, 0, bytemuck::cast_slice(vertices));
+            draws.push((buffer, vertices.len() as u32, self.material_group(material)));
+        }
+
+        let mut encoder = self.device.create_command_encoder(&Default::default());
+        {
+            let attachments: Vec<Option<wgpu::RenderPassColorAttachment>> = views
+                .iter()
+                .map(|view| {
+                    Some(wgpu::RenderPassColorAttachment {
+                        view,
+                        depth_slice: None,
+                        resolve_target: None,
+                        ops: wgpu::Operations {
+                            load: wgpu::LoadOp::Clear(wgpu::Color::TRANSPARENT),
+                            store: wgpu::StoreOp::Store,
+                        },
+                    })
+                })
+                .collect();
+            let mut pass = encoder.begin_render_pass(&wgpu::RenderPassDescriptor {
+                label: Some("plane"),
+                color_attachments: &attachments,
+                depth_stencil_attachment: Some(wgpu::RenderPassDepthStencilAttachment {
+                    view: &depth,
+                    depth_ops: Some(wgpu::Operations {
+                        load: wgpu::LoadOp::Clear(1.0),
+                        store: wgpu::StoreOp::Discard,
+                    }),
+                    stencil_ops: None,
+                }),
+                ..Default::default()
+            });
+            pass.set_pipeline(&self.pipeline);
+            pass.set_bind_group(0, &frame_group, &[]);
+            for (buffer, count, group) in &draws {
+                pass.set_bind_group(1, group, &[]);
+                pass.set_vertex_buffer(0, buffer.slice(..));
+                pass.draw(0..*count, 0..1);
+            }
+        }
+        let padded_row = (width * 4).next_multiple_of(wgpu::COPY_BYTES_PER_ROW_ALIGNMENT);
+        let readbacks: Vec<wgpu::Buffer> = targets
+            .iter()
+            .map(|texture| {
+                let buffer = self.device.create_buffer(&wgpu::BufferDescriptor {
+                    label: Some("readback"),
+                    size: (padded_row * height) as u64,
+                    usage: wgpu::BufferUsages::COPY_DST | wgpu::BufferUsages::MAP_READ,
+                    mapped_at_creation: false,
+                });
+                encoder.copy_texture_to_buffer(
+                    texture.as_image_copy(),
+                    wgpu::TexelCopyBufferInfo {
+                        buffer: &buffer,
+                        layout: wgpu::TexelCopyBufferLayout {
+                            offset: 0,
+                            bytes_per_row: Some(padded_row),
+                            rows_per_image: Some(height),
+                        },
+                    },
+                    wgpu::Extent3d {
+                        width,
+                        height,
+                        depth_or_array_layers: 1,
+                    },
+                );
+                buffer
+            })
+            .collect();
+        self.queue.submit(Some(encoder.finish()));
+        for buffer in &readbacks {
+            buffer.slice(..).map_async(wgpu::MapMode::Read, |_| {});
+        }
+        self.device
+            .poll(wgpu::PollType::wait_indefinitely())
+            .map_err(|error| GpuError::Render(error.to_string()))?;
+        let mut images = Vec::with_capacity(4);
+        for buffer in &readbacks {
+            let mapped = buffer
+                .slice(..)
+                .get_mapped_range()
+                .map_err(|error| GpuError::Render(format!("{error:?}")))?;
+            let mut pixels = Vec::with_capacity((width * height * 4) as usize);
+            for row in 0..height as usize {
+                let start = row * padded_row as usize;
+                pixels.extend_from_slice(&mapped[start..start + width as usize * 4]);
+            }
+            images.push(pixels);
+        }
+        let [albedo, normal, mra, height_map]: [Vec<u8>; 4] =
+            images.try_into().expect("four targets");
+        Ok(PlaneImages {
+            width,
+            height,
+            albedo,
+            normal,
+            mra,
+            height_map,
+        })
+    }
+
+    fn uniform_buffer(&self, bytes: &[u8]) -> wgpu::Buffer {
+        let buffer = self.device.create_buffer(&wgpu::BufferDescriptor {
+            label: Some("uniform"),
+            size: bytes.len() as u64,
+            usage: wgpu::BufferUsages::UNIFORM | wgpu::BufferUsages::COPY_DST,
+            mapped_at_creation: false,
+        });
+        self.queue.write_buffer(&buffer, 0, bytes);
+        buffer
+    }
+
+    fn target(&self, width: u32, height: u32, format: wgpu::TextureFormat) -> wgpu::Texture {
+        self.device.create_texture(&wgpu::TextureDescriptor {
+            label: Some("target"),
+            size: wgpu::Extent3d {
+                width,
+                height,
+                depth_or_array_layers: 1,
+            },
+            mip_level_count: 1,
+            sample_count: 1,
+            dimension: wgpu::TextureDimension::D2,
+            format,
+            usage: wgpu::TextureUsages::RENDER_ATTACHMENT | wgpu::TextureUsages::COPY_SRC,
+            view_formats: &[],
+        })
+    }
+
+    fn material_group(&self, material: &RenderMaterial) -> wgpu::BindGroup {
+        let flag = |texture: &Option<Arc<Texture>>| if texture.is_some() { 1.0 } else { 0.0 };
+        let uniform = MaterialUniform {
+            albedo: material.albedo_factor,
+            params: [
+                material.metallic_value,
+                material.roughness_value,
+                material.ao_value,
+                0.0,
+            ],
+            has_a: [
+                flag(&material.albedo),
+                flag(&material.opacity),
+                flag(&material.normal),
+                flag(&material.metallic),
+            ],
+            has_b: [flag(&material.roughness), flag(&material.ao), 0.0, 0.0],
+        };
+        let buffer = self.uniform_buffer(bytemuck::bytes_of(&uniform));
+        let views: Vec<Arc<wgpu::TextureView>> = [
+            (&material.albedo, SurfaceKind::Albedo),
+            (&material.opacity, SurfaceKind::Mra),
+            (&material.normal, SurfaceKind::Normal),
+            (&material.metallic, SurfaceKind::Mra),
+            (&material.roughness, SurfaceKind::Mra),
+            (&material.ao, SurfaceKind::Mra),
+        ]
+        .into_iter()
+        .map(|(texture, kind)| match texture {
+            Some(texture) => self.texture_view(texture, kind),
+            None => Arc::new(self.white.clone()),
+        })
+        .collect();
+        let mut entries = vec![
+            wgpu::BindGroupEntry {
+                binding: 0,
+                resource: buffer.as_entire_binding(),
+            },
+            wgpu::BindGroupEntry {
+                binding: 1,
+                resource: wgpu::BindingResource::Sampler(&self.sampler),
+            },
+        ];
+        for (index, view) in views.iter().enumerate() {
+            entries.push(wgpu::BindGroupEntry {
+                binding: 2 + index as u32,
+                resource: wgpu::BindingResource::TextureView(view),
+            });
+        }
+        self.device.create_bind_group(&wgpu::BindGroupDescriptor {
+            label: Some("material"),
+            layout: &self.material_layout,
+            entries: &entries,
+        })
+    }
+}
+
+fn extend([x, y, z]: [f32; 3]) -> [f32; 4] {
+    [x, y, z, 0.0]
+}
+
+/// Uploads a mip chain (level 0 first) as one texture.
+fn upload(
+    device: &wgpu::Device,
+    queue: &wgpu::Queue,
+    levels: &[Texture],
+    format: wgpu::TextureFormat,
+) -> wgpu::TextureView {
+    let texture = device.create_texture(&wgpu::TextureDescriptor {
+        label: Some("source"),
+        size: wgpu::Extent3d {
+            width: levels[0].width,
+            height: levels[0].height,
+            depth_or_array_layers: 1,
+        },
+        mip_level_count: levels.len() as u32,
+        sample_count: 1,
+        dimension: wgpu::TextureDimension::D2,
+        format,
+        usage: wgpu::TextureUsages::TEXTURE_BINDING | wgpu::TextureUsages::COPY_DST,
+        view_formats: &[],
+    });
+    for (level, image) in levels.iter().enumerate() {
+        queue.write_texture(
+            wgpu::TexelCopyTextureInfo {
+                texture: &texture,
+                mip_level: level as u32,
+                origin: wgpu::Origin3d::ZERO,
+                aspect: wgpu::TextureAspect::All,
+            },
+            &image.pixels,
+            wgpu::TexelCopyBufferLayout {
+                offset: 0,
+                bytes_per_row: Some(image.width * 4),
+                rows_per_image: Some(image.height),
+            },
+            wgpu::Extent3d {
+                width: image.width,
+                height: image.height,
+                depth_or_array_layers: 1,
+            },
+        );
+    }
+    texture.create_view(&Default::default())
+}
+
+/// Per-vertex tangents (xyz, handedness in w) from UV derivatives, for normal mapping.
+pub fn vertex_tangents(
+    positions: &[[f32; 3]],
+    normals: &[[f32; 3]],
+    uvs: &[[f32; 2]],
+    triangles: &[[u32; 3]],
+) -> Vec<[f32; 4]> {
+    let mut tangents = vec![Vec3::ZERO; positions.len()];
+    let mut bitangents = vec![Vec3::ZERO; positions.len()];
+    for triangle in triangles {
+        let [a, b, c] = triangle.map(|index| index as usize);
+        let (p0, p1, p2) = (
+            Vec3::from(positions[a]),
+            Vec3::from(positions[b]),
+            Vec3::from(positions[c]),
+        );
+        let (t0, t1, t2) = (Vec2::from(uvs[a]), Vec2::from(uvs[b]), Vec2::from(uvs[c]));
+        let (e1, e2, d1, d2) = (p1 - p0, p2 - p0, t1 - t0, t2 - t0);
+        let determinant = d1.x * d2.y - d2.x * d1.y;
+        if determinant.abs() < 1e-12 {
+            continue;
+        }
+        let r = 1.0 / determinant;
+        let tangent = (e1 * d2.y - e2 * d1.y) * r;
+        let bitangent = (e2 * d1.x - e1 * d2.x) * r;
+        for index in [a, b, c] {
+            tangents[index] += tangent;
+            bitangents[index] += bitangent;
+        }
+    }
+    tangents
+        .iter()
+        .zip(&bitangents)
+        .zip(normals)
+        .map(|((&tangent, &bitangent), &normal)| {
+            let normal = Vec3::from(normal);
+            let orthogonal = (tangent - normal * normal.dot(tangent))
+                .try_normalize()
+                .unwrap_or_else(|| normal.any_orthonormal_vector());
+            let handedness = if normal.cross(orthogonal).dot(bitangent) < 0.0 {
+                -1.0
+            } else {
+                1.0
+            };
+            [orthogonal.x, orthogonal.y, orthogonal.z, handedness]
+        })
+        .collect()
+}

@@ -13,10 +13,13 @@ use salsa::Setter;
 
 use crate::artifacts::{load_manifest, save_manifest, write_if_changed, Manifest, ManifestEntry};
 use crate::cache::DiskCache;
+use crate::cache::{CacheEntry, CacheKey};
 use crate::config::{AssetConfig, AssetSource, PipelineConfig, Settings};
+use crate::db::Db;
 use crate::db::{
-    material_file, surface_artifacts, Database, MaterialAsset, SourceFile, Stage, StageRun,
-    SurfaceArtifacts, SurfaceKey,
+    atlas_surface_artifacts, billboard_cache_key, billboard_layout, lod_files, material_file,
+    mesh_textures, plane_images, surface_artifacts, AtlasSurfaceKey, BillboardAsset, Database,
+    MaterialAsset, PlaneKey, SourceFile, Stage, StageRun, SurfaceArtifacts, SurfaceKey,
 };
 use crate::diagnostic::{display_path, Diagnostic};
 use crate::material_definition::MaterialFile;
@@ -71,6 +74,9 @@ pub struct Project {
     files: HashMap<PathBuf, SourceFile>,
     assets: HashMap<String, MaterialAsset>,
     surfaces: HashMap<(String, String, SurfaceKind), SurfaceKey>,
+    billboards: HashMap<String, BillboardAsset>,
+    plane_keys: HashMap<(String, u32), PlaneKey>,
+    atlas_surface_keys: HashMap<(String, SurfaceKind), AtlasSurfaceKey>,
     /// Readable names of input ids, for the event log.
     labels: HashMap<salsa::Id, String>,
 }
@@ -82,8 +88,28 @@ struct AssetPlan {
     input: Option<MaterialAsset>,
     parsed: Option<Arc<MaterialFile>>,
     surfaces: Vec<(String, SurfaceKind, SurfaceKey)>,
+    billboard: Option<BillboardPlan>,
     errors: Vec<Diagnostic>,
 }
+
+/// A billboard cloud's share of a build.
+struct BillboardPlan {
+    input: BillboardAsset,
+    cache_key: CacheKey,
+    /// The artifacts, when the persistent cache had them (then no stage runs).
+    files: Option<BillboardFiles>,
+    plane_keys: Vec<PlaneKey>,
+    surface_keys: Vec<AtlasSurfaceKey>,
+}
+
+/// A baked billboard cloud: file names (inside the asset folder) and bytes, and its plane count.
+#[derive(Clone, Debug)]
+struct BillboardFiles {
+    files: Vec<(String, Vec<u8>)>,
+    planes: usize,
+}
+
+const BILLBOARD_CACHE_STAGE: &str = "billboard";
 
 impl Project {
     pub fn open(config: PipelineConfig, options: ProjectOptions) -> Project {
@@ -96,6 +122,9 @@ impl Project {
             files: HashMap::new(),
             assets: HashMap::new(),
             surfaces: HashMap::new(),
+            billboards: HashMap::new(),
+            plane_keys: HashMap::new(),
+            atlas_surface_keys: HashMap::new(),
             labels: HashMap::new(),
         }
     }
@@ -154,7 +183,25 @@ impl Project {
             .iter()
             .flat_map(|plan| plan.surfaces.iter().map(|(_, _, key)| *key))
             .collect();
-        let results = self.run_surfaces(&keys, progress);
+        let describe_surface = |db: &Database, key: SurfaceKey| {
+            let asset = key.asset(db);
+            (
+                asset.file(db).path(db).clone(),
+                format!(
+                    "{}/{}/{}",
+                    asset.name(db),
+                    key.material(db),
+                    key.surface(db).name()
+                ),
+            )
+        };
+        let results = self.run_parallel(
+            &keys,
+            &describe_surface,
+            &|db, key| surface_artifacts(db, key),
+            progress,
+        );
+        self.bake_billboards(&mut plans, progress);
         let runs = self.db.take_runs();
 
         let output_dir = self.config.output_dir();
@@ -183,6 +230,16 @@ impl Project {
                     .join(&plan.config.name)
                     .join("report.json");
                 self.write_artifact(&path, &bytes, &mut plan.errors, &mut produced);
+            }
+            if let Some(files) = plan
+                .billboard
+                .as_ref()
+                .and_then(|billboard| billboard.files.clone())
+            {
+                let folder = self.config.output.join(&plan.config.name);
+                for (name, bytes) in &files.files {
+                    self.write_artifact(&folder.join(name), bytes, &mut plan.errors, &mut produced);
+                }
             }
             for (path, hash) in &produced {
                 changed |=
@@ -368,14 +425,15 @@ impl Project {
             input: None,
             parsed: None,
             surfaces: Vec::new(),
+            billboard: None,
             errors: Vec::new(),
         };
         match plan.config.source.clone() {
             AssetSource::BillboardCloud { .. } => {
-                plan.errors.push(Diagnostic::new(
-                    &plan.main_file,
-                    format!("asset `{}`: BillboardCloud assets are not baked by this version of cirrus yet", plan.config.name),
-                ));
+                match self.plan_billboard(&plan.config, &plan.main_file) {
+                    Ok(billboard) => plan.billboard = Some(billboard),
+                    Err(diagnostic) => plan.errors.push(diagnostic),
+                }
             }
             AssetSource::Material { .. } => {
                 let file = self.source_file(&plan.main_file);
@@ -398,7 +456,7 @@ impl Project {
                             input.set_textures(&mut self.db).to(Arc::new(textures));
                         }
                         for material in &parsed.materials {
-                            for surface in SurfaceKind::ALL {
+                            for surface in SurfaceKind::MATERIAL {
                                 let key = self.surface_key(
                                     &plan.config.name,
                                     input,
@@ -416,57 +474,337 @@ impl Project {
         plan
     }
 
-    /// Runs the surface stages of `keys` on worker threads, each with its own database clone.
-    fn run_surfaces(
+    /// Reads a billboard cloud's sources into inputs; from the persistent cache when it has the
+    /// result, else runs mesh → planes → layout here and prepares the per-plane and per-surface keys.
+    fn plan_billboard(
+        &mut self,
+        config: &AssetConfig,
+        main_file: &Path,
+    ) -> Result<BillboardPlan, Diagnostic> {
+        let mesh_file = self.source_file(main_file);
+        let obj_bytes = mesh_file
+            .contents(&self.db)
+            .as_ref()
+            .map(|contents| contents.bytes.clone())
+            .map_err(|error| Diagnostic::new(main_file, error.clone()))?;
+        let mut libraries = BTreeMap::new();
+        for library in crate::mesh::material_libraries(main_file, &obj_bytes) {
+            let file = self.source_file(&library);
+            libraries.insert(library, file);
+        }
+        let source_root = self.config.source.clone();
+        let input = match self.billboards.get(&config.name) {
+            Some(&input) => {
+                if input.mesh_file(&self.db) != mesh_file {
+                    input.set_mesh_file(&mut self.db).to(mesh_file);
+                }
+                if **input.libraries(&self.db) != libraries {
+                    input.set_libraries(&mut self.db).to(Arc::new(libraries));
+                }
+                if input.settings(&self.db) != &config.settings {
+                    input.set_settings(&mut self.db).to(config.settings.clone());
+                }
+                if input.source_root(&self.db) != &source_root {
+                    input.set_source_root(&mut self.db).to(source_root);
+                }
+                input
+            }
+            None => {
+                let input = BillboardAsset::new(
+                    &self.db,
+                    config.name.clone(),
+                    source_root,
+                    mesh_file,
+                    Arc::new(libraries),
+                    Arc::new(BTreeMap::new()),
+                    config.settings.clone(),
+                    Arc::new(Vec::new()),
+                );
+                self.labels.insert(input.as_id(), config.name.clone());
+                self.billboards.insert(config.name.clone(), input);
+                input
+            }
+        };
+        let mut textures = BTreeMap::new();
+        for path in mesh_textures(&self.db, input).iter() {
+            let file = self.source_file(path);
+            textures.insert(path.clone(), file);
+        }
+        if **input.textures(&self.db) != textures {
+            input.set_textures(&mut self.db).to(Arc::new(textures));
+        }
+        let cache_key = billboard_cache_key(&self.db, input);
+        let files = self.load_billboard(cache_key);
+        let mut plan = BillboardPlan {
+            input,
+            cache_key,
+            files,
+            plane_keys: Vec::new(),
+            surface_keys: Vec::new(),
+        };
+        if plan.files.is_some() {
+            return Ok(plan);
+        }
+        let layout = billboard_layout(&self.db, input)?;
+        for index in 0..layout.rectangles.len() as u32 {
+            let key = *self
+                .plane_keys
+                .entry((config.name.clone(), index))
+                .or_insert_with(|| PlaneKey::new(&self.db, input, index));
+            self.labels
+                .insert(key.as_id(), format!("{}/plane{index}", config.name));
+            plan.plane_keys.push(key);
+        }
+        if **input.plane_keys(&self.db) != plan.plane_keys {
+            input
+                .set_plane_keys(&mut self.db)
+                .to(Arc::new(plan.plane_keys.clone()));
+        }
+        for surface in SurfaceKind::BILLBOARD {
+            let key = *self
+                .atlas_surface_keys
+                .entry((config.name.clone(), surface))
+                .or_insert_with(|| AtlasSurfaceKey::new(&self.db, input, surface));
+            self.labels
+                .insert(key.as_id(), format!("{}/{}", config.name, surface.name()));
+            plan.surface_keys.push(key);
+        }
+        Ok(plan)
+    }
+
+    fn load_billboard(&self, key: CacheKey) -> Option<BillboardFiles> {
+        let entry = self.db.disk_cache()?.load(BILLBOARD_CACHE_STAGE, key)?;
+        let names: Vec<String> =
+            serde_json::from_value(entry.metadata.get("files")?.clone()).ok()?;
+        let planes = entry.metadata.get("planes")?.as_u64()? as usize;
+        (names.len() == entry.blobs.len()).then(|| BillboardFiles {
+            files: names.into_iter().zip(entry.blobs).collect(),
+            planes,
+        })
+    }
+
+    /// Renders the planes and encodes the atlases of the billboard clouds the cache did not have,
+    /// then assembles their files (and stores them in the persistent cache).
+    fn bake_billboards(&self, plans: &mut [AssetPlan], progress: &(dyn Fn(Progress) + Sync)) {
+        let pending: Vec<usize> = (0..plans.len())
+            .filter(|&index| {
+                plans[index]
+                    .billboard
+                    .as_ref()
+                    .is_some_and(|plan| plan.files.is_none())
+            })
+            .collect();
+        if pending.is_empty() {
+            return;
+        }
+        let describe_plane = |db: &Database, key: PlaneKey| {
+            let asset = key.asset(db);
+            (
+                asset.mesh_file(db).path(db).clone(),
+                format!("{}/plane{}", asset.name(db), key.index(db)),
+            )
+        };
+        let plane_keys: Vec<PlaneKey> = pending
+            .iter()
+            .flat_map(|&index| {
+                plans[index]
+                    .billboard
+                    .as_ref()
+                    .expect("pending")
+                    .plane_keys
+                    .clone()
+            })
+            .collect();
+        let rendered = self.run_parallel(
+            &plane_keys,
+            &describe_plane,
+            &|db, key| plane_images(db, key).map(|_| ()),
+            progress,
+        );
+        let describe_surface = |db: &Database, key: AtlasSurfaceKey| {
+            let asset = key.asset(db);
+            (
+                asset.mesh_file(db).path(db).clone(),
+                format!("{}/{}", asset.name(db), key.surface(db).name()),
+            )
+        };
+        let mut surface_keys = Vec::new();
+        for &index in &pending {
+            let plan = plans[index].billboard.as_ref().expect("pending");
+            let render_failed = plan.plane_keys.iter().any(|key| {
+                rendered[plane_keys
+                    .iter()
+                    .position(|other| other == key)
+                    .expect("listed")]
+                .is_err()
+            });
+            if !render_failed {
+                surface_keys.extend(plan.surface_keys.iter().copied());
+            }
+        }
+        let encoded = self.run_parallel(
+            &surface_keys,
+            &describe_surface,
+            &|db, key| atlas_surface_artifacts(db, key),
+            progress,
+        );
+        for &index in &pending {
+            let plan = &mut plans[index];
+            let billboard = plan.billboard.as_mut().expect("pending");
+            for (key, result) in plane_keys.iter().zip(&rendered) {
+                if let (true, Err(diagnostic)) = (billboard.plane_keys.contains(key), result) {
+                    if !plan.errors.contains(diagnostic) {
+                        plan.errors.push(diagnostic.clone());
+                    }
+                }
+            }
+            let mut surfaces = Vec::new();
+            for (key, result) in surface_keys.iter().zip(&encoded) {
+                if !billboard.surface_keys.contains(key) {
+                    continue;
+                }
+                match result {
+                    Ok(artifacts) => surfaces.push(artifacts.clone()),
+                    Err(diagnostic) => plan.errors.push(diagnostic.clone()),
+                }
+            }
+            if !plan.errors.is_empty() || surfaces.len() != SurfaceKind::BILLBOARD.len() {
+                continue;
+            }
+            match self.assemble_billboard(billboard, &surfaces) {
+                Ok(files) => {
+                    if let Some(cache) = self.db.disk_cache() {
+                        let metadata = serde_json::json!({ "files": files.files.iter().map(|(name, _)| name).collect::<Vec<_>>(), "planes": files.planes });
+                        cache.store(
+                            BILLBOARD_CACHE_STAGE,
+                            billboard.cache_key,
+                            &CacheEntry {
+                                metadata,
+                                blobs: files.files.iter().map(|(_, bytes)| bytes.clone()).collect(),
+                            },
+                        );
+                    }
+                    billboard.files = Some(files);
+                }
+                Err(diagnostic) => plan.errors.push(diagnostic),
+            }
+        }
+    }
+
+    /// The files of a freshly baked billboard cloud: LOD mesh, textures, previews, report.
+    fn assemble_billboard(
         &self,
-        keys: &[SurfaceKey],
+        plan: &BillboardPlan,
+        surfaces: &[Arc<SurfaceArtifacts>],
+    ) -> Result<BillboardFiles, Diagnostic> {
+        let db = &self.db;
+        let input = plan.input;
+        let (obj, mtl) = (*lod_files(db, input)?).clone();
+        let loaded = crate::db::loaded_mesh(db, input)?;
+        let planes = crate::db::billboard_planes(db, input)?;
+        let layout = billboard_layout(db, input)?;
+        let atlas = crate::db::billboard_atlas(db, input)?;
+        let mut files = vec![
+            ("lod.obj".to_string(), obj.into_bytes()),
+            ("lod.mtl".to_string(), mtl.into_bytes()),
+        ];
+        for artifacts in surfaces {
+            let name = artifacts.info.surface.name();
+            files.push((
+                format!("{name}.{}", artifacts.info.container.extension()),
+                artifacts.texture_file.to_vec(),
+            ));
+            files.push((format!("{name}.png"), artifacts.preview_png.to_vec()));
+        }
+        let settings = input.settings(db);
+        let report = serde_json::json!({
+            "asset": input.name(db),
+            "kind": "BillboardCloud",
+            "mesh": display_path(input.mesh_file(db).path(db)),
+            "faces": planes.face_count,
+            "planes": planes.planes.len(),
+            "epsilon": settings.billboard.epsilon,
+            "epsilon_world": planes.epsilon,
+            "max_error_world": planes.max_error,
+            "atlas": {
+                "width": layout.layout.width,
+                "height": layout.layout.height,
+                "texel_density": layout.layout.texel_density,
+                "occupancy": (layout.layout.occupancy * 1e4).round() / 1e4,
+                "coverage": (atlas.coverage * 1e4).round() / 1e4,
+            },
+            "surfaces": surfaces.iter().map(|artifacts| &artifacts.info).collect::<Vec<_>>(),
+            "stage_ms": self.billboard_stage_ms(plan),
+            "warnings": loaded.warnings.iter().map(ErrorSummary::from).collect::<Vec<_>>(),
+        });
+        let mut report_bytes = serde_json::to_vec_pretty(&report).expect("reports serialise");
+        report_bytes.push(b'\n');
+        files.push(("report.json".to_string(), report_bytes));
+        Ok(BillboardFiles {
+            files,
+            planes: planes.planes.len(),
+        })
+    }
+
+    /// Milliseconds per stage spent on this billboard cloud by the runs logged so far.
+    fn billboard_stage_ms(&self, plan: &BillboardPlan) -> BTreeMap<&'static str, f64> {
+        let ids: BTreeSet<salsa::Id> = std::iter::once(plan.input.as_id())
+            .chain(plan.plane_keys.iter().map(|key| key.as_id()))
+            .chain(plan.surface_keys.iter().map(|key| key.as_id()))
+            .collect();
+        let mut totals = BTreeMap::new();
+        for run in self.db.peek_runs() {
+            if ids.contains(&run.key) && !run.from_cache {
+                *totals.entry(run.stage.name()).or_insert(0.0) += (run.ms * 10.0).round() / 10.0;
+            }
+        }
+        totals
+    }
+
+    /// Runs `work` for every item on worker threads, each with its own database clone; a panic
+    /// fails only its item. `describe` names an item's file (for that failure) and progress label.
+    fn run_parallel<T: Copy + Send + Sync, R: Send>(
+        &self,
+        items: &[T],
+        describe: &(dyn Fn(&Database, T) -> (PathBuf, String) + Sync),
+        work: &(dyn Fn(&Database, T) -> Result<R, Diagnostic> + Sync),
         progress: &(dyn Fn(Progress) + Sync),
-    ) -> Vec<Result<Arc<SurfaceArtifacts>, Diagnostic>> {
-        let results: Mutex<Vec<Option<Result<Arc<SurfaceArtifacts>, Diagnostic>>>> =
-            Mutex::new(vec![None; keys.len()]);
+    ) -> Vec<Result<R, Diagnostic>> {
+        let results: Mutex<Vec<Option<Result<R, Diagnostic>>>> =
+            Mutex::new((0..items.len()).map(|_| None).collect());
         let next = AtomicUsize::new(0);
         let done = AtomicUsize::new(0);
         let workers = std::thread::available_parallelism()
             .map_or(2, |count| count.get())
-            .min(keys.len().max(1));
+            .min(items.len().max(1));
         std::thread::scope(|scope| {
             for _ in 0..workers {
                 let db = self.db.clone();
                 let (results, next, done) = (&results, &next, &done);
                 scope.spawn(move || loop {
                     let index = next.fetch_add(1, Ordering::Relaxed);
-                    let Some(&key) = keys.get(index) else { break };
-                    let result =
-                        std::panic::catch_unwind(AssertUnwindSafe(|| surface_artifacts(&db, key)))
-                            .unwrap_or_else(|panic| {
-                                let message = panic
-                                    .downcast_ref::<String>()
-                                    .cloned()
-                                    .or_else(|| {
-                                        panic.downcast_ref::<&str>().map(|text| text.to_string())
-                                    })
-                                    .unwrap_or_else(|| "unknown panic".to_string());
-                                let file = key.asset(&db).file(&db).path(&db).clone();
-                                Err(Diagnostic::new(
-                                    file,
-                                    format!(
-                                        "internal error while baking `{}`: {message}",
-                                        key.material(&db)
-                                    ),
-                                ))
-                            });
+                    let Some(&item) = items.get(index) else { break };
+                    let result = std::panic::catch_unwind(AssertUnwindSafe(|| work(&db, item)))
+                        .unwrap_or_else(|panic| {
+                            let message = panic
+                                .downcast_ref::<String>()
+                                .cloned()
+                                .or_else(|| {
+                                    panic.downcast_ref::<&str>().map(|text| text.to_string())
+                                })
+                                .unwrap_or_else(|| "unknown panic".to_string());
+                            let (file, label) = describe(&db, item);
+                            Err(Diagnostic::new(
+                                file,
+                                format!("internal error while baking `{label}`: {message}"),
+                            ))
+                        });
                     results.lock().expect("results lock")[index] = Some(result);
                     let finished = done.fetch_add(1, Ordering::Relaxed) + 1;
-                    let item = format!(
-                        "{}/{}/{}",
-                        key.asset(&db).name(&db),
-                        key.material(&db),
-                        key.surface(&db).name()
-                    );
                     progress(Progress {
                         done: finished,
-                        total: keys.len(),
-                        item,
+                        total: items.len(),
+                        item: describe(&db, item).1,
                     });
                 });
             }
@@ -475,7 +813,7 @@ impl Project {
             .into_inner()
             .expect("results lock")
             .into_iter()
-            .map(|result| result.expect("every key ran"))
+            .map(|result| result.expect("every item ran"))
             .collect()
     }
 
@@ -556,6 +894,90 @@ impl Project {
         }
     }
 
+    /// The stage instances of a billboard cloud: ran when this build ran them, cached when memory
+    /// or the persistent cache had them, failed for the ones an error left undone.
+    fn billboard_stage_summaries(
+        &self,
+        plan: &AssetPlan,
+        billboard: &BillboardPlan,
+        runs: &[StageRun],
+    ) -> Vec<StageSummary> {
+        let failed = !plan.errors.is_empty();
+        let status = |stage: Stage, id: salsa::Id| -> (StageStatus, f64) {
+            let ran: Vec<&StageRun> = runs
+                .iter()
+                .filter(|run| run.stage == stage && run.key == id && !run.from_cache)
+                .collect();
+            match (ran.is_empty(), failed) {
+                (false, _) => (
+                    StageStatus::Ran,
+                    ran.iter().fold(0.0, |total, run| total + run.ms),
+                ),
+                (true, true) => (StageStatus::Failed, 0.0),
+                (true, false) => (StageStatus::Cached, 0.0),
+            }
+        };
+        let id = billboard.input.as_id();
+        let mut stages = Vec::new();
+        let summary = |stage: Stage, instance: String, key: salsa::Id| {
+            let (status, ms) = status(stage, key);
+            StageSummary {
+                stage: stage.name(),
+                instance,
+                status,
+                ms,
+            }
+        };
+        let mesh = display_path(&plan.main_file);
+        for stage in [Stage::Mesh, Stage::Planes, Stage::Layout] {
+            stages.push(summary(stage, mesh.clone(), id));
+        }
+        let plane_count = billboard
+            .files
+            .as_ref()
+            .map_or(billboard.plane_keys.len(), |files| {
+                files.planes.max(billboard.plane_keys.len())
+            });
+        for index in 0..plane_count {
+            let key = billboard
+                .plane_keys
+                .get(index)
+                .map(|key| key.as_id())
+                .or_else(|| {
+                    self.plane_keys
+                        .get(&(plan.config.name.clone(), index as u32))
+                        .map(|key| key.as_id())
+                });
+            let (status, ms) = match key {
+                Some(key) => status(Stage::Render, key),
+                None => (
+                    if failed {
+                        StageStatus::Failed
+                    } else {
+                        StageStatus::Cached
+                    },
+                    0.0,
+                ),
+            };
+            stages.push(StageSummary {
+                stage: Stage::Render.name(),
+                instance: format!("plane{index}"),
+                status,
+                ms,
+            });
+        }
+        stages.push(summary(Stage::Atlas, mesh.clone(), id));
+        for surface in SurfaceKind::BILLBOARD {
+            let key = self
+                .atlas_surface_keys
+                .get(&(plan.config.name.clone(), surface))
+                .map_or(id, |key| key.as_id());
+            stages.push(summary(Stage::Encode, surface.name().to_string(), key));
+        }
+        stages.push(summary(Stage::Lod, mesh, id));
+        stages
+    }
+
     fn asset_summary(
         &self,
         plan: &AssetPlan,
@@ -598,6 +1020,9 @@ impl Project {
                     ms,
                 });
             }
+        }
+        if let Some(billboard) = &plan.billboard {
+            stages.extend(self.billboard_stage_summaries(plan, billboard, runs));
         }
         for ((material, surface, key), result) in plan.surfaces.iter().zip(results) {
             for stage in [Stage::Pack, Stage::Mips, Stage::Encode, Stage::Write] {

@@ -107,6 +107,12 @@ pub enum Stage {
     Mips,
     Encode,
     Write,
+    Mesh,
+    Planes,
+    Layout,
+    Render,
+    Atlas,
+    Lod,
 }
 
 impl Stage {
@@ -118,6 +124,12 @@ impl Stage {
             Stage::Mips => "mips",
             Stage::Encode => "encode",
             Stage::Write => "write",
+            Stage::Mesh => "mesh",
+            Stage::Planes => "planes",
+            Stage::Layout => "layout",
+            Stage::Render => "render",
+            Stage::Atlas => "atlas",
+            Stage::Lod => "lod",
         }
     }
 
@@ -130,6 +142,13 @@ impl Stage {
             "mip_levels" => Stage::Mips,
             "encoded_surface" => Stage::Encode,
             "surface_artifacts" => Stage::Write,
+            "loaded_mesh" => Stage::Mesh,
+            "billboard_planes" => Stage::Planes,
+            "billboard_layout" => Stage::Layout,
+            "plane_images" => Stage::Render,
+            "billboard_atlas" => Stage::Atlas,
+            "atlas_surface_artifacts" => Stage::Encode,
+            "lod_files" => Stage::Lod,
             _ => return None,
         })
     }
@@ -205,6 +224,11 @@ impl Database {
     /// The tracked functions salsa executed since the last call (its `WillExecute` events).
     pub fn take_executed(&self) -> Vec<ExecutedFunction> {
         std::mem::take(&mut *self.logs.executed.lock().expect("log lock"))
+    }
+
+    /// The stage bodies that ran since the last `take_runs`, leaving them logged.
+    pub fn peek_runs(&self) -> Vec<StageRun> {
+        self.logs.runs.lock().expect("log lock").clone()
     }
 
     /// The stage bodies that ran since the last call, with their durations.
@@ -393,6 +417,7 @@ pub fn block_settings(db: &dyn Db, key: SurfaceKey) -> (BlockFormat, EncodeQuali
         SurfaceKind::Albedo => encode.albedo,
         SurfaceKind::Mra => encode.mra,
         SurfaceKind::Normal => encode.normal,
+        SurfaceKind::Height => encode.height,
     };
     (format, encode.quality)
 }
@@ -604,4 +629,416 @@ fn store_cached(db: &dyn Db, stage: &str, key: CacheKey, entry: impl FnOnce() ->
     if let Some(cache) = db.disk_cache() {
         cache.store(stage, key, &entry());
     }
+}
+
+// ---------------------------------------------------------------------------------------------
+// billboard clouds: mesh → planes → layout → per-plane renders → atlas → encoded surfaces, LOD
+
+/// A `BillboardCloud` asset: an OBJ, the MTL files it names and the textures they name.
+#[salsa::input(debug)]
+pub struct BillboardAsset {
+    #[returns(ref)]
+    pub name: String,
+    #[returns(ref)]
+    pub source_root: PathBuf,
+    #[returns(copy)]
+    pub mesh_file: SourceFile,
+    #[returns(ref)]
+    pub libraries: Arc<BTreeMap<PathBuf, SourceFile>>,
+    #[returns(ref)]
+    pub textures: Arc<BTreeMap<PathBuf, SourceFile>>,
+    #[returns(ref)]
+    pub settings: Settings,
+    /// One key per plane, set by the driver once the layout is known.
+    #[returns(ref)]
+    pub plane_keys: Arc<Vec<PlaneKey>>,
+}
+
+/// One plane of a billboard cloud: the key of its render stage.
+#[salsa::input(debug)]
+pub struct PlaneKey {
+    #[returns(copy)]
+    pub asset: BillboardAsset,
+    #[returns(copy)]
+    pub index: u32,
+}
+
+/// One atlas surface of a billboard cloud: the key of its encode stage.
+#[salsa::input(debug)]
+pub struct AtlasSurfaceKey {
+    #[returns(copy)]
+    pub asset: BillboardAsset,
+    #[returns(copy)]
+    pub surface: SurfaceKind,
+}
+
+fn library_bytes(db: &dyn Db, asset: BillboardAsset) -> BTreeMap<PathBuf, Option<Vec<u8>>> {
+    asset
+        .libraries(db)
+        .iter()
+        .map(|(path, file)| {
+            (
+                path.clone(),
+                file.contents(db)
+                    .as_ref()
+                    .ok()
+                    .map(|contents| contents.bytes.to_vec()),
+            )
+        })
+        .collect()
+}
+
+/// The texture files the mesh's materials name (cheap: the MTL files only).
+#[salsa::tracked(returns(clone))]
+pub fn mesh_textures(db: &dyn Db, asset: BillboardAsset) -> Arc<Vec<PathBuf>> {
+    Arc::new(crate::mesh::texture_paths(
+        asset.mesh_file(db).path(db),
+        &library_bytes(db, asset),
+        asset.source_root(db),
+    ))
+}
+
+/// A loaded mesh with its vertex tangents and load warnings.
+#[derive(Debug, PartialEq)]
+pub struct LoadedMesh {
+    pub mesh: crate::mesh::Mesh,
+    pub tangents: Vec<[f32; 4]>,
+    pub warnings: Vec<Diagnostic>,
+}
+
+#[salsa::tracked(returns(clone))]
+pub fn loaded_mesh(db: &dyn Db, asset: BillboardAsset) -> Result<Arc<LoadedMesh>, Diagnostic> {
+    let file = asset.mesh_file(db);
+    let contents = read_contents(db, file)?;
+    let libraries = library_bytes(db, asset);
+    timed(db, Stage::Mesh, asset, || {
+        let (mesh, warnings) = crate::mesh::load_mesh(
+            file.path(db),
+            &contents.bytes,
+            &libraries,
+            asset.source_root(db),
+        )?;
+        let tangents = match &mesh.uvs {
+            Some(uvs) => {
+                crate::gpu::vertex_tangents(&mesh.positions, &mesh.normals, uvs, &mesh.triangles)
+            }
+            None => Vec::new(),
+        };
+        Ok(Arc::new(LoadedMesh {
+            mesh,
+            tangents,
+            warnings,
+        }))
+    })
+}
+
+#[salsa::tracked(returns(copy))]
+pub fn plane_settings(db: &dyn Db, asset: BillboardAsset) -> crate::planes::PlaneSettings {
+    let billboard = &asset.settings(db).billboard;
+    crate::planes::PlaneSettings {
+        epsilon: billboard.epsilon,
+        max_planes: billboard.max_planes,
+    }
+}
+
+#[salsa::tracked(returns(clone))]
+pub fn billboard_planes(
+    db: &dyn Db,
+    asset: BillboardAsset,
+) -> Result<Arc<crate::planes::PlaneSet>, Diagnostic> {
+    let loaded = loaded_mesh(db, asset)?;
+    let settings = plane_settings(db, asset);
+    timed(db, Stage::Planes, asset, || {
+        Ok(Arc::new(crate::planes::select_planes(
+            &loaded.mesh.positions,
+            &loaded.mesh.triangles,
+            settings,
+        )))
+    })
+}
+
+/// The planes' rectangles and their atlas layout.
+#[derive(Debug, PartialEq)]
+pub struct BillboardLayout {
+    pub rectangles: Vec<crate::rectangles::PlaneRectangle>,
+    pub layout: crate::layout::Layout,
+}
+
+#[salsa::tracked(returns(clone))]
+pub fn atlas_layout_settings(
+    db: &dyn Db,
+    asset: BillboardAsset,
+) -> (crate::config::AtlasSettings, Option<f32>) {
+    let settings = asset.settings(db);
+    (settings.atlas.clone(), settings.billboard.texel_density)
+}
+
+#[salsa::tracked(returns(clone))]
+pub fn billboard_layout(
+    db: &dyn Db,
+    asset: BillboardAsset,
+) -> Result<Arc<BillboardLayout>, Diagnostic> {
+    let loaded = loaded_mesh(db, asset)?;
+    let planes = billboard_planes(db, asset)?;
+    let (atlas, density) = atlas_layout_settings(db, asset);
+    timed(db, Stage::Layout, asset, || {
+        let rectangles = crate::rectangles::plane_rectangles(
+            &loaded.mesh.positions,
+            &loaded.mesh.triangles,
+            &planes,
+        );
+        let sizes: Vec<(f32, f32)> = rectangles
+            .iter()
+            .map(|rectangle| (rectangle.width, rectangle.height))
+            .collect();
+        let layout = crate::layout::layout_rectangles(&sizes, &atlas, density);
+        Ok(Arc::new(BillboardLayout { rectangles, layout }))
+    })
+}
+
+/// `lod.obj` and `lod.mtl`: planes and layout only, so texture edits leave them alone.
+#[salsa::tracked(returns(clone))]
+pub fn lod_files(db: &dyn Db, asset: BillboardAsset) -> Result<Arc<(String, String)>, Diagnostic> {
+    let layout = billboard_layout(db, asset)?;
+    timed(db, Stage::Lod, asset, || {
+        Ok(Arc::new(crate::lod_mesh::lod_mesh(
+            &layout.rectangles,
+            &layout.layout,
+            "billboard_cloud",
+        )))
+    })
+}
+
+#[salsa::tracked(returns(copy))]
+pub fn billboard_alpha_cutoff(db: &dyn Db, asset: BillboardAsset) -> f32 {
+    asset.settings(db).billboard.alpha_cutoff
+}
+
+/// One plane's four images, rendered on the GPU; reads only the textures its faces use.
+#[salsa::tracked(returns(clone))]
+pub fn plane_images(
+    db: &dyn Db,
+    key: PlaneKey,
+) -> Result<Arc<crate::gpu::PlaneImages>, Diagnostic> {
+    let asset = key.asset(db);
+    let loaded = loaded_mesh(db, asset)?;
+    let planes = billboard_planes(db, asset)?;
+    let layout = billboard_layout(db, asset)?;
+    let alpha_cutoff = billboard_alpha_cutoff(db, asset);
+    let index = key.index(db) as usize;
+    let mesh_path = asset.mesh_file(db).path(db).clone();
+    let (Some(placement), Some(rectangle)) = (
+        layout.layout.placements.get(index),
+        layout.rectangles.get(index),
+    ) else {
+        return Err(Diagnostic::new(
+            &mesh_path,
+            format!("plane rectangle {index} no longer exists"),
+        ));
+    };
+    let mut materials = vec![crate::gpu::RenderMaterial::default(); loaded.mesh.materials.len()];
+    let with_uvs = loaded.mesh.uvs.is_some();
+    for material_index in crate::plane_textures::plane_materials(&loaded.mesh, rectangle) {
+        let source = &loaded.mesh.materials[material_index as usize];
+        let decoded = |slot: crate::material_definition::TextureSlot| -> Result<Option<Arc<Texture>>, Diagnostic> {
+            let Some(path) = source.maps.get(&slot).filter(|_| with_uvs) else { return Ok(None) };
+            let Some(&file) = asset.textures(db).get(path) else {
+                return Err(Diagnostic::new(&mesh_path, format!("texture {} was not read", crate::diagnostic::display_path(path))));
+            };
+            if let Err(error) = file.contents(db) {
+                return Err(Diagnostic::new(&mesh_path, format!("material `{}`: {} texture {}: {error}", source.name, slot.name(), crate::diagnostic::display_path(path))));
+            }
+            decoded_texture(db, file).map(Some)
+        };
+        use crate::material_definition::TextureSlot;
+        materials[material_index as usize] = crate::gpu::RenderMaterial {
+            albedo: decoded(TextureSlot::Albedo)?,
+            opacity: decoded(TextureSlot::Opacity)?,
+            normal: decoded(TextureSlot::Normal)?,
+            metallic: decoded(TextureSlot::Metallic)?,
+            roughness: decoded(TextureSlot::Roughness)?,
+            ao: decoded(TextureSlot::Ao)?,
+            albedo_factor: [
+                source.albedo_factor[0],
+                source.albedo_factor[1],
+                source.albedo_factor[2],
+                source.opacity,
+            ],
+            metallic_value: source.metallic,
+            roughness_value: source.roughness,
+            ao_value: 1.0,
+        };
+    }
+    // The depth range covers every assigned face, also beyond ε when `max_planes` capped them.
+    let depth_range = planes.epsilon.max(planes.max_error).max(1e-6);
+    timed(db, Stage::Render, key, || {
+        let gpu =
+            crate::gpu::gpu().map_err(|error| Diagnostic::new(&mesh_path, error.to_string()))?;
+        let input = crate::gpu::PlaneRenderInput {
+            rectangle,
+            epsilon: depth_range,
+            alpha_cutoff,
+            width: placement.width,
+            height: placement.height,
+            batches: crate::plane_textures::plane_batches(
+                &loaded.mesh,
+                &loaded.tangents,
+                rectangle,
+            ),
+            materials: &materials,
+        };
+        gpu.render_plane(&input)
+            .map(Arc::new)
+            .map_err(|error| Diagnostic::new(&mesh_path, error.to_string()))
+    })
+}
+
+#[salsa::tracked(returns(clone))]
+pub fn billboard_atlas(
+    db: &dyn Db,
+    asset: BillboardAsset,
+) -> Result<Arc<crate::atlas::AtlasImages>, Diagnostic> {
+    let layout = billboard_layout(db, asset)?;
+    let mut images = Vec::new();
+    for key in asset.plane_keys(db).iter() {
+        images.push(plane_images(db, *key)?);
+    }
+    timed(db, Stage::Atlas, asset, || {
+        let references: Vec<&crate::gpu::PlaneImages> =
+            images.iter().map(|image| image.as_ref()).collect();
+        Ok(Arc::new(crate::atlas::composite_atlas(
+            &layout.layout,
+            &references,
+        )))
+    })
+}
+
+/// One surface of the atlas (cheap; cuts off when only other surfaces changed).
+#[salsa::tracked(returns(clone))]
+pub fn atlas_surface(db: &dyn Db, key: AtlasSurfaceKey) -> Result<Arc<Texture>, Diagnostic> {
+    let atlas = billboard_atlas(db, key.asset(db))?;
+    Ok(Arc::new(match key.surface(db) {
+        SurfaceKind::Albedo => atlas.albedo.clone(),
+        SurfaceKind::Mra => atlas.mra.clone(),
+        SurfaceKind::Normal => atlas.normal.clone(),
+        SurfaceKind::Height => atlas.height.clone(),
+    }))
+}
+
+#[salsa::tracked(returns(clone))]
+pub fn atlas_block_settings(
+    db: &dyn Db,
+    key: AtlasSurfaceKey,
+) -> (
+    BlockFormat,
+    EncodeQuality,
+    bool,
+    Container,
+    Option<i32>,
+    f32,
+) {
+    let settings = key.asset(db).settings(db);
+    let encode = &settings.encode;
+    let format = match key.surface(db) {
+        SurfaceKind::Albedo => encode.albedo,
+        SurfaceKind::Mra => encode.mra,
+        SurfaceKind::Normal => encode.normal,
+        SurfaceKind::Height => encode.height,
+    };
+    (
+        format,
+        encode.quality,
+        encode.mips,
+        encode.container,
+        encode.zstd,
+        settings.billboard.alpha_cutoff,
+    )
+}
+
+/// Mips, block compression (with its measured PSNR), container and preview of one atlas surface.
+#[salsa::tracked(returns(clone))]
+pub fn atlas_surface_artifacts(
+    db: &dyn Db,
+    key: AtlasSurfaceKey,
+) -> Result<Arc<SurfaceArtifacts>, Diagnostic> {
+    let image = atlas_surface(db, key)?;
+    let (format, quality, mips, container, zstd, alpha_cutoff) = atlas_block_settings(db, key);
+    let surface = key.surface(db);
+    timed(db, Stage::Encode, key, || {
+        let alpha_tested = surface == SurfaceKind::Albedo && has_transparency(&image);
+        let levels = if mips {
+            mip_chain(
+                &image,
+                MipSettings {
+                    kind: surface,
+                    alpha_cutoff: alpha_tested.then_some(alpha_cutoff),
+                },
+            )
+        } else {
+            vec![(*image).clone()]
+        };
+        let texture = encode_levels(
+            &levels,
+            BlockEncodeSettings {
+                format,
+                quality,
+                alpha: alpha_tested,
+                srgb: surface.is_srgb(),
+            },
+        );
+        let decoded = decode_blocks(format, &texture.levels[0], image.width, image.height);
+        let psnr_db = (psnr(&image, &decoded, surface.channels()) * 100.0).round() / 100.0;
+        let texture_file: Arc<[u8]> = write_container(&texture, container, zstd).into();
+        let info = SurfaceInfo {
+            surface,
+            format,
+            srgb: surface.is_srgb(),
+            container,
+            width: image.width,
+            height: image.height,
+            levels: levels.len() as u32,
+            bytes: texture_file.len() as u64,
+            psnr_db,
+            alpha_tested,
+        };
+        Ok(Arc::new(SurfaceArtifacts {
+            info,
+            texture_file,
+            preview_png: preview_png(&image).into(),
+        }))
+    })
+}
+
+/// The content address of a billboard cloud's artifacts: every input file and setting.
+#[salsa::tracked(returns(copy))]
+pub fn billboard_cache_key(db: &dyn Db, asset: BillboardAsset) -> CacheKey {
+    let settings = asset.settings(db);
+    let mut key = CacheKeyBuilder::new("billboard", 1)
+        .debug(
+            &[
+                Stage::Mesh,
+                Stage::Planes,
+                Stage::Layout,
+                Stage::Render,
+                Stage::Atlas,
+                Stage::Encode,
+                Stage::Lod,
+            ]
+            .map(Stage::version),
+        )
+        .debug(&settings.billboard)
+        .debug(&settings.atlas)
+        .debug(&settings.encode)
+        .debug(asset.source_root(db));
+    let mut files: Vec<SourceFile> = vec![asset.mesh_file(db)];
+    files.extend(asset.libraries(db).values().copied());
+    files.extend(asset.textures(db).values().copied());
+    for file in files {
+        key = key.debug(file.path(db));
+        key = match file.contents(db) {
+            Ok(contents) => key.bytes(contents.hash.as_bytes()),
+            Err(error) => key.bytes(error.as_bytes()),
+        };
+    }
+    key.finish()
 }

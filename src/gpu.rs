@@ -97,7 +97,7 @@ pub struct RenderMaterial {
 /// What one plane render needs: its faces (three vertices each) grouped by material.
 #[derive(Clone, Debug)]
 pub struct PlaneRenderInput<'a> {
-    pub rectangle: PlaneRectangle,
+    pub rectangle: &'a PlaneRectangle,
     pub epsilon: f32,
     pub alpha_cutoff: f32,
     pub width: u32,

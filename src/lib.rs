@@ -6,6 +6,7 @@ pub mod config;
 pub mod diagnostic;
 
 // Stages, in pipeline order: pure functions over plain data.
+pub mod atlas;
 pub mod container;
 pub mod encode;
 pub mod gpu;
@@ -15,6 +16,7 @@ pub mod material_definition;
 pub mod mesh;
 pub mod mips;
 pub mod openddl;
+pub mod plane_textures;
 pub mod planes;
 pub mod preview;
 pub mod quality;

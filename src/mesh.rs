@@ -348,3 +348,31 @@ fn compute_normals(mesh: &mut Mesh) {
         .map(|n| n.try_normalize().unwrap_or(glam::Vec3::Z).to_array())
         .collect();
 }
+
+/// The texture files the materials of an OBJ's MTL libraries name (project-relative, sorted),
+/// without parsing the OBJ itself: what a billboard cloud reads besides its mesh.
+pub fn texture_paths(
+    obj_file: &Path,
+    libraries: &BTreeMap<PathBuf, Option<Vec<u8>>>,
+    source_root: &Path,
+) -> Vec<PathBuf> {
+    let folder = obj_file.parent().unwrap_or(Path::new(""));
+    let mut paths = Vec::new();
+    let mut ignored = Vec::new();
+    for bytes in libraries.values().flatten() {
+        let text = String::from_utf8_lossy(bytes);
+        let Ok((materials, _)) = tobj::load_mtl_buf(&mut BufReader::new(text.as_bytes())) else {
+            continue;
+        };
+        for material in &materials {
+            paths.extend(
+                mesh_material(material, folder, source_root, &mut ignored)
+                    .maps
+                    .into_values(),
+            );
+        }
+    }
+    paths.sort();
+    paths.dedup();
+    paths
+}

@@ -64,7 +64,9 @@ fn to_filter_space(texture: &Texture, kind: SurfaceKind) -> Vec<[f32; 4]> {
                 let [x, y, z] = decode_normal([t[0], t[1], t[2]]);
                 [x, y, z, 1.0]
             }
-            SurfaceKind::Mra => [t[0], t[1], t[2], t[3]].map(|c| c as f32 / 255.0),
+            SurfaceKind::Mra | SurfaceKind::Height => {
+                [t[0], t[1], t[2], t[3]].map(|c| c as f32 / 255.0)
+            }
         })
         .collect()
 }
@@ -94,7 +96,9 @@ fn from_filter_space(
                 ]
             }
             SurfaceKind::Normal => encode_normal(normalize_tangent_normal([r, g, b])),
-            SurfaceKind::Mra => [unorm_u8(r), unorm_u8(g), unorm_u8(b), unorm_u8(a)],
+            SurfaceKind::Mra | SurfaceKind::Height => {
+                [unorm_u8(r), unorm_u8(g), unorm_u8(b), unorm_u8(a)]
+            }
         })
         .collect();
     Texture::new(width, height, pixels)

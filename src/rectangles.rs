@@ -1,14 +1,18 @@
-//! Plane rectangles: per plane, the minimum-area rectangle around its faces' projections
-//! (rotating calipers on the convex hull), which gives the plane's frame and its quad.
+//! Plane rectangles: each plane's faces split into clusters that lie apart on the plane (a plane
+//! holds faces anywhere in its ε-slab: one quad around all of them would be mostly empty), and per
+//! cluster the minimum-area rectangle of the projections (rotating calipers on the convex hull),
+//! which gives the quad's frame.
 
 use glam::{Vec2, Vec3};
 
 use crate::planes::PlaneSet;
 
-/// A plane's quad: `origin + x·x_axis + y·y_axis` for x ∈ [0, width], y ∈ [0, height].
-/// `x_axis × y_axis = normal`.
-#[derive(Clone, Copy, Debug, PartialEq)]
+/// A quad on a plane: `origin + x·x_axis + y·y_axis` for x ∈ [0, width], y ∈ [0, height],
+/// `x_axis × y_axis = normal`, holding `faces` (of plane `plane`).
+#[derive(Clone, Debug, PartialEq)]
 pub struct PlaneRectangle {
+    pub plane: u32,
+    pub faces: Vec<u32>,
     pub origin: [f32; 3],
     pub x_axis: [f32; 3],
     pub y_axis: [f32; 3],
@@ -29,42 +33,131 @@ impl PlaneRectangle {
     }
 }
 
-/// The rectangle of every plane of `planes`, in plane order.
+/// The rectangles of every plane of `planes`, in plane order, clusters within a plane ordered by
+/// their first face. Faces closer than `2ε` on the plane share a rectangle.
 pub fn plane_rectangles(
     positions: &[[f32; 3]],
     triangles: &[[u32; 3]],
     planes: &PlaneSet,
 ) -> Vec<PlaneRectangle> {
-    planes
-        .planes
-        .iter()
-        .map(|plane| {
-            let normal = Vec3::from(plane.normal);
-            let u = normal.any_orthonormal_vector();
-            let v = normal.cross(u);
-            let points: Vec<Vec2> = plane
-                .faces
+    let mut rectangles = Vec::new();
+    for (plane_index, plane) in planes.planes.iter().enumerate() {
+        let normal = Vec3::from(plane.normal);
+        let u = normal.any_orthonormal_vector();
+        let v = normal.cross(u);
+        let project = |vertex: u32| {
+            let p = Vec3::from(positions[vertex as usize]);
+            Vec2::new(p.dot(u), p.dot(v))
+        };
+        for faces in clusters(
+            &plane.faces,
+            triangles,
+            &project,
+            2.0 * planes.epsilon.max(1e-6),
+        ) {
+            let points: Vec<Vec2> = faces
                 .iter()
                 .flat_map(|&face| triangles[face as usize])
-                .map(|vertex| {
-                    let p = Vec3::from(positions[vertex as usize]);
-                    Vec2::new(p.dot(u), p.dot(v))
-                })
+                .map(project)
                 .collect();
             let (axis, min, max) = minimum_area_rectangle(&convex_hull(points));
             let x_axis = u * axis.x + v * axis.y;
             let y_axis = normal.cross(x_axis);
             let on_plane = normal * plane.distance;
-            PlaneRectangle {
+            rectangles.push(PlaneRectangle {
+                plane: plane_index as u32,
+                faces,
                 origin: (on_plane + x_axis * min.x + y_axis * min.y).to_array(),
                 x_axis: x_axis.to_array(),
                 y_axis: y_axis.to_array(),
                 normal: normal.to_array(),
                 width: (max.x - min.x).max(0.0),
                 height: (max.y - min.y).max(0.0),
-            }
+            });
+        }
+    }
+    rectangles
+}
+
+/// Groups faces whose projected bounding boxes come within `gap` of each other (union-find over
+/// a grid of `gap`-sized cells). Each group is sorted; groups are ordered by their first face.
+fn clusters(
+    faces: &[u32],
+    triangles: &[[u32; 3]],
+    project: &dyn Fn(u32) -> Vec2,
+    gap: f32,
+) -> Vec<Vec<u32>> {
+    let boxes: Vec<(Vec2, Vec2)> = faces
+        .iter()
+        .map(|&face| {
+            let corners = triangles[face as usize].map(project);
+            let min = corners
+                .iter()
+                .fold(Vec2::splat(f32::INFINITY), |a, &c| a.min(c));
+            let max = corners
+                .iter()
+                .fold(Vec2::splat(f32::NEG_INFINITY), |a, &c| a.max(c));
+            (min, max)
         })
-        .collect()
+        .collect();
+    let mut parent: Vec<usize> = (0..faces.len()).collect();
+    fn root(parent: &mut [usize], mut index: usize) -> usize {
+        while parent[index] != index {
+            parent[index] = parent[parent[index]];
+            index = parent[index];
+        }
+        index
+    }
+    let cell = |value: f32| (value / gap).floor() as i64;
+    let mut owners: std::collections::HashMap<(i64, i64), usize> = std::collections::HashMap::new();
+    for (index, (min, max)) in boxes.iter().enumerate() {
+        // Cells the box grown by half the gap touches; faces sharing a cell are joined.
+        let (x0, x1, y0, y1) = (
+            cell(min.x - 0.5 * gap),
+            cell(max.x + 0.5 * gap),
+            cell(min.y - 0.5 * gap),
+            cell(max.y + 0.5 * gap),
+        );
+        let too_many = (x1 - x0 + 1).saturating_mul(y1 - y0 + 1) > 4096;
+        let step = if too_many {
+            ((x1 - x0 + 1).max(y1 - y0 + 1) / 64).max(1)
+        } else {
+            1
+        };
+        let mut x = x0;
+        while x <= x1 {
+            let mut y = y0;
+            while y <= y1 {
+                match owners.get(&(x, y)) {
+                    Some(&other) => {
+                        let (a, b) = (root(&mut parent, index), root(&mut parent, other));
+                        if a != b {
+                            parent[a.max(b)] = a.min(b);
+                        }
+                    }
+                    None => {
+                        owners.insert((x, y), index);
+                    }
+                }
+                y += step;
+            }
+            x += step;
+        }
+    }
+    let mut groups: std::collections::BTreeMap<usize, Vec<u32>> = std::collections::BTreeMap::new();
+    for index in 0..faces.len() {
+        let group = root(&mut parent, index);
+        groups.entry(group).or_default().push(faces[index]);
+    }
+    let mut groups: Vec<Vec<u32>> = groups
+        .into_values()
+        .map(|mut group| {
+            group.sort_unstable();
+            group
+        })
+        .collect();
+    groups.sort_by_key(|group| group[0]);
+    groups
 }
 
 /// Andrew's monotone chain; counter-clockwise, no collinear points.

@@ -13,16 +13,28 @@ pub enum SurfaceKind {
     Albedo,
     Mra,
     Normal,
+    /// Billboard clouds only: the surface's distance from its plane over ±ε.
+    Height,
 }
 
 impl SurfaceKind {
-    pub const ALL: [SurfaceKind; 3] = [SurfaceKind::Albedo, SurfaceKind::Mra, SurfaceKind::Normal];
+    /// The surfaces of a baked material.
+    pub const MATERIAL: [SurfaceKind; 3] =
+        [SurfaceKind::Albedo, SurfaceKind::Mra, SurfaceKind::Normal];
+    /// The surfaces of a billboard-cloud atlas.
+    pub const BILLBOARD: [SurfaceKind; 4] = [
+        SurfaceKind::Albedo,
+        SurfaceKind::Mra,
+        SurfaceKind::Normal,
+        SurfaceKind::Height,
+    ];
 
     pub fn name(self) -> &'static str {
         match self {
             SurfaceKind::Albedo => "albedo",
             SurfaceKind::Mra => "mra",
             SurfaceKind::Normal => "normal",
+            SurfaceKind::Height => "height",
         }
     }
 
@@ -36,6 +48,7 @@ impl SurfaceKind {
                 TextureSlot::Ao,
             ],
             SurfaceKind::Normal => &[TextureSlot::Normal],
+            SurfaceKind::Height => &[],
         }
     }
 
@@ -45,6 +58,7 @@ impl SurfaceKind {
             SurfaceKind::Albedo => 4,
             SurfaceKind::Mra => 3,
             SurfaceKind::Normal => 2,
+            SurfaceKind::Height => 1,
         }
     }
 
@@ -121,6 +135,9 @@ pub fn pack_surface(
                 texel[3] = 255;
             }
         }
+        SurfaceKind::Height => pixels
+            .chunks_exact_mut(4)
+            .for_each(|texel| texel.copy_from_slice(&[128, 0, 0, 255])),
         SurfaceKind::Normal => {
             for (index, texel) in pixels.chunks_exact_mut(4).enumerate() {
                 let normal = match &resampled[0] {

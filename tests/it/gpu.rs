@@ -22,6 +22,8 @@ fn a_plane_render_covers_its_faces_cuts_alpha_and_encodes_normal_and_height() {
     println!("adapter: {}", gpu.adapter_name);
     // The plane z = 0 over [0, 2] × [0, 1]; a quad over its left half, 0.05 above it (ε = 0.1).
     let rectangle = PlaneRectangle {
+        plane: 0,
+        faces: vec![0, 1],
         origin: [0.0; 3],
         x_axis: [1.0, 0.0, 0.0],
         y_axis: [0.0, 1.0, 0.0],
@@ -54,7 +56,7 @@ fn a_plane_render_covers_its_faces_cuts_alpha_and_encodes_normal_and_height() {
     };
     let materials = [material];
     let input = PlaneRenderInput {
-        rectangle,
+        rectangle: &rectangle,
         epsilon: 0.1,
         alpha_cutoff: 0.5,
         width: 64,

@@ -1,0 +1,102 @@
+//! The atlas: every plane's images placed at its layout position, then the padding and every
+//! uncovered texel filled by extending values outward from covered texels only (so filtering and
+//! mips never pull in a dark or foreign fringe). Albedo alpha stays 0 where nothing was drawn.
+
+use std::collections::VecDeque;
+
+use crate::gpu::PlaneImages;
+use crate::layout::Layout;
+use crate::texture::Texture;
+
+/// The four atlas surfaces of a billboard cloud, before compression.
+#[derive(Clone, Debug, PartialEq)]
+pub struct AtlasImages {
+    pub albedo: Texture,
+    pub normal: Texture,
+    pub mra: Texture,
+    pub height: Texture,
+    /// Fraction of atlas texels covered by a face.
+    pub coverage: f32,
+}
+
+/// Composites `planes` (in layout order) into the atlas of `layout`.
+pub fn composite_atlas(layout: &Layout, planes: &[&PlaneImages]) -> AtlasImages {
+    let (width, height) = (layout.width as usize, layout.height as usize);
+    let mut layers: [Vec<u8>; 4] = std::array::from_fn(|_| vec![0u8; width * height * 4]);
+    let mut covered = vec![false; width * height];
+    for (placement, images) in layout.placements.iter().zip(planes) {
+        let sources = [
+            &images.albedo,
+            &images.normal,
+            &images.mra,
+            &images.height_map,
+        ];
+        for row in 0..images.height {
+            for column in 0..images.width {
+                let source = ((row * images.width + column) * 4) as usize;
+                if images.albedo[source + 3] == 0 {
+                    continue;
+                }
+                let s = (column as f32 + 0.5) / images.width as f32;
+                let t = 1.0 - (row as f32 + 0.5) / images.height as f32;
+                let (x, y) = placement.atlas_position(s, t);
+                let (x, y) = (x.floor() as usize, y.floor() as usize);
+                if x >= width || y >= height {
+                    continue;
+                }
+                let target = y * width + x;
+                covered[target] = true;
+                for (layer, image) in layers.iter_mut().zip(sources) {
+                    layer[target * 4..target * 4 + 4].copy_from_slice(&image[source..source + 4]);
+                }
+            }
+        }
+    }
+    let coverage = covered.iter().filter(|&&c| c).count() as f32 / covered.len().max(1) as f32;
+    extend_outward(&mut layers, &covered, width, height);
+    let [albedo, normal, mra, height_layer] = layers;
+    AtlasImages {
+        albedo: Texture::new(layout.width, layout.height, albedo),
+        normal: Texture::new(layout.width, layout.height, normal),
+        mra: Texture::new(layout.width, layout.height, mra),
+        height: Texture::new(layout.width, layout.height, height_layer),
+        coverage,
+    }
+}
+
+/// Gives every uncovered texel the values of its nearest covered texel (breadth-first from all
+/// covered texels at once). Albedo alpha is left at 0 on filled texels.
+fn extend_outward(layers: &mut [Vec<u8>; 4], covered: &[bool], width: usize, height: usize) {
+    let mut filled = covered.to_vec();
+    let mut queue: VecDeque<usize> = (0..covered.len()).filter(|&index| covered[index]).collect();
+    if queue.is_empty() {
+        // Nothing drawn at all: a neutral flat normal, so the surface stays valid.
+        for texel in layers[1].chunks_exact_mut(4) {
+            texel.copy_from_slice(&[128, 128, 255, 255]);
+        }
+        return;
+    }
+    while let Some(index) = queue.pop_front() {
+        let (x, y) = (index % width, index / width);
+        let neighbours = [
+            (x > 0).then(|| index - 1),
+            (x + 1 < width).then(|| index + 1),
+            (y > 0).then(|| index - width),
+            (y + 1 < height).then(|| index + width),
+        ];
+        for neighbour in neighbours.into_iter().flatten() {
+            if filled[neighbour] {
+                continue;
+            }
+            filled[neighbour] = true;
+            for (layer_index, layer) in layers.iter_mut().enumerate() {
+                let channels = if layer_index == 0 { 3 } else { 4 };
+                let (from, to) = (index * 4, neighbour * 4);
+                for channel in 0..channels {
+                    layer[to + channel] = layer[from + channel];
+                }
+            }
+            queue.push_back(neighbour);
+        }
+    }
+}

@@ -3,6 +3,7 @@
 mod support;
 
 mod bake;
+mod billboard;
 mod cli;
 mod config;
 mod gpu;

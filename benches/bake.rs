@@ -14,11 +14,7 @@ use cirrus::texture::Texture;
 fn main() {
     let repository = Path::new(env!("CARGO_MANIFEST_DIR"));
     let corpus = repository.join("../shared/assets");
-    let mut sources = vec![(
-        "bundled examples",
-        repository.join("examples/assets"),
-        "materials/*.mymaterial",
-    )];
+    let mut sources = vec![("bundled examples", repository.join("examples/assets"), "materials/*.mymaterial")];
     if corpus.join("materials").is_dir() {
         sources.push(("corpus", corpus.clone(), "materials/*.mymaterial"));
     }
@@ -42,20 +38,11 @@ fn bench_planes(corpus: &Path) {
                 (library, bytes)
             })
             .collect();
-        cirrus::mesh::load_mesh(Path::new(file), &bytes, &libraries, Path::new(""))
-            .expect("mesh loads")
-            .0
+        cirrus::mesh::load_mesh(Path::new(file), &bytes, &libraries, Path::new("")).expect("mesh loads").0
     };
     let helmet = load("meshes/flight_helmet/FlightHelmet.obj");
     let start = Instant::now();
-    let set = select_planes(
-        &helmet.positions,
-        &helmet.triangles,
-        PlaneSettings {
-            epsilon: 0.02,
-            max_planes: None,
-        },
-    );
+    let set = select_planes(&helmet.positions, &helmet.triangles, PlaneSettings { epsilon: 0.02, max_planes: None });
     let seconds = start.elapsed().as_secs_f64();
     println!(
         "planes: flight helmet, {} faces → {} planes in {:.0} ms: {:.0} faces/s (bar ≥ 100k)",
@@ -64,36 +51,17 @@ fn bench_planes(corpus: &Path) {
         seconds * 1e3,
         set.face_count as f64 / seconds
     );
-    for tree in [
-        "trees/oak_medium.obj",
-        "trees/ash_small.obj",
-        "trees/bush_2.obj",
-    ] {
+    for tree in ["trees/oak_medium.obj", "trees/ash_small.obj", "trees/bush_2.obj"] {
         let mesh = load(tree);
         let counts: Vec<String> = [0.01, 0.02, 0.04]
             .iter()
             .map(|&epsilon| {
                 let start = Instant::now();
-                let set = select_planes(
-                    &mesh.positions,
-                    &mesh.triangles,
-                    PlaneSettings {
-                        epsilon,
-                        max_planes: None,
-                    },
-                );
-                format!(
-                    "ε {epsilon}: {} planes ({:.0} ms)",
-                    set.planes.len(),
-                    start.elapsed().as_secs_f64() * 1e3
-                )
+                let set = select_planes(&mesh.positions, &mesh.triangles, PlaneSettings { epsilon, max_planes: None });
+                format!("ε {epsilon}: {} planes ({:.0} ms)", set.planes.len(), start.elapsed().as_secs_f64() * 1e3)
             })
             .collect();
-        println!(
-            "planes: {tree} ({} faces): {}",
-            mesh.triangles.len(),
-            counts.join(", ")
-        );
+        println!("planes: {tree} ({} faces): {}", mesh.triangles.len(), counts.join(", "));
     }
 }
 
@@ -101,83 +69,45 @@ fn bench_project(label: &str, source: &Path, glob: &str) {
     let dir = tempfile::tempdir().expect("temporary folder");
     std::os::unix::fs::symlink(source, dir.path().join("assets")).expect("link sources");
     let pipeline = dir.path().join("pipeline.ron");
-    std::fs::write(&pipeline, format!(r#"Pipeline(source: "assets", output: "baked", rules: [(glob: "{glob}", kind: Material)])"#)).unwrap();
-    let open = || {
-        Project::open(
-            load_pipeline(&pipeline).expect("pipeline"),
-            ProjectOptions::default(),
-        )
-    };
+    std::fs::write(&pipeline, format!(r#"Pipeline(source: "assets", output: "baked", rules: [(glob: "{glob}", kind: Material)])"#))
+        .unwrap();
+    let open = || Project::open(load_pipeline(&pipeline).expect("pipeline"), ProjectOptions::default());
 
     let mut project = open();
     let start = Instant::now();
-    let summary = project
-        .build(&BuildOptions::default(), &|_| {})
-        .expect("build");
+    let summary = project.build(&BuildOptions::default(), &|_| {}).expect("build");
     let full = start.elapsed().as_secs_f64();
     assert!(summary.all_ok(), "{}", summary.to_text());
     let start = Instant::now();
-    project
-        .build(&BuildOptions::default(), &|_| {})
-        .expect("build");
+    project.build(&BuildOptions::default(), &|_| {}).expect("build");
     let no_op = start.elapsed().as_secs_f64();
     drop(project);
     let start = Instant::now();
-    let warm = open()
-        .build(&BuildOptions::default(), &|_| {})
-        .expect("build");
+    let warm = open().build(&BuildOptions::default(), &|_| {}).expect("build");
     let restart = start.elapsed().as_secs_f64();
-    assert!(warm.assets.iter().all(|asset| asset
-        .stages
-        .iter()
-        .all(|stage| stage.status == cirrus::summary::StageStatus::Cached)));
+    assert!(warm.assets.iter().all(|asset| asset.stages.iter().all(|stage| stage.status == cirrus::summary::StageStatus::Cached)));
 
     // The raw encoder on the same packed surfaces (mips prepared outside the timing).
     let mut chains = Vec::new();
     for report in glob_reports(&dir.path().join("baked")) {
-        let report: serde_json::Value =
-            serde_json::from_slice(&std::fs::read(report).unwrap()).unwrap();
+        let report: serde_json::Value = serde_json::from_slice(&std::fs::read(report).unwrap()).unwrap();
         for material in report["materials"].as_array().unwrap() {
             for surface in material["surfaces"].as_array().unwrap() {
-                let preview = image::open(dir.path().join(surface["preview"].as_str().unwrap()))
-                    .unwrap()
-                    .into_rgba8();
+                let preview = image::open(dir.path().join(surface["preview"].as_str().unwrap())).unwrap().into_rgba8();
                 let texture = Texture::new(preview.width(), preview.height(), preview.into_raw());
                 let kind = match surface["surface"].as_str().unwrap() {
                     "Albedo" => SurfaceKind::Albedo,
                     "Mra" => SurfaceKind::Mra,
                     _ => SurfaceKind::Normal,
                 };
-                let format: BlockFormat =
-                    serde_json::from_value(surface["format"].clone()).unwrap();
+                let format: BlockFormat = serde_json::from_value(surface["format"].clone()).unwrap();
                 let alpha = surface["alpha_tested"].as_bool().unwrap();
-                let levels = mip_chain(
-                    &texture,
-                    MipSettings {
-                        kind,
-                        alpha_cutoff: alpha.then_some(0.5),
-                    },
-                );
-                chains.push((
-                    levels,
-                    BlockEncodeSettings {
-                        format,
-                        quality: EncodeQuality::Basic,
-                        alpha,
-                        srgb: kind.is_srgb(),
-                    },
-                ));
+                let levels = mip_chain(&texture, MipSettings { kind, alpha_cutoff: alpha.then_some(0.5) });
+                chains.push((levels, BlockEncodeSettings { format, quality: EncodeQuality::Basic, alpha, srgb: kind.is_srgb() }));
             }
         }
     }
-    let texels: f64 = chains
-        .iter()
-        .flat_map(|(levels, _)| {
-            levels
-                .iter()
-                .map(|level| (level.width * level.height) as f64)
-        })
-        .sum();
+    let texels: f64 = chains.iter().flat_map(|(levels, _)| levels.iter().map(|level| (level.width * level.height) as f64)).sum();
     let start = Instant::now();
     for (levels, settings) in &chains {
         std::hint::black_box(encode_levels(levels, *settings));
@@ -185,30 +115,12 @@ fn bench_project(label: &str, source: &Path, glob: &str) {
     let raw = start.elapsed().as_secs_f64();
     let bake_rate = texels / full / 1e6;
     let raw_rate = texels / raw / 1e6;
-    println!(
-        "{label}: {} surfaces, {:.1} Mpix encoded (all mip levels)",
-        chains.len(),
-        texels / 1e6
-    );
+    println!("{label}: {} surfaces, {:.1} Mpix encoded (all mip levels)", chains.len(), texels / 1e6);
     println!("  full bake        {:>8.1} ms  {bake_rate:>6.2} Mpix/s (decode + pack + mips + encode + write)", full * 1e3);
-    println!(
-        "  raw encoder      {:>8.1} ms  {raw_rate:>6.2} Mpix/s (intel_tex_2 on the same levels)",
-        raw * 1e3
-    );
-    println!(
-        "  bake / raw       {:>8.2} ×   (bar ≥ 0.8)",
-        bake_rate / raw_rate
-    );
-    println!(
-        "  no-op rebuild    {:>8.1} ms  {:>6.1} % of the full bake (bar ≤ 5 %)",
-        no_op * 1e3,
-        100.0 * no_op / full
-    );
-    println!(
-        "  warm restart     {:>8.1} ms  {:>6.1} % of the full bake (bar ≤ 5 %)",
-        restart * 1e3,
-        100.0 * restart / full
-    );
+    println!("  raw encoder      {:>8.1} ms  {raw_rate:>6.2} Mpix/s (intel_tex_2 on the same levels)", raw * 1e3);
+    println!("  bake / raw       {:>8.2} ×   (bar ≥ 0.8)", bake_rate / raw_rate);
+    println!("  no-op rebuild    {:>8.1} ms  {:>6.1} % of the full bake (bar ≤ 5 %)", no_op * 1e3, 100.0 * no_op / full);
+    println!("  warm restart     {:>8.1} ms  {:>6.1} % of the full bake (bar ≤ 5 %)", restart * 1e3, 100.0 * restart / full);
 }
 
 fn glob_reports(folder: &Path) -> Vec<std::path::PathBuf> {

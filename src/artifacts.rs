@@ -18,17 +18,13 @@ pub fn write_if_changed(path: &Path, bytes: &[u8]) -> std::io::Result<bool> {
     }
     let folder = path.parent().unwrap_or(Path::new("."));
     std::fs::create_dir_all(folder)?;
-    let mut temporary = tempfile::Builder::new()
-        .prefix(".cirrus-tmp-")
-        .tempfile_in(folder)?;
+    let mut temporary = tempfile::Builder::new().prefix(".cirrus-tmp-").tempfile_in(folder)?;
     #[cfg(unix)]
     {
         // Artifacts are read by engines and tools running as other users: rw-r--r--, not the
         // temporary file's private default.
         use std::os::unix::fs::PermissionsExt;
-        temporary
-            .as_file()
-            .set_permissions(std::fs::Permissions::from_mode(0o644))?;
+        temporary.as_file().set_permissions(std::fs::Permissions::from_mode(0o644))?;
     }
     temporary.write_all(bytes)?;
     temporary.as_file().sync_data()?;
@@ -59,10 +55,7 @@ pub fn manifest_path(output_dir: &Path) -> PathBuf {
 
 /// The manifest of the last build, or an empty one.
 pub fn load_manifest(output_dir: &Path) -> Manifest {
-    std::fs::read(manifest_path(output_dir))
-        .ok()
-        .and_then(|bytes| serde_json::from_slice(&bytes).ok())
-        .unwrap_or_default()
+    std::fs::read(manifest_path(output_dir)).ok().and_then(|bytes| serde_json::from_slice(&bytes).ok()).unwrap_or_default()
 }
 
 pub fn save_manifest(output_dir: &Path, manifest: &Manifest) -> std::io::Result<bool> {

@@ -25,12 +25,7 @@ pub fn composite_atlas(layout: &Layout, planes: &[&PlaneImages]) -> AtlasImages 
     let mut layers: [Vec<u8>; 4] = std::array::from_fn(|_| vec![0u8; width * height * 4]);
     let mut covered = vec![false; width * height];
     for (placement, images) in layout.placements.iter().zip(planes) {
-        let sources = [
-            &images.albedo,
-            &images.normal,
-            &images.mra,
-            &images.height_map,
-        ];
+        let sources = [&images.albedo, &images.normal, &images.mra, &images.height_map];
         for row in 0..images.height {
             for column in 0..images.width {
                 let source = ((row * images.width + column) * 4) as usize;

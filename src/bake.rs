@@ -17,16 +17,16 @@ use crate::cache::{CacheEntry, CacheKey};
 use crate::config::{AssetConfig, AssetSource, PipelineConfig, Settings};
 use crate::db::Db;
 use crate::db::{
-    atlas_surface_artifacts, billboard_cache_key, billboard_layout, lod_files, material_file,
-    mesh_textures, plane_images, surface_artifacts, AtlasSurfaceKey, BillboardAsset, Database,
-    MaterialAsset, PlaneKey, SourceFile, Stage, StageRun, SurfaceArtifacts, SurfaceKey,
+    atlas_surface_artifacts, billboard_cache_key, billboard_layout, lod_files, material_file, mesh_textures, plane_images,
+    surface_artifacts, AtlasSurfaceKey, BillboardAsset, Database, MaterialAsset, PlaneKey, SourceFile, Stage, StageRun, SurfaceArtifacts,
+    SurfaceKey,
 };
 use crate::diagnostic::{display_path, Diagnostic};
 use crate::material_definition::MaterialFile;
 use crate::sources::{read_source, rule_matches};
 use crate::summary::{
-    ArtifactSummary, AssetStatus, AssetSummary, BuildSummary, ErrorSummary, MaterialReport,
-    MaterialReportEntry, StageStatus, StageSummary, SurfaceReport,
+    ArtifactSummary, AssetStatus, AssetSummary, BuildSummary, ErrorSummary, MaterialReport, MaterialReportEntry, StageStatus, StageSummary,
+    SurfaceReport,
 };
 use crate::surface::SurfaceKind;
 
@@ -39,9 +39,7 @@ pub struct ProjectOptions {
 
 impl Default for ProjectOptions {
     fn default() -> Self {
-        ProjectOptions {
-            persistent_cache: true,
-        }
+        ProjectOptions { persistent_cache: true }
     }
 }
 
@@ -113,9 +111,7 @@ const BILLBOARD_CACHE_STAGE: &str = "billboard";
 
 impl Project {
     pub fn open(config: PipelineConfig, options: ProjectOptions) -> Project {
-        let cache = options
-            .persistent_cache
-            .then(|| DiskCache::new(config.output_dir().join(".cirrus").join("cache")));
+        let cache = options.persistent_cache.then(|| DiskCache::new(config.output_dir().join(".cirrus").join("cache")));
         Project {
             config,
             db: Database::new(cache),
@@ -153,54 +149,26 @@ impl Project {
     }
 
     /// Bakes the assets, writing only artifacts whose bytes changed.
-    pub fn build(
-        &mut self,
-        options: &BuildOptions,
-        progress: &(dyn Fn(Progress) + Sync),
-    ) -> Result<BuildSummary, BuildError> {
+    pub fn build(&mut self, options: &BuildOptions, progress: &(dyn Fn(Progress) + Sync)) -> Result<BuildSummary, BuildError> {
         let all_assets = self.asset_list();
         for name in &options.only_assets {
             if !all_assets.iter().any(|asset| &asset.name == name) {
-                return Err(BuildError::UnknownAsset {
-                    name: name.clone(),
-                    pipeline: display_path(&self.config.file),
-                });
+                return Err(BuildError::UnknownAsset { name: name.clone(), pipeline: display_path(&self.config.file) });
             }
         }
         let selected: Vec<AssetConfig> = all_assets
             .iter()
-            .filter(|asset| {
-                options.only_assets.is_empty() || options.only_assets.contains(&asset.name)
-            })
+            .filter(|asset| options.only_assets.is_empty() || options.only_assets.contains(&asset.name))
             .cloned()
             .collect();
 
-        let mut plans: Vec<AssetPlan> = selected
-            .into_iter()
-            .map(|asset| self.plan_asset(asset))
-            .collect();
-        let keys: Vec<SurfaceKey> = plans
-            .iter()
-            .flat_map(|plan| plan.surfaces.iter().map(|(_, _, key)| *key))
-            .collect();
+        let mut plans: Vec<AssetPlan> = selected.into_iter().map(|asset| self.plan_asset(asset)).collect();
+        let keys: Vec<SurfaceKey> = plans.iter().flat_map(|plan| plan.surfaces.iter().map(|(_, _, key)| *key)).collect();
         let describe_surface = |db: &Database, key: SurfaceKey| {
             let asset = key.asset(db);
-            (
-                asset.file(db).path(db).clone(),
-                format!(
-                    "{}/{}/{}",
-                    asset.name(db),
-                    key.material(db),
-                    key.surface(db).name()
-                ),
-            )
+            (asset.file(db).path(db).clone(), format!("{}/{}/{}", asset.name(db), key.material(db), key.surface(db).name()))
         };
-        let results = self.run_parallel(
-            &keys,
-            &describe_surface,
-            &|db, key| surface_artifacts(db, key),
-            progress,
-        );
+        let results = self.run_parallel(&keys, &describe_surface, &|db, key| surface_artifacts(db, key), progress);
         self.bake_billboards(&mut plans, progress);
         let runs = self.db.take_runs();
 
@@ -224,57 +192,38 @@ impl Project {
             if let Some(report) = self.write_surfaces(plan, &surface_results, &mut produced) {
                 let mut bytes = serde_json::to_vec_pretty(&report).expect("reports serialise");
                 bytes.push(b'\n');
-                let path = self
-                    .config
-                    .output
-                    .join(&plan.config.name)
-                    .join("report.json");
+                let path = self.config.output.join(&plan.config.name).join("report.json");
                 self.write_artifact(&path, &bytes, &mut plan.errors, &mut produced);
             }
-            if let Some(files) = plan
-                .billboard
-                .as_ref()
-                .and_then(|billboard| billboard.files.clone())
-            {
+            if let Some(files) = plan.billboard.as_ref().and_then(|billboard| billboard.files.clone()) {
                 let folder = self.config.output.join(&plan.config.name);
                 for (name, bytes) in &files.files {
                     self.write_artifact(&folder.join(name), bytes, &mut plan.errors, &mut produced);
                 }
             }
             for (path, hash) in &produced {
-                changed |=
-                    record_artifact(&mut manifest, next_revision, &plan.config.name, path, hash);
+                changed |= record_artifact(&mut manifest, next_revision, &plan.config.name, path, hash);
             }
             if plan.errors.is_empty() {
                 // A fully baked asset owns exactly what it produced: drop stale artifacts.
                 let name = &plan.config.name;
-                changed |= remove_artifacts(&self.config.root, &mut manifest, |path, entry| {
-                    &entry.asset == name && !produced.contains_key(path)
-                });
+                changed |=
+                    remove_artifacts(&self.config.root, &mut manifest, |path, entry| &entry.asset == name && !produced.contains_key(path));
             }
             summaries.push(self.asset_summary(plan, &surface_results, &runs, &manifest));
         }
         if options.only_assets.is_empty() {
             // Artifacts of assets that left the pipeline.
-            let names: BTreeSet<&str> =
-                all_assets.iter().map(|asset| asset.name.as_str()).collect();
-            changed |= remove_artifacts(&self.config.root, &mut manifest, |_, entry| {
-                !names.contains(entry.asset.as_str())
-            });
+            let names: BTreeSet<&str> = all_assets.iter().map(|asset| asset.name.as_str()).collect();
+            changed |= remove_artifacts(&self.config.root, &mut manifest, |_, entry| !names.contains(entry.asset.as_str()));
         }
         if changed {
             manifest.revision = next_revision;
             if let Err(error) = save_manifest(&output_dir, &manifest) {
-                tracing::error!(
-                    "cannot write {}: {error}",
-                    display_path(&crate::artifacts::manifest_path(&output_dir))
-                );
+                tracing::error!("cannot write {}: {error}", display_path(&crate::artifacts::manifest_path(&output_dir)));
             }
         }
-        Ok(BuildSummary {
-            revision: manifest.revision,
-            assets: summaries,
-        })
+        Ok(BuildSummary { revision: manifest.revision, assets: summaries })
     }
 
     /// Validates every asset's sources without baking: the material files parse, and every
@@ -292,25 +241,30 @@ impl Project {
                     )),
                     AssetSource::Material { .. } => match read_source(&self.config.root, &main_file) {
                         Err(error) => problems.push(Diagnostic::new(&main_file, error)),
-                        Ok(contents) => match crate::material_definition::parse_material_file(&main_file, &contents.bytes, &self.config.source) {
-                            Err(diagnostic) => problems.push(diagnostic),
-                            Ok(parsed) => {
-                                problems.extend(parsed.warnings.iter().cloned().map(|mut warning| {
-                                    warning.message = format!("warning: {}", warning.message);
-                                    warning
-                                }));
-                                for reference in parsed.materials.iter().flat_map(|material| material.textures.values()) {
-                                    let probed = read_source(&self.config.root, &reference.path)
-                                        .map_err(|error| format!("texture \"{}\" ({}): {error}", reference.written, display_path(&reference.path)))
-                                        .and_then(|contents| {
-                                            crate::texture::probe_texture(&reference.path, &contents.bytes).map_err(|diagnostic| diagnostic.to_string())
-                                        });
-                                    if let Err(message) = probed {
-                                        problems.push(Diagnostic::at(&main_file, reference.position, message));
+                        Ok(contents) => {
+                            match crate::material_definition::parse_material_file(&main_file, &contents.bytes, &self.config.source) {
+                                Err(diagnostic) => problems.push(diagnostic),
+                                Ok(parsed) => {
+                                    problems.extend(parsed.warnings.iter().cloned().map(|mut warning| {
+                                        warning.message = format!("warning: {}", warning.message);
+                                        warning
+                                    }));
+                                    for reference in parsed.materials.iter().flat_map(|material| material.textures.values()) {
+                                        let probed = read_source(&self.config.root, &reference.path)
+                                            .map_err(|error| {
+                                                format!("texture \"{}\" ({}): {error}", reference.written, display_path(&reference.path))
+                                            })
+                                            .and_then(|contents| {
+                                                crate::texture::probe_texture(&reference.path, &contents.bytes)
+                                                    .map_err(|diagnostic| diagnostic.to_string())
+                                            });
+                                        if let Err(message) = probed {
+                                            problems.push(Diagnostic::at(&main_file, reference.position, message));
+                                        }
                                     }
                                 }
                             }
-                        },
+                        }
                     },
                 }
                 (asset.name, problems)
@@ -326,11 +280,7 @@ impl Project {
             .into_iter()
             .filter_map(|executed| {
                 let stage = Stage::of_function(&executed.function)?;
-                let label = self
-                    .labels
-                    .get(&executed.key)
-                    .cloned()
-                    .unwrap_or_else(|| format!("{:?}", executed.key));
+                let label = self.labels.get(&executed.key).cloned().unwrap_or_else(|| format!("{:?}", executed.key));
                 Some(format!("{}({label})", stage.name()))
             })
             .collect();
@@ -357,12 +307,7 @@ impl Project {
         }
     }
 
-    fn material_asset(
-        &mut self,
-        name: &str,
-        file: SourceFile,
-        settings: &Settings,
-    ) -> MaterialAsset {
+    fn material_asset(&mut self, name: &str, file: SourceFile, settings: &Settings) -> MaterialAsset {
         let source_root = self.config.source.clone();
         match self.assets.get(name) {
             Some(&asset) => {
@@ -378,29 +323,15 @@ impl Project {
                 asset
             }
             None => {
-                let asset = MaterialAsset::new(
-                    &self.db,
-                    name.to_string(),
-                    source_root,
-                    file,
-                    settings.clone(),
-                    Arc::new(BTreeMap::new()),
-                );
-                self.labels
-                    .insert(asset.as_id(), display_path(file.path(&self.db)));
+                let asset = MaterialAsset::new(&self.db, name.to_string(), source_root, file, settings.clone(), Arc::new(BTreeMap::new()));
+                self.labels.insert(asset.as_id(), display_path(file.path(&self.db)));
                 self.assets.insert(name.to_string(), asset);
                 asset
             }
         }
     }
 
-    fn surface_key(
-        &mut self,
-        asset_name: &str,
-        asset: MaterialAsset,
-        material: &str,
-        surface: SurfaceKind,
-    ) -> SurfaceKey {
+    fn surface_key(&mut self, asset_name: &str, asset: MaterialAsset, material: &str, surface: SurfaceKind) -> SurfaceKey {
         let id = (asset_name.to_string(), material.to_string(), surface);
         if let Some(&key) = self.surfaces.get(&id) {
             if key.asset(&self.db) == asset {
@@ -408,10 +339,7 @@ impl Project {
             }
         }
         let key = SurfaceKey::new(&self.db, asset, material.to_string(), surface);
-        self.labels.insert(
-            key.as_id(),
-            format!("{asset_name}/{material}/{}", surface.name()),
-        );
+        self.labels.insert(key.as_id(), format!("{asset_name}/{material}/{}", surface.name()));
         self.surfaces.insert(id, key);
         key
     }
@@ -419,22 +347,13 @@ impl Project {
     /// Reads an asset's sources into inputs and parses it: everything up to the surface stages.
     fn plan_asset(&mut self, config: AssetConfig) -> AssetPlan {
         let main_file = self.config.source.join(config.source.main_file());
-        let mut plan = AssetPlan {
-            config,
-            main_file,
-            input: None,
-            parsed: None,
-            surfaces: Vec::new(),
-            billboard: None,
-            errors: Vec::new(),
-        };
+        let mut plan =
+            AssetPlan { config, main_file, input: None, parsed: None, surfaces: Vec::new(), billboard: None, errors: Vec::new() };
         match plan.config.source.clone() {
-            AssetSource::BillboardCloud { .. } => {
-                match self.plan_billboard(&plan.config, &plan.main_file) {
-                    Ok(billboard) => plan.billboard = Some(billboard),
-                    Err(diagnostic) => plan.errors.push(diagnostic),
-                }
-            }
+            AssetSource::BillboardCloud { .. } => match self.plan_billboard(&plan.config, &plan.main_file) {
+                Ok(billboard) => plan.billboard = Some(billboard),
+                Err(diagnostic) => plan.errors.push(diagnostic),
+            },
             AssetSource::Material { .. } => {
                 let file = self.source_file(&plan.main_file);
                 let input = self.material_asset(&plan.config.name, file, &plan.config.settings);
@@ -457,12 +376,7 @@ impl Project {
                         }
                         for material in &parsed.materials {
                             for surface in SurfaceKind::MATERIAL {
-                                let key = self.surface_key(
-                                    &plan.config.name,
-                                    input,
-                                    &material.name,
-                                    surface,
-                                );
+                                let key = self.surface_key(&plan.config.name, input, &material.name, surface);
                                 plan.surfaces.push((material.name.clone(), surface, key));
                             }
                         }
@@ -476,11 +390,7 @@ impl Project {
 
     /// Reads a billboard cloud's sources into inputs; from the persistent cache when it has the
     /// result, else runs mesh → planes → layout here and prepares the per-plane and per-surface keys.
-    fn plan_billboard(
-        &mut self,
-        config: &AssetConfig,
-        main_file: &Path,
-    ) -> Result<BillboardPlan, Diagnostic> {
+    fn plan_billboard(&mut self, config: &AssetConfig, main_file: &Path) -> Result<BillboardPlan, Diagnostic> {
         let mesh_file = self.source_file(main_file);
         let obj_bytes = mesh_file
             .contents(&self.db)
@@ -535,38 +445,25 @@ impl Project {
         }
         let cache_key = billboard_cache_key(&self.db, input);
         let files = self.load_billboard(cache_key);
-        let mut plan = BillboardPlan {
-            input,
-            cache_key,
-            files,
-            plane_keys: Vec::new(),
-            surface_keys: Vec::new(),
-        };
+        let mut plan = BillboardPlan { input, cache_key, files, plane_keys: Vec::new(), surface_keys: Vec::new() };
         if plan.files.is_some() {
             return Ok(plan);
         }
         let layout = billboard_layout(&self.db, input)?;
         for index in 0..layout.rectangles.len() as u32 {
-            let key = *self
-                .plane_keys
-                .entry((config.name.clone(), index))
-                .or_insert_with(|| PlaneKey::new(&self.db, input, index));
-            self.labels
-                .insert(key.as_id(), format!("{}/plane{index}", config.name));
+            let key = *self.plane_keys.entry((config.name.clone(), index)).or_insert_with(|| PlaneKey::new(&self.db, input, index));
+            self.labels.insert(key.as_id(), format!("{}/plane{index}", config.name));
             plan.plane_keys.push(key);
         }
         if **input.plane_keys(&self.db) != plan.plane_keys {
-            input
-                .set_plane_keys(&mut self.db)
-                .to(Arc::new(plan.plane_keys.clone()));
+            input.set_plane_keys(&mut self.db).to(Arc::new(plan.plane_keys.clone()));
         }
         for surface in SurfaceKind::BILLBOARD {
             let key = *self
                 .atlas_surface_keys
                 .entry((config.name.clone(), surface))
                 .or_insert_with(|| AtlasSurfaceKey::new(&self.db, input, surface));
-            self.labels
-                .insert(key.as_id(), format!("{}/{}", config.name, surface.name()));
+            self.labels.insert(key.as_id(), format!("{}/{}", config.name, surface.name()));
             plan.surface_keys.push(key);
         }
         Ok(plan)
@@ -574,80 +471,40 @@ impl Project {
 
     fn load_billboard(&self, key: CacheKey) -> Option<BillboardFiles> {
         let entry = self.db.disk_cache()?.load(BILLBOARD_CACHE_STAGE, key)?;
-        let names: Vec<String> =
-            serde_json::from_value(entry.metadata.get("files")?.clone()).ok()?;
+        let names: Vec<String> = serde_json::from_value(entry.metadata.get("files")?.clone()).ok()?;
         let planes = entry.metadata.get("planes")?.as_u64()? as usize;
-        (names.len() == entry.blobs.len()).then(|| BillboardFiles {
-            files: names.into_iter().zip(entry.blobs).collect(),
-            planes,
-        })
+        (names.len() == entry.blobs.len()).then(|| BillboardFiles { files: names.into_iter().zip(entry.blobs).collect(), planes })
     }
 
     /// Renders the planes and encodes the atlases of the billboard clouds the cache did not have,
     /// then assembles their files (and stores them in the persistent cache).
     fn bake_billboards(&self, plans: &mut [AssetPlan], progress: &(dyn Fn(Progress) + Sync)) {
-        let pending: Vec<usize> = (0..plans.len())
-            .filter(|&index| {
-                plans[index]
-                    .billboard
-                    .as_ref()
-                    .is_some_and(|plan| plan.files.is_none())
-            })
-            .collect();
+        let pending: Vec<usize> =
+            (0..plans.len()).filter(|&index| plans[index].billboard.as_ref().is_some_and(|plan| plan.files.is_none())).collect();
         if pending.is_empty() {
             return;
         }
         let describe_plane = |db: &Database, key: PlaneKey| {
             let asset = key.asset(db);
-            (
-                asset.mesh_file(db).path(db).clone(),
-                format!("{}/plane{}", asset.name(db), key.index(db)),
-            )
+            (asset.mesh_file(db).path(db).clone(), format!("{}/plane{}", asset.name(db), key.index(db)))
         };
-        let plane_keys: Vec<PlaneKey> = pending
-            .iter()
-            .flat_map(|&index| {
-                plans[index]
-                    .billboard
-                    .as_ref()
-                    .expect("pending")
-                    .plane_keys
-                    .clone()
-            })
-            .collect();
-        let rendered = self.run_parallel(
-            &plane_keys,
-            &describe_plane,
-            &|db, key| plane_images(db, key).map(|_| ()),
-            progress,
-        );
+        let plane_keys: Vec<PlaneKey> =
+            pending.iter().flat_map(|&index| plans[index].billboard.as_ref().expect("pending").plane_keys.clone()).collect();
+        let rendered = self.run_parallel(&plane_keys, &describe_plane, &|db, key| plane_images(db, key).map(|_| ()), progress);
         let describe_surface = |db: &Database, key: AtlasSurfaceKey| {
             let asset = key.asset(db);
-            (
-                asset.mesh_file(db).path(db).clone(),
-                format!("{}/{}", asset.name(db), key.surface(db).name()),
-            )
+            (asset.mesh_file(db).path(db).clone(), format!("{}/{}", asset.name(db), key.surface(db).name()))
         };
         let mut surface_keys = Vec::new();
         for &index in &pending {
             let plan = plans[index].billboard.as_ref().expect("pending");
-            let render_failed = plan.plane_keys.iter().any(|key| {
-                rendered[plane_keys
-                    .iter()
-                    .position(|other| other == key)
-                    .expect("listed")]
-                .is_err()
-            });
+            let render_failed =
+                plan.plane_keys.iter().any(|key| rendered[plane_keys.iter().position(|other| other == key).expect("listed")].is_err());
             if !render_failed {
                 surface_keys.extend(plan.surface_keys.iter().copied());
             }
         }
-        let encoded = self.run_parallel(
-            &surface_keys,
-            &describe_surface,
-            &|db, key| atlas_surface_artifacts(db, key),
-            progress,
-        );
+        let encoded = self.run_parallel(&surface_keys, &describe_surface, &|db, key| atlas_surface_artifacts(db, key), progress);
         for &index in &pending {
             let plan = &mut plans[index];
             let billboard = plan.billboard.as_mut().expect("pending");
@@ -678,10 +535,7 @@ impl Project {
                         cache.store(
                             BILLBOARD_CACHE_STAGE,
                             billboard.cache_key,
-                            &CacheEntry {
-                                metadata,
-                                blobs: files.files.iter().map(|(_, bytes)| bytes.clone()).collect(),
-                            },
+                            &CacheEntry { metadata, blobs: files.files.iter().map(|(_, bytes)| bytes.clone()).collect() },
                         );
                     }
                     billboard.files = Some(files);
@@ -692,11 +546,7 @@ impl Project {
     }
 
     /// The files of a freshly baked billboard cloud: LOD mesh, textures, previews, report.
-    fn assemble_billboard(
-        &self,
-        plan: &BillboardPlan,
-        surfaces: &[Arc<SurfaceArtifacts>],
-    ) -> Result<BillboardFiles, Diagnostic> {
+    fn assemble_billboard(&self, plan: &BillboardPlan, surfaces: &[Arc<SurfaceArtifacts>]) -> Result<BillboardFiles, Diagnostic> {
         let db = &self.db;
         let input = plan.input;
         let (obj, mtl) = (*lod_files(db, input)?).clone();
@@ -704,16 +554,10 @@ impl Project {
         let planes = crate::db::billboard_planes(db, input)?;
         let layout = billboard_layout(db, input)?;
         let atlas = crate::db::billboard_atlas(db, input)?;
-        let mut files = vec![
-            ("lod.obj".to_string(), obj.into_bytes()),
-            ("lod.mtl".to_string(), mtl.into_bytes()),
-        ];
+        let mut files = vec![("lod.obj".to_string(), obj.into_bytes()), ("lod.mtl".to_string(), mtl.into_bytes())];
         for artifacts in surfaces {
             let name = artifacts.info.surface.name();
-            files.push((
-                format!("{name}.{}", artifacts.info.container.extension()),
-                artifacts.texture_file.to_vec(),
-            ));
+            files.push((format!("{name}.{}", artifacts.info.container.extension()), artifacts.texture_file.to_vec()));
             files.push((format!("{name}.png"), artifacts.preview_png.to_vec()));
         }
         let settings = input.settings(db);
@@ -740,10 +584,7 @@ impl Project {
         let mut report_bytes = serde_json::to_vec_pretty(&report).expect("reports serialise");
         report_bytes.push(b'\n');
         files.push(("report.json".to_string(), report_bytes));
-        Ok(BillboardFiles {
-            files,
-            planes: planes.planes.len(),
-        })
+        Ok(BillboardFiles { files, planes: planes.planes.len() })
     }
 
     /// Milliseconds per stage spent on this billboard cloud by the runs logged so far.
@@ -770,13 +611,10 @@ impl Project {
         work: &(dyn Fn(&Database, T) -> Result<R, Diagnostic> + Sync),
         progress: &(dyn Fn(Progress) + Sync),
     ) -> Vec<Result<R, Diagnostic>> {
-        let results: Mutex<Vec<Option<Result<R, Diagnostic>>>> =
-            Mutex::new((0..items.len()).map(|_| None).collect());
+        let results: Mutex<Vec<Option<Result<R, Diagnostic>>>> = Mutex::new((0..items.len()).map(|_| None).collect());
         let next = AtomicUsize::new(0);
         let done = AtomicUsize::new(0);
-        let workers = std::thread::available_parallelism()
-            .map_or(2, |count| count.get())
-            .min(items.len().max(1));
+        let workers = std::thread::available_parallelism().map_or(2, |count| count.get()).min(items.len().max(1));
         std::thread::scope(|scope| {
             for _ in 0..workers {
                 let db = self.db.clone();
@@ -784,37 +622,22 @@ impl Project {
                 scope.spawn(move || loop {
                     let index = next.fetch_add(1, Ordering::Relaxed);
                     let Some(&item) = items.get(index) else { break };
-                    let result = std::panic::catch_unwind(AssertUnwindSafe(|| work(&db, item)))
-                        .unwrap_or_else(|panic| {
-                            let message = panic
-                                .downcast_ref::<String>()
-                                .cloned()
-                                .or_else(|| {
-                                    panic.downcast_ref::<&str>().map(|text| text.to_string())
-                                })
-                                .unwrap_or_else(|| "unknown panic".to_string());
-                            let (file, label) = describe(&db, item);
-                            Err(Diagnostic::new(
-                                file,
-                                format!("internal error while baking `{label}`: {message}"),
-                            ))
-                        });
+                    let result = std::panic::catch_unwind(AssertUnwindSafe(|| work(&db, item))).unwrap_or_else(|panic| {
+                        let message = panic
+                            .downcast_ref::<String>()
+                            .cloned()
+                            .or_else(|| panic.downcast_ref::<&str>().map(|text| text.to_string()))
+                            .unwrap_or_else(|| "unknown panic".to_string());
+                        let (file, label) = describe(&db, item);
+                        Err(Diagnostic::new(file, format!("internal error while baking `{label}`: {message}")))
+                    });
                     results.lock().expect("results lock")[index] = Some(result);
                     let finished = done.fetch_add(1, Ordering::Relaxed) + 1;
-                    progress(Progress {
-                        done: finished,
-                        total: items.len(),
-                        item: describe(&db, item).1,
-                    });
+                    progress(Progress { done: finished, total: items.len(), item: describe(&db, item).1 });
                 });
             }
         });
-        results
-            .into_inner()
-            .expect("results lock")
-            .into_iter()
-            .map(|result| result.expect("every item ran"))
-            .collect()
+        results.into_inner().expect("results lock").into_iter().map(|result| result.expect("every item ran")).collect()
     }
 
     /// Writes the texture and preview of every baked surface; returns the asset's report.
@@ -835,35 +658,17 @@ impl Project {
                     continue;
                 }
                 let folder = asset_dir.join(material_name);
-                let texture_path = folder.join(format!(
-                    "{}.{}",
-                    surface.name(),
-                    artifacts.info.container.extension()
-                ));
+                let texture_path = folder.join(format!("{}.{}", surface.name(), artifacts.info.container.extension()));
                 let preview_path = folder.join(format!("{}.png", surface.name()));
-                self.write_artifact(
-                    &texture_path,
-                    &artifacts.texture_file,
-                    &mut plan.errors,
-                    produced,
-                );
-                self.write_artifact(
-                    &preview_path,
-                    &artifacts.preview_png,
-                    &mut plan.errors,
-                    produced,
-                );
+                self.write_artifact(&texture_path, &artifacts.texture_file, &mut plan.errors, produced);
+                self.write_artifact(&preview_path, &artifacts.preview_png, &mut plan.errors, produced);
                 surfaces.push(SurfaceReport {
                     path: display_path(&texture_path),
                     preview: display_path(&preview_path),
                     info: artifacts.info.clone(),
                 });
             }
-            materials.push(MaterialReportEntry {
-                name: material.name.clone(),
-                display_name: material.display_name.clone(),
-                surfaces,
-            });
+            materials.push(MaterialReportEntry { name: material.name.clone(), display_name: material.display_name.clone(), surfaces });
         }
         Some(MaterialReport {
             asset: plan.config.name.clone(),
@@ -876,43 +681,23 @@ impl Project {
     }
 
     /// Writes one artifact (project-relative `path`) if its bytes changed and records its hash.
-    fn write_artifact(
-        &self,
-        path: &Path,
-        bytes: &[u8],
-        errors: &mut Vec<Diagnostic>,
-        produced: &mut BTreeMap<String, String>,
-    ) {
+    fn write_artifact(&self, path: &Path, bytes: &[u8], errors: &mut Vec<Diagnostic>, produced: &mut BTreeMap<String, String>) {
         match write_if_changed(&self.config.root.join(path), bytes) {
             Ok(_) => {
                 produced.insert(display_path(path), blake3::hash(bytes).to_hex().to_string());
             }
-            Err(error) => errors.push(Diagnostic::new(
-                path,
-                format!("cannot write the artifact: {error}"),
-            )),
+            Err(error) => errors.push(Diagnostic::new(path, format!("cannot write the artifact: {error}"))),
         }
     }
 
     /// The stage instances of a billboard cloud: ran when this build ran them, cached when memory
     /// or the persistent cache had them, failed for the ones an error left undone.
-    fn billboard_stage_summaries(
-        &self,
-        plan: &AssetPlan,
-        billboard: &BillboardPlan,
-        runs: &[StageRun],
-    ) -> Vec<StageSummary> {
+    fn billboard_stage_summaries(&self, plan: &AssetPlan, billboard: &BillboardPlan, runs: &[StageRun]) -> Vec<StageSummary> {
         let failed = !plan.errors.is_empty();
         let status = |stage: Stage, id: salsa::Id| -> (StageStatus, f64) {
-            let ran: Vec<&StageRun> = runs
-                .iter()
-                .filter(|run| run.stage == stage && run.key == id && !run.from_cache)
-                .collect();
+            let ran: Vec<&StageRun> = runs.iter().filter(|run| run.stage == stage && run.key == id && !run.from_cache).collect();
             match (ran.is_empty(), failed) {
-                (false, _) => (
-                    StageStatus::Ran,
-                    ran.iter().fold(0.0, |total, run| total + run.ms),
-                ),
+                (false, _) => (StageStatus::Ran, ran.iter().fold(0.0, |total, run| total + run.ms)),
                 (true, true) => (StageStatus::Failed, 0.0),
                 (true, false) => (StageStatus::Cached, 0.0),
             }
@@ -921,57 +706,28 @@ impl Project {
         let mut stages = Vec::new();
         let summary = |stage: Stage, instance: String, key: salsa::Id| {
             let (status, ms) = status(stage, key);
-            StageSummary {
-                stage: stage.name(),
-                instance,
-                status,
-                ms,
-            }
+            StageSummary { stage: stage.name(), instance, status, ms }
         };
         let mesh = display_path(&plan.main_file);
         for stage in [Stage::Mesh, Stage::Planes, Stage::Layout] {
             stages.push(summary(stage, mesh.clone(), id));
         }
-        let plane_count = billboard
-            .files
-            .as_ref()
-            .map_or(billboard.plane_keys.len(), |files| {
-                files.planes.max(billboard.plane_keys.len())
-            });
+        let plane_count = billboard.files.as_ref().map_or(billboard.plane_keys.len(), |files| files.planes.max(billboard.plane_keys.len()));
         for index in 0..plane_count {
             let key = billboard
                 .plane_keys
                 .get(index)
                 .map(|key| key.as_id())
-                .or_else(|| {
-                    self.plane_keys
-                        .get(&(plan.config.name.clone(), index as u32))
-                        .map(|key| key.as_id())
-                });
+                .or_else(|| self.plane_keys.get(&(plan.config.name.clone(), index as u32)).map(|key| key.as_id()));
             let (status, ms) = match key {
                 Some(key) => status(Stage::Render, key),
-                None => (
-                    if failed {
-                        StageStatus::Failed
-                    } else {
-                        StageStatus::Cached
-                    },
-                    0.0,
-                ),
+                None => (if failed { StageStatus::Failed } else { StageStatus::Cached }, 0.0),
             };
-            stages.push(StageSummary {
-                stage: Stage::Render.name(),
-                instance: format!("plane{index}"),
-                status,
-                ms,
-            });
+            stages.push(StageSummary { stage: Stage::Render.name(), instance: format!("plane{index}"), status, ms });
         }
         stages.push(summary(Stage::Atlas, mesh.clone(), id));
         for surface in SurfaceKind::BILLBOARD {
-            let key = self
-                .atlas_surface_keys
-                .get(&(plan.config.name.clone(), surface))
-                .map_or(id, |key| key.as_id());
+            let key = self.atlas_surface_keys.get(&(plan.config.name.clone(), surface)).map_or(id, |key| key.as_id());
             stages.push(summary(Stage::Encode, surface.name().to_string(), key));
         }
         stages.push(summary(Stage::Lod, mesh, id));
@@ -989,10 +745,7 @@ impl Project {
             if failed {
                 return (StageStatus::Failed, 0.0);
             }
-            let ran: Vec<&StageRun> = runs
-                .iter()
-                .filter(|run| run.stage == stage && run.key == id)
-                .collect();
+            let ran: Vec<&StageRun> = runs.iter().filter(|run| run.stage == stage && run.key == id).collect();
             let ms = ran.iter().fold(0.0, |total, run| total + run.ms);
             if ran.iter().any(|run| !run.from_cache) {
                 (StageStatus::Ran, ms)
@@ -1004,21 +757,11 @@ impl Project {
         if let Some(input) = plan.input {
             let parse_failed = plan.parsed.is_none();
             let (status, ms) = status_of(Stage::Parse, input.as_id(), parse_failed);
-            stages.push(StageSummary {
-                stage: Stage::Parse.name(),
-                instance: display_path(&plan.main_file),
-                status,
-                ms,
-            });
+            stages.push(StageSummary { stage: Stage::Parse.name(), instance: display_path(&plan.main_file), status, ms });
             for (path, file) in input.textures(&self.db).iter() {
                 let failed = plan.errors.iter().any(|error| &error.file == path);
                 let (status, ms) = status_of(Stage::Decode, file.as_id(), failed);
-                stages.push(StageSummary {
-                    stage: Stage::Decode.name(),
-                    instance: display_path(path),
-                    status,
-                    ms,
-                });
+                stages.push(StageSummary { stage: Stage::Decode.name(), instance: display_path(path), status, ms });
             }
         }
         if let Some(billboard) = &plan.billboard {
@@ -1027,22 +770,14 @@ impl Project {
         for ((material, surface, key), result) in plan.surfaces.iter().zip(results) {
             for stage in [Stage::Pack, Stage::Mips, Stage::Encode, Stage::Write] {
                 let (status, ms) = status_of(stage, key.as_id(), result.is_err());
-                stages.push(StageSummary {
-                    stage: stage.name(),
-                    instance: format!("{material}/{}", surface.name()),
-                    status,
-                    ms,
-                });
+                stages.push(StageSummary { stage: stage.name(), instance: format!("{material}/{}", surface.name()), status, ms });
             }
         }
         let artifacts = manifest
             .artifacts
             .iter()
             .filter(|(_, entry)| entry.asset == plan.config.name)
-            .map(|(path, entry)| ArtifactSummary {
-                path: path.clone(),
-                hash: entry.hash.clone(),
-            })
+            .map(|(path, entry)| ArtifactSummary { path: path.clone(), hash: entry.hash.clone() })
             .collect();
         AssetSummary {
             name: plan.config.name.clone(),
@@ -1050,11 +785,7 @@ impl Project {
                 AssetSource::Material { .. } => "Material",
                 AssetSource::BillboardCloud { .. } => "BillboardCloud",
             },
-            status: if plan.errors.is_empty() {
-                AssetStatus::Ok
-            } else {
-                AssetStatus::Failed
-            },
+            status: if plan.errors.is_empty() { AssetStatus::Ok } else { AssetStatus::Failed },
             stages,
             artifacts,
             errors: plan.errors.iter().map(ErrorSummary::from).collect(),
@@ -1063,42 +794,17 @@ impl Project {
 }
 
 /// Records an artifact in the manifest; true when the entry is new or its bytes changed.
-fn record_artifact(
-    manifest: &mut Manifest,
-    revision: u64,
-    asset: &str,
-    path: &str,
-    hash: &str,
-) -> bool {
-    let unchanged = manifest
-        .artifacts
-        .get(path)
-        .is_some_and(|entry| entry.hash == hash && entry.asset == asset);
+fn record_artifact(manifest: &mut Manifest, revision: u64, asset: &str, path: &str, hash: &str) -> bool {
+    let unchanged = manifest.artifacts.get(path).is_some_and(|entry| entry.hash == hash && entry.asset == asset);
     if !unchanged {
-        manifest.artifacts.insert(
-            path.to_string(),
-            ManifestEntry {
-                asset: asset.to_string(),
-                hash: hash.to_string(),
-                revision,
-            },
-        );
+        manifest.artifacts.insert(path.to_string(), ManifestEntry { asset: asset.to_string(), hash: hash.to_string(), revision });
     }
     !unchanged
 }
 
 /// Deletes the artifacts `doomed` selects, file and manifest entry; true when any was removed.
-fn remove_artifacts(
-    root: &Path,
-    manifest: &mut Manifest,
-    doomed: impl Fn(&str, &ManifestEntry) -> bool,
-) -> bool {
-    let paths: Vec<String> = manifest
-        .artifacts
-        .iter()
-        .filter(|(path, entry)| doomed(path, entry))
-        .map(|(path, _)| path.clone())
-        .collect();
+fn remove_artifacts(root: &Path, manifest: &mut Manifest, doomed: impl Fn(&str, &ManifestEntry) -> bool) -> bool {
+    let paths: Vec<String> = manifest.artifacts.iter().filter(|(path, entry)| doomed(path, entry)).map(|(path, _)| path.clone()).collect();
     for path in &paths {
         let _ = std::fs::remove_file(root.join(path));
         manifest.artifacts.remove(path);

@@ -53,9 +53,7 @@ pub struct CacheEntry {
 
 impl DiskCache {
     pub fn new(folder: impl Into<PathBuf>) -> DiskCache {
-        DiskCache {
-            folder: folder.into(),
-        }
+        DiskCache { folder: folder.into() }
     }
 
     pub fn folder(&self) -> &Path {

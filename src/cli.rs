@@ -11,11 +11,7 @@ use crate::bake::{BuildOptions, Progress, Project, ProjectOptions};
 use crate::config::load_pipeline;
 
 #[derive(Debug, Parser)]
-#[command(
-    name = "cirrus",
-    version,
-    about = "Incremental asset pipeline: billboard-cloud LODs and baked, block-compressed materials"
-)]
+#[command(name = "cirrus", version, about = "Incremental asset pipeline: billboard-cloud LODs and baked, block-compressed materials")]
 pub struct Cli {
     /// More log output (-v: info, -vv: debug, -vvv: trace). RUST_LOG overrides it.
     #[arg(short, long, action = clap::ArgAction::Count, global = true)]
@@ -64,30 +60,18 @@ pub fn init_logging(verbose: u8) {
     };
     let filter = tracing_subscriber::EnvFilter::try_from_default_env()
         .unwrap_or_else(|_| tracing_subscriber::EnvFilter::new(format!("{default},salsa=warn")));
-    let _ = tracing_subscriber::fmt()
-        .with_env_filter(filter)
-        .with_writer(std::io::stderr)
-        .with_target(false)
-        .try_init();
+    let _ = tracing_subscriber::fmt().with_env_filter(filter).with_writer(std::io::stderr).with_target(false).try_init();
 }
 
 pub fn run(cli: Cli) -> anyhow::Result<ExitCode> {
     init_logging(cli.verbose);
     match cli.command {
-        Command::Build {
-            pipeline,
-            assets,
-            summary,
-        } => build(pipeline, assets, summary),
+        Command::Build { pipeline, assets, summary } => build(pipeline, assets, summary),
         Command::Check { pipeline } => check(pipeline),
     }
 }
 
-fn build(
-    pipeline: PathBuf,
-    assets: Vec<String>,
-    format: SummaryFormat,
-) -> anyhow::Result<ExitCode> {
+fn build(pipeline: PathBuf, assets: Vec<String>, format: SummaryFormat) -> anyhow::Result<ExitCode> {
     let config = match load_pipeline(&pipeline) {
         Ok(config) => config,
         Err(error) => {
@@ -99,10 +83,8 @@ fn build(
     let bar = std::io::stderr().is_terminal().then(|| {
         let bar = indicatif::ProgressBar::new(0);
         bar.set_style(
-            indicatif::ProgressStyle::with_template(
-                "{spinner} [{elapsed_precise}] {bar:30} {pos}/{len} {wide_msg}",
-            )
-            .expect("valid progress template"),
+            indicatif::ProgressStyle::with_template("{spinner} [{elapsed_precise}] {bar:30} {pos}/{len} {wide_msg}")
+                .expect("valid progress template"),
         );
         bar
     });
@@ -112,19 +94,9 @@ fn build(
             bar.set_position(progress.done as u64);
             bar.set_message(progress.item);
         }
-        None => tracing::info!(
-            "baked {} ({}/{})",
-            progress.item,
-            progress.done,
-            progress.total
-        ),
+        None => tracing::info!("baked {} ({}/{})", progress.item, progress.done, progress.total),
     };
-    let result = project.build(
-        &BuildOptions {
-            only_assets: assets,
-        },
-        &report_progress,
-    );
+    let result = project.build(&BuildOptions { only_assets: assets }, &report_progress);
     if let Some(bar) = &bar {
         bar.finish_and_clear();
     }
@@ -139,11 +111,7 @@ fn build(
         SummaryFormat::Json => println!("{}", summary.to_json()),
         SummaryFormat::Text => print!("{}", summary.to_text()),
     }
-    Ok(if summary.all_ok() {
-        ExitCode::SUCCESS
-    } else {
-        ExitCode::from(EXIT_ASSET_FAILED)
-    })
+    Ok(if summary.all_ok() { ExitCode::SUCCESS } else { ExitCode::from(EXIT_ASSET_FAILED) })
 }
 
 fn check(pipeline: PathBuf) -> anyhow::Result<ExitCode> {
@@ -154,12 +122,7 @@ fn check(pipeline: PathBuf) -> anyhow::Result<ExitCode> {
             return Ok(ExitCode::from(EXIT_USAGE));
         }
     };
-    let project = Project::open(
-        config,
-        ProjectOptions {
-            persistent_cache: false,
-        },
-    );
+    let project = Project::open(config, ProjectOptions { persistent_cache: false });
     let problems = project.check();
     for (asset, diagnostics) in &problems {
         for diagnostic in diagnostics {
@@ -167,14 +130,7 @@ fn check(pipeline: PathBuf) -> anyhow::Result<ExitCode> {
         }
     }
     let assets = project.asset_list().len();
-    let failed = problems
-        .iter()
-        .filter(|(_, diagnostics)| !diagnostics.is_empty())
-        .count();
+    let failed = problems.iter().filter(|(_, diagnostics)| !diagnostics.is_empty()).count();
     println!("{assets} assets checked, {failed} with problems");
-    Ok(if failed == 0 {
-        ExitCode::SUCCESS
-    } else {
-        ExitCode::from(EXIT_ASSET_FAILED)
-    })
+    Ok(if failed == 0 { ExitCode::SUCCESS } else { ExitCode::from(EXIT_ASSET_FAILED) })
 }

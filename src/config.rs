@@ -86,17 +86,8 @@ pub struct Settings {
 impl Default for Settings {
     fn default() -> Settings {
         Settings {
-            billboard: BillboardSettings {
-                epsilon: 0.02,
-                max_planes: None,
-                texel_density: None,
-                alpha_cutoff: 0.5,
-            },
-            atlas: AtlasSettings {
-                max_size: 2048,
-                padding: 4,
-                power_of_two: true,
-            },
+            billboard: BillboardSettings { epsilon: 0.02, max_planes: None, texel_density: None, alpha_cutoff: 0.5 },
+            atlas: AtlasSettings { max_size: 2048, padding: 4, power_of_two: true },
             encode: EncodeSettings {
                 albedo: BlockFormat::Bc7,
                 mra: BlockFormat::Bc1,
@@ -186,31 +177,16 @@ impl PipelineConfig {
     /// The asset that a source file (relative to the source folder) becomes under `rules`,
     /// unless an explicit asset already uses it.
     pub fn asset_for_rule_match(&self, relative: &Path) -> Option<AssetConfig> {
-        if self
-            .assets
-            .iter()
-            .any(|asset| asset.source.main_file() == relative)
-        {
+        if self.assets.iter().any(|asset| asset.source.main_file() == relative) {
             return None;
         }
-        let rule = self
-            .rules
-            .iter()
-            .find(|rule| rule.matcher.is_match(relative))?;
+        let rule = self.rules.iter().find(|rule| rule.matcher.is_match(relative))?;
         let name = crate::diagnostic::display_path(&relative.with_extension(""));
         let source = match rule.kind {
-            AssetKindName::Material => AssetSource::Material {
-                material: relative.to_path_buf(),
-            },
-            AssetKindName::BillboardCloud => AssetSource::BillboardCloud {
-                mesh: relative.to_path_buf(),
-            },
+            AssetKindName::Material => AssetSource::Material { material: relative.to_path_buf() },
+            AssetKindName::BillboardCloud => AssetSource::BillboardCloud { mesh: relative.to_path_buf() },
         };
-        Some(AssetConfig {
-            name,
-            source,
-            settings: self.defaults.clone(),
-        })
+        Some(AssetConfig { name, source, settings: self.defaults.clone() })
     }
 }
 
@@ -330,41 +306,24 @@ mod raw {
 
 /// Reads and validates `pipeline.ron` at `file`.
 pub fn load_pipeline(file: &Path) -> Result<PipelineConfig, ConfigError> {
-    let text = std::fs::read_to_string(file).map_err(|error| ConfigError {
-        diagnostics: vec![Diagnostic::new(
-            file,
-            format!("cannot read the pipeline file: {error}"),
-        )],
-    })?;
+    let text = std::fs::read_to_string(file)
+        .map_err(|error| ConfigError { diagnostics: vec![Diagnostic::new(file, format!("cannot read the pipeline file: {error}"))] })?;
     parse_pipeline(file, &text)
 }
 
 /// Parses and validates the text of a `pipeline.ron` that lives at `file`.
 pub fn parse_pipeline(file: &Path, text: &str) -> Result<PipelineConfig, ConfigError> {
-    let options =
-        ron::Options::default().with_default_extension(ron::extensions::Extensions::IMPLICIT_SOME);
+    let options = ron::Options::default().with_default_extension(ron::extensions::Extensions::IMPLICIT_SOME);
     let raw: raw::Pipeline = options.from_str(text).map_err(|error| ConfigError {
         diagnostics: vec![Diagnostic::at(
             file,
-            TextPosition {
-                line: error.position.line as u32,
-                column: error.position.col as u32,
-            },
+            TextPosition { line: error.position.line as u32, column: error.position.col as u32 },
             error.code.to_string(),
         )],
     })?;
     let root = file.parent().map(Path::to_path_buf).unwrap_or_default();
-    let root = if root.as_os_str().is_empty() {
-        PathBuf::from(".")
-    } else {
-        root
-    };
-    Validator {
-        file,
-        text,
-        diagnostics: Vec::new(),
-    }
-    .validate(raw, root)
+    let root = if root.as_os_str().is_empty() { PathBuf::from(".") } else { root };
+    Validator { file, text, diagnostics: Vec::new() }.validate(raw, root)
 }
 
 struct Validator<'a> {
@@ -374,149 +333,78 @@ struct Validator<'a> {
 }
 
 impl Validator<'_> {
-    fn validate(
-        mut self,
-        raw: raw::Pipeline,
-        root: PathBuf,
-    ) -> Result<PipelineConfig, ConfigError> {
-        let source = self
-            .project_path(&raw.source, "source", 0)
-            .unwrap_or_default();
-        let output = self
-            .project_path(&raw.output, "output", 0)
-            .unwrap_or_default();
+    fn validate(mut self, raw: raw::Pipeline, root: PathBuf) -> Result<PipelineConfig, ConfigError> {
+        let source = self.project_path(&raw.source, "source", 0).unwrap_or_default();
+        let output = self.project_path(&raw.output, "output", 0).unwrap_or_default();
         if !output.as_os_str().is_empty() && (source.starts_with(&output) || output == source) {
-            self.error_at_value(
-                &raw.output,
-                0,
-                "the output folder must not be the source folder or contain it",
-            );
+            self.error_at_value(&raw.output, 0, "the output folder must not be the source folder or contain it");
         }
-        let server = raw
-            .server
-            .as_ref()
-            .and_then(|address| match address.parse::<SocketAddr>() {
-                Ok(address) => Some(address),
-                Err(_) => {
-                    self.error_at_value(
-                        address,
-                        0,
-                        &format!("`{address}` is not a socket address like 127.0.0.1:7878"),
-                    );
-                    None
-                }
-            });
+        let server = raw.server.as_ref().and_then(|address| match address.parse::<SocketAddr>() {
+            Ok(address) => Some(address),
+            Err(_) => {
+                self.error_at_value(address, 0, &format!("`{address}` is not a socket address like 127.0.0.1:7878"));
+                None
+            }
+        });
         let defaults = self.merge_settings(&Settings::default(), &raw.defaults, 0);
 
         let mut assets = Vec::new();
         let mut names = BTreeSet::new();
         for asset in &raw.assets {
             let (name, path, overrides, kind) = match asset {
-                raw::Asset::Material {
-                    name,
-                    material,
-                    billboard,
-                    atlas,
-                    encode,
-                } => (
-                    name,
-                    material,
-                    (billboard, atlas, encode),
-                    AssetKindName::Material,
-                ),
-                raw::Asset::BillboardCloud {
-                    name,
-                    mesh,
-                    billboard,
-                    atlas,
-                    encode,
-                } => (
-                    name,
-                    mesh,
-                    (billboard, atlas, encode),
-                    AssetKindName::BillboardCloud,
-                ),
+                raw::Asset::Material { name, material, billboard, atlas, encode } => {
+                    (name, material, (billboard, atlas, encode), AssetKindName::Material)
+                }
+                raw::Asset::BillboardCloud { name, mesh, billboard, atlas, encode } => {
+                    (name, mesh, (billboard, atlas, encode), AssetKindName::BillboardCloud)
+                }
             };
             let anchor = self.offset_of_value(name, 0).unwrap_or(0);
             if !valid_asset_name(name) {
-                self.error_at_value(name, 0, &format!("asset name `{name}` must be non-empty and use only letters, digits, `_`, `-`, `.` and `/`"));
+                self.error_at_value(
+                    name,
+                    0,
+                    &format!("asset name `{name}` must be non-empty and use only letters, digits, `_`, `-`, `.` and `/`"),
+                );
             }
             if !names.insert(name.clone()) {
-                let second = self
-                    .offset_of_value(name, anchor + name.len() + 2)
-                    .unwrap_or(anchor);
+                let second = self.offset_of_value(name, anchor + name.len() + 2).unwrap_or(anchor);
                 self.error_at_value(name, second, &format!("asset name `{name}` is used twice"));
             }
             let Some(relative) = self.source_path(path, anchor) else {
                 continue;
             };
-            let overrides = raw::SettingsOverrides {
-                billboard: overrides.0.clone(),
-                atlas: overrides.1.clone(),
-                encode: overrides.2.clone(),
-            };
+            let overrides =
+                raw::SettingsOverrides { billboard: overrides.0.clone(), atlas: overrides.1.clone(), encode: overrides.2.clone() };
             let settings = self.merge_settings(&defaults, &overrides, anchor);
             let source = match kind {
                 AssetKindName::Material => AssetSource::Material { material: relative },
                 AssetKindName::BillboardCloud => AssetSource::BillboardCloud { mesh: relative },
             };
-            assets.push(AssetConfig {
-                name: name.clone(),
-                source,
-                settings,
-            });
+            assets.push(AssetConfig { name: name.clone(), source, settings });
         }
 
         let mut rules = Vec::new();
         for rule in &raw.rules {
-            match globset::GlobBuilder::new(&rule.glob)
-                .literal_separator(true)
-                .build()
-            {
-                Ok(glob) => rules.push(Rule {
-                    glob: rule.glob.clone(),
-                    matcher: glob.compile_matcher(),
-                    kind: rule.kind,
-                }),
-                Err(error) => {
-                    self.error_at_value(&rule.glob, 0, &format!("bad glob: {}", error.kind()))
-                }
+            match globset::GlobBuilder::new(&rule.glob).literal_separator(true).build() {
+                Ok(glob) => rules.push(Rule { glob: rule.glob.clone(), matcher: glob.compile_matcher(), kind: rule.kind }),
+                Err(error) => self.error_at_value(&rule.glob, 0, &format!("bad glob: {}", error.kind())),
             }
         }
 
         if self.diagnostics.is_empty() {
-            Ok(PipelineConfig {
-                file: self.file.to_path_buf(),
-                root,
-                source,
-                output,
-                server,
-                defaults,
-                assets,
-                rules,
-            })
+            Ok(PipelineConfig { file: self.file.to_path_buf(), root, source, output, server, defaults, assets, rules })
         } else {
-            Err(ConfigError {
-                diagnostics: self.diagnostics,
-            })
+            Err(ConfigError { diagnostics: self.diagnostics })
         }
     }
 
-    fn merge_settings(
-        &mut self,
-        base: &Settings,
-        overrides: &raw::SettingsOverrides,
-        anchor: usize,
-    ) -> Settings {
+    fn merge_settings(&mut self, base: &Settings, overrides: &raw::SettingsOverrides, anchor: usize) -> Settings {
         let mut settings = base.clone();
         let billboard = &overrides.billboard;
         if let Some(epsilon) = billboard.epsilon {
             if !(epsilon > 0.0 && epsilon < 1.0) {
-                self.error_at_key(
-                    "epsilon",
-                    anchor,
-                    "epsilon must be in (0, 1): it is a fraction of the bounding-sphere radius",
-                );
+                self.error_at_key("epsilon", anchor, "epsilon must be in (0, 1): it is a fraction of the bounding-sphere radius");
             }
             settings.billboard.epsilon = epsilon;
         }
@@ -528,11 +416,7 @@ impl Validator<'_> {
         }
         if let Some(density) = billboard.texel_density {
             if density.is_some_and(|d| !(d > 0.0 && d.is_finite())) {
-                self.error_at_key(
-                    "texel_density",
-                    anchor,
-                    "texel_density must be a positive number of texels per world unit",
-                );
+                self.error_at_key("texel_density", anchor, "texel_density must be a positive number of texels per world unit");
             }
             settings.billboard.texel_density = density;
         }
@@ -545,11 +429,7 @@ impl Validator<'_> {
         let atlas = &overrides.atlas;
         if let Some(max_size) = atlas.max_size {
             if !(16..=16384).contains(&max_size) || max_size % 4 != 0 {
-                self.error_at_key(
-                    "max_size",
-                    anchor,
-                    "max_size must be a multiple of 4 between 16 and 16384",
-                );
+                self.error_at_key("max_size", anchor, "max_size must be a multiple of 4 between 16 and 16384");
             }
             settings.atlas.max_size = max_size;
         }
@@ -564,39 +444,16 @@ impl Validator<'_> {
         }
         let encode = &overrides.encode;
         let surfaces: [(&str, Option<BlockFormat>, &[BlockFormat], &mut BlockFormat); 4] = [
-            (
-                "albedo",
-                encode.albedo,
-                &[BlockFormat::Bc7, BlockFormat::Bc3, BlockFormat::Bc1],
-                &mut settings.encode.albedo,
-            ),
-            (
-                "mra",
-                encode.mra,
-                &[BlockFormat::Bc1, BlockFormat::Bc7],
-                &mut settings.encode.mra,
-            ),
-            (
-                "normal",
-                encode.normal,
-                &[BlockFormat::Bc5, BlockFormat::Bc7],
-                &mut settings.encode.normal,
-            ),
-            (
-                "height",
-                encode.height,
-                &[BlockFormat::Bc4],
-                &mut settings.encode.height,
-            ),
+            ("albedo", encode.albedo, &[BlockFormat::Bc7, BlockFormat::Bc3, BlockFormat::Bc1], &mut settings.encode.albedo),
+            ("mra", encode.mra, &[BlockFormat::Bc1, BlockFormat::Bc7], &mut settings.encode.mra),
+            ("normal", encode.normal, &[BlockFormat::Bc5, BlockFormat::Bc7], &mut settings.encode.normal),
+            ("height", encode.height, &[BlockFormat::Bc4], &mut settings.encode.height),
         ];
         let mut format_errors = Vec::new();
         for (key, value, allowed, target) in surfaces {
             if let Some(format) = value {
                 if !allowed.contains(&format) {
-                    format_errors.push((
-                        key,
-                        format!("{format:?} cannot hold the {key} surface; use one of {allowed:?}"),
-                    ));
+                    format_errors.push((key, format!("{format:?} cannot hold the {key} surface; use one of {allowed:?}")));
                 }
                 *target = format;
             }
@@ -627,7 +484,11 @@ impl Validator<'_> {
         match normalize_relative_path(Path::new(value)) {
             Some(path) => Some(path),
             None => {
-                self.error_at_value(value, anchor, &format!("the {what} path `{value}` must be relative and stay inside the folder of the pipeline file"));
+                self.error_at_value(
+                    value,
+                    anchor,
+                    &format!("the {what} path `{value}` must be relative and stay inside the folder of the pipeline file"),
+                );
                 None
             }
         }
@@ -638,7 +499,11 @@ impl Validator<'_> {
         match normalize_relative_path(Path::new(value)) {
             Some(path) if !path.as_os_str().is_empty() => Some(path),
             _ => {
-                self.error_at_value(value, anchor, &format!("the asset path `{value}` must be a relative file path inside the source folder"));
+                self.error_at_value(
+                    value,
+                    anchor,
+                    &format!("the asset path `{value}` must be a relative file path inside the source folder"),
+                );
                 None
             }
         }
@@ -646,10 +511,7 @@ impl Validator<'_> {
 
     fn offset_of_value(&self, value: &str, from: usize) -> Option<usize> {
         let quoted = format!("\"{value}\"");
-        self.text
-            .get(from..)?
-            .find(&quoted)
-            .map(|index| index + from)
+        self.text.get(from..)?.find(&quoted).map(|index| index + from)
     }
 
     fn error_at_value(&mut self, value: &str, from: usize, message: &str) {
@@ -658,21 +520,13 @@ impl Validator<'_> {
     }
 
     fn error_at_key(&mut self, key: &str, from: usize, message: &str) {
-        let offset = self
-            .text
-            .get(from..)
-            .and_then(|rest| find_key(rest, key))
-            .map(|index| index + from);
+        let offset = self.text.get(from..).and_then(|rest| find_key(rest, key)).map(|index| index + from);
         self.push(offset, message);
     }
 
     fn push(&mut self, offset: Option<usize>, message: &str) {
         let diagnostic = match offset {
-            Some(offset) => Diagnostic::at(
-                self.file,
-                TextPosition::of_byte_offset(self.text, offset),
-                message,
-            ),
+            Some(offset) => Diagnostic::at(self.file, TextPosition::of_byte_offset(self.text, offset), message),
             None => Diagnostic::new(self.file, message),
         };
         self.diagnostics.push(diagnostic);
@@ -685,8 +539,7 @@ fn find_key(text: &str, key: &str) -> Option<usize> {
     let mut start = 0;
     while let Some(found) = text[start..].find(key) {
         let index = start + found;
-        let before_ok =
-            index == 0 || !(bytes[index - 1].is_ascii_alphanumeric() || bytes[index - 1] == b'_');
+        let before_ok = index == 0 || !(bytes[index - 1].is_ascii_alphanumeric() || bytes[index - 1] == b'_');
         let after = text[index + key.len()..].trim_start();
         if before_ok && after.starts_with(':') {
             return Some(index);
@@ -698,9 +551,7 @@ fn find_key(text: &str, key: &str) -> Option<usize> {
 
 fn valid_asset_name(name: &str) -> bool {
     !name.is_empty()
-        && name
-            .chars()
-            .all(|c| c.is_ascii_alphanumeric() || matches!(c, '_' | '-' | '.' | '/'))
+        && name.chars().all(|c| c.is_ascii_alphanumeric() || matches!(c, '_' | '-' | '.' | '/'))
         && normalize_relative_path(Path::new(name)).is_some_and(|path| path == Path::new(name))
 }
 

@@ -5,11 +5,7 @@ use crate::config::{BlockFormat, Container};
 use crate::encode::{block_bytes, EncodedTexture};
 
 /// Writes `texture` in `container`; `zstd_level` applies to KTX2 only.
-pub fn write_container(
-    texture: &EncodedTexture,
-    container: Container,
-    zstd_level: Option<i32>,
-) -> Vec<u8> {
+pub fn write_container(texture: &EncodedTexture, container: Container, zstd_level: Option<i32>) -> Vec<u8> {
     match container {
         Container::Ktx2 => write_ktx2(texture, zstd_level),
         Container::Dds => write_dds(texture),
@@ -17,9 +13,7 @@ pub fn write_container(
     }
 }
 
-pub const KTX2_IDENTIFIER: [u8; 12] = [
-    0xAB, b'K', b'T', b'X', b' ', b'2', b'0', 0xBB, b'\r', b'\n', 0x1A, b'\n',
-];
+pub const KTX2_IDENTIFIER: [u8; 12] = [0xAB, b'K', b'T', b'X', b' ', b'2', b'0', 0xBB, b'\r', b'\n', 0x1A, b'\n'];
 
 /// Vulkan's `VkFormat` value of a block format.
 pub fn vk_format(format: BlockFormat, srgb: bool) -> u32 {
@@ -39,11 +33,11 @@ pub fn vk_format(format: BlockFormat, srgb: bool) -> u32 {
 fn data_format_descriptor(format: BlockFormat, srgb: bool) -> Vec<u8> {
     // (channel id, bit offset, bit length) per sample; KHR_DF_MODEL_* colour model.
     let (model, samples): (u8, &[(u8, u16, u8)]) = match format {
-        BlockFormat::Bc1 => (128, &[(0, 0, 63)]), // BC1A, COLOR
+        BlockFormat::Bc1 => (128, &[(0, 0, 63)]),               // BC1A, COLOR
         BlockFormat::Bc3 => (130, &[(15, 0, 63), (0, 64, 63)]), // BC3, ALPHA then COLOR
-        BlockFormat::Bc4 => (131, &[(0, 0, 63)]), // BC4, DATA
-        BlockFormat::Bc5 => (132, &[(0, 0, 63), (1, 64, 63)]), // BC5, RED then GREEN
-        BlockFormat::Bc7 => (134, &[(0, 0, 127)]), // BC7, COLOR
+        BlockFormat::Bc4 => (131, &[(0, 0, 63)]),               // BC4, DATA
+        BlockFormat::Bc5 => (132, &[(0, 0, 63), (1, 64, 63)]),  // BC5, RED then GREEN
+        BlockFormat::Bc7 => (134, &[(0, 0, 127)]),              // BC7, COLOR
     };
     let block_size = 24 + 16 * samples.len() as u32;
     let mut dfd = Vec::new();
@@ -57,10 +51,7 @@ fn data_format_descriptor(format: BlockFormat, srgb: bool) -> Vec<u8> {
     let bytes_plane0 = block_bytes(format) as u8;
     dfd.extend_from_slice(&[bytes_plane0, 0, 0, 0, 0, 0, 0, 0]);
     for &(channel, offset, length) in samples {
-        push_u32(
-            &mut dfd,
-            offset as u32 | ((length as u32) << 16) | ((channel as u32) << 24),
-        );
+        push_u32(&mut dfd, offset as u32 | ((length as u32) << 16) | ((channel as u32) << 24));
         push_u32(&mut dfd, 0); // samplePosition 0,0,0,0
         push_u32(&mut dfd, 0); // sampleLower
         push_u32(&mut dfd, u32::MAX); // sampleUpper
@@ -74,11 +65,7 @@ fn write_ktx2(texture: &EncodedTexture, zstd_level: Option<i32>) -> Vec<u8> {
     let level_index_size = level_count * 24;
     let dfd = data_format_descriptor(texture.format, texture.srgb);
     let mut kvd = Vec::new();
-    push_key_value(
-        &mut kvd,
-        "KTXwriter",
-        &format!("cirrus {}", env!("CARGO_PKG_VERSION")),
-    );
+    push_key_value(&mut kvd, "KTXwriter", &format!("cirrus {}", env!("CARGO_PKG_VERSION")));
     let dfd_offset = header_size + level_index_size;
     let kvd_offset = dfd_offset + dfd.len();
     let mut data_start = kvd_offset + kvd.len();
@@ -88,16 +75,11 @@ fn write_ktx2(texture: &EncodedTexture, zstd_level: Option<i32>) -> Vec<u8> {
         .levels
         .iter()
         .map(|level| match zstd_level {
-            Some(compression) => zstd::bulk::compress(level, compression)
-                .expect("zstd compression of an in-memory buffer"),
+            Some(compression) => zstd::bulk::compress(level, compression).expect("zstd compression of an in-memory buffer"),
             None => level.to_vec(),
         })
         .collect();
-    let alignment = if zstd_level.is_some() {
-        1
-    } else {
-        lcm(block_bytes(texture.format), 4)
-    };
+    let alignment = if zstd_level.is_some() { 1 } else { lcm(block_bytes(texture.format), 4) };
     let mut offsets = vec![0usize; level_count];
     let mut cursor = data_start;
     for level in (0..level_count).rev() {
@@ -180,15 +162,7 @@ fn write_dds(texture: &EncodedTexture) -> Vec<u8> {
     let mut file = Vec::new();
     file.extend_from_slice(b"DDS ");
     push_u32(&mut file, 124);
-    push_u32(
-        &mut file,
-        DDSD_CAPS
-            | DDSD_HEIGHT
-            | DDSD_WIDTH
-            | DDSD_PIXELFORMAT
-            | DDSD_MIPMAPCOUNT
-            | DDSD_LINEARSIZE,
-    );
+    push_u32(&mut file, DDSD_CAPS | DDSD_HEIGHT | DDSD_WIDTH | DDSD_PIXELFORMAT | DDSD_MIPMAPCOUNT | DDSD_LINEARSIZE);
     push_u32(&mut file, texture.height);
     push_u32(&mut file, texture.width);
     push_u32(&mut file, texture.levels[0].len() as u32); // pitchOrLinearSize
@@ -199,11 +173,7 @@ fn write_dds(texture: &EncodedTexture) -> Vec<u8> {
     push_u32(&mut file, DDPF_FOURCC);
     file.extend_from_slice(b"DX10");
     file.extend_from_slice(&[0u8; 20]); // bit count and masks
-    let complex = if level_count > 1 {
-        DDSCAPS_COMPLEX | DDSCAPS_MIPMAP
-    } else {
-        0
-    };
+    let complex = if level_count > 1 { DDSCAPS_COMPLEX | DDSCAPS_MIPMAP } else { 0 };
     push_u32(&mut file, DDSCAPS_TEXTURE | complex);
     file.extend_from_slice(&[0u8; 16]); // caps2, caps3, caps4, reserved2
     push_u32(&mut file, dxgi_format(texture.format, texture.srgb));

@@ -32,10 +32,7 @@ pub struct FileContents {
 impl FileContents {
     pub fn new(bytes: Vec<u8>) -> FileContents {
         let hash = blake3::hash(&bytes);
-        FileContents {
-            bytes: bytes.into(),
-            hash,
-        }
+        FileContents { bytes: bytes.into(), hash }
     }
 }
 
@@ -49,12 +46,7 @@ impl Eq for FileContents {}
 
 impl fmt::Debug for FileContents {
     fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
-        write!(
-            f,
-            "FileContents({} bytes, {})",
-            self.bytes.len(),
-            &self.hash.to_hex()[..12]
-        )
+        write!(f, "FileContents({} bytes, {})", self.bytes.len(), &self.hash.to_hex()[..12])
     }
 }
 
@@ -204,21 +196,10 @@ impl Database {
             if let salsa::EventKind::WillExecute { database_key } = event.kind {
                 let text = format!("{database_key:?}");
                 let function = text.split('(').next().unwrap_or_default().to_string();
-                event_logs
-                    .executed
-                    .lock()
-                    .expect("log lock")
-                    .push(ExecutedFunction {
-                        function,
-                        key: database_key.key_index(),
-                    });
+                event_logs.executed.lock().expect("log lock").push(ExecutedFunction { function, key: database_key.key_index() });
             }
         })));
-        Database {
-            storage,
-            cache,
-            logs,
-        }
+        Database { storage, cache, logs }
     }
 
     /// The tracked functions salsa executed since the last call (its `WillExecute` events).
@@ -255,28 +236,16 @@ impl Db for Database {
 fn timed<T>(db: &dyn Db, stage: Stage, key: impl AsId, body: impl FnOnce() -> T) -> T {
     let start = Instant::now();
     let result = body();
-    db.record_run(StageRun {
-        stage,
-        key: key.as_id(),
-        ms: start.elapsed().as_secs_f64() * 1000.0,
-        from_cache: false,
-    });
+    db.record_run(StageRun { stage, key: key.as_id(), ms: start.elapsed().as_secs_f64() * 1000.0, from_cache: false });
     result
 }
 
 fn record_cache_hit(db: &dyn Db, stage: Stage, key: impl AsId) {
-    db.record_run(StageRun {
-        stage,
-        key: key.as_id(),
-        ms: 0.0,
-        from_cache: true,
-    });
+    db.record_run(StageRun { stage, key: key.as_id(), ms: 0.0, from_cache: true });
 }
 
 fn read_contents<'db>(db: &'db dyn Db, file: SourceFile) -> Result<&'db FileContents, Diagnostic> {
-    file.contents(db)
-        .as_ref()
-        .map_err(|error| Diagnostic::new(file.path(db), error.clone()))
+    file.contents(db).as_ref().map_err(|error| Diagnostic::new(file.path(db), error.clone()))
 }
 
 // ---------------------------------------------------------------------------------------------
@@ -289,20 +258,12 @@ pub fn material_file(db: &dyn Db, asset: MaterialAsset) -> Result<Arc<MaterialFi
     let contents = read_contents(db, file)?;
     let path = file.path(db);
     let source_root = asset.source_root(db);
-    let key = CacheKeyBuilder::new("parse", Stage::Parse.version())
-        .bytes(contents.hash.as_bytes())
-        .debug(path)
-        .debug(source_root)
-        .finish();
-    if let Some(parsed) = load_cached(db, "parse", key, |entry| {
-        serde_json::from_value::<MaterialFile>(entry.metadata).ok()
-    }) {
+    let key = CacheKeyBuilder::new("parse", Stage::Parse.version()).bytes(contents.hash.as_bytes()).debug(path).debug(source_root).finish();
+    if let Some(parsed) = load_cached(db, "parse", key, |entry| serde_json::from_value::<MaterialFile>(entry.metadata).ok()) {
         record_cache_hit(db, Stage::Parse, asset);
         return Ok(Arc::new(parsed));
     }
-    let parsed = timed(db, Stage::Parse, asset, || {
-        parse_material_file(path, &contents.bytes, source_root)
-    })?;
+    let parsed = timed(db, Stage::Parse, asset, || parse_material_file(path, &contents.bytes, source_root))?;
     store_cached(db, "parse", key, || CacheEntry {
         metadata: serde_json::to_value(&parsed).expect("material files serialise"),
         blobs: Vec::new(),
@@ -317,9 +278,7 @@ pub fn material_file(db: &dyn Db, asset: MaterialAsset) -> Result<Arc<MaterialFi
 #[salsa::tracked(returns(clone))]
 pub fn decoded_texture(db: &dyn Db, file: SourceFile) -> Result<Arc<Texture>, Diagnostic> {
     let contents = read_contents(db, file)?;
-    timed(db, Stage::Decode, file, || {
-        decode_texture(file.path(db), &contents.bytes).map(Arc::new)
-    })
+    timed(db, Stage::Decode, file, || decode_texture(file.path(db), &contents.bytes).map(Arc::new))
 }
 
 // ---------------------------------------------------------------------------------------------
@@ -339,15 +298,8 @@ pub fn surface_recipe(db: &dyn Db, key: SurfaceKey) -> Result<Arc<SurfaceRecipe>
     let asset = key.asset(db);
     let parsed = material_file(db, asset)?;
     let material_path = asset.file(db).path(db).clone();
-    let Some(material) = parsed
-        .materials
-        .iter()
-        .find(|material| &material.name == key.material(db))
-    else {
-        return Err(Diagnostic::new(
-            &material_path,
-            format!("no material named `{}` any more", key.material(db)),
-        ));
+    let Some(material) = parsed.materials.iter().find(|material| &material.name == key.material(db)) else {
+        return Err(Diagnostic::new(&material_path, format!("no material named `{}` any more", key.material(db))));
     };
     let textures = asset.textures(db);
     let mut sources = Vec::new();
@@ -357,11 +309,7 @@ pub fn surface_recipe(db: &dyn Db, key: SurfaceKey) -> Result<Arc<SurfaceRecipe>
             continue;
         };
         let Some(&file) = textures.get(&reference.path) else {
-            return Err(Diagnostic::at(
-                &material_path,
-                reference.position,
-                format!("texture \"{}\" was not read", reference.written),
-            ));
+            return Err(Diagnostic::at(&material_path, reference.position, format!("texture \"{}\" was not read", reference.written)));
         };
         if let Err(error) = file.contents(db) {
             return Err(Diagnostic::at(
@@ -377,11 +325,7 @@ pub fn surface_recipe(db: &dyn Db, key: SurfaceKey) -> Result<Arc<SurfaceRecipe>
         }
         sources.push(Some(file));
     }
-    Ok(Arc::new(SurfaceRecipe {
-        material_file: material_path,
-        sources,
-        constants: material.constants.clone(),
-    }))
+    Ok(Arc::new(SurfaceRecipe { material_file: material_path, sources, constants: material.constants.clone() }))
 }
 
 /// The settings that shape the mip chain of one surface.
@@ -396,18 +340,10 @@ pub struct MipStageSettings {
 pub fn mip_settings(db: &dyn Db, key: SurfaceKey) -> MipStageSettings {
     let settings = key.asset(db).settings(db);
     let alpha_cutoff = match (key.surface(db), surface_recipe(db, key)) {
-        (SurfaceKind::Albedo, Ok(recipe)) => Some(
-            recipe
-                .constants
-                .alpha_cutoff
-                .unwrap_or(settings.billboard.alpha_cutoff),
-        ),
+        (SurfaceKind::Albedo, Ok(recipe)) => Some(recipe.constants.alpha_cutoff.unwrap_or(settings.billboard.alpha_cutoff)),
         _ => None,
     };
-    MipStageSettings {
-        mips: settings.encode.mips,
-        alpha_cutoff,
-    }
+    MipStageSettings { mips: settings.encode.mips, alpha_cutoff }
 }
 
 #[salsa::tracked(returns(copy))]
@@ -442,13 +378,8 @@ pub fn packed_surface(db: &dyn Db, key: SurfaceKey) -> Result<Arc<Texture>, Diag
         });
     }
     timed(db, Stage::Pack, key, || {
-        let sources: Vec<Option<&Texture>> =
-            decoded.iter().map(|texture| texture.as_deref()).collect();
-        Ok(Arc::new(pack_surface(
-            key.surface(db),
-            &sources,
-            &recipe.constants,
-        )))
+        let sources: Vec<Option<&Texture>> = decoded.iter().map(|texture| texture.as_deref()).collect();
+        Ok(Arc::new(pack_surface(key.surface(db), &sources, &recipe.constants)))
     })
 }
 
@@ -466,25 +397,12 @@ pub fn mip_levels(db: &dyn Db, key: SurfaceKey) -> Result<Arc<MipLevels>, Diagno
     timed(db, Stage::Mips, key, || {
         let alpha_tested = key.surface(db) == SurfaceKind::Albedo && has_transparency(&packed);
         let levels = if settings.mips {
-            let alpha_cutoff = if alpha_tested {
-                settings.alpha_cutoff
-            } else {
-                None
-            };
-            mip_chain(
-                &packed,
-                MipSettings {
-                    kind: key.surface(db),
-                    alpha_cutoff,
-                },
-            )
+            let alpha_cutoff = if alpha_tested { settings.alpha_cutoff } else { None };
+            mip_chain(&packed, MipSettings { kind: key.surface(db), alpha_cutoff })
         } else {
             vec![(*packed).clone()]
         };
-        Ok(Arc::new(MipLevels {
-            levels,
-            alpha_tested,
-        }))
+        Ok(Arc::new(MipLevels { levels, alpha_tested }))
     })
 }
 
@@ -504,21 +422,12 @@ pub fn encoded_surface(db: &dyn Db, key: SurfaceKey) -> Result<Arc<EncodedSurfac
     let surface = key.surface(db);
     timed(db, Stage::Encode, key, || {
         let alpha = surface == SurfaceKind::Albedo && has_transparency(&mips.levels[0]);
-        let settings = BlockEncodeSettings {
-            format,
-            quality,
-            alpha,
-            srgb: surface.is_srgb(),
-        };
+        let settings = BlockEncodeSettings { format, quality, alpha, srgb: surface.is_srgb() };
         let texture = encode_levels(&mips.levels, settings);
         let level0 = &mips.levels[0];
         let decoded = decode_blocks(format, &texture.levels[0], level0.width, level0.height);
         let psnr_db = psnr(level0, &decoded, surface.channels());
-        Ok(Arc::new(EncodedSurface {
-            texture,
-            psnr_db,
-            alpha_tested: mips.alpha_tested,
-        }))
+        Ok(Arc::new(EncodedSurface { texture, psnr_db, alpha_tested: mips.alpha_tested }))
     })
 }
 
@@ -547,10 +456,7 @@ pub struct SurfaceArtifacts {
 
 /// The artifacts of a surface: from the persistent cache when its inputs were baked before.
 #[salsa::tracked(returns(clone))]
-pub fn surface_artifacts(
-    db: &dyn Db,
-    key: SurfaceKey,
-) -> Result<Arc<SurfaceArtifacts>, Diagnostic> {
+pub fn surface_artifacts(db: &dyn Db, key: SurfaceKey) -> Result<Arc<SurfaceArtifacts>, Diagnostic> {
     let recipe = surface_recipe(db, key)?;
     let mip_settings = mip_settings(db, key);
     let block_settings = block_settings(db, key);
@@ -590,18 +496,11 @@ pub fn surface_artifacts(
             psnr_db: (encoded.psnr_db * 100.0).round() / 100.0,
             alpha_tested: encoded.alpha_tested,
         };
-        SurfaceArtifacts {
-            info,
-            texture_file,
-            preview_png: preview_png(&packed).into(),
-        }
+        SurfaceArtifacts { info, texture_file, preview_png: preview_png(&packed).into() }
     });
     store_cached(db, "surface", cache_key, || CacheEntry {
         metadata: serde_json::to_value(&artifacts.info).expect("surface info serialises"),
-        blobs: vec![
-            artifacts.texture_file.to_vec(),
-            artifacts.preview_png.to_vec(),
-        ],
+        blobs: vec![artifacts.texture_file.to_vec(), artifacts.preview_png.to_vec()],
     });
     Ok(Arc::new(artifacts))
 }
@@ -609,19 +508,10 @@ pub fn surface_artifacts(
 fn artifacts_from_entry(entry: CacheEntry) -> Option<SurfaceArtifacts> {
     let info = serde_json::from_value(entry.metadata).ok()?;
     let [texture_file, preview_png]: [Vec<u8>; 2] = entry.blobs.try_into().ok()?;
-    Some(SurfaceArtifacts {
-        info,
-        texture_file: texture_file.into(),
-        preview_png: preview_png.into(),
-    })
+    Some(SurfaceArtifacts { info, texture_file: texture_file.into(), preview_png: preview_png.into() })
 }
 
-fn load_cached<T>(
-    db: &dyn Db,
-    stage: &str,
-    key: CacheKey,
-    decode: impl FnOnce(CacheEntry) -> Option<T>,
-) -> Option<T> {
+fn load_cached<T>(db: &dyn Db, stage: &str, key: CacheKey, decode: impl FnOnce(CacheEntry) -> Option<T>) -> Option<T> {
     db.disk_cache()?.load(stage, key).and_then(decode)
 }
 
@@ -676,26 +566,14 @@ fn library_bytes(db: &dyn Db, asset: BillboardAsset) -> BTreeMap<PathBuf, Option
     asset
         .libraries(db)
         .iter()
-        .map(|(path, file)| {
-            (
-                path.clone(),
-                file.contents(db)
-                    .as_ref()
-                    .ok()
-                    .map(|contents| contents.bytes.to_vec()),
-            )
-        })
+        .map(|(path, file)| (path.clone(), file.contents(db).as_ref().ok().map(|contents| contents.bytes.to_vec())))
         .collect()
 }
 
 /// The texture files the mesh's materials name (cheap: the MTL files only).
 #[salsa::tracked(returns(clone))]
 pub fn mesh_textures(db: &dyn Db, asset: BillboardAsset) -> Arc<Vec<PathBuf>> {
-    Arc::new(crate::mesh::texture_paths(
-        asset.mesh_file(db).path(db),
-        &library_bytes(db, asset),
-        asset.source_root(db),
-    ))
+    Arc::new(crate::mesh::texture_paths(asset.mesh_file(db).path(db), &library_bytes(db, asset), asset.source_root(db)))
 }
 
 /// A loaded mesh with its vertex tangents and load warnings.
@@ -712,49 +590,26 @@ pub fn loaded_mesh(db: &dyn Db, asset: BillboardAsset) -> Result<Arc<LoadedMesh>
     let contents = read_contents(db, file)?;
     let libraries = library_bytes(db, asset);
     timed(db, Stage::Mesh, asset, || {
-        let (mesh, warnings) = crate::mesh::load_mesh(
-            file.path(db),
-            &contents.bytes,
-            &libraries,
-            asset.source_root(db),
-        )?;
+        let (mesh, warnings) = crate::mesh::load_mesh(file.path(db), &contents.bytes, &libraries, asset.source_root(db))?;
         let tangents = match &mesh.uvs {
-            Some(uvs) => {
-                crate::gpu::vertex_tangents(&mesh.positions, &mesh.normals, uvs, &mesh.triangles)
-            }
+            Some(uvs) => crate::gpu::vertex_tangents(&mesh.positions, &mesh.normals, uvs, &mesh.triangles),
             None => Vec::new(),
         };
-        Ok(Arc::new(LoadedMesh {
-            mesh,
-            tangents,
-            warnings,
-        }))
+        Ok(Arc::new(LoadedMesh { mesh, tangents, warnings }))
     })
 }
 
 #[salsa::tracked(returns(copy))]
 pub fn plane_settings(db: &dyn Db, asset: BillboardAsset) -> crate::planes::PlaneSettings {
     let billboard = &asset.settings(db).billboard;
-    crate::planes::PlaneSettings {
-        epsilon: billboard.epsilon,
-        max_planes: billboard.max_planes,
-    }
+    crate::planes::PlaneSettings { epsilon: billboard.epsilon, max_planes: billboard.max_planes }
 }
 
 #[salsa::tracked(returns(clone))]
-pub fn billboard_planes(
-    db: &dyn Db,
-    asset: BillboardAsset,
-) -> Result<Arc<crate::planes::PlaneSet>, Diagnostic> {
+pub fn billboard_planes(db: &dyn Db, asset: BillboardAsset) -> Result<Arc<crate::planes::PlaneSet>, Diagnostic> {
     let loaded = loaded_mesh(db, asset)?;
     let settings = plane_settings(db, asset);
-    timed(db, Stage::Planes, asset, || {
-        Ok(Arc::new(crate::planes::select_planes(
-            &loaded.mesh.positions,
-            &loaded.mesh.triangles,
-            settings,
-        )))
-    })
+    timed(db, Stage::Planes, asset, || Ok(Arc::new(crate::planes::select_planes(&loaded.mesh.positions, &loaded.mesh.triangles, settings))))
 }
 
 /// The planes' rectangles and their atlas layout.
@@ -765,32 +620,19 @@ pub struct BillboardLayout {
 }
 
 #[salsa::tracked(returns(clone))]
-pub fn atlas_layout_settings(
-    db: &dyn Db,
-    asset: BillboardAsset,
-) -> (crate::config::AtlasSettings, Option<f32>) {
+pub fn atlas_layout_settings(db: &dyn Db, asset: BillboardAsset) -> (crate::config::AtlasSettings, Option<f32>) {
     let settings = asset.settings(db);
     (settings.atlas.clone(), settings.billboard.texel_density)
 }
 
 #[salsa::tracked(returns(clone))]
-pub fn billboard_layout(
-    db: &dyn Db,
-    asset: BillboardAsset,
-) -> Result<Arc<BillboardLayout>, Diagnostic> {
+pub fn billboard_layout(db: &dyn Db, asset: BillboardAsset) -> Result<Arc<BillboardLayout>, Diagnostic> {
     let loaded = loaded_mesh(db, asset)?;
     let planes = billboard_planes(db, asset)?;
     let (atlas, density) = atlas_layout_settings(db, asset);
     timed(db, Stage::Layout, asset, || {
-        let rectangles = crate::rectangles::plane_rectangles(
-            &loaded.mesh.positions,
-            &loaded.mesh.triangles,
-            &planes,
-        );
-        let sizes: Vec<(f32, f32)> = rectangles
-            .iter()
-            .map(|rectangle| (rectangle.width, rectangle.height))
-            .collect();
+        let rectangles = crate::rectangles::plane_rectangles(&loaded.mesh.positions, &loaded.mesh.triangles, &planes);
+        let sizes: Vec<(f32, f32)> = rectangles.iter().map(|rectangle| (rectangle.width, rectangle.height)).collect();
         let layout = crate::layout::layout_rectangles(&sizes, &atlas, density);
         Ok(Arc::new(BillboardLayout { rectangles, layout }))
     })
@@ -800,13 +642,7 @@ pub fn billboard_layout(
 #[salsa::tracked(returns(clone))]
 pub fn lod_files(db: &dyn Db, asset: BillboardAsset) -> Result<Arc<(String, String)>, Diagnostic> {
     let layout = billboard_layout(db, asset)?;
-    timed(db, Stage::Lod, asset, || {
-        Ok(Arc::new(crate::lod_mesh::lod_mesh(
-            &layout.rectangles,
-            &layout.layout,
-            "billboard_cloud",
-        )))
-    })
+    timed(db, Stage::Lod, asset, || Ok(Arc::new(crate::lod_mesh::lod_mesh(&layout.rectangles, &layout.layout, "billboard_cloud"))))
 }
 
 #[salsa::tracked(returns(copy))]
@@ -816,10 +652,7 @@ pub fn billboard_alpha_cutoff(db: &dyn Db, asset: BillboardAsset) -> f32 {
 
 /// One plane's four images, rendered on the GPU; reads only the textures its faces use.
 #[salsa::tracked(returns(clone))]
-pub fn plane_images(
-    db: &dyn Db,
-    key: PlaneKey,
-) -> Result<Arc<crate::gpu::PlaneImages>, Diagnostic> {
+pub fn plane_images(db: &dyn Db, key: PlaneKey) -> Result<Arc<crate::gpu::PlaneImages>, Diagnostic> {
     let asset = key.asset(db);
     let loaded = loaded_mesh(db, asset)?;
     let planes = billboard_planes(db, asset)?;
@@ -827,14 +660,8 @@ pub fn plane_images(
     let alpha_cutoff = billboard_alpha_cutoff(db, asset);
     let index = key.index(db) as usize;
     let mesh_path = asset.mesh_file(db).path(db).clone();
-    let (Some(placement), Some(rectangle)) = (
-        layout.layout.placements.get(index),
-        layout.rectangles.get(index),
-    ) else {
-        return Err(Diagnostic::new(
-            &mesh_path,
-            format!("plane rectangle {index} no longer exists"),
-        ));
+    let (Some(placement), Some(rectangle)) = (layout.layout.placements.get(index), layout.rectangles.get(index)) else {
+        return Err(Diagnostic::new(&mesh_path, format!("plane rectangle {index} no longer exists")));
     };
     let mut materials = vec![crate::gpu::RenderMaterial::default(); loaded.mesh.materials.len()];
     let with_uvs = loaded.mesh.uvs.is_some();
@@ -846,7 +673,10 @@ pub fn plane_images(
                 return Err(Diagnostic::new(&mesh_path, format!("texture {} was not read", crate::diagnostic::display_path(path))));
             };
             if let Err(error) = file.contents(db) {
-                return Err(Diagnostic::new(&mesh_path, format!("material `{}`: {} texture {}: {error}", source.name, slot.name(), crate::diagnostic::display_path(path))));
+                return Err(Diagnostic::new(
+                    &mesh_path,
+                    format!("material `{}`: {} texture {}: {error}", source.name, slot.name(), crate::diagnostic::display_path(path)),
+                ));
             }
             decoded_texture(db, file).map(Some)
         };
@@ -858,12 +688,7 @@ pub fn plane_images(
             metallic: decoded(TextureSlot::Metallic)?,
             roughness: decoded(TextureSlot::Roughness)?,
             ao: decoded(TextureSlot::Ao)?,
-            albedo_factor: [
-                source.albedo_factor[0],
-                source.albedo_factor[1],
-                source.albedo_factor[2],
-                source.opacity,
-            ],
+            albedo_factor: [source.albedo_factor[0], source.albedo_factor[1], source.albedo_factor[2], source.opacity],
             metallic_value: source.metallic,
             roughness_value: source.roughness,
             ao_value: 1.0,
@@ -872,44 +697,30 @@ pub fn plane_images(
     // The depth range covers every assigned face, also beyond ε when `max_planes` capped them.
     let depth_range = planes.epsilon.max(planes.max_error).max(1e-6);
     timed(db, Stage::Render, key, || {
-        let gpu =
-            crate::gpu::gpu().map_err(|error| Diagnostic::new(&mesh_path, error.to_string()))?;
+        let gpu = crate::gpu::gpu().map_err(|error| Diagnostic::new(&mesh_path, error.to_string()))?;
         let input = crate::gpu::PlaneRenderInput {
             rectangle,
             epsilon: depth_range,
             alpha_cutoff,
             width: placement.width,
             height: placement.height,
-            batches: crate::plane_textures::plane_batches(
-                &loaded.mesh,
-                &loaded.tangents,
-                rectangle,
-            ),
+            batches: crate::plane_textures::plane_batches(&loaded.mesh, &loaded.tangents, rectangle),
             materials: &materials,
         };
-        gpu.render_plane(&input)
-            .map(Arc::new)
-            .map_err(|error| Diagnostic::new(&mesh_path, error.to_string()))
+        gpu.render_plane(&input).map(Arc::new).map_err(|error| Diagnostic::new(&mesh_path, error.to_string()))
     })
 }
 
 #[salsa::tracked(returns(clone))]
-pub fn billboard_atlas(
-    db: &dyn Db,
-    asset: BillboardAsset,
-) -> Result<Arc<crate::atlas::AtlasImages>, Diagnostic> {
+pub fn billboard_atlas(db: &dyn Db, asset: BillboardAsset) -> Result<Arc<crate::atlas::AtlasImages>, Diagnostic> {
     let layout = billboard_layout(db, asset)?;
     let mut images = Vec::new();
     for key in asset.plane_keys(db).iter() {
         images.push(plane_images(db, *key)?);
     }
     timed(db, Stage::Atlas, asset, || {
-        let references: Vec<&crate::gpu::PlaneImages> =
-            images.iter().map(|image| image.as_ref()).collect();
-        Ok(Arc::new(crate::atlas::composite_atlas(
-            &layout.layout,
-            &references,
-        )))
+        let references: Vec<&crate::gpu::PlaneImages> = images.iter().map(|image| image.as_ref()).collect();
+        Ok(Arc::new(crate::atlas::composite_atlas(&layout.layout, &references)))
     })
 }
 
@@ -926,17 +737,7 @@ pub fn atlas_surface(db: &dyn Db, key: AtlasSurfaceKey) -> Result<Arc<Texture>, 
 }
 
 #[salsa::tracked(returns(clone))]
-pub fn atlas_block_settings(
-    db: &dyn Db,
-    key: AtlasSurfaceKey,
-) -> (
-    BlockFormat,
-    EncodeQuality,
-    bool,
-    Container,
-    Option<i32>,
-    f32,
-) {
+pub fn atlas_block_settings(db: &dyn Db, key: AtlasSurfaceKey) -> (BlockFormat, EncodeQuality, bool, Container, Option<i32>, f32) {
     let settings = key.asset(db).settings(db);
     let encode = &settings.encode;
     let format = match key.surface(db) {
@@ -945,47 +746,23 @@ pub fn atlas_block_settings(
         SurfaceKind::Normal => encode.normal,
         SurfaceKind::Height => encode.height,
     };
-    (
-        format,
-        encode.quality,
-        encode.mips,
-        encode.container,
-        encode.zstd,
-        settings.billboard.alpha_cutoff,
-    )
+    (format, encode.quality, encode.mips, encode.container, encode.zstd, settings.billboard.alpha_cutoff)
 }
 
 /// Mips, block compression (with its measured PSNR), container and preview of one atlas surface.
 #[salsa::tracked(returns(clone))]
-pub fn atlas_surface_artifacts(
-    db: &dyn Db,
-    key: AtlasSurfaceKey,
-) -> Result<Arc<SurfaceArtifacts>, Diagnostic> {
+pub fn atlas_surface_artifacts(db: &dyn Db, key: AtlasSurfaceKey) -> Result<Arc<SurfaceArtifacts>, Diagnostic> {
     let image = atlas_surface(db, key)?;
     let (format, quality, mips, container, zstd, alpha_cutoff) = atlas_block_settings(db, key);
     let surface = key.surface(db);
     timed(db, Stage::Encode, key, || {
         let alpha_tested = surface == SurfaceKind::Albedo && has_transparency(&image);
         let levels = if mips {
-            mip_chain(
-                &image,
-                MipSettings {
-                    kind: surface,
-                    alpha_cutoff: alpha_tested.then_some(alpha_cutoff),
-                },
-            )
+            mip_chain(&image, MipSettings { kind: surface, alpha_cutoff: alpha_tested.then_some(alpha_cutoff) })
         } else {
             vec![(*image).clone()]
         };
-        let texture = encode_levels(
-            &levels,
-            BlockEncodeSettings {
-                format,
-                quality,
-                alpha: alpha_tested,
-                srgb: surface.is_srgb(),
-            },
-        );
+        let texture = encode_levels(&levels, BlockEncodeSettings { format, quality, alpha: alpha_tested, srgb: surface.is_srgb() });
         let decoded = decode_blocks(format, &texture.levels[0], image.width, image.height);
         let psnr_db = (psnr(&image, &decoded, surface.channels()) * 100.0).round() / 100.0;
         let texture_file: Arc<[u8]> = write_container(&texture, container, zstd).into();
@@ -1001,11 +778,7 @@ pub fn atlas_surface_artifacts(
             psnr_db,
             alpha_tested,
         };
-        Ok(Arc::new(SurfaceArtifacts {
-            info,
-            texture_file,
-            preview_png: preview_png(&image).into(),
-        }))
+        Ok(Arc::new(SurfaceArtifacts { info, texture_file, preview_png: preview_png(&image).into() }))
     })
 }
 
@@ -1014,18 +787,7 @@ pub fn atlas_surface_artifacts(
 pub fn billboard_cache_key(db: &dyn Db, asset: BillboardAsset) -> CacheKey {
     let settings = asset.settings(db);
     let mut key = CacheKeyBuilder::new("billboard", 1)
-        .debug(
-            &[
-                Stage::Mesh,
-                Stage::Planes,
-                Stage::Layout,
-                Stage::Render,
-                Stage::Atlas,
-                Stage::Encode,
-                Stage::Lod,
-            ]
-            .map(Stage::version),
-        )
+        .debug(&[Stage::Mesh, Stage::Planes, Stage::Layout, Stage::Render, Stage::Atlas, Stage::Encode, Stage::Lod].map(Stage::version))
         .debug(&settings.billboard)
         .debug(&settings.atlas)
         .debug(&settings.encode)

@@ -43,23 +43,11 @@ pub struct Diagnostic {
 
 impl Diagnostic {
     pub fn new(file: impl Into<PathBuf>, message: impl Into<String>) -> Diagnostic {
-        Diagnostic {
-            file: file.into(),
-            position: None,
-            message: message.into(),
-        }
+        Diagnostic { file: file.into(), position: None, message: message.into() }
     }
 
-    pub fn at(
-        file: impl Into<PathBuf>,
-        position: TextPosition,
-        message: impl Into<String>,
-    ) -> Diagnostic {
-        Diagnostic {
-            file: file.into(),
-            position: Some(position),
-            message: message.into(),
-        }
+    pub fn at(file: impl Into<PathBuf>, position: TextPosition, message: impl Into<String>) -> Diagnostic {
+        Diagnostic { file: file.into(), position: Some(position), message: message.into() }
     }
 
     pub fn line(&self) -> Option<u32> {

@@ -31,15 +31,7 @@ impl Eq for EncodedTexture {}
 
 impl fmt::Debug for EncodedTexture {
     fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
-        write!(
-            f,
-            "EncodedTexture({:?} {}x{} ×{}, {})",
-            self.format,
-            self.width,
-            self.height,
-            self.levels.len(),
-            &self.hash.to_hex()[..12]
-        )
+        write!(f, "EncodedTexture({:?} {}x{} ×{}, {})", self.format, self.width, self.height, self.levels.len(), &self.hash.to_hex()[..12])
     }
 }
 
@@ -62,10 +54,7 @@ pub struct BlockEncodeSettings {
 
 /// Encodes every level of a mip chain (level 0 first).
 pub fn encode_levels(levels: &[Texture], settings: BlockEncodeSettings) -> EncodedTexture {
-    let encoded: Vec<Arc<[u8]>> = levels
-        .iter()
-        .map(|level| Arc::from(encode_level(level, settings)))
-        .collect();
+    let encoded: Vec<Arc<[u8]>> = levels.iter().map(|level| Arc::from(encode_level(level, settings))).collect();
     let mut hasher = blake3::Hasher::new();
     for level in &encoded {
         hasher.update(level);
@@ -99,64 +88,22 @@ pub fn encode_level(level: &Texture, settings: BlockEncodeSettings) -> Vec<u8> {
     let block_row_bytes = blocks_x * block_bytes(settings.format);
     let mut output = vec![0u8; blocks_x * blocks_y * block_bytes(settings.format)];
     let bc7_settings = bc7_settings(settings.quality, settings.alpha);
-    output
-        .par_chunks_mut(block_row_bytes * BLOCK_ROWS_PER_TASK)
-        .zip(padded.par_chunks(strip_bytes))
-        .for_each(|(blocks, texels)| {
-            let rows = texels.len() / row_bytes;
-            let data = texels;
-            let width = padded_width as u32;
-            let height = rows as u32;
-            let stride = row_bytes as u32;
-            match settings.format {
-                BlockFormat::Bc1 => intel_tex_2::bc1::compress_blocks_into(
-                    &intel_tex_2::RgbaSurface {
-                        data,
-                        width,
-                        height,
-                        stride,
-                    },
-                    blocks,
-                ),
-                BlockFormat::Bc3 => intel_tex_2::bc3::compress_blocks_into(
-                    &intel_tex_2::RgbaSurface {
-                        data,
-                        width,
-                        height,
-                        stride,
-                    },
-                    blocks,
-                ),
-                BlockFormat::Bc4 => intel_tex_2::bc4::compress_blocks_into(
-                    &intel_tex_2::RSurface {
-                        data,
-                        width,
-                        height,
-                        stride,
-                    },
-                    blocks,
-                ),
-                BlockFormat::Bc5 => intel_tex_2::bc5::compress_blocks_into(
-                    &intel_tex_2::RgSurface {
-                        data,
-                        width,
-                        height,
-                        stride,
-                    },
-                    blocks,
-                ),
-                BlockFormat::Bc7 => intel_tex_2::bc7::compress_blocks_into(
-                    &bc7_settings,
-                    &intel_tex_2::RgbaSurface {
-                        data,
-                        width,
-                        height,
-                        stride,
-                    },
-                    blocks,
-                ),
+    output.par_chunks_mut(block_row_bytes * BLOCK_ROWS_PER_TASK).zip(padded.par_chunks(strip_bytes)).for_each(|(blocks, texels)| {
+        let rows = texels.len() / row_bytes;
+        let data = texels;
+        let width = padded_width as u32;
+        let height = rows as u32;
+        let stride = row_bytes as u32;
+        match settings.format {
+            BlockFormat::Bc1 => intel_tex_2::bc1::compress_blocks_into(&intel_tex_2::RgbaSurface { data, width, height, stride }, blocks),
+            BlockFormat::Bc3 => intel_tex_2::bc3::compress_blocks_into(&intel_tex_2::RgbaSurface { data, width, height, stride }, blocks),
+            BlockFormat::Bc4 => intel_tex_2::bc4::compress_blocks_into(&intel_tex_2::RSurface { data, width, height, stride }, blocks),
+            BlockFormat::Bc5 => intel_tex_2::bc5::compress_blocks_into(&intel_tex_2::RgSurface { data, width, height, stride }, blocks),
+            BlockFormat::Bc7 => {
+                intel_tex_2::bc7::compress_blocks_into(&bc7_settings, &intel_tex_2::RgbaSurface { data, width, height, stride }, blocks)
             }
-        });
+        }
+    });
     output
 }
 
@@ -182,8 +129,7 @@ fn padded_channels(level: &Texture, width: usize, height: usize, channels: usize
     let mut padded = Vec::with_capacity(width * height * channels);
     for y in 0..height {
         let source_y = y.min(level.height as usize - 1);
-        let row = &level.pixels
-            [source_y * level.width as usize * 4..(source_y + 1) * level.width as usize * 4];
+        let row = &level.pixels[source_y * level.width as usize * 4..(source_y + 1) * level.width as usize * 4];
         for x in 0..width {
             let source_x = x.min(level.width as usize - 1);
             padded.extend_from_slice(&row[source_x * 4..source_x * 4 + channels]);

@@ -34,15 +34,50 @@ pub struct Gpu {
     white: wgpu::TextureView,
     /// Uploaded source textures by content hash and colour space.
     uploads: Mutex<HashMap<(blake3::Hash, bool), Arc<wgpu::TextureView>>>,
+    view_pipeline: wgpu::RenderPipeline,
+    view_material_layout: wgpu::BindGroupLayout,
+}
+
+/// A material for preview renders: textures with their own mip levels (level 0 first).
+#[derive(Clone, Debug, Default)]
+pub struct ViewMaterial {
+    pub albedo: Option<Arc<Vec<Texture>>>,
+    pub opacity: Option<Arc<Vec<Texture>>>,
+    pub normal: Option<Arc<Vec<Texture>>>,
+    /// False for two-channel normal maps (BC5): the shader rebuilds z.
+    pub normal_has_z: bool,
+    /// Linear RGB factor and constant opacity.
+    pub albedo_factor: [f32; 4],
+    pub alpha_cutoff: f32,
+}
+
+/// A mesh for preview renders: vertex batches per material.
+#[derive(Clone, Debug, Default)]
+pub struct ViewMesh {
+    pub batches: Vec<(usize, Vec<RenderVertex>)>,
+    pub materials: Vec<ViewMaterial>,
+}
+
+#[repr(C)]
+#[derive(Clone, Copy, Pod, Zeroable)]
+struct CameraUniform {
+    view_projection: [[f32; 4]; 4],
+    light: [f32; 4],
+}
+
+#[repr(C)]
+#[derive(Clone, Copy, Pod, Zeroable)]
+struct ViewMaterialUniform {
+    albedo: [f32; 4],
+    flags: [f32; 4],
+    params: [f32; 4],
 }
 
 static GPU: OnceLock<Result<Gpu, GpuError>> = OnceLock::new();
 
 /// The shared GPU, created on first use.
 pub fn gpu() -> Result<&'static Gpu, GpuError> {
-    GPU.get_or_init(|| pollster::block_on(Gpu::new()))
-        .as_ref()
-        .map_err(Clone::clone)
+    GPU.get_or_init(|| pollster::block_on(Gpu::new())).as_ref().map_err(Clone::clone)
 }
 
 const ALBEDO_FORMAT: wgpu::TextureFormat = wgpu::TextureFormat::Rgba8UnormSrgb;
@@ -129,17 +164,12 @@ impl Gpu {
             })
             .await
             .map_err(|error| GpuError::NoAdapter(error.to_string()))?;
-        let adapter_name = format!(
-            "{} ({:?})",
-            adapter.get_info().name,
-            adapter.get_info().backend
-        );
+        let adapter_name = format!("{} ({:?})", adapter.get_info().name, adapter.get_info().backend);
         let (device, queue) = adapter
             .request_device(&wgpu::DeviceDescriptor {
                 label: Some("cirrus"),
                 required_features: wgpu::Features::empty(),
-                required_limits: wgpu::Limits::downlevel_defaults()
-                    .using_resolution(adapter.limits()),
+                required_limits: wgpu::Limits::downlevel_defaults().using_resolution(adapter.limits()),
                 ..Default::default()
             })
             .await
@@ -151,17 +181,11 @@ impl Gpu {
         let uniform_entry = |binding| wgpu::BindGroupLayoutEntry {
             binding,
             visibility: wgpu::ShaderStages::VERTEX_FRAGMENT,
-            ty: wgpu::BindingType::Buffer {
-                ty: wgpu::BufferBindingType::Uniform,
-                has_dynamic_offset: false,
-                min_binding_size: None,
-            },
+            ty: wgpu::BindingType::Buffer { ty: wgpu::BufferBindingType::Uniform, has_dynamic_offset: false, min_binding_size: None },
             count: None,
         };
-        let frame_layout = device.create_bind_group_layout(&wgpu::BindGroupLayoutDescriptor {
-            label: Some("frame"),
-            entries: &[uniform_entry(0)],
-        });
+        let frame_layout =
+            device.create_bind_group_layout(&wgpu::BindGroupLayoutDescriptor { label: Some("frame"), entries: &[uniform_entry(0)] });
         let mut material_entries = vec![
             uniform_entry(0),
             wgpu::BindGroupLayoutEntry {
@@ -183,10 +207,8 @@ impl Gpu {
                 count: None,
             });
         }
-        let material_layout = device.create_bind_group_layout(&wgpu::BindGroupLayoutDescriptor {
-            label: Some("material"),
-            entries: &material_entries,
-        });
+        let material_layout =
+            device.create_bind_group_layout(&wgpu::BindGroupLayoutDescriptor { label: Some("material"), entries: &material_entries });
         let layout = device.create_pipeline_layout(&wgpu::PipelineLayoutDescriptor {
             label: Some("plane"),
             bind_group_layouts: &[Some(&frame_layout), Some(&material_layout)],
@@ -194,10 +216,7 @@ impl Gpu {
         });
         let attributes = wgpu::vertex_attr_array![0 => Float32x3, 1 => Float32x3, 2 => Float32x2, 3 => Float32x4];
         let targets: Vec<Option<wgpu::ColorTargetState>> =
-            [ALBEDO_FORMAT, DATA_FORMAT, DATA_FORMAT, DATA_FORMAT]
-                .iter()
-                .map(|&format| Some(format.into()))
-                .collect();
+            [ALBEDO_FORMAT, DATA_FORMAT, DATA_FORMAT, DATA_FORMAT].iter().map(|&format| Some(format.into())).collect();
         let pipeline = device.create_render_pipeline(&wgpu::RenderPipelineDescriptor {
             label: Some("plane"),
             layout: Some(&layout),
@@ -217,10 +236,7 @@ impl Gpu {
                 compilation_options: Default::default(),
                 targets: &targets,
             }),
-            primitive: wgpu::PrimitiveState {
-                cull_mode: None,
-                ..Default::default()
-            },
+            primitive: wgpu::PrimitiveState { cull_mode: None, ..Default::default() },
             depth_stencil: Some(wgpu::DepthStencilState {
                 format: DEPTH_FORMAT,
                 depth_write_enabled: Some(true),
@@ -241,12 +257,49 @@ impl Gpu {
             mipmap_filter: wgpu::MipmapFilterMode::Linear,
             ..Default::default()
         });
-        let white = upload(
-            &device,
-            &queue,
-            &[Texture::constant(1, 1, [255; 4])],
-            DATA_FORMAT,
-        );
+        let white = upload(&device, &queue, &[Texture::constant(1, 1, [255; 4])], DATA_FORMAT);
+        let view_shader = device.create_shader_module(wgpu::ShaderModuleDescriptor {
+            label: Some("view.wgsl"),
+            source: wgpu::ShaderSource::Wgsl(include_str!("../shaders/view.wgsl").into()),
+        });
+        let view_material_layout = device
+            .create_bind_group_layout(&wgpu::BindGroupLayoutDescriptor { label: Some("view material"), entries: &material_entries[..5] });
+        let view_layout = device.create_pipeline_layout(&wgpu::PipelineLayoutDescriptor {
+            label: Some("view"),
+            bind_group_layouts: &[Some(&frame_layout), Some(&view_material_layout)],
+            ..Default::default()
+        });
+        let view_pipeline = device.create_render_pipeline(&wgpu::RenderPipelineDescriptor {
+            label: Some("view"),
+            layout: Some(&view_layout),
+            vertex: wgpu::VertexState {
+                module: &view_shader,
+                entry_point: Some("vs_main"),
+                compilation_options: Default::default(),
+                buffers: &[Some(wgpu::VertexBufferLayout {
+                    array_stride: std::mem::size_of::<RenderVertex>() as u64,
+                    step_mode: wgpu::VertexStepMode::Vertex,
+                    attributes: &attributes,
+                })],
+            },
+            fragment: Some(wgpu::FragmentState {
+                module: &view_shader,
+                entry_point: Some("fs_main"),
+                compilation_options: Default::default(),
+                targets: &[Some(ALBEDO_FORMAT.into())],
+            }),
+            primitive: wgpu::PrimitiveState { cull_mode: None, ..Default::default() },
+            depth_stencil: Some(wgpu::DepthStencilState {
+                format: DEPTH_FORMAT,
+                depth_write_enabled: Some(true),
+                depth_compare: Some(wgpu::CompareFunction::LessEqual),
+                stencil: Default::default(),
+                bias: Default::default(),
+            }),
+            multisample: wgpu::MultisampleState::default(),
+            multiview_mask: None,
+            cache: None,
+        });
         Ok(Gpu {
             device,
             queue,
@@ -257,6 +310,8 @@ impl Gpu {
             sampler,
             white,
             uploads: Mutex::new(HashMap::new()),
+            view_pipeline,
+            view_material_layout,
         })
     }
 
@@ -267,23 +322,9 @@ impl Gpu {
         if let Some(view) = self.uploads.lock().expect("upload cache").get(&key) {
             return view.clone();
         }
-        let levels = mip_chain(
-            texture,
-            MipSettings {
-                kind,
-                alpha_cutoff: None,
-            },
-        );
-        let view = Arc::new(upload(
-            &self.device,
-            &self.queue,
-            &levels,
-            if srgb { ALBEDO_FORMAT } else { DATA_FORMAT },
-        ));
-        self.uploads
-            .lock()
-            .expect("upload cache")
-            .insert(key, view.clone());
+        let levels = mip_chain(texture, MipSettings { kind, alpha_cutoff: None });
+        let view = Arc::new(upload(&self.device, &self.queue, &levels, if srgb { ALBEDO_FORMAT } else { DATA_FORMAT }));
+        self.uploads.lock().expect("upload cache").insert(key, view.clone());
         view
     }
 
@@ -296,33 +337,18 @@ impl Gpu {
             x_axis: extend(rectangle.x_axis),
             y_axis: extend(rectangle.y_axis),
             normal: extend(rectangle.normal),
-            size: [
-                rectangle.width.max(1e-6),
-                rectangle.height.max(1e-6),
-                input.epsilon.max(1e-6),
-                input.alpha_cutoff,
-            ],
+            size: [rectangle.width.max(1e-6), rectangle.height.max(1e-6), input.epsilon.max(1e-6), input.alpha_cutoff],
         };
         let frame_buffer = self.uniform_buffer(bytemuck::bytes_of(&frame));
         let frame_group = self.device.create_bind_group(&wgpu::BindGroupDescriptor {
             label: Some("frame"),
             layout: &self.frame_layout,
-            entries: &[wgpu::BindGroupEntry {
-                binding: 0,
-                resource: frame_buffer.as_entire_binding(),
-            }],
+            entries: &[wgpu::BindGroupEntry { binding: 0, resource: frame_buffer.as_entire_binding() }],
         });
-        let targets: Vec<wgpu::Texture> = [ALBEDO_FORMAT, DATA_FORMAT, DATA_FORMAT, DATA_FORMAT]
-            .iter()
-            .map(|&format| self.target(width, height, format))
-            .collect();
-        let views: Vec<wgpu::TextureView> = targets
-            .iter()
-            .map(|texture| texture.create_view(&Default::default()))
-            .collect();
-        let depth = self
-            .target(width, height, DEPTH_FORMAT)
-            .create_view(&Default::default());
+        let targets: Vec<wgpu::Texture> =
+            [ALBEDO_FORMAT, DATA_FORMAT, DATA_FORMAT, DATA_FORMAT].iter().map(|&format| self.target(width, height, format)).collect();
+        let views: Vec<wgpu::TextureView> = targets.iter().map(|texture| texture.create_view(&Default::default())).collect();
+        let depth = self.target(width, height, DEPTH_FORMAT).create_view(&Default::default());
 
         let mut draws = Vec::new();
         for (material_index, vertices) in &input.batches {
@@ -336,8 +362,7 @@ impl Gpu {
                 usage: wgpu::BufferUsages::VERTEX | wgpu::BufferUsages::COPY_DST,
                 mapped_at_creation: false,
             });
-            self.queue
-                .write_buffer(&buffer, 0, bytemuck::cast_slice(vertices));
+            self.queue.write_buffer(&buffer, 0, bytemuck::cast_slice(vertices));
             draws.push((buffer, vertices.len() as u32, self.material_group(material)));
         }
 
@@ -350,10 +375,7 @@ impl Gpu {
                         view,
                         depth_slice: None,
                         resolve_target: None,
-                        ops: wgpu::Operations {
-                            load: wgpu::LoadOp::Clear(wgpu::Color::TRANSPARENT),
-                            store: wgpu::StoreOp::Store,
-                        },
+                        ops: wgpu::Operations { load: wgpu::LoadOp::Clear(wgpu::Color::TRANSPARENT), store: wgpu::StoreOp::Store },
                     })
                 })
                 .collect();
@@ -362,10 +384,7 @@ impl Gpu {
                 color_attachments: &attachments,
                 depth_stencil_attachment: Some(wgpu::RenderPassDepthStencilAttachment {
                     view: &depth,
-                    depth_ops: Some(wgpu::Operations {
-                        load: wgpu::LoadOp::Clear(1.0),
-                        store: wgpu::StoreOp::Discard,
-                    }),
+                    depth_ops: Some(wgpu::Operations { load: wgpu::LoadOp::Clear(1.0), store: wgpu::StoreOp::Discard }),
                     stencil_ops: None,
                 }),
                 ..Default::default()
@@ -378,6 +397,122 @@ impl Gpu {
                 pass.draw(0..*count, 0..1);
             }
         }
+        let images = self.read_back(encoder, &targets, width, height)?;
+        let [albedo, normal, mra, height_map]: [Vec<u8>; 4] = images.try_into().expect("four targets");
+        Ok(PlaneImages { width, height, albedo, normal, mra, height_map })
+    }
+
+    /// Renders `mesh` under an orthographic camera into a `size`² RGBA8 image (sRGB colour on a
+    /// mid-grey background; alpha 255 where a surface was drawn, 0 elsewhere).
+    pub fn render_view(&self, mesh: &ViewMesh, view_projection: [[f32; 4]; 4], light: [f32; 3], size: u32) -> Result<Vec<u8>, GpuError> {
+        let camera = CameraUniform { view_projection, light: extend(light) };
+        let camera_buffer = self.uniform_buffer(bytemuck::bytes_of(&camera));
+        let camera_group = self.device.create_bind_group(&wgpu::BindGroupDescriptor {
+            label: Some("camera"),
+            layout: &self.frame_layout,
+            entries: &[wgpu::BindGroupEntry { binding: 0, resource: camera_buffer.as_entire_binding() }],
+        });
+        let target = self.target(size, size, ALBEDO_FORMAT);
+        let view = target.create_view(&Default::default());
+        let depth = self.target(size, size, DEPTH_FORMAT).create_view(&Default::default());
+        let mut draws = Vec::new();
+        for (material_index, vertices) in &mesh.batches {
+            if vertices.is_empty() {
+                continue;
+            }
+            let buffer = self.device.create_buffer(&wgpu::BufferDescriptor {
+                label: Some("vertices"),
+                size: std::mem::size_of_val(vertices.as_slice()) as u64,
+                usage: wgpu::BufferUsages::VERTEX | wgpu::BufferUsages::COPY_DST,
+                mapped_at_creation: false,
+            });
+            self.queue.write_buffer(&buffer, 0, bytemuck::cast_slice(vertices));
+            draws.push((buffer, vertices.len() as u32, self.view_material_group(&mesh.materials[*material_index])));
+        }
+        let mut encoder = self.device.create_command_encoder(&Default::default());
+        {
+            let mut pass = encoder.begin_render_pass(&wgpu::RenderPassDescriptor {
+                label: Some("view"),
+                color_attachments: &[Some(wgpu::RenderPassColorAttachment {
+                    view: &view,
+                    depth_slice: None,
+                    resolve_target: None,
+                    ops: wgpu::Operations {
+                        load: wgpu::LoadOp::Clear(wgpu::Color { r: 0.214, g: 0.214, b: 0.214, a: 0.0 }),
+                        store: wgpu::StoreOp::Store,
+                    },
+                })],
+                depth_stencil_attachment: Some(wgpu::RenderPassDepthStencilAttachment {
+                    view: &depth,
+                    depth_ops: Some(wgpu::Operations { load: wgpu::LoadOp::Clear(1.0), store: wgpu::StoreOp::Discard }),
+                    stencil_ops: None,
+                }),
+                ..Default::default()
+            });
+            pass.set_pipeline(&self.view_pipeline);
+            pass.set_bind_group(0, &camera_group, &[]);
+            for (buffer, count, group) in &draws {
+                pass.set_bind_group(1, group, &[]);
+                pass.set_vertex_buffer(0, buffer.slice(..));
+                pass.draw(0..*count, 0..1);
+            }
+        }
+        self.read_back(encoder, &[target], size, size).map(|mut images| images.remove(0))
+    }
+
+    fn view_material_group(&self, material: &ViewMaterial) -> wgpu::BindGroup {
+        let flag = |present: bool| if present { 1.0 } else { 0.0 };
+        let uniform = ViewMaterialUniform {
+            albedo: material.albedo_factor,
+            flags: [
+                flag(material.albedo.is_some()),
+                flag(material.opacity.is_some()),
+                flag(material.normal.is_some()),
+                flag(material.normal_has_z),
+            ],
+            params: [material.alpha_cutoff, 0.0, 0.0, 0.0],
+        };
+        let buffer = self.uniform_buffer(bytemuck::bytes_of(&uniform));
+        let views: Vec<Arc<wgpu::TextureView>> = [(&material.albedo, true), (&material.opacity, false), (&material.normal, false)]
+            .into_iter()
+            .map(|(levels, srgb)| match levels {
+                Some(levels) => self.levels_view(levels, srgb),
+                None => Arc::new(self.white.clone()),
+            })
+            .collect();
+        let mut entries = vec![
+            wgpu::BindGroupEntry { binding: 0, resource: buffer.as_entire_binding() },
+            wgpu::BindGroupEntry { binding: 1, resource: wgpu::BindingResource::Sampler(&self.sampler) },
+        ];
+        for (index, view) in views.iter().enumerate() {
+            entries.push(wgpu::BindGroupEntry { binding: 2 + index as u32, resource: wgpu::BindingResource::TextureView(view) });
+        }
+        self.device.create_bind_group(&wgpu::BindGroupDescriptor {
+            label: Some("view material"),
+            layout: &self.view_material_layout,
+            entries: &entries,
+        })
+    }
+
+    /// A texture with explicit mip levels on the GPU (uploaded once per content).
+    fn levels_view(&self, levels: &[Texture], srgb: bool) -> Arc<wgpu::TextureView> {
+        let key = (levels[0].hash, srgb);
+        if let Some(view) = self.uploads.lock().expect("upload cache").get(&key) {
+            return view.clone();
+        }
+        let view = Arc::new(upload(&self.device, &self.queue, levels, if srgb { ALBEDO_FORMAT } else { DATA_FORMAT }));
+        self.uploads.lock().expect("upload cache").insert(key, view.clone());
+        view
+    }
+
+    /// Submits `encoder` after copying `targets` out, and returns their RGBA8 pixels.
+    fn read_back(
+        &self,
+        mut encoder: wgpu::CommandEncoder,
+        targets: &[wgpu::Texture],
+        width: u32,
+        height: u32,
+    ) -> Result<Vec<Vec<u8>>, GpuError> {
         let padded_row = (width * 4).next_multiple_of(wgpu::COPY_BYTES_PER_ROW_ALIGNMENT);
         let readbacks: Vec<wgpu::Buffer> = targets
             .iter()
@@ -392,17 +527,9 @@ impl Gpu {
                     texture.as_image_copy(),
                     wgpu::TexelCopyBufferInfo {
                         buffer: &buffer,
-                        layout: wgpu::TexelCopyBufferLayout {
-                            offset: 0,
-                            bytes_per_row: Some(padded_row),
-                            rows_per_image: Some(height),
-                        },
+                        layout: wgpu::TexelCopyBufferLayout { offset: 0, bytes_per_row: Some(padded_row), rows_per_image: Some(height) },
                     },
-                    wgpu::Extent3d {
-                        width,
-                        height,
-                        depth_or_array_layers: 1,
-                    },
+                    wgpu::Extent3d { width, height, depth_or_array_layers: 1 },
                 );
                 buffer
             })
@@ -411,15 +538,10 @@ impl Gpu {
         for buffer in &readbacks {
             buffer.slice(..).map_async(wgpu::MapMode::Read, |_| {});
         }
-        self.device
-            .poll(wgpu::PollType::wait_indefinitely())
-            .map_err(|error| GpuError::Render(error.to_string()))?;
-        let mut images = Vec::with_capacity(4);
+        self.device.poll(wgpu::PollType::wait_indefinitely()).map_err(|error| GpuError::Render(error.to_string()))?;
+        let mut images = Vec::with_capacity(targets.len());
         for buffer in &readbacks {
-            let mapped = buffer
-                .slice(..)
-                .get_mapped_range()
-                .map_err(|error| GpuError::Render(format!("{error:?}")))?;
+            let mapped = buffer.slice(..).get_mapped_range().map_err(|error| GpuError::Render(format!("{error:?}")))?;
             let mut pixels = Vec::with_capacity((width * height * 4) as usize);
             for row in 0..height as usize {
                 let start = row * padded_row as usize;
@@ -427,16 +549,7 @@ impl Gpu {
             }
             images.push(pixels);
         }
-        let [albedo, normal, mra, height_map]: [Vec<u8>; 4] =
-            images.try_into().expect("four targets");
-        Ok(PlaneImages {
-            width,
-            height,
-            albedo,
-            normal,
-            mra,
-            height_map,
-        })
+        Ok(images)
     }
 
     fn uniform_buffer(&self, bytes: &[u8]) -> wgpu::Buffer {
@@ -453,11 +566,7 @@ impl Gpu {
     fn target(&self, width: u32, height: u32, format: wgpu::TextureFormat) -> wgpu::Texture {
         self.device.create_texture(&wgpu::TextureDescriptor {
             label: Some("target"),
-            size: wgpu::Extent3d {
-                width,
-                height,
-                depth_or_array_layers: 1,
-            },
+            size: wgpu::Extent3d { width, height, depth_or_array_layers: 1 },
             mip_level_count: 1,
             sample_count: 1,
             dimension: wgpu::TextureDimension::D2,
@@ -471,18 +580,8 @@ impl Gpu {
         let flag = |texture: &Option<Arc<Texture>>| if texture.is_some() { 1.0 } else { 0.0 };
         let uniform = MaterialUniform {
             albedo: material.albedo_factor,
-            params: [
-                material.metallic_value,
-                material.roughness_value,
-                material.ao_value,
-                0.0,
-            ],
-            has_a: [
-                flag(&material.albedo),
-                flag(&material.opacity),
-                flag(&material.normal),
-                flag(&material.metallic),
-            ],
+            params: [material.metallic_value, material.roughness_value, material.ao_value, 0.0],
+            has_a: [flag(&material.albedo), flag(&material.opacity), flag(&material.normal), flag(&material.metallic)],
             has_b: [flag(&material.roughness), flag(&material.ao), 0.0, 0.0],
         };
         let buffer = self.uniform_buffer(bytemuck::bytes_of(&uniform));
@@ -501,20 +600,11 @@ impl Gpu {
         })
         .collect();
         let mut entries = vec![
-            wgpu::BindGroupEntry {
-                binding: 0,
-                resource: buffer.as_entire_binding(),
-            },
-            wgpu::BindGroupEntry {
-                binding: 1,
-                resource: wgpu::BindingResource::Sampler(&self.sampler),
-            },
+            wgpu::BindGroupEntry { binding: 0, resource: buffer.as_entire_binding() },
+            wgpu::BindGroupEntry { binding: 1, resource: wgpu::BindingResource::Sampler(&self.sampler) },
         ];
         for (index, view) in views.iter().enumerate() {
-            entries.push(wgpu::BindGroupEntry {
-                binding: 2 + index as u32,
-                resource: wgpu::BindingResource::TextureView(view),
-            });
+            entries.push(wgpu::BindGroupEntry { binding: 2 + index as u32, resource: wgpu::BindingResource::TextureView(view) });
         }
         self.device.create_bind_group(&wgpu::BindGroupDescriptor {
             label: Some("material"),
@@ -529,19 +619,10 @@ fn extend([x, y, z]: [f32; 3]) -> [f32; 4] {
 }
 
 /// Uploads a mip chain (level 0 first) as one texture.
-fn upload(
-    device: &wgpu::Device,
-    queue: &wgpu::Queue,
-    levels: &[Texture],
-    format: wgpu::TextureFormat,
-) -> wgpu::TextureView {
+fn upload(device: &wgpu::Device, queue: &wgpu::Queue, levels: &[Texture], format: wgpu::TextureFormat) -> wgpu::TextureView {
     let texture = device.create_texture(&wgpu::TextureDescriptor {
         label: Some("source"),
-        size: wgpu::Extent3d {
-            width: levels[0].width,
-            height: levels[0].height,
-            depth_or_array_layers: 1,
-        },
+        size: wgpu::Extent3d { width: levels[0].width, height: levels[0].height, depth_or_array_layers: 1 },
         mip_level_count: levels.len() as u32,
         sample_count: 1,
         dimension: wgpu::TextureDimension::D2,
@@ -558,37 +639,20 @@ fn upload(
                 aspect: wgpu::TextureAspect::All,
             },
             &image.pixels,
-            wgpu::TexelCopyBufferLayout {
-                offset: 0,
-                bytes_per_row: Some(image.width * 4),
-                rows_per_image: Some(image.height),
-            },
-            wgpu::Extent3d {
-                width: image.width,
-                height: image.height,
-                depth_or_array_layers: 1,
-            },
+            wgpu::TexelCopyBufferLayout { offset: 0, bytes_per_row: Some(image.width * 4), rows_per_image: Some(image.height) },
+            wgpu::Extent3d { width: image.width, height: image.height, depth_or_array_layers: 1 },
         );
     }
     texture.create_view(&Default::default())
 }
 
 /// Per-vertex tangents (xyz, handedness in w) from UV derivatives, for normal mapping.
-pub fn vertex_tangents(
-    positions: &[[f32; 3]],
-    normals: &[[f32; 3]],
-    uvs: &[[f32; 2]],
-    triangles: &[[u32; 3]],
-) -> Vec<[f32; 4]> {
+pub fn vertex_tangents(positions: &[[f32; 3]], normals: &[[f32; 3]], uvs: &[[f32; 2]], triangles: &[[u32; 3]]) -> Vec<[f32; 4]> {
     let mut tangents = vec![Vec3::ZERO; positions.len()];
     let mut bitangents = vec![Vec3::ZERO; positions.len()];
     for triangle in triangles {
         let [a, b, c] = triangle.map(|index| index as usize);
-        let (p0, p1, p2) = (
-            Vec3::from(positions[a]),
-            Vec3::from(positions[b]),
-            Vec3::from(positions[c]),
-        );
+        let (p0, p1, p2) = (Vec3::from(positions[a]), Vec3::from(positions[b]), Vec3::from(positions[c]));
         let (t0, t1, t2) = (Vec2::from(uvs[a]), Vec2::from(uvs[b]), Vec2::from(uvs[c]));
         let (e1, e2, d1, d2) = (p1 - p0, p2 - p0, t1 - t0, t2 - t0);
         let determinant = d1.x * d2.y - d2.x * d1.y;
@@ -609,14 +673,8 @@ pub fn vertex_tangents(
         .zip(normals)
         .map(|((&tangent, &bitangent), &normal)| {
             let normal = Vec3::from(normal);
-            let orthogonal = (tangent - normal * normal.dot(tangent))
-                .try_normalize()
-                .unwrap_or_else(|| normal.any_orthonormal_vector());
-            let handedness = if normal.cross(orthogonal).dot(bitangent) < 0.0 {
-                -1.0
-            } else {
-                1.0
-            };
+            let orthogonal = (tangent - normal * normal.dot(tangent)).try_normalize().unwrap_or_else(|| normal.any_orthonormal_vector());
+            let handedness = if normal.cross(orthogonal).dot(bitangent) < 0.0 { -1.0 } else { 1.0 };
             [orthogonal.x, orthogonal.y, orthogonal.z, handedness]
         })
         .collect()

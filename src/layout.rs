@@ -28,54 +28,25 @@ pub struct Layout {
 }
 
 /// Packs rectangles of `sizes` (world units, width × height) into one atlas.
-pub fn layout_rectangles(
-    sizes: &[(f32, f32)],
-    settings: &AtlasSettings,
-    texel_density: Option<f32>,
-) -> Layout {
-    let area: f32 = sizes
-        .iter()
-        .map(|(w, h)| w.max(1e-6) * h.max(1e-6))
-        .sum::<f32>()
-        .max(1e-12);
+pub fn layout_rectangles(sizes: &[(f32, f32)], settings: &AtlasSettings, texel_density: Option<f32>) -> Layout {
+    let area: f32 = sizes.iter().map(|(w, h)| w.max(1e-6) * h.max(1e-6)).sum::<f32>().max(1e-12);
     let max_side = settings.max_size as f32;
     // Start from the density that would fill the largest atlas, or the one asked for.
     let mut density = texel_density.unwrap_or_else(|| (0.8 * max_side * max_side / area).sqrt());
     for _ in 0..200 {
-        let cells: Vec<(u32, u32)> = sizes
-            .iter()
-            .map(|&(w, h)| (block_size(w * density), block_size(h * density)))
-            .collect();
+        let cells: Vec<(u32, u32)> = sizes.iter().map(|&(w, h)| (block_size(w * density), block_size(h * density))).collect();
         if let Some(layout) = pack_smallest(&cells, settings) {
             let used: u64 = cells.iter().map(|&(w, h)| w as u64 * h as u64).sum();
             let occupancy = used as f32 / (layout.0 as f32 * layout.1 as f32);
-            return Layout {
-                width: layout.0,
-                height: layout.1,
-                texel_density: density,
-                placements: layout.2,
-                occupancy,
-            };
+            return Layout { width: layout.0, height: layout.1, texel_density: density, placements: layout.2, occupancy };
         }
         density *= 0.95;
     }
     // Even one block per rectangle does not fit: the caller's max_size is far too small.
     let cells: Vec<(u32, u32)> = sizes.iter().map(|_| (4, 4)).collect();
-    let (width, height, placements) = pack_smallest(
-        &cells,
-        &AtlasSettings {
-            max_size: u32::MAX / 4,
-            ..settings.clone()
-        },
-    )
-    .expect("unbounded atlas");
-    Layout {
-        width,
-        height,
-        texel_density: 0.0,
-        placements,
-        occupancy: 0.0,
-    }
+    let (width, height, placements) =
+        pack_smallest(&cells, &AtlasSettings { max_size: u32::MAX / 4, ..settings.clone() }).expect("unbounded atlas");
+    Layout { width, height, texel_density: 0.0, placements, occupancy: 0.0 }
 }
 
 /// Texels rounded up to whole 4×4 blocks, at least one block.
@@ -84,20 +55,10 @@ fn block_size(texels: f32) -> u32 {
 }
 
 /// The smallest atlas (by area, then squarest) that holds `cells`, if any within `max_size`.
-fn pack_smallest(
-    cells: &[(u32, u32)],
-    settings: &AtlasSettings,
-) -> Option<(u32, u32, Vec<Placement>)> {
+fn pack_smallest(cells: &[(u32, u32)], settings: &AtlasSettings) -> Option<(u32, u32, Vec<Placement>)> {
     let padding = settings.padding;
-    let padded_area: u64 = cells
-        .iter()
-        .map(|&(w, h)| (w + 2 * padding) as u64 * (h + 2 * padding) as u64)
-        .sum();
-    let largest = cells
-        .iter()
-        .map(|&(w, h)| w.min(h) + 2 * padding)
-        .max()
-        .unwrap_or(4);
+    let padded_area: u64 = cells.iter().map(|&(w, h)| (w + 2 * padding) as u64 * (h + 2 * padding) as u64).sum();
+    let largest = cells.iter().map(|&(w, h)| w.min(h) + 2 * padding).max().unwrap_or(4);
     let round = |side: u32| {
         if settings.power_of_two {
             side.next_power_of_two()
@@ -109,11 +70,7 @@ fn pack_smallest(
     let mut width = round(largest.max((padded_area as f64).sqrt() as u32 / 2).max(4));
     while width <= settings.max_size {
         widths.push(width);
-        width = if settings.power_of_two {
-            width * 2
-        } else {
-            round(width + (width / 8).max(4))
-        };
+        width = if settings.power_of_two { width * 2 } else { round(width + (width / 8).max(4)) };
     }
     let mut best: Option<(u32, u32, Vec<Placement>)> = None;
     for width in widths {
@@ -140,34 +97,17 @@ fn pack_smallest(
 fn pack_skyline(cells: &[(u32, u32)], width: u32, padding: u32) -> Option<(u32, Vec<Placement>)> {
     let mut order: Vec<usize> = (0..cells.len()).collect();
     order.sort_by_key(|&index| {
-        (
-            std::cmp::Reverse(cells[index].0.max(cells[index].1)),
-            std::cmp::Reverse(cells[index].0.min(cells[index].1)),
-            index,
-        )
+        (std::cmp::Reverse(cells[index].0.max(cells[index].1)), std::cmp::Reverse(cells[index].0.min(cells[index].1)), index)
     });
     // Skyline segments: (x, y, width).
     let mut skyline: Vec<(u32, u32, u32)> = vec![(0, 0, width)];
-    let mut placements = vec![
-        Placement {
-            x: 0,
-            y: 0,
-            width: 0,
-            height: 0,
-            rotated: false
-        };
-        cells.len()
-    ];
+    let mut placements = vec![Placement { x: 0, y: 0, width: 0, height: 0, rotated: false }; cells.len()];
     let mut used_height = 0;
     for index in order {
         let (w, h) = cells[index];
         let mut best: Option<(u32, u32, usize, bool)> = None; // (top, x, segment, rotated)
         for rotated in [false, true] {
-            let (cell_w, cell_h) = if rotated {
-                (h + 2 * padding, w + 2 * padding)
-            } else {
-                (w + 2 * padding, h + 2 * padding)
-            };
+            let (cell_w, cell_h) = if rotated { (h + 2 * padding, w + 2 * padding) } else { (w + 2 * padding, h + 2 * padding) };
             if cell_w > width {
                 continue;
             }
@@ -195,19 +135,9 @@ fn pack_skyline(cells: &[(u32, u32)], width: u32, padding: u32) -> Option<(u32, 
             }
         }
         let (top, x, _, rotated) = best?;
-        let (cell_w, cell_h) = if rotated {
-            (h + 2 * padding, w + 2 * padding)
-        } else {
-            (w + 2 * padding, h + 2 * padding)
-        };
+        let (cell_w, cell_h) = if rotated { (h + 2 * padding, w + 2 * padding) } else { (w + 2 * padding, h + 2 * padding) };
         let y = top - cell_h;
-        placements[index] = Placement {
-            x: x + padding,
-            y: y + padding,
-            width: w,
-            height: h,
-            rotated,
-        };
+        placements[index] = Placement { x: x + padding, y: y + padding, width: w, height: h, rotated };
         used_height = used_height.max(top);
         // Raise the skyline over [x, x + cell_w) to `top`.
         let mut updated: Vec<(u32, u32, u32)> = Vec::with_capacity(skyline.len() + 2);
@@ -230,9 +160,7 @@ fn pack_skyline(cells: &[(u32, u32)], width: u32, padding: u32) -> Option<(u32, 
         skyline.clear();
         for segment in updated {
             match skyline.last_mut() {
-                Some(last) if last.1 == segment.1 && last.0 + last.2 == segment.0 => {
-                    last.2 += segment.2
-                }
+                Some(last) if last.1 == segment.1 && last.0 + last.2 == segment.0 => last.2 += segment.2,
                 _ => skyline.push(segment),
             }
         }
@@ -245,15 +173,9 @@ impl Placement {
     /// `(s, t)` ∈ [0, 1]² of the rectangle (s along its X axis, t along its Y axis, Y up).
     pub fn atlas_position(&self, s: f32, t: f32) -> (f32, f32) {
         if self.rotated {
-            (
-                self.x as f32 + t * self.height as f32,
-                self.y as f32 + s * self.width as f32,
-            )
+            (self.x as f32 + t * self.height as f32, self.y as f32 + s * self.width as f32)
         } else {
-            (
-                self.x as f32 + s * self.width as f32,
-                self.y as f32 + (1.0 - t) * self.height as f32,
-            )
+            (self.x as f32 + s * self.width as f32, self.y as f32 + (1.0 - t) * self.height as f32)
         }
     }
 

@@ -7,19 +7,9 @@ use crate::layout::Layout;
 use crate::rectangles::PlaneRectangle;
 
 /// The OBJ and MTL text of the billboard cloud; `material` names the atlas material.
-pub fn lod_mesh(
-    rectangles: &[PlaneRectangle],
-    layout: &Layout,
-    material: &str,
-) -> (String, String) {
+pub fn lod_mesh(rectangles: &[PlaneRectangle], layout: &Layout, material: &str) -> (String, String) {
     let mut obj = String::new();
-    let _ = writeln!(
-        obj,
-        "# cirrus billboard cloud: {} planes, atlas {}x{}",
-        rectangles.len(),
-        layout.width,
-        layout.height
-    );
+    let _ = writeln!(obj, "# cirrus billboard cloud: {} planes, atlas {}x{}", rectangles.len(), layout.width, layout.height);
     let _ = writeln!(obj, "mtllib lod.mtl");
     let _ = writeln!(obj, "o {material}");
     let _ = writeln!(obj, "usemtl {material}");
@@ -37,26 +27,8 @@ pub fn lod_mesh(
     }
     for index in 0..rectangles.len() {
         let (v, n) = (index * 4 + 1, index + 1);
-        let _ = writeln!(
-            obj,
-            "f {}/{}/{n} {}/{}/{n} {}/{}/{n}",
-            v,
-            v,
-            v + 1,
-            v + 1,
-            v + 2,
-            v + 2
-        );
-        let _ = writeln!(
-            obj,
-            "f {}/{}/{n} {}/{}/{n} {}/{}/{n}",
-            v,
-            v,
-            v + 2,
-            v + 2,
-            v + 3,
-            v + 3
-        );
+        let _ = writeln!(obj, "f {}/{}/{n} {}/{}/{n} {}/{}/{n}", v, v, v + 1, v + 1, v + 2, v + 2);
+        let _ = writeln!(obj, "f {}/{}/{n} {}/{}/{n} {}/{}/{n}", v, v, v + 2, v + 2, v + 3, v + 3);
     }
     let mtl = format!(
         "# cirrus billboard cloud material (alpha-tested, double-sided)\nnewmtl {material}\nKd 1 1 1\nmap_Kd albedo.png\nmap_d albedo.png\nnorm normal.png\nmap_Pr mra.png\nmap_ao mra.png\n"

@@ -74,13 +74,7 @@ pub struct MaterialConstants {
 
 impl Default for MaterialConstants {
     fn default() -> Self {
-        MaterialConstants {
-            albedo: [1.0; 4],
-            metallic: 0.0,
-            roughness: 1.0,
-            ao: 1.0,
-            alpha_cutoff: None,
-        }
+        MaterialConstants { albedo: [1.0; 4], metallic: 0.0, roughness: 1.0, ao: 1.0, alpha_cutoff: None }
     }
 }
 
@@ -103,25 +97,13 @@ pub struct MaterialFile {
 
 /// Parses the bytes of the `.mymaterial` at `file`; texture paths resolve relative to it and must
 /// stay inside `source_root` (both relative to the project folder).
-pub fn parse_material_file(
-    file: &Path,
-    bytes: &[u8],
-    source_root: &Path,
-) -> Result<MaterialFile, Diagnostic> {
+pub fn parse_material_file(file: &Path, bytes: &[u8], source_root: &Path) -> Result<MaterialFile, Diagnostic> {
     let text = std::str::from_utf8(bytes).map_err(|error| {
-        let position = TextPosition::of_byte_offset(
-            &String::from_utf8_lossy(&bytes[..error.valid_up_to()]),
-            error.valid_up_to(),
-        );
+        let position = TextPosition::of_byte_offset(&String::from_utf8_lossy(&bytes[..error.valid_up_to()]), error.valid_up_to());
         Diagnostic::at(file, position, "the file is not valid UTF-8 text")
     })?;
-    let structures = openddl::parse(text)
-        .map_err(|error| Diagnostic::at(file, error.position, error.message))?;
-    let mut reader = Reader {
-        file,
-        source_root,
-        warnings: Vec::new(),
-    };
+    let structures = openddl::parse(text).map_err(|error| Diagnostic::at(file, error.position, error.message))?;
+    let mut reader = Reader { file, source_root, warnings: Vec::new() };
     let mut materials: Vec<MaterialDefinition> = Vec::new();
     for structure in &structures {
         match &structure.body {
@@ -131,30 +113,21 @@ pub fn parse_material_file(
                     return Err(Diagnostic::at(
                         file,
                         material.position,
-                        format!(
-                            "material name `{}` is already used at line {}",
-                            material.name, first.position.line
-                        ),
+                        format!("material name `{}` is already used at line {}", material.name, first.position.line),
                     ));
                 }
                 materials.push(material);
             }
             _ => reader.warn(
                 structure.position,
-                format!(
-                    "`{}` structure ignored: only `Material` is read at the top level",
-                    structure.identifier()
-                ),
+                format!("`{}` structure ignored: only `Material` is read at the top level", structure.identifier()),
             ),
         }
     }
     if materials.is_empty() {
         return Err(Diagnostic::new(file, "no `Material` structure in the file"));
     }
-    Ok(MaterialFile {
-        materials,
-        warnings: reader.warnings,
-    })
+    Ok(MaterialFile { materials, warnings: reader.warnings })
 }
 
 struct Reader<'a> {
@@ -165,19 +138,14 @@ struct Reader<'a> {
 
 impl Reader<'_> {
     fn warn(&mut self, position: TextPosition, message: String) {
-        self.warnings
-            .push(Diagnostic::at(self.file, position, message));
+        self.warnings.push(Diagnostic::at(self.file, position, message));
     }
 
     fn error(&self, position: TextPosition, message: impl Into<String>) -> Diagnostic {
         Diagnostic::at(self.file, position, message)
     }
 
-    fn material(
-        &mut self,
-        structure: &Structure,
-        index: usize,
-    ) -> Result<MaterialDefinition, Diagnostic> {
+    fn material(&mut self, structure: &Structure, index: usize) -> Result<MaterialDefinition, Diagnostic> {
         let name = match &structure.name {
             Some(name) => name.identifier.clone(),
             None => format!("material{index}"),
@@ -198,28 +166,15 @@ impl Reader<'_> {
                         continue;
                     };
                     let Some(slot) = TextureSlot::from_attrib(&attrib) else {
-                        self.warn(
-                            child.position,
-                            format!("texture attrib \"{attrib}\" is not used by the PBR baker"),
-                        );
+                        self.warn(child.position, format!("texture attrib \"{attrib}\" is not used by the PBR baker"));
                         continue;
                     };
                     let (written, position) = self.string_data(child)?;
                     let path = self.resolve(&written, position)?;
                     if material.textures.contains_key(&slot) {
-                        self.warn(
-                            child.position,
-                            format!("a second \"{attrib}\" texture replaces the first"),
-                        );
+                        self.warn(child.position, format!("a second \"{attrib}\" texture replaces the first"));
                     }
-                    material.textures.insert(
-                        slot,
-                        TextureReference {
-                            path,
-                            written,
-                            position,
-                        },
-                    );
+                    material.textures.insert(slot, TextureReference { path, written, position });
                 }
                 "Color" => {
                     let Some(attrib) = self.attrib(child)? else {
@@ -230,10 +185,7 @@ impl Reader<'_> {
                         let alpha = values.get(3).copied().unwrap_or(1.0);
                         material.constants.albedo = [values[0], values[1], values[2], alpha];
                     } else {
-                        self.warn(
-                            child.position,
-                            format!("color attrib \"{attrib}\" is not used by the PBR baker"),
-                        );
+                        self.warn(child.position, format!("color attrib \"{attrib}\" is not used by the PBR baker"));
                     }
                 }
                 "Param" => {
@@ -250,19 +202,13 @@ impl Reader<'_> {
                             continue;
                         }
                         _ => {
-                            self.warn(
-                                child.position,
-                                format!("param attrib \"{attrib}\" is not used by the PBR baker"),
-                            );
+                            self.warn(child.position, format!("param attrib \"{attrib}\" is not used by the PBR baker"));
                             continue;
                         }
                     };
                     *target = value.clamp(0.0, 1.0);
                 }
-                other => self.warn(
-                    child.position,
-                    format!("`{other}` structure ignored inside `Material`"),
-                ),
+                other => self.warn(child.position, format!("`{other}` structure ignored inside `Material`")),
             }
         }
         Ok(material)
@@ -271,67 +217,39 @@ impl Reader<'_> {
     fn attrib(&mut self, structure: &Structure) -> Result<Option<String>, Diagnostic> {
         let identifier = structure.identifier();
         match structure.property("attrib") {
-            Some(property) => match &property.value {
-                Value::String(text) => Ok(Some(text.clone())),
-                other => Err(self.error(
-                    property.position,
-                    format!(
-                        "the `attrib` of `{identifier}` must be a string, found {}",
-                        other.describe()
-                    ),
-                )),
-            },
+            Some(property) => {
+                match &property.value {
+                    Value::String(text) => Ok(Some(text.clone())),
+                    other => Err(self
+                        .error(property.position, format!("the `attrib` of `{identifier}` must be a string, found {}", other.describe()))),
+                }
+            }
             None => {
-                self.warn(
-                    structure.position,
-                    format!("`{identifier}` without an `attrib` property ignored"),
-                );
+                self.warn(structure.position, format!("`{identifier}` without an `attrib` property ignored"));
                 Ok(None)
             }
         }
     }
 
     /// The single primitive child of `structure`, which must hold data of `expected` type.
-    fn data<'s>(
-        &self,
-        structure: &'s Structure,
-        expected: &str,
-    ) -> Result<(&'s [Value], Option<u32>, TextPosition), Diagnostic> {
+    fn data<'s>(&self, structure: &'s Structure, expected: &str) -> Result<(&'s [Value], Option<u32>, TextPosition), Diagnostic> {
         let identifier = structure.identifier();
-        let mut primitives = structure
-            .children()
-            .iter()
-            .filter_map(|child| match &child.body {
-                StructureBody::Primitive {
-                    data_type,
-                    array_size,
-                    values,
-                } => Some((child, data_type, array_size, values)),
-                StructureBody::Custom { .. } => None,
-            });
+        let mut primitives = structure.children().iter().filter_map(|child| match &child.body {
+            StructureBody::Primitive { data_type, array_size, values } => Some((child, data_type, array_size, values)),
+            StructureBody::Custom { .. } => None,
+        });
         match primitives.next() {
             Some((child, data_type, array_size, values)) => {
                 let type_ok = match expected {
                     "string" => *data_type == openddl::DataType::String,
-                    _ => matches!(
-                        data_type,
-                        openddl::DataType::Half
-                            | openddl::DataType::Float
-                            | openddl::DataType::Double
-                    ),
+                    _ => matches!(data_type, openddl::DataType::Half | openddl::DataType::Float | openddl::DataType::Double),
                 };
                 if !type_ok {
-                    return Err(self.error(
-                        child.position,
-                        format!("`{identifier}` expects {expected} data, found {data_type}"),
-                    ));
+                    return Err(self.error(child.position, format!("`{identifier}` expects {expected} data, found {data_type}")));
                 }
                 Ok((values, *array_size, child.position))
             }
-            None => Err(self.error(
-                structure.position,
-                format!("`{identifier}` holds no {expected} data"),
-            )),
+            None => Err(self.error(structure.position, format!("`{identifier}` holds no {expected} data"))),
         }
     }
 
@@ -339,47 +257,21 @@ impl Reader<'_> {
         let (values, _, position) = self.data(structure, "string")?;
         match values {
             [Value::String(text)] => Ok((text.clone(), position)),
-            _ => Err(self.error(
-                position,
-                format!(
-                    "`{}` expects exactly one string, found {}",
-                    structure.identifier(),
-                    values.len()
-                ),
-            )),
+            _ => Err(self.error(position, format!("`{}` expects exactly one string, found {}", structure.identifier(), values.len()))),
         }
     }
 
     fn float_data(&self, structure: &Structure, counts: &[usize]) -> Result<Vec<f32>, Diagnostic> {
         let (values, _, position) = self.data(structure, "float")?;
-        let floats: Vec<f32> = values
-            .iter()
-            .filter_map(Value::as_f64)
-            .map(|value| value as f32)
-            .collect();
+        let floats: Vec<f32> = values.iter().filter_map(Value::as_f64).map(|value| value as f32).collect();
         if !counts.contains(&floats.len()) {
-            let expected = counts
-                .iter()
-                .map(ToString::to_string)
-                .collect::<Vec<_>>()
-                .join(" or ");
-            return Err(self.error(
-                position,
-                format!(
-                    "`{}` expects {expected} float values, found {}",
-                    structure.identifier(),
-                    floats.len()
-                ),
-            ));
+            let expected = counts.iter().map(ToString::to_string).collect::<Vec<_>>().join(" or ");
+            return Err(
+                self.error(position, format!("`{}` expects {expected} float values, found {}", structure.identifier(), floats.len()))
+            );
         }
         if floats.iter().any(|value| !value.is_finite()) {
-            return Err(self.error(
-                position,
-                format!(
-                    "`{}` holds a value that is not finite",
-                    structure.identifier()
-                ),
-            ));
+            return Err(self.error(position, format!("`{}` holds a value that is not finite", structure.identifier())));
         }
         Ok(floats)
     }
@@ -389,15 +281,8 @@ impl Reader<'_> {
         let folder = self.file.parent().unwrap_or(Path::new(""));
         let joined = folder.join(written.replace('\\', "/"));
         match normalize_relative_path(&joined) {
-            Some(path) if path.starts_with(self.source_root) && path != self.source_root => {
-                Ok(path)
-            }
-            _ => Err(self.error(
-                position,
-                format!(
-                    "texture path \"{written}\" must be relative and stay inside the source folder"
-                ),
-            )),
+            Some(path) if path.starts_with(self.source_root) && path != self.source_root => Ok(path),
+            _ => Err(self.error(position, format!("texture path \"{written}\" must be relative and stay inside the source folder"))),
         }
     }
 }

@@ -28,14 +28,7 @@ pub struct MeshMaterial {
 
 impl Default for MeshMaterial {
     fn default() -> Self {
-        MeshMaterial {
-            name: "default".into(),
-            albedo_factor: [0.8; 3],
-            opacity: 1.0,
-            metallic: 0.0,
-            roughness: 1.0,
-            maps: BTreeMap::new(),
-        }
+        MeshMaterial { name: "default".into(), albedo_factor: [0.8; 3], opacity: 1.0, metallic: 0.0, roughness: 1.0, maps: BTreeMap::new() }
     }
 }
 
@@ -61,9 +54,7 @@ pub fn material_libraries(obj_file: &Path, obj_bytes: &[u8]) -> Vec<PathBuf> {
         let line = line.trim_start();
         if let Some(rest) = line.strip_prefix("mtllib") {
             if rest.starts_with(char::is_whitespace) {
-                if let Some(path) =
-                    normalize_relative_path(&folder.join(rest.trim().replace('\\', "/")))
-                {
+                if let Some(path) = normalize_relative_path(&folder.join(rest.trim().replace('\\', "/"))) {
                     if !libraries.contains(&path) {
                         libraries.push(path);
                     }
@@ -86,35 +77,22 @@ pub fn load_mesh(
     let text = decode_text(obj_file, obj_bytes)?;
     let folder = obj_file.parent().unwrap_or(Path::new("")).to_path_buf();
     let warnings = std::cell::RefCell::new(Vec::new());
-    let options = tobj::LoadOptions {
-        single_index: true,
-        triangulate: true,
-        ignore_points: true,
-        ignore_lines: true,
-    };
+    let options = tobj::LoadOptions { single_index: true, triangulate: true, ignore_points: true, ignore_lines: true };
     let loader = |name: &Path| -> tobj::MTLLoadResult {
-        let Some(path) =
-            normalize_relative_path(&folder.join(name.to_string_lossy().replace('\\', "/")))
-        else {
+        let Some(path) = normalize_relative_path(&folder.join(name.to_string_lossy().replace('\\', "/"))) else {
             return Err(tobj::LoadError::OpenFileFailed);
         };
         match libraries.get(&path) {
             Some(Some(bytes)) => {
                 let text = String::from_utf8_lossy(bytes);
                 tobj::load_mtl_buf(&mut BufReader::new(text.as_bytes())).inspect_err(|error| {
-                    warnings.borrow_mut().push(Diagnostic::new(
-                        &path,
-                        format!("malformed MTL ({error}); its materials use defaults"),
-                    ));
+                    warnings.borrow_mut().push(Diagnostic::new(&path, format!("malformed MTL ({error}); its materials use defaults")));
                 })
             }
             _ => {
                 warnings.borrow_mut().push(Diagnostic::new(
                     obj_file,
-                    format!(
-                        "material library {} not found; default materials used",
-                        crate::diagnostic::display_path(&path)
-                    ),
+                    format!("material library {} not found; default materials used", crate::diagnostic::display_path(&path)),
                 ));
                 Err(tobj::LoadError::OpenFileFailed)
             }
@@ -126,12 +104,7 @@ pub fn load_mesh(
     let (models, materials) = match loaded {
         Ok(Ok(result)) => result,
         Ok(Err(error)) => return Err(Diagnostic::new(obj_file, format!("malformed OBJ: {error}"))),
-        Err(_) => {
-            return Err(Diagnostic::new(
-                obj_file,
-                "malformed OBJ: the parser failed on this file",
-            ))
-        }
+        Err(_) => return Err(Diagnostic::new(obj_file, "malformed OBJ: the parser failed on this file")),
     };
     let mut warnings = warnings.into_inner();
     let tobj_materials = materials.unwrap_or_default();
@@ -142,10 +115,7 @@ pub fn load_mesh(
     let default_material = materials.len() as u32;
     materials.push(MeshMaterial::default());
 
-    let mut mesh = Mesh {
-        uvs: Some(Vec::new()),
-        ..Mesh::default()
-    };
+    let mut mesh = Mesh { uvs: Some(Vec::new()), ..Mesh::default() };
     let mut all_normals = true;
     for model in &models {
         let source = &model.mesh;
@@ -153,66 +123,38 @@ pub fn load_mesh(
         let vertex_count = source.positions.len() / 3;
         for (index, position) in source.positions.chunks_exact(3).enumerate() {
             if position.iter().any(|c| !c.is_finite()) {
-                return Err(Diagnostic::new(
-                    obj_file,
-                    format!(
-                        "object `{}`: vertex {} has a non-finite position",
-                        model.name,
-                        index + 1
-                    ),
-                ));
+                return Err(Diagnostic::new(obj_file, format!("object `{}`: vertex {} has a non-finite position", model.name, index + 1)));
             }
             mesh.positions.push([position[0], position[1], position[2]]);
         }
         let has_normals = source.normals.len() == source.positions.len();
         all_normals &= has_normals;
         if has_normals {
-            mesh.normals
-                .extend(source.normals.chunks_exact(3).map(|n| [n[0], n[1], n[2]]));
+            mesh.normals.extend(source.normals.chunks_exact(3).map(|n| [n[0], n[1], n[2]]));
         } else {
-            mesh.normals
-                .extend(std::iter::repeat_n([0.0; 3], vertex_count));
+            mesh.normals.extend(std::iter::repeat_n([0.0; 3], vertex_count));
         }
         match (&mut mesh.uvs, source.texcoords.len() == vertex_count * 2) {
-            (Some(uvs), true) => {
-                uvs.extend(source.texcoords.chunks_exact(2).map(|uv| [uv[0], uv[1]]))
-            }
+            (Some(uvs), true) => uvs.extend(source.texcoords.chunks_exact(2).map(|uv| [uv[0], uv[1]])),
             (uvs, _) => *uvs = None,
         }
-        let material = source
-            .material_id
-            .map_or(default_material, |id| (id as u32).min(default_material));
+        let material = source.material_id.map_or(default_material, |id| (id as u32).min(default_material));
         for triangle in source.indices.chunks_exact(3) {
             if triangle.iter().any(|&index| index as usize >= vertex_count) {
-                return Err(Diagnostic::new(
-                    obj_file,
-                    format!("object `{}`: a face index is out of range", model.name),
-                ));
+                return Err(Diagnostic::new(obj_file, format!("object `{}`: a face index is out of range", model.name)));
             }
-            mesh.triangles
-                .push([base + triangle[0], base + triangle[1], base + triangle[2]]);
+            mesh.triangles.push([base + triangle[0], base + triangle[1], base + triangle[2]]);
             mesh.triangle_materials.push(material);
         }
     }
     if mesh.triangles.is_empty() {
         return Err(Diagnostic::new(obj_file, "the OBJ has no faces"));
     }
-    if !all_normals
-        || mesh
-            .normals
-            .iter()
-            .any(|n| !n.iter().all(|c| c.is_finite()) || n == &[0.0; 3])
-    {
+    if !all_normals || mesh.normals.iter().any(|n| !n.iter().all(|c| c.is_finite()) || n == &[0.0; 3]) {
         compute_normals(&mut mesh);
     }
-    if mesh.uvs.as_ref().is_some_and(|uvs| {
-        uvs.iter()
-            .any(|uv| !uv[0].is_finite() || !uv[1].is_finite())
-    }) {
-        warnings.push(Diagnostic::new(
-            obj_file,
-            "non-finite texture coordinates: the mesh bakes constant colours",
-        ));
+    if mesh.uvs.as_ref().is_some_and(|uvs| uvs.iter().any(|uv| !uv[0].is_finite() || !uv[1].is_finite())) {
+        warnings.push(Diagnostic::new(obj_file, "non-finite texture coordinates: the mesh bakes constant colours"));
         mesh.uvs = None;
     }
     mesh.materials = materials;
@@ -225,32 +167,16 @@ fn decode_text<'a>(file: &Path, bytes: &'a [u8]) -> Result<std::borrow::Cow<'a, 
         let big_endian = bytes[0] == 0xFE;
         let units: Vec<u16> = bytes[2..]
             .chunks_exact(2)
-            .map(|pair| {
-                if big_endian {
-                    u16::from_be_bytes([pair[0], pair[1]])
-                } else {
-                    u16::from_le_bytes([pair[0], pair[1]])
-                }
-            })
+            .map(|pair| if big_endian { u16::from_be_bytes([pair[0], pair[1]]) } else { u16::from_le_bytes([pair[0], pair[1]]) })
             .collect();
-        return String::from_utf16(&units)
-            .map(std::borrow::Cow::Owned)
-            .map_err(|_| Diagnostic::new(file, "invalid UTF-16 text"));
+        return String::from_utf16(&units).map(std::borrow::Cow::Owned).map_err(|_| Diagnostic::new(file, "invalid UTF-16 text"));
     }
     let bytes = bytes.strip_prefix(&[0xEF, 0xBB, 0xBF]).unwrap_or(bytes);
     Ok(String::from_utf8_lossy(bytes))
 }
 
-fn mesh_material(
-    material: &tobj::Material,
-    folder: &Path,
-    source_root: &Path,
-    warnings: &mut Vec<Diagnostic>,
-) -> MeshMaterial {
-    let mut result = MeshMaterial {
-        name: material.name.clone(),
-        ..MeshMaterial::default()
-    };
+fn mesh_material(material: &tobj::Material, folder: &Path, source_root: &Path, warnings: &mut Vec<Diagnostic>) -> MeshMaterial {
+    let mut result = MeshMaterial { name: material.name.clone(), ..MeshMaterial::default() };
     if let Some(diffuse) = material.diffuse {
         result.albedo_factor = diffuse.map(|c| c.clamp(0.0, 1.0));
     }
@@ -267,16 +193,10 @@ fn mesh_material(
     let statements = [
         (TextureSlot::Albedo, material.diffuse_texture.clone()),
         (TextureSlot::Opacity, material.dissolve_texture.clone()),
-        (
-            TextureSlot::Normal,
-            unknown("norm").or_else(|| material.normal_texture.clone()),
-        ),
+        (TextureSlot::Normal, unknown("norm").or_else(|| material.normal_texture.clone())),
         (TextureSlot::Metallic, unknown("map_Pm")),
         (TextureSlot::Roughness, unknown("map_Pr")),
-        (
-            TextureSlot::Ao,
-            unknown("map_ao").or_else(|| unknown("map_AO")),
-        ),
+        (TextureSlot::Ao, unknown("map_ao").or_else(|| unknown("map_AO"))),
     ];
     for (slot, statement) in statements {
         let Some(statement) = statement else { continue };
@@ -289,10 +209,7 @@ fn mesh_material(
             }
             _ => warnings.push(Diagnostic::new(
                 folder.join("(mtl)"),
-                format!(
-                    "material `{}`: texture \"{file}\" leaves the source folder; ignored",
-                    material.name
-                ),
+                format!("material `{}`: texture \"{file}\" leaves the source folder; ignored", material.name),
             )),
         }
     }
@@ -303,8 +220,7 @@ fn mesh_material(
 pub fn texture_file_from_statement(statement: &str) -> Option<String> {
     let arguments = |option: &str| -> usize {
         match option {
-            "-blendu" | "-blendv" | "-cc" | "-clamp" | "-imfchan" | "-texres" | "-bm"
-            | "-boost" | "-type" => 1,
+            "-blendu" | "-blendv" | "-cc" | "-clamp" | "-imfchan" | "-texres" | "-bm" | "-boost" | "-type" => 1,
             "-mm" => 2,
             "-o" | "-s" | "-t" => 3,
             _ => 0,
@@ -321,10 +237,7 @@ pub fn texture_file_from_statement(statement: &str) -> Option<String> {
         index += 1;
         // Options with a variable number of numbers (-o, -s, -t take 1 to 3).
         let mut taken = 0;
-        while taken < count
-            && index < words.len() - 1
-            && (count == 1 || words[index].parse::<f32>().is_ok())
-        {
+        while taken < count && index < words.len() - 1 && (count == 1 || words[index].parse::<f32>().is_ok()) {
             index += 1;
             taken += 1;
         }
@@ -343,19 +256,12 @@ fn compute_normals(mesh: &mut Mesh) {
             normals[index as usize] += face;
         }
     }
-    mesh.normals = normals
-        .into_iter()
-        .map(|n| n.try_normalize().unwrap_or(glam::Vec3::Z).to_array())
-        .collect();
+    mesh.normals = normals.into_iter().map(|n| n.try_normalize().unwrap_or(glam::Vec3::Z).to_array()).collect();
 }
 
 /// The texture files the materials of an OBJ's MTL libraries name (project-relative, sorted),
 /// without parsing the OBJ itself: what a billboard cloud reads besides its mesh.
-pub fn texture_paths(
-    obj_file: &Path,
-    libraries: &BTreeMap<PathBuf, Option<Vec<u8>>>,
-    source_root: &Path,
-) -> Vec<PathBuf> {
+pub fn texture_paths(obj_file: &Path, libraries: &BTreeMap<PathBuf, Option<Vec<u8>>>, source_root: &Path) -> Vec<PathBuf> {
     let folder = obj_file.parent().unwrap_or(Path::new(""));
     let mut paths = Vec::new();
     let mut ignored = Vec::new();
@@ -365,11 +271,7 @@ pub fn texture_paths(
             continue;
         };
         for material in &materials {
-            paths.extend(
-                mesh_material(material, folder, source_root, &mut ignored)
-                    .maps
-                    .into_values(),
-            );
+            paths.extend(mesh_material(material, folder, source_root, &mut ignored).maps.into_values());
         }
     }
     paths.sort();

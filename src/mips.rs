@@ -2,10 +2,7 @@
 //! surface needs (colour in linear light and alpha-weighted, coverage-preserving alpha for
 //! alpha-tested albedo, renormalised normals, plain averages for data).
 
-use crate::surface::{
-    decode_normal, encode_normal, linear_to_srgb_u8, normalize_tangent_normal, srgb_u8_to_linear,
-    unorm_u8, SurfaceKind,
-};
+use crate::surface::{decode_normal, encode_normal, linear_to_srgb_u8, normalize_tangent_normal, srgb_u8_to_linear, unorm_u8, SurfaceKind};
 use crate::texture::Texture;
 
 /// How the levels of one surface are filtered.
@@ -22,9 +19,7 @@ pub fn mip_chain(level0: &Texture, settings: MipSettings) -> Vec<Texture> {
     // Reduce from unscaled float levels so that coverage scaling does not compound.
     let mut current = to_filter_space(level0, settings.kind);
     let (mut width, mut height) = (level0.width, level0.height);
-    let coverage = settings
-        .alpha_cutoff
-        .map(|cutoff| alpha_coverage(&current, cutoff, 1.0));
+    let coverage = settings.alpha_cutoff.map(|cutoff| alpha_coverage(&current, cutoff, 1.0));
     while width > 1 || height > 1 {
         let (next_width, next_height) = ((width / 2).max(1), (height / 2).max(1));
         current = reduce(&current, width, height, next_width, next_height);
@@ -33,13 +28,7 @@ pub fn mip_chain(level0: &Texture, settings: MipSettings) -> Vec<Texture> {
             (Some(cutoff), Some(coverage)) => coverage_alpha_scale(&current, cutoff, coverage),
             _ => 1.0,
         };
-        levels.push(from_filter_space(
-            &current,
-            width,
-            height,
-            settings.kind,
-            alpha_scale,
-        ));
+        levels.push(from_filter_space(&current, width, height, settings.kind, alpha_scale));
     }
     levels
 }
@@ -53,52 +42,28 @@ fn to_filter_space(texture: &Texture, kind: SurfaceKind) -> Vec<[f32; 4]> {
         .map(|t| match kind {
             SurfaceKind::Albedo => {
                 let alpha = t[3] as f32 / 255.0;
-                [
-                    srgb_u8_to_linear(t[0]) * alpha,
-                    srgb_u8_to_linear(t[1]) * alpha,
-                    srgb_u8_to_linear(t[2]) * alpha,
-                    alpha,
-                ]
+                [srgb_u8_to_linear(t[0]) * alpha, srgb_u8_to_linear(t[1]) * alpha, srgb_u8_to_linear(t[2]) * alpha, alpha]
             }
             SurfaceKind::Normal => {
                 let [x, y, z] = decode_normal([t[0], t[1], t[2]]);
                 [x, y, z, 1.0]
             }
-            SurfaceKind::Mra | SurfaceKind::Height => {
-                [t[0], t[1], t[2], t[3]].map(|c| c as f32 / 255.0)
-            }
+            SurfaceKind::Mra | SurfaceKind::Height => [t[0], t[1], t[2], t[3]].map(|c| c as f32 / 255.0),
         })
         .collect()
 }
 
-fn from_filter_space(
-    texels: &[[f32; 4]],
-    width: u32,
-    height: u32,
-    kind: SurfaceKind,
-    alpha_scale: f32,
-) -> Texture {
+fn from_filter_space(texels: &[[f32; 4]], width: u32, height: u32, kind: SurfaceKind, alpha_scale: f32) -> Texture {
     let pixels = texels
         .iter()
         .flat_map(|&[r, g, b, a]| match kind {
             SurfaceKind::Albedo => {
                 // Un-premultiply; fully transparent texels keep the colour of their neighbours' average.
-                let (r, g, b) = if a > 1e-6 {
-                    (r / a, g / a, b / a)
-                } else {
-                    (r, g, b)
-                };
-                [
-                    linear_to_srgb_u8(r),
-                    linear_to_srgb_u8(g),
-                    linear_to_srgb_u8(b),
-                    unorm_u8(a * alpha_scale),
-                ]
+                let (r, g, b) = if a > 1e-6 { (r / a, g / a, b / a) } else { (r, g, b) };
+                [linear_to_srgb_u8(r), linear_to_srgb_u8(g), linear_to_srgb_u8(b), unorm_u8(a * alpha_scale)]
             }
             SurfaceKind::Normal => encode_normal(normalize_tangent_normal([r, g, b])),
-            SurfaceKind::Mra | SurfaceKind::Height => {
-                [unorm_u8(r), unorm_u8(g), unorm_u8(b), unorm_u8(a)]
-            }
+            SurfaceKind::Mra | SurfaceKind::Height => [unorm_u8(r), unorm_u8(g), unorm_u8(b), unorm_u8(a)],
         })
         .collect();
     Texture::new(width, height, pixels)
@@ -106,13 +71,7 @@ fn from_filter_space(
 
 /// Area-weighted box reduction (handles odd sizes: each target texel covers a fractional
 /// footprint of the source).
-fn reduce(
-    source: &[[f32; 4]],
-    width: u32,
-    height: u32,
-    new_width: u32,
-    new_height: u32,
-) -> Vec<[f32; 4]> {
+fn reduce(source: &[[f32; 4]], width: u32, height: u32, new_width: u32, new_height: u32) -> Vec<[f32; 4]> {
     let scale_x = width as f32 / new_width as f32;
     let scale_y = height as f32 / new_height as f32;
     let weights = |index: u32, scale: f32, limit: u32| -> Vec<(u32, f32)> {
@@ -129,8 +88,7 @@ fn reduce(
         }
         result
     };
-    let columns: Vec<Vec<(u32, f32)>> =
-        (0..new_width).map(|x| weights(x, scale_x, width)).collect();
+    let columns: Vec<Vec<(u32, f32)>> = (0..new_width).map(|x| weights(x, scale_x, width)).collect();
     let mut output = Vec::with_capacity((new_width * new_height) as usize);
     for y in 0..new_height {
         let rows = weights(y, scale_y, height);
@@ -153,10 +111,7 @@ fn reduce(
 
 /// Fraction of texels whose alpha × `scale` passes `cutoff`.
 fn alpha_coverage(texels: &[[f32; 4]], cutoff: f32, scale: f32) -> f32 {
-    let passing = texels
-        .iter()
-        .filter(|texel| texel[3] * scale > cutoff)
-        .count();
+    let passing = texels.iter().filter(|texel| texel[3] * scale > cutoff).count();
     passing as f32 / texels.len().max(1) as f32
 }
 
@@ -183,10 +138,6 @@ fn coverage_alpha_scale(texels: &[[f32; 4]], cutoff: f32, target: f32) -> f32 {
 
 /// Fraction of texels of an RGBA8 texture whose alpha passes `cutoff` (for tests and reports).
 pub fn texture_alpha_coverage(texture: &Texture, cutoff: f32) -> f32 {
-    let passing = texture
-        .pixels
-        .chunks_exact(4)
-        .filter(|texel| texel[3] as f32 / 255.0 > cutoff)
-        .count();
+    let passing = texture.pixels.chunks_exact(4).filter(|texel| texel[3] as f32 / 255.0 > cutoff).count();
     passing as f32 / (texture.width * texture.height) as f32
 }

@@ -107,12 +107,7 @@ pub struct Name {
 
 impl fmt::Display for Name {
     fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
-        write!(
-            f,
-            "{}{}",
-            if self.global { '$' } else { '%' },
-            self.identifier
-        )
+        write!(f, "{}{}", if self.global { '$' } else { '%' }, self.identifier)
     }
 }
 
@@ -196,9 +191,7 @@ impl Structure {
 
     pub fn property(&self, key: &str) -> Option<&Property> {
         match &self.body {
-            StructureBody::Custom { properties, .. } => {
-                properties.iter().find(|property| property.key == key)
-            }
+            StructureBody::Custom { properties, .. } => properties.iter().find(|property| property.key == key),
             StructureBody::Primitive { .. } => None,
         }
     }
@@ -214,10 +207,7 @@ impl Structure {
 /// Parses a whole OpenDDL file.
 pub fn parse(text: &str) -> Result<Vec<Structure>, OpenDdlError> {
     let text = text.strip_prefix('\u{feff}').unwrap_or(text);
-    let mut parser = Parser {
-        lexer: Lexer { text, offset: 0 },
-        peeked: None,
-    };
+    let mut parser = Parser { lexer: Lexer { text, offset: 0 }, peeked: None };
     let mut structures = Vec::new();
     loop {
         let token = parser.peek()?;
@@ -253,10 +243,7 @@ struct Lexer<'a> {
 
 impl<'a> Lexer<'a> {
     fn error(&self, offset: usize, message: impl Into<String>) -> OpenDdlError {
-        OpenDdlError {
-            position: TextPosition::of_byte_offset(self.text, offset),
-            message: message.into(),
-        }
+        OpenDdlError { position: TextPosition::of_byte_offset(self.text, offset), message: message.into() }
     }
 
     fn rest(&self) -> &'a str {
@@ -286,10 +273,7 @@ impl<'a> Lexer<'a> {
         let start = self.offset;
         let rest = self.rest();
         let Some(first) = rest.chars().next() else {
-            return Ok(Token {
-                kind: TokenKind::End,
-                offset: start,
-            });
+            return Ok(Token { kind: TokenKind::End, offset: start });
         };
         let kind = match first {
             '{' | '}' | '[' | ']' | '(' | ')' | ',' | '=' | '*' | ':' => {
@@ -298,33 +282,16 @@ impl<'a> Lexer<'a> {
             }
             '$' | '%' => {
                 self.offset += 1;
-                let identifier = self.identifier().ok_or_else(|| {
-                    self.error(start, format!("`{first}` must be followed by a name"))
-                })?;
-                TokenKind::Name(Name {
-                    global: first == '$',
-                    identifier,
-                })
+                let identifier = self.identifier().ok_or_else(|| self.error(start, format!("`{first}` must be followed by a name")))?;
+                TokenKind::Name(Name { global: first == '$', identifier })
             }
             '"' => TokenKind::String(self.string()?),
             '\'' => TokenKind::Char(self.char_literal()?),
-            c if c.is_ascii_digit() || c == '.' || c == '-' || c == '+' => {
-                TokenKind::Number(self.number()?)
-            }
-            c if c.is_ascii_alphabetic() || c == '_' => {
-                TokenKind::Identifier(self.identifier().unwrap_or_default())
-            }
-            other => {
-                return Err(self.error(
-                    start,
-                    format!("unexpected character `{}`", other.escape_debug()),
-                ))
-            }
+            c if c.is_ascii_digit() || c == '.' || c == '-' || c == '+' => TokenKind::Number(self.number()?),
+            c if c.is_ascii_alphabetic() || c == '_' => TokenKind::Identifier(self.identifier().unwrap_or_default()),
+            other => return Err(self.error(start, format!("unexpected character `{}`", other.escape_debug()))),
         };
-        Ok(Token {
-            kind,
-            offset: start,
-        })
+        Ok(Token { kind, offset: start })
     }
 
     fn identifier(&mut self) -> Option<String> {
@@ -333,9 +300,7 @@ impl<'a> Lexer<'a> {
         if !(first.is_ascii_alphabetic() || first == '_') {
             return None;
         }
-        let length = rest
-            .find(|c: char| !(c.is_ascii_alphanumeric() || c == '_'))
-            .unwrap_or(rest.len());
+        let length = rest.find(|c: char| !(c.is_ascii_alphanumeric() || c == '_')).unwrap_or(rest.len());
         self.offset += length;
         Some(rest[..length].to_string())
     }
@@ -349,21 +314,16 @@ impl<'a> Lexer<'a> {
             length += 1;
         }
         let body = &rest[length..];
-        let is_prefixed = body.len() > 1
-            && body.as_bytes()[0] == b'0'
-            && matches!(body.as_bytes()[1], b'x' | b'X' | b'o' | b'O' | b'b' | b'B');
+        let is_prefixed =
+            body.len() > 1 && body.as_bytes()[0] == b'0' && matches!(body.as_bytes()[1], b'x' | b'X' | b'o' | b'O' | b'b' | b'B');
         if is_prefixed {
             length += 2;
-            length += rest[length..]
-                .find(|c: char| !(c.is_ascii_hexdigit() || c == '_'))
-                .unwrap_or(rest.len() - length);
+            length += rest[length..].find(|c: char| !(c.is_ascii_hexdigit() || c == '_')).unwrap_or(rest.len() - length);
         } else {
             let mut seen_exponent = false;
             while length < bytes.len() {
                 let c = bytes[length];
-                let sign_after_exponent = (c == b'-' || c == b'+')
-                    && seen_exponent
-                    && matches!(bytes[length - 1], b'e' | b'E');
+                let sign_after_exponent = (c == b'-' || c == b'+') && seen_exponent && matches!(bytes[length - 1], b'e' | b'E');
                 if c.is_ascii_digit() || c == b'.' || c == b'_' || sign_after_exponent {
                     length += 1;
                 } else if (c == b'e' || c == b'E') && !seen_exponent {
@@ -376,10 +336,7 @@ impl<'a> Lexer<'a> {
         }
         let text = &rest[..length];
         if !text.bytes().any(|c| c.is_ascii_digit()) {
-            return Err(self.error(
-                start,
-                format!("`{}` is not a number", text.chars().next().unwrap_or(' ')),
-            ));
+            return Err(self.error(start, format!("`{}` is not a number", text.chars().next().unwrap_or(' '))));
         }
         if let Some(next) = rest[length..].chars().next() {
             if next.is_ascii_alphanumeric() || next == '_' {
@@ -420,21 +377,13 @@ impl<'a> Lexer<'a> {
             'U' => 6,
             _ => return Err(self.error(at - 1, format!("unknown escape `\\{}`", c.escape_debug()))),
         };
-        let hex = self
-            .rest()
-            .get(..digits)
-            .filter(|hex| hex.bytes().all(|b| b.is_ascii_hexdigit()));
+        let hex = self.rest().get(..digits).filter(|hex| hex.bytes().all(|b| b.is_ascii_hexdigit()));
         let Some(hex) = hex else {
             return Err(self.error(at - 1, format!("`\\{c}` needs {digits} hexadecimal digits")));
         };
         self.offset += digits;
         let code = u32::from_str_radix(hex, 16).unwrap_or(u32::MAX);
-        char::from_u32(code).ok_or_else(|| {
-            self.error(
-                at - 1,
-                format!("`\\{c}{hex}` is not a Unicode scalar value"),
-            )
-        })
+        char::from_u32(code).ok_or_else(|| self.error(at - 1, format!("`\\{c}{hex}` is not a Unicode scalar value")))
     }
 
     fn quoted(&mut self, quote: char) -> Result<String, OpenDdlError> {
@@ -449,12 +398,7 @@ impl<'a> Lexer<'a> {
             match c {
                 c if c == quote => return Ok(text),
                 '\\' => text.push(self.escape(start)?),
-                '\n' | '\r' => {
-                    return Err(self.error(
-                        start,
-                        "unterminated string (line break before the closing quote)",
-                    ))
-                }
+                '\n' | '\r' => return Err(self.error(start, "unterminated string (line break before the closing quote)")),
                 c => text.push(c),
             }
         }
@@ -479,14 +423,9 @@ impl<'a> Lexer<'a> {
         let start = self.offset;
         let text = self.quoted('\'')?;
         if text.is_empty() || text.chars().any(|c| c as u32 > 0x7f) {
-            return Err(self.error(
-                start,
-                "a character literal holds one or more ASCII characters",
-            ));
+            return Err(self.error(start, "a character literal holds one or more ASCII characters"));
         }
-        Ok(text
-            .bytes()
-            .fold(0i128, |value, byte| (value << 8) | byte as i128))
+        Ok(text.bytes().fold(0i128, |value, byte| (value << 8) | byte as i128))
     }
 }
 
@@ -518,13 +457,7 @@ impl Parser<'_> {
         if token.kind == TokenKind::Punct(punct) {
             Ok(token)
         } else {
-            Err(self.error(
-                token.offset,
-                format!(
-                    "expected `{punct}` {context}, found {}",
-                    describe(&token.kind)
-                ),
-            ))
+            Err(self.error(token.offset, format!("expected `{punct}` {context}, found {}", describe(&token.kind))))
         }
     }
 
@@ -549,13 +482,7 @@ impl Parser<'_> {
         let token = self.next()?;
         let position = TextPosition::of_byte_offset(self.lexer.text, token.offset);
         let TokenKind::Identifier(identifier) = token.kind else {
-            return Err(self.error(
-                token.offset,
-                format!(
-                    "expected a structure identifier, found {}",
-                    describe(&token.kind)
-                ),
-            ));
+            return Err(self.error(token.offset, format!("expected a structure identifier, found {}", describe(&token.kind))));
         };
         if let Some(data_type) = DataType::from_identifier(&identifier) {
             return self.primitive(data_type, position);
@@ -583,74 +510,41 @@ impl Parser<'_> {
                     break;
                 }
                 TokenKind::End => {
-                    return Err(self.error(
-                        open.offset,
-                        format!("the `{{` of `{identifier}` is never closed"),
-                    ));
+                    return Err(self.error(open.offset, format!("the `{{` of `{identifier}` is never closed")));
                 }
                 _ => children.push(self.structure()?),
             }
         }
-        Ok(Structure {
-            name,
-            position,
-            body: StructureBody::Custom {
-                identifier,
-                properties,
-                children,
-            },
-        })
+        Ok(Structure { name, position, body: StructureBody::Custom { identifier, properties, children } })
     }
 
     fn property(&mut self) -> Result<Property, OpenDdlError> {
         let token = self.next()?;
         let position = TextPosition::of_byte_offset(self.lexer.text, token.offset);
         let TokenKind::Identifier(key) = token.kind else {
-            return Err(self.error(
-                token.offset,
-                format!("expected a property name, found {}", describe(&token.kind)),
-            ));
+            return Err(self.error(token.offset, format!("expected a property name, found {}", describe(&token.kind))));
         };
         // OpenDDL 3.0: a property without a value is a bool set to true.
         if !(self.eat('=')? || self.eat(':')?) {
-            return Ok(Property {
-                key,
-                value: Value::Bool(true),
-                position,
-            });
+            return Ok(Property { key, value: Value::Bool(true), position });
         }
         let token = self.next()?;
         let value = match token.kind {
-            TokenKind::Identifier(ref word) if word == "true" || word == "false" => {
-                Value::Bool(word == "true")
-            }
+            TokenKind::Identifier(ref word) if word == "true" || word == "false" => Value::Bool(word == "true"),
             TokenKind::Identifier(ref word) if word == "null" => Value::Ref(Vec::new()),
             TokenKind::Identifier(ref word) => match DataType::from_identifier(word) {
                 Some(data_type) => Value::Type(data_type),
-                None => {
-                    return Err(
-                        self.error(token.offset, format!("`{word}` is not a property value"))
-                    )
-                }
+                None => return Err(self.error(token.offset, format!("`{word}` is not a property value"))),
             },
             TokenKind::String(text) => Value::String(text),
             TokenKind::Char(value) => Value::Integer(value),
-            TokenKind::Number(ref text) => number_value(text).ok_or_else(|| {
-                self.error(token.offset, format!("`{text}` is not a valid number"))
-            })?,
-            TokenKind::Name(first) => Value::Ref(self.reference_rest(first)?),
-            ref other => {
-                return Err(self.error(
-                    token.offset,
-                    format!("expected a property value, found {}", describe(other)),
-                ))
+            TokenKind::Number(ref text) => {
+                number_value(text).ok_or_else(|| self.error(token.offset, format!("`{text}` is not a valid number")))?
             }
+            TokenKind::Name(first) => Value::Ref(self.reference_rest(first)?),
+            ref other => return Err(self.error(token.offset, format!("expected a property value, found {}", describe(other)))),
         };
-        Ok(Property {
-            key,
-            value,
-            position,
-        })
+        Ok(Property { key, value, position })
     }
 
     fn reference_rest(&mut self, first: Name) -> Result<Vec<Name>, OpenDdlError> {
@@ -665,28 +559,16 @@ impl Parser<'_> {
         Ok(names)
     }
 
-    fn primitive(
-        &mut self,
-        data_type: DataType,
-        position: TextPosition,
-    ) -> Result<Structure, OpenDdlError> {
+    fn primitive(&mut self, data_type: DataType, position: TextPosition) -> Result<Structure, OpenDdlError> {
         let mut array_size = None;
         if self.eat('[')? {
             let token = self.next()?;
             let size = match &token.kind {
-                TokenKind::Number(text) => {
-                    parse_integer(text).filter(|size| (1..=u32::MAX as i128).contains(size))
-                }
+                TokenKind::Number(text) => parse_integer(text).filter(|size| (1..=u32::MAX as i128).contains(size)),
                 _ => None,
             };
             let Some(size) = size else {
-                return Err(self.error(
-                    token.offset,
-                    format!(
-                        "expected a positive array size, found {}",
-                        describe(&token.kind)
-                    ),
-                ));
+                return Err(self.error(token.offset, format!("expected a positive array size, found {}", describe(&token.kind))));
             };
             array_size = Some(size as u32);
             self.expect(']', "after the array size")?;
@@ -696,22 +578,13 @@ impl Parser<'_> {
         let open = self.expect('{', &format!("to open the `{data_type}` data"))?;
         let mut values = Vec::new();
         if self.eat('}')? {
-            return Ok(Structure {
-                name,
-                position,
-                body: StructureBody::Primitive {
-                    data_type,
-                    array_size,
-                    values,
-                },
-            });
+            return Ok(Structure { name, position, body: StructureBody::Primitive { data_type, array_size, values } });
         }
         loop {
             match array_size {
                 None => values.push(self.literal(data_type)?),
                 Some(size) => {
-                    let sub_open =
-                        self.expect('{', &format!("to open a `{data_type}[{size}]` element"))?;
+                    let sub_open = self.expect('{', &format!("to open a `{data_type}[{size}]` element"))?;
                     let mut count = 0;
                     loop {
                         values.push(self.literal(data_type)?);
@@ -722,7 +595,8 @@ impl Parser<'_> {
                         self.expect(',', "between values")?;
                     }
                     if count != size {
-                        return Err(self.error(sub_open.offset, format!("this element of `{data_type}[{size}]` has {count} values, expected {size}")));
+                        return Err(self
+                            .error(sub_open.offset, format!("this element of `{data_type}[{size}]` has {count} values, expected {size}")));
                     }
                 }
             }
@@ -731,65 +605,36 @@ impl Parser<'_> {
             }
             let token = self.peek()?;
             if token.kind == TokenKind::End {
-                return Err(self.error(
-                    open.offset,
-                    format!("the `{{` of the `{data_type}` data is never closed"),
-                ));
+                return Err(self.error(open.offset, format!("the `{{` of the `{data_type}` data is never closed")));
             }
             self.expect(',', "between values")?;
         }
-        Ok(Structure {
-            name,
-            position,
-            body: StructureBody::Primitive {
-                data_type,
-                array_size,
-                values,
-            },
-        })
+        Ok(Structure { name, position, body: StructureBody::Primitive { data_type, array_size, values } })
     }
 
     fn literal(&mut self, data_type: DataType) -> Result<Value, OpenDdlError> {
         let token = self.next()?;
-        let mismatch = |parser: &Self, found: &str| {
-            parser.error(
-                token.offset,
-                format!("expected a {data_type} value, found {found}"),
-            )
-        };
+        let mismatch = |parser: &Self, found: &str| parser.error(token.offset, format!("expected a {data_type} value, found {found}"));
         match (data_type, &token.kind) {
-            (DataType::Bool, TokenKind::Identifier(word)) if word == "true" || word == "false" => {
-                Ok(Value::Bool(word == "true"))
-            }
+            (DataType::Bool, TokenKind::Identifier(word)) if word == "true" || word == "false" => Ok(Value::Bool(word == "true")),
             (DataType::String, TokenKind::String(text)) => Ok(Value::String(text.clone())),
-            (DataType::Ref, TokenKind::Identifier(word)) if word == "null" => {
-                Ok(Value::Ref(Vec::new()))
+            (DataType::Ref, TokenKind::Identifier(word)) if word == "null" => Ok(Value::Ref(Vec::new())),
+            (DataType::Ref, TokenKind::Name(first)) => Ok(Value::Ref(self.reference_rest(first.clone())?)),
+            (DataType::Type, TokenKind::Identifier(word)) => {
+                DataType::from_identifier(word).map(Value::Type).ok_or_else(|| mismatch(self, &format!("`{word}`")))
             }
-            (DataType::Ref, TokenKind::Name(first)) => {
-                Ok(Value::Ref(self.reference_rest(first.clone())?))
-            }
-            (DataType::Type, TokenKind::Identifier(word)) => DataType::from_identifier(word)
-                .map(Value::Type)
-                .ok_or_else(|| mismatch(self, &format!("`{word}`"))),
             (DataType::Half | DataType::Float | DataType::Double, TokenKind::Number(text)) => {
-                float_value(text, data_type).ok_or_else(|| {
-                    self.error(token.offset, format!("`{text}` is not a valid {data_type}"))
-                })
+                float_value(text, data_type).ok_or_else(|| self.error(token.offset, format!("`{text}` is not a valid {data_type}")))
             }
             (_, TokenKind::Number(text)) if data_type.integer_range().is_some() => {
                 let (min, max) = data_type.integer_range().expect("checked");
                 match parse_integer(text) {
                     Some(value) if (min..=max).contains(&value) => Ok(Value::Integer(value)),
-                    Some(_) => Err(self.error(
-                        token.offset,
-                        format!("`{text}` does not fit in {data_type}"),
-                    )),
+                    Some(_) => Err(self.error(token.offset, format!("`{text}` does not fit in {data_type}"))),
                     None => Err(mismatch(self, &format!("`{text}`"))),
                 }
             }
-            (_, TokenKind::Char(value)) if data_type.integer_range().is_some() => {
-                Ok(Value::Integer(*value))
-            }
+            (_, TokenKind::Char(value)) if data_type.integer_range().is_some() => Ok(Value::Integer(*value)),
             (_, other) => Err(mismatch(self, &describe(other))),
         }
     }

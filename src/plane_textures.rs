@@ -11,11 +11,7 @@ use crate::rectangles::PlaneRectangle;
 
 /// The materials a rectangle's faces use, in index order.
 pub fn plane_materials(mesh: &Mesh, plane: &PlaneRectangle) -> Vec<u32> {
-    let mut materials: Vec<u32> = plane
-        .faces
-        .iter()
-        .map(|&face| mesh.triangle_materials[face as usize])
-        .collect();
+    let mut materials: Vec<u32> = plane.faces.iter().map(|&face| mesh.triangle_materials[face as usize]).collect();
     materials.sort_unstable();
     materials.dedup();
     materials
@@ -26,21 +22,15 @@ pub fn plane_texture_paths(mesh: &Mesh, plane: &PlaneRectangle) -> Vec<PathBuf> 
     if mesh.uvs.is_none() {
         return Vec::new();
     }
-    let mut paths: Vec<PathBuf> = plane_materials(mesh, plane)
-        .iter()
-        .flat_map(|&material| mesh.materials[material as usize].maps.values().cloned())
-        .collect();
+    let mut paths: Vec<PathBuf> =
+        plane_materials(mesh, plane).iter().flat_map(|&material| mesh.materials[material as usize].maps.values().cloned()).collect();
     paths.sort();
     paths.dedup();
     paths
 }
 
 /// The plane's faces as vertex batches per material (three vertices per triangle).
-pub fn plane_batches(
-    mesh: &Mesh,
-    tangents: &[[f32; 4]],
-    plane: &PlaneRectangle,
-) -> Vec<(usize, Vec<RenderVertex>)> {
+pub fn plane_batches(mesh: &Mesh, tangents: &[[f32; 4]], plane: &PlaneRectangle) -> Vec<(usize, Vec<RenderVertex>)> {
     let mut batches: BTreeMap<usize, Vec<RenderVertex>> = BTreeMap::new();
     for &face in &plane.faces {
         let material = mesh.triangle_materials[face as usize] as usize;
@@ -51,10 +41,7 @@ pub fn plane_batches(
                 position: mesh.positions[vertex],
                 normal: mesh.normals[vertex],
                 uv: mesh.uvs.as_ref().map_or([0.0, 0.0], |uvs| uvs[vertex]),
-                tangent: tangents
-                    .get(vertex)
-                    .copied()
-                    .unwrap_or([1.0, 0.0, 0.0, 1.0]),
+                tangent: tangents.get(vertex).copied().unwrap_or([1.0, 0.0, 0.0, 1.0]),
             });
         }
     }

@@ -91,11 +91,7 @@ impl Face {
         let mut high = f32::INFINITY;
         for vertex in &self.vertices {
             let dots = corners.map(|corner| vertex.dot(corner));
-            let (min, max) = dots
-                .iter()
-                .fold((f32::INFINITY, f32::NEG_INFINITY), |(a, b), &d| {
-                    (a.min(d), b.max(d))
-                });
+            let (min, max) = dots.iter().fold((f32::INFINITY, f32::NEG_INFINITY), |(a, b), &d| (a.min(d), b.max(d)));
             low = low.max(min - epsilon);
             high = high.min(max + epsilon);
         }
@@ -103,25 +99,17 @@ impl Face {
     }
 
     fn distance_to(&self, normal: Vec3, rho: f32) -> f32 {
-        self.vertices
-            .iter()
-            .map(|vertex| (vertex.dot(normal) - rho).abs())
-            .fold(0.0, f32::max)
+        self.vertices.iter().map(|vertex| (vertex.dot(normal) - rho).abs()).fold(0.0, f32::max)
     }
 }
 
 impl Grid {
     fn new(positions: &[[f32; 3]], epsilon_fraction: f32) -> Grid {
-        let (min, max) = positions.iter().fold(
-            (Vec3::splat(f32::INFINITY), Vec3::splat(f32::NEG_INFINITY)),
-            |(min, max), &p| (min.min(Vec3::from(p)), max.max(Vec3::from(p))),
-        );
+        let (min, max) = positions.iter().fold((Vec3::splat(f32::INFINITY), Vec3::splat(f32::NEG_INFINITY)), |(min, max), &p| {
+            (min.min(Vec3::from(p)), max.max(Vec3::from(p)))
+        });
         let center = 0.5 * (min + max);
-        let radius = positions
-            .iter()
-            .map(|&p| Vec3::from(p).distance(center))
-            .fold(0.0, f32::max)
-            .max(1e-6);
+        let radius = positions.iter().map(|&p| Vec3::from(p).distance(center)).fold(0.0, f32::max).max(1e-6);
         let epsilon = epsilon_fraction * radius;
         let rho_bins = ((2.0 * radius / epsilon).ceil() as usize).clamp(16, 256);
         let mut corners = Vec::with_capacity((THETA_BINS + 1) * (PHI_BINS + 1));
@@ -133,20 +121,10 @@ impl Grid {
         let mut centers = Vec::with_capacity(THETA_BINS * PHI_BINS);
         for t in 0..THETA_BINS {
             for p in 0..PHI_BINS {
-                centers.push(direction(
-                    Grid::theta(t) + 0.5 * Grid::theta(1),
-                    Grid::phi(p) + 0.5 * Grid::phi(1),
-                ));
+                centers.push(direction(Grid::theta(t) + 0.5 * Grid::theta(1), Grid::phi(p) + 0.5 * Grid::phi(1)));
             }
         }
-        Grid {
-            center,
-            radius,
-            epsilon,
-            rho_bins,
-            corners,
-            centers,
-        }
+        Grid { center, radius, epsilon, rho_bins, corners, centers }
     }
 
     fn theta(index: usize) -> f32 {
@@ -189,29 +167,16 @@ impl Grid {
         }
         let last = self.rho_bins as isize - 1;
         // Each vertex's offset along every corner direction, computed once.
-        let dots: [Vec<f32>; 3] = face.vertices.map(|vertex| {
-            self.corners
-                .iter()
-                .map(|corner| vertex.dot(*corner))
-                .collect()
-        });
+        let dots: [Vec<f32>; 3] = face.vertices.map(|vertex| self.corners.iter().map(|corner| vertex.dot(*corner)).collect());
         for t in 0..THETA_BINS {
             for p in 0..PHI_BINS {
                 let index = |t: usize, p: usize| t * (PHI_BINS + 1) + p;
-                let corner_indices = [
-                    index(t, p),
-                    index(t + 1, p),
-                    index(t, p + 1),
-                    index(t + 1, p + 1),
-                ];
+                let corner_indices = [index(t, p), index(t + 1, p), index(t, p + 1), index(t + 1, p + 1)];
                 let (mut low, mut high) = (f32::NEG_INFINITY, f32::INFINITY);
                 for vertex_dots in &dots {
                     let values = corner_indices.map(|corner| vertex_dots[corner]);
-                    low =
-                        low.max(values.iter().fold(f32::INFINITY, |a, &d| a.min(d)) - self.epsilon);
-                    high = high.min(
-                        values.iter().fold(f32::NEG_INFINITY, |a, &d| a.max(d)) + self.epsilon,
-                    );
+                    low = low.max(values.iter().fold(f32::INFINITY, |a, &d| a.min(d)) - self.epsilon);
+                    high = high.min(values.iter().fold(f32::NEG_INFINITY, |a, &d| a.max(d)) + self.epsilon);
                 }
                 if low > high {
                     continue;
@@ -219,23 +184,13 @@ impl Grid {
                 let cosine = face.normal.dot(self.centers[t * PHI_BINS + p]);
                 let weight = sign * face.area * cosine.abs();
                 let base = (t * PHI_BINS + p) * self.rho_bins;
-                let (first, end) = (
-                    self.rho_bin(low).clamp(0, last),
-                    self.rho_bin(high).clamp(0, last),
-                );
+                let (first, end) = (self.rho_bin(low).clamp(0, last), self.rho_bin(high).clamp(0, last));
                 for bin in first..=end {
                     density.valid[base + bin as usize] += weight;
                 }
                 // In front of the face: the side its normal points to along this direction.
-                let (front_low, front_high) = if cosine >= 0.0 {
-                    (high, high + self.epsilon)
-                } else {
-                    (low - self.epsilon, low)
-                };
-                let (front_first, front_end) = (
-                    self.rho_bin(front_low).clamp(0, last),
-                    self.rho_bin(front_high).clamp(0, last),
-                );
+                let (front_low, front_high) = if cosine >= 0.0 { (high, high + self.epsilon) } else { (low - self.epsilon, low) };
+                let (front_first, front_end) = (self.rho_bin(front_low).clamp(0, last), self.rho_bin(front_high).clamp(0, last));
                 for bin in front_first..=front_end {
                     if bin < first || bin > end {
                         density.front[base + bin as usize] += weight;
@@ -256,30 +211,19 @@ struct Density {
 
 impl Density {
     fn zero(bins: usize) -> Density {
-        Density {
-            valid: vec![0.0; bins],
-            front: vec![0.0; bins],
-        }
+        Density { valid: vec![0.0; bins], front: vec![0.0; bins] }
     }
 
     fn add(mut self, other: Density) -> Density {
-        self.valid
-            .iter_mut()
-            .zip(&other.valid)
-            .for_each(|(a, b)| *a += b);
-        self.front
-            .iter_mut()
-            .zip(&other.front)
-            .for_each(|(a, b)| *a += b);
+        self.valid.iter_mut().zip(&other.valid).for_each(|(a, b)| *a += b);
+        self.front.iter_mut().zip(&other.front).for_each(|(a, b)| *a += b);
         self
     }
 
     /// The densest bin: valid area minus the near-tangent penalty; where every bin is
     /// penalised below zero (dense foliage), the bin with the most valid area.
     fn best_bin(&self) -> Option<usize> {
-        let argmax = |score: &dyn Fn(usize) -> f32| {
-            (0..self.valid.len()).max_by(|&a, &b| score(a).total_cmp(&score(b)).then(b.cmp(&a)))
-        };
+        let argmax = |score: &dyn Fn(usize) -> f32| (0..self.valid.len()).max_by(|&a, &b| score(a).total_cmp(&score(b)).then(b.cmp(&a)));
         let penalised = |bin: usize| self.valid[bin] - PENALTY * self.front[bin];
         let best = argmax(&penalised)?;
         if penalised(best) > 0.0 {
@@ -293,9 +237,7 @@ impl Density {
     fn of_faces(grid: &Grid, faces: &[Face], sign: f32) -> Density {
         if faces.len() < 64 {
             let mut density = Density::zero(grid.bins());
-            faces
-                .iter()
-                .for_each(|face| grid.contribute(face, sign, &mut density));
+            faces.iter().for_each(|face| grid.contribute(face, sign, &mut density));
             return density;
         }
         faces
@@ -313,45 +255,29 @@ impl Density {
 }
 
 /// Chooses planes for the triangles of a mesh. Deterministic for the same input.
-pub fn select_planes(
-    positions: &[[f32; 3]],
-    triangles: &[[u32; 3]],
-    settings: PlaneSettings,
-) -> PlaneSet {
+pub fn select_planes(positions: &[[f32; 3]], triangles: &[[u32; 3]], settings: PlaneSettings) -> PlaneSet {
     let grid = Grid::new(positions, settings.epsilon);
     let faces: Vec<Face> = triangles
         .iter()
         .map(|triangle| {
-            let vertices =
-                triangle.map(|index| Vec3::from(positions[index as usize]) - grid.center);
+            let vertices = triangle.map(|index| Vec3::from(positions[index as usize]) - grid.center);
             let cross = (vertices[1] - vertices[0]).cross(vertices[2] - vertices[0]);
-            Face {
-                vertices,
-                area: 0.5 * cross.length(),
-                normal: cross.normalize_or_zero(),
-            }
+            Face { vertices, area: 0.5 * cross.length(), normal: cross.normalize_or_zero() }
         })
         .collect();
 
     let mut density = Density::of_faces(&grid, &faces, 1.0);
 
     let mut assigned = vec![false; faces.len()];
-    let mut remaining: Vec<u32> = (0..faces.len() as u32)
-        .filter(|&index| faces[index as usize].area > 0.0)
-        .collect();
+    let mut remaining: Vec<u32> = (0..faces.len() as u32).filter(|&index| faces[index as usize].area > 0.0).collect();
     let mut planes: Vec<(Vec3, f32, Vec<u32>)> = Vec::new();
     let cap = settings.max_planes.map_or(usize::MAX, |cap| cap as usize);
     while !remaining.is_empty() && planes.len() < cap {
         let region = density.best_bin().map(|bin| grid.region(bin));
-        let (normal, rho) = region
-            .and_then(|region| refine(&grid, &faces, &remaining, region))
-            .unwrap_or_else(|| largest_face_plane(&faces, &remaining));
+        let (normal, rho) =
+            region.and_then(|region| refine(&grid, &faces, &remaining, region)).unwrap_or_else(|| largest_face_plane(&faces, &remaining));
         let holds = |(normal, rho): (Vec3, f32)| -> Vec<u32> {
-            remaining
-                .par_iter()
-                .copied()
-                .filter(|&index| faces[index as usize].distance_to(normal, rho) <= grid.epsilon)
-                .collect()
+            remaining.par_iter().copied().filter(|&index| faces[index as usize].distance_to(normal, rho) <= grid.epsilon).collect()
         };
         let (mut normal, mut rho) = (normal, rho);
         let mut members = holds((normal, rho));
@@ -380,10 +306,7 @@ pub fn select_planes(
         }
         let face = &faces[index as usize];
         let best = (0..planes.len())
-            .min_by(|&a, &b| {
-                face.distance_to(planes[a].0, planes[a].1)
-                    .total_cmp(&face.distance_to(planes[b].0, planes[b].1))
-            })
+            .min_by(|&a, &b| face.distance_to(planes[a].0, planes[a].1).total_cmp(&face.distance_to(planes[b].0, planes[b].1)))
             .expect("at least one plane");
         planes[best].2.push(index);
     }
@@ -397,19 +320,10 @@ pub fn select_planes(
             for &index in &members {
                 max_error = max_error.max(faces[index as usize].distance_to(normal, rho));
             }
-            Plane {
-                normal: normal.to_array(),
-                distance: rho + normal.dot(grid.center),
-                faces: members,
-            }
+            Plane { normal: normal.to_array(), distance: rho + normal.dot(grid.center), faces: members }
         })
         .collect();
-    PlaneSet {
-        planes,
-        epsilon: grid.epsilon,
-        max_error,
-        face_count: faces.len(),
-    }
+    PlaneSet { planes, epsilon: grid.epsilon, max_error, face_count: faces.len() }
 }
 
 /// Refines a dense region to the best plane near it: candidate directions around the region's
@@ -418,14 +332,8 @@ pub fn select_planes(
 fn refine(grid: &Grid, faces: &[Face], remaining: &[u32], region: Region) -> Option<(Vec3, f32)> {
     // The validity set of the region and its neighbours (loose test: hull over the corners).
     let grown = Region {
-        theta: (
-            region.theta.0 - 0.5 * (region.theta.1 - region.theta.0),
-            region.theta.1 + 0.5 * (region.theta.1 - region.theta.0),
-        ),
-        phi: (
-            (region.phi.0 - 0.5 * (region.phi.1 - region.phi.0)).max(0.0),
-            region.phi.1 + 0.5 * (region.phi.1 - region.phi.0),
-        ),
+        theta: (region.theta.0 - 0.5 * (region.theta.1 - region.theta.0), region.theta.1 + 0.5 * (region.theta.1 - region.theta.0)),
+        phi: ((region.phi.0 - 0.5 * (region.phi.1 - region.phi.0)).max(0.0), region.phi.1 + 0.5 * (region.phi.1 - region.phi.0)),
         rho: (region.rho.0 - grid.epsilon, region.rho.1 + grid.epsilon),
     };
     let corners = grown.corners();
@@ -433,9 +341,7 @@ fn refine(grid: &Grid, faces: &[Face], remaining: &[u32], region: Region) -> Opt
         .par_iter()
         .copied()
         .filter(|&index| {
-            faces[index as usize]
-                .valid_rho(&corners, grid.epsilon)
-                .is_some_and(|(low, high)| low <= grown.rho.1 && high >= grown.rho.0)
+            faces[index as usize].valid_rho(&corners, grid.epsilon).is_some_and(|(low, high)| low <= grown.rho.1 && high >= grown.rho.0)
         })
         .collect();
     if set.is_empty() {
@@ -444,14 +350,8 @@ fn refine(grid: &Grid, faces: &[Face], remaining: &[u32], region: Region) -> Opt
     // Directions are searched on an evenly strided sample of large sets.
     let stride = set.len().div_ceil(REFINEMENT_SAMPLE);
     let sample: Vec<u32> = set.iter().copied().step_by(stride).collect();
-    let (mut theta, mut phi) = (
-        0.5 * (region.theta.0 + region.theta.1),
-        0.5 * (region.phi.0 + region.phi.1),
-    );
-    let (mut step_theta, mut step_phi) = (
-        0.5 * (region.theta.1 - region.theta.0),
-        0.5 * (region.phi.1 - region.phi.0),
-    );
+    let (mut theta, mut phi) = (0.5 * (region.theta.0 + region.theta.1), 0.5 * (region.phi.0 + region.phi.1));
+    let (mut step_theta, mut step_phi) = (0.5 * (region.theta.1 - region.theta.0), 0.5 * (region.phi.1 - region.phi.0));
     let mut best: Option<(f32, Vec3, f32)> = None;
     let mut events = Vec::with_capacity(set.len() * 4);
     for _ in 0..REFINEMENT_STEPS {
@@ -459,18 +359,14 @@ fn refine(grid: &Grid, faces: &[Face], remaining: &[u32], region: Region) -> Opt
         let candidates: Vec<(f32, f32)> = (-1..=1)
             .flat_map(|dt| (-1..=1).map(move |dp| (dt, dp)))
             .map(|(dt, dp)| {
-                (
-                    center_theta + dt as f32 * step_theta,
-                    (center_phi + dp as f32 * step_phi).clamp(0.0, std::f32::consts::FRAC_PI_2),
-                )
+                (center_theta + dt as f32 * step_theta, (center_phi + dp as f32 * step_phi).clamp(0.0, std::f32::consts::FRAC_PI_2))
             })
             .collect();
         let scored: Vec<Option<(f32, f32, f32)>> = candidates
             .par_iter()
             .map_init(Vec::new, |events, &(candidate_theta, candidate_phi)| {
                 let normal = direction(candidate_theta, candidate_phi);
-                best_offset(faces, &sample, normal, grid.epsilon, events)
-                    .map(|(score, _)| (score, candidate_theta, candidate_phi))
+                best_offset(faces, &sample, normal, grid.epsilon, events).map(|(score, _)| (score, candidate_theta, candidate_phi))
             })
             .collect();
         // In candidate order, so ties resolve the same way on every run.
@@ -490,13 +386,7 @@ fn refine(grid: &Grid, faces: &[Face], remaining: &[u32], region: Region) -> Opt
 /// For planes of direction `normal`: the offset with the largest covered area (exact validity)
 /// minus the penalty of faces it lies just in front of, and that score. `None` when no face of
 /// `set` can lie on such a plane.
-fn best_offset(
-    faces: &[Face],
-    set: &[u32],
-    normal: Vec3,
-    epsilon: f32,
-    events: &mut Vec<(f32, f32)>,
-) -> Option<(f32, f32)> {
+fn best_offset(faces: &[Face], set: &[u32], normal: Vec3, epsilon: f32, events: &mut Vec<(f32, f32)>) -> Option<(f32, f32)> {
     events.clear();
     for &index in set {
         let face = &faces[index as usize];
@@ -510,11 +400,7 @@ fn best_offset(
         let weight = face.area * cosine.abs();
         events.push((low, weight));
         events.push((high, -weight));
-        let (front_low, front_high) = if cosine >= 0.0 {
-            (high, high + epsilon)
-        } else {
-            (low - epsilon, low)
-        };
+        let (front_low, front_high) = if cosine >= 0.0 { (high, high + epsilon) } else { (low - epsilon, low) };
         events.push((front_low, -PENALTY * weight));
         events.push((front_high, PENALTY * weight));
     }
@@ -538,12 +424,7 @@ fn largest_face_plane(faces: &[Face], remaining: &[u32]) -> (Vec3, f32) {
     let index = remaining
         .iter()
         .copied()
-        .max_by(|&a, &b| {
-            faces[a as usize]
-                .area
-                .total_cmp(&faces[b as usize].area)
-                .then(b.cmp(&a))
-        })
+        .max_by(|&a, &b| faces[a as usize].area.total_cmp(&faces[b as usize].area).then(b.cmp(&a)))
         .expect("non-empty");
     let face = &faces[index as usize];
     (face.normal, face.vertices[0].dot(face.normal))
@@ -551,10 +432,6 @@ fn largest_face_plane(faces: &[Face], remaining: &[u32]) -> (Vec3, f32) {
 
 fn largest_face_plane_any(faces: &[Face]) -> (Vec3, f32, Vec<u32>) {
     let all: Vec<u32> = (0..faces.len() as u32).collect();
-    let (normal, rho) = if faces.iter().any(|face| face.area > 0.0) {
-        largest_face_plane(faces, &all)
-    } else {
-        (Vec3::Z, 0.0)
-    };
+    let (normal, rho) = if faces.iter().any(|face| face.area > 0.0) { largest_face_plane(faces, &all) } else { (Vec3::Z, 0.0) };
     (normal, rho, Vec::new())
 }

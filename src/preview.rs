@@ -10,13 +10,7 @@ pub fn preview_png(texture: &Texture) -> Vec<u8> {
         image::codecs::png::CompressionType::Fast,
         image::codecs::png::FilterType::Adaptive,
     );
-    image::ImageEncoder::write_image(
-        encoder,
-        &texture.pixels,
-        texture.width,
-        texture.height,
-        image::ExtendedColorType::Rgba8,
-    )
-    .expect("PNG encoding into memory cannot fail for a valid RGBA8 buffer");
+    image::ImageEncoder::write_image(encoder, &texture.pixels, texture.width, texture.height, image::ExtendedColorType::Rgba8)
+        .expect("PNG encoding into memory cannot fail for a valid RGBA8 buffer");
     bytes
 }

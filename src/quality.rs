@@ -34,12 +34,7 @@ pub fn decode_blocks(format: BlockFormat, blocks: &[u8], width: u32, height: u32
                     let mut red_green = [0u8; 32];
                     bcdec_rs::bc5(block, &mut red_green, 8, false);
                     for index in 0..16 {
-                        rgba[index * 4..index * 4 + 4].copy_from_slice(&[
-                            red_green[index * 2],
-                            red_green[index * 2 + 1],
-                            0,
-                            255,
-                        ]);
+                        rgba[index * 4..index * 4 + 4].copy_from_slice(&[red_green[index * 2], red_green[index * 2 + 1], 0, 255]);
                     }
                 }
             }
@@ -54,8 +49,7 @@ pub fn decode_blocks(format: BlockFormat, blocks: &[u8], width: u32, height: u32
                         break;
                     }
                     let target = (y * width as usize + x) * 4;
-                    pixels[target..target + 4]
-                        .copy_from_slice(&rgba[(row * 4 + column) * 4..][..4]);
+                    pixels[target..target + 4].copy_from_slice(&rgba[(row * 4 + column) * 4..][..4]);
                 }
             }
         }
@@ -65,17 +59,9 @@ pub fn decode_blocks(format: BlockFormat, blocks: &[u8], width: u32, height: u32
 
 /// PSNR in dB between two same-sized textures over their first `channels` channels.
 pub fn psnr(reference: &Texture, decoded: &Texture, channels: usize) -> f64 {
-    assert_eq!(
-        (reference.width, reference.height),
-        (decoded.width, decoded.height),
-        "same size"
-    );
+    assert_eq!((reference.width, reference.height), (decoded.width, decoded.height), "same size");
     let mut squared_error = 0u64;
-    for (a, b) in reference
-        .pixels
-        .chunks_exact(4)
-        .zip(decoded.pixels.chunks_exact(4))
-    {
+    for (a, b) in reference.pixels.chunks_exact(4).zip(decoded.pixels.chunks_exact(4)) {
         for channel in 0..channels {
             let difference = a[channel] as i64 - b[channel] as i64;
             squared_error += (difference * difference) as u64;

@@ -24,22 +24,14 @@ pub struct PlaneRectangle {
 impl PlaneRectangle {
     /// The four corners: origin, +x, +x+y, +y.
     pub fn corners(&self) -> [Vec3; 4] {
-        let (origin, x, y) = (
-            Vec3::from(self.origin),
-            Vec3::from(self.x_axis) * self.width,
-            Vec3::from(self.y_axis) * self.height,
-        );
+        let (origin, x, y) = (Vec3::from(self.origin), Vec3::from(self.x_axis) * self.width, Vec3::from(self.y_axis) * self.height);
         [origin, origin + x, origin + x + y, origin + y]
     }
 }
 
 /// The rectangles of every plane of `planes`, in plane order, clusters within a plane ordered by
 /// their first face. Faces closer than `2ε` on the plane share a rectangle.
-pub fn plane_rectangles(
-    positions: &[[f32; 3]],
-    triangles: &[[u32; 3]],
-    planes: &PlaneSet,
-) -> Vec<PlaneRectangle> {
+pub fn plane_rectangles(positions: &[[f32; 3]], triangles: &[[u32; 3]], planes: &PlaneSet) -> Vec<PlaneRectangle> {
     let mut rectangles = Vec::new();
     for (plane_index, plane) in planes.planes.iter().enumerate() {
         let normal = Vec3::from(plane.normal);
@@ -49,17 +41,8 @@ pub fn plane_rectangles(
             let p = Vec3::from(positions[vertex as usize]);
             Vec2::new(p.dot(u), p.dot(v))
         };
-        for faces in clusters(
-            &plane.faces,
-            triangles,
-            &project,
-            2.0 * planes.epsilon.max(1e-6),
-        ) {
-            let points: Vec<Vec2> = faces
-                .iter()
-                .flat_map(|&face| triangles[face as usize])
-                .map(project)
-                .collect();
+        for faces in clusters(&plane.faces, triangles, &project, 2.0 * planes.epsilon.max(1e-6)) {
+            let points: Vec<Vec2> = faces.iter().flat_map(|&face| triangles[face as usize]).map(project).collect();
             let (axis, min, max) = minimum_area_rectangle(&convex_hull(points));
             let x_axis = u * axis.x + v * axis.y;
             let y_axis = normal.cross(x_axis);
@@ -81,22 +64,13 @@ pub fn plane_rectangles(
 
 /// Groups faces whose projected bounding boxes come within `gap` of each other (union-find over
 /// a grid of `gap`-sized cells). Each group is sorted; groups are ordered by their first face.
-fn clusters(
-    faces: &[u32],
-    triangles: &[[u32; 3]],
-    project: &dyn Fn(u32) -> Vec2,
-    gap: f32,
-) -> Vec<Vec<u32>> {
+fn clusters(faces: &[u32], triangles: &[[u32; 3]], project: &dyn Fn(u32) -> Vec2, gap: f32) -> Vec<Vec<u32>> {
     let boxes: Vec<(Vec2, Vec2)> = faces
         .iter()
         .map(|&face| {
             let corners = triangles[face as usize].map(project);
-            let min = corners
-                .iter()
-                .fold(Vec2::splat(f32::INFINITY), |a, &c| a.min(c));
-            let max = corners
-                .iter()
-                .fold(Vec2::splat(f32::NEG_INFINITY), |a, &c| a.max(c));
+            let min = corners.iter().fold(Vec2::splat(f32::INFINITY), |a, &c| a.min(c));
+            let max = corners.iter().fold(Vec2::splat(f32::NEG_INFINITY), |a, &c| a.max(c));
             (min, max)
         })
         .collect();
@@ -112,18 +86,9 @@ fn clusters(
     let mut owners: std::collections::HashMap<(i64, i64), usize> = std::collections::HashMap::new();
     for (index, (min, max)) in boxes.iter().enumerate() {
         // Cells the box grown by half the gap touches; faces sharing a cell are joined.
-        let (x0, x1, y0, y1) = (
-            cell(min.x - 0.5 * gap),
-            cell(max.x + 0.5 * gap),
-            cell(min.y - 0.5 * gap),
-            cell(max.y + 0.5 * gap),
-        );
+        let (x0, x1, y0, y1) = (cell(min.x - 0.5 * gap), cell(max.x + 0.5 * gap), cell(min.y - 0.5 * gap), cell(max.y + 0.5 * gap));
         let too_many = (x1 - x0 + 1).saturating_mul(y1 - y0 + 1) > 4096;
-        let step = if too_many {
-            ((x1 - x0 + 1).max(y1 - y0 + 1) / 64).max(1)
-        } else {
-            1
-        };
+        let step = if too_many { ((x1 - x0 + 1).max(y1 - y0 + 1) / 64).max(1) } else { 1 };
         let mut x = x0;
         while x <= x1 {
             let mut y = y0;
@@ -171,15 +136,9 @@ pub fn convex_hull(mut points: Vec<Vec2>) -> Vec<Vec2> {
     let mut hull: Vec<Vec2> = Vec::with_capacity(points.len() * 2);
     for pass in 0..2 {
         let start = hull.len();
-        let iterator: Box<dyn Iterator<Item = &Vec2>> = if pass == 0 {
-            Box::new(points.iter())
-        } else {
-            Box::new(points.iter().rev())
-        };
+        let iterator: Box<dyn Iterator<Item = &Vec2>> = if pass == 0 { Box::new(points.iter()) } else { Box::new(points.iter().rev()) };
         for &point in iterator {
-            while hull.len() >= start + 2
-                && cross(hull[hull.len() - 2], hull[hull.len() - 1], point) <= 0.0
-            {
+            while hull.len() >= start + 2 && cross(hull[hull.len() - 2], hull[hull.len() - 1], point) <= 0.0 {
                 hull.pop();
             }
             hull.push(point);

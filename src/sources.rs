@@ -19,9 +19,7 @@ pub fn read_source(root: &Path, relative: &Path) -> FileRead {
     if metadata.len() > MAX_SOURCE_BYTES {
         return Err(format!("is larger than {} MiB", MAX_SOURCE_BYTES >> 20));
     }
-    std::fs::read(&path)
-        .map(FileContents::new)
-        .map_err(describe_io_error)
+    std::fs::read(&path).map(FileContents::new).map_err(describe_io_error)
 }
 
 fn describe_io_error(error: std::io::Error) -> String {
@@ -56,11 +54,7 @@ pub fn rule_matches(config: &PipelineConfig) -> Vec<PathBuf> {
                 }
             } else if let Ok(relative) = path.strip_prefix(&source) {
                 let relative = PathBuf::from(relative.to_string_lossy().replace('\\', "/"));
-                if config
-                    .rules
-                    .iter()
-                    .any(|rule| rule.matcher.is_match(&relative))
-                {
+                if config.rules.iter().any(|rule| rule.matcher.is_match(&relative)) {
                     found.push(relative);
                 }
             }

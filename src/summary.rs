@@ -76,9 +76,7 @@ pub struct AssetSummary {
 
 impl BuildSummary {
     pub fn all_ok(&self) -> bool {
-        self.assets
-            .iter()
-            .all(|asset| asset.status == AssetStatus::Ok)
+        self.assets.iter().all(|asset| asset.status == AssetStatus::Ok)
     }
 
     pub fn to_json(&self) -> String {
@@ -89,17 +87,8 @@ impl BuildSummary {
     pub fn to_text(&self) -> String {
         let mut text = String::new();
         for asset in &self.assets {
-            let count = |status: StageStatus| {
-                asset
-                    .stages
-                    .iter()
-                    .filter(|stage| stage.status == status)
-                    .count()
-            };
-            let ms = asset
-                .stages
-                .iter()
-                .fold(0.0, |total, stage| total + stage.ms);
+            let count = |status: StageStatus| asset.stages.iter().filter(|stage| stage.status == status).count();
+            let ms = asset.stages.iter().fold(0.0, |total, stage| total + stage.ms);
             let status = match asset.status {
                 AssetStatus::Ok => "ok",
                 AssetStatus::Failed => "FAILED",

@@ -19,15 +19,9 @@ pub enum SurfaceKind {
 
 impl SurfaceKind {
     /// The surfaces of a baked material.
-    pub const MATERIAL: [SurfaceKind; 3] =
-        [SurfaceKind::Albedo, SurfaceKind::Mra, SurfaceKind::Normal];
+    pub const MATERIAL: [SurfaceKind; 3] = [SurfaceKind::Albedo, SurfaceKind::Mra, SurfaceKind::Normal];
     /// The surfaces of a billboard-cloud atlas.
-    pub const BILLBOARD: [SurfaceKind; 4] = [
-        SurfaceKind::Albedo,
-        SurfaceKind::Mra,
-        SurfaceKind::Normal,
-        SurfaceKind::Height,
-    ];
+    pub const BILLBOARD: [SurfaceKind; 4] = [SurfaceKind::Albedo, SurfaceKind::Mra, SurfaceKind::Normal, SurfaceKind::Height];
 
     pub fn name(self) -> &'static str {
         match self {
@@ -42,11 +36,7 @@ impl SurfaceKind {
     pub fn slots(self) -> &'static [TextureSlot] {
         match self {
             SurfaceKind::Albedo => &[TextureSlot::Albedo, TextureSlot::Opacity],
-            SurfaceKind::Mra => &[
-                TextureSlot::Metallic,
-                TextureSlot::Roughness,
-                TextureSlot::Ao,
-            ],
+            SurfaceKind::Mra => &[TextureSlot::Metallic, TextureSlot::Roughness, TextureSlot::Ao],
             SurfaceKind::Normal => &[TextureSlot::Normal],
             SurfaceKind::Height => &[],
         }
@@ -72,50 +62,25 @@ const CONSTANT_SURFACE_SIDE: u32 = 4;
 
 /// Packs `kind` from its source maps (`None` where the material has no such map).
 /// `sources` must hold one entry per slot of `kind.slots()`, in that order.
-pub fn pack_surface(
-    kind: SurfaceKind,
-    sources: &[Option<&Texture>],
-    constants: &MaterialConstants,
-) -> Texture {
+pub fn pack_surface(kind: SurfaceKind, sources: &[Option<&Texture>], constants: &MaterialConstants) -> Texture {
     assert_eq!(sources.len(), kind.slots().len(), "one source per slot");
-    let width = sources
-        .iter()
-        .flatten()
-        .map(|texture| texture.width)
-        .max()
-        .unwrap_or(CONSTANT_SURFACE_SIDE);
-    let height = sources
-        .iter()
-        .flatten()
-        .map(|texture| texture.height)
-        .max()
-        .unwrap_or(CONSTANT_SURFACE_SIDE);
+    let width = sources.iter().flatten().map(|texture| texture.width).max().unwrap_or(CONSTANT_SURFACE_SIDE);
+    let height = sources.iter().flatten().map(|texture| texture.height).max().unwrap_or(CONSTANT_SURFACE_SIDE);
     let resampled: Vec<Option<Vec<u8>>> = sources
         .iter()
         .zip(kind.slots())
-        .map(|(source, slot)| {
-            source.map(|texture| resample_rgba8(texture, width, height, slot.is_srgb()))
-        })
+        .map(|(source, slot)| source.map(|texture| resample_rgba8(texture, width, height, slot.is_srgb())))
         .collect();
     let texel_count = (width * height) as usize;
     let mut pixels = vec![0u8; texel_count * 4];
     match kind {
         SurfaceKind::Albedo => {
             let constant = constants.albedo.map(|c| c.clamp(0.0, 1.0));
-            let constant_rgba = [
-                linear_to_srgb_u8(constant[0]),
-                linear_to_srgb_u8(constant[1]),
-                linear_to_srgb_u8(constant[2]),
-                unorm_u8(constant[3]),
-            ];
+            let constant_rgba =
+                [linear_to_srgb_u8(constant[0]), linear_to_srgb_u8(constant[1]), linear_to_srgb_u8(constant[2]), unorm_u8(constant[3])];
             for (index, texel) in pixels.chunks_exact_mut(4).enumerate() {
                 let mut rgba = match &resampled[0] {
-                    Some(albedo) => [
-                        albedo[index * 4],
-                        albedo[index * 4 + 1],
-                        albedo[index * 4 + 2],
-                        albedo[index * 4 + 3],
-                    ],
+                    Some(albedo) => [albedo[index * 4], albedo[index * 4 + 1], albedo[index * 4 + 2], albedo[index * 4 + 3]],
                     None => constant_rgba,
                 };
                 if let Some(opacity) = &resampled[1] {
@@ -128,24 +93,16 @@ pub fn pack_surface(
             let constant = [constants.metallic, constants.roughness, constants.ao].map(unorm_u8);
             for (index, texel) in pixels.chunks_exact_mut(4).enumerate() {
                 for channel in 0..3 {
-                    texel[channel] = resampled[channel]
-                        .as_ref()
-                        .map_or(constant[channel], |map| map[index * 4]);
+                    texel[channel] = resampled[channel].as_ref().map_or(constant[channel], |map| map[index * 4]);
                 }
                 texel[3] = 255;
             }
         }
-        SurfaceKind::Height => pixels
-            .chunks_exact_mut(4)
-            .for_each(|texel| texel.copy_from_slice(&[128, 0, 0, 255])),
+        SurfaceKind::Height => pixels.chunks_exact_mut(4).for_each(|texel| texel.copy_from_slice(&[128, 0, 0, 255])),
         SurfaceKind::Normal => {
             for (index, texel) in pixels.chunks_exact_mut(4).enumerate() {
                 let normal = match &resampled[0] {
-                    Some(map) => normalize_tangent_normal(decode_normal([
-                        map[index * 4],
-                        map[index * 4 + 1],
-                        map[index * 4 + 2],
-                    ])),
+                    Some(map) => normalize_tangent_normal(decode_normal([map[index * 4], map[index * 4 + 1], map[index * 4 + 2]])),
                     None => [0.0, 0.0, 1.0],
                 };
                 texel.copy_from_slice(&encode_normal(normal));
@@ -176,22 +133,11 @@ fn resample_rgba8(texture: &Texture, width: u32, height: u32, srgb: bool) -> Vec
                     c as f32 / 255.0
                 }
             };
-            [
-                decode(texel[0]),
-                decode(texel[1]),
-                decode(texel[2]),
-                texel[3] as f32 / 255.0,
-            ]
+            [decode(texel[0]), decode(texel[1]), decode(texel[2]), texel[3] as f32 / 255.0]
         })
         .collect();
-    let source =
-        image::Rgba32FImage::from_raw(texture.width, texture.height, floats).expect("sized above");
-    let resized = image::imageops::resize(
-        &source,
-        width,
-        height,
-        image::imageops::FilterType::CatmullRom,
-    );
+    let source = image::Rgba32FImage::from_raw(texture.width, texture.height, floats).expect("sized above");
+    let resized = image::imageops::resize(&source, width, height, image::imageops::FilterType::CatmullRom);
     resized
         .into_raw()
         .chunks_exact(4)
@@ -203,12 +149,7 @@ fn resample_rgba8(texture: &Texture, width: u32, height: u32, srgb: bool) -> Vec
                     unorm_u8(c)
                 }
             };
-            [
-                encode(texel[0]),
-                encode(texel[1]),
-                encode(texel[2]),
-                unorm_u8(texel[3]),
-            ]
+            [encode(texel[0]), encode(texel[1]), encode(texel[2]), unorm_u8(texel[3])]
         })
         .collect()
 }
@@ -223,11 +164,7 @@ pub fn srgb_u8_to_linear(value: u8) -> f32 {
 
 pub fn linear_to_srgb_u8(linear: f32) -> u8 {
     let linear = linear.clamp(0.0, 1.0);
-    let srgb = if linear <= 0.003_130_8 {
-        linear * 12.92
-    } else {
-        1.055 * linear.powf(1.0 / 2.4) - 0.055
-    };
+    let srgb = if linear <= 0.003_130_8 { linear * 12.92 } else { 1.055 * linear.powf(1.0 / 2.4) - 0.055 };
     unorm_u8(srgb)
 }
 

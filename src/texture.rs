@@ -24,18 +24,9 @@ pub struct Texture {
 
 impl Texture {
     pub fn new(width: u32, height: u32, pixels: Vec<u8>) -> Texture {
-        assert_eq!(
-            pixels.len(),
-            (width * height * 4) as usize,
-            "RGBA8 pixel count"
-        );
+        assert_eq!(pixels.len(), (width * height * 4) as usize, "RGBA8 pixel count");
         let hash = blake3::hash(&pixels);
-        Texture {
-            width,
-            height,
-            pixels: pixels.into(),
-            hash,
-        }
+        Texture { width, height, pixels: pixels.into(), hash }
     }
 
     /// A one-colour texture of `width` × `height`.
@@ -45,12 +36,7 @@ impl Texture {
 
     pub fn texel(&self, x: u32, y: u32) -> [u8; 4] {
         let index = ((y * self.width + x) * 4) as usize;
-        [
-            self.pixels[index],
-            self.pixels[index + 1],
-            self.pixels[index + 2],
-            self.pixels[index + 3],
-        ]
+        [self.pixels[index], self.pixels[index + 1], self.pixels[index + 2], self.pixels[index + 3]]
     }
 }
 
@@ -64,24 +50,20 @@ impl Eq for Texture {}
 
 impl fmt::Debug for Texture {
     fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
-        write!(
-            f,
-            "Texture({}x{}, {})",
-            self.width,
-            self.height,
-            &self.hash.to_hex()[..12]
-        )
+        write!(f, "Texture({}x{}, {})", self.width, self.height, &self.hash.to_hex()[..12])
     }
 }
 
 /// Reads only the header of the image `bytes`: its size, or why it cannot be decoded.
 pub fn probe_texture(file: &Path, bytes: &[u8]) -> Result<(u32, u32), Diagnostic> {
     let reader = image_reader(file, bytes)?;
-    let (width, height) = reader
-        .into_dimensions()
-        .map_err(|error| Diagnostic::new(file, format!("cannot read the image header: {error}")))?;
+    let (width, height) =
+        reader.into_dimensions().map_err(|error| Diagnostic::new(file, format!("cannot read the image header: {error}")))?;
     if width > MAX_TEXTURE_SIDE || height > MAX_TEXTURE_SIDE {
-        return Err(Diagnostic::new(file, format!("the image is {width}×{height}, larger than the decoder limit of {MAX_TEXTURE_SIDE}² texels")));
+        return Err(Diagnostic::new(
+            file,
+            format!("the image is {width}×{height}, larger than the decoder limit of {MAX_TEXTURE_SIDE}² texels"),
+        ));
     }
     Ok((width, height))
 }
@@ -96,10 +78,9 @@ pub fn decode_texture(file: &Path, bytes: &[u8]) -> Result<Texture, Diagnostic> 
     reader.limits(limits);
     let image = reader.decode().map_err(|error| {
         let message = match error {
-            image::ImageError::Limits(_) => format!(
-                "the image is larger than the decoder limits ({MAX_TEXTURE_SIDE}² texels, {} MiB)",
-                MAX_DECODE_BYTES >> 20
-            ),
+            image::ImageError::Limits(_) => {
+                format!("the image is larger than the decoder limits ({MAX_TEXTURE_SIDE}² texels, {} MiB)", MAX_DECODE_BYTES >> 20)
+            }
             other => format!("cannot decode the image: {other}"),
         };
         Diagnostic::new(file, message)
@@ -111,18 +92,13 @@ pub fn decode_texture(file: &Path, bytes: &[u8]) -> Result<Texture, Diagnostic> 
     Ok(Texture::new(rgba.width(), rgba.height(), rgba.into_raw()))
 }
 
-fn image_reader<'a>(
-    file: &Path,
-    bytes: &'a [u8],
-) -> Result<image::ImageReader<Cursor<&'a [u8]>>, Diagnostic> {
+fn image_reader<'a>(file: &Path, bytes: &'a [u8]) -> Result<image::ImageReader<Cursor<&'a [u8]>>, Diagnostic> {
     let mut reader = image::ImageReader::new(Cursor::new(bytes))
         .with_guessed_format()
         .map_err(|error| Diagnostic::new(file, format!("cannot read the image: {error}")))?;
     if reader.format().is_none() {
-        reader.set_format(
-            image::ImageFormat::from_path(file)
-                .map_err(|_| Diagnostic::new(file, "not a PNG, JPEG, TGA, BMP or GIF image"))?,
-        );
+        reader
+            .set_format(image::ImageFormat::from_path(file).map_err(|_| Diagnostic::new(file, "not a PNG, JPEG, TGA, BMP or GIF image"))?);
     }
     let format = reader.format();
     if !matches!(
@@ -135,10 +111,7 @@ fn image_reader<'a>(
                 | image::ImageFormat::Gif
         )
     ) {
-        return Err(Diagnostic::new(
-            file,
-            "not a PNG, JPEG, TGA, BMP or GIF image",
-        ));
+        return Err(Diagnostic::new(file, "not a PNG, JPEG, TGA, BMP or GIF image"));
     }
     Ok(reader)
 }

@@ -8,22 +8,14 @@ use cirrus::config::load_pipeline;
 
 fn corpus() -> PathBuf {
     let path = Path::new(env!("CARGO_MANIFEST_DIR")).join("../shared/assets");
-    assert!(
-        path.join("materials").is_dir(),
-        "the corpus is missing: expected it at {}",
-        path.display()
-    );
+    assert!(path.join("materials").is_dir(), "the corpus is missing: expected it at {}", path.display());
     path.canonicalize().expect("corpus path")
 }
 
 /// Surfaces whose BC1/BC5 result is below the DESIGN §7 bar with the current encoder, and the
 /// floor each must still clear (measured minus 0.5 dB): a regression guard, listed openly.
-const BELOW_BAR: &[(&str, f64)] = &[
-    ("birch_bark/Mra", 30.2),
-    ("birch_bark/Normal", 38.2),
-    ("helmet_metalparts/Mra", 32.5),
-    ("helmet_rubberwood/Mra", 34.9),
-];
+const BELOW_BAR: &[(&str, f64)] =
+    &[("birch_bark/Mra", 30.2), ("birch_bark/Normal", 38.2), ("helmet_metalparts/Mra", 32.5), ("helmet_rubberwood/Mra", 34.9)];
 
 #[test]
 fn every_corpus_material_bakes_and_meets_the_psnr_bars() {
@@ -35,49 +27,24 @@ fn every_corpus_material_bakes_and_meets_the_psnr_bars() {
     )
     .expect("write pipeline");
     let config = load_pipeline(&dir.path().join("pipeline.ron")).expect("valid pipeline");
-    let mut project = Project::open(
-        config,
-        ProjectOptions {
-            persistent_cache: false,
-        },
-    );
-    let summary = project
-        .build(&BuildOptions::default(), &|_| {})
-        .expect("build runs");
-    assert_eq!(
-        summary.assets.len(),
-        5,
-        "every corpus material file is an asset"
-    );
+    let mut project = Project::open(config, ProjectOptions { persistent_cache: false });
+    let summary = project.build(&BuildOptions::default(), &|_| {}).expect("build runs");
+    assert_eq!(summary.assets.len(), 5, "every corpus material file is an asset");
     assert!(summary.all_ok(), "{}", summary.to_text());
     let mut figures = Vec::new();
     for asset in &summary.assets {
-        let report: serde_json::Value = serde_json::from_slice(
-            &std::fs::read(
-                dir.path()
-                    .join("baked")
-                    .join(&asset.name)
-                    .join("report.json"),
-            )
-            .expect("report"),
-        )
-        .expect("report JSON");
+        let report: serde_json::Value =
+            serde_json::from_slice(&std::fs::read(dir.path().join("baked").join(&asset.name).join("report.json")).expect("report"))
+                .expect("report JSON");
         for material in report["materials"].as_array().expect("materials") {
             for surface in material["surfaces"].as_array().expect("surfaces") {
-                let name = format!(
-                    "{}/{}",
-                    material["name"].as_str().unwrap(),
-                    surface["surface"].as_str().unwrap()
-                );
+                let name = format!("{}/{}", material["name"].as_str().unwrap(), surface["surface"].as_str().unwrap());
                 let psnr = surface["psnr_db"].as_f64().expect("psnr");
                 let bar = match surface["surface"].as_str().unwrap() {
                     "Mra" => 36.0,
                     _ => 42.0,
                 };
-                let floor = BELOW_BAR
-                    .iter()
-                    .find(|(known, _)| *known == name)
-                    .map_or(bar, |(_, floor)| *floor);
+                let floor = BELOW_BAR.iter().find(|(known, _)| *known == name).map_or(bar, |(_, floor)| *floor);
                 figures.push(format!("{name}: {psnr:.2} dB (bar {bar})"));
                 assert!(psnr >= floor, "{name}: {psnr:.2} dB < {floor} dB");
             }
@@ -88,10 +55,7 @@ fn every_corpus_material_bakes_and_meets_the_psnr_bars() {
 }
 
 /// Loads `relative` (inside the corpus) the way the driver does: MTL files served by path.
-fn load_corpus_mesh(
-    relative: &str,
-) -> Result<(cirrus::mesh::Mesh, Vec<cirrus::diagnostic::Diagnostic>), cirrus::diagnostic::Diagnostic>
-{
+fn load_corpus_mesh(relative: &str) -> Result<(cirrus::mesh::Mesh, Vec<cirrus::diagnostic::Diagnostic>), cirrus::diagnostic::Diagnostic> {
     let root = corpus();
     let path = Path::new(relative);
     let bytes = std::fs::read(root.join(path)).expect("read OBJ");
@@ -115,65 +79,33 @@ fn every_obj_conformance_file_loads_or_fails_cleanly() {
             let path = entry.path();
             if path.is_dir() {
                 folders.push(path);
-            } else if path
-                .extension()
-                .is_some_and(|extension| extension.eq_ignore_ascii_case("obj"))
-            {
-                files.push(
-                    path.strip_prefix(&root)
-                        .unwrap()
-                        .to_string_lossy()
-                        .into_owned(),
-                );
+            } else if path.extension().is_some_and(|extension| extension.eq_ignore_ascii_case("obj")) {
+                files.push(path.strip_prefix(&root).unwrap().to_string_lossy().into_owned());
             }
         }
     }
     files.sort();
-    assert!(
-        files.len() >= 100,
-        "the conformance suite has its files: {}",
-        files.len()
-    );
+    assert!(files.len() >= 100, "the conformance suite has its files: {}", files.len());
     let (mut loaded, mut failed) = (0, Vec::new());
     for file in &files {
         match std::panic::catch_unwind(|| load_corpus_mesh(file)) {
             Err(_) => panic!("{file}: the loader panicked"),
             Ok(Ok((mesh, _))) => {
                 loaded += 1;
-                assert_eq!(
-                    mesh.triangles.len(),
-                    mesh.triangle_materials.len(),
-                    "{file}"
-                );
-                assert!(
-                    mesh.normals.iter().all(|n| n.iter().all(|c| c.is_finite())),
-                    "{file}: finite normals"
-                );
-                assert!(
-                    mesh.triangles
-                        .iter()
-                        .flatten()
-                        .all(|&index| (index as usize) < mesh.positions.len()),
-                    "{file}"
-                );
+                assert_eq!(mesh.triangles.len(), mesh.triangle_materials.len(), "{file}");
+                assert!(mesh.normals.iter().all(|n| n.iter().all(|c| c.is_finite())), "{file}: finite normals");
+                assert!(mesh.triangles.iter().flatten().all(|&index| (index as usize) < mesh.positions.len()), "{file}");
             }
             Ok(Err(diagnostic)) => {
                 assert!(
-                    diagnostic
-                        .file
-                        .to_string_lossy()
-                        .contains(Path::new(file).file_name().unwrap().to_str().unwrap()),
+                    diagnostic.file.to_string_lossy().contains(Path::new(file).file_name().unwrap().to_str().unwrap()),
                     "{diagnostic} names the file"
                 );
                 failed.push(diagnostic.to_string());
             }
         }
     }
-    println!(
-        "{loaded} loaded, {} failed cleanly:\n{}",
-        failed.len(),
-        failed.join("\n")
-    );
+    println!("{loaded} loaded, {} failed cleanly:\n{}", failed.len(), failed.join("\n"));
     assert!(loaded >= 60, "most of the suite is valid: {loaded} loaded");
 }
 
@@ -187,39 +119,16 @@ fn corpus_meshes_load_with_their_documented_triangle_counts_and_maps() {
         ("meshes/spot/spot_triangulated_with_mtl.obj", 5_856, true),
         ("meshes/flight_helmet/FlightHelmet.obj", 94_722, true),
     ] {
-        let Ok((mesh, warnings)) = load_corpus_mesh(file) else {
-            panic!("{file} loads")
-        };
+        let Ok((mesh, warnings)) = load_corpus_mesh(file) else { panic!("{file} loads") };
         assert_eq!(mesh.triangles.len(), triangles, "{file}");
         assert_eq!(mesh.uvs.is_some(), with_uvs, "{file}");
         assert!(warnings.is_empty(), "{file}: {warnings:?}");
     }
     let (oak, _) = load_corpus_mesh("trees/oak_medium.obj").unwrap();
-    let bark = oak
-        .materials
-        .iter()
-        .find(|material| material.maps.contains_key(&TextureSlot::Normal))
-        .expect("a bark material");
-    for slot in [
-        TextureSlot::Albedo,
-        TextureSlot::Normal,
-        TextureSlot::Roughness,
-        TextureSlot::Ao,
-    ] {
-        assert!(
-            bark.maps.contains_key(&slot),
-            "bark has {slot:?}: {:?}",
-            bark.maps
-        );
+    let bark = oak.materials.iter().find(|material| material.maps.contains_key(&TextureSlot::Normal)).expect("a bark material");
+    for slot in [TextureSlot::Albedo, TextureSlot::Normal, TextureSlot::Roughness, TextureSlot::Ao] {
+        assert!(bark.maps.contains_key(&slot), "bark has {slot:?}: {:?}", bark.maps);
     }
-    let leaves = oak
-        .materials
-        .iter()
-        .find(|material| material.maps.contains_key(&TextureSlot::Opacity))
-        .expect("a leaf material");
-    assert_eq!(
-        leaves.maps[&TextureSlot::Albedo],
-        leaves.maps[&TextureSlot::Opacity],
-        "palette PNG as map_Kd and map_d"
-    );
+    let leaves = oak.materials.iter().find(|material| material.maps.contains_key(&TextureSlot::Opacity)).expect("a leaf material");
+    assert_eq!(leaves.maps[&TextureSlot::Albedo], leaves.maps[&TextureSlot::Opacity], "palette PNG as map_Kd and map_d");
 }

@@ -6,9 +6,7 @@ use cirrus::mips::texture_alpha_coverage;
 use cirrus::quality::{decode_blocks, psnr};
 use cirrus::summary::AssetStatus;
 
-use crate::support::{
-    build, cutout_png, decode_png, ktx2_level, pattern_png, read_ktx2, TempProject,
-};
+use crate::support::{build, cutout_png, decode_png, ktx2_level, pattern_png, read_ktx2, TempProject};
 
 /// A project over the bundled oak bark (CC0), an alpha-tested cutout and a constants-only
 /// material, with `extra_encode` added to the defaults.
@@ -19,13 +17,9 @@ pub fn material_project(extra_encode: &str) -> TempProject {
             Material(name: "mixed", material: "materials/mixed.mymaterial"),
         ])"#
     ));
-    let bark =
-        std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("examples/assets/textures/bark_oak");
+    let bark = std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("examples/assets/textures/bark_oak");
     for map in ["albedo", "normal", "roughness", "ao"] {
-        project.write(
-            &format!("assets/textures/oak/{map}.jpg"),
-            std::fs::read(bark.join(format!("{map}.jpg"))).expect("bundled bark"),
-        );
+        project.write(&format!("assets/textures/oak/{map}.jpg"), std::fs::read(bark.join(format!("{map}.jpg"))).expect("bundled bark"));
     }
     project.write(
         "assets/materials/bark.mymaterial",
@@ -74,40 +68,20 @@ fn ktx2_surfaces_decode_within_the_psnr_bars_with_full_mip_chains() {
         assert_eq!(ktx2.vk_format, vk_format, "{material}/{surface} vkFormat");
         assert_eq!(ktx2.width, width, "{material}/{surface} width");
         let expected_levels = 32 - ktx2.width.max(ktx2.height).leading_zeros();
-        assert_eq!(
-            ktx2.levels.len() as u32,
-            expected_levels,
-            "{material}/{surface}: mips down to 1×1"
-        );
+        assert_eq!(ktx2.levels.len() as u32, expected_levels, "{material}/{surface}: mips down to 1×1");
         let reference = decode_png(&project.read(&format!("baked/{material}/{surface}.png")));
-        let decoded = decode_blocks(
-            format,
-            &ktx2_level(&bytes, &ktx2, 0),
-            ktx2.width,
-            ktx2.height,
-        );
+        let decoded = decode_blocks(format, &ktx2_level(&bytes, &ktx2, 0), ktx2.width, ktx2.height);
         let channels = match surface {
             "albedo" => 4,
             "mra" => 3,
             _ => 2,
         };
         let measured = psnr(&reference, &decoded, channels);
-        assert!(
-            measured >= bar,
-            "{material}/{surface}: {measured:.2} dB < {bar} dB"
-        );
+        assert!(measured >= bar, "{material}/{surface}: {measured:.2} dB < {bar} dB");
         for level in 1..ktx2.levels.len() {
             let size = |side: u32| (side >> level).max(1).div_ceil(4) as u64;
-            let block = if matches!(format, BlockFormat::Bc1 | BlockFormat::Bc4) {
-                8
-            } else {
-                16
-            };
-            assert_eq!(
-                ktx2.levels[level].2,
-                size(ktx2.width) * size(ktx2.height) * block,
-                "level {level} size"
-            );
+            let block = if matches!(format, BlockFormat::Bc1 | BlockFormat::Bc4) { 8 } else { 16 };
+            assert_eq!(ktx2.levels[level].2, size(ktx2.width) * size(ktx2.height) * block, "level {level} size");
         }
     }
 }
@@ -120,55 +94,28 @@ fn alpha_tested_albedo_keeps_its_coverage_down_the_mip_chain() {
     let ktx2 = read_ktx2(&bytes);
     let coverage = |level: usize| {
         let (width, height) = ((ktx2.width >> level).max(1), (ktx2.height >> level).max(1));
-        texture_alpha_coverage(
-            &decode_blocks(
-                BlockFormat::Bc7,
-                &ktx2_level(&bytes, &ktx2, level),
-                width,
-                height,
-            ),
-            0.5,
-        )
+        texture_alpha_coverage(&decode_blocks(BlockFormat::Bc7, &ktx2_level(&bytes, &ktx2, level), width, height), 0.5)
     };
     let level0 = coverage(0);
-    assert!(
-        level0 > 0.2 && level0 < 0.7,
-        "the fixture is partly transparent: {level0}"
-    );
+    assert!(level0 > 0.2 && level0 < 0.7, "the fixture is partly transparent: {level0}");
     // Down to 32×16 texels; below that a periodic fixture leaves too few distinct alphas to split.
     for level in 1..=3 {
         let difference = (coverage(level) - level0).abs();
-        assert!(
-            difference < 0.05,
-            "level {level}: coverage {} vs {level0}",
-            coverage(level)
-        );
+        assert!(difference < 0.05, "level {level}: coverage {} vs {level0}", coverage(level));
     }
-    let report: serde_json::Value =
-        serde_json::from_slice(&project.read("baked/mixed/report.json")).expect("report");
+    let report: serde_json::Value = serde_json::from_slice(&project.read("baked/mixed/report.json")).expect("report");
     assert_eq!(report["materials"][0]["surfaces"][0]["alpha_tested"], true);
 }
 
 #[test]
 fn dds_and_pvr_containers_have_correct_headers() {
-    for (container, check) in [
-        ("Dds", check_dds as fn(&[u8], u32, u32)),
-        ("Pvr", check_pvr),
-    ] {
+    for (container, check) in [("Dds", check_dds as fn(&[u8], u32, u32)), ("Pvr", check_pvr)] {
         let project = material_project(&format!("container: {container}"));
         let summary = build(&mut project.open());
         assert!(summary.all_ok(), "{}", summary.to_text());
         let extension = container.to_lowercase();
-        check(
-            &project.read(&format!("baked/bark/oak_bark/albedo.{extension}")),
-            1024,
-            11,
-        );
-        check(
-            &project.read(&format!("baked/mixed/plain/mra.{extension}")),
-            128,
-            8,
-        );
+        check(&project.read(&format!("baked/bark/oak_bark/albedo.{extension}")), 1024, 11);
+        check(&project.read(&format!("baked/mixed/plain/mra.{extension}")), 128, 8);
     }
 }
 
@@ -179,16 +126,10 @@ fn check_dds(bytes: &[u8], width: u32, levels: u32) {
     assert_eq!((u32_at(12), u32_at(16)), (width, width), "height, width");
     assert_eq!(u32_at(28), levels, "mip count");
     assert_eq!(&bytes[84..88], b"DX10");
-    assert!(
-        [99, 71].contains(&u32_at(128)),
-        "DXGI BC7 sRGB or BC1 unorm, got {}",
-        u32_at(128)
-    );
+    assert!([99, 71].contains(&u32_at(128)), "DXGI BC7 sRGB or BC1 unorm, got {}", u32_at(128));
     assert_eq!(u32_at(132), 3, "TEXTURE2D");
     let block = if u32_at(128) == 71 { 8 } else { 16 };
-    let payload: u32 = (0..levels)
-        .map(|level| (width >> level).max(1).div_ceil(4).pow(2) * block)
-        .sum();
+    let payload: u32 = (0..levels).map(|level| (width >> level).max(1).div_ceil(4).pow(2) * block).sum();
     assert_eq!(bytes.len() as u32, 148 + payload, "header plus every level");
 }
 
@@ -197,11 +138,7 @@ fn check_pvr(bytes: &[u8], width: u32, levels: u32) {
     assert_eq!(u32_at(0), 0x03525650, "PVR v3 magic");
     let format = u32::from_le_bytes(bytes[8..12].try_into().unwrap());
     assert!([15, 7].contains(&format), "BC7 or BC1");
-    assert_eq!(
-        u32_at(16),
-        if format == 15 { 1 } else { 0 },
-        "colour space: sRGB albedo, linear mra"
-    );
+    assert_eq!(u32_at(16), if format == 15 { 1 } else { 0 }, "colour space: sRGB albedo, linear mra");
     assert_eq!((u32_at(24), u32_at(28)), (width, width));
     assert_eq!(u32_at(44), levels, "mip count");
     assert_eq!(u32_at(48), 0, "no metadata");
@@ -214,10 +151,7 @@ fn zstd_supercompressed_ktx2_round_trips() {
     let bytes = project.read("baked/bark/oak_bark/normal.ktx2");
     let ktx2 = read_ktx2(&bytes);
     assert_eq!(ktx2.supercompression, 2, "zstd");
-    assert!(
-        ktx2.levels[0].1 < ktx2.levels[0].2,
-        "level 0 is smaller supercompressed"
-    );
+    assert!(ktx2.levels[0].1 < ktx2.levels[0].2, "level 0 is smaller supercompressed");
     let reference = decode_png(&project.read("baked/bark/oak_bark/normal.png"));
     let decoded = decode_blocks(BlockFormat::Bc5, &ktx2_level(&bytes, &ktx2, 0), 1024, 1024);
     assert!(psnr(&reference, &decoded, 2) >= 42.0);
@@ -232,26 +166,15 @@ fn constants_fill_missing_maps_and_small_maps_are_resampled() {
     let project = material_project("");
     build(&mut project.open());
     let albedo = decode_png(&project.read("baked/mixed/plain/albedo.png"));
-    assert_eq!(
-        (albedo.width, albedo.height),
-        (4, 4),
-        "no albedo map: one block of the constant"
-    );
+    assert_eq!((albedo.width, albedo.height), (4, 4), "no albedo map: one block of the constant");
     // Colour constants are linear; the sRGB surface stores them encoded.
     assert_eq!(albedo.texel(0, 0), [188, 137, 99, 255]);
     let mra = decode_png(&project.read("baked/mixed/plain/mra.png"));
-    assert_eq!(
-        (mra.width, mra.height),
-        (128, 128),
-        "the largest source of the group"
-    );
+    assert_eq!((mra.width, mra.height), (128, 128), "the largest source of the group");
     assert_eq!(mra.texel(5, 5)[2], 255, "AO defaults to 1");
     let metal = decode_png(&pattern_png(64, 64, 3));
     let (resampled, source) = (mra.texel(64, 64)[0] as i32, metal.texel(32, 32)[0] as i32);
-    assert!(
-        (resampled - source).abs() <= 6,
-        "metallic upsampled 2×: {resampled} vs {source}"
-    );
+    assert!((resampled - source).abs() <= 6, "metallic upsampled 2×: {resampled} vs {source}");
     let normal = decode_png(&project.read("baked/mixed/plain/normal.png"));
     assert_eq!(&normal.texel(0, 0)[..3], &[128, 128, 255], "flat normal");
 }
@@ -261,41 +184,22 @@ fn report_json_lists_every_surface_with_its_measured_psnr() {
     let project = material_project("");
     let summary = build(&mut project.open());
     assert_eq!(summary.assets[0].status, AssetStatus::Ok);
-    let report: serde_json::Value =
-        serde_json::from_slice(&project.read("baked/bark/report.json")).expect("report");
-    let surfaces = report["materials"][0]["surfaces"]
-        .as_array()
-        .expect("surfaces");
-    let names: Vec<&str> = surfaces
-        .iter()
-        .map(|surface| surface["surface"].as_str().unwrap())
-        .collect();
+    let report: serde_json::Value = serde_json::from_slice(&project.read("baked/bark/report.json")).expect("report");
+    let surfaces = report["materials"][0]["surfaces"].as_array().expect("surfaces");
+    let names: Vec<&str> = surfaces.iter().map(|surface| surface["surface"].as_str().unwrap()).collect();
     assert_eq!(names, ["Albedo", "Mra", "Normal"]);
     for surface in surfaces {
         assert!(surface["psnr_db"].as_f64().unwrap() > 36.0);
         assert_eq!(surface["levels"], 11);
     }
-    let manifest: serde_json::Value =
-        serde_json::from_slice(&project.read("baked/manifest.json")).expect("manifest");
+    let manifest: serde_json::Value = serde_json::from_slice(&project.read("baked/manifest.json")).expect("manifest");
     let entry = &manifest["artifacts"]["baked/bark/oak_bark/albedo.ktx2"];
-    assert_eq!(
-        entry["hash"].as_str().unwrap(),
-        blake3::hash(&project.read("baked/bark/oak_bark/albedo.ktx2"))
-            .to_hex()
-            .as_str()
-    );
+    assert_eq!(entry["hash"].as_str().unwrap(), blake3::hash(&project.read("baked/bark/oak_bark/albedo.ktx2")).to_hex().as_str());
     assert_eq!(entry["revision"], 1);
     #[cfg(unix)]
     {
         use std::os::unix::fs::PermissionsExt;
-        let mode = std::fs::metadata(project.path("baked/bark/oak_bark/albedo.ktx2"))
-            .unwrap()
-            .permissions()
-            .mode();
-        assert_eq!(
-            mode & 0o644,
-            0o644,
-            "artifacts are readable by other users: {mode:o}"
-        );
+        let mode = std::fs::metadata(project.path("baked/bark/oak_bark/albedo.ktx2")).unwrap().permissions().mode();
+        assert_eq!(mode & 0o644, 0o644, "artifacts are readable by other users: {mode:o}");
     }
 }

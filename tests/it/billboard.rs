@@ -20,56 +20,20 @@ fn tree_obj(leaf_tilt: f32) -> String {
             obj.push_str(&format!("vt {u} {v}\n"));
         }
         let b = vertices + 1;
-        obj.push_str(&format!(
-            "f {}/{} {}/{} {}/{} {}/{}\n",
-            b,
-            b,
-            b + 1,
-            b + 1,
-            b + 2,
-            b + 2,
-            b + 3,
-            b + 3
-        ));
+        obj.push_str(&format!("f {}/{} {}/{} {}/{} {}/{}\n", b, b, b + 1, b + 1, b + 2, b + 2, b + 3, b + 3));
         vertices += 4;
     };
     let (r, h) = (0.3, 4.0);
-    for [a, b] in [
-        [[-r, -r], [r, -r]],
-        [[r, -r], [r, r]],
-        [[r, r], [-r, r]],
-        [[-r, r], [-r, -r]],
-    ] {
-        quad(
-            &mut obj,
-            [
-                [a[0], 0.0, a[1]],
-                [b[0], 0.0, b[1]],
-                [b[0], h, b[1]],
-                [a[0], h, a[1]],
-            ],
-            "bark",
-        );
+    for [a, b] in [[[-r, -r], [r, -r]], [[r, -r], [r, r]], [[r, r], [-r, r]], [[-r, r], [-r, -r]]] {
+        quad(&mut obj, [[a[0], 0.0, a[1]], [b[0], 0.0, b[1]], [b[0], h, b[1]], [a[0], h, a[1]]], "bark");
     }
     for index in 0..24 {
         let angle = index as f32 * 0.9;
-        let (cx, cy, cz) = (
-            1.5 * angle.cos(),
-            3.0 + (index % 4) as f32 * 0.5,
-            1.5 * angle.sin(),
-        );
-        let (dx, dz) = (
-            0.4 * (angle + leaf_tilt).cos(),
-            0.4 * (angle + leaf_tilt).sin(),
-        );
+        let (cx, cy, cz) = (1.5 * angle.cos(), 3.0 + (index % 4) as f32 * 0.5, 1.5 * angle.sin());
+        let (dx, dz) = (0.4 * (angle + leaf_tilt).cos(), 0.4 * (angle + leaf_tilt).sin());
         quad(
             &mut obj,
-            [
-                [cx - dx, cy - 0.4, cz - dz],
-                [cx + dx, cy - 0.4, cz + dz],
-                [cx + dx, cy + 0.4, cz + dz],
-                [cx - dx, cy + 0.4, cz - dz],
-            ],
+            [[cx - dx, cy - 0.4, cz - dz], [cx + dx, cy - 0.4, cz + dz], [cx + dx, cy + 0.4, cz + dz], [cx - dx, cy + 0.4, cz - dz]],
             "leaves",
         );
     }
@@ -88,10 +52,7 @@ fn tree_project() -> TempProject {
         "newmtl bark\nKd 1 1 1\nmap_Kd bark.png\nnorm bark_normal.png\nPm 0\nPr 0.9\n\nnewmtl leaves\nKd 1 1 1\nmap_Kd leaf.png\nmap_d leaf.png\nPr 0.6\n",
     );
     project.write("assets/bark.png", pattern_png(32, 32, 1));
-    project.write(
-        "assets/bark_normal.png",
-        crate::support::png_bytes(4, 4, &[128, 128, 255, 255].repeat(16)),
-    );
+    project.write("assets/bark_normal.png", crate::support::png_bytes(4, 4, &[128, 128, 255, 255].repeat(16)));
     project.write("assets/leaf.png", cutout_png(64, 64));
     project
 }
@@ -99,43 +60,16 @@ fn tree_project() -> TempProject {
 /// The rectangles (by index) holding faces of `material`, recomputed with the pure stages.
 fn rectangles_with(project: &TempProject, material: &str) -> BTreeSet<String> {
     let obj = project.read("assets/tree.obj");
-    let libraries = [(
-        Path::new("assets/tree.mtl").to_path_buf(),
-        Some(project.read("assets/tree.mtl")),
-    )]
-    .into_iter()
-    .collect();
-    let (mesh, _) = cirrus::mesh::load_mesh(
-        Path::new("assets/tree.obj"),
-        &obj,
-        &libraries,
-        Path::new("assets"),
-    )
-    .expect("loads");
-    let planes = cirrus::planes::select_planes(
-        &mesh.positions,
-        &mesh.triangles,
-        cirrus::planes::PlaneSettings {
-            epsilon: 0.02,
-            max_planes: None,
-        },
-    );
-    let rectangles =
-        cirrus::rectangles::plane_rectangles(&mesh.positions, &mesh.triangles, &planes);
-    let index = mesh
-        .materials
-        .iter()
-        .position(|m| m.name == material)
-        .expect("material") as u32;
+    let libraries = [(Path::new("assets/tree.mtl").to_path_buf(), Some(project.read("assets/tree.mtl")))].into_iter().collect();
+    let (mesh, _) = cirrus::mesh::load_mesh(Path::new("assets/tree.obj"), &obj, &libraries, Path::new("assets")).expect("loads");
+    let planes =
+        cirrus::planes::select_planes(&mesh.positions, &mesh.triangles, cirrus::planes::PlaneSettings { epsilon: 0.02, max_planes: None });
+    let rectangles = cirrus::rectangles::plane_rectangles(&mesh.positions, &mesh.triangles, &planes);
+    let index = mesh.materials.iter().position(|m| m.name == material).expect("material") as u32;
     rectangles
         .iter()
         .enumerate()
-        .filter(|(_, rectangle)| {
-            rectangle
-                .faces
-                .iter()
-                .any(|&face| mesh.triangle_materials[face as usize] == index)
-        })
+        .filter(|(_, rectangle)| rectangle.faces.iter().any(|&face| mesh.triangle_materials[face as usize] == index))
         .map(|(number, _)| format!("render(tree/plane{number})"))
         .collect()
 }
@@ -145,33 +79,18 @@ fn a_billboard_cloud_bakes_its_lod_and_atlas() {
     let project = tree_project();
     let summary = build(&mut project.open());
     assert!(summary.all_ok(), "{}", summary.to_text());
-    let report: serde_json::Value =
-        serde_json::from_slice(&project.read("baked/tree/report.json")).expect("report");
+    let report: serde_json::Value = serde_json::from_slice(&project.read("baked/tree/report.json")).expect("report");
     assert_eq!(report["faces"], 56);
-    assert!(
-        report["max_error_world"].as_f64().unwrap()
-            <= report["epsilon_world"].as_f64().unwrap() * 1.0001
-    );
-    assert!(
-        report["atlas"]["coverage"].as_f64().unwrap() > 0.05,
-        "the atlas holds rendered texels: {}",
-        report["atlas"]
-    );
+    assert!(report["max_error_world"].as_f64().unwrap() <= report["epsilon_world"].as_f64().unwrap() * 1.0001);
+    assert!(report["atlas"]["coverage"].as_f64().unwrap() > 0.05, "the atlas holds rendered texels: {}", report["atlas"]);
     for surface in ["albedo", "mra", "normal", "height"] {
         let ktx2 = crate::support::read_ktx2(&project.read(&format!("baked/tree/{surface}.ktx2")));
         assert_eq!(
             (ktx2.width, ktx2.height),
-            (
-                report["atlas"]["width"].as_u64().unwrap() as u32,
-                report["atlas"]["height"].as_u64().unwrap() as u32
-            )
+            (report["atlas"]["width"].as_u64().unwrap() as u32, report["atlas"]["height"].as_u64().unwrap() as u32)
         );
     }
-    assert_eq!(
-        crate::support::read_ktx2(&project.read("baked/tree/height.ktx2")).vk_format,
-        139,
-        "BC4"
-    );
+    assert_eq!(crate::support::read_ktx2(&project.read("baked/tree/height.ktx2")).vk_format, 139, "BC4");
 }
 
 #[test]
@@ -188,42 +107,18 @@ fn a_bark_texture_edit_rerenders_only_bark_rectangles_and_leaves_the_lod_alone()
     assert!(summary.all_ok(), "{}", summary.to_text());
     let executed: BTreeSet<String> = cirrus.take_executed_stages().into_iter().collect();
     let mut expected = rectangles_with(&project, "bark");
-    let leaf_only: Vec<String> = rectangles_with(&project, "leaves")
-        .difference(&expected)
-        .cloned()
-        .collect();
-    assert!(
-        !expected.is_empty() && !leaf_only.is_empty(),
-        "the fixture has bark rectangles and leaf-only ones"
-    );
-    expected.extend([
-        "decode(assets/bark.png)".to_string(),
-        "atlas(tree)".to_string(),
-        "encode(tree/albedo)".to_string(),
-    ]);
-    assert_eq!(
-        executed, expected,
-        "exactly the bark rectangles, the atlas and the albedo encoder"
-    );
-    assert_eq!(
-        project.read("baked/tree/lod.obj"),
-        lod,
-        "lod.obj is untouched by texture edits"
-    );
-    assert_eq!(
-        project.read("baked/tree/mra.ktx2"),
-        leaves_before,
-        "mra did not change"
-    );
+    let leaf_only: Vec<String> = rectangles_with(&project, "leaves").difference(&expected).cloned().collect();
+    assert!(!expected.is_empty() && !leaf_only.is_empty(), "the fixture has bark rectangles and leaf-only ones");
+    expected.extend(["decode(assets/bark.png)".to_string(), "atlas(tree)".to_string(), "encode(tree/albedo)".to_string()]);
+    assert_eq!(executed, expected, "exactly the bark rectangles, the atlas and the albedo encoder");
+    assert_eq!(project.read("baked/tree/lod.obj"), lod, "lod.obj is untouched by texture edits");
+    assert_eq!(project.read("baked/tree/mra.ktx2"), leaves_before, "mra did not change");
 
     // An encode setting re-runs only the encoder that reads it.
     let pipeline = String::from_utf8(project.read("pipeline.ron")).unwrap();
     std::fs::write(
         project.path("pipeline.ron"),
-        pipeline.replace(
-            "atlas: (max_size: 256, padding: 2)",
-            "atlas: (max_size: 256, padding: 2), encode: (mra: Bc7)",
-        ),
+        pipeline.replace("atlas: (max_size: 256, padding: 2)", "atlas: (max_size: 256, padding: 2), encode: (mra: Bc7)"),
     )
     .unwrap();
     cirrus.reconfigure(cirrus::config::load_pipeline(&project.path("pipeline.ron")).unwrap());
@@ -234,19 +129,8 @@ fn a_bark_texture_edit_rerenders_only_bark_rectangles_and_leaves_the_lod_alone()
     project.write("assets/tree.obj", tree_obj(0.3));
     build(&mut cirrus);
     let executed = cirrus.take_executed_stages();
-    for stage in [
-        "mesh(tree)",
-        "planes(tree)",
-        "layout(tree)",
-        "atlas(tree)",
-        "lod(tree)",
-        "encode(tree/albedo)",
-        "encode(tree/height)",
-    ] {
-        assert!(
-            executed.iter().any(|e| e == stage),
-            "{stage} re-ran after a mesh edit: {executed:?}"
-        );
+    for stage in ["mesh(tree)", "planes(tree)", "layout(tree)", "atlas(tree)", "lod(tree)", "encode(tree/albedo)", "encode(tree/height)"] {
+        assert!(executed.iter().any(|e| e == stage), "{stage} re-ran after a mesh edit: {executed:?}");
     }
     assert_ne!(project.read("baked/tree/lod.obj"), lod, "a new LOD mesh");
 }
@@ -261,17 +145,9 @@ fn an_unchanged_billboard_cloud_runs_no_stage_in_process_or_after_a_restart() {
     assert_eq!(cirrus.take_executed_stages(), Vec::<String>::new());
     let mut restarted = project.open();
     let summary = build(&mut restarted);
-    assert_eq!(
-        restarted.take_executed_stages(),
-        Vec::<String>::new(),
-        "the persistent cache has it"
-    );
+    assert_eq!(restarted.take_executed_stages(), Vec::<String>::new(), "the persistent cache has it");
     for stage in &summary.assets[0].stages {
-        assert_eq!(
-            stage.status,
-            cirrus::summary::StageStatus::Cached,
-            "{stage:?}"
-        );
+        assert_eq!(stage.status, cirrus::summary::StageStatus::Cached, "{stage:?}");
     }
     assert_eq!(summary.revision, again.revision);
 }

@@ -13,10 +13,7 @@ fn project_with_a_broken_material(broken: &str) -> TempProject {
         ])"#,
     );
     project.write("assets/albedo.png", pattern_png(16, 16, 1));
-    project.write(
-        "assets/good.mymaterial",
-        r#"Material $good { Texture (attrib = "diffuse") {string {"albedo.png"}} }"#,
-    );
+    project.write("assets/good.mymaterial", r#"Material $good { Texture (attrib = "diffuse") {string {"albedo.png"}} }"#);
     project.write("assets/broken.mymaterial", broken);
     project
 }
@@ -25,20 +22,11 @@ fn project_with_a_broken_material(broken: &str) -> TempProject {
 /// is 1 and the good asset baked.
 fn broken_asset_errors(project: &TempProject) -> serde_json::Value {
     let output = project.run_cli(&["build", "--summary", "json"]);
-    assert_eq!(
-        output.status.code(),
-        Some(1),
-        "stderr: {}",
-        String::from_utf8_lossy(&output.stderr)
-    );
-    let summary: serde_json::Value =
-        serde_json::from_slice(&output.stdout).expect("one JSON object on stdout");
+    assert_eq!(output.status.code(), Some(1), "stderr: {}", String::from_utf8_lossy(&output.stderr));
+    let summary: serde_json::Value = serde_json::from_slice(&output.stdout).expect("one JSON object on stdout");
     assert_eq!(summary["assets"][0]["name"], "good");
     assert_eq!(summary["assets"][0]["status"], "ok");
-    assert!(
-        project.path("baked/good/good/albedo.ktx2").exists(),
-        "the good asset is baked"
-    );
+    assert!(project.path("baked/good/good/albedo.ktx2").exists(), "the good asset is baked");
     assert_eq!(summary["assets"][1]["status"], "failed");
     summary["assets"][1]["errors"].clone()
 }
@@ -52,19 +40,18 @@ fn unclosed_brace_fails_its_asset_with_line_and_column() {
 
 #[test]
 fn wrong_data_type_fails_its_asset() {
-    let project =
-        project_with_a_broken_material("Material $m {\n  Param (attrib = \"ao\") {int32 {1}}\n}\n");
+    let project = project_with_a_broken_material("Material $m {\n  Param (attrib = \"ao\") {int32 {1}}\n}\n");
     expect![[r#"[{"column":26,"file":"assets/broken.mymaterial","line":2,"message":"`Param` expects float data, found int32"}]"#]]
         .assert_eq(&broken_asset_errors(&project).to_string());
 }
 
 #[test]
 fn missing_texture_names_the_material_file_and_the_missing_path() {
-    let project = project_with_a_broken_material("Material $m {\n  Texture (attrib = \"roughness\") {string {\"../nowhere/rough.png\"}}\n}\n");
+    let project =
+        project_with_a_broken_material("Material $m {\n  Texture (attrib = \"roughness\") {string {\"../nowhere/rough.png\"}}\n}\n");
     std::fs::create_dir_all(project.path("nowhere")).unwrap();
-    let project_inside = project_with_a_broken_material(
-        "Material $m {\n  Texture (attrib = \"roughness\") {string {\"maps/rough.png\"}}\n}\n",
-    );
+    let project_inside =
+        project_with_a_broken_material("Material $m {\n  Texture (attrib = \"roughness\") {string {\"maps/rough.png\"}}\n}\n");
     expect![[r#"[{"column":35,"file":"assets/broken.mymaterial","line":2,"message":"texture path \"../nowhere/rough.png\" must be relative and stay inside the source folder"}]"#]]
         .assert_eq(&broken_asset_errors(&project).to_string().replace(":41,", ":3,"));
     expect![[r#"[{"column":35,"file":"assets/broken.mymaterial","line":2,"message":"roughness texture \"maps/rough.png\" (assets/maps/rough.png): file not found"}]"#]]
@@ -73,24 +60,15 @@ fn missing_texture_names_the_material_file_and_the_missing_path() {
 
 #[test]
 fn unreadable_image_names_the_image_and_keeps_the_last_good_artifacts() {
-    let project = project_with_a_broken_material(
-        "Material $m {\n  Texture (attrib = \"diffuse\") {string {\"bad.png\"}}\n}\n",
-    );
+    let project = project_with_a_broken_material("Material $m {\n  Texture (attrib = \"diffuse\") {string {\"bad.png\"}}\n}\n");
     project.write("assets/bad.png", pattern_png(8, 8, 5));
     assert_eq!(project.run_cli(&["build"]).status.code(), Some(0));
     let good_bytes = project.read("baked/broken/m/albedo.ktx2");
     project.write("assets/bad.png", b"\x89PNG\r\n\x1a\n this is not a PNG");
     expect![[r#"[{"column":null,"file":"assets/bad.png","line":null,"message":"cannot decode the image: Format error decoding Png: ChunkType { type: s is, critical: false, private: true, reserved: true, safecopy: true } chunk appeared before IHDR chunk"}]"#]]
         .assert_eq(&broken_asset_errors(&project).to_string());
-    assert_eq!(
-        project.read("baked/broken/m/albedo.ktx2"),
-        good_bytes,
-        "the last good artifact stays"
-    );
-    assert!(
-        project.path("baked/broken/m/mra.ktx2").exists(),
-        "surfaces that do not read the image still bake"
-    );
+    assert_eq!(project.read("baked/broken/m/albedo.ktx2"), good_bytes, "the last good artifact stays");
+    assert!(project.path("baked/broken/m/mra.ktx2").exists(), "surfaces that do not read the image still bake");
 }
 
 #[test]
@@ -101,56 +79,30 @@ fn bad_pipeline_is_a_configuration_error_with_exit_status_2() {
     expect![[r#"
         pipeline.ron:4:30: Unexpected missing field `material` in `Material`
     "#]]
-    .assert_eq(
-        &String::from_utf8_lossy(&output.stderr)
-            .replace(&format!("{}/", project.root().display()), ""),
-    );
+    .assert_eq(&String::from_utf8_lossy(&output.stderr).replace(&format!("{}/", project.root().display()), ""));
     let output = project.run_cli(&["check"]);
     assert_eq!(output.status.code(), Some(2));
 }
 
 #[test]
 fn summary_json_follows_the_contract_and_asset_selection_works() {
-    let project = project_with_a_broken_material(
-        "Material $m { Param (attrib = \"roughness\") {float {0.5}} }",
-    );
+    let project = project_with_a_broken_material("Material $m { Param (attrib = \"roughness\") {float {0.5}} }");
     let output = project.run_cli(&["build", "--asset", "good", "--summary", "json"]);
     assert_eq!(output.status.code(), Some(0));
     let summary: serde_json::Value = serde_json::from_slice(&output.stdout).unwrap();
     assert_eq!(summary["revision"], 1);
     let asset = &summary["assets"][0];
-    assert_eq!(
-        summary["assets"].as_array().unwrap().len(),
-        1,
-        "--asset selects"
-    );
+    assert_eq!(summary["assets"].as_array().unwrap().len(), 1, "--asset selects");
     let keys: Vec<&String> = asset.as_object().unwrap().keys().collect();
-    assert_eq!(
-        keys,
-        ["artifacts", "errors", "kind", "name", "stages", "status"]
-    );
+    assert_eq!(keys, ["artifacts", "errors", "kind", "name", "stages", "status"]);
     assert_eq!(asset["kind"], "Material");
     let stage = &asset["stages"][0];
-    assert_eq!(
-        (stage["stage"].as_str(), stage["status"].as_str()),
-        (Some("parse"), Some("ran"))
-    );
+    assert_eq!((stage["stage"].as_str(), stage["status"].as_str()), (Some("parse"), Some("ran")));
     assert!(stage["ms"].is_number());
     let artifact = &asset["artifacts"][0];
     let bytes = project.read(artifact["path"].as_str().unwrap());
-    assert_eq!(
-        artifact["hash"].as_str().unwrap(),
-        blake3::hash(&bytes).to_hex().as_str()
-    );
-    assert_eq!(
-        project.run_cli(&["build", "--asset", "nope"]).status.code(),
-        Some(2)
-    );
+    assert_eq!(artifact["hash"].as_str().unwrap(), blake3::hash(&bytes).to_hex().as_str());
+    assert_eq!(project.run_cli(&["build", "--asset", "nope"]).status.code(), Some(2));
     let output = project.run_cli(&["check"]);
-    assert_eq!(
-        output.status.code(),
-        Some(0),
-        "{}",
-        String::from_utf8_lossy(&output.stdout)
-    );
+    assert_eq!(output.status.code(), Some(0), "{}", String::from_utf8_lossy(&output.stdout));
 }

@@ -20,62 +20,32 @@ fn defaults_apply_and_assets_override_them() {
     assert_eq!(config.root, Path::new("project"));
     assert_eq!(config.source_dir(), Path::new("project/assets"));
     let bark = &config.assets[0];
-    assert_eq!(
-        bark.source,
-        AssetSource::Material {
-            material: "materials/bark.mymaterial".into()
-        }
-    );
+    assert_eq!(bark.source, AssetSource::Material { material: "materials/bark.mymaterial".into() });
     assert_eq!(bark.settings.encode.mra, BlockFormat::Bc7, "from defaults");
-    assert_eq!(
-        bark.settings.encode.container,
-        Container::Dds,
-        "asset override"
-    );
-    assert_eq!(
-        bark.settings.encode.zstd, None,
-        "an explicit None overrides a default"
-    );
-    assert_eq!(
-        bark.settings.encode.albedo,
-        BlockFormat::Bc7,
-        "built-in default"
-    );
+    assert_eq!(bark.settings.encode.container, Container::Dds, "asset override");
+    assert_eq!(bark.settings.encode.zstd, None, "an explicit None overrides a default");
+    assert_eq!(bark.settings.encode.albedo, BlockFormat::Bc7, "built-in default");
     let oak = &config.assets[1];
     assert_eq!(oak.settings.billboard.epsilon, 0.03);
     assert_eq!(oak.settings.billboard.max_planes, Some(12));
     assert_eq!(oak.settings.encode.zstd, Some(5));
-    let rule_asset = config
-        .asset_for_rule_match(Path::new("materials/metal/steel.mymaterial"))
-        .expect("rule matches");
+    let rule_asset = config.asset_for_rule_match(Path::new("materials/metal/steel.mymaterial")).expect("rule matches");
     assert_eq!(rule_asset.name, "materials/metal/steel");
-    assert!(
-        config
-            .asset_for_rule_match(Path::new("materials/bark.mymaterial"))
-            .is_none(),
-        "explicit asset wins"
-    );
-    assert!(config
-        .asset_for_rule_match(Path::new("textures/bark.png"))
-        .is_none());
+    assert!(config.asset_for_rule_match(Path::new("materials/bark.mymaterial")).is_none(), "explicit asset wins");
+    assert!(config.asset_for_rule_match(Path::new("textures/bark.png")).is_none());
 }
 
 /// Every `tests/fixtures/pipeline_errors/*.ron` fails with the messages in its `.expected` file.
 #[test]
 fn malformed_pipelines_report_file_line_and_column() {
     let folder = Path::new(env!("CARGO_MANIFEST_DIR")).join("tests/fixtures/pipeline_errors");
-    let mut files: Vec<_> = std::fs::read_dir(&folder)
-        .expect("fixture folder")
-        .flatten()
-        .map(|entry| entry.path())
-        .collect();
+    let mut files: Vec<_> = std::fs::read_dir(&folder).expect("fixture folder").flatten().map(|entry| entry.path()).collect();
     files.retain(|path| path.extension().is_some_and(|extension| extension == "ron"));
     files.sort();
     assert!(files.len() >= 6, "fixtures present");
     for path in files {
         let text = std::fs::read_to_string(&path).expect("fixture");
-        let error =
-            parse_pipeline(Path::new("pipeline.ron"), &text).expect_err("the fixture is malformed");
+        let error = parse_pipeline(Path::new("pipeline.ron"), &text).expect_err("the fixture is malformed");
         expect_test::expect_file![path.with_extension("expected")].assert_eq(&format!("{error}\n"));
     }
 }

@@ -8,12 +8,7 @@ use cirrus::rectangles::PlaneRectangle;
 use cirrus::texture::Texture;
 
 fn vertex(position: [f32; 3], uv: [f32; 2]) -> RenderVertex {
-    RenderVertex {
-        position,
-        normal: [0.0, 0.0, 1.0],
-        uv,
-        tangent: [1.0, 0.0, 0.0, 1.0],
-    }
+    RenderVertex { position, normal: [0.0, 0.0, 1.0], uv, tangent: [1.0, 0.0, 0.0, 1.0] }
 }
 
 #[test]
@@ -65,34 +60,14 @@ fn a_plane_render_covers_its_faces_cuts_alpha_and_encodes_normal_and_height() {
         materials: &materials,
     };
     let images = gpu.render_plane(&input).expect("renders");
-    let texel = |image: &[u8], x: usize, y: usize| -> [u8; 4] {
-        image[(y * 64 + x) * 4..][..4].try_into().unwrap()
-    };
+    let texel = |image: &[u8], x: usize, y: usize| -> [u8; 4] { image[(y * 64 + x) * 4..][..4].try_into().unwrap() };
     // Top-left quarter: covered (opaque texture half is the top, UV v ≥ 0.5).
-    assert_eq!(
-        texel(&images.albedo, 10, 5),
-        [255, 0, 0, 255],
-        "red, opaque"
-    );
-    assert_eq!(
-        texel(&images.albedo, 10, 28)[3],
-        0,
-        "bottom half cut by the alpha test"
-    );
+    assert_eq!(texel(&images.albedo, 10, 5), [255, 0, 0, 255], "red, opaque");
+    assert_eq!(texel(&images.albedo, 10, 28)[3], 0, "bottom half cut by the alpha test");
     assert_eq!(texel(&images.albedo, 50, 5)[3], 0, "right half: no face");
     let normal = texel(&images.normal, 10, 5);
-    assert!(
-        normal[0].abs_diff(128) <= 1 && normal[1].abs_diff(128) <= 1 && normal[2] >= 254,
-        "flat normal: {normal:?}"
-    );
-    assert_eq!(
-        texel(&images.mra, 10, 5)[..3],
-        [0, 128, 255],
-        "metallic 0, roughness 0.5, AO 1"
-    );
+    assert!(normal[0].abs_diff(128) <= 1 && normal[1].abs_diff(128) <= 1 && normal[2] >= 254, "flat normal: {normal:?}");
+    assert_eq!(texel(&images.mra, 10, 5)[..3], [0, 128, 255], "metallic 0, roughness 0.5, AO 1");
     let height = texel(&images.height_map, 10, 5)[0];
-    assert!(
-        height.abs_diff(191) <= 1,
-        "0.05 over ε 0.1 → 0.75: {height}"
-    );
+    assert!(height.abs_diff(191) <= 1, "0.05 over ε 0.1 → 0.75: {height}");
 }

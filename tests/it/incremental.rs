@@ -12,10 +12,7 @@ fn ran_stages(summary: &cirrus::summary::BuildSummary) -> Vec<String> {
         .assets
         .iter()
         .flat_map(|asset| {
-            let ran = asset
-                .stages
-                .iter()
-                .filter(|stage| stage.status == StageStatus::Ran);
+            let ran = asset.stages.iter().filter(|stage| stage.status == StageStatus::Ran);
             ran.map(|stage| format!("{}: {}({})", asset.name, stage.stage, stage.instance))
         })
         .collect()
@@ -29,14 +26,8 @@ fn two_asset_project(albedo_format: &str) -> TempProject {
             Material(name: "second", material: "second.mymaterial"),
         ])"#
     ));
-    for (index, name) in ["albedo", "normal", "ao_a", "ao_b", "normal_b"]
-        .iter()
-        .enumerate()
-    {
-        project.write(
-            &format!("assets/{name}.png"),
-            pattern_png(32, 32, index as u32),
-        );
+    for (index, name) in ["albedo", "normal", "ao_a", "ao_b", "normal_b"].iter().enumerate() {
+        project.write(&format!("assets/{name}.png"), pattern_png(32, 32, index as u32));
     }
     project.write(
         "assets/first.mymaterial",
@@ -101,10 +92,7 @@ fn changing_a_texture_path_in_a_material_file_rebuilds_only_that_surface() {
     build(&mut cirrus);
     cirrus.take_executed_stages();
     let text = String::from_utf8(project.read("assets/first.mymaterial")).unwrap();
-    project.write(
-        "assets/first.mymaterial",
-        text.replace("\"normal.png\"", "\"normal_b.png\""),
-    );
+    project.write("assets/first.mymaterial", text.replace("\"normal.png\"", "\"normal_b.png\""));
     build(&mut cirrus);
     expect![[r#"
         [
@@ -126,11 +114,7 @@ fn changing_a_setting_reruns_only_the_stages_that_read_it() {
     build(&mut cirrus);
     cirrus.take_executed_stages();
     let pipeline = String::from_utf8(project.read("pipeline.ron")).unwrap();
-    std::fs::write(
-        project.path("pipeline.ron"),
-        pipeline.replace("albedo: Bc7", "albedo: Bc3"),
-    )
-    .unwrap();
+    std::fs::write(project.path("pipeline.ron"), pipeline.replace("albedo: Bc7", "albedo: Bc3")).unwrap();
     cirrus.reconfigure(cirrus::config::load_pipeline(&project.path("pipeline.ron")).unwrap());
     build(&mut cirrus);
     expect![[r#"
@@ -145,11 +129,7 @@ fn changing_a_setting_reruns_only_the_stages_that_read_it() {
     "#]]
     .assert_debug_eq(&cirrus.take_executed_stages());
     let albedo = project.read("baked/first/one/albedo.ktx2");
-    assert_eq!(
-        crate::support::read_ktx2(&albedo).vk_format,
-        138,
-        "BC3 sRGB now"
-    );
+    assert_eq!(crate::support::read_ktx2(&albedo).vk_format, 138, "BC3 sRGB now");
 }
 
 #[test]
@@ -160,24 +140,12 @@ fn a_restart_with_unchanged_sources_runs_no_stage() {
     let summary = build(&mut restarted);
     for asset in &summary.assets {
         for stage in &asset.stages {
-            assert_eq!(
-                stage.status,
-                StageStatus::Cached,
-                "{} {} {}",
-                asset.name,
-                stage.stage,
-                stage.instance
-            );
+            assert_eq!(stage.status, StageStatus::Cached, "{} {} {}", asset.name, stage.stage, stage.instance);
         }
     }
     // Salsa executes only the cache lookups (parse and write), never a decode, pack, mips or encode.
     let executed = restarted.take_executed_stages();
-    assert!(
-        executed
-            .iter()
-            .all(|stage| stage.starts_with("parse(") || stage.starts_with("write(")),
-        "{executed:?}"
-    );
+    assert!(executed.iter().all(|stage| stage.starts_with("parse(") || stage.starts_with("write(")), "{executed:?}");
     // A changed file after the restart re-runs only its dependants.
     project.write("assets/ao_b.png", pattern_png(32, 32, 77));
     let mut again = project.open();

@@ -4,10 +4,7 @@
 use cirrus::planes::{select_planes, PlaneSet, PlaneSettings};
 
 fn settings(epsilon: f32) -> PlaneSettings {
-    PlaneSettings {
-        epsilon,
-        max_planes: None,
-    }
+    PlaneSettings { epsilon, max_planes: None }
 }
 
 /// The largest distance of a vertex of each plane's faces from that plane, and a check that
@@ -21,36 +18,18 @@ fn check_assignment(positions: &[[f32; 3]], triangles: &[[u32; 3]], set: &PlaneS
         for &face in &plane.faces {
             seen[face as usize] += 1;
             for &vertex in &triangles[face as usize] {
-                worst = worst.max(
-                    (glam::Vec3::from(positions[vertex as usize]).dot(normal) - plane.distance)
-                        .abs(),
-                );
+                worst = worst.max((glam::Vec3::from(positions[vertex as usize]).dot(normal) - plane.distance).abs());
             }
         }
     }
-    assert!(
-        seen.iter().all(|&count| count == 1),
-        "every face exactly once: {seen:?}"
-    );
+    assert!(seen.iter().all(|&count| count == 1), "every face exactly once: {seen:?}");
     worst
 }
 
 fn cube() -> (Vec<[f32; 3]>, Vec<[u32; 3]>) {
-    let positions = (0..8)
-        .map(|i| [(i & 1) as f32, ((i >> 1) & 1) as f32, ((i >> 2) & 1) as f32])
-        .collect();
-    let quads = [
-        [0, 1, 3, 2],
-        [4, 6, 7, 5],
-        [0, 4, 5, 1],
-        [2, 3, 7, 6],
-        [0, 2, 6, 4],
-        [1, 5, 7, 3],
-    ];
-    let triangles = quads
-        .iter()
-        .flat_map(|q: &[u32; 4]| [[q[0], q[1], q[2]], [q[0], q[2], q[3]]])
-        .collect();
+    let positions = (0..8).map(|i| [(i & 1) as f32, ((i >> 1) & 1) as f32, ((i >> 2) & 1) as f32]).collect();
+    let quads = [[0, 1, 3, 2], [4, 6, 7, 5], [0, 4, 5, 1], [2, 3, 7, 6], [0, 2, 6, 4], [1, 5, 7, 3]];
+    let triangles = quads.iter().flat_map(|q: &[u32; 4]| [[q[0], q[1], q[2]], [q[0], q[2], q[3]]]).collect();
     (positions, triangles)
 }
 
@@ -69,11 +48,7 @@ fn soup(count: usize) -> (Vec<[f32; 3]>, Vec<[u32; 3]>) {
         let center = [random(), random(), random()];
         let base = positions.len() as u32;
         for _ in 0..3 {
-            positions.push([
-                center[0] + 0.05 * random(),
-                center[1] + 0.05 * random(),
-                center[2] + 0.05 * random(),
-            ]);
+            positions.push([center[0] + 0.05 * random(), center[1] + 0.05 * random(), center[2] + 0.05 * random()]);
         }
         triangles.push([base, base + 1, base + 2]);
     }
@@ -85,10 +60,7 @@ fn a_cube_becomes_its_six_faces() {
     let (positions, triangles) = cube();
     let set = select_planes(&positions, &triangles, settings(0.02));
     assert_eq!(set.planes.len(), 6);
-    assert!(
-        set.planes.iter().all(|plane| plane.faces.len() == 2),
-        "each side's two triangles share a plane"
-    );
+    assert!(set.planes.iter().all(|plane| plane.faces.len() == 2), "each side's two triangles share a plane");
     assert!(check_assignment(&positions, &triangles, &set) <= set.epsilon * 1.0001);
 }
 
@@ -98,65 +70,28 @@ fn every_face_is_assigned_within_epsilon_and_selection_is_deterministic() {
     for epsilon in [0.01, 0.05] {
         let set = select_planes(&positions, &triangles, settings(epsilon));
         let worst = check_assignment(&positions, &triangles, &set);
-        assert!(
-            worst <= set.epsilon * 1.0001,
-            "ε = {epsilon}: {worst} > {}",
-            set.epsilon
-        );
-        assert!(
-            (set.max_error - worst).abs() < 1e-5,
-            "the reported error is the real one"
-        );
-        assert_eq!(
-            set,
-            select_planes(&positions, &triangles, settings(epsilon)),
-            "deterministic"
-        );
+        assert!(worst <= set.epsilon * 1.0001, "ε = {epsilon}: {worst} > {}", set.epsilon);
+        assert!((set.max_error - worst).abs() < 1e-5, "the reported error is the real one");
+        assert_eq!(set, select_planes(&positions, &triangles, settings(epsilon)), "deterministic");
     }
-    let loose = select_planes(&positions, &triangles, settings(0.05))
-        .planes
-        .len();
-    let tight = select_planes(&positions, &triangles, settings(0.01))
-        .planes
-        .len();
-    assert!(
-        loose < tight,
-        "a larger ε needs fewer planes: {loose} vs {tight}"
-    );
+    let loose = select_planes(&positions, &triangles, settings(0.05)).planes.len();
+    let tight = select_planes(&positions, &triangles, settings(0.01)).planes.len();
+    assert!(loose < tight, "a larger ε needs fewer planes: {loose} vs {tight}");
 }
 
 #[test]
 fn max_planes_caps_the_count_and_reports_the_achieved_error() {
     let (positions, triangles) = soup(500);
-    let set = select_planes(
-        &positions,
-        &triangles,
-        PlaneSettings {
-            epsilon: 0.02,
-            max_planes: Some(8),
-        },
-    );
+    let set = select_planes(&positions, &triangles, PlaneSettings { epsilon: 0.02, max_planes: Some(8) });
     assert!(set.planes.len() <= 8);
     let worst = check_assignment(&positions, &triangles, &set);
-    assert!(
-        worst > set.epsilon,
-        "capped: some faces move further than ε"
-    );
-    assert!(
-        (set.max_error - worst).abs() < 1e-5,
-        "reported {} vs measured {worst}",
-        set.max_error
-    );
+    assert!(worst > set.epsilon, "capped: some faces move further than ε");
+    assert!((set.max_error - worst).abs() < 1e-5, "reported {} vs measured {worst}", set.max_error);
 }
 
 #[test]
 fn degenerate_faces_are_kept() {
-    let positions = vec![
-        [0.0, 0.0, 0.0],
-        [1.0, 0.0, 0.0],
-        [0.0, 1.0, 0.0],
-        [2.0, 2.0, 2.0],
-    ];
+    let positions = vec![[0.0, 0.0, 0.0], [1.0, 0.0, 0.0], [0.0, 1.0, 0.0], [2.0, 2.0, 2.0]];
     let triangles = vec![[0, 1, 2], [3, 3, 3], [0, 1, 1]];
     let set = select_planes(&positions, &triangles, settings(0.02));
     check_assignment(&positions, &triangles, &set);

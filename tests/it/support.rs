@@ -35,8 +35,7 @@ impl TempProject {
     }
 
     pub fn read(&self, relative: &str) -> Vec<u8> {
-        std::fs::read(self.path(relative))
-            .unwrap_or_else(|error| panic!("read {relative}: {error}"))
+        std::fs::read(self.path(relative)).unwrap_or_else(|error| panic!("read {relative}: {error}"))
     }
 
     pub fn open(&self) -> Project {
@@ -46,18 +45,12 @@ impl TempProject {
 
     /// Runs the `cirrus` binary in the project folder.
     pub fn run_cli(&self, arguments: &[&str]) -> std::process::Output {
-        std::process::Command::new(env!("CARGO_BIN_EXE_cirrus"))
-            .args(arguments)
-            .current_dir(self.root())
-            .output()
-            .expect("run cirrus")
+        std::process::Command::new(env!("CARGO_BIN_EXE_cirrus")).args(arguments).current_dir(self.root()).output().expect("run cirrus")
     }
 }
 
 pub fn build(project: &mut Project) -> BuildSummary {
-    project
-        .build(&BuildOptions::default(), &|_| {})
-        .expect("build runs")
+    project.build(&BuildOptions::default(), &|_| {}).expect("build runs")
 }
 
 /// A deterministic RGBA8 PNG: smooth gradients plus a pattern, seeded by `seed`.
@@ -87,11 +80,7 @@ pub fn cutout_png(width: u32, height: u32) -> Vec<u8> {
             let (cx, cy) = ((x % 32) as f32 - 15.5, (y % 32) as f32 - 15.5);
             let disc = ((9.0 - (cx * cx + cy * cy).sqrt()) / 3.0 + 0.5).clamp(0.0, 1.0);
             let varying = 0.6 + 0.3 * ((x * 7 + y * 13) % 17) as f32 / 16.0;
-            let line = if x % 32 == 30 || y % 16 == 7 {
-                varying
-            } else {
-                0.0
-            };
+            let line = if x % 32 == 30 || y % 16 == 7 { varying } else { 0.0 };
             let alpha = (disc.max(line) * 255.0) as u8;
             pixels.extend_from_slice(&[40, (120 + x % 100) as u8, 30, alpha]);
         }
@@ -101,21 +90,13 @@ pub fn cutout_png(width: u32, height: u32) -> Vec<u8> {
 
 pub fn png_bytes(width: u32, height: u32, rgba: &[u8]) -> Vec<u8> {
     let mut bytes = Vec::new();
-    image::ImageEncoder::write_image(
-        image::codecs::png::PngEncoder::new(&mut bytes),
-        rgba,
-        width,
-        height,
-        image::ExtendedColorType::Rgba8,
-    )
-    .expect("encode PNG");
+    image::ImageEncoder::write_image(image::codecs::png::PngEncoder::new(&mut bytes), rgba, width, height, image::ExtendedColorType::Rgba8)
+        .expect("encode PNG");
     bytes
 }
 
 pub fn decode_png(bytes: &[u8]) -> Texture {
-    let image = image::load_from_memory(bytes)
-        .expect("decode PNG")
-        .into_rgba8();
+    let image = image::load_from_memory(bytes).expect("decode PNG").into_rgba8();
     Texture::new(image.width(), image.height(), image.into_raw())
 }
 
@@ -132,11 +113,7 @@ pub struct Ktx2 {
 }
 
 pub fn read_ktx2(bytes: &[u8]) -> Ktx2 {
-    assert_eq!(
-        &bytes[..12],
-        &cirrus::container::KTX2_IDENTIFIER,
-        "KTX2 identifier"
-    );
+    assert_eq!(&bytes[..12], &cirrus::container::KTX2_IDENTIFIER, "KTX2 identifier");
     let u32_at = |offset: usize| u32::from_le_bytes(bytes[offset..offset + 4].try_into().unwrap());
     let u64_at = |offset: usize| u64::from_le_bytes(bytes[offset..offset + 8].try_into().unwrap());
     let level_count = u32_at(40).max(1) as usize;

@@ -1,0 +1,76 @@
+// Preview renders: a mesh (the source, or a billboard-cloud LOD) under one orthographic camera,
+// alpha-tested, double-sided, lit by one directional light plus ambient, on a neutral background.
+// Alpha is 1 where a surface was drawn: the silhouette.
+
+struct Camera {
+    view_projection: mat4x4f,
+    // xyz: direction towards the light
+    light: vec4f,
+}
+
+struct Material {
+    // rgb: albedo factor (linear), a: constant opacity
+    albedo: vec4f,
+    // has albedo map, has opacity map, has normal map, normal map stores z (else rebuilt)
+    flags: vec4f,
+    // alpha cutoff, unused...
+    params: vec4f,
+}
+
+@group(0) @binding(0) var<uniform> camera: Camera;
+@group(1) @binding(0) var<uniform> material: Material;
+@group(1) @binding(1) var linear_sampler: sampler;
+@group(1) @binding(2) var albedo_map: texture_2d<f32>;
+@group(1) @binding(3) var opacity_map: texture_2d<f32>;
+@group(1) @binding(4) var normal_map: texture_2d<f32>;
+
+struct VertexIn {
+    @location(0) position: vec3f,
+    @location(1) normal: vec3f,
+    @location(2) uv: vec2f,
+    @location(3) tangent: vec4f,
+}
+
+struct VertexOut {
+    @builtin(position) clip: vec4f,
+    @location(0) normal: vec3f,
+    @location(1) uv: vec2f,
+    @location(2) tangent: vec4f,
+}
+
+@vertex
+fn vs_main(input: VertexIn) -> VertexOut {
+    var out: VertexOut;
+    out.clip = camera.view_projection * vec4f(input.position, 1.0);
+    out.normal = input.normal;
+    out.uv = vec2f(input.uv.x, 1.0 - input.uv.y);
+    out.tangent = input.tangent;
+    return out;
+}
+
+@fragment
+fn fs_main(input: VertexOut, @builtin(front_facing) front: bool) -> @location(0) vec4f {
+    let albedo_sample = textureSample(albedo_map, linear_sampler, input.uv);
+    let opacity_sample = textureSample(opacity_map, linear_sampler, input.uv);
+    let normal_sample = textureSample(normal_map, linear_sampler, input.uv);
+    let albedo = select(vec4f(1.0), albedo_sample, material.flags.x > 0.5) * vec4f(material.albedo.rgb, 1.0);
+    let opacity = albedo.a * select(1.0, opacity_sample.r, material.flags.y > 0.5) * material.albedo.a;
+    if (opacity < material.params.x) {
+        discard;
+    }
+    var n = normalize(input.normal);
+    if (material.flags.z > 0.5) {
+        let t = normalize(input.tangent.xyz - n * dot(n, input.tangent.xyz));
+        let b = cross(n, t) * input.tangent.w;
+        var mapped = normal_sample.xyz * 2.0 - 1.0;
+        if (material.flags.w < 0.5) {
+            mapped.z = sqrt(clamp(1.0 - mapped.x * mapped.x - mapped.y * mapped.y, 0.0, 1.0));
+        }
+        n = normalize(t * mapped.x + b * mapped.y + n * mapped.z);
+    }
+    if (!front) {
+        n = -n;
+    }
+    let light = 0.35 + 0.65 * abs(dot(n, normalize(camera.light.xyz)));
+    return vec4f(albedo.rgb * light, 1.0);
+}

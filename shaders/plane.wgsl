@@ -80,7 +80,7 @@ fn sample_or(map: texture_2d<f32>, has: f32, uv: vec2f, fallback: vec4f) -> vec4
 fn fs_main(input: VertexOut) -> Targets {
     let uv = input.uv;
     let albedo = sample_or(albedo_map, material.has_a.x, uv, vec4f(1.0)) * vec4f(material.albedo.rgb, 1.0);
-    let opacity = albedo.a * sample_or(opacity_map, material.has_a.y, uv, vec4f(1.0)).r * material.albedo.a;
+    let opacity = albedo.a * sample_or(opacity_map, material.has_a.y, uv, vec4f(1.0)).a * material.albedo.a;
     if (opacity < frame.size.w) {
         discard;
     }

@@ -54,7 +54,7 @@ fn fs_main(input: VertexOut, @builtin(front_facing) front: bool) -> @location(0)
     let opacity_sample = textureSample(opacity_map, linear_sampler, input.uv);
     let normal_sample = textureSample(normal_map, linear_sampler, input.uv);
     let albedo = select(vec4f(1.0), albedo_sample, material.flags.x > 0.5) * vec4f(material.albedo.rgb, 1.0);
-    let opacity = albedo.a * select(1.0, opacity_sample.r, material.flags.y > 0.5) * material.albedo.a;
+    let opacity = albedo.a * select(1.0, opacity_sample.a, material.flags.y > 0.5) * material.albedo.a;
     if (opacity < material.params.x) {
         discard;
     }

@@ -811,3 +811,159 @@ fn remove_artifacts(root: &Path, manifest: &mut Manifest, doomed: impl Fn(&str, 
     }
     !paths.is_empty()
 }
+
+/// What `cirrus preview` renders.
+#[derive(Clone, Debug)]
+pub struct PreviewOptions {
+    pub asset: String,
+    pub views: usize,
+    pub size: u32,
+    /// Where `contact_sheet.png` and `metrics.json` go (project-relative or absolute).
+    pub out: PathBuf,
+}
+
+#[derive(Debug, thiserror::Error)]
+pub enum PreviewError {
+    #[error(transparent)]
+    Build(#[from] BuildError),
+    #[error("asset `{0}` is not a BillboardCloud: only billboard clouds have a LOD to preview")]
+    NotBillboard(String),
+    #[error("asset `{name}` failed to bake:\n{errors}")]
+    Failed { name: String, errors: String },
+    #[error("{0}")]
+    Artifact(Diagnostic),
+    #[error(transparent)]
+    Gpu(#[from] crate::gpu::GpuError),
+    #[error("cannot write the preview: {0}")]
+    Write(std::io::Error),
+}
+
+impl Project {
+    /// Bakes `asset` if needed, then renders it and its source from the view directions.
+    pub fn preview(&mut self, options: &PreviewOptions) -> Result<crate::lod_preview::PreviewMetrics, PreviewError> {
+        let summary = self.build(&BuildOptions { only_assets: vec![options.asset.clone()] }, &|_| {})?;
+        let asset = &summary.assets[0];
+        if asset.kind != "BillboardCloud" {
+            return Err(PreviewError::NotBillboard(options.asset.clone()));
+        }
+        if asset.status != AssetStatus::Ok {
+            let errors = asset.errors.iter().map(|error| format!("  {}: {}", error.file, error.message)).collect::<Vec<_>>().join("\n");
+            return Err(PreviewError::Failed { name: options.asset.clone(), errors });
+        }
+        let input = self.billboards[&options.asset];
+        let loaded = crate::db::loaded_mesh(&self.db, input).map_err(PreviewError::Artifact)?;
+        let source = self.source_view_mesh(input, &loaded).map_err(PreviewError::Artifact)?;
+        let lod = self.lod_view_mesh(&options.asset, input).map_err(PreviewError::Artifact)?;
+        let positions = &loaded.mesh.positions;
+        let (min, max) =
+            positions.iter().fold((glam::Vec3::splat(f32::INFINITY), glam::Vec3::splat(f32::NEG_INFINITY)), |(min, max), &p| {
+                (min.min(glam::Vec3::from(p)), max.max(glam::Vec3::from(p)))
+            });
+        let center = 0.5 * (min + max);
+        let radius = positions.iter().map(|&p| glam::Vec3::from(p).distance(center)).fold(0.0, f32::max);
+        let gpu = crate::gpu::gpu()?;
+        let preview = crate::lod_preview::preview(gpu, &source, &lod, center.to_array(), radius, options.views, options.size)?;
+        let out = self.config.root.join(&options.out);
+        let mut metrics = serde_json::to_vec_pretty(&preview.metrics).expect("metrics serialise");
+        metrics.push(b'\n');
+        write_if_changed(&out.join("contact_sheet.png"), &preview.contact_sheet).map_err(PreviewError::Write)?;
+        write_if_changed(&out.join("metrics.json"), &metrics).map_err(PreviewError::Write)?;
+        Ok(preview.metrics)
+    }
+
+    /// The source mesh with its decoded maps (mipmapped as for rendering).
+    fn source_view_mesh(&self, input: BillboardAsset, loaded: &crate::db::LoadedMesh) -> Result<crate::gpu::ViewMesh, Diagnostic> {
+        use crate::material_definition::TextureSlot;
+        let db = &self.db;
+        let cutoff = input.settings(db).billboard.alpha_cutoff;
+        let mut materials = Vec::new();
+        for material in &loaded.mesh.materials {
+            let levels = |slot: TextureSlot, kind: SurfaceKind| -> Result<Option<Arc<Vec<crate::texture::Texture>>>, Diagnostic> {
+                let Some(path) = material.maps.get(&slot).filter(|_| loaded.mesh.uvs.is_some()) else { return Ok(None) };
+                let Some(&file) = input.textures(db).get(path) else { return Ok(None) };
+                let texture = if slot == TextureSlot::Opacity {
+                    crate::db::opacity_texture(db, file)?
+                } else {
+                    crate::db::decoded_texture(db, file)?
+                };
+                // The reference keeps alpha-tested coverage at every distance, as the bake does.
+                let alpha_cutoff = matches!(slot, TextureSlot::Albedo | TextureSlot::Opacity).then_some(cutoff);
+                Ok(Some(Arc::new(crate::mips::mip_chain(&texture, crate::mips::MipSettings { kind, alpha_cutoff }))))
+            };
+            materials.push(crate::gpu::ViewMaterial {
+                albedo: levels(TextureSlot::Albedo, SurfaceKind::Albedo)?,
+                opacity: levels(TextureSlot::Opacity, SurfaceKind::Albedo)?,
+                normal: levels(TextureSlot::Normal, SurfaceKind::Normal)?,
+                normal_has_z: true,
+                albedo_factor: [material.albedo_factor[0], material.albedo_factor[1], material.albedo_factor[2], material.opacity],
+                alpha_cutoff: cutoff,
+            });
+        }
+        let all_faces = crate::rectangles::PlaneRectangle {
+            plane: 0,
+            faces: (0..loaded.mesh.triangles.len() as u32).collect(),
+            origin: [0.0; 3],
+            x_axis: [1.0, 0.0, 0.0],
+            y_axis: [0.0, 1.0, 0.0],
+            normal: [0.0, 0.0, 1.0],
+            width: 0.0,
+            height: 0.0,
+        };
+        Ok(crate::gpu::ViewMesh { batches: crate::plane_textures::plane_batches(&loaded.mesh, &loaded.tangents, &all_faces), materials })
+    }
+
+    /// The baked LOD as an engine sees it: `lod.obj` with the decoded KTX2 atlas levels.
+    fn lod_view_mesh(&self, name: &str, input: BillboardAsset) -> Result<crate::gpu::ViewMesh, Diagnostic> {
+        let folder = self.config.output.join(name);
+        let read = |file: &str| -> Result<Vec<u8>, Diagnostic> {
+            let path = folder.join(file);
+            std::fs::read(self.config.root.join(&path))
+                .map_err(|error| Diagnostic::new(&path, format!("cannot read the baked artifact: {error}")))
+        };
+        let obj_path = folder.join("lod.obj");
+        let (mesh, _) = crate::mesh::load_mesh(&obj_path, &read("lod.obj")?, &BTreeMap::new(), &folder)?;
+        let decode = |file: &str| -> Result<Arc<Vec<crate::texture::Texture>>, Diagnostic> {
+            let ktx2 = crate::container::read_ktx2(&read(file)?).map_err(|error| Diagnostic::new(folder.join(file), error))?;
+            let levels = ktx2
+                .levels
+                .iter()
+                .enumerate()
+                .map(|(level, blocks)| {
+                    let (width, height) = ((ktx2.width >> level).max(1), (ktx2.height >> level).max(1));
+                    crate::quality::decode_blocks(ktx2.format, blocks, width, height)
+                })
+                .collect();
+            Ok(Arc::new(levels))
+        };
+        let mut normal = (*decode("normal.ktx2")?).clone();
+        // BC5 holds X and Y only; the shader rebuilds Z from them.
+        for level in &mut normal {
+            let pixels: Vec<u8> = level.pixels.chunks_exact(4).flat_map(|texel| [texel[0], texel[1], 0, 255]).collect();
+            *level = crate::texture::Texture::new(level.width, level.height, pixels);
+        }
+        let material = crate::gpu::ViewMaterial {
+            albedo: Some(decode("albedo.ktx2")?),
+            opacity: None,
+            normal: Some(Arc::new(normal)),
+            normal_has_z: false,
+            albedo_factor: [1.0; 4],
+            alpha_cutoff: input.settings(&self.db).billboard.alpha_cutoff,
+        };
+        let tangents = crate::gpu::vertex_tangents(&mesh.positions, &mesh.normals, mesh.uvs.as_deref().unwrap_or(&[]), &mesh.triangles);
+        let vertices = mesh
+            .triangles
+            .iter()
+            .flatten()
+            .map(|&index| {
+                let index = index as usize;
+                crate::gpu::RenderVertex {
+                    position: mesh.positions[index],
+                    normal: mesh.normals[index],
+                    uv: mesh.uvs.as_ref().map_or([0.0; 2], |uvs| uvs[index]),
+                    tangent: tangents.get(index).copied().unwrap_or([1.0, 0.0, 0.0, 1.0]),
+                }
+            })
+            .collect();
+        Ok(crate::gpu::ViewMesh { batches: vec![(0, vertices)], materials: vec![material] })
+    }
+}

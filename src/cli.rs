@@ -34,6 +34,24 @@ pub enum Command {
         #[arg(long, value_enum, default_value_t = SummaryFormat::Text)]
         summary: SummaryFormat,
     },
+    /// Render a billboard cloud and its source from many directions: contact sheet and metrics.
+    Preview {
+        /// The pipeline file.
+        #[arg(long, default_value = "pipeline.ron")]
+        pipeline: PathBuf,
+        /// The BillboardCloud asset.
+        #[arg(long)]
+        asset: String,
+        /// How many of the 26 cube directions to render.
+        #[arg(long, default_value_t = 26, value_parser = clap::value_parser!(u32).range(1..=26))]
+        views: u32,
+        /// Image size in pixels (square).
+        #[arg(long, default_value_t = 256, value_parser = clap::value_parser!(u32).range(16..=2048))]
+        size: u32,
+        /// Output folder (default: <output>/<asset>/preview).
+        #[arg(long)]
+        out: Option<PathBuf>,
+    },
     /// Validate the pipeline and every asset's sources without baking.
     Check {
         /// The pipeline file.
@@ -68,6 +86,7 @@ pub fn run(cli: Cli) -> anyhow::Result<ExitCode> {
     match cli.command {
         Command::Build { pipeline, assets, summary } => build(pipeline, assets, summary),
         Command::Check { pipeline } => check(pipeline),
+        Command::Preview { pipeline, asset, views, size, out } => preview(pipeline, asset, views, size, out),
     }
 }
 
@@ -133,4 +152,38 @@ fn check(pipeline: PathBuf) -> anyhow::Result<ExitCode> {
     let failed = problems.iter().filter(|(_, diagnostics)| !diagnostics.is_empty()).count();
     println!("{assets} assets checked, {failed} with problems");
     Ok(if failed == 0 { ExitCode::SUCCESS } else { ExitCode::from(EXIT_ASSET_FAILED) })
+}
+
+fn preview(pipeline: PathBuf, asset: String, views: u32, size: u32, out: Option<PathBuf>) -> anyhow::Result<ExitCode> {
+    let config = match load_pipeline(&pipeline) {
+        Ok(config) => config,
+        Err(error) => {
+            eprintln!("{error}");
+            return Ok(ExitCode::from(EXIT_USAGE));
+        }
+    };
+    let out = out.unwrap_or_else(|| config.output.join(&asset).join("preview"));
+    let mut project = Project::open(config, ProjectOptions::default());
+    let options = crate::bake::PreviewOptions { asset, views: views as usize, size, out: out.clone() };
+    match project.preview(&options) {
+        Ok(metrics) => {
+            println!(
+                "{} views: mean IoU {:.3}, min IoU {:.3}, mean PSNR {:.2} dB",
+                metrics.views.len(),
+                metrics.mean_iou,
+                metrics.min_iou,
+                metrics.mean_psnr
+            );
+            println!("wrote {}/contact_sheet.png and metrics.json", crate::diagnostic::display_path(&out));
+            Ok(ExitCode::SUCCESS)
+        }
+        Err(error @ (crate::bake::PreviewError::Build(_) | crate::bake::PreviewError::NotBillboard(_))) => {
+            eprintln!("error: {error}");
+            Ok(ExitCode::from(EXIT_USAGE))
+        }
+        Err(error) => {
+            eprintln!("error: {error}");
+            Ok(ExitCode::from(EXIT_ASSET_FAILED))
+        }
+    }
 }

@@ -237,3 +237,45 @@ fn lcm(a: usize, b: usize) -> usize {
     };
     a / gcd(a, b) * b
 }
+
+/// A KTX2 file read back: its block format and the block data of every level (level 0 first).
+#[derive(Clone, Debug, PartialEq)]
+pub struct Ktx2Texture {
+    pub format: BlockFormat,
+    pub srgb: bool,
+    pub width: u32,
+    pub height: u32,
+    pub levels: Vec<Vec<u8>>,
+}
+
+/// Reads a block-compressed KTX2 file as written by `write_container` (BC formats, one face and
+/// layer, optional zstd supercompression).
+pub fn read_ktx2(bytes: &[u8]) -> Result<Ktx2Texture, String> {
+    if bytes.len() < 80 || bytes[..12] != KTX2_IDENTIFIER {
+        return Err("not a KTX2 file".into());
+    }
+    let u32_at = |offset: usize| u32::from_le_bytes(bytes[offset..offset + 4].try_into().expect("4 bytes"));
+    let u64_at = |offset: usize| bytes.get(offset..offset + 8).map(|b| u64::from_le_bytes(b.try_into().expect("8 bytes")));
+    let vk_format = u32_at(12);
+    let (format, srgb) = [BlockFormat::Bc1, BlockFormat::Bc3, BlockFormat::Bc4, BlockFormat::Bc5, BlockFormat::Bc7]
+        .into_iter()
+        .flat_map(|format| [(format, false), (format, true)])
+        .find(|&(format, srgb)| self::vk_format(format, srgb) == vk_format)
+        .ok_or_else(|| format!("unsupported vkFormat {vk_format}"))?;
+    let (width, height, level_count, scheme) = (u32_at(20), u32_at(24), u32_at(40).max(1) as usize, u32_at(44));
+    let mut levels = Vec::with_capacity(level_count);
+    for level in 0..level_count {
+        let at = 80 + level * 24;
+        let (offset, length, uncompressed) = match (u64_at(at), u64_at(at + 8), u64_at(at + 16)) {
+            (Some(offset), Some(length), Some(uncompressed)) => (offset as usize, length as usize, uncompressed as usize),
+            _ => return Err("truncated level index".into()),
+        };
+        let data = bytes.get(offset..offset.saturating_add(length)).ok_or("a level lies outside the file")?;
+        levels.push(match scheme {
+            0 => data.to_vec(),
+            2 => zstd::bulk::decompress(data, uncompressed).map_err(|error| format!("zstd: {error}"))?,
+            other => return Err(format!("unsupported supercompression scheme {other}")),
+        });
+    }
+    Ok(Ktx2Texture { format, srgb, width, height, levels })
+}

@@ -147,7 +147,15 @@ impl Stage {
 
     /// Bumped whenever the stage's output for the same inputs changes; part of cache keys.
     pub fn version(self) -> u32 {
-        1
+        match self {
+            // 2: opacity maps read alpha when the image has transparency.
+            Stage::Pack => 2,
+            // 2: coverage-preserving mips for albedo and opacity sources; opacity from alpha.
+            Stage::Render => 2,
+            // 2: `map_d` naming the albedo texture is not applied a second time.
+            Stage::Mesh => 2,
+            _ => 1,
+        }
     }
 }
 
@@ -273,6 +281,13 @@ pub fn material_file(db: &dyn Db, asset: MaterialAsset) -> Result<Arc<MaterialFi
 
 // ---------------------------------------------------------------------------------------------
 // decode
+
+/// A source texture as an opacity map (alpha if it has transparency, else red), decoded once.
+#[salsa::tracked(returns(clone))]
+pub fn opacity_texture(db: &dyn Db, file: SourceFile) -> Result<Arc<Texture>, Diagnostic> {
+    let texture = decoded_texture(db, file)?;
+    Ok(Arc::new(crate::texture::opacity_channel(&texture)))
+}
 
 /// A source texture decoded to RGBA8.
 #[salsa::tracked(returns(clone))]
@@ -678,7 +693,8 @@ pub fn plane_images(db: &dyn Db, key: PlaneKey) -> Result<Arc<crate::gpu::PlaneI
                     format!("material `{}`: {} texture {}: {error}", source.name, slot.name(), crate::diagnostic::display_path(path)),
                 ));
             }
-            decoded_texture(db, file).map(Some)
+            if slot == crate::material_definition::TextureSlot::Opacity { opacity_texture(db, file) } else { decoded_texture(db, file) }
+                .map(Some)
         };
         use crate::material_definition::TextureSlot;
         materials[material_index as usize] = crate::gpu::RenderMaterial {

@@ -33,7 +33,7 @@ pub struct Gpu {
     sampler: wgpu::Sampler,
     white: wgpu::TextureView,
     /// Uploaded source textures by content hash and colour space.
-    uploads: Mutex<HashMap<(blake3::Hash, bool), Arc<wgpu::TextureView>>>,
+    uploads: Mutex<HashMap<(blake3::Hash, bool, u32), Arc<wgpu::TextureView>>>,
     view_pipeline: wgpu::RenderPipeline,
     view_material_layout: wgpu::BindGroupLayout,
 }
@@ -316,13 +316,13 @@ impl Gpu {
     }
 
     /// A source texture on the GPU with its mip chain (uploaded once per content).
-    fn texture_view(&self, texture: &Texture, kind: SurfaceKind) -> Arc<wgpu::TextureView> {
+    fn texture_view(&self, texture: &Texture, kind: SurfaceKind, alpha_cutoff: Option<f32>) -> Arc<wgpu::TextureView> {
         let srgb = kind == SurfaceKind::Albedo;
-        let key = (texture.hash, srgb);
+        let key = (texture.hash, srgb, alpha_cutoff.map_or(u32::MAX, f32::to_bits));
         if let Some(view) = self.uploads.lock().expect("upload cache").get(&key) {
             return view.clone();
         }
-        let levels = mip_chain(texture, MipSettings { kind, alpha_cutoff: None });
+        let levels = mip_chain(texture, MipSettings { kind, alpha_cutoff });
         let view = Arc::new(upload(&self.device, &self.queue, &levels, if srgb { ALBEDO_FORMAT } else { DATA_FORMAT }));
         self.uploads.lock().expect("upload cache").insert(key, view.clone());
         view
@@ -363,7 +363,7 @@ impl Gpu {
                 mapped_at_creation: false,
             });
             self.queue.write_buffer(&buffer, 0, bytemuck::cast_slice(vertices));
-            draws.push((buffer, vertices.len() as u32, self.material_group(material)));
+            draws.push((buffer, vertices.len() as u32, self.material_group(material, input.alpha_cutoff)));
         }
 
         let mut encoder = self.device.create_command_encoder(&Default::default());
@@ -496,7 +496,7 @@ impl Gpu {
 
     /// A texture with explicit mip levels on the GPU (uploaded once per content).
     fn levels_view(&self, levels: &[Texture], srgb: bool) -> Arc<wgpu::TextureView> {
-        let key = (levels[0].hash, srgb);
+        let key = (levels[0].hash, srgb, levels.len() as u32);
         if let Some(view) = self.uploads.lock().expect("upload cache").get(&key) {
             return view.clone();
         }
@@ -576,7 +576,7 @@ impl Gpu {
         })
     }
 
-    fn material_group(&self, material: &RenderMaterial) -> wgpu::BindGroup {
+    fn material_group(&self, material: &RenderMaterial, alpha_cutoff: f32) -> wgpu::BindGroup {
         let flag = |texture: &Option<Arc<Texture>>| if texture.is_some() { 1.0 } else { 0.0 };
         let uniform = MaterialUniform {
             albedo: material.albedo_factor,
@@ -586,16 +586,16 @@ impl Gpu {
         };
         let buffer = self.uniform_buffer(bytemuck::bytes_of(&uniform));
         let views: Vec<Arc<wgpu::TextureView>> = [
-            (&material.albedo, SurfaceKind::Albedo),
-            (&material.opacity, SurfaceKind::Mra),
-            (&material.normal, SurfaceKind::Normal),
-            (&material.metallic, SurfaceKind::Mra),
-            (&material.roughness, SurfaceKind::Mra),
-            (&material.ao, SurfaceKind::Mra),
+            (&material.albedo, SurfaceKind::Albedo, Some(alpha_cutoff)),
+            (&material.opacity, SurfaceKind::Albedo, Some(alpha_cutoff)),
+            (&material.normal, SurfaceKind::Normal, None),
+            (&material.metallic, SurfaceKind::Mra, None),
+            (&material.roughness, SurfaceKind::Mra, None),
+            (&material.ao, SurfaceKind::Mra, None),
         ]
         .into_iter()
-        .map(|(texture, kind)| match texture {
-            Some(texture) => self.texture_view(texture, kind),
+        .map(|(texture, kind, cutoff)| match texture {
+            Some(texture) => self.texture_view(texture, kind, cutoff),
             None => Arc::new(self.white.clone()),
         })
         .collect();

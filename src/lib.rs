@@ -12,6 +12,7 @@ pub mod encode;
 pub mod gpu;
 pub mod layout;
 pub mod lod_mesh;
+pub mod lod_preview;
 pub mod material_definition;
 pub mod mesh;
 pub mod mips;

@@ -213,6 +213,11 @@ fn mesh_material(material: &tobj::Material, folder: &Path, source_root: &Path, w
             )),
         }
     }
+    // `map_d` naming the albedo texture itself (foliage exporters write that): the albedo's
+    // alpha is the opacity; applying it twice would square it.
+    if result.maps.get(&TextureSlot::Opacity).is_some_and(|opacity| result.maps.get(&TextureSlot::Albedo) == Some(opacity)) {
+        result.maps.remove(&TextureSlot::Opacity);
+    }
     result
 }
 

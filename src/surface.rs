@@ -69,7 +69,12 @@ pub fn pack_surface(kind: SurfaceKind, sources: &[Option<&Texture>], constants: 
     let resampled: Vec<Option<Vec<u8>>> = sources
         .iter()
         .zip(kind.slots())
-        .map(|(source, slot)| source.map(|texture| resample_rgba8(texture, width, height, slot.is_srgb())))
+        .map(|(source, slot)| {
+            source.map(|texture| match slot {
+                TextureSlot::Opacity => resample_rgba8(&crate::texture::opacity_channel(texture), width, height, false),
+                _ => resample_rgba8(texture, width, height, slot.is_srgb()),
+            })
+        })
         .collect();
     let texel_count = (width * height) as usize;
     let mut pixels = vec![0u8; texel_count * 4];

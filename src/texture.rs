@@ -115,3 +115,19 @@ fn image_reader<'a>(file: &Path, bytes: &'a [u8]) -> Result<image::ImageReader<C
     }
     Ok(reader)
 }
+
+/// An opacity map as one grey value in every channel (alpha included, so alpha-aware mips keep
+/// its coverage): the alpha channel when the image has transparency (an
+/// RGBA texture used as `map_d`, as foliage exporters write), else its red channel.
+pub fn opacity_channel(texture: &Texture) -> Texture {
+    let use_alpha = texture.pixels.chunks_exact(4).any(|texel| texel[3] < 255);
+    let pixels = texture
+        .pixels
+        .chunks_exact(4)
+        .flat_map(|texel| {
+            let value = if use_alpha { texel[3] } else { texel[0] };
+            [value, value, value, value]
+        })
+        .collect();
+    Texture::new(texture.width, texture.height, pixels)
+}

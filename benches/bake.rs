@@ -23,6 +23,102 @@ fn main() {
     }
     if corpus.join("meshes").is_dir() {
         bench_planes(&corpus);
+        bench_billboards(&corpus);
+    }
+}
+
+/// A writable copy of the corpus trees in a temporary project with `assets` (pipeline text).
+fn tree_project(corpus: &Path, assets: &str) -> tempfile::TempDir {
+    let dir = tempfile::tempdir().expect("temporary folder");
+    let trees = dir.path().join("assets/trees");
+    std::fs::create_dir_all(trees.join("textures")).unwrap();
+    for entry in std::fs::read_dir(corpus.join("trees")).unwrap().chain(std::fs::read_dir(corpus.join("trees/textures")).unwrap()).flatten()
+    {
+        if entry.path().is_file() {
+            let relative = entry.path().strip_prefix(corpus.join("trees")).unwrap().to_path_buf();
+            std::fs::copy(entry.path(), trees.join(relative)).unwrap();
+        }
+    }
+    std::fs::write(dir.path().join("pipeline.ron"), format!(r#"Pipeline(source: "assets", output: "baked", assets: [{assets}])"#)).unwrap();
+    dir
+}
+
+/// Billboard clouds: the oak's full bake (child process: wall time, peak memory, stage
+/// breakdown), a bark-texture edit next to it, and plane count and IoU per tree and ε.
+fn bench_billboards(corpus: &Path) {
+    let dir = tree_project(corpus, r#"BillboardCloud(name: "oak", mesh: "trees/oak_medium.obj")"#);
+    let start = Instant::now();
+    let mut child = std::process::Command::new(env!("CARGO_BIN_EXE_cirrus"))
+        .args(["build", "--summary", "json"])
+        .current_dir(dir.path())
+        .stdout(std::process::Stdio::null())
+        .stderr(std::process::Stdio::null())
+        .spawn()
+        .expect("run cirrus");
+    let status_file = format!("/proc/{}/status", child.id());
+    let mut peak_kib = 0u64;
+    while child.try_wait().expect("child").is_none() {
+        if let Ok(status) = std::fs::read_to_string(&status_file) {
+            if let Some(line) = status.lines().find(|line| line.starts_with("VmHWM:")) {
+                peak_kib = peak_kib.max(line.split_whitespace().nth(1).and_then(|kib| kib.parse().ok()).unwrap_or(0));
+            }
+        }
+        std::thread::sleep(std::time::Duration::from_millis(5));
+    }
+    let full = start.elapsed().as_secs_f64();
+    let report: serde_json::Value = serde_json::from_slice(&std::fs::read(dir.path().join("baked/oak/report.json")).unwrap()).unwrap();
+    println!(
+        "billboard: oak_medium full bake (process) {:.2} s wall (bar ≤ 5 s), peak memory {:.0} MiB (bar ≤ 1536), {} planes → atlas {}x{}",
+        full,
+        peak_kib as f64 / 1024.0,
+        report["planes"],
+        report["atlas"]["width"],
+        report["atlas"]["height"]
+    );
+    println!("billboard: oak stage ms {}", report["stage_ms"]);
+
+    // A bark-texture edit, in process, after a full bake.
+    let dir = tree_project(corpus, r#"BillboardCloud(name: "oak", mesh: "trees/oak_medium.obj")"#);
+    let mut project = Project::open(load_pipeline(&dir.path().join("pipeline.ron")).unwrap(), ProjectOptions { persistent_cache: false });
+    let start = Instant::now();
+    project.build(&BuildOptions::default(), &|_| {}).unwrap();
+    let full = start.elapsed().as_secs_f64();
+    let bark = dir.path().join("assets/trees/textures/oak_color_1k.jpg");
+    let mut image = image::open(&bark).unwrap().into_rgb8();
+    image.get_pixel_mut(10, 10).0 = [255, 0, 0];
+    image.save(&bark).unwrap();
+    let start = Instant::now();
+    let summary = project.build(&BuildOptions::default(), &|_| {}).unwrap();
+    let edit = start.elapsed().as_secs_f64();
+    let renders = summary.assets[0]
+        .stages
+        .iter()
+        .filter(|stage| stage.stage == "render" && stage.status == cirrus::summary::StageStatus::Ran)
+        .count();
+    println!(
+        "billboard: oak bark-texture edit {:.0} ms vs full bake {:.0} ms in process: {:.1} % (bar ≤ 20 %), {renders} of {} rectangles re-rendered",
+        edit * 1e3,
+        full * 1e3,
+        100.0 * edit / full,
+        summary.assets[0].stages.iter().filter(|stage| stage.stage == "render").count()
+    );
+
+    for tree in ["oak_medium", "ash_small", "bush_2"] {
+        let mut figures = Vec::new();
+        for epsilon in [0.01, 0.02, 0.04] {
+            let dir = tree_project(
+                corpus,
+                &format!(r#"BillboardCloud(name: "tree", mesh: "trees/{tree}.obj", billboard: (epsilon: {epsilon}))"#),
+            );
+            let mut project =
+                Project::open(load_pipeline(&dir.path().join("pipeline.ron")).unwrap(), ProjectOptions { persistent_cache: false });
+            let options = cirrus::bake::PreviewOptions { asset: "tree".into(), views: 26, size: 256, out: "preview".into() };
+            let metrics = project.preview(&options).expect("preview");
+            let report: serde_json::Value =
+                serde_json::from_slice(&std::fs::read(dir.path().join("baked/tree/report.json")).unwrap()).unwrap();
+            figures.push(format!("ε {epsilon}: {} planes, mean IoU {:.3}", report["planes"], metrics.mean_iou));
+        }
+        println!("billboard: {tree}: {}", figures.join("; "));
     }
 }
 

@@ -81,7 +81,7 @@ pub fn init_logging(verbose: u8) {
     let _ = tracing_subscriber::fmt().with_env_filter(filter).with_writer(std::io::stderr).with_target(false).try_init();
 }
 
-pub fn run(cli: Cli) -> anyhow::Result<ExitCode> {
+pub fn run(cli: Cli) -> ExitCode {
     init_logging(cli.verbose);
     match cli.command {
         Command::Build { pipeline, assets, summary } => build(pipeline, assets, summary),
@@ -90,12 +90,12 @@ pub fn run(cli: Cli) -> anyhow::Result<ExitCode> {
     }
 }
 
-fn build(pipeline: PathBuf, assets: Vec<String>, format: SummaryFormat) -> anyhow::Result<ExitCode> {
+fn build(pipeline: PathBuf, assets: Vec<String>, format: SummaryFormat) -> ExitCode {
     let config = match load_pipeline(&pipeline) {
         Ok(config) => config,
         Err(error) => {
             eprintln!("{error}");
-            return Ok(ExitCode::from(EXIT_USAGE));
+            return ExitCode::from(EXIT_USAGE);
         }
     };
     let mut project = Project::open(config, ProjectOptions::default());
@@ -123,22 +123,26 @@ fn build(pipeline: PathBuf, assets: Vec<String>, format: SummaryFormat) -> anyho
         Ok(summary) => summary,
         Err(error) => {
             eprintln!("error: {error}");
-            return Ok(ExitCode::from(EXIT_USAGE));
+            return ExitCode::from(EXIT_USAGE);
         }
     };
     match format {
         SummaryFormat::Json => println!("{}", summary.to_json()),
         SummaryFormat::Text => print!("{}", summary.to_text()),
     }
-    Ok(if summary.all_ok() { ExitCode::SUCCESS } else { ExitCode::from(EXIT_ASSET_FAILED) })
+    if summary.all_ok() {
+        ExitCode::SUCCESS
+    } else {
+        ExitCode::from(EXIT_ASSET_FAILED)
+    }
 }
 
-fn check(pipeline: PathBuf) -> anyhow::Result<ExitCode> {
+fn check(pipeline: PathBuf) -> ExitCode {
     let config = match load_pipeline(&pipeline) {
         Ok(config) => config,
         Err(error) => {
             eprintln!("{error}");
-            return Ok(ExitCode::from(EXIT_USAGE));
+            return ExitCode::from(EXIT_USAGE);
         }
     };
     let project = Project::open(config, ProjectOptions { persistent_cache: false });
@@ -151,15 +155,19 @@ fn check(pipeline: PathBuf) -> anyhow::Result<ExitCode> {
     let assets = project.asset_list().len();
     let failed = problems.iter().filter(|(_, diagnostics)| !diagnostics.is_empty()).count();
     println!("{assets} assets checked, {failed} with problems");
-    Ok(if failed == 0 { ExitCode::SUCCESS } else { ExitCode::from(EXIT_ASSET_FAILED) })
+    if failed == 0 {
+        ExitCode::SUCCESS
+    } else {
+        ExitCode::from(EXIT_ASSET_FAILED)
+    }
 }
 
-fn preview(pipeline: PathBuf, asset: String, views: u32, size: u32, out: Option<PathBuf>) -> anyhow::Result<ExitCode> {
+fn preview(pipeline: PathBuf, asset: String, views: u32, size: u32, out: Option<PathBuf>) -> ExitCode {
     let config = match load_pipeline(&pipeline) {
         Ok(config) => config,
         Err(error) => {
             eprintln!("{error}");
-            return Ok(ExitCode::from(EXIT_USAGE));
+            return ExitCode::from(EXIT_USAGE);
         }
     };
     let out = out.unwrap_or_else(|| config.output.join(&asset).join("preview"));
@@ -175,15 +183,15 @@ fn preview(pipeline: PathBuf, asset: String, views: u32, size: u32, out: Option<
                 metrics.mean_psnr
             );
             println!("wrote {}/contact_sheet.png and metrics.json", crate::diagnostic::display_path(&out));
-            Ok(ExitCode::SUCCESS)
+            ExitCode::SUCCESS
         }
         Err(error @ (crate::bake::PreviewError::Build(_) | crate::bake::PreviewError::NotBillboard(_))) => {
             eprintln!("error: {error}");
-            Ok(ExitCode::from(EXIT_USAGE))
+            ExitCode::from(EXIT_USAGE)
         }
         Err(error) => {
             eprintln!("error: {error}");
-            Ok(ExitCode::from(EXIT_ASSET_FAILED))
+            ExitCode::from(EXIT_ASSET_FAILED)
         }
     }
 }

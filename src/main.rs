@@ -5,12 +5,5 @@ use std::process::ExitCode;
 use clap::Parser;
 
 fn main() -> ExitCode {
-    let cli = cirrus::cli::Cli::parse();
-    match cirrus::cli::run(cli) {
-        Ok(code) => code,
-        Err(error) => {
-            eprintln!("error: {error:#}");
-            ExitCode::from(cirrus::cli::EXIT_USAGE)
-        }
-    }
+    cirrus::cli::run(cirrus::cli::Cli::parse())
 }

@@ -1,5 +1,6 @@
-//! Benchmark (`cargo bench`): material-bake throughput next to the raw encoder's on the same
-//! maps, and a no-op rebuild and a warm restart next to a full bake. Prints figures.
+//! Benchmark (`cargo bench [-- materials|planes|billboard]`): material-bake throughput next to
+//! the raw encoder's, no-op rebuild and warm restart next to a full bake, plane selection speed,
+//! and billboard-cloud bake time, memory, edit re-bake and fidelity per ε. Prints figures.
 
 use std::path::Path;
 use std::time::Instant;
@@ -18,12 +19,21 @@ fn main() {
     if corpus.join("materials").is_dir() {
         sources.push(("corpus", corpus.clone(), "materials/*.mymaterial"));
     }
-    for (label, source, glob) in sources {
-        bench_project(label, &source.canonicalize().expect("source folder"), glob);
+    // `cargo bench -- NAME` runs only the sections whose name contains NAME.
+    let filter: Vec<String> = std::env::args().skip(1).filter(|argument| !argument.starts_with('-')).collect();
+    let wanted = |section: &str| filter.is_empty() || filter.iter().any(|name| section.contains(name.as_str()));
+    if wanted("materials") {
+        for (label, source, glob) in sources {
+            bench_project(label, &source.canonicalize().expect("source folder"), glob);
+        }
     }
     if corpus.join("meshes").is_dir() {
-        bench_planes(&corpus);
-        bench_billboards(&corpus);
+        if wanted("planes") {
+            bench_planes(&corpus);
+        }
+        if wanted("billboard") {
+            bench_billboards(&corpus);
+        }
     }
 }
 

@@ -176,6 +176,10 @@ pub struct ExecutedFunction {
     pub key: salsa::Id,
 }
 
+/// The last encoding of each atlas surface (its levels and blocks), so that an edit re-encodes
+/// only the blocks it changed. A performance memory: results equal a full encode.
+type PreviousEncodings = Mutex<std::collections::HashMap<salsa::Id, (BlockEncodeSettings, Arc<Vec<Texture>>, EncodedTexture)>>;
+
 #[derive(Default)]
 struct Logs {
     executed: Mutex<Vec<ExecutedFunction>>,
@@ -186,6 +190,8 @@ struct Logs {
 pub trait Db: salsa::Database {
     fn disk_cache(&self) -> Option<&DiskCache>;
     fn record_run(&self, run: StageRun);
+    fn previous_encoding(&self, key: salsa::Id) -> Option<(BlockEncodeSettings, Arc<Vec<Texture>>, EncodedTexture)>;
+    fn remember_encoding(&self, key: salsa::Id, settings: BlockEncodeSettings, levels: Arc<Vec<Texture>>, encoded: EncodedTexture);
 }
 
 #[salsa::db]
@@ -194,6 +200,7 @@ pub struct Database {
     storage: salsa::Storage<Self>,
     cache: Option<DiskCache>,
     logs: Arc<Logs>,
+    encodings: Arc<PreviousEncodings>,
 }
 
 impl Database {
@@ -207,7 +214,7 @@ impl Database {
                 event_logs.executed.lock().expect("log lock").push(ExecutedFunction { function, key: database_key.key_index() });
             }
         })));
-        Database { storage, cache, logs }
+        Database { storage, cache, logs, encodings: Arc::default() }
     }
 
     /// The tracked functions salsa executed since the last call (its `WillExecute` events).
@@ -237,6 +244,14 @@ impl Db for Database {
 
     fn record_run(&self, run: StageRun) {
         self.logs.runs.lock().expect("log lock").push(run);
+    }
+
+    fn previous_encoding(&self, key: salsa::Id) -> Option<(BlockEncodeSettings, Arc<Vec<Texture>>, EncodedTexture)> {
+        self.encodings.lock().expect("encodings lock").get(&key).cloned()
+    }
+
+    fn remember_encoding(&self, key: salsa::Id, settings: BlockEncodeSettings, levels: Arc<Vec<Texture>>, encoded: EncodedTexture) {
+        self.encodings.lock().expect("encodings lock").insert(key, (settings, levels, encoded));
     }
 }
 
@@ -778,7 +793,15 @@ pub fn atlas_surface_artifacts(db: &dyn Db, key: AtlasSurfaceKey) -> Result<Arc<
         } else {
             vec![(*image).clone()]
         };
-        let texture = encode_levels(&levels, BlockEncodeSettings { format, quality, alpha: alpha_tested, srgb: surface.is_srgb() });
+        let settings = BlockEncodeSettings { format, quality, alpha: alpha_tested, srgb: surface.is_srgb() };
+        let previous = db.previous_encoding(key.as_id()).filter(|(previous_settings, _, _)| *previous_settings == settings);
+        let texture = crate::encode::encode_levels_reusing(
+            &levels,
+            settings,
+            previous.as_ref().map(|(_, levels, encoded)| (levels.as_slice(), encoded)),
+        );
+        let levels = Arc::new(levels);
+        db.remember_encoding(key.as_id(), settings, levels.clone(), texture.clone());
         let decoded = decode_blocks(format, &texture.levels[0], image.width, image.height);
         let psnr_db = (psnr(&image, &decoded, surface.channels()) * 100.0).round() / 100.0;
         let texture_file: Arc<[u8]> = write_container(&texture, container, zstd).into();

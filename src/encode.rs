@@ -137,3 +137,96 @@ fn padded_channels(level: &Texture, width: usize, height: usize, channels: usize
     }
     padded
 }
+
+/// Encodes a mip chain like `encode_levels`, reusing the blocks of `previous` (the same surface
+/// encoded earlier with the same settings) wherever a 4×4 block's texels are unchanged. Block
+/// encoding is independent per block, so the result is identical to a full encode.
+pub fn encode_levels_reusing(
+    levels: &[Texture],
+    settings: BlockEncodeSettings,
+    previous: Option<(&[Texture], &EncodedTexture)>,
+) -> EncodedTexture {
+    let Some((previous_levels, previous_encoded)) = previous.filter(|(previous_levels, encoded)| {
+        encoded.format == settings.format && encoded.srgb == settings.srgb && previous_levels.len() == levels.len()
+    }) else {
+        return encode_levels(levels, settings);
+    };
+    let size = block_bytes(settings.format);
+    let encoded: Vec<Arc<[u8]>> = levels
+        .iter()
+        .zip(previous_levels)
+        .zip(&previous_encoded.levels)
+        .map(|((level, old_level), old_blocks)| {
+            if (level.width, level.height) != (old_level.width, old_level.height) {
+                return Arc::from(encode_level(level, settings));
+            }
+            if level.hash == old_level.hash {
+                return old_blocks.clone();
+            }
+            let changed = changed_blocks(level, old_level);
+            if changed.len() * 2 > level.width.div_ceil(4) as usize * level.height.div_ceil(4) as usize {
+                return Arc::from(encode_level(level, settings));
+            }
+            // The changed blocks side by side in one strip, encoded together, then scattered.
+            let strip = Texture::new(4 * changed.len() as u32, 4, strip_of_blocks(level, &changed));
+            let fresh = encode_level(&strip, settings);
+            let mut blocks = old_blocks.to_vec();
+            for (index, &(bx, by)) in changed.iter().enumerate() {
+                let target = (by as usize * level.width.div_ceil(4) as usize + bx as usize) * size;
+                blocks[target..target + size].copy_from_slice(&fresh[index * size..(index + 1) * size]);
+            }
+            Arc::from(blocks)
+        })
+        .collect();
+    let mut hasher = blake3::Hasher::new();
+    for level in &encoded {
+        hasher.update(level);
+    }
+    EncodedTexture {
+        format: settings.format,
+        srgb: settings.srgb,
+        width: levels[0].width,
+        height: levels[0].height,
+        levels: encoded,
+        hash: hasher.finalize(),
+    }
+}
+
+/// The (x, y) block coordinates whose texels differ between two same-sized levels.
+fn changed_blocks(level: &Texture, old: &Texture) -> Vec<(u32, u32)> {
+    let (blocks_x, blocks_y) = (level.width.div_ceil(4), level.height.div_ceil(4));
+    let row_bytes = level.width as usize * 4;
+    let mut changed = Vec::new();
+    for by in 0..blocks_y {
+        for bx in 0..blocks_x {
+            let x0 = bx as usize * 16;
+            let x1 = ((bx as usize + 1) * 16).min(row_bytes);
+            let differs = (by * 4..((by + 1) * 4).min(level.height)).any(|y| {
+                let start = y as usize * row_bytes;
+                level.pixels[start + x0..start + x1] != old.pixels[start + x0..start + x1]
+            });
+            if differs {
+                changed.push((bx, by));
+            }
+        }
+    }
+    changed
+}
+
+/// The listed 4×4 blocks (edges repeated past the level's border) laid side by side.
+fn strip_of_blocks(level: &Texture, blocks: &[(u32, u32)]) -> Vec<u8> {
+    let width = 4 * blocks.len();
+    let mut pixels = vec![0u8; width * 4 * 4];
+    for (index, &(bx, by)) in blocks.iter().enumerate() {
+        for row in 0..4u32 {
+            let y = (by * 4 + row).min(level.height - 1);
+            for column in 0..4u32 {
+                let x = (bx * 4 + column).min(level.width - 1);
+                let source = ((y * level.width + x) * 4) as usize;
+                let target = (row as usize * width + index * 4 + column as usize) * 4;
+                pixels[target..target + 4].copy_from_slice(&level.pixels[source..source + 4]);
+            }
+        }
+    }
+    pixels
+}

@@ -203,3 +203,28 @@ fn report_json_lists_every_surface_with_its_measured_psnr() {
         assert_eq!(mode & 0o644, 0o644, "artifacts are readable by other users: {mode:o}");
     }
 }
+
+#[test]
+fn re_encoding_only_changed_blocks_equals_a_full_encode() {
+    use cirrus::config::EncodeQuality;
+    use cirrus::encode::{encode_levels, encode_levels_reusing, BlockEncodeSettings};
+    use cirrus::mips::{mip_chain, MipSettings};
+    use cirrus::surface::SurfaceKind;
+    let before = decode_png(&pattern_png(96, 64, 1));
+    let mut pixels = before.pixels.to_vec();
+    for y in 20..27 {
+        for x in 30..41 {
+            pixels[(y * 96 + x) * 4..][..3].copy_from_slice(&[255, 0, 0]);
+        }
+    }
+    let after = cirrus::texture::Texture::new(96, 64, pixels);
+    for format in [BlockFormat::Bc1, BlockFormat::Bc3, BlockFormat::Bc4, BlockFormat::Bc5, BlockFormat::Bc7] {
+        let settings = BlockEncodeSettings { format, quality: EncodeQuality::Basic, alpha: false, srgb: false };
+        let chain = |texture| mip_chain(texture, MipSettings { kind: SurfaceKind::Mra, alpha_cutoff: None });
+        let (old_levels, new_levels) = (chain(&before), chain(&after));
+        let old = encode_levels(&old_levels, settings);
+        let reused = encode_levels_reusing(&new_levels, settings, Some((&old_levels, &old)));
+        assert_eq!(reused, encode_levels(&new_levels, settings), "{format:?}: reuse is exact");
+        assert_ne!(reused, old, "{format:?}: the edit shows");
+    }
+}

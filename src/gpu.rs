@@ -36,6 +36,8 @@ pub struct Gpu {
     uploads: Mutex<HashMap<(blake3::Hash, bool, u32), Arc<wgpu::TextureView>>>,
     view_pipeline: wgpu::RenderPipeline,
     view_material_layout: wgpu::BindGroupLayout,
+    /// Material bind groups by content (constants, texture hashes, cutoff).
+    material_groups: Mutex<HashMap<blake3::Hash, Arc<wgpu::BindGroup>>>,
 }
 
 /// A material for preview renders: textures with their own mip levels (level 0 first).
@@ -312,6 +314,7 @@ impl Gpu {
             uploads: Mutex::new(HashMap::new()),
             view_pipeline,
             view_material_layout,
+            material_groups: Mutex::new(HashMap::new()),
         })
     }
 
@@ -348,7 +351,8 @@ impl Gpu {
         let targets: Vec<wgpu::Texture> =
             [ALBEDO_FORMAT, DATA_FORMAT, DATA_FORMAT, DATA_FORMAT].iter().map(|&format| self.target(width, height, format)).collect();
         let views: Vec<wgpu::TextureView> = targets.iter().map(|texture| texture.create_view(&Default::default())).collect();
-        let depth = self.target(width, height, DEPTH_FORMAT).create_view(&Default::default());
+        let depth_texture = self.target(width, height, DEPTH_FORMAT);
+        let depth = depth_texture.create_view(&Default::default());
 
         let mut draws = Vec::new();
         for (material_index, vertices) in &input.batches {
@@ -356,13 +360,7 @@ impl Gpu {
                 continue;
             }
             let material = &input.materials[*material_index];
-            let buffer = self.device.create_buffer(&wgpu::BufferDescriptor {
-                label: Some("vertices"),
-                size: std::mem::size_of_val(vertices.as_slice()) as u64,
-                usage: wgpu::BufferUsages::VERTEX | wgpu::BufferUsages::COPY_DST,
-                mapped_at_creation: false,
-            });
-            self.queue.write_buffer(&buffer, 0, bytemuck::cast_slice(vertices));
+            let buffer = self.vertex_buffer(vertices);
             draws.push((buffer, vertices.len() as u32, self.material_group(material, input.alpha_cutoff)));
         }
 
@@ -392,12 +390,19 @@ impl Gpu {
             pass.set_pipeline(&self.pipeline);
             pass.set_bind_group(0, &frame_group, &[]);
             for (buffer, count, group) in &draws {
-                pass.set_bind_group(1, group, &[]);
+                pass.set_bind_group(1, group.as_ref(), &[]);
                 pass.set_vertex_buffer(0, buffer.slice(..));
                 pass.draw(0..*count, 0..1);
             }
         }
         let images = self.read_back(encoder, &targets, width, height)?;
+        // Free device memory now rather than whenever wgpu next triages destroyed resources.
+        targets.iter().for_each(wgpu::Texture::destroy);
+        depth_texture.destroy();
+        frame_buffer.destroy();
+        for (buffer, _, _) in &draws {
+            buffer.destroy();
+        }
         let [albedo, normal, mra, height_map]: [Vec<u8>; 4] = images.try_into().expect("four targets");
         Ok(PlaneImages { width, height, albedo, normal, mra, height_map })
     }
@@ -420,13 +425,7 @@ impl Gpu {
             if vertices.is_empty() {
                 continue;
             }
-            let buffer = self.device.create_buffer(&wgpu::BufferDescriptor {
-                label: Some("vertices"),
-                size: std::mem::size_of_val(vertices.as_slice()) as u64,
-                usage: wgpu::BufferUsages::VERTEX | wgpu::BufferUsages::COPY_DST,
-                mapped_at_creation: false,
-            });
-            self.queue.write_buffer(&buffer, 0, bytemuck::cast_slice(vertices));
+            let buffer = self.vertex_buffer(vertices);
             draws.push((buffer, vertices.len() as u32, self.view_material_group(&mesh.materials[*material_index])));
         }
         let mut encoder = self.device.create_command_encoder(&Default::default());
@@ -547,20 +546,30 @@ impl Gpu {
                 let start = row * padded_row as usize;
                 pixels.extend_from_slice(&mapped[start..start + width as usize * 4]);
             }
+            drop(mapped);
+            buffer.unmap();
+            buffer.destroy();
             images.push(pixels);
         }
         Ok(images)
     }
 
     fn uniform_buffer(&self, bytes: &[u8]) -> wgpu::Buffer {
-        let buffer = self.device.create_buffer(&wgpu::BufferDescriptor {
+        use wgpu::util::DeviceExt;
+        self.device.create_buffer_init(&wgpu::util::BufferInitDescriptor {
             label: Some("uniform"),
-            size: bytes.len() as u64,
-            usage: wgpu::BufferUsages::UNIFORM | wgpu::BufferUsages::COPY_DST,
-            mapped_at_creation: false,
-        });
-        self.queue.write_buffer(&buffer, 0, bytes);
-        buffer
+            contents: bytes,
+            usage: wgpu::BufferUsages::UNIFORM,
+        })
+    }
+
+    fn vertex_buffer(&self, vertices: &[RenderVertex]) -> wgpu::Buffer {
+        use wgpu::util::DeviceExt;
+        self.device.create_buffer_init(&wgpu::util::BufferInitDescriptor {
+            label: Some("vertices"),
+            contents: bytemuck::cast_slice(vertices),
+            usage: wgpu::BufferUsages::VERTEX,
+        })
     }
 
     fn target(&self, width: u32, height: u32, format: wgpu::TextureFormat) -> wgpu::Texture {
@@ -576,7 +585,7 @@ impl Gpu {
         })
     }
 
-    fn material_group(&self, material: &RenderMaterial, alpha_cutoff: f32) -> wgpu::BindGroup {
+    fn material_group(&self, material: &RenderMaterial, alpha_cutoff: f32) -> Arc<wgpu::BindGroup> {
         let flag = |texture: &Option<Arc<Texture>>| if texture.is_some() { 1.0 } else { 0.0 };
         let uniform = MaterialUniform {
             albedo: material.albedo_factor,
@@ -584,6 +593,16 @@ impl Gpu {
             has_a: [flag(&material.albedo), flag(&material.opacity), flag(&material.normal), flag(&material.metallic)],
             has_b: [flag(&material.roughness), flag(&material.ao), 0.0, 0.0],
         };
+        let mut key = blake3::Hasher::new();
+        key.update(bytemuck::bytes_of(&uniform));
+        key.update(&alpha_cutoff.to_bits().to_le_bytes());
+        for texture in [&material.albedo, &material.opacity, &material.normal, &material.metallic, &material.roughness, &material.ao] {
+            key.update(texture.as_ref().map_or(&[0u8; 32], |texture| texture.hash.as_bytes()));
+        }
+        let key = key.finalize();
+        if let Some(group) = self.material_groups.lock().expect("material groups").get(&key) {
+            return group.clone();
+        }
         let buffer = self.uniform_buffer(bytemuck::bytes_of(&uniform));
         let views: Vec<Arc<wgpu::TextureView>> = [
             (&material.albedo, SurfaceKind::Albedo, Some(alpha_cutoff)),
@@ -606,11 +625,13 @@ impl Gpu {
         for (index, view) in views.iter().enumerate() {
             entries.push(wgpu::BindGroupEntry { binding: 2 + index as u32, resource: wgpu::BindingResource::TextureView(view) });
         }
-        self.device.create_bind_group(&wgpu::BindGroupDescriptor {
+        let group = Arc::new(self.device.create_bind_group(&wgpu::BindGroupDescriptor {
             label: Some("material"),
             layout: &self.material_layout,
             entries: &entries,
-        })
+        }));
+        self.material_groups.lock().expect("material groups").insert(key, group.clone());
+        group
     }
 }
 

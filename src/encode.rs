@@ -55,6 +55,11 @@ pub struct BlockEncodeSettings {
 /// Encodes every level of a mip chain (level 0 first).
 pub fn encode_levels(levels: &[Texture], settings: BlockEncodeSettings) -> EncodedTexture {
     let encoded: Vec<Arc<[u8]>> = levels.iter().map(|level| Arc::from(encode_level(level, settings))).collect();
+    encoded_texture(levels, settings, encoded)
+}
+
+/// The encoded texture of `levels`, hashed over its block data.
+fn encoded_texture(levels: &[Texture], settings: BlockEncodeSettings, encoded: Vec<Arc<[u8]>>) -> EncodedTexture {
     let mut hasher = blake3::Hasher::new();
     for level in &encoded {
         hasher.update(level);
@@ -178,18 +183,7 @@ pub fn encode_levels_reusing(
             Arc::from(blocks)
         })
         .collect();
-    let mut hasher = blake3::Hasher::new();
-    for level in &encoded {
-        hasher.update(level);
-    }
-    EncodedTexture {
-        format: settings.format,
-        srgb: settings.srgb,
-        width: levels[0].width,
-        height: levels[0].height,
-        levels: encoded,
-        hash: hasher.finalize(),
-    }
+    encoded_texture(levels, settings, encoded)
 }
 
 /// The (x, y) block coordinates whose texels differ between two same-sized levels.

@@ -2,6 +2,8 @@
 //! surface needs (colour in linear light and alpha-weighted, coverage-preserving alpha for
 //! alpha-tested albedo, renormalised normals, plain averages for data).
 
+use rayon::prelude::*;
+
 use crate::surface::{decode_normal, encode_normal, linear_to_srgb_u8, normalize_tangent_normal, srgb_u8_to_linear, unorm_u8, SurfaceKind};
 use crate::texture::Texture;
 
@@ -89,24 +91,29 @@ fn reduce(source: &[[f32; 4]], width: u32, height: u32, new_width: u32, new_heig
         result
     };
     let columns: Vec<Vec<(u32, f32)>> = (0..new_width).map(|x| weights(x, scale_x, width)).collect();
-    let mut output = Vec::with_capacity((new_width * new_height) as usize);
-    for y in 0..new_height {
-        let rows = weights(y, scale_y, height);
-        for column in &columns {
-            let mut sum = [0.0f32; 4];
-            for &(sy, wy) in &rows {
-                for &(sx, wx) in column {
-                    let texel = source[(sy * width + sx) as usize];
-                    let weight = wx * wy;
-                    for channel in 0..4 {
-                        sum[channel] += texel[channel] * weight;
+    // Rows in parallel: each output texel is the same arithmetic whichever thread computes it.
+    (0..new_height)
+        .into_par_iter()
+        .flat_map_iter(|y| {
+            let rows = weights(y, scale_y, height);
+            columns
+                .iter()
+                .map(|column| {
+                    let mut sum = [0.0f32; 4];
+                    for &(sy, wy) in &rows {
+                        for &(sx, wx) in column {
+                            let texel = source[(sy * width + sx) as usize];
+                            let weight = wx * wy;
+                            for channel in 0..4 {
+                                sum[channel] += texel[channel] * weight;
+                            }
+                        }
                     }
-                }
-            }
-            output.push(sum);
-        }
-    }
-    output
+                    sum
+                })
+                .collect::<Vec<_>>()
+        })
+        .collect()
 }
 
 /// Fraction of texels whose alpha × `scale` passes `cutoff`.

@@ -89,7 +89,10 @@ fn bench_billboards(corpus: &Path) {
 
     // A bark-texture edit, in process, after a full bake.
     let dir = tree_project(corpus, r#"BillboardCloud(name: "oak", mesh: "trees/oak_medium.obj")"#);
-    let mut project = Project::open(load_pipeline(&dir.path().join("pipeline.ron")).unwrap(), ProjectOptions { persistent_cache: false });
+    let mut project = Project::open(
+        load_pipeline(&dir.path().join("pipeline.ron")).unwrap(),
+        ProjectOptions { persistent_cache: false, ..Default::default() },
+    );
     let start = Instant::now();
     project.build(&BuildOptions::default(), &|_| {}).unwrap();
     let full = start.elapsed().as_secs_f64();
@@ -120,8 +123,10 @@ fn bench_billboards(corpus: &Path) {
                 corpus,
                 &format!(r#"BillboardCloud(name: "tree", mesh: "trees/{tree}.obj", billboard: (epsilon: {epsilon}))"#),
             );
-            let mut project =
-                Project::open(load_pipeline(&dir.path().join("pipeline.ron")).unwrap(), ProjectOptions { persistent_cache: false });
+            let mut project = Project::open(
+                load_pipeline(&dir.path().join("pipeline.ron")).unwrap(),
+                ProjectOptions { persistent_cache: false, ..Default::default() },
+            );
             let options = cirrus::bake::PreviewOptions { asset: "tree".into(), views: 26, size: 256, out: "preview".into() };
             let metrics = project.preview(&options).expect("preview");
             let report: serde_json::Value =

@@ -2,7 +2,7 @@
 //! stages of every asset on worker threads with database clones, writes the artifacts and the
 //! manifest, and says what ran. It is the one place where the pipeline meets the disk.
 
-use std::collections::{BTreeMap, BTreeSet, HashMap};
+use std::collections::{BTreeMap, BTreeSet, HashMap, HashSet};
 use std::panic::AssertUnwindSafe;
 use std::path::{Path, PathBuf};
 use std::sync::atomic::{AtomicUsize, Ordering};
@@ -25,8 +25,8 @@ use crate::diagnostic::{display_path, Diagnostic};
 use crate::material_definition::MaterialFile;
 use crate::sources::{read_source, rule_matches};
 use crate::summary::{
-    ArtifactSummary, AssetStatus, AssetSummary, BuildSummary, ErrorSummary, MaterialReport, MaterialReportEntry, StageStatus, StageSummary,
-    SurfaceReport,
+    ArtifactSummary, AssetStatus, AssetSummary, BuildSummary, ChangedArtifact, ErrorSummary, MaterialReport, MaterialReportEntry,
+    StageStatus, StageSummary, SurfaceReport,
 };
 use crate::surface::SurfaceKind;
 
@@ -35,12 +35,24 @@ use crate::surface::SurfaceKind;
 pub struct ProjectOptions {
     /// Keep stage results on disk under `<output>/.cirrus/cache` across runs.
     pub persistent_cache: bool,
+    /// When source files are read again.
+    pub source_reading: SourceReading,
 }
 
 impl Default for ProjectOptions {
     fn default() -> Self {
-        ProjectOptions { persistent_cache: true }
+        ProjectOptions { persistent_cache: true, source_reading: SourceReading::EveryBuild }
     }
+}
+
+/// When a build reads a source file it has read before.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum SourceReading {
+    /// Every build reads (and hashes) every source again: `cirrus build`.
+    EveryBuild,
+    /// Only files named by `Project::invalidate_sources` since they were last read: the daemon,
+    /// whose watcher says what changed.
+    WhenInvalidated,
 }
 
 /// What one build covers.
@@ -48,6 +60,30 @@ impl Default for ProjectOptions {
 pub struct BuildOptions {
     /// Build only these assets (all when empty).
     pub only_assets: Vec<String>,
+    /// Raised by another thread to stop the build (salsa cancellation of its workers); the build
+    /// then returns `BuildError::Cancelled` and writes nothing.
+    pub cancel: Option<CancelFlag>,
+    /// Give this build a revision of its own even when it changed no artifact (the daemon's
+    /// batches are numbered by it).
+    pub always_new_revision: bool,
+}
+
+/// A flag that cancels a running build when raised.
+#[derive(Clone, Debug, Default)]
+pub struct CancelFlag(Arc<std::sync::atomic::AtomicBool>);
+
+impl CancelFlag {
+    pub fn raise(&self) {
+        self.0.store(true, Ordering::SeqCst);
+    }
+
+    pub fn lower(&self) {
+        self.0.store(false, Ordering::SeqCst);
+    }
+
+    pub fn is_raised(&self) -> bool {
+        self.0.load(Ordering::SeqCst)
+    }
 }
 
 /// Progress of the stage work of a build, for progress bars and logs.
@@ -63,6 +99,8 @@ pub struct Progress {
 pub enum BuildError {
     #[error("no asset named `{name}` in {pipeline}")]
     UnknownAsset { name: String, pipeline: String },
+    #[error("the build was cancelled by a newer edit")]
+    Cancelled,
 }
 
 /// An open project: the pipeline, the salsa database and the inputs created so far.
@@ -77,6 +115,16 @@ pub struct Project {
     atlas_surface_keys: HashMap<(String, SurfaceKind), AtlasSurfaceKey>,
     /// Readable names of input ids, for the event log.
     labels: HashMap<salsa::Id, String>,
+    source_reading: SourceReading,
+    /// Files read since they were last invalidated (see `SourceReading::WhenInvalidated`).
+    fresh: HashSet<PathBuf>,
+    /// Per graph node id (`stage(instance)` or a file's path): the revision of its last run or
+    /// content change, and its last duration.
+    history: HashMap<String, (u64, f64)>,
+    /// The summary of the last finished build, for the graph's node states.
+    last_summary: Option<BuildSummary>,
+    /// The manifest revision of the last build (or of the manifest found on disk).
+    revision: u64,
 }
 
 /// One asset's share of a build.
@@ -112,7 +160,8 @@ const BILLBOARD_CACHE_STAGE: &str = "billboard";
 impl Project {
     pub fn open(config: PipelineConfig, options: ProjectOptions) -> Project {
         let cache = options.persistent_cache.then(|| DiskCache::new(config.output_dir().join(".cirrus").join("cache")));
-        Project {
+        let revision = load_manifest(&config.output_dir()).revision;
+        let mut project = Project {
             config,
             db: Database::new(cache),
             files: HashMap::new(),
@@ -122,7 +171,67 @@ impl Project {
             plane_keys: HashMap::new(),
             atlas_surface_keys: HashMap::new(),
             labels: HashMap::new(),
+            source_reading: options.source_reading,
+            fresh: HashSet::new(),
+            history: HashMap::new(),
+            last_summary: None,
+            revision: 0,
+        };
+        project.revision = revision;
+        project
+    }
+
+    fn next_revision(&self) -> u64 {
+        self.revision + 1
+    }
+
+    /// The revision of the last build (the manifest's).
+    pub fn revision(&self) -> u64 {
+        self.revision
+    }
+
+    /// Uses up a revision without a build (the daemon numbers a configuration error's batch).
+    pub fn skip_revision(&mut self) {
+        self.revision += 1;
+    }
+
+    /// Every source file read so far (project-relative).
+    pub fn source_paths(&self) -> BTreeSet<PathBuf> {
+        self.files.keys().cloned().collect()
+    }
+
+    /// Marks source files as changed on disk: the next build reads them again.
+    pub fn invalidate_sources<'a>(&mut self, paths: impl IntoIterator<Item = &'a Path>) {
+        for path in paths {
+            self.fresh.remove(path);
         }
+    }
+
+    /// Reads `paths` again now; true when any of them is new to the project or its bytes changed
+    /// (so that a touch with identical bytes costs no build).
+    pub fn refresh_sources<'a>(&mut self, paths: impl IntoIterator<Item = &'a Path>) -> bool {
+        let mut changed = false;
+        for path in paths {
+            let Some(&file) = self.files.get(path) else {
+                changed = true;
+                continue;
+            };
+            let before = file.contents(&self.db).clone();
+            self.fresh.remove(path);
+            self.source_file(path);
+            changed |= file.contents(&self.db) != &before;
+        }
+        changed
+    }
+
+    /// Marks every source file as possibly changed (after a watcher overflow or error).
+    pub fn invalidate_all_sources(&mut self) {
+        self.fresh.clear();
+    }
+
+    /// Whether `path` (project-relative) is a source file some asset read.
+    pub fn is_source(&self, path: &Path) -> bool {
+        self.files.contains_key(path)
     }
 
     pub fn config(&self) -> &PipelineConfig {
@@ -162,20 +271,37 @@ impl Project {
             .cloned()
             .collect();
 
-        let mut plans: Vec<AssetPlan> = selected.into_iter().map(|asset| self.plan_asset(asset)).collect();
+        let cancel = options.cancel.clone().unwrap_or_default();
+        let mut plans = Vec::new();
+        for asset in selected {
+            if cancel.is_raised() {
+                self.db.take_runs();
+                return Err(BuildError::Cancelled);
+            }
+            plans.push(self.plan_asset(asset));
+        }
         let keys: Vec<SurfaceKey> = plans.iter().flat_map(|plan| plan.surfaces.iter().map(|(_, _, key)| *key)).collect();
         let describe_surface = |db: &Database, key: SurfaceKey| {
             let asset = key.asset(db);
             (asset.file(db).path(db).clone(), format!("{}/{}/{}", asset.name(db), key.material(db), key.surface(db).name()))
         };
-        let results = self.run_parallel(&keys, &describe_surface, &|db, key| surface_artifacts(db, key), progress);
-        self.bake_billboards(&mut plans, progress);
+        let results = self.run_parallel(&keys, &describe_surface, &|db, key| surface_artifacts(db, key), progress, &cancel);
+        if !cancel.is_raised() {
+            self.bake_billboards(&mut plans, progress, &cancel);
+        }
         let runs = self.db.take_runs();
+        if cancel.is_raised() {
+            return Err(BuildError::Cancelled);
+        }
+        let results: Vec<Result<Arc<SurfaceArtifacts>, Diagnostic>> =
+            results.into_iter().map(|result| result.expect("not cancelled")).collect();
 
         let output_dir = self.config.output_dir();
         let mut manifest = load_manifest(&output_dir);
-        let next_revision = manifest.revision + 1;
-        let mut changed = false;
+        let next_revision = manifest.revision.max(self.revision) + 1;
+        let mut changed = options.always_new_revision;
+        let mut changed_artifacts = Vec::new();
+        let mut removed_artifacts = Vec::new();
         let mut summaries = Vec::new();
         let mut results = results.into_iter();
         for plan in &mut plans {
@@ -201,29 +327,54 @@ impl Project {
                     self.write_artifact(&folder.join(name), bytes, &mut plan.errors, &mut produced);
                 }
             }
+            let asset_folder = format!("{}/", display_path(&self.config.output.join(&plan.config.name)));
             for (path, hash) in &produced {
-                changed |= record_artifact(&mut manifest, next_revision, &plan.config.name, path, hash);
+                if record_artifact(&mut manifest, next_revision, &plan.config.name, path, hash) {
+                    changed = true;
+                    changed_artifacts.push(ChangedArtifact {
+                        asset: plan.config.name.clone(),
+                        artifact: path.strip_prefix(&asset_folder).unwrap_or(path).to_string(),
+                        path: path.clone(),
+                        hash: hash.clone(),
+                    });
+                }
             }
             if plan.errors.is_empty() {
                 // A fully baked asset owns exactly what it produced: drop stale artifacts.
                 let name = &plan.config.name;
-                changed |=
-                    remove_artifacts(&self.config.root, &mut manifest, |path, entry| &entry.asset == name && !produced.contains_key(path));
+                removed_artifacts.extend(remove_artifacts(&self.config.root, &mut manifest, |path, entry| {
+                    &entry.asset == name && !produced.contains_key(path)
+                }));
             }
             summaries.push(self.asset_summary(plan, &surface_results, &runs, &manifest));
         }
         if options.only_assets.is_empty() {
             // Artifacts of assets that left the pipeline.
             let names: BTreeSet<&str> = all_assets.iter().map(|asset| asset.name.as_str()).collect();
-            changed |= remove_artifacts(&self.config.root, &mut manifest, |_, entry| !names.contains(entry.asset.as_str()));
+            removed_artifacts.extend(remove_artifacts(&self.config.root, &mut manifest, |_, entry| !names.contains(entry.asset.as_str())));
         }
+        changed |= !removed_artifacts.is_empty();
         if changed {
             manifest.revision = next_revision;
             if let Err(error) = save_manifest(&output_dir, &manifest) {
                 tracing::error!("cannot write {}: {error}", display_path(&crate::artifacts::manifest_path(&output_dir)));
             }
         }
-        Ok(BuildSummary { revision: manifest.revision, assets: summaries })
+        self.revision = manifest.revision;
+        for run in runs.iter().filter(|run| !run.from_cache) {
+            if let Some(label) = self.labels.get(&run.key) {
+                let entry = self.history.entry(format!("{}({label})", run.stage.name())).or_insert((0, 0.0));
+                if entry.0 != manifest.revision {
+                    *entry = (manifest.revision, 0.0);
+                }
+                entry.1 += run.ms;
+            }
+        }
+        changed_artifacts.sort_by(|a, b| a.path.cmp(&b.path));
+        let summary =
+            BuildSummary { revision: manifest.revision, assets: summaries, changed: changed_artifacts, removed: removed_artifacts };
+        self.last_summary = Some(summary.clone());
+        Ok(summary)
     }
 
     /// Validates every asset's sources without baking: the material files parse, and every
@@ -290,16 +441,24 @@ impl Project {
 
     /// The salsa input of a file, read from disk now; set again only when its bytes changed.
     fn source_file(&mut self, path: &Path) -> SourceFile {
+        if self.source_reading == SourceReading::WhenInvalidated && self.fresh.contains(path) {
+            if let Some(&file) = self.files.get(path) {
+                return file;
+            }
+        }
         let contents = read_source(&self.config.root, path);
+        self.fresh.insert(path.to_path_buf());
         match self.files.get(path) {
             Some(&file) => {
                 if file.contents(&self.db) != &contents {
                     let _previous = file.set_contents(&mut self.db).to(contents);
+                    self.history.insert(file_node_id(path), (self.next_revision(), 0.0));
                 }
                 file
             }
             None => {
                 let file = SourceFile::new(&self.db, path.to_path_buf(), contents);
+                self.history.insert(file_node_id(path), (self.next_revision(), 0.0));
                 self.labels.insert(file.as_id(), display_path(path));
                 self.files.insert(path.to_path_buf(), file);
                 file
@@ -478,7 +637,7 @@ impl Project {
 
     /// Renders the planes and encodes the atlases of the billboard clouds the cache did not have,
     /// then assembles their files (and stores them in the persistent cache).
-    fn bake_billboards(&self, plans: &mut [AssetPlan], progress: &(dyn Fn(Progress) + Sync)) {
+    fn bake_billboards(&self, plans: &mut [AssetPlan], progress: &(dyn Fn(Progress) + Sync), cancel: &CancelFlag) {
         let pending: Vec<usize> =
             (0..plans.len()).filter(|&index| plans[index].billboard.as_ref().is_some_and(|plan| plan.files.is_none())).collect();
         if pending.is_empty() {
@@ -490,7 +649,8 @@ impl Project {
         };
         let plane_keys: Vec<PlaneKey> =
             pending.iter().flat_map(|&index| plans[index].billboard.as_ref().expect("pending").plane_keys.clone()).collect();
-        let rendered = self.run_parallel(&plane_keys, &describe_plane, &|db, key| plane_images(db, key).map(|_| ()), progress);
+        let rendered = self.run_parallel(&plane_keys, &describe_plane, &|db, key| plane_images(db, key).map(|_| ()), progress, cancel);
+        let Some(rendered) = rendered.into_iter().collect::<Option<Vec<_>>>() else { return };
         let describe_surface = |db: &Database, key: AtlasSurfaceKey| {
             let asset = key.asset(db);
             (asset.mesh_file(db).path(db).clone(), format!("{}/{}", asset.name(db), key.surface(db).name()))
@@ -504,7 +664,8 @@ impl Project {
                 surface_keys.extend(plan.surface_keys.iter().copied());
             }
         }
-        let encoded = self.run_parallel(&surface_keys, &describe_surface, &|db, key| atlas_surface_artifacts(db, key), progress);
+        let encoded = self.run_parallel(&surface_keys, &describe_surface, &|db, key| atlas_surface_artifacts(db, key), progress, cancel);
+        let Some(encoded) = encoded.into_iter().collect::<Option<Vec<_>>>() else { return };
         for &index in &pending {
             let plan = &mut plans[index];
             let billboard = plan.billboard.as_mut().expect("pending");
@@ -604,40 +765,66 @@ impl Project {
 
     /// Runs `work` for every item on worker threads, each with its own database clone; a panic
     /// fails only its item. `describe` names an item's file (for that failure) and progress label.
+    /// Raising `cancel` stops the workers: those inside a query unwind with `salsa::Cancelled`
+    /// (their clones' cancellation tokens), the rest take no new item; unfinished items are `None`.
     fn run_parallel<T: Copy + Send + Sync, R: Send>(
         &self,
         items: &[T],
         describe: &(dyn Fn(&Database, T) -> (PathBuf, String) + Sync),
         work: &(dyn Fn(&Database, T) -> Result<R, Diagnostic> + Sync),
         progress: &(dyn Fn(Progress) + Sync),
-    ) -> Vec<Result<R, Diagnostic>> {
+        cancel: &CancelFlag,
+    ) -> Vec<Option<Result<R, Diagnostic>>> {
         let results: Mutex<Vec<Option<Result<R, Diagnostic>>>> = Mutex::new((0..items.len()).map(|_| None).collect());
         let next = AtomicUsize::new(0);
         let done = AtomicUsize::new(0);
+        let running = AtomicUsize::new(0);
         let workers = std::thread::available_parallelism().map_or(2, |count| count.get()).min(items.len().max(1));
+        let clones: Vec<Database> = (0..workers).map(|_| self.db.clone()).collect();
+        let tokens: Vec<salsa::CancellationToken> = clones.iter().map(salsa::Database::cancellation_token).collect();
         std::thread::scope(|scope| {
-            for _ in 0..workers {
-                let db = self.db.clone();
-                let (results, next, done) = (&results, &next, &done);
-                scope.spawn(move || loop {
-                    let index = next.fetch_add(1, Ordering::Relaxed);
-                    let Some(&item) = items.get(index) else { break };
-                    let result = std::panic::catch_unwind(AssertUnwindSafe(|| work(&db, item))).unwrap_or_else(|panic| {
-                        let message = panic
-                            .downcast_ref::<String>()
-                            .cloned()
-                            .or_else(|| panic.downcast_ref::<&str>().map(|text| text.to_string()))
-                            .unwrap_or_else(|| "unknown panic".to_string());
-                        let (file, label) = describe(&db, item);
-                        Err(Diagnostic::new(file, format!("internal error while baking `{label}`: {message}")))
-                    });
-                    results.lock().expect("results lock")[index] = Some(result);
-                    let finished = done.fetch_add(1, Ordering::Relaxed) + 1;
-                    progress(Progress { done: finished, total: items.len(), item: describe(&db, item).1 });
+            for db in clones {
+                let (results, next, done, running) = (&results, &next, &done, &running);
+                running.fetch_add(1, Ordering::SeqCst);
+                scope.spawn(move || {
+                    loop {
+                        if cancel.is_raised() {
+                            break;
+                        }
+                        let index = next.fetch_add(1, Ordering::Relaxed);
+                        let Some(&item) = items.get(index) else { break };
+                        let result = match std::panic::catch_unwind(AssertUnwindSafe(|| work(&db, item))) {
+                            Ok(result) => result,
+                            Err(panic) if panic.is::<salsa::Cancelled>() => break,
+                            Err(panic) => {
+                                let message = panic
+                                    .downcast_ref::<String>()
+                                    .cloned()
+                                    .or_else(|| panic.downcast_ref::<&str>().map(|text| text.to_string()))
+                                    .unwrap_or_else(|| "unknown panic".to_string());
+                                let (file, label) = describe(&db, item);
+                                Err(Diagnostic::new(file, format!("internal error while baking `{label}`: {message}")))
+                            }
+                        };
+                        results.lock().expect("results lock")[index] = Some(result);
+                        let finished = done.fetch_add(1, Ordering::Relaxed) + 1;
+                        progress(Progress { done: finished, total: items.len(), item: describe(&db, item).1 });
+                    }
+                    // The clone is dropped here, before the writer can set the next inputs.
+                    drop(db);
+                    running.fetch_sub(1, Ordering::SeqCst);
                 });
             }
+            // Watch for cancellation while the workers run; pass it on to their queries.
+            while running.load(Ordering::SeqCst) > 0 {
+                if cancel.is_raised() {
+                    tokens.iter().for_each(salsa::CancellationToken::cancel);
+                    break;
+                }
+                std::thread::sleep(std::time::Duration::from_millis(2));
+            }
         });
-        results.into_inner().expect("results lock").into_iter().map(|result| result.expect("every item ran")).collect()
+        results.into_inner().expect("results lock")
     }
 
     /// Writes the texture and preview of every baked surface; returns the asset's report.
@@ -802,14 +989,19 @@ fn record_artifact(manifest: &mut Manifest, revision: u64, asset: &str, path: &s
     !unchanged
 }
 
-/// Deletes the artifacts `doomed` selects, file and manifest entry; true when any was removed.
-fn remove_artifacts(root: &Path, manifest: &mut Manifest, doomed: impl Fn(&str, &ManifestEntry) -> bool) -> bool {
+/// Deletes the artifacts `doomed` selects, file and manifest entry; returns their paths.
+fn remove_artifacts(root: &Path, manifest: &mut Manifest, doomed: impl Fn(&str, &ManifestEntry) -> bool) -> Vec<String> {
     let paths: Vec<String> = manifest.artifacts.iter().filter(|(path, entry)| doomed(path, entry)).map(|(path, _)| path.clone()).collect();
     for path in &paths {
         let _ = std::fs::remove_file(root.join(path));
         manifest.artifacts.remove(path);
     }
-    !paths.is_empty()
+    paths
+}
+
+/// The graph node id of a source file.
+pub fn file_node_id(path: &Path) -> String {
+    display_path(path)
 }
 
 /// What `cirrus preview` renders.
@@ -841,7 +1033,7 @@ pub enum PreviewError {
 impl Project {
     /// Bakes `asset` if needed, then renders it and its source from the view directions.
     pub fn preview(&mut self, options: &PreviewOptions) -> Result<crate::lod_preview::PreviewMetrics, PreviewError> {
-        let summary = self.build(&BuildOptions { only_assets: vec![options.asset.clone()] }, &|_| {})?;
+        let summary = self.build(&BuildOptions { only_assets: vec![options.asset.clone()], ..Default::default() }, &|_| {})?;
         let asset = &summary.assets[0];
         if asset.kind != "BillboardCloud" {
             return Err(PreviewError::NotBillboard(options.asset.clone()));
@@ -965,5 +1157,207 @@ impl Project {
             })
             .collect();
         Ok(crate::gpu::ViewMesh { batches: vec![(0, vertices)], materials: vec![material] })
+    }
+}
+
+/// The graph id of a stage instance, as the event log names it: `stage(label)`.
+fn stage_node_id(stage: Stage, label: &str) -> String {
+    format!("{}({label})", stage.name())
+}
+
+impl Project {
+    /// The dependency graph of every asset: source files, stage instances (per surface, per
+    /// plane) and artifacts, with an edge for each read a stage function makes. Reads the
+    /// sources and runs the stages up to the layout where needed (to know the planes).
+    pub fn graph(&mut self) -> crate::graph::Graph {
+        use crate::graph::{GraphBuilder, Node, NodeKind};
+        let mut graph = GraphBuilder::default();
+        let statuses = self.last_stage_statuses();
+        let last_revision = self.last_summary.as_ref().map(|summary| summary.revision);
+        let manifest = load_manifest(&self.config.output_dir());
+        let stage = |graph: &mut GraphBuilder, history: &HashMap<String, (u64, f64)>, asset: &str, stage: Stage, label: &str| {
+            let id = stage_node_id(stage, label);
+            let last = history.get(&id);
+            // Stages a summary does not list (a billboard's texture decodes): from the history.
+            let (state, ms) = statuses.get(&id).cloned().unwrap_or(match (last_revision, last) {
+                (None, _) => ("pending", None),
+                (Some(revision), Some((ran, ms))) if *ran == revision => ("ran", Some((ms * 10.0).round() / 10.0)),
+                (Some(_), _) => ("cached", None),
+            });
+            graph.node(Node {
+                id: id.clone(),
+                kind: NodeKind::Stage,
+                label: id.clone(),
+                // A decoded texture is shared by every asset that reads the file.
+                asset: (stage != Stage::Decode).then(|| asset.to_string()),
+                revision: last.map(|(revision, _)| *revision),
+                ms: ms.or(last.map(|(_, ms)| (ms * 10.0).round() / 10.0)),
+                state: state.to_string(),
+            });
+            id
+        };
+        let artifact = |graph: &mut GraphBuilder, asset: &str, path: &Path, from: &[&String]| {
+            let id = display_path(path);
+            let entry = manifest.artifacts.get(&id);
+            graph.node(Node {
+                id: id.clone(),
+                kind: NodeKind::Artifact,
+                label: id.clone(),
+                asset: Some(asset.to_string()),
+                revision: entry.map(|entry| entry.revision),
+                ms: None,
+                state: if entry.is_some() { "written" } else { "pending" }.to_string(),
+            });
+            for stage in from {
+                graph.edge(stage, &id);
+            }
+        };
+        for asset in self.asset_list() {
+            let plan = self.plan_asset(asset);
+            let name = plan.config.name.clone();
+            let main_file = self.file_node(&mut graph, &plan.main_file);
+            let asset_folder = self.config.output.join(&name);
+            if let Some(input) = plan.input {
+                let parse = stage(&mut graph, &self.history, &name, Stage::Parse, &display_path(&plan.main_file));
+                graph.edge(&main_file, &parse);
+                let mut writes = Vec::new();
+                if let Some(parsed) = &plan.parsed {
+                    let container = plan.config.settings.encode.container;
+                    for material in &parsed.materials {
+                        for surface in SurfaceKind::MATERIAL {
+                            let label = format!("{name}/{}/{}", material.name, surface.name());
+                            let [pack, mips, encode, write] = [Stage::Pack, Stage::Mips, Stage::Encode, Stage::Write]
+                                .map(|kind| stage(&mut graph, &self.history, &name, kind, &label));
+                            for slot in surface.slots() {
+                                let Some(reference) = material.textures.get(slot) else { continue };
+                                let file = self.file_node(&mut graph, &reference.path);
+                                let decode = stage(&mut graph, &self.history, &name, Stage::Decode, &display_path(&reference.path));
+                                graph.edge(&file, &decode);
+                                graph.edge(&decode, &pack);
+                                // The write stage hashes its sources for the persistent cache key.
+                                graph.edge(&file, &write);
+                            }
+                            for reader in [&pack, &mips, &write] {
+                                graph.edge(&parse, reader);
+                            }
+                            graph.edge(&pack, &mips);
+                            graph.edge(&mips, &encode);
+                            graph.edge(&encode, &write);
+                            graph.edge(&pack, &write);
+                            let folder = asset_folder.join(&material.name);
+                            artifact(&mut graph, &name, &folder.join(format!("{}.{}", surface.name(), container.extension())), &[&write]);
+                            artifact(&mut graph, &name, &folder.join(format!("{}.png", surface.name())), &[&write]);
+                            writes.push(write);
+                        }
+                    }
+                }
+                let mut report_sources: Vec<&String> = writes.iter().collect();
+                report_sources.push(&parse);
+                artifact(&mut graph, &name, &asset_folder.join("report.json"), &report_sources);
+                let _ = input;
+            }
+            if let Some(billboard) = &plan.billboard {
+                self.billboard_graph(&mut graph, &name, billboard.input, &main_file, &stage, &artifact);
+            }
+        }
+        graph.finish()
+    }
+
+    #[allow(clippy::type_complexity)]
+    fn billboard_graph(
+        &self,
+        graph: &mut crate::graph::GraphBuilder,
+        name: &str,
+        input: BillboardAsset,
+        mesh_file: &str,
+        stage: &dyn Fn(&mut crate::graph::GraphBuilder, &HashMap<String, (u64, f64)>, &str, Stage, &str) -> String,
+        artifact: &dyn Fn(&mut crate::graph::GraphBuilder, &str, &Path, &[&String]),
+    ) {
+        let db = &self.db;
+        let [mesh, planes, layout, atlas, lod] =
+            [Stage::Mesh, Stage::Planes, Stage::Layout, Stage::Atlas, Stage::Lod].map(|kind| stage(graph, &self.history, name, kind, name));
+        graph.edge(mesh_file, &mesh);
+        for library in input.libraries(db).keys() {
+            let file = self.file_node(graph, library);
+            graph.edge(&file, &mesh);
+        }
+        graph.edge(&mesh, &planes);
+        graph.edge(&mesh, &layout);
+        graph.edge(&planes, &layout);
+        graph.edge(&layout, &lod);
+        graph.edge(&layout, &atlas);
+        let folder = self.config.output.join(name);
+        artifact(graph, name, &folder.join("lod.obj"), &[&lod]);
+        artifact(graph, name, &folder.join("lod.mtl"), &[&lod]);
+        let mut report_sources = vec![mesh.clone(), planes.clone(), layout.clone(), atlas.clone()];
+        if let (Ok(loaded), Ok(plane_layout)) = (crate::db::loaded_mesh(db, input), billboard_layout(db, input)) {
+            for (index, rectangle) in plane_layout.rectangles.iter().enumerate() {
+                let render = stage(graph, &self.history, name, Stage::Render, &format!("{name}/plane{index}"));
+                for reader in [&mesh, &planes, &layout] {
+                    graph.edge(reader, &render);
+                }
+                graph.edge(&render, &atlas);
+                if loaded.mesh.uvs.is_none() {
+                    continue;
+                }
+                for material in crate::plane_textures::plane_materials(&loaded.mesh, rectangle) {
+                    for path in loaded.mesh.materials[material as usize].maps.values() {
+                        let file = self.file_node(graph, path);
+                        let decode = stage(graph, &self.history, name, Stage::Decode, &display_path(path));
+                        graph.edge(&file, &decode);
+                        graph.edge(&decode, &render);
+                    }
+                }
+            }
+        }
+        let container = input.settings(db).encode.container;
+        for surface in SurfaceKind::BILLBOARD {
+            let encode = stage(graph, &self.history, name, Stage::Encode, &format!("{name}/{}", surface.name()));
+            graph.edge(&atlas, &encode);
+            artifact(graph, name, &folder.join(format!("{}.{}", surface.name(), container.extension())), &[&encode]);
+            artifact(graph, name, &folder.join(format!("{}.png", surface.name())), &[&encode]);
+            report_sources.push(encode);
+        }
+        artifact(graph, name, &folder.join("report.json"), &report_sources.iter().collect::<Vec<_>>());
+    }
+
+    /// Adds the node of a source file; returns its id.
+    fn file_node(&self, graph: &mut crate::graph::GraphBuilder, path: &Path) -> String {
+        let id = file_node_id(path);
+        let present = self.files.get(path).is_some_and(|file| file.contents(&self.db).is_ok());
+        graph.node(crate::graph::Node {
+            id: id.clone(),
+            kind: crate::graph::NodeKind::File,
+            label: id.clone(),
+            asset: None,
+            revision: self.history.get(&id).map(|(revision, _)| *revision),
+            ms: None,
+            state: if present { "present" } else { "missing" }.to_string(),
+        });
+        id
+    }
+
+    /// Stage node id → (state, milliseconds) from the last build's summary.
+    fn last_stage_statuses(&self) -> HashMap<String, (&'static str, Option<f64>)> {
+        let mut statuses = HashMap::new();
+        let Some(summary) = &self.last_summary else { return statuses };
+        for asset in &summary.assets {
+            for stage_summary in &asset.stages {
+                let Some(stage) = Stage::ALL.iter().copied().find(|stage| stage.name() == stage_summary.stage) else { continue };
+                let label = match (asset.kind, stage) {
+                    ("Material", Stage::Parse | Stage::Decode) => stage_summary.instance.clone(),
+                    ("BillboardCloud", Stage::Mesh | Stage::Planes | Stage::Layout | Stage::Atlas | Stage::Lod) => asset.name.clone(),
+                    _ => format!("{}/{}", asset.name, stage_summary.instance),
+                };
+                let state = match stage_summary.status {
+                    StageStatus::Ran => "ran",
+                    StageStatus::Cached => "cached",
+                    StageStatus::Failed => "failed",
+                };
+                let ms = (stage_summary.status == StageStatus::Ran).then_some((stage_summary.ms * 10.0).round() / 10.0);
+                statuses.insert(stage_node_id(stage, &label), (state, ms));
+            }
+        }
+        statuses
     }
 }

@@ -1,4 +1,4 @@
-//! The command line: `cirrus build` and `cirrus check`, their options, output and exit codes
+//! The command line: `build`, `watch`, `graph`, `preview` and `check`, their options, output and exit codes
 //! (0: every asset baked, 1: some asset failed, 2: usage or configuration error).
 
 use std::io::IsTerminal;
@@ -52,6 +52,30 @@ pub enum Command {
         #[arg(long)]
         out: Option<PathBuf>,
     },
+    /// Bake, then watch the sources and re-bake what each edit invalidated; tell engines over TCP.
+    Watch {
+        /// The pipeline file.
+        #[arg(long, default_value = "pipeline.ron")]
+        pipeline: PathBuf,
+        /// The hot-reload server's address (default: `server` of the pipeline; loopback only
+        /// unless you give another interface).
+        #[arg(long, value_name = "ADDR")]
+        listen: Option<std::net::SocketAddr>,
+        /// Events closer together than this many milliseconds become one batch.
+        #[arg(long, default_value_t = 50, value_name = "MS")]
+        debounce_ms: u64,
+    },
+    /// Print the dependency graph: source files, stage instances and artifacts, with timings.
+    Graph {
+        /// The pipeline file.
+        #[arg(long, default_value = "pipeline.ron")]
+        pipeline: PathBuf,
+        /// Only this asset and the files that feed it.
+        #[arg(long)]
+        asset: Option<String>,
+        #[arg(long, value_enum, default_value_t = crate::graph::GraphFormat::Dot)]
+        format: crate::graph::GraphFormat,
+    },
     /// Validate the pipeline and every asset's sources without baking.
     Check {
         /// The pipeline file.
@@ -86,6 +110,18 @@ pub fn run(cli: Cli) -> ExitCode {
     match cli.command {
         Command::Build { pipeline, assets, summary } => build(pipeline, assets, summary),
         Command::Check { pipeline } => check(pipeline),
+        Command::Watch { pipeline, listen, debounce_ms } => {
+            let settings =
+                crate::watch::WatchSettings { pipeline, listen, debounce: std::time::Duration::from_millis(debounce_ms), max_builds: None };
+            match crate::watch::watch(&settings) {
+                Ok(()) => ExitCode::SUCCESS,
+                Err(error) => {
+                    eprintln!("error: {error}");
+                    ExitCode::from(EXIT_USAGE)
+                }
+            }
+        }
+        Command::Graph { pipeline, asset, format } => graph(pipeline, asset, format),
         Command::Preview { pipeline, asset, views, size, out } => preview(pipeline, asset, views, size, out),
     }
 }
@@ -115,7 +151,7 @@ fn build(pipeline: PathBuf, assets: Vec<String>, format: SummaryFormat) -> ExitC
         }
         None => tracing::info!("baked {} ({}/{})", progress.item, progress.done, progress.total),
     };
-    let result = project.build(&BuildOptions { only_assets: assets }, &report_progress);
+    let result = project.build(&BuildOptions { only_assets: assets, ..Default::default() }, &report_progress);
     if let Some(bar) = &bar {
         bar.finish_and_clear();
     }
@@ -145,7 +181,7 @@ fn check(pipeline: PathBuf) -> ExitCode {
             return ExitCode::from(EXIT_USAGE);
         }
     };
-    let project = Project::open(config, ProjectOptions { persistent_cache: false });
+    let project = Project::open(config, ProjectOptions { persistent_cache: false, ..Default::default() });
     let problems = project.check();
     for (asset, diagnostics) in &problems {
         for diagnostic in diagnostics {
@@ -193,5 +229,41 @@ fn preview(pipeline: PathBuf, asset: String, views: u32, size: u32, out: Option<
             eprintln!("error: {error}");
             ExitCode::from(EXIT_ASSET_FAILED)
         }
+    }
+}
+
+fn graph(pipeline: PathBuf, asset: Option<String>, format: crate::graph::GraphFormat) -> ExitCode {
+    let config = match load_pipeline(&pipeline) {
+        Ok(config) => config,
+        Err(error) => {
+            eprintln!("{error}");
+            return ExitCode::from(EXIT_USAGE);
+        }
+    };
+    let mut project = Project::open(config, ProjectOptions::default());
+    if let Some(name) = &asset {
+        if !project.asset_list().iter().any(|candidate| &candidate.name == name) {
+            eprintln!("error: no asset named `{name}` in {}", crate::diagnostic::display_path(&pipeline));
+            return ExitCode::from(EXIT_USAGE);
+        }
+    }
+    // A build first (cached work costs nothing), so that nodes carry their states and timings.
+    let summary = match project.build(&BuildOptions::default(), &|_| {}) {
+        Ok(summary) => summary,
+        Err(error) => {
+            eprintln!("error: {error}");
+            return ExitCode::from(EXIT_USAGE);
+        }
+    };
+    let graph = project.graph();
+    let graph = match &asset {
+        Some(name) => graph.for_asset(name),
+        None => graph,
+    };
+    print!("{}", graph.render(format));
+    if summary.all_ok() {
+        ExitCode::SUCCESS
+    } else {
+        ExitCode::from(EXIT_ASSET_FAILED)
     }
 }

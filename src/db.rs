@@ -108,6 +108,21 @@ pub enum Stage {
 }
 
 impl Stage {
+    pub const ALL: [Stage; 12] = [
+        Stage::Parse,
+        Stage::Decode,
+        Stage::Pack,
+        Stage::Mips,
+        Stage::Encode,
+        Stage::Write,
+        Stage::Mesh,
+        Stage::Planes,
+        Stage::Layout,
+        Stage::Render,
+        Stage::Atlas,
+        Stage::Lod,
+    ];
+
     pub fn name(self) -> &'static str {
         match self {
             Stage::Parse => "parse",

@@ -472,11 +472,14 @@ impl Gpu {
                 buffer
             })
             .collect();
-        self.queue.submit(Some(encoder.finish()));
+        let submission = self.queue.submit(Some(encoder.finish()));
         for buffer in &readbacks {
             buffer.slice(..).map_async(wgpu::MapMode::Read, |_| {});
         }
-        self.device.poll(wgpu::PollType::wait_indefinitely()).map_err(|error| GpuError::Render(error.to_string()))?;
+        // Wait for this submission only: other threads' renders stay in flight meanwhile.
+        self.device
+            .poll(wgpu::PollType::Wait { submission_index: Some(submission), timeout: None })
+            .map_err(|error| GpuError::Render(error.to_string()))?;
         let mut images = Vec::with_capacity(targets.len());
         for buffer in &readbacks {
             let mapped = buffer.slice(..).get_mapped_range().map_err(|error| GpuError::Render(format!("{error:?}")))?;

@@ -33,5 +33,8 @@ pub mod db;
 pub mod artifacts;
 pub mod bake;
 pub mod cli;
+pub mod graph;
+pub mod server;
 pub mod sources;
 pub mod summary;
+pub mod watch;

@@ -12,6 +12,24 @@ use crate::diagnostic::{display_path, Diagnostic};
 pub struct BuildSummary {
     pub revision: u64,
     pub assets: Vec<AssetSummary>,
+    /// Artifacts whose bytes this build changed (written or renamed into place), in path order.
+    #[serde(skip)]
+    pub changed: Vec<ChangedArtifact>,
+    /// Artifacts this build deleted (their asset left the pipeline or stopped producing them).
+    #[serde(skip)]
+    pub removed: Vec<String>,
+}
+
+/// An artifact a build wrote: what a running engine must reload.
+#[derive(Clone, Debug, PartialEq, Eq, Serialize)]
+pub struct ChangedArtifact {
+    pub asset: String,
+    /// The file inside the asset's folder, e.g. `oak_bark/albedo.ktx2`.
+    pub artifact: String,
+    /// Relative to the folder of `pipeline.ron`.
+    pub path: String,
+    /// blake3 hex digest of the file.
+    pub hash: String,
 }
 
 #[derive(Clone, Copy, Debug, PartialEq, Eq, Serialize)]

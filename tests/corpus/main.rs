@@ -27,7 +27,7 @@ fn every_corpus_material_bakes_and_meets_the_psnr_bars() {
     )
     .expect("write pipeline");
     let config = load_pipeline(&dir.path().join("pipeline.ron")).expect("valid pipeline");
-    let mut project = Project::open(config, ProjectOptions { persistent_cache: false });
+    let mut project = Project::open(config, ProjectOptions { persistent_cache: false, ..Default::default() });
     let summary = project.build(&BuildOptions::default(), &|_| {}).expect("build runs");
     assert_eq!(summary.assets.len(), 5, "every corpus material file is an asset");
     assert!(summary.all_ok(), "{}", summary.to_text());
@@ -154,7 +154,7 @@ fn corpus_billboard_clouds_bake_and_keep_their_silhouettes() {
     )
     .expect("write pipeline");
     let config = load_pipeline(&dir.path().join("pipeline.ron")).expect("valid pipeline");
-    let mut project = Project::open(config, ProjectOptions { persistent_cache: false });
+    let mut project = Project::open(config, ProjectOptions { persistent_cache: false, ..Default::default() });
     let summary = project.build(&BuildOptions::default(), &|_| {}).expect("build runs");
     assert!(summary.all_ok(), "{}", summary.to_text());
     let mut figures = Vec::new();

@@ -11,3 +11,4 @@ mod incremental;
 mod layout;
 mod material_files;
 mod planes;
+mod watch;

@@ -1,0 +1,343 @@
+//! The hot-reload server (an IO edge): newline-delimited JSON over TCP, many clients at once,
+//! `since` replay, and the graph request. The protocol is documented in `PROTOCOL.md`.
+//!
+//! Every client has a reader thread (bounded lines; malformed input is answered with an `error`
+//! message and never reaches the daemon) and a writer thread fed by a bounded queue, so a slow
+//! or vanished client never blocks the daemon: when its queue is full it is disconnected.
+
+use std::collections::VecDeque;
+use std::io::{BufRead, BufReader, Write};
+use std::net::{Shutdown, SocketAddr, TcpListener, TcpStream};
+use std::sync::mpsc::{sync_channel, Receiver, SyncSender, TrySendError};
+use std::sync::{Arc, Mutex};
+
+use serde::{Deserialize, Serialize};
+
+use crate::graph::{Graph, GraphFormat};
+use crate::summary::ChangedArtifact;
+
+pub const PROTOCOL_VERSION: u32 = 1;
+
+/// Limits of the server.
+#[derive(Clone, Debug)]
+pub struct ServerSettings {
+    /// Longest client line accepted, in bytes; longer lines are answered with an error.
+    pub max_line_bytes: usize,
+    /// How many batches are kept for `since` replay.
+    pub history: usize,
+    /// Messages queued for one client before it is disconnected as too slow.
+    pub client_queue: usize,
+}
+
+impl Default for ServerSettings {
+    fn default() -> Self {
+        ServerSettings { max_line_bytes: 64 * 1024, history: 1024, client_queue: 4096 }
+    }
+}
+
+/// One finished build, as the engine sees it.
+#[derive(Clone, Debug, PartialEq, Serialize)]
+pub struct BatchEvent {
+    pub revision: u64,
+    /// Artifacts renamed into place by this build, with their blake3 hashes.
+    pub changed: Vec<ChangedArtifact>,
+    /// Artifacts deleted by this build (project-relative paths).
+    pub removed: Vec<String>,
+    /// Every failed asset's problems.
+    pub failed: Vec<FailedEntry>,
+    /// Wall time of the build in milliseconds.
+    pub ms: f64,
+}
+
+/// One problem of a failed asset (or of `pipeline.ron`, with `asset` null and stage `config`).
+#[derive(Clone, Debug, PartialEq, Serialize)]
+pub struct FailedEntry {
+    pub asset: Option<String>,
+    pub stage: String,
+    pub message: String,
+    pub file: String,
+    pub line: Option<u32>,
+    pub column: Option<u32>,
+}
+
+#[derive(Serialize)]
+#[serde(tag = "type", rename_all = "lowercase")]
+enum Outgoing<'a> {
+    Hello { protocol: u32, revision: u64 },
+    Batch(&'a BatchEvent),
+    Resync { revision: u64, message: String },
+    Graph { format: &'static str, graph: Option<&'a Graph>, text: Option<String> },
+    Error { message: String },
+}
+
+#[derive(Deserialize)]
+#[serde(tag = "type", rename_all = "lowercase", deny_unknown_fields)]
+enum Request {
+    Subscribe {
+        #[serde(default)]
+        since: Option<u64>,
+    },
+    Graph {
+        #[serde(default)]
+        format: Option<String>,
+        #[serde(default)]
+        asset: Option<String>,
+    },
+}
+
+fn line(message: &Outgoing) -> Arc<str> {
+    let mut text = serde_json::to_string(message).expect("messages serialise");
+    text.push('\n');
+    text.into()
+}
+
+struct Client {
+    id: u64,
+    queue: SyncSender<Arc<str>>,
+    stream: TcpStream,
+    subscribed: bool,
+}
+
+struct State {
+    revision: u64,
+    /// Recent batches: (revision, the line sent).
+    history: VecDeque<(u64, Arc<str>)>,
+    clients: Vec<Client>,
+    graph: Arc<Graph>,
+    next_client: u64,
+}
+
+/// A running server; dropping it does not stop the listener thread (it lives as long as the
+/// daemon process).
+#[derive(Clone)]
+pub struct Server {
+    state: Arc<Mutex<State>>,
+    settings: ServerSettings,
+    address: SocketAddr,
+}
+
+#[derive(Debug, thiserror::Error)]
+#[error("cannot listen on {address}: {source}")]
+pub struct ServerError {
+    pub address: SocketAddr,
+    pub source: std::io::Error,
+}
+
+impl Server {
+    /// Binds `address` and starts accepting clients on a thread of its own.
+    pub fn start(address: SocketAddr, settings: ServerSettings, revision: u64) -> Result<Server, ServerError> {
+        let listener = TcpListener::bind(address).map_err(|source| ServerError { address, source })?;
+        let address = listener.local_addr().map_err(|source| ServerError { address, source })?;
+        let state = State { revision, history: VecDeque::new(), clients: Vec::new(), graph: Arc::default(), next_client: 0 };
+        let server = Server { state: Arc::new(Mutex::new(state)), settings, address };
+        let accepting = server.clone();
+        std::thread::Builder::new()
+            .name("cirrus-accept".into())
+            .spawn(move || {
+                for stream in listener.incoming() {
+                    match stream {
+                        Ok(stream) => accepting.accept(stream),
+                        Err(error) => tracing::warn!("hot-reload server: accept failed: {error}"),
+                    }
+                }
+            })
+            .expect("spawn the accept thread");
+        Ok(server)
+    }
+
+    pub fn address(&self) -> SocketAddr {
+        self.address
+    }
+
+    /// Sends a finished batch to every subscribed client and keeps it for replay.
+    pub fn publish(&self, batch: &BatchEvent) {
+        let message = line(&Outgoing::Batch(batch));
+        let mut state = self.state.lock().expect("server state");
+        state.revision = batch.revision;
+        state.history.push_back((batch.revision, message.clone()));
+        while state.history.len() > self.settings.history {
+            state.history.pop_front();
+        }
+        state.clients.retain(|client| !client.subscribed || send(client, message.clone()));
+    }
+
+    /// The graph answered to `graph` requests from now on.
+    pub fn set_graph(&self, graph: Graph) {
+        self.state.lock().expect("server state").graph = Arc::new(graph);
+    }
+
+    /// Clients connected now.
+    pub fn client_count(&self) -> usize {
+        self.state.lock().expect("server state").clients.len()
+    }
+
+    fn accept(&self, stream: TcpStream) {
+        let _ = stream.set_nodelay(true);
+        let (Ok(reader_stream), Ok(writer_stream)) = (stream.try_clone(), stream.try_clone()) else { return };
+        let (queue, outgoing) = sync_channel::<Arc<str>>(self.settings.client_queue);
+        let id = {
+            let mut state = self.state.lock().expect("server state");
+            let id = state.next_client;
+            state.next_client += 1;
+            let hello = line(&Outgoing::Hello { protocol: PROTOCOL_VERSION, revision: state.revision });
+            let client = Client { id, queue, stream, subscribed: false };
+            if !send(&client, hello) {
+                return;
+            }
+            state.clients.push(client);
+            id
+        };
+        let peer = writer_stream.peer_addr().map(|address| address.to_string()).unwrap_or_default();
+        tracing::info!("hot-reload client {id} connected from {peer}");
+        let _ = std::thread::Builder::new().name(format!("cirrus-client-{id}-write")).spawn(move || write_loop(writer_stream, outgoing));
+        let server = self.clone();
+        let _ = std::thread::Builder::new().name(format!("cirrus-client-{id}-read")).spawn(move || {
+            server.read_loop(id, reader_stream);
+            server.disconnect(id);
+            tracing::info!("hot-reload client {id} disconnected");
+        });
+    }
+
+    fn disconnect(&self, id: u64) {
+        let mut state = self.state.lock().expect("server state");
+        if let Some(position) = state.clients.iter().position(|client| client.id == id) {
+            let client = state.clients.remove(position);
+            let _ = client.stream.shutdown(Shutdown::Both);
+        }
+    }
+
+    fn read_loop(&self, id: u64, stream: TcpStream) {
+        let mut reader = BufReader::new(stream);
+        loop {
+            match read_bounded_line(&mut reader, self.settings.max_line_bytes) {
+                ClientLine::End => return,
+                ClientLine::TooLong => {
+                    self.reply(id, Outgoing::Error { message: format!("line longer than {} bytes", self.settings.max_line_bytes) })
+                }
+                ClientLine::Line(bytes) => {
+                    let text = String::from_utf8_lossy(&bytes);
+                    let text = text.trim();
+                    if text.is_empty() {
+                        continue;
+                    }
+                    match serde_json::from_str::<Request>(text) {
+                        Ok(request) => self.handle(id, request),
+                        Err(error) => self.reply(id, Outgoing::Error { message: format!("malformed request: {error}") }),
+                    }
+                }
+            }
+        }
+    }
+
+    fn handle(&self, id: u64, request: Request) {
+        match request {
+            Request::Subscribe { since } => {
+                let mut state = self.state.lock().expect("server state");
+                let revision = state.revision;
+                let oldest = state.history.front().map(|(revision, _)| *revision);
+                let mut replay: Vec<Arc<str>> = Vec::new();
+                if let Some(since) = since {
+                    if oldest.is_some_and(|oldest| since + 1 < oldest) || (oldest.is_none() && since < revision) {
+                        replay.push(line(&Outgoing::Resync {
+                            revision,
+                            message: format!("revision {since} is older than the daemon's history: reload every artifact"),
+                        }));
+                    }
+                    replay.extend(state.history.iter().filter(|(batch, _)| *batch > since).map(|(_, line)| line.clone()));
+                }
+                let Some(client) = state.clients.iter_mut().find(|client| client.id == id) else { return };
+                client.subscribed = true;
+                let client = &*client;
+                let delivered = replay.into_iter().all(|message| send(client, message));
+                if !delivered {
+                    state.clients.retain(|client| client.id != id);
+                }
+            }
+            Request::Graph { format, asset } => {
+                let format = match format.as_deref().unwrap_or("json") {
+                    "json" => GraphFormat::Json,
+                    "dot" => GraphFormat::Dot,
+                    "mermaid" => GraphFormat::Mermaid,
+                    other => {
+                        return self
+                            .reply(id, Outgoing::Error { message: format!("unknown graph format `{other}`: json, dot or mermaid") });
+                    }
+                };
+                let graph = self.state.lock().expect("server state").graph.clone();
+                let graph = match &asset {
+                    Some(asset) => Arc::new(graph.for_asset(asset)),
+                    None => graph,
+                };
+                let message = match format {
+                    GraphFormat::Json => Outgoing::Graph { format: "json", graph: Some(&graph), text: None },
+                    GraphFormat::Dot => Outgoing::Graph { format: "dot", graph: None, text: Some(graph.render(format)) },
+                    GraphFormat::Mermaid => Outgoing::Graph { format: "mermaid", graph: None, text: Some(graph.render(format)) },
+                };
+                self.reply(id, message);
+            }
+        }
+    }
+
+    fn reply(&self, id: u64, message: Outgoing) {
+        let message = line(&message);
+        let mut state = self.state.lock().expect("server state");
+        state.clients.retain(|client| client.id != id || send(client, message.clone()));
+    }
+}
+
+/// Queues `message` for `client`; false (and the connection closed) when its queue is full.
+fn send(client: &Client, message: Arc<str>) -> bool {
+    match client.queue.try_send(message) {
+        Ok(()) => true,
+        Err(TrySendError::Full(_)) | Err(TrySendError::Disconnected(_)) => {
+            tracing::warn!("hot-reload client {} is not reading: disconnected", client.id);
+            let _ = client.stream.shutdown(Shutdown::Both);
+            false
+        }
+    }
+}
+
+fn write_loop(mut stream: TcpStream, outgoing: Receiver<Arc<str>>) {
+    for message in outgoing {
+        if stream.write_all(message.as_bytes()).is_err() {
+            let _ = stream.shutdown(Shutdown::Both);
+            return;
+        }
+    }
+}
+
+enum ClientLine {
+    Line(Vec<u8>),
+    TooLong,
+    End,
+}
+
+/// Reads one `\n`-terminated line of at most `limit` bytes; a longer line is skipped to its end.
+/// A line cut off by the end of the stream is dropped (a half-sent request does nothing).
+fn read_bounded_line(reader: &mut impl BufRead, limit: usize) -> ClientLine {
+    let mut line = Vec::new();
+    let mut too_long = false;
+    loop {
+        let available = match reader.fill_buf() {
+            Ok([]) | Err(_) => return ClientLine::End,
+            Ok(available) => available,
+        };
+        let (chunk, found_end) = match available.iter().position(|&byte| byte == b'\n') {
+            Some(end) => (&available[..end], true),
+            None => (available, false),
+        };
+        if !too_long {
+            if line.len() + chunk.len() > limit {
+                too_long = true;
+                line = Vec::new();
+            } else {
+                line.extend_from_slice(chunk);
+            }
+        }
+        let consumed = chunk.len() + usize::from(found_end);
+        reader.consume(consumed);
+        if found_end {
+            return if too_long { ClientLine::TooLong } else { ClientLine::Line(line) };
+        }
+    }
+}

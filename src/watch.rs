@@ -1,0 +1,364 @@
+//! `cirrus watch`: the daemon. The only module that touches `notify`. One thread (the caller's)
+//! owns the project and its database and is the only writer; builds run on database clones on
+//! worker threads, and a relevant edit during a build cancels it (salsa cancellation) so that the
+//! next build starts from the newest inputs. Each finished build is logged and published to the
+//! hot-reload server.
+
+use std::collections::BTreeSet;
+use std::net::SocketAddr;
+use std::path::{Path, PathBuf};
+use std::sync::mpsc::{channel, Receiver, RecvTimeoutError};
+use std::sync::{Arc, RwLock};
+use std::time::{Duration, Instant};
+
+use notify::{EventKind, RecursiveMode};
+use notify_debouncer_full::{new_debouncer, DebounceEventResult};
+
+use crate::bake::{BuildError, BuildOptions, CancelFlag, Project, ProjectOptions, SourceReading};
+use crate::config::{load_pipeline, ConfigError, PipelineConfig};
+use crate::diagnostic::display_path;
+use crate::server::{BatchEvent, FailedEntry, Server, ServerSettings};
+use crate::summary::{AssetStatus, BuildSummary, StageStatus};
+
+/// How the daemon runs.
+#[derive(Clone, Debug)]
+pub struct WatchSettings {
+    pub pipeline: PathBuf,
+    /// Overrides `server` of `pipeline.ron`.
+    pub listen: Option<SocketAddr>,
+    /// The debouncer's window: events closer than this become one batch.
+    pub debounce: Duration,
+    /// Stop after this many finished builds (tests and benchmarks); run forever when `None`.
+    pub max_builds: Option<u64>,
+}
+
+#[derive(Debug, thiserror::Error)]
+pub enum WatchError {
+    #[error(transparent)]
+    Config(#[from] ConfigError),
+    #[error(transparent)]
+    Server(#[from] crate::server::ServerError),
+    #[error("cannot watch {path}: {source}")]
+    Watch { path: String, source: notify::Error },
+    #[error("cannot resolve the project folder {path}: {source}")]
+    Root { path: String, source: std::io::Error },
+}
+
+/// What the watcher thread needs to tell relevant events from noise, kept current by the owner.
+struct EventFilter {
+    /// Absolute project folder (the folder of `pipeline.ron`).
+    root: PathBuf,
+    /// Absolute `pipeline.ron`.
+    pipeline: PathBuf,
+    /// Absolute output folder: never a source.
+    output: PathBuf,
+    source: PathBuf,
+    config: PipelineConfig,
+    /// Every source file read so far, project-relative.
+    sources: BTreeSet<PathBuf>,
+}
+
+impl EventFilter {
+    /// The project-relative path of `path` when an edit to it can change a build.
+    fn relevant(&self, path: &Path) -> Option<PathBuf> {
+        if path == self.pipeline {
+            return Some(PathBuf::from(self.pipeline.file_name()?));
+        }
+        if path.starts_with(&self.output) {
+            return None;
+        }
+        let relative = path.strip_prefix(&self.root).ok()?.to_path_buf();
+        if self.sources.contains(&relative) {
+            return Some(relative);
+        }
+        let in_source = path.strip_prefix(&self.source).ok()?;
+        let in_source = PathBuf::from(in_source.to_string_lossy().replace('\\', "/"));
+        self.config.rules.iter().any(|rule| rule.matcher.is_match(&in_source)).then_some(relative)
+    }
+}
+
+/// What the watcher thread hands the owner.
+enum WatchMessage {
+    Changed(BTreeSet<PathBuf>),
+    /// The watcher lost track (error or overflow): everything is read again.
+    Rescan(String),
+}
+
+/// Runs the daemon until the process ends (or `max_builds` builds finished).
+pub fn watch(settings: &WatchSettings) -> Result<(), WatchError> {
+    let config = load_pipeline(&settings.pipeline)?;
+    let absolute = |path: &Path| {
+        std::path::absolute(path)
+            .and_then(|path| path.canonicalize())
+            .map_err(|source| WatchError::Root { path: display_path(path), source })
+    };
+    let root = absolute(&config.root)?;
+    let pipeline = root.join(config.file.file_name().unwrap_or_default());
+    let mut project =
+        Project::open(config.clone(), ProjectOptions { persistent_cache: true, source_reading: SourceReading::WhenInvalidated });
+
+    let listen = settings.listen.or(config.server);
+    let server = match listen {
+        Some(address) => Some(Server::start(address, ServerSettings::default(), project.revision())?),
+        None => None,
+    };
+    if let Some(server) = &server {
+        tracing::info!("hot-reload server listening on {}", server.address());
+        eprintln!("cirrus watch: hot-reload server on {}", server.address());
+    }
+
+    let filter = Arc::new(RwLock::new(EventFilter {
+        output: root.join(&config.output),
+        source: root.join(&config.source),
+        root: root.clone(),
+        pipeline: pipeline.clone(),
+        config: config.clone(),
+        sources: BTreeSet::new(),
+    }));
+    let cancel = CancelFlag::default();
+    let (sender, messages) = channel::<WatchMessage>();
+    let watcher_filter = filter.clone();
+    let watcher_cancel = cancel.clone();
+    let mut debouncer = new_debouncer(settings.debounce, None, move |result: DebounceEventResult| {
+        let message = match result {
+            Err(errors) => WatchMessage::Rescan(errors.iter().map(ToString::to_string).collect::<Vec<_>>().join("; ")),
+            Ok(events) => {
+                if events.iter().any(|event| event.need_rescan()) {
+                    WatchMessage::Rescan("the watcher's event queue overflowed".into())
+                } else {
+                    let filter = watcher_filter.read().expect("event filter");
+                    let changed: BTreeSet<PathBuf> = events
+                        .iter()
+                        .filter(|event| !matches!(event.kind, EventKind::Access(_)))
+                        .flat_map(|event| event.paths.iter())
+                        .filter_map(|path| filter.relevant(path))
+                        .collect();
+                    if changed.is_empty() {
+                        return;
+                    }
+                    WatchMessage::Changed(changed)
+                }
+            }
+        };
+        // A build in flight is stale now: cancel it; the owner rebuilds from the newest inputs.
+        watcher_cancel.raise();
+        let _ = sender.send(message);
+    })
+    .map_err(|source| WatchError::Watch { path: display_path(&root), source })?;
+    let mut watched = watch_folders(&mut debouncer, &root, &config, &[])?;
+
+    let mut builds = 0u64;
+    let mut pending: BTreeSet<PathBuf> = BTreeSet::new();
+    let mut first = true;
+    // A build is owed even without changed bytes: the first one, and one after a cancellation.
+    let mut force_build = true;
+    loop {
+        if !first {
+            // Block for the next edit, then take every message already queued.
+            match receive(&messages, &mut pending, &mut project) {
+                Some(()) => {}
+                None => return Ok(()),
+            }
+        }
+        cancel.lower();
+        // Messages that arrived in between belong to this build too.
+        while let Ok(message) = messages.try_recv() {
+            apply_message(message, &mut pending, &mut project);
+        }
+        let mut reconfigured = false;
+        if pending.remove(Path::new(pipeline.file_name().unwrap_or_default())) {
+            match load_pipeline(&project.config().file) {
+                Ok(new_config) => {
+                    tracing::info!("{} changed: reconfigured", display_path(&new_config.file));
+                    watched = watch_folders(&mut debouncer, &root, &new_config, &watched)?;
+                    {
+                        let mut filter = filter.write().expect("event filter");
+                        filter.output = root.join(&new_config.output);
+                        filter.source = root.join(&new_config.source);
+                        filter.config = new_config.clone();
+                    }
+                    project.reconfigure(new_config);
+                    project.invalidate_all_sources();
+                    reconfigured = true;
+                }
+                Err(error) => {
+                    tracing::error!("{error}");
+                    eprintln!("{error}");
+                    let failed = error
+                        .diagnostics
+                        .iter()
+                        .map(|diagnostic| FailedEntry {
+                            asset: None,
+                            stage: "config".into(),
+                            message: diagnostic.message.clone(),
+                            file: display_path(&diagnostic.file),
+                            line: diagnostic.line(),
+                            column: diagnostic.column(),
+                        })
+                        .collect();
+                    // Keep running on the last good configuration; report the broken file.
+                    if let Some(server) = &server {
+                        let batch =
+                            BatchEvent { revision: project.revision() + 1, changed: Vec::new(), removed: Vec::new(), failed, ms: 0.0 };
+                        project.skip_revision();
+                        server.publish(&batch);
+                    }
+                    if pending.is_empty() {
+                        continue;
+                    }
+                }
+            }
+        }
+        let changed_files: Vec<PathBuf> = std::mem::take(&mut pending).into_iter().collect();
+        let changed = project.refresh_sources(changed_files.iter().map(PathBuf::as_path));
+        if !force_build && !reconfigured && !changed {
+            tracing::debug!("{} file(s) touched with identical bytes: nothing to do", changed_files.len());
+            continue;
+        }
+        force_build = false;
+        let start = Instant::now();
+        let options = BuildOptions { cancel: Some(cancel.clone()), always_new_revision: !first, ..Default::default() };
+        let summary = match project.build(&options, &|_| {}) {
+            Ok(summary) => summary,
+            Err(BuildError::Cancelled) => {
+                tracing::info!("build cancelled by a newer edit after {:.0} ms; restarting", start.elapsed().as_secs_f64() * 1e3);
+                // The next build covers this batch's edits too (their inputs are set already).
+                pending.extend(changed_files);
+                force_build = true;
+                first = false;
+                continue;
+            }
+            Err(error) => {
+                tracing::error!("{error}");
+                first = false;
+                continue;
+            }
+        };
+        let ms = start.elapsed().as_secs_f64() * 1e3;
+        first = false;
+        filter.write().expect("event filter").sources = project.source_paths();
+        let graph = project.graph();
+        log_batch(&summary, &changed_files, &graph, ms);
+        if let Some(server) = &server {
+            server.set_graph(graph);
+            server.publish(&batch_event(&summary, ms));
+        }
+        builds += 1;
+        if settings.max_builds.is_some_and(|max| builds >= max) {
+            return Ok(());
+        }
+    }
+}
+
+/// Waits for at least one message; false when the watcher is gone.
+fn receive(messages: &Receiver<WatchMessage>, pending: &mut BTreeSet<PathBuf>, project: &mut Project) -> Option<()> {
+    loop {
+        match messages.recv_timeout(Duration::from_secs(3600)) {
+            Ok(message) => {
+                apply_message(message, pending, project);
+                return Some(());
+            }
+            Err(RecvTimeoutError::Timeout) => continue,
+            Err(RecvTimeoutError::Disconnected) => return None,
+        }
+    }
+}
+
+fn apply_message(message: WatchMessage, pending: &mut BTreeSet<PathBuf>, project: &mut Project) {
+    match message {
+        WatchMessage::Changed(paths) => pending.extend(paths),
+        WatchMessage::Rescan(why) => {
+            tracing::warn!("rescanning every source: {why}");
+            project.invalidate_all_sources();
+            pending.extend(project.source_paths());
+        }
+    }
+}
+
+/// Watches the source folder recursively and the folder of `pipeline.ron` (editors replace files
+/// by rename, so folders are watched, not files). Returns the folders watched now.
+fn watch_folders(
+    debouncer: &mut notify_debouncer_full::Debouncer<notify::RecommendedWatcher, notify_debouncer_full::RecommendedCache>,
+    root: &Path,
+    config: &PipelineConfig,
+    previous: &[(PathBuf, RecursiveMode)],
+) -> Result<Vec<(PathBuf, RecursiveMode)>, WatchError> {
+    let source = root.join(&config.source);
+    let mut wanted = vec![(source.clone(), RecursiveMode::Recursive)];
+    if !root.starts_with(&source) {
+        wanted.push((root.to_path_buf(), RecursiveMode::NonRecursive));
+    }
+    for (path, mode) in previous {
+        if !wanted.contains(&(path.clone(), *mode)) {
+            let _ = debouncer.unwatch(path);
+        }
+    }
+    for (path, mode) in &wanted {
+        if !previous.contains(&(path.clone(), *mode)) {
+            debouncer.watch(path, *mode).map_err(|source| WatchError::Watch { path: display_path(path), source })?;
+        }
+    }
+    Ok(wanted)
+}
+
+/// The batch message of a finished build.
+pub fn batch_event(summary: &BuildSummary, ms: f64) -> BatchEvent {
+    let mut failed = Vec::new();
+    for asset in summary.assets.iter().filter(|asset| asset.status == AssetStatus::Failed) {
+        let stage = asset.stages.iter().find(|stage| stage.status == StageStatus::Failed).map_or("parse", |stage| stage.stage);
+        for error in &asset.errors {
+            failed.push(FailedEntry {
+                asset: Some(asset.name.clone()),
+                stage: stage.to_string(),
+                message: error.message.clone(),
+                file: error.file.clone(),
+                line: error.line,
+                column: error.column,
+            });
+        }
+    }
+    BatchEvent {
+        revision: summary.revision,
+        changed: summary.changed.clone(),
+        removed: summary.removed.clone(),
+        failed,
+        ms: (ms * 10.0).round() / 10.0,
+    }
+}
+
+/// Logs what a batch changed, which stages ran and which edited file made them run.
+fn log_batch(summary: &BuildSummary, changed_files: &[PathBuf], graph: &crate::graph::Graph, ms: f64) {
+    let ran: Vec<String> = summary
+        .assets
+        .iter()
+        .flat_map(|asset| asset.stages.iter().filter(|stage| stage.status == StageStatus::Ran).map(move |stage| (asset, stage)))
+        .map(|(asset, stage)| format!("{}:{}({})", asset.name, stage.stage, stage.instance))
+        .collect();
+    tracing::info!(
+        "batch r{}: {} file(s) changed, {} stage(s) ran, {} artifact(s) changed, {} failed asset(s), {ms:.0} ms",
+        summary.revision,
+        changed_files.len(),
+        ran.len(),
+        summary.changed.len(),
+        summary.assets.iter().filter(|asset| asset.status == AssetStatus::Failed).count()
+    );
+    for file in changed_files {
+        let id = crate::bake::file_node_id(file);
+        let downstream = graph.downstream(&id);
+        let stages: Vec<&String> = downstream.iter().filter(|node| node.contains('(')).collect();
+        tracing::info!("  {id} changed: invalidates {} stage(s) downstream", stages.len());
+        tracing::debug!("  {id} → {}", stages.iter().map(|stage| stage.as_str()).collect::<Vec<_>>().join(", "));
+    }
+    for stage in &ran {
+        tracing::debug!("  ran {stage}");
+    }
+    for artifact in &summary.changed {
+        tracing::info!("  wrote {} ({})", artifact.path, &artifact.hash[..12]);
+    }
+    for asset in summary.assets.iter().filter(|asset| asset.status == AssetStatus::Failed) {
+        for error in &asset.errors {
+            let position = error.line.map(|line| format!(":{line}")).unwrap_or_default();
+            tracing::warn!("  {} failed: {}{position}: {}", asset.name, error.file, error.message);
+        }
+    }
+}

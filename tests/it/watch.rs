@@ -1,0 +1,368 @@
+//! The daemon end to end: `cirrus watch` runs as a process on a temporary project, clients
+//! connect over TCP, and files are edited the ways editors save them.
+
+use std::collections::BTreeMap;
+use std::io::{BufRead, BufReader, Read, Write};
+use std::net::TcpStream;
+use std::process::{Child, Command, Stdio};
+use std::sync::{Arc, Mutex};
+use std::time::{Duration, Instant};
+
+use serde_json::Value;
+
+use crate::support::{pattern_png, TempProject};
+
+/// A running `cirrus watch` and everything it printed on stderr.
+struct Daemon {
+    child: Child,
+    address: String,
+    log: Arc<Mutex<String>>,
+}
+
+impl Daemon {
+    fn start(project: &TempProject) -> Daemon {
+        let mut child = Command::new(env!("CARGO_BIN_EXE_cirrus"))
+            .args(["watch", "--listen", "127.0.0.1:0", "--debounce-ms", "100", "-v"])
+            .current_dir(project.root())
+            .stdout(Stdio::null())
+            .stderr(Stdio::piped())
+            .spawn()
+            .expect("start cirrus watch");
+        let log = Arc::new(Mutex::new(String::new()));
+        let (address_sender, address_receiver) = std::sync::mpsc::channel();
+        let stderr = child.stderr.take().expect("stderr");
+        let log_writer = log.clone();
+        std::thread::spawn(move || {
+            for line in BufReader::new(stderr).lines().map_while(Result::ok) {
+                if let Some(address) = line.strip_prefix("cirrus watch: hot-reload server on ") {
+                    let _ = address_sender.send(address.to_string());
+                }
+                let mut log = log_writer.lock().unwrap();
+                log.push_str(&line);
+                log.push('\n');
+            }
+        });
+        let address = address_receiver
+            .recv_timeout(Duration::from_secs(60))
+            .unwrap_or_else(|_| panic!("daemon did not start: {}", log.lock().unwrap()));
+        Daemon { child, address, log }
+    }
+
+    fn connect(&self) -> Client {
+        let stream = TcpStream::connect(&self.address).expect("connect to the daemon");
+        stream.set_read_timeout(Some(Duration::from_secs(120))).unwrap();
+        let mut client = Client { reader: BufReader::new(stream.try_clone().unwrap()), stream };
+        let hello = client.receive();
+        assert_eq!((hello["type"].as_str(), hello["protocol"].as_u64()), (Some("hello"), Some(1)), "{hello}");
+        client
+    }
+
+    fn alive(&mut self) -> bool {
+        self.child.try_wait().expect("daemon status").is_none()
+    }
+}
+
+impl Drop for Daemon {
+    fn drop(&mut self) {
+        let _ = self.child.kill();
+        let _ = self.child.wait();
+    }
+}
+
+struct Client {
+    stream: TcpStream,
+    reader: BufReader<TcpStream>,
+}
+
+impl Client {
+    fn send(&mut self, line: &str) {
+        self.stream.write_all(line.as_bytes()).expect("send");
+        self.stream.write_all(b"\n").expect("send");
+    }
+
+    fn receive(&mut self) -> Value {
+        let mut line = String::new();
+        self.reader.read_line(&mut line).expect("a message from the daemon");
+        serde_json::from_str(&line).unwrap_or_else(|error| panic!("not JSON ({error}): {line:?}"))
+    }
+
+    /// The next `batch` message (other messages in between are skipped).
+    fn batch(&mut self) -> Value {
+        loop {
+            let message = self.receive();
+            if message["type"] == "batch" {
+                return message;
+            }
+        }
+    }
+
+    /// True when nothing arrives within `wait`.
+    fn quiet_for(&mut self, wait: Duration) -> bool {
+        self.stream.set_read_timeout(Some(wait)).unwrap();
+        let mut byte = [0u8; 1];
+        let quiet = matches!(self.reader.get_mut().peek(&mut byte), Err(_)) && self.reader.buffer().is_empty();
+        self.stream.set_read_timeout(Some(Duration::from_secs(120))).unwrap();
+        quiet
+    }
+
+    fn subscribe(&mut self, since: Option<u64>) {
+        let since = since.map_or("null".to_string(), |revision| revision.to_string());
+        self.send(&format!(r#"{{"type":"subscribe","since":{since}}}"#));
+    }
+}
+
+/// Two materials from a rule and one listed asset, 32² textures: quick to bake.
+fn watched_project() -> TempProject {
+    let project = TempProject::new(
+        r#"Pipeline(source: "assets", output: "baked", assets: [
+            Material(name: "rock", material: "rock.mymaterial"),
+        ], rules: [(glob: "extra/*.mymaterial", kind: Material)])"#,
+    );
+    for (index, name) in ["albedo", "normal", "ao", "roughness"].iter().enumerate() {
+        project.write(&format!("assets/{name}.png"), pattern_png(32, 32, index as u32));
+    }
+    project.write(
+        "assets/rock.mymaterial",
+        "Material $rock {\n  Texture (attrib = \"diffuse\") {string {\"albedo.png\"}}\n  Texture (attrib = \"normal\") {string {\"normal.png\"}}\n  Texture (attrib = \"ao\") {string {\"ao.png\"}}\n  Texture (attrib = \"roughness\") {string {\"roughness.png\"}}\n}\n",
+    );
+    project.write("assets/extra/moss.mymaterial", "Material $moss { Texture (attrib = \"diffuse\") {string {\"../albedo.png\"}} }\n");
+    project
+}
+
+/// Path → blake3 of every file under the output folder (the cache excluded).
+fn output_hashes(project: &TempProject) -> BTreeMap<String, String> {
+    let mut hashes = BTreeMap::new();
+    let mut folders = vec![project.path("baked")];
+    while let Some(folder) = folders.pop() {
+        for entry in std::fs::read_dir(&folder).into_iter().flatten().flatten() {
+            let path = entry.path();
+            if path.is_dir() {
+                if !path.ends_with(".cirrus") {
+                    folders.push(path);
+                }
+            } else if !path.ends_with("manifest.json") {
+                let relative = path.strip_prefix(project.root()).unwrap().to_string_lossy().replace('\\', "/");
+                hashes.insert(relative, blake3::hash(&std::fs::read(&path).unwrap()).to_hex().to_string());
+            }
+        }
+    }
+    hashes
+}
+
+/// The paths of a batch's `changed`, after checking each file is complete and matches its hash.
+fn changed_paths(project: &TempProject, batch: &Value) -> Vec<String> {
+    let mut paths = Vec::new();
+    for entry in batch["changed"].as_array().expect("changed") {
+        let path = entry["path"].as_str().unwrap();
+        let bytes = std::fs::read(project.path(path)).unwrap_or_else(|error| panic!("{path}: {error}"));
+        assert_eq!(blake3::hash(&bytes).to_hex().as_str(), entry["hash"].as_str().unwrap(), "{path} matches its hash");
+        assert!(path.ends_with(entry["artifact"].as_str().unwrap()), "{entry}");
+        paths.push(path.to_string());
+    }
+    paths
+}
+
+/// The files whose hashes differ between two snapshots (new files included).
+fn differing(before: &BTreeMap<String, String>, after: &BTreeMap<String, String>) -> Vec<String> {
+    after.iter().filter(|(path, hash)| before.get(*path) != Some(hash)).map(|(path, _)| path.clone()).collect()
+}
+
+fn ao_variant(seed: u32) -> Vec<u8> {
+    pattern_png(32, 32, 100 + seed)
+}
+
+#[test]
+fn edits_become_one_batch_each_naming_exactly_the_changed_artifacts() {
+    let project = watched_project();
+    let daemon = Daemon::start(&project);
+    let mut client = daemon.connect();
+    client.subscribe(Some(0));
+    let first = client.batch();
+    assert_eq!(first["failed"], serde_json::json!([]), "{first}");
+    let paths = changed_paths(&project, &first);
+    assert!(
+        paths.contains(&"baked/rock/rock/mra.ktx2".to_string()) && paths.contains(&"baked/extra/moss/moss/albedo.ktx2".to_string()),
+        "{paths:?}"
+    );
+
+    // In place.
+    let before = output_hashes(&project);
+    project.write("assets/ao.png", ao_variant(1));
+    let batch = client.batch();
+    let after = output_hashes(&project);
+    assert_eq!(changed_paths(&project, &batch), differing(&before, &after));
+    assert_eq!(changed_paths(&project, &batch), ["baked/rock/report.json", "baked/rock/rock/mra.ktx2", "baked/rock/rock/mra.png"]);
+    assert!(client.quiet_for(Duration::from_millis(600)), "one edit is one batch");
+
+    // Written to a temporary file and renamed over the original.
+    let before = after;
+    project.write("assets/.ao.png.tmp", ao_variant(2));
+    std::fs::rename(project.path("assets/.ao.png.tmp"), project.path("assets/ao.png")).unwrap();
+    let batch = client.batch();
+    let after = output_hashes(&project);
+    assert_eq!(changed_paths(&project, &batch), differing(&before, &after));
+    assert!(!batch["changed"].as_array().unwrap().is_empty());
+    assert!(client.quiet_for(Duration::from_millis(600)), "a rename save is one batch");
+
+    // Deleted and created again, with a backup file beside it (editors that keep `file~`).
+    let before = after;
+    std::fs::rename(project.path("assets/normal.png"), project.path("assets/normal.png~")).unwrap();
+    project.write("assets/normal.png", pattern_png(32, 32, 77));
+    let batch = client.batch();
+    assert_eq!(batch["failed"], serde_json::json!([]), "{batch}");
+    let after = output_hashes(&project);
+    assert_eq!(changed_paths(&project, &batch), differing(&before, &after));
+    assert_eq!(changed_paths(&project, &batch), ["baked/rock/report.json", "baked/rock/rock/normal.ktx2", "baked/rock/rock/normal.png"]);
+    assert!(client.quiet_for(Duration::from_millis(600)), "a delete + create save is one batch");
+
+    // A touch with identical bytes does nothing at all.
+    project.write("assets/normal.png", pattern_png(32, 32, 77));
+    assert!(client.quiet_for(Duration::from_millis(800)), "identical bytes make no batch");
+}
+
+#[test]
+fn broken_materials_fail_with_their_line_keep_their_artifacts_and_recover() {
+    let project = watched_project();
+    let daemon = Daemon::start(&project);
+    let mut client = daemon.connect();
+    client.subscribe(Some(0));
+    client.batch();
+    let good = output_hashes(&project);
+
+    let text = String::from_utf8(project.read("assets/rock.mymaterial")).unwrap();
+    project.write("assets/rock.mymaterial", text.replace("{string {\"ao.png\"}}", "{float {\"ao.png\"}}"));
+    let batch = client.batch();
+    let failed = batch["failed"].as_array().unwrap();
+    assert_eq!(failed.len(), 1, "{batch}");
+    assert_eq!(failed[0]["asset"], "rock");
+    assert_eq!(failed[0]["file"], "assets/rock.mymaterial");
+    assert_eq!(failed[0]["line"], 4, "{batch}");
+    assert!(failed[0]["message"].as_str().unwrap().contains("float"), "{batch}");
+    assert_eq!(output_hashes(&project), good, "the last good artifacts stay");
+
+    project.write("assets/rock.mymaterial", text);
+    let batch = client.batch();
+    assert_eq!(batch["failed"], serde_json::json!([]), "recovered: {batch}");
+    assert_eq!(batch["changed"], serde_json::json!([]), "same artifacts as before: {batch}");
+
+    // A new file matching a rule becomes an asset.
+    project.write("assets/extra/lichen.mymaterial", "Material $lichen { Texture (attrib = \"diffuse\") {string {\"../ao.png\"}} }\n");
+    let batch = client.batch();
+    let paths = changed_paths(&project, &batch);
+    assert!(paths.contains(&"baked/extra/lichen/lichen/albedo.ktx2".to_string()), "{paths:?}");
+
+    // A deleted input fails its asset, and its return recovers it.
+    let albedo = project.read("assets/albedo.png");
+    std::fs::remove_file(project.path("assets/albedo.png")).unwrap();
+    let batch = client.batch();
+    let mut failed: Vec<&str> = batch["failed"].as_array().unwrap().iter().map(|entry| entry["asset"].as_str().unwrap_or("")).collect();
+    failed.sort();
+    assert_eq!(failed, ["extra/moss", "rock"], "{batch}");
+    assert!(batch["failed"][0]["message"].as_str().unwrap().contains("albedo.png"), "{batch}");
+    project.write("assets/albedo.png", &albedo);
+    let batch = client.batch();
+    assert_eq!(batch["failed"], serde_json::json!([]), "{batch}");
+
+    // Editing pipeline.ron reconfigures the running daemon: the rock asset becomes DDS.
+    let pipeline = String::from_utf8(project.read("pipeline.ron")).unwrap();
+    project.write(
+        "pipeline.ron",
+        pipeline.replace(r#"material: "rock.mymaterial")"#, r#"material: "rock.mymaterial", encode: (container: Dds))"#),
+    );
+    let batch = client.batch();
+    let paths = changed_paths(&project, &batch);
+    assert!(paths.contains(&"baked/rock/rock/albedo.dds".to_string()), "{paths:?}");
+    assert!(batch["removed"].as_array().unwrap().iter().any(|path| path == "baked/rock/rock/albedo.ktx2"), "{batch}");
+    assert!(!project.path("baked/rock/rock/albedo.ktx2").exists());
+
+    // A broken pipeline.ron is reported with its position; the daemon keeps the last good one.
+    project.write("pipeline.ron", "Pipeline(source: \"assets\",\n  output: 12)\n");
+    let batch = client.batch();
+    assert_eq!(batch["failed"][0]["stage"], "config", "{batch}");
+    assert_eq!(batch["failed"][0]["file"], "pipeline.ron", "{batch}");
+    assert_eq!(batch["failed"][0]["line"], 2, "{batch}");
+    project.write("assets/ao.png", ao_variant(5));
+    let batch = client.batch();
+    assert!(changed_paths(&project, &batch).contains(&"baked/rock/rock/mra.dds".to_string()), "{batch}");
+}
+
+/// The manifest's revision once it passes `after` (the daemon writes it with every build).
+fn wait_for_revision_after(project: &TempProject, after: u64) -> u64 {
+    let deadline = Instant::now() + Duration::from_secs(120);
+    loop {
+        let revision = std::fs::read(project.path("baked/manifest.json"))
+            .ok()
+            .and_then(|bytes| serde_json::from_slice::<Value>(&bytes).ok())
+            .and_then(|manifest| manifest["revision"].as_u64())
+            .unwrap_or(0);
+        if revision > after {
+            return revision;
+        }
+        assert!(Instant::now() < deadline, "no build after revision {after}");
+        std::thread::sleep(Duration::from_millis(20));
+    }
+}
+
+#[test]
+fn reconnecting_with_since_replays_the_missed_batches() {
+    let project = watched_project();
+    let daemon = Daemon::start(&project);
+    let mut client = daemon.connect();
+    client.subscribe(Some(0));
+    let seen = client.batch()["revision"].as_u64().unwrap();
+    drop(client);
+
+    project.write("assets/ao.png", ao_variant(1));
+    let first_missed = wait_for_revision_after(&project, seen);
+    project.write("assets/roughness.png", ao_variant(2));
+    let second_missed = wait_for_revision_after(&project, first_missed);
+
+    let mut client = daemon.connect();
+    client.subscribe(Some(seen));
+    let replayed = [client.batch(), client.batch()];
+    assert_eq!(replayed.each_ref().map(|batch| batch["revision"].as_u64().unwrap()), [first_missed, second_missed]);
+    // The older batch names files that the newer one replaced; the newer one matches the disk.
+    assert!(replayed[0]["changed"].as_array().unwrap().iter().any(|entry| entry["path"] == "baked/rock/rock/mra.png"), "{}", replayed[0]);
+    assert!(changed_paths(&project, &replayed[1]).contains(&"baked/rock/rock/mra.png".to_string()), "{}", replayed[1]);
+    assert!(client.quiet_for(Duration::from_millis(300)), "nothing else replayed");
+
+    // A client that saw everything gets nothing again.
+    let mut current = daemon.connect();
+    current.subscribe(Some(second_missed));
+    assert!(current.quiet_for(Duration::from_millis(300)));
+}
+
+#[test]
+fn garbage_and_abrupt_clients_do_not_harm_the_daemon() {
+    let project = watched_project();
+    let mut daemon = Daemon::start(&project);
+    let mut observer = daemon.connect();
+    observer.subscribe(Some(0));
+    observer.batch();
+
+    let mut rude = daemon.connect();
+    rude.send("this is not json");
+    assert_eq!(rude.receive()["type"], "error");
+    rude.send(r#"{"type":"launch_missiles"}"#);
+    assert_eq!(rude.receive()["type"], "error");
+    rude.send(&"x".repeat(200_000));
+    let reply = rude.receive();
+    assert!(reply["message"].as_str().unwrap().contains("longer than"), "{reply}");
+    rude.send(r#"{"type":"graph","format":"json"}"#);
+    let graph = rude.receive();
+    assert_eq!(graph["type"], "graph", "the same connection still works: {graph}");
+    assert!(graph["graph"]["nodes"].as_array().unwrap().len() > 10);
+    // Half a line, then gone; a client that vanishes without reading.
+    rude.stream.write_all(br#"{"type":"subscr"#).unwrap();
+    drop(rude);
+    let mut silent = TcpStream::connect(&daemon.address).unwrap();
+    silent.write_all(b"\xff\xfe\x00garbage without newline").unwrap();
+    let mut buffer = [0u8; 16];
+    let _ = silent.read(&mut buffer);
+    drop(silent);
+
+    project.write("assets/ao.png", ao_variant(9));
+    let batch = observer.batch();
+    assert!(!batch["changed"].as_array().unwrap().is_empty(), "{batch}");
+    assert!(daemon.alive(), "daemon alive; log:\n{}", daemon.log.lock().unwrap());
+}

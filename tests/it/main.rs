@@ -7,6 +7,7 @@ mod billboard;
 mod cli;
 mod config;
 mod gpu;
+mod graph;
 mod incremental;
 mod layout;
 mod material_files;

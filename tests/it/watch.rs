@@ -1,7 +1,7 @@
 //! The daemon end to end: `cirrus watch` runs as a process on a temporary project, clients
 //! connect over TCP, and files are edited the ways editors save them.
 
-use std::collections::BTreeMap;
+use std::collections::{BTreeMap, BTreeSet};
 use std::io::{BufRead, BufReader, Read, Write};
 use std::net::TcpStream;
 use std::process::{Child, Command, Stdio};
@@ -365,4 +365,67 @@ fn garbage_and_abrupt_clients_do_not_harm_the_daemon() {
     let batch = observer.batch();
     assert!(!batch["changed"].as_array().unwrap().is_empty(), "{batch}");
     assert!(daemon.alive(), "daemon alive; log:\n{}", daemon.log.lock().unwrap());
+}
+
+#[test]
+fn a_burst_of_300_new_files_becomes_a_few_batches_and_loses_none() {
+    let project = watched_project();
+    let daemon = Daemon::start(&project);
+    let mut client = daemon.connect();
+    client.subscribe(Some(0));
+    client.batch();
+    // A branch checkout: 300 new material files at once, each its own asset under the rule.
+    for index in 0..300 {
+        project.write(
+            &format!("assets/extra/burst_{index:03}.mymaterial"),
+            format!("Material $m {{ Texture (attrib = \"diffuse\") {{string {{\"../albedo.png\"}}}} Param (attrib = \"roughness\") {{float {{{}}}}} }}\n", index as f32 / 300.0),
+        );
+    }
+    let mut reports = BTreeSet::new();
+    let mut batches = 0;
+    while reports.len() < 300 {
+        let batch = client.batch();
+        batches += 1;
+        assert_eq!(batch["failed"], serde_json::json!([]), "{batch}");
+        for path in changed_paths(&project, &batch) {
+            if path.starts_with("baked/extra/burst_") && path.ends_with("/report.json") {
+                reports.insert(path);
+            }
+        }
+        assert!(batches <= 10, "300 files became more than 10 batches");
+    }
+    assert!(client.quiet_for(Duration::from_millis(500)));
+    assert!(project.path("baked/extra/burst_299/m/mra.ktx2").exists());
+}
+
+#[test]
+fn an_edit_during_a_build_cancels_it_and_the_next_build_uses_the_newest_bytes() {
+    let project = watched_project();
+    // A large albedo, so that its encode is still running when the second edit lands.
+    project.write("assets/albedo.png", pattern_png(1024, 1024, 1));
+    let daemon = Daemon::start(&project);
+    let mut client = daemon.connect();
+    client.subscribe(Some(0));
+    client.batch();
+
+    project.write("assets/albedo.png", pattern_png(1024, 1024, 2));
+    std::thread::sleep(Duration::from_millis(250));
+    let newest = pattern_png(1024, 1024, 3);
+    project.write("assets/albedo.png", &newest);
+    let mut last = client.batch();
+    while !client.quiet_for(Duration::from_millis(1500)) {
+        last = client.batch();
+    }
+    let log = daemon.log.lock().unwrap().clone();
+    assert!(log.contains("build cancelled by a newer edit"), "the first build was cancelled:\n{log}");
+
+    // What the daemon wrote last equals a fresh bake of the newest bytes.
+    let reference = watched_project();
+    reference.write("assets/albedo.png", &newest);
+    let mut cirrus = reference.open();
+    assert!(crate::support::build(&mut cirrus).all_ok());
+    let expected = reference.read("baked/rock/rock/albedo.ktx2");
+    assert_eq!(project.read("baked/rock/rock/albedo.ktx2"), expected);
+    let albedo = last["changed"].as_array().unwrap().iter().find(|entry| entry["path"] == "baked/rock/rock/albedo.ktx2");
+    assert_eq!(albedo.map(|entry| entry["hash"].clone()), Some(serde_json::json!(blake3::hash(&expected).to_hex().to_string())), "{last}");
 }

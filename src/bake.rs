@@ -125,6 +125,8 @@ pub struct Project {
     last_summary: Option<BuildSummary>,
     /// The manifest revision of the last build (or of the manifest found on disk).
     revision: u64,
+    /// A source input was created or set since the last finished build (also by `graph`).
+    sources_changed_since_build: bool,
 }
 
 /// One asset's share of a build.
@@ -176,8 +178,10 @@ impl Project {
             history: HashMap::new(),
             last_summary: None,
             revision: 0,
+            sources_changed_since_build: false,
         };
         project.revision = revision;
+        project.sources_changed_since_build = false;
         project
     }
 
@@ -207,10 +211,11 @@ impl Project {
         }
     }
 
-    /// Reads `paths` again now; true when any of them is new to the project or its bytes changed
-    /// (so that a touch with identical bytes costs no build).
+    /// Reads `paths` again now; true when any of them is new to the project or its bytes changed,
+    /// or another input changed since the last finished build (so that a touch with identical
+    /// bytes costs no build).
     pub fn refresh_sources<'a>(&mut self, paths: impl IntoIterator<Item = &'a Path>) -> bool {
-        let mut changed = false;
+        let mut changed = self.sources_changed_since_build;
         for path in paths {
             let Some(&file) = self.files.get(path) else {
                 changed = true;
@@ -361,6 +366,7 @@ impl Project {
             }
         }
         self.revision = manifest.revision;
+        self.sources_changed_since_build = false;
         for run in runs.iter().filter(|run| !run.from_cache) {
             if let Some(label) = self.labels.get(&run.key) {
                 let entry = self.history.entry(format!("{}({label})", run.stage.name())).or_insert((0, 0.0));
@@ -453,12 +459,14 @@ impl Project {
                 if file.contents(&self.db) != &contents {
                     let _previous = file.set_contents(&mut self.db).to(contents);
                     self.history.insert(file_node_id(path), (self.next_revision(), 0.0));
+                    self.sources_changed_since_build = true;
                 }
                 file
             }
             None => {
                 let file = SourceFile::new(&self.db, path.to_path_buf(), contents);
                 self.history.insert(file_node_id(path), (self.next_revision(), 0.0));
+                self.sources_changed_since_build = true;
                 self.labels.insert(file.as_id(), display_path(path));
                 self.files.insert(path.to_path_buf(), file);
                 file

@@ -237,11 +237,14 @@ pub fn watch(settings: &WatchSettings) -> Result<(), WatchError> {
         let ms = start.elapsed().as_secs_f64() * 1e3;
         first = false;
         filter.write().expect("event filter").sources = project.source_paths();
+        // The engine hears first; the graph (which may compute a cached billboard's layout) after.
+        if let Some(server) = &server {
+            server.publish(&batch_event(&summary, ms));
+        }
         let graph = project.graph();
         log_batch(&summary, &changed_files, &graph, ms);
         if let Some(server) = &server {
             server.set_graph(graph);
-            server.publish(&batch_event(&summary, ms));
         }
         builds += 1;
         if settings.max_builds.is_some_and(|max| builds >= max) {

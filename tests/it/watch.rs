@@ -100,7 +100,7 @@ impl Client {
     fn quiet_for(&mut self, wait: Duration) -> bool {
         self.stream.set_read_timeout(Some(wait)).unwrap();
         let mut byte = [0u8; 1];
-        let quiet = matches!(self.reader.get_mut().peek(&mut byte), Err(_)) && self.reader.buffer().is_empty();
+        let quiet = self.reader.get_mut().peek(&mut byte).is_err() && self.reader.buffer().is_empty();
         self.stream.set_read_timeout(Some(Duration::from_secs(120))).unwrap();
         quiet
     }

@@ -736,6 +736,8 @@ impl Project {
             "mesh": display_path(input.mesh_file(db).path(db)),
             "faces": planes.face_count,
             "planes": planes.planes.len(),
+            "quads": layout.layout.placements.len(),
+            "alpha_cutoff": settings.billboard.alpha_cutoff,
             "epsilon": settings.billboard.epsilon,
             "epsilon_world": planes.epsilon,
             "max_error_world": planes.max_error,
@@ -1053,7 +1055,9 @@ impl Project {
         let input = self.billboards[&options.asset];
         let loaded = crate::db::loaded_mesh(&self.db, input).map_err(PreviewError::Artifact)?;
         let source = self.source_view_mesh(input, &loaded).map_err(PreviewError::Artifact)?;
-        let lod = self.lod_view_mesh(&options.asset, input).map_err(PreviewError::Artifact)?;
+        let cutoff = input.settings(&self.db).billboard.alpha_cutoff;
+        let folder = self.config.output.join(&options.asset);
+        let lod = crate::artifacts::read_lod_view_mesh(&self.config.root, &folder, cutoff).map_err(PreviewError::Artifact)?;
         let positions = &loaded.mesh.positions;
         let (min, max) =
             positions.iter().fold((glam::Vec3::splat(f32::INFINITY), glam::Vec3::splat(f32::NEG_INFINITY)), |(min, max), &p| {
@@ -1110,61 +1114,6 @@ impl Project {
             height: 0.0,
         };
         Ok(crate::gpu::ViewMesh { batches: crate::plane_textures::plane_batches(&loaded.mesh, &loaded.tangents, &all_faces), materials })
-    }
-
-    /// The baked LOD as an engine sees it: `lod.obj` with the decoded KTX2 atlas levels.
-    fn lod_view_mesh(&self, name: &str, input: BillboardAsset) -> Result<crate::gpu::ViewMesh, Diagnostic> {
-        let folder = self.config.output.join(name);
-        let read = |file: &str| -> Result<Vec<u8>, Diagnostic> {
-            let path = folder.join(file);
-            std::fs::read(self.config.root.join(&path))
-                .map_err(|error| Diagnostic::new(&path, format!("cannot read the baked artifact: {error}")))
-        };
-        let obj_path = folder.join("lod.obj");
-        let (mesh, _) = crate::mesh::load_mesh(&obj_path, &read("lod.obj")?, &BTreeMap::new(), &folder)?;
-        let decode = |file: &str| -> Result<Arc<Vec<crate::texture::Texture>>, Diagnostic> {
-            let ktx2 = crate::container::read_ktx2(&read(file)?).map_err(|error| Diagnostic::new(folder.join(file), error))?;
-            let levels = ktx2
-                .levels
-                .iter()
-                .enumerate()
-                .map(|(level, blocks)| {
-                    let (width, height) = ((ktx2.width >> level).max(1), (ktx2.height >> level).max(1));
-                    crate::quality::decode_blocks(ktx2.format, blocks, width, height)
-                })
-                .collect();
-            Ok(Arc::new(levels))
-        };
-        let mut normal = (*decode("normal.ktx2")?).clone();
-        // BC5 holds X and Y only; the shader rebuilds Z from them.
-        for level in &mut normal {
-            let pixels: Vec<u8> = level.pixels.chunks_exact(4).flat_map(|texel| [texel[0], texel[1], 0, 255]).collect();
-            *level = crate::texture::Texture::new(level.width, level.height, pixels);
-        }
-        let material = crate::gpu::ViewMaterial {
-            albedo: Some(decode("albedo.ktx2")?),
-            opacity: None,
-            normal: Some(Arc::new(normal)),
-            normal_has_z: false,
-            albedo_factor: [1.0; 4],
-            alpha_cutoff: input.settings(&self.db).billboard.alpha_cutoff,
-        };
-        let tangents = crate::gpu::vertex_tangents(&mesh.positions, &mesh.normals, mesh.uvs.as_deref().unwrap_or(&[]), &mesh.triangles);
-        let vertices = mesh
-            .triangles
-            .iter()
-            .flatten()
-            .map(|&index| {
-                let index = index as usize;
-                crate::gpu::RenderVertex {
-                    position: mesh.positions[index],
-                    normal: mesh.normals[index],
-                    uv: mesh.uvs.as_ref().map_or([0.0; 2], |uvs| uvs[index]),
-                    tangent: tangents.get(index).copied().unwrap_or([1.0, 0.0, 0.0, 1.0]),
-                }
-            })
-            .collect();
-        Ok(crate::gpu::ViewMesh { batches: vec![(0, vertices)], materials: vec![material] })
     }
 }
 

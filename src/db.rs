@@ -282,7 +282,7 @@ fn record_cache_hit(db: &dyn Db, stage: Stage, key: impl AsId) {
     db.record_run(StageRun { stage, key: key.as_id(), ms: 0.0, from_cache: true });
 }
 
-fn read_contents<'db>(db: &'db dyn Db, file: SourceFile) -> Result<&'db FileContents, Diagnostic> {
+fn read_contents(db: &dyn Db, file: SourceFile) -> Result<&FileContents, Diagnostic> {
     file.contents(db).as_ref().map_err(|error| Diagnostic::new(file.path(db), error.clone()))
 }
 

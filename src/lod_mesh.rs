@@ -1,4 +1,5 @@
-//! The LOD mesh: `lod.obj` + `lod.mtl` text, two triangles per plane with UVs into the atlas and
+//! The LOD mesh: `lod.obj` + `lod.mtl` text, two triangles per rectangle (a cluster of a plane's
+//! faces) with UVs into the atlas and
 //! the plane's normal. Depends on planes and layout only: a texture edit does not rewrite it.
 
 use std::fmt::Write;
@@ -9,7 +10,9 @@ use crate::rectangles::PlaneRectangle;
 /// The OBJ and MTL text of the billboard cloud; `material` names the atlas material.
 pub fn lod_mesh(rectangles: &[PlaneRectangle], layout: &Layout, material: &str) -> (String, String) {
     let mut obj = String::new();
-    let _ = writeln!(obj, "# cirrus billboard cloud: {} planes, atlas {}x{}", rectangles.len(), layout.width, layout.height);
+    let planes = rectangles.iter().map(|rectangle| rectangle.plane).collect::<std::collections::BTreeSet<_>>().len();
+    let _ =
+        writeln!(obj, "# cirrus billboard cloud: {} quads on {planes} planes, atlas {}x{}", rectangles.len(), layout.width, layout.height);
     let _ = writeln!(obj, "mtllib lod.mtl");
     let _ = writeln!(obj, "o {material}");
     let _ = writeln!(obj, "usemtl {material}");

@@ -5,7 +5,13 @@
 use glam::{Mat4, Vec3};
 use serde::Serialize;
 
-use crate::gpu::{Gpu, GpuError, ViewMesh};
+use std::collections::BTreeMap;
+use std::path::PathBuf;
+use std::sync::Arc;
+
+use crate::diagnostic::Diagnostic;
+use crate::gpu::{Gpu, GpuError, RenderVertex, ViewMaterial, ViewMesh};
+use crate::texture::Texture;
 
 /// The 26 view directions, unit length: 6 face centres, 12 edge midpoints, 8 corners.
 pub fn view_directions() -> Vec<[f32; 3]> {
@@ -56,17 +62,11 @@ pub fn preview(
     views: usize,
     size: u32,
 ) -> Result<Preview, GpuError> {
-    let center = Vec3::from(center);
-    let radius = radius.max(1e-6);
-    let light = Vec3::new(0.4, 0.8, 0.45).normalize().to_array();
+    let light = preview_light();
     let mut metrics = Vec::new();
     let mut pairs = Vec::new();
     for direction in view_directions().into_iter().take(views) {
-        let d = Vec3::from(direction);
-        let up = if d.y.abs() > 0.9 { Vec3::Z } else { Vec3::Y };
-        let view = Mat4::look_at_rh(center + d * 2.0 * radius, center, up);
-        let projection = Mat4::orthographic_rh(-radius, radius, -radius, radius, 0.5 * radius, 3.5 * radius);
-        let matrix = (projection * view).to_cols_array_2d();
+        let matrix = view_projection(center, radius, direction);
         let source_image = gpu.render_view(source, matrix, light, size)?;
         let lod_image = gpu.render_view(lod, matrix, light, size)?;
         metrics.push(ViewMetrics { direction, iou: silhouette_iou(&source_image, &lod_image), psnr: rgb_psnr(&source_image, &lod_image) });
@@ -77,6 +77,94 @@ pub fn preview(
     let min_iou = metrics.iter().map(|view| view.iou).fold(1.0, f64::min);
     let mean_psnr = metrics.iter().map(|view| view.psnr).sum::<f64>() / count;
     Ok(Preview { metrics: PreviewMetrics { views: metrics, mean_iou, min_iou, mean_psnr }, contact_sheet: contact_sheet(&pairs, size) })
+}
+
+/// The light direction of every preview render.
+pub fn preview_light() -> [f32; 3] {
+    Vec3::new(0.4, 0.8, 0.45).normalize().to_array()
+}
+
+/// The orthographic camera of the previews: looking at `center` from `direction` (unit length),
+/// framing the sphere of `radius`.
+pub fn view_projection(center: [f32; 3], radius: f32, direction: [f32; 3]) -> [[f32; 4]; 4] {
+    let (center, radius, direction) = (Vec3::from(center), radius.max(1e-6), Vec3::from(direction));
+    let up = if direction.y.abs() > 0.9 { Vec3::Z } else { Vec3::Y };
+    let view = Mat4::look_at_rh(center + direction * 2.0 * radius, center, up);
+    let projection = Mat4::orthographic_rh(-radius, radius, -radius, radius, 0.5 * radius, 3.5 * radius);
+    (projection * view).to_cols_array_2d()
+}
+
+/// The centre of the bounding box of `mesh`'s vertices and the radius around it that holds them.
+pub fn bounding_sphere(mesh: &ViewMesh) -> ([f32; 3], f32) {
+    let positions = || mesh.batches.iter().flat_map(|(_, vertices)| vertices.iter().map(|vertex| Vec3::from(vertex.position)));
+    let (min, max) =
+        positions().fold((Vec3::splat(f32::INFINITY), Vec3::splat(f32::NEG_INFINITY)), |(min, max), p| (min.min(p), max.max(p)));
+    if min.x > max.x {
+        return ([0.0; 3], 1.0);
+    }
+    let center = 0.5 * (min + max);
+    (center.to_array(), positions().map(|p| p.distance(center)).fold(0.0, f32::max))
+}
+
+/// The files of a baked LOD, each with its path (for messages) and bytes.
+pub struct LodFiles {
+    pub obj: (PathBuf, Vec<u8>),
+    pub albedo_ktx2: (PathBuf, Vec<u8>),
+    pub normal_ktx2: (PathBuf, Vec<u8>),
+    pub alpha_cutoff: f32,
+}
+
+/// The baked LOD as an engine sees it: `lod.obj` with the decoded KTX2 atlas levels (BC-decoded,
+/// so renders show the compression), alpha-tested and double-sided.
+pub fn lod_view_mesh(files: &LodFiles) -> Result<ViewMesh, Diagnostic> {
+    let (obj_path, obj_bytes) = &files.obj;
+    let folder = obj_path.parent().map(PathBuf::from).unwrap_or_default();
+    let (mesh, _) = crate::mesh::load_mesh(obj_path, obj_bytes, &BTreeMap::new(), &folder)?;
+    let decode = |(path, bytes): &(PathBuf, Vec<u8>)| -> Result<Vec<Texture>, Diagnostic> {
+        let ktx2 = crate::container::read_ktx2(bytes).map_err(|error| Diagnostic::new(path, error))?;
+        Ok(ktx2
+            .levels
+            .iter()
+            .enumerate()
+            .map(|(level, blocks)| {
+                let (width, height) = ((ktx2.width >> level).max(1), (ktx2.height >> level).max(1));
+                crate::quality::decode_blocks(ktx2.format, blocks, width, height)
+            })
+            .collect())
+    };
+    // BC5 holds X and Y only; the shader rebuilds Z from them.
+    let normal = decode(&files.normal_ktx2)?
+        .into_iter()
+        .map(|level| {
+            let pixels: Vec<u8> = level.pixels.chunks_exact(4).flat_map(|texel| [texel[0], texel[1], 0, 255]).collect();
+            Texture::new(level.width, level.height, pixels)
+        })
+        .collect();
+    let material = ViewMaterial {
+        albedo: Some(Arc::new(decode(&files.albedo_ktx2)?)),
+        opacity: None,
+        normal: Some(Arc::new(normal)),
+        normal_has_z: false,
+        albedo_factor: [1.0; 4],
+        alpha_cutoff: files.alpha_cutoff,
+    };
+    let uvs = mesh.uvs.as_deref().unwrap_or(&[]);
+    let tangents = crate::gpu::vertex_tangents(&mesh.positions, &mesh.normals, uvs, &mesh.triangles);
+    let vertices = mesh
+        .triangles
+        .iter()
+        .flatten()
+        .map(|&index| {
+            let index = index as usize;
+            RenderVertex {
+                position: mesh.positions[index],
+                normal: mesh.normals[index],
+                uv: uvs.get(index).copied().unwrap_or([0.0; 2]),
+                tangent: tangents.get(index).copied().unwrap_or([1.0, 0.0, 0.0, 1.0]),
+            }
+        })
+        .collect();
+    Ok(ViewMesh { batches: vec![(0, vertices)], materials: vec![material] })
 }
 
 /// |A ∩ B| / |A ∪ B| of the drawn pixels (alpha > 0); 1 when both are empty.

@@ -133,14 +133,13 @@ fn coverage_alpha_scale(texels: &[[f32; 4]], cutoff: f32, target: f32) -> f32 {
             high = middle;
         }
     }
-    let best = [low, high]
+    [low, high]
         .into_iter()
         .min_by(|a, b| {
             let error = |scale: f32| (alpha_coverage(texels, cutoff, scale) - target).abs();
             error(*a).total_cmp(&error(*b))
         })
-        .unwrap_or(1.0);
-    best
+        .unwrap_or(1.0)
 }
 
 /// Fraction of texels of an RGBA8 texture whose alpha passes `cutoff` (for tests and reports).

@@ -257,8 +257,8 @@ impl<'a> Lexer<'a> {
             self.offset += rest.len() - trimmed.len();
             if trimmed.starts_with("//") {
                 self.offset += trimmed.find('\n').unwrap_or(trimmed.len());
-            } else if trimmed.starts_with("/*") {
-                match trimmed[2..].find("*/") {
+            } else if let Some(comment) = trimmed.strip_prefix("/*") {
+                match comment.find("*/") {
                     Some(end) => self.offset += end + 4,
                     None => return Err(self.error(self.offset, "unterminated `/*` comment")),
                 }
@@ -489,15 +489,13 @@ impl Parser<'_> {
         }
         let name = self.optional_name()?;
         let mut properties = Vec::new();
-        if self.eat('(')? {
-            if !self.eat(')')? {
-                loop {
-                    properties.push(self.property()?);
-                    if self.eat(')')? {
-                        break;
-                    }
-                    self.expect(',', "between properties")?;
+        if self.eat('(')? && !self.eat(')')? {
+            loop {
+                properties.push(self.property()?);
+                if self.eat(')')? {
+                    break;
                 }
+                self.expect(',', "between properties")?;
             }
         }
         let open = self.expect('{', &format!("to open the `{identifier}` structure"))?;

@@ -110,9 +110,9 @@ fn clusters(faces: &[u32], triangles: &[[u32; 3]], project: &dyn Fn(u32) -> Vec2
         }
     }
     let mut groups: std::collections::BTreeMap<usize, Vec<u32>> = std::collections::BTreeMap::new();
-    for index in 0..faces.len() {
+    for (index, &face) in faces.iter().enumerate() {
         let group = root(&mut parent, index);
-        groups.entry(group).or_default().push(faces[index]);
+        groups.entry(group).or_default().push(face);
     }
     let mut groups: Vec<Vec<u32>> = groups
         .into_values()

@@ -40,7 +40,7 @@ fn tree_obj(leaf_tilt: f32) -> String {
     obj
 }
 
-fn tree_project() -> TempProject {
+pub(crate) fn tree_project() -> TempProject {
     let project = TempProject::new(
         r#"Pipeline(source: "assets", output: "baked", assets: [
             BillboardCloud(name: "tree", mesh: "tree.obj", atlas: (max_size: 256, padding: 2)),

@@ -13,3 +13,8 @@ mod layout;
 mod material_files;
 mod planes;
 mod watch;
+
+/// The viewer example, compiled in so the tests drive the very code `cargo run --example viewer`
+/// runs (a nested `cargo build` would wait on the build-directory lock the test run holds).
+#[path = "../../examples/viewer.rs"]
+mod viewer;

@@ -429,3 +429,78 @@ fn an_edit_during_a_build_cancels_it_and_the_next_build_uses_the_newest_bytes() 
     let albedo = last["changed"].as_array().unwrap().iter().find(|entry| entry["path"] == "baked/rock/rock/albedo.ktx2");
     assert_eq!(albedo.map(|entry| entry["hash"].clone()), Some(serde_json::json!(blake3::hash(&expected).to_hex().to_string())), "{last}");
 }
+
+#[test]
+fn the_viewer_keeps_the_last_good_lod_on_failure_and_reloads_on_a_texture_edit() {
+    let project = crate::billboard::tree_project();
+    let daemon = Daemon::start(&project);
+    let mut client = daemon.connect();
+    client.subscribe(Some(0));
+    assert!(client.batch()["failed"].as_array().unwrap().is_empty());
+
+    let screenshot = project.path("shot.png");
+    let arguments = ["viewer", "--headless", "--size", "192", "--reloads", "1", "--connect", &daemon.address, "--screenshot"];
+    let options = <crate::viewer::Options as clap::Parser>::try_parse_from(
+        arguments
+            .iter()
+            .map(|argument| argument.to_string())
+            .chain([screenshot.display().to_string(), project.path("baked/tree").display().to_string()]),
+    )
+    .expect("viewer options");
+    let lines = Arc::new(Mutex::new(Vec::<String>::new()));
+    let viewer = {
+        let lines = lines.clone();
+        std::thread::spawn(move || crate::viewer::run(&options, &mut |line| lines.lock().unwrap().push(line)))
+    };
+    let wait_for_lines = |count: usize| {
+        let start = Instant::now();
+        while lines.lock().unwrap().len() < count {
+            assert!(start.elapsed() < Duration::from_secs(120), "viewer said only {:?}", lines.lock().unwrap());
+            std::thread::sleep(Duration::from_millis(20));
+        }
+    };
+    wait_for_lines(1);
+    // The viewer subscribes after loading; give it a moment to be listening before editing.
+    std::thread::sleep(Duration::from_millis(500));
+    let first = crate::support::decode_png(&std::fs::read(&screenshot).unwrap());
+
+    // A broken mesh fails the asset: the viewer reports it and keeps showing the last LOD.
+    let obj = project.read("assets/tree.obj");
+    project.write("assets/tree.obj", "v 0 0 0\nf 1 2 3\n");
+    client.batch();
+    wait_for_lines(2);
+    // Restored, the artifacts are byte for byte what they were: nothing to reload.
+    project.write("assets/tree.obj", &obj);
+    client.batch();
+    wait_for_lines(3);
+    // A bark texture edit rewrites the atlas: the viewer reloads and renders again.
+    project.write("assets/bark.png", pattern_png(32, 32, 9));
+    let batch = client.batch();
+    let start = Instant::now();
+    while !viewer.is_finished() {
+        assert!(start.elapsed() < Duration::from_secs(120), "the viewer did not reload: {:?}", lines.lock().unwrap());
+        std::thread::sleep(Duration::from_millis(20));
+    }
+    let result = viewer.join().expect("viewer thread");
+    let lines = lines.lock().unwrap().clone();
+    assert_eq!(result, Ok(()), "{lines:?}");
+    let revision = batch["revision"].as_u64().unwrap();
+    assert_eq!(lines.len(), 4, "{lines:?}");
+    let numbers = |line: &str| -> (usize, f64) {
+        let (quads, rest) = line.split_once(": ").unwrap().1.split_once(" quads, ").unwrap();
+        (quads.parse().unwrap(), rest.split('%').next().unwrap().parse().unwrap())
+    };
+    assert!(lines[0].starts_with("loaded: "), "{lines:?}");
+    assert!(lines[1].contains(": the asset failed, keeping the last LOD:\n  assets/tree.obj"), "{lines:?}");
+    assert!(lines[2].ends_with(": nothing shown here changed"), "{lines:?}");
+    assert!(lines[3].starts_with(&format!("reloaded r{revision} (albedo.ktx2")), "{lines:?}");
+    let ((quads, coverage), (reloaded_quads, reloaded_coverage)) = (numbers(&lines[0]), numbers(&lines[3]));
+    let obj = String::from_utf8(project.read("baked/tree/lod.obj")).unwrap();
+    assert_eq!(quads, obj.lines().filter(|line| line.starts_with("f ")).count() / 2, "every quad of lod.obj is shown");
+    assert_eq!(reloaded_quads, quads, "{lines:?}");
+    // Only the colour changed; BC7 may move a few alpha-tested edge texels.
+    assert!(coverage > 5.0 && (reloaded_coverage - coverage).abs() < 0.5, "a texture edit keeps the silhouette: {lines:?}");
+    let second = crate::support::decode_png(&std::fs::read(&screenshot).unwrap());
+    let differing = first.pixels.chunks_exact(4).zip(second.pixels.chunks_exact(4)).filter(|(a, b)| a != b).count();
+    assert!(differing > 100, "the reloaded bark shows in the screenshot ({differing} pixels differ)");
+}

@@ -139,8 +139,11 @@ impl Grid {
         -self.radius + (bin as f32) * 2.0 * self.radius / self.rho_bins as f32
     }
 
-    fn rho_bin(&self, rho: f32) -> isize {
-        ((rho + self.radius) * self.rho_bins as f32 / (2.0 * self.radius)).floor() as isize
+    /// The bin holding offset `rho`, clamped to the grid (a truncating cast is the floor here:
+    /// negative positions clamp to bin 0 either way).
+    fn rho_bin(&self, rho: f32) -> usize {
+        let position = ((rho + self.radius) * self.rho_bins as f32 / (2.0 * self.radius)).max(0.0);
+        (position as usize).min(self.rho_bins - 1)
     }
 
     fn bins(&self) -> usize {
@@ -158,43 +161,49 @@ impl Grid {
         }
     }
 
-    /// Adds `sign` × the density contribution of `face`: area × |cos| to every bin where a valid
-    /// plane exists (`density.valid`), and that to the bins just in front of the face
-    /// (`density.front`, weighted by PENALTY when scoring).
-    fn contribute(&self, face: &Face, sign: f32, density: &mut Density) {
+    /// Adds `sign` × the density contribution of `face` to direction row `t` (θ bin `t`, every φ
+    /// bin, every ρ bin; `valid` and `front` are that row's slices): area × |cos| to every bin where
+    /// a valid plane exists (`valid`), and to the bins just in front of the face (`front`, weighted
+    /// by PENALTY when scoring).
+    fn contribute_to_row(&self, face: &Face, sign: f32, t: usize, valid: &mut [f32], front: &mut [f32]) {
         if face.area <= 0.0 {
             return;
         }
-        let last = self.rho_bins as isize - 1;
-        // Each vertex's offset along every corner direction, computed once.
-        let dots: [Vec<f32>; 3] = face.vertices.map(|vertex| self.corners.iter().map(|corner| vertex.dot(*corner)).collect());
-        for t in 0..THETA_BINS {
+        // Per direction bin, the offsets a plane through every vertex can take: for each vertex,
+        // the range of its offsets over the bin's four corner directions, intersected over the
+        // vertices and widened by ε. Flat arrays, so the loops vectorise.
+        const ROW: usize = PHI_BINS + 1;
+        let (mut lows, mut highs) = ([f32::NEG_INFINITY; PHI_BINS], [f32::INFINITY; PHI_BINS]);
+        let (row_corners, next_corners) = (&self.corners[t * ROW..(t + 1) * ROW], &self.corners[(t + 1) * ROW..(t + 2) * ROW]);
+        for vertex in &face.vertices {
+            let (mut row, mut next) = ([0.0f32; ROW], [0.0f32; ROW]);
+            for p in 0..ROW {
+                row[p] = vertex.dot(row_corners[p]);
+                next[p] = vertex.dot(next_corners[p]);
+            }
             for p in 0..PHI_BINS {
-                let index = |t: usize, p: usize| t * (PHI_BINS + 1) + p;
-                let corner_indices = [index(t, p), index(t + 1, p), index(t, p + 1), index(t + 1, p + 1)];
-                let (mut low, mut high) = (f32::NEG_INFINITY, f32::INFINITY);
-                for vertex_dots in &dots {
-                    let values = corner_indices.map(|corner| vertex_dots[corner]);
-                    low = low.max(values.iter().fold(f32::INFINITY, |a, &d| a.min(d)) - self.epsilon);
-                    high = high.min(values.iter().fold(f32::NEG_INFINITY, |a, &d| a.max(d)) + self.epsilon);
-                }
-                if low > high {
-                    continue;
-                }
-                let cosine = face.normal.dot(self.centers[t * PHI_BINS + p]);
-                let weight = sign * face.area * cosine.abs();
-                let base = (t * PHI_BINS + p) * self.rho_bins;
-                let (first, end) = (self.rho_bin(low).clamp(0, last), self.rho_bin(high).clamp(0, last));
-                for bin in first..=end {
-                    density.valid[base + bin as usize] += weight;
-                }
-                // In front of the face: the side its normal points to along this direction.
-                let (front_low, front_high) = if cosine >= 0.0 { (high, high + self.epsilon) } else { (low - self.epsilon, low) };
-                let (front_first, front_end) = (self.rho_bin(front_low).clamp(0, last), self.rho_bin(front_high).clamp(0, last));
-                for bin in front_first..=front_end {
-                    if bin < first || bin > end {
-                        density.front[base + bin as usize] += weight;
-                    }
+                let (a, b, c, d) = (row[p], row[p + 1], next[p], next[p + 1]);
+                lows[p] = lows[p].max(a.min(b).min(c.min(d)));
+                highs[p] = highs[p].min(a.max(b).max(c.max(d)));
+            }
+        }
+        for p in 0..PHI_BINS {
+            // max/min commute with the rounding of ±ε: the same values as widening per vertex.
+            let (low, high) = (lows[p] - self.epsilon, highs[p] + self.epsilon);
+            if low > high {
+                continue;
+            }
+            let cosine = face.normal.dot(self.centers[t * PHI_BINS + p]);
+            let weight = sign * face.area * cosine.abs();
+            let base = p * self.rho_bins;
+            let (first, end) = (self.rho_bin(low), self.rho_bin(high));
+            valid[base + first..=base + end].iter_mut().for_each(|density| *density += weight);
+            // In front of the face: the side its normal points to along this direction.
+            let (front_low, front_high) = if cosine >= 0.0 { (high, high + self.epsilon) } else { (low - self.epsilon, low) };
+            let (front_first, front_end) = (self.rho_bin(front_low), self.rho_bin(front_high));
+            for bin in front_first..=front_end {
+                if bin < first || bin > end {
+                    front[base + bin] += weight;
                 }
             }
         }
@@ -214,10 +223,15 @@ impl Density {
         Density { valid: vec![0.0; bins], front: vec![0.0; bins] }
     }
 
-    fn add(mut self, other: Density) -> Density {
-        self.valid.iter_mut().zip(&other.valid).for_each(|(a, b)| *a += b);
-        self.front.iter_mut().zip(&other.front).for_each(|(a, b)| *a += b);
-        self
+    /// Adds `sign` × the contributions of `faces`, in parallel over θ rows: every bin sums its
+    /// faces in their order, so the densities (and the planes) are the same on every run.
+    fn add_faces(&mut self, grid: &Grid, faces: &[Face], sign: f32) {
+        let row = PHI_BINS * grid.rho_bins;
+        self.valid.par_chunks_mut(row).zip(self.front.par_chunks_mut(row)).enumerate().for_each(|(t, (valid, front))| {
+            for face in faces {
+                grid.contribute_to_row(face, sign, t, valid, front);
+            }
+        });
     }
 
     /// The densest bin: valid area minus the near-tangent penalty; where every bin is
@@ -231,26 +245,6 @@ impl Density {
         }
         let best = argmax(&|bin| self.valid[bin])?;
         (self.valid[best] > 1e-12).then_some(best)
-    }
-
-    /// The density of `faces` (with `sign`), in parallel.
-    fn of_faces(grid: &Grid, faces: &[Face], sign: f32) -> Density {
-        if faces.len() < 64 {
-            let mut density = Density::zero(grid.bins());
-            faces.iter().for_each(|face| grid.contribute(face, sign, &mut density));
-            return density;
-        }
-        faces
-            .par_iter()
-            .with_min_len(64)
-            .fold(
-                || Density::zero(grid.bins()),
-                |mut density, face| {
-                    grid.contribute(face, sign, &mut density);
-                    density
-                },
-            )
-            .reduce(|| Density::zero(grid.bins()), Density::add)
     }
 }
 
@@ -266,7 +260,8 @@ pub fn select_planes(positions: &[[f32; 3]], triangles: &[[u32; 3]], settings: P
         })
         .collect();
 
-    let mut density = Density::of_faces(&grid, &faces, 1.0);
+    let mut density = Density::zero(grid.bins());
+    density.add_faces(&grid, &faces, 1.0);
 
     let mut assigned = vec![false; faces.len()];
     let mut remaining: Vec<u32> = (0..faces.len() as u32).filter(|&index| faces[index as usize].area > 0.0).collect();
@@ -288,7 +283,7 @@ pub fn select_planes(positions: &[[f32; 3]], triangles: &[[u32; 3]], settings: P
         }
         planes.push((normal, rho, Vec::new()));
         let removed: Vec<Face> = members.iter().map(|&index| faces[index as usize]).collect();
-        density = density.add(Density::of_faces(&grid, &removed, -1.0));
+        density.add_faces(&grid, &removed, -1.0);
         for &index in &members {
             assigned[index as usize] = true;
         }
@@ -386,7 +381,7 @@ fn refine(grid: &Grid, faces: &[Face], remaining: &[u32], region: Region) -> Opt
 /// For planes of direction `normal`: the offset with the largest covered area (exact validity)
 /// minus the penalty of faces it lies just in front of, and that score. `None` when no face of
 /// `set` can lie on such a plane.
-fn best_offset(faces: &[Face], set: &[u32], normal: Vec3, epsilon: f32, events: &mut Vec<(f32, f32)>) -> Option<(f32, f32)> {
+fn best_offset(faces: &[Face], set: &[u32], normal: Vec3, epsilon: f32, events: &mut Vec<u64>) -> Option<(f32, f32)> {
     events.clear();
     for &index in set {
         let face = &faces[index as usize];
@@ -398,25 +393,51 @@ fn best_offset(faces: &[Face], set: &[u32], normal: Vec3, epsilon: f32, events: 
         }
         let cosine = face.normal.dot(normal);
         let weight = face.area * cosine.abs();
-        events.push((low, weight));
-        events.push((high, -weight));
+        events.push(event_key(low, weight));
+        events.push(event_key(high, -weight));
         let (front_low, front_high) = if cosine >= 0.0 { (high, high + epsilon) } else { (low - epsilon, low) };
-        events.push((front_low, -PENALTY * weight));
-        events.push((front_high, PENALTY * weight));
+        events.push(event_key(front_low, -PENALTY * weight));
+        events.push(event_key(front_high, PENALTY * weight));
     }
     if events.is_empty() {
         return None;
     }
-    // Openings before closings at the same offset, so touching intervals overlap.
-    events.sort_by(|a, b| a.0.total_cmp(&b.0).then(b.1.total_cmp(&a.1)));
+    // By offset, openings before closings at the same offset so touching intervals overlap.
+    events.sort_unstable();
     let (mut sum, mut best) = (0.0f32, None::<(f32, f32)>);
-    for (offset, delta) in events.iter() {
+    for &key in events.iter() {
+        let (offset, delta) = event_of_key(key);
         sum += delta;
         if best.is_none_or(|(score, _)| sum > score) {
-            best = Some((sum, *offset));
+            best = Some((sum, offset));
         }
     }
     best.filter(|(score, _)| *score > 0.0)
+}
+
+/// An (offset, delta) event as one integer whose order is offset ascending, then delta
+/// descending (the order of `f32::total_cmp`): sorting integers is several times faster than
+/// sorting pairs of floats, and equal keys are equal events, so the sums are the same every run.
+fn event_key(offset: f32, delta: f32) -> u64 {
+    ((total_order_bits(offset) as u64) << 32) | !total_order_bits(delta) as u64
+}
+
+fn event_of_key(key: u64) -> (f32, f32) {
+    (from_total_order_bits((key >> 32) as u32), from_total_order_bits(!(key as u32)))
+}
+
+/// The bits of `value` as an unsigned integer ordered like `f32::total_cmp`.
+fn total_order_bits(value: f32) -> u32 {
+    let bits = value.to_bits();
+    if bits & 0x8000_0000 != 0 {
+        !bits
+    } else {
+        bits | 0x8000_0000
+    }
+}
+
+fn from_total_order_bits(ordered: u32) -> f32 {
+    f32::from_bits(if ordered & 0x8000_0000 != 0 { ordered & 0x7fff_ffff } else { !ordered })
 }
 
 /// The supporting plane of the largest remaining face (always valid for it).
@@ -435,3 +456,4 @@ fn largest_face_plane_any(faces: &[Face]) -> (Vec3, f32, Vec<u32>) {
     let (normal, rho) = if faces.iter().any(|face| face.area > 0.0) { largest_face_plane(faces, &all) } else { (Vec3::Z, 0.0) };
     (normal, rho, Vec::new())
 }
+

@@ -35,6 +35,9 @@ fn main() {
         if wanted("billboard") {
             bench_billboards(&corpus);
         }
+        if wanted("billboard-quality") {
+            bench_billboard_quality(&corpus);
+        }
         if wanted("watch") {
             bench_watch(&corpus);
         }
@@ -292,7 +295,16 @@ fn bench_billboards(corpus: &Path) {
         100.0 * edit / full,
         summary.assets[0].stages.iter().filter(|stage| stage.stage == "render").count()
     );
+    let mut edit_ms = std::collections::BTreeMap::<&str, f64>::new();
+    for stage in summary.assets[0].stages.iter().filter(|stage| stage.status == cirrus::summary::StageStatus::Ran) {
+        *edit_ms.entry(stage.stage).or_default() += stage.ms;
+    }
+    let edit_ms: Vec<String> = edit_ms.iter().map(|(stage, ms)| format!("{stage} {ms:.0}")).collect();
+    println!("billboard: bark edit stage ms (summed over threads): {}", edit_ms.join(", "));
+}
 
+/// Plane counts and mean silhouette IoU of each corpus tree at three ε.
+fn bench_billboard_quality(corpus: &Path) {
     for tree in ["oak_medium", "ash_small", "bush_2"] {
         let mut figures = Vec::new();
         for epsilon in [0.01, 0.02, 0.04] {

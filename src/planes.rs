@@ -456,4 +456,3 @@ fn largest_face_plane_any(faces: &[Face]) -> (Vec3, f32, Vec<u32>) {
     let (normal, rho) = if faces.iter().any(|face| face.area > 0.0) { largest_face_plane(faces, &all) } else { (Vec3::Z, 0.0) };
     (normal, rho, Vec::new())
 }
-

@@ -126,13 +126,18 @@ pub fn run(cli: Cli) -> ExitCode {
     }
 }
 
+/// The validated pipeline, or the usage exit status after printing why it is not valid.
+fn load_pipeline_or_report(pipeline: &std::path::Path) -> Result<crate::config::PipelineConfig, ExitCode> {
+    load_pipeline(pipeline).map_err(|error| {
+        eprintln!("{error}");
+        ExitCode::from(EXIT_USAGE)
+    })
+}
+
 fn build(pipeline: PathBuf, assets: Vec<String>, format: SummaryFormat) -> ExitCode {
-    let config = match load_pipeline(&pipeline) {
+    let config = match load_pipeline_or_report(&pipeline) {
         Ok(config) => config,
-        Err(error) => {
-            eprintln!("{error}");
-            return ExitCode::from(EXIT_USAGE);
-        }
+        Err(code) => return code,
     };
     let mut project = Project::open(config, ProjectOptions::default());
     let bar = std::io::stderr().is_terminal().then(|| {
@@ -174,12 +179,9 @@ fn build(pipeline: PathBuf, assets: Vec<String>, format: SummaryFormat) -> ExitC
 }
 
 fn check(pipeline: PathBuf) -> ExitCode {
-    let config = match load_pipeline(&pipeline) {
+    let config = match load_pipeline_or_report(&pipeline) {
         Ok(config) => config,
-        Err(error) => {
-            eprintln!("{error}");
-            return ExitCode::from(EXIT_USAGE);
-        }
+        Err(code) => return code,
     };
     let project = Project::open(config, ProjectOptions { persistent_cache: false, ..Default::default() });
     let problems = project.check();
@@ -199,12 +201,9 @@ fn check(pipeline: PathBuf) -> ExitCode {
 }
 
 fn preview(pipeline: PathBuf, asset: String, views: u32, size: u32, out: Option<PathBuf>) -> ExitCode {
-    let config = match load_pipeline(&pipeline) {
+    let config = match load_pipeline_or_report(&pipeline) {
         Ok(config) => config,
-        Err(error) => {
-            eprintln!("{error}");
-            return ExitCode::from(EXIT_USAGE);
-        }
+        Err(code) => return code,
     };
     let out = out.unwrap_or_else(|| config.output.join(&asset).join("preview"));
     let mut project = Project::open(config, ProjectOptions::default());
@@ -233,12 +232,9 @@ fn preview(pipeline: PathBuf, asset: String, views: u32, size: u32, out: Option<
 }
 
 fn graph(pipeline: PathBuf, asset: Option<String>, format: crate::graph::GraphFormat) -> ExitCode {
-    let config = match load_pipeline(&pipeline) {
+    let config = match load_pipeline_or_report(&pipeline) {
         Ok(config) => config,
-        Err(error) => {
-            eprintln!("{error}");
-            return ExitCode::from(EXIT_USAGE);
-        }
+        Err(code) => return code,
     };
     let mut project = Project::open(config, ProjectOptions::default());
     if let Some(name) = &asset {

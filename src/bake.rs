@@ -163,7 +163,7 @@ impl Project {
     pub fn open(config: PipelineConfig, options: ProjectOptions) -> Project {
         let cache = options.persistent_cache.then(|| DiskCache::new(config.output_dir().join(".cirrus").join("cache")));
         let revision = load_manifest(&config.output_dir()).revision;
-        let mut project = Project {
+        Project {
             config,
             db: Database::new(cache),
             files: HashMap::new(),
@@ -177,12 +177,9 @@ impl Project {
             fresh: HashSet::new(),
             history: HashMap::new(),
             last_summary: None,
-            revision: 0,
+            revision,
             sources_changed_since_build: false,
-        };
-        project.revision = revision;
-        project.sources_changed_since_build = false;
-        project
+        }
     }
 
     fn next_revision(&self) -> u64 {
@@ -369,7 +366,7 @@ impl Project {
         self.sources_changed_since_build = false;
         for run in runs.iter().filter(|run| !run.from_cache) {
             if let Some(label) = self.labels.get(&run.key) {
-                let entry = self.history.entry(format!("{}({label})", run.stage.name())).or_insert((0, 0.0));
+                let entry = self.history.entry(stage_node_id(run.stage, label)).or_insert((0, 0.0));
                 if entry.0 != manifest.revision {
                     *entry = (manifest.revision, 0.0);
                 }
@@ -1174,7 +1171,7 @@ impl Project {
             let name = plan.config.name.clone();
             let main_file = self.file_node(&mut graph, &plan.main_file);
             let asset_folder = self.config.output.join(&name);
-            if let Some(input) = plan.input {
+            if plan.input.is_some() {
                 let parse = stage(&mut graph, &self.history, &name, Stage::Parse, &display_path(&plan.main_file));
                 graph.edge(&main_file, &parse);
                 let mut writes = Vec::new();
@@ -1211,7 +1208,6 @@ impl Project {
                 let mut report_sources: Vec<&String> = writes.iter().collect();
                 report_sources.push(&parse);
                 artifact(&mut graph, &name, &asset_folder.join("report.json"), &report_sources);
-                let _ = input;
             }
             if let Some(billboard) = &plan.billboard {
                 self.billboard_graph(&mut graph, &name, billboard.input, &main_file, &stage, &artifact);

@@ -7,7 +7,7 @@
 use std::collections::BTreeSet;
 use std::net::SocketAddr;
 use std::path::{Path, PathBuf};
-use std::sync::mpsc::{channel, Receiver, RecvTimeoutError};
+use std::sync::mpsc::channel;
 use std::sync::{Arc, RwLock};
 use std::time::{Duration, Instant};
 
@@ -154,11 +154,9 @@ pub fn watch(settings: &WatchSettings) -> Result<(), WatchError> {
     let mut force_build = true;
     loop {
         if !first {
-            // Block for the next edit, then take every message already queued.
-            match receive(&messages, &mut pending, &mut project) {
-                Some(()) => {}
-                None => return Ok(()),
-            }
+            // Block for the next edit (the watcher gone ends the daemon).
+            let Ok(message) = messages.recv() else { return Ok(()) };
+            apply_message(message, &mut pending, &mut project);
         }
         cancel.lower();
         // Messages that arrived in between belong to this build too.
@@ -249,20 +247,6 @@ pub fn watch(settings: &WatchSettings) -> Result<(), WatchError> {
         builds += 1;
         if settings.max_builds.is_some_and(|max| builds >= max) {
             return Ok(());
-        }
-    }
-}
-
-/// Waits for at least one message; false when the watcher is gone.
-fn receive(messages: &Receiver<WatchMessage>, pending: &mut BTreeSet<PathBuf>, project: &mut Project) -> Option<()> {
-    loop {
-        match messages.recv_timeout(Duration::from_secs(3600)) {
-            Ok(message) => {
-                apply_message(message, pending, project);
-                return Some(());
-            }
-            Err(RecvTimeoutError::Timeout) => continue,
-            Err(RecvTimeoutError::Disconnected) => return None,
         }
     }
 }

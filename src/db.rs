@@ -169,6 +169,9 @@ impl Stage {
             Stage::Render => 2,
             // 2: `map_d` naming the albedo texture is not applied a second time.
             Stage::Mesh => 2,
+            // 2: each plane is fitted to its faces (least squares within ε), not left at the
+            // edge of the valid offsets.
+            Stage::Planes => 2,
             _ => 1,
         }
     }

@@ -281,6 +281,9 @@ pub fn select_planes(positions: &[[f32; 3]], triangles: &[[u32; 3]], settings: P
             (normal, rho) = largest_face_plane(&faces, &remaining);
             members = holds((normal, rho));
         }
+        // Every member stays within ε of the fitted plane, so it holds a superset of them.
+        (normal, rho) = fit_plane(&faces, &members, normal, rho, grid.epsilon);
+        members = holds((normal, rho));
         planes.push((normal, rho, Vec::new()));
         let removed: Vec<Face> = members.iter().map(|&index| faces[index as usize]).collect();
         density.add_faces(&grid, &removed, -1.0);
@@ -376,6 +379,54 @@ fn refine(grid: &Grid, faces: &[Face], remaining: &[u32], region: Region) -> Opt
     }
     let (_, normal, _) = best?;
     best_offset(faces, &set, normal, grid.epsilon, &mut events).map(|(_, rho)| (normal, rho))
+}
+
+/// The plane nearest its faces among those that still hold each of them within ε.
+/// The greedy search takes the first offset of the densest interval, which leaves some face a
+/// whole ε from the plane. The fit is area-weighted least squares over the vertices. Its normal
+/// is used when every face stays within ε of it. Otherwise the fit tries halfway to the found
+/// normal, then the found normal itself, and only the offset moves. The offset is the weighted
+/// mean, clamped to the interval where every face stays valid.
+fn fit_plane(faces: &[Face], members: &[u32], normal: Vec3, rho: f32, epsilon: f32) -> (Vec3, f32) {
+    let total: f32 = members.iter().map(|&index| faces[index as usize].area).sum();
+    if members.is_empty() || total <= 0.0 {
+        return (normal, rho);
+    }
+    let mean = members.iter().fold(Vec3::ZERO, |sum, &index| {
+        let face = &faces[index as usize];
+        sum + face.area / 3.0 * (face.vertices[0] + face.vertices[1] + face.vertices[2])
+    }) / total;
+    let mut covariance = glam::Mat3::ZERO;
+    for &index in members {
+        let face = &faces[index as usize];
+        for vertex in face.vertices {
+            let d = vertex - mean;
+            covariance += face.area / 3.0 * glam::Mat3::from_cols(d * d.x, d * d.y, d * d.z);
+        }
+    }
+    // The smallest eigenvector of the covariance, by power iteration on (trace − covariance),
+    // started from the found normal.
+    let shifted = glam::Mat3::from_diagonal(Vec3::splat(covariance.x_axis.x + covariance.y_axis.y + covariance.z_axis.z)) - covariance;
+    let mut fitted = normal;
+    for _ in 0..32 {
+        fitted = (shifted * fitted).normalize_or_zero();
+    }
+    if fitted.dot(normal) < 0.0 {
+        fitted = -fitted;
+    }
+    let candidates = [fitted, (fitted + normal).normalize_or_zero(), normal];
+    for candidate in candidates.into_iter().filter(|candidate| candidate.is_finite() && *candidate != Vec3::ZERO) {
+        let (mut low, mut high) = (f32::NEG_INFINITY, f32::INFINITY);
+        for &index in members {
+            let dots = faces[index as usize].vertices.map(|vertex| vertex.dot(candidate));
+            low = low.max(dots[0].max(dots[1]).max(dots[2]) - epsilon);
+            high = high.min(dots[0].min(dots[1]).min(dots[2]) + epsilon);
+        }
+        if low <= high {
+            return (candidate, mean.dot(candidate).clamp(low, high));
+        }
+    }
+    (normal, rho)
 }
 
 /// For planes of direction `normal`: the offset with the largest covered area (exact validity)

@@ -96,3 +96,29 @@ fn degenerate_faces_are_kept() {
     let set = select_planes(&positions, &triangles, settings(0.02));
     check_assignment(&positions, &triangles, &set);
 }
+
+#[test]
+fn a_plane_is_fitted_to_its_faces_not_left_at_the_edge_of_epsilon() {
+    // A gently tilted, slightly bumpy sheet (bumps ±1 % of ε): one plane holds it all, and that
+    // plane passes through the sheet instead of lying up to ε away from it.
+    let (mut positions, mut triangles) = (Vec::new(), Vec::new());
+    let epsilon = 0.05;
+    for row in 0..=10 {
+        for column in 0..=10 {
+            let (x, y) = (column as f32 / 10.0, row as f32 / 10.0);
+            let bump = if (row + column) % 2 == 0 { 0.0002 } else { -0.0002 };
+            positions.push([x, y, 0.13 * x - 0.07 * y + bump]);
+        }
+    }
+    for row in 0..10u32 {
+        for column in 0..10u32 {
+            let corner = row * 11 + column;
+            triangles.push([corner, corner + 1, corner + 12]);
+            triangles.push([corner, corner + 12, corner + 11]);
+        }
+    }
+    let set = select_planes(&positions, &triangles, settings(epsilon));
+    assert_eq!(set.planes.len(), 1);
+    let worst = check_assignment(&positions, &triangles, &set);
+    assert!(worst < 0.05 * set.epsilon, "the sheet is {worst} from its plane (ε = {})", set.epsilon);
+}

@@ -614,7 +614,9 @@ impl Project {
             return Ok(plan);
         }
         let layout = billboard_layout(&self.db, input)?;
-        for index in 0..layout.rectangles.len() as u32 {
+        // One render stage per plane (its rectangles are numbered consecutively).
+        let plane_count = layout.rectangles.last().map_or(0, |rectangle| rectangle.plane + 1);
+        for index in 0..plane_count {
             let key = *self.plane_keys.entry((config.name.clone(), index)).or_insert_with(|| PlaneKey::new(&self.db, input, index));
             self.labels.insert(key.as_id(), format!("{}/plane{index}", config.name));
             plan.plane_keys.push(key);
@@ -1244,7 +1246,8 @@ impl Project {
         artifact(graph, name, &folder.join("lod.mtl"), &[&lod]);
         let mut report_sources = vec![mesh.clone(), planes.clone(), layout.clone(), atlas.clone()];
         if let (Ok(loaded), Ok(plane_layout)) = (crate::db::loaded_mesh(db, input), billboard_layout(db, input)) {
-            for (index, rectangle) in plane_layout.rectangles.iter().enumerate() {
+            let plane_count = plane_layout.rectangles.last().map_or(0, |rectangle| rectangle.plane + 1);
+            for index in 0..plane_count {
                 let render = stage(graph, &self.history, name, Stage::Render, &format!("{name}/plane{index}"));
                 for reader in [&mesh, &planes, &layout] {
                     graph.edge(reader, &render);
@@ -1253,7 +1256,15 @@ impl Project {
                 if loaded.mesh.uvs.is_none() {
                     continue;
                 }
-                for material in crate::plane_textures::plane_materials(&loaded.mesh, rectangle) {
+                let mut materials: Vec<u32> = plane_layout
+                    .rectangles
+                    .iter()
+                    .filter(|rectangle| rectangle.plane == index)
+                    .flat_map(|rectangle| crate::plane_textures::plane_materials(&loaded.mesh, rectangle))
+                    .collect();
+                materials.sort_unstable();
+                materials.dedup();
+                for material in materials {
                     for path in loaded.mesh.materials[material as usize].maps.values() {
                         let file = self.file_node(graph, path);
                         let decode = stage(graph, &self.history, name, Stage::Decode, &display_path(path));

@@ -698,22 +698,29 @@ pub fn billboard_alpha_cutoff(db: &dyn Db, asset: BillboardAsset) -> f32 {
     asset.settings(db).billboard.alpha_cutoff
 }
 
-/// One plane's four images, rendered on the GPU; reads only the textures its faces use.
+/// One plane's images (four per rectangle of the plane, in rectangle order), rendered on the
+/// GPU in one go; reads only the textures its faces use.
 #[salsa::tracked(returns(clone))]
-pub fn plane_images(db: &dyn Db, key: PlaneKey) -> Result<Arc<crate::gpu::PlaneImages>, Diagnostic> {
+pub fn plane_images(db: &dyn Db, key: PlaneKey) -> Result<Arc<Vec<crate::gpu::PlaneImages>>, Diagnostic> {
     let asset = key.asset(db);
     let loaded = loaded_mesh(db, asset)?;
     let planes = billboard_planes(db, asset)?;
     let layout = billboard_layout(db, asset)?;
     let alpha_cutoff = billboard_alpha_cutoff(db, asset);
-    let index = key.index(db) as usize;
+    let plane = key.index(db);
     let mesh_path = asset.mesh_file(db).path(db).clone();
-    let (Some(placement), Some(rectangle)) = (layout.layout.placements.get(index), layout.rectangles.get(index)) else {
-        return Err(Diagnostic::new(&mesh_path, format!("plane rectangle {index} no longer exists")));
-    };
+    let rectangles: Vec<(&crate::layout::Placement, &crate::rectangles::PlaneRectangle)> =
+        layout.layout.placements.iter().zip(&layout.rectangles).filter(|(_, rectangle)| rectangle.plane == plane).collect();
+    if rectangles.is_empty() {
+        return Err(Diagnostic::new(&mesh_path, format!("plane {plane} no longer exists")));
+    }
+    let mut used: Vec<u32> =
+        rectangles.iter().flat_map(|(_, rectangle)| crate::plane_textures::plane_materials(&loaded.mesh, rectangle)).collect();
+    used.sort_unstable();
+    used.dedup();
     let mut materials = vec![crate::gpu::RenderMaterial::default(); loaded.mesh.materials.len()];
     let with_uvs = loaded.mesh.uvs.is_some();
-    for material_index in crate::plane_textures::plane_materials(&loaded.mesh, rectangle) {
+    for material_index in used {
         let source = &loaded.mesh.materials[material_index as usize];
         let decoded = |slot: crate::material_definition::TextureSlot| -> Result<Option<Arc<Texture>>, Diagnostic> {
             let Some(path) = source.maps.get(&slot).filter(|_| with_uvs) else { return Ok(None) };
@@ -747,16 +754,19 @@ pub fn plane_images(db: &dyn Db, key: PlaneKey) -> Result<Arc<crate::gpu::PlaneI
     let depth_range = planes.epsilon.max(planes.max_error).max(1e-6);
     timed(db, Stage::Render, key, || {
         let gpu = crate::gpu::gpu().map_err(|error| Diagnostic::new(&mesh_path, error.to_string()))?;
-        let input = crate::gpu::PlaneRenderInput {
-            rectangle,
-            epsilon: depth_range,
-            alpha_cutoff,
-            width: placement.width,
-            height: placement.height,
-            batches: crate::plane_textures::plane_batches(&loaded.mesh, &loaded.tangents, rectangle),
-            materials: &materials,
-        };
-        gpu.render_plane(&input).map(Arc::new).map_err(|error| Diagnostic::new(&mesh_path, error.to_string()))
+        let inputs: Vec<crate::gpu::PlaneRenderInput> = rectangles
+            .iter()
+            .map(|(placement, rectangle)| crate::gpu::PlaneRenderInput {
+                rectangle,
+                epsilon: depth_range,
+                alpha_cutoff,
+                width: placement.width,
+                height: placement.height,
+                batches: crate::plane_textures::plane_batches(&loaded.mesh, &loaded.tangents, rectangle),
+                materials: &materials,
+            })
+            .collect();
+        gpu.render_rectangles(&inputs).map(Arc::new).map_err(|error| Diagnostic::new(&mesh_path, error.to_string()))
     })
 }
 
@@ -768,7 +778,8 @@ pub fn billboard_atlas(db: &dyn Db, asset: BillboardAsset) -> Result<Arc<crate::
         images.push(plane_images(db, *key)?);
     }
     timed(db, Stage::Atlas, asset, || {
-        let references: Vec<&crate::gpu::PlaneImages> = images.iter().map(|image| image.as_ref()).collect();
+        // Rectangles are numbered plane by plane, so the planes' images in order are theirs.
+        let references: Vec<&crate::gpu::PlaneImages> = images.iter().flat_map(|plane| plane.iter()).collect();
         Ok(Arc::new(crate::atlas::composite_atlas(&layout.layout, &references)))
     })
 }

@@ -29,6 +29,8 @@ pub struct Gpu {
     device: wgpu::Device,
     queue: wgpu::Queue,
     pub adapter_name: String,
+    /// The largest render target side the device allows.
+    max_texture_size: u32,
     pipeline: wgpu::RenderPipeline,
     frame_layout: wgpu::BindGroupLayout,
     material_layout: wgpu::BindGroupLayout,
@@ -95,6 +97,8 @@ pub fn gpu() -> Result<&'static Gpu, GpuError> {
 const ALBEDO_FORMAT: wgpu::TextureFormat = wgpu::TextureFormat::Rgba8UnormSrgb;
 const DATA_FORMAT: wgpu::TextureFormat = wgpu::TextureFormat::Rgba8Unorm;
 const DEPTH_FORMAT: wgpu::TextureFormat = wgpu::TextureFormat::Depth32Float;
+/// Texels of one stack of plane rectangles (about 40 MB of targets and as much to read back).
+const MAX_STACK_TEXELS: u64 = 2048 * 1024;
 
 #[repr(C)]
 #[derive(Clone, Copy, Pod, Zeroable)]
@@ -254,6 +258,7 @@ impl Gpu {
         Ok(Gpu {
             instance,
             adapter,
+            max_texture_size: device.limits().max_texture_dimension_2d,
             device,
             queue,
             adapter_name,
@@ -283,36 +288,76 @@ impl Gpu {
     }
 
     /// Renders one plane's four images.
-    pub fn render_plane(&self, input: &PlaneRenderInput) -> Result<PlaneImages, GpuError> {
-        let (width, height) = (input.width.max(1), input.height.max(1));
-        let rectangle = &input.rectangle;
-        let frame = FrameUniform {
-            origin: extend(rectangle.origin),
-            x_axis: extend(rectangle.x_axis),
-            y_axis: extend(rectangle.y_axis),
-            normal: extend(rectangle.normal),
-            size: [rectangle.width.max(1e-6), rectangle.height.max(1e-6), input.epsilon.max(1e-6), input.alpha_cutoff],
-        };
-        let frame_buffer = self.uniform_buffer(bytemuck::bytes_of(&frame));
-        let frame_group = self.device.create_bind_group(&wgpu::BindGroupDescriptor {
-            label: Some("frame"),
-            layout: &self.frame_layout,
-            entries: &[wgpu::BindGroupEntry { binding: 0, resource: frame_buffer.as_entire_binding() }],
-        });
+    /// Renders the rectangles of one plane (or any set of rectangles): each under its own
+    /// orthographic camera, stacked in shared targets, in as few submissions and read-backs as
+    /// the stack size allows. Per-submission latency, not shading, dominates small renders.
+    pub fn render_rectangles(&self, inputs: &[PlaneRenderInput]) -> Result<Vec<PlaneImages>, GpuError> {
+        let mut images = Vec::with_capacity(inputs.len());
+        let mut chunk_start = 0;
+        while chunk_start < inputs.len() {
+            // Rectangles are stacked from the top; a stack holds at least one of them.
+            let (mut chunk_end, mut stack_width, mut stack_height) = (chunk_start, 0u32, 0u32);
+            while let Some(input) = inputs.get(chunk_end) {
+                let (width, height) = (input.width.max(1), input.height.max(1));
+                let (grown_width, grown_height) = (stack_width.max(width), stack_height + height);
+                let too_big = grown_height > self.max_texture_size || grown_width as u64 * grown_height as u64 > MAX_STACK_TEXELS;
+                if chunk_end > chunk_start && too_big {
+                    break;
+                }
+                (stack_width, stack_height) = (grown_width, grown_height);
+                chunk_end += 1;
+            }
+            images.extend(self.render_stack(&inputs[chunk_start..chunk_end], stack_width, stack_height)?);
+            chunk_start = chunk_end;
+        }
+        Ok(images)
+    }
+
+    /// One submission: `inputs` rendered one below the other into `width` × `height` targets.
+    fn render_stack(&self, inputs: &[PlaneRenderInput], width: u32, height: u32) -> Result<Vec<PlaneImages>, GpuError> {
         let targets: Vec<wgpu::Texture> =
             [ALBEDO_FORMAT, DATA_FORMAT, DATA_FORMAT, DATA_FORMAT].iter().map(|&format| self.target(width, height, format)).collect();
         let views: Vec<wgpu::TextureView> = targets.iter().map(|texture| texture.create_view(&Default::default())).collect();
         let depth_texture = self.target(width, height, DEPTH_FORMAT);
         let depth = depth_texture.create_view(&Default::default());
 
-        let mut draws = Vec::new();
-        for (material_index, vertices) in &input.batches {
-            if vertices.is_empty() {
-                continue;
+        struct StackedDraws {
+            top: u32,
+            width: u32,
+            height: u32,
+            frame_buffer: wgpu::Buffer,
+            frame_group: wgpu::BindGroup,
+            draws: Vec<(wgpu::Buffer, u32, Arc<wgpu::BindGroup>)>,
+        }
+        let mut stacked = Vec::with_capacity(inputs.len());
+        let mut top = 0;
+        for input in inputs {
+            let rectangle = &input.rectangle;
+            let frame = FrameUniform {
+                origin: extend(rectangle.origin),
+                x_axis: extend(rectangle.x_axis),
+                y_axis: extend(rectangle.y_axis),
+                normal: extend(rectangle.normal),
+                size: [rectangle.width.max(1e-6), rectangle.height.max(1e-6), input.epsilon.max(1e-6), input.alpha_cutoff],
+            };
+            let frame_buffer = self.uniform_buffer(bytemuck::bytes_of(&frame));
+            let frame_group = self.device.create_bind_group(&wgpu::BindGroupDescriptor {
+                label: Some("frame"),
+                layout: &self.frame_layout,
+                entries: &[wgpu::BindGroupEntry { binding: 0, resource: frame_buffer.as_entire_binding() }],
+            });
+            let mut draws = Vec::new();
+            for (material_index, vertices) in &input.batches {
+                if vertices.is_empty() {
+                    continue;
+                }
+                let material = &input.materials[*material_index];
+                let buffer = self.vertex_buffer(vertices);
+                draws.push((buffer, vertices.len() as u32, self.material_group(material, input.alpha_cutoff)));
             }
-            let material = &input.materials[*material_index];
-            let buffer = self.vertex_buffer(vertices);
-            draws.push((buffer, vertices.len() as u32, self.material_group(material, input.alpha_cutoff)));
+            let (rectangle_width, rectangle_height) = (input.width.max(1), input.height.max(1));
+            stacked.push(StackedDraws { top, width: rectangle_width, height: rectangle_height, frame_buffer, frame_group, draws });
+            top += rectangle_height;
         }
 
         let mut encoder = self.device.create_command_encoder(&Default::default());
@@ -329,7 +374,7 @@ impl Gpu {
                 })
                 .collect();
             let mut pass = encoder.begin_render_pass(&wgpu::RenderPassDescriptor {
-                label: Some("plane"),
+                label: Some("plane rectangles"),
                 color_attachments: &attachments,
                 depth_stencil_attachment: Some(wgpu::RenderPassDepthStencilAttachment {
                     view: &depth,
@@ -339,23 +384,48 @@ impl Gpu {
                 ..Default::default()
             });
             pass.set_pipeline(&self.pipeline);
-            pass.set_bind_group(0, &frame_group, &[]);
-            for (buffer, count, group) in &draws {
-                pass.set_bind_group(1, group.as_ref(), &[]);
-                pass.set_vertex_buffer(0, buffer.slice(..));
-                pass.draw(0..*count, 0..1);
+            for rectangle in &stacked {
+                // The camera's clip square maps onto this rectangle's rows of the stack only.
+                pass.set_viewport(0.0, rectangle.top as f32, rectangle.width as f32, rectangle.height as f32, 0.0, 1.0);
+                pass.set_scissor_rect(0, rectangle.top, rectangle.width, rectangle.height);
+                pass.set_bind_group(0, &rectangle.frame_group, &[]);
+                for (buffer, count, group) in &rectangle.draws {
+                    pass.set_bind_group(1, group.as_ref(), &[]);
+                    pass.set_vertex_buffer(0, buffer.slice(..));
+                    pass.draw(0..*count, 0..1);
+                }
             }
         }
-        let images = self.read_back(encoder, &targets, width, height)?;
+        let stack = self.read_back(encoder, &targets, width, height)?;
         // Free device memory now rather than whenever wgpu next triages destroyed resources.
         targets.iter().for_each(wgpu::Texture::destroy);
         depth_texture.destroy();
-        frame_buffer.destroy();
-        for (buffer, _, _) in &draws {
-            buffer.destroy();
+        for rectangle in &stacked {
+            rectangle.frame_buffer.destroy();
+            for (buffer, _, _) in &rectangle.draws {
+                buffer.destroy();
+            }
         }
-        let [albedo, normal, mra, height_map]: [Vec<u8>; 4] = images.try_into().expect("four targets");
-        Ok(PlaneImages { width, height, albedo, normal, mra, height_map })
+        let rows = |image: &[u8], rectangle: &StackedDraws| -> Vec<u8> {
+            let row_bytes = rectangle.width as usize * 4;
+            let mut pixels = Vec::with_capacity(row_bytes * rectangle.height as usize);
+            for row in rectangle.top..rectangle.top + rectangle.height {
+                let start = row as usize * width as usize * 4;
+                pixels.extend_from_slice(&image[start..start + row_bytes]);
+            }
+            pixels
+        };
+        Ok(stacked
+            .iter()
+            .map(|rectangle| PlaneImages {
+                width: rectangle.width,
+                height: rectangle.height,
+                albedo: rows(&stack[0], rectangle),
+                normal: rows(&stack[1], rectangle),
+                mra: rows(&stack[2], rectangle),
+                height_map: rows(&stack[3], rectangle),
+            })
+            .collect())
     }
 
     /// Renders `mesh` under an orthographic camera into a `size`² RGBA8 image (sRGB colour on a

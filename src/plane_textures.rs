@@ -1,6 +1,6 @@
 //! Per-plane textures: what one plane's render is made of (its faces, grouped by material, as
 //! vertices with normals, UVs and tangents) and which source textures it reads. The rendering
-//! itself is `gpu::Gpu::render_plane`.
+//! itself is `gpu::Gpu::render_rectangles`.
 
 use std::collections::BTreeMap;
 use std::path::PathBuf;

@@ -57,8 +57,8 @@ pub(crate) fn tree_project() -> TempProject {
     project
 }
 
-/// The rectangles (by index) holding faces of `material`, recomputed with the pure stages.
-fn rectangles_with(project: &TempProject, material: &str) -> BTreeSet<String> {
+/// The render stages of the planes holding faces of `material`, recomputed with the pure stages.
+fn planes_with(project: &TempProject, material: &str) -> BTreeSet<String> {
     let obj = project.read("assets/tree.obj");
     let libraries = [(Path::new("assets/tree.mtl").to_path_buf(), Some(project.read("assets/tree.mtl")))].into_iter().collect();
     let (mesh, _) = cirrus::mesh::load_mesh(Path::new("assets/tree.obj"), &obj, &libraries, Path::new("assets")).expect("loads");
@@ -68,9 +68,8 @@ fn rectangles_with(project: &TempProject, material: &str) -> BTreeSet<String> {
     let index = mesh.materials.iter().position(|m| m.name == material).expect("material") as u32;
     rectangles
         .iter()
-        .enumerate()
-        .filter(|(_, rectangle)| rectangle.faces.iter().any(|&face| mesh.triangle_materials[face as usize] == index))
-        .map(|(number, _)| format!("render(tree/plane{number})"))
+        .filter(|rectangle| rectangle.faces.iter().any(|&face| mesh.triangle_materials[face as usize] == index))
+        .map(|rectangle| format!("render(tree/plane{})", rectangle.plane))
         .collect()
 }
 
@@ -94,7 +93,7 @@ fn a_billboard_cloud_bakes_its_lod_and_atlas() {
 }
 
 #[test]
-fn a_bark_texture_edit_rerenders_only_bark_rectangles_and_leaves_the_lod_alone() {
+fn a_bark_texture_edit_rerenders_only_bark_planes_and_leaves_the_lod_alone() {
     let project = tree_project();
     let mut cirrus = project.open();
     build(&mut cirrus);
@@ -106,8 +105,8 @@ fn a_bark_texture_edit_rerenders_only_bark_rectangles_and_leaves_the_lod_alone()
     let summary = build(&mut cirrus);
     assert!(summary.all_ok(), "{}", summary.to_text());
     let executed: BTreeSet<String> = cirrus.take_executed_stages().into_iter().collect();
-    let mut expected = rectangles_with(&project, "bark");
-    let leaf_only: Vec<String> = rectangles_with(&project, "leaves").difference(&expected).cloned().collect();
+    let mut expected = planes_with(&project, "bark");
+    let leaf_only: Vec<String> = planes_with(&project, "leaves").difference(&expected).cloned().collect();
     assert!(!expected.is_empty() && !leaf_only.is_empty(), "the fixture has bark rectangles and leaf-only ones");
     expected.extend(["decode(assets/bark.png)".to_string(), "atlas(tree)".to_string(), "encode(tree/albedo)".to_string()]);
     assert_eq!(executed, expected, "exactly the bark rectangles, the atlas and the albedo encoder");

@@ -59,7 +59,7 @@ fn a_plane_render_covers_its_faces_cuts_alpha_and_encodes_normal_and_height() {
         batches: vec![(0, quad.to_vec())],
         materials: &materials,
     };
-    let images = gpu.render_plane(&input).expect("renders");
+    let images = gpu.render_rectangles(std::slice::from_ref(&input)).expect("renders").remove(0);
     let texel = |image: &[u8], x: usize, y: usize| -> [u8; 4] { image[(y * 64 + x) * 4..][..4].try_into().unwrap() };
     // Top-left quarter: covered (opaque texture half is the top, UV v ≥ 0.5).
     assert_eq!(texel(&images.albedo, 10, 5), [255, 0, 0, 255], "red, opaque");
@@ -70,4 +70,14 @@ fn a_plane_render_covers_its_faces_cuts_alpha_and_encodes_normal_and_height() {
     assert_eq!(texel(&images.mra, 10, 5)[..3], [0, 128, 255], "metallic 0, roughness 0.5, AO 1");
     let height = texel(&images.height_map, 10, 5)[0];
     assert!(height.abs_diff(191) <= 1, "0.05 over ε 0.1 → 0.75: {height}");
+
+    // Stacked in one submission under a wider rectangle with another camera, each rectangle
+    // gets exactly the images it gets alone.
+    let wide = PlaneRectangle { origin: [-0.5, -0.25, 0.0], width: 3.0, height: 2.0, ..rectangle.clone() };
+    let second = PlaneRenderInput { rectangle: &wide, width: 96, height: 64, ..input.clone() };
+    let stacked = gpu.render_rectangles(&[second.clone(), input.clone()]).expect("renders");
+    assert_eq!(stacked.len(), 2);
+    assert_eq!(stacked[1], images, "the first rectangle, second in the stack");
+    assert_eq!(stacked[0], gpu.render_rectangles(&[second]).expect("renders").remove(0), "the wide rectangle");
+    assert!(stacked[0].albedo.chunks_exact(4).any(|texel| texel[3] == 255), "the wide rectangle sees the quad too");
 }

@@ -74,42 +74,99 @@ fn encoded_texture(levels: &[Texture], settings: BlockEncodeSettings, encoded: V
     }
 }
 
-/// Rows of blocks per parallel task.
-const BLOCK_ROWS_PER_TASK: usize = 8;
+/// Blocks per parallel encoding task.
+const BLOCKS_PER_TASK: usize = 1024;
 
 /// Encodes one level; sizes that are not a multiple of 4 are padded by repeating the edge.
+/// Each distinct 4×4 block is encoded once: an atlas is mostly transparent fill where many
+/// blocks repeat, and a block's encoding depends on its texels only, so the result is the same
+/// as encoding every block.
 pub fn encode_level(level: &Texture, settings: BlockEncodeSettings) -> Vec<u8> {
-    let blocks_x = level.width.div_ceil(4) as usize;
-    let blocks_y = level.height.div_ceil(4) as usize;
-    let padded_width = blocks_x * 4;
     let channels = match settings.format {
         BlockFormat::Bc4 => 1,
         BlockFormat::Bc5 => 2,
         _ => 4,
     };
-    let padded = padded_channels(level, padded_width, blocks_y * 4, channels);
-    let row_bytes = padded_width * channels;
-    let strip_bytes = row_bytes * 4 * BLOCK_ROWS_PER_TASK;
-    let block_row_bytes = blocks_x * block_bytes(settings.format);
-    let mut output = vec![0u8; blocks_x * blocks_y * block_bytes(settings.format)];
+    let texels = block_texels(level, channels);
+    let block_len = 16 * channels;
+    let block_count = texels.len() / block_len;
+    // Each block's number among the distinct blocks, and the first block of each. Blocks are
+    // hashed in parallel; equal hashes are confirmed byte for byte.
+    let hashes: Vec<u64> = texels.par_chunks_exact(block_len).map(block_hash).collect();
+    let mut numbers: std::collections::HashMap<u64, u32> = std::collections::HashMap::with_capacity(block_count / 2);
+    let mut distinct_of_block = Vec::with_capacity(block_count);
+    let mut distinct: Vec<&[u8]> = Vec::new();
+    for (block, hash) in texels.chunks_exact(block_len).zip(hashes) {
+        let number = match numbers.get(&hash) {
+            Some(&number) if distinct[number as usize] == block => number,
+            seen => {
+                distinct.push(block);
+                let number = distinct.len() as u32 - 1;
+                if seen.is_none() {
+                    numbers.insert(hash, number);
+                }
+                number
+            }
+        };
+        distinct_of_block.push(number);
+    }
+    let size = block_bytes(settings.format);
+    let mut encoded = vec![0u8; distinct.len() * size];
     let bc7_settings = bc7_settings(settings.quality, settings.alpha);
-    output.par_chunks_mut(block_row_bytes * BLOCK_ROWS_PER_TASK).zip(padded.par_chunks(strip_bytes)).for_each(|(blocks, texels)| {
-        let rows = texels.len() / row_bytes;
-        let data = texels;
-        let width = padded_width as u32;
-        let height = rows as u32;
-        let stride = row_bytes as u32;
+    encoded.par_chunks_mut(size * BLOCKS_PER_TASK).zip(distinct.par_chunks(BLOCKS_PER_TASK)).for_each(|(output, blocks)| {
+        // The blocks side by side: one row of blocks, 4 texels high.
+        let row_len = 4 * channels;
+        let stride = blocks.len() * row_len;
+        let mut data = vec![0u8; stride * 4];
+        for (index, block) in blocks.iter().enumerate() {
+            for row in 0..4 {
+                data[row * stride + index * row_len..][..row_len].copy_from_slice(&block[row * row_len..][..row_len]);
+            }
+        }
+        let (data, width, height, stride) = (&data[..], 4 * blocks.len() as u32, 4, stride as u32);
         match settings.format {
-            BlockFormat::Bc1 => intel_tex_2::bc1::compress_blocks_into(&intel_tex_2::RgbaSurface { data, width, height, stride }, blocks),
-            BlockFormat::Bc3 => intel_tex_2::bc3::compress_blocks_into(&intel_tex_2::RgbaSurface { data, width, height, stride }, blocks),
-            BlockFormat::Bc4 => intel_tex_2::bc4::compress_blocks_into(&intel_tex_2::RSurface { data, width, height, stride }, blocks),
-            BlockFormat::Bc5 => intel_tex_2::bc5::compress_blocks_into(&intel_tex_2::RgSurface { data, width, height, stride }, blocks),
+            BlockFormat::Bc1 => intel_tex_2::bc1::compress_blocks_into(&intel_tex_2::RgbaSurface { data, width, height, stride }, output),
+            BlockFormat::Bc3 => intel_tex_2::bc3::compress_blocks_into(&intel_tex_2::RgbaSurface { data, width, height, stride }, output),
+            BlockFormat::Bc4 => intel_tex_2::bc4::compress_blocks_into(&intel_tex_2::RSurface { data, width, height, stride }, output),
+            BlockFormat::Bc5 => intel_tex_2::bc5::compress_blocks_into(&intel_tex_2::RgSurface { data, width, height, stride }, output),
             BlockFormat::Bc7 => {
-                intel_tex_2::bc7::compress_blocks_into(&bc7_settings, &intel_tex_2::RgbaSurface { data, width, height, stride }, blocks)
+                intel_tex_2::bc7::compress_blocks_into(&bc7_settings, &intel_tex_2::RgbaSurface { data, width, height, stride }, output)
             }
         }
     });
+    let mut output = Vec::with_capacity(block_count * size);
+    for &number in &distinct_of_block {
+        output.extend_from_slice(&encoded[number as usize * size..][..size]);
+    }
     output
+}
+
+/// A 64-bit hash of a block's bytes (FxHash over 8-byte words; blocks are 16, 32 or 64 bytes).
+fn block_hash(block: &[u8]) -> u64 {
+    block.chunks_exact(8).fold(0u64, |hash, word| {
+        (hash.rotate_left(5) ^ u64::from_le_bytes(word.try_into().expect("8 bytes"))).wrapping_mul(0x51_7c_c1_b7_27_22_0a_95)
+    })
+}
+
+/// The first `channels` channels of every 4×4 block, block by block in row-major block order,
+/// each block's rows top to bottom; texels past the level's edge repeat the last row / column.
+fn block_texels(level: &Texture, channels: usize) -> Vec<u8> {
+    let (blocks_x, blocks_y) = (level.width.div_ceil(4) as usize, level.height.div_ceil(4) as usize);
+    let (width, height) = (level.width as usize, level.height as usize);
+    let mut texels = vec![0u8; blocks_x * blocks_y * 16 * channels];
+    texels.par_chunks_mut(blocks_x * 16 * channels).enumerate().for_each(|(by, block_row)| {
+        for (bx, block) in block_row.chunks_exact_mut(16 * channels).enumerate() {
+            for row in 0..4 {
+                let y = (by * 4 + row).min(height - 1);
+                for column in 0..4 {
+                    let x = (bx * 4 + column).min(width - 1);
+                    let source = (y * width + x) * 4;
+                    block[(row * 4 + column) * channels..][..channels].copy_from_slice(&level.pixels[source..source + channels]);
+                }
+            }
+        }
+    });
+    texels
 }
 
 fn bc7_settings(quality: EncodeQuality, alpha: bool) -> intel_tex_2::bc7::EncodeSettings {
@@ -126,21 +183,6 @@ fn bc7_settings(quality: EncodeQuality, alpha: bool) -> intel_tex_2::bc7::Encode
         (EncodeQuality::Basic, true) => bc7::alpha_basic_settings(),
         (EncodeQuality::Slow, true) => bc7::alpha_slow_settings(),
     }
-}
-
-/// The first `channels` channels of every texel, in a `width` × `height` buffer whose extra
-/// columns and rows repeat the last ones.
-fn padded_channels(level: &Texture, width: usize, height: usize, channels: usize) -> Vec<u8> {
-    let mut padded = Vec::with_capacity(width * height * channels);
-    for y in 0..height {
-        let source_y = y.min(level.height as usize - 1);
-        let row = &level.pixels[source_y * level.width as usize * 4..(source_y + 1) * level.width as usize * 4];
-        for x in 0..width {
-            let source_x = x.min(level.width as usize - 1);
-            padded.extend_from_slice(&row[source_x * 4..source_x * 4 + channels]);
-        }
-    }
-    padded
 }
 
 /// Encodes a mip chain like `encode_levels`, reusing the blocks of `previous` (the same surface

@@ -228,3 +228,51 @@ fn re_encoding_only_changed_blocks_equals_a_full_encode() {
         assert_ne!(reused, old, "{format:?}: the edit shows");
     }
 }
+
+#[test]
+fn a_level_encodes_each_block_as_that_block_alone_repeated_blocks_included() {
+    use cirrus::config::EncodeQuality;
+    use cirrus::encode::{block_bytes, encode_level, BlockEncodeSettings};
+    use cirrus::texture::Texture;
+    // 42 × 26: 11 × 7 blocks, the last column and row padded. Tiles repeat every 3 blocks, so
+    // most blocks are duplicates (the encoder encodes each distinct block once).
+    let (width, height) = (42usize, 26usize);
+    let mut pixels = Vec::with_capacity(width * height * 4);
+    for y in 0..height {
+        for x in 0..width {
+            let (u, v) = (x % 12, y % 4);
+            let t = u * 8 + v * 16;
+            pixels.extend_from_slice(&[t as u8, (t / 2 + 20) as u8, (200 - t) as u8, if u < 6 { 255 } else { 0 }]);
+        }
+    }
+    pixels[(13 * width + 17) * 4] ^= 0xff; // one block unlike its repeats
+    let texture = Texture::new(width as u32, height as u32, pixels);
+    for format in [BlockFormat::Bc1, BlockFormat::Bc3, BlockFormat::Bc4, BlockFormat::Bc5, BlockFormat::Bc7] {
+        let settings = BlockEncodeSettings { format, quality: EncodeQuality::Basic, alpha: true, srgb: false };
+        let mut expected = Vec::new();
+        for by in 0..height.div_ceil(4) {
+            for bx in 0..width.div_ceil(4) {
+                let mut block = Vec::new();
+                for row in 0..4 {
+                    for column in 0..4 {
+                        let (x, y) = ((bx * 4 + column).min(width - 1), (by * 4 + row).min(height - 1));
+                        block.extend_from_slice(&texture.pixels[(y * width + x) * 4..][..4]);
+                    }
+                }
+                expected.extend(encode_level(&Texture::new(4, 4, block), settings));
+            }
+        }
+        let encoded = encode_level(&texture, settings);
+        assert_eq!(encoded.len(), 11 * 7 * block_bytes(format), "{format:?}");
+        assert!(encoded == expected, "{format:?}: every block as encoded alone");
+        let channels = match format {
+            BlockFormat::Bc4 => 1,
+            BlockFormat::Bc5 => 2,
+            BlockFormat::Bc1 => 3,
+            _ => 4,
+        };
+        let decoded = cirrus::quality::decode_blocks(format, &encoded, width as u32, height as u32);
+        let psnr = cirrus::quality::psnr(&texture, &decoded, channels);
+        assert!(psnr > 30.0, "{format:?}: blocks decode to the level: {psnr:.1} dB");
+    }
+}

@@ -290,7 +290,7 @@ fn bench_billboards(corpus: &Path) {
         .filter(|stage| stage.stage == "render" && stage.status == cirrus::summary::StageStatus::Ran)
         .count();
     println!(
-        "billboard: oak bark-texture edit {:.0} ms vs full bake {:.0} ms in process: {:.1} % (bar ≤ 20 %), {renders} of {} planes re-rendered",
+        "billboard: oak bark-texture edit {:.0} ms vs full bake {:.0} ms in process: {:.1} % (bar ≤ 20 %), {renders} of {} render stages (planes × material sets) re-ran",
         edit * 1e3,
         full * 1e3,
         100.0 * edit / full,

@@ -154,7 +154,8 @@ struct BillboardPlan {
 #[derive(Clone, Debug)]
 struct BillboardFiles {
     files: Vec<(String, Vec<u8>)>,
-    planes: usize,
+    /// The render stages' names (`plane12:bark`), for the summary of a cached asset.
+    render_labels: Vec<String>,
 }
 
 const BILLBOARD_CACHE_STAGE: &str = "billboard";
@@ -614,11 +615,13 @@ impl Project {
             return Ok(plan);
         }
         let layout = billboard_layout(&self.db, input)?;
-        // One render stage per plane (its rectangles are numbered consecutively).
-        let plane_count = layout.rectangles.last().map_or(0, |rectangle| rectangle.plane + 1);
-        for index in 0..plane_count {
+        // One render stage per render group (a plane's rectangles showing the same materials).
+        let loaded = crate::db::loaded_mesh(&self.db, input)?;
+        for (index, group) in layout.render_groups.iter().enumerate() {
+            let index = index as u32;
             let key = *self.plane_keys.entry((config.name.clone(), index)).or_insert_with(|| PlaneKey::new(&self.db, input, index));
-            self.labels.insert(key.as_id(), format!("{}/plane{index}", config.name));
+            let label = crate::plane_textures::render_group_label(&loaded.mesh, group);
+            self.labels.insert(key.as_id(), format!("{}/{label}", config.name));
             plan.plane_keys.push(key);
         }
         if **input.plane_keys(&self.db) != plan.plane_keys {
@@ -638,8 +641,8 @@ impl Project {
     fn load_billboard(&self, key: CacheKey) -> Option<BillboardFiles> {
         let entry = self.db.disk_cache()?.load(BILLBOARD_CACHE_STAGE, key)?;
         let names: Vec<String> = serde_json::from_value(entry.metadata.get("files")?.clone()).ok()?;
-        let planes = entry.metadata.get("planes")?.as_u64()? as usize;
-        (names.len() == entry.blobs.len()).then(|| BillboardFiles { files: names.into_iter().zip(entry.blobs).collect(), planes })
+        let render_labels: Vec<String> = serde_json::from_value(entry.metadata.get("renders")?.clone()).ok()?;
+        (names.len() == entry.blobs.len()).then(|| BillboardFiles { files: names.into_iter().zip(entry.blobs).collect(), render_labels })
     }
 
     /// Renders the planes and encodes the atlases of the billboard clouds the cache did not have,
@@ -650,9 +653,11 @@ impl Project {
         if pending.is_empty() {
             return;
         }
+        let labels = &self.labels;
         let describe_plane = |db: &Database, key: PlaneKey| {
             let asset = key.asset(db);
-            (asset.mesh_file(db).path(db).clone(), format!("{}/plane{}", asset.name(db), key.index(db)))
+            let label = labels.get(&key.as_id()).cloned().unwrap_or_else(|| format!("{}/render{}", asset.name(db), key.index(db)));
+            (asset.mesh_file(db).path(db).clone(), label)
         };
         let plane_keys: Vec<PlaneKey> =
             pending.iter().flat_map(|&index| plans[index].billboard.as_ref().expect("pending").plane_keys.clone()).collect();
@@ -699,7 +704,7 @@ impl Project {
             match self.assemble_billboard(billboard, &surfaces) {
                 Ok(files) => {
                     if let Some(cache) = self.db.disk_cache() {
-                        let metadata = serde_json::json!({ "files": files.files.iter().map(|(name, _)| name).collect::<Vec<_>>(), "planes": files.planes });
+                        let metadata = serde_json::json!({ "files": files.files.iter().map(|(name, _)| name).collect::<Vec<_>>(), "renders": files.render_labels });
                         cache.store(
                             BILLBOARD_CACHE_STAGE,
                             billboard.cache_key,
@@ -754,7 +759,9 @@ impl Project {
         let mut report_bytes = serde_json::to_vec_pretty(&report).expect("reports serialise");
         report_bytes.push(b'\n');
         files.push(("report.json".to_string(), report_bytes));
-        Ok(BillboardFiles { files, planes: planes.planes.len() })
+        let render_labels =
+            layout.render_groups.iter().map(|group| crate::plane_textures::render_group_label(&loaded.mesh, group)).collect();
+        Ok(BillboardFiles { files, render_labels })
     }
 
     /// Milliseconds per stage spent on this billboard cloud by the runs logged so far.
@@ -908,8 +915,10 @@ impl Project {
         for stage in [Stage::Mesh, Stage::Planes, Stage::Layout] {
             stages.push(summary(stage, mesh.clone(), id));
         }
-        let plane_count = billboard.files.as_ref().map_or(billboard.plane_keys.len(), |files| files.planes.max(billboard.plane_keys.len()));
-        for index in 0..plane_count {
+        let cached_labels = billboard.files.as_ref().map_or(&[][..], |files| files.render_labels.as_slice());
+        let render_count = cached_labels.len().max(billboard.plane_keys.len());
+        let name_prefix = format!("{}/", plan.config.name);
+        for index in 0..render_count {
             let key = billboard
                 .plane_keys
                 .get(index)
@@ -919,7 +928,12 @@ impl Project {
                 Some(key) => status(Stage::Render, key),
                 None => (if failed { StageStatus::Failed } else { StageStatus::Cached }, 0.0),
             };
-            stages.push(StageSummary { stage: Stage::Render.name(), instance: format!("plane{index}"), status, ms });
+            let instance = cached_labels
+                .get(index)
+                .cloned()
+                .or_else(|| key.and_then(|key| self.labels.get(&key)).map(|label| label.strip_prefix(&name_prefix).unwrap_or(label).to_string()))
+                .unwrap_or_else(|| format!("render{index}"));
+            stages.push(StageSummary { stage: Stage::Render.name(), instance, status, ms });
         }
         stages.push(summary(Stage::Atlas, mesh.clone(), id));
         for surface in SurfaceKind::BILLBOARD {
@@ -1246,9 +1260,9 @@ impl Project {
         artifact(graph, name, &folder.join("lod.mtl"), &[&lod]);
         let mut report_sources = vec![mesh.clone(), planes.clone(), layout.clone(), atlas.clone()];
         if let (Ok(loaded), Ok(plane_layout)) = (crate::db::loaded_mesh(db, input), billboard_layout(db, input)) {
-            let plane_count = plane_layout.rectangles.last().map_or(0, |rectangle| rectangle.plane + 1);
-            for index in 0..plane_count {
-                let render = stage(graph, &self.history, name, Stage::Render, &format!("{name}/plane{index}"));
+            for group in &plane_layout.render_groups {
+                let label = crate::plane_textures::render_group_label(&loaded.mesh, group);
+                let render = stage(graph, &self.history, name, Stage::Render, &format!("{name}/{label}"));
                 for reader in [&mesh, &planes, &layout] {
                     graph.edge(reader, &render);
                 }
@@ -1256,15 +1270,7 @@ impl Project {
                 if loaded.mesh.uvs.is_none() {
                     continue;
                 }
-                let mut materials: Vec<u32> = plane_layout
-                    .rectangles
-                    .iter()
-                    .filter(|rectangle| rectangle.plane == index)
-                    .flat_map(|rectangle| crate::plane_textures::plane_materials(&loaded.mesh, rectangle))
-                    .collect();
-                materials.sort_unstable();
-                materials.dedup();
-                for material in materials {
+                for &material in &group.materials {
                     for path in loaded.mesh.materials[material as usize].maps.values() {
                         let file = self.file_node(graph, path);
                         let decode = stage(graph, &self.history, name, Stage::Decode, &display_path(path));

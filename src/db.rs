@@ -665,6 +665,8 @@ pub fn billboard_planes(db: &dyn Db, asset: BillboardAsset) -> Result<Arc<crate:
 pub struct BillboardLayout {
     pub rectangles: Vec<crate::rectangles::PlaneRectangle>,
     pub layout: crate::layout::Layout,
+    /// The render stages: each plane's rectangles grouped by the materials they show.
+    pub render_groups: Vec<crate::plane_textures::RenderGroup>,
 }
 
 #[salsa::tracked(returns(clone))]
@@ -682,7 +684,8 @@ pub fn billboard_layout(db: &dyn Db, asset: BillboardAsset) -> Result<Arc<Billbo
         let rectangles = crate::rectangles::plane_rectangles(&loaded.mesh.positions, &loaded.mesh.triangles, &planes);
         let sizes: Vec<(f32, f32)> = rectangles.iter().map(|rectangle| (rectangle.width, rectangle.height)).collect();
         let layout = crate::layout::layout_rectangles(&sizes, &atlas, density);
-        Ok(Arc::new(BillboardLayout { rectangles, layout }))
+        let render_groups = crate::plane_textures::render_groups(&loaded.mesh, &rectangles);
+        Ok(Arc::new(BillboardLayout { rectangles, layout, render_groups }))
     })
 }
 
@@ -698,8 +701,9 @@ pub fn billboard_alpha_cutoff(db: &dyn Db, asset: BillboardAsset) -> f32 {
     asset.settings(db).billboard.alpha_cutoff
 }
 
-/// One plane's images (four per rectangle of the plane, in rectangle order), rendered on the
-/// GPU in one go; reads only the textures its faces use.
+/// The images of one render group (four per rectangle, in rectangle order): one plane's
+/// rectangles that show the same materials, rendered on the GPU in one go; reads only the
+/// textures of those materials.
 #[salsa::tracked(returns(clone))]
 pub fn plane_images(db: &dyn Db, key: PlaneKey) -> Result<Arc<Vec<crate::gpu::PlaneImages>>, Diagnostic> {
     let asset = key.asset(db);
@@ -707,20 +711,19 @@ pub fn plane_images(db: &dyn Db, key: PlaneKey) -> Result<Arc<Vec<crate::gpu::Pl
     let planes = billboard_planes(db, asset)?;
     let layout = billboard_layout(db, asset)?;
     let alpha_cutoff = billboard_alpha_cutoff(db, asset);
-    let plane = key.index(db);
+    let index = key.index(db) as usize;
     let mesh_path = asset.mesh_file(db).path(db).clone();
-    let rectangles: Vec<(&crate::layout::Placement, &crate::rectangles::PlaneRectangle)> =
-        layout.layout.placements.iter().zip(&layout.rectangles).filter(|(_, rectangle)| rectangle.plane == plane).collect();
-    if rectangles.is_empty() {
-        return Err(Diagnostic::new(&mesh_path, format!("plane {plane} no longer exists")));
-    }
-    let mut used: Vec<u32> =
-        rectangles.iter().flat_map(|(_, rectangle)| crate::plane_textures::plane_materials(&loaded.mesh, rectangle)).collect();
-    used.sort_unstable();
-    used.dedup();
+    let Some(group) = layout.render_groups.get(index) else {
+        return Err(Diagnostic::new(&mesh_path, format!("render group {index} no longer exists")));
+    };
+    let rectangles: Vec<(&crate::layout::Placement, &crate::rectangles::PlaneRectangle)> = group
+        .rectangles
+        .iter()
+        .map(|&rectangle| (&layout.layout.placements[rectangle as usize], &layout.rectangles[rectangle as usize]))
+        .collect();
     let mut materials = vec![crate::gpu::RenderMaterial::default(); loaded.mesh.materials.len()];
     let with_uvs = loaded.mesh.uvs.is_some();
-    for material_index in used {
+    for &material_index in &group.materials {
         let source = &loaded.mesh.materials[material_index as usize];
         let decoded = |slot: crate::material_definition::TextureSlot| -> Result<Option<Arc<Texture>>, Diagnostic> {
             let Some(path) = source.maps.get(&slot).filter(|_| with_uvs) else { return Ok(None) };
@@ -778,8 +781,15 @@ pub fn billboard_atlas(db: &dyn Db, asset: BillboardAsset) -> Result<Arc<crate::
         images.push(plane_images(db, *key)?);
     }
     timed(db, Stage::Atlas, asset, || {
-        // Rectangles are numbered plane by plane, so the planes' images in order are theirs.
-        let references: Vec<&crate::gpu::PlaneImages> = images.iter().flat_map(|plane| plane.iter()).collect();
+        // Each group's images belong to its rectangles; every rectangle is in one group.
+        let mut by_rectangle: Vec<Option<&crate::gpu::PlaneImages>> = vec![None; layout.rectangles.len()];
+        for (group, group_images) in layout.render_groups.iter().zip(&images) {
+            for (&rectangle, image) in group.rectangles.iter().zip(group_images.iter()) {
+                by_rectangle[rectangle as usize] = Some(image);
+            }
+        }
+        let references: Vec<&crate::gpu::PlaneImages> =
+            by_rectangle.into_iter().map(|image| image.expect("every rectangle is in a render group")).collect();
         Ok(Arc::new(crate::atlas::composite_atlas(&layout.layout, &references)))
     })
 }
@@ -854,7 +864,8 @@ pub fn atlas_surface_artifacts(db: &dyn Db, key: AtlasSurfaceKey) -> Result<Arc<
 #[salsa::tracked(returns(copy))]
 pub fn billboard_cache_key(db: &dyn Db, asset: BillboardAsset) -> CacheKey {
     let settings = asset.settings(db);
-    let mut key = CacheKeyBuilder::new("billboard", 1)
+    // 2: render stages are per plane and material set, listed in the entry's metadata.
+    let mut key = CacheKeyBuilder::new("billboard", 2)
         .debug(&[Stage::Mesh, Stage::Planes, Stage::Layout, Stage::Render, Stage::Atlas, Stage::Encode, Stage::Lod].map(Stage::version))
         .debug(&settings.billboard)
         .debug(&settings.atlas)

@@ -1,4 +1,5 @@
-//! Per-plane textures: what one plane's render is made of (its faces, grouped by material, as
+//! Per-plane textures: how a plane's rectangles split into render stages (by the materials
+//! their faces use), what one rectangle's render is made of (its faces, grouped by material, as
 //! vertices with normals, UVs and tangents) and which source textures it reads. The rendering
 //! itself is `gpu::Gpu::render_rectangles`.
 
@@ -15,6 +16,41 @@ pub fn plane_materials(mesh: &Mesh, plane: &PlaneRectangle) -> Vec<u32> {
     materials.sort_unstable();
     materials.dedup();
     materials
+}
+
+/// One render stage: the rectangles of one plane whose faces use the same set of materials, so
+/// that an edit of one material's texture re-renders only the rectangles that show it.
+#[derive(Clone, Debug, PartialEq)]
+pub struct RenderGroup {
+    pub plane: u32,
+    /// Material indices, ascending.
+    pub materials: Vec<u32>,
+    /// Rectangle indices, ascending.
+    pub rectangles: Vec<u32>,
+}
+
+/// The render groups of `rectangles` (which come plane by plane): per plane, one group per
+/// distinct material set, in order of each set's first rectangle.
+pub fn render_groups(mesh: &Mesh, rectangles: &[PlaneRectangle]) -> Vec<RenderGroup> {
+    let mut groups: Vec<RenderGroup> = Vec::new();
+    let mut plane_start = 0;
+    for (index, rectangle) in rectangles.iter().enumerate() {
+        if groups.last().is_some_and(|group| group.plane != rectangle.plane) {
+            plane_start = groups.len();
+        }
+        let materials = plane_materials(mesh, rectangle);
+        match groups[plane_start..].iter_mut().find(|group| group.materials == materials) {
+            Some(group) => group.rectangles.push(index as u32),
+            None => groups.push(RenderGroup { plane: rectangle.plane, materials, rectangles: vec![index as u32] }),
+        }
+    }
+    groups
+}
+
+/// A render group's name in logs, summaries and the graph: `plane12:bark+leaves`.
+pub fn render_group_label(mesh: &Mesh, group: &RenderGroup) -> String {
+    let names: Vec<&str> = group.materials.iter().map(|&material| mesh.materials[material as usize].name.as_str()).collect();
+    format!("plane{}:{}", group.plane, names.join("+"))
 }
 
 /// The texture files a plane's render reads: the maps of the materials its faces use.

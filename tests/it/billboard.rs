@@ -57,8 +57,9 @@ pub(crate) fn tree_project() -> TempProject {
     project
 }
 
-/// The render stages of the planes holding faces of `material`, recomputed with the pure stages.
-fn planes_with(project: &TempProject, material: &str) -> BTreeSet<String> {
+/// The render stages (one per plane and material set) that show `material`, recomputed with the
+/// pure stages.
+fn render_stages_showing(project: &TempProject, material: &str) -> BTreeSet<String> {
     let obj = project.read("assets/tree.obj");
     let libraries = [(Path::new("assets/tree.mtl").to_path_buf(), Some(project.read("assets/tree.mtl")))].into_iter().collect();
     let (mesh, _) = cirrus::mesh::load_mesh(Path::new("assets/tree.obj"), &obj, &libraries, Path::new("assets")).expect("loads");
@@ -66,10 +67,10 @@ fn planes_with(project: &TempProject, material: &str) -> BTreeSet<String> {
         cirrus::planes::select_planes(&mesh.positions, &mesh.triangles, cirrus::planes::PlaneSettings { epsilon: 0.02, max_planes: None });
     let rectangles = cirrus::rectangles::plane_rectangles(&mesh.positions, &mesh.triangles, &planes);
     let index = mesh.materials.iter().position(|m| m.name == material).expect("material") as u32;
-    rectangles
+    cirrus::plane_textures::render_groups(&mesh, &rectangles)
         .iter()
-        .filter(|rectangle| rectangle.faces.iter().any(|&face| mesh.triangle_materials[face as usize] == index))
-        .map(|rectangle| format!("render(tree/plane{})", rectangle.plane))
+        .filter(|group| group.materials.contains(&index))
+        .map(|group| format!("render(tree/{})", cirrus::plane_textures::render_group_label(&mesh, group)))
         .collect()
 }
 
@@ -105,11 +106,11 @@ fn a_bark_texture_edit_rerenders_only_bark_planes_and_leaves_the_lod_alone() {
     let summary = build(&mut cirrus);
     assert!(summary.all_ok(), "{}", summary.to_text());
     let executed: BTreeSet<String> = cirrus.take_executed_stages().into_iter().collect();
-    let mut expected = planes_with(&project, "bark");
-    let leaf_only: Vec<String> = planes_with(&project, "leaves").difference(&expected).cloned().collect();
-    assert!(!expected.is_empty() && !leaf_only.is_empty(), "the fixture has bark rectangles and leaf-only ones");
+    let mut expected = render_stages_showing(&project, "bark");
+    let leaf_only: Vec<String> = render_stages_showing(&project, "leaves").difference(&expected).cloned().collect();
+    assert!(!expected.is_empty() && !leaf_only.is_empty(), "the fixture has bark render stages and leaf-only ones");
     expected.extend(["decode(assets/bark.png)".to_string(), "atlas(tree)".to_string(), "encode(tree/albedo)".to_string()]);
-    assert_eq!(executed, expected, "exactly the bark rectangles, the atlas and the albedo encoder");
+    assert_eq!(executed, expected, "exactly the render stages showing bark, the atlas and the albedo encoder");
     assert_eq!(project.read("baked/tree/lod.obj"), lod, "lod.obj is untouched by texture edits");
     assert_eq!(project.read("baked/tree/mra.ktx2"), leaves_before, "mra did not change");
 

@@ -67,7 +67,9 @@ fn a_plane_render_covers_its_faces_cuts_alpha_and_encodes_normal_and_height() {
     assert_eq!(texel(&images.albedo, 50, 5)[3], 0, "right half: no face");
     let normal = texel(&images.normal, 10, 5);
     assert!(normal[0].abs_diff(128) <= 1 && normal[1].abs_diff(128) <= 1 && normal[2] >= 254, "flat normal: {normal:?}");
-    assert_eq!(texel(&images.mra, 10, 5)[..3], [0, 128, 255], "metallic 0, roughness 0.5, AO 1");
+    let mra = texel(&images.mra, 10, 5);
+    // 0.5 × 255 = 127.5 rounds either way (llvmpipe 128, NVIDIA 127).
+    assert!(mra[0] == 0 && mra[1].abs_diff(128) <= 1 && mra[2] == 255, "metallic 0, roughness 0.5, AO 1: {mra:?}");
     let height = texel(&images.height_map, 10, 5)[0];
     assert!(height.abs_diff(191) <= 1, "0.05 over ε 0.1 → 0.75: {height}");
 

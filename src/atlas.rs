@@ -2,7 +2,7 @@
 //! uncovered texel filled by extending values outward from covered texels only (so filtering and
 //! mips never pull in a dark or foreign fringe). Albedo alpha stays 0 where nothing was drawn.
 
-use std::collections::VecDeque;
+use rayon::prelude::*;
 
 use crate::gpu::PlaneImages;
 use crate::layout::Layout;
@@ -60,10 +60,12 @@ pub fn composite_atlas(layout: &Layout, planes: &[&PlaneImages]) -> AtlasImages 
 }
 
 /// Gives every uncovered texel the values of its nearest covered texel (breadth-first from all
-/// covered texels at once). Albedo alpha is left at 0 on filled texels.
+/// covered texels at once). Albedo alpha is left at 0 on filled texels. The search only finds
+/// each texel's source; the four layers then copy from their sources in parallel.
 fn extend_outward(layers: &mut [Vec<u8>; 4], covered: &[bool], width: usize, height: usize) {
-    let mut filled = covered.to_vec();
-    let mut queue: VecDeque<usize> = (0..covered.len()).filter(|&index| covered[index]).collect();
+    const UNREACHED: u32 = u32::MAX;
+    let mut source: Vec<u32> = covered.iter().enumerate().map(|(index, &c)| if c { index as u32 } else { UNREACHED }).collect();
+    let mut queue: Vec<u32> = (0..covered.len() as u32).filter(|&index| covered[index as usize]).collect();
     if queue.is_empty() {
         // Nothing drawn at all: a neutral flat normal, so the surface stays valid.
         for texel in layers[1].chunks_exact_mut(4) {
@@ -71,8 +73,13 @@ fn extend_outward(layers: &mut [Vec<u8>; 4], covered: &[bool], width: usize, hei
         }
         return;
     }
-    while let Some(index) = queue.pop_front() {
+    queue.reserve(covered.len() - queue.len());
+    let mut next = 0;
+    while let Some(&index) = queue.get(next) {
+        next += 1;
+        let index = index as usize;
         let (x, y) = (index % width, index / width);
+        let from = source[index];
         let neighbours = [
             (x > 0).then(|| index - 1),
             (x + 1 < width).then(|| index + 1),
@@ -80,18 +87,19 @@ fn extend_outward(layers: &mut [Vec<u8>; 4], covered: &[bool], width: usize, hei
             (y + 1 < height).then(|| index + width),
         ];
         for neighbour in neighbours.into_iter().flatten() {
-            if filled[neighbour] {
-                continue;
+            if source[neighbour] == UNREACHED {
+                source[neighbour] = from;
+                queue.push(neighbour as u32);
             }
-            filled[neighbour] = true;
-            for (layer_index, layer) in layers.iter_mut().enumerate() {
-                let channels = if layer_index == 0 { 3 } else { 4 };
-                let (from, to) = (index * 4, neighbour * 4);
-                for channel in 0..channels {
-                    layer[to + channel] = layer[from + channel];
-                }
-            }
-            queue.push_back(neighbour);
         }
     }
+    layers.par_iter_mut().enumerate().for_each(|(layer_index, layer)| {
+        let channels = if layer_index == 0 { 3 } else { 4 };
+        for (index, &from) in source.iter().enumerate() {
+            let from = from as usize;
+            if from != index {
+                layer.copy_within(from * 4..from * 4 + channels, index * 4);
+            }
+        }
+    });
 }

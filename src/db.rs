@@ -166,7 +166,11 @@ impl Stage {
             // 2: opacity maps read alpha when the image has transparency.
             Stage::Pack => 2,
             // 2: coverage-preserving mips for albedo and opacity sources; opacity from alpha.
-            Stage::Render => 2,
+            // 3: transparent texels of albedo mips keep their footprint's colour (not black).
+            Stage::Render => 3,
+            // 2: transparent texels of albedo mips keep their footprint's colour (not black).
+            Stage::Mips => 2,
+            Stage::Encode => 2,
             // 2: `map_d` naming the albedo texture is not applied a second time.
             Stage::Mesh => 2,
             // 2: each plane is fitted to its faces (least squares within ε), not left at the

@@ -20,17 +20,23 @@ pub fn mip_chain(level0: &Texture, settings: MipSettings) -> Vec<Texture> {
     let mut levels = vec![level0.clone()];
     // Reduce from unscaled float levels so that coverage scaling does not compound.
     let mut current = to_filter_space(level0, settings.kind);
+    // Straight (not alpha-weighted) linear colour, for albedo texels whose whole footprint is
+    // transparent: alpha weighting would leave them black, and bilinear filtering at an
+    // alpha-tested edge would then pull the visible colour toward black.
+    let mut straight = (settings.kind == SurfaceKind::Albedo && level0.pixels.chunks_exact(4).any(|texel| texel[3] == 0))
+        .then(|| straight_linear_colour(level0));
     let (mut width, mut height) = (level0.width, level0.height);
     let coverage = settings.alpha_cutoff.map(|cutoff| alpha_coverage(&current, cutoff, 1.0));
     while width > 1 || height > 1 {
         let (next_width, next_height) = ((width / 2).max(1), (height / 2).max(1));
         current = reduce(&current, width, height, next_width, next_height);
+        straight = straight.map(|colour| reduce(&colour, width, height, next_width, next_height));
         (width, height) = (next_width, next_height);
         let alpha_scale = match (settings.alpha_cutoff, coverage) {
             (Some(cutoff), Some(coverage)) => coverage_alpha_scale(&current, cutoff, coverage),
             _ => 1.0,
         };
-        levels.push(from_filter_space(&current, width, height, settings.kind, alpha_scale));
+        levels.push(from_filter_space(&current, straight.as_deref(), width, height, settings.kind, alpha_scale));
     }
     levels
 }
@@ -55,13 +61,31 @@ fn to_filter_space(texture: &Texture, kind: SurfaceKind) -> Vec<[f32; 4]> {
         .collect()
 }
 
-fn from_filter_space(texels: &[[f32; 4]], width: u32, height: u32, kind: SurfaceKind, alpha_scale: f32) -> Texture {
+/// Linear colour of every texel, not weighted by alpha.
+fn straight_linear_colour(texture: &Texture) -> Vec<[f32; 4]> {
+    texture.pixels.chunks_exact(4).map(|t| [srgb_u8_to_linear(t[0]), srgb_u8_to_linear(t[1]), srgb_u8_to_linear(t[2]), 1.0]).collect()
+}
+
+fn from_filter_space(
+    texels: &[[f32; 4]],
+    straight: Option<&[[f32; 4]]>,
+    width: u32,
+    height: u32,
+    kind: SurfaceKind,
+    alpha_scale: f32,
+) -> Texture {
     let pixels = texels
         .iter()
-        .flat_map(|&[r, g, b, a]| match kind {
+        .enumerate()
+        .flat_map(|(index, &[r, g, b, a])| match kind {
             SurfaceKind::Albedo => {
-                // Un-premultiply; fully transparent texels keep the colour of their neighbours' average.
-                let (r, g, b) = if a > 1e-6 { (r / a, g / a, b / a) } else { (r, g, b) };
+                // Un-premultiply; fully transparent texels take the plain average colour of
+                // their footprint (the colour a fill extended there), not black.
+                let (r, g, b) = match straight {
+                    _ if a > 1e-6 => (r / a, g / a, b / a),
+                    Some(straight) => (straight[index][0], straight[index][1], straight[index][2]),
+                    None => (r, g, b),
+                };
                 [linear_to_srgb_u8(r), linear_to_srgb_u8(g), linear_to_srgb_u8(b), unorm_u8(a * alpha_scale)]
             }
             SurfaceKind::Normal => encode_normal(normalize_tangent_normal([r, g, b])),

@@ -276,3 +276,22 @@ fn a_level_encodes_each_block_as_that_block_alone_repeated_blocks_included() {
         assert!(psnr > 30.0, "{format:?}: blocks decode to the level: {psnr:.1} dB");
     }
 }
+
+#[test]
+fn transparent_albedo_texels_keep_their_colour_down_the_mip_chain() {
+    use cirrus::mips::{mip_chain, MipSettings};
+    use cirrus::surface::SurfaceKind;
+    use cirrus::texture::Texture;
+    // Left half opaque red, right half transparent but filled green (as the atlas fill does).
+    let mut pixels = Vec::new();
+    for _y in 0..8 {
+        for x in 0..8 {
+            pixels.extend_from_slice(if x < 4 { &[200, 30, 30, 255] } else { &[40, 180, 40, 0] });
+        }
+    }
+    let levels = mip_chain(&Texture::new(8, 8, pixels), MipSettings { kind: SurfaceKind::Albedo, alpha_cutoff: Some(0.5) });
+    let level1 = &levels[1];
+    let texel = |x: usize, y: usize| -> [u8; 4] { level1.pixels[(y * 4 + x) * 4..][..4].try_into().unwrap() };
+    assert_eq!(texel(0, 1)[..3], [200, 30, 30], "opaque texels keep their colour");
+    assert_eq!(texel(3, 1), [40, 180, 40, 0], "fully transparent texels keep the fill colour, not black");
+}

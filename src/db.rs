@@ -170,7 +170,8 @@ impl Stage {
             Stage::Render => 3,
             // 2: transparent texels of albedo mips keep their footprint's colour (not black).
             Stage::Mips => 2,
-            Stage::Encode => 2,
+            // 2: as Mips 2. 3: fully transparent BC7 blocks use the fastest profile.
+            Stage::Encode => 3,
             // 2: `map_d` naming the albedo texture is not applied a second time.
             Stage::Mesh => 2,
             // 2: each plane is fitted to its faces (least squares within ε), not left at the

@@ -110,10 +110,32 @@ pub fn encode_level(level: &Texture, settings: BlockEncodeSettings) -> Vec<u8> {
         };
         distinct_of_block.push(number);
     }
+    // Fully transparent blocks of an alpha-tested BC7 surface are seen only through filtering
+    // next to visible texels: they get the fastest profile, visible blocks the chosen one.
+    let fill_profile = settings.format == BlockFormat::Bc7 && settings.alpha;
+    let (fill, visible): (Vec<u32>, Vec<u32>) = (0..distinct.len() as u32)
+        .partition(|&number| fill_profile && distinct[number as usize].chunks_exact(4).all(|texel| texel[3] == 0));
     let size = block_bytes(settings.format);
     let mut encoded = vec![0u8; distinct.len() * size];
-    let bc7_settings = bc7_settings(settings.quality, settings.alpha);
-    encoded.par_chunks_mut(size * BLOCKS_PER_TASK).zip(distinct.par_chunks(BLOCKS_PER_TASK)).for_each(|(output, blocks)| {
+    for (numbers, quality) in [(visible, settings.quality), (fill, EncodeQuality::UltraFast)] {
+        let blocks: Vec<&[u8]> = numbers.iter().map(|&number| distinct[number as usize]).collect();
+        let fresh = encode_blocks(&blocks, settings.format, channels, &bc7_settings(quality, settings.alpha));
+        for (index, &number) in numbers.iter().enumerate() {
+            encoded[number as usize * size..][..size].copy_from_slice(&fresh[index * size..][..size]);
+        }
+    }
+    let mut output = Vec::with_capacity(block_count * size);
+    for &number in &distinct_of_block {
+        output.extend_from_slice(&encoded[number as usize * size..][..size]);
+    }
+    output
+}
+
+/// Encodes `blocks` (each 16 texels of `channels` bytes, rows top to bottom), in parallel.
+fn encode_blocks(blocks: &[&[u8]], format: BlockFormat, channels: usize, bc7_settings: &intel_tex_2::bc7::EncodeSettings) -> Vec<u8> {
+    let size = block_bytes(format);
+    let mut encoded = vec![0u8; blocks.len() * size];
+    encoded.par_chunks_mut(size * BLOCKS_PER_TASK).zip(blocks.par_chunks(BLOCKS_PER_TASK)).for_each(|(output, blocks)| {
         // The blocks side by side: one row of blocks, 4 texels high.
         let row_len = 4 * channels;
         let stride = blocks.len() * row_len;
@@ -124,21 +146,17 @@ pub fn encode_level(level: &Texture, settings: BlockEncodeSettings) -> Vec<u8> {
             }
         }
         let (data, width, height, stride) = (&data[..], 4 * blocks.len() as u32, 4, stride as u32);
-        match settings.format {
+        match format {
             BlockFormat::Bc1 => intel_tex_2::bc1::compress_blocks_into(&intel_tex_2::RgbaSurface { data, width, height, stride }, output),
             BlockFormat::Bc3 => intel_tex_2::bc3::compress_blocks_into(&intel_tex_2::RgbaSurface { data, width, height, stride }, output),
             BlockFormat::Bc4 => intel_tex_2::bc4::compress_blocks_into(&intel_tex_2::RSurface { data, width, height, stride }, output),
             BlockFormat::Bc5 => intel_tex_2::bc5::compress_blocks_into(&intel_tex_2::RgSurface { data, width, height, stride }, output),
             BlockFormat::Bc7 => {
-                intel_tex_2::bc7::compress_blocks_into(&bc7_settings, &intel_tex_2::RgbaSurface { data, width, height, stride }, output)
+                intel_tex_2::bc7::compress_blocks_into(bc7_settings, &intel_tex_2::RgbaSurface { data, width, height, stride }, output)
             }
         }
     });
-    let mut output = Vec::with_capacity(block_count * size);
-    for &number in &distinct_of_block {
-        output.extend_from_slice(&encoded[number as usize * size..][..size]);
-    }
-    output
+    encoded
 }
 
 /// A 64-bit hash of a block's bytes (FxHash over 8-byte words; blocks are 16, 32 or 64 bytes).

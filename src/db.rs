@@ -164,14 +164,17 @@ impl Stage {
     pub fn version(self) -> u32 {
         match self {
             // 2: opacity maps read alpha when the image has transparency.
-            Stage::Pack => 2,
+            // 3: linear → sRGB bytes from tables, rounded like the f64 formula (was f32 powf).
+            Stage::Pack => 3,
             // 2: coverage-preserving mips for albedo and opacity sources; opacity from alpha.
             // 3: transparent texels of albedo mips keep their footprint's colour (not black).
-            Stage::Render => 3,
+            // 4: sRGB bytes as Pack 3.
+            Stage::Render => 4,
             // 2: transparent texels of albedo mips keep their footprint's colour (not black).
-            Stage::Mips => 2,
-            // 2: as Mips 2. 3: fully transparent BC7 blocks use the fastest profile.
-            Stage::Encode => 3,
+            // 3: sRGB bytes as Pack 3.
+            Stage::Mips => 3,
+            // 2: as Mips 2. 3: fully transparent BC7 blocks use the fastest profile. 4: as Mips 3.
+            Stage::Encode => 4,
             // 2: `map_d` naming the albedo texture is not applied a second time.
             Stage::Mesh => 2,
             // 2: each plane is fitted to its faces (least squares within ε), not left at the

@@ -46,7 +46,7 @@ pub fn mip_chain(level0: &Texture, settings: MipSettings) -> Vec<Texture> {
 fn to_filter_space(texture: &Texture, kind: SurfaceKind) -> Vec<[f32; 4]> {
     texture
         .pixels
-        .chunks_exact(4)
+        .par_chunks_exact(4)
         .map(|t| match kind {
             SurfaceKind::Albedo => {
                 let alpha = t[3] as f32 / 255.0;
@@ -75,9 +75,9 @@ fn from_filter_space(
     alpha_scale: f32,
 ) -> Texture {
     let pixels = texels
-        .iter()
+        .par_iter()
         .enumerate()
-        .flat_map(|(index, &[r, g, b, a])| match kind {
+        .flat_map_iter(|(index, &[r, g, b, a])| match kind {
             SurfaceKind::Albedo => {
                 // Un-premultiply; fully transparent texels take the plain average colour of
                 // their footprint (the colour a fill extended there), not black.

@@ -295,3 +295,25 @@ fn transparent_albedo_texels_keep_their_colour_down_the_mip_chain() {
     assert_eq!(texel(0, 1)[..3], [200, 30, 30], "opaque texels keep their colour");
     assert_eq!(texel(3, 1), [40, 180, 40, 0], "fully transparent texels keep the fill colour, not black");
 }
+
+#[test]
+fn linear_to_srgb_bytes_round_like_the_formula() {
+    use cirrus::surface::{linear_to_srgb_u8, srgb_u8_to_linear};
+    let formula = |linear: f64| {
+        let linear = linear.clamp(0.0, 1.0);
+        let srgb = if linear <= 0.003_130_8 { linear * 12.92 } else { 1.055 * linear.powf(1.0 / 2.4) - 0.055 };
+        (srgb * 255.0 + 0.5).floor() as u8
+    };
+    let mut mismatches = Vec::new();
+    for step in 0..=2_000_000u32 {
+        let linear = step as f32 / 2_000_000.0;
+        if linear_to_srgb_u8(linear) != formula(linear as f64) {
+            mismatches.push(linear);
+        }
+    }
+    assert!(mismatches.is_empty(), "{} values differ, first {:?}", mismatches.len(), &mismatches[..mismatches.len().min(5)]);
+    assert_eq!((linear_to_srgb_u8(-1.0), linear_to_srgb_u8(2.0), linear_to_srgb_u8(f32::NAN)), (0, 255, 0));
+    for byte in 0..=255u8 {
+        assert_eq!(linear_to_srgb_u8(srgb_u8_to_linear(byte)), byte, "round trip of {byte}");
+    }
+}

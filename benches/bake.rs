@@ -9,10 +9,10 @@ use std::time::Instant;
 use cirrus::bake::{BuildOptions, Project, ProjectOptions};
 use cirrus::config::{load_pipeline, BlockFormat, EncodeQuality};
 use cirrus::encode::BlockEncodeSettings;
-use rayon::prelude::*;
 use cirrus::mips::{mip_chain, MipSettings};
 use cirrus::surface::SurfaceKind;
 use cirrus::texture::Texture;
+use rayon::prelude::*;
 
 fn main() {
     let repository = Path::new(env!("CARGO_MANIFEST_DIR"));
@@ -453,7 +453,9 @@ fn raw_encode_level(level: &Texture, settings: BlockEncodeSettings) -> Vec<u8> {
             BlockFormat::Bc3 => intel_tex_2::bc3::compress_blocks_into(&intel_tex_2::RgbaSurface { data, width, height, stride }, blocks),
             BlockFormat::Bc4 => intel_tex_2::bc4::compress_blocks_into(&intel_tex_2::RSurface { data, width, height, stride }, blocks),
             BlockFormat::Bc5 => intel_tex_2::bc5::compress_blocks_into(&intel_tex_2::RgSurface { data, width, height, stride }, blocks),
-            BlockFormat::Bc7 => intel_tex_2::bc7::compress_blocks_into(&bc7, &intel_tex_2::RgbaSurface { data, width, height, stride }, blocks),
+            BlockFormat::Bc7 => {
+                intel_tex_2::bc7::compress_blocks_into(&bc7, &intel_tex_2::RgbaSurface { data, width, height, stride }, blocks)
+            }
         }
     });
     output

@@ -931,7 +931,9 @@ impl Project {
             let instance = cached_labels
                 .get(index)
                 .cloned()
-                .or_else(|| key.and_then(|key| self.labels.get(&key)).map(|label| label.strip_prefix(&name_prefix).unwrap_or(label).to_string()))
+                .or_else(|| {
+                    key.and_then(|key| self.labels.get(&key)).map(|label| label.strip_prefix(&name_prefix).unwrap_or(label).to_string())
+                })
                 .unwrap_or_else(|| format!("render{index}"));
             stages.push(StageSummary { stage: Stage::Render.name(), instance, status, ms });
         }

@@ -82,21 +82,32 @@ const BLOCKS_PER_TASK: usize = 1024;
 /// blocks repeat, and a block's encoding depends on its texels only, so the result is the same
 /// as encoding every block.
 pub fn encode_level(level: &Texture, settings: BlockEncodeSettings) -> Vec<u8> {
-    let channels = match settings.format {
+    let channels = format_channels(settings.format);
+    let texels = block_texels(level, channels);
+    encode_block_list(texels.chunks_exact(16 * channels), settings)
+}
+
+/// The bytes per texel a format's encoder reads.
+fn format_channels(format: BlockFormat) -> usize {
+    match format {
         BlockFormat::Bc4 => 1,
         BlockFormat::Bc5 => 2,
         _ => 4,
-    };
-    let texels = block_texels(level, channels);
-    let block_len = 16 * channels;
-    let block_count = texels.len() / block_len;
+    }
+}
+
+/// Encodes a list of blocks (16 texels each, rows top to bottom), in order.
+fn encode_block_list<'a>(blocks: impl Iterator<Item = &'a [u8]>, settings: BlockEncodeSettings) -> Vec<u8> {
+    let channels = format_channels(settings.format);
+    let blocks: Vec<&[u8]> = blocks.collect();
+    let block_count = blocks.len();
     // Each block's number among the distinct blocks, and the first block of each. Blocks are
     // hashed in parallel; equal hashes are confirmed byte for byte.
-    let hashes: Vec<u64> = texels.par_chunks_exact(block_len).map(block_hash).collect();
+    let hashes: Vec<u64> = blocks.par_iter().map(|block| block_hash(block)).collect();
     let mut numbers: std::collections::HashMap<u64, u32> = std::collections::HashMap::with_capacity(block_count / 2);
     let mut distinct_of_block = Vec::with_capacity(block_count);
     let mut distinct: Vec<&[u8]> = Vec::new();
-    for (block, hash) in texels.chunks_exact(block_len).zip(hashes) {
+    for (&block, hash) in blocks.iter().zip(hashes) {
         let number = match numbers.get(&hash) {
             Some(&number) if distinct[number as usize] == block => number,
             seen => {
@@ -232,13 +243,15 @@ pub fn encode_levels_reusing(
             if changed.len() * 2 > level.width.div_ceil(4) as usize * level.height.div_ceil(4) as usize {
                 return Arc::from(encode_level(level, settings));
             }
-            // The changed blocks side by side in one strip, encoded together, then scattered.
-            let strip = Texture::new(4 * changed.len() as u32, 4, strip_of_blocks(level, &changed));
-            let fresh = encode_level(&strip, settings);
+            // The changed blocks encoded together, then scattered.
+            let block_len = 16 * format_channels(settings.format);
+            let texels = block_texels(level, format_channels(settings.format));
+            let blocks_x = level.width.div_ceil(4) as usize;
+            let block_numbers: Vec<usize> = changed.iter().map(|&(bx, by)| by as usize * blocks_x + bx as usize).collect();
+            let fresh = encode_block_list(block_numbers.iter().map(|&number| &texels[number * block_len..][..block_len]), settings);
             let mut blocks = old_blocks.to_vec();
-            for (index, &(bx, by)) in changed.iter().enumerate() {
-                let target = (by as usize * level.width.div_ceil(4) as usize + bx as usize) * size;
-                blocks[target..target + size].copy_from_slice(&fresh[index * size..(index + 1) * size]);
+            for (index, &number) in block_numbers.iter().enumerate() {
+                blocks[number * size..][..size].copy_from_slice(&fresh[index * size..][..size]);
             }
             Arc::from(blocks)
         })
@@ -265,22 +278,4 @@ fn changed_blocks(level: &Texture, old: &Texture) -> Vec<(u32, u32)> {
         }
     }
     changed
-}
-
-/// The listed 4×4 blocks (edges repeated past the level's border) laid side by side.
-fn strip_of_blocks(level: &Texture, blocks: &[(u32, u32)]) -> Vec<u8> {
-    let width = 4 * blocks.len();
-    let mut pixels = vec![0u8; width * 4 * 4];
-    for (index, &(bx, by)) in blocks.iter().enumerate() {
-        for row in 0..4u32 {
-            let y = (by * 4 + row).min(level.height - 1);
-            for column in 0..4u32 {
-                let x = (bx * 4 + column).min(level.width - 1);
-                let source = ((y * level.width + x) * 4) as usize;
-                let target = (row as usize * width + index * 4 + column as usize) * 4;
-                pixels[target..target + 4].copy_from_slice(&level.pixels[source..source + 4]);
-            }
-        }
-    }
-    pixels
 }

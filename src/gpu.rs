@@ -37,7 +37,8 @@ pub struct Gpu {
     sampler: wgpu::Sampler,
     white: wgpu::TextureView,
     /// Uploaded source textures by content hash and colour space.
-    uploads: Mutex<HashMap<(blake3::Hash, bool, u32), Arc<wgpu::TextureView>>>,
+    /// A cell per key, so that threads wanting the same new texture upload it once.
+    uploads: Mutex<HashMap<UploadKey, Arc<std::sync::OnceLock<Arc<wgpu::TextureView>>>>>,
     view_pipeline: wgpu::RenderPipeline,
     view_material_layout: wgpu::BindGroupLayout,
     /// Material bind groups by content (constants, texture hashes, cutoff).
@@ -93,6 +94,9 @@ static GPU: OnceLock<Result<Gpu, GpuError>> = OnceLock::new();
 pub fn gpu() -> Result<&'static Gpu, GpuError> {
     GPU.get_or_init(|| pollster::block_on(Gpu::new())).as_ref().map_err(Clone::clone)
 }
+
+/// An uploaded texture: content hash, sRGB, and the alpha cutoff bits or level count.
+type UploadKey = (blake3::Hash, bool, u32);
 
 const ALBEDO_FORMAT: wgpu::TextureFormat = wgpu::TextureFormat::Rgba8UnormSrgb;
 const DATA_FORMAT: wgpu::TextureFormat = wgpu::TextureFormat::Rgba8Unorm;
@@ -278,16 +282,19 @@ impl Gpu {
     fn texture_view(&self, texture: &Texture, kind: SurfaceKind, alpha_cutoff: Option<f32>) -> Arc<wgpu::TextureView> {
         let srgb = kind == SurfaceKind::Albedo;
         let key = (texture.hash, srgb, alpha_cutoff.map_or(u32::MAX, f32::to_bits));
-        if let Some(view) = self.uploads.lock().expect("upload cache").get(&key) {
-            return view.clone();
-        }
-        let levels = mip_chain(texture, MipSettings { kind, alpha_cutoff });
-        let view = Arc::new(upload(&self.device, &self.queue, &levels, if srgb { ALBEDO_FORMAT } else { DATA_FORMAT }));
-        self.uploads.lock().expect("upload cache").insert(key, view.clone());
-        view
+        self.cached_upload(key, || {
+            let levels = mip_chain(texture, MipSettings { kind, alpha_cutoff });
+            upload(&self.device, &self.queue, &levels, if srgb { ALBEDO_FORMAT } else { DATA_FORMAT })
+        })
     }
 
-    /// Renders one plane's four images.
+    /// The upload cached under `key`, made by `make` by the first thread that asks for it; other
+    /// threads asking meanwhile wait for it instead of uploading it again.
+    fn cached_upload(&self, key: UploadKey, make: impl FnOnce() -> wgpu::TextureView) -> Arc<wgpu::TextureView> {
+        let cell = self.uploads.lock().expect("upload cache").entry(key).or_default().clone();
+        cell.get_or_init(|| Arc::new(make())).clone()
+    }
+
     /// Renders the rectangles of one plane (or any set of rectangles): each under its own
     /// orthographic camera, stacked in shared targets, in as few submissions and read-backs as
     /// the stack size allows. Per-submission latency, not shading, dominates small renders.
@@ -660,12 +667,7 @@ impl Gpu {
     /// A texture with explicit mip levels on the GPU (uploaded once per content).
     fn levels_view(&self, levels: &[Texture], srgb: bool) -> Arc<wgpu::TextureView> {
         let key = (levels[0].hash, srgb, levels.len() as u32);
-        if let Some(view) = self.uploads.lock().expect("upload cache").get(&key) {
-            return view.clone();
-        }
-        let view = Arc::new(upload(&self.device, &self.queue, levels, if srgb { ALBEDO_FORMAT } else { DATA_FORMAT }));
-        self.uploads.lock().expect("upload cache").insert(key, view.clone());
-        view
+        self.cached_upload(key, || upload(&self.device, &self.queue, levels, if srgb { ALBEDO_FORMAT } else { DATA_FORMAT }))
     }
 
     /// Submits `encoder` after copying `targets` out, and returns their RGBA8 pixels.

@@ -84,7 +84,8 @@ const BLOCKS_PER_TASK: usize = 1024;
 pub fn encode_level(level: &Texture, settings: BlockEncodeSettings) -> Vec<u8> {
     let channels = format_channels(settings.format);
     let texels = block_texels(level, channels);
-    encode_block_list(texels.chunks_exact(16 * channels), settings)
+    let blocks: Vec<&[u8]> = texels.chunks_exact(16 * channels).collect();
+    encode_block_list(&blocks, settings)
 }
 
 /// The bytes per texel a format's encoder reads.
@@ -97,9 +98,8 @@ fn format_channels(format: BlockFormat) -> usize {
 }
 
 /// Encodes a list of blocks (16 texels each, rows top to bottom), in order.
-fn encode_block_list<'a>(blocks: impl Iterator<Item = &'a [u8]>, settings: BlockEncodeSettings) -> Vec<u8> {
+fn encode_block_list(blocks: &[&[u8]], settings: BlockEncodeSettings) -> Vec<u8> {
     let channels = format_channels(settings.format);
-    let blocks: Vec<&[u8]> = blocks.collect();
     let block_count = blocks.len();
     // Each block's number among the distinct blocks, and the first block of each. Blocks are
     // hashed in parallel; equal hashes are confirmed byte for byte.
@@ -181,21 +181,27 @@ fn block_hash(block: &[u8]) -> u64 {
 /// each block's rows top to bottom; texels past the level's edge repeat the last row / column.
 fn block_texels(level: &Texture, channels: usize) -> Vec<u8> {
     let (blocks_x, blocks_y) = (level.width.div_ceil(4) as usize, level.height.div_ceil(4) as usize);
-    let (width, height) = (level.width as usize, level.height as usize);
     let mut texels = vec![0u8; blocks_x * blocks_y * 16 * channels];
     texels.par_chunks_mut(blocks_x * 16 * channels).enumerate().for_each(|(by, block_row)| {
         for (bx, block) in block_row.chunks_exact_mut(16 * channels).enumerate() {
-            for row in 0..4 {
-                let y = (by * 4 + row).min(height - 1);
-                for column in 0..4 {
-                    let x = (bx * 4 + column).min(width - 1);
-                    let source = (y * width + x) * 4;
-                    block[(row * 4 + column) * channels..][..channels].copy_from_slice(&level.pixels[source..source + channels]);
-                }
-            }
+            copy_block(level, bx, by, channels, block);
         }
     });
     texels
+}
+
+/// Copies block (`bx`, `by`) of `level` into `block` (16 texels of `channels` bytes, rows top to
+/// bottom); texels past the level's edge repeat the last row / column.
+fn copy_block(level: &Texture, bx: usize, by: usize, channels: usize, block: &mut [u8]) {
+    let (width, height) = (level.width as usize, level.height as usize);
+    for row in 0..4 {
+        let y = (by * 4 + row).min(height - 1);
+        for column in 0..4 {
+            let x = (bx * 4 + column).min(width - 1);
+            let source = (y * width + x) * 4;
+            block[(row * 4 + column) * channels..][..channels].copy_from_slice(&level.pixels[source..source + channels]);
+        }
+    }
 }
 
 fn bc7_settings(quality: EncodeQuality, alpha: bool) -> intel_tex_2::bc7::EncodeSettings {
@@ -243,14 +249,17 @@ pub fn encode_levels_reusing(
             if changed.len() * 2 > level.width.div_ceil(4) as usize * level.height.div_ceil(4) as usize {
                 return Arc::from(encode_level(level, settings));
             }
-            // The changed blocks encoded together, then scattered.
-            let block_len = 16 * format_channels(settings.format);
-            let texels = block_texels(level, format_channels(settings.format));
+            // Only the changed blocks are gathered and encoded, then scattered.
+            let channels = format_channels(settings.format);
+            let mut texels = vec![0u8; changed.len() * 16 * channels];
+            for (block, &(bx, by)) in texels.chunks_exact_mut(16 * channels).zip(&changed) {
+                copy_block(level, bx as usize, by as usize, channels, block);
+            }
+            let fresh = encode_block_list(&texels.chunks_exact(16 * channels).collect::<Vec<_>>(), settings);
             let blocks_x = level.width.div_ceil(4) as usize;
-            let block_numbers: Vec<usize> = changed.iter().map(|&(bx, by)| by as usize * blocks_x + bx as usize).collect();
-            let fresh = encode_block_list(block_numbers.iter().map(|&number| &texels[number * block_len..][..block_len]), settings);
             let mut blocks = old_blocks.to_vec();
-            for (index, &number) in block_numbers.iter().enumerate() {
+            for (index, &(bx, by)) in changed.iter().enumerate() {
+                let number = by as usize * blocks_x + bx as usize;
                 blocks[number * size..][..size].copy_from_slice(&fresh[index * size..][..size]);
             }
             Arc::from(blocks)

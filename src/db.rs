@@ -178,8 +178,9 @@ impl Stage {
             // 2: `map_d` naming the albedo texture is not applied a second time.
             Stage::Mesh => 2,
             // 2: each plane is fitted to its faces (least squares within ε), not left at the
-            // edge of the valid offsets.
-            Stage::Planes => 2,
+            // edge of the valid offsets. 3: faces then move to their nearest plane (rounds of
+            // reassignment and refitting).
+            Stage::Planes => 3,
             _ => 1,
         }
     }

@@ -38,6 +38,8 @@ const PENALTY: f32 = 10.0;
 const REFINEMENT_STEPS: usize = 6;
 /// Faces a refinement evaluates candidate directions on (the final offset uses them all).
 const REFINEMENT_SAMPLE: usize = 768;
+/// Rounds of moving faces to their nearest plane and refitting after the greedy selection.
+const REASSIGNMENT_ROUNDS: usize = 6;
 
 /// The plane-space grid: directions over the upper hemisphere (a plane and its flip are one
 /// plane), offsets ρ over [-R, R] around the bounding-sphere centre.
@@ -309,6 +311,8 @@ pub fn select_planes(positions: &[[f32; 3]], triangles: &[[u32; 3]], settings: P
         planes[best].2.push(index);
     }
 
+    reassign_to_nearest_planes(&faces, &mut planes, grid.epsilon);
+
     let mut max_error = 0.0f32;
     let planes = planes
         .into_iter()
@@ -322,6 +326,68 @@ pub fn select_planes(positions: &[[f32; 3]], triangles: &[[u32; 3]], settings: P
         })
         .collect();
     PlaneSet { planes, epsilon: grid.epsilon, max_error, face_count: faces.len() }
+}
+
+/// Moves every face to the plane nearest it, then fits the planes to their new members, for
+/// up to REASSIGNMENT_ROUNDS rounds, and ends with one last move so each face sits on its
+/// nearest plane. The greedy selection gives a chosen plane every remaining face within ε, so a
+/// face often lies nearly ε from an early plane while a later plane passes right through it, and
+/// in a view at an angle to the plane a face drawn on its plane is displaced by up to that
+/// distance. A face only ever moves to a strictly nearer plane, so no face ends farther from its
+/// plane than the greedy selection left it (within ε, unless capped). Planes left without faces
+/// are dropped by the caller. Deterministic: every face decides alone, ties keep the current plane.
+fn reassign_to_nearest_planes(faces: &[Face], planes: &mut [(Vec3, f32, Vec<u32>)], epsilon: f32) {
+    let mut assignment = vec![usize::MAX; faces.len()];
+    for (plane, (_, _, members)) in planes.iter().enumerate() {
+        for &index in members {
+            assignment[index as usize] = plane;
+        }
+    }
+    for round in 0..=REASSIGNMENT_ROUNDS {
+        let normals: Vec<Vec3> = planes.iter().map(|plane| plane.0).collect();
+        let offsets: Vec<f32> = planes.iter().map(|plane| plane.1).collect();
+        let moved: Vec<Option<usize>> =
+            faces.par_iter().zip(&assignment).map(|(face, &current)| nearer_plane(face, current, &normals, &offsets)).collect();
+        let mut changed = false;
+        for (slot, moved) in assignment.iter_mut().zip(moved) {
+            if let Some(plane) = moved {
+                *slot = plane;
+                changed = true;
+            }
+        }
+        if !changed {
+            return;
+        }
+        for plane in planes.iter_mut() {
+            plane.2.clear();
+        }
+        for (index, &plane) in assignment.iter().enumerate() {
+            planes[plane].2.push(index as u32);
+        }
+        if round == REASSIGNMENT_ROUNDS {
+            return;
+        }
+        planes.par_iter_mut().for_each(|(normal, rho, members)| (*normal, *rho) = fit_plane(faces, members, *normal, *rho, epsilon));
+    }
+}
+
+/// The plane strictly nearer `face` than plane `current` (largest vertex distance), if any.
+/// The centroid's distance is a lower bound (a mean of the vertex distances), so the exact test
+/// runs only for planes that pass near the face.
+fn nearer_plane(face: &Face, current: usize, normals: &[Vec3], offsets: &[f32]) -> Option<usize> {
+    let centroid = (face.vertices[0] + face.vertices[1] + face.vertices[2]) / 3.0;
+    let mut best_distance = face.distance_to(normals[current], offsets[current]);
+    let mut best = None;
+    for (plane, (&normal, &offset)) in normals.iter().zip(offsets).enumerate() {
+        if (normal.dot(centroid) - offset).abs() >= best_distance || plane == current {
+            continue;
+        }
+        let distance = face.distance_to(normal, offset);
+        if distance < best_distance {
+            (best_distance, best) = (distance, Some(plane));
+        }
+    }
+    best
 }
 
 /// Refines a dense region to the best plane near it: candidate directions around the region's

@@ -122,3 +122,30 @@ fn a_plane_is_fitted_to_its_faces_not_left_at_the_edge_of_epsilon() {
     let worst = check_assignment(&positions, &triangles, &set);
     assert!(worst < 0.05 * set.epsilon, "the sheet is {worst} from its plane (ε = {})", set.epsilon);
 }
+
+#[test]
+fn every_face_ends_on_its_nearest_plane() {
+    // The greedy selection hands a plane every remaining face within ε, even one that a later
+    // plane passes right through; the reassignment moves it there, since a face drawn on its
+    // plane is displaced by its distance in views at an angle to the plane.
+    let (positions, triangles) = soup(600);
+    let set = select_planes(&positions, &triangles, settings(0.05));
+    let distance = |face: u32, plane: &cirrus::planes::Plane| {
+        let normal = glam::Vec3::from(plane.normal);
+        triangles[face as usize]
+            .iter()
+            .map(|&vertex| (glam::Vec3::from(positions[vertex as usize]).dot(normal) - plane.distance).abs())
+            .fold(0.0f32, f32::max)
+    };
+    let mut farther = 0;
+    for plane in &set.planes {
+        for &face in &plane.faces {
+            let nearest = set.planes.iter().map(|other| distance(face, other)).fold(f32::INFINITY, f32::min);
+            if distance(face, plane) > nearest + 1e-5 {
+                farther += 1;
+            }
+        }
+    }
+    assert_eq!(farther, 0, "faces not on their nearest plane, of {} in {} planes", triangles.len(), set.planes.len());
+    assert!(check_assignment(&positions, &triangles, &set) <= set.epsilon * 1.0001);
+}

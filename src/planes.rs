@@ -48,8 +48,12 @@ struct Grid {
     radius: f32,
     epsilon: f32,
     rho_bins: usize,
-    /// Corner directions, (THETA_BINS + 1) × (PHI_BINS + 1).
-    corners: Vec<Vec3>,
+    /// cos θ and sin θ of the THETA_BINS + 1 corner rows, and sin φ and cos φ of the
+    /// PHI_BINS + 1 corner columns: a corner direction is (sin φ cos θ, sin φ sin θ, cos φ), so a
+    /// vertex's offset along it is sin φ (x cos θ + y sin θ) + z cos φ, which vectorises over φ.
+    theta_cos_sin: Vec<(f32, f32)>,
+    sin_phi: [f32; PHI_BINS + 1],
+    cos_phi: [f32; PHI_BINS + 1],
     /// Centre direction of each direction bin, THETA_BINS × PHI_BINS.
     centers: Vec<Vec3>,
 }
@@ -114,19 +118,16 @@ impl Grid {
         let radius = positions.iter().map(|&p| Vec3::from(p).distance(center)).fold(0.0, f32::max).max(1e-6);
         let epsilon = epsilon_fraction * radius;
         let rho_bins = ((2.0 * radius / epsilon).ceil() as usize).clamp(16, 256);
-        let mut corners = Vec::with_capacity((THETA_BINS + 1) * (PHI_BINS + 1));
-        for t in 0..=THETA_BINS {
-            for p in 0..=PHI_BINS {
-                corners.push(direction(Grid::theta(t), Grid::phi(p)));
-            }
-        }
+        let theta_cos_sin = (0..=THETA_BINS).map(|t| (Grid::theta(t).cos(), Grid::theta(t).sin())).collect();
+        let sin_phi = std::array::from_fn(|p| Grid::phi(p).sin());
+        let cos_phi = std::array::from_fn(|p| Grid::phi(p).cos());
         let mut centers = Vec::with_capacity(THETA_BINS * PHI_BINS);
         for t in 0..THETA_BINS {
             for p in 0..PHI_BINS {
                 centers.push(direction(Grid::theta(t) + 0.5 * Grid::theta(1), Grid::phi(p) + 0.5 * Grid::phi(1)));
             }
         }
-        Grid { center, radius, epsilon, rho_bins, corners, centers }
+        Grid { center, radius, epsilon, rho_bins, theta_cos_sin, sin_phi, cos_phi, centers }
     }
 
     fn theta(index: usize) -> f32 {
@@ -163,25 +164,25 @@ impl Grid {
         }
     }
 
-    /// Adds `sign` × the density contribution of `face` to direction row `t` (θ bin `t`, every φ
-    /// bin, every ρ bin; `valid` and `front` are that row's slices): area × |cos| to every bin where
-    /// a valid plane exists (`valid`), and to the bins just in front of the face (`front`, weighted
-    /// by PENALTY when scoring).
-    fn contribute_to_row(&self, face: &Face, sign: f32, t: usize, valid: &mut [f32], front: &mut [f32]) {
+    /// The ρ bins `face` contributes to in each φ bin of direction row `t` (θ bin `t`): where
+    /// a valid plane exists, and just in front of the face (the side its normal points to).
+    fn row_ranges(&self, face: &Face, t: usize) -> [BinRanges; PHI_BINS] {
+        let mut ranges = [BinRanges::EMPTY; PHI_BINS];
         if face.area <= 0.0 {
-            return;
+            return ranges;
         }
         // Per direction bin, the offsets a plane through every vertex can take: for each vertex,
         // the range of its offsets over the bin's four corner directions, intersected over the
         // vertices and widened by ε. Flat arrays, so the loops vectorise.
         const ROW: usize = PHI_BINS + 1;
         let (mut lows, mut highs) = ([f32::NEG_INFINITY; PHI_BINS], [f32::INFINITY; PHI_BINS]);
-        let (row_corners, next_corners) = (&self.corners[t * ROW..(t + 1) * ROW], &self.corners[(t + 1) * ROW..(t + 2) * ROW]);
+        let ((cos_row, sin_row), (cos_next, sin_next)) = (self.theta_cos_sin[t], self.theta_cos_sin[t + 1]);
         for vertex in &face.vertices {
+            let (along_row, along_next) = (vertex.x * cos_row + vertex.y * sin_row, vertex.x * cos_next + vertex.y * sin_next);
             let (mut row, mut next) = ([0.0f32; ROW], [0.0f32; ROW]);
             for p in 0..ROW {
-                row[p] = vertex.dot(row_corners[p]);
-                next[p] = vertex.dot(next_corners[p]);
+                row[p] = self.sin_phi[p] * along_row + vertex.z * self.cos_phi[p];
+                next[p] = self.sin_phi[p] * along_next + vertex.z * self.cos_phi[p];
             }
             for p in 0..PHI_BINS {
                 let (a, b, c, d) = (row[p], row[p + 1], next[p], next[p + 1]);
@@ -189,27 +190,54 @@ impl Grid {
                 highs[p] = highs[p].min(a.max(b).max(c.max(d)));
             }
         }
-        for p in 0..PHI_BINS {
+        for (p, range) in ranges.iter_mut().enumerate() {
             // max/min commute with the rounding of ±ε: the same values as widening per vertex.
             let (low, high) = (lows[p] - self.epsilon, highs[p] + self.epsilon);
             if low > high {
                 continue;
             }
             let cosine = face.normal.dot(self.centers[t * PHI_BINS + p]);
-            let weight = sign * face.area * cosine.abs();
-            let base = p * self.rho_bins;
-            let (first, end) = (self.rho_bin(low), self.rho_bin(high));
-            valid[base + first..=base + end].iter_mut().for_each(|density| *density += weight);
-            // In front of the face: the side its normal points to along this direction.
             let (front_low, front_high) = if cosine >= 0.0 { (high, high + self.epsilon) } else { (low - self.epsilon, low) };
-            let (front_first, front_end) = (self.rho_bin(front_low), self.rho_bin(front_high));
-            for bin in front_first..=front_end {
+            *range = BinRanges {
+                valid: (self.rho_bin(low) as u8, self.rho_bin(high) as u8),
+                front: (self.rho_bin(front_low) as u8, self.rho_bin(front_high) as u8),
+            };
+        }
+        ranges
+    }
+
+    /// Adds `sign` × the density contribution of `face` to direction row `t` (`valid` and
+    /// `front` are that row's slices, `ranges` the face's from `row_ranges`): area × |cos| to
+    /// every bin where a valid plane exists, and to the bins just in front of the face (weighted
+    /// by PENALTY when scoring).
+    fn contribute_to_row(&self, face: &Face, ranges: &[BinRanges], sign: f32, t: usize, valid: &mut [f32], front: &mut [f32]) {
+        for (p, range) in ranges.iter().enumerate() {
+            let (first, end) = (range.valid.0 as usize, range.valid.1 as usize);
+            if first > end {
+                continue;
+            }
+            let weight = sign * face.area * face.normal.dot(self.centers[t * PHI_BINS + p]).abs();
+            let base = p * self.rho_bins;
+            valid[base + first..=base + end].iter_mut().for_each(|density| *density += weight);
+            for bin in range.front.0 as usize..=range.front.1 as usize {
                 if bin < first || bin > end {
                     front[base + bin] += weight;
                 }
             }
         }
     }
+}
+
+/// One face's ρ bins in one direction bin (first and last, inclusive): where a valid plane
+/// exists, and just in front of the face. ρ has at most 256 bins.
+#[derive(Clone, Copy)]
+struct BinRanges {
+    valid: (u8, u8),
+    front: (u8, u8),
+}
+
+impl BinRanges {
+    const EMPTY: BinRanges = BinRanges { valid: (u8::MAX, 0), front: (u8::MAX, 0) };
 }
 
 /// Per bin: the area of faces a plane in the bin can hold, and of faces it would lie just in
@@ -225,13 +253,40 @@ impl Density {
         Density { valid: vec![0.0; bins], front: vec![0.0; bins] }
     }
 
-    /// Adds `sign` × the contributions of `faces`, in parallel over θ rows: every bin sums its
-    /// faces in their order, so the densities (and the planes) are the same on every run.
-    fn add_faces(&mut self, grid: &Grid, faces: &[Face], sign: f32) {
+    /// The density of all `faces`, and the ρ bins each face contributes to (kept, so removing
+    /// the faces of a chosen plane does not redo the geometry). In parallel over θ rows: every
+    /// bin sums its faces in their order, so the densities (and the planes) are the same on
+    /// every run.
+    fn of_faces(grid: &Grid, faces: &[Face]) -> (Density, Vec<BinRanges>) {
+        let mut density = Density::zero(grid.bins());
+        let mut ranges = vec![BinRanges::EMPTY; THETA_BINS * faces.len() * PHI_BINS];
         let row = PHI_BINS * grid.rho_bins;
+        if !faces.is_empty() {
+            density
+                .valid
+                .par_chunks_mut(row)
+                .zip(density.front.par_chunks_mut(row))
+                .zip(ranges.par_chunks_mut(faces.len() * PHI_BINS))
+                .enumerate()
+                .for_each(|(t, ((valid, front), ranges))| {
+                    for (face, ranges) in faces.iter().zip(ranges.chunks_exact_mut(PHI_BINS)) {
+                        ranges.copy_from_slice(&grid.row_ranges(face, t));
+                        grid.contribute_to_row(face, ranges, 1.0, t, valid, front);
+                    }
+                });
+        }
+        (density, ranges)
+    }
+
+    /// Subtracts the contributions of the faces `removed` (indices into the faces `ranges` were
+    /// computed for), in parallel over θ rows.
+    fn remove_faces(&mut self, grid: &Grid, faces: &[Face], ranges: &[BinRanges], removed: &[u32]) {
+        let row = PHI_BINS * grid.rho_bins;
+        let per_row = faces.len() * PHI_BINS;
         self.valid.par_chunks_mut(row).zip(self.front.par_chunks_mut(row)).enumerate().for_each(|(t, (valid, front))| {
-            for face in faces {
-                grid.contribute_to_row(face, sign, t, valid, front);
+            for &index in removed {
+                let start = t * per_row + index as usize * PHI_BINS;
+                grid.contribute_to_row(&faces[index as usize], &ranges[start..start + PHI_BINS], -1.0, t, valid, front);
             }
         });
     }
@@ -262,8 +317,7 @@ pub fn select_planes(positions: &[[f32; 3]], triangles: &[[u32; 3]], settings: P
         })
         .collect();
 
-    let mut density = Density::zero(grid.bins());
-    density.add_faces(&grid, &faces, 1.0);
+    let (mut density, ranges) = Density::of_faces(&grid, &faces);
 
     let mut assigned = vec![false; faces.len()];
     let mut remaining: Vec<u32> = (0..faces.len() as u32).filter(|&index| faces[index as usize].area > 0.0).collect();
@@ -273,6 +327,7 @@ pub fn select_planes(positions: &[[f32; 3]], triangles: &[[u32; 3]], settings: P
         let region = density.best_bin().map(|bin| grid.region(bin));
         let (normal, rho) =
             region.and_then(|region| refine(&grid, &faces, &remaining, region)).unwrap_or_else(|| largest_face_plane(&faces, &remaining));
+
         let holds = |(normal, rho): (Vec3, f32)| -> Vec<u32> {
             remaining.par_iter().copied().filter(|&index| faces[index as usize].distance_to(normal, rho) <= grid.epsilon).collect()
         };
@@ -287,8 +342,7 @@ pub fn select_planes(positions: &[[f32; 3]], triangles: &[[u32; 3]], settings: P
         (normal, rho) = fit_plane(&faces, &members, normal, rho, grid.epsilon);
         members = holds((normal, rho));
         planes.push((normal, rho, Vec::new()));
-        let removed: Vec<Face> = members.iter().map(|&index| faces[index as usize]).collect();
-        density.add_faces(&grid, &removed, -1.0);
+        density.remove_faces(&grid, &faces, &ranges, &members);
         for &index in &members {
             assigned[index as usize] = true;
         }

@@ -178,8 +178,8 @@ impl Stage {
             // 2: `map_d` naming the albedo texture is not applied a second time.
             Stage::Mesh => 2,
             // 2: each plane is fitted to its faces (least squares within ε), not left at the
-            // edge of the valid offsets. 3: faces then move to their nearest plane (rounds of
-            // reassignment and refitting).
+            // edge of the valid offsets. 3: faces then move to their nearest plane holding their
+            // material (rounds of reassignment and refitting).
             Stage::Planes => 3,
             _ => 1,
         }
@@ -666,7 +666,14 @@ pub fn plane_settings(db: &dyn Db, asset: BillboardAsset) -> crate::planes::Plan
 pub fn billboard_planes(db: &dyn Db, asset: BillboardAsset) -> Result<Arc<crate::planes::PlaneSet>, Diagnostic> {
     let loaded = loaded_mesh(db, asset)?;
     let settings = plane_settings(db, asset);
-    timed(db, Stage::Planes, asset, || Ok(Arc::new(crate::planes::select_planes(&loaded.mesh.positions, &loaded.mesh.triangles, settings))))
+    timed(db, Stage::Planes, asset, || {
+        Ok(Arc::new(crate::planes::select_planes(
+            &loaded.mesh.positions,
+            &loaded.mesh.triangles,
+            &loaded.mesh.triangle_materials,
+            settings,
+        )))
+    })
 }
 
 /// The planes' rectangles and their atlas layout.

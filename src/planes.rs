@@ -305,8 +305,10 @@ impl Density {
     }
 }
 
-/// Chooses planes for the triangles of a mesh. Deterministic for the same input.
-pub fn select_planes(positions: &[[f32; 3]], triangles: &[[u32; 3]], settings: PlaneSettings) -> PlaneSet {
+/// Chooses planes for the triangles of a mesh. `face_materials` holds each triangle's material
+/// (empty: one material); faces only move between planes that already hold their material,
+/// see `reassign_to_nearest_planes`. Deterministic for the same input.
+pub fn select_planes(positions: &[[f32; 3]], triangles: &[[u32; 3]], face_materials: &[u32], settings: PlaneSettings) -> PlaneSet {
     let grid = Grid::new(positions, settings.epsilon);
     let faces: Vec<Face> = triangles
         .iter()
@@ -365,7 +367,8 @@ pub fn select_planes(positions: &[[f32; 3]], triangles: &[[u32; 3]], settings: P
         planes[best].2.push(index);
     }
 
-    reassign_to_nearest_planes(&faces, &mut planes, grid.epsilon);
+    let face_materials: Vec<u32> = (0..faces.len()).map(|face| face_materials.get(face).copied().unwrap_or(0)).collect();
+    reassign_to_nearest_planes(&faces, &face_materials, &mut planes, grid.epsilon);
 
     let mut max_error = 0.0f32;
     let planes = planes
@@ -382,15 +385,18 @@ pub fn select_planes(positions: &[[f32; 3]], triangles: &[[u32; 3]], settings: P
     PlaneSet { planes, epsilon: grid.epsilon, max_error, face_count: faces.len() }
 }
 
-/// Moves every face to the plane nearest it, then fits the planes to their new members, for
-/// up to REASSIGNMENT_ROUNDS rounds, and ends with one last move so each face sits on its
-/// nearest plane. The greedy selection gives a chosen plane every remaining face within ε, so a
-/// face often lies nearly ε from an early plane while a later plane passes right through it, and
-/// in a view at an angle to the plane a face drawn on its plane is displaced by up to that
-/// distance. A face only ever moves to a strictly nearer plane, so no face ends farther from its
-/// plane than the greedy selection left it (within ε, unless capped). Planes left without faces
-/// are dropped by the caller. Deterministic: every face decides alone, ties keep the current plane.
-fn reassign_to_nearest_planes(faces: &[Face], planes: &mut [(Vec3, f32, Vec<u32>)], epsilon: f32) {
+/// Moves every face to the plane nearest it among those holding its material, then fits the
+/// planes to their new members, for up to REASSIGNMENT_ROUNDS rounds, and ends with one last
+/// move so each face sits on its nearest such plane. The greedy selection gives a chosen plane
+/// every remaining face within ε, so a face often lies nearly ε from an early plane while a
+/// later plane passes right through it, and in a view at an angle to the plane a face drawn on
+/// its plane is displaced by up to that distance. A face only ever moves to a strictly nearer
+/// plane, so no face ends farther from its plane than the greedy selection left it (within ε,
+/// unless capped). Faces never bring a material to a plane that had none of it: a plane's
+/// render groups, and the renders a texture edit invalidates, stay those of the greedy
+/// selection or fewer. Planes left without faces are dropped by the caller. Deterministic:
+/// every face decides alone, ties keep the current plane.
+fn reassign_to_nearest_planes(faces: &[Face], face_materials: &[u32], planes: &mut [(Vec3, f32, Vec<u32>)], epsilon: f32) {
     let mut assignment = vec![usize::MAX; faces.len()];
     for (plane, (_, _, members)) in planes.iter().enumerate() {
         for &index in members {
@@ -400,8 +406,22 @@ fn reassign_to_nearest_planes(faces: &[Face], planes: &mut [(Vec3, f32, Vec<u32>
     for round in 0..=REASSIGNMENT_ROUNDS {
         let normals: Vec<Vec3> = planes.iter().map(|plane| plane.0).collect();
         let offsets: Vec<f32> = planes.iter().map(|plane| plane.1).collect();
-        let moved: Vec<Option<usize>> =
-            faces.par_iter().zip(&assignment).map(|(face, &current)| nearer_plane(face, current, &normals, &offsets)).collect();
+        let materials: Vec<Vec<u32>> = planes
+            .iter()
+            .map(|(_, _, members)| {
+                let mut materials: Vec<u32> = members.iter().map(|&index| face_materials[index as usize]).collect();
+                materials.sort_unstable();
+                materials.dedup();
+                materials
+            })
+            .collect();
+        let candidates = Candidates { normals: &normals, offsets: &offsets, materials: &materials };
+        let moved: Vec<Option<usize>> = faces
+            .par_iter()
+            .zip(&assignment)
+            .enumerate()
+            .map(|(index, (face, &current))| nearer_plane(face, face_materials[index], current, &candidates))
+            .collect();
         let mut changed = false;
         for (slot, moved) in assignment.iter_mut().zip(moved) {
             if let Some(plane) = moved {
@@ -425,19 +445,26 @@ fn reassign_to_nearest_planes(faces: &[Face], planes: &mut [(Vec3, f32, Vec<u32>
     }
 }
 
-/// The plane strictly nearer `face` than plane `current` (largest vertex distance), if any.
-/// The centroid's distance is a lower bound (a mean of the vertex distances), so the exact test
-/// runs only for planes that pass near the face.
-fn nearer_plane(face: &Face, current: usize, normals: &[Vec3], offsets: &[f32]) -> Option<usize> {
+/// The planes a face may move to: normal, offset and the (sorted) materials each holds.
+struct Candidates<'a> {
+    normals: &'a [Vec3],
+    offsets: &'a [f32],
+    materials: &'a [Vec<u32>],
+}
+
+/// The plane holding `material` strictly nearer `face` than plane `current` (largest vertex
+/// distance), if any. The centroid's distance is a lower bound (a mean of the vertex
+/// distances), so the exact test runs only for planes that pass near the face.
+fn nearer_plane(face: &Face, material: u32, current: usize, candidates: &Candidates) -> Option<usize> {
     let centroid = (face.vertices[0] + face.vertices[1] + face.vertices[2]) / 3.0;
-    let mut best_distance = face.distance_to(normals[current], offsets[current]);
+    let mut best_distance = face.distance_to(candidates.normals[current], candidates.offsets[current]);
     let mut best = None;
-    for (plane, (&normal, &offset)) in normals.iter().zip(offsets).enumerate() {
+    for (plane, (&normal, &offset)) in candidates.normals.iter().zip(candidates.offsets).enumerate() {
         if (normal.dot(centroid) - offset).abs() >= best_distance || plane == current {
             continue;
         }
         let distance = face.distance_to(normal, offset);
-        if distance < best_distance {
+        if distance < best_distance && candidates.materials[plane].binary_search(&material).is_ok() {
             (best_distance, best) = (distance, Some(plane));
         }
     }

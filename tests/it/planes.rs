@@ -58,7 +58,7 @@ fn soup(count: usize) -> (Vec<[f32; 3]>, Vec<[u32; 3]>) {
 #[test]
 fn a_cube_becomes_its_six_faces() {
     let (positions, triangles) = cube();
-    let set = select_planes(&positions, &triangles, settings(0.02));
+    let set = select_planes(&positions, &triangles, &[], settings(0.02));
     assert_eq!(set.planes.len(), 6);
     assert!(set.planes.iter().all(|plane| plane.faces.len() == 2), "each side's two triangles share a plane");
     assert!(check_assignment(&positions, &triangles, &set) <= set.epsilon * 1.0001);
@@ -68,21 +68,21 @@ fn a_cube_becomes_its_six_faces() {
 fn every_face_is_assigned_within_epsilon_and_selection_is_deterministic() {
     let (positions, triangles) = soup(2000);
     for epsilon in [0.01, 0.05] {
-        let set = select_planes(&positions, &triangles, settings(epsilon));
+        let set = select_planes(&positions, &triangles, &[], settings(epsilon));
         let worst = check_assignment(&positions, &triangles, &set);
         assert!(worst <= set.epsilon * 1.0001, "ε = {epsilon}: {worst} > {}", set.epsilon);
         assert!((set.max_error - worst).abs() < 1e-5, "the reported error is the real one");
-        assert_eq!(set, select_planes(&positions, &triangles, settings(epsilon)), "deterministic");
+        assert_eq!(set, select_planes(&positions, &triangles, &[], settings(epsilon)), "deterministic");
     }
-    let loose = select_planes(&positions, &triangles, settings(0.05)).planes.len();
-    let tight = select_planes(&positions, &triangles, settings(0.01)).planes.len();
+    let loose = select_planes(&positions, &triangles, &[], settings(0.05)).planes.len();
+    let tight = select_planes(&positions, &triangles, &[], settings(0.01)).planes.len();
     assert!(loose < tight, "a larger ε needs fewer planes: {loose} vs {tight}");
 }
 
 #[test]
 fn max_planes_caps_the_count_and_reports_the_achieved_error() {
     let (positions, triangles) = soup(500);
-    let set = select_planes(&positions, &triangles, PlaneSettings { epsilon: 0.02, max_planes: Some(8) });
+    let set = select_planes(&positions, &triangles, &[], PlaneSettings { epsilon: 0.02, max_planes: Some(8) });
     assert!(set.planes.len() <= 8);
     let worst = check_assignment(&positions, &triangles, &set);
     assert!(worst > set.epsilon, "capped: some faces move further than ε");
@@ -93,7 +93,7 @@ fn max_planes_caps_the_count_and_reports_the_achieved_error() {
 fn degenerate_faces_are_kept() {
     let positions = vec![[0.0, 0.0, 0.0], [1.0, 0.0, 0.0], [0.0, 1.0, 0.0], [2.0, 2.0, 2.0]];
     let triangles = vec![[0, 1, 2], [3, 3, 3], [0, 1, 1]];
-    let set = select_planes(&positions, &triangles, settings(0.02));
+    let set = select_planes(&positions, &triangles, &[], settings(0.02));
     check_assignment(&positions, &triangles, &set);
 }
 
@@ -117,7 +117,7 @@ fn a_plane_is_fitted_to_its_faces_not_left_at_the_edge_of_epsilon() {
             triangles.push([corner, corner + 12, corner + 11]);
         }
     }
-    let set = select_planes(&positions, &triangles, settings(epsilon));
+    let set = select_planes(&positions, &triangles, &[], settings(epsilon));
     assert_eq!(set.planes.len(), 1);
     let worst = check_assignment(&positions, &triangles, &set);
     assert!(worst < 0.05 * set.epsilon, "the sheet is {worst} from its plane (ε = {})", set.epsilon);
@@ -129,7 +129,7 @@ fn every_face_ends_on_its_nearest_plane() {
     // plane passes right through; the reassignment moves it there, since a face drawn on its
     // plane is displaced by its distance in views at an angle to the plane.
     let (positions, triangles) = soup(600);
-    let set = select_planes(&positions, &triangles, settings(0.05));
+    let set = select_planes(&positions, &triangles, &[], settings(0.05));
     let distance = |face: u32, plane: &cirrus::planes::Plane| {
         let normal = glam::Vec3::from(plane.normal);
         triangles[face as usize]
@@ -148,4 +148,25 @@ fn every_face_ends_on_its_nearest_plane() {
     }
     assert_eq!(farther, 0, "faces not on their nearest plane, of {} in {} planes", triangles.len(), set.planes.len());
     assert!(check_assignment(&positions, &triangles, &set) <= set.epsilon * 1.0001);
+}
+
+#[test]
+fn faces_move_only_to_planes_that_hold_their_material() {
+    // Moving a bark face onto a leaf plane would make that plane render bark too, so a bark
+    // texture edit would re-render it. Two materials at random: with them given, fewer planes
+    // mix materials than when selection ignores them.
+    let (positions, triangles) = soup(600);
+    let materials: Vec<u32> = (0..triangles.len() as u32).map(|face| (face * 7 + face / 3) % 2).collect();
+    let mixed = |set: &PlaneSet| {
+        set.planes
+            .iter()
+            .filter(|plane| {
+                plane.faces.iter().any(|&f| materials[f as usize] == 0) && plane.faces.iter().any(|&f| materials[f as usize] == 1)
+            })
+            .count()
+    };
+    let aware = select_planes(&positions, &triangles, &materials, settings(0.05));
+    let blind = select_planes(&positions, &triangles, &[], settings(0.05));
+    check_assignment(&positions, &triangles, &aware);
+    assert!(mixed(&aware) < mixed(&blind), "planes mixing materials: {} aware of materials, {} blind", mixed(&aware), mixed(&blind));
 }

@@ -334,8 +334,12 @@ impl Gpu {
             height: u32,
             frame_buffer: wgpu::Buffer,
             frame_group: wgpu::BindGroup,
-            draws: Vec<(wgpu::Buffer, u32, Arc<wgpu::BindGroup>)>,
+            /// Vertex range in the stack's one vertex buffer, and the material.
+            draws: Vec<(std::ops::Range<u32>, Arc<wgpu::BindGroup>)>,
         }
+        // Every draw of the stack reads one vertex buffer: lavapipe's cost per bound buffer
+        // (memory and time) then comes once per submission instead of once per draw.
+        let mut all_vertices: Vec<RenderVertex> = Vec::new();
         let mut stacked = Vec::with_capacity(inputs.len());
         let mut top = 0;
         for input in inputs {
@@ -359,14 +363,16 @@ impl Gpu {
                     continue;
                 }
                 let material = &input.materials[*material_index];
-                let buffer = self.vertex_buffer(vertices);
-                draws.push((buffer, vertices.len() as u32, self.material_group(material, input.alpha_cutoff)));
+                let first = all_vertices.len() as u32;
+                all_vertices.extend_from_slice(vertices);
+                draws.push((first..all_vertices.len() as u32, self.material_group(material, input.alpha_cutoff)));
             }
             let (rectangle_width, rectangle_height) = (input.width.max(1), input.height.max(1));
             stacked.push(StackedDraws { top, width: rectangle_width, height: rectangle_height, frame_buffer, frame_group, draws });
             top += rectangle_height;
         }
 
+        let vertex_buffer = (!all_vertices.is_empty()).then(|| self.vertex_buffer(&all_vertices));
         let mut encoder = self.device.create_command_encoder(&Default::default());
         {
             let attachments: Vec<Option<wgpu::RenderPassColorAttachment>> = views
@@ -391,15 +397,17 @@ impl Gpu {
                 ..Default::default()
             });
             pass.set_pipeline(&self.pipeline);
+            if let Some(buffer) = &vertex_buffer {
+                pass.set_vertex_buffer(0, buffer.slice(..));
+            }
             for rectangle in &stacked {
                 // The camera's clip square maps onto this rectangle's rows of the stack only.
                 pass.set_viewport(0.0, rectangle.top as f32, rectangle.width as f32, rectangle.height as f32, 0.0, 1.0);
                 pass.set_scissor_rect(0, rectangle.top, rectangle.width, rectangle.height);
                 pass.set_bind_group(0, &rectangle.frame_group, &[]);
-                for (buffer, count, group) in &rectangle.draws {
+                for (vertices, group) in &rectangle.draws {
                     pass.set_bind_group(1, group.as_ref(), &[]);
-                    pass.set_vertex_buffer(0, buffer.slice(..));
-                    pass.draw(0..*count, 0..1);
+                    pass.draw(vertices.clone(), 0..1);
                 }
             }
         }
@@ -409,9 +417,9 @@ impl Gpu {
         depth_texture.destroy();
         for rectangle in &stacked {
             rectangle.frame_buffer.destroy();
-            for (buffer, _, _) in &rectangle.draws {
-                buffer.destroy();
-            }
+        }
+        if let Some(buffer) = &vertex_buffer {
+            buffer.destroy();
         }
         let rows = |image: &[u8], rectangle: &StackedDraws| -> Vec<u8> {
             let row_bytes = rectangle.width as usize * 4;

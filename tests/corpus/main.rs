@@ -137,7 +137,7 @@ fn corpus_meshes_load_with_their_documented_triangle_counts_and_maps() {
 /// Trees whose mean IoU at the default ε is below the DESIGN §7 bar of 0.85, with the floor each
 /// must still clear (measured − 0.02): leaves on the foliage's long perimeter shift by up to ε
 /// when projected.
-const IOU_BELOW_BAR: &[(&str, f64)] = &[("bush", 0.81), ("ash", 0.81)];
+const IOU_BELOW_BAR: &[(&str, f64)] = &[("bush", 0.80), ("ash", 0.80)];
 
 #[test]
 fn corpus_billboard_clouds_bake_and_keep_their_silhouettes() {

@@ -268,7 +268,8 @@ fn bench_billboards(corpus: &Path) {
     );
     println!("billboard: oak stage ms {}", report["stage_ms"]);
 
-    // A bark-texture edit, in process, after a full bake.
+    // Bark-texture edits, in process, after a full bake: five in a row (a different texel
+    // each time), so the figure is what an artist saving repeatedly sees, first edit included.
     let dir = tree_project(corpus, r#"BillboardCloud(name: "oak", mesh: "trees/oak_medium.obj")"#);
     let mut project = Project::open(
         load_pipeline(&dir.path().join("pipeline.ron")).unwrap(),
@@ -278,22 +279,35 @@ fn bench_billboards(corpus: &Path) {
     project.build(&BuildOptions::default(), &|_| {}).unwrap();
     let full = start.elapsed().as_secs_f64();
     let bark = dir.path().join("assets/trees/textures/oak_color_1k.jpg");
-    let mut image = image::open(&bark).unwrap().into_rgb8();
-    image.get_pixel_mut(10, 10).0 = [255, 0, 0];
-    image.save(&bark).unwrap();
-    let start = Instant::now();
-    let summary = project.build(&BuildOptions::default(), &|_| {}).unwrap();
-    let edit = start.elapsed().as_secs_f64();
+    let mut edits = Vec::new();
+    let mut summary = None;
+    for edit in 0..5u8 {
+        let mut image = image::open(&bark).unwrap().into_rgb8();
+        image.get_pixel_mut(10, 10).0 = [255, edit * 50, 0];
+        image.save(&bark).unwrap();
+        let start = Instant::now();
+        let built = project.build(&BuildOptions::default(), &|_| {}).unwrap();
+        edits.push(start.elapsed().as_secs_f64());
+        summary.get_or_insert(built);
+    }
+    let summary = summary.expect("five edits");
+    let first = edits[0];
+    let mut sorted = edits.clone();
+    sorted.sort_by(f64::total_cmp);
+    let edit = sorted[sorted.len() / 2];
     let renders = summary.assets[0]
         .stages
         .iter()
         .filter(|stage| stage.stage == "render" && stage.status == cirrus::summary::StageStatus::Ran)
         .count();
     println!(
-        "billboard: oak bark-texture edit {:.0} ms vs full bake {:.0} ms in process: {:.1} % (bar ≤ 20 %), {renders} of {} render stages (planes × material sets) re-ran",
+        "billboard: oak bark-texture edit, median of 5: {:.0} ms vs full bake {:.0} ms in process: {:.1} % (bar ≤ 20 %); first edit {:.0} ms ({:.1} %); all {:?} ms; {renders} of {} render stages (planes × material sets) re-ran",
         edit * 1e3,
         full * 1e3,
         100.0 * edit / full,
+        first * 1e3,
+        100.0 * first / full,
+        edits.iter().map(|seconds| (seconds * 1e3).round() as u32).collect::<Vec<_>>(),
         summary.assets[0].stages.iter().filter(|stage| stage.stage == "render").count()
     );
     let mut edit_ms = std::collections::BTreeMap::<&str, f64>::new();
@@ -301,7 +315,7 @@ fn bench_billboards(corpus: &Path) {
         *edit_ms.entry(stage.stage).or_default() += stage.ms;
     }
     let edit_ms: Vec<String> = edit_ms.iter().map(|(stage, ms)| format!("{stage} {ms:.0}")).collect();
-    println!("billboard: bark edit stage ms (summed over threads): {}", edit_ms.join(", "));
+    println!("billboard: first bark edit stage ms (summed over threads): {}", edit_ms.join(", "));
 }
 
 /// Plane counts and mean silhouette IoU of each corpus tree at three ε.

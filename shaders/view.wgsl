@@ -17,8 +17,10 @@ struct Material {
     params: vec4f,
 }
 
-@group(0) @binding(0) var<uniform> camera: Camera;
-@group(1) @binding(0) var<uniform> material: Material;
+// Constants in read-only storage buffers, not uniform ones: lavapipe would compile a shader
+// variant for every rebound uniform buffer (see `constants_entry` in gpu.rs).
+@group(0) @binding(0) var<storage, read> camera: Camera;
+@group(1) @binding(0) var<storage, read> material: Material;
 @group(1) @binding(1) var linear_sampler: sampler;
 @group(1) @binding(2) var albedo_map: texture_2d<f32>;
 @group(1) @binding(3) var opacity_map: texture_2d<f32>;

@@ -64,35 +64,47 @@ pub fn composite_atlas(layout: &Layout, planes: &[&PlaneImages]) -> AtlasImages 
 /// each texel's source; the four layers then copy from their sources in parallel.
 fn extend_outward(layers: &mut [Vec<u8>; 4], covered: &[bool], width: usize, height: usize) {
     const UNREACHED: u32 = u32::MAX;
-    let mut source: Vec<u32> = covered.iter().enumerate().map(|(index, &c)| if c { index as u32 } else { UNREACHED }).collect();
-    let mut queue: Vec<u32> = (0..covered.len() as u32).filter(|&index| covered[index as usize]).collect();
-    if queue.is_empty() {
+    const BORDER: u32 = u32::MAX - 1;
+    if !covered.iter().any(|&c| c) {
         // Nothing drawn at all: a neutral flat normal, so the surface stays valid.
         for texel in layers[1].chunks_exact_mut(4) {
             texel.copy_from_slice(&[128, 128, 255, 255]);
         }
         return;
     }
-    queue.reserve(covered.len() - queue.len());
+    // The search runs on a grid with a one-texel border that counts as already reached, so a
+    // texel's four neighbours are ±1 and ±stride with no bounds tests. Each cell holds the
+    // (unpadded) index of the covered texel it copies from.
+    let stride = width + 2;
+    let mut source = vec![UNREACHED; stride * (height + 2)];
+    source[..stride].fill(BORDER);
+    source[(height + 1) * stride..].fill(BORDER);
+    for row in 1..=height {
+        source[row * stride] = BORDER;
+        source[row * stride + width + 1] = BORDER;
+    }
+    let mut queue: Vec<u32> = Vec::with_capacity(width * height);
+    for (index, _) in covered.iter().enumerate().filter(|(_, &c)| c) {
+        let padded = (index / width + 1) * stride + index % width + 1;
+        source[padded] = index as u32;
+        queue.push(padded as u32);
+    }
+    // Breadth-first from every covered texel at once, neighbours in the order left, right, up,
+    // down: each uncovered texel takes the source of the texel that reached it first.
     let mut next = 0;
-    while let Some(&index) = queue.get(next) {
+    while let Some(&cell) = queue.get(next) {
         next += 1;
-        let index = index as usize;
-        let (x, y) = (index % width, index / width);
-        let from = source[index];
-        let neighbours = [
-            (x > 0).then(|| index - 1),
-            (x + 1 < width).then(|| index + 1),
-            (y > 0).then(|| index - width),
-            (y + 1 < height).then(|| index + width),
-        ];
-        for neighbour in neighbours.into_iter().flatten() {
+        let cell = cell as usize;
+        let from = source[cell];
+        for neighbour in [cell - 1, cell + 1, cell - stride, cell + stride] {
             if source[neighbour] == UNREACHED {
                 source[neighbour] = from;
                 queue.push(neighbour as u32);
             }
         }
     }
+    let source: Vec<u32> =
+        (0..height).flat_map(|row| source[(row + 1) * stride + 1..(row + 1) * stride + 1 + width].iter().copied()).collect();
     layers.par_iter_mut().enumerate().for_each(|(layer_index, layer)| {
         let channels = if layer_index == 0 { 3 } else { 4 };
         for (index, &from) in source.iter().enumerate() {

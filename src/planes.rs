@@ -329,7 +329,6 @@ pub fn select_planes(positions: &[[f32; 3]], triangles: &[[u32; 3]], face_materi
         let region = density.best_bin().map(|bin| grid.region(bin));
         let (normal, rho) =
             region.and_then(|region| refine(&grid, &faces, &remaining, region)).unwrap_or_else(|| largest_face_plane(&faces, &remaining));
-
         let holds = |(normal, rho): (Vec3, f32)| -> Vec<u32> {
             remaining.par_iter().copied().filter(|&index| faces[index as usize].distance_to(normal, rho) <= grid.epsilon).collect()
         };

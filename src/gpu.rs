@@ -345,8 +345,8 @@ impl Gpu {
             /// Vertex range in the stack's one vertex buffer, and the material.
             draws: Vec<(std::ops::Range<u32>, Arc<wgpu::BindGroup>)>,
         }
-        // Every draw of the stack reads one vertex buffer: lavapipe's cost per bound buffer
-        // (memory and time) then comes once per submission instead of once per draw.
+        // Every draw of the stack reads one vertex buffer: one buffer to create and fill per
+        // submission instead of one per draw.
         let mut all_vertices: Vec<RenderVertex> = Vec::new();
         let mut stacked = Vec::with_capacity(inputs.len());
         let mut top = 0;

@@ -142,7 +142,7 @@ fn reduce(source: &[[f32; 4]], width: u32, height: u32, new_width: u32, new_heig
 
 /// Fraction of texels whose alpha × `scale` passes `cutoff`.
 fn alpha_coverage(texels: &[[f32; 4]], cutoff: f32, scale: f32) -> f32 {
-    let passing = texels.iter().filter(|texel| texel[3] * scale > cutoff).count();
+    let passing = texels.par_iter().filter(|texel| texel[3] * scale > cutoff).count();
     passing as f32 / texels.len().max(1) as f32
 }
 

@@ -1,6 +1,8 @@
 //! Compression quality: block data decoded back with `bcdec_rs` and compared with the
 //! uncompressed surface (PSNR over the channels that carry data).
 
+use rayon::prelude::*;
+
 use crate::config::BlockFormat;
 use crate::encode::block_bytes;
 use crate::texture::Texture;
@@ -15,7 +17,8 @@ pub fn decode_blocks(format: BlockFormat, blocks: &[u8], width: u32, height: u32
     let blocks_y = height.div_ceil(4) as usize;
     let size = block_bytes(format);
     let mut pixels = vec![0u8; (width * height * 4) as usize];
-    for by in 0..blocks_y {
+    // Block rows in parallel: each writes its own four rows of pixels.
+    pixels.par_chunks_mut(width as usize * 4 * 4).enumerate().take(blocks_y).for_each(|(by, rows)| {
         for bx in 0..blocks_x {
             let block = &blocks[(by * blocks_x + bx) * size..][..size];
             let mut rgba = [0u8; 64];
@@ -39,8 +42,7 @@ pub fn decode_blocks(format: BlockFormat, blocks: &[u8], width: u32, height: u32
                 }
             }
             for row in 0..4 {
-                let y = by * 4 + row;
-                if y >= height as usize {
+                if by * 4 + row >= height as usize {
                     break;
                 }
                 for column in 0..4 {
@@ -48,25 +50,34 @@ pub fn decode_blocks(format: BlockFormat, blocks: &[u8], width: u32, height: u32
                     if x >= width as usize {
                         break;
                     }
-                    let target = (y * width as usize + x) * 4;
-                    pixels[target..target + 4].copy_from_slice(&rgba[(row * 4 + column) * 4..][..4]);
+                    let target = (row * width as usize + x) * 4;
+                    rows[target..target + 4].copy_from_slice(&rgba[(row * 4 + column) * 4..][..4]);
                 }
             }
         }
-    }
+    });
     Texture::new(width, height, pixels)
 }
 
 /// PSNR in dB between two same-sized textures over their first `channels` channels.
 pub fn psnr(reference: &Texture, decoded: &Texture, channels: usize) -> f64 {
     assert_eq!((reference.width, reference.height), (decoded.width, decoded.height), "same size");
-    let mut squared_error = 0u64;
-    for (a, b) in reference.pixels.chunks_exact(4).zip(decoded.pixels.chunks_exact(4)) {
-        for channel in 0..channels {
-            let difference = a[channel] as i64 - b[channel] as i64;
-            squared_error += (difference * difference) as u64;
-        }
-    }
+    // Integer sums, so the parallel order does not change the result.
+    let squared_error: u64 = reference
+        .pixels
+        .par_chunks(4 * 4096)
+        .zip(decoded.pixels.par_chunks(4 * 4096))
+        .map(|(reference, decoded)| {
+            let mut sum = 0u64;
+            for (a, b) in reference.chunks_exact(4).zip(decoded.chunks_exact(4)) {
+                for channel in 0..channels {
+                    let difference = a[channel] as i64 - b[channel] as i64;
+                    sum += (difference * difference) as u64;
+                }
+            }
+            sum
+        })
+        .sum();
     let samples = (reference.width * reference.height) as u64 * channels as u64;
     if squared_error == 0 {
         return LOSSLESS_PSNR_DB;

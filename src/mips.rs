@@ -63,7 +63,7 @@ fn to_filter_space(texture: &Texture, kind: SurfaceKind) -> Vec<[f32; 4]> {
 
 /// Linear colour of every texel, not weighted by alpha.
 fn straight_linear_colour(texture: &Texture) -> Vec<[f32; 4]> {
-    texture.pixels.chunks_exact(4).map(|t| [srgb_u8_to_linear(t[0]), srgb_u8_to_linear(t[1]), srgb_u8_to_linear(t[2]), 1.0]).collect()
+    texture.pixels.par_chunks_exact(4).map(|t| [srgb_u8_to_linear(t[0]), srgb_u8_to_linear(t[1]), srgb_u8_to_linear(t[2]), 1.0]).collect()
 }
 
 fn from_filter_space(

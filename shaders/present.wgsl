@@ -7,7 +7,8 @@ struct Present {
     offset_and_decode: vec4<f32>,
 };
 
-@group(0) @binding(0) var<uniform> present: Present;
+// A storage buffer like every constant in cirrus (see `constants_entry` in gpu.rs).
+@group(0) @binding(0) var<storage, read> present: Present;
 @group(0) @binding(1) var image: texture_2d<f32>;
 
 @vertex

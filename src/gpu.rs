@@ -542,7 +542,7 @@ impl Gpu {
                     binding: 0,
                     visibility: wgpu::ShaderStages::FRAGMENT,
                     ty: wgpu::BindingType::Buffer {
-                        ty: wgpu::BufferBindingType::Uniform,
+                        ty: wgpu::BufferBindingType::Storage { read_only: true },
                         has_dynamic_offset: false,
                         min_binding_size: None,
                     },
@@ -615,7 +615,7 @@ impl Gpu {
             if surface.config.format.is_srgb() { 1.0 } else { 0.0 },
             0.0,
         ];
-        let uniform = self.uniform_buffer(bytemuck::bytes_of(&offset));
+        let uniform = self.constants_buffer(bytemuck::bytes_of(&offset));
         let group = self.device.create_bind_group(&wgpu::BindGroupDescriptor {
             label: Some("present"),
             layout: &surface.layout,
@@ -739,32 +739,18 @@ impl Gpu {
         Ok(images)
     }
 
-    fn uniform_buffer(&self, bytes: &[u8]) -> wgpu::Buffer {
-        use wgpu::util::DeviceExt;
-        self.device.create_buffer_init(&wgpu::util::BufferInitDescriptor {
-            label: Some("uniform"),
-            contents: bytes,
-            usage: wgpu::BufferUsages::UNIFORM,
-        })
-    }
-
     /// A read-only storage buffer of per-draw constants (see `constants_entry` in `Gpu::new`).
     fn constants_buffer(&self, bytes: &[u8]) -> wgpu::Buffer {
-        use wgpu::util::DeviceExt;
-        self.device.create_buffer_init(&wgpu::util::BufferInitDescriptor {
-            label: Some("constants"),
-            contents: bytes,
-            usage: wgpu::BufferUsages::STORAGE,
-        })
+        self.filled_buffer("constants", bytes, wgpu::BufferUsages::STORAGE)
     }
 
     fn vertex_buffer(&self, vertices: &[RenderVertex]) -> wgpu::Buffer {
+        self.filled_buffer("vertices", bytemuck::cast_slice(vertices), wgpu::BufferUsages::VERTEX)
+    }
+
+    fn filled_buffer(&self, label: &str, bytes: &[u8], usage: wgpu::BufferUsages) -> wgpu::Buffer {
         use wgpu::util::DeviceExt;
-        self.device.create_buffer_init(&wgpu::util::BufferInitDescriptor {
-            label: Some("vertices"),
-            contents: bytemuck::cast_slice(vertices),
-            usage: wgpu::BufferUsages::VERTEX,
-        })
+        self.device.create_buffer_init(&wgpu::util::BufferInitDescriptor { label: Some(label), contents: bytes, usage })
     }
 
     fn target(&self, width: u32, height: u32, format: wgpu::TextureFormat) -> wgpu::Texture {

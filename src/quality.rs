@@ -18,7 +18,7 @@ pub fn decode_blocks(format: BlockFormat, blocks: &[u8], width: u32, height: u32
     let size = block_bytes(format);
     let mut pixels = vec![0u8; (width * height * 4) as usize];
     // Block rows in parallel: each writes its own four rows of pixels.
-    pixels.par_chunks_mut(width as usize * 4 * 4).enumerate().take(blocks_y).for_each(|(by, rows)| {
+    pixels.par_chunks_mut((width as usize * 4 * 4).max(1)).enumerate().take(blocks_y).for_each(|(by, rows)| {
         for bx in 0..blocks_x {
             let block = &blocks[(by * blocks_x + bx) * size..][..size];
             let mut rgba = [0u8; 64];

@@ -331,7 +331,7 @@ fn bench_billboard_quality(corpus: &Path) {
                 load_pipeline(&dir.path().join("pipeline.ron")).unwrap(),
                 ProjectOptions { persistent_cache: false, ..Default::default() },
             );
-            let options = cirrus::bake::PreviewOptions { asset: "tree".into(), views: 26, size: 256, out: "preview".into() };
+            let options = cirrus::bake::PreviewOptions { asset: "tree".into(), settings: Default::default(), out: "preview".into() };
             let metrics = project.preview(&options).expect("preview");
             let report: serde_json::Value =
                 serde_json::from_slice(&std::fs::read(dir.path().join("baked/tree/report.json")).unwrap()).unwrap();

@@ -1033,8 +1033,7 @@ pub fn file_node_id(path: &Path) -> String {
 #[derive(Clone, Debug)]
 pub struct PreviewOptions {
     pub asset: String,
-    pub views: usize,
-    pub size: u32,
+    pub settings: crate::lod_preview::PreviewSettings,
     /// Where `contact_sheet.png` and `metrics.json` go (project-relative or absolute).
     pub out: PathBuf,
 }
@@ -1081,7 +1080,7 @@ impl Project {
         let center = 0.5 * (min + max);
         let radius = positions.iter().map(|&p| glam::Vec3::from(p).distance(center)).fold(0.0, f32::max);
         let gpu = crate::gpu::gpu()?;
-        let preview = crate::lod_preview::preview(gpu, &source, &lod, center.to_array(), radius, options.views, options.size)?;
+        let preview = crate::lod_preview::preview(gpu, &source, &lod, center.to_array(), radius, options.settings)?;
         let out = self.config.root.join(&options.out);
         let mut metrics = serde_json::to_vec_pretty(&preview.metrics).expect("metrics serialise");
         metrics.push(b'\n');

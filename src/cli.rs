@@ -48,6 +48,10 @@ pub enum Command {
         /// Image size in pixels (square).
         #[arg(long, default_value_t = 256, value_parser = clap::value_parser!(u32).range(16..=2048))]
         size: u32,
+        /// Samples per pixel along each axis (4: 16 samples); a pixel is in a silhouette when at
+        /// least half of its samples are covered.
+        #[arg(long, default_value_t = 4, value_parser = clap::value_parser!(u32).range(1..=4))]
+        samples: u32,
         /// Output folder (default: <output>/<asset>/preview).
         #[arg(long)]
         out: Option<PathBuf>,
@@ -122,7 +126,10 @@ pub fn run(cli: Cli) -> ExitCode {
             }
         }
         Command::Graph { pipeline, asset, format } => graph(pipeline, asset, format),
-        Command::Preview { pipeline, asset, views, size, out } => preview(pipeline, asset, views, size, out),
+        Command::Preview { pipeline, asset, views, size, samples, out } => {
+            let settings = crate::lod_preview::PreviewSettings { views: views as usize, size, samples_per_axis: samples };
+            preview(pipeline, asset, settings, out)
+        }
     }
 }
 
@@ -200,19 +207,20 @@ fn check(pipeline: PathBuf) -> ExitCode {
     }
 }
 
-fn preview(pipeline: PathBuf, asset: String, views: u32, size: u32, out: Option<PathBuf>) -> ExitCode {
+fn preview(pipeline: PathBuf, asset: String, settings: crate::lod_preview::PreviewSettings, out: Option<PathBuf>) -> ExitCode {
     let config = match load_pipeline_or_report(&pipeline) {
         Ok(config) => config,
         Err(code) => return code,
     };
     let out = out.unwrap_or_else(|| config.output.join(&asset).join("preview"));
     let mut project = Project::open(config, ProjectOptions::default());
-    let options = crate::bake::PreviewOptions { asset, views: views as usize, size, out: out.clone() };
+    let options = crate::bake::PreviewOptions { asset, settings, out: out.clone() };
     match project.preview(&options) {
         Ok(metrics) => {
             println!(
-                "{} views: mean IoU {:.3}, min IoU {:.3}, mean PSNR {:.2} dB",
+                "{} views, {} samples per pixel: mean IoU {:.3}, min IoU {:.3}, mean PSNR {:.2} dB",
                 metrics.views.len(),
+                metrics.samples_per_pixel,
                 metrics.mean_iou,
                 metrics.min_iou,
                 metrics.mean_psnr

@@ -1,9 +1,17 @@
 //! LOD previews: the source mesh and its billboard cloud rendered from the 26 directions of a
 //! cube (face centres, edge midpoints, corners) under the same orthographic camera and light,
 //! compared by silhouette IoU and PSNR, and laid out side by side in a contact sheet.
+//!
+//! Every pixel is resolved from several samples (4 × 4 by default): a pixel belongs to a
+//! silhouette when at least half of its samples are covered, and its colour is their mean. With
+//! one sample per pixel, foliage finer than a pixel makes the IoU measure aliasing: the source
+//! against itself moved a quarter pixel along both image axes scored 0.850 (ash) and 0.835
+//! (bush); with 16 samples, 0.905 and 0.886.
 
 use glam::{Mat4, Vec3};
 use serde::Serialize;
+
+use rayon::prelude::*;
 
 use std::collections::BTreeMap;
 use std::path::PathBuf;
@@ -39,6 +47,8 @@ pub struct ViewMetrics {
 
 #[derive(Clone, Debug, PartialEq, Serialize)]
 pub struct PreviewMetrics {
+    /// Samples per pixel behind each silhouette and colour (`samples_per_axis`²).
+    pub samples_per_pixel: u32,
     pub views: Vec<ViewMetrics>,
     pub mean_iou: f64,
     pub min_iou: f64,
@@ -51,32 +61,111 @@ pub struct Preview {
     pub contact_sheet: Vec<u8>,
 }
 
-/// Renders `source` and `lod` from the first `views` directions at `size`² pixels, framing the
-/// sphere at `center` with `radius`.
+/// How a preview renders: how many of the 26 directions, the image size, and how many samples
+/// per pixel along each axis.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct PreviewSettings {
+    pub views: usize,
+    pub size: u32,
+    pub samples_per_axis: u32,
+}
+
+impl Default for PreviewSettings {
+    fn default() -> Self {
+        PreviewSettings { views: 26, size: 256, samples_per_axis: 4 }
+    }
+}
+
+/// Renders `source` and `lod` from the first `settings.views` directions, framing the sphere at
+/// `center` with `radius`.
 pub fn preview(
     gpu: &Gpu,
     source: &ViewMesh,
     lod: &ViewMesh,
     center: [f32; 3],
     radius: f32,
-    views: usize,
-    size: u32,
+    settings: PreviewSettings,
 ) -> Result<Preview, GpuError> {
     let light = preview_light();
     let mut metrics = Vec::new();
     let mut pairs = Vec::new();
-    for direction in view_directions().into_iter().take(views) {
+    for direction in view_directions().into_iter().take(settings.views) {
         let matrix = view_projection(center, radius, direction);
-        let source_image = gpu.render_view(source, matrix, light, size)?;
-        let lod_image = gpu.render_view(lod, matrix, light, size)?;
-        metrics.push(ViewMetrics { direction, iou: silhouette_iou(&source_image, &lod_image), psnr: rgb_psnr(&source_image, &lod_image) });
-        pairs.push((source_image, lod_image));
+        let source_view = render_resolved_view(gpu, source, matrix, light, settings)?;
+        let lod_view = render_resolved_view(gpu, lod, matrix, light, settings)?;
+        metrics.push(ViewMetrics {
+            direction,
+            iou: silhouette_iou(&source_view, &lod_view),
+            psnr: rgb_psnr(&source_view.rgba, &lod_view.rgba),
+        });
+        pairs.push((source_view.rgba, lod_view.rgba));
     }
     let count = metrics.len().max(1) as f64;
     let mean_iou = metrics.iter().map(|view| view.iou).sum::<f64>() / count;
     let min_iou = metrics.iter().map(|view| view.iou).fold(1.0, f64::min);
     let mean_psnr = metrics.iter().map(|view| view.psnr).sum::<f64>() / count;
-    Ok(Preview { metrics: PreviewMetrics { views: metrics, mean_iou, min_iou, mean_psnr }, contact_sheet: contact_sheet(&pairs, size) })
+    let samples_per_pixel = settings.samples_per_axis * settings.samples_per_axis;
+    Ok(Preview {
+        metrics: PreviewMetrics { samples_per_pixel, views: metrics, mean_iou, min_iou, mean_psnr },
+        contact_sheet: contact_sheet(&pairs, settings.size),
+    })
+}
+
+/// A view resolved to its pixels: the sRGB colour (the mean of the pixel's samples, taken in
+/// linear light; alpha 255 where any sample is covered) and how many samples are covered.
+pub struct ResolvedView {
+    pub rgba: Vec<u8>,
+    pub covered: Vec<u16>,
+    pub samples_per_pixel: u16,
+}
+
+impl ResolvedView {
+    /// Whether pixel `index` is inside the silhouette: at least half of its samples covered.
+    pub fn in_silhouette(&self, index: usize) -> bool {
+        2 * self.covered[index] >= self.samples_per_pixel
+    }
+}
+
+fn render_resolved_view(
+    gpu: &Gpu,
+    mesh: &ViewMesh,
+    view_projection: [[f32; 4]; 4],
+    light: [f32; 3],
+    settings: PreviewSettings,
+) -> Result<ResolvedView, GpuError> {
+    let samples_per_axis = settings.samples_per_axis.max(1);
+    let samples = gpu.render_view(mesh, view_projection, light, settings.size * samples_per_axis)?;
+    Ok(resolve_samples(&samples, settings.size, samples_per_axis))
+}
+
+/// Box-resolves an RGBA image of `size × samples_per_axis` pixels square (from
+/// [`Gpu::render_view`]: alpha 255 where a surface was drawn) into `size`² pixels.
+pub fn resolve_samples(samples: &[u8], size: u32, samples_per_axis: u32) -> ResolvedView {
+    let (size, per_axis) = (size as usize, samples_per_axis as usize);
+    let sample_row = size * per_axis * 4;
+    let mut rgba = vec![0u8; size * size * 4];
+    let mut covered = vec![0u16; size * size];
+    rgba.par_chunks_mut(size * 4).zip(covered.par_chunks_mut(size)).enumerate().for_each(|(y, (rgba_row, covered_row))| {
+        for x in 0..size {
+            let (mut linear, mut count) = ([0.0f32; 3], 0u16);
+            for sample_y in y * per_axis..(y + 1) * per_axis {
+                let row = &samples[sample_y * sample_row..(sample_y + 1) * sample_row];
+                for sample in row[x * per_axis * 4..(x + 1) * per_axis * 4].chunks_exact(4) {
+                    for (sum, &value) in linear.iter_mut().zip(sample) {
+                        *sum += crate::surface::srgb_u8_to_linear(value);
+                    }
+                    count += (sample[3] > 0) as u16;
+                }
+            }
+            let scale = 1.0 / (per_axis * per_axis) as f32;
+            for (channel, sum) in linear.iter().enumerate() {
+                rgba_row[x * 4 + channel] = crate::surface::linear_to_srgb_u8(sum * scale);
+            }
+            rgba_row[x * 4 + 3] = if count > 0 { 255 } else { 0 };
+            covered_row[x] = count;
+        }
+    });
+    ResolvedView { rgba, covered, samples_per_pixel: (per_axis * per_axis) as u16 }
 }
 
 /// The light direction of every preview render.
@@ -167,11 +256,11 @@ pub fn lod_view_mesh(files: &LodFiles) -> Result<ViewMesh, Diagnostic> {
     Ok(ViewMesh { batches: vec![(0, vertices)], materials: vec![material] })
 }
 
-/// |A ∩ B| / |A ∪ B| of the drawn pixels (alpha > 0); 1 when both are empty.
-pub fn silhouette_iou(a: &[u8], b: &[u8]) -> f64 {
+/// |A ∩ B| / |A ∪ B| of the silhouettes (pixels at least half covered); 1 when both are empty.
+pub fn silhouette_iou(a: &ResolvedView, b: &ResolvedView) -> f64 {
     let (mut both, mut either) = (0u64, 0u64);
-    for (x, y) in a.chunks_exact(4).zip(b.chunks_exact(4)) {
-        let (in_a, in_b) = (x[3] > 0, y[3] > 0);
+    for index in 0..a.covered.len().min(b.covered.len()) {
+        let (in_a, in_b) = (a.in_silhouette(index), b.in_silhouette(index));
         both += (in_a && in_b) as u64;
         either += (in_a || in_b) as u64;
     }

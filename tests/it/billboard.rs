@@ -174,9 +174,10 @@ fn preview_of_the_bundled_bush_writes_a_contact_sheet_and_metrics() {
     let directions: BTreeSet<String> = views.iter().map(|view| view["direction"].to_string()).collect();
     assert_eq!(directions.len(), 26, "26 distinct directions");
     let mean = metrics["mean_iou"].as_f64().unwrap();
-    // DESIGN §7 asks 0.85; the bush measures 0.79 at the default ε (thin branches shift by up to
-    // ε when projected): this floor guards against regressions, the gap is reported openly.
-    assert!(mean >= 0.75, "mean IoU {mean}");
+    println!("bundled bush, 1024² atlas: mean IoU {mean:.3}, {} samples per pixel", metrics["samples_per_pixel"]);
+    assert_eq!(metrics["samples_per_pixel"], 16);
+    // The bar of DESIGN §7.
+    assert!(mean >= 0.85, "mean IoU {mean}");
     assert!(metrics["min_iou"].as_f64().unwrap() <= mean && metrics["mean_psnr"].as_f64().unwrap() > 20.0);
     let sheet = image::load_from_memory(&project.read("baked/bush/preview/contact_sheet.png")).expect("PNG");
     assert_eq!((sheet.width(), sheet.height()), (4 * 2 * 256 + 3 * 8, 7 * 256 + 6 * 8), "source | LOD pairs, four per row");

@@ -83,3 +83,80 @@ fn a_plane_render_covers_its_faces_cuts_alpha_and_encodes_normal_and_height() {
     assert_eq!(stacked[0], gpu.render_rectangles(&[second]).expect("renders").remove(0), "the wide rectangle");
     assert!(stacked[0].albedo.chunks_exact(4).any(|texel| texel[3] == 255), "the wide rectangle sees the quad too");
 }
+
+#[test]
+fn a_resolved_pixel_is_in_the_silhouette_when_half_its_samples_are_covered() {
+    use cirrus::lod_preview::{resolve_samples, silhouette_iou};
+    // Two by two pixels of 4 × 4 samples: white where covered, black background. Covered samples
+    // per pixel: 16, 8, 7, 0.
+    let covered_per_pixel = [16, 8, 7, 0];
+    let mut samples = vec![0u8; 8 * 8 * 4];
+    for (pixel, &covered) in covered_per_pixel.iter().enumerate() {
+        let (pixel_x, pixel_y) = (pixel % 2, pixel / 2);
+        for sample in 0..covered {
+            let (x, y) = (pixel_x * 4 + sample % 4, pixel_y * 4 + sample / 4);
+            samples[(y * 8 + x) * 4..][..4].copy_from_slice(&[255, 255, 255, 255]);
+        }
+    }
+    let view = resolve_samples(&samples, 2, 4);
+    assert_eq!(view.covered, vec![16, 8, 7, 0]);
+    assert_eq!((0..4).map(|pixel| view.in_silhouette(pixel)).collect::<Vec<_>>(), [true, true, false, false]);
+    // Half the samples white is half the light: sRGB 188, not 128.
+    assert_eq!(view.rgba[4..8], [188, 188, 188, 255]);
+    assert_eq!(view.rgba[12..16], [0, 0, 0, 0]);
+    let one_pixel = resolve_samples(&samples[..4 * 4 * 4], 1, 1);
+    assert_eq!((one_pixel.covered[0], one_pixel.in_silhouette(0)), (1, true));
+    assert_eq!(silhouette_iou(&view, &view), 1.0);
+}
+
+/// A quad in the plane x = 0, seen along x, cut out by an alpha texture of 256² random texels
+/// (70 % opaque) that spans 48 pixels of a 64-pixel view: detail finer than a pixel, as foliage
+/// is at preview sizes.
+fn speckled_quad(offset: f32) -> cirrus::gpu::ViewMesh {
+    use cirrus::mips::{mip_chain, MipSettings};
+    let mut state = 12345u32;
+    let mut pixels = Vec::new();
+    for _ in 0..256 * 256 {
+        state = state.wrapping_mul(1_664_525).wrapping_add(1_013_904_223);
+        let alpha = if (state >> 8) % 10 < 7 { 255 } else { 0 };
+        pixels.extend([60, 160, 60, alpha]);
+    }
+    let levels =
+        mip_chain(&Texture::new(256, 256, pixels), MipSettings { kind: cirrus::surface::SurfaceKind::Albedo, alpha_cutoff: Some(0.5) });
+    let corner = |y: f32, z: f32, uv: [f32; 2]| RenderVertex {
+        position: [0.0, y + offset, z + offset],
+        normal: [1.0, 0.0, 0.0],
+        uv,
+        tangent: [0.0, 1.0, 0.0, 1.0],
+    };
+    let (low, high) = (-0.75, 0.75);
+    let vertices = vec![
+        corner(low, low, [0.0, 0.0]),
+        corner(high, low, [1.0, 0.0]),
+        corner(high, high, [1.0, 1.0]),
+        corner(low, low, [0.0, 0.0]),
+        corner(high, high, [1.0, 1.0]),
+        corner(low, high, [0.0, 1.0]),
+    ];
+    let material =
+        cirrus::gpu::ViewMaterial { albedo: Some(Arc::new(levels)), albedo_factor: [1.0; 4], alpha_cutoff: 0.5, ..Default::default() };
+    cirrus::gpu::ViewMesh { batches: vec![(0, vertices)], materials: vec![material] }
+}
+
+#[test]
+fn sixteen_samples_per_pixel_keep_the_silhouette_iou_from_measuring_aliasing() {
+    use cirrus::lod_preview::{preview, PreviewSettings};
+    let gpu = gpu().expect("a GPU adapter (install mesa-vulkan-drivers for the software one)");
+    // The same cut-out moved by a quarter pixel: a LOD could hardly be closer.
+    let quarter_pixel = 0.25 * 2.0 / 64.0;
+    let (source, moved) = (speckled_quad(0.0), speckled_quad(quarter_pixel));
+    let iou = |samples_per_axis| {
+        let settings = PreviewSettings { views: 1, size: 64, samples_per_axis };
+        let preview = preview(gpu, &source, &moved, [0.0; 3], 1.0, settings).expect("renders");
+        assert_eq!(preview.metrics.samples_per_pixel, samples_per_axis * samples_per_axis);
+        preview.metrics.mean_iou
+    };
+    let (one_sample, sixteen_samples) = (iou(1), iou(4));
+    println!("quarter-pixel move: IoU {one_sample:.3} with 1 sample per pixel, {sixteen_samples:.3} with 16");
+    assert!(sixteen_samples > 0.9 && sixteen_samples > one_sample + 0.1, "{one_sample} vs {sixteen_samples}");
+}

@@ -789,24 +789,47 @@ pub fn plane_images(db: &dyn Db, key: PlaneKey) -> Result<Arc<Vec<crate::gpu::Pl
     })
 }
 
+/// Every render group's images of `asset`, in render-group order.
+fn render_group_images(db: &dyn Db, asset: BillboardAsset) -> Result<Vec<Arc<Vec<crate::gpu::PlaneImages>>>, Diagnostic> {
+    asset.plane_keys(db).iter().map(|key| plane_images(db, *key)).collect()
+}
+
+/// The images of every rectangle, in layout order: each group's images belong to its
+/// rectangles, and every rectangle is in one group.
+fn images_by_rectangle<'a>(layout: &BillboardLayout, images: &'a [Arc<Vec<crate::gpu::PlaneImages>>]) -> Vec<&'a crate::gpu::PlaneImages> {
+    let mut by_rectangle: Vec<Option<&crate::gpu::PlaneImages>> = vec![None; layout.rectangles.len()];
+    for (group, group_images) in layout.render_groups.iter().zip(images) {
+        for (&rectangle, image) in group.rectangles.iter().zip(group_images.iter()) {
+            by_rectangle[rectangle as usize] = Some(image);
+        }
+    }
+    by_rectangle.into_iter().map(|image| image.expect("every rectangle is in a render group")).collect()
+}
+
+/// The atlas texels that faces cover (part of the atlas stage): unchanged by colour-only
+/// edits, which therefore skip the fill search below.
+#[salsa::tracked(returns(clone))]
+pub fn atlas_coverage(db: &dyn Db, asset: BillboardAsset) -> Result<Arc<crate::atlas::AtlasCoverage>, Diagnostic> {
+    let layout = billboard_layout(db, asset)?;
+    let images = render_group_images(db, asset)?;
+    timed(db, Stage::Atlas, asset, || Ok(Arc::new(crate::atlas::atlas_coverage(&layout.layout, &images_by_rectangle(&layout, &images)))))
+}
+
+/// The texel each uncovered atlas texel is filled from (part of the atlas stage).
+#[salsa::tracked(returns(clone))]
+pub fn atlas_fill_sources(db: &dyn Db, asset: BillboardAsset) -> Result<Arc<crate::atlas::FillSources>, Diagnostic> {
+    let coverage = atlas_coverage(db, asset)?;
+    timed(db, Stage::Atlas, asset, || Ok(Arc::new(crate::atlas::fill_sources(&coverage))))
+}
+
 #[salsa::tracked(returns(clone))]
 pub fn billboard_atlas(db: &dyn Db, asset: BillboardAsset) -> Result<Arc<crate::atlas::AtlasImages>, Diagnostic> {
     let layout = billboard_layout(db, asset)?;
-    let mut images = Vec::new();
-    for key in asset.plane_keys(db).iter() {
-        images.push(plane_images(db, *key)?);
-    }
+    let images = render_group_images(db, asset)?;
+    let coverage = atlas_coverage(db, asset)?;
+    let fill = atlas_fill_sources(db, asset)?;
     timed(db, Stage::Atlas, asset, || {
-        // Each group's images belong to its rectangles; every rectangle is in one group.
-        let mut by_rectangle: Vec<Option<&crate::gpu::PlaneImages>> = vec![None; layout.rectangles.len()];
-        for (group, group_images) in layout.render_groups.iter().zip(&images) {
-            for (&rectangle, image) in group.rectangles.iter().zip(group_images.iter()) {
-                by_rectangle[rectangle as usize] = Some(image);
-            }
-        }
-        let references: Vec<&crate::gpu::PlaneImages> =
-            by_rectangle.into_iter().map(|image| image.expect("every rectangle is in a render group")).collect();
-        Ok(Arc::new(crate::atlas::composite_atlas(&layout.layout, &references)))
+        Ok(Arc::new(crate::atlas::composite_atlas(&layout.layout, &images_by_rectangle(&layout, &images), &coverage, &fill)))
     })
 }
 

@@ -16,7 +16,7 @@ use crate::container::write_container;
 use crate::diagnostic::Diagnostic;
 use crate::encode::{encode_levels, BlockEncodeSettings, EncodedTexture};
 use crate::material_definition::{parse_material_file, MaterialConstants, MaterialFile};
-use crate::mips::{mip_chain, MipSettings};
+use crate::mips::{mip_chain, mip_chain_reusing, MipSettings};
 use crate::preview::preview_png;
 use crate::quality::{decode_blocks, psnr};
 use crate::surface::{has_transparency, pack_surface, SurfaceKind};
@@ -203,9 +203,17 @@ pub struct ExecutedFunction {
     pub key: salsa::Id,
 }
 
-/// The last encoding of each atlas surface (its levels and blocks), so that an edit re-encodes
-/// only the blocks it changed. A performance memory: results equal a full encode.
-type PreviousEncodings = Mutex<std::collections::HashMap<salsa::Id, (BlockEncodeSettings, Arc<Vec<Texture>>, EncodedTexture)>>;
+/// The last encoding of one atlas surface, so that an edit filters again only the mip tiles and
+/// encodes again only the blocks it changed. A performance memory: results equal a full encode.
+#[derive(Clone)]
+pub struct PreviousEncoding {
+    pub settings: BlockEncodeSettings,
+    pub levels: Arc<Vec<Texture>>,
+    pub mips: Option<Arc<crate::mips::MipReuse>>,
+    pub encoded: EncodedTexture,
+}
+
+type PreviousEncodings = Mutex<std::collections::HashMap<salsa::Id, PreviousEncoding>>;
 
 #[derive(Default)]
 struct Logs {
@@ -217,8 +225,8 @@ struct Logs {
 pub trait Db: salsa::Database {
     fn disk_cache(&self) -> Option<&DiskCache>;
     fn record_run(&self, run: StageRun);
-    fn previous_encoding(&self, key: salsa::Id) -> Option<(BlockEncodeSettings, Arc<Vec<Texture>>, EncodedTexture)>;
-    fn remember_encoding(&self, key: salsa::Id, settings: BlockEncodeSettings, levels: Arc<Vec<Texture>>, encoded: EncodedTexture);
+    fn previous_encoding(&self, key: salsa::Id) -> Option<PreviousEncoding>;
+    fn remember_encoding(&self, key: salsa::Id, encoding: PreviousEncoding);
 }
 
 #[salsa::db]
@@ -273,12 +281,12 @@ impl Db for Database {
         self.logs.runs.lock().expect("log lock").push(run);
     }
 
-    fn previous_encoding(&self, key: salsa::Id) -> Option<(BlockEncodeSettings, Arc<Vec<Texture>>, EncodedTexture)> {
+    fn previous_encoding(&self, key: salsa::Id) -> Option<PreviousEncoding> {
         self.encodings.lock().expect("encodings lock").get(&key).cloned()
     }
 
-    fn remember_encoding(&self, key: salsa::Id, settings: BlockEncodeSettings, levels: Arc<Vec<Texture>>, encoded: EncodedTexture) {
-        self.encodings.lock().expect("encodings lock").insert(key, (settings, levels, encoded));
+    fn remember_encoding(&self, key: salsa::Id, encoding: PreviousEncoding) {
+        self.encodings.lock().expect("encodings lock").insert(key, encoding);
     }
 }
 
@@ -866,20 +874,25 @@ pub fn atlas_surface_artifacts(db: &dyn Db, key: AtlasSurfaceKey) -> Result<Arc<
     let surface = key.surface(db);
     timed(db, Stage::Encode, key, || {
         let alpha_tested = surface == SurfaceKind::Albedo && has_transparency(&image);
-        let levels = if mips {
-            mip_chain(&image, MipSettings { kind: surface, alpha_cutoff: alpha_tested.then_some(alpha_cutoff) })
+        let previous = db.previous_encoding(key.as_id());
+        let (levels, mip_reuse) = if mips {
+            let previous_mips = previous.as_ref().and_then(|previous| Some((previous.levels.as_slice(), &**previous.mips.as_ref()?)));
+            mip_chain_reusing(&image, MipSettings { kind: surface, alpha_cutoff: alpha_tested.then_some(alpha_cutoff) }, previous_mips)
         } else {
-            vec![(*image).clone()]
+            (vec![(*image).clone()], None)
         };
         let settings = BlockEncodeSettings { format, quality, alpha: alpha_tested, srgb: surface.is_srgb() };
-        let previous = db.previous_encoding(key.as_id()).filter(|(previous_settings, _, _)| *previous_settings == settings);
+        let previous_blocks = previous.as_ref().filter(|previous| previous.settings == settings);
         let texture = crate::encode::encode_levels_reusing(
             &levels,
             settings,
-            previous.as_ref().map(|(_, levels, encoded)| (levels.as_slice(), encoded)),
+            previous_blocks.map(|previous| (previous.levels.as_slice(), &previous.encoded)),
         );
         let levels = Arc::new(levels);
-        db.remember_encoding(key.as_id(), settings, levels.clone(), texture.clone());
+        db.remember_encoding(
+            key.as_id(),
+            PreviousEncoding { settings, levels: levels.clone(), mips: mip_reuse.map(Arc::new), encoded: texture.clone() },
+        );
         let decoded = decode_blocks(format, &texture.levels[0], image.width, image.height);
         let psnr_db = (psnr(&image, &decoded, surface.channels()) * 100.0).round() / 100.0;
         let texture_file: Arc<[u8]> = write_container(&texture, container, zstd).into();

@@ -17,16 +17,86 @@ pub struct MipSettings {
 
 /// Level 0 followed by every smaller level down to 1×1.
 pub fn mip_chain(level0: &Texture, settings: MipSettings) -> Vec<Texture> {
-    let mut levels = vec![level0.clone()];
+    full_chain(level0, settings).0
+}
+
+/// Side of the tiles that [`mip_chain_reusing`] filters again on their own: with sizes that are
+/// multiples of it, each of the first `REUSE_TILE_LEVELS` levels reduces within the tile.
+const REUSE_TILE: usize = 64;
+const REUSE_TILE_LEVELS: usize = 6;
+
+/// What a mip chain keeps so that the next chain of the same surface can filter only the tiles
+/// that changed: the filter-space texels of the level with one texel per tile, and the alpha
+/// scale of every level.
+#[derive(Clone, Debug)]
+pub struct MipReuse {
+    settings: MipSettings,
+    coverage: Option<f32>,
+    alpha_scales: Vec<f32>,
+    tile_level: Vec<[f32; 4]>,
+    tile_level_straight: Option<Vec<[f32; 4]>>,
+}
+
+/// Like [`mip_chain`], reusing `previous` (the levels of the same surface made earlier, with what
+/// that chain kept): when only colour changed (alpha identical), only the 64² tiles of level 0
+/// that changed are filtered again, and the coarse levels from one texel per tile. The levels are
+/// identical to a full chain's; the [`MipReuse`] is for the next call (none for sizes that are
+/// not multiples of the tile).
+pub fn mip_chain_reusing(
+    level0: &Texture,
+    settings: MipSettings,
+    previous: Option<(&[Texture], &MipReuse)>,
+) -> (Vec<Texture>, Option<MipReuse>) {
+    previous
+        .and_then(|(levels, reuse)| refilter_changed_tiles(level0, settings, levels, reuse))
+        .unwrap_or_else(|| full_chain(level0, settings))
+}
+
+fn reusable_size(width: u32, height: u32) -> bool {
+    width as usize % REUSE_TILE == 0 && height as usize % REUSE_TILE == 0
+}
+
+fn full_chain(level0: &Texture, settings: MipSettings) -> (Vec<Texture>, Option<MipReuse>) {
     // Reduce from unscaled float levels so that coverage scaling does not compound.
-    let mut current = to_filter_space(level0, settings.kind);
+    let current = to_filter_space(&level0.pixels, settings.kind);
     // Straight (not alpha-weighted) linear colour, for albedo texels whose whole footprint is
     // transparent: alpha weighting would leave them black, and bilinear filtering at an
     // alpha-tested edge would then pull the visible colour toward black.
-    let mut straight = (settings.kind == SurfaceKind::Albedo && level0.pixels.chunks_exact(4).any(|texel| texel[3] == 0))
-        .then(|| straight_linear_colour(level0));
-    let (mut width, mut height) = (level0.width, level0.height);
+    let straight = (settings.kind == SurfaceKind::Albedo && level0.pixels.chunks_exact(4).any(|texel| texel[3] == 0))
+        .then(|| straight_linear_colour(&level0.pixels));
     let coverage = settings.alpha_cutoff.map(|cutoff| alpha_coverage(&current, cutoff, 1.0));
+    let mut chain = Chain { levels: vec![level0.clone()], alpha_scales: vec![1.0], tile_level: None };
+    let keep_tile_level = reusable_size(level0.width, level0.height);
+    extend_chain(&mut chain, current, straight, settings, coverage, keep_tile_level);
+    let reuse = chain.tile_level.map(|(tile_level, tile_level_straight)| MipReuse {
+        settings,
+        coverage,
+        alpha_scales: chain.alpha_scales,
+        tile_level,
+        tile_level_straight,
+    });
+    (chain.levels, reuse)
+}
+
+/// Levels made so far, the alpha scale of each, and the tile level's texels once reached.
+struct Chain {
+    levels: Vec<Texture>,
+    alpha_scales: Vec<f32>,
+    tile_level: Option<(Vec<[f32; 4]>, Option<Vec<[f32; 4]>>)>,
+}
+
+/// Reduces `current` (the filter-space texels of the chain's last level) level by level down to
+/// 1×1, appending each level and its alpha scale.
+fn extend_chain(
+    chain: &mut Chain,
+    mut current: Vec<[f32; 4]>,
+    mut straight: Option<Vec<[f32; 4]>>,
+    settings: MipSettings,
+    coverage: Option<f32>,
+    keep_tile_level: bool,
+) {
+    let last = chain.levels.last().expect("level 0");
+    let (mut width, mut height) = (last.width, last.height);
     while width > 1 || height > 1 {
         let (next_width, next_height) = ((width / 2).max(1), (height / 2).max(1));
         current = reduce(&current, width, height, next_width, next_height);
@@ -36,16 +106,109 @@ pub fn mip_chain(level0: &Texture, settings: MipSettings) -> Vec<Texture> {
             (Some(cutoff), Some(coverage)) => coverage_alpha_scale(&current, cutoff, coverage),
             _ => 1.0,
         };
-        levels.push(from_filter_space(&current, straight.as_deref(), width, height, settings.kind, alpha_scale));
+        chain.levels.push(from_filter_space(&current, straight.as_deref(), width, height, settings.kind, alpha_scale));
+        chain.alpha_scales.push(alpha_scale);
+        if keep_tile_level && chain.levels.len() == REUSE_TILE_LEVELS + 1 {
+            chain.tile_level = Some((current.clone(), straight.clone()));
+        }
     }
-    levels
+}
+
+/// The incremental path of [`mip_chain_reusing`]; `None` when it does not apply (other settings
+/// or size, or alpha changed: alpha moves the coverage scale of whole levels).
+fn refilter_changed_tiles(
+    level0: &Texture,
+    settings: MipSettings,
+    previous_levels: &[Texture],
+    previous: &MipReuse,
+) -> Option<(Vec<Texture>, Option<MipReuse>)> {
+    let old = previous_levels.first()?;
+    let (width, height) = (level0.width, level0.height);
+    if previous.settings != settings
+        || (old.width, old.height) != (width, height)
+        || !reusable_size(width, height)
+        || previous_levels.len() != previous.alpha_scales.len()
+    {
+        return None;
+    }
+    let (tiles_x, tiles_y) = (width as usize / REUSE_TILE, height as usize / REUSE_TILE);
+    let row_bytes = width as usize * 4;
+    let tile_rows = |tile: usize| {
+        let (x, y) = (tile % tiles_x * REUSE_TILE, tile / tiles_x * REUSE_TILE);
+        (y..y + REUSE_TILE).map(move |row| row * row_bytes + x * 4..row * row_bytes + (x + REUSE_TILE) * 4)
+    };
+    // Per tile: whether its texels changed, and whether any alpha did.
+    let changes: Vec<(bool, bool)> = (0..tiles_x * tiles_y)
+        .into_par_iter()
+        .map(|tile| {
+            let mut changed = false;
+            for range in tile_rows(tile) {
+                let (new, old) = (&level0.pixels[range.clone()], &old.pixels[range]);
+                if new != old {
+                    changed = true;
+                    if new.chunks_exact(4).zip(old.chunks_exact(4)).any(|(a, b)| a[3] != b[3]) {
+                        return (true, true);
+                    }
+                }
+            }
+            (changed, false)
+        })
+        .collect();
+    if changes.iter().any(|&(_, alpha_changed)| alpha_changed) {
+        return None;
+    }
+    let changed_tiles: Vec<usize> = changes.iter().enumerate().filter(|(_, (changed, _))| *changed).map(|(tile, _)| tile).collect();
+    // Each changed tile filtered on its own, with the arithmetic of a full chain: its bytes at
+    // levels 1 to REUSE_TILE_LEVELS, and its one texel at the last of them.
+    type Refiltered = (usize, Vec<Vec<u8>>, [f32; 4], Option<[f32; 4]>);
+    let refiltered: Vec<Refiltered> = changed_tiles
+        .par_iter()
+        .map(|&tile| {
+            let pixels: Vec<u8> = tile_rows(tile).flat_map(|range| level0.pixels[range].iter().copied()).collect();
+            let mut current = to_filter_space(&pixels, settings.kind);
+            let mut straight = previous.tile_level_straight.is_some().then(|| straight_linear_colour(&pixels));
+            let mut side = REUSE_TILE as u32;
+            let mut bytes = Vec::with_capacity(REUSE_TILE_LEVELS);
+            for level in 1..=REUSE_TILE_LEVELS {
+                current = reduce(&current, side, side, side / 2, side / 2);
+                straight = straight.map(|colour| reduce(&colour, side, side, side / 2, side / 2));
+                side /= 2;
+                bytes.push(filter_space_bytes(&current, straight.as_deref(), settings.kind, previous.alpha_scales[level]));
+            }
+            (tile, bytes, current[0], straight.map(|colour| colour[0]))
+        })
+        .collect();
+    let mut levels = vec![level0.clone()];
+    for level in 1..=REUSE_TILE_LEVELS {
+        let mut pixels = previous_levels[level].pixels.to_vec();
+        let (level_width, side) = (width as usize >> level, REUSE_TILE >> level);
+        for (tile, bytes, _, _) in &refiltered {
+            let (x, y) = (tile % tiles_x * side, tile / tiles_x * side);
+            for (row, source) in bytes[level - 1].chunks_exact(side * 4).enumerate() {
+                let start = ((y + row) * level_width + x) * 4;
+                pixels[start..start + side * 4].copy_from_slice(source);
+            }
+        }
+        levels.push(Texture::new(width >> level, height >> level, pixels));
+    }
+    let mut tile_level = previous.tile_level.clone();
+    let mut tile_level_straight = previous.tile_level_straight.clone();
+    for (tile, _, texel, straight_texel) in &refiltered {
+        tile_level[*tile] = *texel;
+        if let (Some(straight), Some(texel)) = (tile_level_straight.as_mut(), straight_texel) {
+            straight[*tile] = *texel;
+        }
+    }
+    let mut chain = Chain { levels, alpha_scales: previous.alpha_scales[..=REUSE_TILE_LEVELS].to_vec(), tile_level: None };
+    extend_chain(&mut chain, tile_level.clone(), tile_level_straight.clone(), settings, previous.coverage, false);
+    let reuse = MipReuse { settings, coverage: previous.coverage, alpha_scales: chain.alpha_scales, tile_level, tile_level_straight };
+    Some((chain.levels, Some(reuse)))
 }
 
 /// Texels as floats in the space where averaging is right: linear premultiplied colour for
 /// albedo, unit vectors for normals, plain values for data.
-fn to_filter_space(texture: &Texture, kind: SurfaceKind) -> Vec<[f32; 4]> {
-    texture
-        .pixels
+fn to_filter_space(pixels: &[u8], kind: SurfaceKind) -> Vec<[f32; 4]> {
+    pixels
         .par_chunks_exact(4)
         .map(|t| match kind {
             SurfaceKind::Albedo => {
@@ -62,8 +225,8 @@ fn to_filter_space(texture: &Texture, kind: SurfaceKind) -> Vec<[f32; 4]> {
 }
 
 /// Linear colour of every texel, not weighted by alpha.
-fn straight_linear_colour(texture: &Texture) -> Vec<[f32; 4]> {
-    texture.pixels.par_chunks_exact(4).map(|t| [srgb_u8_to_linear(t[0]), srgb_u8_to_linear(t[1]), srgb_u8_to_linear(t[2]), 1.0]).collect()
+fn straight_linear_colour(pixels: &[u8]) -> Vec<[f32; 4]> {
+    pixels.par_chunks_exact(4).map(|t| [srgb_u8_to_linear(t[0]), srgb_u8_to_linear(t[1]), srgb_u8_to_linear(t[2]), 1.0]).collect()
 }
 
 fn from_filter_space(
@@ -77,22 +240,35 @@ fn from_filter_space(
     let pixels = texels
         .par_iter()
         .enumerate()
-        .flat_map_iter(|(index, &[r, g, b, a])| match kind {
-            SurfaceKind::Albedo => {
-                // Un-premultiply; fully transparent texels take the plain average colour of
-                // their footprint (the colour a fill extended there), not black.
-                let (r, g, b) = match straight {
-                    _ if a > 1e-6 => (r / a, g / a, b / a),
-                    Some(straight) => (straight[index][0], straight[index][1], straight[index][2]),
-                    None => (r, g, b),
-                };
-                [linear_to_srgb_u8(r), linear_to_srgb_u8(g), linear_to_srgb_u8(b), unorm_u8(a * alpha_scale)]
-            }
-            SurfaceKind::Normal => encode_normal(normalize_tangent_normal([r, g, b])),
-            SurfaceKind::Mra | SurfaceKind::Height => [unorm_u8(r), unorm_u8(g), unorm_u8(b), unorm_u8(a)],
-        })
+        .flat_map_iter(|(index, &texel)| texel_bytes(texel, straight.map(|straight| straight[index]), kind, alpha_scale))
         .collect();
     Texture::new(width, height, pixels)
+}
+
+/// [`from_filter_space`] of a few texels, on this thread.
+fn filter_space_bytes(texels: &[[f32; 4]], straight: Option<&[[f32; 4]]>, kind: SurfaceKind, alpha_scale: f32) -> Vec<u8> {
+    texels
+        .iter()
+        .enumerate()
+        .flat_map(|(index, &texel)| texel_bytes(texel, straight.map(|straight| straight[index]), kind, alpha_scale))
+        .collect()
+}
+
+fn texel_bytes([r, g, b, a]: [f32; 4], straight: Option<[f32; 4]>, kind: SurfaceKind, alpha_scale: f32) -> [u8; 4] {
+    match kind {
+        SurfaceKind::Albedo => {
+            // Un-premultiply; fully transparent texels take the plain average colour of their
+            // footprint (the colour a fill extended there), not black.
+            let (r, g, b) = match straight {
+                _ if a > 1e-6 => (r / a, g / a, b / a),
+                Some(straight) => (straight[0], straight[1], straight[2]),
+                None => (r, g, b),
+            };
+            [linear_to_srgb_u8(r), linear_to_srgb_u8(g), linear_to_srgb_u8(b), unorm_u8(a * alpha_scale)]
+        }
+        SurfaceKind::Normal => encode_normal(normalize_tangent_normal([r, g, b])),
+        SurfaceKind::Mra | SurfaceKind::Height => [unorm_u8(r), unorm_u8(g), unorm_u8(b), unorm_u8(a)],
+    }
 }
 
 /// Area-weighted box reduction (handles odd sizes: each target texel covers a fractional

@@ -230,6 +230,60 @@ fn re_encoding_only_changed_blocks_equals_a_full_encode() {
 }
 
 #[test]
+fn refiltering_only_changed_mip_tiles_equals_a_full_chain() {
+    use cirrus::mips::{mip_chain, mip_chain_reusing, MipSettings};
+    use cirrus::surface::SurfaceKind;
+    use cirrus::texture::Texture;
+    // 192 × 128: six 64² tiles. Cut-out albedo (coverage preserved), a normal map, plain data.
+    let cutout = decode_png(&cutout_png(192, 128));
+    let pattern = decode_png(&pattern_png(192, 128, 3));
+    let edit = |texture: &Texture, region: std::ops::Range<usize>, change: &dyn Fn(&mut [u8])| {
+        let mut pixels = texture.pixels.to_vec();
+        for y in region.clone() {
+            for x in 70..90 {
+                change(&mut pixels[(y * 192 + x) * 4..][..4]);
+            }
+        }
+        Texture::new(192, 128, pixels)
+    };
+    let cases = [
+        (cutout.clone(), MipSettings { kind: SurfaceKind::Albedo, alpha_cutoff: Some(0.5) }),
+        (pattern.clone(), MipSettings { kind: SurfaceKind::Normal, alpha_cutoff: None }),
+        (pattern, MipSettings { kind: SurfaceKind::Mra, alpha_cutoff: None }),
+    ];
+    for (before, settings) in cases {
+        let (old_levels, reuse) = mip_chain_reusing(&before, settings, None);
+        assert_eq!(old_levels, mip_chain(&before, settings));
+        let reuse = reuse.expect("multiples of the tile size keep what the next chain reuses");
+        // A colour edit in the tiles (1, 0) and (1, 1); then a second one on top of it.
+        let recolour = |texel: &mut [u8]| texel[..3].copy_from_slice(&[200, 30, 90]);
+        let after = edit(&before, 50..80, &recolour);
+        let (levels, next) = mip_chain_reusing(&after, settings, Some((&old_levels, &reuse)));
+        assert_eq!(levels, mip_chain(&after, settings), "{settings:?}: the same levels as a full chain");
+        assert_ne!(levels[3], old_levels[3], "{settings:?}: the edit shows");
+        let again = edit(&after, 0..20, &|texel: &mut [u8]| texel[0] = 10);
+        let (levels_again, _) = mip_chain_reusing(&again, settings, Some((&levels, next.as_ref().unwrap())));
+        assert_eq!(levels_again, mip_chain(&again, settings), "{settings:?}: reuse of a reused chain");
+        // Unchanged tiles really come from the previous chain: a texel planted in its level 1
+        // outside the edited tiles survives.
+        let mut planted = old_levels.clone();
+        let mut pixels = planted[1].pixels.to_vec();
+        pixels[(5 * 96 + 5) * 4] ^= 0xff;
+        planted[1] = Texture::new(96, 64, pixels);
+        let (from_planted, _) = mip_chain_reusing(&after, settings, Some((&planted, &reuse)));
+        assert_eq!(from_planted[1].texel(5, 5), planted[1].texel(5, 5), "{settings:?}");
+    }
+    // An alpha edit moves whole levels' coverage scale: a full chain, still equal.
+    let albedo = MipSettings { kind: SurfaceKind::Albedo, alpha_cutoff: Some(0.5) };
+    let (old_levels, reuse) = mip_chain_reusing(&cutout, albedo, None);
+    let holes = edit(&cutout, 40..60, &|texel: &mut [u8]| texel[3] = 0);
+    let (levels, _) = mip_chain_reusing(&holes, albedo, Some((&old_levels, reuse.as_ref().unwrap())));
+    assert_eq!(levels, mip_chain(&holes, albedo));
+    // Sizes that are not multiples of the tile keep nothing to reuse.
+    assert!(mip_chain_reusing(&Texture::constant(96, 64, [1, 2, 3, 255]), albedo, None).1.is_none());
+}
+
+#[test]
 fn a_level_encodes_each_block_as_that_block_alone_repeated_blocks_included() {
     use cirrus::config::EncodeQuality;
     use cirrus::encode::{block_bytes, encode_level, BlockEncodeSettings};

@@ -117,6 +117,15 @@ fn a_bark_texture_edit_rerenders_only_bark_planes_and_leaves_the_lod_alone() {
     assert_eq!(executed, expected, "exactly the render stages showing bark, the atlas and the albedo encoder");
     assert_eq!(project.read("baked/tree/lod.obj"), lod, "lod.obj is untouched by texture edits");
     assert_eq!(project.read("baked/tree/mra.ktx2"), leaves_before, "mra did not change");
+    // Re-filtering and re-encoding only what changed bakes what a clean build of the edited
+    // sources bakes.
+    let clean = tree_project();
+    clean.write("assets/bark.png", pattern_png(32, 32, 7));
+    build(&mut clean.open());
+    for artifact in ["albedo.ktx2", "mra.ktx2", "normal.ktx2", "height.ktx2", "lod.obj"] {
+        let path = format!("baked/tree/{artifact}");
+        assert!(project.read(&path) == clean.read(&path), "{artifact} differs from a clean build's");
+    }
 
     // An encode setting re-runs only the encoder that reads it.
     let pipeline = String::from_utf8(project.read("pipeline.ron")).unwrap();

@@ -33,8 +33,14 @@ pub struct MipReuse {
     settings: MipSettings,
     coverage: Option<f32>,
     alpha_scales: Vec<f32>,
-    tile_level: Vec<[f32; 4]>,
-    tile_level_straight: Option<Vec<[f32; 4]>>,
+    tile_level: TileLevel,
+}
+
+/// The filter-space texels of the level with one texel per tile, and their straight colour.
+#[derive(Clone, Debug)]
+struct TileLevel {
+    texels: Vec<[f32; 4]>,
+    straight: Option<Vec<[f32; 4]>>,
 }
 
 /// Like [`mip_chain`], reusing `previous` (the levels of the same surface made earlier, with what
@@ -53,7 +59,7 @@ pub fn mip_chain_reusing(
 }
 
 fn reusable_size(width: u32, height: u32) -> bool {
-    width as usize % REUSE_TILE == 0 && height as usize % REUSE_TILE == 0
+    (width as usize).is_multiple_of(REUSE_TILE) && (height as usize).is_multiple_of(REUSE_TILE)
 }
 
 fn full_chain(level0: &Texture, settings: MipSettings) -> (Vec<Texture>, Option<MipReuse>) {
@@ -68,13 +74,7 @@ fn full_chain(level0: &Texture, settings: MipSettings) -> (Vec<Texture>, Option<
     let mut chain = Chain { levels: vec![level0.clone()], alpha_scales: vec![1.0], tile_level: None };
     let keep_tile_level = reusable_size(level0.width, level0.height);
     extend_chain(&mut chain, current, straight, settings, coverage, keep_tile_level);
-    let reuse = chain.tile_level.map(|(tile_level, tile_level_straight)| MipReuse {
-        settings,
-        coverage,
-        alpha_scales: chain.alpha_scales,
-        tile_level,
-        tile_level_straight,
-    });
+    let reuse = chain.tile_level.map(|tile_level| MipReuse { settings, coverage, alpha_scales: chain.alpha_scales, tile_level });
     (chain.levels, reuse)
 }
 
@@ -82,7 +82,7 @@ fn full_chain(level0: &Texture, settings: MipSettings) -> (Vec<Texture>, Option<
 struct Chain {
     levels: Vec<Texture>,
     alpha_scales: Vec<f32>,
-    tile_level: Option<(Vec<[f32; 4]>, Option<Vec<[f32; 4]>>)>,
+    tile_level: Option<TileLevel>,
 }
 
 /// Reduces `current` (the filter-space texels of the chain's last level) level by level down to
@@ -109,7 +109,7 @@ fn extend_chain(
         chain.levels.push(from_filter_space(&current, straight.as_deref(), width, height, settings.kind, alpha_scale));
         chain.alpha_scales.push(alpha_scale);
         if keep_tile_level && chain.levels.len() == REUSE_TILE_LEVELS + 1 {
-            chain.tile_level = Some((current.clone(), straight.clone()));
+            chain.tile_level = Some(TileLevel { texels: current.clone(), straight: straight.clone() });
         }
     }
 }
@@ -166,7 +166,7 @@ fn refilter_changed_tiles(
         .map(|&tile| {
             let pixels: Vec<u8> = tile_rows(tile).flat_map(|range| level0.pixels[range].iter().copied()).collect();
             let mut current = to_filter_space(&pixels, settings.kind);
-            let mut straight = previous.tile_level_straight.is_some().then(|| straight_linear_colour(&pixels));
+            let mut straight = previous.tile_level.straight.is_some().then(|| straight_linear_colour(&pixels));
             let mut side = REUSE_TILE as u32;
             let mut bytes = Vec::with_capacity(REUSE_TILE_LEVELS);
             for level in 1..=REUSE_TILE_LEVELS {
@@ -192,16 +192,15 @@ fn refilter_changed_tiles(
         levels.push(Texture::new(width >> level, height >> level, pixels));
     }
     let mut tile_level = previous.tile_level.clone();
-    let mut tile_level_straight = previous.tile_level_straight.clone();
     for (tile, _, texel, straight_texel) in &refiltered {
-        tile_level[*tile] = *texel;
-        if let (Some(straight), Some(texel)) = (tile_level_straight.as_mut(), straight_texel) {
+        tile_level.texels[*tile] = *texel;
+        if let (Some(straight), Some(texel)) = (tile_level.straight.as_mut(), straight_texel) {
             straight[*tile] = *texel;
         }
     }
     let mut chain = Chain { levels, alpha_scales: previous.alpha_scales[..=REUSE_TILE_LEVELS].to_vec(), tile_level: None };
-    extend_chain(&mut chain, tile_level.clone(), tile_level_straight.clone(), settings, previous.coverage, false);
-    let reuse = MipReuse { settings, coverage: previous.coverage, alpha_scales: chain.alpha_scales, tile_level, tile_level_straight };
+    extend_chain(&mut chain, tile_level.texels.clone(), tile_level.straight.clone(), settings, previous.coverage, false);
+    let reuse = MipReuse { settings, coverage: previous.coverage, alpha_scales: chain.alpha_scales, tile_level };
     Some((chain.levels, Some(reuse)))
 }
 

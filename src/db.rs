@@ -211,6 +211,8 @@ pub struct PreviousEncoding {
     pub levels: Arc<Vec<Texture>>,
     pub mips: Option<Arc<crate::mips::MipReuse>>,
     pub encoded: EncodedTexture,
+    /// Level 0's squared error per block, for the PSNR.
+    pub block_errors: Arc<crate::quality::BlockErrors>,
 }
 
 type PreviousEncodings = Mutex<std::collections::HashMap<salsa::Id, PreviousEncoding>>;
@@ -888,13 +890,25 @@ pub fn atlas_surface_artifacts(db: &dyn Db, key: AtlasSurfaceKey) -> Result<Arc<
             settings,
             previous_blocks.map(|previous| (previous.levels.as_slice(), &previous.encoded)),
         );
+        let block_errors = crate::quality::block_errors_reusing(
+            format,
+            &texture.levels[0],
+            &image,
+            surface.channels(),
+            previous_blocks.map(|previous| (&previous.levels[0], &previous.encoded.levels[0][..], &*previous.block_errors)),
+        );
+        let psnr_db = (block_errors.psnr(image.width, image.height) * 100.0).round() / 100.0;
         let levels = Arc::new(levels);
         db.remember_encoding(
             key.as_id(),
-            PreviousEncoding { settings, levels: levels.clone(), mips: mip_reuse.map(Arc::new), encoded: texture.clone() },
+            PreviousEncoding {
+                settings,
+                levels: levels.clone(),
+                mips: mip_reuse.map(Arc::new),
+                encoded: texture.clone(),
+                block_errors: Arc::new(block_errors),
+            },
         );
-        let decoded = decode_blocks(format, &texture.levels[0], image.width, image.height);
-        let psnr_db = (psnr(&image, &decoded, surface.channels()) * 100.0).round() / 100.0;
         let texture_file: Arc<[u8]> = write_container(&texture, container, zstd).into();
         let info = SurfaceInfo {
             surface,

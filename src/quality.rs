@@ -20,27 +20,7 @@ pub fn decode_blocks(format: BlockFormat, blocks: &[u8], width: u32, height: u32
     // Block rows in parallel: each writes its own four rows of pixels.
     pixels.par_chunks_mut((width as usize * 4 * 4).max(1)).enumerate().take(blocks_y).for_each(|(by, rows)| {
         for bx in 0..blocks_x {
-            let block = &blocks[(by * blocks_x + bx) * size..][..size];
-            let mut rgba = [0u8; 64];
-            match format {
-                BlockFormat::Bc1 => bcdec_rs::bc1(block, &mut rgba, 16),
-                BlockFormat::Bc3 => bcdec_rs::bc3(block, &mut rgba, 16),
-                BlockFormat::Bc7 => bcdec_rs::bc7(block, &mut rgba, 16),
-                BlockFormat::Bc4 => {
-                    let mut red = [0u8; 16];
-                    bcdec_rs::bc4(block, &mut red, 4, false);
-                    for (index, value) in red.iter().enumerate() {
-                        rgba[index * 4..index * 4 + 4].copy_from_slice(&[*value, 0, 0, 255]);
-                    }
-                }
-                BlockFormat::Bc5 => {
-                    let mut red_green = [0u8; 32];
-                    bcdec_rs::bc5(block, &mut red_green, 8, false);
-                    for index in 0..16 {
-                        rgba[index * 4..index * 4 + 4].copy_from_slice(&[red_green[index * 2], red_green[index * 2 + 1], 0, 255]);
-                    }
-                }
-            }
+            let rgba = decode_block(format, &blocks[(by * blocks_x + bx) * size..][..size]);
             for row in 0..4 {
                 if by * 4 + row >= height as usize {
                     break;
@@ -57,6 +37,101 @@ pub fn decode_blocks(format: BlockFormat, blocks: &[u8], width: u32, height: u32
         }
     });
     Texture::new(width, height, pixels)
+}
+
+/// One 4×4 block decoded to RGBA8, row by row.
+fn decode_block(format: BlockFormat, block: &[u8]) -> [u8; 64] {
+    let mut rgba = [0u8; 64];
+    match format {
+        BlockFormat::Bc1 => bcdec_rs::bc1(block, &mut rgba, 16),
+        BlockFormat::Bc3 => bcdec_rs::bc3(block, &mut rgba, 16),
+        BlockFormat::Bc7 => bcdec_rs::bc7(block, &mut rgba, 16),
+        BlockFormat::Bc4 => {
+            let mut red = [0u8; 16];
+            bcdec_rs::bc4(block, &mut red, 4, false);
+            for (index, value) in red.iter().enumerate() {
+                rgba[index * 4..index * 4 + 4].copy_from_slice(&[*value, 0, 0, 255]);
+            }
+        }
+        BlockFormat::Bc5 => {
+            let mut red_green = [0u8; 32];
+            bcdec_rs::bc5(block, &mut red_green, 8, false);
+            for index in 0..16 {
+                rgba[index * 4..index * 4 + 4].copy_from_slice(&[red_green[index * 2], red_green[index * 2 + 1], 0, 255]);
+            }
+        }
+    }
+    rgba
+}
+
+/// The squared error of every 4×4 block of a level against `reference`, over its first
+/// `channels` channels (texels inside the level only): what a PSNR sums, kept so that a later
+/// measurement of the same surface decodes only the blocks that changed.
+#[derive(Clone, Debug, PartialEq)]
+pub struct BlockErrors {
+    pub format: BlockFormat,
+    pub channels: usize,
+    pub errors: Vec<u32>,
+}
+
+impl BlockErrors {
+    /// PSNR in dB over `width` × `height` texels.
+    pub fn psnr(&self, width: u32, height: u32) -> f64 {
+        let squared_error: u64 = self.errors.iter().map(|&error| error as u64).sum();
+        psnr_of_squared_error(squared_error, width as u64 * height as u64 * self.channels as u64)
+    }
+}
+
+/// [`BlockErrors`] of `blocks` (BC data of `reference`'s size), reusing `previous` (the same
+/// surface measured earlier: its reference, blocks and errors) for every block whose data and
+/// reference texels are both unchanged. Equal to measuring every block.
+pub fn block_errors_reusing(
+    format: BlockFormat,
+    blocks: &[u8],
+    reference: &Texture,
+    channels: usize,
+    previous: Option<(&Texture, &[u8], &BlockErrors)>,
+) -> BlockErrors {
+    let (width, height) = (reference.width as usize, reference.height as usize);
+    let (blocks_x, blocks_y) = (width.div_ceil(4), height.div_ceil(4));
+    let size = block_bytes(format);
+    let previous = previous.filter(|(old_reference, old_blocks, old)| {
+        (old_reference.width, old_reference.height) == (reference.width, reference.height)
+            && old_blocks.len() == blocks.len()
+            && (old.format, old.channels, old.errors.len()) == (format, channels, blocks_x * blocks_y)
+    });
+    let mut errors = vec![0u32; blocks_x * blocks_y];
+    errors.par_chunks_mut(blocks_x.max(1)).enumerate().for_each(|(by, row_errors)| {
+        let rows = by * 4..(by * 4 + 4).min(height);
+        for (bx, error) in row_errors.iter_mut().enumerate() {
+            let number = by * blocks_x + bx;
+            let block = &blocks[number * size..][..size];
+            let columns = bx * 4 * 4..((bx * 4 + 4).min(width)) * 4;
+            let texels = |row: usize| row * width * 4 + columns.start..row * width * 4 + columns.end;
+            if let Some((old_reference, old_blocks, old)) = previous {
+                let unchanged = old_blocks[number * size..][..size] == *block
+                    && rows.clone().all(|row| old_reference.pixels[texels(row)] == reference.pixels[texels(row)]);
+                if unchanged {
+                    *error = old.errors[number];
+                    continue;
+                }
+            }
+            let decoded = decode_block(format, block);
+            let mut sum = 0u32;
+            for (row_in_block, row) in rows.clone().enumerate() {
+                let source = &reference.pixels[texels(row)];
+                for (column, texel) in source.chunks_exact(4).enumerate() {
+                    let decoded = &decoded[(row_in_block * 4 + column) * 4..][..4];
+                    for channel in 0..channels {
+                        let difference = texel[channel] as i32 - decoded[channel] as i32;
+                        sum += (difference * difference) as u32;
+                    }
+                }
+            }
+            *error = sum;
+        }
+    });
+    BlockErrors { format, channels, errors }
 }
 
 /// PSNR in dB between two same-sized textures over their first `channels` channels.
@@ -78,10 +153,13 @@ pub fn psnr(reference: &Texture, decoded: &Texture, channels: usize) -> f64 {
             sum
         })
         .sum();
-    let samples = (reference.width * reference.height) as u64 * channels as u64;
+    psnr_of_squared_error(squared_error, (reference.width * reference.height) as u64 * channels as u64)
+}
+
+fn psnr_of_squared_error(squared_error: u64, samples: u64) -> f64 {
     if squared_error == 0 {
         return LOSSLESS_PSNR_DB;
     }
-    let mse = squared_error as f64 / samples as f64;
+    let mse = squared_error as f64 / samples.max(1) as f64;
     (10.0 * (255.0f64 * 255.0 / mse).log10()).min(LOSSLESS_PSNR_DB)
 }

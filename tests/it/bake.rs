@@ -226,6 +226,22 @@ fn re_encoding_only_changed_blocks_equals_a_full_encode() {
         let reused = encode_levels_reusing(&new_levels, settings, Some((&old_levels, &old)));
         assert_eq!(reused, encode_levels(&new_levels, settings), "{format:?}: reuse is exact");
         assert_ne!(reused, old, "{format:?}: the edit shows");
+        // The PSNR from per-block errors, measured again only where blocks or texels changed.
+        use cirrus::quality::{block_errors_reusing, decode_blocks, psnr};
+        let channels = 3;
+        let old_errors = block_errors_reusing(format, &old.levels[0], &old_levels[0], channels, None);
+        let fresh = block_errors_reusing(format, &reused.levels[0], &new_levels[0], channels, None);
+        let reused_errors =
+            block_errors_reusing(format, &reused.levels[0], &new_levels[0], channels, Some((&old_levels[0], &old.levels[0], &old_errors)));
+        assert_eq!(reused_errors, fresh, "{format:?}");
+        let decoded = decode_blocks(format, &reused.levels[0], 96, 64);
+        assert_eq!(fresh.psnr(96, 64), psnr(&new_levels[0], &decoded, channels), "{format:?}");
+        // Errors planted in the previous measurement stay where nothing changed.
+        let mut planted = old_errors.clone();
+        planted.errors[0] += 1;
+        let from_planted =
+            block_errors_reusing(format, &reused.levels[0], &new_levels[0], channels, Some((&old_levels[0], &old.levels[0], &planted)));
+        assert_eq!(from_planted.errors[0], fresh.errors[0] + 1, "{format:?}: block 0 is reused");
     }
 }
 

@@ -741,6 +741,8 @@ impl Project {
             "faces": planes.face_count,
             "planes": planes.planes.len(),
             "quads": layout.layout.placements.len(),
+            // Faces of solid materials drawn on another plane's quad too (crack filling).
+            "faces_also_drawn": layout.rectangles.iter().map(|rectangle| rectangle.also_drawn.len()).sum::<usize>(),
             "alpha_cutoff": settings.billboard.alpha_cutoff,
             "epsilon": settings.billboard.epsilon,
             "epsilon_world": planes.epsilon,
@@ -1120,6 +1122,7 @@ impl Project {
         let all_faces = crate::rectangles::PlaneRectangle {
             plane: 0,
             faces: (0..loaded.mesh.triangles.len() as u32).collect(),
+            also_drawn: Vec::new(),
             origin: [0.0; 3],
             x_axis: [1.0, 0.0, 0.0],
             y_axis: [0.0, 1.0, 0.0],

@@ -181,6 +181,9 @@ impl Stage {
             // edge of the valid offsets. 3: faces then move to their nearest plane holding their
             // material (rounds of reassignment and refitting).
             Stage::Planes => 3,
+            // 2: faces of solid materials are also drawn on other planes' rectangles they lie
+            // within ε of (crack filling).
+            Stage::Layout => 2,
             _ => 1,
         }
     }
@@ -707,7 +710,15 @@ pub fn billboard_layout(db: &dyn Db, asset: BillboardAsset) -> Result<Arc<Billbo
     let planes = billboard_planes(db, asset)?;
     let (atlas, density) = atlas_layout_settings(db, asset);
     timed(db, Stage::Layout, asset, || {
-        let rectangles = crate::rectangles::plane_rectangles(&loaded.mesh.positions, &loaded.mesh.triangles, &planes);
+        let mut rectangles = crate::rectangles::plane_rectangles(&loaded.mesh.positions, &loaded.mesh.triangles, &planes);
+        let solid_materials: Vec<bool> = loaded.mesh.materials.iter().map(|material| !material.cut_out).collect();
+        let crack_filling = crate::rectangles::CrackFillingInput {
+            positions: &loaded.mesh.positions,
+            triangles: &loaded.mesh.triangles,
+            face_materials: &loaded.mesh.triangle_materials,
+            solid_materials: &solid_materials,
+        };
+        crate::rectangles::add_crack_filling_faces(&crack_filling, &planes, &mut rectangles);
         let sizes: Vec<(f32, f32)> = rectangles.iter().map(|rectangle| (rectangle.width, rectangle.height)).collect();
         let layout = crate::layout::layout_rectangles(&sizes, &atlas, density);
         let render_groups = crate::plane_textures::render_groups(&loaded.mesh, &rectangles);

@@ -24,11 +24,22 @@ pub struct MeshMaterial {
     pub roughness: f32,
     /// Texture maps, project-relative paths.
     pub maps: BTreeMap<TextureSlot, PathBuf>,
+    /// The MTL declares a cut-out surface: a `map_d`, or `d` below 1.
+    #[serde(default)]
+    pub cut_out: bool,
 }
 
 impl Default for MeshMaterial {
     fn default() -> Self {
-        MeshMaterial { name: "default".into(), albedo_factor: [0.8; 3], opacity: 1.0, metallic: 0.0, roughness: 1.0, maps: BTreeMap::new() }
+        MeshMaterial {
+            name: "default".into(),
+            albedo_factor: [0.8; 3],
+            opacity: 1.0,
+            metallic: 0.0,
+            roughness: 1.0,
+            maps: BTreeMap::new(),
+            cut_out: false,
+        }
     }
 }
 
@@ -183,6 +194,7 @@ fn mesh_material(material: &tobj::Material, folder: &Path, source_root: &Path, w
     if let Some(dissolve) = material.dissolve {
         result.opacity = dissolve.clamp(0.0, 1.0);
     }
+    result.cut_out = result.opacity < 1.0 || material.dissolve_texture.is_some();
     let unknown = |key: &str| material.unknown_param.get(key).cloned();
     if let Some(value) = unknown("Pm").and_then(|v| v.trim().parse::<f32>().ok()) {
         result.metallic = value.clamp(0.0, 1.0);

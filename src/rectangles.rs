@@ -3,6 +3,8 @@
 //! cluster the minimum-area rectangle of the projections (rotating calipers on the convex hull),
 //! which gives the quad's frame.
 
+use rayon::prelude::*;
+
 use glam::{Vec2, Vec3};
 
 use crate::planes::PlaneSet;
@@ -13,6 +15,8 @@ use crate::planes::PlaneSet;
 pub struct PlaneRectangle {
     pub plane: u32,
     pub faces: Vec<u32>,
+    /// Faces of other planes drawn on this one too (see [`add_crack_filling_faces`]).
+    pub also_drawn: Vec<u32>,
     pub origin: [f32; 3],
     pub x_axis: [f32; 3],
     pub y_axis: [f32; 3],
@@ -50,6 +54,7 @@ pub fn plane_rectangles(positions: &[[f32; 3]], triangles: &[[u32; 3]], planes: 
             rectangles.push(PlaneRectangle {
                 plane: plane_index as u32,
                 faces,
+                also_drawn: Vec::new(),
                 origin: (on_plane + x_axis * min.x + y_axis * min.y).to_array(),
                 x_axis: x_axis.to_array(),
                 y_axis: y_axis.to_array(),
@@ -60,6 +65,82 @@ pub fn plane_rectangles(positions: &[[f32; 3]], triangles: &[[u32; 3]], planes: 
         }
     }
     rectangles
+}
+
+/// The mesh as [`add_crack_filling_faces`] needs it.
+pub struct CrackFillingInput<'a> {
+    pub positions: &'a [[f32; 3]],
+    pub triangles: &'a [[u32; 3]],
+    pub face_materials: &'a [u32],
+    /// Per material: a solid surface (the MTL declares no cut-out: no `map_d`, `d` = 1).
+    pub solid_materials: &'a [bool],
+}
+
+/// Draws faces of solid materials also on the rectangles of other planes that they lie within
+/// ε of, overlap, and whose faces already use their material. A solid surface split between
+/// planes (a trunk's faces around its axis) otherwise shows cracks where the planes meet at an
+/// angle to the view: each plane holds only its own strip of the surface, displaced by up to ε.
+/// Cut-out foliage is left alone: its gaps are real, and duplicates would only thicken it. The
+/// materials of each rectangle, hence its render group, do not change.
+pub fn add_crack_filling_faces(input: &CrackFillingInput, planes: &PlaneSet, rectangles: &mut [PlaneRectangle]) {
+    let epsilon = planes.epsilon;
+    let mut own_plane = vec![u32::MAX; input.triangles.len()];
+    for (index, plane) in planes.planes.iter().enumerate() {
+        for &face in &plane.faces {
+            own_plane[face as usize] = index as u32;
+        }
+    }
+    let mut rectangles_of_plane: Vec<Vec<usize>> = vec![Vec::new(); planes.planes.len()];
+    let mut materials_of_rectangle: Vec<Vec<u32>> = Vec::with_capacity(rectangles.len());
+    for (index, rectangle) in rectangles.iter().enumerate() {
+        rectangles_of_plane[rectangle.plane as usize].push(index);
+        let mut materials: Vec<u32> = rectangle.faces.iter().map(|&face| input.face_materials[face as usize]).collect();
+        materials.sort_unstable();
+        materials.dedup();
+        materials_of_rectangle.push(materials);
+    }
+    let solid_faces: Vec<u32> = (0..input.triangles.len() as u32)
+        .filter(|&face| input.solid_materials.get(input.face_materials[face as usize] as usize).copied().unwrap_or(false))
+        .collect();
+    let pairs: Vec<(usize, u32)> = solid_faces
+        .par_iter()
+        .flat_map_iter(|&face| {
+            let corners = input.triangles[face as usize].map(|vertex| Vec3::from(input.positions[vertex as usize]));
+            let centroid = (corners[0] + corners[1] + corners[2]) / 3.0;
+            let radius = corners.iter().map(|corner| corner.distance(centroid)).fold(0.0, f32::max);
+            let material = input.face_materials[face as usize];
+            let mut found = Vec::new();
+            for (index, plane) in planes.planes.iter().enumerate() {
+                let normal = Vec3::from(plane.normal);
+                if index as u32 == own_plane[face as usize] || (normal.dot(centroid) - plane.distance).abs() > epsilon + radius {
+                    continue;
+                }
+                if corners.iter().any(|corner| (normal.dot(*corner) - plane.distance).abs() > epsilon) {
+                    continue;
+                }
+                for &rectangle_index in &rectangles_of_plane[index] {
+                    let rectangle = &rectangles[rectangle_index];
+                    if materials_of_rectangle[rectangle_index].binary_search(&material).is_err() {
+                        continue;
+                    }
+                    let (origin, x_axis, y_axis) =
+                        (Vec3::from(rectangle.origin), Vec3::from(rectangle.x_axis), Vec3::from(rectangle.y_axis));
+                    let (mut low, mut high) = (Vec2::splat(f32::INFINITY), Vec2::splat(f32::NEG_INFINITY));
+                    for corner in corners {
+                        let on_plane = Vec2::new((corner - origin).dot(x_axis), (corner - origin).dot(y_axis));
+                        (low, high) = (low.min(on_plane), high.max(on_plane));
+                    }
+                    if high.x >= 0.0 && high.y >= 0.0 && low.x <= rectangle.width && low.y <= rectangle.height {
+                        found.push((rectangle_index, face));
+                    }
+                }
+            }
+            found
+        })
+        .collect();
+    for (rectangle, face) in pairs {
+        rectangles[rectangle].also_drawn.push(face);
+    }
 }
 
 /// Groups faces whose projected bounding boxes come within `gap` of each other (union-find over

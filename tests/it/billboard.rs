@@ -192,3 +192,65 @@ fn preview_of_the_bundled_bush_writes_a_contact_sheet_and_metrics() {
     assert_eq!((sheet.width(), sheet.height()), (4 * 2 * 256 + 3 * 8, 7 * 256 + 6 * 8), "source | LOD pairs, four per row");
     assert_eq!(project.run_cli(&["preview", "--asset", "nope"]).status.code(), Some(2));
 }
+
+/// A trunk along y: `rings` rings of `segments` vertices, tapering from radius 0.35 to 0.2 over
+/// height 6 and twisting by a third of a segment per ring (as generated trees are), open ends.
+fn trunk_obj(segments: usize, rings: usize) -> String {
+    let mut obj = String::from("mtllib trunk.mtl\nusemtl bark\n");
+    for ring in 0..=rings {
+        let t = ring as f32 / rings as f32;
+        let radius = 0.35 - 0.15 * t;
+        for index in 0..=segments {
+            let angle = (index as f32 + ring as f32 / 3.0) / segments as f32 * std::f32::consts::TAU;
+            obj.push_str(&format!(
+                "v {} {} {}\nvt {} {t}\n",
+                radius * angle.cos(),
+                6.0 * t,
+                radius * angle.sin(),
+                index as f32 / segments as f32
+            ));
+        }
+    }
+    let vertex = |ring: usize, index: usize| ring * (segments + 1) + index + 1;
+    for ring in 0..rings {
+        for index in 0..segments {
+            let [a, b, c, d] = [vertex(ring, index), vertex(ring, index + 1), vertex(ring + 1, index + 1), vertex(ring + 1, index)];
+            obj.push_str(&format!("f {a}/{a} {d}/{d} {c}/{c} {b}/{b}\n"));
+        }
+    }
+    obj
+}
+
+#[test]
+fn a_solid_trunk_split_between_planes_shows_no_cracks() {
+    // The same trunk, solid, and declared cut-out (`d` just below 1: every texel still passes
+    // the cutoff), which keeps each face on its own plane only.
+    let mut figures = Vec::new();
+    for declaration in ["", "d 0.999\n"] {
+        let project = TempProject::new(
+            r#"Pipeline(source: "assets", output: "baked", assets: [
+                BillboardCloud(name: "trunk", mesh: "trunk.obj", atlas: (max_size: 512)),
+            ])"#,
+        );
+        project.write("assets/trunk.obj", trunk_obj(12, 8));
+        project.write("assets/trunk.mtl", format!("newmtl bark\nKd 0.4 0.3 0.2\n{declaration}map_Kd bark.png\n"));
+        project.write("assets/bark.png", pattern_png(32, 32, 1));
+        let output = project.run_cli(&["preview", "--asset", "trunk"]);
+        assert_eq!(output.status.code(), Some(0), "{}", String::from_utf8_lossy(&output.stderr));
+        let report: serde_json::Value = serde_json::from_slice(&project.read("baked/trunk/report.json")).unwrap();
+        let metrics: serde_json::Value = serde_json::from_slice(&project.read("baked/trunk/preview/metrics.json")).unwrap();
+        figures.push((
+            report["planes"].as_u64().unwrap(),
+            report["faces_also_drawn"].as_u64().unwrap(),
+            metrics["mean_iou"].as_f64().unwrap(),
+            metrics["min_iou"].as_f64().unwrap(),
+        ));
+    }
+    println!("trunk (planes, faces also drawn, mean IoU, min IoU): solid {:?}, declared cut-out {:?}", figures[0], figures[1]);
+    let [(planes, also_drawn, solid_mean, solid_min), (_, cut_out_also_drawn, cut_out_mean, cut_out_min)] = figures[..] else {
+        unreachable!()
+    };
+    assert!(planes >= 3 && also_drawn > 0 && cut_out_also_drawn == 0, "{figures:?}");
+    // Cracks show most where the view is at an angle to two planes: the worst view gains most.
+    assert!(solid_min > cut_out_min + 0.1 && solid_mean > cut_out_mean, "{figures:?}");
+}

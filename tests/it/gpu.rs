@@ -19,6 +19,7 @@ fn a_plane_render_covers_its_faces_cuts_alpha_and_encodes_normal_and_height() {
     let rectangle = PlaneRectangle {
         plane: 0,
         faces: vec![0, 1],
+        also_drawn: Vec::new(),
         origin: [0.0; 3],
         x_axis: [1.0, 0.0, 0.0],
         y_axis: [0.0, 1.0, 0.0],

@@ -103,6 +103,8 @@ fn extend_chain(
         straight = straight.map(|colour| reduce(&colour, width, height, next_width, next_height));
         (width, height) = (next_width, next_height);
         let alpha_scale = match (settings.alpha_cutoff, coverage) {
+            // All or nothing passes on level 0, so on every level: no scale keeps it better.
+            (Some(_), Some(coverage)) if coverage == 0.0 || coverage == 1.0 => 1.0,
             (Some(cutoff), Some(coverage)) => coverage_alpha_scale(&current, cutoff, coverage),
             _ => 1.0,
         };

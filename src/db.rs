@@ -168,13 +168,15 @@ impl Stage {
             Stage::Pack => 3,
             // 2: coverage-preserving mips for albedo and opacity sources; opacity from alpha.
             // 3: transparent texels of albedo mips keep their footprint's colour (not black).
-            // 4: sRGB bytes as Pack 3.
-            Stage::Render => 4,
+            // 4: sRGB bytes as Pack 3. 5: as Mips 4.
+            Stage::Render => 5,
             // 2: transparent texels of albedo mips keep their footprint's colour (not black).
-            // 3: sRGB bytes as Pack 3.
-            Stage::Mips => 3,
+            // 3: sRGB bytes as Pack 3. 4: no coverage scaling when all or none of level 0 passes
+            // the cutoff (alpha kept as it is, not scaled to just above the cutoff).
+            Stage::Mips => 4,
             // 2: as Mips 2. 3: fully transparent BC7 blocks use the fastest profile. 4: as Mips 3.
-            Stage::Encode => 4,
+            // 5: as Mips 4.
+            Stage::Encode => 5,
             // 2: `map_d` naming the albedo texture is not applied a second time.
             Stage::Mesh => 2,
             // 2: each plane is fitted to its faces (least squares within ε), not left at the

@@ -348,6 +348,25 @@ fn a_level_encodes_each_block_as_that_block_alone_repeated_blocks_included() {
 }
 
 #[test]
+fn alpha_that_passes_the_cutoff_everywhere_is_not_rescaled_down_the_mip_chain() {
+    use cirrus::mips::{mip_chain, MipSettings};
+    use cirrus::surface::SurfaceKind;
+    // Coverage is 1 on every level already; scaling alpha toward the cutoff would only make it
+    // fragile under filtering.
+    for alpha in [255, 200] {
+        let levels = mip_chain(
+            &cirrus::texture::Texture::constant(16, 16, [90, 60, 40, alpha]),
+            MipSettings { kind: SurfaceKind::Albedo, alpha_cutoff: Some(0.5) },
+        );
+        assert!(
+            levels.iter().all(|level| level.texel(0, 0)[3] == alpha),
+            "{alpha}: {:?}",
+            levels.iter().map(|l| l.texel(0, 0)).collect::<Vec<_>>()
+        );
+    }
+}
+
+#[test]
 fn transparent_albedo_texels_keep_their_colour_down_the_mip_chain() {
     use cirrus::mips::{mip_chain, MipSettings};
     use cirrus::surface::SurfaceKind;

@@ -19,21 +19,31 @@ pub struct AtlasImages {
     pub coverage: f32,
 }
 
-/// Which atlas texels a face covers: the shape of the atlas without its colours, so that a
-/// colour-only edit finds it unchanged and skips the fill search.
+/// Which atlas texels a face covers, and what is drawn there: the shape of the atlas without its
+/// colours, so that a colour-only edit finds it unchanged and skips the fill search.
 #[derive(Clone, Debug, PartialEq)]
 pub struct AtlasCoverage {
     pub width: u32,
     pub height: u32,
     pub covered: Vec<bool>,
+    /// Every covered texel in index order with the plane image and texel drawn on it (the last
+    /// plane in layout order wins).
+    pub drawn: Vec<DrawnTexel>,
 }
 
-/// For every atlas texel, the covered texel whose values it takes: itself where covered, the
-/// nearest covered texel elsewhere. Empty when nothing is covered.
-#[derive(Clone, Debug, PartialEq)]
-pub struct FillSources(pub Vec<u32>);
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct DrawnTexel {
+    pub atlas_texel: u32,
+    pub plane: u32,
+    pub plane_texel: u32,
+}
 
-/// Calls `visit(plane, source_texel, atlas_texel)` for every drawn texel of `planes` (in layout
+/// For every atlas texel, the covered texel it takes its values from: itself where covered,
+/// the nearest covered texel elsewhere. Empty when nothing is covered.
+#[derive(Clone, Debug, PartialEq)]
+pub struct TexelSources(pub Vec<u32>);
+
+/// Calls `visit(plane, plane_texel, atlas_texel)` for every drawn texel of `planes` (in layout
 /// order) at its atlas texel; later planes overwrite earlier ones.
 fn for_each_drawn_texel(layout: &Layout, planes: &[&PlaneImages], mut visit: impl FnMut(usize, usize, usize)) {
     let (width, height) = (layout.width as usize, layout.height as usize);
@@ -56,45 +66,75 @@ fn for_each_drawn_texel(layout: &Layout, planes: &[&PlaneImages], mut visit: imp
     }
 }
 
-/// The atlas texels that `planes` (in layout order) cover.
+/// The atlas texels that `planes` (in layout order) cover, and what each shows.
 pub fn atlas_coverage(layout: &Layout, planes: &[&PlaneImages]) -> AtlasCoverage {
-    let mut covered = vec![false; layout.width as usize * layout.height as usize];
-    for_each_drawn_texel(layout, planes, |_, _, target| covered[target] = true);
-    AtlasCoverage { width: layout.width, height: layout.height, covered }
-}
-
-/// Composites `planes` (in layout order) into the atlas of `layout`, then gives every uncovered
-/// texel the values named by `fill` (from [`fill_sources`] of the same coverage).
-pub fn composite_atlas(layout: &Layout, planes: &[&PlaneImages], coverage: &AtlasCoverage, fill: &FillSources) -> AtlasImages {
     let texels = layout.width as usize * layout.height as usize;
-    let mut layers: [Vec<u8>; 4] = std::array::from_fn(|_| vec![0u8; texels * 4]);
-    for_each_drawn_texel(layout, planes, |plane, source, target| {
-        let images = planes[plane];
-        let sources = [&images.albedo, &images.normal, &images.mra, &images.height_map];
-        for (layer, image) in layers.iter_mut().zip(sources) {
-            layer[target * 4..target * 4 + 4].copy_from_slice(&image[source * 4..source * 4 + 4]);
-        }
-    });
-    let covered_count = coverage.covered.iter().filter(|&&covered| covered).count();
-    apply_fill(&mut layers, fill);
-    let [albedo, normal, mra, height_layer] = layers;
-    AtlasImages {
-        albedo: Texture::new(layout.width, layout.height, albedo),
-        normal: Texture::new(layout.width, layout.height, normal),
-        mra: Texture::new(layout.width, layout.height, mra),
-        height: Texture::new(layout.width, layout.height, height_layer),
-        coverage: covered_count as f32 / texels.max(1) as f32,
-    }
+    let mut last_drawn = vec![(u32::MAX, 0u32); texels];
+    for_each_drawn_texel(layout, planes, |plane, plane_texel, atlas_texel| last_drawn[atlas_texel] = (plane as u32, plane_texel as u32));
+    let covered: Vec<bool> = last_drawn.iter().map(|&(plane, _)| plane != u32::MAX).collect();
+    let drawn = last_drawn
+        .iter()
+        .enumerate()
+        .filter(|(_, (plane, _))| *plane != u32::MAX)
+        .map(|(atlas_texel, &(plane, plane_texel))| DrawnTexel { atlas_texel: atlas_texel as u32, plane, plane_texel })
+        .collect();
+    AtlasCoverage { width: layout.width, height: layout.height, covered, drawn }
 }
 
-/// Finds, for every uncovered texel, its nearest covered texel (breadth-first from all covered
-/// texels at once).
-pub fn fill_sources(coverage: &AtlasCoverage) -> FillSources {
+/// Where every atlas texel takes its values from (see [`TexelSources`]).
+pub fn texel_sources(coverage: &AtlasCoverage) -> TexelSources {
+    TexelSources(fill_sources(coverage))
+}
+
+/// Composites `planes` (in layout order) into the atlas of `layout`: the drawn texels of
+/// `coverage`, then every texel takes the values of the texel `sources` names (from
+/// [`texel_sources`] of the same coverage), the four surfaces and their rows in parallel.
+/// Albedo alpha stays 0 on uncovered texels.
+pub fn composite_atlas(layout: &Layout, planes: &[&PlaneImages], coverage: &AtlasCoverage, sources: &TexelSources) -> AtlasImages {
+    let texels = layout.width as usize * layout.height as usize;
+    let layer = |index: usize| -> Texture {
+        let mut drawn = vec![0u8; texels * 4];
+        for texel in &coverage.drawn {
+            let images = planes[texel.plane as usize];
+            let image = [&images.albedo, &images.normal, &images.mra, &images.height_map][index];
+            drawn[texel.atlas_texel as usize * 4..][..4].copy_from_slice(&image[texel.plane_texel as usize * 4..][..4]);
+        }
+        if sources.0.is_empty() {
+            // Nothing drawn at all: a neutral flat normal, so the surface stays valid.
+            if index == 1 {
+                for texel in drawn.chunks_exact_mut(4) {
+                    texel.copy_from_slice(&[128, 128, 255, 255]);
+                }
+            }
+            return Texture::new(layout.width, layout.height, drawn);
+        }
+        let mut pixels = vec![0u8; texels * 4];
+        let row = layout.width as usize * 4;
+        pixels.par_chunks_mut(row.max(4)).enumerate().for_each(|(y, row_pixels)| {
+            let first = y * layout.width as usize;
+            for (x, texel) in row_pixels.chunks_exact_mut(4).enumerate() {
+                let from = sources.0[first + x] as usize;
+                texel.copy_from_slice(&drawn[from * 4..][..4]);
+                if index == 0 && from != first + x {
+                    texel[3] = 0;
+                }
+            }
+        });
+        Texture::new(layout.width, layout.height, pixels)
+    };
+    let ((albedo, normal), (mra, height)) = rayon::join(|| rayon::join(|| layer(0), || layer(1)), || rayon::join(|| layer(2), || layer(3)));
+    AtlasImages { albedo, normal, mra, height, coverage: coverage.drawn.len() as f32 / texels.max(1) as f32 }
+}
+
+/// For every texel, the covered texel it takes values from: itself where covered, the nearest
+/// covered texel elsewhere (breadth-first from all covered texels at once). Empty when nothing
+/// is covered.
+pub fn fill_sources(coverage: &AtlasCoverage) -> Vec<u32> {
     const UNREACHED: u32 = u32::MAX;
     const BORDER: u32 = u32::MAX - 1;
     let (width, height, covered) = (coverage.width as usize, coverage.height as usize, &coverage.covered);
     if !covered.iter().any(|&c| c) {
-        return FillSources(Vec::new());
+        return Vec::new();
     }
     // The search runs on a grid with a one-texel border that counts as already reached, so a
     // texel's four neighbours are ±1 and ±stride with no bounds tests. Each cell holds the
@@ -127,26 +167,5 @@ pub fn fill_sources(coverage: &AtlasCoverage) -> FillSources {
             }
         }
     }
-    FillSources((0..height).flat_map(|row| source[(row + 1) * stride + 1..(row + 1) * stride + 1 + width].iter().copied()).collect())
-}
-
-/// Gives every uncovered texel the values of its fill source, the four layers in parallel.
-/// Albedo alpha is left at 0 on filled texels. With nothing covered, the normal layer becomes a
-/// neutral flat normal, so the surface stays valid.
-fn apply_fill(layers: &mut [Vec<u8>; 4], fill: &FillSources) {
-    if fill.0.is_empty() {
-        for texel in layers[1].chunks_exact_mut(4) {
-            texel.copy_from_slice(&[128, 128, 255, 255]);
-        }
-        return;
-    }
-    layers.par_iter_mut().enumerate().for_each(|(layer_index, layer)| {
-        let channels = if layer_index == 0 { 3 } else { 4 };
-        for (index, &from) in fill.0.iter().enumerate() {
-            let from = from as usize;
-            if from != index {
-                layer.copy_within(from * 4..from * 4 + channels, index * 4);
-            }
-        }
-    });
+    (0..height).flat_map(|row| source[(row + 1) * stride + 1..(row + 1) * stride + 1 + width].iter().copied()).collect()
 }

@@ -838,11 +838,12 @@ pub fn atlas_coverage(db: &dyn Db, asset: BillboardAsset) -> Result<Arc<crate::a
     timed(db, Stage::Atlas, asset, || Ok(Arc::new(crate::atlas::atlas_coverage(&layout.layout, &images_by_rectangle(&layout, &images)))))
 }
 
-/// The texel each uncovered atlas texel is filled from (part of the atlas stage).
+/// Where each atlas texel takes its values from, uncovered ones by the fill search (part of the
+/// atlas stage).
 #[salsa::tracked(returns(clone))]
-pub fn atlas_fill_sources(db: &dyn Db, asset: BillboardAsset) -> Result<Arc<crate::atlas::FillSources>, Diagnostic> {
+pub fn atlas_texel_sources(db: &dyn Db, asset: BillboardAsset) -> Result<Arc<crate::atlas::TexelSources>, Diagnostic> {
     let coverage = atlas_coverage(db, asset)?;
-    timed(db, Stage::Atlas, asset, || Ok(Arc::new(crate::atlas::fill_sources(&coverage))))
+    timed(db, Stage::Atlas, asset, || Ok(Arc::new(crate::atlas::texel_sources(&coverage))))
 }
 
 #[salsa::tracked(returns(clone))]
@@ -850,9 +851,9 @@ pub fn billboard_atlas(db: &dyn Db, asset: BillboardAsset) -> Result<Arc<crate::
     let layout = billboard_layout(db, asset)?;
     let images = render_group_images(db, asset)?;
     let coverage = atlas_coverage(db, asset)?;
-    let fill = atlas_fill_sources(db, asset)?;
+    let sources = atlas_texel_sources(db, asset)?;
     timed(db, Stage::Atlas, asset, || {
-        Ok(Arc::new(crate::atlas::composite_atlas(&layout.layout, &images_by_rectangle(&layout, &images), &coverage, &fill)))
+        Ok(Arc::new(crate::atlas::composite_atlas(&layout.layout, &images_by_rectangle(&layout, &images), &coverage, &sources)))
     })
 }
 

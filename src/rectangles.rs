@@ -1,7 +1,8 @@
 //! Plane rectangles: each plane's faces split into clusters that lie apart on the plane (a plane
 //! holds faces anywhere in its ε-slab: one quad around all of them would be mostly empty), and per
 //! cluster the minimum-area rectangle of the projections (rotating calipers on the convex hull),
-//! which gives the quad's frame.
+//! which gives the quad's frame; then the faces of solid materials each quad draws besides its
+//! own, to close cracks between planes.
 
 use rayon::prelude::*;
 

@@ -25,7 +25,8 @@ pub struct Texture {
 impl Texture {
     pub fn new(width: u32, height: u32, pixels: Vec<u8>) -> Texture {
         assert_eq!(pixels.len(), (width * height * 4) as usize, "RGBA8 pixel count");
-        let hash = blake3::hash(&pixels);
+        // The same hash either way; large images hash on every core (atlas surfaces are 16 MB).
+        let hash = if pixels.len() >= 1 << 20 { blake3::Hasher::new().update_rayon(&pixels).finalize() } else { blake3::hash(&pixels) };
         Texture { width, height, pixels: pixels.into(), hash }
     }
 

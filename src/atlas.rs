@@ -31,6 +31,7 @@ pub struct AtlasCoverage {
     pub drawn: Vec<DrawnTexel>,
 }
 
+/// One covered atlas texel and the texel of a plane image (in layout order) drawn on it.
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub struct DrawnTexel {
     pub atlas_texel: u32,

@@ -218,9 +218,9 @@ fn preview(pipeline: PathBuf, asset: String, settings: crate::lod_preview::Previ
     match project.preview(&options) {
         Ok(metrics) => {
             println!(
-                "{} views, {} samples per pixel: mean IoU {:.3}, min IoU {:.3}, mean PSNR {:.2} dB",
+                "{} views, {} per pixel: mean IoU {:.3}, min IoU {:.3}, mean PSNR {:.2} dB",
                 metrics.views.len(),
-                metrics.samples_per_pixel,
+                if metrics.samples_per_pixel == 1 { "1 sample".to_string() } else { format!("{} samples", metrics.samples_per_pixel) },
                 metrics.mean_iou,
                 metrics.min_iou,
                 metrics.mean_psnr

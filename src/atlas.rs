@@ -25,7 +25,6 @@ pub struct AtlasImages {
 pub struct AtlasCoverage {
     pub width: u32,
     pub height: u32,
-    pub covered: Vec<bool>,
     /// Every covered texel in index order with the plane image and texel drawn on it (the last
     /// plane in layout order wins).
     pub drawn: Vec<DrawnTexel>,
@@ -72,14 +71,13 @@ pub fn atlas_coverage(layout: &Layout, planes: &[&PlaneImages]) -> AtlasCoverage
     let texels = layout.width as usize * layout.height as usize;
     let mut last_drawn = vec![(u32::MAX, 0u32); texels];
     for_each_drawn_texel(layout, planes, |plane, plane_texel, atlas_texel| last_drawn[atlas_texel] = (plane as u32, plane_texel as u32));
-    let covered: Vec<bool> = last_drawn.iter().map(|&(plane, _)| plane != u32::MAX).collect();
     let drawn = last_drawn
         .iter()
         .enumerate()
         .filter(|(_, (plane, _))| *plane != u32::MAX)
         .map(|(atlas_texel, &(plane, plane_texel))| DrawnTexel { atlas_texel: atlas_texel as u32, plane, plane_texel })
         .collect();
-    AtlasCoverage { width: layout.width, height: layout.height, covered, drawn }
+    AtlasCoverage { width: layout.width, height: layout.height, drawn }
 }
 
 /// Where every atlas texel takes its values from (see [`TexelSources`]).
@@ -133,8 +131,8 @@ pub fn composite_atlas(layout: &Layout, planes: &[&PlaneImages], coverage: &Atla
 pub fn fill_sources(coverage: &AtlasCoverage) -> Vec<u32> {
     const UNREACHED: u32 = u32::MAX;
     const BORDER: u32 = u32::MAX - 1;
-    let (width, height, covered) = (coverage.width as usize, coverage.height as usize, &coverage.covered);
-    if !covered.iter().any(|&c| c) {
+    let (width, height) = (coverage.width as usize, coverage.height as usize);
+    if coverage.drawn.is_empty() {
         return Vec::new();
     }
     // The search runs on a grid with a one-texel border that counts as already reached, so a
@@ -149,7 +147,7 @@ pub fn fill_sources(coverage: &AtlasCoverage) -> Vec<u32> {
         source[row * stride + width + 1] = BORDER;
     }
     let mut queue: Vec<u32> = Vec::with_capacity(width * height);
-    for (index, _) in covered.iter().enumerate().filter(|(_, &c)| c) {
+    for index in coverage.drawn.iter().map(|drawn| drawn.atlas_texel as usize) {
         let padded = (index / width + 1) * stride + index % width + 1;
         source[padded] = index as u32;
         queue.push(padded as u32);

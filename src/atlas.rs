@@ -80,11 +80,6 @@ pub fn atlas_coverage(layout: &Layout, planes: &[&PlaneImages]) -> AtlasCoverage
     AtlasCoverage { width: layout.width, height: layout.height, drawn }
 }
 
-/// Where every atlas texel takes its values from (see [`TexelSources`]).
-pub fn texel_sources(coverage: &AtlasCoverage) -> TexelSources {
-    TexelSources(fill_sources(coverage))
-}
-
 /// Composites `planes` (in layout order) into the atlas of `layout`: the drawn texels of
 /// `coverage`, then every texel takes the values of the texel `sources` names (from
 /// [`texel_sources`] of the same coverage), the four surfaces and their rows in parallel.
@@ -125,15 +120,14 @@ pub fn composite_atlas(layout: &Layout, planes: &[&PlaneImages], coverage: &Atla
     AtlasImages { albedo, normal, mra, height, coverage: coverage.drawn.len() as f32 / texels.max(1) as f32 }
 }
 
-/// For every texel, the covered texel it takes values from: itself where covered, the nearest
-/// covered texel elsewhere (breadth-first from all covered texels at once). Empty when nothing
-/// is covered.
-pub fn fill_sources(coverage: &AtlasCoverage) -> Vec<u32> {
+/// Where every atlas texel takes its values from (see [`TexelSources`]): the nearest covered
+/// texel, breadth-first from all covered texels at once.
+pub fn texel_sources(coverage: &AtlasCoverage) -> TexelSources {
     const UNREACHED: u32 = u32::MAX;
     const BORDER: u32 = u32::MAX - 1;
     let (width, height) = (coverage.width as usize, coverage.height as usize);
     if coverage.drawn.is_empty() {
-        return Vec::new();
+        return TexelSources(Vec::new());
     }
     // The search runs on a grid with a one-texel border that counts as already reached, so a
     // texel's four neighbours are ±1 and ±stride with no bounds tests. Each cell holds the
@@ -166,5 +160,5 @@ pub fn fill_sources(coverage: &AtlasCoverage) -> Vec<u32> {
             }
         }
     }
-    (0..height).flat_map(|row| source[(row + 1) * stride + 1..(row + 1) * stride + 1 + width].iter().copied()).collect()
+    TexelSources((0..height).flat_map(|row| source[(row + 1) * stride + 1..(row + 1) * stride + 1 + width].iter().copied()).collect())
 }

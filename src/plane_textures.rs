@@ -12,10 +12,7 @@ use crate::rectangles::PlaneRectangle;
 
 /// The materials a rectangle's faces use, in index order.
 pub fn plane_materials(mesh: &Mesh, plane: &PlaneRectangle) -> Vec<u32> {
-    let mut materials: Vec<u32> = plane.faces.iter().map(|&face| mesh.triangle_materials[face as usize]).collect();
-    materials.sort_unstable();
-    materials.dedup();
-    materials
+    crate::planes::materials_of_faces(&plane.faces, &mesh.triangle_materials)
 }
 
 /// One render stage: the rectangles of one plane whose faces use the same set of materials, so

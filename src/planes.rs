@@ -405,15 +405,7 @@ fn reassign_to_nearest_planes(faces: &[Face], face_materials: &[u32], planes: &m
     for round in 0..=REASSIGNMENT_ROUNDS {
         let normals: Vec<Vec3> = planes.iter().map(|plane| plane.0).collect();
         let offsets: Vec<f32> = planes.iter().map(|plane| plane.1).collect();
-        let materials: Vec<Vec<u32>> = planes
-            .iter()
-            .map(|(_, _, members)| {
-                let mut materials: Vec<u32> = members.iter().map(|&index| face_materials[index as usize]).collect();
-                materials.sort_unstable();
-                materials.dedup();
-                materials
-            })
-            .collect();
+        let materials: Vec<Vec<u32>> = planes.iter().map(|(_, _, members)| materials_of_faces(members, face_materials)).collect();
         let candidates = Candidates { normals: &normals, offsets: &offsets, materials: &materials };
         let moved: Vec<Option<usize>> = faces
             .par_iter()
@@ -442,6 +434,14 @@ fn reassign_to_nearest_planes(faces: &[Face], face_materials: &[u32], planes: &m
         }
         planes.par_iter_mut().for_each(|(normal, rho, members)| (*normal, *rho) = fit_plane(faces, members, *normal, *rho, epsilon));
     }
+}
+
+/// The materials `faces` use (`face_materials` per face; empty: one material), ascending.
+pub fn materials_of_faces(faces: &[u32], face_materials: &[u32]) -> Vec<u32> {
+    let mut materials: Vec<u32> = faces.iter().map(|&face| face_materials.get(face as usize).copied().unwrap_or(0)).collect();
+    materials.sort_unstable();
+    materials.dedup();
+    materials
 }
 
 /// The planes a face may move to: normal, offset and the (sorted) materials each holds.

@@ -95,10 +95,7 @@ pub fn add_crack_filling_faces(input: &CrackFillingInput, planes: &PlaneSet, rec
     let mut materials_of_rectangle: Vec<Vec<u32>> = Vec::with_capacity(rectangles.len());
     for (index, rectangle) in rectangles.iter().enumerate() {
         rectangles_of_plane[rectangle.plane as usize].push(index);
-        let mut materials: Vec<u32> = rectangle.faces.iter().map(|&face| input.face_materials[face as usize]).collect();
-        materials.sort_unstable();
-        materials.dedup();
-        materials_of_rectangle.push(materials);
+        materials_of_rectangle.push(crate::planes::materials_of_faces(&rectangle.faces, input.face_materials));
     }
     let solid_faces: Vec<u32> = (0..input.triangles.len() as u32)
         .filter(|&face| input.solid_materials.get(input.face_materials[face as usize] as usize).copied().unwrap_or(false))

@@ -18,7 +18,6 @@ use crate::encode::{encode_levels, BlockEncodeSettings, EncodedTexture};
 use crate::material_definition::{parse_material_file, MaterialConstants, MaterialFile};
 use crate::mips::{mip_chain, mip_chain_reusing, MipSettings};
 use crate::preview::preview_png;
-use crate::quality::{decode_blocks, psnr};
 use crate::surface::{has_transparency, pack_surface, SurfaceKind};
 use crate::texture::{decode_texture, Texture};
 
@@ -497,8 +496,8 @@ pub fn encoded_surface(db: &dyn Db, key: SurfaceKey) -> Result<Arc<EncodedSurfac
         let settings = BlockEncodeSettings { format, quality, alpha, srgb: surface.is_srgb() };
         let texture = encode_levels(&mips.levels, settings);
         let level0 = &mips.levels[0];
-        let decoded = decode_blocks(format, &texture.levels[0], level0.width, level0.height);
-        let psnr_db = psnr(level0, &decoded, surface.channels());
+        let errors = crate::quality::block_errors_reusing(format, &texture.levels[0], level0, surface.channels(), None);
+        let psnr_db = errors.psnr(level0.width, level0.height);
         Ok(Arc::new(EncodedSurface { texture, psnr_db, alpha_tested: mips.alpha_tested }))
     })
 }

@@ -352,7 +352,7 @@ fn bench_planes(corpus: &Path) {
     use cirrus::planes::{select_planes, PlaneSettings};
     let load = |file: &str| {
         let bytes = std::fs::read(corpus.join(file)).expect("mesh");
-        let libraries = cirrus::mesh::material_libraries(Path::new(file), &bytes)
+        let libraries = cirrus::mesh::material_libraries(Path::new(file), &bytes, Path::new(""))
             .into_iter()
             .map(|library| {
                 let bytes = std::fs::read(corpus.join(&library)).ok();

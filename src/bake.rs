@@ -164,7 +164,11 @@ impl Project {
     pub fn open(config: PipelineConfig, options: ProjectOptions) -> Project {
         let cache = options.persistent_cache.then(|| DiskCache::new(config.output_dir().join(".cirrus").join("cache")));
         let revision = load_manifest(&config.output_dir()).revision;
-        Project {
+        let swept = crate::artifacts::sweep_temporary_files(&config.output_dir());
+        if swept > 0 {
+            tracing::info!("deleted {swept} temporary file(s) left by an interrupted build");
+        }
+        let mut project = Project {
             config,
             db: Database::new(cache),
             files: HashMap::new(),
@@ -180,7 +184,9 @@ impl Project {
             last_summary: None,
             revision,
             sources_changed_since_build: false,
-        }
+        };
+        project.sync_limits();
+        project
     }
 
     fn next_revision(&self) -> u64 {
@@ -244,25 +250,61 @@ impl Project {
     /// Replaces the pipeline; settings changes reach only the stages that read them.
     pub fn reconfigure(&mut self, config: PipelineConfig) {
         self.config = config;
+        self.sync_limits();
+    }
+
+    /// Sets the pipeline-wide limits input when they changed (setters never compare).
+    fn sync_limits(&mut self) {
+        let texture = self.config.limits.texture;
+        match crate::db::PipelineLimits::try_get(&self.db) {
+            Some(limits) if limits.texture(&self.db) == texture => {}
+            Some(limits) => {
+                limits.set_texture(&mut self.db).to(texture);
+            }
+            None => {
+                crate::db::PipelineLimits::new(&self.db, texture);
+            }
+        }
     }
 
     /// The assets of the pipeline: the listed ones, then files matching `rules`.
     pub fn asset_list(&self) -> Vec<AssetConfig> {
+        self.asset_list_and_conflicts().0
+    }
+
+    /// The assets of the pipeline, and a warning for each rule-matched file that does not
+    /// become an asset because its name is reserved or collides with another asset's folder.
+    pub fn asset_list_and_conflicts(&self) -> (Vec<AssetConfig>, Vec<Diagnostic>) {
         let mut assets = self.config.assets.clone();
-        let mut names: BTreeSet<String> = assets.iter().map(|asset| asset.name.clone()).collect();
+        let mut conflicts = Vec::new();
         for relative in rule_matches(&self.config) {
-            if let Some(asset) = self.config.asset_for_rule_match(&relative) {
-                if names.insert(asset.name.clone()) {
-                    assets.push(asset);
-                }
+            let Some(asset) = self.config.asset_for_rule_match(&relative) else { continue };
+            let file = self.config.source.join(&relative);
+            if let Some(reserved) = crate::config::reserved_asset_name(&asset.name) {
+                conflicts.push(Diagnostic::new(file, format!("warning: matches a rule but is not baked: {reserved}")));
+            } else if let Some(other) = assets.iter().find(|other| crate::config::asset_folders_collide(&other.name, &asset.name)) {
+                conflicts.push(Diagnostic::new(
+                    file,
+                    format!(
+                        "warning: matches a rule but is not baked: its asset name `{}` collides with the asset `{}` ({})",
+                        asset.name,
+                        other.name,
+                        display_path(&self.config.source.join(other.source.main_file()))
+                    ),
+                ));
+            } else {
+                assets.push(asset);
             }
         }
-        assets
+        (assets, conflicts)
     }
 
     /// Bakes the assets, writing only artifacts whose bytes changed.
     pub fn build(&mut self, options: &BuildOptions, progress: &(dyn Fn(Progress) + Sync)) -> Result<BuildSummary, BuildError> {
-        let all_assets = self.asset_list();
+        let (all_assets, conflicts) = self.asset_list_and_conflicts();
+        for conflict in &conflicts {
+            tracing::warn!("{conflict}");
+        }
         for name in &options.only_assets {
             if !all_assets.iter().any(|asset| &asset.name == name) {
                 return Err(BuildError::UnknownAsset { name: name.clone(), pipeline: display_path(&self.config.file) });
@@ -345,22 +387,35 @@ impl Project {
             if plan.errors.is_empty() {
                 // A fully baked asset owns exactly what it produced: drop stale artifacts.
                 let name = &plan.config.name;
-                removed_artifacts.extend(remove_artifacts(&self.config.root, &mut manifest, |path, entry| {
+                removed_artifacts.extend(remove_artifacts(&self.config, &mut manifest, |path, entry| {
                     &entry.asset == name && !produced.contains_key(path)
                 }));
             }
             summaries.push(self.asset_summary(plan, &surface_results, &runs, &manifest));
         }
-        if options.only_assets.is_empty() {
-            // Artifacts of assets that left the pipeline.
+        if options.only_assets.is_empty() && self.config.source_dir().is_dir() {
+            // Artifacts of assets that left the pipeline (not of those that a vanished source
+            // folder took along: they failed, and keep their last good artifacts).
             let names: BTreeSet<&str> = all_assets.iter().map(|asset| asset.name.as_str()).collect();
-            removed_artifacts.extend(remove_artifacts(&self.config.root, &mut manifest, |_, entry| !names.contains(entry.asset.as_str())));
+            removed_artifacts.extend(remove_artifacts(&self.config, &mut manifest, |_, entry| !names.contains(entry.asset.as_str())));
         }
         changed |= !removed_artifacts.is_empty();
         if changed {
             manifest.revision = next_revision;
             if let Err(error) = save_manifest(&output_dir, &manifest) {
-                tracing::error!("cannot write {}: {error}", display_path(&crate::artifacts::manifest_path(&output_dir)));
+                // Without the manifest, the next build cannot tell its artifacts from the user's
+                // files: every asset of this build fails, so scripts and CI notice.
+                let file = display_path(&self.config.output.join("manifest.json"));
+                tracing::error!("cannot write {file}: {error}");
+                for summary in &mut summaries {
+                    summary.status = AssetStatus::Failed;
+                    summary.errors.push(ErrorSummary {
+                        file: file.clone(),
+                        line: None,
+                        column: None,
+                        message: format!("cannot write the manifest: {error}"),
+                    });
+                }
             }
         }
         self.revision = manifest.revision;
@@ -384,7 +439,9 @@ impl Project {
     /// Validates every asset's sources without baking: the material files parse, and every
     /// texture they name exists and has a readable image header.
     pub fn check(&self) -> Vec<(String, Vec<Diagnostic>)> {
-        self.asset_list()
+        let (assets, conflicts) = self.asset_list_and_conflicts();
+        let conflicts = conflicts.into_iter().map(|conflict| (display_path(&conflict.file), vec![conflict]));
+        assets
             .into_iter()
             .map(|asset| {
                 let main_file = self.config.source.join(asset.source.main_file());
@@ -394,7 +451,7 @@ impl Project {
                         &main_file,
                         format!("asset `{}`: BillboardCloud assets are not baked by this version of cirrus yet", asset.name),
                     )),
-                    AssetSource::Material { .. } => match read_source(&self.config.root, &main_file) {
+                    AssetSource::Material { .. } => match read_source(&self.config.root, &self.config.source, &main_file) {
                         Err(error) => problems.push(Diagnostic::new(&main_file, error)),
                         Ok(contents) => {
                             match crate::material_definition::parse_material_file(&main_file, &contents.bytes, &self.config.source) {
@@ -405,12 +462,12 @@ impl Project {
                                         warning
                                     }));
                                     for reference in parsed.materials.iter().flat_map(|material| material.textures.values()) {
-                                        let probed = read_source(&self.config.root, &reference.path)
+                                        let probed = read_source(&self.config.root, &self.config.source, &reference.path)
                                             .map_err(|error| {
                                                 format!("texture \"{}\" ({}): {error}", reference.written, display_path(&reference.path))
                                             })
                                             .and_then(|contents| {
-                                                crate::texture::probe_texture(&reference.path, &contents.bytes)
+                                                crate::texture::probe_texture(&reference.path, &contents.bytes, self.config.limits.texture)
                                                     .map_err(|diagnostic| diagnostic.to_string())
                                             });
                                         if let Err(message) = probed {
@@ -424,6 +481,7 @@ impl Project {
                 }
                 (asset.name, problems)
             })
+            .chain(conflicts)
             .collect()
     }
 
@@ -450,7 +508,7 @@ impl Project {
                 return file;
             }
         }
-        let contents = read_source(&self.config.root, path);
+        let contents = read_source(&self.config.root, &self.config.source, path);
         self.fresh.insert(path.to_path_buf());
         match self.files.get(path) {
             Some(&file) => {
@@ -563,7 +621,7 @@ impl Project {
             .map(|contents| contents.bytes.clone())
             .map_err(|error| Diagnostic::new(main_file, error.clone()))?;
         let mut libraries = BTreeMap::new();
-        for library in crate::mesh::material_libraries(main_file, &obj_bytes) {
+        for library in crate::mesh::material_libraries(main_file, &obj_bytes, &self.config.source) {
             let file = self.source_file(&library);
             libraries.insert(library, file);
         }
@@ -865,8 +923,12 @@ impl Project {
                 let folder = asset_dir.join(material_name);
                 let texture_path = folder.join(format!("{}.{}", surface.name(), artifacts.info.container.extension()));
                 let preview_path = folder.join(format!("{}.png", surface.name()));
-                self.write_artifact(&texture_path, &artifacts.texture_file, &mut plan.errors, produced);
-                self.write_artifact(&preview_path, &artifacts.preview_png, &mut plan.errors, produced);
+                let written = self.write_artifact(&texture_path, &artifacts.texture_file, &mut plan.errors, produced)
+                    & self.write_artifact(&preview_path, &artifacts.preview_png, &mut plan.errors, produced);
+                if !written {
+                    // The report describes only files that are on disk.
+                    continue;
+                }
                 surfaces.push(SurfaceReport {
                     path: display_path(&texture_path),
                     preview: display_path(&preview_path),
@@ -885,13 +947,25 @@ impl Project {
         })
     }
 
-    /// Writes one artifact (project-relative `path`) if its bytes changed and records its hash.
-    fn write_artifact(&self, path: &Path, bytes: &[u8], errors: &mut Vec<Diagnostic>, produced: &mut BTreeMap<String, String>) {
-        match write_if_changed(&self.config.root.join(path), bytes) {
+    /// Writes one artifact (project-relative `path`) if its bytes changed and records its hash;
+    /// false when it could not be written. A report that differs only in its timings is kept.
+    fn write_artifact(&self, path: &Path, bytes: &[u8], errors: &mut Vec<Diagnostic>, produced: &mut BTreeMap<String, String>) -> bool {
+        let absolute = self.config.root.join(path);
+        if path.file_name().is_some_and(|name| name == "report.json") {
+            if let Some(existing) = crate::artifacts::same_report_on_disk(&absolute, bytes) {
+                produced.insert(display_path(path), blake3::hash(&existing).to_hex().to_string());
+                return true;
+            }
+        }
+        match write_if_changed(&absolute, bytes) {
             Ok(_) => {
                 produced.insert(display_path(path), blake3::hash(bytes).to_hex().to_string());
+                true
             }
-            Err(error) => errors.push(Diagnostic::new(path, format!("cannot write the artifact: {error}"))),
+            Err(error) => {
+                errors.push(Diagnostic::new(path, format!("cannot write the artifact: {error}")));
+                false
+            }
         }
     }
 
@@ -1016,14 +1090,58 @@ fn record_artifact(manifest: &mut Manifest, revision: u64, asset: &str, path: &s
     !unchanged
 }
 
-/// Deletes the artifacts `doomed` selects, file and manifest entry; returns their paths.
-fn remove_artifacts(root: &Path, manifest: &mut Manifest, doomed: impl Fn(&str, &ManifestEntry) -> bool) -> Vec<String> {
+/// Deletes the artifacts `doomed` selects, file and manifest entry; returns the paths deleted.
+/// `manifest.json` is a file on disk that anyone may have edited: a listed path is deleted only
+/// when it lies inside the output folder and the file there is the one cirrus wrote (its blake3
+/// matches the entry). Any other entry is dropped from the manifest with a warning, its file
+/// left alone.
+fn remove_artifacts(config: &PipelineConfig, manifest: &mut Manifest, doomed: impl Fn(&str, &ManifestEntry) -> bool) -> Vec<String> {
     let paths: Vec<String> = manifest.artifacts.iter().filter(|(path, entry)| doomed(path, entry)).map(|(path, _)| path.clone()).collect();
-    for path in &paths {
-        let _ = std::fs::remove_file(root.join(path));
-        manifest.artifacts.remove(path);
+    let mut removed = Vec::new();
+    for path in paths {
+        let Some(entry) = manifest.artifacts.remove(&path) else { continue };
+        match stale_artifact_file(config, &path, &entry.hash) {
+            Ok(Some(file)) => match std::fs::remove_file(&file) {
+                Ok(()) => removed.push(path),
+                Err(error) => tracing::warn!("cannot delete the stale artifact {path}: {error}"),
+            },
+            Ok(None) => removed.push(path),
+            Err(why) => tracing::warn!("manifest.json lists `{path}`, which is not deleted: {why}"),
+        }
     }
-    paths
+    removed
+}
+
+/// The file of a stale artifact that may be deleted (`None` when it is gone already), or why it
+/// must not be: outside the output folder, not a regular file, or not the bytes cirrus wrote.
+fn stale_artifact_file(config: &PipelineConfig, path: &str, hash: &str) -> Result<Option<PathBuf>, String> {
+    let normalized = crate::config::normalize_relative_path(Path::new(path));
+    let inside_output = normalized.as_ref().is_some_and(|normalized| {
+        display_path(normalized) == path && normalized.starts_with(&config.output) && normalized != &config.output
+    });
+    if !inside_output {
+        return Err(format!("it is not a path inside the output folder `{}`", display_path(&config.output)));
+    }
+    let file = config.root.join(path);
+    let metadata = match std::fs::symlink_metadata(&file) {
+        Ok(metadata) => metadata,
+        Err(error) if error.kind() == std::io::ErrorKind::NotFound => return Ok(None),
+        Err(error) => return Err(error.to_string()),
+    };
+    if !metadata.is_file() {
+        return Err("it is not a regular file (cirrus writes only regular files)".to_string());
+    }
+    // A symbolic link among the folders could lead outside the output folder.
+    let output = config.output_dir().canonicalize().map_err(|error| error.to_string())?;
+    let folder = file.parent().and_then(|folder| folder.canonicalize().ok());
+    if !folder.is_some_and(|folder| folder.starts_with(&output)) {
+        return Err("its folder resolves outside the output folder".to_string());
+    }
+    let bytes = crate::sources::read_regular_file(&file, crate::sources::MAX_SOURCE_BYTES)?;
+    if blake3::hash(&bytes).to_hex().as_str() != hash {
+        return Err("its bytes are not the ones cirrus wrote there (edited or replaced since)".to_string());
+    }
+    Ok(Some(file))
 }
 
 /// The graph node id of a source file.

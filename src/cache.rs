@@ -1,7 +1,8 @@
 //! The persistent stage cache: results stored on disk under a content address (stage, stage
 //! version, settings and input hashes), so a restart with unchanged sources runs no stage.
 //! Entries are written to a temporary file and renamed into place; a corrupt or unreadable entry
-//! is a miss, never an error.
+//! is a miss, never an error. Each entry records its stage and key, so an entry file that sits
+//! under another key (copied or swapped by hand) is a miss too, never another result.
 
 use std::io::Write;
 use std::path::{Path, PathBuf};
@@ -38,6 +39,9 @@ impl CacheKeyBuilder {
     }
 }
 
+/// Largest cache entry read back.
+const MAX_ENTRY_BYTES: u64 = 4 << 30;
+
 /// A cache folder: one file per entry, a header line of JSON followed by binary blobs.
 #[derive(Clone, Debug)]
 pub struct DiskCache {
@@ -66,8 +70,8 @@ impl DiskCache {
     }
 
     pub fn load(&self, stage: &str, key: CacheKey) -> Option<CacheEntry> {
-        let bytes = std::fs::read(self.entry_path(stage, key)).ok()?;
-        decode_entry(&bytes)
+        let bytes = crate::sources::read_regular_file(&self.entry_path(stage, key), MAX_ENTRY_BYTES).ok()?;
+        decode_entry(&bytes, stage, key)
     }
 
     /// Stores an entry; failures (full disk, permissions) only cost a future miss.
@@ -76,8 +80,8 @@ impl DiskCache {
         let result = (|| -> std::io::Result<()> {
             let folder = path.parent().expect("entry paths have a folder");
             std::fs::create_dir_all(folder)?;
-            let mut temporary = tempfile::NamedTempFile::new_in(folder)?;
-            temporary.write_all(&encode_entry(entry))?;
+            let mut temporary = tempfile::Builder::new().prefix(crate::artifacts::TEMPORARY_PREFIX).tempfile_in(folder)?;
+            temporary.write_all(&encode_entry(stage, key, entry))?;
             temporary.persist(&path).map_err(|error| error.error)?;
             Ok(())
         })();
@@ -87,10 +91,18 @@ impl DiskCache {
     }
 }
 
-fn encode_entry(entry: &CacheEntry) -> Vec<u8> {
+/// The header of an entry: format, then the stage and key it was stored under.
+fn entry_header(stage: &str, key: CacheKey) -> Vec<u8> {
+    let mut header = b"CIRRUSC2".to_vec();
+    header.extend_from_slice(&(stage.len() as u64).to_le_bytes());
+    header.extend_from_slice(stage.as_bytes());
+    header.extend_from_slice(key.0.as_bytes());
+    header
+}
+
+fn encode_entry(stage: &str, key: CacheKey, entry: &CacheEntry) -> Vec<u8> {
     let metadata = serde_json::to_vec(&entry.metadata).expect("JSON values serialise");
-    let mut bytes = Vec::new();
-    bytes.extend_from_slice(b"CIRRUSC1");
+    let mut bytes = entry_header(stage, key);
     bytes.extend_from_slice(&(metadata.len() as u64).to_le_bytes());
     bytes.extend_from_slice(&metadata);
     bytes.extend_from_slice(&(entry.blobs.len() as u64).to_le_bytes());
@@ -103,12 +115,12 @@ fn encode_entry(entry: &CacheEntry) -> Vec<u8> {
     bytes
 }
 
-fn decode_entry(bytes: &[u8]) -> Option<CacheEntry> {
+fn decode_entry(bytes: &[u8], stage: &str, key: CacheKey) -> Option<CacheEntry> {
     let (body, checksum) = bytes.split_at_checked(bytes.len().checked_sub(32)?)?;
     if blake3::hash(body).as_bytes() != checksum {
         return None;
     }
-    let mut rest = body.strip_prefix(b"CIRRUSC1")?;
+    let mut rest = body.strip_prefix(entry_header(stage, key).as_slice())?;
     let mut take = |count: usize| -> Option<&[u8]> {
         let (head, tail) = rest.split_at_checked(count)?;
         rest = tail;

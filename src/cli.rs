@@ -61,9 +61,9 @@ pub enum Command {
         /// The pipeline file.
         #[arg(long, default_value = "pipeline.ron")]
         pipeline: PathBuf,
-        /// The hot-reload server's address (default: `server` of the pipeline; loopback only
-        /// unless you give another interface).
-        #[arg(long, value_name = "ADDR")]
+        /// The hot-reload server's address, e.g. 127.0.0.1:7878 or localhost:7878 (default:
+        /// `server` of the pipeline). The protocol has no authentication: keep it on loopback.
+        #[arg(long, value_name = "ADDR", value_parser = crate::config::resolve_socket_address)]
         listen: Option<std::net::SocketAddr>,
         /// Events closer together than this many milliseconds become one batch.
         #[arg(long, default_value_t = 50, value_name = "MS")]

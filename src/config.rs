@@ -163,6 +163,13 @@ pub struct PipelineConfig {
     pub defaults: Settings,
     pub assets: Vec<AssetConfig>,
     pub rules: Vec<Rule>,
+    pub limits: Limits,
+}
+
+/// Pipeline-wide resource limits.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
+pub struct Limits {
+    pub texture: crate::texture::TextureLimits,
 }
 
 impl PipelineConfig {
@@ -216,6 +223,15 @@ mod raw {
         pub assets: Vec<Asset>,
         #[serde(default)]
         pub rules: Vec<Rule>,
+        #[serde(default)]
+        pub limits: Limits,
+    }
+
+    #[derive(Deserialize, Default)]
+    #[serde(deny_unknown_fields)]
+    pub struct Limits {
+        /// MiB one texture's working set may take.
+        pub texture_memory_mib: Option<u64>,
     }
 
     #[derive(Deserialize, Default)]
@@ -304,16 +320,75 @@ mod raw {
     }
 }
 
-/// Reads and validates `pipeline.ron` at `file`.
+/// Largest `pipeline.ron` read.
+const MAX_PIPELINE_BYTES: u64 = 16 << 20;
+
+/// Reads and validates `pipeline.ron` at `file`, then checks on disk that the output folder,
+/// with symbolic links resolved, neither holds nor lies inside the source folder.
 pub fn load_pipeline(file: &Path) -> Result<PipelineConfig, ConfigError> {
-    let text = std::fs::read_to_string(file)
-        .map_err(|error| ConfigError { diagnostics: vec![Diagnostic::new(file, format!("cannot read the pipeline file: {error}"))] })?;
-    parse_pipeline(file, &text)
+    let fail = |message: String| ConfigError { diagnostics: vec![Diagnostic::new(file, message)] };
+    let bytes = crate::sources::read_regular_file(file, MAX_PIPELINE_BYTES).map_err(|why| {
+        fail(format!("cannot read the pipeline file: it {}", why.strip_prefix("is ").map_or(why.clone(), |rest| format!("is {rest}"))))
+    })?;
+    let text = String::from_utf8(bytes).map_err(|error| {
+        let position = TextPosition::of_byte_offset(&String::from_utf8_lossy(error.as_bytes()), error.utf8_error().valid_up_to());
+        ConfigError { diagnostics: vec![Diagnostic::at(file, position, "the pipeline file is not UTF-8 text")] }
+    })?;
+    let config = parse_pipeline(file, &text)?;
+    let (source, output) = (resolve_existing_prefix(&config.source_dir()), resolve_existing_prefix(&config.output_dir()));
+    if let Some(overlap) = folder_overlap(&source, &output) {
+        let position = find_key(&text, "output").map(|offset| TextPosition::of_byte_offset(&text, offset));
+        let message = format!("{overlap} (after following symbolic links: source {}, output {})", source.display(), output.display());
+        return Err(ConfigError {
+            diagnostics: vec![match position {
+                Some(position) => Diagnostic::at(file, position, message),
+                None => Diagnostic::new(file, message),
+            }],
+        });
+    }
+    Ok(config)
+}
+
+/// `path` made absolute with symbolic links resolved as far as it exists (an output folder
+/// may not exist yet: its missing tail is appended to its nearest existing ancestor, resolved).
+fn resolve_existing_prefix(path: &Path) -> PathBuf {
+    let absolute = std::path::absolute(path).unwrap_or_else(|_| path.to_path_buf());
+    let mut existing = absolute.as_path();
+    let mut tail = Vec::new();
+    loop {
+        if let Ok(resolved) = existing.canonicalize() {
+            return tail.iter().rev().fold(resolved, |path: PathBuf, part| path.join(part));
+        }
+        match (existing.parent(), existing.file_name()) {
+            (Some(parent), Some(name)) => {
+                tail.push(name.to_os_string());
+                existing = parent;
+            }
+            _ => return absolute,
+        }
+    }
+}
+
+/// Why an output folder may not be used beside this source folder, if it may not: artifacts
+/// and previews written there would overwrite source files, and the watcher would bake its own
+/// output.
+fn folder_overlap(source: &Path, output: &Path) -> Option<&'static str> {
+    if output == source {
+        Some("the output folder must not be the source folder")
+    } else if source.starts_with(output) {
+        Some("the output folder must not contain the source folder")
+    } else if output.starts_with(source) {
+        Some("the output folder must not lie inside the source folder")
+    } else {
+        None
+    }
 }
 
 /// Parses and validates the text of a `pipeline.ron` that lives at `file`.
 pub fn parse_pipeline(file: &Path, text: &str) -> Result<PipelineConfig, ConfigError> {
     let options = ron::Options::default().with_default_extension(ron::extensions::Extensions::IMPLICIT_SOME);
+    // Editors on Windows may save a byte-order mark.
+    let text = text.strip_prefix('\u{feff}').unwrap_or(text);
     let raw: raw::Pipeline = options.from_str(text).map_err(|error| ConfigError {
         diagnostics: vec![Diagnostic::at(
             file,
@@ -334,15 +409,16 @@ struct Validator<'a> {
 
 impl Validator<'_> {
     fn validate(mut self, raw: raw::Pipeline, root: PathBuf) -> Result<PipelineConfig, ConfigError> {
-        let source = self.project_path(&raw.source, "source", 0).unwrap_or_default();
-        let output = self.project_path(&raw.output, "output", 0).unwrap_or_default();
-        if !output.as_os_str().is_empty() && (source.starts_with(&output) || output == source) {
-            self.error_at_value(&raw.output, 0, "the output folder must not be the source folder or contain it");
+        let source = self.project_path(&raw.source, "source", 0);
+        let output = self.project_path(&raw.output, "output", 0);
+        if let Some(overlap) = source.as_ref().zip(output.as_ref()).and_then(|(source, output)| folder_overlap(source, output)) {
+            self.error_at_value(&raw.output, 0, overlap);
         }
-        let server = raw.server.as_ref().and_then(|address| match address.parse::<SocketAddr>() {
+        let (source, output) = (source.unwrap_or_default(), output.unwrap_or_default());
+        let server = raw.server.as_ref().and_then(|address| match resolve_socket_address(address) {
             Ok(address) => Some(address),
-            Err(_) => {
-                self.error_at_value(address, 0, &format!("`{address}` is not a socket address like 127.0.0.1:7878"));
+            Err(why) => {
+                self.error_at_value(address, 0, &why);
                 None
             }
         });
@@ -360,16 +436,30 @@ impl Validator<'_> {
                 }
             };
             let anchor = self.offset_of_value(name, 0).unwrap_or(0);
-            if !valid_asset_name(name) {
+            let normal_form = normalize_relative_path(Path::new(name)).map(|path| crate::diagnostic::display_path(&path));
+            if valid_asset_name(&name.replace("//", "/").replace("/./", "/")) && normal_form.as_deref() != Some(name.as_str()) {
+                let normal_form = normal_form.unwrap_or_default();
+                self.error_at_value(name, 0, &format!("asset name `{name}` names the folder `{normal_form}`: write `{normal_form}`"));
+            } else if !valid_asset_name(name) {
                 self.error_at_value(
                     name,
                     0,
                     &format!("asset name `{name}` must be non-empty and use only letters, digits, `_`, `-`, `.` and `/`"),
                 );
             }
+            if let Some(reserved) = reserved_asset_name(name) {
+                self.error_at_value(name, 0, &reserved);
+            }
             if !names.insert(name.clone()) {
                 let second = self.offset_of_value(name, anchor + name.len() + 2).unwrap_or(anchor);
                 self.error_at_value(name, second, &format!("asset name `{name}` is used twice"));
+            } else if let Some(other) = names.iter().find(|other| *other != name && asset_folders_collide(other, name)) {
+                let other = other.clone();
+                self.error_at_value(
+                    name,
+                    anchor,
+                    &format!("asset names `{other}` and `{name}` would share a folder: one lies inside the other"),
+                );
             }
             let Some(relative) = self.source_path(path, anchor) else {
                 continue;
@@ -392,8 +482,16 @@ impl Validator<'_> {
             }
         }
 
+        let mut limits = Limits::default();
+        if let Some(mib) = raw.limits.texture_memory_mib {
+            if !(16..=1 << 24).contains(&mib) {
+                self.error_at_key("texture_memory_mib", 0, "texture_memory_mib must be between 16 and 16777216 (MiB)");
+            }
+            limits.texture.working_set = mib << 20;
+        }
+
         if self.diagnostics.is_empty() {
-            Ok(PipelineConfig { file: self.file.to_path_buf(), root, source, output, server, defaults, assets, rules })
+            Ok(PipelineConfig { file: self.file.to_path_buf(), root, source, output, server, defaults, assets, rules, limits })
         } else {
             Err(ConfigError { diagnostics: self.diagnostics })
         }
@@ -533,6 +631,21 @@ impl Validator<'_> {
     }
 }
 
+/// A listening address: `127.0.0.1:7878`, `[::1]:7878` or a host name with a port
+/// (`localhost:7878`, resolved now; IPv4 preferred).
+pub fn resolve_socket_address(text: &str) -> Result<SocketAddr, String> {
+    use std::net::ToSocketAddrs;
+    if let Ok(address) = text.parse::<SocketAddr>() {
+        return Ok(address);
+    }
+    let usage = format!("`{text}` is not an address like 127.0.0.1:7878 or localhost:7878");
+    if text.rsplit_once(':').is_none_or(|(host, port)| host.is_empty() || port.parse::<u16>().is_err()) {
+        return Err(usage);
+    }
+    let addresses: Vec<SocketAddr> = text.to_socket_addrs().map_err(|error| format!("{usage}: {error}"))?.collect();
+    addresses.iter().find(|address| address.is_ipv4()).or(addresses.first()).copied().ok_or(usage)
+}
+
 /// The offset of `key:` as a field name in `text` (not as a substring of another name).
 fn find_key(text: &str, key: &str) -> Option<usize> {
     let bytes = text.as_bytes();
@@ -550,9 +663,32 @@ fn find_key(text: &str, key: &str) -> Option<usize> {
 }
 
 fn valid_asset_name(name: &str) -> bool {
+    // Compared as text: `a//b` and `a/./b` are the same folder as `a/b` and would pass a path
+    // comparison while escaping the duplicate check.
     !name.is_empty()
         && name.chars().all(|c| c.is_ascii_alphanumeric() || matches!(c, '_' | '-' | '.' | '/'))
-        && normalize_relative_path(Path::new(name)).is_some_and(|path| path == Path::new(name))
+        && normalize_relative_path(Path::new(name)).is_some_and(|path| crate::diagnostic::display_path(&path) == name)
+}
+
+/// Names of the output folder's own files: an asset named so would overwrite them.
+pub const RESERVED_ASSET_NAMES: [&str; 2] = ["manifest.json", ".cirrus"];
+
+/// Why an asset may not be called `name`, if it may not: its folder would be the manifest or
+/// the cache, or its name starts with the temporary-file prefix.
+pub fn reserved_asset_name(name: &str) -> Option<String> {
+    let first = name.split('/').next().unwrap_or(name);
+    if RESERVED_ASSET_NAMES.contains(&first) || first.starts_with(crate::artifacts::TEMPORARY_PREFIX) {
+        Some(format!("asset name `{name}` is reserved: `<output>/{first}` belongs to cirrus"))
+    } else {
+        None
+    }
+}
+
+/// Whether two asset names share artifacts: the same name, or one folder inside the other
+/// (`x` and `x/m`: the stale-artifact cleanup of one would delete the other's files).
+pub fn asset_folders_collide(a: &str, b: &str) -> bool {
+    let inside = |outer: &str, inner: &str| inner.strip_prefix(outer).is_some_and(|rest| rest.starts_with('/'));
+    a == b || inside(a, b) || inside(b, a)
 }
 
 /// Resolves `.` and `..` lexically; `None` when the path is absolute or climbs out of its base.

@@ -53,6 +53,18 @@ impl fmt::Debug for FileContents {
 pub type FileRead = Result<FileContents, String>;
 
 /// A source file; `path` is relative to the folder of `pipeline.ron`.
+/// Pipeline-wide limits, one per database (set by the driver from `pipeline.ron`).
+#[salsa::input(singleton, debug)]
+pub struct PipelineLimits {
+    #[returns(copy)]
+    pub texture: crate::texture::TextureLimits,
+}
+
+/// The texture limits in force (the defaults before the driver set any).
+pub fn texture_limits(db: &dyn Db) -> crate::texture::TextureLimits {
+    PipelineLimits::try_get(db).map_or_else(Default::default, |limits| limits.texture(db))
+}
+
 #[salsa::input(debug)]
 pub struct SourceFile {
     #[returns(ref)]
@@ -349,7 +361,8 @@ pub fn opacity_texture(db: &dyn Db, file: SourceFile) -> Result<Arc<Texture>, Di
 #[salsa::tracked(returns(clone))]
 pub fn decoded_texture(db: &dyn Db, file: SourceFile) -> Result<Arc<Texture>, Diagnostic> {
     let contents = read_contents(db, file)?;
-    timed(db, Stage::Decode, file, || decode_texture(file.path(db), &contents.bytes).map(Arc::new))
+    let limits = texture_limits(db);
+    timed(db, Stage::Decode, file, || decode_texture(file.path(db), &contents.bytes, limits).map(Arc::new))
 }
 
 // ---------------------------------------------------------------------------------------------
@@ -659,6 +672,15 @@ pub struct LoadedMesh {
 pub fn loaded_mesh(db: &dyn Db, asset: BillboardAsset) -> Result<Arc<LoadedMesh>, Diagnostic> {
     let file = asset.mesh_file(db);
     let contents = read_contents(db, file)?;
+    // A missing MTL is a warning (its materials fall back to defaults); one that is there but
+    // cannot be read (not a regular file, no permission) fails the mesh, naming why.
+    for (path, library) in asset.libraries(db).iter() {
+        if let Err(why) = library.contents(db) {
+            if why != crate::sources::FILE_NOT_FOUND {
+                return Err(Diagnostic::new(path, why.clone()));
+            }
+        }
+    }
     let libraries = library_bytes(db, asset);
     timed(db, Stage::Mesh, asset, || {
         let (mesh, warnings) = crate::mesh::load_mesh(file.path(db), &contents.bytes, &libraries, asset.source_root(db))?;

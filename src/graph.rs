@@ -93,6 +93,11 @@ impl Graph {
     }
 
     /// The part of the graph that belongs to `asset` or feeds it.
+    /// Whether any node belongs to `asset`.
+    pub fn has_asset(&self, asset: &str) -> bool {
+        self.nodes.iter().any(|node| node.asset.as_deref() == Some(asset))
+    }
+
     pub fn for_asset(&self, asset: &str) -> Graph {
         let own: BTreeSet<&str> =
             self.nodes.iter().filter(|node| node.asset.as_deref() == Some(asset)).map(|node| node.id.as_str()).collect();

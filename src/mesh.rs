@@ -56,8 +56,9 @@ pub struct Mesh {
     pub materials: Vec<MeshMaterial>,
 }
 
-/// The `mtllib` files an OBJ names, resolved (project-relative) next to it.
-pub fn material_libraries(obj_file: &Path, obj_bytes: &[u8]) -> Vec<PathBuf> {
+/// The `mtllib` files an OBJ names, resolved (project-relative) next to it; those outside the
+/// source folder `source_root` are left out (`load_mesh` then warns that they are not found).
+pub fn material_libraries(obj_file: &Path, obj_bytes: &[u8], source_root: &Path) -> Vec<PathBuf> {
     let text = String::from_utf8_lossy(obj_bytes);
     let folder = obj_file.parent().unwrap_or(Path::new(""));
     let mut libraries = Vec::new();
@@ -66,7 +67,7 @@ pub fn material_libraries(obj_file: &Path, obj_bytes: &[u8]) -> Vec<PathBuf> {
         if let Some(rest) = line.strip_prefix("mtllib") {
             if rest.starts_with(char::is_whitespace) {
                 if let Some(path) = normalize_relative_path(&folder.join(rest.trim().replace('\\', "/"))) {
-                    if !libraries.contains(&path) {
+                    if path.starts_with(source_root) && !libraries.contains(&path) {
                         libraries.push(path);
                     }
                 }
@@ -88,18 +89,30 @@ pub fn load_mesh(
     let text = decode_text(obj_file, obj_bytes)?;
     let folder = obj_file.parent().unwrap_or(Path::new("")).to_path_buf();
     let warnings = std::cell::RefCell::new(Vec::new());
+    // The MTL file that defined each material, for warnings that name it.
+    let material_files = std::cell::RefCell::new(BTreeMap::<String, PathBuf>::new());
     let options = tobj::LoadOptions { single_index: true, triangulate: true, ignore_points: true, ignore_lines: true };
     let loader = |name: &Path| -> tobj::MTLLoadResult {
-        let Some(path) = normalize_relative_path(&folder.join(name.to_string_lossy().replace('\\', "/"))) else {
+        let written = name.to_string_lossy().replace('\\', "/");
+        let path = normalize_relative_path(&folder.join(&written)).filter(|path| path.starts_with(source_root));
+        let Some(path) = path else {
+            warnings.borrow_mut().push(Diagnostic::new(
+                obj_file,
+                format!("material library \"{written}\" lies outside the source folder; ignored, default materials used"),
+            ));
             return Err(tobj::LoadError::OpenFileFailed);
         };
         match libraries.get(&path) {
-            Some(Some(bytes)) => {
-                let text = String::from_utf8_lossy(bytes);
-                tobj::load_mtl_buf(&mut BufReader::new(text.as_bytes())).inspect_err(|error| {
-                    warnings.borrow_mut().push(Diagnostic::new(&path, format!("malformed MTL ({error}); its materials use defaults")));
+            Some(Some(bytes)) => load_mtl(bytes)
+                .inspect(|(materials, _)| {
+                    let mut files = material_files.borrow_mut();
+                    for material in materials {
+                        files.entry(material.name.clone()).or_insert_with(|| path.clone());
+                    }
                 })
-            }
+                .inspect_err(|error| {
+                    warnings.borrow_mut().push(Diagnostic::new(&path, format!("malformed MTL ({error}); its materials use defaults")));
+                }),
             _ => {
                 warnings.borrow_mut().push(Diagnostic::new(
                     obj_file,
@@ -118,16 +131,23 @@ pub fn load_mesh(
         Err(_) => return Err(Diagnostic::new(obj_file, "malformed OBJ: the parser failed on this file")),
     };
     let mut warnings = warnings.into_inner();
+    let material_files = material_files.into_inner();
     let tobj_materials = materials.unwrap_or_default();
     let mut materials: Vec<MeshMaterial> = Vec::new();
     for material in &tobj_materials {
-        materials.push(mesh_material(material, &folder, source_root, &mut warnings));
+        let library = material_files.get(&material.name).cloned().unwrap_or_else(|| obj_file.to_path_buf());
+        materials.push(mesh_material(material, &folder, &library, source_root, &mut warnings));
     }
     let default_material = materials.len() as u32;
     materials.push(MeshMaterial::default());
+    warnings.extend(undefined_material_uses(obj_file, &text, &tobj_materials));
 
     let mut mesh = Mesh { uvs: Some(Vec::new()), ..Mesh::default() };
     let mut all_normals = true;
+    // Objects without texture coordinates (their vertices get UV 0, their faces a copy of their
+    // material without maps); when no object has any, the mesh has no UVs at all.
+    let mut objects_without_uvs = Vec::new();
+    let mut faces_without_uvs = Vec::new();
     for model in &models {
         let source = &model.mesh;
         let base = mesh.positions.len() as u32;
@@ -145,14 +165,23 @@ pub fn load_mesh(
         } else {
             mesh.normals.extend(std::iter::repeat_n([0.0; 3], vertex_count));
         }
-        match (&mut mesh.uvs, source.texcoords.len() == vertex_count * 2) {
-            (Some(uvs), true) => uvs.extend(source.texcoords.chunks_exact(2).map(|uv| [uv[0], uv[1]])),
-            (uvs, _) => *uvs = None,
+        let uvs = mesh.uvs.get_or_insert_with(Vec::new);
+        let has_uvs = source.texcoords.len() == vertex_count * 2;
+        if has_uvs {
+            uvs.extend(source.texcoords.chunks_exact(2).map(|uv| [uv[0], uv[1]]));
+        } else {
+            uvs.extend(std::iter::repeat_n([0.0; 2], vertex_count));
+            if !source.indices.is_empty() {
+                objects_without_uvs.push(model.name.clone());
+            }
         }
         let material = source.material_id.map_or(default_material, |id| (id as u32).min(default_material));
         for triangle in source.indices.chunks_exact(3) {
             if triangle.iter().any(|&index| index as usize >= vertex_count) {
                 return Err(Diagnostic::new(obj_file, format!("object `{}`: a face index is out of range", model.name)));
+            }
+            if !has_uvs {
+                faces_without_uvs.push(mesh.triangles.len());
             }
             mesh.triangles.push([base + triangle[0], base + triangle[1], base + triangle[2]]);
             mesh.triangle_materials.push(material);
@@ -160,6 +189,30 @@ pub fn load_mesh(
     }
     if mesh.triangles.is_empty() {
         return Err(Diagnostic::new(obj_file, "the OBJ has no faces"));
+    }
+    check_scale(obj_file, &mesh)?;
+    if faces_without_uvs.len() == mesh.triangles.len() {
+        mesh.uvs = None;
+    } else if !faces_without_uvs.is_empty() {
+        for name in &objects_without_uvs {
+            warnings.push(Diagnostic::new(
+                obj_file,
+                format!("object `{name}` has no texture coordinates: its faces bake their materials' constant colours, not their maps"),
+            ));
+        }
+        // Each material those faces use, once more without maps.
+        let mut without_maps: BTreeMap<u32, u32> = BTreeMap::new();
+        for face in faces_without_uvs {
+            let material = mesh.triangle_materials[face];
+            let copy = *without_maps.entry(material).or_insert_with(|| {
+                let mut copy = materials[material as usize].clone();
+                copy.name = format!("{} (no UVs)", copy.name);
+                copy.maps.clear();
+                materials.push(copy);
+                materials.len() as u32 - 1
+            });
+            mesh.triangle_materials[face] = copy;
+        }
     }
     if !all_normals || mesh.normals.iter().any(|n| !n.iter().all(|c| c.is_finite()) || n == &[0.0; 3]) {
         compute_normals(&mut mesh);
@@ -186,7 +239,87 @@ fn decode_text<'a>(file: &Path, bytes: &'a [u8]) -> Result<std::borrow::Cow<'a, 
     Ok(String::from_utf8_lossy(bytes))
 }
 
-fn mesh_material(material: &tobj::Material, folder: &Path, source_root: &Path, warnings: &mut Vec<Diagnostic>) -> MeshMaterial {
+/// Parses MTL bytes with tobj, whose parser panics on some malformed statements (`Kd` with two
+/// numbers): a panic is a parse error like any other.
+fn load_mtl(bytes: &[u8]) -> tobj::MTLLoadResult {
+    let text = String::from_utf8_lossy(bytes);
+    std::panic::catch_unwind(|| tobj::load_mtl_buf(&mut BufReader::new(text.as_bytes())))
+        .unwrap_or(Err(tobj::LoadError::MaterialParseError))
+}
+
+/// Largest bounding-box diagonal accepted, in world units: the stages compute in single
+/// precision, and squared distances of larger meshes overflow it.
+pub const MAX_MESH_EXTENT: f64 = 1e9;
+/// Smallest bounding-box diagonal accepted: areas and squared distances of smaller meshes fall
+/// below single precision's normal range.
+pub const MIN_MESH_EXTENT: f64 = 1e-6;
+
+/// Refuses meshes that single precision cannot bake: coordinates so large or so small that the
+/// stages' squared distances overflow or vanish, and meshes whose every face has zero area.
+fn check_scale(obj_file: &Path, mesh: &Mesh) -> Result<(), Diagnostic> {
+    let (mut min, mut max) = ([f64::INFINITY; 3], [f64::NEG_INFINITY; 3]);
+    for &index in mesh.triangles.iter().flatten() {
+        let position = mesh.positions[index as usize];
+        for axis in 0..3 {
+            min[axis] = min[axis].min(f64::from(position[axis]));
+            max[axis] = max[axis].max(f64::from(position[axis]));
+        }
+    }
+    let extent = (0..3).map(|axis| (max[axis] - min[axis]).powi(2)).sum::<f64>().sqrt();
+    if extent > MAX_MESH_EXTENT {
+        return Err(Diagnostic::new(
+            obj_file,
+            format!("the mesh spans {extent:.3e} units, more than the {MAX_MESH_EXTENT:.0e} that single precision can bake: scale it down"),
+        ));
+    }
+    let area: f64 = mesh
+        .triangles
+        .iter()
+        .map(|triangle| {
+            let [a, b, c] = triangle.map(|index| glam::DVec3::from(mesh.positions[index as usize].map(f64::from)));
+            0.5 * (b - a).cross(c - a).length()
+        })
+        .sum();
+    if area == 0.0 {
+        return Err(Diagnostic::new(obj_file, "every face of the mesh has zero area: there is nothing to bake"));
+    }
+    if extent < MIN_MESH_EXTENT {
+        return Err(Diagnostic::new(
+            obj_file,
+            format!("the mesh spans {extent:.3e} units, less than the {MIN_MESH_EXTENT:.0e} that single precision can bake: scale it up"),
+        ));
+    }
+    Ok(())
+}
+
+/// A warning for each `usemtl` that names no material of the MTL libraries (tobj silently gives
+/// those faces the default material).
+fn undefined_material_uses(obj_file: &Path, text: &str, materials: &[tobj::Material]) -> Vec<Diagnostic> {
+    let mut warned = std::collections::BTreeSet::new();
+    let mut warnings = Vec::new();
+    for (index, line) in text.lines().enumerate() {
+        let Some(name) = line.trim_start().strip_prefix("usemtl").filter(|rest| rest.starts_with(char::is_whitespace)).map(str::trim)
+        else {
+            continue;
+        };
+        if !name.is_empty() && !materials.iter().any(|material| material.name == name) && warned.insert(name.to_string()) {
+            warnings.push(Diagnostic::at(
+                obj_file,
+                crate::diagnostic::TextPosition { line: index as u32 + 1, column: 1 },
+                format!("`usemtl {name}` names no material of the mesh's MTL files: those faces use the default material"),
+            ));
+        }
+    }
+    warnings
+}
+
+fn mesh_material(
+    material: &tobj::Material,
+    folder: &Path,
+    library: &Path,
+    source_root: &Path,
+    warnings: &mut Vec<Diagnostic>,
+) -> MeshMaterial {
     let mut result = MeshMaterial { name: material.name.clone(), ..MeshMaterial::default() };
     if let Some(diffuse) = material.diffuse {
         result.albedo_factor = diffuse.map(|c| c.clamp(0.0, 1.0));
@@ -220,7 +353,7 @@ fn mesh_material(material: &tobj::Material, folder: &Path, source_root: &Path, w
                 result.maps.insert(slot, path);
             }
             _ => warnings.push(Diagnostic::new(
-                folder.join("(mtl)"),
+                library,
                 format!("material `{}`: texture \"{file}\" leaves the source folder; ignored", material.name),
             )),
         }
@@ -283,12 +416,11 @@ pub fn texture_paths(obj_file: &Path, libraries: &BTreeMap<PathBuf, Option<Vec<u
     let mut paths = Vec::new();
     let mut ignored = Vec::new();
     for bytes in libraries.values().flatten() {
-        let text = String::from_utf8_lossy(bytes);
-        let Ok((materials, _)) = tobj::load_mtl_buf(&mut BufReader::new(text.as_bytes())) else {
+        let Ok((materials, _)) = load_mtl(bytes) else {
             continue;
         };
         for material in &materials {
-            paths.extend(mesh_material(material, folder, source_root, &mut ignored).maps.into_values());
+            paths.extend(mesh_material(material, folder, obj_file, source_root, &mut ignored).maps.into_values());
         }
     }
     paths.sort();

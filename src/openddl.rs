@@ -207,7 +207,7 @@ impl Structure {
 /// Parses a whole OpenDDL file.
 pub fn parse(text: &str) -> Result<Vec<Structure>, OpenDdlError> {
     let text = text.strip_prefix('\u{feff}').unwrap_or(text);
-    let mut parser = Parser { lexer: Lexer { text, offset: 0 }, peeked: None };
+    let mut parser = Parser { lexer: Lexer { text, offset: 0 }, peeked: None, depth: 0 };
     let mut structures = Vec::new();
     loop {
         let token = parser.peek()?;
@@ -429,9 +429,16 @@ impl<'a> Lexer<'a> {
     }
 }
 
+/// How deeply structures may nest. Real files nest a few levels; the parser, and the tree's
+/// drop, comparison and walkers, recurse once per level, so a bound keeps a hostile file from
+/// overflowing the stack.
+pub const MAX_NESTING: usize = 100;
+
 struct Parser<'a> {
     lexer: Lexer<'a>,
     peeked: Option<Token>,
+    /// Structures open around the one being parsed.
+    depth: usize,
 }
 
 impl Parser<'_> {
@@ -499,6 +506,10 @@ impl Parser<'_> {
             }
         }
         let open = self.expect('{', &format!("to open the `{identifier}` structure"))?;
+        if self.depth >= MAX_NESTING {
+            return Err(self.error(open.offset, format!("structures nested too deeply (more than {MAX_NESTING} levels)")));
+        }
+        self.depth += 1;
         let mut children = Vec::new();
         loop {
             let token = self.peek()?;
@@ -513,6 +524,7 @@ impl Parser<'_> {
                 _ => children.push(self.structure()?),
             }
         }
+        self.depth -= 1;
         Ok(Structure { name, position, body: StructureBody::Custom { identifier, properties, children } })
     }
 

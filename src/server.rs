@@ -27,11 +27,13 @@ pub struct ServerSettings {
     pub history: usize,
     /// Messages queued for one client before it is disconnected as too slow.
     pub client_queue: usize,
+    /// Clients connected at once; more are answered with an error and closed.
+    pub max_clients: usize,
 }
 
 impl Default for ServerSettings {
     fn default() -> Self {
-        ServerSettings { max_line_bytes: 64 * 1024, history: 1024, client_queue: 4096 }
+        ServerSettings { max_line_bytes: 64 * 1024, history: 1024, client_queue: 4096, max_clients: 64 }
     }
 }
 
@@ -70,9 +72,10 @@ enum Outgoing<'a> {
     Error { message: String },
 }
 
-#[derive(Deserialize)]
+/// A client's request line, parsed.
+#[derive(Debug, Deserialize)]
 #[serde(tag = "type", rename_all = "lowercase", deny_unknown_fields)]
-enum Request {
+pub enum Request {
     Subscribe {
         #[serde(default)]
         since: Option<u64>,
@@ -83,6 +86,17 @@ enum Request {
         #[serde(default)]
         asset: Option<String>,
     },
+}
+
+/// Parses one client line (without its `\n`): `Ok(None)` for a blank line, an error message
+/// for anything that is not a request. JSON nesting is bounded by `serde_json` (128 levels).
+pub fn parse_request(bytes: &[u8]) -> Result<Option<Request>, String> {
+    let text = String::from_utf8_lossy(bytes);
+    let text = text.trim();
+    if text.is_empty() {
+        return Ok(None);
+    }
+    serde_json::from_str::<Request>(text).map(Some).map_err(|error| format!("malformed request: {error}"))
 }
 
 fn line(message: &Outgoing) -> Arc<str> {
@@ -177,6 +191,16 @@ impl Server {
         let (queue, outgoing) = sync_channel::<Arc<str>>(self.settings.client_queue);
         let id = {
             let mut state = self.state.lock().expect("server state");
+            if state.clients.len() >= self.settings.max_clients {
+                let refusal =
+                    line(&Outgoing::Error { message: format!("too many clients ({} connected): try again later", state.clients.len()) });
+                let mut stream = stream;
+                let _ = stream.set_write_timeout(Some(std::time::Duration::from_millis(200)));
+                let _ = stream.write_all(refusal.as_bytes());
+                let _ = stream.shutdown(Shutdown::Both);
+                tracing::warn!("hot-reload server: refused a client, {} connected already", state.clients.len());
+                return;
+            }
             let id = state.next_client;
             state.next_client += 1;
             let hello = line(&Outgoing::Hello { protocol: PROTOCOL_VERSION, revision: state.revision });
@@ -214,17 +238,11 @@ impl Server {
                 ClientLine::TooLong => {
                     self.reply(id, Outgoing::Error { message: format!("line longer than {} bytes", self.settings.max_line_bytes) })
                 }
-                ClientLine::Line(bytes) => {
-                    let text = String::from_utf8_lossy(&bytes);
-                    let text = text.trim();
-                    if text.is_empty() {
-                        continue;
-                    }
-                    match serde_json::from_str::<Request>(text) {
-                        Ok(request) => self.handle(id, request),
-                        Err(error) => self.reply(id, Outgoing::Error { message: format!("malformed request: {error}") }),
-                    }
-                }
+                ClientLine::Line(bytes) => match parse_request(&bytes) {
+                    Ok(Some(request)) => self.handle(id, request),
+                    Ok(None) => {}
+                    Err(message) => self.reply(id, Outgoing::Error { message }),
+                },
             }
         }
     }
@@ -237,7 +255,15 @@ impl Server {
                 let oldest = state.history.front().map(|(revision, _)| *revision);
                 let mut replay: Vec<Arc<str>> = Vec::new();
                 if let Some(since) = since {
-                    if oldest.is_some_and(|oldest| since + 1 < oldest) || (oldest.is_none() && since < revision) {
+                    if since > revision {
+                        replay.push(line(&Outgoing::Resync {
+                            revision,
+                            message: format!(
+                                "revision {since} is newer than the daemon's revision {revision} (the output was baked by another \
+                                 daemon or cleaned): reload every artifact"
+                            ),
+                        }));
+                    } else if oldest.is_some_and(|oldest| since + 1 < oldest) || (oldest.is_none() && since < revision) {
                         replay.push(line(&Outgoing::Resync {
                             revision,
                             message: format!("revision {since} is older than the daemon's history: reload every artifact"),
@@ -265,6 +291,9 @@ impl Server {
                 };
                 let graph = self.state.lock().expect("server state").graph.clone();
                 let graph = match &asset {
+                    Some(asset) if !graph.has_asset(asset) => {
+                        return self.reply(id, Outgoing::Error { message: format!("no asset named `{asset}` in the graph") });
+                    }
                     Some(asset) => Arc::new(graph.for_asset(asset)),
                     None => graph,
                 };

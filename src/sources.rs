@@ -9,23 +9,69 @@ use crate::db::{FileContents, FileRead};
 /// Largest source file read (textures, meshes, materials).
 pub const MAX_SOURCE_BYTES: u64 = 512 << 20;
 
-/// Reads `relative` (to the project folder `root`), or says why it cannot be read.
-pub fn read_source(root: &Path, relative: &Path) -> FileRead {
-    let path = root.join(relative);
-    let metadata = std::fs::metadata(&path).map_err(describe_io_error)?;
+/// Reads `relative` (to the project folder `root`), a file inside the source folder `source`
+/// (project-relative too), or says why it cannot be read.
+///
+/// Paths written inside source files (`mtllib`, texture references) are untrusted and checked
+/// to stay inside the source folder before they get here. Symbolic links placed in the source
+/// folder are the user's own choice (a shared texture library linked in) and are followed,
+/// wherever they lead; what they lead to must still be a regular file within the size limit.
+pub fn read_source(root: &Path, source: &Path, relative: &Path) -> FileRead {
+    if !root.join(source).is_dir() {
+        return Err(format!("the source folder {} does not exist", crate::diagnostic::display_path(source)));
+    }
+    read_regular_file(&root.join(relative), MAX_SOURCE_BYTES).map(FileContents::new)
+}
+
+/// Reads the file at `path` when it is a regular file (symbolic links followed) of at most
+/// `limit` bytes. FIFOs, devices, sockets and folders are refused without blocking: the file is
+/// opened non-blocking and checked on the open handle, and at most `limit + 1` bytes are read,
+/// whatever the metadata says (`/proc` files and growing files report other sizes).
+pub fn read_regular_file(path: &Path, limit: u64) -> Result<Vec<u8>, String> {
+    use std::io::Read;
+    let mut options = std::fs::OpenOptions::new();
+    options.read(true);
+    #[cfg(unix)]
+    {
+        use std::os::unix::fs::OpenOptionsExt;
+        // Opening a FIFO for reading blocks until a writer appears; non-blocking, it does not.
+        options.custom_flags(libc::O_NONBLOCK);
+    }
+    let file = options.open(path).map_err(describe_io_error)?;
+    let metadata = file.metadata().map_err(describe_io_error)?;
     if metadata.is_dir() {
         return Err("is a folder, not a file".to_string());
     }
-    if metadata.len() > MAX_SOURCE_BYTES {
-        return Err(format!("is larger than {} MiB", MAX_SOURCE_BYTES >> 20));
+    if !metadata.is_file() {
+        return Err("is not a regular file (a FIFO, socket or device)".to_string());
     }
-    std::fs::read(&path).map(FileContents::new).map_err(describe_io_error)
+    if metadata.len() > limit {
+        return Err(format!("is larger than {}", describe_bytes(limit)));
+    }
+    let mut bytes = Vec::with_capacity(metadata.len() as usize);
+    file.take(limit + 1).read_to_end(&mut bytes).map_err(describe_io_error)?;
+    if bytes.len() as u64 > limit {
+        return Err(format!("is larger than {}", describe_bytes(limit)));
+    }
+    Ok(bytes)
 }
+
+fn describe_bytes(bytes: u64) -> String {
+    if bytes >= 1 << 20 {
+        format!("{} MiB", bytes >> 20)
+    } else {
+        format!("{bytes} bytes")
+    }
+}
+
+/// What `read_source` says of a file that does not exist.
+pub const FILE_NOT_FOUND: &str = "file not found";
 
 fn describe_io_error(error: std::io::Error) -> String {
     match error.kind() {
-        std::io::ErrorKind::NotFound => "file not found".to_string(),
+        std::io::ErrorKind::NotFound => FILE_NOT_FOUND.to_string(),
         std::io::ErrorKind::PermissionDenied => "permission denied".to_string(),
+        std::io::ErrorKind::IsADirectory => "is a folder, not a file".to_string(),
         _ => format!("cannot read: {error}"),
     }
 }

@@ -13,6 +13,51 @@ pub const MAX_TEXTURE_SIDE: u32 = 16384;
 /// Largest accepted decoder allocation.
 pub const MAX_DECODE_BYTES: u64 = 1 << 30;
 
+/// Memory the stages after decoding need per texel of a texture, at their peak: the decoded
+/// and packed RGBA8 levels, the mip filter's linear-light float texels (two sets of four `f32`
+/// for colour with alpha) and the levels it makes, the blocks and their decoded check, the
+/// preview. A whole `cirrus build` of one 8192² albedo peaks at 29 bytes per texel opaque and 44
+/// alpha-tested (1.8 and 2.8 GiB); the estimate leaves room for a second map decoded meanwhile.
+pub const WORKING_SET_BYTES_PER_TEXEL: u64 = 64;
+
+/// Default budget of one texture's working set: textures up to about 8192² pass.
+pub const DEFAULT_TEXTURE_MEMORY: u64 = 4 << 30;
+
+/// How much memory one texture may cost.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Hash)]
+pub struct TextureLimits {
+    /// Bytes one texture's working set may take (`WORKING_SET_BYTES_PER_TEXEL` per texel).
+    pub working_set: u64,
+}
+
+impl Default for TextureLimits {
+    fn default() -> Self {
+        TextureLimits { working_set: DEFAULT_TEXTURE_MEMORY }
+    }
+}
+
+impl TextureLimits {
+    /// Refuses a `width` × `height` texture whose working set exceeds the budget, from its
+    /// header, before anything is decoded.
+    pub fn check(&self, file: &Path, width: u32, height: u32) -> Result<(), Diagnostic> {
+        let needed = u64::from(width) * u64::from(height) * WORKING_SET_BYTES_PER_TEXEL;
+        if needed <= self.working_set {
+            return Ok(());
+        }
+        let mib = |bytes: u64| bytes.div_ceil(1 << 20);
+        Err(Diagnostic::new(
+            file,
+            format!(
+                "the image is {width}×{height}: baking it needs about {} MiB, more than the texture memory budget of {} MiB \
+                 (raise it with `limits: (texture_memory_mib: {})` in the pipeline file, or use a smaller image)",
+                mib(needed),
+                mib(self.working_set),
+                mib(needed).next_power_of_two()
+            ),
+        ))
+    }
+}
+
 /// An RGBA8 image, shared without copying. Equality is by content hash.
 #[derive(Clone)]
 pub struct Texture {
@@ -55,8 +100,9 @@ impl fmt::Debug for Texture {
     }
 }
 
-/// Reads only the header of the image `bytes`: its size, or why it cannot be decoded.
-pub fn probe_texture(file: &Path, bytes: &[u8]) -> Result<(u32, u32), Diagnostic> {
+/// Reads only the header of the image `bytes`: its size, or why it cannot be decoded or is
+/// beyond `limits`.
+pub fn probe_texture(file: &Path, bytes: &[u8], limits: TextureLimits) -> Result<(u32, u32), Diagnostic> {
     let reader = image_reader(file, bytes)?;
     let (width, height) =
         reader.into_dimensions().map_err(|error| Diagnostic::new(file, format!("cannot read the image header: {error}")))?;
@@ -66,11 +112,49 @@ pub fn probe_texture(file: &Path, bytes: &[u8]) -> Result<(u32, u32), Diagnostic
             format!("the image is {width}×{height}, larger than the decoder limit of {MAX_TEXTURE_SIDE}² texels"),
         ));
     }
+    limits.check(file, width, height)?;
+    if is_truncated_jpeg(bytes) {
+        return Err(Diagnostic::new(file, TRUNCATED_JPEG));
+    }
     Ok((width, height))
 }
 
-/// Decodes the image `bytes` read from `file`; the format comes from the bytes, else the extension.
-pub fn decode_texture(file: &Path, bytes: &[u8]) -> Result<Texture, Diagnostic> {
+const TRUNCATED_JPEG: &str = "the JPEG is truncated (its image data has no end-of-image marker): re-export it";
+
+/// Whether `bytes` are a JPEG whose entropy-coded data stops before the end-of-image marker.
+/// The decoder fills what is missing with grey and reports no error, so the check is ours: walk
+/// the marker segments to the first scan, then look for EOI (`FF D9`, which byte stuffing keeps
+/// out of scan data). Thumbnails inside APP segments are skipped with their segment.
+fn is_truncated_jpeg(bytes: &[u8]) -> bool {
+    if !bytes.starts_with(&[0xFF, 0xD8]) {
+        return false;
+    }
+    let mut at = 2;
+    loop {
+        let Some(&[prefix, marker]) = bytes.get(at..at + 2).map(|pair| <&[u8; 2]>::try_from(pair).expect("two bytes")) else {
+            return true;
+        };
+        if prefix != 0xFF {
+            // Not a marker where one must be: malformed, which the decoder reports itself.
+            return false;
+        }
+        match marker {
+            0xFF => at += 1,
+            0xDA => return !bytes[at..].windows(2).any(|pair| pair == [0xFF, 0xD9]),
+            0xD9 => return false,
+            0x01 | 0xD0..=0xD7 => at += 2,
+            _ => {
+                let Some(length) = bytes.get(at + 2..at + 4).map(|pair| u16::from_be_bytes([pair[0], pair[1]])) else { return true };
+                at += 2 + usize::from(length);
+            }
+        }
+    }
+}
+
+/// Decodes the image `bytes` read from `file`; the format comes from the bytes, else the
+/// extension. The header is checked against `limits` before anything is decoded.
+pub fn decode_texture(file: &Path, bytes: &[u8], limits: TextureLimits) -> Result<Texture, Diagnostic> {
+    probe_texture(file, bytes, limits)?;
     let mut reader = image_reader(file, bytes)?;
     let mut limits = image::Limits::default();
     limits.max_image_width = Some(MAX_TEXTURE_SIDE);

@@ -58,22 +58,50 @@ struct EventFilter {
     sources: BTreeSet<PathBuf>,
 }
 
+/// What an event on a path means to the daemon.
+#[derive(Debug, PartialEq)]
+enum Relevance {
+    Noise,
+    /// These project-relative files may have changed.
+    Files(Vec<PathBuf>),
+    /// The source folder or one of its parents was created, deleted or moved: the recursive watch
+    /// must be armed again and every source read again.
+    SourceFolder,
+}
+
 impl EventFilter {
-    /// The project-relative path of `path` when an edit to it can change a build.
-    fn relevant(&self, path: &Path) -> Option<PathBuf> {
+    /// What an event on `path` means: files whose edit can change a build, or the source folder
+    /// itself coming and going.
+    /// `structural`: the event creates, removes or renames `path` (only those move the source
+    /// folder).
+    fn relevance(&self, path: &Path, structural: bool) -> Relevance {
         if path == self.pipeline {
-            return Some(PathBuf::from(self.pipeline.file_name()?));
+            return Relevance::Files(self.pipeline.file_name().map(PathBuf::from).into_iter().collect());
+        }
+        if self.source.starts_with(path) && path.starts_with(&self.root) {
+            return if structural { Relevance::SourceFolder } else { Relevance::Noise };
         }
         if path.starts_with(&self.output) {
-            return None;
+            return Relevance::Noise;
         }
-        let relative = path.strip_prefix(&self.root).ok()?.to_path_buf();
-        if self.sources.contains(&relative) {
-            return Some(relative);
+        let Ok(relative) = path.strip_prefix(&self.root) else { return Relevance::Noise };
+        if self.sources.contains(relative) {
+            return Relevance::Files(vec![relative.to_path_buf()]);
         }
-        let in_source = path.strip_prefix(&self.source).ok()?;
+        // A folder deleted or moved away takes the sources inside it along (one event, no
+        // event per file).
+        let inside: Vec<PathBuf> =
+            self.sources.range(relative.to_path_buf()..).take_while(|source| source.starts_with(relative)).cloned().collect();
+        if !inside.is_empty() {
+            return Relevance::Files(inside);
+        }
+        let Ok(in_source) = path.strip_prefix(&self.source) else { return Relevance::Noise };
         let in_source = PathBuf::from(in_source.to_string_lossy().replace('\\', "/"));
-        self.config.rules.iter().any(|rule| rule.matcher.is_match(&in_source)).then_some(relative)
+        if self.config.rules.iter().any(|rule| rule.matcher.is_match(&in_source)) {
+            Relevance::Files(vec![relative.to_path_buf()])
+        } else {
+            Relevance::Noise
+        }
     }
 }
 
@@ -82,6 +110,9 @@ enum WatchMessage {
     Changed(BTreeSet<PathBuf>),
     /// The watcher lost track (error or overflow): everything is read again.
     Rescan(String),
+    /// The source folder (or a parent) was created, deleted or moved: watch it again, then read
+    /// everything again.
+    Rearm,
 }
 
 /// Runs the daemon until the process ends (or `max_builds` builds finished).
@@ -105,6 +136,13 @@ pub fn watch(settings: &WatchSettings) -> Result<(), WatchError> {
     if let Some(server) = &server {
         tracing::info!("hot-reload server listening on {}", server.address());
         eprintln!("cirrus watch: hot-reload server on {}", server.address());
+        if !server.address().ip().is_loopback() {
+            tracing::warn!(
+                "the hot-reload server listens on {}, beyond this machine: the protocol has no authentication, so any host that \
+                 reaches this port can read artifact paths and the dependency graph; use 127.0.0.1 unless that is intended",
+                server.address()
+            );
+        }
     }
 
     let filter = Arc::new(RwLock::new(EventFilter {
@@ -127,16 +165,28 @@ pub fn watch(settings: &WatchSettings) -> Result<(), WatchError> {
                     WatchMessage::Rescan("the watcher's event queue overflowed".into())
                 } else {
                     let filter = watcher_filter.read().expect("event filter");
-                    let changed: BTreeSet<PathBuf> = events
-                        .iter()
-                        .filter(|event| !matches!(event.kind, EventKind::Access(_)))
-                        .flat_map(|event| event.paths.iter())
-                        .filter_map(|path| filter.relevant(path))
-                        .collect();
-                    if changed.is_empty() {
-                        return;
+                    let mut changed = BTreeSet::new();
+                    let mut rearm = false;
+                    for event in events.iter().filter(|event| !matches!(event.kind, EventKind::Access(_))) {
+                        let structural = matches!(
+                            event.kind,
+                            EventKind::Create(_) | EventKind::Remove(_) | EventKind::Modify(notify::event::ModifyKind::Name(_))
+                        );
+                        for path in &event.paths {
+                            match filter.relevance(path, structural) {
+                                Relevance::Noise => {}
+                                Relevance::Files(files) => changed.extend(files),
+                                Relevance::SourceFolder => rearm = true,
+                            }
+                        }
                     }
-                    WatchMessage::Changed(changed)
+                    if rearm {
+                        WatchMessage::Rearm
+                    } else if changed.is_empty() {
+                        return;
+                    } else {
+                        WatchMessage::Changed(changed)
+                    }
                 }
             }
         };
@@ -145,30 +195,43 @@ pub fn watch(settings: &WatchSettings) -> Result<(), WatchError> {
         let _ = sender.send(message);
     })
     .map_err(|source| WatchError::Watch { path: display_path(&root), source })?;
-    let mut watched = watch_folders(&mut debouncer, &root, &config, &[])?;
+    debouncer.watch(&root, RecursiveMode::NonRecursive).map_err(|source| WatchError::Watch { path: display_path(&root), source })?;
+    let mut watched = watch_folders(&mut debouncer, &root, &config, &[]);
 
     let mut builds = 0u64;
     let mut pending: BTreeSet<PathBuf> = BTreeSet::new();
     let mut first = true;
     // A build is owed even without changed bytes: the first one, and one after a cancellation.
     let mut force_build = true;
+    let mut rearm = false;
     loop {
         if !first {
             // Block for the next edit (the watcher gone ends the daemon).
             let Ok(message) = messages.recv() else { return Ok(()) };
-            apply_message(message, &mut pending, &mut project);
+            rearm |= apply_message(message, &mut pending, &mut project);
         }
         cancel.lower();
         // Messages that arrived in between belong to this build too.
         while let Ok(message) = messages.try_recv() {
-            apply_message(message, &mut pending, &mut project);
+            rearm |= apply_message(message, &mut pending, &mut project);
+        }
+        if std::mem::take(&mut rearm) {
+            // The old recursive watch may follow a folder that was moved away, or nothing at all.
+            watched = watch_folders(&mut debouncer, &root, project.config(), &watched);
+            force_build = true;
         }
         let mut reconfigured = false;
         if pending.remove(Path::new(pipeline.file_name().unwrap_or_default())) {
             match load_pipeline(&project.config().file) {
                 Ok(new_config) => {
                     tracing::info!("{} changed: reconfigured", display_path(&new_config.file));
-                    watched = watch_folders(&mut debouncer, &root, &new_config, &watched)?;
+                    if new_config.server != project.config().server && settings.listen.is_none() {
+                        tracing::warn!(
+                            "`server` changed in {}: the hot-reload server keeps its address until `cirrus watch` restarts",
+                            display_path(&new_config.file)
+                        );
+                    }
+                    watched = watch_folders(&mut debouncer, &root, &new_config, &watched);
                     {
                         let mut filter = filter.write().expect("event filter");
                         filter.output = root.join(&new_config.output);
@@ -251,7 +314,9 @@ pub fn watch(settings: &WatchSettings) -> Result<(), WatchError> {
     }
 }
 
-fn apply_message(message: WatchMessage, pending: &mut BTreeSet<PathBuf>, project: &mut Project) {
+/// Applies a watcher message; true when the source folder must be watched again.
+fn apply_message(message: WatchMessage, pending: &mut BTreeSet<PathBuf>, project: &mut Project) -> bool {
+    let rearm = matches!(message, WatchMessage::Rearm);
     match message {
         WatchMessage::Changed(paths) => pending.extend(paths),
         WatchMessage::Rescan(why) => {
@@ -259,33 +324,51 @@ fn apply_message(message: WatchMessage, pending: &mut BTreeSet<PathBuf>, project
             project.invalidate_all_sources();
             pending.extend(project.source_paths());
         }
+        WatchMessage::Rearm => {
+            tracing::info!("the source folder {} appeared, moved or vanished: watching it again", display_path(&project.config().source));
+            project.invalidate_all_sources();
+            pending.extend(project.source_paths());
+        }
     }
+    rearm
 }
 
-/// Watches the source folder recursively and the folder of `pipeline.ron` (editors replace files
-/// by rename, so folders are watched, not files). Returns the folders watched now.
+/// Watches (again) the source folder recursively, and non-recursively each folder between the
+/// project folder and it, so that the source folder's own creation, deletion or move is seen
+/// (a recursive watch dies with its folder, and a folder that is missing cannot be watched).
+/// The project folder itself is watched for the whole run (`pipeline.ron`). Folders that do not
+/// exist are skipped, not errors: the daemon keeps running and reports the missing sources.
+/// Returns the folders watched now.
 fn watch_folders(
     debouncer: &mut notify_debouncer_full::Debouncer<notify::RecommendedWatcher, notify_debouncer_full::RecommendedCache>,
     root: &Path,
     config: &PipelineConfig,
     previous: &[(PathBuf, RecursiveMode)],
-) -> Result<Vec<(PathBuf, RecursiveMode)>, WatchError> {
+) -> Vec<(PathBuf, RecursiveMode)> {
+    for (path, _) in previous {
+        let _ = debouncer.unwatch(path);
+    }
     let source = root.join(&config.source);
-    let mut wanted = vec![(source.clone(), RecursiveMode::Recursive)];
-    if !root.starts_with(&source) {
-        wanted.push((root.to_path_buf(), RecursiveMode::NonRecursive));
-    }
-    for (path, mode) in previous {
-        if !wanted.contains(&(path.clone(), *mode)) {
-            let _ = debouncer.unwatch(path);
+    let mut wanted: Vec<(PathBuf, RecursiveMode)> = source
+        .ancestors()
+        .skip(1)
+        .take_while(|folder| folder.starts_with(root) && *folder != root)
+        .map(|folder| (folder.to_path_buf(), RecursiveMode::NonRecursive))
+        .collect();
+    wanted.reverse();
+    wanted.push((source, RecursiveMode::Recursive));
+    let mut watched = Vec::new();
+    for (path, mode) in wanted {
+        if !path.is_dir() {
+            tracing::warn!("{} does not exist: its assets fail until it appears", display_path(&path));
+            break;
+        }
+        match debouncer.watch(&path, mode) {
+            Ok(()) => watched.push((path, mode)),
+            Err(error) => tracing::warn!("cannot watch {}: {error}", display_path(&path)),
         }
     }
-    for (path, mode) in &wanted {
-        if !previous.contains(&(path.clone(), *mode)) {
-            debouncer.watch(path, *mode).map_err(|source| WatchError::Watch { path: display_path(path), source })?;
-        }
-    }
-    Ok(wanted)
+    watched
 }
 
 /// The batch message of a finished build.

@@ -59,7 +59,7 @@ fn load_corpus_mesh(relative: &str) -> Result<(cirrus::mesh::Mesh, Vec<cirrus::d
     let root = corpus();
     let path = Path::new(relative);
     let bytes = std::fs::read(root.join(path)).expect("read OBJ");
-    let libraries = cirrus::mesh::material_libraries(path, &bytes)
+    let libraries = cirrus::mesh::material_libraries(path, &bytes, Path::new(""))
         .into_iter()
         .map(|library| {
             let bytes = std::fs::read(root.join(&library)).ok();

@@ -65,7 +65,7 @@ fn unreadable_image_names_the_image_and_keeps_the_last_good_artifacts() {
     assert_eq!(project.run_cli(&["build"]).status.code(), Some(0));
     let good_bytes = project.read("baked/broken/m/albedo.ktx2");
     project.write("assets/bad.png", b"\x89PNG\r\n\x1a\n this is not a PNG");
-    expect![[r#"[{"column":null,"file":"assets/bad.png","line":null,"message":"cannot decode the image: Format error decoding Png: ChunkType { type: s is, critical: false, private: true, reserved: true, safecopy: true } chunk appeared before IHDR chunk"}]"#]]
+    expect![[r#"[{"column":null,"file":"assets/bad.png","line":null,"message":"cannot read the image header: Format error decoding Png: ChunkType { type: s is, critical: false, private: true, reserved: true, safecopy: true } chunk appeared before IHDR chunk"}]"#]]
         .assert_eq(&broken_asset_errors(&project).to_string());
     assert_eq!(project.read("baked/broken/m/albedo.ktx2"), good_bytes, "the last good artifact stays");
     assert!(project.path("baked/broken/m/mra.ktx2").exists(), "surfaces that do not read the image still bake");

@@ -13,16 +13,23 @@ use serde_json::Value;
 use crate::support::{pattern_png, TempProject};
 
 /// A running `cirrus watch` and everything it printed on stderr.
-struct Daemon {
-    child: Child,
-    address: String,
-    log: Arc<Mutex<String>>,
+pub struct Daemon {
+    pub child: Child,
+    pub address: String,
+    pub log: Arc<Mutex<String>>,
 }
 
 impl Daemon {
-    fn start(project: &TempProject) -> Daemon {
+    pub fn start(project: &TempProject) -> Daemon {
+        Daemon::start_with(project, &["--listen", "127.0.0.1:0"])
+    }
+
+    /// Starts the daemon with `listen` arguments (`--listen ADDR`, or none for the pipeline's).
+    pub fn start_with(project: &TempProject, listen: &[&str]) -> Daemon {
         let mut child = Command::new(env!("CARGO_BIN_EXE_cirrus"))
-            .args(["watch", "--listen", "127.0.0.1:0", "--debounce-ms", "100", "-v"])
+            .arg("watch")
+            .args(listen)
+            .args(["--debounce-ms", "100", "-v"])
             .current_dir(project.root())
             .stdout(Stdio::null())
             .stderr(Stdio::piped())
@@ -48,7 +55,7 @@ impl Daemon {
         Daemon { child, address, log }
     }
 
-    fn connect(&self) -> Client {
+    pub fn connect(&self) -> Client {
         let stream = TcpStream::connect(&self.address).expect("connect to the daemon");
         stream.set_read_timeout(Some(Duration::from_secs(120))).unwrap();
         let mut client = Client { reader: BufReader::new(stream.try_clone().unwrap()), stream };
@@ -57,7 +64,7 @@ impl Daemon {
         client
     }
 
-    fn alive(&mut self) -> bool {
+    pub fn alive(&mut self) -> bool {
         self.child.try_wait().expect("daemon status").is_none()
     }
 }
@@ -69,25 +76,25 @@ impl Drop for Daemon {
     }
 }
 
-struct Client {
+pub struct Client {
     stream: TcpStream,
     reader: BufReader<TcpStream>,
 }
 
 impl Client {
-    fn send(&mut self, line: &str) {
+    pub fn send(&mut self, line: &str) {
         self.stream.write_all(line.as_bytes()).expect("send");
         self.stream.write_all(b"\n").expect("send");
     }
 
-    fn receive(&mut self) -> Value {
+    pub fn receive(&mut self) -> Value {
         let mut line = String::new();
         self.reader.read_line(&mut line).expect("a message from the daemon");
         serde_json::from_str(&line).unwrap_or_else(|error| panic!("not JSON ({error}): {line:?}"))
     }
 
     /// The next `batch` message (other messages in between are skipped).
-    fn batch(&mut self) -> Value {
+    pub fn batch(&mut self) -> Value {
         loop {
             let message = self.receive();
             if message["type"] == "batch" {
@@ -97,7 +104,7 @@ impl Client {
     }
 
     /// True when nothing arrives within `wait`.
-    fn quiet_for(&mut self, wait: Duration) -> bool {
+    pub fn quiet_for(&mut self, wait: Duration) -> bool {
         self.stream.set_read_timeout(Some(wait)).unwrap();
         let mut byte = [0u8; 1];
         let quiet = self.reader.get_mut().peek(&mut byte).is_err() && self.reader.buffer().is_empty();
@@ -105,14 +112,14 @@ impl Client {
         quiet
     }
 
-    fn subscribe(&mut self, since: Option<u64>) {
+    pub fn subscribe(&mut self, since: Option<u64>) {
         let since = since.map_or("null".to_string(), |revision| revision.to_string());
         self.send(&format!(r#"{{"type":"subscribe","since":{since}}}"#));
     }
 }
 
 /// Two materials from a rule and one listed asset, 32² textures: quick to bake.
-fn watched_project() -> TempProject {
+pub fn watched_project() -> TempProject {
     let project = TempProject::new(
         r#"Pipeline(source: "assets", output: "baked", assets: [
             Material(name: "rock", material: "rock.mymaterial"),
@@ -130,7 +137,7 @@ fn watched_project() -> TempProject {
 }
 
 /// Path → blake3 of every file under the output folder (the cache excluded).
-fn output_hashes(project: &TempProject) -> BTreeMap<String, String> {
+pub fn output_hashes(project: &TempProject) -> BTreeMap<String, String> {
     let mut hashes = BTreeMap::new();
     let mut folders = vec![project.path("baked")];
     while let Some(folder) = folders.pop() {
@@ -150,7 +157,7 @@ fn output_hashes(project: &TempProject) -> BTreeMap<String, String> {
 }
 
 /// The paths of a batch's `changed`, after checking each file is complete and matches its hash.
-fn changed_paths(project: &TempProject, batch: &Value) -> Vec<String> {
+pub fn changed_paths(project: &TempProject, batch: &Value) -> Vec<String> {
     let mut paths = Vec::new();
     for entry in batch["changed"].as_array().expect("changed") {
         let path = entry["path"].as_str().unwrap();

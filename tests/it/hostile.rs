@@ -1,0 +1,577 @@
+//! Hostile and clumsy input: every way found to make cirrus delete a user's file, hang, abort or
+//! exhaust memory, and the smaller ways to let bad input through. Each test reproduces one report
+//! of the hardening issue; the process-level ones run the `cirrus` binary with a deadline, so that
+//! a hang or an abort fails the test instead of the test run.
+
+use std::path::Path;
+use std::process::{Command, Output, Stdio};
+use std::time::{Duration, Instant};
+
+use cirrus::config::{load_pipeline, parse_pipeline};
+
+use crate::support::{build, pattern_png, TempProject};
+use crate::watch::{changed_paths, output_hashes, watched_project, Daemon};
+
+/// Runs `cirrus ARGS` in the project folder; fails the test when it runs past `limit` (a hang).
+fn run_with_deadline(project: &TempProject, arguments: &[&str], limit: Duration) -> Output {
+    let mut child = Command::new(env!("CARGO_BIN_EXE_cirrus"))
+        .args(arguments)
+        .current_dir(project.root())
+        .stdin(Stdio::null())
+        .stdout(Stdio::piped())
+        .stderr(Stdio::piped())
+        .spawn()
+        .expect("run cirrus");
+    let start = Instant::now();
+    while child.try_wait().expect("status").is_none() {
+        if start.elapsed() > limit {
+            let _ = child.kill();
+            let output = child.wait_with_output().expect("output");
+            panic!(
+                "`cirrus {}` still ran after {limit:?}: it hangs\nstderr: {}",
+                arguments.join(" "),
+                String::from_utf8_lossy(&output.stderr)
+            );
+        }
+        std::thread::sleep(Duration::from_millis(20));
+    }
+    child.wait_with_output().expect("output")
+}
+
+fn text(output: &Output) -> String {
+    format!("{}{}", String::from_utf8_lossy(&output.stdout), String::from_utf8_lossy(&output.stderr))
+}
+
+/// A one-material project over small generated textures (quick to bake).
+fn material_project() -> TempProject {
+    let project = TempProject::new(
+        r#"Pipeline(source: "assets", output: "baked", assets: [
+            Material(name: "rock", material: "rock.mymaterial"),
+            Material(name: "moss", material: "moss.mymaterial"),
+        ])"#,
+    );
+    project.write("assets/albedo.png", pattern_png(32, 32, 1));
+    project.write("assets/normal.png", pattern_png(32, 32, 2));
+    project.write(
+        "assets/rock.mymaterial",
+        "Material $rock {\n  Texture (attrib = \"diffuse\") {string {\"albedo.png\"}}\n  Texture (attrib = \"normal\") {string {\"normal.png\"}}\n}\n",
+    );
+    project.write("assets/moss.mymaterial", "Material $moss { Texture (attrib = \"diffuse\") {string {\"albedo.png\"}} }\n");
+    project
+}
+
+fn make_fifo(path: &Path) {
+    let _ = std::fs::remove_file(path);
+    let status = Command::new("mkfifo").arg(path).status().expect("mkfifo");
+    assert!(status.success(), "mkfifo {}", path.display());
+}
+
+fn manifest(project: &TempProject) -> serde_json::Value {
+    serde_json::from_slice(&project.read("baked/manifest.json")).expect("manifest is JSON")
+}
+
+// ---------------------------------------------------------------------------------------------
+// severe
+
+#[test]
+fn stale_artifact_cleanup_deletes_only_files_cirrus_wrote_inside_the_output_folder() {
+    let project = material_project();
+    let outside = tempfile::tempdir().unwrap();
+    let absolute_victim = outside.path().join("victim.txt");
+    std::fs::write(&absolute_victim, "keep me").unwrap();
+    project.write("victim.txt", "keep me");
+    project.write("assets/notes.txt", "keep me");
+    project.write("baked/handmade.txt", "keep me");
+    project.write("baked/stale.txt", "cirrus wrote this");
+    assert!(build(&mut project.open()).all_ok());
+
+    // A manifest edited by hand (or by an attacker): entries of an asset that left the pipeline.
+    let mut edited = manifest(&project);
+    let entry = |hash: &str| serde_json::json!({"asset": "gone", "hash": hash, "revision": 1});
+    let real = |path: &str| blake3::hash(&project.read(path)).to_hex().to_string();
+    let artifacts = edited["artifacts"].as_object_mut().unwrap();
+    for path in ["baked/../victim.txt", "assets/notes.txt", "pipeline.ron", "victim.txt"] {
+        let on_disk = path.replace("baked/../", "");
+        artifacts.insert(path.to_string(), entry(&real(&on_disk)));
+    }
+    let absolute = absolute_victim.to_string_lossy().into_owned();
+    artifacts.insert(absolute.clone(), entry(&blake3::hash(b"keep me").to_hex().to_string()));
+    // Inside the output folder, but not the bytes cirrus recorded: a user's file.
+    artifacts.insert("baked/handmade.txt".into(), entry("0000"));
+    // Inside the output folder with the recorded bytes: a real stale artifact, deleted.
+    artifacts.insert("baked/stale.txt".into(), entry(&real("baked/stale.txt")));
+    project.write("baked/manifest.json", serde_json::to_vec_pretty(&edited).unwrap());
+
+    let output = run_with_deadline(&project, &["build"], Duration::from_secs(120));
+    assert!(output.status.success(), "{}", text(&output));
+    for kept in ["victim.txt", "assets/notes.txt", "pipeline.ron", "baked/handmade.txt"] {
+        assert!(project.path(kept).exists(), "{kept} was deleted");
+    }
+    assert!(absolute_victim.exists(), "an absolute path listed in the manifest was deleted");
+    assert!(!project.path("baked/stale.txt").exists(), "a real stale artifact is still removed");
+    assert!(text(&output).contains("not deleted"), "the refusals are reported: {}", text(&output));
+    let after = manifest(&project);
+    assert!(
+        after["artifacts"].as_object().unwrap().keys().all(|path| path.starts_with("baked/rock/") || path.starts_with("baked/moss/")),
+        "refused entries leave the manifest: {after}"
+    );
+}
+
+#[test]
+fn structures_nested_ten_thousand_deep_fail_with_a_position_instead_of_aborting() {
+    let project = material_project();
+    let depth = 10_000;
+    let nested = format!("{}{}", "Extra {\n".repeat(depth), "}".repeat(depth));
+    project.write("assets/moss.mymaterial", format!("Material $moss {{ {nested} }}\n"));
+    for command in ["build", "check"] {
+        let output = run_with_deadline(&project, &[command], Duration::from_secs(60));
+        let printed = text(&output);
+        assert_eq!(output.status.code(), Some(1), "`{command}` exits 1, not an abort: {printed}");
+        assert!(printed.contains("assets/moss.mymaterial:100:"), "`{command}` names the file and line: {printed}");
+        assert!(printed.contains("nested too deeply"), "{printed}");
+    }
+    assert!(project.path("baked/rock/rock/albedo.ktx2").exists(), "the other asset still bakes");
+
+    // pipeline.ron and the protocol's JSON have their parsers' own limits.
+    let deep_ron = format!("Pipeline(source: \"assets\", output: \"baked\", assets: {}{})", "[".repeat(depth), "]".repeat(depth));
+    let error = parse_pipeline(Path::new("pipeline.ron"), &deep_ron).expect_err("too deep");
+    assert!(error.to_string().contains("pipeline.ron:1:"), "{error}");
+    let deep_json = format!("{}{}", "[".repeat(depth), "]".repeat(depth));
+    assert!(cirrus::server::parse_request(deep_json.as_bytes()).is_err());
+}
+
+#[test]
+fn fifos_and_devices_as_inputs_are_refused_without_blocking() {
+    let project = material_project();
+    make_fifo(&project.path("assets/normal.png"));
+    let output = run_with_deadline(&project, &["build"], Duration::from_secs(60));
+    let printed = text(&output);
+    assert_eq!(output.status.code(), Some(1), "{printed}");
+    assert!(printed.contains("assets/normal.png") && printed.contains("not a regular file"), "{printed}");
+    assert!(project.path("baked/moss/moss/albedo.ktx2").exists(), "the other asset still bakes");
+    let output = run_with_deadline(&project, &["check"], Duration::from_secs(60));
+    assert!(text(&output).contains("not a regular file"), "{}", text(&output));
+
+    // A FIFO as the material file, as a rule-matched file and as a mesh with a FIFO `mtllib`.
+    let project = TempProject::new(
+        r#"Pipeline(source: "assets", output: "baked", assets: [
+            Material(name: "fifo", material: "fifo.mymaterial"),
+            BillboardCloud(name: "tree", mesh: "tree.obj"),
+        ], rules: [(glob: "rules/*.mymaterial", kind: Material)])"#,
+    );
+    std::fs::create_dir_all(project.path("assets/rules")).unwrap();
+    make_fifo(&project.path("assets/fifo.mymaterial"));
+    make_fifo(&project.path("assets/rules/pipe.mymaterial"));
+    make_fifo(&project.path("assets/tree.obj"));
+    let output = run_with_deadline(&project, &["build"], Duration::from_secs(60));
+    let printed = text(&output);
+    assert_eq!(output.status.code(), Some(1), "{printed}");
+    for file in ["assets/fifo.mymaterial", "assets/rules/pipe.mymaterial", "assets/tree.obj"] {
+        assert!(printed.contains(&format!("{file}: is not a regular file")), "{file}: {printed}");
+    }
+    std::fs::remove_file(project.path("assets/tree.obj")).unwrap();
+    project.write("assets/tree.obj", "mtllib tree.mtl\nv 0 0 0\nv 1 0 0\nv 0 1 0\nf 1 2 3\n");
+    make_fifo(&project.path("assets/tree.mtl"));
+    let output = run_with_deadline(&project, &["build", "--asset", "tree"], Duration::from_secs(60));
+    assert!(text(&output).contains("assets/tree.mtl: is not a regular file"), "{}", text(&output));
+
+    // A symbolic link to /dev/zero (endless bytes) is refused, not read into memory.
+    let project = material_project();
+    std::fs::remove_file(project.path("assets/normal.png")).unwrap();
+    std::os::unix::fs::symlink("/dev/zero", project.path("assets/normal.png")).unwrap();
+    let output = run_with_deadline(&project, &["build"], Duration::from_secs(60));
+    let printed = text(&output);
+    assert_eq!(output.status.code(), Some(1), "{printed}");
+    assert!(printed.contains("assets/normal.png") && printed.contains("not a regular file"), "{printed}");
+
+    // The pipeline file itself.
+    let project = TempProject::new("");
+    std::fs::remove_file(project.path("pipeline.ron")).unwrap();
+    make_fifo(&project.path("pipeline.ron"));
+    let output = run_with_deadline(&project, &["check"], Duration::from_secs(60));
+    assert_eq!(output.status.code(), Some(2), "{}", text(&output));
+    assert!(text(&output).contains("not a regular file"), "{}", text(&output));
+}
+
+#[test]
+fn a_missing_source_folder_fails_the_assets_and_the_daemon_waits_for_it() {
+    let project = watched_project();
+    std::fs::rename(project.path("assets"), project.path("elsewhere")).unwrap();
+    let mut daemon = Daemon::start(&project);
+    let mut client = daemon.connect();
+    client.subscribe(Some(0));
+    let batch = client.batch();
+    let failed = batch["failed"].as_array().unwrap();
+    assert!(!failed.is_empty(), "{batch}");
+    assert!(failed.iter().all(|entry| entry["message"].as_str().unwrap().contains("source folder assets does not exist")), "{batch}");
+    assert!(daemon.alive(), "watch keeps running without its source folder");
+
+    // The folder appears: everything bakes.
+    std::fs::rename(project.path("elsewhere"), project.path("assets")).unwrap();
+    let batch = client.batch();
+    assert_eq!(batch["failed"], serde_json::json!([]), "{batch}");
+    assert!(changed_paths(&project, &batch).contains(&"baked/rock/rock/albedo.ktx2".to_string()), "{batch}");
+
+    // A typo in `source` while running: a failure batch, the daemon keeps its clients.
+    let pipeline = String::from_utf8(project.read("pipeline.ron")).unwrap();
+    project.write("pipeline.ron", pipeline.replace(r#"source: "assets""#, r#"source: "asets""#));
+    let batch = client.batch();
+    assert!(batch["failed"][0]["message"].as_str().unwrap().contains("source folder asets does not exist"), "{batch}");
+    assert!(daemon.alive());
+    project.write("pipeline.ron", &pipeline);
+    let batch = client.batch();
+    assert_eq!(batch["failed"], serde_json::json!([]), "{batch}");
+    // And it hears edits again.
+    project.write("assets/ao.png", pattern_png(32, 32, 9));
+    let batch = client.batch();
+    assert!(changed_paths(&project, &batch).contains(&"baked/rock/rock/mra.ktx2".to_string()), "{batch}");
+}
+
+// ---------------------------------------------------------------------------------------------
+// high
+
+#[test]
+fn an_output_folder_that_is_holds_or_lies_inside_the_source_is_refused() {
+    for (source, output) in [("assets", "."), ("assets", ""), ("assets", "./"), ("src", "src/.."), ("src", "src"), ("src", "src/baked")] {
+        let text = format!(r#"Pipeline(source: "{source}", output: "{output}")"#);
+        let error = parse_pipeline(Path::new("pipeline.ron"), &text).expect_err(&format!("output {output:?} beside source {source:?}"));
+        assert!(error.to_string().contains("pipeline.ron:1:") && error.to_string().contains("output folder must not"), "{error}");
+    }
+    // Through a symbolic link: `out` is the source folder under another name.
+    let project = TempProject::new(r#"Pipeline(source: "assets", output: "out")"#);
+    std::fs::create_dir_all(project.path("assets")).unwrap();
+    std::os::unix::fs::symlink(project.path("assets"), project.path("out")).unwrap();
+    let error = load_pipeline(&project.path("pipeline.ron")).expect_err("output is the source through a link");
+    assert!(error.to_string().contains("output folder must not be the source folder"), "{error}");
+}
+
+#[test]
+fn the_daemon_hears_its_source_folder_again_after_it_is_deleted_or_moved_and_back() {
+    let project = watched_project();
+    let daemon = Daemon::start(&project);
+    let mut client = daemon.connect();
+    client.subscribe(Some(0));
+    client.batch();
+
+    // Renamed away and back (a sync tool, an archive unpacked in place).
+    std::fs::rename(project.path("assets"), project.path("assets.moved")).unwrap();
+    let batch = client.batch();
+    assert!(!batch["failed"].as_array().unwrap().is_empty(), "the assets fail while their folder is gone: {batch}");
+    std::fs::rename(project.path("assets.moved"), project.path("assets")).unwrap();
+    let batch = client.batch();
+    assert_eq!(batch["failed"], serde_json::json!([]), "{batch}");
+    project.write("assets/ao.png", pattern_png(32, 32, 11));
+    let batch = client.batch();
+    assert!(changed_paths(&project, &batch).contains(&"baked/rock/rock/mra.ktx2".to_string()), "heard after a move: {batch}");
+
+    // Deleted and created again.
+    let saved = tempfile::tempdir().unwrap();
+    let copy = |from: &Path, to: &Path| {
+        let status = Command::new("cp").arg("-r").arg(from).arg(to).status().unwrap();
+        assert!(status.success());
+    };
+    copy(&project.path("assets"), &saved.path().join("assets"));
+    std::fs::remove_dir_all(project.path("assets")).unwrap();
+    let batch = client.batch();
+    assert!(!batch["failed"].as_array().unwrap().is_empty(), "{batch}");
+    copy(&saved.path().join("assets"), project.root());
+    let batch = client.batch();
+    assert_eq!(batch["failed"], serde_json::json!([]), "{batch}");
+    project.write("assets/ao.png", pattern_png(32, 32, 12));
+    let batch = client.batch();
+    assert!(changed_paths(&project, &batch).contains(&"baked/rock/rock/mra.ktx2".to_string()), "heard after re-creation: {batch}");
+
+    // A subfolder moved away takes its assets along.
+    std::fs::rename(project.path("assets/extra"), saved.path().join("extra")).unwrap();
+    let batch = client.batch();
+    let failed: Vec<&str> = batch["failed"].as_array().unwrap().iter().filter_map(|entry| entry["asset"].as_str()).collect();
+    assert!(failed.contains(&"extra/moss") || batch["removed"].as_array().is_some_and(|removed| !removed.is_empty()), "{batch}");
+}
+
+#[test]
+fn textures_whose_working_set_exceeds_the_budget_fail_from_their_header() {
+    // A 16384² PNG header (the decode limit admits it; its working set is 16 GiB).
+    let mut huge = Vec::new();
+    let encoder = image::codecs::png::PngEncoder::new(&mut huge);
+    let row = vec![0u8; 16384 * 4];
+    // Writing 1 GiB of pixels would be slow: a valid header with one row of data is enough,
+    // since the budget is checked before decoding.
+    let _ = image::ImageEncoder::write_image(encoder, &row, 16384, 1, image::ExtendedColorType::Rgba8);
+    let height_offset = 16 + 4; // signature (8) + IHDR length and type (8) + width (4)
+    huge[height_offset..height_offset + 4].copy_from_slice(&16384u32.to_be_bytes());
+    let crc = crc32(&huge[12..29]);
+    huge[29..33].copy_from_slice(&crc.to_be_bytes());
+    let error = cirrus::texture::probe_texture(Path::new("huge.png"), &huge, Default::default()).expect_err("over budget");
+    assert!(error.to_string().contains("16384×16384") && error.to_string().contains("texture_memory_mib"), "{error}");
+
+    // The budget is a setting: 16 MiB refuses a 1024² texture (64 MiB), admits 256² (4 MiB).
+    let project = TempProject::new(
+        r#"Pipeline(source: "assets", output: "baked", limits: (texture_memory_mib: 16), assets: [
+            Material(name: "big", material: "big.mymaterial"),
+            Material(name: "small", material: "small.mymaterial"),
+        ])"#,
+    );
+    project.write("assets/big.png", pattern_png(1024, 1024, 1));
+    project.write("assets/small.png", pattern_png(256, 256, 2));
+    project.write("assets/big.mymaterial", "Material $big { Texture (attrib = \"diffuse\") {string {\"big.png\"}} }");
+    project.write("assets/small.mymaterial", "Material $small { Texture (attrib = \"diffuse\") {string {\"small.png\"}} }");
+    let summary = build(&mut project.open());
+    let big = summary.assets.iter().find(|asset| asset.name == "big").unwrap();
+    assert!(big.errors.iter().any(|error| error.message.contains("texture memory budget of 16 MiB")), "{}", summary.to_text());
+    assert!(summary.assets.iter().find(|asset| asset.name == "small").unwrap().status == cirrus::summary::AssetStatus::Ok);
+    let output = run_with_deadline(&project, &["check"], Duration::from_secs(60));
+    assert!(text(&output).contains("texture memory budget"), "check reports it too: {}", text(&output));
+}
+
+/// CRC-32 (PNG's polynomial), for patching a chunk header.
+fn crc32(bytes: &[u8]) -> u32 {
+    let mut crc = !0u32;
+    for &byte in bytes {
+        crc ^= u32::from(byte);
+        for _ in 0..8 {
+            crc = if crc & 1 == 1 { (crc >> 1) ^ 0xEDB8_8320 } else { crc >> 1 };
+        }
+    }
+    !crc
+}
+
+// ---------------------------------------------------------------------------------------------
+// moderate
+
+#[test]
+fn a_truncated_jpeg_fails_instead_of_baking_grey() {
+    let project = material_project();
+    let jpeg = std::fs::read(Path::new(env!("CARGO_MANIFEST_DIR")).join("examples/assets/textures/bark_oak/albedo.jpg")).unwrap();
+    project.write("assets/albedo.jpg", &jpeg[..jpeg.len() / 2]);
+    project.write("assets/whole.jpg", &jpeg);
+    project.write("assets/moss.mymaterial", "Material $moss { Texture (attrib = \"diffuse\") {string {\"albedo.jpg\"}} }\n");
+    project.write("assets/rock.mymaterial", "Material $rock { Texture (attrib = \"diffuse\") {string {\"whole.jpg\"}} }\n");
+    let summary = build(&mut project.open());
+    let moss = summary.assets.iter().find(|asset| asset.name == "moss").unwrap();
+    assert!(
+        moss.errors.iter().any(|error| error.file == "assets/albedo.jpg" && error.message.contains("truncated")),
+        "{}",
+        summary.to_text()
+    );
+    assert_eq!(
+        summary.assets.iter().find(|asset| asset.name == "rock").unwrap().status,
+        cirrus::summary::AssetStatus::Ok,
+        "a whole JPEG bakes"
+    );
+    // A truncated PNG fails in the decoder.
+    let png = pattern_png(64, 64, 3);
+    let error =
+        cirrus::texture::decode_texture(Path::new("cut.png"), &png[..png.len() - 40], Default::default()).expect_err("truncated PNG");
+    assert!(error.to_string().starts_with("cut.png: "), "{error}");
+}
+
+fn load_obj(
+    obj: &str,
+    mtl: Option<&str>,
+) -> Result<(cirrus::mesh::Mesh, Vec<cirrus::diagnostic::Diagnostic>), cirrus::diagnostic::Diagnostic> {
+    let obj_path = Path::new("assets/m.obj");
+    let mut libraries = std::collections::BTreeMap::new();
+    for library in cirrus::mesh::material_libraries(obj_path, obj.as_bytes(), Path::new("assets")) {
+        libraries.insert(library, mtl.map(|text| text.as_bytes().to_vec()));
+    }
+    cirrus::mesh::load_mesh(obj_path, obj.as_bytes(), &libraries, Path::new("assets"))
+}
+
+#[test]
+fn an_object_without_uvs_keeps_the_other_objects_textured() {
+    let mtl = "newmtl bark\nmap_Kd bark.png\n";
+    let obj = "mtllib m.mtl\nv 0 0 0\nv 1 0 0\nv 0 1 0\nvt 0 0\nvt 1 0\nvt 0 1\n\
+               o trunk\nusemtl bark\nf 1/1 2/2 3/3\n\
+               o branch\nv 0 0 1\nv 1 0 1\nv 0 1 1\nusemtl bark\nf 4 5 6\n";
+    let (mesh, warnings) = load_obj(obj, Some(mtl)).expect("loads");
+    assert!(mesh.uvs.is_some(), "the textured object keeps its UVs");
+    let material_of = |face: usize| &mesh.materials[mesh.triangle_materials[face] as usize];
+    assert!(!material_of(0).maps.is_empty(), "trunk keeps its maps");
+    assert!(material_of(1).maps.is_empty(), "branch bakes constants");
+    assert_eq!(material_of(1).albedo_factor, material_of(0).albedo_factor);
+    assert!(warnings.iter().any(|warning| warning.message.contains("object `branch` has no texture coordinates")), "{warnings:?}");
+}
+
+#[test]
+fn asset_names_that_share_a_folder_or_name_cirrus_files_are_refused() {
+    let cases = [
+        (r#"("a/b", "a//b")"#, "names the folder `a/b`: write `a/b`"),
+        (r#"("a/b", "a/./b")"#, "names the folder `a/b`: write `a/b`"),
+        (r#"("x", "x/m")"#, "would share a folder"),
+        (r#"("manifest.json", "ok")"#, "is reserved"),
+        (r#"(".cirrus", "ok")"#, "is reserved"),
+    ];
+    for (names, expected) in cases {
+        let (first, second) = names.trim_matches(|c| c == '(' || c == ')').split_once(", ").unwrap();
+        let text = format!(
+            r#"Pipeline(source: "assets", output: "baked", assets: [
+                Material(name: {first}, material: "a.mymaterial"),
+                Material(name: {second}, material: "b.mymaterial"),
+            ])"#
+        );
+        let error = parse_pipeline(Path::new("pipeline.ron"), &text).expect_err(names);
+        assert!(error.to_string().contains(expected), "{names}: {error}");
+        assert!(error.to_string().contains("pipeline.ron:"), "{error}");
+    }
+
+    // A rule-matched file whose name collides is reported, not silently dropped.
+    let project = material_project();
+    let pipeline = String::from_utf8(project.read("pipeline.ron")).unwrap();
+    project.write("pipeline.ron", pipeline.replace("])", "], rules: [(glob: \"**/*.mymaterial\", kind: Material)])"));
+    project.write("assets/rock/extra.mymaterial", "Material $x { }\n");
+    let output = run_with_deadline(&project, &["check"], Duration::from_secs(60));
+    assert!(text(&output).contains("assets/rock/extra.mymaterial: warning: matches a rule but is not baked"), "{}", text(&output));
+
+    // A manifest that cannot be written fails the build.
+    let project = material_project();
+    std::fs::create_dir_all(project.path("baked/manifest.json/in_the_way")).unwrap();
+    let output = run_with_deadline(&project, &["build"], Duration::from_secs(60));
+    assert_eq!(output.status.code(), Some(1), "{}", text(&output));
+    assert!(text(&output).contains("cannot write the manifest"), "{}", text(&output));
+}
+
+#[test]
+fn material_libraries_and_textures_outside_the_source_folder_are_not_read() {
+    let obj = "mtllib ../../etc/passwd\nmtllib ../pipeline.ron\nv 0 0 0\nv 1 0 0\nv 0 1 0\nf 1 2 3\n";
+    assert!(cirrus::mesh::material_libraries(Path::new("assets/m.obj"), obj.as_bytes(), Path::new("assets")).is_empty());
+    let (_, warnings) = load_obj(obj, None).expect("loads with default materials");
+    assert_eq!(warnings.iter().filter(|warning| warning.message.contains("lies outside the source folder")).count(), 2, "{warnings:?}");
+
+    // Symbolic links placed in the source folder are the user's (a shared library linked in):
+    // followed wherever they lead, as long as they lead to a regular file.
+    let project = material_project();
+    project.write("library/shared.png", pattern_png(8, 8, 5));
+    std::fs::remove_file(project.path("assets/normal.png")).unwrap();
+    std::os::unix::fs::symlink(project.path("library/shared.png"), project.path("assets/normal.png")).unwrap();
+    std::fs::rename(project.path("assets/albedo.png"), project.path("assets/real_albedo.png")).unwrap();
+    std::os::unix::fs::symlink("real_albedo.png", project.path("assets/albedo.png")).unwrap();
+    let summary = build(&mut project.open());
+    assert!(summary.all_ok(), "{}", summary.to_text());
+}
+
+#[test]
+fn server_addresses_take_host_names_and_a_public_one_is_warned_about() {
+    let config =
+        parse_pipeline(Path::new("pipeline.ron"), r#"Pipeline(source: "a", output: "b", server: Some("localhost:7878"))"#).unwrap();
+    assert_eq!(config.server.map(|address| (address.ip().is_loopback(), address.port())), Some((true, 7878)));
+    let error = parse_pipeline(Path::new("pipeline.ron"), r#"Pipeline(source: "a", output: "b", server: Some("localhost"))"#).unwrap_err();
+    assert!(error.to_string().contains("localhost:7878"), "{error}");
+
+    let project = watched_project();
+    let daemon = Daemon::start_with(&project, &["--listen", "0.0.0.0:0"]);
+    let mut client = daemon.connect();
+    client.subscribe(Some(0));
+    client.batch();
+    let log = daemon.log.lock().unwrap().clone();
+    assert!(log.contains("no authentication"), "{log}");
+    drop(daemon);
+    let daemon = Daemon::start_with(&project, &["--listen", "localhost:0"]);
+    daemon.connect();
+}
+
+#[test]
+fn a_cache_entry_moved_under_another_key_is_a_miss_not_another_result() {
+    let project = material_project();
+    assert!(build(&mut project.open()).all_ok());
+    let good = output_hashes(&project);
+    // Swap every pair of entries of the final stage: each now sits under another surface's key.
+    let mut entries = Vec::new();
+    let mut folders = vec![project.path("baked/.cirrus/cache")];
+    while let Some(folder) = folders.pop() {
+        for entry in std::fs::read_dir(&folder).unwrap().flatten() {
+            if entry.file_type().unwrap().is_dir() {
+                folders.push(entry.path());
+            } else {
+                entries.push(entry.path());
+            }
+        }
+    }
+    entries.sort();
+    assert!(entries.len() >= 2, "{entries:?}");
+    let contents: Vec<Vec<u8>> = entries.iter().map(|path| std::fs::read(path).unwrap()).collect();
+    for (index, path) in entries.iter().enumerate() {
+        std::fs::write(path, &contents[(index + 1) % contents.len()]).unwrap();
+    }
+    std::fs::remove_dir_all(project.path("baked/rock")).unwrap();
+    std::fs::remove_dir_all(project.path("baked/moss")).unwrap();
+    let summary = build(&mut project.open());
+    assert!(summary.all_ok(), "{}", summary.to_text());
+    assert_eq!(output_hashes(&project), good, "every artifact as before: swapped entries were misses");
+}
+
+#[test]
+fn meshes_too_large_too_small_or_flat_for_single_precision_fail_with_a_diagnostic() {
+    let triangle = |scale: &str| format!("v 0 0 0\nv {scale} 0 0\nv 0 {scale} 0\nf 1 2 3\n");
+    let error = load_obj(&triangle("1e30"), None).expect_err("too large");
+    assert!(error.message.contains("scale it down"), "{error}");
+    let error = load_obj(&triangle("1e-30"), None).expect_err("too small");
+    assert!(error.message.contains("scale it up"), "{error}");
+    let error = load_obj("v 0 0 0\nv 1 0 0\nv 2 0 0\nf 1 2 3\n", None).expect_err("zero area");
+    assert!(error.message.contains("zero area"), "{error}");
+    assert!(load_obj(&triangle("1e3"), None).is_ok());
+}
+
+// ---------------------------------------------------------------------------------------------
+// low
+
+#[test]
+fn the_cheap_low_ones() {
+    // A byte-order mark in pipeline.ron.
+    assert!(parse_pipeline(Path::new("pipeline.ron"), "\u{feff}Pipeline(source: \"a\", output: \"b\")").is_ok());
+
+    // `usemtl` of a material no MTL defines is warned about, with its line.
+    let (_, warnings) = load_obj("mtllib m.mtl\nv 0 0 0\nv 1 0 0\nv 0 1 0\nusemtl nope\nf 1 2 3\n", Some("newmtl bark\n")).unwrap();
+    let warning = warnings.iter().find(|warning| warning.message.contains("usemtl nope")).expect("a warning");
+    assert_eq!((warning.file.as_path(), warning.line()), (Path::new("assets/m.obj"), Some(5)));
+
+    // MTL warnings name the MTL file.
+    let (_, warnings) =
+        load_obj("mtllib m.mtl\nv 0 0 0\nv 1 0 0\nv 0 1 0\nusemtl bark\nf 1 2 3\n", Some("newmtl bark\nmap_Kd ../../x.png\n")).unwrap();
+    assert!(
+        warnings.iter().any(|warning| warning.file == Path::new("assets/m.mtl") && warning.message.contains("leaves the source folder")),
+        "{warnings:?}"
+    );
+
+    // Temporary files that a killed build left behind are swept (once they are a minute old).
+    let project = material_project();
+    project.write("baked/rock/.cirrus-tmp-old", "partial");
+    project.write("baked/rock/.cirrus-tmp-fresh", "partial");
+    let status = Command::new("touch").args(["-d", "2 minutes ago"]).arg(project.path("baked/rock/.cirrus-tmp-old")).status().unwrap();
+    assert!(status.success());
+    build(&mut project.open());
+    assert!(!project.path("baked/rock/.cirrus-tmp-old").exists());
+    assert!(project.path("baked/rock/.cirrus-tmp-fresh").exists(), "a fresh one may belong to a running build");
+}
+
+#[test]
+fn protocol_edges_since_from_the_future_unknown_graph_assets_and_too_many_clients() {
+    let project = watched_project();
+    let daemon = Daemon::start(&project);
+    let mut client = daemon.connect();
+    client.subscribe(Some(0));
+    let revision = client.batch()["revision"].as_u64().unwrap();
+
+    let mut late = daemon.connect();
+    late.subscribe(Some(revision + 100));
+    let message = late.receive();
+    assert_eq!(message["type"], "resync", "{message}");
+    assert!(message["message"].as_str().unwrap().contains("newer than the daemon's revision"), "{message}");
+
+    client.send(r#"{"type":"graph","format":"json","asset":"nope"}"#);
+    let message = client.receive();
+    assert_eq!(message["type"], "error", "{message}");
+    assert!(message["message"].as_str().unwrap().contains("no asset named `nope`"), "{message}");
+
+    let mut crowd = Vec::new();
+    let refused = (0..80).any(|_| {
+        let stream = std::net::TcpStream::connect(&daemon.address).unwrap();
+        stream.set_read_timeout(Some(Duration::from_secs(10))).unwrap();
+        let mut reader = std::io::BufReader::new(stream.try_clone().unwrap());
+        let mut line = String::new();
+        std::io::BufRead::read_line(&mut reader, &mut line).unwrap();
+        crowd.push(stream);
+        line.contains("too many clients")
+    });
+    assert!(refused, "connections beyond the cap are refused");
+    drop(crowd);
+}

@@ -399,7 +399,9 @@ impl Project {
             let names: BTreeSet<&str> = all_assets.iter().map(|asset| asset.name.as_str()).collect();
             removed_artifacts.extend(remove_artifacts(&self.config, &mut manifest, |_, entry| !names.contains(entry.asset.as_str())));
         }
-        changed |= !removed_artifacts.is_empty();
+        // A failure is news too: its batch gets a revision of its own, so that a client that
+        // subscribes after it (with `since` = the revision before) still hears of it.
+        changed |= !removed_artifacts.is_empty() || summaries.iter().any(|summary| summary.status == AssetStatus::Failed);
         if changed {
             manifest.revision = next_revision;
             if let Err(error) = save_manifest(&output_dir, &manifest) {

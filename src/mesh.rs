@@ -239,10 +239,18 @@ fn decode_text<'a>(file: &Path, bytes: &'a [u8]) -> Result<std::borrow::Cow<'a, 
     Ok(String::from_utf8_lossy(bytes))
 }
 
-/// Parses MTL bytes with tobj, whose parser panics on some malformed statements (`Kd` with two
-/// numbers): a panic is a parse error like any other.
+/// Parses MTL bytes with tobj, whose parser panics on a colour statement with fewer than three
+/// numbers (`Kd 0.5 3`): such a file is a parse error before tobj sees it, and any other panic
+/// is one too.
 fn load_mtl(bytes: &[u8]) -> tobj::MTLLoadResult {
     let text = String::from_utf8_lossy(bytes);
+    let short_colour = text.lines().any(|line| {
+        let mut words = line.split_whitespace();
+        matches!(words.next(), Some("Ka" | "Kd" | "Ks" | "Ke")) && words.count() < 3
+    });
+    if short_colour {
+        return Err(tobj::LoadError::MaterialParseError);
+    }
     std::panic::catch_unwind(|| tobj::load_mtl_buf(&mut BufReader::new(text.as_bytes())))
         .unwrap_or(Err(tobj::LoadError::MaterialParseError))
 }

@@ -66,8 +66,10 @@ fn mutate(rng: &mut Rng, input: &[u8], seeds: &[Vec<u8>], tokens: &[&str]) -> Ve
 }
 
 /// Feeds `target` seeds and their mutations (mutations of mutations too) for the fuzzing time;
-/// returns how many inputs ran. A panic fails the test with the input that caused it.
-fn fuzz(name: &str, seeds: Vec<Vec<u8>>, tokens: &[&str], target: impl Fn(&[u8])) -> u64 {
+/// returns how many inputs ran. `target` says whether it accepted the input: accepted inputs are
+/// kept for more mutation (they reach deeper than the ones refused at their first token), and
+/// one refused input in sixteen. A panic fails the test with the input that caused it.
+fn fuzz(name: &str, seeds: Vec<Vec<u8>>, tokens: &[&str], target: impl Fn(&[u8]) -> bool) -> u64 {
     let seconds: u64 = std::env::var("CIRRUS_FUZZ_SECONDS").ok().and_then(|text| text.parse().ok()).unwrap_or(3);
     let deadline = Instant::now() + Duration::from_secs(seconds);
     let mut rng = Rng(0x9E37_79B9_7F4A_7C15 ^ name.len() as u64);
@@ -79,13 +81,21 @@ fn fuzz(name: &str, seeds: Vec<Vec<u8>>, tokens: &[&str], target: impl Fn(&[u8])
         let input =
             if executions < seeds.len() as u64 { seeds[executions as usize].clone() } else { mutate(&mut rng, parent, &seeds, tokens) };
         executions += 1;
-        if let Err(panic) = std::panic::catch_unwind(AssertUnwindSafe(|| target(&input))) {
-            let message = panic.downcast_ref::<String>().cloned().or_else(|| panic.downcast_ref::<&str>().map(|text| text.to_string()));
-            failure = Some((input, message.unwrap_or_default()));
-            break;
-        }
-        if pool.len() < 4096 && rng.below(4) == 0 {
-            pool.push(input);
+        let accepted = match std::panic::catch_unwind(AssertUnwindSafe(|| target(&input))) {
+            Ok(accepted) => accepted,
+            Err(panic) => {
+                let message = panic.downcast_ref::<String>().cloned().or_else(|| panic.downcast_ref::<&str>().map(|text| text.to_string()));
+                failure = Some((input, message.unwrap_or_default()));
+                break;
+            }
+        };
+        if accepted || rng.below(16) == 0 {
+            if pool.len() < 4096 {
+                pool.push(input);
+            } else {
+                let slot = rng.below(pool.len());
+                pool[slot] = input;
+            }
         }
     }
     if let Some((input, message)) = failure {
@@ -160,7 +170,7 @@ fn fuzz_openddl_material_files() {
         "\u{feff}",
     ];
     let executions = fuzz("openddl", seeds, &tokens, |bytes| {
-        let _ = cirrus::material_definition::parse_material_file(Path::new("assets/m.mymaterial"), bytes, Path::new("assets"));
+        cirrus::material_definition::parse_material_file(Path::new("assets/m.mymaterial"), bytes, Path::new("assets")).is_ok()
     });
     assert!(executions > 0);
 }
@@ -206,7 +216,7 @@ fn fuzz_pipeline_validation() {
         "\\",
     ];
     let executions = fuzz("pipeline", seeds, &tokens, |bytes| {
-        let _ = cirrus::config::parse_pipeline(Path::new("pipeline.ron"), &String::from_utf8_lossy(bytes));
+        cirrus::config::parse_pipeline(Path::new("pipeline.ron"), &String::from_utf8_lossy(bytes)).is_ok()
     });
     assert!(executions > 0);
 }
@@ -233,14 +243,14 @@ newmtl leaf\nd 0.5\nmap_d leaf.png\nmap_Kd leaf.png\n"
         let path = Path::new("assets/m.obj");
         let libraries: BTreeMap<PathBuf, Option<Vec<u8>>> =
             cirrus::mesh::material_libraries(path, obj, Path::new("assets")).into_iter().map(|library| (library, mtl.clone())).collect();
-        if let Ok((mesh, _)) = cirrus::mesh::load_mesh(path, obj, &libraries, Path::new("assets")) {
-            // What later stages rely on: indices in range, one material per face.
-            assert_eq!(mesh.triangles.len(), mesh.triangle_materials.len());
-            assert!(mesh.triangles.iter().flatten().all(|&index| (index as usize) < mesh.positions.len()));
-            assert!(mesh.triangle_materials.iter().all(|&material| (material as usize) < mesh.materials.len()));
-            assert!(mesh.uvs.as_ref().is_none_or(|uvs| uvs.len() == mesh.positions.len()));
-        }
         let _ = cirrus::mesh::texture_paths(path, &libraries, Path::new("assets"));
+        let Ok((mesh, _)) = cirrus::mesh::load_mesh(path, obj, &libraries, Path::new("assets")) else { return false };
+        // What later stages rely on: indices in range, one material per face.
+        assert_eq!(mesh.triangles.len(), mesh.triangle_materials.len());
+        assert!(mesh.triangles.iter().flatten().all(|&index| (index as usize) < mesh.positions.len()));
+        assert!(mesh.triangle_materials.iter().all(|&material| (material as usize) < mesh.materials.len()));
+        assert!(mesh.uvs.as_ref().is_none_or(|uvs| uvs.len() == mesh.positions.len()));
+        true
     });
     assert!(executions > 0);
 }
@@ -258,8 +268,6 @@ fn fuzz_protocol_request_lines() {
     .map(|line| line.as_bytes().to_vec())
     .collect();
     let tokens = ["{", "}", "[", "]", "\"", ":", ",", "null", "-1", "1e400", "\"type\"", "\"since\"", "\\u0000", "\\ud800", "\u{feff}"];
-    let executions = fuzz("protocol", seeds, &tokens, |bytes| {
-        let _ = cirrus::server::parse_request(bytes);
-    });
+    let executions = fuzz("protocol", seeds, &tokens, |bytes| matches!(cirrus::server::parse_request(bytes), Ok(Some(_))));
     assert!(executions > 0);
 }

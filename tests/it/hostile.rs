@@ -103,7 +103,7 @@ fn stale_artifact_cleanup_deletes_only_files_cirrus_wrote_inside_the_output_fold
         artifacts.insert(path.to_string(), entry(&real(&on_disk)));
     }
     let absolute = absolute_victim.to_string_lossy().into_owned();
-    artifacts.insert(absolute.clone(), entry(&blake3::hash(b"keep me").to_hex().to_string()));
+    artifacts.insert(absolute.clone(), entry(blake3::hash(b"keep me").to_hex().as_str()));
     // Inside the output folder, but not the bytes cirrus recorded: a user's file.
     artifacts.insert("baked/handmade.txt".into(), entry("0000"));
     // Inside the output folder with the recorded bytes: a real stale artifact, deleted.

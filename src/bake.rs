@@ -447,44 +447,73 @@ impl Project {
             .into_iter()
             .map(|asset| {
                 let main_file = self.config.source.join(asset.source.main_file());
-                let mut problems = Vec::new();
-                match &asset.source {
-                    AssetSource::BillboardCloud { .. } => problems.push(Diagnostic::new(
-                        &main_file,
-                        format!("asset `{}`: BillboardCloud assets are not baked by this version of cirrus yet", asset.name),
-                    )),
-                    AssetSource::Material { .. } => match read_source(&self.config.root, &self.config.source, &main_file) {
-                        Err(error) => problems.push(Diagnostic::new(&main_file, error)),
-                        Ok(contents) => {
-                            match crate::material_definition::parse_material_file(&main_file, &contents.bytes, &self.config.source) {
-                                Err(diagnostic) => problems.push(diagnostic),
-                                Ok(parsed) => {
-                                    problems.extend(parsed.warnings.iter().cloned().map(|mut warning| {
-                                        warning.message = format!("warning: {}", warning.message);
-                                        warning
-                                    }));
-                                    for reference in parsed.materials.iter().flat_map(|material| material.textures.values()) {
-                                        let probed = read_source(&self.config.root, &self.config.source, &reference.path)
-                                            .map_err(|error| {
-                                                format!("texture \"{}\" ({}): {error}", reference.written, display_path(&reference.path))
-                                            })
-                                            .and_then(|contents| {
-                                                crate::texture::probe_texture(&reference.path, &contents.bytes, self.config.limits.texture)
-                                                    .map_err(|diagnostic| diagnostic.to_string())
-                                            });
-                                        if let Err(message) = probed {
-                                            problems.push(Diagnostic::at(&main_file, reference.position, message));
-                                        }
-                                    }
-                                }
-                            }
-                        }
-                    },
-                }
+                let problems = match &asset.source {
+                    AssetSource::BillboardCloud { .. } => self.check_billboard(&main_file),
+                    AssetSource::Material { .. } => self.check_material(&main_file),
+                };
                 (asset.name, problems)
             })
             .chain(conflicts)
             .collect()
+    }
+
+    /// A material file parses, and every texture it names is readable and within the limits.
+    fn check_material(&self, main_file: &Path) -> Vec<Diagnostic> {
+        let contents = match read_source(&self.config.root, &self.config.source, main_file) {
+            Ok(contents) => contents,
+            Err(error) => return vec![Diagnostic::new(main_file, error)],
+        };
+        let parsed = match crate::material_definition::parse_material_file(main_file, &contents.bytes, &self.config.source) {
+            Ok(parsed) => parsed,
+            Err(diagnostic) => return vec![diagnostic],
+        };
+        let mut problems: Vec<Diagnostic> = parsed.warnings.iter().map(as_warning).collect();
+        for reference in parsed.materials.iter().flat_map(|material| material.textures.values()) {
+            if let Err(message) = self.probe_texture_file(&reference.path) {
+                let message = format!("texture \"{}\" ({}): {message}", reference.written, display_path(&reference.path));
+                problems.push(Diagnostic::at(main_file, reference.position, message));
+            }
+        }
+        problems
+    }
+
+    /// A mesh loads with its material libraries, and every texture its materials name is
+    /// readable and within the limits.
+    fn check_billboard(&self, main_file: &Path) -> Vec<Diagnostic> {
+        let read = |path: &Path| read_source(&self.config.root, &self.config.source, path);
+        let contents = match read(main_file) {
+            Ok(contents) => contents,
+            Err(error) => return vec![Diagnostic::new(main_file, error)],
+        };
+        let mut libraries = BTreeMap::new();
+        for library in crate::mesh::material_libraries(main_file, &contents.bytes, &self.config.source) {
+            let bytes = match read(&library) {
+                Ok(contents) => Some(contents.bytes.to_vec()),
+                Err(error) if error == crate::sources::FILE_NOT_FOUND => None,
+                Err(error) => return vec![Diagnostic::new(&library, error)],
+            };
+            libraries.insert(library, bytes);
+        }
+        let (mesh, warnings) = match crate::mesh::load_mesh(main_file, &contents.bytes, &libraries, &self.config.source) {
+            Ok(loaded) => loaded,
+            Err(diagnostic) => return vec![diagnostic],
+        };
+        let mut problems: Vec<Diagnostic> = warnings.iter().map(as_warning).collect();
+        let textures: BTreeSet<&PathBuf> = mesh.materials.iter().flat_map(|material| material.maps.values()).collect();
+        for path in textures {
+            if let Err(message) = self.probe_texture_file(path) {
+                problems.push(Diagnostic::new(path, message));
+            }
+        }
+        problems
+    }
+
+    /// Reads a texture's header: readable, decodable, within the texture limits.
+    fn probe_texture_file(&self, path: &Path) -> Result<(), String> {
+        let contents = read_source(&self.config.root, &self.config.source, path)?;
+        crate::texture::probe_texture(path, &contents.bytes, self.config.limits.texture)
+            .map(|_| ())
+            .map_err(|diagnostic| diagnostic.message)
     }
 
     /// The stage functions salsa executed since the last call, as `stage(instance)`, sorted.
@@ -1252,6 +1281,11 @@ impl Project {
         };
         Ok(crate::gpu::ViewMesh { batches: crate::plane_textures::plane_batches(&loaded.mesh, &loaded.tangents, &all_faces), materials })
     }
+}
+
+/// A warning reported by `check`: the diagnostic with its message marked.
+fn as_warning(diagnostic: &Diagnostic) -> Diagnostic {
+    Diagnostic { message: format!("warning: {}", diagnostic.message), ..diagnostic.clone() }
 }
 
 /// The graph id of a stage instance, as the event log names it: `stage(label)`.

@@ -106,3 +106,34 @@ fn summary_json_follows_the_contract_and_asset_selection_works() {
     let output = project.run_cli(&["check"]);
     assert_eq!(output.status.code(), Some(0), "{}", String::from_utf8_lossy(&output.stdout));
 }
+
+#[test]
+fn check_passes_on_the_bundled_pipeline_and_reports_each_kind_s_problems() {
+    let root = std::path::Path::new(env!("CARGO_MANIFEST_DIR"));
+    let output = std::process::Command::new(env!("CARGO_BIN_EXE_cirrus")).args(["check"]).current_dir(root).output().unwrap();
+    assert_eq!(output.status.code(), Some(0), "{}", String::from_utf8_lossy(&output.stdout));
+
+    // A billboard cloud: a missing map, an MTL map leaving the source folder, a mesh that does
+    // not load; and a material naming a missing texture.
+    let project = TempProject::new(
+        r#"Pipeline(source: "assets", output: "baked", assets: [
+            BillboardCloud(name: "tree", mesh: "tree.obj"),
+            BillboardCloud(name: "broken", mesh: "broken.obj"),
+            Material(name: "leaf", material: "leaf.mymaterial"),
+        ])"#,
+    );
+    project.write("assets/tree.obj", "mtllib tree.mtl\nv 0 0 0\nv 1 0 0\nv 0 1 0\nvt 0 0\nvt 1 0\nvt 0 1\nusemtl bark\nf 1/1 2/2 3/3\n");
+    project.write("assets/tree.mtl", "newmtl bark\nmap_Kd bark.png\nnorm ../../outside.png\n");
+    project.write("assets/broken.obj", "v 0 0 0\nf 1 2 3\n");
+    project.write("assets/leaf.mymaterial", "Material $leaf { Texture (attrib = \"diffuse\") {string {\"leaf.png\"}} }\n");
+    let output = project.run_cli(&["check"]);
+    assert_eq!(output.status.code(), Some(1));
+    expect![[r#"
+        tree: assets/tree.mtl: warning: material `bark`: texture "../../outside.png" leaves the source folder; ignored
+        tree: assets/bark.png: file not found
+        broken: assets/broken.obj: malformed OBJ: face vertex index out of bounds
+        leaf: assets/leaf.mymaterial:1:48: texture "leaf.png" (assets/leaf.png): file not found
+        3 assets checked, 3 with problems
+    "#]]
+    .assert_eq(&String::from_utf8_lossy(&output.stdout));
+}

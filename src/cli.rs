@@ -88,6 +88,17 @@ pub enum Command {
     },
 }
 
+/// The graph formats on the command line (`graph` is a data module and knows nothing of clap).
+impl ValueEnum for crate::graph::GraphFormat {
+    fn value_variants<'a>() -> &'a [Self] {
+        &crate::graph::GraphFormat::ALL
+    }
+
+    fn to_possible_value(&self) -> Option<clap::builder::PossibleValue> {
+        Some(clap::builder::PossibleValue::new(self.name()))
+    }
+}
+
 #[derive(Clone, Copy, Debug, PartialEq, Eq, ValueEnum)]
 pub enum SummaryFormat {
     Text,

@@ -66,11 +66,24 @@ impl GraphBuilder {
     }
 }
 
-#[derive(Clone, Copy, Debug, PartialEq, Eq, clap::ValueEnum)]
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
 pub enum GraphFormat {
     Dot,
     Json,
     Mermaid,
+}
+
+impl GraphFormat {
+    pub const ALL: [GraphFormat; 3] = [GraphFormat::Dot, GraphFormat::Json, GraphFormat::Mermaid];
+
+    /// The name on the command line and in the protocol.
+    pub fn name(self) -> &'static str {
+        match self {
+            GraphFormat::Dot => "dot",
+            GraphFormat::Json => "json",
+            GraphFormat::Mermaid => "mermaid",
+        }
+    }
 }
 
 impl Graph {

@@ -1,40 +1,48 @@
 //! cirrus: an incremental asset-pipeline daemon that bakes meshes into billboard-cloud LODs and
-//! texture sets into block-compressed GPU materials. Modules are listed in pipeline order.
+//! texture sets into block-compressed GPU materials. The modules are listed in reading order:
+//! what a newcomer reads first comes first, each group builds on the ones above it.
 
-// Shell: configuration and diagnostics.
+// The inputs: the pipeline file, and how every problem with an input is reported.
 pub mod config;
 pub mod diagnostic;
 
-// Stages, in pipeline order: pure functions over plain data.
-pub mod atlas;
-pub mod container;
-pub mod encode;
-pub mod gpu;
-pub mod layout;
-pub mod lod_mesh;
-pub mod lod_preview;
-pub mod material_definition;
+// Shared libraries: pure functions over plain data (no salsa, no IO).
+pub mod openddl;
+pub mod texture;
 pub mod mesh;
 pub mod mips;
-pub mod openddl;
-pub mod plane_textures;
-pub mod planes;
-pub mod preview;
+pub mod encode;
 pub mod quality;
-pub mod rectangles;
+pub mod container;
+pub mod preview;
+pub mod gpu;
+
+// The Material kind: the .mymaterial file, then channel packing (whose `SurfaceKind` the
+// billboard atlas shares).
+pub mod material_definition;
 pub mod surface;
-pub mod texture;
 
-// Salsa glue and the edges: persistent cache.
-pub mod cache;
+// The BillboardCloud kind's stages, in pipeline order.
+pub mod planes;
+pub mod rectangles;
+pub mod layout;
+pub mod plane_textures;
+pub mod atlas;
+pub mod lod_mesh;
+pub mod lod_preview;
+
+// The database: salsa inputs and tracked stage functions, and the persistent cache behind them.
 pub mod db;
+pub mod cache;
 
-// The edges and the driver.
+// The edges and the driver: reading sources, writing artifacts, the build, what it reports.
+pub mod sources;
 pub mod artifacts;
 pub mod bake;
-pub mod cli;
-pub mod graph;
-pub mod server;
-pub mod sources;
 pub mod summary;
+pub mod graph;
+
+// The shell: the daemon, its protocol, the command line.
 pub mod watch;
+pub mod server;
+pub mod cli;

@@ -280,14 +280,9 @@ impl Server {
                 }
             }
             Request::Graph { format, asset } => {
-                let format = match format.as_deref().unwrap_or("json") {
-                    "json" => GraphFormat::Json,
-                    "dot" => GraphFormat::Dot,
-                    "mermaid" => GraphFormat::Mermaid,
-                    other => {
-                        return self
-                            .reply(id, Outgoing::Error { message: format!("unknown graph format `{other}`: json, dot or mermaid") });
-                    }
+                let name = format.as_deref().unwrap_or("json");
+                let Some(format) = GraphFormat::ALL.into_iter().find(|format| format.name() == name) else {
+                    return self.reply(id, Outgoing::Error { message: format!("unknown graph format `{name}`: json, dot or mermaid") });
                 };
                 let graph = self.state.lock().expect("server state").graph.clone();
                 let graph = match &asset {

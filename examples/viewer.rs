@@ -114,6 +114,7 @@ fn report_alpha_cutoff(folder: &Path) -> Option<f32> {
 
 #[allow(dead_code)] // The integration tests include this file as a module and call `run`.
 fn main() -> std::process::ExitCode {
+    cirrus::gpu::quiet_wayland_probe();
     let options = Options::parse();
     match run(&options, &mut |line| {
         println!("{line}");

@@ -88,6 +88,20 @@ struct ViewMaterialUniform {
     params: [f32; 4],
 }
 
+/// Mesa's Vulkan drivers probe for a Wayland display when the GPU starts, and libwayland prints
+/// "error: XDG_RUNTIME_DIR is invalid or not set in the environment." when that variable is
+/// unset (a CI job, an SSH session, a service): users read "error" and think the bake failed.
+/// Without `XDG_RUNTIME_DIR` and `WAYLAND_DISPLAY` there is no compositor to reach anyway, so the
+/// variable is pointed at a folder that does not exist, and the probe fails quietly.
+///
+/// Call it first in `main`, while the process has one thread: setting the environment while
+/// other threads may read it is a data race in the C library.
+pub fn quiet_wayland_probe() {
+    if std::env::var_os("XDG_RUNTIME_DIR").is_none() && std::env::var_os("WAYLAND_DISPLAY").is_none() {
+        std::env::set_var("XDG_RUNTIME_DIR", std::env::temp_dir().join("cirrus-no-wayland-session"));
+    }
+}
+
 static GPU: OnceLock<Result<Gpu, GpuError>> = OnceLock::new();
 
 /// The shared GPU, created on first use.

@@ -3,6 +3,27 @@
 //! Entries are written to a temporary file and renamed into place; a corrupt or unreadable entry
 //! is a miss, never an error. Each entry records its stage and key, so an entry file that sits
 //! under another key (copied or swapped by hand) is a miss too, never another result.
+//!
+//! # Keys
+//!
+//! A key is the blake3 hash of an explicit byte encoding, the same on every machine and in every
+//! checkout folder (no `Debug` text, no absolute paths), so that a cache can be shared:
+//!
+//! - the prefix `cirrus-cache-v2\0`, then the entry's stage name and format version;
+//! - then each part, in the order the table says, as `u64` little-endian length + bytes, where a
+//!   part's bytes are: integers little-endian (`u32`, `i32`); `f32` by its bit pattern; `bool` as
+//!   one byte; strings as UTF-8; paths project-relative with `/` separators; enums by their
+//!   names as written in `pipeline.ron` (`Bc7`, `Ktx2`, …) or their artifact names (`albedo`);
+//!   `Option` as a tag byte (0 none, 1 some) then the value; arrays, tuples and settings structs
+//!   as their fields in declaration order, each a part of its own; content as its blake3 hash.
+//!
+//! | entry (`stage`, version) | parts, in order |
+//! |---|---|
+//! | `parse`, `Stage::Parse` | the `.mymaterial` content hash; its path; the source folder |
+//! | `surface`, 1 | versions of pack, mips, encode and write; the surface name; the material's constants (albedo ×4, metallic, roughness, ao, alpha cutoff option); mip settings (mips, alpha cutoff option); block format and encoder quality; container and zstd level option; per slot of the surface, the source's content hash or `none` |
+//! | `billboard`, 2 | versions of mesh, planes, layout, render, atlas, encode, lod; billboard settings (ε, max planes option, texel density option, alpha cutoff); atlas settings (max size, padding, power of two); encode settings (albedo, mra, normal, height formats, mips, container, zstd option, quality); the source folder; per file read (mesh, MTL files, textures, in that order), its path and its content hash or read error |
+//!
+//! Bump an entry's version (or a stage's) whenever its result changes for the same parts.
 
 use std::io::Write;
 use std::path::{Path, PathBuf};
@@ -17,25 +38,154 @@ pub struct CacheKeyBuilder(blake3::Hasher);
 impl CacheKeyBuilder {
     pub fn new(stage: &str, version: u32) -> CacheKeyBuilder {
         let mut hasher = blake3::Hasher::new();
-        hasher.update(b"cirrus-cache-v1\0");
-        hasher.update(stage.as_bytes());
-        hasher.update(&version.to_le_bytes());
-        CacheKeyBuilder(hasher)
+        hasher.update(b"cirrus-cache-v2\0");
+        CacheKeyBuilder(hasher).part(stage).part(&version)
     }
 
+    /// Adds raw bytes as one part (length-prefixed).
     pub fn bytes(mut self, bytes: &[u8]) -> Self {
         self.0.update(&(bytes.len() as u64).to_le_bytes());
         self.0.update(bytes);
         self
     }
 
-    /// Adds a value by its `Debug` text: settings and small plain-data inputs.
-    pub fn debug(self, value: &impl std::fmt::Debug) -> Self {
-        self.bytes(format!("{value:?}").as_bytes())
+    /// Adds a value in its key encoding (see the module docs).
+    pub fn part(self, part: &(impl KeyPart + ?Sized)) -> Self {
+        part.add_to(self)
     }
 
     pub fn finish(self) -> CacheKey {
         CacheKey(self.0.finalize())
+    }
+}
+
+/// A value with a fixed byte encoding in cache keys: one or more parts.
+pub trait KeyPart {
+    fn add_to(&self, key: CacheKeyBuilder) -> CacheKeyBuilder;
+}
+
+impl KeyPart for str {
+    fn add_to(&self, key: CacheKeyBuilder) -> CacheKeyBuilder {
+        key.bytes(self.as_bytes())
+    }
+}
+
+impl KeyPart for String {
+    fn add_to(&self, key: CacheKeyBuilder) -> CacheKeyBuilder {
+        key.bytes(self.as_bytes())
+    }
+}
+
+impl KeyPart for Path {
+    fn add_to(&self, key: CacheKeyBuilder) -> CacheKeyBuilder {
+        key.part(crate::diagnostic::display_path(self).as_str())
+    }
+}
+
+impl KeyPart for PathBuf {
+    fn add_to(&self, key: CacheKeyBuilder) -> CacheKeyBuilder {
+        key.part(self.as_path())
+    }
+}
+
+impl KeyPart for u32 {
+    fn add_to(&self, key: CacheKeyBuilder) -> CacheKeyBuilder {
+        key.bytes(&self.to_le_bytes())
+    }
+}
+
+impl KeyPart for i32 {
+    fn add_to(&self, key: CacheKeyBuilder) -> CacheKeyBuilder {
+        key.bytes(&self.to_le_bytes())
+    }
+}
+
+impl KeyPart for f32 {
+    fn add_to(&self, key: CacheKeyBuilder) -> CacheKeyBuilder {
+        key.bytes(&self.to_bits().to_le_bytes())
+    }
+}
+
+impl KeyPart for bool {
+    fn add_to(&self, key: CacheKeyBuilder) -> CacheKeyBuilder {
+        key.bytes(&[u8::from(*self)])
+    }
+}
+
+impl KeyPart for blake3::Hash {
+    fn add_to(&self, key: CacheKeyBuilder) -> CacheKeyBuilder {
+        key.bytes(self.as_bytes())
+    }
+}
+
+impl<T: KeyPart> KeyPart for Option<T> {
+    fn add_to(&self, key: CacheKeyBuilder) -> CacheKeyBuilder {
+        match self {
+            None => key.bytes(&[0]),
+            Some(value) => key.bytes(&[1]).part(value),
+        }
+    }
+}
+
+impl<T: KeyPart, const N: usize> KeyPart for [T; N] {
+    fn add_to(&self, key: CacheKeyBuilder) -> CacheKeyBuilder {
+        self.iter().fold(key, |key, item| key.part(item))
+    }
+}
+
+impl<A: KeyPart, B: KeyPart> KeyPart for (A, B) {
+    fn add_to(&self, key: CacheKeyBuilder) -> CacheKeyBuilder {
+        key.part(&self.0).part(&self.1)
+    }
+}
+
+/// Enums enter keys by their names as `pipeline.ron` writes them (their `Debug` text is the
+/// same today, but that is not a contract).
+macro_rules! key_part_by_name {
+    ($type:ty { $($variant:ident),* $(,)? }) => {
+        impl KeyPart for $type {
+            fn add_to(&self, key: CacheKeyBuilder) -> CacheKeyBuilder {
+                key.part(match self { $(<$type>::$variant => stringify!($variant),)* })
+            }
+        }
+    };
+}
+
+key_part_by_name!(crate::config::BlockFormat { Bc1, Bc3, Bc4, Bc5, Bc7 });
+key_part_by_name!(crate::config::Container { Ktx2, Dds, Pvr });
+key_part_by_name!(crate::config::EncodeQuality { UltraFast, VeryFast, Fast, Basic, Slow });
+
+impl KeyPart for crate::surface::SurfaceKind {
+    fn add_to(&self, key: CacheKeyBuilder) -> CacheKeyBuilder {
+        key.part(self.name())
+    }
+}
+
+impl KeyPart for crate::config::BillboardSettings {
+    fn add_to(&self, key: CacheKeyBuilder) -> CacheKeyBuilder {
+        let crate::config::BillboardSettings { epsilon, max_planes, texel_density, alpha_cutoff } = self;
+        key.part(epsilon).part(max_planes).part(texel_density).part(alpha_cutoff)
+    }
+}
+
+impl KeyPart for crate::config::AtlasSettings {
+    fn add_to(&self, key: CacheKeyBuilder) -> CacheKeyBuilder {
+        let crate::config::AtlasSettings { max_size, padding, power_of_two } = self;
+        key.part(max_size).part(padding).part(power_of_two)
+    }
+}
+
+impl KeyPart for crate::config::EncodeSettings {
+    fn add_to(&self, key: CacheKeyBuilder) -> CacheKeyBuilder {
+        let crate::config::EncodeSettings { albedo, mra, normal, height, mips, container, zstd, quality } = self;
+        key.part(albedo).part(mra).part(normal).part(height).part(mips).part(container).part(zstd).part(quality)
+    }
+}
+
+impl KeyPart for crate::material_definition::MaterialConstants {
+    fn add_to(&self, key: CacheKeyBuilder) -> CacheKeyBuilder {
+        let crate::material_definition::MaterialConstants { albedo, metallic, roughness, ao, alpha_cutoff } = self;
+        key.part(albedo).part(metallic).part(roughness).part(ao).part(alpha_cutoff)
     }
 }
 

@@ -334,7 +334,7 @@ pub fn material_file(db: &dyn Db, asset: MaterialAsset) -> Result<Arc<MaterialFi
     let contents = read_contents(db, file)?;
     let path = file.path(db);
     let source_root = asset.source_root(db);
-    let key = CacheKeyBuilder::new("parse", Stage::Parse.version()).bytes(contents.hash.as_bytes()).debug(path).debug(source_root).finish();
+    let key = CacheKeyBuilder::new("parse", Stage::Parse.version()).part(&contents.hash).part(path).part(source_root).finish();
     if let Some(parsed) = load_cached(db, "parse", key, |entry| serde_json::from_value::<MaterialFile>(entry.metadata).ok()) {
         record_cache_hit(db, Stage::Parse, asset);
         return Ok(Arc::new(parsed));
@@ -546,16 +546,17 @@ pub fn surface_artifacts(db: &dyn Db, key: SurfaceKey) -> Result<Arc<SurfaceArti
     let block_settings = block_settings(db, key);
     let file_settings = file_settings(db, key);
     let mut cache_key = CacheKeyBuilder::new("surface", 1)
-        .debug(&[Stage::Pack, Stage::Mips, Stage::Encode, Stage::Write].map(Stage::version))
-        .debug(&key.surface(db))
-        .debug(&recipe.constants)
-        .debug(&mip_settings)
-        .debug(&block_settings)
-        .debug(&file_settings);
+        .part(&[Stage::Pack, Stage::Mips, Stage::Encode, Stage::Write].map(Stage::version))
+        .part(&key.surface(db))
+        .part(&recipe.constants)
+        .part(&mip_settings.mips)
+        .part(&mip_settings.alpha_cutoff)
+        .part(&block_settings)
+        .part(&file_settings);
     for source in &recipe.sources {
         cache_key = match source {
-            Some(file) => cache_key.bytes(read_contents(db, *file)?.hash.as_bytes()),
-            None => cache_key.bytes(b"none"),
+            Some(file) => cache_key.part(&read_contents(db, *file)?.hash),
+            None => cache_key.part("none"),
         };
     }
     let cache_key = cache_key.finish();
@@ -967,19 +968,19 @@ pub fn billboard_cache_key(db: &dyn Db, asset: BillboardAsset) -> CacheKey {
     let settings = asset.settings(db);
     // 2: render stages are per plane and material set, listed in the entry's metadata.
     let mut key = CacheKeyBuilder::new("billboard", 2)
-        .debug(&[Stage::Mesh, Stage::Planes, Stage::Layout, Stage::Render, Stage::Atlas, Stage::Encode, Stage::Lod].map(Stage::version))
-        .debug(&settings.billboard)
-        .debug(&settings.atlas)
-        .debug(&settings.encode)
-        .debug(asset.source_root(db));
+        .part(&[Stage::Mesh, Stage::Planes, Stage::Layout, Stage::Render, Stage::Atlas, Stage::Encode, Stage::Lod].map(Stage::version))
+        .part(&settings.billboard)
+        .part(&settings.atlas)
+        .part(&settings.encode)
+        .part(asset.source_root(db));
     let mut files: Vec<SourceFile> = vec![asset.mesh_file(db)];
     files.extend(asset.libraries(db).values().copied());
     files.extend(asset.textures(db).values().copied());
     for file in files {
-        key = key.debug(file.path(db));
+        key = key.part(file.path(db));
         key = match file.contents(db) {
-            Ok(contents) => key.bytes(contents.hash.as_bytes()),
-            Err(error) => key.bytes(error.as_bytes()),
+            Ok(contents) => key.part(&contents.hash),
+            Err(error) => key.part(error),
         };
     }
     key.finish()

@@ -3,6 +3,7 @@
 mod support;
 
 mod bake;
+mod cache;
 mod billboard;
 mod cli;
 mod config;

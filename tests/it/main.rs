@@ -15,6 +15,7 @@ mod incremental;
 mod layout;
 mod material_files;
 mod planes;
+mod tidy;
 mod watch;
 
 /// The viewer example, compiled in so the tests drive the very code `cargo run --example viewer`

@@ -1,0 +1,55 @@
+//! The invariants of ARCHITECTURE.md that a grep can check: every file says what it is for, and
+//! salsa, wgpu, notify, sockets and file-system IO stay in the modules that own them.
+
+use std::path::{Path, PathBuf};
+
+fn rust_files(folder: &str) -> Vec<PathBuf> {
+    let mut files = Vec::new();
+    let mut folders = vec![Path::new(env!("CARGO_MANIFEST_DIR")).join(folder)];
+    while let Some(folder) = folders.pop() {
+        for entry in std::fs::read_dir(&folder).unwrap().flatten() {
+            let path = entry.path();
+            if path.is_dir() {
+                folders.push(path);
+            } else if path.extension().is_some_and(|extension| extension == "rs") {
+                files.push(path);
+            }
+        }
+    }
+    files.sort();
+    files
+}
+
+/// The module name of a file under `src/` (`watch` for `src/watch.rs`).
+fn module(path: &Path) -> String {
+    path.file_stem().unwrap().to_string_lossy().into_owned()
+}
+
+/// The code of a file without its comments (doc comments name salsa and wgpu freely).
+fn code(path: &Path) -> String {
+    std::fs::read_to_string(path).unwrap().lines().filter(|line| !line.trim_start().starts_with("//")).collect::<Vec<_>>().join("\n")
+}
+
+/// The modules under `src/` whose code contains any of `needles`.
+fn modules_using(needles: &[&str]) -> Vec<String> {
+    rust_files("src").iter().filter(|path| needles.iter().any(|needle| code(path).contains(needle))).map(|path| module(path)).collect()
+}
+
+#[test]
+fn every_file_starts_by_saying_what_it_is_for() {
+    let files: Vec<PathBuf> = ["src", "tests", "benches", "examples"].iter().flat_map(|folder| rust_files(folder)).collect();
+    assert!(files.len() > 40);
+    let silent: Vec<&PathBuf> = files.iter().filter(|path| !std::fs::read_to_string(path).unwrap().starts_with("//!")).collect();
+    assert!(silent.is_empty(), "files without a `//!` line first: {silent:?}");
+}
+
+#[test]
+fn salsa_wgpu_notify_sockets_and_file_io_stay_in_their_modules() {
+    assert_eq!(modules_using(&["salsa::", "#[salsa"]), ["bake", "db"], "salsa: the database and the driver that sets its inputs");
+    assert_eq!(modules_using(&["wgpu::"]), ["gpu"], "only gpu holds the wgpu device");
+    assert_eq!(modules_using(&["notify::", "notify_debouncer"]), ["watch"], "only watch touches notify");
+    assert_eq!(modules_using(&["std::net::Tcp", "TcpListener", "TcpStream"]), ["server"], "only server touches sockets");
+    let io = modules_using(&["std::fs", "File::", "OpenOptions", "canonicalize", "read_dir"]);
+    let edges = ["artifacts", "bake", "cache", "config", "sources", "watch"];
+    assert!(io.iter().all(|module| edges.contains(&module.as_str())), "file-system IO outside the edges: {io:?}");
+}

@@ -3,8 +3,8 @@
 mod support;
 
 mod bake;
-mod cache;
 mod billboard;
+mod cache;
 mod cli;
 mod config;
 mod fuzz;

@@ -10,7 +10,7 @@ use cirrus::bake::{BuildOptions, Project, ProjectOptions};
 use cirrus::config::{load_pipeline, BlockFormat, EncodeQuality};
 use cirrus::encode::BlockEncodeSettings;
 use cirrus::mips::{mip_chain, MipSettings};
-use cirrus::surface::SurfaceKind;
+use cirrus::texture::SurfaceKind;
 use cirrus::texture::Texture;
 use rayon::prelude::*;
 

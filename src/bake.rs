@@ -28,7 +28,7 @@ use crate::summary::{
     ArtifactSummary, AssetStatus, AssetSummary, BuildSummary, ChangedArtifact, ErrorSummary, MaterialReport, MaterialReportEntry,
     StageStatus, StageSummary, SurfaceReport,
 };
-use crate::surface::SurfaceKind;
+use crate::texture::SurfaceKind;
 
 /// How a project is opened.
 #[derive(Clone, Debug)]
@@ -1242,7 +1242,7 @@ impl Project {
 
     /// The source mesh with its decoded maps (mipmapped as for rendering).
     fn source_view_mesh(&self, input: BillboardAsset, loaded: &crate::db::LoadedMesh) -> Result<crate::gpu::ViewMesh, Diagnostic> {
-        use crate::material_definition::TextureSlot;
+        use crate::texture::TextureSlot;
         let db = &self.db;
         let cutoff = input.settings(db).billboard.alpha_cutoff;
         let mut materials = Vec::new();

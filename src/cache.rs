@@ -155,7 +155,7 @@ key_part_by_name!(crate::config::BlockFormat { Bc1, Bc3, Bc4, Bc5, Bc7 });
 key_part_by_name!(crate::config::Container { Ktx2, Dds, Pvr });
 key_part_by_name!(crate::config::EncodeQuality { UltraFast, VeryFast, Fast, Basic, Slow });
 
-impl KeyPart for crate::surface::SurfaceKind {
+impl KeyPart for crate::texture::SurfaceKind {
     fn add_to(&self, key: CacheKeyBuilder) -> CacheKeyBuilder {
         key.part(self.name())
     }

@@ -18,7 +18,8 @@ use crate::encode::{encode_levels, BlockEncodeSettings, EncodedTexture};
 use crate::material_definition::{parse_material_file, MaterialConstants, MaterialFile};
 use crate::mips::{mip_chain, mip_chain_reusing, MipSettings};
 use crate::preview::preview_png;
-use crate::surface::{has_transparency, pack_surface, SurfaceKind};
+use crate::surface::{has_transparency, pack_surface};
+use crate::texture::SurfaceKind;
 use crate::texture::{decode_texture, Texture};
 
 /// The bytes of a source file and their blake3 hash. Equality is by hash.
@@ -686,7 +687,7 @@ pub fn loaded_mesh(db: &dyn Db, asset: BillboardAsset) -> Result<Arc<LoadedMesh>
     timed(db, Stage::Mesh, asset, || {
         let (mesh, warnings) = crate::mesh::load_mesh(file.path(db), &contents.bytes, &libraries, asset.source_root(db))?;
         let tangents = match &mesh.uvs {
-            Some(uvs) => crate::gpu::vertex_tangents(&mesh.positions, &mesh.normals, uvs, &mesh.triangles),
+            Some(uvs) => crate::mesh::vertex_tangents(&mesh.positions, &mesh.normals, uvs, &mesh.triangles),
             None => Vec::new(),
         };
         Ok(Arc::new(LoadedMesh { mesh, tangents, warnings }))
@@ -786,7 +787,7 @@ pub fn plane_images(db: &dyn Db, key: PlaneKey) -> Result<Arc<Vec<crate::gpu::Pl
     let with_uvs = loaded.mesh.uvs.is_some();
     for &material_index in &group.materials {
         let source = &loaded.mesh.materials[material_index as usize];
-        let decoded = |slot: crate::material_definition::TextureSlot| -> Result<Option<Arc<Texture>>, Diagnostic> {
+        let decoded = |slot: crate::texture::TextureSlot| -> Result<Option<Arc<Texture>>, Diagnostic> {
             let Some(path) = source.maps.get(&slot).filter(|_| with_uvs) else { return Ok(None) };
             let Some(&file) = asset.textures(db).get(path) else {
                 return Err(Diagnostic::new(&mesh_path, format!("texture {} was not read", crate::diagnostic::display_path(path))));
@@ -797,10 +798,9 @@ pub fn plane_images(db: &dyn Db, key: PlaneKey) -> Result<Arc<Vec<crate::gpu::Pl
                     format!("material `{}`: {} texture {}: {error}", source.name, slot.name(), crate::diagnostic::display_path(path)),
                 ));
             }
-            if slot == crate::material_definition::TextureSlot::Opacity { opacity_texture(db, file) } else { decoded_texture(db, file) }
-                .map(Some)
+            if slot == crate::texture::TextureSlot::Opacity { opacity_texture(db, file) } else { decoded_texture(db, file) }.map(Some)
         };
-        use crate::material_definition::TextureSlot;
+        use crate::texture::TextureSlot;
         materials[material_index as usize] = crate::gpu::RenderMaterial {
             albedo: decoded(TextureSlot::Albedo)?,
             opacity: decoded(TextureSlot::Opacity)?,

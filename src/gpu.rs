@@ -5,11 +5,10 @@ use std::collections::HashMap;
 use std::sync::{Arc, Mutex, OnceLock};
 
 use bytemuck::{Pod, Zeroable};
-use glam::{Vec2, Vec3};
 
 use crate::mips::{mip_chain, MipSettings};
 use crate::rectangles::PlaneRectangle;
-use crate::surface::SurfaceKind;
+use crate::texture::SurfaceKind;
 use crate::texture::Texture;
 
 #[derive(Clone, Debug, PartialEq, Eq, thiserror::Error)]
@@ -903,38 +902,4 @@ fn upload(device: &wgpu::Device, queue: &wgpu::Queue, levels: &[Texture], format
         );
     }
     texture.create_view(&Default::default())
-}
-
-/// Per-vertex tangents (xyz, handedness in w) from UV derivatives, for normal mapping.
-pub fn vertex_tangents(positions: &[[f32; 3]], normals: &[[f32; 3]], uvs: &[[f32; 2]], triangles: &[[u32; 3]]) -> Vec<[f32; 4]> {
-    let mut tangents = vec![Vec3::ZERO; positions.len()];
-    let mut bitangents = vec![Vec3::ZERO; positions.len()];
-    for triangle in triangles {
-        let [a, b, c] = triangle.map(|index| index as usize);
-        let (p0, p1, p2) = (Vec3::from(positions[a]), Vec3::from(positions[b]), Vec3::from(positions[c]));
-        let (t0, t1, t2) = (Vec2::from(uvs[a]), Vec2::from(uvs[b]), Vec2::from(uvs[c]));
-        let (e1, e2, d1, d2) = (p1 - p0, p2 - p0, t1 - t0, t2 - t0);
-        let determinant = d1.x * d2.y - d2.x * d1.y;
-        if determinant.abs() < 1e-12 {
-            continue;
-        }
-        let r = 1.0 / determinant;
-        let tangent = (e1 * d2.y - e2 * d1.y) * r;
-        let bitangent = (e2 * d1.x - e1 * d2.x) * r;
-        for index in [a, b, c] {
-            tangents[index] += tangent;
-            bitangents[index] += bitangent;
-        }
-    }
-    tangents
-        .iter()
-        .zip(&bitangents)
-        .zip(normals)
-        .map(|((&tangent, &bitangent), &normal)| {
-            let normal = Vec3::from(normal);
-            let orthogonal = (tangent - normal * normal.dot(tangent)).try_normalize().unwrap_or_else(|| normal.any_orthonormal_vector());
-            let handedness = if normal.cross(orthogonal).dot(bitangent) < 0.0 { -1.0 } else { 1.0 };
-            [orthogonal.x, orthogonal.y, orthogonal.z, handedness]
-        })
-        .collect()
 }

@@ -238,7 +238,7 @@ pub fn lod_view_mesh(files: &LodFiles) -> Result<ViewMesh, Diagnostic> {
         alpha_cutoff: files.alpha_cutoff,
     };
     let uvs = mesh.uvs.as_deref().unwrap_or(&[]);
-    let tangents = crate::gpu::vertex_tangents(&mesh.positions, &mesh.normals, uvs, &mesh.triangles);
+    let tangents = crate::mesh::vertex_tangents(&mesh.positions, &mesh.normals, uvs, &mesh.triangles);
     let vertices = mesh
         .triangles
         .iter()

@@ -9,46 +9,19 @@ use serde::{Deserialize, Serialize};
 use crate::config::normalize_relative_path;
 use crate::diagnostic::{Diagnostic, TextPosition};
 use crate::openddl::{self, Structure, StructureBody, Value};
+use crate::texture::TextureSlot;
 
-/// The source maps a material can name.
-#[derive(Clone, Copy, Debug, PartialEq, Eq, Hash, PartialOrd, Ord, Serialize, Deserialize)]
-pub enum TextureSlot {
-    Albedo,
-    Opacity,
-    Normal,
-    Metallic,
-    Roughness,
-    Ao,
-}
-
-impl TextureSlot {
-    pub fn name(self) -> &'static str {
-        match self {
-            TextureSlot::Albedo => "albedo",
-            TextureSlot::Opacity => "opacity",
-            TextureSlot::Normal => "normal",
-            TextureSlot::Metallic => "metallic",
-            TextureSlot::Roughness => "roughness",
-            TextureSlot::Ao => "ao",
-        }
-    }
-
-    /// Colour maps are sRGB; data maps are linear.
-    pub fn is_srgb(self) -> bool {
-        self == TextureSlot::Albedo
-    }
-
-    fn from_attrib(attrib: &str) -> Option<TextureSlot> {
-        Some(match attrib {
-            "diffuse" | "albedo" | "base_color" => TextureSlot::Albedo,
-            "opacity" | "transparency" | "alpha" => TextureSlot::Opacity,
-            "normal" => TextureSlot::Normal,
-            "metallic" | "metalness" => TextureSlot::Metallic,
-            "roughness" => TextureSlot::Roughness,
-            "ao" | "occlusion" => TextureSlot::Ao,
-            _ => return None,
-        })
-    }
+/// The slot a `Texture (attrib = "…")` fills.
+fn slot_from_attrib(attrib: &str) -> Option<TextureSlot> {
+    Some(match attrib {
+        "diffuse" | "albedo" | "base_color" => TextureSlot::Albedo,
+        "opacity" | "transparency" | "alpha" => TextureSlot::Opacity,
+        "normal" => TextureSlot::Normal,
+        "metallic" | "metalness" => TextureSlot::Metallic,
+        "roughness" => TextureSlot::Roughness,
+        "ao" | "occlusion" => TextureSlot::Ao,
+        _ => return None,
+    })
 }
 
 /// A texture path as written, and where it resolves inside the source folder.
@@ -165,7 +138,7 @@ impl Reader<'_> {
                     let Some(attrib) = self.attrib(child)? else {
                         continue;
                     };
-                    let Some(slot) = TextureSlot::from_attrib(&attrib) else {
+                    let Some(slot) = slot_from_attrib(&attrib) else {
                         self.warn(child.position, format!("texture attrib \"{attrib}\" is not used by the PBR baker"));
                         continue;
                     };

@@ -10,7 +10,7 @@ use serde::{Deserialize, Serialize};
 
 use crate::config::normalize_relative_path;
 use crate::diagnostic::Diagnostic;
-use crate::material_definition::TextureSlot;
+use crate::texture::TextureSlot;
 
 /// One material of a mesh.
 #[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
@@ -434,4 +434,38 @@ pub fn texture_paths(obj_file: &Path, libraries: &BTreeMap<PathBuf, Option<Vec<u
     paths.sort();
     paths.dedup();
     paths
+}
+
+/// Per-vertex tangents (xyz, handedness in w) from UV derivatives, for normal mapping.
+pub fn vertex_tangents(positions: &[[f32; 3]], normals: &[[f32; 3]], uvs: &[[f32; 2]], triangles: &[[u32; 3]]) -> Vec<[f32; 4]> {
+    let mut tangents = vec![glam::Vec3::ZERO; positions.len()];
+    let mut bitangents = vec![glam::Vec3::ZERO; positions.len()];
+    for triangle in triangles {
+        let [a, b, c] = triangle.map(|index| index as usize);
+        let (p0, p1, p2) = (glam::Vec3::from(positions[a]), glam::Vec3::from(positions[b]), glam::Vec3::from(positions[c]));
+        let (t0, t1, t2) = (glam::Vec2::from(uvs[a]), glam::Vec2::from(uvs[b]), glam::Vec2::from(uvs[c]));
+        let (e1, e2, d1, d2) = (p1 - p0, p2 - p0, t1 - t0, t2 - t0);
+        let determinant = d1.x * d2.y - d2.x * d1.y;
+        if determinant.abs() < 1e-12 {
+            continue;
+        }
+        let r = 1.0 / determinant;
+        let tangent = (e1 * d2.y - e2 * d1.y) * r;
+        let bitangent = (e2 * d1.x - e1 * d2.x) * r;
+        for index in [a, b, c] {
+            tangents[index] += tangent;
+            bitangents[index] += bitangent;
+        }
+    }
+    tangents
+        .iter()
+        .zip(&bitangents)
+        .zip(normals)
+        .map(|((&tangent, &bitangent), &normal)| {
+            let normal = glam::Vec3::from(normal);
+            let orthogonal = (tangent - normal * normal.dot(tangent)).try_normalize().unwrap_or_else(|| normal.any_orthonormal_vector());
+            let handedness = if normal.cross(orthogonal).dot(bitangent) < 0.0 { -1.0 } else { 1.0 };
+            [orthogonal.x, orthogonal.y, orthogonal.z, handedness]
+        })
+        .collect()
 }

@@ -2,60 +2,8 @@
 //! (albedo+opacity, metallic/roughness/AO, normal XY), each at the largest size of its sources,
 //! smaller sources resampled with a Catmull-Rom filter, constants where a map is missing.
 
-use serde::{Deserialize, Serialize};
-
-use crate::material_definition::{MaterialConstants, TextureSlot};
-use crate::texture::Texture;
-
-/// The three textures of a baked material.
-#[derive(Clone, Copy, Debug, PartialEq, Eq, Hash, PartialOrd, Ord, Serialize, Deserialize)]
-pub enum SurfaceKind {
-    Albedo,
-    Mra,
-    Normal,
-    /// Billboard clouds only: the surface's distance from its plane over ±ε.
-    Height,
-}
-
-impl SurfaceKind {
-    /// The surfaces of a baked material.
-    pub const MATERIAL: [SurfaceKind; 3] = [SurfaceKind::Albedo, SurfaceKind::Mra, SurfaceKind::Normal];
-    /// The surfaces of a billboard-cloud atlas.
-    pub const BILLBOARD: [SurfaceKind; 4] = [SurfaceKind::Albedo, SurfaceKind::Mra, SurfaceKind::Normal, SurfaceKind::Height];
-
-    pub fn name(self) -> &'static str {
-        match self {
-            SurfaceKind::Albedo => "albedo",
-            SurfaceKind::Mra => "mra",
-            SurfaceKind::Normal => "normal",
-            SurfaceKind::Height => "height",
-        }
-    }
-
-    /// The source maps this surface is packed from.
-    pub fn slots(self) -> &'static [TextureSlot] {
-        match self {
-            SurfaceKind::Albedo => &[TextureSlot::Albedo, TextureSlot::Opacity],
-            SurfaceKind::Mra => &[TextureSlot::Metallic, TextureSlot::Roughness, TextureSlot::Ao],
-            SurfaceKind::Normal => &[TextureSlot::Normal],
-            SurfaceKind::Height => &[],
-        }
-    }
-
-    /// How many channels (from R) carry data: the channels that quality is measured on.
-    pub fn channels(self) -> usize {
-        match self {
-            SurfaceKind::Albedo => 4,
-            SurfaceKind::Mra => 3,
-            SurfaceKind::Normal => 2,
-            SurfaceKind::Height => 1,
-        }
-    }
-
-    pub fn is_srgb(self) -> bool {
-        self == SurfaceKind::Albedo
-    }
-}
+use crate::material_definition::MaterialConstants;
+use crate::texture::{SurfaceKind, Texture, TextureSlot};
 
 /// Size of a surface with no source map at all: one BC block.
 const CONSTANT_SURFACE_SIDE: u32 = 4;

@@ -1,10 +1,14 @@
-//! Decoded source textures: PNG, JPEG, TGA, BMP or GIF bytes to RGBA8 pixels, with size limits
-//! so that a decompression bomb is an error, not an out-of-memory crash.
+//! Textures: the vocabulary every kind shares (`TextureSlot`, the source maps a material names;
+//! `SurfaceKind`, the packed GPU surfaces), and decoded source textures: PNG, JPEG, TGA, BMP or
+//! GIF bytes to RGBA8 pixels, with size and memory limits checked from the header, so that a
+//! decompression bomb is an error, not an out-of-memory crash.
 
 use std::fmt;
 use std::io::Cursor;
 use std::path::Path;
 use std::sync::Arc;
+
+use serde::{Deserialize, Serialize};
 
 use crate::diagnostic::Diagnostic;
 
@@ -55,6 +59,85 @@ impl TextureLimits {
                 mib(needed).next_power_of_two()
             ),
         ))
+    }
+}
+
+/// The source maps a material can name.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Hash, PartialOrd, Ord, Serialize, Deserialize)]
+pub enum TextureSlot {
+    Albedo,
+    Opacity,
+    Normal,
+    Metallic,
+    Roughness,
+    Ao,
+}
+
+impl TextureSlot {
+    pub fn name(self) -> &'static str {
+        match self {
+            TextureSlot::Albedo => "albedo",
+            TextureSlot::Opacity => "opacity",
+            TextureSlot::Normal => "normal",
+            TextureSlot::Metallic => "metallic",
+            TextureSlot::Roughness => "roughness",
+            TextureSlot::Ao => "ao",
+        }
+    }
+
+    /// Colour maps are sRGB; data maps are linear.
+    pub fn is_srgb(self) -> bool {
+        self == TextureSlot::Albedo
+    }
+}
+
+/// The three textures of a baked material.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Hash, PartialOrd, Ord, Serialize, Deserialize)]
+pub enum SurfaceKind {
+    Albedo,
+    Mra,
+    Normal,
+    /// Billboard clouds only: the surface's distance from its plane over ±ε.
+    Height,
+}
+
+impl SurfaceKind {
+    /// The surfaces of a baked material.
+    pub const MATERIAL: [SurfaceKind; 3] = [SurfaceKind::Albedo, SurfaceKind::Mra, SurfaceKind::Normal];
+    /// The surfaces of a billboard-cloud atlas.
+    pub const BILLBOARD: [SurfaceKind; 4] = [SurfaceKind::Albedo, SurfaceKind::Mra, SurfaceKind::Normal, SurfaceKind::Height];
+
+    pub fn name(self) -> &'static str {
+        match self {
+            SurfaceKind::Albedo => "albedo",
+            SurfaceKind::Mra => "mra",
+            SurfaceKind::Normal => "normal",
+            SurfaceKind::Height => "height",
+        }
+    }
+
+    /// The source maps this surface is packed from.
+    pub fn slots(self) -> &'static [TextureSlot] {
+        match self {
+            SurfaceKind::Albedo => &[TextureSlot::Albedo, TextureSlot::Opacity],
+            SurfaceKind::Mra => &[TextureSlot::Metallic, TextureSlot::Roughness, TextureSlot::Ao],
+            SurfaceKind::Normal => &[TextureSlot::Normal],
+            SurfaceKind::Height => &[],
+        }
+    }
+
+    /// How many channels (from R) carry data: the channels that quality is measured on.
+    pub fn channels(self) -> usize {
+        match self {
+            SurfaceKind::Albedo => 4,
+            SurfaceKind::Mra => 3,
+            SurfaceKind::Normal => 2,
+            SurfaceKind::Height => 1,
+        }
+    }
+
+    pub fn is_srgb(self) -> bool {
+        self == SurfaceKind::Albedo
     }
 }
 

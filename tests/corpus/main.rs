@@ -111,7 +111,7 @@ fn every_obj_conformance_file_loads_or_fails_cleanly() {
 
 #[test]
 fn corpus_meshes_load_with_their_documented_triangle_counts_and_maps() {
-    use cirrus::material_definition::TextureSlot;
+    use cirrus::texture::TextureSlot;
     for (file, triangles, with_uvs) in [
         ("trees/oak_medium.obj", 13_806, true),
         ("trees/ash_small.obj", 11_072, true),

@@ -209,7 +209,7 @@ fn re_encoding_only_changed_blocks_equals_a_full_encode() {
     use cirrus::config::EncodeQuality;
     use cirrus::encode::{encode_levels, encode_levels_reusing, BlockEncodeSettings};
     use cirrus::mips::{mip_chain, MipSettings};
-    use cirrus::surface::SurfaceKind;
+    use cirrus::texture::SurfaceKind;
     let before = decode_png(&pattern_png(96, 64, 1));
     let mut pixels = before.pixels.to_vec();
     for y in 20..27 {
@@ -248,7 +248,7 @@ fn re_encoding_only_changed_blocks_equals_a_full_encode() {
 #[test]
 fn refiltering_only_changed_mip_tiles_equals_a_full_chain() {
     use cirrus::mips::{mip_chain, mip_chain_reusing, MipSettings};
-    use cirrus::surface::SurfaceKind;
+    use cirrus::texture::SurfaceKind;
     use cirrus::texture::Texture;
     // 192 × 128: six 64² tiles. Cut-out albedo (coverage preserved), a normal map, plain data.
     let cutout = decode_png(&cutout_png(192, 128));
@@ -350,7 +350,7 @@ fn a_level_encodes_each_block_as_that_block_alone_repeated_blocks_included() {
 #[test]
 fn alpha_that_passes_the_cutoff_everywhere_is_not_rescaled_down_the_mip_chain() {
     use cirrus::mips::{mip_chain, MipSettings};
-    use cirrus::surface::SurfaceKind;
+    use cirrus::texture::SurfaceKind;
     // Coverage is 1 on every level already; scaling alpha toward the cutoff would only make it
     // fragile under filtering.
     for alpha in [255, 200] {
@@ -369,7 +369,7 @@ fn alpha_that_passes_the_cutoff_everywhere_is_not_rescaled_down_the_mip_chain() 
 #[test]
 fn transparent_albedo_texels_keep_their_colour_down_the_mip_chain() {
     use cirrus::mips::{mip_chain, MipSettings};
-    use cirrus::surface::SurfaceKind;
+    use cirrus::texture::SurfaceKind;
     use cirrus::texture::Texture;
     // Left half opaque red, right half transparent but filled green (as the atlas fill does).
     let mut pixels = Vec::new();

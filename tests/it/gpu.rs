@@ -123,7 +123,7 @@ fn speckled_quad(offset: f32) -> cirrus::gpu::ViewMesh {
         pixels.extend([60, 160, 60, alpha]);
     }
     let levels =
-        mip_chain(&Texture::new(256, 256, pixels), MipSettings { kind: cirrus::surface::SurfaceKind::Albedo, alpha_cutoff: Some(0.5) });
+        mip_chain(&Texture::new(256, 256, pixels), MipSettings { kind: cirrus::texture::SurfaceKind::Albedo, alpha_cutoff: Some(0.5) });
     let corner = |y: f32, z: f32, uv: [f32; 2]| RenderVertex {
         position: [0.0, y + offset, z + offset],
         normal: [1.0, 0.0, 0.0],

@@ -3,8 +3,9 @@
 
 use std::path::Path;
 
-use cirrus::material_definition::{parse_material_file, TextureSlot};
+use cirrus::material_definition::parse_material_file;
 use cirrus::openddl::{self, StructureBody, Value};
+use cirrus::texture::TextureSlot;
 use expect_test::expect;
 
 #[test]

@@ -7,6 +7,7 @@ mod billboard;
 mod cache;
 mod cli;
 mod config;
+mod conformance;
 mod fuzz;
 mod gpu;
 mod graph;

@@ -127,7 +127,13 @@ pub fn load_mesh(
     }));
     let (models, materials) = match loaded {
         Ok(Ok(result)) => result,
-        Ok(Err(error)) => return Err(Diagnostic::new(obj_file, format!("malformed OBJ: {error}"))),
+        Ok(Err(error)) => {
+            let message = format!("malformed OBJ: {error}");
+            return Err(match obj_error_line(&text, &error) {
+                Some(line) => Diagnostic::at(obj_file, crate::diagnostic::TextPosition { line, column: 1 }, message),
+                None => Diagnostic::new(obj_file, message),
+            });
+        }
         Err(_) => return Err(Diagnostic::new(obj_file, "malformed OBJ: the parser failed on this file")),
     };
     let mut warnings = warnings.into_inner();
@@ -298,6 +304,65 @@ fn check_scale(obj_file: &Path, mesh: &Mesh) -> Result<(), Diagnostic> {
         ));
     }
     Ok(())
+}
+
+/// The line a tobj error comes from (tobj does not say): the first statement of the kind the
+/// error names that fails the same test, found by scanning the text again. `None` when the
+/// error names no statement or no line fails the test.
+fn obj_error_line(text: &str, error: &tobj::LoadError) -> Option<u32> {
+    use tobj::LoadError;
+    let floats = |words: &[&str], count: usize| words.len() >= count && words[..count].iter().all(|word| word.parse::<f32>().is_ok());
+    let totals = text.lines().fold([0i64; 3], |mut totals, line| {
+        match line.split_whitespace().next() {
+            Some("v") => totals[0] += 1,
+            Some("vt") => totals[1] += 1,
+            Some("vn") => totals[2] += 1,
+            _ => {}
+        }
+        totals
+    });
+    let mut seen = [0i64; 3];
+    for (index, line) in text.lines().enumerate() {
+        let words: Vec<&str> = line.split_whitespace().collect();
+        let Some((&keyword, arguments)) = words.split_first() else { continue };
+        let failing = match (keyword, error) {
+            ("v", LoadError::PositionParseError) => !floats(arguments, 3),
+            ("vt", LoadError::TexcoordParseError) => !floats(arguments, 2),
+            ("vn", LoadError::NormalParseError) => !floats(arguments, 3),
+            ("f", LoadError::InvalidPolygon) => arguments.len() < 3,
+            (
+                "f",
+                LoadError::FaceParseError
+                | LoadError::FaceVertexOutOfBounds
+                | LoadError::FaceTexCoordOutOfBounds
+                | LoadError::FaceNormalOutOfBounds,
+            ) => arguments.iter().any(|vertex| {
+                vertex.split('/').enumerate().any(|(slot, index)| {
+                    let checked = match error {
+                        LoadError::FaceVertexOutOfBounds => slot == 0,
+                        LoadError::FaceTexCoordOutOfBounds => slot == 1,
+                        LoadError::FaceNormalOutOfBounds => slot == 2,
+                        _ => slot < 3,
+                    };
+                    // Positive indices may point forward (checked against the file's total),
+                    // negative ones back from here.
+                    let valid = |value: i64| (value > 0 && value <= totals[slot.min(2)]) || (value < 0 && -value <= seen[slot.min(2)]);
+                    checked && !(index.is_empty() && slot > 0) && index.parse::<i64>().map_or(true, |value| !valid(value))
+                })
+            }),
+            _ => false,
+        };
+        if failing {
+            return Some(index as u32 + 1);
+        }
+        match keyword {
+            "v" => seen[0] += 1,
+            "vt" => seen[1] += 1,
+            "vn" => seen[2] += 1,
+            _ => {}
+        }
+    }
+    None
 }
 
 /// A warning for each `usemtl` that names no material of the MTL libraries (tobj silently gives

@@ -131,7 +131,7 @@ fn check_passes_on_the_bundled_pipeline_and_reports_each_kind_s_problems() {
     expect![[r#"
         tree: assets/tree.mtl: warning: material `bark`: texture "../../outside.png" leaves the source folder; ignored
         tree: assets/bark.png: file not found
-        broken: assets/broken.obj: malformed OBJ: face vertex index out of bounds
+        broken: assets/broken.obj:2:1: malformed OBJ: face vertex index out of bounds
         leaf: assets/leaf.mymaterial:1:48: texture "leaf.png" (assets/leaf.png): file not found
         3 assets checked, 3 with problems
     "#]]

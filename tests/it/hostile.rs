@@ -540,6 +540,15 @@ fn the_cheap_low_ones() {
     let warning = warnings.iter().find(|warning| warning.message.contains("usemtl nope")).expect("a warning");
     assert_eq!((warning.file.as_path(), warning.line()), (Path::new("assets/m.obj"), Some(5)));
 
+    // OBJ errors carry their line.
+    for (obj, line) in
+        [("v 0 0 0\nv 1 0 0\nv 0 1 0\nf 1 2 3\nf 1 2 9\n", 5), ("v 0 0 0\nv 1 oops 0\n", 2), ("v 0 0 0\nvt 0 0\nf 1/1 1/7 1/1\n", 3)]
+    {
+        let error = load_obj(obj, None).expect_err(obj);
+        assert_eq!(error.line(), Some(line), "{error}");
+        assert!(error.message.starts_with("malformed OBJ: "), "{error}");
+    }
+
     // MTL warnings name the MTL file.
     let (_, warnings) =
         load_obj("mtllib m.mtl\nv 0 0 0\nv 1 0 0\nv 0 1 0\nusemtl bark\nf 1 2 3\n", Some("newmtl bark\nmap_Kd ../../x.png\n")).unwrap();

@@ -6,7 +6,7 @@
 use crate::config::AtlasSettings;
 
 /// Where one rectangle landed, in texels (the content, without its padding).
-#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+#[derive(Clone, Copy, Debug, PartialEq, Eq, serde::Serialize, serde::Deserialize)]
 pub struct Placement {
     pub x: u32,
     pub y: u32,
@@ -16,7 +16,7 @@ pub struct Placement {
     pub rotated: bool,
 }
 
-#[derive(Clone, Debug, PartialEq)]
+#[derive(Clone, Debug, PartialEq, serde::Serialize, serde::Deserialize)]
 pub struct Layout {
     pub width: u32,
     pub height: u32,

@@ -17,7 +17,7 @@ pub fn plane_materials(mesh: &Mesh, plane: &PlaneRectangle) -> Vec<u32> {
 
 /// One render stage: the rectangles of one plane whose faces use the same set of materials, so
 /// that an edit of one material's texture re-renders only the rectangles that show it.
-#[derive(Clone, Debug, PartialEq)]
+#[derive(Clone, Debug, PartialEq, serde::Serialize, serde::Deserialize)]
 pub struct RenderGroup {
     pub plane: u32,
     /// Material indices, ascending.

@@ -14,7 +14,7 @@ pub struct PlaneSettings {
 }
 
 /// One plane: points `x` with `normal · x = distance`, and the faces assigned to it.
-#[derive(Clone, Debug, PartialEq)]
+#[derive(Clone, Debug, PartialEq, serde::Serialize, serde::Deserialize)]
 pub struct Plane {
     pub normal: [f32; 3],
     pub distance: f32,
@@ -22,7 +22,7 @@ pub struct Plane {
 }
 
 /// The result of plane selection.
-#[derive(Clone, Debug, PartialEq)]
+#[derive(Clone, Debug, PartialEq, serde::Serialize, serde::Deserialize)]
 pub struct PlaneSet {
     pub planes: Vec<Plane>,
     /// ε in world units.

@@ -12,7 +12,7 @@ use crate::planes::PlaneSet;
 
 /// A quad on a plane: `origin + x·x_axis + y·y_axis` for x ∈ [0, width], y ∈ [0, height],
 /// `x_axis × y_axis = normal`, holding `faces` (of plane `plane`).
-#[derive(Clone, Debug, PartialEq)]
+#[derive(Clone, Debug, PartialEq, serde::Serialize, serde::Deserialize)]
 pub struct PlaneRectangle {
     pub plane: u32,
     pub faces: Vec<u32>,

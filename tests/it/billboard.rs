@@ -263,3 +263,63 @@ fn a_solid_trunk_split_between_planes_shows_no_cracks() {
     // Cracks show most where the view is at an angle to two planes: the worst view gains most.
     assert!(solid_min > cut_out_min + 0.1 && solid_mean > cut_out_mean, "{figures:?}");
 }
+
+/// The stages of `asset` in a `build --summary json` printed on stdout: (stage, instance) → status.
+fn stage_statuses(output: &std::process::Output, asset: &str) -> Vec<(String, String, String)> {
+    assert!(output.status.success(), "{}", String::from_utf8_lossy(&output.stderr));
+    let summary: serde_json::Value = serde_json::from_slice(&output.stdout).expect("summary JSON");
+    let asset = summary["assets"].as_array().unwrap().iter().find(|entry| entry["name"] == asset).expect("the asset");
+    asset["stages"]
+        .as_array()
+        .unwrap()
+        .iter()
+        .map(|stage| {
+            let text = |key: &str| stage[key].as_str().unwrap().to_string();
+            (text("stage"), text("instance"), text("status"))
+        })
+        .collect()
+}
+
+#[test]
+fn after_a_restart_a_leaf_colour_edit_reuses_mesh_planes_layout_lod_and_the_unchanged_encodes() {
+    let project = TempProject::new(
+        r#"Pipeline(source: "assets", output: "baked", assets: [
+            BillboardCloud(name: "bush", mesh: "trees/bush_2.obj", atlas: (max_size: 512)),
+        ])"#,
+    );
+    let trees = Path::new(env!("CARGO_MANIFEST_DIR")).join("examples/assets/trees");
+    let textures = ["aspen_color.png", "oak_color_1k.jpg", "oak_normal_1k.jpg", "oak_roughness_1k.jpg", "oak_ao_1k.jpg"];
+    for file in
+        ["bush_2.obj".to_string(), "bush_2.mtl".to_string()].into_iter().chain(textures.map(|texture| format!("textures/{texture}")))
+    {
+        project.write(&format!("assets/trees/{file}"), std::fs::read(trees.join(&file)).unwrap());
+    }
+    let first = stage_statuses(&project.run_cli(&["build", "--summary", "json"]), "bush");
+    assert!(first.iter().all(|(_, _, status)| status == "ran"), "{first:?}");
+
+    // Another process after a colour edit of the leaves (alpha kept, so coverage is the same).
+    let leaves = image::load_from_memory(&project.read("assets/trees/textures/aspen_color.png")).unwrap().into_rgba8();
+    let (width, height) = leaves.dimensions();
+    let recoloured: Vec<u8> = leaves.into_raw().chunks_exact(4).flat_map(|texel| [texel[1], texel[0], texel[2], texel[3]]).collect();
+    project.write("assets/trees/textures/aspen_color.png", crate::support::png_bytes(width, height, &recoloured));
+    let second = stage_statuses(&project.run_cli(&["build", "--summary", "json"]), "bush");
+    let status = |stage: &str, instance: Option<&str>| -> BTreeSet<String> {
+        second
+            .iter()
+            .filter(|(name, this_instance, _)| name == stage && instance.is_none_or(|instance| instance == this_instance))
+            .map(|(_, _, status)| status.clone())
+            .collect()
+    };
+    let cached = BTreeSet::from(["cached".to_string()]);
+    let ran = BTreeSet::from(["ran".to_string()]);
+    for stage in ["mesh", "planes", "layout", "lod"] {
+        assert_eq!(status(stage, None), cached, "{stage}: {second:?}");
+    }
+    // Plane images are not kept on disk (storing them costs more than rendering them again).
+    assert_eq!(status("render", None), ran);
+    assert_eq!(status("atlas", None), ran);
+    assert_eq!(status("encode", Some("albedo")), ran, "the leaves' colour is in the albedo");
+    for surface in ["mra", "normal", "height"] {
+        assert_eq!(status("encode", Some(surface)), cached, "{surface}: {second:?}");
+    }
+}

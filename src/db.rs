@@ -1056,11 +1056,11 @@ fn encode_atlas_surface(db: &dyn Db, key: AtlasSurfaceKey, image: &Texture) -> R
     let (format, quality, mips, container, zstd, alpha_cutoff) = atlas_block_settings(db, key);
     let surface = key.surface(db);
     timed(db, Stage::Encode, key, || {
-        let alpha_tested = surface == SurfaceKind::Albedo && has_transparency(&image);
+        let alpha_tested = surface == SurfaceKind::Albedo && has_transparency(image);
         let previous = db.previous_encoding(key.as_id());
         let (levels, mip_reuse) = if mips {
             let previous_mips = previous.as_ref().and_then(|previous| Some((previous.levels.as_slice(), &**previous.mips.as_ref()?)));
-            mip_chain_reusing(&image, MipSettings { kind: surface, alpha_cutoff: alpha_tested.then_some(alpha_cutoff) }, previous_mips)
+            mip_chain_reusing(image, MipSettings { kind: surface, alpha_cutoff: alpha_tested.then_some(alpha_cutoff) }, previous_mips)
         } else {
             (vec![image.clone()], None)
         };
@@ -1074,7 +1074,7 @@ fn encode_atlas_surface(db: &dyn Db, key: AtlasSurfaceKey, image: &Texture) -> R
         let block_errors = crate::quality::block_errors_reusing(
             format,
             &texture.levels[0],
-            &image,
+            image,
             surface.channels(),
             previous_blocks.map(|previous| (&previous.levels[0], &previous.encoded.levels[0][..], &*previous.block_errors)),
         );
@@ -1103,7 +1103,7 @@ fn encode_atlas_surface(db: &dyn Db, key: AtlasSurfaceKey, image: &Texture) -> R
             psnr_db,
             alpha_tested,
         };
-        Ok(Arc::new(SurfaceArtifacts { info, texture_file, preview_png: preview_png(&image).into() }))
+        Ok(Arc::new(SurfaceArtifacts { info, texture_file, preview_png: preview_png(image).into() }))
     })
 }
 

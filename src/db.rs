@@ -709,17 +709,20 @@ pub struct LoadedMesh {
 /// bytes), and the source folder texture paths must stay in.
 #[salsa::tracked(returns(copy))]
 pub fn mesh_cache_key(db: &dyn Db, asset: BillboardAsset) -> CacheKey {
-    let mut key = CacheKeyBuilder::new("mesh", Stage::Mesh.version()).part(asset.source_root(db));
-    let mut files = vec![asset.mesh_file(db)];
-    files.extend(asset.libraries(db).values().copied());
-    for file in files {
-        key = key.part(file.path(db));
-        key = match file.contents(db) {
+    let key = CacheKeyBuilder::new("mesh", Stage::Mesh.version()).part(asset.source_root(db));
+    let files = std::iter::once(asset.mesh_file(db)).chain(asset.libraries(db).values().copied());
+    key_with_files(db, key, files).finish()
+}
+
+/// Adds each file's path and its content hash (or why it could not be read) to a key.
+fn key_with_files(db: &dyn Db, key: CacheKeyBuilder, files: impl IntoIterator<Item = SourceFile>) -> CacheKeyBuilder {
+    files.into_iter().fold(key, |key, file| {
+        let key = key.part(file.path(db));
+        match file.contents(db) {
             Ok(contents) => key.part(&contents.hash),
             Err(error) => key.part(error),
-        };
-    }
-    key.finish()
+        }
+    })
 }
 
 fn loaded_mesh_entry(loaded: &LoadedMesh) -> CacheEntry {
@@ -1112,21 +1115,13 @@ fn encode_atlas_surface(db: &dyn Db, key: AtlasSurfaceKey, image: &Texture) -> R
 pub fn billboard_cache_key(db: &dyn Db, asset: BillboardAsset) -> CacheKey {
     let settings = asset.settings(db);
     // 2: render stages are per plane and material set, listed in the entry's metadata.
-    let mut key = CacheKeyBuilder::new("billboard", 2)
+    let key = CacheKeyBuilder::new("billboard", 2)
         .part(&[Stage::Mesh, Stage::Planes, Stage::Layout, Stage::Render, Stage::Atlas, Stage::Encode, Stage::Lod].map(Stage::version))
         .part(&settings.billboard)
         .part(&settings.atlas)
         .part(&settings.encode)
         .part(asset.source_root(db));
-    let mut files: Vec<SourceFile> = vec![asset.mesh_file(db)];
-    files.extend(asset.libraries(db).values().copied());
-    files.extend(asset.textures(db).values().copied());
-    for file in files {
-        key = key.part(file.path(db));
-        key = match file.contents(db) {
-            Ok(contents) => key.part(&contents.hash),
-            Err(error) => key.part(error),
-        };
-    }
-    key.finish()
+    let files =
+        std::iter::once(asset.mesh_file(db)).chain(asset.libraries(db).values().copied()).chain(asset.textures(db).values().copied());
+    key_with_files(db, key, files).finish()
 }

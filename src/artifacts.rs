@@ -8,6 +8,9 @@ use std::path::{Path, PathBuf};
 
 use serde::{Deserialize, Serialize};
 
+use crate::config::PipelineConfig;
+use crate::diagnostic::display_path;
+
 /// The name prefix of temporary files (artifacts and cache entries before their rename); files
 /// with it that a killed build left behind are swept by `sweep_temporary_files`.
 pub const TEMPORARY_PREFIX: &str = ".cirrus-tmp-";
@@ -130,4 +133,67 @@ pub fn read_lod_view_mesh(root: &Path, folder: &Path, alpha_cutoff: f32) -> Resu
         normal_ktx2: read("normal.ktx2")?,
         alpha_cutoff,
     })
+}
+
+/// Records an artifact in the manifest; true when the entry is new or its bytes changed.
+pub fn record_artifact(manifest: &mut Manifest, revision: u64, asset: &str, path: &str, hash: &str) -> bool {
+    let unchanged = manifest.artifacts.get(path).is_some_and(|entry| entry.hash == hash && entry.asset == asset);
+    if !unchanged {
+        manifest.artifacts.insert(path.to_string(), ManifestEntry { asset: asset.to_string(), hash: hash.to_string(), revision });
+    }
+    !unchanged
+}
+
+/// Deletes the artifacts `doomed` selects, file and manifest entry; returns the paths deleted.
+/// `manifest.json` is a file on disk that anyone may have edited: a listed path is deleted only
+/// when it lies inside the output folder and the file there is the one cirrus wrote (its blake3
+/// matches the entry). Any other entry is dropped from the manifest with a warning, its file
+/// left alone.
+pub fn remove_artifacts(config: &PipelineConfig, manifest: &mut Manifest, doomed: impl Fn(&str, &ManifestEntry) -> bool) -> Vec<String> {
+    let paths: Vec<String> = manifest.artifacts.iter().filter(|(path, entry)| doomed(path, entry)).map(|(path, _)| path.clone()).collect();
+    let mut removed = Vec::new();
+    for path in paths {
+        let Some(entry) = manifest.artifacts.remove(&path) else { continue };
+        match stale_artifact_file(config, &path, &entry.hash) {
+            Ok(Some(file)) => match std::fs::remove_file(&file) {
+                Ok(()) => removed.push(path),
+                Err(error) => tracing::warn!("cannot delete the stale artifact {path}: {error}"),
+            },
+            Ok(None) => removed.push(path),
+            Err(why) => tracing::warn!("manifest.json lists `{path}`, which is not deleted: {why}"),
+        }
+    }
+    removed
+}
+
+/// The file of a stale artifact that may be deleted (`None` when it is gone already), or why it
+/// must not be: outside the output folder, not a regular file, or not the bytes cirrus wrote.
+fn stale_artifact_file(config: &PipelineConfig, path: &str, hash: &str) -> Result<Option<PathBuf>, String> {
+    let normalized = crate::config::normalize_relative_path(Path::new(path));
+    let inside_output = normalized.as_ref().is_some_and(|normalized| {
+        display_path(normalized) == path && normalized.starts_with(&config.output) && normalized != &config.output
+    });
+    if !inside_output {
+        return Err(format!("it is not a path inside the output folder `{}`", display_path(&config.output)));
+    }
+    let file = config.root.join(path);
+    let metadata = match std::fs::symlink_metadata(&file) {
+        Ok(metadata) => metadata,
+        Err(error) if error.kind() == std::io::ErrorKind::NotFound => return Ok(None),
+        Err(error) => return Err(error.to_string()),
+    };
+    if !metadata.is_file() {
+        return Err("it is not a regular file (cirrus writes only regular files)".to_string());
+    }
+    // A symbolic link among the folders could lead outside the output folder.
+    let output = config.output_dir().canonicalize().map_err(|error| error.to_string())?;
+    let folder = file.parent().and_then(|folder| folder.canonicalize().ok());
+    if !folder.is_some_and(|folder| folder.starts_with(&output)) {
+        return Err("its folder resolves outside the output folder".to_string());
+    }
+    let bytes = crate::sources::read_regular_file(&file, crate::sources::MAX_SOURCE_BYTES)?;
+    if blake3::hash(&bytes).to_hex().as_str() != hash {
+        return Err("its bytes are not the ones cirrus wrote there (edited or replaced since)".to_string());
+    }
+    Ok(Some(file))
 }

@@ -11,7 +11,7 @@ use std::sync::{Arc, Mutex};
 use salsa::plumbing::AsId;
 use salsa::Setter;
 
-use crate::artifacts::{load_manifest, save_manifest, write_if_changed, Manifest, ManifestEntry};
+use crate::artifacts::{load_manifest, record_artifact, remove_artifacts, save_manifest, write_if_changed, Manifest};
 use crate::cache::DiskCache;
 use crate::cache::{CacheEntry, CacheKey};
 use crate::config::{AssetConfig, AssetSource, PipelineConfig, Settings};
@@ -448,72 +448,13 @@ impl Project {
             .map(|asset| {
                 let main_file = self.config.source.join(asset.source.main_file());
                 let problems = match &asset.source {
-                    AssetSource::BillboardCloud { .. } => self.check_billboard(&main_file),
-                    AssetSource::Material { .. } => self.check_material(&main_file),
+                    AssetSource::BillboardCloud { .. } => crate::check::check_billboard(&self.config, &main_file),
+                    AssetSource::Material { .. } => crate::check::check_material(&self.config, &main_file),
                 };
                 (asset.name, problems)
             })
             .chain(conflicts)
             .collect()
-    }
-
-    /// A material file parses, and every texture it names is readable and within the limits.
-    fn check_material(&self, main_file: &Path) -> Vec<Diagnostic> {
-        let contents = match read_source(&self.config.root, &self.config.source, main_file) {
-            Ok(contents) => contents,
-            Err(error) => return vec![Diagnostic::new(main_file, error)],
-        };
-        let parsed = match crate::material_definition::parse_material_file(main_file, &contents.bytes, &self.config.source) {
-            Ok(parsed) => parsed,
-            Err(diagnostic) => return vec![diagnostic],
-        };
-        let mut problems: Vec<Diagnostic> = parsed.warnings.iter().map(as_warning).collect();
-        for reference in parsed.materials.iter().flat_map(|material| material.textures.values()) {
-            if let Err(message) = self.probe_texture_file(&reference.path) {
-                let message = format!("texture \"{}\" ({}): {message}", reference.written, display_path(&reference.path));
-                problems.push(Diagnostic::at(main_file, reference.position, message));
-            }
-        }
-        problems
-    }
-
-    /// A mesh loads with its material libraries, and every texture its materials name is
-    /// readable and within the limits.
-    fn check_billboard(&self, main_file: &Path) -> Vec<Diagnostic> {
-        let read = |path: &Path| read_source(&self.config.root, &self.config.source, path);
-        let contents = match read(main_file) {
-            Ok(contents) => contents,
-            Err(error) => return vec![Diagnostic::new(main_file, error)],
-        };
-        let mut libraries = BTreeMap::new();
-        for library in crate::mesh::material_libraries(main_file, &contents.bytes, &self.config.source) {
-            let bytes = match read(&library) {
-                Ok(contents) => Some(contents.bytes.to_vec()),
-                Err(error) if error == crate::sources::FILE_NOT_FOUND => None,
-                Err(error) => return vec![Diagnostic::new(&library, error)],
-            };
-            libraries.insert(library, bytes);
-        }
-        let (mesh, warnings) = match crate::mesh::load_mesh(main_file, &contents.bytes, &libraries, &self.config.source) {
-            Ok(loaded) => loaded,
-            Err(diagnostic) => return vec![diagnostic],
-        };
-        let mut problems: Vec<Diagnostic> = warnings.iter().map(as_warning).collect();
-        let textures: BTreeSet<&PathBuf> = mesh.materials.iter().flat_map(|material| material.maps.values()).collect();
-        for path in textures {
-            if let Err(message) = self.probe_texture_file(path) {
-                problems.push(Diagnostic::new(path, message));
-            }
-        }
-        problems
-    }
-
-    /// Reads a texture's header: readable, decodable, within the texture limits.
-    fn probe_texture_file(&self, path: &Path) -> Result<(), String> {
-        let contents = read_source(&self.config.root, &self.config.source, path)?;
-        crate::texture::probe_texture(path, &contents.bytes, self.config.limits.texture)
-            .map(|_| ())
-            .map_err(|diagnostic| diagnostic.message)
     }
 
     /// The stage functions salsa executed since the last call, as `stage(instance)`, sorted.
@@ -1112,69 +1053,6 @@ impl Project {
     }
 }
 
-/// Records an artifact in the manifest; true when the entry is new or its bytes changed.
-fn record_artifact(manifest: &mut Manifest, revision: u64, asset: &str, path: &str, hash: &str) -> bool {
-    let unchanged = manifest.artifacts.get(path).is_some_and(|entry| entry.hash == hash && entry.asset == asset);
-    if !unchanged {
-        manifest.artifacts.insert(path.to_string(), ManifestEntry { asset: asset.to_string(), hash: hash.to_string(), revision });
-    }
-    !unchanged
-}
-
-/// Deletes the artifacts `doomed` selects, file and manifest entry; returns the paths deleted.
-/// `manifest.json` is a file on disk that anyone may have edited: a listed path is deleted only
-/// when it lies inside the output folder and the file there is the one cirrus wrote (its blake3
-/// matches the entry). Any other entry is dropped from the manifest with a warning, its file
-/// left alone.
-fn remove_artifacts(config: &PipelineConfig, manifest: &mut Manifest, doomed: impl Fn(&str, &ManifestEntry) -> bool) -> Vec<String> {
-    let paths: Vec<String> = manifest.artifacts.iter().filter(|(path, entry)| doomed(path, entry)).map(|(path, _)| path.clone()).collect();
-    let mut removed = Vec::new();
-    for path in paths {
-        let Some(entry) = manifest.artifacts.remove(&path) else { continue };
-        match stale_artifact_file(config, &path, &entry.hash) {
-            Ok(Some(file)) => match std::fs::remove_file(&file) {
-                Ok(()) => removed.push(path),
-                Err(error) => tracing::warn!("cannot delete the stale artifact {path}: {error}"),
-            },
-            Ok(None) => removed.push(path),
-            Err(why) => tracing::warn!("manifest.json lists `{path}`, which is not deleted: {why}"),
-        }
-    }
-    removed
-}
-
-/// The file of a stale artifact that may be deleted (`None` when it is gone already), or why it
-/// must not be: outside the output folder, not a regular file, or not the bytes cirrus wrote.
-fn stale_artifact_file(config: &PipelineConfig, path: &str, hash: &str) -> Result<Option<PathBuf>, String> {
-    let normalized = crate::config::normalize_relative_path(Path::new(path));
-    let inside_output = normalized.as_ref().is_some_and(|normalized| {
-        display_path(normalized) == path && normalized.starts_with(&config.output) && normalized != &config.output
-    });
-    if !inside_output {
-        return Err(format!("it is not a path inside the output folder `{}`", display_path(&config.output)));
-    }
-    let file = config.root.join(path);
-    let metadata = match std::fs::symlink_metadata(&file) {
-        Ok(metadata) => metadata,
-        Err(error) if error.kind() == std::io::ErrorKind::NotFound => return Ok(None),
-        Err(error) => return Err(error.to_string()),
-    };
-    if !metadata.is_file() {
-        return Err("it is not a regular file (cirrus writes only regular files)".to_string());
-    }
-    // A symbolic link among the folders could lead outside the output folder.
-    let output = config.output_dir().canonicalize().map_err(|error| error.to_string())?;
-    let folder = file.parent().and_then(|folder| folder.canonicalize().ok());
-    if !folder.is_some_and(|folder| folder.starts_with(&output)) {
-        return Err("its folder resolves outside the output folder".to_string());
-    }
-    let bytes = crate::sources::read_regular_file(&file, crate::sources::MAX_SOURCE_BYTES)?;
-    if blake3::hash(&bytes).to_hex().as_str() != hash {
-        return Err("its bytes are not the ones cirrus wrote there (edited or replaced since)".to_string());
-    }
-    Ok(Some(file))
-}
-
 /// The graph node id of a source file.
 pub fn file_node_id(path: &Path) -> String {
     display_path(path)
@@ -1281,11 +1159,6 @@ impl Project {
         };
         Ok(crate::gpu::ViewMesh { batches: crate::plane_textures::plane_batches(&loaded.mesh, &loaded.tangents, &all_faces), materials })
     }
-}
-
-/// A warning reported by `check`: the diagnostic with its message marked.
-fn as_warning(diagnostic: &Diagnostic) -> Diagnostic {
-    Diagnostic { message: format!("warning: {}", diagnostic.message), ..diagnostic.clone() }
 }
 
 /// The graph id of a stage instance, as the event log names it: `stage(label)`.

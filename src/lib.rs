@@ -39,6 +39,7 @@ pub mod cache;
 pub mod sources;
 pub mod artifacts;
 pub mod bake;
+pub mod check;
 pub mod summary;
 pub mod graph;
 

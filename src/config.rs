@@ -423,6 +423,13 @@ impl Validator<'_> {
             }
         });
         let defaults = self.merge_settings(&Settings::default(), &raw.defaults, 0);
+        let mut limits = Limits::default();
+        if let Some(mib) = raw.limits.texture_memory_mib {
+            if !(16..=1 << 24).contains(&mib) {
+                self.error_at_key("texture_memory_mib", 0, "texture_memory_mib must be between 16 and 16777216 (MiB)");
+            }
+            limits.texture.working_set = mib << 20;
+        }
 
         let mut assets = Vec::new();
         let mut names = BTreeSet::new();
@@ -467,6 +474,20 @@ impl Validator<'_> {
             let overrides =
                 raw::SettingsOverrides { billboard: overrides.0.clone(), atlas: overrides.1.clone(), encode: overrides.2.clone() };
             let settings = self.merge_settings(&defaults, &overrides, anchor);
+            if kind == AssetKindName::BillboardCloud {
+                // Each atlas surface goes through the texture tail: the same budget holds.
+                let side = settings.atlas.max_size;
+                let needed = u64::from(side) * u64::from(side) * crate::texture::WORKING_SET_BYTES_PER_TEXEL;
+                if needed > limits.texture.working_set {
+                    let message = format!(
+                        "asset `{name}`: a {side}² atlas needs about {} MiB per surface, more than the texture memory budget of {} MiB \
+                         (lower max_size or raise `limits: (texture_memory_mib: …)`)",
+                        needed >> 20,
+                        limits.texture.working_set >> 20
+                    );
+                    self.error_at_value(name, anchor, &message);
+                }
+            }
             let source = match kind {
                 AssetKindName::Material => AssetSource::Material { material: relative },
                 AssetKindName::BillboardCloud => AssetSource::BillboardCloud { mesh: relative },
@@ -480,14 +501,6 @@ impl Validator<'_> {
                 Ok(glob) => rules.push(Rule { glob: rule.glob.clone(), matcher: glob.compile_matcher(), kind: rule.kind }),
                 Err(error) => self.error_at_value(&rule.glob, 0, &format!("bad glob: {}", error.kind())),
             }
-        }
-
-        let mut limits = Limits::default();
-        if let Some(mib) = raw.limits.texture_memory_mib {
-            if !(16..=1 << 24).contains(&mib) {
-                self.error_at_key("texture_memory_mib", 0, "texture_memory_mib must be between 16 and 16777216 (MiB)");
-            }
-            limits.texture.working_set = mib << 20;
         }
 
         if self.diagnostics.is_empty() {

@@ -337,6 +337,14 @@ fn textures_whose_working_set_exceeds_the_budget_fail_from_their_header() {
     assert!(summary.assets.iter().find(|asset| asset.name == "small").unwrap().status == cirrus::summary::AssetStatus::Ok);
     let output = run_with_deadline(&project, &["check"], Duration::from_secs(60));
     assert!(text(&output).contains("texture memory budget"), "check reports it too: {}", text(&output));
+
+    // A billboard atlas is a texture too: 16384² is over the default budget, 8192² within it.
+    let atlas = |side: u32| {
+        format!(r#"Pipeline(source: "a", output: "b", assets: [BillboardCloud(name: "t", mesh: "t.obj", atlas: (max_size: {side}))])"#)
+    };
+    let error = parse_pipeline(Path::new("pipeline.ron"), &atlas(16384)).expect_err("over budget");
+    assert!(error.to_string().contains("a 16384² atlas needs about 16384 MiB per surface"), "{error}");
+    assert!(parse_pipeline(Path::new("pipeline.ron"), &atlas(8192)).is_ok());
 }
 
 /// CRC-32 (PNG's polynomial), for patching a chunk header.

@@ -438,11 +438,12 @@ impl Project {
         Ok(summary)
     }
 
-    /// Validates every asset's sources without baking: the material files parse, and every
-    /// texture they name exists and has a readable image header.
+    /// Validates every asset's sources without baking (see `check`), and reports rule-matched
+    /// files that do not become assets.
     pub fn check(&self) -> Vec<(String, Vec<Diagnostic>)> {
         let (assets, conflicts) = self.asset_list_and_conflicts();
-        let conflicts = conflicts.into_iter().map(|conflict| (display_path(&conflict.file), vec![conflict]));
+        // Rule-matched files that do not become assets are reported under `rules`.
+        let conflicts = conflicts.into_iter().map(|conflict| ("rules".to_string(), vec![conflict]));
         assets
             .into_iter()
             .map(|asset| {

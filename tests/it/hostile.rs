@@ -444,7 +444,7 @@ fn asset_names_that_share_a_folder_or_name_cirrus_files_are_refused() {
     project.write("pipeline.ron", pipeline.replace("])", "], rules: [(glob: \"**/*.mymaterial\", kind: Material)])"));
     project.write("assets/rock/extra.mymaterial", "Material $x { }\n");
     let output = run_with_deadline(&project, &["check"], Duration::from_secs(60));
-    assert!(text(&output).contains("assets/rock/extra.mymaterial: warning: matches a rule but is not baked"), "{}", text(&output));
+    assert!(text(&output).contains("rules: assets/rock/extra.mymaterial: warning: matches a rule but is not baked"), "{}", text(&output));
 
     // A manifest that cannot be written fails the build.
     let project = material_project();

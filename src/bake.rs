@@ -368,8 +368,14 @@ impl Project {
             }
             if let Some(files) = plan.billboard.as_ref().and_then(|billboard| billboard.files.clone()) {
                 let folder = self.config.output.join(&plan.config.name);
+                // The report comes last and describes the files above: it is written only when
+                // they all are (a failed write keeps the last good report with its files).
+                let mut all_written = true;
                 for (name, bytes) in &files.files {
-                    self.write_artifact(&folder.join(name), bytes, &mut plan.errors, &mut produced);
+                    if name == "report.json" && !all_written {
+                        continue;
+                    }
+                    all_written &= self.write_artifact(&folder.join(name), bytes, &mut plan.errors, &mut produced);
                 }
             }
             let asset_folder = format!("{}/", display_path(&self.config.output.join(&plan.config.name)));

@@ -323,3 +323,17 @@ fn after_a_restart_a_leaf_colour_edit_reuses_mesh_planes_layout_lod_and_the_unch
         assert_eq!(status("encode", Some(surface)), cached, "{surface}: {second:?}");
     }
 }
+
+#[test]
+fn a_failed_artifact_write_keeps_the_last_good_report() {
+    let project = tree_project();
+    // A folder where an artifact goes: that write fails.
+    std::fs::create_dir_all(project.path("baked/tree/albedo.png/in_the_way")).unwrap();
+    let summary = build(&mut project.open());
+    let tree = summary.assets.iter().find(|asset| asset.name == "tree").unwrap();
+    assert!(tree.errors.iter().any(|error| error.file == "baked/tree/albedo.png"), "{}", summary.to_text());
+    assert!(!project.path("baked/tree/report.json").exists(), "no report describes files that are not there");
+    std::fs::remove_dir_all(project.path("baked/tree/albedo.png")).unwrap();
+    assert!(build(&mut project.open()).all_ok());
+    assert!(project.path("baked/tree/report.json").exists());
+}

@@ -328,7 +328,8 @@ const MAX_PIPELINE_BYTES: u64 = 16 << 20;
 pub fn load_pipeline(file: &Path) -> Result<PipelineConfig, ConfigError> {
     let fail = |message: String| ConfigError { diagnostics: vec![Diagnostic::new(file, message)] };
     let bytes = crate::sources::read_regular_file(file, MAX_PIPELINE_BYTES).map_err(|why| {
-        fail(format!("cannot read the pipeline file: it {}", why.strip_prefix("is ").map_or(why.clone(), |rest| format!("is {rest}"))))
+        // "is not a regular file", "is larger than …" read as a sentence; the rest are reasons.
+        fail(if why.starts_with("is ") { format!("the pipeline file {why}") } else { format!("cannot read the pipeline file: {why}") })
     })?;
     let text = String::from_utf8(bytes).map_err(|error| {
         let position = TextPosition::of_byte_offset(&String::from_utf8_lossy(error.as_bytes()), error.utf8_error().valid_up_to());

@@ -336,16 +336,8 @@ pub fn material_file(db: &dyn Db, asset: MaterialAsset) -> Result<Arc<MaterialFi
     let path = file.path(db);
     let source_root = asset.source_root(db);
     let key = CacheKeyBuilder::new("parse", Stage::Parse.version()).part(&contents.hash).part(path).part(source_root).finish();
-    if let Some(parsed) = load_cached(db, "parse", key, |entry| serde_json::from_value::<MaterialFile>(entry.metadata).ok()) {
-        record_cache_hit(db, Stage::Parse, asset);
-        return Ok(Arc::new(parsed));
-    }
-    let parsed = timed(db, Stage::Parse, asset, || parse_material_file(path, &contents.bytes, source_root))?;
-    store_cached(db, "parse", key, || CacheEntry {
-        metadata: serde_json::to_value(&parsed).expect("material files serialise"),
-        blobs: Vec::new(),
-    });
-    Ok(Arc::new(parsed))
+    cached_json(db, Stage::Parse, asset, key, || timed(db, Stage::Parse, asset, || parse_material_file(path, &contents.bytes, source_root)))
+        .map(Arc::new)
 }
 
 // ---------------------------------------------------------------------------------------------
@@ -607,21 +599,22 @@ fn store_cached(db: &dyn Db, stage: &str, key: CacheKey, entry: impl FnOnce() ->
     }
 }
 
-/// A stage result stored as JSON metadata (plane sets, layouts: small, exact with
-/// `float_roundtrip`), loaded or computed and stored.
+/// A stage result stored as JSON metadata under the stage's name (parsed materials, plane sets,
+/// layouts: small, exact with `float_roundtrip`): loaded (a cache hit of `stage` for `id`), or
+/// computed and stored.
 fn cached_json<T: serde::Serialize + serde::de::DeserializeOwned>(
     db: &dyn Db,
-    stage_name: &str,
+    stage: Stage,
+    id: impl AsId,
     key: CacheKey,
-    on_hit: impl FnOnce(),
     compute: impl FnOnce() -> Result<T, Diagnostic>,
 ) -> Result<T, Diagnostic> {
-    if let Some(value) = load_cached(db, stage_name, key, |entry| serde_json::from_value::<T>(entry.metadata).ok()) {
-        on_hit();
+    if let Some(value) = load_cached(db, stage.name(), key, |entry| serde_json::from_value::<T>(entry.metadata).ok()) {
+        record_cache_hit(db, stage, id);
         return Ok(value);
     }
     let value = compute()?;
-    store_cached(db, stage_name, key, || CacheEntry {
+    store_cached(db, stage.name(), key, || CacheEntry {
         metadata: serde_json::to_value(&value).expect("stage results serialise"),
         blobs: Vec::new(),
     });
@@ -803,8 +796,7 @@ pub fn planes_cache_key(db: &dyn Db, asset: BillboardAsset) -> CacheKey {
 
 #[salsa::tracked(returns(clone))]
 pub fn billboard_planes(db: &dyn Db, asset: BillboardAsset) -> Result<Arc<crate::planes::PlaneSet>, Diagnostic> {
-    let on_hit = || record_cache_hit(db, Stage::Planes, asset);
-    cached_json(db, "planes", planes_cache_key(db, asset), on_hit, || {
+    cached_json(db, Stage::Planes, asset, planes_cache_key(db, asset), || {
         let loaded = loaded_mesh(db, asset)?;
         let settings = plane_settings(db, asset);
         timed(db, Stage::Planes, asset, || {
@@ -837,8 +829,7 @@ pub fn layout_cache_key(db: &dyn Db, asset: BillboardAsset) -> CacheKey {
 
 #[salsa::tracked(returns(clone))]
 pub fn billboard_layout(db: &dyn Db, asset: BillboardAsset) -> Result<Arc<BillboardLayout>, Diagnostic> {
-    let on_hit = || record_cache_hit(db, Stage::Layout, asset);
-    cached_json(db, "layout", layout_cache_key(db, asset), on_hit, || compute_billboard_layout(db, asset)).map(Arc::new)
+    cached_json(db, Stage::Layout, asset, layout_cache_key(db, asset), || compute_billboard_layout(db, asset)).map(Arc::new)
 }
 
 fn compute_billboard_layout(db: &dyn Db, asset: BillboardAsset) -> Result<BillboardLayout, Diagnostic> {
@@ -866,8 +857,7 @@ fn compute_billboard_layout(db: &dyn Db, asset: BillboardAsset) -> Result<Billbo
 #[salsa::tracked(returns(clone))]
 pub fn lod_files(db: &dyn Db, asset: BillboardAsset) -> Result<Arc<(String, String)>, Diagnostic> {
     let key = CacheKeyBuilder::new("lod", Stage::Lod.version()).part(&layout_cache_key(db, asset).0).finish();
-    let on_hit = || record_cache_hit(db, Stage::Lod, asset);
-    cached_json(db, "lod", key, on_hit, || {
+    cached_json(db, Stage::Lod, asset, key, || {
         let layout = billboard_layout(db, asset)?;
         timed(db, Stage::Lod, asset, || Ok(crate::lod_mesh::lod_mesh(&layout.rectangles, &layout.layout, "billboard_cloud")))
     })

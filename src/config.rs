@@ -478,7 +478,7 @@ impl Validator<'_> {
             if kind == AssetKindName::BillboardCloud {
                 // Each atlas surface goes through the texture tail: the same budget holds.
                 let side = settings.atlas.max_size;
-                let needed = u64::from(side) * u64::from(side) * crate::texture::WORKING_SET_BYTES_PER_TEXEL;
+                let needed = crate::texture::TextureLimits::working_set_of(side, side);
                 if needed > limits.texture.working_set {
                     let message = format!(
                         "asset `{name}`: a {side}² atlas needs about {} MiB per surface, more than the texture memory budget of {} MiB \

@@ -41,10 +41,15 @@ impl Default for TextureLimits {
 }
 
 impl TextureLimits {
+    /// The bytes a `width` × `height` texture's bake needs at its peak.
+    pub fn working_set_of(width: u32, height: u32) -> u64 {
+        u64::from(width) * u64::from(height) * WORKING_SET_BYTES_PER_TEXEL
+    }
+
     /// Refuses a `width` × `height` texture whose working set exceeds the budget, from its
     /// header, before anything is decoded.
     pub fn check(&self, file: &Path, width: u32, height: u32) -> Result<(), Diagnostic> {
-        let needed = u64::from(width) * u64::from(height) * WORKING_SET_BYTES_PER_TEXEL;
+        let needed = TextureLimits::working_set_of(width, height);
         if needed <= self.working_set {
             return Ok(());
         }

@@ -70,6 +70,24 @@ enum Relevance {
 }
 
 impl EventFilter {
+    /// What a debounced batch of events tells the owner: nothing, files that may have changed,
+    /// or that the source folder must be watched again.
+    fn message(&self, events: &[notify_debouncer_full::DebouncedEvent]) -> Option<WatchMessage> {
+        let mut changed = BTreeSet::new();
+        for event in events.iter().filter(|event| !matches!(event.kind, EventKind::Access(_))) {
+            let structural =
+                matches!(event.kind, EventKind::Create(_) | EventKind::Remove(_) | EventKind::Modify(notify::event::ModifyKind::Name(_)));
+            for path in &event.paths {
+                match self.relevance(path, structural) {
+                    Relevance::Noise => {}
+                    Relevance::Files(files) => changed.extend(files),
+                    Relevance::SourceFolder => return Some(WatchMessage::Rearm),
+                }
+            }
+        }
+        (!changed.is_empty()).then_some(WatchMessage::Changed(changed))
+    }
+
     /// What an event on `path` means: files whose edit can change a build, or the source folder
     /// itself coming and going.
     /// `structural`: the event creates, removes or renames `path` (only those move the source
@@ -160,34 +178,12 @@ pub fn watch(settings: &WatchSettings) -> Result<(), WatchError> {
     let mut debouncer = new_debouncer(settings.debounce, None, move |result: DebounceEventResult| {
         let message = match result {
             Err(errors) => WatchMessage::Rescan(errors.iter().map(ToString::to_string).collect::<Vec<_>>().join("; ")),
+            Ok(events) if events.iter().any(|event| event.need_rescan()) => {
+                WatchMessage::Rescan("the watcher's event queue overflowed".into())
+            }
             Ok(events) => {
-                if events.iter().any(|event| event.need_rescan()) {
-                    WatchMessage::Rescan("the watcher's event queue overflowed".into())
-                } else {
-                    let filter = watcher_filter.read().expect("event filter");
-                    let mut changed = BTreeSet::new();
-                    let mut rearm = false;
-                    for event in events.iter().filter(|event| !matches!(event.kind, EventKind::Access(_))) {
-                        let structural = matches!(
-                            event.kind,
-                            EventKind::Create(_) | EventKind::Remove(_) | EventKind::Modify(notify::event::ModifyKind::Name(_))
-                        );
-                        for path in &event.paths {
-                            match filter.relevance(path, structural) {
-                                Relevance::Noise => {}
-                                Relevance::Files(files) => changed.extend(files),
-                                Relevance::SourceFolder => rearm = true,
-                            }
-                        }
-                    }
-                    if rearm {
-                        WatchMessage::Rearm
-                    } else if changed.is_empty() {
-                        return;
-                    } else {
-                        WatchMessage::Changed(changed)
-                    }
-                }
+                let Some(message) = watcher_filter.read().expect("event filter").message(&events) else { return };
+                message
             }
         };
         // A build in flight is stale now: cancel it; the owner rebuilds from the newest inputs.

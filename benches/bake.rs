@@ -6,10 +6,10 @@
 use std::path::Path;
 use std::time::Instant;
 
-use cirrus::bake::{BuildOptions, Project, ProjectOptions};
 use cirrus::config::{load_pipeline, BlockFormat, EncodeQuality};
-use cirrus::encode::BlockEncodeSettings;
-use cirrus::mips::{mip_chain, MipSettings};
+use cirrus::project::{BuildOptions, Project, ProjectOptions};
+use cirrus::texture::encode::BlockEncodeSettings;
+use cirrus::texture::mips::{mip_chain, MipSettings};
 use cirrus::texture::SurfaceKind;
 use cirrus::texture::Texture;
 use rayon::prelude::*;
@@ -358,10 +358,10 @@ fn bench_billboard_quality(corpus: &Path) {
                 load_pipeline(&dir.path().join("pipeline.ron")).unwrap(),
                 ProjectOptions { persistent_cache: false, ..Default::default() },
             );
-            let options = cirrus::bake::PreviewOptions { asset: "tree".into(), settings: Default::default(), out: "preview".into() };
+            let options = cirrus::project::PreviewOptions { asset: "tree".into(), settings: Default::default(), out: "preview".into() };
             let metrics = project.preview(&options).expect("preview");
-            let one_sample = cirrus::lod_preview::PreviewSettings { samples_per_axis: 1, ..Default::default() };
-            let aliased = project.preview(&cirrus::bake::PreviewOptions { settings: one_sample, ..options }).expect("preview");
+            let one_sample = cirrus::kinds::billboard_cloud::lod_preview::PreviewSettings { samples_per_axis: 1, ..Default::default() };
+            let aliased = project.preview(&cirrus::project::PreviewOptions { settings: one_sample, ..options }).expect("preview");
             let report: serde_json::Value =
                 serde_json::from_slice(&std::fs::read(dir.path().join("baked/tree/report.json")).unwrap()).unwrap();
             figures.push(format!(
@@ -375,7 +375,7 @@ fn bench_billboard_quality(corpus: &Path) {
 
 /// Plane selection: faces per second on the flight helmet, plane counts of the trees per ε.
 fn bench_planes(corpus: &Path) {
-    use cirrus::planes::{select_planes, PlaneSettings};
+    use cirrus::kinds::billboard_cloud::planes::{select_planes, PlaneSettings};
     let load = |file: &str| {
         let bytes = std::fs::read(corpus.join(file)).expect("mesh");
         let libraries = cirrus::mesh::material_libraries(Path::new(file), &bytes, Path::new(""))
@@ -490,7 +490,7 @@ fn raw_encode_level(level: &Texture, settings: BlockEncodeSettings) -> Vec<u8> {
             padded.extend_from_slice(&level.pixels[source..source + channels]);
         }
     }
-    let block_size = cirrus::encode::block_bytes(settings.format);
+    let block_size = cirrus::texture::encode::block_bytes(settings.format);
     let (row_bytes, block_row_bytes) = (blocks_x * 4 * channels, blocks_x * block_size);
     let mut output = vec![0u8; blocks_x * blocks_y * block_size];
     let bc7 = if settings.alpha { intel_tex_2::bc7::alpha_basic_settings() } else { intel_tex_2::bc7::opaque_basic_settings() };

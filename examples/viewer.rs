@@ -88,7 +88,7 @@ impl Scene {
         let alpha_cutoff = options.alpha_cutoff.unwrap_or_else(|| report_alpha_cutoff(&options.folder).unwrap_or(0.5));
         let mesh =
             cirrus::artifacts::read_lod_view_mesh(Path::new("."), &options.folder, alpha_cutoff).map_err(|error| error.to_string())?;
-        let (center, radius) = cirrus::lod_preview::bounding_sphere(&mesh);
+        let (center, radius) = cirrus::kinds::billboard_cloud::lod_preview::bounding_sphere(&mesh);
         let camera = Camera { yaw: 0.6, pitch: 0.25, zoom: 1.0 };
         Ok(Scene { folder: options.folder.clone(), alpha_cutoff, mesh, center, radius, camera })
     }
@@ -103,7 +103,8 @@ impl Scene {
     /// A `size`² RGBA8 image of the LOD (mid-grey background, alpha 0 there).
     fn render(&self, gpu: &Gpu, size: u32) -> Result<Vec<u8>, String> {
         let matrix = self.camera.view_projection(self.center, self.radius);
-        gpu.render_view(&self.mesh, matrix, cirrus::lod_preview::preview_light(), size).map_err(|error| error.to_string())
+        gpu.render_view(&self.mesh, matrix, cirrus::kinds::billboard_cloud::lod_preview::preview_light(), size)
+            .map_err(|error| error.to_string())
     }
 }
 
@@ -183,7 +184,7 @@ fn write_screenshot(gpu: &Gpu, scene: &Scene, size: u32, path: &Path, what: &str
     for texel in pixels.chunks_exact_mut(4) {
         texel[3] = 255;
     }
-    let png = cirrus::preview::preview_png(&cirrus::texture::Texture::new(size, size, pixels));
+    let png = cirrus::texture::preview::preview_png(&cirrus::texture::Texture::new(size, size, pixels));
     cirrus::artifacts::write_if_changed(path, &png).map_err(|error| format!("cannot write {}: {error}", path.display()))?;
     let quads = scene.mesh.batches.iter().map(|(_, vertices)| vertices.len() / 6).sum::<usize>();
     let coverage = 100.0 * covered as f64 / (size as f64 * size as f64);

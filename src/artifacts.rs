@@ -127,7 +127,7 @@ pub fn read_lod_view_mesh(root: &Path, folder: &Path, alpha_cutoff: f32) -> Resu
             .map_err(|error| crate::diagnostic::Diagnostic::new(&path, format!("cannot read the baked artifact: {error}")))?;
         Ok((path, bytes))
     };
-    crate::lod_preview::lod_view_mesh(&crate::lod_preview::LodFiles {
+    crate::kinds::billboard_cloud::lod_preview::lod_view_mesh(&crate::kinds::billboard_cloud::lod_preview::LodFiles {
         obj: read("lod.obj")?,
         albedo_ktx2: read("albedo.ktx2")?,
         normal_ktx2: read("normal.ktx2")?,

@@ -190,9 +190,9 @@ impl KeyPart for crate::config::EncodeSettings {
     }
 }
 
-impl KeyPart for crate::material_definition::MaterialConstants {
+impl KeyPart for crate::kinds::material::definition::MaterialConstants {
     fn add_to(&self, key: CacheKeyBuilder) -> CacheKeyBuilder {
-        let crate::material_definition::MaterialConstants { albedo, metallic, roughness, ao, alpha_cutoff } = self;
+        let crate::kinds::material::definition::MaterialConstants { albedo, metallic, roughness, ao, alpha_cutoff } = self;
         key.part(albedo).part(metallic).part(roughness).part(ao).part(alpha_cutoff)
     }
 }

@@ -15,7 +15,7 @@ pub fn check_material(config: &PipelineConfig, main_file: &Path) -> Vec<Diagnost
         Ok(contents) => contents,
         Err(error) => return vec![Diagnostic::new(main_file, error)],
     };
-    let parsed = match crate::material_definition::parse_material_file(main_file, &contents.bytes, &config.source) {
+    let parsed = match crate::kinds::material::definition::parse_material_file(main_file, &contents.bytes, &config.source) {
         Ok(parsed) => parsed,
         Err(diagnostic) => return vec![diagnostic],
     };

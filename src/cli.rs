@@ -7,8 +7,8 @@ use std::process::ExitCode;
 
 use clap::{Parser, Subcommand, ValueEnum};
 
-use crate::bake::{BuildOptions, Progress, Project, ProjectOptions};
 use crate::config::load_pipeline;
+use crate::project::{BuildOptions, Progress, Project, ProjectOptions};
 
 #[derive(Debug, Parser)]
 #[command(name = "cirrus", version, about = "Incremental asset pipeline: billboard-cloud LODs and baked, block-compressed materials")]
@@ -138,7 +138,8 @@ pub fn run(cli: Cli) -> ExitCode {
         }
         Command::Graph { pipeline, asset, format } => graph(pipeline, asset, format),
         Command::Preview { pipeline, asset, views, size, samples, out } => {
-            let settings = crate::lod_preview::PreviewSettings { views: views as usize, size, samples_per_axis: samples };
+            let settings =
+                crate::kinds::billboard_cloud::lod_preview::PreviewSettings { views: views as usize, size, samples_per_axis: samples };
             preview(pipeline, asset, settings, out)
         }
     }
@@ -218,14 +219,19 @@ fn check(pipeline: PathBuf) -> ExitCode {
     }
 }
 
-fn preview(pipeline: PathBuf, asset: String, settings: crate::lod_preview::PreviewSettings, out: Option<PathBuf>) -> ExitCode {
+fn preview(
+    pipeline: PathBuf,
+    asset: String,
+    settings: crate::kinds::billboard_cloud::lod_preview::PreviewSettings,
+    out: Option<PathBuf>,
+) -> ExitCode {
     let config = match load_pipeline_or_report(&pipeline) {
         Ok(config) => config,
         Err(code) => return code,
     };
     let out = out.unwrap_or_else(|| config.output.join(&asset).join("preview"));
     let mut project = Project::open(config, ProjectOptions::default());
-    let options = crate::bake::PreviewOptions { asset, settings, out: out.clone() };
+    let options = crate::project::PreviewOptions { asset, settings, out: out.clone() };
     match project.preview(&options) {
         Ok(metrics) => {
             println!(
@@ -239,7 +245,7 @@ fn preview(pipeline: PathBuf, asset: String, settings: crate::lod_preview::Previ
             println!("wrote {}/contact_sheet.png and metrics.json", crate::diagnostic::display_path(&out));
             ExitCode::SUCCESS
         }
-        Err(error @ (crate::bake::PreviewError::Build(_) | crate::bake::PreviewError::NotBillboard(_))) => {
+        Err(error @ (crate::project::PreviewError::Build(_) | crate::project::PreviewError::NotBillboard(_))) => {
             eprintln!("error: {error}");
             ExitCode::from(EXIT_USAGE)
         }

@@ -12,13 +12,14 @@ use salsa::plumbing::AsId;
 
 use crate::cache::{CacheEntry, CacheKey, CacheKeyBuilder, DiskCache};
 use crate::config::{BlockFormat, Container, EncodeQuality, Settings};
-use crate::container::write_container;
 use crate::diagnostic::Diagnostic;
-use crate::encode::{encode_levels, BlockEncodeSettings, EncodedTexture};
-use crate::material_definition::{parse_material_file, MaterialConstants, MaterialFile};
-use crate::mips::{mip_chain, mip_chain_reusing, MipSettings};
-use crate::preview::preview_png;
-use crate::surface::{has_transparency, pack_surface};
+use crate::kinds::material::channel_packing::pack_surface;
+use crate::kinds::material::definition::{parse_material_file, MaterialConstants, MaterialFile};
+use crate::texture::color::has_transparency;
+use crate::texture::container::write_container;
+use crate::texture::encode::{encode_levels, BlockEncodeSettings, EncodedTexture};
+use crate::texture::mips::{mip_chain, mip_chain_reusing, MipSettings};
+use crate::texture::preview::preview_png;
 use crate::texture::SurfaceKind;
 use crate::texture::{decode_texture, Texture};
 
@@ -226,10 +227,10 @@ pub struct ExecutedFunction {
 pub struct PreviousEncoding {
     pub settings: BlockEncodeSettings,
     pub levels: Arc<Vec<Texture>>,
-    pub mips: Option<Arc<crate::mips::MipReuse>>,
+    pub mips: Option<Arc<crate::texture::mips::MipReuse>>,
     pub encoded: EncodedTexture,
     /// Level 0's squared error per block, for the PSNR.
-    pub block_errors: Arc<crate::quality::BlockErrors>,
+    pub block_errors: Arc<crate::texture::quality::BlockErrors>,
 }
 
 type PreviousEncodings = Mutex<std::collections::HashMap<salsa::Id, PreviousEncoding>>;
@@ -502,7 +503,7 @@ pub fn encoded_surface(db: &dyn Db, key: SurfaceKey) -> Result<Arc<EncodedSurfac
         let settings = BlockEncodeSettings { format, quality, alpha, srgb: surface.is_srgb() };
         let texture = encode_levels(&mips.levels, settings);
         let level0 = &mips.levels[0];
-        let errors = crate::quality::block_errors_reusing(format, &texture.levels[0], level0, surface.channels(), None);
+        let errors = crate::texture::quality::block_errors_reusing(format, &texture.levels[0], level0, surface.channels(), None);
         let psnr_db = errors.psnr(level0.width, level0.height);
         Ok(Arc::new(EncodedSurface { texture, psnr_db, alpha_tested: mips.alpha_tested }))
     })
@@ -779,9 +780,9 @@ pub fn loaded_mesh(db: &dyn Db, asset: BillboardAsset) -> Result<Arc<LoadedMesh>
 }
 
 #[salsa::tracked(returns(copy))]
-pub fn plane_settings(db: &dyn Db, asset: BillboardAsset) -> crate::planes::PlaneSettings {
+pub fn plane_settings(db: &dyn Db, asset: BillboardAsset) -> crate::kinds::billboard_cloud::planes::PlaneSettings {
     let billboard = &asset.settings(db).billboard;
-    crate::planes::PlaneSettings { epsilon: billboard.epsilon, max_planes: billboard.max_planes }
+    crate::kinds::billboard_cloud::planes::PlaneSettings { epsilon: billboard.epsilon, max_planes: billboard.max_planes }
 }
 
 #[salsa::tracked(returns(copy))]
@@ -795,12 +796,17 @@ pub fn planes_cache_key(db: &dyn Db, asset: BillboardAsset) -> CacheKey {
 }
 
 #[salsa::tracked(returns(clone))]
-pub fn billboard_planes(db: &dyn Db, asset: BillboardAsset) -> Result<Arc<crate::planes::PlaneSet>, Diagnostic> {
+pub fn billboard_planes(db: &dyn Db, asset: BillboardAsset) -> Result<Arc<crate::kinds::billboard_cloud::planes::PlaneSet>, Diagnostic> {
     cached_json(db, Stage::Planes, asset, planes_cache_key(db, asset), || {
         let loaded = loaded_mesh(db, asset)?;
         let settings = plane_settings(db, asset);
         timed(db, Stage::Planes, asset, || {
-            Ok(crate::planes::select_planes(&loaded.mesh.positions, &loaded.mesh.triangles, &loaded.mesh.triangle_materials, settings))
+            Ok(crate::kinds::billboard_cloud::planes::select_planes(
+                &loaded.mesh.positions,
+                &loaded.mesh.triangles,
+                &loaded.mesh.triangle_materials,
+                settings,
+            ))
         })
     })
     .map(Arc::new)
@@ -809,10 +815,10 @@ pub fn billboard_planes(db: &dyn Db, asset: BillboardAsset) -> Result<Arc<crate:
 /// The planes' rectangles and their atlas layout.
 #[derive(Debug, PartialEq, serde::Serialize, serde::Deserialize)]
 pub struct BillboardLayout {
-    pub rectangles: Vec<crate::rectangles::PlaneRectangle>,
-    pub layout: crate::layout::Layout,
+    pub rectangles: Vec<crate::kinds::billboard_cloud::rectangles::PlaneRectangle>,
+    pub layout: crate::kinds::billboard_cloud::layout::Layout,
     /// The render stages: each plane's rectangles grouped by the materials they show.
-    pub render_groups: Vec<crate::plane_textures::RenderGroup>,
+    pub render_groups: Vec<crate::kinds::billboard_cloud::render_groups::RenderGroup>,
 }
 
 #[salsa::tracked(returns(clone))]
@@ -837,18 +843,19 @@ fn compute_billboard_layout(db: &dyn Db, asset: BillboardAsset) -> Result<Billbo
     let planes = billboard_planes(db, asset)?;
     let (atlas, density) = atlas_layout_settings(db, asset);
     timed(db, Stage::Layout, asset, || {
-        let mut rectangles = crate::rectangles::plane_rectangles(&loaded.mesh.positions, &loaded.mesh.triangles, &planes);
+        let mut rectangles =
+            crate::kinds::billboard_cloud::rectangles::plane_rectangles(&loaded.mesh.positions, &loaded.mesh.triangles, &planes);
         let solid_materials: Vec<bool> = loaded.mesh.materials.iter().map(|material| !material.cut_out).collect();
-        let crack_filling = crate::rectangles::CrackFillingInput {
+        let crack_filling = crate::kinds::billboard_cloud::rectangles::CrackFillingInput {
             positions: &loaded.mesh.positions,
             triangles: &loaded.mesh.triangles,
             face_materials: &loaded.mesh.triangle_materials,
             solid_materials: &solid_materials,
         };
-        crate::rectangles::add_crack_filling_faces(&crack_filling, &planes, &mut rectangles);
+        crate::kinds::billboard_cloud::rectangles::add_crack_filling_faces(&crack_filling, &planes, &mut rectangles);
         let sizes: Vec<(f32, f32)> = rectangles.iter().map(|rectangle| (rectangle.width, rectangle.height)).collect();
-        let layout = crate::layout::layout_rectangles(&sizes, &atlas, density);
-        let render_groups = crate::plane_textures::render_groups(&loaded.mesh, &rectangles);
+        let layout = crate::kinds::billboard_cloud::layout::layout_rectangles(&sizes, &atlas, density);
+        let render_groups = crate::kinds::billboard_cloud::render_groups::render_groups(&loaded.mesh, &rectangles);
         Ok(BillboardLayout { rectangles, layout, render_groups })
     })
 }
@@ -859,7 +866,9 @@ pub fn lod_files(db: &dyn Db, asset: BillboardAsset) -> Result<Arc<(String, Stri
     let key = CacheKeyBuilder::new("lod", Stage::Lod.version()).part(&layout_cache_key(db, asset).0).finish();
     cached_json(db, Stage::Lod, asset, key, || {
         let layout = billboard_layout(db, asset)?;
-        timed(db, Stage::Lod, asset, || Ok(crate::lod_mesh::lod_mesh(&layout.rectangles, &layout.layout, "billboard_cloud")))
+        timed(db, Stage::Lod, asset, || {
+            Ok(crate::kinds::billboard_cloud::lod_mesh::lod_mesh(&layout.rectangles, &layout.layout, "billboard_cloud"))
+        })
     })
     .map(Arc::new)
 }
@@ -887,7 +896,7 @@ pub fn plane_images(db: &dyn Db, key: PlaneKey) -> Result<Arc<Vec<crate::gpu::Pl
     // and storing them made a full bake 1.0 s slower (3.2 → 4.2 s on ext4), more than rendering
     // every group again after a restart costs (0.8 s wall).
     let planes = billboard_planes(db, asset)?;
-    let rectangles: Vec<(&crate::layout::Placement, &crate::rectangles::PlaneRectangle)> = group
+    let rectangles: Vec<(&crate::packing::Placement, &crate::kinds::billboard_cloud::rectangles::PlaneRectangle)> = group
         .rectangles
         .iter()
         .map(|&rectangle| (&layout.layout.placements[rectangle as usize], &layout.rectangles[rectangle as usize]))
@@ -930,12 +939,12 @@ pub fn plane_images(db: &dyn Db, key: PlaneKey) -> Result<Arc<Vec<crate::gpu::Pl
         let inputs: Vec<crate::gpu::PlaneRenderInput> = rectangles
             .iter()
             .map(|(placement, rectangle)| crate::gpu::PlaneRenderInput {
-                rectangle,
+                frame: rectangle.frame(),
                 epsilon: depth_range,
                 alpha_cutoff,
                 width: placement.width,
                 height: placement.height,
-                batches: crate::plane_textures::plane_batches(&loaded.mesh, &loaded.tangents, rectangle),
+                batches: crate::kinds::billboard_cloud::render_groups::plane_batches(&loaded.mesh, &loaded.tangents, rectangle),
                 materials: &materials,
             })
             .collect();
@@ -964,28 +973,38 @@ fn images_by_rectangle<'a>(layout: &BillboardLayout, images: &'a [Arc<Vec<crate:
 /// The atlas texels that faces cover (part of the atlas stage): unchanged by colour-only
 /// edits, which therefore skip the fill search below.
 #[salsa::tracked(returns(clone))]
-pub fn atlas_coverage(db: &dyn Db, asset: BillboardAsset) -> Result<Arc<crate::atlas::AtlasCoverage>, Diagnostic> {
+pub fn atlas_coverage(db: &dyn Db, asset: BillboardAsset) -> Result<Arc<crate::kinds::billboard_cloud::atlas::AtlasCoverage>, Diagnostic> {
     let layout = billboard_layout(db, asset)?;
     let images = render_group_images(db, asset)?;
-    timed(db, Stage::Atlas, asset, || Ok(Arc::new(crate::atlas::atlas_coverage(&layout.layout, &images_by_rectangle(&layout, &images)))))
+    timed(db, Stage::Atlas, asset, || {
+        Ok(Arc::new(crate::kinds::billboard_cloud::atlas::atlas_coverage(&layout.layout, &images_by_rectangle(&layout, &images))))
+    })
 }
 
 /// Where each atlas texel takes its values from, uncovered ones by the fill search (part of the
 /// atlas stage).
 #[salsa::tracked(returns(clone))]
-pub fn atlas_texel_sources(db: &dyn Db, asset: BillboardAsset) -> Result<Arc<crate::atlas::TexelSources>, Diagnostic> {
+pub fn atlas_texel_sources(
+    db: &dyn Db,
+    asset: BillboardAsset,
+) -> Result<Arc<crate::kinds::billboard_cloud::atlas::TexelSources>, Diagnostic> {
     let coverage = atlas_coverage(db, asset)?;
-    timed(db, Stage::Atlas, asset, || Ok(Arc::new(crate::atlas::texel_sources(&coverage))))
+    timed(db, Stage::Atlas, asset, || Ok(Arc::new(crate::kinds::billboard_cloud::atlas::texel_sources(&coverage))))
 }
 
 #[salsa::tracked(returns(clone))]
-pub fn billboard_atlas(db: &dyn Db, asset: BillboardAsset) -> Result<Arc<crate::atlas::AtlasImages>, Diagnostic> {
+pub fn billboard_atlas(db: &dyn Db, asset: BillboardAsset) -> Result<Arc<crate::kinds::billboard_cloud::atlas::AtlasImages>, Diagnostic> {
     let layout = billboard_layout(db, asset)?;
     let images = render_group_images(db, asset)?;
     let coverage = atlas_coverage(db, asset)?;
     let sources = atlas_texel_sources(db, asset)?;
     timed(db, Stage::Atlas, asset, || {
-        Ok(Arc::new(crate::atlas::composite_atlas(&layout.layout, &images_by_rectangle(&layout, &images), &coverage, &sources)))
+        Ok(Arc::new(crate::kinds::billboard_cloud::atlas::composite_atlas(
+            &layout.layout,
+            &images_by_rectangle(&layout, &images),
+            &coverage,
+            &sources,
+        )))
     })
 }
 
@@ -1059,12 +1078,12 @@ fn encode_atlas_surface(db: &dyn Db, key: AtlasSurfaceKey, image: &Texture) -> R
         };
         let settings = BlockEncodeSettings { format, quality, alpha: alpha_tested, srgb: surface.is_srgb() };
         let previous_blocks = previous.as_ref().filter(|previous| previous.settings == settings);
-        let texture = crate::encode::encode_levels_reusing(
+        let texture = crate::texture::encode::encode_levels_reusing(
             &levels,
             settings,
             previous_blocks.map(|previous| (previous.levels.as_slice(), &previous.encoded)),
         );
-        let block_errors = crate::quality::block_errors_reusing(
+        let block_errors = crate::texture::quality::block_errors_reusing(
             format,
             &texture.levels[0],
             image,

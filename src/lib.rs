@@ -6,42 +6,29 @@
 pub mod config;
 pub mod diagnostic;
 
-// Shared libraries: pure functions over plain data (no salsa, no IO).
+// Shared libraries: pure functions over plain data (no salsa, no IO), named by role.
 pub mod openddl;
 pub mod texture;
 pub mod mesh;
-pub mod mips;
-pub mod encode;
-pub mod quality;
-pub mod container;
-pub mod preview;
+pub mod packing;
 pub mod gpu;
 
-// The Material kind: the .mymaterial file, then channel packing (whose `SurfaceKind` the
-// billboard atlas shares).
-pub mod material_definition;
-pub mod surface;
-
-// The BillboardCloud kind's stages, in pipeline order.
-pub mod planes;
-pub mod rectangles;
-pub mod layout;
-pub mod plane_textures;
-pub mod atlas;
-pub mod lod_mesh;
-pub mod lod_preview;
-
-// The database: salsa inputs and tracked stage functions, and the persistent cache behind them.
+// The machinery, which names no kind: the database, the persistent cache, reading sources,
+// writing artifacts, running jobs on workers, what a build reports, the dependency graph.
 pub mod db;
 pub mod cache;
-
-// The edges and the driver: reading sources, writing artifacts, the build, what it reports.
 pub mod sources;
 pub mod artifacts;
-pub mod bake;
-pub mod check;
 pub mod summary;
 pub mod graph;
+
+// The asset kinds: the one list of kinds and the questions the driver asks them, then one
+// folder per kind.
+pub mod kinds;
+
+// The driver: inputs in, jobs on workers, artifacts out; it names no kind.
+pub mod project;
+pub mod check;
 
 // The shell: the daemon, its protocol, the command line.
 pub mod watch;

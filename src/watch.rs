@@ -14,9 +14,9 @@ use std::time::{Duration, Instant};
 use notify::{EventKind, RecursiveMode};
 use notify_debouncer_full::{new_debouncer, DebounceEventResult};
 
-use crate::bake::{BuildError, BuildOptions, CancelFlag, Project, ProjectOptions, SourceReading};
 use crate::config::{load_pipeline, ConfigError, PipelineConfig};
 use crate::diagnostic::display_path;
+use crate::project::{BuildError, BuildOptions, CancelFlag, Project, ProjectOptions, SourceReading};
 use crate::server::{BatchEvent, FailedEntry, Server, ServerSettings};
 use crate::summary::{AssetStatus, BuildSummary, StageStatus};
 
@@ -409,7 +409,7 @@ fn log_batch(summary: &BuildSummary, changed_files: &[PathBuf], graph: &crate::g
         summary.assets.iter().filter(|asset| asset.status == AssetStatus::Failed).count()
     );
     for file in changed_files {
-        let id = crate::bake::file_node_id(file);
+        let id = crate::project::file_node_id(file);
         let downstream = graph.downstream(&id);
         let stages: Vec<&String> = downstream.iter().filter(|node| node.contains('(')).collect();
         tracing::info!("  {id} changed: invalidates {} stage(s) downstream", stages.len());

@@ -3,8 +3,8 @@
 
 use std::path::{Path, PathBuf};
 
-use cirrus::bake::{BuildOptions, Project, ProjectOptions};
 use cirrus::config::load_pipeline;
+use cirrus::project::{BuildOptions, Project, ProjectOptions};
 
 fn corpus() -> PathBuf {
     let path = Path::new(env!("CARGO_MANIFEST_DIR")).join("../shared/assets");
@@ -155,8 +155,11 @@ fn corpus_billboard_clouds_bake_and_keep_their_silhouettes() {
     assert!(summary.all_ok(), "{}", summary.to_text());
     let mut figures = Vec::new();
     for name in ["oak", "ash", "bush"] {
-        let options =
-            cirrus::bake::PreviewOptions { asset: name.into(), settings: Default::default(), out: format!("baked/{name}/preview").into() };
+        let options = cirrus::project::PreviewOptions {
+            asset: name.into(),
+            settings: Default::default(),
+            out: format!("baked/{name}/preview").into(),
+        };
         let metrics = project.preview(&options).expect("preview renders");
         assert_eq!(metrics.views.len(), 26);
         // The bar of DESIGN §7, at the default ε and 16 samples per pixel.

@@ -2,9 +2,9 @@
 //! uncompressed packed surface (its PNG preview), mip chains, formats and container headers.
 
 use cirrus::config::BlockFormat;
-use cirrus::mips::texture_alpha_coverage;
-use cirrus::quality::{decode_blocks, psnr};
 use cirrus::summary::AssetStatus;
+use cirrus::texture::mips::texture_alpha_coverage;
+use cirrus::texture::quality::{decode_blocks, psnr};
 
 use crate::support::{build, cutout_png, decode_png, ktx2_level, pattern_png, read_ktx2, TempProject};
 
@@ -207,8 +207,8 @@ fn report_json_lists_every_surface_with_its_measured_psnr() {
 #[test]
 fn re_encoding_only_changed_blocks_equals_a_full_encode() {
     use cirrus::config::EncodeQuality;
-    use cirrus::encode::{encode_levels, encode_levels_reusing, BlockEncodeSettings};
-    use cirrus::mips::{mip_chain, MipSettings};
+    use cirrus::texture::encode::{encode_levels, encode_levels_reusing, BlockEncodeSettings};
+    use cirrus::texture::mips::{mip_chain, MipSettings};
     use cirrus::texture::SurfaceKind;
     let before = decode_png(&pattern_png(96, 64, 1));
     let mut pixels = before.pixels.to_vec();
@@ -227,7 +227,7 @@ fn re_encoding_only_changed_blocks_equals_a_full_encode() {
         assert_eq!(reused, encode_levels(&new_levels, settings), "{format:?}: reuse is exact");
         assert_ne!(reused, old, "{format:?}: the edit shows");
         // The PSNR from per-block errors, measured again only where blocks or texels changed.
-        use cirrus::quality::{block_errors_reusing, decode_blocks, psnr};
+        use cirrus::texture::quality::{block_errors_reusing, decode_blocks, psnr};
         let channels = 3;
         let old_errors = block_errors_reusing(format, &old.levels[0], &old_levels[0], channels, None);
         let fresh = block_errors_reusing(format, &reused.levels[0], &new_levels[0], channels, None);
@@ -247,7 +247,7 @@ fn re_encoding_only_changed_blocks_equals_a_full_encode() {
 
 #[test]
 fn refiltering_only_changed_mip_tiles_equals_a_full_chain() {
-    use cirrus::mips::{mip_chain, mip_chain_reusing, MipSettings};
+    use cirrus::texture::mips::{mip_chain, mip_chain_reusing, MipSettings};
     use cirrus::texture::SurfaceKind;
     use cirrus::texture::Texture;
     // 192 × 128: six 64² tiles. Cut-out albedo (coverage preserved), a normal map, plain data.
@@ -302,7 +302,7 @@ fn refiltering_only_changed_mip_tiles_equals_a_full_chain() {
 #[test]
 fn a_level_encodes_each_block_as_that_block_alone_repeated_blocks_included() {
     use cirrus::config::EncodeQuality;
-    use cirrus::encode::{block_bytes, encode_level, BlockEncodeSettings};
+    use cirrus::texture::encode::{block_bytes, encode_level, BlockEncodeSettings};
     use cirrus::texture::Texture;
     // 42 × 26: 11 × 7 blocks, the last column and row padded. Tiles repeat every 3 blocks, so
     // most blocks are duplicates (the encoder encodes each distinct block once).
@@ -341,15 +341,15 @@ fn a_level_encodes_each_block_as_that_block_alone_repeated_blocks_included() {
             BlockFormat::Bc1 => 3,
             _ => 4,
         };
-        let decoded = cirrus::quality::decode_blocks(format, &encoded, width as u32, height as u32);
-        let psnr = cirrus::quality::psnr(&texture, &decoded, channels);
+        let decoded = cirrus::texture::quality::decode_blocks(format, &encoded, width as u32, height as u32);
+        let psnr = cirrus::texture::quality::psnr(&texture, &decoded, channels);
         assert!(psnr > 30.0, "{format:?}: blocks decode to the level: {psnr:.1} dB");
     }
 }
 
 #[test]
 fn alpha_that_passes_the_cutoff_everywhere_is_not_rescaled_down_the_mip_chain() {
-    use cirrus::mips::{mip_chain, MipSettings};
+    use cirrus::texture::mips::{mip_chain, MipSettings};
     use cirrus::texture::SurfaceKind;
     // Coverage is 1 on every level already; scaling alpha toward the cutoff would only make it
     // fragile under filtering.
@@ -368,7 +368,7 @@ fn alpha_that_passes_the_cutoff_everywhere_is_not_rescaled_down_the_mip_chain() 
 
 #[test]
 fn transparent_albedo_texels_keep_their_colour_down_the_mip_chain() {
-    use cirrus::mips::{mip_chain, MipSettings};
+    use cirrus::texture::mips::{mip_chain, MipSettings};
     use cirrus::texture::SurfaceKind;
     use cirrus::texture::Texture;
     // Left half opaque red, right half transparent but filled green (as the atlas fill does).
@@ -387,7 +387,7 @@ fn transparent_albedo_texels_keep_their_colour_down_the_mip_chain() {
 
 #[test]
 fn linear_to_srgb_bytes_round_like_the_formula() {
-    use cirrus::surface::{linear_to_srgb_u8, srgb_u8_to_linear};
+    use cirrus::texture::color::{linear_to_srgb_u8, srgb_u8_to_linear};
     let formula = |linear: f64| {
         let linear = linear.clamp(0.0, 1.0);
         let srgb = if linear <= 0.003_130_8 { linear * 12.92 } else { 1.055 * linear.powf(1.0 / 2.4) - 0.055 };

@@ -63,18 +63,18 @@ fn render_stages_showing(project: &TempProject, material: &str) -> BTreeSet<Stri
     let obj = project.read("assets/tree.obj");
     let libraries = [(Path::new("assets/tree.mtl").to_path_buf(), Some(project.read("assets/tree.mtl")))].into_iter().collect();
     let (mesh, _) = cirrus::mesh::load_mesh(Path::new("assets/tree.obj"), &obj, &libraries, Path::new("assets")).expect("loads");
-    let planes = cirrus::planes::select_planes(
+    let planes = cirrus::kinds::billboard_cloud::planes::select_planes(
         &mesh.positions,
         &mesh.triangles,
         &mesh.triangle_materials,
-        cirrus::planes::PlaneSettings { epsilon: 0.02, max_planes: None },
+        cirrus::kinds::billboard_cloud::planes::PlaneSettings { epsilon: 0.02, max_planes: None },
     );
-    let rectangles = cirrus::rectangles::plane_rectangles(&mesh.positions, &mesh.triangles, &planes);
+    let rectangles = cirrus::kinds::billboard_cloud::rectangles::plane_rectangles(&mesh.positions, &mesh.triangles, &planes);
     let index = mesh.materials.iter().position(|m| m.name == material).expect("material") as u32;
-    cirrus::plane_textures::render_groups(&mesh, &rectangles)
+    cirrus::kinds::billboard_cloud::render_groups::render_groups(&mesh, &rectangles)
         .iter()
         .filter(|group| group.materials.contains(&index))
-        .map(|group| format!("render(tree/{})", cirrus::plane_textures::render_group_label(&mesh, group)))
+        .map(|group| format!("render(tree/{})", cirrus::kinds::billboard_cloud::render_groups::render_group_label(&mesh, group)))
         .collect()
 }
 

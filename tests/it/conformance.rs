@@ -6,9 +6,9 @@
 use std::collections::BTreeSet;
 use std::path::Path;
 
-use cirrus::bake::{Project, ProjectOptions};
 use cirrus::config::load_pipeline;
 use cirrus::graph::NodeKind;
+use cirrus::project::{Project, ProjectOptions};
 use cirrus::summary::{AssetStatus, StageStatus};
 
 use crate::support::{build, TempProject};

@@ -170,7 +170,7 @@ fn fuzz_openddl_material_files() {
         "\u{feff}",
     ];
     let executions = fuzz("openddl", seeds, &tokens, |bytes| {
-        cirrus::material_definition::parse_material_file(Path::new("assets/m.mymaterial"), bytes, Path::new("assets")).is_ok()
+        cirrus::kinds::material::definition::parse_material_file(Path::new("assets/m.mymaterial"), bytes, Path::new("assets")).is_ok()
     });
     assert!(executions > 0);
 }

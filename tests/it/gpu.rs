@@ -4,7 +4,7 @@
 use std::sync::Arc;
 
 use cirrus::gpu::{gpu, PlaneRenderInput, RenderMaterial, RenderVertex};
-use cirrus::rectangles::PlaneRectangle;
+use cirrus::kinds::billboard_cloud::rectangles::PlaneRectangle;
 use cirrus::texture::Texture;
 
 fn vertex(position: [f32; 3], uv: [f32; 2]) -> RenderVertex {
@@ -52,7 +52,7 @@ fn a_plane_render_covers_its_faces_cuts_alpha_and_encodes_normal_and_height() {
     };
     let materials = [material];
     let input = PlaneRenderInput {
-        rectangle: &rectangle,
+        frame: rectangle.frame(),
         epsilon: 0.1,
         alpha_cutoff: 0.5,
         width: 64,
@@ -77,7 +77,7 @@ fn a_plane_render_covers_its_faces_cuts_alpha_and_encodes_normal_and_height() {
     // Stacked in one submission under a wider rectangle with another camera, each rectangle
     // gets exactly the images it gets alone.
     let wide = PlaneRectangle { origin: [-0.5, -0.25, 0.0], width: 3.0, height: 2.0, ..rectangle.clone() };
-    let second = PlaneRenderInput { rectangle: &wide, width: 96, height: 64, ..input.clone() };
+    let second = PlaneRenderInput { frame: wide.frame(), width: 96, height: 64, ..input.clone() };
     let stacked = gpu.render_rectangles(&[second.clone(), input.clone()]).expect("renders");
     assert_eq!(stacked.len(), 2);
     assert_eq!(stacked[1], images, "the first rectangle, second in the stack");
@@ -87,7 +87,7 @@ fn a_plane_render_covers_its_faces_cuts_alpha_and_encodes_normal_and_height() {
 
 #[test]
 fn a_resolved_pixel_is_in_the_silhouette_when_half_its_samples_are_covered() {
-    use cirrus::lod_preview::{resolve_samples, silhouette_iou};
+    use cirrus::kinds::billboard_cloud::lod_preview::{resolve_samples, silhouette_iou};
     // Two by two pixels of 4 × 4 samples: white where covered, black background. Covered samples
     // per pixel: 16, 8, 7, 0.
     let covered_per_pixel = [16, 8, 7, 0];
@@ -114,7 +114,7 @@ fn a_resolved_pixel_is_in_the_silhouette_when_half_its_samples_are_covered() {
 /// (70 % opaque) that spans 48 pixels of a 64-pixel view: detail finer than a pixel, as foliage
 /// is at preview sizes.
 fn speckled_quad(offset: f32) -> cirrus::gpu::ViewMesh {
-    use cirrus::mips::{mip_chain, MipSettings};
+    use cirrus::texture::mips::{mip_chain, MipSettings};
     let mut state = 12345u32;
     let mut pixels = Vec::new();
     for _ in 0..256 * 256 {
@@ -146,7 +146,7 @@ fn speckled_quad(offset: f32) -> cirrus::gpu::ViewMesh {
 
 #[test]
 fn sixteen_samples_per_pixel_keep_the_silhouette_iou_from_measuring_aliasing() {
-    use cirrus::lod_preview::{preview, PreviewSettings};
+    use cirrus::kinds::billboard_cloud::lod_preview::{preview, PreviewSettings};
     let gpu = gpu().expect("a GPU adapter (install mesa-vulkan-drivers for the software one)");
     // The same cut-out moved by a quarter pixel: a LOD could hardly be closer.
     let quarter_pixel = 0.25 * 2.0 / 64.0;

@@ -5,9 +5,9 @@
 use std::collections::BTreeSet;
 use std::path::Path;
 
-use cirrus::bake::{Project, ProjectOptions};
 use cirrus::config::load_pipeline;
 use cirrus::graph::{Graph, NodeKind};
+use cirrus::project::{Project, ProjectOptions};
 use expect_test::expect;
 
 use crate::support::{build, TempProject};

@@ -2,9 +2,9 @@
 //! without overlaps, with padding, block alignment and the size rules.
 
 use cirrus::config::AtlasSettings;
-use cirrus::layout::{layout_rectangles, Layout};
-use cirrus::planes::{select_planes, PlaneSettings};
-use cirrus::rectangles::{convex_hull, minimum_area_rectangle, plane_rectangles};
+use cirrus::kinds::billboard_cloud::layout::{layout_rectangles, Layout};
+use cirrus::kinds::billboard_cloud::planes::{select_planes, PlaneSettings};
+use cirrus::kinds::billboard_cloud::rectangles::{convex_hull, minimum_area_rectangle, plane_rectangles};
 use glam::{Vec2, Vec3};
 
 #[test]
@@ -91,7 +91,7 @@ fn layouts_have_no_overlaps_keep_padding_and_scale_density_at_max_size() {
 
 #[test]
 fn lod_obj_loads_back_with_every_quad_inside_its_atlas_placement() {
-    use cirrus::lod_mesh::lod_mesh;
+    use cirrus::kinds::billboard_cloud::lod_mesh::lod_mesh;
     let positions: Vec<[f32; 3]> = (0..8).map(|i| [(i & 1) as f32 * 2.0, ((i >> 1) & 1) as f32, ((i >> 2) & 1) as f32 * 3.0]).collect();
     let quads = [[0u32, 1, 3, 2], [4, 6, 7, 5], [0, 4, 5, 1], [2, 3, 7, 6], [0, 2, 6, 4], [1, 5, 7, 3]];
     let triangles: Vec<[u32; 3]> = quads.iter().flat_map(|q| [[q[0], q[1], q[2]], [q[0], q[2], q[3]]]).collect();

@@ -3,7 +3,7 @@
 
 use std::path::Path;
 
-use cirrus::material_definition::parse_material_file;
+use cirrus::kinds::material::definition::parse_material_file;
 use cirrus::openddl::{self, StructureBody, Value};
 use cirrus::texture::TextureSlot;
 use expect_test::expect;

@@ -1,7 +1,7 @@
 //! Plane selection: every face assigned once and within ε of its plane (unless capped),
 //! coplanar faces share a plane, the cap holds, and the result is deterministic.
 
-use cirrus::planes::{select_planes, PlaneSet, PlaneSettings};
+use cirrus::kinds::billboard_cloud::planes::{select_planes, PlaneSet, PlaneSettings};
 
 fn settings(epsilon: f32) -> PlaneSettings {
     PlaneSettings { epsilon, max_planes: None }
@@ -130,7 +130,7 @@ fn every_face_ends_on_its_nearest_plane() {
     // plane is displaced by its distance in views at an angle to the plane.
     let (positions, triangles) = soup(600);
     let set = select_planes(&positions, &triangles, &[], settings(0.05));
-    let distance = |face: u32, plane: &cirrus::planes::Plane| {
+    let distance = |face: u32, plane: &cirrus::kinds::billboard_cloud::planes::Plane| {
         let normal = glam::Vec3::from(plane.normal);
         triangles[face as usize]
             .iter()

@@ -3,8 +3,8 @@
 
 use std::path::{Path, PathBuf};
 
-use cirrus::bake::{BuildOptions, Project, ProjectOptions};
 use cirrus::config::load_pipeline;
+use cirrus::project::{BuildOptions, Project, ProjectOptions};
 use cirrus::summary::BuildSummary;
 use cirrus::texture::Texture;
 
@@ -113,7 +113,7 @@ pub struct Ktx2 {
 }
 
 pub fn read_ktx2(bytes: &[u8]) -> Ktx2 {
-    assert_eq!(&bytes[..12], &cirrus::container::KTX2_IDENTIFIER, "KTX2 identifier");
+    assert_eq!(&bytes[..12], &cirrus::texture::container::KTX2_IDENTIFIER, "KTX2 identifier");
     let u32_at = |offset: usize| u32::from_le_bytes(bytes[offset..offset + 4].try_into().unwrap());
     let u64_at = |offset: usize| u64::from_le_bytes(bytes[offset..offset + 8].try_into().unwrap());
     let level_count = u32_at(40).max(1) as usize;

@@ -22,7 +22,7 @@ use crate::db::{
     SurfaceKey,
 };
 use crate::diagnostic::{display_path, Diagnostic};
-use crate::material_definition::MaterialFile;
+use crate::kinds::material::definition::MaterialFile;
 use crate::sources::{read_source, rule_matches};
 use crate::summary::{
     ArtifactSummary, AssetStatus, AssetSummary, BuildSummary, ChangedArtifact, ErrorSummary, MaterialReport, MaterialReportEntry,
@@ -657,7 +657,7 @@ impl Project {
         for (index, group) in layout.render_groups.iter().enumerate() {
             let index = index as u32;
             let key = *self.plane_keys.entry((config.name.clone(), index)).or_insert_with(|| PlaneKey::new(&self.db, input, index));
-            let label = crate::plane_textures::render_group_label(&loaded.mesh, group);
+            let label = crate::kinds::billboard_cloud::render_groups::render_group_label(&loaded.mesh, group);
             self.labels.insert(key.as_id(), format!("{}/{label}", config.name));
             plan.plane_keys.push(key);
         }
@@ -798,8 +798,11 @@ impl Project {
         let mut report_bytes = serde_json::to_vec_pretty(&report).expect("reports serialise");
         report_bytes.push(b'\n');
         files.push(("report.json".to_string(), report_bytes));
-        let render_labels =
-            layout.render_groups.iter().map(|group| crate::plane_textures::render_group_label(&loaded.mesh, group)).collect();
+        let render_labels = layout
+            .render_groups
+            .iter()
+            .map(|group| crate::kinds::billboard_cloud::render_groups::render_group_label(&loaded.mesh, group))
+            .collect();
         Ok(BillboardFiles { files, render_labels })
     }
 
@@ -1069,7 +1072,7 @@ pub fn file_node_id(path: &Path) -> String {
 #[derive(Clone, Debug)]
 pub struct PreviewOptions {
     pub asset: String,
-    pub settings: crate::lod_preview::PreviewSettings,
+    pub settings: crate::kinds::billboard_cloud::lod_preview::PreviewSettings,
     /// Where `contact_sheet.png` and `metrics.json` go (project-relative or absolute).
     pub out: PathBuf,
 }
@@ -1092,7 +1095,10 @@ pub enum PreviewError {
 
 impl Project {
     /// Bakes `asset` if needed, then renders it and its source from the view directions.
-    pub fn preview(&mut self, options: &PreviewOptions) -> Result<crate::lod_preview::PreviewMetrics, PreviewError> {
+    pub fn preview(
+        &mut self,
+        options: &PreviewOptions,
+    ) -> Result<crate::kinds::billboard_cloud::lod_preview::PreviewMetrics, PreviewError> {
         let summary = self.build(&BuildOptions { only_assets: vec![options.asset.clone()], ..Default::default() }, &|_| {})?;
         let asset = &summary.assets[0];
         if asset.kind != "BillboardCloud" {
@@ -1116,7 +1122,7 @@ impl Project {
         let center = 0.5 * (min + max);
         let radius = positions.iter().map(|&p| glam::Vec3::from(p).distance(center)).fold(0.0, f32::max);
         let gpu = crate::gpu::gpu()?;
-        let preview = crate::lod_preview::preview(gpu, &source, &lod, center.to_array(), radius, options.settings)?;
+        let preview = crate::kinds::billboard_cloud::lod_preview::preview(gpu, &source, &lod, center.to_array(), radius, options.settings)?;
         let out = self.config.root.join(&options.out);
         let mut metrics = serde_json::to_vec_pretty(&preview.metrics).expect("metrics serialise");
         metrics.push(b'\n');
@@ -1142,7 +1148,7 @@ impl Project {
                 };
                 // The reference keeps alpha-tested coverage at every distance, as the bake does.
                 let alpha_cutoff = matches!(slot, TextureSlot::Albedo | TextureSlot::Opacity).then_some(cutoff);
-                Ok(Some(Arc::new(crate::mips::mip_chain(&texture, crate::mips::MipSettings { kind, alpha_cutoff }))))
+                Ok(Some(Arc::new(crate::texture::mips::mip_chain(&texture, crate::texture::mips::MipSettings { kind, alpha_cutoff }))))
             };
             materials.push(crate::gpu::ViewMaterial {
                 albedo: levels(TextureSlot::Albedo, SurfaceKind::Albedo)?,
@@ -1153,7 +1159,7 @@ impl Project {
                 alpha_cutoff: cutoff,
             });
         }
-        let all_faces = crate::rectangles::PlaneRectangle {
+        let all_faces = crate::kinds::billboard_cloud::rectangles::PlaneRectangle {
             plane: 0,
             faces: (0..loaded.mesh.triangles.len() as u32).collect(),
             also_drawn: Vec::new(),
@@ -1164,7 +1170,10 @@ impl Project {
             width: 0.0,
             height: 0.0,
         };
-        Ok(crate::gpu::ViewMesh { batches: crate::plane_textures::plane_batches(&loaded.mesh, &loaded.tangents, &all_faces), materials })
+        Ok(crate::gpu::ViewMesh {
+            batches: crate::kinds::billboard_cloud::render_groups::plane_batches(&loaded.mesh, &loaded.tangents, &all_faces),
+            materials,
+        })
     }
 }
 
@@ -1299,7 +1308,7 @@ impl Project {
         let mut report_sources = vec![mesh.clone(), planes.clone(), layout.clone(), atlas.clone()];
         if let (Ok(loaded), Ok(plane_layout)) = (crate::db::loaded_mesh(db, input), billboard_layout(db, input)) {
             for group in &plane_layout.render_groups {
-                let label = crate::plane_textures::render_group_label(&loaded.mesh, group);
+                let label = crate::kinds::billboard_cloud::render_groups::render_group_label(&loaded.mesh, group);
                 let render = stage(graph, &self.history, name, Stage::Render, &format!("{name}/{label}"));
                 for reader in [&mesh, &planes, &layout] {
                     graph.edge(reader, &render);

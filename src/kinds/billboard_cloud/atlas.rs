@@ -5,7 +5,7 @@
 use rayon::prelude::*;
 
 use crate::gpu::PlaneImages;
-use crate::layout::Layout;
+use crate::kinds::billboard_cloud::layout::Layout;
 use crate::texture::Texture;
 
 /// The four atlas surfaces of a billboard cloud, before compression.

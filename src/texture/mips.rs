@@ -4,7 +4,7 @@
 
 use rayon::prelude::*;
 
-use crate::surface::{decode_normal, encode_normal, linear_to_srgb_u8, normalize_tangent_normal, srgb_u8_to_linear, unorm_u8};
+use crate::texture::color::{decode_normal, encode_normal, linear_to_srgb_u8, normalize_tangent_normal, srgb_u8_to_linear, unorm_u8};
 use crate::texture::SurfaceKind;
 use crate::texture::Texture;
 

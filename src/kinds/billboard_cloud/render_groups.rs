@@ -7,12 +7,12 @@ use std::collections::BTreeMap;
 use std::path::PathBuf;
 
 use crate::gpu::RenderVertex;
+use crate::kinds::billboard_cloud::rectangles::PlaneRectangle;
 use crate::mesh::Mesh;
-use crate::rectangles::PlaneRectangle;
 
 /// The materials a rectangle's faces use, in index order.
 pub fn plane_materials(mesh: &Mesh, plane: &PlaneRectangle) -> Vec<u32> {
-    crate::planes::materials_of_faces(&plane.faces, &mesh.triangle_materials)
+    crate::kinds::billboard_cloud::planes::materials_of_faces(&plane.faces, &mesh.triangle_materials)
 }
 
 /// One render stage: the rectangles of one plane whose faces use the same set of materials, so

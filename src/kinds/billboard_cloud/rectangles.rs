@@ -8,7 +8,7 @@ use rayon::prelude::*;
 
 use glam::{Vec2, Vec3};
 
-use crate::planes::PlaneSet;
+use crate::kinds::billboard_cloud::planes::PlaneSet;
 
 /// A quad on a plane: `origin + x·x_axis + y·y_axis` for x ∈ [0, width], y ∈ [0, height],
 /// `x_axis × y_axis = normal`, holding `faces` (of plane `plane`).
@@ -95,7 +95,7 @@ pub fn add_crack_filling_faces(input: &CrackFillingInput, planes: &PlaneSet, rec
     let mut materials_of_rectangle: Vec<Vec<u32>> = Vec::with_capacity(rectangles.len());
     for (index, rectangle) in rectangles.iter().enumerate() {
         rectangles_of_plane[rectangle.plane as usize].push(index);
-        materials_of_rectangle.push(crate::planes::materials_of_faces(&rectangle.faces, input.face_materials));
+        materials_of_rectangle.push(crate::kinds::billboard_cloud::planes::materials_of_faces(&rectangle.faces, input.face_materials));
     }
     let solid_faces: Vec<u32> = (0..input.triangles.len() as u32)
         .filter(|&face| input.solid_materials.get(input.face_materials[face as usize] as usize).copied().unwrap_or(false))
@@ -257,4 +257,18 @@ pub fn minimum_area_rectangle(hull: &[Vec2]) -> (Vec2, Vec2, Vec2) {
             area(a).total_cmp(&area(b))
         })
         .unwrap_or_else(|| frame(Vec2::X))
+}
+
+impl PlaneRectangle {
+    /// The rectangle's frame, as the plane renderer takes it.
+    pub fn frame(&self) -> crate::gpu::RectangleFrame {
+        crate::gpu::RectangleFrame {
+            origin: self.origin,
+            x_axis: self.x_axis,
+            y_axis: self.y_axis,
+            normal: self.normal,
+            width: self.width,
+            height: self.height,
+        }
+    }
 }

@@ -4,7 +4,7 @@
 use rayon::prelude::*;
 
 use crate::config::BlockFormat;
-use crate::encode::block_bytes;
+use crate::texture::encode::block_bytes;
 use crate::texture::Texture;
 
 /// PSNR reported for a lossless result (the true value is infinite).

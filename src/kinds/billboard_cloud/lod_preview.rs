@@ -152,14 +152,14 @@ pub fn resolve_samples(samples: &[u8], size: u32, samples_per_axis: u32) -> Reso
                 let row = &samples[sample_y * sample_row..(sample_y + 1) * sample_row];
                 for sample in row[x * per_axis * 4..(x + 1) * per_axis * 4].chunks_exact(4) {
                     for (sum, &value) in linear.iter_mut().zip(sample) {
-                        *sum += crate::surface::srgb_u8_to_linear(value);
+                        *sum += crate::texture::color::srgb_u8_to_linear(value);
                     }
                     count += (sample[3] > 0) as u16;
                 }
             }
             let scale = 1.0 / (per_axis * per_axis) as f32;
             for (channel, sum) in linear.iter().enumerate() {
-                rgba_row[x * 4 + channel] = crate::surface::linear_to_srgb_u8(sum * scale);
+                rgba_row[x * 4 + channel] = crate::texture::color::linear_to_srgb_u8(sum * scale);
             }
             rgba_row[x * 4 + 3] = if count > 0 { 255 } else { 0 };
             covered_row[x] = count;
@@ -210,14 +210,14 @@ pub fn lod_view_mesh(files: &LodFiles) -> Result<ViewMesh, Diagnostic> {
     let folder = obj_path.parent().map(PathBuf::from).unwrap_or_default();
     let (mesh, _) = crate::mesh::load_mesh(obj_path, obj_bytes, &BTreeMap::new(), &folder)?;
     let decode = |(path, bytes): &(PathBuf, Vec<u8>)| -> Result<Vec<Texture>, Diagnostic> {
-        let ktx2 = crate::container::read_ktx2(bytes).map_err(|error| Diagnostic::new(path, error))?;
+        let ktx2 = crate::texture::container::read_ktx2(bytes).map_err(|error| Diagnostic::new(path, error))?;
         Ok(ktx2
             .levels
             .iter()
             .enumerate()
             .map(|(level, blocks)| {
                 let (width, height) = ((ktx2.width >> level).max(1), (ktx2.height >> level).max(1));
-                crate::quality::decode_blocks(ktx2.format, blocks, width, height)
+                crate::texture::quality::decode_blocks(ktx2.format, blocks, width, height)
             })
             .collect())
     };
@@ -308,5 +308,5 @@ fn contact_sheet(pairs: &[(Vec<u8>, Vec<u8>)], size: u32) -> Vec<u8> {
             }
         }
     }
-    crate::preview::preview_png(&crate::texture::Texture::new(width as u32, height as u32, pixels))
+    crate::texture::preview::preview_png(&crate::texture::Texture::new(width as u32, height as u32, pixels))
 }

@@ -3,6 +3,13 @@
 //! GIF bytes to RGBA8 pixels, with size and memory limits checked from the header, so that a
 //! decompression bomb is an error, not an out-of-memory crash.
 
+pub mod color;
+pub mod mips;
+pub mod encode;
+pub mod quality;
+pub mod container;
+pub mod preview;
+
 use std::fmt;
 use std::io::Cursor;
 use std::path::Path;

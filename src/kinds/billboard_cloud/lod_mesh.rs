@@ -4,8 +4,8 @@
 
 use std::fmt::Write;
 
-use crate::layout::Layout;
-use crate::rectangles::PlaneRectangle;
+use crate::kinds::billboard_cloud::layout::Layout;
+use crate::kinds::billboard_cloud::rectangles::PlaneRectangle;
 
 /// The OBJ and MTL text of the billboard cloud; `material` names the atlas material.
 pub fn lod_mesh(rectangles: &[PlaneRectangle], layout: &Layout, material: &str) -> (String, String) {

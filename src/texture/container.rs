@@ -2,7 +2,7 @@
 //! optional zstd supercompression), DDS (DX10 header) or PVR v3.
 
 use crate::config::{BlockFormat, Container};
-use crate::encode::{block_bytes, EncodedTexture};
+use crate::texture::encode::{block_bytes, EncodedTexture};
 
 /// Writes `texture` in `container`; `zstd_level` applies to KTX2 only.
 pub fn write_container(texture: &EncodedTexture, container: Container, zstd_level: Option<i32>) -> Vec<u8> {

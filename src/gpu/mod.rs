@@ -1,0 +1,369 @@
+//! The GPU: the only holder of the wgpu device (created once, lazily, so material-only builds
+//! need no adapter), the pipelines and the helpers every renderer shares (uploads, buffers,
+//! read-back). One file per renderer: `plane_render` (billboard planes), `view_render`
+//! (preview views), `window` (the viewer's window surfaces).
+
+mod plane_render;
+mod view_render;
+mod window;
+
+pub use plane_render::{PlaneImages, PlaneRenderInput, RectangleFrame, RenderMaterial};
+pub use view_render::{ViewMaterial, ViewMesh};
+pub use window::WindowSurface;
+
+use std::collections::HashMap;
+use std::sync::{Arc, Mutex, OnceLock};
+
+use bytemuck::{Pod, Zeroable};
+
+use crate::texture::mips::{mip_chain, MipSettings};
+use crate::texture::SurfaceKind;
+use crate::texture::Texture;
+
+#[derive(Clone, Debug, PartialEq, Eq, thiserror::Error)]
+pub enum GpuError {
+    #[error("no GPU adapter: wgpu found no Vulkan, Metal, DX12 or GL device ({0}). Billboard clouds render their textures on the GPU; on Linux without a GPU install a software Vulkan driver, e.g. `apt-get install mesa-vulkan-drivers` (llvmpipe)")]
+    NoAdapter(String),
+    #[error("the GPU device could not be created: {0}")]
+    Device(String),
+    #[error("GPU rendering failed: {0}")]
+    Render(String),
+}
+
+/// The device and everything created once for it.
+pub struct Gpu {
+    instance: wgpu::Instance,
+    adapter: wgpu::Adapter,
+    device: wgpu::Device,
+    queue: wgpu::Queue,
+    pub adapter_name: String,
+    /// The largest render target side the device allows.
+    max_texture_size: u32,
+    pipeline: wgpu::RenderPipeline,
+    frame_layout: wgpu::BindGroupLayout,
+    material_layout: wgpu::BindGroupLayout,
+    sampler: wgpu::Sampler,
+    white: wgpu::TextureView,
+    /// Uploaded source textures by content hash and colour space.
+    /// A cell per key, so that threads wanting the same new texture upload it once.
+    uploads: Mutex<HashMap<UploadKey, Arc<std::sync::OnceLock<Arc<wgpu::TextureView>>>>>,
+    view_pipeline: wgpu::RenderPipeline,
+    view_material_layout: wgpu::BindGroupLayout,
+    /// Material bind groups by content (constants, texture hashes, cutoff).
+    material_groups: Mutex<HashMap<blake3::Hash, Arc<wgpu::BindGroup>>>,
+}
+
+/// Mesa's Vulkan drivers probe for a Wayland display when the GPU starts, and libwayland prints
+/// "error: XDG_RUNTIME_DIR is invalid or not set in the environment." when that variable is
+/// unset (a CI job, an SSH session, a service): users read "error" and think the bake failed.
+/// Without `XDG_RUNTIME_DIR` and `WAYLAND_DISPLAY` there is no compositor to reach anyway, so the
+/// variable is pointed at a folder that does not exist, and the probe fails quietly.
+///
+/// Call it first in `main`, while the process has one thread: setting the environment while
+/// other threads may read it is a data race in the C library.
+pub fn quiet_wayland_probe() {
+    if std::env::var_os("XDG_RUNTIME_DIR").is_none() && std::env::var_os("WAYLAND_DISPLAY").is_none() {
+        std::env::set_var("XDG_RUNTIME_DIR", std::env::temp_dir().join("cirrus-no-wayland-session"));
+    }
+}
+
+static GPU: OnceLock<Result<Gpu, GpuError>> = OnceLock::new();
+
+/// The shared GPU, created on first use.
+pub fn gpu() -> Result<&'static Gpu, GpuError> {
+    GPU.get_or_init(|| pollster::block_on(Gpu::new())).as_ref().map_err(Clone::clone)
+}
+
+/// An uploaded texture: content hash, sRGB, and the alpha cutoff bits or level count.
+type UploadKey = (blake3::Hash, bool, u32);
+
+const ALBEDO_FORMAT: wgpu::TextureFormat = wgpu::TextureFormat::Rgba8UnormSrgb;
+const DATA_FORMAT: wgpu::TextureFormat = wgpu::TextureFormat::Rgba8Unorm;
+const DEPTH_FORMAT: wgpu::TextureFormat = wgpu::TextureFormat::Depth32Float;
+/// Texels of one stack of plane rectangles (about 40 MB of targets and as much to read back).
+const MAX_STACK_TEXELS: u64 = 2048 * 1024;
+
+/// One vertex of a plane's faces.
+#[repr(C)]
+#[derive(Clone, Copy, Debug, PartialEq, Pod, Zeroable)]
+pub struct RenderVertex {
+    pub position: [f32; 3],
+    pub normal: [f32; 3],
+    pub uv: [f32; 2],
+    pub tangent: [f32; 4],
+}
+
+impl Gpu {
+    async fn new() -> Result<Gpu, GpuError> {
+        let instance = wgpu::Instance::new(wgpu::InstanceDescriptor::new_without_display_handle());
+        let adapter = instance
+            .request_adapter(&wgpu::RequestAdapterOptions {
+                power_preference: wgpu::PowerPreference::HighPerformance,
+                ..Default::default()
+            })
+            .await
+            .map_err(|error| GpuError::NoAdapter(error.to_string()))?;
+        let adapter_name = format!("{} ({:?})", adapter.get_info().name, adapter.get_info().backend);
+        let (device, queue) = adapter
+            .request_device(&wgpu::DeviceDescriptor {
+                label: Some("cirrus"),
+                required_features: wgpu::Features::empty(),
+                required_limits: wgpu::Limits::downlevel_defaults().using_resolution(adapter.limits()),
+                ..Default::default()
+            })
+            .await
+            .map_err(|error| GpuError::Device(error.to_string()))?;
+        let shader = device.create_shader_module(wgpu::ShaderModuleDescriptor {
+            label: Some("plane.wgsl"),
+            source: wgpu::ShaderSource::Wgsl(include_str!("../../shaders/plane.wgsl").into()),
+        });
+        // Per-draw constants (frames, cameras, materials) live in read-only storage buffers, not
+        // uniform buffers: lavapipe inlines uniform-buffer contents into the shader and
+        // JIT-compiles a new variant on every rebind, and keeps them all. On the oak that was
+        // 4,220 compiles, about 1.6 MB kept per render group and 2.4 GB peak.
+        let constants_entry = |binding| wgpu::BindGroupLayoutEntry {
+            binding,
+            visibility: wgpu::ShaderStages::VERTEX_FRAGMENT,
+            ty: wgpu::BindingType::Buffer {
+                ty: wgpu::BufferBindingType::Storage { read_only: true },
+                has_dynamic_offset: false,
+                min_binding_size: None,
+            },
+            count: None,
+        };
+        let frame_layout =
+            device.create_bind_group_layout(&wgpu::BindGroupLayoutDescriptor { label: Some("frame"), entries: &[constants_entry(0)] });
+        let mut material_entries = vec![
+            constants_entry(0),
+            wgpu::BindGroupLayoutEntry {
+                binding: 1,
+                visibility: wgpu::ShaderStages::FRAGMENT,
+                ty: wgpu::BindingType::Sampler(wgpu::SamplerBindingType::Filtering),
+                count: None,
+            },
+        ];
+        for binding in 2..8 {
+            material_entries.push(wgpu::BindGroupLayoutEntry {
+                binding,
+                visibility: wgpu::ShaderStages::FRAGMENT,
+                ty: wgpu::BindingType::Texture {
+                    sample_type: wgpu::TextureSampleType::Float { filterable: true },
+                    view_dimension: wgpu::TextureViewDimension::D2,
+                    multisampled: false,
+                },
+                count: None,
+            });
+        }
+        let material_layout =
+            device.create_bind_group_layout(&wgpu::BindGroupLayoutDescriptor { label: Some("material"), entries: &material_entries });
+        let layout = device.create_pipeline_layout(&wgpu::PipelineLayoutDescriptor {
+            label: Some("plane"),
+            bind_group_layouts: &[Some(&frame_layout), Some(&material_layout)],
+            ..Default::default()
+        });
+        let targets: Vec<Option<wgpu::ColorTargetState>> =
+            [ALBEDO_FORMAT, DATA_FORMAT, DATA_FORMAT, DATA_FORMAT].iter().map(|&format| Some(format.into())).collect();
+        let pipeline = mesh_pipeline(&device, "plane", &layout, &shader, &targets);
+        let sampler = device.create_sampler(&wgpu::SamplerDescriptor {
+            label: Some("trilinear repeat"),
+            address_mode_u: wgpu::AddressMode::Repeat,
+            address_mode_v: wgpu::AddressMode::Repeat,
+            mag_filter: wgpu::FilterMode::Linear,
+            min_filter: wgpu::FilterMode::Linear,
+            mipmap_filter: wgpu::MipmapFilterMode::Linear,
+            ..Default::default()
+        });
+        let white = upload(&device, &queue, &[Texture::constant(1, 1, [255; 4])], DATA_FORMAT);
+        let view_shader = device.create_shader_module(wgpu::ShaderModuleDescriptor {
+            label: Some("view.wgsl"),
+            source: wgpu::ShaderSource::Wgsl(include_str!("../../shaders/view.wgsl").into()),
+        });
+        let view_material_layout = device
+            .create_bind_group_layout(&wgpu::BindGroupLayoutDescriptor { label: Some("view material"), entries: &material_entries[..5] });
+        let view_layout = device.create_pipeline_layout(&wgpu::PipelineLayoutDescriptor {
+            label: Some("view"),
+            bind_group_layouts: &[Some(&frame_layout), Some(&view_material_layout)],
+            ..Default::default()
+        });
+        let view_pipeline = mesh_pipeline(&device, "view", &view_layout, &view_shader, &[Some(ALBEDO_FORMAT.into())]);
+        Ok(Gpu {
+            instance,
+            adapter,
+            max_texture_size: device.limits().max_texture_dimension_2d,
+            device,
+            queue,
+            adapter_name,
+            pipeline,
+            frame_layout,
+            material_layout,
+            sampler,
+            white,
+            uploads: Mutex::new(HashMap::new()),
+            view_pipeline,
+            view_material_layout,
+            material_groups: Mutex::new(HashMap::new()),
+        })
+    }
+
+    /// The upload cached under `key`, made by `make` by the first thread that asks for it; other
+    /// threads asking meanwhile wait for it instead of uploading it again.
+    fn cached_upload(&self, key: UploadKey, make: impl FnOnce() -> wgpu::TextureView) -> Arc<wgpu::TextureView> {
+        let cell = self.uploads.lock().expect("upload cache").entry(key).or_default().clone();
+        cell.get_or_init(|| Arc::new(make())).clone()
+    }
+
+    /// Submits `encoder` after copying `targets` out, and returns their RGBA8 pixels.
+    fn read_back(
+        &self,
+        mut encoder: wgpu::CommandEncoder,
+        targets: &[wgpu::Texture],
+        width: u32,
+        height: u32,
+    ) -> Result<Vec<Vec<u8>>, GpuError> {
+        let padded_row = (width * 4).next_multiple_of(wgpu::COPY_BYTES_PER_ROW_ALIGNMENT);
+        let readbacks: Vec<wgpu::Buffer> = targets
+            .iter()
+            .map(|texture| {
+                let buffer = self.device.create_buffer(&wgpu::BufferDescriptor {
+                    label: Some("readback"),
+                    size: (padded_row * height) as u64,
+                    usage: wgpu::BufferUsages::COPY_DST | wgpu::BufferUsages::MAP_READ,
+                    mapped_at_creation: false,
+                });
+                encoder.copy_texture_to_buffer(
+                    texture.as_image_copy(),
+                    wgpu::TexelCopyBufferInfo {
+                        buffer: &buffer,
+                        layout: wgpu::TexelCopyBufferLayout { offset: 0, bytes_per_row: Some(padded_row), rows_per_image: Some(height) },
+                    },
+                    wgpu::Extent3d { width, height, depth_or_array_layers: 1 },
+                );
+                buffer
+            })
+            .collect();
+        let submission = self.queue.submit(Some(encoder.finish()));
+        for buffer in &readbacks {
+            buffer.slice(..).map_async(wgpu::MapMode::Read, |_| {});
+        }
+        // Wait for this submission only: other threads' renders stay in flight meanwhile.
+        self.device
+            .poll(wgpu::PollType::Wait { submission_index: Some(submission), timeout: None })
+            .map_err(|error| GpuError::Render(error.to_string()))?;
+        let mut images = Vec::with_capacity(targets.len());
+        for buffer in &readbacks {
+            let mapped = buffer.slice(..).get_mapped_range().map_err(|error| GpuError::Render(format!("{error:?}")))?;
+            let mut pixels = Vec::with_capacity((width * height * 4) as usize);
+            for row in 0..height as usize {
+                let start = row * padded_row as usize;
+                pixels.extend_from_slice(&mapped[start..start + width as usize * 4]);
+            }
+            drop(mapped);
+            buffer.unmap();
+            buffer.destroy();
+            images.push(pixels);
+        }
+        Ok(images)
+    }
+
+    /// A read-only storage buffer of per-draw constants (see `constants_entry` in `Gpu::new`).
+    fn constants_buffer(&self, bytes: &[u8]) -> wgpu::Buffer {
+        self.filled_buffer("constants", bytes, wgpu::BufferUsages::STORAGE)
+    }
+
+    fn vertex_buffer(&self, vertices: &[RenderVertex]) -> wgpu::Buffer {
+        self.filled_buffer("vertices", bytemuck::cast_slice(vertices), wgpu::BufferUsages::VERTEX)
+    }
+
+    fn filled_buffer(&self, label: &str, bytes: &[u8], usage: wgpu::BufferUsages) -> wgpu::Buffer {
+        use wgpu::util::DeviceExt;
+        self.device.create_buffer_init(&wgpu::util::BufferInitDescriptor { label: Some(label), contents: bytes, usage })
+    }
+
+    fn target(&self, width: u32, height: u32, format: wgpu::TextureFormat) -> wgpu::Texture {
+        self.device.create_texture(&wgpu::TextureDescriptor {
+            label: Some("target"),
+            size: wgpu::Extent3d { width, height, depth_or_array_layers: 1 },
+            mip_level_count: 1,
+            sample_count: 1,
+            dimension: wgpu::TextureDimension::D2,
+            format,
+            usage: wgpu::TextureUsages::RENDER_ATTACHMENT | wgpu::TextureUsages::COPY_SRC,
+            view_formats: &[],
+        })
+    }
+}
+
+/// A pipeline drawing `RenderVertex` triangles double-sided with a depth test: the one shape
+/// both the plane bake and the preview use.
+fn mesh_pipeline(
+    device: &wgpu::Device,
+    label: &str,
+    layout: &wgpu::PipelineLayout,
+    shader: &wgpu::ShaderModule,
+    targets: &[Option<wgpu::ColorTargetState>],
+) -> wgpu::RenderPipeline {
+    let attributes = wgpu::vertex_attr_array![0 => Float32x3, 1 => Float32x3, 2 => Float32x2, 3 => Float32x4];
+    device.create_render_pipeline(&wgpu::RenderPipelineDescriptor {
+        label: Some(label),
+        layout: Some(layout),
+        vertex: wgpu::VertexState {
+            module: shader,
+            entry_point: Some("vs_main"),
+            compilation_options: Default::default(),
+            buffers: &[Some(wgpu::VertexBufferLayout {
+                array_stride: std::mem::size_of::<RenderVertex>() as u64,
+                step_mode: wgpu::VertexStepMode::Vertex,
+                attributes: &attributes,
+            })],
+        },
+        fragment: Some(wgpu::FragmentState {
+            module: shader,
+            entry_point: Some("fs_main"),
+            compilation_options: Default::default(),
+            targets,
+        }),
+        primitive: wgpu::PrimitiveState { cull_mode: None, ..Default::default() },
+        depth_stencil: Some(wgpu::DepthStencilState {
+            format: DEPTH_FORMAT,
+            depth_write_enabled: Some(true),
+            depth_compare: Some(wgpu::CompareFunction::LessEqual),
+            stencil: Default::default(),
+            bias: Default::default(),
+        }),
+        multisample: wgpu::MultisampleState::default(),
+        multiview_mask: None,
+        cache: None,
+    })
+}
+
+fn extend([x, y, z]: [f32; 3]) -> [f32; 4] {
+    [x, y, z, 0.0]
+}
+
+/// Uploads a mip chain (level 0 first) as one texture.
+fn upload(device: &wgpu::Device, queue: &wgpu::Queue, levels: &[Texture], format: wgpu::TextureFormat) -> wgpu::TextureView {
+    let texture = device.create_texture(&wgpu::TextureDescriptor {
+        label: Some("source"),
+        size: wgpu::Extent3d { width: levels[0].width, height: levels[0].height, depth_or_array_layers: 1 },
+        mip_level_count: levels.len() as u32,
+        sample_count: 1,
+        dimension: wgpu::TextureDimension::D2,
+        format,
+        usage: wgpu::TextureUsages::TEXTURE_BINDING | wgpu::TextureUsages::COPY_DST,
+        view_formats: &[],
+    });
+    for (level, image) in levels.iter().enumerate() {
+        queue.write_texture(
+            wgpu::TexelCopyTextureInfo {
+                texture: &texture,
+                mip_level: level as u32,
+                origin: wgpu::Origin3d::ZERO,
+                aspect: wgpu::TextureAspect::All,
+            },
+            &image.pixels,
+            wgpu::TexelCopyBufferLayout { offset: 0, bytes_per_row: Some(image.width * 4), rows_per_image: Some(image.height) },
+            wgpu::Extent3d { width: image.width, height: image.height, depth_or_array_layers: 1 },
+        );
+    }
+    texture.create_view(&Default::default())
+}

@@ -1,0 +1,289 @@
+//! The plane renderer of billboard clouds: a plane's rectangles stacked in shared targets,
+//! rendered in one submission with `shaders/plane.wgsl` into albedo, normal, mra and height.
+
+use std::sync::Arc;
+
+use bytemuck::{Pod, Zeroable};
+
+use super::*;
+
+#[repr(C)]
+#[derive(Clone, Copy, Pod, Zeroable)]
+struct FrameUniform {
+    origin: [f32; 4],
+    x_axis: [f32; 4],
+    y_axis: [f32; 4],
+    normal: [f32; 4],
+    size: [f32; 4],
+}
+
+#[repr(C)]
+#[derive(Clone, Copy, Pod, Zeroable)]
+struct MaterialUniform {
+    albedo: [f32; 4],
+    params: [f32; 4],
+    has_a: [f32; 4],
+    has_b: [f32; 4],
+}
+
+/// A material as the renderer sees it: decoded maps (any may be missing) and constants.
+#[derive(Clone, Debug, Default)]
+pub struct RenderMaterial {
+    pub albedo: Option<Arc<Texture>>,
+    pub opacity: Option<Arc<Texture>>,
+    pub normal: Option<Arc<Texture>>,
+    pub metallic: Option<Arc<Texture>>,
+    pub roughness: Option<Arc<Texture>>,
+    pub ao: Option<Arc<Texture>>,
+    /// Linear RGB factor and constant opacity.
+    pub albedo_factor: [f32; 4],
+    pub metallic_value: f32,
+    pub roughness_value: f32,
+    pub ao_value: f32,
+}
+
+/// Where a rectangle lies in the mesh's space: `x_axis × y_axis = normal`, `width` along
+/// `x_axis` and `height` along `y_axis` from `origin`.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct RectangleFrame {
+    pub origin: [f32; 3],
+    pub x_axis: [f32; 3],
+    pub y_axis: [f32; 3],
+    pub normal: [f32; 3],
+    pub width: f32,
+    pub height: f32,
+}
+
+/// What one plane render needs: its faces (three vertices each) grouped by material.
+#[derive(Clone, Debug)]
+pub struct PlaneRenderInput<'a> {
+    pub frame: RectangleFrame,
+    pub epsilon: f32,
+    pub alpha_cutoff: f32,
+    pub width: u32,
+    pub height: u32,
+    /// (material index, that material's triangles' vertices).
+    pub batches: Vec<(usize, Vec<RenderVertex>)>,
+    pub materials: &'a [RenderMaterial],
+}
+
+/// The four images of one plane, RGBA8, rows from the top (the plane's +Y edge).
+#[derive(Clone, Debug, PartialEq)]
+pub struct PlaneImages {
+    pub width: u32,
+    pub height: u32,
+    /// sRGB-encoded colour; alpha 1 where a face covers the texel, 0 elsewhere.
+    pub albedo: Vec<u8>,
+    pub normal: Vec<u8>,
+    pub mra: Vec<u8>,
+    pub height_map: Vec<u8>,
+}
+
+impl Gpu {
+    /// A source texture on the GPU with its mip chain (uploaded once per content).
+    fn texture_view(&self, texture: &Texture, kind: SurfaceKind, alpha_cutoff: Option<f32>) -> Arc<wgpu::TextureView> {
+        let srgb = kind == SurfaceKind::Albedo;
+        let key = (texture.hash, srgb, alpha_cutoff.map_or(u32::MAX, f32::to_bits));
+        self.cached_upload(key, || {
+            let levels = mip_chain(texture, MipSettings { kind, alpha_cutoff });
+            upload(&self.device, &self.queue, &levels, if srgb { ALBEDO_FORMAT } else { DATA_FORMAT })
+        })
+    }
+
+    /// Renders the rectangles of one plane (or any set of rectangles): each under its own
+    /// orthographic camera, stacked in shared targets, in as few submissions and read-backs as
+    /// the stack size allows. Per-submission latency, not shading, dominates small renders.
+    pub fn render_rectangles(&self, inputs: &[PlaneRenderInput]) -> Result<Vec<PlaneImages>, GpuError> {
+        let mut images = Vec::with_capacity(inputs.len());
+        let mut chunk_start = 0;
+        while chunk_start < inputs.len() {
+            // Rectangles are stacked from the top; a stack holds at least one of them.
+            let (mut chunk_end, mut stack_width, mut stack_height) = (chunk_start, 0u32, 0u32);
+            while let Some(input) = inputs.get(chunk_end) {
+                let (width, height) = (input.width.max(1), input.height.max(1));
+                let (grown_width, grown_height) = (stack_width.max(width), stack_height + height);
+                let too_big = grown_height > self.max_texture_size || grown_width as u64 * grown_height as u64 > MAX_STACK_TEXELS;
+                if chunk_end > chunk_start && too_big {
+                    break;
+                }
+                (stack_width, stack_height) = (grown_width, grown_height);
+                chunk_end += 1;
+            }
+            images.extend(self.render_stack(&inputs[chunk_start..chunk_end], stack_width, stack_height)?);
+            chunk_start = chunk_end;
+        }
+        Ok(images)
+    }
+
+    /// One submission: `inputs` rendered one below the other into `width` × `height` targets.
+    fn render_stack(&self, inputs: &[PlaneRenderInput], width: u32, height: u32) -> Result<Vec<PlaneImages>, GpuError> {
+        let targets: Vec<wgpu::Texture> =
+            [ALBEDO_FORMAT, DATA_FORMAT, DATA_FORMAT, DATA_FORMAT].iter().map(|&format| self.target(width, height, format)).collect();
+        let views: Vec<wgpu::TextureView> = targets.iter().map(|texture| texture.create_view(&Default::default())).collect();
+        let depth_texture = self.target(width, height, DEPTH_FORMAT);
+        let depth = depth_texture.create_view(&Default::default());
+
+        struct StackedDraws {
+            top: u32,
+            width: u32,
+            height: u32,
+            frame_buffer: wgpu::Buffer,
+            frame_group: wgpu::BindGroup,
+            /// Vertex range in the stack's one vertex buffer, and the material.
+            draws: Vec<(std::ops::Range<u32>, Arc<wgpu::BindGroup>)>,
+        }
+        // Every draw of the stack reads one vertex buffer: one buffer to create and fill per
+        // submission instead of one per draw.
+        let mut all_vertices: Vec<RenderVertex> = Vec::new();
+        let mut stacked = Vec::with_capacity(inputs.len());
+        let mut top = 0;
+        for input in inputs {
+            let rectangle = &input.frame;
+            let frame = FrameUniform {
+                origin: extend(rectangle.origin),
+                x_axis: extend(rectangle.x_axis),
+                y_axis: extend(rectangle.y_axis),
+                normal: extend(rectangle.normal),
+                size: [rectangle.width.max(1e-6), rectangle.height.max(1e-6), input.epsilon.max(1e-6), input.alpha_cutoff],
+            };
+            let frame_buffer = self.constants_buffer(bytemuck::bytes_of(&frame));
+            let frame_group = self.device.create_bind_group(&wgpu::BindGroupDescriptor {
+                label: Some("frame"),
+                layout: &self.frame_layout,
+                entries: &[wgpu::BindGroupEntry { binding: 0, resource: frame_buffer.as_entire_binding() }],
+            });
+            let mut draws = Vec::new();
+            for (material_index, vertices) in &input.batches {
+                if vertices.is_empty() {
+                    continue;
+                }
+                let material = &input.materials[*material_index];
+                let first = all_vertices.len() as u32;
+                all_vertices.extend_from_slice(vertices);
+                draws.push((first..all_vertices.len() as u32, self.material_group(material, input.alpha_cutoff)));
+            }
+            let (rectangle_width, rectangle_height) = (input.width.max(1), input.height.max(1));
+            stacked.push(StackedDraws { top, width: rectangle_width, height: rectangle_height, frame_buffer, frame_group, draws });
+            top += rectangle_height;
+        }
+
+        let vertex_buffer = (!all_vertices.is_empty()).then(|| self.vertex_buffer(&all_vertices));
+        let mut encoder = self.device.create_command_encoder(&Default::default());
+        {
+            let attachments: Vec<Option<wgpu::RenderPassColorAttachment>> = views
+                .iter()
+                .map(|view| {
+                    Some(wgpu::RenderPassColorAttachment {
+                        view,
+                        depth_slice: None,
+                        resolve_target: None,
+                        ops: wgpu::Operations { load: wgpu::LoadOp::Clear(wgpu::Color::TRANSPARENT), store: wgpu::StoreOp::Store },
+                    })
+                })
+                .collect();
+            let mut pass = encoder.begin_render_pass(&wgpu::RenderPassDescriptor {
+                label: Some("plane rectangles"),
+                color_attachments: &attachments,
+                depth_stencil_attachment: Some(wgpu::RenderPassDepthStencilAttachment {
+                    view: &depth,
+                    depth_ops: Some(wgpu::Operations { load: wgpu::LoadOp::Clear(1.0), store: wgpu::StoreOp::Discard }),
+                    stencil_ops: None,
+                }),
+                ..Default::default()
+            });
+            pass.set_pipeline(&self.pipeline);
+            if let Some(buffer) = &vertex_buffer {
+                pass.set_vertex_buffer(0, buffer.slice(..));
+            }
+            for rectangle in &stacked {
+                // The camera's clip square maps onto this rectangle's rows of the stack only.
+                pass.set_viewport(0.0, rectangle.top as f32, rectangle.width as f32, rectangle.height as f32, 0.0, 1.0);
+                pass.set_scissor_rect(0, rectangle.top, rectangle.width, rectangle.height);
+                pass.set_bind_group(0, &rectangle.frame_group, &[]);
+                for (vertices, group) in &rectangle.draws {
+                    pass.set_bind_group(1, group.as_ref(), &[]);
+                    pass.draw(vertices.clone(), 0..1);
+                }
+            }
+        }
+        let stack = self.read_back(encoder, &targets, width, height)?;
+        // Free device memory now rather than whenever wgpu next triages destroyed resources.
+        targets.iter().for_each(wgpu::Texture::destroy);
+        depth_texture.destroy();
+        for rectangle in &stacked {
+            rectangle.frame_buffer.destroy();
+        }
+        if let Some(buffer) = &vertex_buffer {
+            buffer.destroy();
+        }
+        let rows = |image: &[u8], rectangle: &StackedDraws| -> Vec<u8> {
+            let row_bytes = rectangle.width as usize * 4;
+            let mut pixels = Vec::with_capacity(row_bytes * rectangle.height as usize);
+            for row in rectangle.top..rectangle.top + rectangle.height {
+                let start = row as usize * width as usize * 4;
+                pixels.extend_from_slice(&image[start..start + row_bytes]);
+            }
+            pixels
+        };
+        Ok(stacked
+            .iter()
+            .map(|rectangle| PlaneImages {
+                width: rectangle.width,
+                height: rectangle.height,
+                albedo: rows(&stack[0], rectangle),
+                normal: rows(&stack[1], rectangle),
+                mra: rows(&stack[2], rectangle),
+                height_map: rows(&stack[3], rectangle),
+            })
+            .collect())
+    }
+
+    fn material_group(&self, material: &RenderMaterial, alpha_cutoff: f32) -> Arc<wgpu::BindGroup> {
+        let flag = |texture: &Option<Arc<Texture>>| if texture.is_some() { 1.0 } else { 0.0 };
+        let uniform = MaterialUniform {
+            albedo: material.albedo_factor,
+            params: [material.metallic_value, material.roughness_value, material.ao_value, 0.0],
+            has_a: [flag(&material.albedo), flag(&material.opacity), flag(&material.normal), flag(&material.metallic)],
+            has_b: [flag(&material.roughness), flag(&material.ao), 0.0, 0.0],
+        };
+        let mut key = blake3::Hasher::new();
+        key.update(bytemuck::bytes_of(&uniform));
+        key.update(&alpha_cutoff.to_bits().to_le_bytes());
+        for texture in [&material.albedo, &material.opacity, &material.normal, &material.metallic, &material.roughness, &material.ao] {
+            key.update(texture.as_ref().map_or(&[0u8; 32], |texture| texture.hash.as_bytes()));
+        }
+        let key = key.finalize();
+        if let Some(group) = self.material_groups.lock().expect("material groups").get(&key) {
+            return group.clone();
+        }
+        let buffer = self.constants_buffer(bytemuck::bytes_of(&uniform));
+        let views: Vec<Arc<wgpu::TextureView>> = [
+            (&material.albedo, SurfaceKind::Albedo, Some(alpha_cutoff)),
+            (&material.opacity, SurfaceKind::Albedo, Some(alpha_cutoff)),
+            (&material.normal, SurfaceKind::Normal, None),
+            (&material.metallic, SurfaceKind::Mra, None),
+            (&material.roughness, SurfaceKind::Mra, None),
+            (&material.ao, SurfaceKind::Mra, None),
+        ]
+        .into_iter()
+        .map(|(texture, kind, cutoff)| match texture {
+            Some(texture) => self.texture_view(texture, kind, cutoff),
+            None => Arc::new(self.white.clone()),
+        })
+        .collect();
+        let mut entries = vec![
+            wgpu::BindGroupEntry { binding: 0, resource: buffer.as_entire_binding() },
+            wgpu::BindGroupEntry { binding: 1, resource: wgpu::BindingResource::Sampler(&self.sampler) },
+        ];
+        for (index, view) in views.iter().enumerate() {
+            entries.push(wgpu::BindGroupEntry { binding: 2 + index as u32, resource: wgpu::BindingResource::TextureView(view) });
+        }
+        let group = Arc::new(self.device.create_bind_group(&wgpu::BindGroupDescriptor {
+            label: Some("material"),
+            layout: &self.material_layout,
+            entries: &entries,
+        }));
+        self.material_groups.lock().expect("material groups").insert(key, group.clone());
+        group
+    }
+}

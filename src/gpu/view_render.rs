@@ -1,0 +1,137 @@
+//! The preview renderer: a mesh with mipmapped materials under an orthographic camera
+//! (`shaders/view.wgsl`), for `cirrus preview` and the viewer.
+
+use std::sync::Arc;
+
+use bytemuck::{Pod, Zeroable};
+
+use super::*;
+
+/// A material for preview renders: textures with their own mip levels (level 0 first).
+#[derive(Clone, Debug, Default)]
+pub struct ViewMaterial {
+    pub albedo: Option<Arc<Vec<Texture>>>,
+    pub opacity: Option<Arc<Vec<Texture>>>,
+    pub normal: Option<Arc<Vec<Texture>>>,
+    /// False for two-channel normal maps (BC5): the shader rebuilds z.
+    pub normal_has_z: bool,
+    /// Linear RGB factor and constant opacity.
+    pub albedo_factor: [f32; 4],
+    pub alpha_cutoff: f32,
+}
+
+/// A mesh for preview renders: vertex batches per material.
+#[derive(Clone, Debug, Default)]
+pub struct ViewMesh {
+    pub batches: Vec<(usize, Vec<RenderVertex>)>,
+    pub materials: Vec<ViewMaterial>,
+}
+
+#[repr(C)]
+#[derive(Clone, Copy, Pod, Zeroable)]
+struct CameraUniform {
+    view_projection: [[f32; 4]; 4],
+    light: [f32; 4],
+}
+
+#[repr(C)]
+#[derive(Clone, Copy, Pod, Zeroable)]
+struct ViewMaterialUniform {
+    albedo: [f32; 4],
+    flags: [f32; 4],
+    params: [f32; 4],
+}
+
+impl Gpu {
+    /// Renders `mesh` under an orthographic camera into a `size`² RGBA8 image (sRGB colour on a
+    /// mid-grey background; alpha 255 where a surface was drawn, 0 elsewhere).
+    pub fn render_view(&self, mesh: &ViewMesh, view_projection: [[f32; 4]; 4], light: [f32; 3], size: u32) -> Result<Vec<u8>, GpuError> {
+        let camera = CameraUniform { view_projection, light: extend(light) };
+        let camera_buffer = self.constants_buffer(bytemuck::bytes_of(&camera));
+        let camera_group = self.device.create_bind_group(&wgpu::BindGroupDescriptor {
+            label: Some("camera"),
+            layout: &self.frame_layout,
+            entries: &[wgpu::BindGroupEntry { binding: 0, resource: camera_buffer.as_entire_binding() }],
+        });
+        let target = self.target(size, size, ALBEDO_FORMAT);
+        let view = target.create_view(&Default::default());
+        let depth = self.target(size, size, DEPTH_FORMAT).create_view(&Default::default());
+        let mut draws = Vec::new();
+        for (material_index, vertices) in &mesh.batches {
+            if vertices.is_empty() {
+                continue;
+            }
+            let buffer = self.vertex_buffer(vertices);
+            draws.push((buffer, vertices.len() as u32, self.view_material_group(&mesh.materials[*material_index])));
+        }
+        let mut encoder = self.device.create_command_encoder(&Default::default());
+        {
+            let mut pass = encoder.begin_render_pass(&wgpu::RenderPassDescriptor {
+                label: Some("view"),
+                color_attachments: &[Some(wgpu::RenderPassColorAttachment {
+                    view: &view,
+                    depth_slice: None,
+                    resolve_target: None,
+                    ops: wgpu::Operations {
+                        load: wgpu::LoadOp::Clear(wgpu::Color { r: 0.214, g: 0.214, b: 0.214, a: 0.0 }),
+                        store: wgpu::StoreOp::Store,
+                    },
+                })],
+                depth_stencil_attachment: Some(wgpu::RenderPassDepthStencilAttachment {
+                    view: &depth,
+                    depth_ops: Some(wgpu::Operations { load: wgpu::LoadOp::Clear(1.0), store: wgpu::StoreOp::Discard }),
+                    stencil_ops: None,
+                }),
+                ..Default::default()
+            });
+            pass.set_pipeline(&self.view_pipeline);
+            pass.set_bind_group(0, &camera_group, &[]);
+            for (buffer, count, group) in &draws {
+                pass.set_bind_group(1, group, &[]);
+                pass.set_vertex_buffer(0, buffer.slice(..));
+                pass.draw(0..*count, 0..1);
+            }
+        }
+        self.read_back(encoder, &[target], size, size).map(|mut images| images.remove(0))
+    }
+
+    fn view_material_group(&self, material: &ViewMaterial) -> wgpu::BindGroup {
+        let flag = |present: bool| if present { 1.0 } else { 0.0 };
+        let uniform = ViewMaterialUniform {
+            albedo: material.albedo_factor,
+            flags: [
+                flag(material.albedo.is_some()),
+                flag(material.opacity.is_some()),
+                flag(material.normal.is_some()),
+                flag(material.normal_has_z),
+            ],
+            params: [material.alpha_cutoff, 0.0, 0.0, 0.0],
+        };
+        let buffer = self.constants_buffer(bytemuck::bytes_of(&uniform));
+        let views: Vec<Arc<wgpu::TextureView>> = [(&material.albedo, true), (&material.opacity, false), (&material.normal, false)]
+            .into_iter()
+            .map(|(levels, srgb)| match levels {
+                Some(levels) => self.levels_view(levels, srgb),
+                None => Arc::new(self.white.clone()),
+            })
+            .collect();
+        let mut entries = vec![
+            wgpu::BindGroupEntry { binding: 0, resource: buffer.as_entire_binding() },
+            wgpu::BindGroupEntry { binding: 1, resource: wgpu::BindingResource::Sampler(&self.sampler) },
+        ];
+        for (index, view) in views.iter().enumerate() {
+            entries.push(wgpu::BindGroupEntry { binding: 2 + index as u32, resource: wgpu::BindingResource::TextureView(view) });
+        }
+        self.device.create_bind_group(&wgpu::BindGroupDescriptor {
+            label: Some("view material"),
+            layout: &self.view_material_layout,
+            entries: &entries,
+        })
+    }
+
+    /// A texture with explicit mip levels on the GPU (uploaded once per content).
+    fn levels_view(&self, levels: &[Texture], srgb: bool) -> Arc<wgpu::TextureView> {
+        let key = (levels[0].hash, srgb, levels.len() as u32);
+        self.cached_upload(key, || upload(&self.device, &self.queue, levels, if srgb { ALBEDO_FORMAT } else { DATA_FORMAT }))
+    }
+}

@@ -1,0 +1,45 @@
+//! The UV layout: plane rectangles packed into one atlas at one uniform texel density, sizes
+//! rounded up to whole BC blocks with `padding` texels around each, 90° rotation allowed, in
+//! the smallest (power-of-two when asked) atlas that fits; the density scales down uniformly
+//! when `max_size` is reached.
+
+use crate::config::AtlasSettings;
+use crate::packing::{pack_smallest, Placement};
+
+#[derive(Clone, Debug, PartialEq, serde::Serialize, serde::Deserialize)]
+pub struct Layout {
+    pub width: u32,
+    pub height: u32,
+    /// Texels per world unit.
+    pub texel_density: f32,
+    pub placements: Vec<Placement>,
+    /// Fraction of the atlas covered by rectangles (without padding).
+    pub occupancy: f32,
+}
+
+/// Packs rectangles of `sizes` (world units, width × height) into one atlas.
+pub fn layout_rectangles(sizes: &[(f32, f32)], settings: &AtlasSettings, texel_density: Option<f32>) -> Layout {
+    let area: f32 = sizes.iter().map(|(w, h)| w.max(1e-6) * h.max(1e-6)).sum::<f32>().max(1e-12);
+    let max_side = settings.max_size as f32;
+    // Start from the density that would fill the largest atlas, or the one asked for.
+    let mut density = texel_density.unwrap_or_else(|| (0.8 * max_side * max_side / area).sqrt());
+    for _ in 0..200 {
+        let cells: Vec<(u32, u32)> = sizes.iter().map(|&(w, h)| (block_size(w * density), block_size(h * density))).collect();
+        if let Some(layout) = pack_smallest(&cells, settings) {
+            let used: u64 = cells.iter().map(|&(w, h)| w as u64 * h as u64).sum();
+            let occupancy = used as f32 / (layout.0 as f32 * layout.1 as f32);
+            return Layout { width: layout.0, height: layout.1, texel_density: density, placements: layout.2, occupancy };
+        }
+        density *= 0.95;
+    }
+    // Even one block per rectangle does not fit: the caller's max_size is far too small.
+    let cells: Vec<(u32, u32)> = sizes.iter().map(|_| (4, 4)).collect();
+    let (width, height, placements) =
+        pack_smallest(&cells, &AtlasSettings { max_size: u32::MAX / 4, ..settings.clone() }).expect("unbounded atlas");
+    Layout { width, height, texel_density: 0.0, placements, occupancy: 0.0 }
+}
+
+/// Texels rounded up to whole 4×4 blocks, at least one block.
+fn block_size(texels: f32) -> u32 {
+    ((texels.ceil().max(1.0) as u32).div_ceil(4) * 4).max(4)
+}

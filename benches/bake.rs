@@ -358,10 +358,18 @@ fn bench_billboard_quality(corpus: &Path) {
                 load_pipeline(&dir.path().join("pipeline.ron")).unwrap(),
                 ProjectOptions { persistent_cache: false, ..Default::default() },
             );
-            let options = cirrus::project::PreviewOptions { asset: "tree".into(), settings: Default::default(), out: "preview".into() };
-            let metrics = project.preview(&options).expect("preview");
+            let options = cirrus::kinds::billboard_cloud::PreviewOptions {
+                asset: "tree".into(),
+                settings: Default::default(),
+                out: "preview".into(),
+            };
+            let metrics = cirrus::kinds::billboard_cloud::preview(&mut project, &options).expect("preview");
             let one_sample = cirrus::kinds::billboard_cloud::lod_preview::PreviewSettings { samples_per_axis: 1, ..Default::default() };
-            let aliased = project.preview(&cirrus::project::PreviewOptions { settings: one_sample, ..options }).expect("preview");
+            let aliased = cirrus::kinds::billboard_cloud::preview(
+                &mut project,
+                &cirrus::kinds::billboard_cloud::PreviewOptions { settings: one_sample, ..options },
+            )
+            .expect("preview");
             let report: serde_json::Value =
                 serde_json::from_slice(&std::fs::read(dir.path().join("baked/tree/report.json")).unwrap()).unwrap();
             figures.push(format!(

@@ -86,8 +86,8 @@ struct Scene {
 impl Scene {
     fn load(options: &Options) -> Result<Scene, String> {
         let alpha_cutoff = options.alpha_cutoff.unwrap_or_else(|| report_alpha_cutoff(&options.folder).unwrap_or(0.5));
-        let mesh =
-            cirrus::artifacts::read_lod_view_mesh(Path::new("."), &options.folder, alpha_cutoff).map_err(|error| error.to_string())?;
+        let mesh = cirrus::kinds::billboard_cloud::read_lod_view_mesh(Path::new("."), &options.folder, alpha_cutoff)
+            .map_err(|error| error.to_string())?;
         let (center, radius) = cirrus::kinds::billboard_cloud::lod_preview::bounding_sphere(&mesh);
         let camera = Camera { yaw: 0.6, pitch: 0.25, zoom: 1.0 };
         Ok(Scene { folder: options.folder.clone(), alpha_cutoff, mesh, center, radius, camera })
@@ -95,8 +95,8 @@ impl Scene {
 
     /// Loads the artifacts again; on failure the old mesh stays and the error is returned.
     fn reload(&mut self) -> Result<(), String> {
-        self.mesh =
-            cirrus::artifacts::read_lod_view_mesh(Path::new("."), &self.folder, self.alpha_cutoff).map_err(|error| error.to_string())?;
+        self.mesh = cirrus::kinds::billboard_cloud::read_lod_view_mesh(Path::new("."), &self.folder, self.alpha_cutoff)
+            .map_err(|error| error.to_string())?;
         Ok(())
     }
 

@@ -118,21 +118,11 @@ pub fn save_manifest(output_dir: &Path, manifest: &Manifest) -> std::io::Result<
     write_if_changed(&manifest_path(output_dir), &bytes)
 }
 
-/// The baked LOD in `folder` (relative to `root`) as an engine loads it: `lod.obj` with the
-/// decoded levels of `albedo.ktx2` and `normal.ktx2`, alpha-tested at `alpha_cutoff`.
-pub fn read_lod_view_mesh(root: &Path, folder: &Path, alpha_cutoff: f32) -> Result<crate::gpu::ViewMesh, crate::diagnostic::Diagnostic> {
-    let read = |file: &str| -> Result<(PathBuf, Vec<u8>), crate::diagnostic::Diagnostic> {
-        let path = folder.join(file);
-        let bytes = std::fs::read(root.join(&path))
-            .map_err(|error| crate::diagnostic::Diagnostic::new(&path, format!("cannot read the baked artifact: {error}")))?;
-        Ok((path, bytes))
-    };
-    crate::kinds::billboard_cloud::lod_preview::lod_view_mesh(&crate::kinds::billboard_cloud::lod_preview::LodFiles {
-        obj: read("lod.obj")?,
-        albedo_ktx2: read("albedo.ktx2")?,
-        normal_ktx2: read("normal.ktx2")?,
-        alpha_cutoff,
-    })
+/// The bytes of a baked artifact (`path` relative to `root`), for commands that read what a
+/// build wrote (the preview, the viewer).
+pub fn read_artifact(root: &Path, path: &Path) -> Result<Vec<u8>, crate::diagnostic::Diagnostic> {
+    std::fs::read(root.join(path))
+        .map_err(|error| crate::diagnostic::Diagnostic::new(path, format!("cannot read the baked artifact: {error}")))
 }
 
 /// Records an artifact in the manifest; true when the entry is new or its bytes changed.

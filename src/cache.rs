@@ -169,34 +169,6 @@ impl KeyPart for crate::texture::SurfaceKind {
     }
 }
 
-impl KeyPart for crate::config::BillboardSettings {
-    fn add_to(&self, key: CacheKeyBuilder) -> CacheKeyBuilder {
-        let crate::config::BillboardSettings { epsilon, max_planes, texel_density, alpha_cutoff } = self;
-        key.part(epsilon).part(max_planes).part(texel_density).part(alpha_cutoff)
-    }
-}
-
-impl KeyPart for crate::config::AtlasSettings {
-    fn add_to(&self, key: CacheKeyBuilder) -> CacheKeyBuilder {
-        let crate::config::AtlasSettings { max_size, padding, power_of_two } = self;
-        key.part(max_size).part(padding).part(power_of_two)
-    }
-}
-
-impl KeyPart for crate::config::EncodeSettings {
-    fn add_to(&self, key: CacheKeyBuilder) -> CacheKeyBuilder {
-        let crate::config::EncodeSettings { albedo, mra, normal, height, mips, container, zstd, quality } = self;
-        key.part(albedo).part(mra).part(normal).part(height).part(mips).part(container).part(zstd).part(quality)
-    }
-}
-
-impl KeyPart for crate::kinds::material::definition::MaterialConstants {
-    fn add_to(&self, key: CacheKeyBuilder) -> CacheKeyBuilder {
-        let crate::kinds::material::definition::MaterialConstants { albedo, metallic, roughness, ao, alpha_cutoff } = self;
-        key.part(albedo).part(metallic).part(roughness).part(ao).part(alpha_cutoff)
-    }
-}
-
 /// Largest cache entry read back.
 const MAX_ENTRY_BYTES: u64 = 4 << 30;
 
@@ -225,6 +197,11 @@ impl DiskCache {
     fn entry_path(&self, stage: &str, key: CacheKey) -> PathBuf {
         let hex = key.0.to_hex();
         self.folder.join(stage).join(&hex[..2]).join(&hex[2..])
+    }
+
+    /// Whether an entry file exists under `key` (it may still turn out corrupt when loaded).
+    pub fn contains(&self, stage: &str, key: CacheKey) -> bool {
+        self.entry_path(stage, key).is_file()
     }
 
     pub fn load(&self, stage: &str, key: CacheKey) -> Option<CacheEntry> {

@@ -231,8 +231,8 @@ fn preview(
     };
     let out = out.unwrap_or_else(|| config.output.join(&asset).join("preview"));
     let mut project = Project::open(config, ProjectOptions::default());
-    let options = crate::project::PreviewOptions { asset, settings, out: out.clone() };
-    match project.preview(&options) {
+    let options = crate::kinds::billboard_cloud::PreviewOptions { asset, settings, out: out.clone() };
+    match crate::kinds::billboard_cloud::preview(&mut project, &options) {
         Ok(metrics) => {
             println!(
                 "{} views, {} per pixel: mean IoU {:.3}, min IoU {:.3}, mean PSNR {:.2} dB",
@@ -245,7 +245,9 @@ fn preview(
             println!("wrote {}/contact_sheet.png and metrics.json", crate::diagnostic::display_path(&out));
             ExitCode::SUCCESS
         }
-        Err(error @ (crate::project::PreviewError::Build(_) | crate::project::PreviewError::NotBillboard(_))) => {
+        Err(
+            error @ (crate::kinds::billboard_cloud::PreviewError::Build(_) | crate::kinds::billboard_cloud::PreviewError::NotBillboard(_)),
+        ) => {
             eprintln!("error: {error}");
             ExitCode::from(EXIT_USAGE)
         }

@@ -75,6 +75,18 @@ pub struct EncodeSettings {
     pub quality: EncodeQuality,
 }
 
+impl EncodeSettings {
+    /// The block format of one kind of surface.
+    pub fn format_of(&self, surface: crate::texture::SurfaceKind) -> BlockFormat {
+        match surface {
+            crate::texture::SurfaceKind::Albedo => self.albedo,
+            crate::texture::SurfaceKind::Mra => self.mra,
+            crate::texture::SurfaceKind::Normal => self.normal,
+            crate::texture::SurfaceKind::Height => self.height,
+        }
+    }
+}
+
 /// Every setting of one asset, defaults and overrides merged.
 #[derive(Clone, Debug, PartialEq, Serialize)]
 pub struct Settings {

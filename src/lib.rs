@@ -19,6 +19,7 @@ pub mod db;
 pub mod cache;
 pub mod sources;
 pub mod artifacts;
+pub mod schedule;
 pub mod summary;
 pub mod graph;
 
@@ -28,7 +29,6 @@ pub mod kinds;
 
 // The driver: inputs in, jobs on workers, artifacts out; it names no kind.
 pub mod project;
-pub mod check;
 
 // The shell: the daemon, its protocol, the command line.
 pub mod watch;

@@ -1,11 +1,10 @@
 //! What a build reports: the `build --summary json` contract of DESIGN §6, its text rendering,
-//! and the per-asset `report.json`.
+//! the stage statuses it is made of.
 
 use std::fmt::Write;
 
 use serde::Serialize;
 
-use crate::db::SurfaceInfo;
 use crate::diagnostic::{display_path, Diagnostic};
 
 #[derive(Clone, Debug, PartialEq, Serialize)]
@@ -133,31 +132,4 @@ impl BuildSummary {
         let _ = writeln!(text, "revision {}", self.revision);
         text
     }
-}
-
-/// `<output>/<asset>/report.json` of a `Material` asset: deterministic (no timings), so that it
-/// only changes when the artifacts do.
-#[derive(Clone, Debug, PartialEq, Serialize)]
-pub struct MaterialReport {
-    pub asset: String,
-    pub kind: &'static str,
-    pub file: String,
-    pub materials: Vec<MaterialReportEntry>,
-    pub warnings: Vec<ErrorSummary>,
-    pub errors: Vec<ErrorSummary>,
-}
-
-#[derive(Clone, Debug, PartialEq, Serialize)]
-pub struct MaterialReportEntry {
-    pub name: String,
-    pub display_name: Option<String>,
-    pub surfaces: Vec<SurfaceReport>,
-}
-
-#[derive(Clone, Debug, PartialEq, Serialize)]
-pub struct SurfaceReport {
-    pub path: String,
-    pub preview: String,
-    #[serde(flatten)]
-    pub info: SurfaceInfo,
 }

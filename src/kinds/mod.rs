@@ -1,4 +1,289 @@
-//! The asset kinds: the one list of kinds, and the questions the driver asks each of them.
+//! The asset kinds: the one list of kinds (`AssetKind`), the questions the driver asks each of
+//! them (`Kind`), and what the answers are made of: jobs to run on workers, stage instances (the
+//! build summary, the graph dump and the event-log labels all come from them) and outputs.
+//! Adding a kind: a folder with a `Kind` implementation, one variant here, one in `config`.
 
+use std::path::{Path, PathBuf};
+use std::sync::Arc;
+
+use crate::cache::CacheKey;
+use crate::config::{AssetSource, PipelineConfig};
+use crate::db::{Asset, Db, Stage, StageRun};
+use crate::diagnostic::Diagnostic;
+use crate::texture::tail::TailSettings;
+use crate::texture::{SurfaceKind, Texture};
+
+pub mod tail_queries;
 pub mod material;
 pub mod billboard_cloud;
+
+/// The questions the driver asks an asset kind. Every answer is computed from the database
+/// (through the kind's tracked functions); none does IO.
+pub trait Kind {
+    /// The kind's name in `pipeline.ron`, summaries and reports.
+    const NAME: &'static str;
+
+    /// The files the asset reads, as far as the files read so far tell (the driver reads them
+    /// and asks again until nothing new turns up).
+    fn files_to_read(db: &dyn Db, asset: Asset) -> Vec<PathBuf>;
+
+    /// The first jobs of a build; each job may schedule more.
+    fn first_jobs(db: &dyn Db, asset: Asset) -> Vec<Job>;
+
+    /// Runs one of the kind's own steps (surfaces are run by the shared tail).
+    fn run_step(db: &dyn Db, asset: Asset, step: &'static str, index: u32) -> Result<Vec<Job>, Diagnostic>;
+
+    /// Every stage instance of the asset, as far as known, marked failed where `errors` left it
+    /// without a result.
+    fn stage_instances(db: &dyn Db, asset: Asset, output_folder: &Path, errors: &[Diagnostic]) -> Vec<StageInstance>;
+
+    /// The files to write (project-relative paths inside `output_folder`) and the report, from
+    /// the finished stages; `runs` are this build's stage runs (for timings in the report).
+    fn outputs(db: &dyn Db, asset: Asset, output_folder: &Path, errors: &mut Vec<Diagnostic>, runs: &[StageRun]) -> AssetOutputs;
+
+    /// `cirrus check`: the asset's sources validated without baking.
+    fn check(config: &PipelineConfig, main_file: &Path) -> Vec<Diagnostic>;
+
+    /// The image of one of the asset's tail surfaces.
+    fn surface_image(db: &dyn Db, asset: Asset, surface: &SurfaceId) -> Result<Arc<Texture>, Diagnostic>;
+
+    /// The tail settings of one of the asset's surfaces.
+    fn tail_settings(db: &dyn Db, asset: Asset, surface: &SurfaceId) -> Result<TailSettings, Diagnostic>;
+
+    /// A key for what the surface's image is made of, cheap to compute (source hashes and
+    /// settings), so that a surface already in the persistent cache needs no image at all.
+    fn surface_recipe_key(db: &dyn Db, asset: Asset, surface: &SurfaceId) -> Result<Option<CacheKey>, Diagnostic>;
+}
+
+/// The kinds of asset cirrus bakes: one `match` per question of `Kind`.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Hash)]
+pub enum AssetKind {
+    Material,
+    BillboardCloud,
+}
+
+use billboard_cloud::BillboardCloud;
+use material::Material;
+
+impl AssetKind {
+    pub fn of(source: &AssetSource) -> AssetKind {
+        match source {
+            AssetSource::Material { .. } => AssetKind::Material,
+            AssetSource::BillboardCloud { .. } => AssetKind::BillboardCloud,
+        }
+    }
+
+    pub fn name(self) -> &'static str {
+        match self {
+            AssetKind::Material => Material::NAME,
+            AssetKind::BillboardCloud => BillboardCloud::NAME,
+        }
+    }
+
+    pub fn files_to_read(self, db: &dyn Db, asset: Asset) -> Vec<PathBuf> {
+        match self {
+            AssetKind::Material => Material::files_to_read(db, asset),
+            AssetKind::BillboardCloud => BillboardCloud::files_to_read(db, asset),
+        }
+    }
+
+    pub fn first_jobs(self, db: &dyn Db, asset: Asset) -> Vec<Job> {
+        match self {
+            AssetKind::Material => Material::first_jobs(db, asset),
+            AssetKind::BillboardCloud => BillboardCloud::first_jobs(db, asset),
+        }
+    }
+
+    /// Runs a job on a worker: a surface through the shared tail, a step by its kind.
+    pub fn run_job(self, db: &dyn Db, job: &Job) -> Result<Vec<Job>, Diagnostic> {
+        match (&job.task, self) {
+            (Task::Surface(surface), _) => tail_queries::surface_artifacts(db, job.asset, surface.clone()).map(|_| Vec::new()),
+            (Task::Step(step, index), AssetKind::Material) => Material::run_step(db, job.asset, step, *index),
+            (Task::Step(step, index), AssetKind::BillboardCloud) => BillboardCloud::run_step(db, job.asset, step, *index),
+        }
+    }
+
+    pub fn stage_instances(self, db: &dyn Db, asset: Asset, output_folder: &Path, errors: &[Diagnostic]) -> Vec<StageInstance> {
+        match self {
+            AssetKind::Material => Material::stage_instances(db, asset, output_folder, errors),
+            AssetKind::BillboardCloud => BillboardCloud::stage_instances(db, asset, output_folder, errors),
+        }
+    }
+
+    pub fn outputs(self, db: &dyn Db, asset: Asset, output_folder: &Path, errors: &mut Vec<Diagnostic>, runs: &[StageRun]) -> AssetOutputs {
+        match self {
+            AssetKind::Material => Material::outputs(db, asset, output_folder, errors, runs),
+            AssetKind::BillboardCloud => BillboardCloud::outputs(db, asset, output_folder, errors, runs),
+        }
+    }
+
+    pub fn check(self, config: &PipelineConfig, main_file: &Path) -> Vec<Diagnostic> {
+        match self {
+            AssetKind::Material => Material::check(config, main_file),
+            AssetKind::BillboardCloud => BillboardCloud::check(config, main_file),
+        }
+    }
+
+    pub fn surface_image(self, db: &dyn Db, asset: Asset, surface: &SurfaceId) -> Result<Arc<Texture>, Diagnostic> {
+        match self {
+            AssetKind::Material => Material::surface_image(db, asset, surface),
+            AssetKind::BillboardCloud => BillboardCloud::surface_image(db, asset, surface),
+        }
+    }
+
+    pub fn tail_settings(self, db: &dyn Db, asset: Asset, surface: &SurfaceId) -> Result<TailSettings, Diagnostic> {
+        match self {
+            AssetKind::Material => Material::tail_settings(db, asset, surface),
+            AssetKind::BillboardCloud => BillboardCloud::tail_settings(db, asset, surface),
+        }
+    }
+
+    pub fn surface_recipe_key(self, db: &dyn Db, asset: Asset, surface: &SurfaceId) -> Result<Option<CacheKey>, Diagnostic> {
+        match self {
+            AssetKind::Material => Material::surface_recipe_key(db, asset, surface),
+            AssetKind::BillboardCloud => BillboardCloud::surface_recipe_key(db, asset, surface),
+        }
+    }
+}
+
+/// One surface that ends in the texture tail: `group` names what it belongs to inside the asset
+/// (a material's name; empty for an asset's own surfaces, like a billboard cloud's atlas).
+#[derive(Clone, Debug, PartialEq, Eq, Hash, PartialOrd, Ord)]
+pub struct SurfaceId {
+    pub group: String,
+    pub surface: SurfaceKind,
+}
+
+impl SurfaceId {
+    /// The instance label of the surface's tail stages: `asset/group/surface` or `asset/surface`.
+    pub fn label(&self, asset_name: &str) -> String {
+        format!("{asset_name}/{}", self.instance())
+    }
+
+    /// The surface's name inside its asset: `group/surface` or `surface`.
+    pub fn instance(&self) -> String {
+        if self.group.is_empty() {
+            self.surface.name().to_string()
+        } else {
+            format!("{}/{}", self.group, self.surface.name())
+        }
+    }
+
+    /// Its texture and preview files inside the asset folder.
+    pub fn artifact_paths(&self, output_folder: &Path, container: crate::config::Container) -> [PathBuf; 2] {
+        let folder = if self.group.is_empty() { output_folder.to_path_buf() } else { output_folder.join(&self.group) };
+        [folder.join(format!("{}.{}", self.surface.name(), container.extension())), folder.join(format!("{}.png", self.surface.name()))]
+    }
+}
+
+/// Work for a worker thread: one step of an asset, or one surface through the tail.
+#[derive(Clone, Debug, PartialEq)]
+pub struct Job {
+    pub asset: Asset,
+    pub task: Task,
+    /// Waves to wait after the wave that scheduled it (jobs of one wave run in parallel).
+    pub after: u32,
+    /// For progress and for naming the job in an internal error.
+    pub label: String,
+}
+
+#[derive(Clone, Debug, PartialEq)]
+pub enum Task {
+    /// A step of the kind's own, with an index (a render group, a tile).
+    Step(&'static str, u32),
+    /// A surface through the shared texture tail.
+    Surface(SurfaceId),
+}
+
+/// One instance of a stage, as the summary, the graph dump and the event log name it.
+#[derive(Clone, Debug, PartialEq)]
+pub struct StageInstance {
+    pub stage: Stage,
+    /// Its label in the event log and the graph: the node is `stage(label)`.
+    pub label: String,
+    /// Its name in the build summary (inside the asset).
+    pub instance: String,
+    /// What its function reads.
+    pub reads: Vec<Read>,
+    /// The artifacts made from its result (project-relative).
+    pub writes: Vec<PathBuf>,
+    /// Shared by every asset that reads the same file (a decode), not owned by this asset.
+    pub shared: bool,
+    /// The asset's errors left it without a result.
+    pub failed: bool,
+}
+
+/// One read of a stage instance: a source file, or another instance's result.
+#[derive(Clone, Debug, PartialEq)]
+pub enum Read {
+    File(PathBuf),
+    Stage(Stage, String),
+}
+
+impl StageInstance {
+    pub fn new(stage: Stage, label: impl Into<String>, instance: impl Into<String>) -> StageInstance {
+        StageInstance {
+            stage,
+            label: label.into(),
+            instance: instance.into(),
+            reads: Vec::new(),
+            writes: Vec::new(),
+            shared: false,
+            failed: false,
+        }
+    }
+
+    pub fn reads_stage(mut self, other: &StageInstance) -> Self {
+        self.reads.push(Read::Stage(other.stage, other.label.clone()));
+        self
+    }
+
+    /// The node id in the graph and the event log: `stage(label)`.
+    pub fn node_id(&self) -> String {
+        stage_node_id(self.stage.name, &self.label)
+    }
+}
+
+/// The graph id of a stage instance, as the event log names it: `stage(label)`.
+pub fn stage_node_id(stage: &str, label: &str) -> String {
+    format!("{stage}({label})")
+}
+
+/// The shared tail stages of one surface (mips → encode → write), reading `image` (the stage
+/// that made the surface's image) and writing its two files.
+pub fn tail_instances(
+    asset_name: &str,
+    surface: &SurfaceId,
+    image: &StageInstance,
+    files: [PathBuf; 2],
+    failed: bool,
+) -> [StageInstance; 3] {
+    let label = surface.label(asset_name);
+    let instance = surface.instance();
+    let mut mips = StageInstance::new(tail_queries::MIPS, &label, &instance).reads_stage(image);
+    let mut encode = StageInstance::new(tail_queries::ENCODE, &label, &instance).reads_stage(&mips);
+    let mut write = StageInstance::new(tail_queries::WRITE, &label, &instance).reads_stage(&encode).reads_stage(image);
+    write.writes = files.to_vec();
+    for stage in [&mut mips, &mut encode, &mut write] {
+        stage.failed = failed;
+    }
+    [mips, encode, write]
+}
+
+/// What an asset writes: files (project-relative) and its `report.json`, written last.
+#[derive(Clone, Debug, Default)]
+pub struct AssetOutputs {
+    pub files: Vec<(PathBuf, Arc<[u8]>)>,
+    pub report: Option<Vec<u8>>,
+}
+
+/// Reads a texture's header for `check`: readable, decodable, within the texture limits.
+pub fn check_texture_file(config: &PipelineConfig, path: &Path) -> Result<(), String> {
+    let contents = crate::sources::read_source(&config.root, &config.source, path)?;
+    crate::texture::probe_texture(path, &contents.bytes, config.limits.texture).map(|_| ()).map_err(|diagnostic| diagnostic.message)
+}
+
+/// A warning reported by `check`: the diagnostic with its message marked.
+pub fn as_warning(diagnostic: &Diagnostic) -> Diagnostic {
+    Diagnostic { message: format!("warning: {}", diagnostic.message), ..diagnostic.clone() }
+}

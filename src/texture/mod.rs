@@ -9,6 +9,7 @@ pub mod encode;
 pub mod quality;
 pub mod container;
 pub mod preview;
+pub mod tail;
 
 use std::fmt;
 use std::io::Cursor;

@@ -155,12 +155,12 @@ fn corpus_billboard_clouds_bake_and_keep_their_silhouettes() {
     assert!(summary.all_ok(), "{}", summary.to_text());
     let mut figures = Vec::new();
     for name in ["oak", "ash", "bush"] {
-        let options = cirrus::project::PreviewOptions {
+        let options = cirrus::kinds::billboard_cloud::PreviewOptions {
             asset: name.into(),
             settings: Default::default(),
             out: format!("baked/{name}/preview").into(),
         };
-        let metrics = project.preview(&options).expect("preview renders");
+        let metrics = cirrus::kinds::billboard_cloud::preview(&mut project, &options).expect("preview renders");
         assert_eq!(metrics.views.len(), 26);
         // The bar of DESIGN §7, at the default ε and 16 samples per pixel.
         let floor = 0.85;

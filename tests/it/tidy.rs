@@ -45,12 +45,27 @@ fn every_file_starts_by_saying_what_it_is_for() {
 
 #[test]
 fn salsa_wgpu_notify_sockets_and_file_io_stay_in_their_modules() {
-    assert_eq!(modules_using(&["salsa::", "#[salsa"]), ["db.rs", "project.rs"], "salsa: the database and the driver that sets its inputs");
+    let salsa = modules_using(&["salsa::", "#[salsa"]);
+    let glue = |module: &String| ["db.rs", "project.rs", "schedule.rs"].contains(&module.as_str()) || module.ends_with("queries.rs");
+    assert!(salsa.iter().all(glue), "salsa outside the database, the driver, the scheduler and the kinds' queries.rs: {salsa:?}");
+    assert!(salsa.iter().any(|module| module == "kinds/material/queries.rs"), "the check sees the kinds' queries: {salsa:?}");
     let wgpu = modules_using(&["wgpu::"]);
     assert!(!wgpu.is_empty() && wgpu.iter().all(|module| module.starts_with("gpu/")), "only gpu/ holds the wgpu device: {wgpu:?}");
     assert_eq!(modules_using(&["notify::", "notify_debouncer"]), ["watch.rs"], "only watch touches notify");
     assert_eq!(modules_using(&["std::net::Tcp", "TcpListener", "TcpStream"]), ["server.rs"], "only server touches sockets");
-    let io = modules_using(&["std::fs", "File::", "OpenOptions", "canonicalize", "read_dir"]);
-    let edges = ["artifacts.rs", "project.rs", "cache.rs", "config.rs", "sources.rs", "watch.rs"];
+    let io = modules_using(&["std::fs", " File::", "OpenOptions", "canonicalize", "read_dir"]);
+    let edges = ["artifacts.rs", "cache.rs", "config.rs", "sources.rs", "watch.rs"];
     assert!(io.iter().all(|module| edges.contains(&module.as_str())), "file-system IO outside the edges: {io:?}");
+}
+
+#[test]
+fn the_driver_and_the_machinery_name_no_kind() {
+    let machinery = ["project.rs", "schedule.rs", "db.rs", "cache.rs", "summary.rs", "graph.rs", "artifacts.rs", "sources.rs"];
+    for module in machinery {
+        let path = Path::new(env!("CARGO_MANIFEST_DIR")).join("src").join(module);
+        let code = code(&path).to_lowercase();
+        for kind in ["material", "billboard", "planes", "atlas"] {
+            assert!(!code.contains(kind), "{module} names `{kind}`");
+        }
+    }
 }

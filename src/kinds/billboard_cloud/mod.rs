@@ -1,5 +1,11 @@
 //! The `BillboardCloud` kind: a mesh turned into a cloud of textured quads (planes → rectangles
-//! → layout → per-plane renders → atlas) whose surfaces end in the shared texture tail.
+//! → layout → per-group renders → atlas) whose four atlas surfaces end in the shared texture
+//! tail, plus `lod.obj` / `lod.mtl`; and `cirrus preview`, which compares the source with the
+//! baked LOD.
+//!
+//! Jobs: `layout` (mesh, planes and layout on a worker, wave 0), then the LOD and one `render`
+//! per render group (wave 1, renders only when some atlas surface is not in the cache), then the
+//! four atlas surfaces through the tail (wave 2).
 
 pub mod planes;
 pub mod rectangles;
@@ -8,3 +14,361 @@ pub mod render_groups;
 pub mod atlas;
 pub mod lod_mesh;
 pub mod lod_preview;
+pub mod queries;
+
+use std::collections::BTreeMap;
+use std::path::{Path, PathBuf};
+use std::sync::Arc;
+
+use crate::cache::CacheKey;
+use crate::config::PipelineConfig;
+use crate::db::{Asset, Db, StageRun, DECODE};
+use crate::diagnostic::{display_path, Diagnostic};
+use crate::kinds::{as_warning, check_texture_file, tail_instances, AssetOutputs, Job, Kind, Read, StageInstance, SurfaceId, Task};
+use crate::summary::ErrorSummary;
+use crate::texture::tail::TailSettings;
+use crate::texture::{SurfaceKind, Texture};
+use queries::{billboard_layout, billboard_planes, loaded_mesh, lod_files, mesh_libraries, mesh_textures, render_label};
+use queries::{ATLAS, LAYOUT, LOD, MESH, PLANES, RENDER};
+
+pub struct BillboardCloud;
+
+fn atlas_surfaces() -> [SurfaceId; 4] {
+    SurfaceKind::BILLBOARD.map(|surface| SurfaceId { group: String::new(), surface })
+}
+
+impl Kind for BillboardCloud {
+    const NAME: &'static str = "BillboardCloud";
+
+    fn files_to_read(db: &dyn Db, asset: Asset) -> Vec<PathBuf> {
+        let mut files = vec![asset.main_file(db).clone()];
+        files.extend(queries::mesh_library_paths(db, asset).iter().cloned());
+        files.extend(mesh_textures(db, asset).iter().cloned());
+        files
+    }
+
+    fn first_jobs(db: &dyn Db, asset: Asset) -> Vec<Job> {
+        vec![Job { asset, task: Task::Step("layout", 0), after: 0, label: asset.name(db).clone() }]
+    }
+
+    fn run_step(db: &dyn Db, asset: Asset, step: &'static str, index: u32) -> Result<Vec<Job>, Diagnostic> {
+        let name = asset.name(db);
+        match step {
+            "layout" => {
+                let layout = billboard_layout(db, asset)?;
+                let mut jobs = vec![Job { asset, task: Task::Step("lod", 0), after: 1, label: format!("{name}/lod") }];
+                // Renders are needed only for surfaces the persistent cache does not hold.
+                let surfaces = atlas_surfaces();
+                if !surfaces.iter().all(|surface| crate::kinds::tail_queries::surface_in_cache(db, asset, surface)) {
+                    let groups = 0..layout.render_groups.len() as u32;
+                    jobs.extend(groups.map(|group| Job {
+                        asset,
+                        task: Task::Step("render", group),
+                        after: 1,
+                        label: format!("{name}/render{group}"),
+                    }));
+                }
+                jobs.extend(surfaces.map(|surface| Job { asset, label: surface.label(name), task: Task::Surface(surface), after: 2 }));
+                Ok(jobs)
+            }
+            "render" => queries::plane_images(db, asset, index).map(|_| Vec::new()),
+            _ => lod_files(db, asset).map(|_| Vec::new()),
+        }
+    }
+
+    fn stage_instances(db: &dyn Db, asset: Asset, output_folder: &Path, errors: &[Diagnostic]) -> Vec<StageInstance> {
+        let name = asset.name(db);
+        let main_file = asset.main_file(db);
+        let mesh_label = display_path(main_file);
+        let failed = !errors.is_empty();
+        let report = output_folder.join("report.json");
+        let mut mesh = StageInstance::new(MESH, name, &mesh_label);
+        mesh.reads.push(Read::File(main_file.clone()));
+        mesh.reads.extend(mesh_libraries(db, asset).keys().map(|path| Read::File(path.clone())));
+        let planes = StageInstance::new(PLANES, name, &mesh_label).reads_stage(&mesh);
+        let layout = StageInstance::new(LAYOUT, name, &mesh_label).reads_stage(&mesh).reads_stage(&planes);
+        let mut atlas = StageInstance::new(ATLAS, name, &mesh_label).reads_stage(&layout);
+        let mut lod = StageInstance::new(LOD, name, &mesh_label).reads_stage(&layout);
+        lod.writes = vec![output_folder.join("lod.obj"), output_folder.join("lod.mtl")];
+        let mut instances = vec![mesh.clone(), planes.clone(), layout.clone()];
+        let mut decodes = BTreeMap::new();
+        if let (Ok(loaded), Ok(plane_layout)) = (loaded_mesh(db, asset), billboard_layout(db, asset)) {
+            for group in &plane_layout.render_groups {
+                let label = render_label(name, &loaded.mesh, group);
+                let instance = label.strip_prefix(&format!("{name}/")).unwrap_or(&label).to_string();
+                let mut render = StageInstance::new(RENDER, label, instance).reads_stage(&mesh).reads_stage(&planes).reads_stage(&layout);
+                if loaded.mesh.uvs.is_some() {
+                    for &material in &group.materials {
+                        for path in loaded.mesh.materials[material as usize].maps.values() {
+                            let label = display_path(path);
+                            render.reads.push(Read::Stage(DECODE, label.clone()));
+                            decodes.entry(label).or_insert_with(|| {
+                                let mut decode = StageInstance::new(DECODE, display_path(path), display_path(path));
+                                decode.reads.push(Read::File(path.clone()));
+                                decode.shared = true;
+                                decode
+                            });
+                        }
+                    }
+                }
+                atlas = atlas.reads_stage(&render);
+                instances.push(render);
+            }
+        }
+        let container = asset.settings(db).encode.container;
+        let mut tails = Vec::new();
+        for surface in atlas_surfaces() {
+            let [mips, encode, mut write] = tail_instances(name, &surface, &atlas, surface.artifact_paths(output_folder, container), false);
+            write.writes.push(report.clone());
+            tails.extend([mips, encode, write]);
+        }
+        atlas.writes.push(report.clone());
+        instances[0].writes.push(report.clone());
+        instances.push(atlas);
+        instances.extend(tails);
+        instances.push(lod);
+        instances.extend(decodes.into_values());
+        for instance in &mut instances {
+            instance.failed = failed;
+        }
+        instances
+    }
+
+    fn outputs(db: &dyn Db, asset: Asset, output_folder: &Path, errors: &mut Vec<Diagnostic>, runs: &[StageRun]) -> AssetOutputs {
+        if !errors.is_empty() {
+            return AssetOutputs::default();
+        }
+        match billboard_outputs(db, asset, output_folder, runs) {
+            Ok(outputs) => outputs,
+            Err(diagnostic) => {
+                errors.push(diagnostic);
+                AssetOutputs::default()
+            }
+        }
+    }
+
+    /// The mesh loads with its material libraries, and every texture its materials name is
+    /// readable and within the limits; warnings are reported as problems too.
+    fn check(config: &PipelineConfig, main_file: &Path) -> Vec<Diagnostic> {
+        let read = |path: &Path| crate::sources::read_source(&config.root, &config.source, path);
+        let contents = match read(main_file) {
+            Ok(contents) => contents,
+            Err(error) => return vec![Diagnostic::new(main_file, error)],
+        };
+        let mut libraries = BTreeMap::new();
+        for library in crate::mesh::material_libraries(main_file, &contents.bytes, &config.source) {
+            let bytes = match read(&library) {
+                Ok(contents) => Some(contents.bytes.to_vec()),
+                Err(error) if error == crate::sources::FILE_NOT_FOUND => None,
+                Err(error) => return vec![Diagnostic::new(&library, error)],
+            };
+            libraries.insert(library, bytes);
+        }
+        let (mesh, warnings) = match crate::mesh::load_mesh(main_file, &contents.bytes, &libraries, &config.source) {
+            Ok(loaded) => loaded,
+            Err(diagnostic) => return vec![diagnostic],
+        };
+        let mut problems: Vec<Diagnostic> = warnings.iter().map(as_warning).collect();
+        let textures: std::collections::BTreeSet<&PathBuf> = mesh.materials.iter().flat_map(|material| material.maps.values()).collect();
+        for path in textures {
+            if let Err(message) = check_texture_file(config, path) {
+                problems.push(Diagnostic::new(path, message));
+            }
+        }
+        problems
+    }
+
+    fn surface_image(db: &dyn Db, asset: Asset, surface: &SurfaceId) -> Result<Arc<Texture>, Diagnostic> {
+        queries::atlas_surface(db, asset, surface.surface)
+    }
+
+    fn tail_settings(db: &dyn Db, asset: Asset, surface: &SurfaceId) -> Result<TailSettings, Diagnostic> {
+        let settings = asset.settings(db);
+        let encode = &settings.encode;
+        Ok(TailSettings {
+            surface: surface.surface,
+            format: encode.format_of(surface.surface),
+            quality: encode.quality,
+            mips: encode.mips,
+            alpha_cutoff: (surface.surface == SurfaceKind::Albedo).then_some(settings.billboard.alpha_cutoff),
+            container: encode.container,
+            zstd: encode.zstd,
+        })
+    }
+
+    fn surface_recipe_key(db: &dyn Db, asset: Asset, _surface: &SurfaceId) -> Result<Option<CacheKey>, Diagnostic> {
+        Ok(Some(queries::atlas_recipe_key(db, asset)))
+    }
+}
+
+/// The files of a baked billboard cloud: LOD mesh, textures, previews, report.
+fn billboard_outputs(db: &dyn Db, asset: Asset, output_folder: &Path, runs: &[StageRun]) -> Result<AssetOutputs, Diagnostic> {
+    let (obj, mtl) = (*lod_files(db, asset)?).clone();
+    let loaded = loaded_mesh(db, asset)?;
+    let planes = billboard_planes(db, asset)?;
+    let layout = billboard_layout(db, asset)?;
+    let mut outputs = AssetOutputs::default();
+    outputs.files.push((output_folder.join("lod.obj"), obj.into_bytes().into()));
+    outputs.files.push((output_folder.join("lod.mtl"), mtl.into_bytes().into()));
+    let container = asset.settings(db).encode.container;
+    let mut surfaces = Vec::new();
+    for surface in atlas_surfaces() {
+        let artifacts = crate::kinds::tail_queries::surface_artifacts(db, asset, surface.clone())?;
+        let [texture_path, preview_path] = surface.artifact_paths(output_folder, container);
+        outputs.files.push((texture_path, artifacts.texture_file.clone()));
+        outputs.files.push((preview_path, artifacts.preview_png.clone()));
+        surfaces.push(artifacts.info.clone());
+    }
+    let settings = asset.settings(db);
+    let name = asset.name(db);
+    let mut stage_ms: BTreeMap<&str, f64> = BTreeMap::new();
+    for run in runs.iter().filter(|run| !run.from_cache && (&run.label == name || run.label.starts_with(&format!("{name}/")))) {
+        *stage_ms.entry(run.stage).or_insert(0.0) += (run.ms * 10.0).round() / 10.0;
+    }
+    let atlas_coverage = queries::atlas_coverage_fraction(db, asset)?;
+    let report = serde_json::json!({
+        "asset": name,
+        "kind": BillboardCloud::NAME,
+        "mesh": display_path(asset.main_file(db)),
+        "faces": planes.face_count,
+        "planes": planes.planes.len(),
+        "quads": layout.layout.placements.len(),
+        // Faces of solid materials drawn on another plane's quad too (crack filling).
+        "faces_also_drawn": layout.rectangles.iter().map(|rectangle| rectangle.also_drawn.len()).sum::<usize>(),
+        "alpha_cutoff": settings.billboard.alpha_cutoff,
+        "epsilon": settings.billboard.epsilon,
+        "epsilon_world": planes.epsilon,
+        "max_error_world": planes.max_error,
+        "atlas": {
+            "width": layout.layout.width,
+            "height": layout.layout.height,
+            "texel_density": layout.layout.texel_density,
+            "occupancy": (layout.layout.occupancy * 1e4).round() / 1e4,
+            "coverage": atlas_coverage,
+        },
+        "surfaces": surfaces,
+        "stage_ms": stage_ms,
+        "warnings": loaded.warnings.iter().map(ErrorSummary::from).collect::<Vec<_>>(),
+    });
+    outputs.report = Some(serde_json::to_vec_pretty(&report).expect("reports serialise"));
+    Ok(outputs)
+}
+
+/// What `cirrus preview` renders.
+#[derive(Clone, Debug)]
+pub struct PreviewOptions {
+    pub asset: String,
+    pub settings: lod_preview::PreviewSettings,
+    /// Where `contact_sheet.png` and `metrics.json` go (project-relative or absolute).
+    pub out: PathBuf,
+}
+
+#[derive(Debug, thiserror::Error)]
+pub enum PreviewError {
+    #[error(transparent)]
+    Build(#[from] crate::project::BuildError),
+    #[error("asset `{0}` is not a BillboardCloud: only billboard clouds have a LOD to preview")]
+    NotBillboard(String),
+    #[error("asset `{name}` failed to bake:\n{errors}")]
+    Failed { name: String, errors: String },
+    #[error("{0}")]
+    Artifact(Diagnostic),
+    #[error(transparent)]
+    Gpu(#[from] crate::gpu::GpuError),
+    #[error("cannot write the preview: {0}")]
+    Write(std::io::Error),
+}
+
+/// `cirrus preview`: bakes the asset if needed, then renders it and its source from the view
+/// directions and writes the contact sheet and the metrics.
+pub fn preview(project: &mut crate::project::Project, options: &PreviewOptions) -> Result<lod_preview::PreviewMetrics, PreviewError> {
+    let build = crate::project::BuildOptions { only_assets: vec![options.asset.clone()], ..Default::default() };
+    let summary = project.build(&build, &|_| {})?;
+    let asset = &summary.assets[0];
+    if asset.kind != BillboardCloud::NAME {
+        return Err(PreviewError::NotBillboard(options.asset.clone()));
+    }
+    if asset.status != crate::summary::AssetStatus::Ok {
+        let errors = asset.errors.iter().map(|error| format!("  {}: {}", error.file, error.message)).collect::<Vec<_>>().join("\n");
+        return Err(PreviewError::Failed { name: options.asset.clone(), errors });
+    }
+    let input = project.asset_input(&options.asset).expect("a built asset has an input");
+    let db = project.database();
+    let loaded = loaded_mesh(db, input).map_err(PreviewError::Artifact)?;
+    let source = source_view_mesh(db, input, &loaded).map_err(PreviewError::Artifact)?;
+    let cutoff = input.settings(db).billboard.alpha_cutoff;
+    let config = project.config();
+    let folder = config.output.join(&options.asset);
+    let lod = read_lod_view_mesh(&config.root, &folder, cutoff).map_err(PreviewError::Artifact)?;
+    let positions = &loaded.mesh.positions;
+    let (min, max) = positions.iter().fold((glam::Vec3::splat(f32::INFINITY), glam::Vec3::splat(f32::NEG_INFINITY)), |(min, max), &p| {
+        (min.min(glam::Vec3::from(p)), max.max(glam::Vec3::from(p)))
+    });
+    let center = 0.5 * (min + max);
+    let radius = positions.iter().map(|&p| glam::Vec3::from(p).distance(center)).fold(0.0, f32::max);
+    let gpu = crate::gpu::gpu()?;
+    let preview = lod_preview::preview(gpu, &source, &lod, center.to_array(), radius, options.settings)?;
+    let out = config.root.join(&options.out);
+    let mut metrics = serde_json::to_vec_pretty(&preview.metrics).expect("metrics serialise");
+    metrics.push(b'\n');
+    crate::artifacts::write_if_changed(&out.join("contact_sheet.png"), &preview.contact_sheet).map_err(PreviewError::Write)?;
+    crate::artifacts::write_if_changed(&out.join("metrics.json"), &metrics).map_err(PreviewError::Write)?;
+    Ok(preview.metrics)
+}
+
+/// The baked LOD in `folder` (relative to `root`) as an engine loads it: `lod.obj` with the
+/// decoded levels of `albedo.ktx2` and `normal.ktx2`, alpha-tested at `alpha_cutoff`.
+pub fn read_lod_view_mesh(root: &Path, folder: &Path, alpha_cutoff: f32) -> Result<crate::gpu::ViewMesh, Diagnostic> {
+    let read = |file: &str| -> Result<(PathBuf, Vec<u8>), Diagnostic> {
+        let path = folder.join(file);
+        let bytes = crate::artifacts::read_artifact(root, &path)?;
+        Ok((path, bytes))
+    };
+    lod_preview::lod_view_mesh(&lod_preview::LodFiles {
+        obj: read("lod.obj")?,
+        albedo_ktx2: read("albedo.ktx2")?,
+        normal_ktx2: read("normal.ktx2")?,
+        alpha_cutoff,
+    })
+}
+
+/// The source mesh with its decoded maps (mipmapped as for rendering).
+fn source_view_mesh(db: &dyn Db, input: Asset, loaded: &queries::LoadedMesh) -> Result<crate::gpu::ViewMesh, Diagnostic> {
+    use crate::texture::TextureSlot;
+    let cutoff = input.settings(db).billboard.alpha_cutoff;
+    let mut materials = Vec::new();
+    for material in &loaded.mesh.materials {
+        let levels = |slot: TextureSlot, kind: SurfaceKind| -> Result<Option<Arc<Vec<crate::texture::Texture>>>, Diagnostic> {
+            let Some(path) = material.maps.get(&slot).filter(|_| loaded.mesh.uvs.is_some()) else { return Ok(None) };
+            let Some(file) = crate::db::asset_file(db, input, path.clone()) else { return Ok(None) };
+            let texture =
+                if slot == TextureSlot::Opacity { crate::db::opacity_texture(db, file)? } else { crate::db::decoded_texture(db, file)? };
+            // The reference keeps alpha-tested coverage at every distance, as the bake does.
+            let alpha_cutoff = matches!(slot, TextureSlot::Albedo | TextureSlot::Opacity).then_some(cutoff);
+            Ok(Some(Arc::new(crate::texture::mips::mip_chain(&texture, crate::texture::mips::MipSettings { kind, alpha_cutoff }))))
+        };
+        materials.push(crate::gpu::ViewMaterial {
+            albedo: levels(TextureSlot::Albedo, SurfaceKind::Albedo)?,
+            opacity: levels(TextureSlot::Opacity, SurfaceKind::Albedo)?,
+            normal: levels(TextureSlot::Normal, SurfaceKind::Normal)?,
+            normal_has_z: true,
+            albedo_factor: [material.albedo_factor[0], material.albedo_factor[1], material.albedo_factor[2], material.opacity],
+            alpha_cutoff: cutoff,
+        });
+    }
+    let all_faces = crate::kinds::billboard_cloud::rectangles::PlaneRectangle {
+        plane: 0,
+        faces: (0..loaded.mesh.triangles.len() as u32).collect(),
+        also_drawn: Vec::new(),
+        origin: [0.0; 3],
+        x_axis: [1.0, 0.0, 0.0],
+        y_axis: [0.0, 1.0, 0.0],
+        normal: [0.0, 0.0, 1.0],
+        width: 0.0,
+        height: 0.0,
+    };
+    Ok(crate::gpu::ViewMesh {
+        batches: crate::kinds::billboard_cloud::render_groups::plane_batches(&loaded.mesh, &loaded.tangents, &all_faces),
+        materials,
+    })
+}

@@ -1,5 +1,213 @@
 //! The `Material` kind: a `.mymaterial` file and the texture maps it names, packed into albedo,
-//! mra and normal surfaces that end in the shared texture tail.
+//! mra and normal surfaces per material that end in the shared texture tail.
+//!
+//! Jobs: `parse` (wave 0), then one tail job per material × surface. Stage instances: `parse`,
+//! a `decode` per texture, then per surface `pack → mips → encode → write`.
 
 pub mod definition;
 pub mod channel_packing;
+pub mod queries;
+
+use std::path::{Path, PathBuf};
+use std::sync::Arc;
+
+use serde::Serialize;
+
+use crate::cache::CacheKey;
+use crate::config::PipelineConfig;
+use crate::db::{Asset, Db, StageRun, DECODE};
+use crate::diagnostic::{display_path, Diagnostic};
+use crate::kinds::{as_warning, check_texture_file, tail_instances, AssetOutputs, Job, Kind, Read, StageInstance, SurfaceId, Task};
+use crate::summary::ErrorSummary;
+use crate::texture::tail::{SurfaceInfo, TailSettings};
+use crate::texture::{SurfaceKind, Texture};
+use queries::{material_file, packed_surface, referenced_textures, surface_recipe, PACK, PARSE};
+
+pub struct Material;
+
+/// The surfaces of every material of the asset, in file order.
+fn surfaces(parsed: &definition::MaterialFile) -> Vec<SurfaceId> {
+    let materials = parsed.materials.iter();
+    materials.flat_map(|material| SurfaceKind::MATERIAL.map(|surface| SurfaceId { group: material.name.clone(), surface })).collect()
+}
+
+impl Kind for Material {
+    const NAME: &'static str = "Material";
+
+    fn files_to_read(db: &dyn Db, asset: Asset) -> Vec<PathBuf> {
+        let mut files = vec![asset.main_file(db).clone()];
+        if let Ok(parsed) = material_file(db, asset) {
+            files.extend(referenced_textures(&parsed));
+        }
+        files
+    }
+
+    fn first_jobs(db: &dyn Db, asset: Asset) -> Vec<Job> {
+        vec![Job { asset, task: Task::Step("parse", 0), after: 0, label: display_path(asset.main_file(db)) }]
+    }
+
+    fn run_step(db: &dyn Db, asset: Asset, _step: &'static str, _index: u32) -> Result<Vec<Job>, Diagnostic> {
+        let parsed = material_file(db, asset)?;
+        for warning in &parsed.warnings {
+            tracing::warn!("{warning}");
+        }
+        let name = asset.name(db);
+        Ok(surfaces(&parsed)
+            .into_iter()
+            .map(|surface| Job { asset, label: surface.label(name), task: Task::Surface(surface), after: 1 })
+            .collect())
+    }
+
+    fn stage_instances(db: &dyn Db, asset: Asset, output_folder: &Path, errors: &[Diagnostic]) -> Vec<StageInstance> {
+        let main_file = asset.main_file(db);
+        let main_label = display_path(main_file);
+        let parsed = material_file(db, asset);
+        let mut parse = StageInstance::new(PARSE, &main_label, &main_label);
+        parse.reads.push(Read::File(main_file.clone()));
+        parse.failed = parsed.is_err();
+        let report = output_folder.join("report.json");
+        parse.writes.push(report.clone());
+        let mut instances = vec![parse.clone()];
+        let Ok(parsed) = parsed else { return instances };
+        for path in referenced_textures(&parsed) {
+            let label = display_path(&path);
+            let mut decode = StageInstance::new(DECODE, &label, &label);
+            decode.reads.push(Read::File(path.clone()));
+            decode.shared = true;
+            decode.failed = errors.iter().any(|error| error.file == path);
+            instances.push(decode);
+        }
+        let container = asset.settings(db).encode.container;
+        let name = asset.name(db);
+        for surface in surfaces(&parsed) {
+            let mut pack = StageInstance::new(PACK, surface.label(name), surface.instance()).reads_stage(&parse);
+            if let Some(material) = parsed.materials.iter().find(|material| material.name == surface.group) {
+                for slot in surface.surface.slots() {
+                    if let Some(reference) = material.textures.get(slot) {
+                        pack.reads.push(Read::Stage(DECODE, display_path(&reference.path)));
+                    }
+                }
+            }
+            let [mut mips, encode, mut write] =
+                tail_instances(name, &surface, &pack, surface.artifact_paths(output_folder, container), false);
+            // The alpha cutoff of an albedo's mips comes from the material's constants.
+            mips = mips.reads_stage(&parse);
+            write.writes.push(report.clone());
+            instances.extend([pack, mips, encode, write]);
+        }
+        instances
+    }
+
+    fn outputs(db: &dyn Db, asset: Asset, output_folder: &Path, errors: &mut Vec<Diagnostic>, _runs: &[StageRun]) -> AssetOutputs {
+        let Ok(parsed) = material_file(db, asset) else { return AssetOutputs::default() };
+        let container = asset.settings(db).encode.container;
+        let mut outputs = AssetOutputs::default();
+        let mut materials = Vec::new();
+        for material in &parsed.materials {
+            let mut reports = Vec::new();
+            for surface in SurfaceKind::MATERIAL {
+                let id = SurfaceId { group: material.name.clone(), surface };
+                let Ok(artifacts) = crate::kinds::tail_queries::surface_artifacts(db, asset, id.clone()) else { continue };
+                let [texture_path, preview_path] = id.artifact_paths(output_folder, container);
+                reports.push(SurfaceReport {
+                    path: display_path(&texture_path),
+                    preview: display_path(&preview_path),
+                    info: artifacts.info.clone(),
+                });
+                outputs.files.push((texture_path, artifacts.texture_file.clone()));
+                outputs.files.push((preview_path, artifacts.preview_png.clone()));
+            }
+            materials.push(MaterialReportEntry {
+                name: material.name.clone(),
+                display_name: material.display_name.clone(),
+                surfaces: reports,
+            });
+        }
+        let report = MaterialReport {
+            asset: asset.name(db).clone(),
+            kind: Material::NAME,
+            file: display_path(asset.main_file(db)),
+            materials,
+            warnings: parsed.warnings.iter().map(ErrorSummary::from).collect(),
+            errors: errors.iter().map(ErrorSummary::from).collect(),
+        };
+        outputs.report = Some(serde_json::to_vec_pretty(&report).expect("reports serialise"));
+        outputs
+    }
+
+    /// The material file parses, and every texture it names is readable and within the limits;
+    /// warnings are reported as problems too.
+    fn check(config: &PipelineConfig, main_file: &Path) -> Vec<Diagnostic> {
+        let contents = match crate::sources::read_source(&config.root, &config.source, main_file) {
+            Ok(contents) => contents,
+            Err(error) => return vec![Diagnostic::new(main_file, error)],
+        };
+        let parsed = match definition::parse_material_file(main_file, &contents.bytes, &config.source) {
+            Ok(parsed) => parsed,
+            Err(diagnostic) => return vec![diagnostic],
+        };
+        let mut problems: Vec<Diagnostic> = parsed.warnings.iter().map(as_warning).collect();
+        for reference in parsed.materials.iter().flat_map(|material| material.textures.values()) {
+            if let Err(message) = check_texture_file(config, &reference.path) {
+                let message = format!("texture \"{}\" ({}): {message}", reference.written, display_path(&reference.path));
+                problems.push(Diagnostic::at(main_file, reference.position, message));
+            }
+        }
+        problems
+    }
+
+    fn surface_image(db: &dyn Db, asset: Asset, surface: &SurfaceId) -> Result<Arc<Texture>, Diagnostic> {
+        packed_surface(db, asset, surface.clone())
+    }
+
+    fn tail_settings(db: &dyn Db, asset: Asset, surface: &SurfaceId) -> Result<TailSettings, Diagnostic> {
+        let settings = asset.settings(db);
+        let encode = &settings.encode;
+        let alpha_cutoff = match surface.surface {
+            SurfaceKind::Albedo => {
+                let recipe = surface_recipe(db, asset, surface.clone())?;
+                Some(recipe.constants.alpha_cutoff.unwrap_or(settings.billboard.alpha_cutoff))
+            }
+            _ => None,
+        };
+        Ok(TailSettings {
+            surface: surface.surface,
+            format: encode.format_of(surface.surface),
+            quality: encode.quality,
+            mips: encode.mips,
+            alpha_cutoff,
+            container: encode.container,
+            zstd: encode.zstd,
+        })
+    }
+
+    fn surface_recipe_key(db: &dyn Db, asset: Asset, surface: &SurfaceId) -> Result<Option<CacheKey>, Diagnostic> {
+        queries::surface_recipe_key(db, asset, surface.clone()).map(Some)
+    }
+}
+
+/// `report.json` of a material asset.
+#[derive(Clone, Debug, PartialEq, Serialize)]
+pub struct MaterialReport {
+    pub asset: String,
+    pub kind: &'static str,
+    pub file: String,
+    pub materials: Vec<MaterialReportEntry>,
+    pub warnings: Vec<ErrorSummary>,
+    pub errors: Vec<ErrorSummary>,
+}
+
+#[derive(Clone, Debug, PartialEq, Serialize)]
+pub struct MaterialReportEntry {
+    pub name: String,
+    pub display_name: Option<String>,
+    pub surfaces: Vec<SurfaceReport>,
+}
+
+#[derive(Clone, Debug, PartialEq, Serialize)]
+pub struct SurfaceReport {
+    pub path: String,
+    pub preview: String,
+    #[serde(flatten)]
+    pub info: SurfaceInfo,
+}

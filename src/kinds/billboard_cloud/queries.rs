@@ -1,0 +1,409 @@
+//! The BillboardCloud kind's tracked functions: thin glue between the database and the kind's
+//! pure stages (mesh → planes → layout → per-group renders → atlas, and the LOD mesh). Render
+//! groups are tracked functions of (asset, group index); the atlas surfaces go through the
+//! shared texture tail.
+//!
+//! The mesh, planes, layout and LOD are also kept in the persistent cache, under keys chained
+//! from the keys of what they read (mesh inputs → planes → layout → LOD), so that after a
+//! restart a texture edit re-runs only the renders, the atlas and the surfaces whose texels
+//! changed.
+
+use std::collections::BTreeMap;
+use std::path::PathBuf;
+use std::sync::Arc;
+
+use super::layout::Layout;
+use super::rectangles::PlaneRectangle;
+use super::render_groups::RenderGroup;
+use crate::cache::{CacheEntry, CacheKey, CacheKeyBuilder, KeyPart};
+use crate::db::{
+    asset_file, cached_json, decoded_texture, from_pod_blob, key_with_files, load_cached, opacity_texture, pod_blob, read_contents,
+    record_cache_hit, stage_key, store_cached, timed, Asset, Db, SourceFile, Stage,
+};
+use crate::diagnostic::{display_path, Diagnostic};
+use crate::gpu::PlaneImages;
+use crate::texture::{SurfaceKind, Texture, TextureSlot};
+
+// Mesh 2: `map_d` naming the albedo texture is not applied a second time.
+pub const MESH: Stage = Stage { name: "mesh", version: 2 };
+// Planes 2: each plane is fitted to its faces (least squares within ε). 3: faces then move to
+// their nearest plane holding their material (rounds of reassignment and refitting).
+pub const PLANES: Stage = Stage { name: "planes", version: 3 };
+// Layout 2: faces of solid materials are also drawn on other planes' rectangles they lie within
+// ε of (crack filling).
+pub const LAYOUT: Stage = Stage { name: "layout", version: 2 };
+// Render 2–5: coverage-preserving mips of alpha sources; transparent texels keep their
+// footprint's colour; sRGB bytes from tables; no coverage scaling when all or none pass.
+pub const RENDER: Stage = Stage { name: "render", version: 5 };
+pub const ATLAS: Stage = Stage { name: "atlas", version: 1 };
+pub const LOD: Stage = Stage { name: "lod", version: 1 };
+
+impl KeyPart for crate::config::AtlasSettings {
+    fn add_to(&self, key: CacheKeyBuilder) -> CacheKeyBuilder {
+        let crate::config::AtlasSettings { max_size, padding, power_of_two } = self;
+        key.part(max_size).part(padding).part(power_of_two)
+    }
+}
+
+/// The OBJ's input.
+fn mesh_source(db: &dyn Db, asset: Asset) -> Result<SourceFile, Diagnostic> {
+    let path = asset.main_file(db);
+    asset_file(db, asset, path.clone()).ok_or_else(|| Diagnostic::new(path, "was not read"))
+}
+
+/// The MTL files the OBJ names (project-relative), read or not.
+#[salsa::tracked(returns(clone))]
+pub fn mesh_library_paths(db: &dyn Db, asset: Asset) -> Arc<Vec<PathBuf>> {
+    let Ok(file) = mesh_source(db, asset) else { return Arc::default() };
+    let Ok(contents) = file.contents(db) else { return Arc::default() };
+    Arc::new(crate::mesh::material_libraries(asset.main_file(db), &contents.bytes, asset.source_root(db)))
+}
+
+/// The MTL files the OBJ names, as far as read, by project-relative path.
+#[salsa::tracked(returns(clone))]
+pub fn mesh_libraries(db: &dyn Db, asset: Asset) -> Arc<BTreeMap<PathBuf, SourceFile>> {
+    let paths = mesh_library_paths(db, asset);
+    Arc::new(paths.iter().filter_map(|path| Some((path.clone(), asset_file(db, asset, path.clone())?))).collect())
+}
+
+fn library_bytes(db: &dyn Db, asset: Asset) -> BTreeMap<PathBuf, Option<Vec<u8>>> {
+    mesh_libraries(db, asset)
+        .iter()
+        .map(|(path, file)| (path.clone(), file.contents(db).as_ref().ok().map(|contents| contents.bytes.to_vec())))
+        .collect()
+}
+
+/// The texture files the mesh's materials name (cheap: the MTL files only).
+#[salsa::tracked(returns(clone))]
+pub fn mesh_textures(db: &dyn Db, asset: Asset) -> Arc<Vec<PathBuf>> {
+    Arc::new(crate::mesh::texture_paths(asset.main_file(db), &library_bytes(db, asset), asset.source_root(db)))
+}
+
+/// A loaded mesh with its vertex tangents and load warnings.
+#[derive(Debug, PartialEq)]
+pub struct LoadedMesh {
+    pub mesh: crate::mesh::Mesh,
+    pub tangents: Vec<[f32; 4]>,
+    pub warnings: Vec<Diagnostic>,
+}
+
+/// The content address of what the mesh stage reads: the OBJ and its MTL files (paths and
+/// bytes), and the source folder texture paths must stay in.
+#[salsa::tracked(returns(copy))]
+pub fn mesh_cache_key(db: &dyn Db, asset: Asset) -> CacheKey {
+    let key = stage_key(MESH).part(asset.source_root(db));
+    let libraries = mesh_libraries(db, asset);
+    let files = mesh_source(db, asset).ok().into_iter().chain(libraries.values().copied());
+    key_with_files(db, key, files).finish()
+}
+
+fn loaded_mesh_entry(loaded: &LoadedMesh) -> CacheEntry {
+    let mesh = &loaded.mesh;
+    CacheEntry {
+        metadata: serde_json::json!({ "materials": mesh.materials, "warnings": loaded.warnings, "uvs": mesh.uvs.is_some() }),
+        blobs: vec![
+            pod_blob(&mesh.positions),
+            pod_blob(&mesh.normals),
+            mesh.uvs.as_deref().map(pod_blob).unwrap_or_default(),
+            pod_blob(&mesh.triangles),
+            pod_blob(&mesh.triangle_materials),
+            pod_blob(&loaded.tangents),
+        ],
+    }
+}
+
+fn loaded_mesh_from_entry(entry: CacheEntry) -> Option<LoadedMesh> {
+    let [positions, normals, uvs, triangles, triangle_materials, tangents]: [Vec<u8>; 6] = entry.blobs.try_into().ok()?;
+    let mesh = crate::mesh::Mesh {
+        positions: from_pod_blob(&positions)?,
+        normals: from_pod_blob(&normals)?,
+        uvs: if entry.metadata.get("uvs")?.as_bool()? { Some(from_pod_blob(&uvs)?) } else { None },
+        triangles: from_pod_blob(&triangles)?,
+        triangle_materials: from_pod_blob(&triangle_materials)?,
+        materials: serde_json::from_value(entry.metadata.get("materials")?.clone()).ok()?,
+    };
+    let warnings = serde_json::from_value(entry.metadata.get("warnings")?.clone()).ok()?;
+    Some(LoadedMesh { mesh, tangents: from_pod_blob(&tangents)?, warnings })
+}
+
+/// The mesh (stage `mesh`): OBJ + MTL loaded, tangents computed.
+#[salsa::tracked(returns(clone))]
+pub fn loaded_mesh(db: &dyn Db, asset: Asset) -> Result<Arc<LoadedMesh>, Diagnostic> {
+    let file = mesh_source(db, asset)?;
+    let contents = read_contents(db, file)?;
+    // A missing MTL is a warning (its materials fall back to defaults); one that is there but
+    // cannot be read (not a regular file, no permission) fails the mesh, naming why.
+    for (path, library) in mesh_libraries(db, asset).iter() {
+        if let Err(why) = library.contents(db) {
+            if why != crate::sources::FILE_NOT_FOUND {
+                return Err(Diagnostic::new(path, why.clone()));
+            }
+        }
+    }
+    let name = asset.name(db);
+    let cache_key = mesh_cache_key(db, asset);
+    if let Some(loaded) = load_cached(db, MESH.name, cache_key, loaded_mesh_from_entry) {
+        record_cache_hit(db, MESH, name);
+        return Ok(Arc::new(loaded));
+    }
+    let libraries = library_bytes(db, asset);
+    let loaded = timed(db, MESH, name, || {
+        let (mesh, warnings) = crate::mesh::load_mesh(file.path(db), &contents.bytes, &libraries, asset.source_root(db))?;
+        let tangents = match &mesh.uvs {
+            Some(uvs) => crate::mesh::vertex_tangents(&mesh.positions, &mesh.normals, uvs, &mesh.triangles),
+            None => Vec::new(),
+        };
+        Ok(LoadedMesh { mesh, tangents, warnings })
+    })?;
+    store_cached(db, MESH.name, cache_key, || loaded_mesh_entry(&loaded));
+    Ok(Arc::new(loaded))
+}
+
+#[salsa::tracked(returns(copy))]
+pub fn plane_settings(db: &dyn Db, asset: Asset) -> super::planes::PlaneSettings {
+    let billboard = &asset.settings(db).billboard;
+    super::planes::PlaneSettings { epsilon: billboard.epsilon, max_planes: billboard.max_planes }
+}
+
+#[salsa::tracked(returns(copy))]
+pub fn planes_cache_key(db: &dyn Db, asset: Asset) -> CacheKey {
+    let settings = plane_settings(db, asset);
+    stage_key(PLANES).part(&mesh_cache_key(db, asset).0).part(&settings.epsilon).part(&settings.max_planes).finish()
+}
+
+/// The planes (stage `planes`).
+#[salsa::tracked(returns(clone))]
+pub fn billboard_planes(db: &dyn Db, asset: Asset) -> Result<Arc<super::planes::PlaneSet>, Diagnostic> {
+    let name = asset.name(db);
+    cached_json(db, PLANES, name, planes_cache_key(db, asset), || {
+        let loaded = loaded_mesh(db, asset)?;
+        let settings = plane_settings(db, asset);
+        timed(db, PLANES, name, || {
+            Ok(super::planes::select_planes(&loaded.mesh.positions, &loaded.mesh.triangles, &loaded.mesh.triangle_materials, settings))
+        })
+    })
+    .map(Arc::new)
+}
+
+/// The planes' rectangles and their atlas layout.
+#[derive(Debug, PartialEq, serde::Serialize, serde::Deserialize)]
+pub struct BillboardLayout {
+    pub rectangles: Vec<PlaneRectangle>,
+    pub layout: Layout,
+    /// The render stages: each plane's rectangles grouped by the materials they show.
+    pub render_groups: Vec<RenderGroup>,
+}
+
+#[salsa::tracked(returns(clone))]
+pub fn atlas_layout_settings(db: &dyn Db, asset: Asset) -> (crate::config::AtlasSettings, Option<f32>) {
+    let settings = asset.settings(db);
+    (settings.atlas.clone(), settings.billboard.texel_density)
+}
+
+#[salsa::tracked(returns(copy))]
+pub fn layout_cache_key(db: &dyn Db, asset: Asset) -> CacheKey {
+    let (atlas, density) = atlas_layout_settings(db, asset);
+    stage_key(LAYOUT).part(&planes_cache_key(db, asset).0).part(&atlas).part(&density).finish()
+}
+
+/// Rectangles, layout and render groups (stage `layout`).
+#[salsa::tracked(returns(clone))]
+pub fn billboard_layout(db: &dyn Db, asset: Asset) -> Result<Arc<BillboardLayout>, Diagnostic> {
+    cached_json(db, LAYOUT, asset.name(db), layout_cache_key(db, asset), || compute_billboard_layout(db, asset)).map(Arc::new)
+}
+
+fn compute_billboard_layout(db: &dyn Db, asset: Asset) -> Result<BillboardLayout, Diagnostic> {
+    let loaded = loaded_mesh(db, asset)?;
+    let planes = billboard_planes(db, asset)?;
+    let (atlas, density) = atlas_layout_settings(db, asset);
+    timed(db, LAYOUT, asset.name(db), || {
+        let mut rectangles = super::rectangles::plane_rectangles(&loaded.mesh.positions, &loaded.mesh.triangles, &planes);
+        let solid_materials: Vec<bool> = loaded.mesh.materials.iter().map(|material| !material.cut_out).collect();
+        let crack_filling = super::rectangles::CrackFillingInput {
+            positions: &loaded.mesh.positions,
+            triangles: &loaded.mesh.triangles,
+            face_materials: &loaded.mesh.triangle_materials,
+            solid_materials: &solid_materials,
+        };
+        super::rectangles::add_crack_filling_faces(&crack_filling, &planes, &mut rectangles);
+        let sizes: Vec<(f32, f32)> = rectangles.iter().map(|rectangle| (rectangle.width, rectangle.height)).collect();
+        let layout = super::layout::layout_rectangles(&sizes, &atlas, density);
+        let render_groups = super::render_groups::render_groups(&loaded.mesh, &rectangles);
+        Ok(BillboardLayout { rectangles, layout, render_groups })
+    })
+}
+
+/// `lod.obj` and `lod.mtl` (stage `lod`): planes and layout only, so texture edits leave them alone.
+#[salsa::tracked(returns(clone))]
+pub fn lod_files(db: &dyn Db, asset: Asset) -> Result<Arc<(String, String)>, Diagnostic> {
+    let name = asset.name(db);
+    let key = stage_key(LOD).part(&layout_cache_key(db, asset).0).finish();
+    cached_json(db, LOD, name, key, || {
+        let layout = billboard_layout(db, asset)?;
+        timed(db, LOD, name, || Ok(super::lod_mesh::lod_mesh(&layout.rectangles, &layout.layout, "billboard_cloud")))
+    })
+    .map(Arc::new)
+}
+
+#[salsa::tracked(returns(copy))]
+pub fn billboard_alpha_cutoff(db: &dyn Db, asset: Asset) -> f32 {
+    asset.settings(db).billboard.alpha_cutoff
+}
+
+/// The label of a render group's stage instance: `asset/plane12:bark+leaves`.
+pub fn render_label(asset_name: &str, mesh: &crate::mesh::Mesh, group: &RenderGroup) -> String {
+    format!("{asset_name}/{}", super::render_groups::render_group_label(mesh, group))
+}
+
+/// A decoded source map of the mesh's material, as a render reads it.
+fn material_map(
+    db: &dyn Db,
+    asset: Asset,
+    material: &crate::mesh::MeshMaterial,
+    slot: TextureSlot,
+) -> Result<Option<Arc<Texture>>, Diagnostic> {
+    let mesh_path = asset.main_file(db);
+    let Some(path) = material.maps.get(&slot) else { return Ok(None) };
+    let Some(file) = asset_file(db, asset, path.clone()) else {
+        return Err(Diagnostic::new(mesh_path, format!("texture {} was not read", display_path(path))));
+    };
+    if let Err(error) = file.contents(db) {
+        return Err(Diagnostic::new(
+            mesh_path,
+            format!("material `{}`: {} texture {}: {error}", material.name, slot.name(), display_path(path)),
+        ));
+    }
+    if slot == TextureSlot::Opacity { opacity_texture(db, file) } else { decoded_texture(db, file) }.map(Some)
+}
+
+/// The images of one render group (four per rectangle, in rectangle order): one plane's
+/// rectangles that show the same materials, rendered on the GPU in one go (stage `render`);
+/// reads only the textures of those materials.
+#[salsa::tracked(returns(clone))]
+pub fn plane_images(db: &dyn Db, asset: Asset, group: u32) -> Result<Arc<Vec<PlaneImages>>, Diagnostic> {
+    let loaded = loaded_mesh(db, asset)?;
+    let layout = billboard_layout(db, asset)?;
+    let alpha_cutoff = billboard_alpha_cutoff(db, asset);
+    let mesh_path = asset.main_file(db).clone();
+    let Some(group) = layout.render_groups.get(group as usize) else {
+        return Err(Diagnostic::new(&mesh_path, format!("render group {group} no longer exists")));
+    };
+    // Plane images stay out of the persistent cache: on the oak they are 40 MB in 1,245 entries,
+    // and storing them made a full bake 1.0 s slower (3.2 → 4.2 s on ext4), more than rendering
+    // every group again after a restart costs (0.8 s wall).
+    let planes = billboard_planes(db, asset)?;
+    let mut materials = vec![crate::gpu::RenderMaterial::default(); loaded.mesh.materials.len()];
+    for &material_index in &group.materials {
+        let source = &loaded.mesh.materials[material_index as usize];
+        let map = |slot| if loaded.mesh.uvs.is_some() { material_map(db, asset, source, slot) } else { Ok(None) };
+        materials[material_index as usize] = crate::gpu::RenderMaterial {
+            albedo: map(TextureSlot::Albedo)?,
+            opacity: map(TextureSlot::Opacity)?,
+            normal: map(TextureSlot::Normal)?,
+            metallic: map(TextureSlot::Metallic)?,
+            roughness: map(TextureSlot::Roughness)?,
+            ao: map(TextureSlot::Ao)?,
+            albedo_factor: [source.albedo_factor[0], source.albedo_factor[1], source.albedo_factor[2], source.opacity],
+            metallic_value: source.metallic,
+            roughness_value: source.roughness,
+            ao_value: 1.0,
+        };
+    }
+    // The depth range covers every assigned face, also beyond ε when `max_planes` capped them.
+    let depth_range = planes.epsilon.max(planes.max_error).max(1e-6);
+    timed(db, RENDER, &render_label(asset.name(db), &loaded.mesh, group), || {
+        let gpu = crate::gpu::gpu().map_err(|error| Diagnostic::new(&mesh_path, error.to_string()))?;
+        let inputs: Vec<crate::gpu::PlaneRenderInput> = group
+            .rectangles
+            .iter()
+            .map(|&rectangle| {
+                let (placement, rectangle) = (&layout.layout.placements[rectangle as usize], &layout.rectangles[rectangle as usize]);
+                crate::gpu::PlaneRenderInput {
+                    frame: rectangle.frame(),
+                    epsilon: depth_range,
+                    alpha_cutoff,
+                    width: placement.width,
+                    height: placement.height,
+                    batches: super::render_groups::plane_batches(&loaded.mesh, &loaded.tangents, rectangle),
+                    materials: &materials,
+                }
+            })
+            .collect();
+        gpu.render_rectangles(&inputs).map_err(|error| Diagnostic::new(&mesh_path, error.to_string()))
+    })
+    .map(Arc::new)
+}
+
+/// Every render group's images, in render-group order.
+fn render_group_images(db: &dyn Db, asset: Asset, layout: &BillboardLayout) -> Result<Vec<Arc<Vec<PlaneImages>>>, Diagnostic> {
+    (0..layout.render_groups.len() as u32).map(|group| plane_images(db, asset, group)).collect()
+}
+
+/// The images of every rectangle, in layout order: each group's images belong to its
+/// rectangles, and every rectangle is in one group.
+fn images_by_rectangle<'a>(layout: &BillboardLayout, images: &'a [Arc<Vec<PlaneImages>>]) -> Vec<&'a PlaneImages> {
+    let mut by_rectangle: Vec<Option<&PlaneImages>> = vec![None; layout.rectangles.len()];
+    for (group, group_images) in layout.render_groups.iter().zip(images) {
+        for (&rectangle, image) in group.rectangles.iter().zip(group_images.iter()) {
+            by_rectangle[rectangle as usize] = Some(image);
+        }
+    }
+    by_rectangle.into_iter().map(|image| image.expect("every rectangle is in a render group")).collect()
+}
+
+/// The atlas texels that faces cover (part of the atlas stage): unchanged by colour-only
+/// edits, which therefore skip the fill search below.
+#[salsa::tracked(returns(clone))]
+pub fn atlas_coverage(db: &dyn Db, asset: Asset) -> Result<Arc<super::atlas::AtlasCoverage>, Diagnostic> {
+    let layout = billboard_layout(db, asset)?;
+    let images = render_group_images(db, asset, &layout)?;
+    timed(db, ATLAS, asset.name(db), || Ok(Arc::new(super::atlas::atlas_coverage(&layout.layout, &images_by_rectangle(&layout, &images)))))
+}
+
+/// Where each atlas texel takes its values from, uncovered ones by the fill search (part of the
+/// atlas stage).
+#[salsa::tracked(returns(clone))]
+pub fn atlas_texel_sources(db: &dyn Db, asset: Asset) -> Result<Arc<super::atlas::TexelSources>, Diagnostic> {
+    let coverage = atlas_coverage(db, asset)?;
+    timed(db, ATLAS, asset.name(db), || Ok(Arc::new(super::atlas::texel_sources(&coverage))))
+}
+
+/// The composited, filled atlas surfaces (stage `atlas`).
+#[salsa::tracked(returns(clone))]
+pub fn billboard_atlas(db: &dyn Db, asset: Asset) -> Result<Arc<super::atlas::AtlasImages>, Diagnostic> {
+    let layout = billboard_layout(db, asset)?;
+    let images = render_group_images(db, asset, &layout)?;
+    let coverage = atlas_coverage(db, asset)?;
+    let sources = atlas_texel_sources(db, asset)?;
+    timed(db, ATLAS, asset.name(db), || {
+        Ok(Arc::new(super::atlas::composite_atlas(&layout.layout, &images_by_rectangle(&layout, &images), &coverage, &sources)))
+    })
+}
+
+/// One surface of the atlas.
+pub fn atlas_surface(db: &dyn Db, asset: Asset, surface: SurfaceKind) -> Result<Arc<Texture>, Diagnostic> {
+    let atlas = billboard_atlas(db, asset)?;
+    Ok(Arc::new(match surface {
+        SurfaceKind::Albedo => atlas.albedo.clone(),
+        SurfaceKind::Mra => atlas.mra.clone(),
+        SurfaceKind::Normal => atlas.normal.clone(),
+        SurfaceKind::Height => atlas.height.clone(),
+    }))
+}
+
+/// What the atlas is made of, cheap to compute: the layout's key (mesh, MTL, settings), every
+/// texture the materials name, the alpha cutoff, the render and atlas versions.
+#[salsa::tracked(returns(copy))]
+pub fn atlas_recipe_key(db: &dyn Db, asset: Asset) -> CacheKey {
+    let key = stage_key(ATLAS).part(&RENDER.version).part(&layout_cache_key(db, asset).0).part(&billboard_alpha_cutoff(db, asset));
+    let textures = mesh_textures(db, asset).iter().filter_map(|path| asset_file(db, asset, path.clone())).collect::<Vec<_>>();
+    key_with_files(db, key, textures).finish()
+}
+
+/// The fraction of atlas texels that faces cover, rounded to 1e-4, for the report: kept in the
+/// persistent cache under the atlas's recipe, so that a bake served from the cache needs no atlas.
+#[salsa::tracked(returns(clone))]
+pub fn atlas_coverage_fraction(db: &dyn Db, asset: Asset) -> Result<f64, Diagnostic> {
+    let key = stage_key(Stage { name: "atlas-coverage", version: 1 }).part(&atlas_recipe_key(db, asset).0).finish();
+    cached_json(db, ATLAS, asset.name(db), key, || Ok(((billboard_atlas(db, asset)?.coverage * 1e4).round() / 1e4) as f64))
+}

@@ -1,0 +1,121 @@
+//! The Material kind's tracked functions: thin glue between the database and the kind's pure
+//! stages (parse, channel packing); the surfaces then run through the shared texture tail.
+
+use std::path::PathBuf;
+use std::sync::Arc;
+
+use super::channel_packing::pack_surface;
+use super::definition::{parse_material_file, MaterialConstants, MaterialFile};
+use crate::cache::{CacheKey, CacheKeyBuilder, KeyPart};
+use crate::db::{cached_json, decoded_texture, read_contents, stage_key, timed, Asset, Db, SourceFile, Stage};
+use crate::diagnostic::{display_path, Diagnostic};
+use crate::kinds::SurfaceId;
+use crate::texture::Texture;
+
+pub const PARSE: Stage = Stage { name: "parse", version: 1 };
+// 2: opacity maps read alpha when the image has transparency. 3: linear → sRGB bytes from
+// tables, rounded like the f64 formula (was f32 powf).
+pub const PACK: Stage = Stage { name: "pack", version: 3 };
+
+impl KeyPart for MaterialConstants {
+    fn add_to(&self, key: CacheKeyBuilder) -> CacheKeyBuilder {
+        let MaterialConstants { albedo, metallic, roughness, ao, alpha_cutoff } = self;
+        key.part(albedo).part(metallic).part(roughness).part(ao).part(alpha_cutoff)
+    }
+}
+
+/// The input of the `.mymaterial` file (cuts off when textures join or leave the asset).
+fn material_source(db: &dyn Db, asset: Asset) -> Result<SourceFile, Diagnostic> {
+    let path = asset.main_file(db);
+    crate::db::asset_file(db, asset, path.clone()).ok_or_else(|| Diagnostic::new(path, "was not read"))
+}
+
+/// The `.mymaterial` file of an asset, parsed (cached on disk by content).
+#[salsa::tracked(returns(clone))]
+pub fn material_file(db: &dyn Db, asset: Asset) -> Result<Arc<MaterialFile>, Diagnostic> {
+    let file = material_source(db, asset)?;
+    let contents = read_contents(db, file)?;
+    let path = file.path(db);
+    let source_root = asset.source_root(db);
+    let key = stage_key(PARSE).part(&contents.hash).part(path).part(source_root).finish();
+    let label = display_path(path);
+    cached_json(db, PARSE, &label, key, || timed(db, PARSE, &label, || parse_material_file(path, &contents.bytes, source_root)))
+        .map(Arc::new)
+}
+
+/// What one surface is made of: its source files (one per slot) and constants.
+#[derive(Clone, Debug, PartialEq)]
+pub struct SurfaceRecipe {
+    /// One entry per slot of the surface; `None` where the material has no such map.
+    pub sources: Vec<Option<SourceFile>>,
+    pub constants: MaterialConstants,
+}
+
+#[salsa::tracked(returns(clone))]
+pub fn surface_recipe(db: &dyn Db, asset: Asset, surface: SurfaceId) -> Result<Arc<SurfaceRecipe>, Diagnostic> {
+    let parsed = material_file(db, asset)?;
+    let material_path = asset.main_file(db);
+    let Some(material) = parsed.materials.iter().find(|material| material.name == surface.group) else {
+        return Err(Diagnostic::new(material_path, format!("no material named `{}` any more", surface.group)));
+    };
+    let mut sources = Vec::new();
+    for slot in surface.surface.slots() {
+        let Some(reference) = material.textures.get(slot) else {
+            sources.push(None);
+            continue;
+        };
+        let Some(file) = crate::db::asset_file(db, asset, reference.path.clone()) else {
+            return Err(Diagnostic::at(material_path, reference.position, format!("texture \"{}\" was not read", reference.written)));
+        };
+        if let Err(error) = file.contents(db) {
+            return Err(Diagnostic::at(
+                material_path,
+                reference.position,
+                format!("{} texture \"{}\" ({}): {error}", slot.name(), reference.written, display_path(&reference.path)),
+            ));
+        }
+        sources.push(Some(file));
+    }
+    Ok(Arc::new(SurfaceRecipe { sources, constants: material.constants.clone() }))
+}
+
+/// The surface packed from its source maps (stage `pack`).
+#[salsa::tracked(returns(clone))]
+pub fn packed_surface(db: &dyn Db, asset: Asset, surface: SurfaceId) -> Result<Arc<Texture>, Diagnostic> {
+    let recipe = surface_recipe(db, asset, surface.clone())?;
+    let mut decoded = Vec::new();
+    for source in &recipe.sources {
+        decoded.push(match source {
+            Some(file) => Some(decoded_texture(db, *file)?),
+            None => None,
+        });
+    }
+    timed(db, PACK, &surface.label(asset.name(db)), || {
+        let sources: Vec<Option<&Texture>> = decoded.iter().map(|texture| texture.as_deref()).collect();
+        Ok(Arc::new(pack_surface(surface.surface, &sources, &recipe.constants)))
+    })
+}
+
+/// What a surface's image is made of: the pack stage's version, the constants and each slot's
+/// source content.
+#[salsa::tracked(returns(clone))]
+pub fn surface_recipe_key(db: &dyn Db, asset: Asset, surface: SurfaceId) -> Result<CacheKey, Diagnostic> {
+    let recipe = surface_recipe(db, asset, surface.clone())?;
+    let mut key = stage_key(PACK).part(&surface.surface).part(&recipe.constants);
+    for source in &recipe.sources {
+        key = match source {
+            Some(file) => key.part(&read_contents(db, *file)?.hash),
+            None => key.part("none"),
+        };
+    }
+    Ok(key.finish())
+}
+
+/// Every texture the material file references (project-relative), once each.
+pub fn referenced_textures(parsed: &MaterialFile) -> Vec<PathBuf> {
+    let mut paths: Vec<PathBuf> =
+        parsed.materials.iter().flat_map(|material| material.textures.values()).map(|reference| reference.path.clone()).collect();
+    paths.sort();
+    paths.dedup();
+    paths
+}

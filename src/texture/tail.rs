@@ -1,0 +1,169 @@
+//! The texture tail every kind's surfaces end in: mip chain → block compression (reusing the
+//! tiles and blocks an edit left alone) → PSNR from per-block errors → container → PNG preview.
+//! Pure functions over plain data, in three steps so that a setting reaches only the step that
+//! reads it; `PreviousEncoding` is what one run leaves for the next to reuse (results equal a
+//! full run).
+
+use std::sync::Arc;
+
+use crate::config::{BlockFormat, Container, EncodeQuality};
+use crate::texture::color::has_transparency;
+use crate::texture::container::write_container;
+use crate::texture::encode::{encode_levels_reusing, BlockEncodeSettings, EncodedTexture};
+use crate::texture::mips::{mip_chain_reusing, MipReuse, MipSettings};
+use crate::texture::preview::preview_png;
+use crate::texture::quality::{block_errors_reusing, BlockErrors};
+use crate::texture::{SurfaceKind, Texture};
+
+/// Everything the tail of one surface reads besides its image.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct TailSettings {
+    pub surface: SurfaceKind,
+    pub format: BlockFormat,
+    pub quality: EncodeQuality,
+    pub mips: bool,
+    /// The alpha-test cutoff applied when an albedo surface has transparency.
+    pub alpha_cutoff: Option<f32>,
+    pub container: Container,
+    pub zstd: Option<i32>,
+}
+
+/// The settings of the mip step alone (so that an encoder setting does not re-filter).
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct MipStepSettings {
+    pub surface: SurfaceKind,
+    pub mips: bool,
+    pub alpha_cutoff: Option<f32>,
+}
+
+impl TailSettings {
+    pub fn mip_step(&self) -> MipStepSettings {
+        MipStepSettings { surface: self.surface, mips: self.mips, alpha_cutoff: self.alpha_cutoff }
+    }
+}
+
+/// A surface's mip chain (level 0 first) and whether its alpha is tested.
+#[derive(Clone, Debug)]
+pub struct MipLevels {
+    pub levels: Arc<Vec<Texture>>,
+    pub alpha_tested: bool,
+    /// What the next chain of the same surface can reuse.
+    pub reuse: Option<Arc<MipReuse>>,
+}
+
+impl PartialEq for MipLevels {
+    fn eq(&self, other: &Self) -> bool {
+        self.levels == other.levels && self.alpha_tested == other.alpha_tested
+    }
+}
+
+/// A block-compressed surface with its per-block errors and PSNR (level 0 against the image).
+#[derive(Clone, Debug)]
+pub struct EncodedSurface {
+    pub settings: BlockEncodeSettings,
+    pub texture: EncodedTexture,
+    pub block_errors: Arc<BlockErrors>,
+    /// Rounded to 0.01 dB.
+    pub psnr_db: f64,
+}
+
+impl PartialEq for EncodedSurface {
+    fn eq(&self, other: &Self) -> bool {
+        self.settings == other.settings && self.texture == other.texture && self.psnr_db == other.psnr_db
+    }
+}
+
+/// What one surface is written as, with the figures its report needs.
+#[derive(Clone, Debug, PartialEq, serde::Serialize, serde::Deserialize)]
+pub struct SurfaceInfo {
+    pub surface: SurfaceKind,
+    pub format: BlockFormat,
+    pub srgb: bool,
+    pub container: Container,
+    pub width: u32,
+    pub height: u32,
+    pub levels: u32,
+    pub bytes: u64,
+    pub psnr_db: f64,
+    pub alpha_tested: bool,
+}
+
+/// The files of one surface: the texture container and a PNG preview of the image.
+#[derive(Clone, Debug, PartialEq)]
+pub struct SurfaceArtifacts {
+    pub info: SurfaceInfo,
+    pub texture_file: Arc<[u8]>,
+    pub preview_png: Arc<[u8]>,
+}
+
+/// The last encoding of a surface, so that the next one filters again only the mip tiles and
+/// encodes again only the blocks that changed.
+#[derive(Clone, Debug)]
+pub struct PreviousEncoding {
+    pub mips: MipLevels,
+    pub encoded: EncodedSurface,
+}
+
+/// The mip chain of `image`, reusing the previous chain's unchanged tiles.
+pub fn tail_mips(image: &Texture, settings: MipStepSettings, previous: Option<&PreviousEncoding>) -> MipLevels {
+    let alpha_tested = settings.surface == SurfaceKind::Albedo && has_transparency(image);
+    if !settings.mips {
+        return MipLevels { levels: Arc::new(vec![image.clone()]), alpha_tested, reuse: None };
+    }
+    let mip_settings = MipSettings { kind: settings.surface, alpha_cutoff: settings.alpha_cutoff.filter(|_| alpha_tested) };
+    let previous = previous.and_then(|previous| Some((previous.mips.levels.as_slice(), &**previous.mips.reuse.as_ref()?)));
+    let (levels, reuse) = mip_chain_reusing(image, mip_settings, previous);
+    MipLevels { levels: Arc::new(levels), alpha_tested, reuse: reuse.map(Arc::new) }
+}
+
+/// Block-compresses a mip chain, reusing the previous encoding's blocks where the texels are
+/// unchanged, and measures level 0's error per block (again only where something changed).
+pub fn tail_encode(
+    mips: &MipLevels,
+    surface: SurfaceKind,
+    format: BlockFormat,
+    quality: EncodeQuality,
+    previous: Option<&PreviousEncoding>,
+) -> EncodedSurface {
+    let settings = BlockEncodeSettings { format, quality, alpha: mips.alpha_tested, srgb: surface.is_srgb() };
+    let previous = previous.filter(|previous| previous.encoded.settings == settings);
+    let texture = encode_levels_reusing(
+        &mips.levels,
+        settings,
+        previous.map(|previous| (previous.mips.levels.as_slice(), &previous.encoded.texture)),
+    );
+    let image = &mips.levels[0];
+    let block_errors = block_errors_reusing(
+        format,
+        &texture.levels[0],
+        image,
+        surface.channels(),
+        previous.map(|previous| (&previous.mips.levels[0], &previous.encoded.texture.levels[0][..], &*previous.encoded.block_errors)),
+    );
+    let psnr_db = (block_errors.psnr(image.width, image.height) * 100.0).round() / 100.0;
+    EncodedSurface { settings, texture, block_errors: Arc::new(block_errors), psnr_db }
+}
+
+/// The container file and PNG preview of an encoded surface.
+pub fn tail_write(
+    image: &Texture,
+    surface: SurfaceKind,
+    encoded: &EncodedSurface,
+    container: Container,
+    zstd: Option<i32>,
+) -> SurfaceArtifacts {
+    let texture_file: Arc<[u8]> = write_container(&encoded.texture, container, zstd).into();
+    let info = SurfaceInfo {
+        surface,
+        format: encoded.texture.format,
+        srgb: encoded.texture.srgb,
+        container,
+        width: encoded.texture.width,
+        height: encoded.texture.height,
+        levels: encoded.texture.levels.len() as u32,
+        bytes: texture_file.len() as u64,
+        psnr_db: encoded.psnr_db,
+        alpha_tested: encoded.settings.alpha,
+    };
+    SurfaceArtifacts { info, texture_file, preview_png: preview_png(image).into() }
+}

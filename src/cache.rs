@@ -176,7 +176,13 @@ const MAX_ENTRY_BYTES: u64 = 4 << 30;
 #[derive(Clone, Debug)]
 pub struct DiskCache {
     folder: PathBuf,
+    /// Writes of large entries still running on their own threads (see `flush`).
+    pending: std::sync::Arc<std::sync::Mutex<Vec<std::thread::JoinHandle<()>>>>,
 }
+
+/// Entries at least this large (before compression) are compressed and written on a thread of
+/// their own, so that the stage that made them goes on (the build waits for them at its end).
+const BACKGROUND_STORE_BYTES: usize = 1 << 20;
 
 /// One cache entry: small metadata plus large binary parts.
 #[derive(Clone, Debug, PartialEq)]
@@ -187,7 +193,7 @@ pub struct CacheEntry {
 
 impl DiskCache {
     pub fn new(folder: impl Into<PathBuf>) -> DiskCache {
-        DiskCache { folder: folder.into() }
+        DiskCache { folder: folder.into(), pending: Default::default() }
     }
 
     pub fn folder(&self) -> &Path {
@@ -209,42 +215,73 @@ impl DiskCache {
         decode_entry(&bytes, stage, key)
     }
 
-    /// Stores an entry; failures (full disk, permissions) only cost a future miss.
-    pub fn store(&self, stage: &str, key: CacheKey, entry: &CacheEntry) {
+    /// Stores an entry; failures (full disk, permissions) only cost a future miss. Large entries
+    /// are written in the background: call `flush` before relying on them being on disk.
+    pub fn store(&self, stage: &str, key: CacheKey, entry: CacheEntry) {
         let path = self.entry_path(stage, key);
-        let result = (|| -> std::io::Result<()> {
-            let folder = path.parent().expect("entry paths have a folder");
-            std::fs::create_dir_all(folder)?;
-            let mut temporary = tempfile::Builder::new().prefix(crate::artifacts::TEMPORARY_PREFIX).tempfile_in(folder)?;
-            temporary.write_all(&encode_entry(stage, key, entry))?;
-            temporary.persist(&path).map_err(|error| error.error)?;
-            Ok(())
-        })();
-        if let Err(error) = result {
-            tracing::warn!("cannot write cache entry {}: {error}", path.display());
+        let stage = stage.to_string();
+        let size = entry_size(&entry);
+        let write = move || {
+            let result = (|| -> std::io::Result<()> {
+                let folder = path.parent().expect("entry paths have a folder");
+                std::fs::create_dir_all(folder)?;
+                let mut temporary = tempfile::Builder::new().prefix(crate::artifacts::TEMPORARY_PREFIX).tempfile_in(folder)?;
+                temporary.write_all(&encode_entry(&stage, key, &entry))?;
+                temporary.persist(&path).map_err(|error| error.error)?;
+                Ok(())
+            })();
+            if let Err(error) = result {
+                tracing::warn!("cannot write cache entry {}: {error}", path.display());
+            }
+        };
+        if size < BACKGROUND_STORE_BYTES {
+            write();
+        } else {
+            self.pending.lock().expect("pending writes lock").push(std::thread::spawn(write));
+        }
+    }
+
+    /// Waits for the entries still being written.
+    pub fn flush(&self) {
+        let pending = std::mem::take(&mut *self.pending.lock().expect("pending writes lock"));
+        for write in pending {
+            let _ = write.join();
         }
     }
 }
 
+fn entry_size(entry: &CacheEntry) -> usize {
+    entry.blobs.iter().map(Vec::len).sum()
+}
+
 /// The header of an entry: format, then the stage and key it was stored under.
 fn entry_header(stage: &str, key: CacheKey) -> Vec<u8> {
-    let mut header = b"CIRRUSC2".to_vec();
+    let mut header = b"CIRRUSC3".to_vec();
     header.extend_from_slice(&(stage.len() as u64).to_le_bytes());
     header.extend_from_slice(stage.as_bytes());
     header.extend_from_slice(key.0.as_bytes());
     header
 }
 
+/// zstd level of entry bodies: the fastest, because most bytes are images with large uniform
+/// areas (a fill, transparent texels), which it already shrinks severalfold.
+const ENTRY_ZSTD_LEVEL: i32 = 1;
+
+/// Header, the body's length before compression, the zstd-compressed body (metadata, blobs),
+/// and a blake3 checksum of everything before it.
 fn encode_entry(stage: &str, key: CacheKey, entry: &CacheEntry) -> Vec<u8> {
     let metadata = serde_json::to_vec(&entry.metadata).expect("JSON values serialise");
-    let mut bytes = entry_header(stage, key);
-    bytes.extend_from_slice(&(metadata.len() as u64).to_le_bytes());
-    bytes.extend_from_slice(&metadata);
-    bytes.extend_from_slice(&(entry.blobs.len() as u64).to_le_bytes());
+    let mut body = Vec::with_capacity(metadata.len() + entry.blobs.iter().map(|blob| blob.len() + 8).sum::<usize>() + 16);
+    body.extend_from_slice(&(metadata.len() as u64).to_le_bytes());
+    body.extend_from_slice(&metadata);
+    body.extend_from_slice(&(entry.blobs.len() as u64).to_le_bytes());
     for blob in &entry.blobs {
-        bytes.extend_from_slice(&(blob.len() as u64).to_le_bytes());
-        bytes.extend_from_slice(blob);
+        body.extend_from_slice(&(blob.len() as u64).to_le_bytes());
+        body.extend_from_slice(blob);
     }
+    let mut bytes = entry_header(stage, key);
+    bytes.extend_from_slice(&(body.len() as u64).to_le_bytes());
+    bytes.extend_from_slice(&zstd::bulk::compress(&body, ENTRY_ZSTD_LEVEL).expect("zstd compresses in memory"));
     let checksum = blake3::hash(&bytes);
     bytes.extend_from_slice(checksum.as_bytes());
     bytes
@@ -255,7 +292,14 @@ fn decode_entry(bytes: &[u8], stage: &str, key: CacheKey) -> Option<CacheEntry> 
     if blake3::hash(body).as_bytes() != checksum {
         return None;
     }
-    let mut rest = body.strip_prefix(entry_header(stage, key).as_slice())?;
+    let rest = body.strip_prefix(entry_header(stage, key).as_slice())?;
+    let (length, compressed) = rest.split_at_checked(8)?;
+    let length = u64::from_le_bytes(length.try_into().ok()?);
+    if length > MAX_ENTRY_BYTES {
+        return None;
+    }
+    let body = zstd::bulk::decompress(compressed, length as usize).ok()?;
+    let mut rest = body.as_slice();
     let mut take = |count: usize| -> Option<&[u8]> {
         let (head, tail) = rest.split_at_checked(count)?;
         rest = tail;

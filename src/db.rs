@@ -226,7 +226,7 @@ pub fn load_cached<T>(db: &dyn Db, entry: &str, key: CacheKey, decode: impl FnOn
 
 pub fn store_cached(db: &dyn Db, entry: &str, key: CacheKey, make: impl FnOnce() -> CacheEntry) {
     if let Some(cache) = db.disk_cache() {
-        cache.store(entry, key, &make());
+        cache.store(entry, key, make());
     }
 }
 

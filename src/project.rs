@@ -13,7 +13,7 @@ use salsa::Setter;
 use crate::artifacts::{load_manifest, record_artifact, remove_artifacts, save_manifest, write_if_changed, Manifest};
 use crate::cache::DiskCache;
 use crate::config::{AssetConfig, PipelineConfig};
-use crate::db::{Asset, Database, SourceFile, StageRun};
+use crate::db::{Asset, Database, Db, SourceFile, StageRun};
 use crate::diagnostic::{display_path, Diagnostic};
 use crate::kinds::{stage_node_id, AssetKind, Read, StageInstance};
 use crate::sources::{read_source, rule_matches};
@@ -319,6 +319,10 @@ impl Project {
         let first_jobs = assets.iter().flat_map(|(_, asset)| asset.kind(&self.db).first_jobs(&self.db, *asset)).collect();
         let finished = crate::schedule::run_jobs(&self.db, first_jobs, progress, &cancel);
         let runs = self.db.take_runs();
+        if let Some(cache) = self.db.disk_cache() {
+            // Entries written in the background are on disk before the build reports.
+            cache.flush();
+        }
         let Some(finished) = finished.filter(|_| !cancel.is_raised()) else { return Err(BuildError::Cancelled) };
         // Per asset: its errors, and the labels of its jobs that failed.
         let mut failures: HashMap<Asset, (Vec<Diagnostic>, HashSet<String>)> = HashMap::new();

@@ -6,7 +6,7 @@
 
 use std::sync::Arc;
 
-use crate::cache::{CacheEntry, CacheKeyBuilder};
+use crate::cache::{CacheEntry, CacheKey, CacheKeyBuilder};
 use crate::db::{load_cached, record_cache_hit, store_cached, timed, Asset, Db, Stage};
 use crate::diagnostic::Diagnostic;
 use crate::kinds::SurfaceId;
@@ -26,6 +26,8 @@ pub const WRITE: Stage = Stage { name: "write", version: 1 };
 /// The cache entry of a finished surface (under its recipe key and under its content key).
 const SURFACE_ENTRY: &str = "surface";
 const SURFACE_ENTRY_VERSION: u32 = 3;
+/// The entry under a surface's recipe key: the content key of its files.
+const SURFACE_RECIPE_ENTRY: &str = "surface-recipe";
 
 #[salsa::tracked(returns(clone))]
 pub fn tail_settings(db: &dyn Db, asset: Asset, surface: SurfaceId) -> Result<TailSettings, Diagnostic> {
@@ -63,7 +65,7 @@ pub fn surface_mips(db: &dyn Db, asset: Asset, surface: SurfaceId) -> Result<Arc
     let image = surface_image(db, asset, surface.clone())?;
     let settings = mip_step_settings(db, asset, surface.clone())?;
     let label = surface.label(asset.name(db));
-    let previous = db.previous_encoding(&label);
+    let previous = previous_encoding(db, &label);
     Ok(Arc::new(timed(db, MIPS, &label, || tail_mips(&image, settings, previous.as_ref()))))
 }
 
@@ -73,9 +75,11 @@ pub fn surface_blocks(db: &dyn Db, asset: Asset, surface: SurfaceId) -> Result<A
     let mips = surface_mips(db, asset, surface.clone())?;
     let (format, quality) = encode_step_settings(db, asset, surface.clone())?;
     let label = surface.label(asset.name(db));
-    let previous = db.previous_encoding(&label);
+    let previous = previous_encoding(db, &label);
     let encoded = timed(db, ENCODE, &label, || tail_encode(&mips, surface.surface, format, quality, previous.as_ref()));
-    db.remember_encoding(&label, PreviousEncoding { mips: (*mips).clone(), encoded: encoded.clone() });
+    let remembered = PreviousEncoding { mips: (*mips).clone(), encoded: encoded.clone() };
+    store_cached(db, ENCODING_MEMO, encoding_memo_key(&label), || encoding_entry(&remembered));
+    db.remember_encoding(&label, remembered);
     Ok(Arc::new(encoded))
 }
 
@@ -86,7 +90,7 @@ pub fn surface_files(db: &dyn Db, asset: Asset, surface: SurfaceId) -> Result<Ar
     let image = surface_image(db, asset, surface.clone())?;
     let settings = tail_settings(db, asset, surface.clone())?;
     let label = surface.label(asset.name(db));
-    let content_key = surface_key(&settings).part(&image.width).part(&image.height).part(&image.hash).finish();
+    let content_key = content_key(&settings, &image);
     if let Some(artifacts) = load_cached(db, SURFACE_ENTRY, content_key, artifacts_from_entry) {
         record_cache_hit(db, WRITE, &label);
         return Ok(Arc::new(artifacts));
@@ -105,14 +109,18 @@ pub fn surface_artifacts(db: &dyn Db, asset: Asset, surface: SurfaceId) -> Resul
     let settings = tail_settings(db, asset, surface.clone())?;
     let recipe_key = asset.kind(db).surface_recipe_key(db, asset, &surface)?.map(|recipe| surface_key(&settings).part(&recipe.0).finish());
     if let Some(key) = recipe_key {
-        if let Some(artifacts) = load_cached(db, SURFACE_ENTRY, key, artifacts_from_entry) {
+        // The recipe's entry names the content entry that holds the files.
+        let content =
+            load_cached(db, SURFACE_RECIPE_ENTRY, key, |entry| Some(CacheKey(blake3::Hash::from_hex(entry.metadata.as_str()?).ok()?)));
+        if let Some(artifacts) = content.and_then(|content| load_cached(db, SURFACE_ENTRY, content, artifacts_from_entry)) {
             record_cache_hit(db, WRITE, &surface.label(asset.name(db)));
             return Ok(Arc::new(artifacts));
         }
     }
-    let artifacts = surface_files(db, asset, surface)?;
+    let artifacts = surface_files(db, asset, surface.clone())?;
     if let Some(key) = recipe_key {
-        store_cached(db, SURFACE_ENTRY, key, || artifacts_entry(&artifacts));
+        let content = content_key(&settings, &*surface_image(db, asset, surface)?);
+        store_cached(db, SURFACE_RECIPE_ENTRY, key, || CacheEntry { metadata: content.0.to_hex().to_string().into(), blobs: Vec::new() });
     }
     Ok(artifacts)
 }
@@ -122,9 +130,14 @@ pub fn surface_artifacts(db: &dyn Db, asset: Asset, surface: SurfaceId) -> Resul
 pub fn surface_in_cache(db: &dyn Db, asset: Asset, surface: &SurfaceId) -> bool {
     let (Some(cache), Ok(settings)) = (db.disk_cache(), tail_settings(db, asset, surface.clone())) else { return false };
     match asset.kind(db).surface_recipe_key(db, asset, surface) {
-        Ok(Some(recipe)) => cache.contains(SURFACE_ENTRY, surface_key(&settings).part(&recipe.0).finish()),
+        Ok(Some(recipe)) => cache.contains(SURFACE_RECIPE_ENTRY, surface_key(&settings).part(&recipe.0).finish()),
         _ => false,
     }
+}
+
+/// The key of a surface's files by the texels of its image.
+fn content_key(settings: &TailSettings, image: &Texture) -> CacheKey {
+    surface_key(settings).part(&image.width).part(&image.height).part(&image.hash).finish()
 }
 
 /// The start of both keys of a surface entry: the tail's versions and every tail setting.
@@ -151,4 +164,74 @@ fn artifacts_from_entry(entry: CacheEntry) -> Option<SurfaceArtifacts> {
     let info = serde_json::from_value(entry.metadata).ok()?;
     let [texture_file, preview_png]: [Vec<u8>; 2] = entry.blobs.try_into().ok()?;
     Some(SurfaceArtifacts { info, texture_file: texture_file.into(), preview_png: preview_png.into() })
+}
+
+/// The memo of a surface's last encoding on disk: not a content address but the surface's
+/// identity (asset, surface, tail settings), overwritten by every encode, so that a new process
+/// re-encodes only the blocks an edit changed. Results equal a full encode either way.
+const ENCODING_MEMO: &str = "encoding-memo";
+
+/// By the surface's label alone: settings are not part of the key (reading them would make
+/// the mips depend on encoder settings); the steps reuse only what was made with their settings.
+fn encoding_memo_key(label: &str) -> CacheKey {
+    CacheKeyBuilder::new(ENCODING_MEMO, SURFACE_ENTRY_VERSION).part(&[MIPS.version, ENCODE.version]).part(label).finish()
+}
+
+/// The surface's last encoding: from this process, else from the memo on disk.
+fn previous_encoding(db: &dyn Db, label: &str) -> Option<PreviousEncoding> {
+    if let Some(previous) = db.previous_encoding(label) {
+        return Some(previous);
+    }
+    let previous = load_cached(db, ENCODING_MEMO, encoding_memo_key(label), encoding_from_entry)?;
+    db.remember_encoding(label, previous.clone());
+    Some(previous)
+}
+
+fn encoding_entry(previous: &PreviousEncoding) -> CacheEntry {
+    let (mips, encoded) = (&previous.mips, &previous.encoded);
+    let levels: Vec<(u32, u32)> = mips.levels.iter().map(|level| (level.width, level.height)).collect();
+    let metadata = serde_json::json!({
+        "levels": levels,
+        "alpha_tested": mips.alpha_tested,
+        "reuse": mips.reuse.as_deref(),
+        "settings": encoded.settings,
+        "width": encoded.texture.width,
+        "height": encoded.texture.height,
+        "psnr_db": encoded.psnr_db,
+        "channels": encoded.block_errors.channels,
+    });
+    let mut blobs: Vec<Vec<u8>> = mips.levels.iter().map(|level| level.pixels.to_vec()).collect();
+    blobs.extend(encoded.texture.levels.iter().map(|level| level.to_vec()));
+    blobs.push(crate::db::pod_blob(&encoded.block_errors.errors));
+    CacheEntry { metadata, blobs }
+}
+
+fn encoding_from_entry(entry: CacheEntry) -> Option<PreviousEncoding> {
+    let metadata = &entry.metadata;
+    let sizes: Vec<(u32, u32)> = serde_json::from_value(metadata.get("levels")?.clone()).ok()?;
+    let settings: crate::texture::encode::BlockEncodeSettings = serde_json::from_value(metadata.get("settings")?.clone()).ok()?;
+    let reuse: Option<crate::texture::mips::MipReuse> = serde_json::from_value(metadata.get("reuse")?.clone()).ok()?;
+    if entry.blobs.len() != 2 * sizes.len() + 1 {
+        return None;
+    }
+    let mut blobs = entry.blobs.into_iter();
+    let mut levels = Vec::new();
+    for &(width, height) in &sizes {
+        let pixels = blobs.next()?;
+        if pixels.len() != width as usize * height as usize * 4 {
+            return None;
+        }
+        levels.push(Texture::new(width, height, pixels));
+    }
+    let encoded_levels: Vec<Arc<[u8]>> = blobs.by_ref().take(sizes.len()).map(Arc::from).collect();
+    let errors = crate::db::from_pod_blob::<u32>(&blobs.next()?)?;
+    let width = metadata.get("width")?.as_u64()? as u32;
+    let height = metadata.get("height")?.as_u64()? as u32;
+    let texture = crate::texture::encode::EncodedTexture::from_levels(settings.format, settings.srgb, width, height, encoded_levels);
+    let block_errors =
+        crate::texture::quality::BlockErrors { format: settings.format, channels: metadata.get("channels")?.as_u64()? as usize, errors };
+    Some(PreviousEncoding {
+        mips: MipLevels { levels: Arc::new(levels), alpha_tested: metadata.get("alpha_tested")?.as_bool()?, reuse: reuse.map(Arc::new) },
+        encoded: EncodedSurface { settings, texture, block_errors: Arc::new(block_errors), psnr_db: metadata.get("psnr_db")?.as_f64()? },
+    })
 }

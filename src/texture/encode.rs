@@ -43,7 +43,7 @@ pub fn block_bytes(format: BlockFormat) -> usize {
 }
 
 /// Settings of one encode.
-#[derive(Clone, Copy, Debug, PartialEq, Eq, Hash)]
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Hash, serde::Serialize, serde::Deserialize)]
 pub struct BlockEncodeSettings {
     pub format: BlockFormat,
     pub quality: EncodeQuality,
@@ -60,17 +60,17 @@ pub fn encode_levels(levels: &[Texture], settings: BlockEncodeSettings) -> Encod
 
 /// The encoded texture of `levels`, hashed over its block data.
 fn encoded_texture(levels: &[Texture], settings: BlockEncodeSettings, encoded: Vec<Arc<[u8]>>) -> EncodedTexture {
-    let mut hasher = blake3::Hasher::new();
-    for level in &encoded {
-        hasher.update(level);
-    }
-    EncodedTexture {
-        format: settings.format,
-        srgb: settings.srgb,
-        width: levels[0].width,
-        height: levels[0].height,
-        levels: encoded,
-        hash: hasher.finalize(),
+    EncodedTexture::from_levels(settings.format, settings.srgb, levels[0].width, levels[0].height, encoded)
+}
+
+impl EncodedTexture {
+    /// An encoded texture from its block data per level (level 0 first).
+    pub fn from_levels(format: BlockFormat, srgb: bool, width: u32, height: u32, levels: Vec<Arc<[u8]>>) -> EncodedTexture {
+        let mut hasher = blake3::Hasher::new();
+        for level in &levels {
+            hasher.update(level);
+        }
+        EncodedTexture { format, srgb, width, height, levels, hash: hasher.finalize() }
     }
 }
 

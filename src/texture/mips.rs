@@ -9,7 +9,7 @@ use crate::texture::SurfaceKind;
 use crate::texture::Texture;
 
 /// How the levels of one surface are filtered.
-#[derive(Clone, Copy, Debug, PartialEq)]
+#[derive(Clone, Copy, Debug, PartialEq, serde::Serialize, serde::Deserialize)]
 pub struct MipSettings {
     pub kind: SurfaceKind,
     /// Alpha-tested albedo: keep the fraction of texels above this cutoff equal on every level.
@@ -29,7 +29,7 @@ const REUSE_TILE_LEVELS: usize = 6;
 /// What a mip chain keeps so that the next chain of the same surface can filter only the tiles
 /// that changed: the filter-space texels of the level with one texel per tile, and the alpha
 /// scale of every level.
-#[derive(Clone, Debug)]
+#[derive(Clone, Debug, serde::Serialize, serde::Deserialize)]
 pub struct MipReuse {
     settings: MipSettings,
     coverage: Option<f32>,
@@ -38,7 +38,7 @@ pub struct MipReuse {
 }
 
 /// The filter-space texels of the level with one texel per tile, and their straight colour.
-#[derive(Clone, Debug)]
+#[derive(Clone, Debug, serde::Serialize, serde::Deserialize)]
 struct TileLevel {
     texels: Vec<[f32; 4]>,
     straight: Option<Vec<[f32; 4]>>,

@@ -8,7 +8,7 @@
 //! restart a texture edit re-runs only the renders, the atlas and the surfaces whose texels
 //! changed.
 
-use std::collections::BTreeMap;
+use std::collections::{BTreeMap, HashMap};
 use std::path::PathBuf;
 use std::sync::Arc;
 
@@ -285,12 +285,15 @@ pub fn plane_images(db: &dyn Db, asset: Asset, group: u32) -> Result<Arc<Vec<Pla
     let layout = billboard_layout(db, asset)?;
     let alpha_cutoff = billboard_alpha_cutoff(db, asset);
     let mesh_path = asset.main_file(db).clone();
+    let group_index = group;
     let Some(group) = layout.render_groups.get(group as usize) else {
         return Err(Diagnostic::new(&mesh_path, format!("render group {group} no longer exists")));
     };
-    // Plane images stay out of the persistent cache: on the oak they are 40 MB in 1,245 entries,
-    // and storing them made a full bake 1.0 s slower (3.2 → 4.2 s on ext4), more than rendering
-    // every group again after a restart costs (0.8 s wall).
+    let label = render_label(asset.name(db), &loaded.mesh, group);
+    if let Some(images) = stored_renders(db, asset).get(&render_group_key(db, asset, group_index)) {
+        record_cache_hit(db, RENDER, &label);
+        return Ok(images.clone());
+    }
     let planes = billboard_planes(db, asset)?;
     let mut materials = vec![crate::gpu::RenderMaterial::default(); loaded.mesh.materials.len()];
     for &material_index in &group.materials {
@@ -311,7 +314,7 @@ pub fn plane_images(db: &dyn Db, asset: Asset, group: u32) -> Result<Arc<Vec<Pla
     }
     // The depth range covers every assigned face, also beyond ε when `max_planes` capped them.
     let depth_range = planes.epsilon.max(planes.max_error).max(1e-6);
-    timed(db, RENDER, &render_label(asset.name(db), &loaded.mesh, group), || {
+    timed(db, RENDER, &label, || {
         let gpu = crate::gpu::gpu().map_err(|error| Diagnostic::new(&mesh_path, error.to_string()))?;
         let inputs: Vec<crate::gpu::PlaneRenderInput> = group
             .rectangles
@@ -357,6 +360,7 @@ fn images_by_rectangle<'a>(layout: &BillboardLayout, images: &'a [Arc<Vec<PlaneI
 pub fn atlas_coverage(db: &dyn Db, asset: Asset) -> Result<Arc<super::atlas::AtlasCoverage>, Diagnostic> {
     let layout = billboard_layout(db, asset)?;
     let images = render_group_images(db, asset, &layout)?;
+    store_renders(db, asset, &images);
     timed(db, ATLAS, asset.name(db), || Ok(Arc::new(super::atlas::atlas_coverage(&layout.layout, &images_by_rectangle(&layout, &images)))))
 }
 
@@ -406,4 +410,94 @@ pub fn atlas_recipe_key(db: &dyn Db, asset: Asset) -> CacheKey {
 pub fn atlas_coverage_fraction(db: &dyn Db, asset: Asset) -> Result<f64, Diagnostic> {
     let key = stage_key(Stage { name: "atlas-coverage", version: 1 }).part(&atlas_recipe_key(db, asset).0).finish();
     cached_json(db, ATLAS, asset.name(db), key, || Ok(((billboard_atlas(db, asset)?.coverage * 1e4).round() / 1e4) as f64))
+}
+
+/// What one render group's images are made of: the layout (mesh, MTL, planes, settings), the
+/// group, the alpha cutoff, and the textures of the group's materials.
+#[salsa::tracked(returns(copy))]
+pub fn render_group_key(db: &dyn Db, asset: Asset, group: u32) -> CacheKey {
+    let key = stage_key(RENDER).part(&layout_cache_key(db, asset).0).part(&group).part(&billboard_alpha_cutoff(db, asset));
+    let (Ok(loaded), Ok(layout)) = (loaded_mesh(db, asset), billboard_layout(db, asset)) else { return key.finish() };
+    let Some(render_group) = layout.render_groups.get(group as usize) else { return key.finish() };
+    let mut paths: Vec<&PathBuf> = Vec::new();
+    if loaded.mesh.uvs.is_some() {
+        for &material in &render_group.materials {
+            paths.extend(loaded.mesh.materials[material as usize].maps.values());
+        }
+    }
+    paths.sort();
+    paths.dedup();
+    let files: Vec<SourceFile> = paths.into_iter().filter_map(|path| asset_file(db, asset, path.clone())).collect();
+    key_with_files(db, key, files).finish()
+}
+
+/// The render memo on disk: every render group's images of the asset's last atlas, under the
+/// layout's key (one entry per layout, overwritten when groups change), each group's images
+/// under its `render_group_key`. One entry rather than one per group: on the oak, 1,245 entries
+/// made a full bake 1.0 s slower; one 40 MB entry costs a fraction of that.
+const RENDER_MEMO: &str = "render-memo";
+
+fn render_memo_key(db: &dyn Db, asset: Asset) -> CacheKey {
+    stage_key(Stage { name: RENDER_MEMO, version: RENDER.version }).part(&layout_cache_key(db, asset).0).finish()
+}
+
+/// The render groups' images the memo on disk holds, by group key (read once per layout).
+#[salsa::tracked(returns(clone))]
+pub fn stored_renders(db: &dyn Db, asset: Asset) -> Arc<HashMap<CacheKey, Arc<Vec<PlaneImages>>>> {
+    Arc::new(load_cached(db, RENDER_MEMO, render_memo_key(db, asset), renders_from_entry).unwrap_or_default())
+}
+
+/// Stores every group's images when some were rendered (not all came from the memo).
+fn store_renders(db: &dyn Db, asset: Asset, images: &[Arc<Vec<PlaneImages>>]) {
+    if db.disk_cache().is_none() {
+        return;
+    }
+    let stored = stored_renders(db, asset);
+    let keys: Vec<CacheKey> = (0..images.len() as u32).map(|group| render_group_key(db, asset, group)).collect();
+    if keys.iter().all(|key| stored.contains_key(key)) {
+        return;
+    }
+    store_cached(db, RENDER_MEMO, render_memo_key(db, asset), || {
+        let mut groups = Vec::new();
+        let mut bytes = Vec::new();
+        for (key, group_images) in keys.iter().zip(images) {
+            let sizes: Vec<(u32, u32)> = group_images.iter().map(|image| (image.width, image.height)).collect();
+            groups.push((key.0.to_hex().to_string(), sizes));
+            for image in group_images.iter() {
+                for plane in [&image.albedo, &image.normal, &image.mra, &image.height_map] {
+                    bytes.extend_from_slice(plane);
+                }
+            }
+        }
+        CacheEntry { metadata: serde_json::json!({ "groups": groups }), blobs: vec![bytes] }
+    });
+}
+
+fn renders_from_entry(entry: CacheEntry) -> Option<HashMap<CacheKey, Arc<Vec<PlaneImages>>>> {
+    let groups: Vec<(String, Vec<(u32, u32)>)> = serde_json::from_value(entry.metadata.get("groups")?.clone()).ok()?;
+    let [bytes]: [Vec<u8>; 1] = entry.blobs.try_into().ok()?;
+    let mut rest = bytes.as_slice();
+    let mut take = |count: usize| -> Option<Vec<u8>> {
+        let (head, tail) = rest.split_at_checked(count)?;
+        rest = tail;
+        Some(head.to_vec())
+    };
+    let mut renders = HashMap::new();
+    for (key, sizes) in groups {
+        let key = CacheKey(blake3::Hash::from_hex(key).ok()?);
+        let mut images = Vec::new();
+        for (width, height) in sizes {
+            let texels = width as usize * height as usize * 4;
+            images.push(PlaneImages {
+                width,
+                height,
+                albedo: take(texels)?,
+                normal: take(texels)?,
+                mra: take(texels)?,
+                height_map: take(texels)?,
+            });
+        }
+        renders.insert(key, Arc::new(images));
+    }
+    rest.is_empty().then_some(renders)
 }

@@ -17,19 +17,39 @@
 //!   `Option` as a tag byte (0 none, 1 some) then the value; arrays, tuples and settings structs
 //!   as their fields in declaration order, each a part of its own; content as its blake3 hash.
 //!
-//! | entry (`stage`, version) | parts, in order |
-//! |---|---|
-//! | `parse`, `Stage::Parse` | the `.mymaterial` content hash; its path; the source folder |
-//! | `surface`, 1 | versions of pack, mips, encode and write; the surface name; the material's constants (albedo ×4, metallic, roughness, ao, alpha cutoff option); mip settings (mips, alpha cutoff option); block format and encoder quality; container and zstd level option; per slot of the surface, the source's content hash or `none` |
-//! | `billboard`, 2 | versions of mesh, planes, layout, render, atlas, encode, lod; billboard settings (ε, max planes option, texel density option, alpha cutoff); atlas settings (max size, padding, power of two); encode settings (albedo, mra, normal, height formats, mips, container, zstd option, quality); the source folder; per file read (mesh, MTL files, textures, in that order), its path and its content hash or read error |
-//! | `mesh`, `Stage::Mesh` | the source folder; per file the mesh stage reads (the OBJ, then its MTL files), its path and its content hash or read error |
-//! | `planes`, `Stage::Planes` | the `mesh` key; ε; max planes option |
-//! | `layout`, `Stage::Layout` | the `planes` key; atlas settings; texel density option |
-//! | `lod`, `Stage::Lod` | the `layout` key |
-//! | `atlas-surface`, 1 | versions of mips, encode and write; the surface name; the atlas surface's width, height and content hash; block format and encoder quality; mips; container and zstd level option; alpha cutoff |
+//! | entry folder (key name, version) | parts, in order | holds |
+//! |---|---|---|
+//! | `parse` (`parse`, `PARSE`) | the `.mymaterial` content hash; its path; the source folder | the parsed material file |
+//! | `surface-recipe` (`surface`, 3) | the tail's parts (below); the kind's recipe key | the content key of the surface's files |
+//! | `surface` (`surface`, 3) | the tail's parts; the image's width, height and content hash | the container file and PNG preview |
+//! | `encoding-memo` (`encoding-memo`, 3) | mips and encode versions; the surface's label (`asset/material/surface`, `asset/surface`) | the surface's last encoding (a memo: overwritten) |
+//! | `mesh` (`mesh`, `MESH`) | the source folder; per file the mesh stage reads (the OBJ, then its MTL files), its path and its content hash or read error | the loaded mesh and tangents |
+//! | `planes` (`planes`, `PLANES`) | the `mesh` key; ε; max planes option | the plane set |
+//! | `layout` (`layout`, `LAYOUT`) | the `planes` key; atlas settings (max size, padding, power of two); texel density option | rectangles, layout, render groups |
+//! | `lod` (`lod`, `LOD`) | the `layout` key | `lod.obj`, `lod.mtl` |
+//! | `render-memo` (`render-memo`, `RENDER`) | the `layout` key | every render group's images, each under its group key (a memo: overwritten) |
+//! | `atlas` (`atlas-coverage`, 1) | the billboard atlas recipe key | the atlas's coverage fraction (for the report) |
 //!
-//! A billboard cloud's plane images stay out of the cache: on the oak they are 40 MB in 1,245
-//! entries, and storing them made a full bake 1.0 s slower, more than rendering them again costs.
+//! The tail's parts: the mips, encode and write versions; the surface name; block format;
+//! encoder quality; mips; alpha cutoff option; container; zstd level option.
+//!
+//! Recipe keys (what a surface's image is made of, cheap to compute, so that a surface in the
+//! cache needs no image): a material surface's is (`pack`, `PACK`), the surface name, the
+//! material's constants (albedo ×4, metallic, roughness, ao, alpha cutoff option), per slot of
+//! the surface the source's content hash or `none`; a billboard cloud's atlas surfaces share
+//! (`atlas`, `ATLAS`), the render version, the `layout` key, the alpha cutoff, per texture the
+//! materials name its path and content hash or read error. A render group's key: (`render`,
+//! `RENDER`), the `layout` key, the group's index, the alpha cutoff, per texture of the group's
+//! materials its path and content hash or read error.
+//!
+//! Memos are not content addresses but an identity's last result, overwritten on every run:
+//! they only let the next run skip work, and what they hold is checked against the current
+//! inputs (group keys, settings, texels) before any of it is reused. Plane images and the last
+//! encodings are stored this way because they are large (on the oak, 36 MB of images in one
+//! entry instead of 1,245, which made a full bake 1.0 s slower; about 26 MB per atlas surface).
+//!
+//! Entry bodies are zstd-compressed (level 1); entries of 1 MiB or more are written on a thread
+//! of their own, and the build waits for them before it reports.
 //!
 //! Bump an entry's version (or a stage's) whenever its result changes for the same parts.
 

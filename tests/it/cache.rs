@@ -47,8 +47,8 @@ fn keys_have_a_pinned_encoding() {
 
 #[test]
 fn the_same_project_in_two_folders_has_the_same_keys() {
-    let first = crate::bake::material_project("");
-    let second = crate::bake::material_project("");
+    let first = crate::material::bake::material_project("");
+    let second = crate::material::bake::material_project("");
     assert_ne!(first.root(), second.root());
     assert!(build(&mut first.open()).all_ok());
     assert!(build(&mut second.open()).all_ok());

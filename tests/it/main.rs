@@ -1,21 +1,18 @@
-//! The integration tests of cirrus: one binary, one module per concern.
+//! The integration tests of cirrus: one binary, a module per kind (`material`, `billboard_cloud`)
+//! and one per concern of the machinery and the shell.
 
 mod support;
 
-mod bake;
-mod billboard;
+mod material;
+mod billboard_cloud;
+
 mod cache;
 mod cli;
 mod config;
 mod conformance;
 mod fuzz;
-mod gpu;
 mod graph;
 mod hostile;
-mod incremental;
-mod layout;
-mod material_files;
-mod planes;
 mod tidy;
 mod watch;
 

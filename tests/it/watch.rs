@@ -439,7 +439,7 @@ fn an_edit_during_a_build_cancels_it_and_the_next_build_uses_the_newest_bytes() 
 
 #[test]
 fn the_viewer_keeps_the_last_good_lod_on_failure_and_reloads_on_a_texture_edit() {
-    let project = crate::billboard::tree_project();
+    let project = crate::billboard_cloud::bake::tree_project();
     let daemon = Daemon::start(&project);
     let mut client = daemon.connect();
     client.subscribe(Some(0));

@@ -22,7 +22,7 @@
 //! | `parse` (`parse`, `PARSE`) | the `.mymaterial` content hash; its path; the source folder | the parsed material file |
 //! | `surface-recipe` (`surface`, 3) | the tail's parts (below); the kind's recipe key | the content key of the surface's files |
 //! | `surface` (`surface`, 3) | the tail's parts; the image's width, height and content hash | the container file and PNG preview |
-//! | `encoding-memo` (`encoding-memo`, 3) | mips and encode versions; the surface's label (`asset/material/surface`, `asset/surface`) | the surface's last encoding (a memo: overwritten) |
+//! | `encoding-memo` (`encoding-memo`, 3) | mips and encode versions; the surface's label (`asset/material/surface`, `asset/surface`) | a BC7 surface's last encoding (a memo: overwritten) |
 //! | `mesh` (`mesh`, `MESH`) | the source folder; per file the mesh stage reads (the OBJ, then its MTL files), its path and its content hash or read error | the loaded mesh and tangents |
 //! | `planes` (`planes`, `PLANES`) | the `mesh` key; ε; max planes option | the plane set |
 //! | `layout` (`layout`, `LAYOUT`) | the `planes` key; atlas settings (max size, padding, power of two); texel density option | rectangles, layout, render groups |
@@ -46,9 +46,11 @@
 //! they only let the next run skip work, and what they hold is checked against the current
 //! inputs (group keys, settings, texels) before any of it is reused. Plane images and the last
 //! encodings are stored this way because they are large (on the oak, 36 MB of images in one
-//! entry instead of 1,245, which made a full bake 1.0 s slower; about 26 MB per atlas surface).
+//! entry instead of 1,245, which made a full bake 1.0 s slower; about 26 MB per atlas surface,
+//! kept for BC7 only, the one slow encoder).
 //!
-//! Entry bodies are zstd-compressed (level 1); entries of 1 MiB or more are written on a thread
+//! Entry bodies of images are zstd-compressed (level 1; surface files are compressed already and
+//! stored as they are); entries of 1 MiB or more are written on a thread
 //! of their own, and the build waits for them before it reports.
 //!
 //! Bump an entry's version (or a stage's) whenever its result changes for the same parts.
@@ -209,6 +211,9 @@ const BACKGROUND_STORE_BYTES: usize = 1 << 20;
 pub struct CacheEntry {
     pub metadata: serde_json::Value,
     pub blobs: Vec<Vec<u8>>,
+    /// Compress the body (images with uniform areas); false for blobs that are compressed
+    /// already (KTX2 with zstd, PNG), where it would cost time and save nothing.
+    pub compress: bool,
 }
 
 impl DiskCache {
@@ -300,8 +305,13 @@ fn encode_entry(stage: &str, key: CacheKey, entry: &CacheEntry) -> Vec<u8> {
         body.extend_from_slice(blob);
     }
     let mut bytes = entry_header(stage, key);
+    bytes.push(entry.compress as u8);
     bytes.extend_from_slice(&(body.len() as u64).to_le_bytes());
-    bytes.extend_from_slice(&zstd::bulk::compress(&body, ENTRY_ZSTD_LEVEL).expect("zstd compresses in memory"));
+    if entry.compress {
+        bytes.extend_from_slice(&zstd::bulk::compress(&body, ENTRY_ZSTD_LEVEL).expect("zstd compresses in memory"));
+    } else {
+        bytes.extend_from_slice(&body);
+    }
     let checksum = blake3::hash(&bytes);
     bytes.extend_from_slice(checksum.as_bytes());
     bytes
@@ -313,13 +323,21 @@ fn decode_entry(bytes: &[u8], stage: &str, key: CacheKey) -> Option<CacheEntry> 
         return None;
     }
     let rest = body.strip_prefix(entry_header(stage, key).as_slice())?;
-    let (length, compressed) = rest.split_at_checked(8)?;
+    let (&compress, rest) = rest.split_first()?;
+    let (length, stored) = rest.split_at_checked(8)?;
     let length = u64::from_le_bytes(length.try_into().ok()?);
     if length > MAX_ENTRY_BYTES {
         return None;
     }
-    let body = zstd::bulk::decompress(compressed, length as usize).ok()?;
-    let mut rest = body.as_slice();
+    let decompressed;
+    let mut rest = match compress {
+        0 => stored,
+        1 => {
+            decompressed = zstd::bulk::decompress(stored, length as usize).ok()?;
+            decompressed.as_slice()
+        }
+        _ => return None,
+    };
     let mut take = |count: usize| -> Option<&[u8]> {
         let (head, tail) = rest.split_at_checked(count)?;
         rest = tail;
@@ -333,5 +351,5 @@ fn decode_entry(bytes: &[u8], stage: &str, key: CacheKey) -> Option<CacheEntry> 
         let length = u64::from_le_bytes(take(8)?.try_into().ok()?) as usize;
         blobs.push(take(length)?.to_vec());
     }
-    Some(CacheEntry { metadata, blobs })
+    Some(CacheEntry { metadata, blobs, compress: compress == 1 })
 }

@@ -5,7 +5,7 @@
 
 use std::collections::{BTreeMap, HashMap};
 use std::fmt;
-use std::path::{Path, PathBuf};
+use std::path::PathBuf;
 use std::sync::{Arc, Mutex};
 use std::time::Instant;
 
@@ -95,13 +95,6 @@ pub fn asset_file(db: &dyn Db, asset: Asset, path: PathBuf) -> Option<SourceFile
     asset.files(db).get(&path).copied()
 }
 
-/// The contents of a file the asset read, or a diagnostic naming it.
-pub fn read_asset_file(db: &dyn Db, asset: Asset, path: &Path) -> Result<SourceFile, Diagnostic> {
-    let file = asset_file(db, asset, path.to_path_buf()).ok_or_else(|| Diagnostic::new(path, "was not read"))?;
-    read_contents(db, file)?;
-    Ok(file)
-}
-
 pub fn read_contents(db: &dyn Db, file: SourceFile) -> Result<&FileContents, Diagnostic> {
     file.contents(db).as_ref().map_err(|error| Diagnostic::new(file.path(db), error.clone()))
 }
@@ -154,11 +147,6 @@ pub struct Database {
 impl Database {
     pub fn new(cache: Option<DiskCache>) -> Database {
         Database { storage: salsa::Storage::default(), cache, logs: Arc::default(), encodings: Arc::default() }
-    }
-
-    /// The stage bodies that ran since the last `take_runs`, leaving them logged.
-    pub fn peek_runs(&self) -> Vec<StageRun> {
-        self.logs.runs.lock().expect("log lock").clone()
     }
 
     /// The stage bodies that ran since the last call, with their durations.
@@ -248,6 +236,7 @@ pub fn cached_json<T: serde::Serialize + serde::de::DeserializeOwned>(
     store_cached(db, stage.name, key, || CacheEntry {
         metadata: serde_json::to_value(&value).expect("stage results serialise"),
         blobs: Vec::new(),
+        compress: true,
     });
     Ok(value)
 }

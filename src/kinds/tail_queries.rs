@@ -78,7 +78,9 @@ pub fn surface_blocks(db: &dyn Db, asset: Asset, surface: SurfaceId) -> Result<A
     let previous = previous_encoding(db, &label);
     let encoded = timed(db, ENCODE, &label, || tail_encode(&mips, surface.surface, format, quality, previous.as_ref()));
     let remembered = PreviousEncoding { mips: (*mips).clone(), encoded: encoded.clone() };
-    store_cached(db, ENCODING_MEMO, encoding_memo_key(&label), || encoding_entry(&remembered));
+    if memo_worth_storing(format) {
+        store_cached(db, ENCODING_MEMO, encoding_memo_key(&label), || encoding_entry(&remembered));
+    }
     db.remember_encoding(&label, remembered);
     Ok(Arc::new(encoded))
 }
@@ -120,7 +122,11 @@ pub fn surface_artifacts(db: &dyn Db, asset: Asset, surface: SurfaceId) -> Resul
     let artifacts = surface_files(db, asset, surface.clone())?;
     if let Some(key) = recipe_key {
         let content = content_key(&settings, &*surface_image(db, asset, surface)?);
-        store_cached(db, SURFACE_RECIPE_ENTRY, key, || CacheEntry { metadata: content.0.to_hex().to_string().into(), blobs: Vec::new() });
+        store_cached(db, SURFACE_RECIPE_ENTRY, key, || CacheEntry {
+            metadata: content.0.to_hex().to_string().into(),
+            blobs: Vec::new(),
+            compress: false,
+        });
     }
     Ok(artifacts)
 }
@@ -157,6 +163,7 @@ fn artifacts_entry(artifacts: &SurfaceArtifacts) -> CacheEntry {
     CacheEntry {
         metadata: serde_json::to_value(&artifacts.info).expect("surface info serialises"),
         blobs: vec![artifacts.texture_file.to_vec(), artifacts.preview_png.to_vec()],
+        compress: false,
     }
 }
 
@@ -170,6 +177,14 @@ fn artifacts_from_entry(entry: CacheEntry) -> Option<SurfaceArtifacts> {
 /// identity (asset, surface, tail settings), overwritten by every encode, so that a new process
 /// re-encodes only the blocks an edit changed. Results equal a full encode either way.
 const ENCODING_MEMO: &str = "encoding-memo";
+
+/// Whether a surface's last encoding is kept on disk: for BC7 only, whose encoder is the slow
+/// one (on the oak's 2048² albedo, re-encoding from scratch after a restart costs about 0.9 s;
+/// the memo, about 26 MB before compression, is written in the background). The other formats
+/// encode a whole atlas in about 0.1 s, less than writing and reading their memo would cost.
+fn memo_worth_storing(format: crate::config::BlockFormat) -> bool {
+    format == crate::config::BlockFormat::Bc7
+}
 
 /// By the surface's label alone: settings are not part of the key (reading them would make
 /// the mips depend on encoder settings); the steps reuse only what was made with their settings.
@@ -203,7 +218,7 @@ fn encoding_entry(previous: &PreviousEncoding) -> CacheEntry {
     let mut blobs: Vec<Vec<u8>> = mips.levels.iter().map(|level| level.pixels.to_vec()).collect();
     blobs.extend(encoded.texture.levels.iter().map(|level| level.to_vec()));
     blobs.push(crate::db::pod_blob(&encoded.block_errors.errors));
-    CacheEntry { metadata, blobs }
+    CacheEntry { metadata, blobs, compress: true }
 }
 
 fn encoding_from_entry(entry: CacheEntry) -> Option<PreviousEncoding> {

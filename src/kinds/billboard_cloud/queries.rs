@@ -109,6 +109,7 @@ fn loaded_mesh_entry(loaded: &LoadedMesh) -> CacheEntry {
             pod_blob(&mesh.triangle_materials),
             pod_blob(&loaded.tangents),
         ],
+        compress: false,
     }
 }
 
@@ -469,7 +470,7 @@ fn store_renders(db: &dyn Db, asset: Asset, images: &[Arc<Vec<PlaneImages>>]) {
                 }
             }
         }
-        CacheEntry { metadata: serde_json::json!({ "groups": groups }), blobs: vec![bytes] }
+        CacheEntry { metadata: serde_json::json!({ "groups": groups }), blobs: vec![bytes], compress: true }
     });
 }
 

@@ -17,6 +17,9 @@ pub mod tail_queries;
 pub mod material;
 pub mod billboard_cloud;
 
+use billboard_cloud::BillboardCloud;
+use material::Material;
+
 /// The questions the driver asks an asset kind. Every answer is computed from the database
 /// (through the kind's tracked functions); none does IO.
 pub trait Kind {
@@ -61,9 +64,6 @@ pub enum AssetKind {
     Material,
     BillboardCloud,
 }
-
-use billboard_cloud::BillboardCloud;
-use material::Material;
 
 impl AssetKind {
     pub fn of(source: &AssetSource) -> AssetKind {
@@ -251,22 +251,13 @@ pub fn stage_node_id(stage: &str, label: &str) -> String {
 
 /// The shared tail stages of one surface (mips → encode → write), reading `image` (the stage
 /// that made the surface's image) and writing its two files.
-pub fn tail_instances(
-    asset_name: &str,
-    surface: &SurfaceId,
-    image: &StageInstance,
-    files: [PathBuf; 2],
-    failed: bool,
-) -> [StageInstance; 3] {
+pub fn tail_instances(asset_name: &str, surface: &SurfaceId, image: &StageInstance, files: [PathBuf; 2]) -> [StageInstance; 3] {
     let label = surface.label(asset_name);
     let instance = surface.instance();
-    let mut mips = StageInstance::new(tail_queries::MIPS, &label, &instance).reads_stage(image);
-    let mut encode = StageInstance::new(tail_queries::ENCODE, &label, &instance).reads_stage(&mips);
+    let mips = StageInstance::new(tail_queries::MIPS, &label, &instance).reads_stage(image);
+    let encode = StageInstance::new(tail_queries::ENCODE, &label, &instance).reads_stage(&mips);
     let mut write = StageInstance::new(tail_queries::WRITE, &label, &instance).reads_stage(&encode).reads_stage(image);
     write.writes = files.to_vec();
-    for stage in [&mut mips, &mut encode, &mut write] {
-        stage.failed = failed;
-    }
     [mips, encode, write]
 }
 

@@ -72,7 +72,8 @@ impl Kind for BillboardCloud {
                 Ok(jobs)
             }
             "render" => queries::plane_images(db, asset, index).map(|_| Vec::new()),
-            _ => lod_files(db, asset).map(|_| Vec::new()),
+            "lod" => lod_files(db, asset).map(|_| Vec::new()),
+            other => unreachable!("the billboard kind schedules no step `{other}`"),
         }
     }
 
@@ -84,6 +85,7 @@ impl Kind for BillboardCloud {
         let report = output_folder.join("report.json");
         let mut mesh = StageInstance::new(MESH, name, &mesh_label);
         mesh.reads.push(Read::File(main_file.clone()));
+        mesh.writes.push(report.clone());
         mesh.reads.extend(mesh_libraries(db, asset).keys().map(|path| Read::File(path.clone())));
         let planes = StageInstance::new(PLANES, name, &mesh_label).reads_stage(&mesh);
         let layout = StageInstance::new(LAYOUT, name, &mesh_label).reads_stage(&mesh).reads_stage(&planes);
@@ -118,12 +120,11 @@ impl Kind for BillboardCloud {
         let container = asset.settings(db).encode.container;
         let mut tails = Vec::new();
         for surface in atlas_surfaces() {
-            let [mips, encode, mut write] = tail_instances(name, &surface, &atlas, surface.artifact_paths(output_folder, container), false);
+            let [mips, encode, mut write] = tail_instances(name, &surface, &atlas, surface.artifact_paths(output_folder, container));
             write.writes.push(report.clone());
             tails.extend([mips, encode, write]);
         }
         atlas.writes.push(report.clone());
-        instances[0].writes.push(report.clone());
         instances.push(atlas);
         instances.extend(tails);
         instances.push(lod);

@@ -88,8 +88,7 @@ impl Kind for Material {
                     }
                 }
             }
-            let [mut mips, encode, mut write] =
-                tail_instances(name, &surface, &pack, surface.artifact_paths(output_folder, container), false);
+            let [mut mips, encode, mut write] = tail_instances(name, &surface, &pack, surface.artifact_paths(output_folder, container));
             // The alpha cutoff of an albedo's mips comes from the material's constants.
             mips = mips.reads_stage(&parse);
             write.writes.push(report.clone());

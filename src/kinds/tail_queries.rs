@@ -240,6 +240,14 @@ fn encoding_from_entry(entry: CacheEntry) -> Option<PreviousEncoding> {
     }
     let encoded_levels: Vec<Arc<[u8]>> = blobs.by_ref().take(sizes.len()).map(Arc::from).collect();
     let errors = crate::db::from_pod_blob::<u32>(&blobs.next()?)?;
+    // Block data and errors must fit the levels (a hand-made entry is a miss, never a panic).
+    let blocks = |(width, height): (u32, u32)| width.div_ceil(4) as usize * height.div_ceil(4) as usize;
+    let block_bytes = crate::texture::encode::block_bytes(settings.format);
+    if sizes.iter().zip(&encoded_levels).any(|(&size, level)| level.len() != blocks(size) * block_bytes)
+        || errors.len() != blocks(*sizes.first()?)
+    {
+        return None;
+    }
     let width = metadata.get("width")?.as_u64()? as u32;
     let height = metadata.get("height")?.as_u64()? as u32;
     let texture = crate::texture::encode::EncodedTexture::from_levels(settings.format, settings.srgb, width, height, encoded_levels);

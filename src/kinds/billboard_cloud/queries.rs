@@ -291,7 +291,16 @@ pub fn plane_images(db: &dyn Db, asset: Asset, group: u32) -> Result<Arc<Vec<Pla
         return Err(Diagnostic::new(&mesh_path, format!("render group {group} no longer exists")));
     };
     let label = render_label(asset.name(db), &loaded.mesh, group);
-    if let Some(images) = stored_renders(db, asset).get(&render_group_key(db, asset, group_index)) {
+    let stored = stored_renders(db, asset);
+    let remembered = stored.get(&render_group_key(db, asset, group_index)).filter(|images| {
+        // A memo that does not fit the group (a hand-made entry) is a miss, never a panic.
+        images.len() == group.rectangles.len()
+            && images.iter().zip(&group.rectangles).all(|(image, &rectangle)| {
+                let placement = &layout.layout.placements[rectangle as usize];
+                (image.width, image.height) == (placement.width.max(1), placement.height.max(1))
+            })
+    });
+    if let Some(images) = remembered {
         record_cache_hit(db, RENDER, &label);
         return Ok(images.clone());
     }

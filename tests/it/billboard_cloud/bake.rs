@@ -343,3 +343,57 @@ fn a_failed_artifact_write_keeps_the_last_good_report() {
     assert!(build(&mut project.open()).all_ok());
     assert!(project.path("baked/tree/report.json").exists());
 }
+
+#[test]
+fn memo_entries_that_do_not_fit_are_misses_and_the_bake_equals_a_clean_one() {
+    let project = tree_project();
+    build(&mut project.open());
+    // Replace every memo with a well-formed entry (valid checksum) whose contents do not fit:
+    // images of the wrong size, blocks and errors that do not match their levels.
+    let cache_folder = project.path("baked/.cirrus/cache");
+    let cache = cirrus::cache::DiskCache::new(&cache_folder);
+    let mut replaced = 0;
+    for stage in ["render-memo", "encoding-memo"] {
+        for prefix in std::fs::read_dir(cache_folder.join(stage)).unwrap().flatten() {
+            for entry in std::fs::read_dir(prefix.path()).unwrap().flatten() {
+                let hex = format!("{}{}", prefix.file_name().to_string_lossy(), entry.file_name().to_string_lossy());
+                let key = cirrus::cache::CacheKey(blake3::Hash::from_hex(&hex).unwrap());
+                let mut real = cache.load(stage, key).unwrap();
+                if stage == "render-memo" {
+                    // Every group of the real memo, each with one 1×1 image.
+                    let groups: Vec<(String, Vec<(u32, u32)>)> = serde_json::from_value(real.metadata["groups"].clone()).unwrap();
+                    real.metadata = serde_json::json!({ "groups": groups.iter().map(|(group, _)| (group, [(1, 1)])).collect::<Vec<_>>() });
+                    real.blobs = vec![vec![7; groups.len() * 16]];
+                } else {
+                    // The real levels, with block data and errors that do not fit them.
+                    let levels = real.metadata["levels"].as_array().unwrap().len();
+                    for blob in &mut real.blobs[levels..] {
+                        blob.truncate(3);
+                    }
+                }
+                cache.store(stage, key, real);
+                replaced += 1;
+            }
+        }
+    }
+    cache.flush();
+    assert_eq!(replaced, 2, "one render memo and one encoding memo (the BC7 albedo)");
+
+    // A new process after a one-texel bark edit renders and encodes what it must, and bakes what
+    // a clean build of the edited sources bakes. (Without the checks, the render memo's groups
+    // panic the atlas; the encoding memo's blocks go unused here because the edit changes most
+    // blocks, and its check guards edits that change few.)
+    let mut bark = image::load_from_memory(&pattern_png(32, 32, 1)).unwrap().into_rgba8();
+    bark.put_pixel(5, 5, image::Rgba([255, 0, 0, 255]));
+    let bark = crate::support::png_bytes(32, 32, bark.as_raw());
+    project.write("assets/bark.png", &bark);
+    let summary = build(&mut project.open());
+    assert!(summary.all_ok(), "{}", summary.to_text());
+    let clean = tree_project();
+    clean.write("assets/bark.png", &bark);
+    build(&mut clean.open());
+    for artifact in ["albedo.ktx2", "mra.ktx2", "normal.ktx2", "height.ktx2", "lod.obj"] {
+        let path = format!("baked/tree/{artifact}");
+        assert!(project.read(&path) == clean.read(&path), "{artifact} differs from a clean build's");
+    }
+}

@@ -2,6 +2,8 @@
 //! uncovered texel filled by extending values outward from covered texels only (so filtering and
 //! mips never pull in a dark or foreign fringe). Albedo alpha stays 0 where nothing was drawn.
 
+use std::sync::Arc;
+
 use rayon::prelude::*;
 
 use crate::gpu::PlaneImages;
@@ -11,10 +13,10 @@ use crate::texture::Texture;
 /// The four atlas surfaces of a billboard cloud, before compression.
 #[derive(Clone, Debug, PartialEq)]
 pub struct AtlasImages {
-    pub albedo: Texture,
-    pub normal: Texture,
-    pub mra: Texture,
-    pub height: Texture,
+    pub albedo: Arc<Texture>,
+    pub normal: Arc<Texture>,
+    pub mra: Arc<Texture>,
+    pub height: Arc<Texture>,
     /// Fraction of atlas texels covered by a face.
     pub coverage: f32,
 }
@@ -117,6 +119,7 @@ pub fn composite_atlas(layout: &Layout, planes: &[&PlaneImages], coverage: &Atla
         Texture::new(layout.width, layout.height, pixels)
     };
     let ((albedo, normal), (mra, height)) = rayon::join(|| rayon::join(|| layer(0), || layer(1)), || rayon::join(|| layer(2), || layer(3)));
+    let [albedo, normal, mra, height] = [albedo, normal, mra, height].map(Arc::new);
     AtlasImages { albedo, normal, mra, height, coverage: coverage.drawn.len() as f32 / texels.max(1) as f32 }
 }
 

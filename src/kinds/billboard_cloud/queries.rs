@@ -394,15 +394,15 @@ pub fn billboard_atlas(db: &dyn Db, asset: Asset) -> Result<Arc<super::atlas::At
     })
 }
 
-/// One surface of the atlas.
+/// One surface of the atlas (shared, not copied).
 pub fn atlas_surface(db: &dyn Db, asset: Asset, surface: SurfaceKind) -> Result<Arc<Texture>, Diagnostic> {
     let atlas = billboard_atlas(db, asset)?;
-    Ok(Arc::new(match surface {
+    Ok(match surface {
         SurfaceKind::Albedo => atlas.albedo.clone(),
         SurfaceKind::Mra => atlas.mra.clone(),
         SurfaceKind::Normal => atlas.normal.clone(),
         SurfaceKind::Height => atlas.height.clone(),
-    }))
+    })
 }
 
 /// What the atlas is made of, cheap to compute: the layout's key (mesh, MTL, settings), every

@@ -29,6 +29,9 @@
 //! | `lod` (`lod`, `LOD`) | the `layout` key | `lod.obj`, `lod.mtl` |
 //! | `render-memo` (`render-memo`, `RENDER`) | the `layout` key | every render group's images, each under its group key (a memo: overwritten) |
 //! | `atlas` (`atlas-coverage`, 1) | the billboard atlas recipe key | the atlas's coverage fraction (for the report) |
+//! | `atlas-fill` (`atlas-fill`, 1) | the coverage's content hash (atlas size, then every drawn texel's atlas texel, plane and plane texel as `u32`) | the fill search's source of every atlas texel (as offsets) |
+//! | `surface-recipe` (`surface`, 3) | the tail's parts; the atlas surface's parts key (below) | the content key of the surface's files |
+//! | `source-mips` (`source-mips`, 1) | decode and mips versions; the texture file's content hash; the material slot; the filter kind; the alpha cutoff bits (or `u32::MAX`) | the mip chain the renders sample |
 //!
 //! The tail's parts: the mips, encode and write versions; the surface name; block format;
 //! encoder quality; mips; alpha cutoff option; container; zstd level option.
@@ -40,7 +43,10 @@
 //! (`atlas`, `ATLAS`), the render version, the `layout` key, the alpha cutoff, per texture the
 //! materials name its path and content hash or read error. A render group's key: (`render`,
 //! `RENDER`), the `layout` key, the group's index, the alpha cutoff, per texture of the group's
-//! materials its path and content hash or read error.
+//! materials its path and content hash or read error. An atlas surface's parts key, asked when
+//! its recipe misses (after the renders, before compositing): (`atlas-parts`, 1), the atlas
+//! version, the `layout` key, the alpha cutoff, the surface, the coverage's content hash, and
+//! the hash of that surface's image of every render group (width, height, bytes).
 //!
 //! Memos are not content addresses but an identity's last result, overwritten on every run:
 //! they only let the next run skip work, and what they hold is checked against the current
@@ -49,14 +55,17 @@
 //! entry instead of 1,245, which made a full bake 1.0 s slower; about 26 MB per atlas surface,
 //! kept for BC7 only, the one slow encoder).
 //!
-//! Entry bodies of images are zstd-compressed (level 1; surface files are compressed already and
-//! stored as they are); entries of 1 MiB or more are written on a thread
-//! of their own, and the build waits for them before it reports.
+//! Blobs of images are zstd-compressed (level 1, in 4 MiB frames compressed and decompressed in
+//! parallel straight into each blob's buffer; surface files are compressed already and stored as
+//! they are); entries of 1 MiB or more, and memos gathered from shared images, are made and
+//! written on a thread of their own, and the build waits for them before it reports.
 //!
 //! Bump an entry's version (or a stage's) whenever its result changes for the same parts.
 
 use std::io::Write;
 use std::path::{Path, PathBuf};
+
+use rayon::prelude::*;
 
 /// A content address: the blake3 hash of everything a stage result depends on.
 #[derive(Clone, Copy, Debug, PartialEq, Eq, Hash)]
@@ -243,26 +252,33 @@ impl DiskCache {
     /// Stores an entry; failures (full disk, permissions) only cost a future miss. Large entries
     /// are written in the background: call `flush` before relying on them being on disk.
     pub fn store(&self, stage: &str, key: CacheKey, entry: CacheEntry) {
-        let path = self.entry_path(stage, key);
-        let stage = stage.to_string();
-        let size = entry_size(&entry);
-        let write = move || {
-            let result = (|| -> std::io::Result<()> {
-                let folder = path.parent().expect("entry paths have a folder");
-                std::fs::create_dir_all(folder)?;
-                let mut temporary = tempfile::Builder::new().prefix(crate::artifacts::TEMPORARY_PREFIX).tempfile_in(folder)?;
-                temporary.write_all(&encode_entry(&stage, key, &entry))?;
-                temporary.persist(&path).map_err(|error| error.error)?;
-                Ok(())
-            })();
-            if let Err(error) = result {
-                tracing::warn!("cannot write cache entry {}: {error}", path.display());
-            }
-        };
-        if size < BACKGROUND_STORE_BYTES {
-            write();
+        if entry_size(&entry) < BACKGROUND_STORE_BYTES {
+            self.write_entry(stage, key, &entry);
         } else {
-            self.pending.lock().expect("pending writes lock").push(std::thread::spawn(write));
+            self.store_in_background(stage, key, move || entry);
+        }
+    }
+
+    /// Makes an entry and stores it on a thread of its own (for large entries whose making,
+    /// such as gathering images into one blob, would hold up the stage); see `flush`.
+    pub fn store_in_background(&self, stage: &str, key: CacheKey, make: impl FnOnce() -> CacheEntry + Send + 'static) {
+        let (cache, stage) = (self.clone(), stage.to_string());
+        let write = std::thread::spawn(move || cache.write_entry(&stage, key, &make()));
+        self.pending.lock().expect("pending writes lock").push(write);
+    }
+
+    fn write_entry(&self, stage: &str, key: CacheKey, entry: &CacheEntry) {
+        let path = self.entry_path(stage, key);
+        let result = (|| -> std::io::Result<()> {
+            let folder = path.parent().expect("entry paths have a folder");
+            std::fs::create_dir_all(folder)?;
+            let mut temporary = tempfile::Builder::new().prefix(crate::artifacts::TEMPORARY_PREFIX).tempfile_in(folder)?;
+            temporary.write_all(&encode_entry(stage, key, entry))?;
+            temporary.persist(&path).map_err(|error| error.error)?;
+            Ok(())
+        })();
+        if let Err(error) = result {
+            tracing::warn!("cannot write cache entry {}: {error}", path.display());
         }
     }
 
@@ -281,7 +297,7 @@ fn entry_size(entry: &CacheEntry) -> usize {
 
 /// The header of an entry: format, then the stage and key it was stored under.
 fn entry_header(stage: &str, key: CacheKey) -> Vec<u8> {
-    let mut header = b"CIRRUSC3".to_vec();
+    let mut header = b"CIRRUSC4".to_vec();
     header.extend_from_slice(&(stage.len() as u64).to_le_bytes());
     header.extend_from_slice(stage.as_bytes());
     header.extend_from_slice(key.0.as_bytes());
@@ -292,25 +308,40 @@ fn entry_header(stage: &str, key: CacheKey) -> Vec<u8> {
 /// areas (a fill, transparent texels), which it already shrinks severalfold.
 const ENTRY_ZSTD_LEVEL: i32 = 1;
 
-/// Header, the body's length before compression, the zstd-compressed body (metadata, blobs),
+/// Blobs are compressed in frames of this many bytes, in parallel (a 40 MB render memo
+/// compresses and decompresses on every core), and decompressed straight into their own
+/// buffers (no body to copy them out of).
+const ENTRY_FRAME_BYTES: usize = 4 << 20;
+
+/// Header; whether blobs are compressed; the metadata (JSON); the blobs, each as its length
+/// and then its bytes, or its zstd frames (count, then each frame's stored length and bytes);
 /// and a blake3 checksum of everything before it.
 fn encode_entry(stage: &str, key: CacheKey, entry: &CacheEntry) -> Vec<u8> {
     let metadata = serde_json::to_vec(&entry.metadata).expect("JSON values serialise");
-    let mut body = Vec::with_capacity(metadata.len() + entry.blobs.iter().map(|blob| blob.len() + 8).sum::<usize>() + 16);
-    body.extend_from_slice(&(metadata.len() as u64).to_le_bytes());
-    body.extend_from_slice(&metadata);
-    body.extend_from_slice(&(entry.blobs.len() as u64).to_le_bytes());
-    for blob in &entry.blobs {
-        body.extend_from_slice(&(blob.len() as u64).to_le_bytes());
-        body.extend_from_slice(blob);
-    }
     let mut bytes = entry_header(stage, key);
     bytes.push(entry.compress as u8);
-    bytes.extend_from_slice(&(body.len() as u64).to_le_bytes());
+    bytes.extend_from_slice(&(metadata.len() as u64).to_le_bytes());
+    bytes.extend_from_slice(&metadata);
+    bytes.extend_from_slice(&(entry.blobs.len() as u64).to_le_bytes());
     if entry.compress {
-        bytes.extend_from_slice(&zstd::bulk::compress(&body, ENTRY_ZSTD_LEVEL).expect("zstd compresses in memory"));
+        let frames: Vec<&[u8]> = entry.blobs.iter().flat_map(|blob| blob.chunks(ENTRY_FRAME_BYTES)).collect();
+        let compressed: Vec<Vec<u8>> =
+            frames.par_iter().map(|frame| zstd::bulk::compress(frame, ENTRY_ZSTD_LEVEL).expect("zstd compresses in memory")).collect();
+        let mut compressed = compressed.into_iter();
+        for blob in &entry.blobs {
+            let frame_count = blob.len().div_ceil(ENTRY_FRAME_BYTES);
+            bytes.extend_from_slice(&(blob.len() as u64).to_le_bytes());
+            bytes.extend_from_slice(&(frame_count as u64).to_le_bytes());
+            for frame in compressed.by_ref().take(frame_count) {
+                bytes.extend_from_slice(&(frame.len() as u64).to_le_bytes());
+                bytes.extend_from_slice(&frame);
+            }
+        }
     } else {
-        bytes.extend_from_slice(&body);
+        for blob in &entry.blobs {
+            bytes.extend_from_slice(&(blob.len() as u64).to_le_bytes());
+            bytes.extend_from_slice(blob);
+        }
     }
     let checksum = blake3::hash(&bytes);
     bytes.extend_from_slice(checksum.as_bytes());
@@ -322,34 +353,62 @@ fn decode_entry(bytes: &[u8], stage: &str, key: CacheKey) -> Option<CacheEntry> 
     if blake3::hash(body).as_bytes() != checksum {
         return None;
     }
-    let rest = body.strip_prefix(entry_header(stage, key).as_slice())?;
-    let (&compress, rest) = rest.split_first()?;
-    let (length, stored) = rest.split_at_checked(8)?;
-    let length = u64::from_le_bytes(length.try_into().ok()?);
-    if length > MAX_ENTRY_BYTES {
-        return None;
-    }
-    let decompressed;
-    let mut rest = match compress {
-        0 => stored,
-        1 => {
-            decompressed = zstd::bulk::decompress(stored, length as usize).ok()?;
-            decompressed.as_slice()
-        }
+    let mut reader = EntryReader(body.strip_prefix(entry_header(stage, key).as_slice())?);
+    let compress = match reader.bytes(1)? {
+        [0] => false,
+        [1] => true,
         _ => return None,
     };
-    let mut take = |count: usize| -> Option<&[u8]> {
-        let (head, tail) = rest.split_at_checked(count)?;
-        rest = tail;
-        Some(head)
-    };
-    let metadata_length = u64::from_le_bytes(take(8)?.try_into().ok()?) as usize;
-    let metadata = serde_json::from_slice(take(metadata_length)?).ok()?;
-    let blob_count = u64::from_le_bytes(take(8)?.try_into().ok()?) as usize;
+    let metadata_length = reader.length()?;
+    let metadata = serde_json::from_slice(reader.bytes(metadata_length)?).ok()?;
+    let blob_count = reader.length()?;
     let mut blobs = Vec::with_capacity(blob_count.min(64));
+    let mut total = 0usize;
     for _ in 0..blob_count {
-        let length = u64::from_le_bytes(take(8)?.try_into().ok()?) as usize;
-        blobs.push(take(length)?.to_vec());
+        let length = reader.length()?;
+        total = total.checked_add(length).filter(|&total| total as u64 <= MAX_ENTRY_BYTES)?;
+        if compress {
+            let frame_count = reader.length()?;
+            if frame_count != length.div_ceil(ENTRY_FRAME_BYTES) {
+                return None;
+            }
+            let mut frames = Vec::with_capacity(frame_count);
+            for _ in 0..frame_count {
+                let frame_length = reader.length()?;
+                frames.push(reader.bytes(frame_length)?);
+            }
+            blobs.push(decompress_frames(&frames, length)?);
+        } else {
+            blobs.push(reader.bytes(length)?.to_vec());
+        }
     }
-    Some(CacheEntry { metadata, blobs, compress: compress == 1 })
+    reader.0.is_empty().then_some(CacheEntry { metadata, blobs, compress })
+}
+
+/// Reads an entry's parts in order; `None` past its end.
+struct EntryReader<'a>(&'a [u8]);
+
+impl<'a> EntryReader<'a> {
+    fn bytes(&mut self, count: usize) -> Option<&'a [u8]> {
+        let (head, tail) = self.0.split_at_checked(count)?;
+        self.0 = tail;
+        Some(head)
+    }
+
+    /// A little-endian u64 length, at most `MAX_ENTRY_BYTES`.
+    fn length(&mut self) -> Option<usize> {
+        let length = u64::from_le_bytes(self.bytes(8)?.try_into().ok()?);
+        (length <= MAX_ENTRY_BYTES).then_some(length as usize)
+    }
+}
+
+/// A blob of `length` bytes from its zstd frames (each `ENTRY_FRAME_BYTES` long but the
+/// last), decompressed in parallel into one buffer; `None` when a frame does not fit.
+fn decompress_frames(frames: &[&[u8]], length: usize) -> Option<Vec<u8>> {
+    let mut blob = vec![0u8; length];
+    let all_fit = blob.par_chunks_mut(ENTRY_FRAME_BYTES).zip(frames).all(|(output, frame)| {
+        let mut decoder = zstd::bulk::Decompressor::new().expect("zstd decompressor");
+        matches!(decoder.decompress_to_buffer(frame, output), Ok(written) if written == output.len())
+    });
+    all_fit.then_some(blob)
 }

@@ -218,6 +218,14 @@ pub fn store_cached(db: &dyn Db, entry: &str, key: CacheKey, make: impl FnOnce()
     }
 }
 
+/// Like `store_cached`, but the entry is also made on the cache's background thread (`make`
+/// owns what it needs: `Arc`s of the images it gathers).
+pub fn store_cached_in_background(db: &dyn Db, entry: &str, key: CacheKey, make: impl FnOnce() -> CacheEntry + Send + 'static) {
+    if let Some(cache) = db.disk_cache() {
+        cache.store_in_background(entry, key, make);
+    }
+}
+
 /// A stage result stored as JSON metadata under the stage's name (parsed materials, plane sets,
 /// layouts: small, exact with `float_roundtrip`): loaded (a cache hit of `stage` for `label`), or
 /// computed and stored.

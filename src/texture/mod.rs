@@ -159,7 +159,7 @@ impl SurfaceKind {
 pub struct Texture {
     pub width: u32,
     pub height: u32,
-    pub pixels: Arc<[u8]>,
+    pub pixels: Arc<Vec<u8>>,
     pub hash: blake3::Hash,
 }
 
@@ -168,7 +168,7 @@ impl Texture {
         assert_eq!(pixels.len(), (width * height * 4) as usize, "RGBA8 pixel count");
         // The same hash either way; large images hash on every core (atlas surfaces are 16 MB).
         let hash = if pixels.len() >= 1 << 20 { blake3::Hasher::new().update_rayon(&pixels).finalize() } else { blake3::hash(&pixels) };
-        Texture { width, height, pixels: pixels.into(), hash }
+        Texture { width, height, pixels: Arc::new(pixels), hash }
     }
 
     /// A one-colour texture of `width` × `height`.

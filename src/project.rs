@@ -319,6 +319,7 @@ impl Project {
         let first_jobs = assets.iter().flat_map(|(_, asset)| asset.kind(&self.db).first_jobs(&self.db, *asset)).collect();
         let finished = crate::schedule::run_jobs(&self.db, first_jobs, progress, &cancel);
         let runs = self.db.take_runs();
+        crate::gpu::wait_for_gpu_start();
         if let Some(cache) = self.db.disk_cache() {
             // Entries written in the background are on disk before the build reports.
             cache.flush();

@@ -7,7 +7,7 @@ mod plane_render;
 mod view_render;
 mod window;
 
-pub use plane_render::{PlaneImages, PlaneRenderInput, RectangleFrame, RenderMaterial};
+pub use plane_render::{material_mip_settings, PlaneImages, PlaneRenderInput, RectangleFrame, RenderMaterial};
 pub use view_render::{ViewMaterial, ViewMesh};
 pub use window::WindowSurface;
 
@@ -72,6 +72,30 @@ static GPU: OnceLock<Result<Gpu, GpuError>> = OnceLock::new();
 /// The shared GPU, created on first use.
 pub fn gpu() -> Result<&'static Gpu, GpuError> {
     GPU.get_or_init(|| pollster::block_on(Gpu::new())).as_ref().map_err(Clone::clone)
+}
+
+/// The thread `start_gpu_in_background` started, until someone waits for it.
+static GPU_STARTER: Mutex<Option<std::thread::JoinHandle<()>>> = Mutex::new(None);
+
+/// Starts creating the shared GPU on a thread of its own (about 50–80 ms on llvmpipe), for a
+/// caller that knows it will render soon and has other work to do meanwhile; `gpu()` then waits
+/// for it. Call `wait_for_gpu_start` before the process ends.
+pub fn start_gpu_in_background() {
+    let mut starter = GPU_STARTER.lock().expect("GPU starter lock");
+    if GPU.get().is_none() && starter.is_none() {
+        *starter = Some(std::thread::spawn(|| {
+            let _ = gpu();
+        }));
+    }
+}
+
+/// Waits for a GPU start begun by `start_gpu_in_background` (so that the process never exits
+/// while the driver is being set up).
+pub fn wait_for_gpu_start() {
+    let starter = GPU_STARTER.lock().expect("GPU starter lock").take();
+    if let Some(starter) = starter {
+        let _ = starter.join();
+    }
 }
 
 /// An uploaded texture: content hash, sRGB, and the alpha cutoff bits or level count.

@@ -6,6 +6,7 @@ use std::sync::Arc;
 use bytemuck::{Pod, Zeroable};
 
 use super::*;
+use crate::texture::TextureSlot;
 
 #[repr(C)]
 #[derive(Clone, Copy, Pod, Zeroable)]
@@ -79,14 +80,45 @@ pub struct PlaneImages {
     pub height_map: Vec<u8>,
 }
 
+/// How the renders filter a material's texture for `slot`: colour and opacity maps with
+/// coverage-preserving mips at the cutoff, the others as data.
+pub fn material_mip_settings(slot: TextureSlot, alpha_cutoff: f32) -> MipSettings {
+    match slot {
+        TextureSlot::Albedo | TextureSlot::Opacity => MipSettings { kind: SurfaceKind::Albedo, alpha_cutoff: Some(alpha_cutoff) },
+        TextureSlot::Normal => MipSettings { kind: SurfaceKind::Normal, alpha_cutoff: None },
+        TextureSlot::Metallic | TextureSlot::Roughness | TextureSlot::Ao => MipSettings { kind: SurfaceKind::Mra, alpha_cutoff: None },
+    }
+}
+
+/// An uploaded chain: its level 0's content, its colour space and its cutoff.
+fn upload_key(level0: &Texture, settings: MipSettings) -> UploadKey {
+    (level0.hash, settings.kind == SurfaceKind::Albedo, settings.alpha_cutoff.map_or(u32::MAX, f32::to_bits))
+}
+
+/// Colour maps are sampled as sRGB, the others as data.
+fn view_format(settings: MipSettings) -> wgpu::TextureFormat {
+    if settings.kind == SurfaceKind::Albedo {
+        ALBEDO_FORMAT
+    } else {
+        DATA_FORMAT
+    }
+}
+
 impl Gpu {
-    /// A source texture on the GPU with its mip chain (uploaded once per content).
-    fn texture_view(&self, texture: &Texture, kind: SurfaceKind, alpha_cutoff: Option<f32>) -> Arc<wgpu::TextureView> {
-        let srgb = kind == SurfaceKind::Albedo;
-        let key = (texture.hash, srgb, alpha_cutoff.map_or(u32::MAX, f32::to_bits));
-        self.cached_upload(key, || {
-            let levels = mip_chain(texture, MipSettings { kind, alpha_cutoff });
-            upload(&self.device, &self.queue, &levels, if srgb { ALBEDO_FORMAT } else { DATA_FORMAT })
+    /// Uploads the mip chain of a material's texture for `slot` (made with
+    /// [`material_mip_settings`], level 0 first) ahead of the renders that use it: renders of
+    /// a material with that level 0 then find it on the GPU instead of filtering their own.
+    pub fn upload_material_mips(&self, levels: &[Texture], slot: TextureSlot, alpha_cutoff: f32) {
+        let settings = material_mip_settings(slot, alpha_cutoff);
+        self.cached_upload(upload_key(&levels[0], settings), || upload(&self.device, &self.queue, levels, view_format(settings)));
+    }
+
+    /// A material's texture for `slot`, on the GPU with its mip chain (made and uploaded once
+    /// per content, unless `upload_material_mips` uploaded it already).
+    fn material_texture_view(&self, texture: &Texture, slot: TextureSlot, alpha_cutoff: f32) -> Arc<wgpu::TextureView> {
+        let settings = material_mip_settings(slot, alpha_cutoff);
+        self.cached_upload(upload_key(texture, settings), || {
+            upload(&self.device, &self.queue, &mip_chain(texture, settings), view_format(settings))
         })
     }
 
@@ -258,16 +290,16 @@ impl Gpu {
         }
         let buffer = self.constants_buffer(bytemuck::bytes_of(&uniform));
         let views: Vec<Arc<wgpu::TextureView>> = [
-            (&material.albedo, SurfaceKind::Albedo, Some(alpha_cutoff)),
-            (&material.opacity, SurfaceKind::Albedo, Some(alpha_cutoff)),
-            (&material.normal, SurfaceKind::Normal, None),
-            (&material.metallic, SurfaceKind::Mra, None),
-            (&material.roughness, SurfaceKind::Mra, None),
-            (&material.ao, SurfaceKind::Mra, None),
+            (&material.albedo, TextureSlot::Albedo),
+            (&material.opacity, TextureSlot::Opacity),
+            (&material.normal, TextureSlot::Normal),
+            (&material.metallic, TextureSlot::Metallic),
+            (&material.roughness, TextureSlot::Roughness),
+            (&material.ao, TextureSlot::Ao),
         ]
         .into_iter()
-        .map(|(texture, kind, cutoff)| match texture {
-            Some(texture) => self.texture_view(texture, kind, cutoff),
+        .map(|(texture, slot)| match texture {
+            Some(texture) => self.material_texture_view(texture, slot, alpha_cutoff),
             None => Arc::new(self.white.clone()),
         })
         .collect();

@@ -56,6 +56,13 @@ pub trait Kind {
     /// A key for what the surface's image is made of, cheap to compute (source hashes and
     /// settings), so that a surface already in the persistent cache needs no image at all.
     fn surface_recipe_key(db: &dyn Db, asset: Asset, surface: &SurfaceId) -> Result<Option<CacheKey>, Diagnostic>;
+
+    /// A key for what the surface's image is put together from, asked when the recipe missed:
+    /// dearer (it may run the stages before the image) but cheaper than the image, and finer
+    /// than the recipe (an edit that leaves this surface's parts alone finds it), or none.
+    fn surface_parts_key(_db: &dyn Db, _asset: Asset, _surface: &SurfaceId) -> Result<Option<CacheKey>, Diagnostic> {
+        Ok(None)
+    }
 }
 
 /// The kinds of asset cirrus bakes: one `match` per question of `Kind`.
@@ -98,6 +105,10 @@ impl AssetKind {
     pub fn run_job(self, db: &dyn Db, job: &Job) -> Result<Vec<Job>, Diagnostic> {
         match (&job.task, self) {
             (Task::Surface(surface), _) => tail_queries::surface_artifacts(db, job.asset, surface.clone()).map(|_| Vec::new()),
+            (Task::LoadPreviousEncoding(surface), _) => {
+                tail_queries::load_previous_encoding(db, job.asset, surface);
+                Ok(Vec::new())
+            }
             (Task::Step(step, index), AssetKind::Material) => Material::run_step(db, job.asset, step, *index),
             (Task::Step(step, index), AssetKind::BillboardCloud) => BillboardCloud::run_step(db, job.asset, step, *index),
         }
@@ -135,6 +146,13 @@ impl AssetKind {
         match self {
             AssetKind::Material => Material::tail_settings(db, asset, surface),
             AssetKind::BillboardCloud => BillboardCloud::tail_settings(db, asset, surface),
+        }
+    }
+
+    pub fn surface_parts_key(self, db: &dyn Db, asset: Asset, surface: &SurfaceId) -> Result<Option<CacheKey>, Diagnostic> {
+        match self {
+            AssetKind::Material => Material::surface_parts_key(db, asset, surface),
+            AssetKind::BillboardCloud => BillboardCloud::surface_parts_key(db, asset, surface),
         }
     }
 
@@ -193,6 +211,9 @@ pub enum Task {
     Step(&'static str, u32),
     /// A surface through the shared texture tail.
     Surface(SurfaceId),
+    /// Loads a surface's last encoding from the persistent cache ahead of its tail (a kind
+    /// schedules it beside slower work, so that the load is off the surface's path).
+    LoadPreviousEncoding(SurfaceId),
 }
 
 /// One instance of a stage, as the summary, the graph dump and the event log name it.

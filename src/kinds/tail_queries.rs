@@ -7,7 +7,7 @@
 use std::sync::Arc;
 
 use crate::cache::{CacheEntry, CacheKey, CacheKeyBuilder};
-use crate::db::{load_cached, record_cache_hit, store_cached, timed, Asset, Db, Stage};
+use crate::db::{load_cached, record_cache_hit, store_cached, store_cached_in_background, timed, Asset, Db, Stage};
 use crate::diagnostic::Diagnostic;
 use crate::kinds::SurfaceId;
 use crate::texture::tail::{
@@ -79,7 +79,8 @@ pub fn surface_blocks(db: &dyn Db, asset: Asset, surface: SurfaceId) -> Result<A
     let encoded = timed(db, ENCODE, &label, || tail_encode(&mips, surface.surface, format, quality, previous.as_ref()));
     let remembered = PreviousEncoding { mips: (*mips).clone(), encoded: encoded.clone() };
     if memo_worth_storing(format) {
-        store_cached(db, ENCODING_MEMO, encoding_memo_key(&label), || encoding_entry(&remembered));
+        let memo = remembered.clone();
+        store_cached_in_background(db, ENCODING_MEMO, encoding_memo_key(&label), move || encoding_entry(&memo));
     }
     db.remember_encoding(&label, remembered);
     Ok(Arc::new(encoded))
@@ -105,23 +106,39 @@ pub fn surface_files(db: &dyn Db, asset: Asset, surface: SurfaceId) -> Result<Ar
 }
 
 /// A surface's finished files: from the persistent cache by its recipe when the kind can name
-/// one (then no image is made), else through the tail.
+/// one (then no image is made), else by its parts (then the image is not put together), else
+/// through the tail.
 #[salsa::tracked(returns(clone))]
 pub fn surface_artifacts(db: &dyn Db, asset: Asset, surface: SurfaceId) -> Result<Arc<SurfaceArtifacts>, Diagnostic> {
     let settings = tail_settings(db, asset, surface.clone())?;
-    let recipe_key = asset.kind(db).surface_recipe_key(db, asset, &surface)?.map(|recipe| surface_key(&settings).part(&recipe.0).finish());
-    if let Some(key) = recipe_key {
-        // The recipe's entry names the content entry that holds the files.
-        let content =
-            load_cached(db, SURFACE_RECIPE_ENTRY, key, |entry| Some(CacheKey(blake3::Hash::from_hex(entry.metadata.as_str()?).ok()?)));
-        if let Some(artifacts) = content.and_then(|content| load_cached(db, SURFACE_ENTRY, content, artifacts_from_entry)) {
-            record_cache_hit(db, WRITE, &surface.label(asset.name(db)));
-            return Ok(Arc::new(artifacts));
-        }
+    let kind = asset.kind(db);
+    let recipe_key = kind.surface_recipe_key(db, asset, &surface)?.map(|recipe| surface_key(&settings).part(&recipe.0).finish());
+    if let Some(artifacts) = recipe_key.and_then(|key| artifacts_by_recipe(db, key)) {
+        record_cache_hit(db, WRITE, &surface.label(asset.name(db)));
+        return Ok(Arc::new(artifacts));
     }
-    let artifacts = surface_files(db, asset, surface.clone())?;
-    if let Some(key) = recipe_key {
-        let content = content_key(&settings, &*surface_image(db, asset, surface)?);
+    let parts_key = kind.surface_parts_key(db, asset, &surface)?.map(|parts| surface_key(&settings).part(&parts.0).finish());
+    let from_parts = parts_key.and_then(|key| artifacts_by_recipe(db, key).map(|artifacts| (Arc::new(artifacts), None)));
+    let (artifacts, content) = match from_parts {
+        Some(found) => {
+            record_cache_hit(db, WRITE, &surface.label(asset.name(db)));
+            found
+        }
+        None => {
+            let artifacts = surface_files(db, asset, surface.clone())?;
+            (artifacts, Some(content_key(&settings, &*surface_image(db, asset, surface.clone())?)))
+        }
+    };
+    // Both keys name the content entry from now on (found by parts: the content key is the
+    // one the parts' entry names).
+    let content = match content {
+        Some(content) => content,
+        None => match parts_key.and_then(|key| recipe_target(db, key)) {
+            Some(content) => content,
+            None => return Ok(artifacts),
+        },
+    };
+    for key in [recipe_key, parts_key].into_iter().flatten() {
         store_cached(db, SURFACE_RECIPE_ENTRY, key, || CacheEntry {
             metadata: content.0.to_hex().to_string().into(),
             blobs: Vec::new(),
@@ -129,6 +146,16 @@ pub fn surface_artifacts(db: &dyn Db, asset: Asset, surface: SurfaceId) -> Resul
         });
     }
     Ok(artifacts)
+}
+
+/// The content key a recipe (or parts) entry names.
+fn recipe_target(db: &dyn Db, key: CacheKey) -> Option<CacheKey> {
+    load_cached(db, SURFACE_RECIPE_ENTRY, key, |entry| Some(CacheKey(blake3::Hash::from_hex(entry.metadata.as_str()?).ok()?)))
+}
+
+/// The files a recipe (or parts) entry leads to.
+fn artifacts_by_recipe(db: &dyn Db, key: CacheKey) -> Option<SurfaceArtifacts> {
+    recipe_target(db, key).and_then(|content| load_cached(db, SURFACE_ENTRY, content, artifacts_from_entry))
 }
 
 /// Whether the persistent cache holds the surface's files under its recipe (a kind can then
@@ -190,6 +217,12 @@ fn memo_worth_storing(format: crate::config::BlockFormat) -> bool {
 /// the mips depend on encoder settings); the steps reuse only what was made with their settings.
 fn encoding_memo_key(label: &str) -> CacheKey {
     CacheKeyBuilder::new(ENCODING_MEMO, SURFACE_ENTRY_VERSION).part(&[MIPS.version, ENCODE.version]).part(label).finish()
+}
+
+/// Loads the surface's last encoding into this process ahead of its tail (no-op when it is
+/// here already or the memo holds none).
+pub fn load_previous_encoding(db: &dyn Db, asset: Asset, surface: &SurfaceId) {
+    previous_encoding(db, &surface.label(asset.name(db)));
 }
 
 /// The surface's last encoding: from this process, else from the memo on disk.

@@ -2,24 +2,11 @@
 //! uncovered texel filled by extending values outward from covered texels only (so filtering and
 //! mips never pull in a dark or foreign fringe). Albedo alpha stays 0 where nothing was drawn.
 
-use std::sync::Arc;
-
 use rayon::prelude::*;
 
 use crate::gpu::PlaneImages;
 use crate::kinds::billboard_cloud::layout::Layout;
-use crate::texture::Texture;
-
-/// The four atlas surfaces of a billboard cloud, before compression.
-#[derive(Clone, Debug, PartialEq)]
-pub struct AtlasImages {
-    pub albedo: Arc<Texture>,
-    pub normal: Arc<Texture>,
-    pub mra: Arc<Texture>,
-    pub height: Arc<Texture>,
-    /// Fraction of atlas texels covered by a face.
-    pub coverage: f32,
-}
+use crate::texture::{SurfaceKind, Texture};
 
 /// Which atlas texels a face covers, and what is drawn there: the shape of the atlas without its
 /// colours, so that a colour-only edit finds it unchanged and skips the fill search.
@@ -32,8 +19,19 @@ pub struct AtlasCoverage {
     pub drawn: Vec<DrawnTexel>,
 }
 
+impl AtlasCoverage {
+    /// A content hash of the coverage (size and every drawn texel), hashed on every core.
+    pub fn content_hash(&self) -> blake3::Hash {
+        let mut hasher = blake3::Hasher::new();
+        hasher.update(&self.width.to_le_bytes()).update(&self.height.to_le_bytes());
+        hasher.update_rayon(bytemuck::cast_slice(&self.drawn));
+        hasher.finalize()
+    }
+}
+
 /// One covered atlas texel and the texel of a plane image (in layout order) drawn on it.
-#[derive(Clone, Copy, Debug, PartialEq)]
+#[repr(C)]
+#[derive(Clone, Copy, Debug, PartialEq, bytemuck::Pod, bytemuck::Zeroable)]
 pub struct DrawnTexel {
     pub atlas_texel: u32,
     pub plane: u32,
@@ -45,36 +43,61 @@ pub struct DrawnTexel {
 #[derive(Clone, Debug, PartialEq)]
 pub struct TexelSources(pub Vec<u32>);
 
-/// Calls `visit(plane, plane_texel, atlas_texel)` for every drawn texel of `planes` (in layout
-/// order) at its atlas texel; later planes overwrite earlier ones.
-fn for_each_drawn_texel(layout: &Layout, planes: &[&PlaneImages], mut visit: impl FnMut(usize, usize, usize)) {
-    let (width, height) = (layout.width as usize, layout.height as usize);
-    for (plane, (placement, images)) in layout.placements.iter().zip(planes).enumerate() {
-        for row in 0..images.height {
-            for column in 0..images.width {
-                let source = (row * images.width + column) as usize;
-                if images.albedo[source * 4 + 3] == 0 {
-                    continue;
-                }
-                let s = (column as f32 + 0.5) / images.width as f32;
-                let t = 1.0 - (row as f32 + 0.5) / images.height as f32;
-                let (x, y) = placement.atlas_position(s, t);
-                let (x, y) = (x.floor() as usize, y.floor() as usize);
-                if x < width && y < height {
-                    visit(plane, source, y * width + x);
-                }
-            }
+impl TexelSources {
+    /// Each texel's source as an offset from the texel itself (wrapping): zero where covered and
+    /// small nearby, so the list compresses to a few percent of its size.
+    pub fn to_offsets(&self) -> Vec<u32> {
+        self.0.par_iter().enumerate().map(|(texel, &source)| source.wrapping_sub(texel as u32)).collect()
+    }
+
+    /// The sources back from `to_offsets`, for an atlas of `texels` texels; `None` when the
+    /// count is wrong or a source lies outside the atlas (a damaged or hand-made cache entry).
+    pub fn from_offsets(offsets: &[u32], texels: usize) -> Option<TexelSources> {
+        if offsets.len() != texels {
+            return None;
         }
+        let sources: Vec<u32> = offsets.par_iter().enumerate().map(|(texel, &offset)| offset.wrapping_add(texel as u32)).collect();
+        sources.par_iter().all(|&source| (source as usize) < texels).then_some(TexelSources(sources))
     }
 }
 
-/// The atlas texels that `planes` (in layout order) cover, and what each shows.
+/// The (atlas texel, plane texel) pairs of every drawn texel of one plane's images at its
+/// placement, in the plane's texel order.
+fn drawn_texels(layout: &Layout, placement: &crate::packing::Placement, images: &PlaneImages) -> Vec<(u32, u32)> {
+    let (width, height) = (layout.width as usize, layout.height as usize);
+    let mut drawn = Vec::new();
+    for row in 0..images.height {
+        for column in 0..images.width {
+            let source = (row * images.width + column) as usize;
+            if images.albedo[source * 4 + 3] == 0 {
+                continue;
+            }
+            let s = (column as f32 + 0.5) / images.width as f32;
+            let t = 1.0 - (row as f32 + 0.5) / images.height as f32;
+            let (x, y) = placement.atlas_position(s, t);
+            let (x, y) = (x.floor() as usize, y.floor() as usize);
+            if x < width && y < height {
+                drawn.push(((y * width + x) as u32, source as u32));
+            }
+        }
+    }
+    drawn
+}
+
+/// The atlas texels that `planes` (in layout order) cover, and what each shows: the planes are
+/// traced in parallel, then laid down in layout order (a later plane wins a shared texel).
 pub fn atlas_coverage(layout: &Layout, planes: &[&PlaneImages]) -> AtlasCoverage {
     let texels = layout.width as usize * layout.height as usize;
+    let per_plane: Vec<Vec<(u32, u32)>> =
+        layout.placements.par_iter().zip(planes.par_iter()).map(|(placement, images)| drawn_texels(layout, placement, images)).collect();
     let mut last_drawn = vec![(u32::MAX, 0u32); texels];
-    for_each_drawn_texel(layout, planes, |plane, plane_texel, atlas_texel| last_drawn[atlas_texel] = (plane as u32, plane_texel as u32));
+    for (plane, drawn) in per_plane.iter().enumerate() {
+        for &(atlas_texel, plane_texel) in drawn {
+            last_drawn[atlas_texel as usize] = (plane as u32, plane_texel);
+        }
+    }
     let drawn = last_drawn
-        .iter()
+        .par_iter()
         .enumerate()
         .filter(|(_, (plane, _))| *plane != u32::MAX)
         .map(|(atlas_texel, &(plane, plane_texel))| DrawnTexel { atlas_texel: atlas_texel as u32, plane, plane_texel })
@@ -82,45 +105,56 @@ pub fn atlas_coverage(layout: &Layout, planes: &[&PlaneImages]) -> AtlasCoverage
     AtlasCoverage { width: layout.width, height: layout.height, drawn }
 }
 
-/// Composites `planes` (in layout order) into the atlas of `layout`: the drawn texels of
-/// `coverage`, then every texel takes the values of the texel `sources` names (from
-/// [`texel_sources`] of the same coverage), the four surfaces and their rows in parallel.
-/// Albedo alpha stays 0 on uncovered texels.
-pub fn composite_atlas(layout: &Layout, planes: &[&PlaneImages], coverage: &AtlasCoverage, sources: &TexelSources) -> AtlasImages {
+/// One surface of the atlas of `layout`: the drawn texels of `coverage` from `planes` (in
+/// layout order), then every texel takes the values of the texel `sources` names (from
+/// [`texel_sources`] of the same coverage), rows in parallel. Albedo alpha stays 0 on
+/// uncovered texels. Surfaces are composited one by one, so that a surface whose parts did not
+/// change is never composited (see the kind's `surface_parts_key`).
+pub fn composite_atlas_surface(
+    layout: &Layout,
+    planes: &[&PlaneImages],
+    coverage: &AtlasCoverage,
+    sources: &TexelSources,
+    surface: SurfaceKind,
+) -> Texture {
     let texels = layout.width as usize * layout.height as usize;
-    let layer = |index: usize| -> Texture {
-        let mut drawn = vec![0u8; texels * 4];
-        for texel in &coverage.drawn {
-            let images = planes[texel.plane as usize];
-            let image = [&images.albedo, &images.normal, &images.mra, &images.height_map][index];
-            drawn[texel.atlas_texel as usize * 4..][..4].copy_from_slice(&image[texel.plane_texel as usize * 4..][..4]);
-        }
-        if sources.0.is_empty() {
-            // Nothing drawn at all: a neutral flat normal, so the surface stays valid.
-            if index == 1 {
-                for texel in drawn.chunks_exact_mut(4) {
-                    texel.copy_from_slice(&[128, 128, 255, 255]);
-                }
+    let mut drawn = vec![0u8; texels * 4];
+    for texel in &coverage.drawn {
+        let image = plane_surface(planes[texel.plane as usize], surface);
+        drawn[texel.atlas_texel as usize * 4..][..4].copy_from_slice(&image[texel.plane_texel as usize * 4..][..4]);
+    }
+    if sources.0.is_empty() {
+        // Nothing drawn at all: a neutral flat normal, so the surface stays valid.
+        if surface == SurfaceKind::Normal {
+            for texel in drawn.chunks_exact_mut(4) {
+                texel.copy_from_slice(&[128, 128, 255, 255]);
             }
-            return Texture::new(layout.width, layout.height, drawn);
         }
-        let mut pixels = vec![0u8; texels * 4];
-        let row = layout.width as usize * 4;
-        pixels.par_chunks_mut(row.max(4)).enumerate().for_each(|(y, row_pixels)| {
-            let first = y * layout.width as usize;
-            for (x, texel) in row_pixels.chunks_exact_mut(4).enumerate() {
-                let from = sources.0[first + x] as usize;
-                texel.copy_from_slice(&drawn[from * 4..][..4]);
-                if index == 0 && from != first + x {
-                    texel[3] = 0;
-                }
+        return Texture::new(layout.width, layout.height, drawn);
+    }
+    let mut pixels = vec![0u8; texels * 4];
+    let row = layout.width as usize * 4;
+    pixels.par_chunks_mut(row.max(4)).enumerate().for_each(|(y, row_pixels)| {
+        let first = y * layout.width as usize;
+        for (x, texel) in row_pixels.chunks_exact_mut(4).enumerate() {
+            let from = sources.0[first + x] as usize;
+            texel.copy_from_slice(&drawn[from * 4..][..4]);
+            if surface == SurfaceKind::Albedo && from != first + x {
+                texel[3] = 0;
             }
-        });
-        Texture::new(layout.width, layout.height, pixels)
-    };
-    let ((albedo, normal), (mra, height)) = rayon::join(|| rayon::join(|| layer(0), || layer(1)), || rayon::join(|| layer(2), || layer(3)));
-    let [albedo, normal, mra, height] = [albedo, normal, mra, height].map(Arc::new);
-    AtlasImages { albedo, normal, mra, height, coverage: coverage.drawn.len() as f32 / texels.max(1) as f32 }
+        }
+    });
+    Texture::new(layout.width, layout.height, pixels)
+}
+
+/// The image of `surface` among a plane's four.
+pub fn plane_surface(images: &PlaneImages, surface: SurfaceKind) -> &[u8] {
+    match surface {
+        SurfaceKind::Albedo => &images.albedo,
+        SurfaceKind::Normal => &images.normal,
+        SurfaceKind::Mra => &images.mra,
+        SurfaceKind::Height => &images.height_map,
+    }
 }
 
 /// Where every atlas texel takes its values from (see [`TexelSources`]): the nearest covered

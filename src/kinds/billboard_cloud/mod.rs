@@ -27,7 +27,7 @@ use crate::diagnostic::{display_path, Diagnostic};
 use crate::kinds::{as_warning, check_texture_file, tail_instances, AssetOutputs, Job, Kind, Read, StageInstance, SurfaceId, Task};
 use crate::summary::ErrorSummary;
 use crate::texture::tail::TailSettings;
-use crate::texture::{SurfaceKind, Texture};
+use crate::texture::{SurfaceKind, Texture, TextureSlot};
 use queries::{billboard_layout, billboard_planes, loaded_mesh, lod_files, mesh_libraries, mesh_textures, render_label};
 use queries::{ATLAS, LAYOUT, LOD, MESH, PLANES, RENDER};
 
@@ -35,6 +35,15 @@ pub struct BillboardCloud;
 
 fn atlas_surfaces() -> [SurfaceId; 4] {
     SurfaceKind::BILLBOARD.map(|surface| SurfaceId { group: String::new(), surface })
+}
+
+/// Every (material, slot) whose texture the renders sample, in material order.
+fn material_texture_slots(loaded: &queries::LoadedMesh) -> Vec<(usize, TextureSlot)> {
+    if loaded.mesh.uvs.is_none() {
+        return Vec::new();
+    }
+    let materials = loaded.mesh.materials.iter().enumerate();
+    materials.flat_map(|(index, material)| material.maps.keys().map(move |&slot| (index, slot))).collect()
 }
 
 impl Kind for BillboardCloud {
@@ -56,20 +65,59 @@ impl Kind for BillboardCloud {
         match step {
             "layout" => {
                 let layout = billboard_layout(db, asset)?;
-                let mut jobs = vec![Job { asset, task: Task::Step("lod", 0), after: 1, label: format!("{name}/lod") }];
-                // Renders are needed only for surfaces the persistent cache does not hold.
+                let lod = Job { asset, task: Task::Step("lod", 0), after: 1, label: format!("{name}/lod") };
                 let surfaces = atlas_surfaces();
-                if !surfaces.iter().all(|surface| crate::kinds::tail_queries::surface_in_cache(db, asset, surface)) {
-                    let groups = 0..layout.render_groups.len() as u32;
-                    jobs.extend(groups.map(|group| Job {
-                        asset,
-                        task: Task::Step("render", group),
-                        after: 1,
-                        label: format!("{name}/render{group}"),
-                    }));
+                let surface_jobs =
+                    surfaces.clone().map(|surface| Job { asset, label: surface.label(name), task: Task::Surface(surface), after: 2 });
+                // Renders are needed only for surfaces the persistent cache does not hold.
+                if surfaces.iter().all(|surface| crate::kinds::tail_queries::surface_in_cache(db, asset, surface)) {
+                    return Ok([lod].into_iter().chain(surface_jobs).collect());
                 }
-                jobs.extend(surfaces.map(|surface| Job { asset, label: surface.label(name), task: Task::Surface(surface), after: 2 }));
+                // Renders are likely (unless every group is in the render memo): the GPU starts
+                // on its own thread, and the slow loads (the render memo, the textures, the
+                // surfaces' last encodings) run as jobs of their own before the renders, on
+                // every worker, instead of one after the other inside the first render.
+                crate::gpu::start_gpu_in_background();
+                let mut jobs = vec![Job { asset, task: Task::Step("render-memo", 0), after: 1, label: format!("{name}/render-memo") }];
+                jobs.extend(surfaces.iter().map(|surface| Job {
+                    asset,
+                    task: Task::LoadPreviousEncoding(surface.clone()),
+                    after: 1,
+                    label: surface.label(name),
+                }));
+                let uploads = material_texture_slots(&*loaded_mesh(db, asset)?).len() as u32;
+                jobs.extend((0..uploads).map(|texture| Job {
+                    asset,
+                    task: Task::Step("upload", texture),
+                    after: 1,
+                    label: format!("{name}/upload{texture}"),
+                }));
+                jobs.push(lod);
+                let groups = 0..layout.render_groups.len() as u32;
+                jobs.extend(groups.map(|group| Job {
+                    asset,
+                    task: Task::Step("render", group),
+                    after: 1,
+                    label: format!("{name}/render{group}"),
+                }));
+                jobs.extend(surface_jobs);
                 Ok(jobs)
+            }
+            "render-memo" => {
+                queries::stored_renders(db, asset);
+                Ok(Vec::new())
+            }
+            "upload" => {
+                // Errors are the renders' to report.
+                let loaded = loaded_mesh(db, asset)?;
+                if let Some(&(material, slot)) = material_texture_slots(&loaded).get(index as usize) {
+                    if let (Ok(Some(levels)), Ok(gpu)) =
+                        (queries::material_texture_mips(db, asset, material as u32, slot), crate::gpu::gpu())
+                    {
+                        gpu.upload_material_mips(&levels, slot, queries::billboard_alpha_cutoff(db, asset));
+                    }
+                }
+                Ok(Vec::new())
             }
             "render" => queries::plane_images(db, asset, index).map(|_| Vec::new()),
             "lod" => lod_files(db, asset).map(|_| Vec::new()),
@@ -199,6 +247,10 @@ impl Kind for BillboardCloud {
 
     fn surface_recipe_key(db: &dyn Db, asset: Asset, _surface: &SurfaceId) -> Result<Option<CacheKey>, Diagnostic> {
         Ok(Some(queries::atlas_recipe_key(db, asset)))
+    }
+
+    fn surface_parts_key(db: &dyn Db, asset: Asset, surface: &SurfaceId) -> Result<Option<CacheKey>, Diagnostic> {
+        queries::atlas_surface_parts_key(db, asset, surface.surface).map(Some)
     }
 }
 

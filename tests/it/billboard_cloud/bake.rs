@@ -138,7 +138,9 @@ fn a_bark_texture_edit_rerenders_only_bark_planes_and_leaves_the_lod_alone() {
     .unwrap();
     cirrus.reconfigure(cirrus::config::load_pipeline(&project.path("pipeline.ron")).unwrap());
     build(&mut cirrus);
-    assert_eq!(cirrus.take_executed_stages(), ["encode(tree/mra)", "write(tree/mra)"], "the mips are the same");
+    // The bark edit found the mra surface in the cache by its parts without compositing it:
+    // it is composited now, with the same texels, so its mips do not run again.
+    assert_eq!(cirrus.take_executed_stages(), ["atlas(tree)", "encode(tree/mra)", "write(tree/mra)"], "the mips are the same");
 
     // A mesh edit re-runs everything downstream of it.
     project.write("assets/tree.obj", tree_obj(0.3));
@@ -324,6 +326,10 @@ fn after_a_restart_a_leaf_colour_edit_reuses_mesh_planes_layout_lod_and_the_unch
     }
     assert_eq!(status("render", None).len(), 2, "the bush has render groups with and without leaves");
     assert_eq!(status("atlas", None), ran);
+    // The unchanged textures' mip chains come from the cache: only the leaves are decoded.
+    for (_, instance, state) in second.iter().filter(|(stage, _, _)| stage == "decode") {
+        assert_eq!(state, if instance.ends_with("aspen_color.png") { "ran" } else { "cached" }, "decode({instance})");
+    }
     assert_eq!(status("encode", Some("albedo")), ran, "the leaves' colour is in the albedo");
     for surface in ["mra", "normal", "height"] {
         assert_eq!(status("encode", Some(surface)), cached, "{surface}: {second:?}");
@@ -353,7 +359,7 @@ fn memo_entries_that_do_not_fit_are_misses_and_the_bake_equals_a_clean_one() {
     let cache_folder = project.path("baked/.cirrus/cache");
     let cache = cirrus::cache::DiskCache::new(&cache_folder);
     let mut replaced = 0;
-    for stage in ["render-memo", "encoding-memo"] {
+    for stage in ["render-memo", "encoding-memo", "atlas-fill", "source-mips"] {
         for prefix in std::fs::read_dir(cache_folder.join(stage)).unwrap().flatten() {
             for entry in std::fs::read_dir(prefix.path()).unwrap().flatten() {
                 let hex = format!("{}{}", prefix.file_name().to_string_lossy(), entry.file_name().to_string_lossy());
@@ -364,6 +370,12 @@ fn memo_entries_that_do_not_fit_are_misses_and_the_bake_equals_a_clean_one() {
                     let groups: Vec<(String, Vec<(u32, u32)>)> = serde_json::from_value(real.metadata["groups"].clone()).unwrap();
                     real.metadata = serde_json::json!({ "groups": groups.iter().map(|(group, _)| (group, [(1, 1)])).collect::<Vec<_>>() });
                     real.blobs = vec![vec![7; groups.len() * 16]];
+                } else if stage == "atlas-fill" {
+                    // A source for every texel, all far outside the atlas.
+                    real.blobs = vec![vec![0xff; real.blobs[0].len()]];
+                } else if stage == "source-mips" {
+                    // A chain whose levels do not halve.
+                    real.metadata = serde_json::json!(vec![(1, 1); real.blobs.len()]);
                 } else {
                     // The real levels, with block data and errors that do not fit them.
                     let levels = real.metadata["levels"].as_array().unwrap().len();
@@ -377,7 +389,9 @@ fn memo_entries_that_do_not_fit_are_misses_and_the_bake_equals_a_clean_one() {
         }
     }
     cache.flush();
-    assert_eq!(replaced, 2, "one render memo and one encoding memo (the BC7 albedo)");
+    // One render memo, one encoding memo (the BC7 albedo), one fill, and three source mip
+    // chains (bark colour and normal, leaf colour: its `map_d` names the same file).
+    assert_eq!(replaced, 6);
 
     // A new process after a one-texel bark edit renders and encodes what it must, and bakes what
     // a clean build of the edited sources bakes. (Without the checks, the render memo's groups

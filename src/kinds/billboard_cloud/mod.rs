@@ -3,9 +3,10 @@
 //! tail, plus `lod.obj` / `lod.mtl`; and `cirrus preview`, which compares the source with the
 //! baked LOD.
 //!
-//! Jobs: `layout` (mesh, planes and layout on a worker, wave 0), then the LOD and one `render`
-//! per render group (wave 1, renders only when some atlas surface is not in the cache), then the
-//! four atlas surfaces through the tail (wave 2).
+//! Jobs: `layout` (mesh, planes and layout on a worker, wave 0), then the LOD and, when some
+//! atlas surface is not in the cache, the loads the renders need (`render-memo`, one `upload`
+//! per material texture, the surfaces' last encodings) followed by one `render` per render group
+//! (wave 1), then the four atlas surfaces through the tail (wave 2).
 
 pub mod planes;
 pub mod rectangles;

@@ -16,7 +16,7 @@ use std::sync::{Arc, Mutex, OnceLock};
 
 use bytemuck::{Pod, Zeroable};
 
-use crate::texture::mips::{mip_chain, MipSettings};
+use crate::texture::mips::MipSettings;
 use crate::texture::SurfaceKind;
 use crate::texture::Texture;
 

@@ -27,15 +27,17 @@ struct MaterialUniform {
     has_b: [f32; 4],
 }
 
-/// A material as the renderer sees it: decoded maps (any may be missing) and constants.
+/// A material as the renderer sees it: its maps as mip chains (level 0 the decoded map, made by
+/// `texture::mips::mip_chain` with [`material_mip_settings`] for the slot; any may be missing)
+/// and constants.
 #[derive(Clone, Debug, Default)]
 pub struct RenderMaterial {
-    pub albedo: Option<Arc<Texture>>,
-    pub opacity: Option<Arc<Texture>>,
-    pub normal: Option<Arc<Texture>>,
-    pub metallic: Option<Arc<Texture>>,
-    pub roughness: Option<Arc<Texture>>,
-    pub ao: Option<Arc<Texture>>,
+    pub albedo: Option<Arc<Vec<Texture>>>,
+    pub opacity: Option<Arc<Vec<Texture>>>,
+    pub normal: Option<Arc<Vec<Texture>>>,
+    pub metallic: Option<Arc<Vec<Texture>>>,
+    pub roughness: Option<Arc<Vec<Texture>>>,
+    pub ao: Option<Arc<Vec<Texture>>>,
     /// Linear RGB factor and constant opacity.
     pub albedo_factor: [f32; 4],
     pub metallic_value: f32,
@@ -106,20 +108,16 @@ fn view_format(settings: MipSettings) -> wgpu::TextureFormat {
 
 impl Gpu {
     /// Uploads the mip chain of a material's texture for `slot` (made with
-    /// [`material_mip_settings`], level 0 first) ahead of the renders that use it: renders of
-    /// a material with that level 0 then find it on the GPU instead of filtering their own.
+    /// [`material_mip_settings`], level 0 first) ahead of the renders that use it, once per
+    /// content: a kind can upload on every worker while other work runs.
     pub fn upload_material_mips(&self, levels: &[Texture], slot: TextureSlot, alpha_cutoff: f32) {
-        let settings = material_mip_settings(slot, alpha_cutoff);
-        self.cached_upload(upload_key(&levels[0], settings), || upload(&self.device, &self.queue, levels, view_format(settings)));
+        self.material_texture_view(levels, slot, alpha_cutoff);
     }
 
-    /// A material's texture for `slot`, on the GPU with its mip chain (made and uploaded once
-    /// per content, unless `upload_material_mips` uploaded it already).
-    fn material_texture_view(&self, texture: &Texture, slot: TextureSlot, alpha_cutoff: f32) -> Arc<wgpu::TextureView> {
+    /// A material's mip chain for `slot` on the GPU (uploaded once per content).
+    fn material_texture_view(&self, levels: &[Texture], slot: TextureSlot, alpha_cutoff: f32) -> Arc<wgpu::TextureView> {
         let settings = material_mip_settings(slot, alpha_cutoff);
-        self.cached_upload(upload_key(texture, settings), || {
-            upload(&self.device, &self.queue, &mip_chain(texture, settings), view_format(settings))
-        })
+        self.cached_upload(upload_key(&levels[0], settings), || upload(&self.device, &self.queue, levels, view_format(settings)))
     }
 
     /// Renders the rectangles of one plane (or any set of rectangles): each under its own
@@ -271,7 +269,7 @@ impl Gpu {
     }
 
     fn material_group(&self, material: &RenderMaterial, alpha_cutoff: f32) -> Arc<wgpu::BindGroup> {
-        let flag = |texture: &Option<Arc<Texture>>| if texture.is_some() { 1.0 } else { 0.0 };
+        let flag = |levels: &Option<Arc<Vec<Texture>>>| if levels.is_some() { 1.0 } else { 0.0 };
         let uniform = MaterialUniform {
             albedo: material.albedo_factor,
             params: [material.metallic_value, material.roughness_value, material.ao_value, 0.0],
@@ -282,7 +280,7 @@ impl Gpu {
         key.update(bytemuck::bytes_of(&uniform));
         key.update(&alpha_cutoff.to_bits().to_le_bytes());
         for texture in [&material.albedo, &material.opacity, &material.normal, &material.metallic, &material.roughness, &material.ao] {
-            key.update(texture.as_ref().map_or(&[0u8; 32], |texture| texture.hash.as_bytes()));
+            key.update(texture.as_ref().map_or(&[0u8; 32], |levels| levels[0].hash.as_bytes()));
         }
         let key = key.finalize();
         if let Some(group) = self.material_groups.lock().expect("material groups").get(&key) {

@@ -410,19 +410,8 @@ fn source_view_mesh(db: &dyn Db, input: Asset, loaded: &queries::LoadedMesh) -> 
             alpha_cutoff: cutoff,
         });
     }
-    let all_faces = crate::kinds::billboard_cloud::rectangles::PlaneRectangle {
-        plane: 0,
-        faces: (0..loaded.mesh.triangles.len() as u32).collect(),
-        also_drawn: Vec::new(),
-        origin: [0.0; 3],
-        x_axis: [1.0, 0.0, 0.0],
-        y_axis: [0.0, 1.0, 0.0],
-        normal: [0.0, 0.0, 1.0],
-        width: 0.0,
-        height: 0.0,
-    };
     Ok(crate::gpu::ViewMesh {
-        batches: crate::kinds::billboard_cloud::render_groups::plane_batches(&loaded.mesh, &loaded.tangents, &all_faces),
+        batches: render_groups::face_batches(&loaded.mesh, &loaded.tangents, 0..loaded.mesh.triangles.len() as u32),
         materials,
     })
 }

@@ -362,12 +362,7 @@ pub fn plane_images(db: &dyn Db, asset: Asset, group: u32) -> Result<Arc<Vec<Pla
     let mut materials = vec![crate::gpu::RenderMaterial::default(); loaded.mesh.materials.len()];
     for &material_index in &group.materials {
         let source = &loaded.mesh.materials[material_index as usize];
-        let map = |slot| -> Result<Option<Arc<Texture>>, Diagnostic> {
-            if loaded.mesh.uvs.is_none() {
-                return Ok(None);
-            }
-            Ok(material_texture_mips(db, asset, material_index, slot)?.map(|levels| Arc::new(levels[0].clone())))
-        };
+        let map = |slot| if loaded.mesh.uvs.is_some() { material_texture_mips(db, asset, material_index, slot) } else { Ok(None) };
         materials[material_index as usize] = crate::gpu::RenderMaterial {
             albedo: map(TextureSlot::Albedo)?,
             opacity: map(TextureSlot::Opacity)?,
@@ -396,7 +391,11 @@ pub fn plane_images(db: &dyn Db, asset: Asset, group: u32) -> Result<Arc<Vec<Pla
                     alpha_cutoff,
                     width: placement.width,
                     height: placement.height,
-                    batches: super::render_groups::plane_batches(&loaded.mesh, &loaded.tangents, rectangle),
+                    batches: super::render_groups::face_batches(
+                        &loaded.mesh,
+                        &loaded.tangents,
+                        rectangle.faces.iter().chain(&rectangle.also_drawn).copied(),
+                    ),
                     materials: &materials,
                 }
             })

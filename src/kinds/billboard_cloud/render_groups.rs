@@ -62,11 +62,11 @@ pub fn plane_texture_paths(mesh: &Mesh, plane: &PlaneRectangle) -> Vec<PathBuf> 
     paths
 }
 
-/// The faces the rectangle draws (its own, then those it also draws) as vertex batches per
-/// material (three vertices per triangle).
-pub fn plane_batches(mesh: &Mesh, tangents: &[[f32; 4]], plane: &PlaneRectangle) -> Vec<(usize, Vec<RenderVertex>)> {
+/// `faces` as vertex batches per material (three vertices per triangle, in the order given): a
+/// rectangle's own faces then those it also draws, or every face for a view of the mesh.
+pub fn face_batches(mesh: &Mesh, tangents: &[[f32; 4]], faces: impl IntoIterator<Item = u32>) -> Vec<(usize, Vec<RenderVertex>)> {
     let mut batches: BTreeMap<usize, Vec<RenderVertex>> = BTreeMap::new();
-    for &face in plane.faces.iter().chain(&plane.also_drawn) {
+    for face in faces {
         let material = mesh.triangle_materials[face as usize] as usize;
         let batch = batches.entry(material).or_default();
         for vertex in mesh.triangles[face as usize] {

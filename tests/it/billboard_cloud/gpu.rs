@@ -43,7 +43,10 @@ fn a_plane_render_covers_its_faces_cuts_alpha_and_encodes_normal_and_height() {
         }
     }
     let material = RenderMaterial {
-        albedo: Some(Arc::new(Texture::new(8, 8, pixels))),
+        albedo: Some(Arc::new(cirrus::texture::mips::mip_chain(
+            &Texture::new(8, 8, pixels),
+            cirrus::gpu::material_mip_settings(cirrus::texture::TextureSlot::Albedo, 0.5),
+        ))),
         albedo_factor: [1.0, 0.0, 0.0, 1.0],
         metallic_value: 0.0,
         roughness_value: 0.5,

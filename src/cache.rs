@@ -27,7 +27,7 @@
 //! | `planes` (`planes`, `PLANES`) | the `mesh` key; ε; max planes option | the plane set |
 //! | `layout` (`layout`, `LAYOUT`) | the `planes` key; atlas settings (max size, padding, power of two); texel density option | rectangles, layout, render groups |
 //! | `lod` (`lod`, `LOD`) | the `layout` key | `lod.obj`, `lod.mtl` |
-//! | `render-memo` (`render-memo`, `RENDER`) | the `layout` key | every render group's images, each under its group key (a memo: overwritten) |
+//! | `render-memo` (`render-memo`, `RENDER`) | the `layout` key; a material set | the images of every render group that shows that set, each under its group key (a memo: overwritten) |
 //! | `atlas` (`atlas-coverage`, 1) | the billboard atlas recipe key | the atlas's coverage fraction (for the report) |
 //! | `atlas-fill` (`atlas-fill`, 1) | the coverage's content hash (atlas size, then every drawn texel's atlas texel, plane and plane texel as `u32`) | the fill search's source of every atlas texel (as offsets) |
 //! | `surface-recipe` (`surface`, 3) | the tail's parts; the atlas surface's parts key (below) | the content key of the surface's files |
@@ -169,6 +169,13 @@ impl<T: KeyPart> KeyPart for Option<T> {
 impl<T: KeyPart, const N: usize> KeyPart for [T; N] {
     fn add_to(&self, key: CacheKeyBuilder) -> CacheKeyBuilder {
         self.iter().fold(key, |key, item| key.part(item))
+    }
+}
+
+/// Slices enter with their length, so that `[a, b]` then `c` differs from `[a]` then `b, c`.
+impl<T: KeyPart> KeyPart for [T] {
+    fn add_to(&self, key: CacheKeyBuilder) -> CacheKeyBuilder {
+        self.iter().fold(key.part(&(self.len() as u32)), |key, item| key.part(item))
     }
 }
 

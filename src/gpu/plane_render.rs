@@ -70,16 +70,56 @@ pub struct PlaneRenderInput<'a> {
     pub materials: &'a [RenderMaterial],
 }
 
-/// The four images of one plane, RGBA8, rows from the top (the plane's +Y edge).
-#[derive(Clone, Debug, PartialEq)]
+/// The four images of one plane, RGBA8, rows from the top (the plane's +Y edge), one after the
+/// other in a shared buffer: albedo (sRGB-encoded colour; alpha 1 where a face covers the texel,
+/// 0 elsewhere), normal, mra and height. The buffer may hold other planes' images too (a render
+/// memo read from disk holds a whole set of them), so that loading images copies nothing.
+#[derive(Clone, Debug)]
 pub struct PlaneImages {
     pub width: u32,
     pub height: u32,
-    /// sRGB-encoded colour; alpha 1 where a face covers the texel, 0 elsewhere.
-    pub albedo: Vec<u8>,
-    pub normal: Vec<u8>,
-    pub mra: Vec<u8>,
-    pub height_map: Vec<u8>,
+    buffer: Arc<Vec<u8>>,
+    offset: usize,
+}
+
+impl PlaneImages {
+    /// The surfaces in buffer order.
+    pub const SURFACES: [SurfaceKind; 4] = [SurfaceKind::Albedo, SurfaceKind::Normal, SurfaceKind::Mra, SurfaceKind::Height];
+
+    /// The bytes of one `width` × `height` plane's four images.
+    pub fn byte_len(width: u32, height: u32) -> usize {
+        Self::SURFACES.len() * Self::surface_len(width, height)
+    }
+
+    fn surface_len(width: u32, height: u32) -> usize {
+        width as usize * height as usize * 4
+    }
+
+    /// The images that start at `offset` in `buffer` (the four surfaces in [`Self::SURFACES`]
+    /// order); `None` when the buffer ends before them.
+    pub fn in_buffer(width: u32, height: u32, buffer: Arc<Vec<u8>>, offset: usize) -> Option<PlaneImages> {
+        let end = offset.checked_add(Self::byte_len(width, height))?;
+        (end <= buffer.len()).then_some(PlaneImages { width, height, buffer, offset })
+    }
+
+    /// All four images, in [`Self::SURFACES`] order.
+    pub fn bytes(&self) -> &[u8] {
+        &self.buffer[self.offset..][..Self::byte_len(self.width, self.height)]
+    }
+
+    /// The image of `surface`.
+    pub fn surface(&self, surface: SurfaceKind) -> &[u8] {
+        let index = Self::SURFACES.iter().position(|&kind| kind == surface).expect("every surface kind has an image");
+        let length = Self::surface_len(self.width, self.height);
+        &self.bytes()[index * length..][..length]
+    }
+}
+
+/// Images are equal by size and contents, wherever their buffers lie.
+impl PartialEq for PlaneImages {
+    fn eq(&self, other: &Self) -> bool {
+        (self.width, self.height) == (other.width, other.height) && self.bytes() == other.bytes()
+    }
 }
 
 /// How the renders filter a material's texture for `slot`: colour and opacity maps with
@@ -246,24 +286,18 @@ impl Gpu {
         if let Some(buffer) = &vertex_buffer {
             buffer.destroy();
         }
-        let rows = |image: &[u8], rectangle: &StackedDraws| -> Vec<u8> {
-            let row_bytes = rectangle.width as usize * 4;
-            let mut pixels = Vec::with_capacity(row_bytes * rectangle.height as usize);
-            for row in rectangle.top..rectangle.top + rectangle.height {
-                let start = row as usize * width as usize * 4;
-                pixels.extend_from_slice(&image[start..start + row_bytes]);
-            }
-            pixels
-        };
+        // Each rectangle's rows of the four targets, one after the other in a buffer of its own.
         Ok(stacked
             .iter()
-            .map(|rectangle| PlaneImages {
-                width: rectangle.width,
-                height: rectangle.height,
-                albedo: rows(&stack[0], rectangle),
-                normal: rows(&stack[1], rectangle),
-                mra: rows(&stack[2], rectangle),
-                height_map: rows(&stack[3], rectangle),
+            .map(|rectangle| {
+                let row_bytes = rectangle.width as usize * 4;
+                let mut pixels = Vec::with_capacity(PlaneImages::byte_len(rectangle.width, rectangle.height));
+                for image in &stack {
+                    for row in rectangle.top..rectangle.top + rectangle.height {
+                        pixels.extend_from_slice(&image[row as usize * width as usize * 4..][..row_bytes]);
+                    }
+                }
+                PlaneImages::in_buffer(rectangle.width, rectangle.height, Arc::new(pixels), 0).expect("the buffer holds four images")
             })
             .collect())
     }

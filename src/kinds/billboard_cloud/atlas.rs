@@ -65,11 +65,12 @@ impl TexelSources {
 /// placement, in the plane's texel order.
 fn drawn_texels(layout: &Layout, placement: &crate::packing::Placement, images: &PlaneImages) -> Vec<(u32, u32)> {
     let (width, height) = (layout.width as usize, layout.height as usize);
+    let albedo = images.surface(SurfaceKind::Albedo);
     let mut drawn = Vec::new();
     for row in 0..images.height {
         for column in 0..images.width {
             let source = (row * images.width + column) as usize;
-            if images.albedo[source * 4 + 3] == 0 {
+            if albedo[source * 4 + 3] == 0 {
                 continue;
             }
             let s = (column as f32 + 0.5) / images.width as f32;
@@ -118,9 +119,10 @@ pub fn composite_atlas_surface(
     surface: SurfaceKind,
 ) -> Texture {
     let texels = layout.width as usize * layout.height as usize;
+    let images: Vec<&[u8]> = planes.iter().map(|images| images.surface(surface)).collect();
     let mut drawn = vec![0u8; texels * 4];
     for texel in &coverage.drawn {
-        let image = plane_surface(planes[texel.plane as usize], surface);
+        let image = images[texel.plane as usize];
         drawn[texel.atlas_texel as usize * 4..][..4].copy_from_slice(&image[texel.plane_texel as usize * 4..][..4]);
     }
     if sources.0.is_empty() {
@@ -145,16 +147,6 @@ pub fn composite_atlas_surface(
         }
     });
     Texture::new(layout.width, layout.height, pixels)
-}
-
-/// The image of `surface` among a plane's four.
-pub fn plane_surface(images: &PlaneImages, surface: SurfaceKind) -> &[u8] {
-    match surface {
-        SurfaceKind::Albedo => &images.albedo,
-        SurfaceKind::Normal => &images.normal,
-        SurfaceKind::Mra => &images.mra,
-        SurfaceKind::Height => &images.height_map,
-    }
 }
 
 /// Where every atlas texel takes its values from (see [`TexelSources`]): the nearest covered

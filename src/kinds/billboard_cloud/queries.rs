@@ -488,7 +488,7 @@ pub fn atlas_surface_parts_key(db: &dyn Db, asset: Asset, surface: SurfaceKind) 
     for group_images in &images {
         for image in group_images.iter() {
             hasher.update(&image.width.to_le_bytes()).update(&image.height.to_le_bytes());
-            hasher.update(super::atlas::plane_surface(image, surface));
+            hasher.update(image.surface(surface));
         }
     }
     let key = stage_key(Stage { name: "atlas-parts", version: 1 })
@@ -541,75 +541,82 @@ pub fn render_group_key(db: &dyn Db, asset: Asset, group: u32) -> CacheKey {
     key_with_files(db, key, files).finish()
 }
 
-/// The render memo on disk: every render group's images of the asset's last atlas, under the
-/// layout's key (one entry per layout, overwritten when groups change), each group's images
-/// under its `render_group_key`. One entry rather than one per group: on the oak, 1,245 entries
-/// made a full bake 1.0 s slower; one 40 MB entry costs a fraction of that.
+/// The render memo on disk, one entry per material set: the images of every render group of
+/// the asset's last atlas that shows that set, under the layout's key and the set (overwritten
+/// when one of its groups changes), each group's images under its `render_group_key`. Per set,
+/// not per group (on the oak, 1,245 entries made a full bake 1.0 s slower) nor one for all: an
+/// edit of the bark's texture rewrites the two sets that show bark (9 of the oak's 37 MB).
 const RENDER_MEMO: &str = "render-memo";
 
-fn render_memo_key(db: &dyn Db, asset: Asset) -> CacheKey {
-    stage_key(Stage { name: RENDER_MEMO, version: RENDER.version }).part(&layout_cache_key(db, asset).0).finish()
+fn render_memo_key(db: &dyn Db, asset: Asset, materials: &[u32]) -> CacheKey {
+    stage_key(Stage { name: RENDER_MEMO, version: RENDER.version }).part(&layout_cache_key(db, asset).0).part(materials).finish()
+}
+
+/// The material sets of the layout's render groups, each with its groups' indices.
+fn groups_by_material_set(layout: &BillboardLayout) -> BTreeMap<&[u32], Vec<u32>> {
+    let mut sets: BTreeMap<&[u32], Vec<u32>> = BTreeMap::new();
+    for (index, group) in layout.render_groups.iter().enumerate() {
+        sets.entry(group.materials.as_slice()).or_default().push(index as u32);
+    }
+    sets
 }
 
 /// The render groups' images the memo on disk holds, by group key (read once per layout).
 #[salsa::tracked(returns(clone))]
 pub fn stored_renders(db: &dyn Db, asset: Asset) -> Arc<HashMap<CacheKey, Arc<Vec<PlaneImages>>>> {
-    Arc::new(load_cached(db, RENDER_MEMO, render_memo_key(db, asset), renders_from_entry).unwrap_or_default())
+    let Ok(layout) = billboard_layout(db, asset) else { return Arc::default() };
+    let mut renders = HashMap::new();
+    for materials in groups_by_material_set(&layout).keys() {
+        renders.extend(load_cached(db, RENDER_MEMO, render_memo_key(db, asset, materials), renders_from_entry).unwrap_or_default());
+    }
+    Arc::new(renders)
 }
 
-/// Stores every group's images when some were rendered (not all came from the memo).
+/// Stores the images of every material set some of whose groups were rendered (not all came
+/// from the memo).
 fn store_renders(db: &dyn Db, asset: Asset, images: &[Arc<Vec<PlaneImages>>]) {
     if db.disk_cache().is_none() {
         return;
     }
+    let Ok(layout) = billboard_layout(db, asset) else { return };
     let stored = stored_renders(db, asset);
-    let keys: Vec<CacheKey> = (0..images.len() as u32).map(|group| render_group_key(db, asset, group)).collect();
-    if keys.iter().all(|key| stored.contains_key(key)) {
-        return;
-    }
-    // Gathering some 40 MB of images into one blob happens on the writer's thread.
-    let images = images.to_vec();
-    store_cached_in_background(db, RENDER_MEMO, render_memo_key(db, asset), move || {
-        let mut groups = Vec::new();
-        let mut bytes = Vec::new();
-        for (key, group_images) in keys.iter().zip(&images) {
-            let sizes: Vec<(u32, u32)> = group_images.iter().map(|image| (image.width, image.height)).collect();
-            groups.push((key.0.to_hex().to_string(), sizes));
-            for image in group_images.iter() {
-                for plane in [&image.albedo, &image.normal, &image.mra, &image.height_map] {
-                    bytes.extend_from_slice(plane);
+    for (materials, groups) in groups_by_material_set(&layout) {
+        let keys: Vec<CacheKey> = groups.iter().map(|&group| render_group_key(db, asset, group)).collect();
+        if keys.iter().all(|key| stored.contains_key(key)) {
+            continue;
+        }
+        // Gathering megabytes of images into one blob happens on the writer's thread.
+        let images: Vec<Arc<Vec<PlaneImages>>> = groups.iter().map(|&group| images[group as usize].clone()).collect();
+        store_cached_in_background(db, RENDER_MEMO, render_memo_key(db, asset, materials), move || {
+            let mut groups = Vec::new();
+            let mut bytes = Vec::new();
+            for (key, group_images) in keys.iter().zip(&images) {
+                let sizes: Vec<(u32, u32)> = group_images.iter().map(|image| (image.width, image.height)).collect();
+                groups.push((key.0.to_hex().to_string(), sizes));
+                for image in group_images.iter() {
+                    bytes.extend_from_slice(image.bytes());
                 }
             }
-        }
-        CacheEntry { metadata: serde_json::json!({ "groups": groups }), blobs: vec![bytes], compress: true }
-    });
+            CacheEntry { metadata: serde_json::json!({ "groups": groups }), blobs: vec![bytes], compress: true }
+        });
+    }
 }
 
+/// A render memo entry's groups; their images share the entry's blob (nothing is copied).
 fn renders_from_entry(entry: CacheEntry) -> Option<HashMap<CacheKey, Arc<Vec<PlaneImages>>>> {
     let groups: Vec<(String, Vec<(u32, u32)>)> = serde_json::from_value(entry.metadata.get("groups")?.clone()).ok()?;
     let [bytes]: [Vec<u8>; 1] = entry.blobs.try_into().ok()?;
-    let mut rest = bytes.as_slice();
-    let mut take = |count: usize| -> Option<Vec<u8>> {
-        let (head, tail) = rest.split_at_checked(count)?;
-        rest = tail;
-        Some(head.to_vec())
-    };
+    let buffer = Arc::new(bytes);
+    let mut offset = 0;
     let mut renders = HashMap::new();
     for (key, sizes) in groups {
         let key = CacheKey(blake3::Hash::from_hex(key).ok()?);
         let mut images = Vec::new();
         for (width, height) in sizes {
-            let texels = width as usize * height as usize * 4;
-            images.push(PlaneImages {
-                width,
-                height,
-                albedo: take(texels)?,
-                normal: take(texels)?,
-                mra: take(texels)?,
-                height_map: take(texels)?,
-            });
+            images.push(PlaneImages::in_buffer(width, height, buffer.clone(), offset)?);
+            offset += PlaneImages::byte_len(width, height);
         }
         renders.insert(key, Arc::new(images));
     }
-    rest.is_empty().then_some(renders)
+    (offset == buffer.len()).then_some(renders)
 }

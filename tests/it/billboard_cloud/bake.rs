@@ -389,9 +389,10 @@ fn memo_entries_that_do_not_fit_are_misses_and_the_bake_equals_a_clean_one() {
         }
     }
     cache.flush();
-    // One render memo, one encoding memo (the BC7 albedo), one fill, and three source mip
-    // chains (bark colour and normal, leaf colour: its `map_d` names the same file).
-    assert_eq!(replaced, 6);
+    // A render memo per material set the planes show (two), one encoding memo (the BC7
+    // albedo), one fill, and three source mip chains (bark colour and normal, leaf colour: its
+    // `map_d` names the same file).
+    assert_eq!(replaced, 7);
 
     // A new process after a one-texel bark edit renders and encodes what it must, and bakes what
     // a clean build of the edited sources bakes. (Without the checks, the render memo's groups

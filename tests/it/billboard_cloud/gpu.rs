@@ -5,7 +5,7 @@ use std::sync::Arc;
 
 use cirrus::gpu::{gpu, PlaneRenderInput, RenderMaterial, RenderVertex};
 use cirrus::kinds::billboard_cloud::rectangles::PlaneRectangle;
-use cirrus::texture::Texture;
+use cirrus::texture::{SurfaceKind, Texture};
 
 fn vertex(position: [f32; 3], uv: [f32; 2]) -> RenderVertex {
     RenderVertex { position, normal: [0.0, 0.0, 1.0], uv, tangent: [1.0, 0.0, 0.0, 1.0] }
@@ -66,15 +66,15 @@ fn a_plane_render_covers_its_faces_cuts_alpha_and_encodes_normal_and_height() {
     let images = gpu.render_rectangles(std::slice::from_ref(&input)).expect("renders").remove(0);
     let texel = |image: &[u8], x: usize, y: usize| -> [u8; 4] { image[(y * 64 + x) * 4..][..4].try_into().unwrap() };
     // Top-left quarter: covered (opaque texture half is the top, UV v ≥ 0.5).
-    assert_eq!(texel(&images.albedo, 10, 5), [255, 0, 0, 255], "red, opaque");
-    assert_eq!(texel(&images.albedo, 10, 28)[3], 0, "bottom half cut by the alpha test");
-    assert_eq!(texel(&images.albedo, 50, 5)[3], 0, "right half: no face");
-    let normal = texel(&images.normal, 10, 5);
+    assert_eq!(texel(images.surface(SurfaceKind::Albedo), 10, 5), [255, 0, 0, 255], "red, opaque");
+    assert_eq!(texel(images.surface(SurfaceKind::Albedo), 10, 28)[3], 0, "bottom half cut by the alpha test");
+    assert_eq!(texel(images.surface(SurfaceKind::Albedo), 50, 5)[3], 0, "right half: no face");
+    let normal = texel(images.surface(SurfaceKind::Normal), 10, 5);
     assert!(normal[0].abs_diff(128) <= 1 && normal[1].abs_diff(128) <= 1 && normal[2] >= 254, "flat normal: {normal:?}");
-    let mra = texel(&images.mra, 10, 5);
+    let mra = texel(images.surface(SurfaceKind::Mra), 10, 5);
     // 0.5 × 255 = 127.5 rounds either way (llvmpipe 128, NVIDIA 127).
     assert!(mra[0] == 0 && mra[1].abs_diff(128) <= 1 && mra[2] == 255, "metallic 0, roughness 0.5, AO 1: {mra:?}");
-    let height = texel(&images.height_map, 10, 5)[0];
+    let height = texel(images.surface(SurfaceKind::Height), 10, 5)[0];
     assert!(height.abs_diff(191) <= 1, "0.05 over ε 0.1 → 0.75: {height}");
 
     // Stacked in one submission under a wider rectangle with another camera, each rectangle
@@ -85,7 +85,7 @@ fn a_plane_render_covers_its_faces_cuts_alpha_and_encodes_normal_and_height() {
     assert_eq!(stacked.len(), 2);
     assert_eq!(stacked[1], images, "the first rectangle, second in the stack");
     assert_eq!(stacked[0], gpu.render_rectangles(&[second]).expect("renders").remove(0), "the wide rectangle");
-    assert!(stacked[0].albedo.chunks_exact(4).any(|texel| texel[3] == 255), "the wide rectangle sees the quad too");
+    assert!(stacked[0].surface(SurfaceKind::Albedo).chunks_exact(4).any(|texel| texel[3] == 255), "the wide rectangle sees the quad too");
 }
 
 #[test]

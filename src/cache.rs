@@ -22,7 +22,7 @@
 //! | `parse` (`parse`, `PARSE`) | the `.mymaterial` content hash; its path; the source folder | the parsed material file |
 //! | `surface-recipe` (`surface`, 3) | the tail's parts (below); the kind's recipe key | the content key of the surface's files |
 //! | `surface` (`surface`, 3) | the tail's parts; the image's width, height and content hash | the container file and PNG preview |
-//! | `encoding-memo` (`encoding-memo`, 3) | mips and encode versions; the surface's label (`asset/material/surface`, `asset/surface`) | a BC7 surface's last encoding (a memo: overwritten) |
+//! | `encoding-memo` (`encoding-memo`, 4) | mips and encode versions; the surface's label (`asset/material/surface`, `asset/surface`) | a BC7 surface's last encoding: level 0's block fingerprints, the other levels, the blocks, the errors (a memo: overwritten) |
 //! | `mesh` (`mesh`, `MESH`) | the source folder; per file the mesh stage reads (the OBJ, then its MTL files), its path and its content hash or read error | the loaded mesh and tangents |
 //! | `planes` (`planes`, `PLANES`) | the `mesh` key; ε; max planes option | the plane set |
 //! | `layout` (`layout`, `LAYOUT`) | the `planes` key; atlas settings (max size, padding, power of two); texel density option | rectangles, layout, render groups |
@@ -280,7 +280,7 @@ impl DiskCache {
             let folder = path.parent().expect("entry paths have a folder");
             std::fs::create_dir_all(folder)?;
             let mut temporary = tempfile::Builder::new().prefix(crate::artifacts::TEMPORARY_PREFIX).tempfile_in(folder)?;
-            temporary.write_all(&encode_entry(stage, key, entry))?;
+            write_entry_to(temporary.as_file_mut(), stage, key, entry)?;
             temporary.persist(&path).map_err(|error| error.error)?;
             Ok(())
         })();
@@ -322,14 +322,16 @@ const ENTRY_FRAME_BYTES: usize = 4 << 20;
 
 /// Header; whether blobs are compressed; the metadata (JSON); the blobs, each as its length
 /// and then its bytes, or its zstd frames (count, then each frame's stored length and bytes);
-/// and a blake3 checksum of everything before it.
-fn encode_entry(stage: &str, key: CacheKey, entry: &CacheEntry) -> Vec<u8> {
+/// and a blake3 checksum of everything before it. Written straight to `file` as it is made
+/// (a 30 MB entry is never gathered into one buffer first).
+fn write_entry_to(file: &mut std::fs::File, stage: &str, key: CacheKey, entry: &CacheEntry) -> std::io::Result<()> {
+    let mut writer = ChecksummedWriter { inner: std::io::BufWriter::with_capacity(1 << 20, file), hasher: blake3::Hasher::new() };
     let metadata = serde_json::to_vec(&entry.metadata).expect("JSON values serialise");
-    let mut bytes = entry_header(stage, key);
-    bytes.push(entry.compress as u8);
-    bytes.extend_from_slice(&(metadata.len() as u64).to_le_bytes());
-    bytes.extend_from_slice(&metadata);
-    bytes.extend_from_slice(&(entry.blobs.len() as u64).to_le_bytes());
+    writer.write(&entry_header(stage, key))?;
+    writer.write(&[entry.compress as u8])?;
+    writer.write(&(metadata.len() as u64).to_le_bytes())?;
+    writer.write(&metadata)?;
+    writer.write(&(entry.blobs.len() as u64).to_le_bytes())?;
     if entry.compress {
         let frames: Vec<&[u8]> = entry.blobs.iter().flat_map(|blob| blob.chunks(ENTRY_FRAME_BYTES)).collect();
         let compressed: Vec<Vec<u8>> =
@@ -337,22 +339,39 @@ fn encode_entry(stage: &str, key: CacheKey, entry: &CacheEntry) -> Vec<u8> {
         let mut compressed = compressed.into_iter();
         for blob in &entry.blobs {
             let frame_count = blob.len().div_ceil(ENTRY_FRAME_BYTES);
-            bytes.extend_from_slice(&(blob.len() as u64).to_le_bytes());
-            bytes.extend_from_slice(&(frame_count as u64).to_le_bytes());
+            writer.write(&(blob.len() as u64).to_le_bytes())?;
+            writer.write(&(frame_count as u64).to_le_bytes())?;
             for frame in compressed.by_ref().take(frame_count) {
-                bytes.extend_from_slice(&(frame.len() as u64).to_le_bytes());
-                bytes.extend_from_slice(&frame);
+                writer.write(&(frame.len() as u64).to_le_bytes())?;
+                writer.write(&frame)?;
             }
         }
     } else {
         for blob in &entry.blobs {
-            bytes.extend_from_slice(&(blob.len() as u64).to_le_bytes());
-            bytes.extend_from_slice(blob);
+            writer.write(&(blob.len() as u64).to_le_bytes())?;
+            writer.write(blob)?;
         }
     }
-    let checksum = blake3::hash(&bytes);
-    bytes.extend_from_slice(checksum.as_bytes());
-    bytes
+    let checksum = writer.hasher.finalize();
+    writer.inner.write_all(checksum.as_bytes())?;
+    writer.inner.flush()
+}
+
+/// A buffered file writer that hashes what it writes.
+struct ChecksummedWriter<W: Write> {
+    inner: std::io::BufWriter<W>,
+    hasher: blake3::Hasher,
+}
+
+impl<W: Write> ChecksummedWriter<W> {
+    fn write(&mut self, bytes: &[u8]) -> std::io::Result<()> {
+        if bytes.len() >= 1 << 20 {
+            self.hasher.update_rayon(bytes);
+        } else {
+            self.hasher.update(bytes);
+        }
+        self.inner.write_all(bytes)
+    }
 }
 
 fn decode_entry(bytes: &[u8], stage: &str, key: CacheKey) -> Option<CacheEntry> {

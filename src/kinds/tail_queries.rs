@@ -10,6 +10,7 @@ use crate::cache::{CacheEntry, CacheKey, CacheKeyBuilder};
 use crate::db::{load_cached, record_cache_hit, store_cached, store_cached_in_background, timed, Asset, Db, Stage};
 use crate::diagnostic::Diagnostic;
 use crate::kinds::SurfaceId;
+use crate::texture::fingerprint::BlockFingerprints;
 use crate::texture::tail::{
     tail_encode, tail_mips, tail_write, EncodedSurface, MipLevels, MipStepSettings, PreviousEncoding, SurfaceArtifacts, TailSettings,
 };
@@ -77,7 +78,7 @@ pub fn surface_blocks(db: &dyn Db, asset: Asset, surface: SurfaceId) -> Result<A
     let label = surface.label(asset.name(db));
     let previous = previous_encoding(db, &label);
     let encoded = timed(db, ENCODE, &label, || tail_encode(&mips, surface.surface, format, quality, previous.as_ref()));
-    let remembered = PreviousEncoding { mips: (*mips).clone(), encoded: encoded.clone() };
+    let remembered = PreviousEncoding::of(&mips, &encoded);
     if memo_worth_storing(format) {
         let memo = remembered.clone();
         store_cached_in_background(db, ENCODING_MEMO, encoding_memo_key(&label), move || encoding_entry(&memo));
@@ -204,10 +205,12 @@ fn artifacts_from_entry(entry: CacheEntry) -> Option<SurfaceArtifacts> {
 /// identity (asset, surface, tail settings), overwritten by every encode, so that a new process
 /// re-encodes only the blocks an edit changed. Results equal a full encode either way.
 const ENCODING_MEMO: &str = "encoding-memo";
+/// 4: level 0 as block fingerprints.
+const ENCODING_MEMO_VERSION: u32 = 4;
 
 /// Whether a surface's last encoding is kept on disk: for BC7 only, whose encoder is the slow
 /// one (on the oak's 2048² albedo, re-encoding from scratch after a restart costs about 0.9 s;
-/// the memo, about 26 MB before compression, is written in the background). The other formats
+/// the memo, 16 MB, is written in the background). The other formats
 /// encode a whole atlas in about 0.1 s, less than writing and reading their memo would cost.
 fn memo_worth_storing(format: crate::config::BlockFormat) -> bool {
     format == crate::config::BlockFormat::Bc7
@@ -216,7 +219,7 @@ fn memo_worth_storing(format: crate::config::BlockFormat) -> bool {
 /// By the surface's label alone: settings are not part of the key (reading them would make
 /// the mips depend on encoder settings); the steps reuse only what was made with their settings.
 fn encoding_memo_key(label: &str) -> CacheKey {
-    CacheKeyBuilder::new(ENCODING_MEMO, SURFACE_ENTRY_VERSION).part(&[MIPS.version, ENCODE.version]).part(label).finish()
+    CacheKeyBuilder::new(ENCODING_MEMO, ENCODING_MEMO_VERSION).part(&[MIPS.version, ENCODE.version]).part(label).finish()
 }
 
 /// Loads the surface's last encoding into this process ahead of its tail (no-op when it is
@@ -236,22 +239,24 @@ fn previous_encoding(db: &dyn Db, label: &str) -> Option<PreviousEncoding> {
 }
 
 fn encoding_entry(previous: &PreviousEncoding) -> CacheEntry {
-    let (mips, encoded) = (&previous.mips, &previous.encoded);
-    let levels: Vec<(u32, u32)> = mips.levels.iter().map(|level| (level.width, level.height)).collect();
+    let (blocks, encoded) = (&previous.level0_blocks, &previous.encoded);
+    let levels: Vec<(u32, u32)> = previous.lower_levels.iter().map(|level| (level.width, level.height)).collect();
     let metadata = serde_json::json!({
         "levels": levels,
-        "alpha_tested": mips.alpha_tested,
-        "reuse": mips.reuse.as_deref(),
+        "reuse": previous.mip_reuse.as_deref(),
         "settings": encoded.settings,
         "width": encoded.texture.width,
         "height": encoded.texture.height,
         "psnr_db": encoded.psnr_db,
         "channels": encoded.block_errors.channels,
     });
-    let mut blobs: Vec<Vec<u8>> = mips.levels.iter().map(|level| level.pixels.to_vec()).collect();
+    let mut blobs = vec![crate::db::pod_blob(&blocks.texels), crate::db::pod_blob(&blocks.alphas)];
+    blobs.extend(previous.lower_levels.iter().map(|level| level.pixels.to_vec()));
     blobs.extend(encoded.texture.levels.iter().map(|level| level.to_vec()));
     blobs.push(crate::db::pod_blob(&encoded.block_errors.errors));
-    CacheEntry { metadata, blobs, compress: true }
+    // Uncompressed: fingerprints and blocks hardly compress, and writing 16 MB costs less than
+    // compressing it (measured on the oak's albedo).
+    CacheEntry { metadata, blobs, compress: false }
 }
 
 fn encoding_from_entry(entry: CacheEntry) -> Option<PreviousEncoding> {
@@ -259,35 +264,45 @@ fn encoding_from_entry(entry: CacheEntry) -> Option<PreviousEncoding> {
     let sizes: Vec<(u32, u32)> = serde_json::from_value(metadata.get("levels")?.clone()).ok()?;
     let settings: crate::texture::encode::BlockEncodeSettings = serde_json::from_value(metadata.get("settings")?.clone()).ok()?;
     let reuse: Option<crate::texture::mips::MipReuse> = serde_json::from_value(metadata.get("reuse")?.clone()).ok()?;
-    if entry.blobs.len() != 2 * sizes.len() + 1 {
+    let width = metadata.get("width")?.as_u64()? as u32;
+    let height = metadata.get("height")?.as_u64()? as u32;
+    let level_count = sizes.len() + 1;
+    if entry.blobs.len() != 2 + sizes.len() + level_count + 1 {
         return None;
     }
     let mut blobs = entry.blobs.into_iter();
-    let mut levels = Vec::new();
-    for &(width, height) in &sizes {
+    let texels = crate::db::from_pod_blob::<u64>(&blobs.next()?)?;
+    let alphas = crate::db::from_pod_blob::<u64>(&blobs.next()?)?;
+    let level0_blocks = BlockFingerprints { width, height, texels, alphas };
+    let mut lower_levels = Vec::new();
+    for &(level_width, level_height) in &sizes {
         let pixels = blobs.next()?;
-        if pixels.len() != width as usize * height as usize * 4 {
+        if pixels.len() != level_width as usize * level_height as usize * 4 {
             return None;
         }
-        levels.push(Texture::new(width, height, pixels));
+        lower_levels.push(Texture::new(level_width, level_height, pixels));
     }
-    let encoded_levels: Vec<Arc<[u8]>> = blobs.by_ref().take(sizes.len()).map(Arc::from).collect();
+    let encoded_levels: Vec<Arc<[u8]>> = blobs.by_ref().take(level_count).map(Arc::from).collect();
     let errors = crate::db::from_pod_blob::<u32>(&blobs.next()?)?;
-    // Block data and errors must fit the levels (a hand-made entry is a miss, never a panic).
+    // Fingerprints, block data and errors must fit the levels (a hand-made entry is a miss,
+    // never a panic).
     let blocks = |(width, height): (u32, u32)| width.div_ceil(4) as usize * height.div_ceil(4) as usize;
     let block_bytes = crate::texture::encode::block_bytes(settings.format);
-    if sizes.iter().zip(&encoded_levels).any(|(&size, level)| level.len() != blocks(size) * block_bytes)
-        || errors.len() != blocks(*sizes.first()?)
+    let all_sizes: Vec<(u32, u32)> = std::iter::once((width, height)).chain(sizes.iter().copied()).collect();
+    if all_sizes.iter().zip(&encoded_levels).any(|(&size, level)| level.len() != blocks(size) * block_bytes)
+        || errors.len() != blocks((width, height))
+        || level0_blocks.texels.len() != blocks((width, height))
+        || level0_blocks.alphas.len() != blocks((width, height))
     {
         return None;
     }
-    let width = metadata.get("width")?.as_u64()? as u32;
-    let height = metadata.get("height")?.as_u64()? as u32;
     let texture = crate::texture::encode::EncodedTexture::from_levels(settings.format, settings.srgb, width, height, encoded_levels);
     let block_errors =
         crate::texture::quality::BlockErrors { format: settings.format, channels: metadata.get("channels")?.as_u64()? as usize, errors };
     Some(PreviousEncoding {
-        mips: MipLevels { levels: Arc::new(levels), alpha_tested: metadata.get("alpha_tested")?.as_bool()?, reuse: reuse.map(Arc::new) },
+        level0_blocks: Arc::new(level0_blocks),
+        lower_levels,
+        mip_reuse: reuse.map(Arc::new),
         encoded: EncodedSurface { settings, texture, block_errors: Arc::new(block_errors), psnr_db: metadata.get("psnr_db")?.as_f64()? },
     })
 }

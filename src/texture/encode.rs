@@ -7,6 +7,7 @@ use std::sync::Arc;
 use rayon::prelude::*;
 
 use crate::config::{BlockFormat, EncodeQuality};
+use crate::texture::fingerprint::BlockFingerprints;
 use crate::texture::Texture;
 
 /// One texture, block-compressed, all levels. Equality is by content hash.
@@ -220,32 +221,63 @@ fn bc7_settings(quality: EncodeQuality, alpha: bool) -> intel_tex_2::bc7::Encode
     }
 }
 
+/// What [`encode_levels_reusing`] reuses of the surface's last encoding: the block fingerprints
+/// of its level 0, its other levels' texels, and its blocks.
+#[derive(Clone, Copy, Debug)]
+pub struct PreviousBlocks<'a> {
+    pub level0_blocks: &'a BlockFingerprints,
+    pub lower_levels: &'a [Texture],
+    pub encoded: &'a EncodedTexture,
+}
+
 /// Encodes a mip chain like `encode_levels`, reusing the blocks of `previous` (the same surface
-/// encoded earlier with the same settings) wherever a 4×4 block's texels are unchanged. Block
-/// encoding is independent per block, so the result is identical to a full encode.
+/// encoded earlier with the same settings) wherever a 4×4 block's texels are unchanged: on level
+/// 0 by its fingerprints (`level0_blocks`, of `levels[0]`), below by the texels. Block encoding
+/// is independent per block, so the result is identical to a full encode.
 pub fn encode_levels_reusing(
     levels: &[Texture],
+    level0_blocks: &BlockFingerprints,
     settings: BlockEncodeSettings,
-    previous: Option<(&[Texture], &EncodedTexture)>,
+    previous: Option<PreviousBlocks>,
 ) -> EncodedTexture {
-    let Some((previous_levels, previous_encoded)) = previous.filter(|(previous_levels, encoded)| {
-        encoded.format == settings.format && encoded.srgb == settings.srgb && previous_levels.len() == levels.len()
+    let Some(previous) = previous.filter(|previous| {
+        previous.encoded.format == settings.format
+            && previous.encoded.srgb == settings.srgb
+            && previous.lower_levels.len() + 1 == levels.len()
+            && previous.encoded.levels.len() == levels.len()
     }) else {
         return encode_levels(levels, settings);
     };
     let size = block_bytes(settings.format);
     let encoded: Vec<Arc<[u8]>> = levels
         .iter()
-        .zip(previous_levels)
-        .zip(&previous_encoded.levels)
-        .map(|((level, old_level), old_blocks)| {
-            if (level.width, level.height) != (old_level.width, old_level.height) {
-                return Arc::from(encode_level(level, settings));
-            }
-            if level.hash == old_level.hash {
+        .enumerate()
+        .zip(&previous.encoded.levels)
+        .map(|((index, level), old_blocks)| {
+            let changed = if index == 0 {
+                if !level0_blocks.same_size(previous.level0_blocks)
+                    || (level.width, level.height) != (level0_blocks.width, level0_blocks.height)
+                {
+                    return Arc::from(encode_level(level, settings));
+                }
+                let blocks_x = level0_blocks.blocks_x() as u32;
+                (0..level0_blocks.texels.len())
+                    .filter(|&number| level0_blocks.block_changed(previous.level0_blocks, number))
+                    .map(|number| (number as u32 % blocks_x, number as u32 / blocks_x))
+                    .collect::<Vec<_>>()
+            } else {
+                let old_level = &previous.lower_levels[index - 1];
+                if (level.width, level.height) != (old_level.width, old_level.height) {
+                    return Arc::from(encode_level(level, settings));
+                }
+                if level.hash == old_level.hash {
+                    return old_blocks.clone();
+                }
+                changed_blocks(level, old_level)
+            };
+            if changed.is_empty() {
                 return old_blocks.clone();
             }
-            let changed = changed_blocks(level, old_level);
             if changed.len() * 2 > level.width.div_ceil(4) as usize * level.height.div_ceil(4) as usize {
                 return Arc::from(encode_level(level, settings));
             }

@@ -5,6 +5,7 @@
 use rayon::prelude::*;
 
 use crate::texture::color::{decode_normal, encode_normal, linear_to_srgb_u8, normalize_tangent_normal, srgb_u8_to_linear, unorm_u8};
+use crate::texture::fingerprint::BlockFingerprints;
 use crate::texture::SurfaceKind;
 use crate::texture::Texture;
 
@@ -44,18 +45,29 @@ struct TileLevel {
     straight: Option<Vec<[f32; 4]>>,
 }
 
-/// Like [`mip_chain`], reusing `previous` (the levels of the same surface made earlier, with what
-/// that chain kept): when only colour changed (alpha identical), only the 64² tiles of level 0
-/// that changed are filtered again, and the coarse levels from one texel per tile. The levels are
-/// identical to a full chain's; the [`MipReuse`] is for the next call (none for sizes that are
-/// not multiples of the tile).
+/// What [`mip_chain_reusing`] reuses of the chain made before for the same surface: the block
+/// fingerprints of its level 0 (not the level itself: it is the largest, and only which tiles
+/// changed matters), its other levels, and what it kept for reuse.
+#[derive(Clone, Copy, Debug)]
+pub struct PreviousChain<'a> {
+    pub level0_blocks: &'a BlockFingerprints,
+    pub lower_levels: &'a [Texture],
+    pub reuse: &'a MipReuse,
+}
+
+/// Like [`mip_chain`], reusing `previous`: when only colour changed (alpha identical), only the
+/// 64² tiles of level 0 that changed (by `level0_blocks`, the fingerprints of `level0`) are
+/// filtered again, and the coarse levels from one texel per tile. The levels are identical to a
+/// full chain's; the [`MipReuse`] is for the next call (none for sizes that are not multiples
+/// of the tile).
 pub fn mip_chain_reusing(
     level0: &Texture,
+    level0_blocks: &BlockFingerprints,
     settings: MipSettings,
-    previous: Option<(&[Texture], &MipReuse)>,
+    previous: Option<PreviousChain>,
 ) -> (Vec<Texture>, Option<MipReuse>) {
     previous
-        .and_then(|(levels, reuse)| refilter_changed_tiles(level0, settings, levels, reuse))
+        .and_then(|previous| refilter_changed_tiles(level0, level0_blocks, settings, previous))
         .unwrap_or_else(|| full_chain(level0, settings))
 }
 
@@ -121,16 +133,16 @@ fn extend_chain(
 /// or size, or alpha changed: alpha moves the coverage scale of whole levels).
 fn refilter_changed_tiles(
     level0: &Texture,
+    level0_blocks: &BlockFingerprints,
     settings: MipSettings,
-    previous_levels: &[Texture],
-    previous: &MipReuse,
+    previous: PreviousChain,
 ) -> Option<(Vec<Texture>, Option<MipReuse>)> {
-    let old = previous_levels.first()?;
     let (width, height) = (level0.width, level0.height);
-    if previous.settings != settings
-        || (old.width, old.height) != (width, height)
+    if previous.reuse.settings != settings
+        || (level0_blocks.width, level0_blocks.height) != (width, height)
+        || !level0_blocks.same_size(previous.level0_blocks)
         || !reusable_size(width, height)
-        || previous_levels.len() != previous.alpha_scales.len()
+        || previous.lower_levels.len() + 1 != previous.reuse.alpha_scales.len()
     {
         return None;
     }
@@ -140,17 +152,20 @@ fn refilter_changed_tiles(
         let (x, y) = (tile % tiles_x * REUSE_TILE, tile / tiles_x * REUSE_TILE);
         (y..y + REUSE_TILE).map(move |row| row * row_bytes + x * 4..row * row_bytes + (x + REUSE_TILE) * 4)
     };
-    // Per tile: whether its texels changed, and whether any alpha did.
+    // Per tile: whether any of its blocks changed, and whether any alpha did.
+    let (tile_blocks, blocks_x) = (REUSE_TILE / 4, level0_blocks.blocks_x());
     let changes: Vec<(bool, bool)> = (0..tiles_x * tiles_y)
         .into_par_iter()
         .map(|tile| {
+            let (first_x, first_y) = (tile % tiles_x * tile_blocks, tile / tiles_x * tile_blocks);
             let mut changed = false;
-            for range in tile_rows(tile) {
-                let (new, old) = (&level0.pixels[range.clone()], &old.pixels[range]);
-                if new != old {
-                    changed = true;
-                    if new.chunks_exact(4).zip(old.chunks_exact(4)).any(|(a, b)| a[3] != b[3]) {
-                        return (true, true);
+            for by in first_y..first_y + tile_blocks {
+                for number in by * blocks_x + first_x..by * blocks_x + first_x + tile_blocks {
+                    if level0_blocks.block_changed(previous.level0_blocks, number) {
+                        changed = true;
+                        if level0_blocks.alpha_changed(previous.level0_blocks, number) {
+                            return (true, true);
+                        }
                     }
                 }
             }
@@ -169,21 +184,21 @@ fn refilter_changed_tiles(
         .map(|&tile| {
             let pixels: Vec<u8> = tile_rows(tile).flat_map(|range| level0.pixels[range].iter().copied()).collect();
             let mut current = to_filter_space(&pixels, settings.kind);
-            let mut straight = previous.tile_level.straight.is_some().then(|| straight_linear_colour(&pixels));
+            let mut straight = previous.reuse.tile_level.straight.is_some().then(|| straight_linear_colour(&pixels));
             let mut side = REUSE_TILE as u32;
             let mut bytes = Vec::with_capacity(REUSE_TILE_LEVELS);
             for level in 1..=REUSE_TILE_LEVELS {
                 current = reduce(&current, side, side, side / 2, side / 2);
                 straight = straight.map(|colour| reduce(&colour, side, side, side / 2, side / 2));
                 side /= 2;
-                bytes.push(filter_space_bytes(&current, straight.as_deref(), settings.kind, previous.alpha_scales[level]));
+                bytes.push(filter_space_bytes(&current, straight.as_deref(), settings.kind, previous.reuse.alpha_scales[level]));
             }
             (tile, bytes, current[0], straight.map(|colour| colour[0]))
         })
         .collect();
     let mut levels = vec![level0.clone()];
     for level in 1..=REUSE_TILE_LEVELS {
-        let mut pixels = previous_levels[level].pixels.to_vec();
+        let mut pixels = previous.lower_levels[level - 1].pixels.to_vec();
         let (level_width, side) = (width as usize >> level, REUSE_TILE >> level);
         for (tile, bytes, _, _) in &refiltered {
             let (x, y) = (tile % tiles_x * side, tile / tiles_x * side);
@@ -194,16 +209,16 @@ fn refilter_changed_tiles(
         }
         levels.push(Texture::new(width >> level, height >> level, pixels));
     }
-    let mut tile_level = previous.tile_level.clone();
+    let mut tile_level = previous.reuse.tile_level.clone();
     for (tile, _, texel, straight_texel) in &refiltered {
         tile_level.texels[*tile] = *texel;
         if let (Some(straight), Some(texel)) = (tile_level.straight.as_mut(), straight_texel) {
             straight[*tile] = *texel;
         }
     }
-    let mut chain = Chain { levels, alpha_scales: previous.alpha_scales[..=REUSE_TILE_LEVELS].to_vec(), tile_level: None };
-    extend_chain(&mut chain, tile_level.texels.clone(), tile_level.straight.clone(), settings, previous.coverage, false);
-    let reuse = MipReuse { settings, coverage: previous.coverage, alpha_scales: chain.alpha_scales, tile_level };
+    let mut chain = Chain { levels, alpha_scales: previous.reuse.alpha_scales[..=REUSE_TILE_LEVELS].to_vec(), tile_level: None };
+    extend_chain(&mut chain, tile_level.texels.clone(), tile_level.straight.clone(), settings, previous.reuse.coverage, false);
+    let reuse = MipReuse { settings, coverage: previous.reuse.coverage, alpha_scales: chain.alpha_scales, tile_level };
     Some((chain.levels, Some(reuse)))
 }
 

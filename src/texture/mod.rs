@@ -5,6 +5,7 @@
 
 pub mod color;
 pub mod mips;
+pub mod fingerprint;
 pub mod encode;
 pub mod quality;
 pub mod container;

@@ -5,6 +5,7 @@ use rayon::prelude::*;
 
 use crate::config::BlockFormat;
 use crate::texture::encode::block_bytes;
+use crate::texture::fingerprint::BlockFingerprints;
 use crate::texture::Texture;
 
 /// PSNR reported for a lossless result (the true value is infinite).
@@ -83,20 +84,23 @@ impl BlockErrors {
 }
 
 /// [`BlockErrors`] of `blocks` (BC data of `reference`'s size), reusing `previous` (the same
-/// surface measured earlier: its reference, blocks and errors) for every block whose data and
-/// reference texels are both unchanged. Equal to measuring every block.
+/// surface measured earlier: its reference's block fingerprints, its blocks and errors) for
+/// every block whose data and reference texels (by `reference_blocks`, the fingerprints of
+/// `reference`) are both unchanged. Equal to measuring every block.
 pub fn block_errors_reusing(
     format: BlockFormat,
     blocks: &[u8],
     reference: &Texture,
+    reference_blocks: &BlockFingerprints,
     channels: usize,
-    previous: Option<(&Texture, &[u8], &BlockErrors)>,
+    previous: Option<(&BlockFingerprints, &[u8], &BlockErrors)>,
 ) -> BlockErrors {
     let (width, height) = (reference.width as usize, reference.height as usize);
     let (blocks_x, blocks_y) = (width.div_ceil(4), height.div_ceil(4));
     let size = block_bytes(format);
     let previous = previous.filter(|(old_reference, old_blocks, old)| {
-        (old_reference.width, old_reference.height) == (reference.width, reference.height)
+        old_reference.same_size(reference_blocks)
+            && (reference_blocks.width, reference_blocks.height) == (reference.width, reference.height)
             && old_blocks.len() == blocks.len()
             && (old.format, old.channels, old.errors.len()) == (format, channels, blocks_x * blocks_y)
     });
@@ -109,8 +113,7 @@ pub fn block_errors_reusing(
             let columns = bx * 4 * 4..((bx * 4 + 4).min(width)) * 4;
             let texels = |row: usize| row * width * 4 + columns.start..row * width * 4 + columns.end;
             if let Some((old_reference, old_blocks, old)) = previous {
-                let unchanged = old_blocks[number * size..][..size] == *block
-                    && rows.clone().all(|row| old_reference.pixels[texels(row)] == reference.pixels[texels(row)]);
+                let unchanged = old_blocks[number * size..][..size] == *block && !reference_blocks.block_changed(old_reference, number);
                 if unchanged {
                     *error = old.errors[number];
                     continue;

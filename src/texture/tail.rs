@@ -9,8 +9,9 @@ use std::sync::Arc;
 use crate::config::{BlockFormat, Container, EncodeQuality};
 use crate::texture::color::has_transparency;
 use crate::texture::container::write_container;
-use crate::texture::encode::{encode_levels_reusing, BlockEncodeSettings, EncodedTexture};
-use crate::texture::mips::{mip_chain_reusing, MipReuse, MipSettings};
+use crate::texture::encode::{encode_levels_reusing, BlockEncodeSettings, EncodedTexture, PreviousBlocks};
+use crate::texture::fingerprint::BlockFingerprints;
+use crate::texture::mips::{mip_chain_reusing, MipReuse, MipSettings, PreviousChain};
 use crate::texture::preview::preview_png;
 use crate::texture::quality::{block_errors_reusing, BlockErrors};
 use crate::texture::{SurfaceKind, Texture};
@@ -47,6 +48,8 @@ impl TailSettings {
 pub struct MipLevels {
     pub levels: Arc<Vec<Texture>>,
     pub alpha_tested: bool,
+    /// The fingerprints of level 0's blocks (what the next bake compares instead of texels).
+    pub level0_blocks: Arc<BlockFingerprints>,
     /// What the next chain of the same surface can reuse.
     pub reuse: Option<Arc<MipReuse>>,
 }
@@ -97,23 +100,46 @@ pub struct SurfaceArtifacts {
 }
 
 /// The last encoding of a surface, so that the next one filters again only the mip tiles and
-/// encodes again only the blocks that changed.
+/// encodes again only the blocks that changed. Level 0 is kept as block fingerprints only: it
+/// is the largest level (16 of 28 MB on the oak's atlas), and a new process loads this.
 #[derive(Clone, Debug)]
 pub struct PreviousEncoding {
-    pub mips: MipLevels,
+    pub level0_blocks: Arc<BlockFingerprints>,
+    /// Levels 1 and below.
+    pub lower_levels: Vec<Texture>,
+    pub mip_reuse: Option<Arc<MipReuse>>,
     pub encoded: EncodedSurface,
+}
+
+impl PreviousEncoding {
+    /// What a bake of `mips` encoded as `encoded` leaves for the next (sharing their buffers).
+    pub fn of(mips: &MipLevels, encoded: &EncodedSurface) -> PreviousEncoding {
+        PreviousEncoding {
+            level0_blocks: mips.level0_blocks.clone(),
+            lower_levels: mips.levels[1..].to_vec(),
+            mip_reuse: mips.reuse.clone(),
+            encoded: encoded.clone(),
+        }
+    }
 }
 
 /// The mip chain of `image`, reusing the previous chain's unchanged tiles.
 pub fn tail_mips(image: &Texture, settings: MipStepSettings, previous: Option<&PreviousEncoding>) -> MipLevels {
     let alpha_tested = settings.surface == SurfaceKind::Albedo && has_transparency(image);
+    let level0_blocks = Arc::new(BlockFingerprints::of(image));
     if !settings.mips {
-        return MipLevels { levels: Arc::new(vec![image.clone()]), alpha_tested, reuse: None };
+        return MipLevels { levels: Arc::new(vec![image.clone()]), alpha_tested, level0_blocks, reuse: None };
     }
     let mip_settings = MipSettings { kind: settings.surface, alpha_cutoff: settings.alpha_cutoff.filter(|_| alpha_tested) };
-    let previous = previous.and_then(|previous| Some((previous.mips.levels.as_slice(), &**previous.mips.reuse.as_ref()?)));
-    let (levels, reuse) = mip_chain_reusing(image, mip_settings, previous);
-    MipLevels { levels: Arc::new(levels), alpha_tested, reuse: reuse.map(Arc::new) }
+    let previous = previous.and_then(|previous| {
+        Some(PreviousChain {
+            level0_blocks: &previous.level0_blocks,
+            lower_levels: &previous.lower_levels,
+            reuse: previous.mip_reuse.as_deref()?,
+        })
+    });
+    let (levels, reuse) = mip_chain_reusing(image, &level0_blocks, mip_settings, previous);
+    MipLevels { levels: Arc::new(levels), alpha_tested, level0_blocks, reuse: reuse.map(Arc::new) }
 }
 
 /// Block-compresses a mip chain, reusing the previous encoding's blocks where the texels are
@@ -129,16 +155,22 @@ pub fn tail_encode(
     let previous = previous.filter(|previous| previous.encoded.settings == settings);
     let texture = encode_levels_reusing(
         &mips.levels,
+        &mips.level0_blocks,
         settings,
-        previous.map(|previous| (previous.mips.levels.as_slice(), &previous.encoded.texture)),
+        previous.map(|previous| PreviousBlocks {
+            level0_blocks: &previous.level0_blocks,
+            lower_levels: &previous.lower_levels,
+            encoded: &previous.encoded.texture,
+        }),
     );
     let image = &mips.levels[0];
     let block_errors = block_errors_reusing(
         format,
         &texture.levels[0],
         image,
+        &mips.level0_blocks,
         surface.channels(),
-        previous.map(|previous| (&previous.mips.levels[0], &previous.encoded.texture.levels[0][..], &*previous.encoded.block_errors)),
+        previous.map(|previous| (&*previous.level0_blocks, &previous.encoded.texture.levels[0][..], &*previous.encoded.block_errors)),
     );
     let psnr_db = (block_errors.psnr(image.width, image.height) * 100.0).round() / 100.0;
     EncodedSurface { settings, texture, block_errors: Arc::new(block_errors), psnr_db }

@@ -377,9 +377,10 @@ fn memo_entries_that_do_not_fit_are_misses_and_the_bake_equals_a_clean_one() {
                     // A chain whose levels do not halve.
                     real.metadata = serde_json::json!(vec![(1, 1); real.blobs.len()]);
                 } else {
-                    // The real levels, with block data and errors that do not fit them.
+                    // The real fingerprints and levels, with block data and errors that do
+                    // not fit them.
                     let levels = real.metadata["levels"].as_array().unwrap().len();
-                    for blob in &mut real.blobs[levels..] {
+                    for blob in &mut real.blobs[2 + levels..] {
                         blob.truncate(3);
                     }
                 }

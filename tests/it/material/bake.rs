@@ -207,7 +207,8 @@ fn report_json_lists_every_surface_with_its_measured_psnr() {
 #[test]
 fn re_encoding_only_changed_blocks_equals_a_full_encode() {
     use cirrus::config::EncodeQuality;
-    use cirrus::texture::encode::{encode_levels, encode_levels_reusing, BlockEncodeSettings};
+    use cirrus::texture::encode::{encode_levels, encode_levels_reusing, BlockEncodeSettings, PreviousBlocks};
+    use cirrus::texture::fingerprint::BlockFingerprints;
     use cirrus::texture::mips::{mip_chain, MipSettings};
     use cirrus::texture::SurfaceKind;
     let before = decode_png(&pattern_png(96, 64, 1));
@@ -223,33 +224,73 @@ fn re_encoding_only_changed_blocks_equals_a_full_encode() {
         let chain = |texture| mip_chain(texture, MipSettings { kind: SurfaceKind::Mra, alpha_cutoff: None });
         let (old_levels, new_levels) = (chain(&before), chain(&after));
         let old = encode_levels(&old_levels, settings);
-        let reused = encode_levels_reusing(&new_levels, settings, Some((&old_levels, &old)));
+        let (old_blocks, new_blocks) = (BlockFingerprints::of(&old_levels[0]), BlockFingerprints::of(&new_levels[0]));
+        let previous = PreviousBlocks { level0_blocks: &old_blocks, lower_levels: &old_levels[1..], encoded: &old };
+        let reused = encode_levels_reusing(&new_levels, &new_blocks, settings, Some(previous));
         assert_eq!(reused, encode_levels(&new_levels, settings), "{format:?}: reuse is exact");
         assert_ne!(reused, old, "{format:?}: the edit shows");
         // The PSNR from per-block errors, measured again only where blocks or texels changed.
         use cirrus::texture::quality::{block_errors_reusing, decode_blocks, psnr};
         let channels = 3;
-        let old_errors = block_errors_reusing(format, &old.levels[0], &old_levels[0], channels, None);
-        let fresh = block_errors_reusing(format, &reused.levels[0], &new_levels[0], channels, None);
-        let reused_errors =
-            block_errors_reusing(format, &reused.levels[0], &new_levels[0], channels, Some((&old_levels[0], &old.levels[0], &old_errors)));
+        let old_errors = block_errors_reusing(format, &old.levels[0], &old_levels[0], &old_blocks, channels, None);
+        let fresh = block_errors_reusing(format, &reused.levels[0], &new_levels[0], &new_blocks, channels, None);
+        let measure_again = |previous_errors| {
+            block_errors_reusing(
+                format,
+                &reused.levels[0],
+                &new_levels[0],
+                &new_blocks,
+                channels,
+                Some((&old_blocks, &old.levels[0][..], previous_errors)),
+            )
+        };
+        let reused_errors = measure_again(&old_errors);
         assert_eq!(reused_errors, fresh, "{format:?}");
         let decoded = decode_blocks(format, &reused.levels[0], 96, 64);
         assert_eq!(fresh.psnr(96, 64), psnr(&new_levels[0], &decoded, channels), "{format:?}");
         // Errors planted in the previous measurement stay where nothing changed.
         let mut planted = old_errors.clone();
         planted.errors[0] += 1;
-        let from_planted =
-            block_errors_reusing(format, &reused.levels[0], &new_levels[0], channels, Some((&old_levels[0], &old.levels[0], &planted)));
+        let from_planted = measure_again(&planted);
         assert_eq!(from_planted.errors[0], fresh.errors[0] + 1, "{format:?}: block 0 is reused");
     }
 }
 
 #[test]
+fn block_fingerprints_see_a_one_texel_change_in_its_block_alone_edge_blocks_included() {
+    use cirrus::texture::fingerprint::BlockFingerprints;
+    use cirrus::texture::Texture;
+    // 10 × 7: the last block column is two texels wide, the last block row three high.
+    let before = Texture::new(10, 7, (0..10 * 7 * 4).map(|byte| (byte * 37 % 251) as u8).collect());
+    let old = BlockFingerprints::of(&before);
+    assert_eq!((old.texels.len(), old.alphas.len()), (3 * 2, 3 * 2));
+    for (x, y) in (0..7).flat_map(|y| (0..10).map(move |x| (x, y))) {
+        for channel in [0, 3] {
+            let mut pixels = before.pixels.to_vec();
+            pixels[(y * 10 + x) * 4 + channel] ^= 1;
+            let new = BlockFingerprints::of(&Texture::new(10, 7, pixels));
+            let block = y / 4 * 3 + x / 4;
+            let changed: Vec<usize> = (0..6).filter(|&number| new.block_changed(&old, number)).collect();
+            assert_eq!(changed, [block], "texel ({x}, {y}), channel {channel}");
+            let alpha_changed: Vec<usize> = (0..6).filter(|&number| new.alpha_changed(&old, number)).collect();
+            assert_eq!(alpha_changed, if channel == 3 { vec![block] } else { vec![] }, "texel ({x}, {y}), channel {channel}");
+        }
+    }
+}
+
+#[test]
 fn refiltering_only_changed_mip_tiles_equals_a_full_chain() {
-    use cirrus::texture::mips::{mip_chain, mip_chain_reusing, MipSettings};
+    use cirrus::texture::fingerprint::BlockFingerprints;
+    use cirrus::texture::mips::{mip_chain, mip_chain_reusing, MipSettings, PreviousChain};
     use cirrus::texture::SurfaceKind;
     use cirrus::texture::Texture;
+    // The reusing chain of `texture` after `previous` (its levels and what it kept).
+    let chain_after = |texture: &Texture, settings, previous: Option<(&[Texture], &cirrus::texture::mips::MipReuse)>| {
+        let blocks = previous.map(|(levels, _)| BlockFingerprints::of(&levels[0]));
+        let previous =
+            previous.map(|(levels, reuse)| PreviousChain { level0_blocks: blocks.as_ref().unwrap(), lower_levels: &levels[1..], reuse });
+        mip_chain_reusing(texture, &BlockFingerprints::of(texture), settings, previous)
+    };
     // 192 × 128: six 64² tiles. Cut-out albedo (coverage preserved), a normal map, plain data.
     let cutout = decode_png(&cutout_png(192, 128));
     let pattern = decode_png(&pattern_png(192, 128, 3));
@@ -268,17 +309,17 @@ fn refiltering_only_changed_mip_tiles_equals_a_full_chain() {
         (pattern, MipSettings { kind: SurfaceKind::Mra, alpha_cutoff: None }),
     ];
     for (before, settings) in cases {
-        let (old_levels, reuse) = mip_chain_reusing(&before, settings, None);
+        let (old_levels, reuse) = chain_after(&before, settings, None);
         assert_eq!(old_levels, mip_chain(&before, settings));
         let reuse = reuse.expect("multiples of the tile size keep what the next chain reuses");
         // A colour edit in the tiles (1, 0) and (1, 1); then a second one on top of it.
         let recolour = |texel: &mut [u8]| texel[..3].copy_from_slice(&[200, 30, 90]);
         let after = edit(&before, 50..80, &recolour);
-        let (levels, next) = mip_chain_reusing(&after, settings, Some((&old_levels, &reuse)));
+        let (levels, next) = chain_after(&after, settings, Some((&old_levels, &reuse)));
         assert_eq!(levels, mip_chain(&after, settings), "{settings:?}: the same levels as a full chain");
         assert_ne!(levels[3], old_levels[3], "{settings:?}: the edit shows");
         let again = edit(&after, 0..20, &|texel: &mut [u8]| texel[0] = 10);
-        let (levels_again, _) = mip_chain_reusing(&again, settings, Some((&levels, next.as_ref().unwrap())));
+        let (levels_again, _) = chain_after(&again, settings, Some((&levels, next.as_ref().unwrap())));
         assert_eq!(levels_again, mip_chain(&again, settings), "{settings:?}: reuse of a reused chain");
         // Unchanged tiles really come from the previous chain: a texel planted in its level 1
         // outside the edited tiles survives.
@@ -286,17 +327,17 @@ fn refiltering_only_changed_mip_tiles_equals_a_full_chain() {
         let mut pixels = planted[1].pixels.to_vec();
         pixels[(5 * 96 + 5) * 4] ^= 0xff;
         planted[1] = Texture::new(96, 64, pixels);
-        let (from_planted, _) = mip_chain_reusing(&after, settings, Some((&planted, &reuse)));
+        let (from_planted, _) = chain_after(&after, settings, Some((&planted, &reuse)));
         assert_eq!(from_planted[1].texel(5, 5), planted[1].texel(5, 5), "{settings:?}");
     }
     // An alpha edit moves whole levels' coverage scale: a full chain, still equal.
     let albedo = MipSettings { kind: SurfaceKind::Albedo, alpha_cutoff: Some(0.5) };
-    let (old_levels, reuse) = mip_chain_reusing(&cutout, albedo, None);
+    let (old_levels, reuse) = chain_after(&cutout, albedo, None);
     let holes = edit(&cutout, 40..60, &|texel: &mut [u8]| texel[3] = 0);
-    let (levels, _) = mip_chain_reusing(&holes, albedo, Some((&old_levels, reuse.as_ref().unwrap())));
+    let (levels, _) = chain_after(&holes, albedo, Some((&old_levels, reuse.as_ref().unwrap())));
     assert_eq!(levels, mip_chain(&holes, albedo));
     // Sizes that are not multiples of the tile keep nothing to reuse.
-    assert!(mip_chain_reusing(&Texture::constant(96, 64, [1, 2, 3, 255]), albedo, None).1.is_none());
+    assert!(chain_after(&Texture::constant(96, 64, [1, 2, 3, 255]), albedo, None).1.is_none());
 }
 
 #[test]

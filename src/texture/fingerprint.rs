@@ -20,32 +20,25 @@ impl BlockFingerprints {
     /// The fingerprints of every block of `texture`, block rows in parallel.
     pub fn of(texture: &Texture) -> BlockFingerprints {
         let (width, height) = (texture.width as usize, texture.height as usize);
-        let blocks_x = width.div_ceil(4);
-        let per_row: Vec<(Vec<u64>, Vec<u64>)> = (0..height.div_ceil(4))
-            .into_par_iter()
-            .map(|by| {
-                let mut row = (Vec::with_capacity(blocks_x), Vec::with_capacity(blocks_x));
+        let (blocks_x, blocks_y) = (width.div_ceil(4), height.div_ceil(4));
+        let (mut texels, mut alphas) = (vec![0u64; blocks_x * blocks_y], vec![0u64; blocks_x * blocks_y]);
+        texels.par_chunks_mut(blocks_x.max(1)).zip(alphas.par_chunks_mut(blocks_x.max(1))).enumerate().for_each(
+            |(by, (row_texels, row_alphas))| {
                 for bx in 0..blocks_x {
-                    let (mut texels, mut alphas) = ([0u8; 64], [0u8; 16]);
+                    let (mut block, mut block_alphas) = ([0u8; 64], [0u8; 16]);
                     let columns = bx * 4..(bx * 4 + 4).min(width);
                     for (row_in_block, y) in (by * 4..(by * 4 + 4).min(height)).enumerate() {
                         let source = &texture.pixels[(y * width + columns.start) * 4..(y * width + columns.end) * 4];
-                        texels[row_in_block * 16..][..source.len()].copy_from_slice(source);
+                        block[row_in_block * 16..][..source.len()].copy_from_slice(source);
                         for (column, texel) in source.chunks_exact(4).enumerate() {
-                            alphas[row_in_block * 4 + column] = texel[3];
+                            block_alphas[row_in_block * 4 + column] = texel[3];
                         }
                     }
-                    row.0.push(xxhash_rust::xxh3::xxh3_64(&texels));
-                    row.1.push(xxhash_rust::xxh3::xxh3_64(&alphas));
+                    row_texels[bx] = xxhash_rust::xxh3::xxh3_64(&block);
+                    row_alphas[bx] = xxhash_rust::xxh3::xxh3_64(&block_alphas);
                 }
-                row
-            })
-            .collect();
-        let (mut texels, mut alphas) = (Vec::with_capacity(blocks_x * per_row.len()), Vec::with_capacity(blocks_x * per_row.len()));
-        for (row_texels, row_alphas) in per_row {
-            texels.extend(row_texels);
-            alphas.extend(row_alphas);
-        }
+            },
+        );
         BlockFingerprints { width: texture.width, height: texture.height, texels, alphas }
     }
 

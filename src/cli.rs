@@ -190,6 +190,9 @@ fn build(pipeline: PathBuf, assets: Vec<String>, format: SummaryFormat) -> ExitC
         SummaryFormat::Json => println!("{}", summary.to_json()),
         SummaryFormat::Text => print!("{}", summary.to_text()),
     }
+    // The process ends here: freeing every memo one by one would only delay the exit (about
+    // 7 ms on the oak). The cache's background writes finished inside `build`.
+    std::mem::forget(project);
     if summary.all_ok() {
         ExitCode::SUCCESS
     } else {

@@ -1,5 +1,6 @@
-//! Benchmark (`cargo bench [-- materials|planes|billboard|watch]`): material-bake throughput next to
-//! the raw encoder's, no-op rebuild and warm restart next to a full bake, plane selection speed,
+//! Benchmark (`cargo bench [-- materials|packing|planes|billboard|watch]`): material-bake
+//! throughput next to the raw encoder's, no-op rebuild and warm restart next to a full bake, the
+//! page packer's time and occupancy beside Python `rectpack`, plane selection speed,
 //! billboard-cloud bake time, memory, edit re-bake and fidelity per ε, and the daemon's edit latency,
 //! burst handling and warm restart (`watch`). Prints figures.
 
@@ -29,6 +30,9 @@ fn main() {
             bench_project(label, &source.canonicalize().expect("source folder"), glob);
         }
     }
+    if wanted("packing") {
+        bench_packing(repository);
+    }
     if corpus.join("meshes").is_dir() {
         if wanted("planes") {
             bench_planes(&corpus);
@@ -43,6 +47,76 @@ fn main() {
             bench_watch(&corpus);
         }
     }
+}
+
+/// The page packer on 1,000 textures of mixed sizes (1 to 512 texels a side, mostly small, any
+/// aspect): median time of a pack with the atlas defaults, and occupancy beside Python
+/// `rectpack`'s best variant on the same sizes (rounded up to whole blocks, no padding, rotation
+/// on) when a `python3` that imports `rectpack` is on the PATH or named by `CIRRUS_BENCH_PYTHON`.
+fn bench_packing(repository: &Path) {
+    use cirrus::packing::max_rects::{pack_pages, PageSettings};
+    let mut state = 0x5eed_u64;
+    let mut next = move || {
+        state = state.wrapping_mul(6364136223846793005).wrapping_add(1442695040888963407);
+        (state >> 33) as u32
+    };
+    let sizes: Vec<(u32, u32)> = (0..1000)
+        .map(|_| {
+            let scale = 1u32 << (next() % 9);
+            (1 + next() % (2 * scale).min(512), 1 + next() % (2 * scale).min(512))
+        })
+        .collect();
+    let settings = PageSettings { max_size: 8192, padding: 4, rotate: true, power_of_two: false, pages: 1 };
+    let mut times = Vec::new();
+    let mut packing = None;
+    for _ in 0..7 {
+        let start = Instant::now();
+        packing = Some(pack_pages(&sizes, &settings).expect("1,000 textures fit one 8192² page"));
+        times.push(start.elapsed().as_secs_f64() * 1000.0);
+    }
+    times.sort_by(f64::total_cmp);
+    let packing = packing.expect("packed");
+    println!(
+        "packing: 1,000 textures of mixed sizes, padding 4, rotation on: {:.1} ms median of 7 (bar ≤ 50 ms), {:?} page, content occupancy {:.3}",
+        times[3],
+        packing.pages[0],
+        packing.occupancy()
+    );
+    // Beside rectpack: sizes in whole blocks, no padding.
+    let blocks: Vec<(u32, u32)> = sizes.iter().map(|&(w, h)| (w.div_ceil(4) * 4, h.div_ceil(4) * 4)).collect();
+    let bare = PageSettings { padding: 0, ..settings };
+    let start = Instant::now();
+    let ours = pack_pages(&blocks, &bare).expect("fits");
+    let ours_ms = start.elapsed().as_secs_f64() * 1000.0;
+    let python = std::env::var("CIRRUS_BENCH_PYTHON").unwrap_or_else(|_| "python3".to_string());
+    let script = repository.join("benches/rectpack_occupancy.py");
+    let child = std::process::Command::new(&python)
+        .arg(&script)
+        .stdin(std::process::Stdio::piped())
+        .stdout(std::process::Stdio::piped())
+        .stderr(std::process::Stdio::piped())
+        .spawn();
+    let rectpack = child.ok().and_then(|mut child| {
+        use std::io::Write;
+        let json = serde_json::to_string(&blocks.iter().map(|&(w, h)| [w, h]).collect::<Vec<_>>()).expect("sizes");
+        child.stdin.take().expect("stdin").write_all(json.as_bytes()).ok()?;
+        let output = child.wait_with_output().ok()?;
+        output.status.success().then(|| serde_json::from_slice::<serde_json::Value>(&output.stdout).ok()).flatten()
+    });
+    let beside = match rectpack {
+        Some(result) => format!(
+            "rectpack's best {:.3} ({}, {:.0} s over every variant)",
+            result["occupancy"].as_f64().unwrap_or(0.0),
+            result["variant"].as_str().unwrap_or("?"),
+            result["seconds"].as_f64().unwrap_or(0.0)
+        ),
+        None => format!("rectpack not measured: `{python}` cannot run {} (pip install rectpack)", script.display()),
+    };
+    println!(
+        "packing: the same sizes in whole blocks, no padding: cirrus {:.3} on {:?} ({ours_ms:.1} ms) beside {beside}",
+        ours.occupancy(),
+        ours.pages[0]
+    );
 }
 
 /// A running `cirrus watch` on a project folder, and a client subscribed to it.

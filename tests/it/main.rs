@@ -13,6 +13,7 @@ mod conformance;
 mod fuzz;
 mod graph;
 mod hostile;
+mod packing;
 mod tidy;
 mod watch;
 

@@ -1,6 +1,10 @@
-//! Rectangle packing, shared by every kind that lays texels out on a page: cells (whole BC
-//! blocks) packed bottom-left along a skyline, 90° rotation allowed, `padding` texels around
-//! each, in the smallest (power-of-two when asked) page within `max_size`.
+//! Rectangle packing, shared by every kind that lays texels out on a page. `pack_smallest`:
+//! cells (whole BC blocks) packed bottom-left along a skyline, 90° rotation allowed, `padding`
+//! texels around each, in the smallest (power-of-two when asked) page within `max_size` (the
+//! billboard atlas). `max_rects`: MaxRects over several rules and orders onto one or more pages
+//! (the texture atlas).
+
+pub mod max_rects;
 
 use crate::config::AtlasSettings;
 

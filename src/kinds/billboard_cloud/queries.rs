@@ -436,13 +436,13 @@ pub fn atlas_coverage(db: &dyn Db, asset: Asset) -> Result<Arc<super::atlas::Atl
 /// atlas stage). Kept in the persistent cache under the coverage's content hash: a colour-only
 /// edit in a new process loads it (about 15 ms on the oak) instead of searching (about 90 ms).
 #[salsa::tracked(returns(clone))]
-pub fn atlas_texel_sources(db: &dyn Db, asset: Asset) -> Result<Arc<super::atlas::TexelSources>, Diagnostic> {
+pub fn atlas_texel_sources(db: &dyn Db, asset: Asset) -> Result<Arc<crate::texture::fill::TexelSources>, Diagnostic> {
     let coverage = atlas_coverage(db, asset)?;
     let key = stage_key(ATLAS_FILL).part(&coverage.content_hash()).finish();
     let texels = coverage.width as usize * coverage.height as usize;
     let stored = load_cached(db, ATLAS_FILL.name, key, |entry| {
         let [offsets]: [Vec<u8>; 1] = entry.blobs.try_into().ok()?;
-        super::atlas::TexelSources::from_offsets(&from_pod_blob::<u32>(&offsets)?, texels)
+        crate::texture::fill::TexelSources::from_offsets(&from_pod_blob::<u32>(&offsets)?, texels)
     });
     if let Some(sources) = stored {
         return Ok(Arc::new(sources));

@@ -16,6 +16,7 @@ use crate::texture::{SurfaceKind, Texture};
 pub mod tail_queries;
 pub mod material;
 pub mod billboard_cloud;
+pub mod atlas;
 
 use billboard_cloud::BillboardCloud;
 use material::Material;

@@ -5,6 +5,7 @@ mod support;
 
 mod material;
 mod billboard_cloud;
+mod atlas;
 
 mod cache;
 mod cli;

@@ -1,0 +1,3 @@
+//! The `Atlas` kind (being built): its page composite and trim, over the shared packer.
+
+mod page;

@@ -1,0 +1,73 @@
+//! Pages put together from packed entries: every entry's texels where the table says, turned
+//! entries included; padding the clamp of the entry's own edge; trim of transparent borders.
+
+use cirrus::kinds::atlas::page::{composite_page, crop, opaque_bounds, page_texel, TrimRect};
+use cirrus::packing::max_rects::{pack_pages, PageSettings};
+use cirrus::texture::Texture;
+
+/// A texture whose every texel differs from its neighbours and from other textures' (`seed`).
+fn noise(width: u32, height: u32, seed: u32) -> Texture {
+    let pixels = (0..width * height * 4).map(|byte| ((byte.wrapping_mul(2654435761) ^ seed.wrapping_mul(40503)) >> 7) as u8 | 1).collect();
+    Texture::new(width, height, pixels)
+}
+
+#[test]
+fn every_entry_reads_back_from_its_place_and_its_padding_repeats_its_own_edge() {
+    // Long thin entries make the packer turn some of them.
+    let textures: Vec<Texture> = [(40, 8), (8, 40), (33, 17), (5, 61), (64, 64), (3, 3), (90, 6), (12, 30)]
+        .iter()
+        .enumerate()
+        .map(|(index, &(width, height))| noise(width, height, index as u32))
+        .collect();
+    let sizes: Vec<(u32, u32)> = textures.iter().map(|texture| (texture.width, texture.height)).collect();
+    let padding = 4;
+    let packing = pack_pages(&sizes, &PageSettings { max_size: 512, padding, rotate: true, power_of_two: false, pages: 1 }).unwrap();
+    assert!(packing.placements.iter().any(|place| place.placement.rotated), "some entry is turned");
+    let (width, height) = packing.pages[0];
+    let entries: Vec<(&Texture, _)> = textures.iter().zip(&packing.placements).map(|(texture, place)| (texture, place.placement)).collect();
+    let page = composite_page(width, height, &entries, padding);
+    for (texture, placement) in &entries {
+        for row in 0..texture.height {
+            for column in 0..texture.width {
+                let (x, y) = page_texel(placement, column, row);
+                assert_eq!(page.texel(x, y), texture.texel(column, row), "{placement:?} texel ({column}, {row})");
+            }
+        }
+        // The padding: beyond each corner and each edge, the entry's own nearest edge texel.
+        let (span_x, span_y) = if placement.rotated { (placement.height, placement.width) } else { (placement.width, placement.height) };
+        let (right, bottom) = (placement.x + span_x - 1, placement.y + span_y - 1);
+        for step in 1..=padding {
+            assert_eq!(page.texel(placement.x - step, placement.y - step), page.texel(placement.x, placement.y));
+            assert_eq!(page.texel(right + step, bottom + step), page.texel(right, bottom));
+            assert_eq!(page.texel(placement.x - step, bottom), page.texel(placement.x, bottom));
+            assert_eq!(page.texel(right, placement.y - step), page.texel(right, placement.y));
+        }
+    }
+    // No texel outside the entries and their padding is a colour none of them has.
+    let mut known: std::collections::HashSet<[u8; 4]> = std::collections::HashSet::new();
+    for texture in &textures {
+        known.extend(texture.pixels.chunks_exact(4).map(|texel| <[u8; 4]>::try_from(texel).unwrap()));
+    }
+    assert!(page.pixels.chunks_exact(4).all(|texel| known.contains(texel)), "the fill copies entry texels only");
+}
+
+#[test]
+fn trim_keeps_the_smallest_rectangle_with_any_alpha_and_where_it_was() {
+    let mut pixels = vec![0u8; 10 * 8 * 4];
+    for (x, y) in [(3, 2), (6, 5), (4, 4)] {
+        pixels[(y * 10 + x) * 4..][..4].copy_from_slice(&[200, 100, 50, 1]);
+    }
+    let sprite = Texture::new(10, 8, pixels);
+    let bounds = opaque_bounds(&sprite);
+    assert_eq!(bounds, TrimRect { x: 3, y: 2, width: 4, height: 4 });
+    let kept = crop(&sprite, bounds);
+    assert_eq!((kept.width, kept.height), (4, 4));
+    assert_eq!(kept.texel(0, 0), [200, 100, 50, 1]);
+    assert_eq!(kept.texel(3, 3), [200, 100, 50, 1]);
+    assert_eq!(kept.texel(1, 2), [200, 100, 50, 1]);
+    // Nothing visible: the entry keeps one texel.
+    assert_eq!(opaque_bounds(&Texture::constant(5, 5, [9, 9, 9, 0])), TrimRect { x: 0, y: 0, width: 1, height: 1 });
+    // Opaque: nothing to trim, and the crop is the texture itself.
+    let opaque = Texture::constant(6, 3, [1, 2, 3, 255]);
+    assert_eq!(crop(&opaque, opaque_bounds(&opaque)), opaque);
+}

@@ -82,8 +82,6 @@ pub struct PagePlacement {
 pub struct PagePacking {
     pub pages: Vec<(u32, u32)>,
     pub placements: Vec<PagePlacement>,
-    /// The variant that packed each page.
-    pub variants: Vec<PackVariant>,
 }
 
 impl PagePacking {
@@ -126,7 +124,6 @@ pub fn pack_pages(sizes: &[(u32, u32)], settings: &PageSettings) -> Result<PageP
     }
     let mut left: Vec<usize> = (0..cells.len()).collect();
     let mut pages = Vec::new();
-    let mut variants = Vec::new();
     let mut placements =
         vec![PagePlacement { page: 0, placement: Placement { x: 0, y: 0, width: 0, height: 0, rotated: false } }; sizes.len()];
     loop {
@@ -139,8 +136,7 @@ pub fn pack_pages(sizes: &[(u32, u32)], settings: &PageSettings) -> Result<PageP
                     page_placement(page, cell_place.expect("a page search places everything"), sizes[index], settings.padding);
             }
             pages.push((found.width * 4, found.height * 4));
-            variants.push(found.variant);
-            return Ok(PagePacking { pages, placements, variants });
+            return Ok(PagePacking { pages, placements });
         }
         // A full page: the variant that places the most area on it.
         let full = full_page(&subset, max_blocks, settings.rotate);
@@ -163,9 +159,102 @@ pub fn pack_pages(sizes: &[(u32, u32)], settings: &PageSettings) -> Result<PageP
         }
         assert!(still_left.len() < left.len(), "every rectangle fits an empty page (checked above)");
         pages.push((max_blocks * 4, max_blocks * 4));
-        variants.push(full.variant);
         left = still_left;
     }
+}
+
+/// How [`pack_pages_keeping`] went.
+#[derive(Clone, Debug, PartialEq, Eq)]
+pub enum Repack {
+    /// The previous layout was kept: only these rectangles (input indices) were placed anew (new
+    /// ones, and ones whose size changed), in free space.
+    Kept { placed: Vec<usize> },
+    /// Everything was packed afresh: the kept layout would have been too wasteful (below 90 % of
+    /// a fresh pack's occupancy) or could not take the new rectangles.
+    Repacked,
+}
+
+/// Like [`pack_pages`], keeping the `previous` layout (the last packing of the same settings:
+/// its pages, and each rectangle's place if it had one) as a hint: rectangles of unchanged size
+/// stay where they were, the others go into free space on the same pages. A fresh pack replaces
+/// it only when the kept layout cannot take them or its occupancy falls below 90 % of the fresh
+/// one's; a previous layout that does not fit the settings (other padding, larger than
+/// `max_size`, overlapping) is not kept.
+pub fn pack_pages_keeping(
+    sizes: &[(u32, u32)],
+    settings: &PageSettings,
+    previous_pages: &[(u32, u32)],
+    previous: &[Option<PagePlacement>],
+) -> Result<(PagePacking, Repack), PackError> {
+    let fresh = pack_pages(sizes, settings)?;
+    let kept = keep_layout(sizes, settings, previous_pages, previous);
+    Ok(match kept {
+        Some((packing, placed)) if packing.occupancy() >= 0.9 * fresh.occupancy() => (packing, Repack::Kept { placed }),
+        _ => (fresh, Repack::Repacked),
+    })
+}
+
+/// The previous layout with the rectangles it lacks added in free space; `None` when it does
+/// not fit the settings or cannot take them.
+fn keep_layout(
+    sizes: &[(u32, u32)],
+    settings: &PageSettings,
+    previous_pages: &[(u32, u32)],
+    previous: &[Option<PagePlacement>],
+) -> Option<(PagePacking, Vec<usize>)> {
+    let page_fits = |&(width, height): &(u32, u32)| {
+        width % 4 == 0
+            && height % 4 == 0
+            && width <= settings.max_size
+            && height <= settings.max_size
+            && (!settings.power_of_two || (width.is_power_of_two() && height.is_power_of_two()))
+    };
+    if previous_pages.is_empty() || previous_pages.len() as u32 > settings.pages || !previous_pages.iter().all(page_fits) {
+        return None;
+    }
+    let mut bins: Vec<Bin> = previous_pages.iter().map(|&(width, height)| Bin::new(width / 4, height / 4, false)).collect();
+    let cell_of = |(width, height): (u32, u32), rotated: bool| {
+        let (span_x, span_y) = if rotated { (height, width) } else { (width, height) };
+        ((span_x + 2 * settings.padding).div_ceil(4), (span_y + 2 * settings.padding).div_ceil(4))
+    };
+    let mut placements: Vec<Option<PagePlacement>> = vec![None; sizes.len()];
+    let mut taken: Vec<Vec<Rect>> = vec![Vec::new(); bins.len()];
+    for (index, &size) in sizes.iter().enumerate() {
+        let Some(old) = previous.get(index).copied().flatten() else { continue };
+        let placement = old.placement;
+        if (placement.width, placement.height) != size || (placement.rotated && !settings.rotate) {
+            continue;
+        }
+        let (Some(x), Some(y)) = (placement.x.checked_sub(settings.padding), placement.y.checked_sub(settings.padding)) else {
+            return None;
+        };
+        let (width, height) = cell_of(size, placement.rotated);
+        let cell = Rect { x: x / 4, y: y / 4, width, height };
+        let page = old.page as usize;
+        let inside = page < bins.len() && cell.right() <= bins[page].width && cell.bottom() <= bins[page].height;
+        if x % 4 != 0 || y % 4 != 0 || !inside || taken[page].iter().any(|other| other.intersects(&cell)) {
+            return None;
+        }
+        taken[page].push(cell);
+        bins[page].place(cell);
+        placements[index] = Some(old);
+    }
+    // The rest, largest first, into the first page with room (best short side fit there).
+    let mut placed: Vec<usize> = (0..sizes.len()).filter(|&index| placements[index].is_none()).collect();
+    placed.sort_by_key(|&index| (std::cmp::Reverse(sizes[index].0 as u64 * sizes[index].1 as u64), index));
+    for &index in &placed {
+        let (width, height) = cell_of(sizes[index], false);
+        let (page, place) = bins
+            .iter()
+            .enumerate()
+            .find_map(|(page, bin)| Some((page, bin.find(width, height, settings.rotate, PlacementRule::BestShortSideFit)?)))?;
+        let (w, h) = if place.rotated { (height, width) } else { (width, height) };
+        bins[page].place(Rect { x: place.x, y: place.y, width: w, height: h });
+        placements[index] = Some(page_placement(page as u32, place, sizes[index], settings.padding));
+    }
+    placed.sort_unstable();
+    let placements = placements.into_iter().map(|place| place.expect("every rectangle placed")).collect();
+    Some((PagePacking { pages: previous_pages.to_vec(), placements }, placed))
 }
 
 fn page_placement(page: u32, place: CellPlace, (width, height): (u32, u32), padding: u32) -> PagePlacement {
@@ -194,7 +283,6 @@ struct CellPlace {
 struct Packed {
     width: u32,
     height: u32,
-    variant: PackVariant,
     places: Vec<Option<CellPlace>>,
 }
 
@@ -223,7 +311,7 @@ fn smallest_page(cells: &[Cell], settings: &PageSettings) -> Option<Packed> {
         });
         let height = round(height.max().unwrap_or(1).max(1));
         smallest_area.fetch_min(width as u64 * height as u64, Ordering::Relaxed);
-        (height <= max_blocks).then_some(Packed { width, height, variant, places })
+        (height <= max_blocks).then_some(Packed { width, height, places })
     };
     let better = |a: &Packed, b: &Packed| {
         let key = |packed: &Packed| (packed.width as u64 * packed.height as u64, packed.width.abs_diff(packed.height));
@@ -261,7 +349,7 @@ fn full_page(cells: &[Cell], side: u32, rotate: bool) -> Packed {
         .par_iter()
         .map(|&variant| {
             let places = max_rects(cells, side, side, variant, None, rotate).expect("partial packing always succeeds");
-            Packed { width: side, height: side, variant, places }
+            Packed { width: side, height: side, places }
         })
         .collect();
     let placed_area = |packed: &Packed| -> u64 {

@@ -129,3 +129,61 @@ fn a_rectangle_larger_than_a_page_is_named() {
     assert_eq!(error, PackError::TooLarge { index: 1, width: 260, height: 20, max_size: 256 });
     assert_eq!(error.to_string(), "rectangle 1 is 260×20 texels with its padding, larger than a page of at most 256×256");
 }
+
+#[test]
+fn a_kept_layout_moves_nothing_and_new_rectangles_go_into_free_space() {
+    use cirrus::packing::max_rects::{pack_pages_keeping, Repack};
+    let settings = PageSettings { max_size: 2048, padding: 2, rotate: true, power_of_two: true, pages: 2 };
+    let sizes = mixed_sizes(120, 128, 5);
+    let first = pack_pages(&sizes, &settings).unwrap();
+    let previous: Vec<_> = first.placements.iter().copied().map(Some).collect();
+    // The same sizes (a pixel edit): nothing moves.
+    let (same, how) = pack_pages_keeping(&sizes, &settings, &first.pages, &previous).unwrap();
+    assert_eq!((same.clone(), how), (first.clone(), Repack::Kept { placed: vec![] }));
+    // One more rectangle, and one resized: the others stay, those two go into free space.
+    let mut grown = sizes.clone();
+    grown[7] = (grown[7].0 + 9, grown[7].1);
+    grown.push((20, 36));
+    let mut hint = previous.clone();
+    hint.push(None);
+    let (kept, how) = pack_pages_keeping(&grown, &settings, &first.pages, &hint).unwrap();
+    assert_eq!(how, Repack::Kept { placed: vec![7, 120] });
+    assert_valid(&grown, &settings, &kept);
+    for index in (0..120).filter(|&index| index != 7) {
+        assert_eq!(kept.placements[index], first.placements[index], "rectangle {index} stays");
+    }
+    // Most rectangles gone: the kept page would be mostly empty, so everything is packed anew.
+    let few = &sizes[..10];
+    let (repacked, how) = pack_pages_keeping(few, &settings, &first.pages, &previous[..10]).unwrap();
+    assert_eq!(how, Repack::Repacked);
+    assert_eq!(repacked, pack_pages(few, &settings).unwrap());
+    // A hint that does not fit the settings (other padding: cells off the block grid, or
+    // overlapping) is not kept.
+    let (_, how) = pack_pages_keeping(&sizes, &PageSettings { padding: 3, ..settings }, &first.pages, &previous).unwrap();
+    assert_eq!(how, Repack::Repacked);
+    let mut overlapping = previous.clone();
+    overlapping[1] = overlapping[0].map(|mut place| {
+        place.placement.width = sizes[1].0;
+        place.placement.height = sizes[1].1;
+        place
+    });
+    let (_, how) = pack_pages_keeping(&sizes, &settings, &first.pages, &overlapping).unwrap();
+    assert_eq!(how, Repack::Repacked);
+}
+
+#[test]
+fn new_rectangles_that_the_kept_pages_cannot_take_make_a_fresh_pack() {
+    use cirrus::packing::max_rects::{pack_pages_keeping, Repack};
+    let settings = PageSettings { max_size: 1024, padding: 0, rotate: false, power_of_two: true, pages: 4 };
+    let sizes = vec![(64, 64); 16];
+    let first = pack_pages(&sizes, &settings).unwrap();
+    assert_eq!(first.pages, [(256, 256)]);
+    let previous: Vec<_> = first.placements.iter().copied().map(Some).collect();
+    let mut more = sizes.clone();
+    more.extend([(128, 128); 4]);
+    let mut hint = previous;
+    hint.extend([None; 4]);
+    let (packing, how) = pack_pages_keeping(&more, &settings, &first.pages, &hint).unwrap();
+    assert_eq!(how, Repack::Repacked);
+    assert_valid(&more, &settings, &packing);
+}

@@ -47,7 +47,7 @@ pub struct RenderMaterial {
 
 /// Where a rectangle lies in the mesh's space: `x_axis × y_axis = normal`, `width` along
 /// `x_axis` and `height` along `y_axis` from `origin`.
-#[derive(Clone, Copy, Debug, PartialEq)]
+#[derive(Clone, Copy, Debug, PartialEq, serde::Serialize, serde::Deserialize)]
 pub struct RectangleFrame {
     pub origin: [f32; 3],
     pub x_axis: [f32; 3],

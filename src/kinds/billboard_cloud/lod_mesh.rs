@@ -25,7 +25,7 @@ pub fn lod_mesh(rectangles: &[PlaneRectangle], layout: &Layout, material: &str) 
             let [u, v] = placement.uv(s, t, layout.width, layout.height);
             let _ = writeln!(obj, "vt {u} {v}");
         }
-        let [x, y, z] = rectangle.normal;
+        let [x, y, z] = rectangle.frame.normal;
         let _ = writeln!(obj, "vn {x} {y} {z}");
     }
     for index in 0..rectangles.len() {

@@ -31,7 +31,7 @@ pub const MESH: Stage = Stage { name: "mesh", version: 2 };
 pub const PLANES: Stage = Stage { name: "planes", version: 3 };
 // Layout 2: faces of solid materials are also drawn on other planes' rectangles they lie within
 // ε of (crack filling).
-pub const LAYOUT: Stage = Stage { name: "layout", version: 2 };
+pub const LAYOUT: Stage = Stage { name: "layout", version: 3 };
 // Render 2–5: coverage-preserving mips of alpha sources; transparent texels keep their
 // footprint's colour; sRGB bytes from tables; no coverage scaling when all or none pass.
 pub const RENDER: Stage = Stage { name: "render", version: 5 };
@@ -227,7 +227,7 @@ fn compute_billboard_layout(db: &dyn Db, asset: Asset) -> Result<BillboardLayout
             solid_materials: &solid_materials,
         };
         super::rectangles::add_crack_filling_faces(&crack_filling, &planes, &mut rectangles);
-        let sizes: Vec<(f32, f32)> = rectangles.iter().map(|rectangle| (rectangle.width, rectangle.height)).collect();
+        let sizes: Vec<(f32, f32)> = rectangles.iter().map(|rectangle| (rectangle.frame.width, rectangle.frame.height)).collect();
         let layout = super::layout::layout_rectangles(&sizes, &atlas, density);
         let render_groups = super::render_groups::render_groups(&loaded.mesh, &rectangles);
         Ok(BillboardLayout { rectangles, layout, render_groups })
@@ -386,7 +386,7 @@ pub fn plane_images(db: &dyn Db, asset: Asset, group: u32) -> Result<Arc<Vec<Pla
             .map(|&rectangle| {
                 let (placement, rectangle) = (&layout.layout.placements[rectangle as usize], &layout.rectangles[rectangle as usize]);
                 crate::gpu::PlaneRenderInput {
-                    frame: rectangle.frame(),
+                    frame: rectangle.frame,
                     epsilon: depth_range,
                     alpha_cutoff,
                     width: placement.width,

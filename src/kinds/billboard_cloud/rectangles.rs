@@ -8,28 +8,25 @@ use rayon::prelude::*;
 
 use glam::{Vec2, Vec3};
 
+use crate::gpu::RectangleFrame;
 use crate::kinds::billboard_cloud::planes::PlaneSet;
 
-/// A quad on a plane: `origin + x·x_axis + y·y_axis` for x ∈ [0, width], y ∈ [0, height],
-/// `x_axis × y_axis = normal`, holding `faces` (of plane `plane`).
+/// A quad on a plane, `frame` (`origin + x·x_axis + y·y_axis` for x ∈ [0, width],
+/// y ∈ [0, height], `x_axis × y_axis = normal`), holding `faces` (of plane `plane`).
 #[derive(Clone, Debug, PartialEq, serde::Serialize, serde::Deserialize)]
 pub struct PlaneRectangle {
     pub plane: u32,
     pub faces: Vec<u32>,
     /// Faces of other planes drawn on this one too (see [`add_crack_filling_faces`]).
     pub also_drawn: Vec<u32>,
-    pub origin: [f32; 3],
-    pub x_axis: [f32; 3],
-    pub y_axis: [f32; 3],
-    pub normal: [f32; 3],
-    pub width: f32,
-    pub height: f32,
+    pub frame: RectangleFrame,
 }
 
 impl PlaneRectangle {
     /// The four corners: origin, +x, +x+y, +y.
     pub fn corners(&self) -> [Vec3; 4] {
-        let (origin, x, y) = (Vec3::from(self.origin), Vec3::from(self.x_axis) * self.width, Vec3::from(self.y_axis) * self.height);
+        let frame = &self.frame;
+        let (origin, x, y) = (Vec3::from(frame.origin), Vec3::from(frame.x_axis) * frame.width, Vec3::from(frame.y_axis) * frame.height);
         [origin, origin + x, origin + x + y, origin + y]
     }
 }
@@ -56,12 +53,14 @@ pub fn plane_rectangles(positions: &[[f32; 3]], triangles: &[[u32; 3]], planes: 
                 plane: plane_index as u32,
                 faces,
                 also_drawn: Vec::new(),
-                origin: (on_plane + x_axis * min.x + y_axis * min.y).to_array(),
-                x_axis: x_axis.to_array(),
-                y_axis: y_axis.to_array(),
-                normal: normal.to_array(),
-                width: (max.x - min.x).max(0.0),
-                height: (max.y - min.y).max(0.0),
+                frame: RectangleFrame {
+                    origin: (on_plane + x_axis * min.x + y_axis * min.y).to_array(),
+                    x_axis: x_axis.to_array(),
+                    y_axis: y_axis.to_array(),
+                    normal: normal.to_array(),
+                    width: (max.x - min.x).max(0.0),
+                    height: (max.y - min.y).max(0.0),
+                },
             });
         }
     }
@@ -122,13 +121,13 @@ pub fn add_crack_filling_faces(input: &CrackFillingInput, planes: &PlaneSet, rec
                         continue;
                     }
                     let (origin, x_axis, y_axis) =
-                        (Vec3::from(rectangle.origin), Vec3::from(rectangle.x_axis), Vec3::from(rectangle.y_axis));
+                        (Vec3::from(rectangle.frame.origin), Vec3::from(rectangle.frame.x_axis), Vec3::from(rectangle.frame.y_axis));
                     let (mut low, mut high) = (Vec2::splat(f32::INFINITY), Vec2::splat(f32::NEG_INFINITY));
                     for corner in corners {
                         let on_plane = Vec2::new((corner - origin).dot(x_axis), (corner - origin).dot(y_axis));
                         (low, high) = (low.min(on_plane), high.max(on_plane));
                     }
-                    if high.x >= 0.0 && high.y >= 0.0 && low.x <= rectangle.width && low.y <= rectangle.height {
+                    if high.x >= 0.0 && high.y >= 0.0 && low.x <= rectangle.frame.width && low.y <= rectangle.frame.height {
                         found.push((rectangle_index, face));
                     }
                 }
@@ -257,18 +256,4 @@ pub fn minimum_area_rectangle(hull: &[Vec2]) -> (Vec2, Vec2, Vec2) {
             area(a).total_cmp(&area(b))
         })
         .unwrap_or_else(|| frame(Vec2::X))
-}
-
-impl PlaneRectangle {
-    /// The rectangle's frame, as the plane renderer takes it.
-    pub fn frame(&self) -> crate::gpu::RectangleFrame {
-        crate::gpu::RectangleFrame {
-            origin: self.origin,
-            x_axis: self.x_axis,
-            y_axis: self.y_axis,
-            normal: self.normal,
-            width: self.width,
-            height: self.height,
-        }
-    }
 }

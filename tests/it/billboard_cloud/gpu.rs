@@ -3,8 +3,7 @@
 
 use std::sync::Arc;
 
-use cirrus::gpu::{gpu, PlaneRenderInput, RenderMaterial, RenderVertex};
-use cirrus::kinds::billboard_cloud::rectangles::PlaneRectangle;
+use cirrus::gpu::{gpu, PlaneRenderInput, RectangleFrame, RenderMaterial, RenderVertex};
 use cirrus::texture::{SurfaceKind, Texture};
 
 fn vertex(position: [f32; 3], uv: [f32; 2]) -> RenderVertex {
@@ -16,10 +15,7 @@ fn a_plane_render_covers_its_faces_cuts_alpha_and_encodes_normal_and_height() {
     let gpu = gpu().expect("a GPU adapter (install mesa-vulkan-drivers for the software one)");
     println!("adapter: {}", gpu.adapter_name);
     // The plane z = 0 over [0, 2] × [0, 1]; a quad over its left half, 0.05 above it (ε = 0.1).
-    let rectangle = PlaneRectangle {
-        plane: 0,
-        faces: vec![0, 1],
-        also_drawn: Vec::new(),
+    let rectangle = RectangleFrame {
         origin: [0.0; 3],
         x_axis: [1.0, 0.0, 0.0],
         y_axis: [0.0, 1.0, 0.0],
@@ -55,7 +51,7 @@ fn a_plane_render_covers_its_faces_cuts_alpha_and_encodes_normal_and_height() {
     };
     let materials = [material];
     let input = PlaneRenderInput {
-        frame: rectangle.frame(),
+        frame: rectangle,
         epsilon: 0.1,
         alpha_cutoff: 0.5,
         width: 64,
@@ -79,8 +75,8 @@ fn a_plane_render_covers_its_faces_cuts_alpha_and_encodes_normal_and_height() {
 
     // Stacked in one submission under a wider rectangle with another camera, each rectangle
     // gets exactly the images it gets alone.
-    let wide = PlaneRectangle { origin: [-0.5, -0.25, 0.0], width: 3.0, height: 2.0, ..rectangle.clone() };
-    let second = PlaneRenderInput { frame: wide.frame(), width: 96, height: 64, ..input.clone() };
+    let wide = RectangleFrame { origin: [-0.5, -0.25, 0.0], width: 3.0, height: 2.0, ..rectangle };
+    let second = PlaneRenderInput { frame: wide, width: 96, height: 64, ..input.clone() };
     let stacked = gpu.render_rectangles(&[second.clone(), input.clone()]).expect("renders");
     assert_eq!(stacked.len(), 2);
     assert_eq!(stacked[1], images, "the first rectangle, second in the stack");

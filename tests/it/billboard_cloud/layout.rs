@@ -28,18 +28,18 @@ fn plane_rectangles_frame_every_face_of_their_plane() {
     let triangles: Vec<[u32; 3]> = quads.iter().flat_map(|q| [[q[0], q[1], q[2]], [q[0], q[2], q[3]]]).collect();
     let planes = select_planes(&positions, &triangles, &[], PlaneSettings { epsilon: 0.02, max_planes: None });
     let rectangles = plane_rectangles(&positions, &triangles, &planes);
-    let mut areas: Vec<f32> = rectangles.iter().map(|r| r.width * r.height).collect();
+    let mut areas: Vec<f32> = rectangles.iter().map(|r| r.frame.width * r.frame.height).collect();
     areas.sort_by(f32::total_cmp);
     for (area, expected) in areas.iter().zip([2.0, 2.0, 3.0, 3.0, 6.0, 6.0]) {
         assert!((area - expected).abs() < 1e-3, "areas {areas:?}");
     }
     for (plane, rectangle) in planes.planes.iter().zip(&rectangles) {
-        let (x, y, n) = (Vec3::from(rectangle.x_axis), Vec3::from(rectangle.y_axis), Vec3::from(rectangle.normal));
+        let (x, y, n) = (Vec3::from(rectangle.frame.x_axis), Vec3::from(rectangle.frame.y_axis), Vec3::from(rectangle.frame.normal));
         assert!((x.cross(y) - n).length() < 1e-4, "right-handed frame");
         for vertex in plane.faces.iter().flat_map(|&face| triangles[face as usize]) {
-            let local = Vec3::from(positions[vertex as usize]) - Vec3::from(rectangle.origin);
+            let local = Vec3::from(positions[vertex as usize]) - Vec3::from(rectangle.frame.origin);
             let (u, v) = (local.dot(x), local.dot(y));
-            assert!(u > -1e-3 && u < rectangle.width + 1e-3 && v > -1e-3 && v < rectangle.height + 1e-3, "inside: {u} {v}");
+            assert!(u > -1e-3 && u < rectangle.frame.width + 1e-3 && v > -1e-3 && v < rectangle.frame.height + 1e-3, "inside: {u} {v}");
         }
     }
 }
@@ -98,7 +98,7 @@ fn lod_obj_loads_back_with_every_quad_inside_its_atlas_placement() {
     let planes = select_planes(&positions, &triangles, &[], PlaneSettings { epsilon: 0.02, max_planes: None });
     let rectangles = plane_rectangles(&positions, &triangles, &planes);
     let settings = AtlasSettings { max_size: 256, padding: 4, power_of_two: true };
-    let layout = layout_rectangles(&rectangles.iter().map(|r| (r.width, r.height)).collect::<Vec<_>>(), &settings, None);
+    let layout = layout_rectangles(&rectangles.iter().map(|r| (r.frame.width, r.frame.height)).collect::<Vec<_>>(), &settings, None);
     let (obj, mtl) = lod_mesh(&rectangles, &layout, "box");
     assert!(mtl.contains("newmtl box") && mtl.contains("map_Kd albedo.png"));
     let (models, _) =

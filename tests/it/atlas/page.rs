@@ -71,3 +71,69 @@ fn trim_keeps_the_smallest_rectangle_with_any_alpha_and_where_it_was() {
     let opaque = Texture::constant(6, 3, [1, 2, 3, 255]);
     assert_eq!(crop(&opaque, opaque_bounds(&opaque)), opaque);
 }
+
+#[test]
+fn a_source_uv_through_the_table_lands_on_the_page_texel_of_that_source_texel() {
+    use cirrus::kinds::atlas::table::{uv_transform, AtlasEntry};
+    // Sprites with transparent borders (trimmed), some long enough to be turned.
+    let sprites: Vec<Texture> = [(40, 12, 3), (12, 50, 5), (30, 30, 0), (64, 9, 2), (7, 33, 1)]
+        .iter()
+        .enumerate()
+        .map(|(index, &(width, height, border))| {
+            let inner = noise(width - 2 * border, height - 2 * border, index as u32 + 10);
+            let mut pixels = vec![0u8; (width * height * 4) as usize];
+            for y in 0..inner.height {
+                for x in 0..inner.width {
+                    let at = (((y + border) * width + x + border) * 4) as usize;
+                    pixels[at..at + 4].copy_from_slice(&inner.texel(x, y));
+                }
+            }
+            Texture::new(width, height, pixels)
+        })
+        .collect();
+    let trims: Vec<TrimRect> = sprites.iter().map(opaque_bounds).collect();
+    let kept: Vec<Texture> = sprites.iter().zip(&trims).map(|(sprite, &trim)| crop(sprite, trim)).collect();
+    // Placed by hand, every other one turned, one after the other along the page.
+    let (page_width, page_height) = (256, 128);
+    let mut x = 4;
+    let placements: Vec<cirrus::packing::Placement> = kept
+        .iter()
+        .enumerate()
+        .map(|(index, texture)| {
+            let rotated = index % 2 == 1;
+            let placement = cirrus::packing::Placement { x, y: 4, width: texture.width, height: texture.height, rotated };
+            x += if rotated { texture.height } else { texture.width } + 8;
+            placement
+        })
+        .collect();
+    let entries: Vec<(&Texture, _)> = kept.iter().zip(&placements).map(|(texture, &placement)| (texture, placement)).collect();
+    let page = composite_page(page_width, page_height, &entries, 2);
+    for ((sprite, trim), placement) in sprites.iter().zip(&trims).zip(&placements) {
+        let source_size = [sprite.width, sprite.height];
+        let (uv_offset, uv_scale) = uv_transform(placement, *trim, source_size, (page_width, page_height));
+        let entry = AtlasEntry {
+            name: String::new(),
+            page: 0,
+            x: placement.x,
+            y: placement.y,
+            width: trim.width,
+            height: trim.height,
+            rotated: placement.rotated,
+            source_size,
+            trim_offset: [trim.x, trim.y],
+            uv_offset,
+            uv_scale,
+            aliases: Vec::new(),
+        };
+        for row in trim.y..trim.y + trim.height {
+            for column in trim.x..trim.x + trim.width {
+                // The texel's centre as a UV of the source (v up).
+                let uv = [(column as f64 + 0.5) / sprite.width as f64, 1.0 - (row as f64 + 0.5) / sprite.height as f64];
+                let [u, v] = entry.page_uv(uv);
+                let (x, y) = ((u * page_width as f64).floor() as u32, ((1.0 - v) * page_height as f64).floor() as u32);
+                assert_eq!((x, y), page_texel(placement, column - trim.x, row - trim.y), "{entry:?} texel ({column}, {row})");
+                assert_eq!(page.texel(x, y), sprite.texel(column, row));
+            }
+        }
+    }
+}

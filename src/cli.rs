@@ -212,9 +212,18 @@ fn check(pipeline: PathBuf) -> ExitCode {
             println!("{asset}: {diagnostic}");
         }
     }
+    // Warnings are printed but do not fail the check: the bake goes ahead past them.
     let assets = project.asset_list().len();
-    let failed = problems.iter().filter(|(_, diagnostics)| !diagnostics.is_empty()).count();
-    println!("{assets} assets checked, {failed} with problems");
+    let failed = problems.iter().filter(|(_, diagnostics)| diagnostics.iter().any(|diagnostic| !diagnostic.is_warning())).count();
+    let warned = problems
+        .iter()
+        .filter(|(_, diagnostics)| !diagnostics.is_empty() && diagnostics.iter().all(crate::diagnostic::Diagnostic::is_warning))
+        .count();
+    if warned == 0 {
+        println!("{assets} assets checked, {failed} with problems");
+    } else {
+        println!("{assets} assets checked, {failed} with problems, {warned} with warnings only");
+    }
     if failed == 0 {
         ExitCode::SUCCESS
     } else {

@@ -42,6 +42,12 @@ pub struct Diagnostic {
 }
 
 impl Diagnostic {
+    /// Whether this is a warning (a message marked `warning: `, as `cirrus check` reports what
+    /// does not stop a bake), not an error.
+    pub fn is_warning(&self) -> bool {
+        self.message.starts_with("warning: ")
+    }
+
     pub fn new(file: impl Into<PathBuf>, message: impl Into<String>) -> Diagnostic {
         Diagnostic { file: file.into(), position: None, message: message.into() }
     }

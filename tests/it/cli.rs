@@ -136,4 +136,16 @@ fn check_passes_on_the_bundled_pipeline_and_reports_each_kind_s_problems() {
         3 assets checked, 3 with problems
     "#]]
     .assert_eq(&String::from_utf8_lossy(&output.stdout));
+
+    // Warnings alone do not fail the check (the bake goes ahead past them).
+    project.write("assets/bark.png", crate::support::png_bytes(4, 4, &[90, 60, 30, 255].repeat(16)));
+    project.write("assets/leaf.png", crate::support::png_bytes(4, 4, &[30, 90, 30, 255].repeat(16)));
+    project.write("assets/broken.obj", "v 0 0 0\nv 1 0 0\nv 0 1 0\nf 1 2 3\n");
+    let output = project.run_cli(&["check"]);
+    expect![[r#"
+        tree: assets/tree.mtl: warning: material `bark`: texture "../../outside.png" leaves the source folder; ignored
+        3 assets checked, 0 with problems, 1 with warnings only
+    "#]]
+    .assert_eq(&String::from_utf8_lossy(&output.stdout));
+    assert_eq!(output.status.code(), Some(0));
 }

@@ -62,6 +62,17 @@ pub struct AtlasSettings {
     pub power_of_two: bool,
 }
 
+/// How an `Atlas` asset packs its textures onto pages.
+#[derive(Clone, Debug, PartialEq, Eq, Hash, Serialize)]
+pub struct PackSettings {
+    pub max_size: u32,
+    pub padding: u32,
+    pub rotate: bool,
+    pub trim: bool,
+    pub power_of_two: bool,
+    pub pages: u32,
+}
+
 #[derive(Clone, Debug, PartialEq, Eq, Hash, Serialize)]
 pub struct EncodeSettings {
     pub albedo: BlockFormat,
@@ -92,6 +103,7 @@ impl EncodeSettings {
 pub struct Settings {
     pub billboard: BillboardSettings,
     pub atlas: AtlasSettings,
+    pub pack: PackSettings,
     pub encode: EncodeSettings,
 }
 
@@ -100,6 +112,7 @@ impl Default for Settings {
         Settings {
             billboard: BillboardSettings { epsilon: 0.02, max_planes: None, texel_density: None, alpha_cutoff: 0.5 },
             atlas: AtlasSettings { max_size: 2048, padding: 4, power_of_two: true },
+            pack: PackSettings { max_size: 4096, padding: 4, rotate: true, trim: true, power_of_two: false, pages: 4 },
             encode: EncodeSettings {
                 albedo: BlockFormat::Bc7,
                 mra: BlockFormat::Bc1,
@@ -118,6 +131,7 @@ impl Default for Settings {
 pub enum AssetKindName {
     Material,
     BillboardCloud,
+    Atlas,
 }
 
 /// What an asset is made from.
@@ -127,6 +141,8 @@ pub enum AssetSource {
     Material { material: PathBuf },
     /// An OBJ mesh, relative to the source folder.
     BillboardCloud { mesh: PathBuf },
+    /// Textures (and meshes to remap) by globs over the source folder.
+    Atlas { textures: Vec<String>, meshes: Vec<String> },
 }
 
 impl AssetSource {
@@ -134,6 +150,7 @@ impl AssetSource {
         match self {
             AssetSource::Material { .. } => AssetKindName::Material,
             AssetSource::BillboardCloud { .. } => AssetKindName::BillboardCloud,
+            AssetSource::Atlas { .. } => AssetKindName::Atlas,
         }
     }
 
@@ -141,6 +158,17 @@ impl AssetSource {
         match self {
             AssetSource::Material { material } => material,
             AssetSource::BillboardCloud { mesh } => mesh,
+            // No one file: what concerns the whole asset is said of the source folder.
+            AssetSource::Atlas { .. } => Path::new(""),
+        }
+    }
+
+    /// The lists of globs (over the source folder) whose matches the asset reads, in the order
+    /// its kind takes them (an atlas: textures, then meshes); none for kinds that name files.
+    pub fn glob_lists(&self) -> Vec<&[String]> {
+        match self {
+            AssetSource::Atlas { textures, meshes } => vec![textures, meshes],
+            _ => Vec::new(),
         }
     }
 }
@@ -204,6 +232,8 @@ impl PipelineConfig {
         let source = match rule.kind {
             AssetKindName::Material => AssetSource::Material { material: relative.to_path_buf() },
             AssetKindName::BillboardCloud => AssetSource::BillboardCloud { mesh: relative.to_path_buf() },
+            // Refused when the pipeline is read: a rule makes one asset per file.
+            AssetKindName::Atlas => return None,
         };
         Some(AssetConfig { name, source, settings: self.defaults.clone() })
     }
@@ -254,7 +284,20 @@ mod raw {
         #[serde(default)]
         pub atlas: AtlasOverrides,
         #[serde(default)]
+        pub pack: PackOverrides,
+        #[serde(default)]
         pub encode: EncodeOverrides,
+    }
+
+    #[derive(Deserialize, Default, Clone)]
+    #[serde(deny_unknown_fields)]
+    pub struct PackOverrides {
+        pub max_size: Option<u32>,
+        pub padding: Option<u32>,
+        pub rotate: Option<bool>,
+        pub trim: Option<bool>,
+        pub power_of_two: Option<bool>,
+        pub pages: Option<u32>,
     }
 
     /// `Some(None)` is an explicit `None` in the file; `None` is "not given".
@@ -322,6 +365,16 @@ mod raw {
             #[serde(default)]
             encode: EncodeOverrides,
         },
+        Atlas {
+            name: String,
+            textures: Vec<String>,
+            #[serde(default)]
+            meshes: Vec<String>,
+            #[serde(default)]
+            pack: PackOverrides,
+            #[serde(default)]
+            encode: EncodeOverrides,
+        },
     }
 
     #[derive(Deserialize)]
@@ -330,6 +383,15 @@ mod raw {
         pub glob: String,
         pub kind: AssetKindName,
     }
+}
+
+/// A glob over paths relative to the source folder (`*` stops at `/`, `**` crosses folders).
+pub fn source_glob(glob: &str) -> Result<globset::GlobMatcher, String> {
+    globset::GlobBuilder::new(glob)
+        .literal_separator(true)
+        .build()
+        .map(|glob| glob.compile_matcher())
+        .map_err(|error| error.kind().to_string())
 }
 
 /// Largest `pipeline.ron` read.
@@ -447,12 +509,16 @@ impl Validator<'_> {
         let mut assets = Vec::new();
         let mut names = BTreeSet::new();
         for asset in &raw.assets {
-            let (name, path, overrides, kind) = match asset {
+            let default_pack = raw::PackOverrides::default();
+            let (name, path, (billboard, atlas, pack, encode), kind) = match asset {
                 raw::Asset::Material { name, material, billboard, atlas, encode } => {
-                    (name, material, (billboard, atlas, encode), AssetKindName::Material)
+                    (name, Some(material), (billboard.clone(), atlas.clone(), default_pack.clone(), encode), AssetKindName::Material)
                 }
                 raw::Asset::BillboardCloud { name, mesh, billboard, atlas, encode } => {
-                    (name, mesh, (billboard, atlas, encode), AssetKindName::BillboardCloud)
+                    (name, Some(mesh), (billboard.clone(), atlas.clone(), default_pack.clone(), encode), AssetKindName::BillboardCloud)
+                }
+                raw::Asset::Atlas { name, pack, encode, .. } => {
+                    (name, None, (Default::default(), Default::default(), pack.clone(), encode), AssetKindName::Atlas)
                 }
             };
             let anchor = self.offset_of_value(name, 0).unwrap_or(0);
@@ -481,11 +547,14 @@ impl Validator<'_> {
                     &format!("asset names `{other}` and `{name}` would share a folder: one lies inside the other"),
                 );
             }
-            let Some(relative) = self.source_path(path, anchor) else {
-                continue;
+            let relative = match path {
+                Some(path) => match self.source_path(path, anchor) {
+                    Some(relative) => Some(relative),
+                    None => continue,
+                },
+                None => None,
             };
-            let overrides =
-                raw::SettingsOverrides { billboard: overrides.0.clone(), atlas: overrides.1.clone(), encode: overrides.2.clone() };
+            let overrides = raw::SettingsOverrides { billboard, atlas, pack, encode: encode.clone() };
             let settings = self.merge_settings(&defaults, &overrides, anchor);
             if kind == AssetKindName::BillboardCloud {
                 // Each atlas surface goes through the texture tail: the same budget holds.
@@ -501,18 +570,41 @@ impl Validator<'_> {
                     self.error_at_value(name, anchor, &message);
                 }
             }
-            let source = match kind {
-                AssetKindName::Material => AssetSource::Material { material: relative },
-                AssetKindName::BillboardCloud => AssetSource::BillboardCloud { mesh: relative },
+            let source = match (asset, relative) {
+                (raw::Asset::Atlas { textures, meshes, .. }, _) => {
+                    if !meshes.is_empty() {
+                        // Not silently ignored: the remap is not written yet.
+                        self.error_at_key(
+                            "meshes",
+                            anchor,
+                            "Atlas `meshes` are not remapped by this version of cirrus yet: leave `meshes` out",
+                        );
+                    }
+                    if textures.is_empty() {
+                        self.error_at_value(name, anchor, &format!("asset `{name}`: an atlas needs at least one texture glob"));
+                    }
+                    for glob in textures.iter().chain(meshes) {
+                        if let Err(error) = source_glob(glob) {
+                            self.error_at_value(glob, anchor, &format!("bad glob: {error}"));
+                        }
+                    }
+                    AssetSource::Atlas { textures: textures.clone(), meshes: meshes.clone() }
+                }
+                (raw::Asset::Material { .. }, Some(relative)) => AssetSource::Material { material: relative },
+                (raw::Asset::BillboardCloud { .. }, Some(relative)) => AssetSource::BillboardCloud { mesh: relative },
+                _ => unreachable!("materials and billboard clouds name one file"),
             };
             assets.push(AssetConfig { name: name.clone(), source, settings });
         }
 
         let mut rules = Vec::new();
         for rule in &raw.rules {
-            match globset::GlobBuilder::new(&rule.glob).literal_separator(true).build() {
-                Ok(glob) => rules.push(Rule { glob: rule.glob.clone(), matcher: glob.compile_matcher(), kind: rule.kind }),
-                Err(error) => self.error_at_value(&rule.glob, 0, &format!("bad glob: {}", error.kind())),
+            if rule.kind == AssetKindName::Atlas {
+                self.error_at_value(&rule.glob, 0, "a rule makes one asset per file: an Atlas is listed under `assets` with its globs");
+            }
+            match source_glob(&rule.glob) {
+                Ok(matcher) => rules.push(Rule { glob: rule.glob.clone(), matcher, kind: rule.kind }),
+                Err(error) => self.error_at_value(&rule.glob, 0, &format!("bad glob: {error}")),
             }
         }
 
@@ -520,6 +612,22 @@ impl Validator<'_> {
             Ok(PipelineConfig { file: self.file.to_path_buf(), root, source, output, server, defaults, assets, rules, limits })
         } else {
             Err(ConfigError { diagnostics: self.diagnostics })
+        }
+    }
+
+    /// A page's `max_size` and `padding` (a billboard atlas, a texture atlas), checked.
+    fn page_size_overrides(&mut self, max_size: Option<u32>, padding: Option<u32>, anchor: usize, size: &mut u32, pad: &mut u32) {
+        if let Some(max_size) = max_size {
+            if !(16..=16384).contains(&max_size) || max_size % 4 != 0 {
+                self.error_at_key("max_size", anchor, "max_size must be a multiple of 4 between 16 and 16384");
+            }
+            *size = max_size;
+        }
+        if let Some(padding) = padding {
+            if padding > 64 {
+                self.error_at_key("padding", anchor, "padding must be at most 64 texels");
+            }
+            *pad = padding;
         }
     }
 
@@ -551,21 +659,21 @@ impl Validator<'_> {
             settings.billboard.alpha_cutoff = cutoff;
         }
         let atlas = &overrides.atlas;
-        if let Some(max_size) = atlas.max_size {
-            if !(16..=16384).contains(&max_size) || max_size % 4 != 0 {
-                self.error_at_key("max_size", anchor, "max_size must be a multiple of 4 between 16 and 16384");
-            }
-            settings.atlas.max_size = max_size;
-        }
-        if let Some(padding) = atlas.padding {
-            if padding > 64 {
-                self.error_at_key("padding", anchor, "padding must be at most 64 texels");
-            }
-            settings.atlas.padding = padding;
-        }
+        self.page_size_overrides(atlas.max_size, atlas.padding, anchor, &mut settings.atlas.max_size, &mut settings.atlas.padding);
         if let Some(power_of_two) = atlas.power_of_two {
             settings.atlas.power_of_two = power_of_two;
         }
+        let pack = &overrides.pack;
+        self.page_size_overrides(pack.max_size, pack.padding, anchor, &mut settings.pack.max_size, &mut settings.pack.padding);
+        if let Some(pages) = pack.pages {
+            if !(1..=64).contains(&pages) {
+                self.error_at_key("pages", anchor, "pages must be between 1 and 64");
+            }
+            settings.pack.pages = pages;
+        }
+        settings.pack.rotate = pack.rotate.unwrap_or(settings.pack.rotate);
+        settings.pack.trim = pack.trim.unwrap_or(settings.pack.trim);
+        settings.pack.power_of_two = pack.power_of_two.unwrap_or(settings.pack.power_of_two);
         let encode = &overrides.encode;
         let surfaces: [(&str, Option<BlockFormat>, &[BlockFormat], &mut BlockFormat); 4] = [
             ("albedo", encode.albedo, &[BlockFormat::Bc7, BlockFormat::Bc3, BlockFormat::Bc1], &mut settings.encode.albedo),

@@ -87,6 +87,11 @@ pub struct Asset {
     /// Every file read for this asset, by project-relative path.
     #[returns(ref)]
     pub files: Arc<BTreeMap<PathBuf, SourceFile>>,
+    /// For each glob list of the asset's source (`AssetSource::glob_lists`: kinds that name
+    /// their sources by glob), the files below the source folder that match it,
+    /// project-relative and sorted: the driver lists them.
+    #[returns(ref)]
+    pub listed: Arc<Vec<Vec<PathBuf>>>,
 }
 
 /// The input of one file the asset read (cuts off when other files join or leave the asset).

@@ -264,12 +264,27 @@ impl Project {
                 asset
             }
             None => {
-                let asset =
-                    Asset::new(&self.db, config.name.clone(), kind, source_root, main_file, config.settings.clone(), Arc::default());
+                let asset = Asset::new(
+                    &self.db,
+                    config.name.clone(),
+                    kind,
+                    source_root,
+                    main_file,
+                    config.settings.clone(),
+                    Arc::default(),
+                    Arc::default(),
+                );
                 self.assets.insert(config.name.clone(), asset);
                 asset
             }
         };
+        // Sources named by globs: listed on every build, so that new files join and deleted
+        // ones leave.
+        let listed: Vec<Vec<PathBuf>> =
+            config.source.glob_lists().into_iter().map(|globs| crate::sources::glob_matches(&self.config, globs)).collect();
+        if **asset.listed(&self.db) != listed {
+            asset.set_listed(&mut self.db).to(Arc::new(listed));
+        }
         for _ in 0..MAX_DISCOVERY_ROUNDS {
             // The files known so far are read first: what they say decides what else is read.
             let known: Vec<PathBuf> = asset.files(&self.db).keys().cloned().collect();
@@ -459,8 +474,7 @@ impl Project {
         assets
             .into_iter()
             .map(|asset| {
-                let main_file = self.config.source.join(asset.source.main_file());
-                let problems = AssetKind::of(&asset.source).check(&self.config, &main_file);
+                let problems = AssetKind::of(&asset.source).check(&self.config, &asset);
                 (asset.name, problems)
             })
             .chain(conflicts)

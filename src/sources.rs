@@ -81,6 +81,23 @@ pub fn rule_matches(config: &PipelineConfig) -> Vec<PathBuf> {
     if config.rules.is_empty() {
         return Vec::new();
     }
+    source_files_where(config, |relative| config.rules.iter().any(|rule| rule.matcher.is_match(relative)))
+}
+
+/// Files below the source folder that match one of `globs` (over paths relative to it),
+/// project-relative, sorted: the files an asset named by globs reads.
+pub fn glob_matches(config: &PipelineConfig, globs: &[String]) -> Vec<PathBuf> {
+    let matchers: Vec<globset::GlobMatcher> = globs.iter().filter_map(|glob| crate::config::source_glob(glob).ok()).collect();
+    if matchers.is_empty() {
+        return Vec::new();
+    }
+    let found = source_files_where(config, |relative| matchers.iter().any(|matcher| matcher.is_match(relative)));
+    found.into_iter().map(|relative| config.source.join(relative)).collect()
+}
+
+/// Files below the source folder (not below the output folder) for which `wanted` holds of
+/// their path relative to the source folder (`/`-separated), sorted. Links are not followed.
+fn source_files_where(config: &PipelineConfig, wanted: impl Fn(&Path) -> bool) -> Vec<PathBuf> {
     let source = config.source_dir();
     let output = config.output_dir();
     let mut found = Vec::new();
@@ -100,7 +117,7 @@ pub fn rule_matches(config: &PipelineConfig) -> Vec<PathBuf> {
                 }
             } else if let Ok(relative) = path.strip_prefix(&source) {
                 let relative = PathBuf::from(relative.to_string_lossy().replace('\\', "/"));
-                if config.rules.iter().any(|rule| rule.matcher.is_match(&relative)) {
+                if wanted(&relative) {
                     found.push(relative);
                 }
             }

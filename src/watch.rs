@@ -115,7 +115,18 @@ impl EventFilter {
         }
         let Ok(in_source) = path.strip_prefix(&self.source) else { return Relevance::Noise };
         let in_source = PathBuf::from(in_source.to_string_lossy().replace('\\', "/"));
-        if self.config.rules.iter().any(|rule| rule.matcher.is_match(&in_source)) {
+        // A file a rule or an asset's glob matches joins (or leaves) the pipeline.
+        let globbed = self
+            .config
+            .assets
+            .iter()
+            .flat_map(|asset| asset.source.glob_lists())
+            .flatten()
+            .any(|glob| crate::config::source_glob(glob).is_ok_and(|matcher| matcher.is_match(&in_source)));
+        // A new folder: files written into it before its watch was added send no event of their
+        // own, so assets that list by glob look again.
+        let new_folder = structural && path.is_dir() && self.config.assets.iter().any(|asset| !asset.source.glob_lists().is_empty());
+        if globbed || new_folder || self.config.rules.iter().any(|rule| rule.matcher.is_match(&in_source)) {
             Relevance::Files(vec![relative.to_path_buf()])
         } else {
             Relevance::Noise

@@ -7,7 +7,7 @@ use std::path::{Path, PathBuf};
 use std::sync::Arc;
 
 use crate::cache::CacheKey;
-use crate::config::{AssetSource, PipelineConfig};
+use crate::config::{AssetConfig, AssetSource, PipelineConfig};
 use crate::db::{Asset, Db, Stage, StageRun};
 use crate::diagnostic::Diagnostic;
 use crate::texture::tail::TailSettings;
@@ -18,6 +18,7 @@ pub mod material;
 pub mod billboard_cloud;
 pub mod atlas;
 
+use atlas::Atlas;
 use billboard_cloud::BillboardCloud;
 use material::Material;
 
@@ -46,7 +47,7 @@ pub trait Kind {
     fn outputs(db: &dyn Db, asset: Asset, output_folder: &Path, errors: &mut Vec<Diagnostic>, runs: &[StageRun]) -> AssetOutputs;
 
     /// `cirrus check`: the asset's sources validated without baking.
-    fn check(config: &PipelineConfig, main_file: &Path) -> Vec<Diagnostic>;
+    fn check(config: &PipelineConfig, asset: &AssetConfig) -> Vec<Diagnostic>;
 
     /// The image of one of the asset's tail surfaces.
     fn surface_image(db: &dyn Db, asset: Asset, surface: &SurfaceId) -> Result<Arc<Texture>, Diagnostic>;
@@ -71,6 +72,7 @@ pub trait Kind {
 pub enum AssetKind {
     Material,
     BillboardCloud,
+    Atlas,
 }
 
 impl AssetKind {
@@ -78,6 +80,7 @@ impl AssetKind {
         match source {
             AssetSource::Material { .. } => AssetKind::Material,
             AssetSource::BillboardCloud { .. } => AssetKind::BillboardCloud,
+            AssetSource::Atlas { .. } => AssetKind::Atlas,
         }
     }
 
@@ -85,6 +88,7 @@ impl AssetKind {
         match self {
             AssetKind::Material => Material::NAME,
             AssetKind::BillboardCloud => BillboardCloud::NAME,
+            AssetKind::Atlas => Atlas::NAME,
         }
     }
 
@@ -92,6 +96,7 @@ impl AssetKind {
         match self {
             AssetKind::Material => Material::files_to_read(db, asset),
             AssetKind::BillboardCloud => BillboardCloud::files_to_read(db, asset),
+            AssetKind::Atlas => Atlas::files_to_read(db, asset),
         }
     }
 
@@ -99,6 +104,7 @@ impl AssetKind {
         match self {
             AssetKind::Material => Material::first_jobs(db, asset),
             AssetKind::BillboardCloud => BillboardCloud::first_jobs(db, asset),
+            AssetKind::Atlas => Atlas::first_jobs(db, asset),
         }
     }
 
@@ -112,6 +118,7 @@ impl AssetKind {
             }
             (Task::Step(step, index), AssetKind::Material) => Material::run_step(db, job.asset, step, *index),
             (Task::Step(step, index), AssetKind::BillboardCloud) => BillboardCloud::run_step(db, job.asset, step, *index),
+            (Task::Step(step, index), AssetKind::Atlas) => Atlas::run_step(db, job.asset, step, *index),
         }
     }
 
@@ -119,6 +126,7 @@ impl AssetKind {
         match self {
             AssetKind::Material => Material::stage_instances(db, asset, output_folder, errors),
             AssetKind::BillboardCloud => BillboardCloud::stage_instances(db, asset, output_folder, errors),
+            AssetKind::Atlas => Atlas::stage_instances(db, asset, output_folder, errors),
         }
     }
 
@@ -126,13 +134,15 @@ impl AssetKind {
         match self {
             AssetKind::Material => Material::outputs(db, asset, output_folder, errors, runs),
             AssetKind::BillboardCloud => BillboardCloud::outputs(db, asset, output_folder, errors, runs),
+            AssetKind::Atlas => Atlas::outputs(db, asset, output_folder, errors, runs),
         }
     }
 
-    pub fn check(self, config: &PipelineConfig, main_file: &Path) -> Vec<Diagnostic> {
+    pub fn check(self, config: &PipelineConfig, asset: &AssetConfig) -> Vec<Diagnostic> {
         match self {
-            AssetKind::Material => Material::check(config, main_file),
-            AssetKind::BillboardCloud => BillboardCloud::check(config, main_file),
+            AssetKind::Material => Material::check(config, asset),
+            AssetKind::BillboardCloud => BillboardCloud::check(config, asset),
+            AssetKind::Atlas => Atlas::check(config, asset),
         }
     }
 
@@ -140,6 +150,7 @@ impl AssetKind {
         match self {
             AssetKind::Material => Material::surface_image(db, asset, surface),
             AssetKind::BillboardCloud => BillboardCloud::surface_image(db, asset, surface),
+            AssetKind::Atlas => Atlas::surface_image(db, asset, surface),
         }
     }
 
@@ -147,6 +158,7 @@ impl AssetKind {
         match self {
             AssetKind::Material => Material::tail_settings(db, asset, surface),
             AssetKind::BillboardCloud => BillboardCloud::tail_settings(db, asset, surface),
+            AssetKind::Atlas => Atlas::tail_settings(db, asset, surface),
         }
     }
 
@@ -154,6 +166,7 @@ impl AssetKind {
         match self {
             AssetKind::Material => Material::surface_parts_key(db, asset, surface),
             AssetKind::BillboardCloud => BillboardCloud::surface_parts_key(db, asset, surface),
+            AssetKind::Atlas => Atlas::surface_parts_key(db, asset, surface),
         }
     }
 
@@ -161,6 +174,7 @@ impl AssetKind {
         match self {
             AssetKind::Material => Material::surface_recipe_key(db, asset, surface),
             AssetKind::BillboardCloud => BillboardCloud::surface_recipe_key(db, asset, surface),
+            AssetKind::Atlas => Atlas::surface_recipe_key(db, asset, surface),
         }
     }
 }

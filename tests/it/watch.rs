@@ -511,3 +511,32 @@ fn the_viewer_keeps_the_last_good_lod_on_failure_and_reloads_on_a_texture_edit()
     let differing = first.pixels.chunks_exact(4).zip(second.pixels.chunks_exact(4)).filter(|(a, b)| a != b).count();
     assert!(differing > 100, "the reloaded bark shows in the screenshot ({differing} pixels differ)");
 }
+
+#[test]
+fn a_texture_added_under_an_atlas_glob_joins_the_atlas_while_watching_and_leaves_when_deleted() {
+    let project = TempProject::new(
+        r#"Pipeline(source: "assets", output: "baked", assets: [
+            Atlas(name: "icons", textures: ["icons/**/*.png"], pack: (max_size: 256)),
+        ])"#,
+    );
+    project.write("assets/icons/a.png", pattern_png(16, 16, 1));
+    let daemon = Daemon::start(&project);
+    let mut client = daemon.connect();
+    client.subscribe(Some(0));
+    let first = client.batch();
+    assert_eq!(first["failed"], serde_json::json!([]), "{first}");
+    let entries = |project: &TempProject| -> Vec<String> {
+        let table: Value = serde_json::from_slice(&project.read("baked/icons/atlas.json")).unwrap();
+        table["entries"].as_array().unwrap().iter().map(|entry| entry["name"].as_str().unwrap().to_string()).collect()
+    };
+    assert_eq!(entries(&project), ["icons/a.png"]);
+    // In a new folder, too: `**` crosses folders.
+    project.write("assets/icons/more/b.png", pattern_png(24, 8, 2));
+    let batch = client.batch();
+    assert!(changed_paths(&project, &batch).contains(&"baked/icons/atlas.json".to_string()), "{batch}");
+    assert_eq!(entries(&project), ["icons/a.png", "icons/more/b.png"]);
+    std::fs::remove_file(project.path("assets/icons/a.png")).unwrap();
+    let batch = client.batch();
+    assert_eq!(batch["failed"], serde_json::json!([]), "{batch}");
+    assert_eq!(entries(&project), ["icons/more/b.png"]);
+}

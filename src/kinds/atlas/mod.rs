@@ -1,7 +1,200 @@
-//! The `Atlas` kind (DESIGN §3.5), being built: so far its pure steps (`page`: trim, page
-//! composite; `table`: `atlas.json` and the UV transform) over the shared packer
-//! (`packing::max_rects`) and fill (`texture::fill`). The `Kind` answers, inputs by glob and the
-//! mesh remap come next (issue 14).
+//! The `Atlas` kind (DESIGN §3.5): textures named by globs, trimmed, equal ones merged, packed
+//! onto pages (`packing::max_rects`), each page composited (`page`) and sent through the shared
+//! tail as `atlas.ktx2` / `atlas_N.ktx2`, with the table `atlas.json` (`table`). Being built
+//! (issue 14): the stable layout hint, the mesh remap and a recipe key come next.
 
 pub mod page;
+pub mod queries;
 pub mod table;
+
+use std::path::{Path, PathBuf};
+use std::sync::Arc;
+
+use crate::cache::CacheKey;
+use crate::config::{AssetConfig, AssetSource, PipelineConfig};
+use crate::db::{Asset, Db, StageRun, DECODE};
+use crate::diagnostic::{display_path, Diagnostic};
+use crate::kinds::{check_texture_file, tail_instances, AssetOutputs, Job, Kind, Read, StageInstance, SurfaceId, Task};
+use crate::texture::tail::TailSettings;
+use crate::texture::{SurfaceKind, Texture};
+
+use queries::{atlas_layout, atlas_page, atlas_texture_files, page_group, page_label, page_recipe_key, page_stem, COMPOSITE, LAYOUT};
+use table::{uv_transform, AtlasEntry, AtlasPage, AtlasTable};
+
+pub struct Atlas;
+
+/// The tail surface of page `page`.
+fn page_surface(page: u32) -> SurfaceId {
+    SurfaceId { group: page_group(page), surface: SurfaceKind::Albedo }
+}
+
+/// The page a surface of this kind is.
+fn surface_page(surface: &SurfaceId) -> Option<u32> {
+    surface.group.strip_prefix("page")?.parse().ok()
+}
+
+/// A page's texture and preview files.
+fn page_files(output_folder: &Path, page: u32, container: crate::config::Container) -> [PathBuf; 2] {
+    let stem = page_stem(page);
+    [output_folder.join(format!("{stem}.{}", container.extension())), output_folder.join(format!("{stem}.png"))]
+}
+
+impl Kind for Atlas {
+    const NAME: &'static str = "Atlas";
+
+    fn files_to_read(db: &dyn Db, asset: Asset) -> Vec<PathBuf> {
+        asset.listed(db).iter().flatten().cloned().collect()
+    }
+
+    fn first_jobs(db: &dyn Db, asset: Asset) -> Vec<Job> {
+        vec![Job { asset, task: Task::Step("layout", 0), after: 0, label: asset.name(db).clone() }]
+    }
+
+    fn run_step(db: &dyn Db, asset: Asset, step: &'static str, _index: u32) -> Result<Vec<Job>, Diagnostic> {
+        match step {
+            "layout" => {
+                let layout = atlas_layout(db, asset)?;
+                let name = asset.name(db);
+                Ok((0..layout.pages.len() as u32)
+                    .map(|page| Job { asset, task: Task::Surface(page_surface(page)), after: 1, label: page_surface(page).label(name) })
+                    .collect())
+            }
+            other => unreachable!("the atlas kind schedules no step `{other}`"),
+        }
+    }
+
+    fn stage_instances(db: &dyn Db, asset: Asset, output_folder: &Path, errors: &[Diagnostic]) -> Vec<StageInstance> {
+        let name = asset.name(db);
+        let report = output_folder.join("report.json");
+        let mut pack = StageInstance::new(LAYOUT, name, name);
+        let mut instances = Vec::new();
+        for path in atlas_texture_files(db, asset) {
+            let label = display_path(path);
+            let mut decode = StageInstance::new(DECODE, &label, &label);
+            decode.reads.push(Read::File(path.clone()));
+            decode.shared = true;
+            pack.reads.push(Read::Stage(DECODE, label));
+            instances.push(decode);
+        }
+        pack.writes = vec![output_folder.join("atlas.json"), report.clone()];
+        let container = asset.settings(db).encode.container;
+        let pages = atlas_layout(db, asset).map_or(0, |layout| layout.pages.len() as u32);
+        let mut tails = Vec::new();
+        for page in 0..pages {
+            let composite = StageInstance::new(COMPOSITE, page_label(name, page), page_group(page)).reads_stage(&pack);
+            let [mips, encode, mut write] =
+                tail_instances(name, &page_surface(page), &composite, page_files(output_folder, page, container));
+            write.writes.push(report.clone());
+            tails.extend([composite, mips, encode, write]);
+        }
+        instances.insert(0, pack);
+        instances.extend(tails);
+        for instance in &mut instances {
+            instance.failed = !errors.is_empty();
+        }
+        instances
+    }
+
+    fn outputs(db: &dyn Db, asset: Asset, output_folder: &Path, errors: &mut Vec<Diagnostic>, _runs: &[StageRun]) -> AssetOutputs {
+        if !errors.is_empty() {
+            return AssetOutputs::default();
+        }
+        match atlas_outputs(db, asset, output_folder) {
+            Ok(outputs) => outputs,
+            Err(diagnostic) => {
+                errors.push(diagnostic);
+                AssetOutputs::default()
+            }
+        }
+    }
+
+    /// Every texture the globs match is readable and within the limits; globs that match
+    /// nothing are an error.
+    fn check(config: &PipelineConfig, asset: &AssetConfig) -> Vec<Diagnostic> {
+        let AssetSource::Atlas { textures, .. } = &asset.source else { return Vec::new() };
+        let files = crate::sources::glob_matches(config, textures);
+        if files.is_empty() {
+            return vec![Diagnostic::new(&config.source, format!("atlas `{}`: no texture matches {textures:?}", asset.name))];
+        }
+        files.iter().filter_map(|path| check_texture_file(config, path).err().map(|message| Diagnostic::new(path, message))).collect()
+    }
+
+    fn surface_image(db: &dyn Db, asset: Asset, surface: &SurfaceId) -> Result<Arc<Texture>, Diagnostic> {
+        let page =
+            surface_page(surface).ok_or_else(|| Diagnostic::new(asset.source_root(db), format!("no atlas page {}", surface.group)))?;
+        atlas_page(db, asset, page)
+    }
+
+    fn tail_settings(db: &dyn Db, asset: Asset, _surface: &SurfaceId) -> Result<TailSettings, Diagnostic> {
+        let encode = &asset.settings(db).encode;
+        Ok(TailSettings {
+            surface: SurfaceKind::Albedo,
+            format: encode.albedo,
+            quality: encode.quality,
+            mips: encode.mips,
+            alpha_cutoff: None,
+            container: encode.container,
+            zstd: encode.zstd,
+        })
+    }
+
+    fn surface_recipe_key(db: &dyn Db, asset: Asset, surface: &SurfaceId) -> Result<Option<CacheKey>, Diagnostic> {
+        Ok(surface_page(surface).map(|page| page_recipe_key(db, asset, page)))
+    }
+}
+
+/// The pages, their previews, `atlas.json` and the report.
+fn atlas_outputs(db: &dyn Db, asset: Asset, output_folder: &Path) -> Result<AssetOutputs, Diagnostic> {
+    let layout = atlas_layout(db, asset)?;
+    let container = asset.settings(db).encode.container;
+    let mut outputs = AssetOutputs::default();
+    let mut pages = Vec::new();
+    let mut surfaces = Vec::new();
+    for (page, &(width, height)) in layout.pages.iter().enumerate() {
+        let page = page as u32;
+        let artifacts = crate::kinds::tail_queries::surface_artifacts(db, asset, page_surface(page))?;
+        let [texture_path, preview_path] = page_files(output_folder, page, container);
+        pages.push(AtlasPage { file: display_path(texture_path.strip_prefix(output_folder).unwrap_or(&texture_path)), width, height });
+        outputs.files.push((texture_path, artifacts.texture_file.clone()));
+        outputs.files.push((preview_path, artifacts.preview_png.clone()));
+        surfaces.push(artifacts.info.clone());
+    }
+    let mut entries: Vec<AtlasEntry> = layout
+        .entries
+        .iter()
+        .zip(&layout.placements)
+        .map(|(entry, place)| {
+            let placement = place.placement;
+            let page_size = layout.pages[place.page as usize];
+            let (uv_offset, uv_scale) = uv_transform(&placement, entry.trim, entry.source_size, page_size);
+            AtlasEntry {
+                name: entry.name.clone(),
+                page: place.page,
+                x: placement.x,
+                y: placement.y,
+                width: placement.width,
+                height: placement.height,
+                rotated: placement.rotated,
+                source_size: entry.source_size,
+                trim_offset: [entry.trim.x, entry.trim.y],
+                uv_offset,
+                uv_scale,
+                aliases: entry.aliases.clone(),
+            }
+        })
+        .collect();
+    entries.sort_by(|a, b| a.name.cmp(&b.name));
+    let table = AtlasTable { pages, entries };
+    outputs.files.push((output_folder.join("atlas.json"), table.to_json().into_bytes().into()));
+    let report = serde_json::json!({
+        "asset": asset.name(db),
+        "kind": Atlas::NAME,
+        "entries": layout.entries.len(),
+        "textures": atlas_texture_files(db, asset).len(),
+        "pages": layout.pages,
+        "occupancy": (layout.occupancy() * 1e4).round() / 1e4,
+        "surfaces": surfaces,
+    });
+    outputs.report = Some(serde_json::to_vec_pretty(&report).expect("reports serialise"));
+    Ok(outputs)
+}

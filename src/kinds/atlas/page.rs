@@ -57,7 +57,8 @@ pub fn page_texel(placement: &Placement, column: u32, row: u32) -> (u32, u32) {
 
 /// A `width` × `height` page of `entries` (each texture with its placement, the texture's size
 /// being the placement's): each entry copied into place, the `padding` texels around it the
-/// nearest texel of its own edge, every other texel that of the nearest entry or padding texel.
+/// nearest texel of its own edge, every other texel the colour of the nearest entry or padding
+/// texel (with alpha 0 when any entry has transparency).
 pub fn composite_page(width: u32, height: u32, entries: &[(&Texture, Placement)], padding: u32) -> Texture {
     let (page_width, page_height) = (width as usize, height as usize);
     let mut pixels = vec![0u8; page_width * page_height * 4];
@@ -100,7 +101,17 @@ pub fn composite_page(width: u32, height: u32, entries: &[(&Texture, Placement)]
     if sources.0.is_empty() {
         return Texture::new(width, height, pixels);
     }
-    let filled: Vec<u8> =
-        sources.0.iter().flat_map(|&from| <[u8; 4]>::try_from(&pixels[from as usize * 4..][..4]).expect("four bytes")).collect();
+    // Beyond the entries and their padding nothing is drawn: transparent when any entry has
+    // transparency (so previews and blending show nothing there), opaque otherwise (so an
+    // opaque atlas stays opaque down its mips).
+    let transparent = pixels.chunks_exact(4).zip(&covered).any(|(texel, &covered)| covered && texel[3] < 255);
+    let mut filled = Vec::with_capacity(pixels.len());
+    for (index, &from) in sources.0.iter().enumerate() {
+        let mut texel: [u8; 4] = pixels[from as usize * 4..][..4].try_into().expect("four bytes");
+        if transparent && !covered[index] {
+            texel[3] = 0;
+        }
+        filled.extend_from_slice(&texel);
+    }
     Texture::new(width, height, filled)
 }

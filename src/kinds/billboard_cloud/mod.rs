@@ -22,7 +22,7 @@ use std::path::{Path, PathBuf};
 use std::sync::Arc;
 
 use crate::cache::CacheKey;
-use crate::config::PipelineConfig;
+use crate::config::{AssetConfig, PipelineConfig};
 use crate::db::{Asset, Db, StageRun, DECODE};
 use crate::diagnostic::{display_path, Diagnostic};
 use crate::kinds::{as_warning, check_texture_file, tail_instances, AssetOutputs, Job, Kind, Read, StageInstance, SurfaceId, Task};
@@ -199,7 +199,8 @@ impl Kind for BillboardCloud {
 
     /// The mesh loads with its material libraries, and every texture its materials name is
     /// readable and within the limits; warnings are reported as problems too.
-    fn check(config: &PipelineConfig, main_file: &Path) -> Vec<Diagnostic> {
+    fn check(config: &PipelineConfig, asset: &AssetConfig) -> Vec<Diagnostic> {
+        let main_file = &config.source.join(asset.source.main_file());
         let read = |path: &Path| crate::sources::read_source(&config.root, &config.source, path);
         let contents = match read(main_file) {
             Ok(contents) => contents,

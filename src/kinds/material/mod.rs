@@ -14,7 +14,7 @@ use std::sync::Arc;
 use serde::Serialize;
 
 use crate::cache::CacheKey;
-use crate::config::PipelineConfig;
+use crate::config::{AssetConfig, PipelineConfig};
 use crate::db::{Asset, Db, StageRun, DECODE};
 use crate::diagnostic::{display_path, Diagnostic};
 use crate::kinds::{as_warning, check_texture_file, tail_instances, AssetOutputs, Job, Kind, Read, StageInstance, SurfaceId, Task};
@@ -136,7 +136,8 @@ impl Kind for Material {
 
     /// The material file parses, and every texture it names is readable and within the limits;
     /// warnings are reported as problems too.
-    fn check(config: &PipelineConfig, main_file: &Path) -> Vec<Diagnostic> {
+    fn check(config: &PipelineConfig, asset: &AssetConfig) -> Vec<Diagnostic> {
+        let main_file = &config.source.join(asset.source.main_file());
         let contents = match crate::sources::read_source(&config.root, &config.source, main_file) {
             Ok(contents) => contents,
             Err(error) => return vec![Diagnostic::new(main_file, error)],

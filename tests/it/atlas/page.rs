@@ -43,12 +43,14 @@ fn every_entry_reads_back_from_its_place_and_its_padding_repeats_its_own_edge() 
             assert_eq!(page.texel(right, placement.y - step), page.texel(right, placement.y));
         }
     }
-    // No texel outside the entries and their padding is a colour none of them has.
-    let mut known: std::collections::HashSet<[u8; 4]> = std::collections::HashSet::new();
+    // No texel outside the entries and their padding is a colour none of them has, and there
+    // alpha is 0 (these entries have transparency).
+    let mut known: std::collections::HashSet<[u8; 3]> = std::collections::HashSet::new();
     for texture in &textures {
-        known.extend(texture.pixels.chunks_exact(4).map(|texel| <[u8; 4]>::try_from(texel).unwrap()));
+        known.extend(texture.pixels.chunks_exact(4).map(|texel| <[u8; 3]>::try_from(&texel[..3]).unwrap()));
     }
-    assert!(page.pixels.chunks_exact(4).all(|texel| known.contains(texel)), "the fill copies entry texels only");
+    assert!(page.pixels.chunks_exact(4).all(|texel| known.contains(&texel[..3])), "the fill copies entry colours only");
+    assert_eq!(page.texel(width - 1, height - 1)[3], 0, "the page's far corner is fill, transparent");
 }
 
 #[test]

@@ -1,0 +1,126 @@
+//! Atlas assets end to end: `atlas.json` as DESIGN §3.5 has it, every entry read back from the
+//! decoded page at its rectangle, aliases, new files joining by glob, and bad inputs.
+
+use cirrus::config::BlockFormat;
+use cirrus::texture::quality::decode_blocks;
+
+use crate::support::{build, decode_png, ktx2_level, pattern_png, png_bytes, read_ktx2, TempProject};
+
+fn atlas_project() -> TempProject {
+    let project = TempProject::new(
+        r#"Pipeline(source: "assets", output: "baked", assets: [
+            Atlas(name: "ui", textures: ["ui/*.png", "extra/big.png"], pack: (max_size: 512, padding: 4)),
+        ])"#,
+    );
+    for (index, (width, height)) in [(64, 32), (20, 72), (36, 36), (120, 16)].into_iter().enumerate() {
+        project.write(&format!("assets/ui/icon{index}.png"), pattern_png(width, height, index as u32 + 1));
+    }
+    // The same pixels under another name: one rectangle, two names.
+    project.write("assets/ui/copy.png", pattern_png(36, 36, 3));
+    // A sprite with a transparent border of 3 texels.
+    let mut sprite = vec![0u8; 30 * 20 * 4];
+    for y in 3..17 {
+        for x in 3..27 {
+            sprite[(y * 30 + x) * 4..][..4].copy_from_slice(&[200, (x * 8) as u8, (y * 12) as u8, 255]);
+        }
+    }
+    project.write("assets/ui/sprite.png", png_bytes(30, 20, &sprite));
+    project
+}
+
+#[test]
+fn every_entry_reads_back_from_the_page_at_its_rectangle_and_aliases_share_one() {
+    let project = atlas_project();
+    let summary = build(&mut project.open());
+    assert!(summary.all_ok(), "{}", summary.to_text());
+    let table: serde_json::Value = serde_json::from_slice(&project.read("baked/ui/atlas.json")).unwrap();
+    let entries = table["entries"].as_array().unwrap();
+    let names: Vec<&str> = entries.iter().map(|entry| entry["name"].as_str().unwrap()).collect();
+    assert_eq!(names, ["ui/copy.png", "ui/icon0.png", "ui/icon1.png", "ui/icon3.png", "ui/sprite.png"]);
+    let copy = &entries[0];
+    assert_eq!(copy["aliases"], serde_json::json!(["ui/icon2.png"]));
+    let sprite = &entries[4];
+    assert_eq!((sprite["source_size"].clone(), sprite["trim_offset"].clone()), (serde_json::json!([30, 20]), serde_json::json!([3, 3])));
+    assert_eq!((sprite["width"].as_u64(), sprite["height"].as_u64()), (Some(24), Some(14)));
+    // The page decoded from its blocks: each entry where the table says (BC7 on patterns).
+    let page = &table["pages"][0];
+    assert_eq!(page["file"], "atlas.ktx2");
+    let bytes = project.read("baked/ui/atlas.ktx2");
+    let ktx2 = read_ktx2(&bytes);
+    assert_eq!((ktx2.width as u64, ktx2.height as u64), (page["width"].as_u64().unwrap(), page["height"].as_u64().unwrap()));
+    let decoded = decode_blocks(BlockFormat::Bc7, &ktx2_level(&bytes, &ktx2, 0), ktx2.width, ktx2.height);
+    for entry in entries {
+        let name = entry["name"].as_str().unwrap();
+        let source = decode_png(&project.read(&format!("assets/{name}")));
+        let [x, y, width, height] = ["x", "y", "width", "height"].map(|key| entry[key].as_u64().unwrap() as u32);
+        let [trim_x, trim_y] = [0, 1].map(|axis| entry["trim_offset"][axis].as_u64().unwrap() as u32);
+        let rotated = entry["rotated"].as_bool().unwrap();
+        let (mut squared, mut count) = (0u64, 0u64);
+        for row in 0..height {
+            for column in 0..width {
+                let (page_x, page_y) = if rotated { (x + height - 1 - row, y + column) } else { (x + column, y + row) };
+                let (a, b) = (source.texel(column + trim_x, row + trim_y), decoded.texel(page_x, page_y));
+                squared += (0..4).map(|channel| (a[channel] as i64 - b[channel] as i64).pow(2) as u64).sum::<u64>();
+                count += 4;
+            }
+        }
+        let psnr = 10.0 * (255.0f64 * 255.0 / (squared as f64 / count as f64).max(1e-9)).log10();
+        assert!(psnr > 30.0, "{name}: {psnr:.1} dB");
+    }
+}
+
+#[test]
+fn a_new_file_matching_the_glob_joins_the_atlas_and_a_deleted_one_leaves() {
+    let project = atlas_project();
+    let mut cirrus = project.open();
+    assert!(build(&mut cirrus).all_ok());
+    project.write("assets/extra/big.png", pattern_png(40, 40, 9));
+    assert!(build(&mut cirrus).all_ok());
+    let table: serde_json::Value = serde_json::from_slice(&project.read("baked/ui/atlas.json")).unwrap();
+    assert!(table["entries"].as_array().unwrap().iter().any(|entry| entry["name"] == "extra/big.png"));
+    std::fs::remove_file(project.path("assets/ui/icon0.png")).unwrap();
+    assert!(build(&mut cirrus).all_ok());
+    let table: serde_json::Value = serde_json::from_slice(&project.read("baked/ui/atlas.json")).unwrap();
+    assert!(!table["entries"].as_array().unwrap().iter().any(|entry| entry["name"] == "ui/icon0.png"));
+}
+
+#[test]
+fn a_texture_larger_than_a_page_and_an_unreadable_one_are_named() {
+    let project = atlas_project();
+    project.write("assets/extra/big.png", pattern_png(600, 8, 9));
+    let summary = build(&mut project.open());
+    let ui = &summary.assets[0];
+    assert!(
+        ui.errors.iter().any(|error| error.message.contains("extra/big.png") && error.message.contains("larger than a page")),
+        "{}",
+        summary.to_text()
+    );
+    project.write("assets/extra/big.png", b"not a png");
+    let summary = build(&mut project.open());
+    assert!(summary.assets[0].errors.iter().any(|error| error.file == "assets/extra/big.png"), "{}", summary.to_text());
+}
+
+#[test]
+fn a_same_size_edit_recomposites_its_page_and_leaves_the_table_alone() {
+    let project = atlas_project();
+    let mut cirrus = project.open();
+    assert!(build(&mut cirrus).all_ok());
+    cirrus.take_executed_stages();
+    let table = project.read("baked/ui/atlas.json");
+    let written = std::fs::metadata(project.path("baked/ui/atlas.json")).unwrap().modified().unwrap();
+    project.write("assets/ui/icon1.png", pattern_png(20, 72, 77));
+    assert!(build(&mut cirrus).all_ok());
+    expect_test::expect![[r#"
+        [
+            "composite(ui/page0)",
+            "decode(assets/ui/icon1.png)",
+            "encode(ui/page0/albedo)",
+            "layout(ui)",
+            "mips(ui/page0/albedo)",
+            "write(ui/page0/albedo)",
+        ]
+    "#]]
+    .assert_debug_eq(&cirrus.take_executed_stages());
+    assert_eq!(project.read("baked/ui/atlas.json"), table, "nothing moved");
+    assert_eq!(std::fs::metadata(project.path("baked/ui/atlas.json")).unwrap().modified().unwrap(), written, "not rewritten");
+}

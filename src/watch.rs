@@ -54,8 +54,16 @@ struct EventFilter {
     output: PathBuf,
     source: PathBuf,
     config: PipelineConfig,
+    /// The globs of assets that name their sources by glob (compiled once per configuration).
+    asset_globs: Vec<globset::GlobMatcher>,
     /// Every source file read so far, project-relative.
     sources: BTreeSet<PathBuf>,
+}
+
+/// The compiled globs of every asset that names its sources by glob.
+fn asset_globs(config: &PipelineConfig) -> Vec<globset::GlobMatcher> {
+    let globs = config.assets.iter().flat_map(|asset| asset.source.glob_lists()).flatten();
+    globs.filter_map(|glob| crate::config::source_glob(glob).ok()).collect()
 }
 
 /// What an event on a path means to the daemon.
@@ -116,16 +124,10 @@ impl EventFilter {
         let Ok(in_source) = path.strip_prefix(&self.source) else { return Relevance::Noise };
         let in_source = PathBuf::from(in_source.to_string_lossy().replace('\\', "/"));
         // A file a rule or an asset's glob matches joins (or leaves) the pipeline.
-        let globbed = self
-            .config
-            .assets
-            .iter()
-            .flat_map(|asset| asset.source.glob_lists())
-            .flatten()
-            .any(|glob| crate::config::source_glob(glob).is_ok_and(|matcher| matcher.is_match(&in_source)));
+        let globbed = self.asset_globs.iter().any(|matcher| matcher.is_match(&in_source));
         // A new folder: files written into it before its watch was added send no event of their
         // own, so assets that list by glob look again.
-        let new_folder = structural && path.is_dir() && self.config.assets.iter().any(|asset| !asset.source.glob_lists().is_empty());
+        let new_folder = structural && !self.asset_globs.is_empty() && path.is_dir();
         if globbed || new_folder || self.config.rules.iter().any(|rule| rule.matcher.is_match(&in_source)) {
             Relevance::Files(vec![relative.to_path_buf()])
         } else {
@@ -180,6 +182,7 @@ pub fn watch(settings: &WatchSettings) -> Result<(), WatchError> {
         root: root.clone(),
         pipeline: pipeline.clone(),
         config: config.clone(),
+        asset_globs: asset_globs(&config),
         sources: BTreeSet::new(),
     }));
     let cancel = CancelFlag::default();
@@ -244,6 +247,7 @@ pub fn watch(settings: &WatchSettings) -> Result<(), WatchError> {
                         filter.output = root.join(&new_config.output);
                         filter.source = root.join(&new_config.source);
                         filter.config = new_config.clone();
+                        filter.asset_globs = asset_globs(&new_config);
                     }
                     project.reconfigure(new_config);
                     project.invalidate_all_sources();

@@ -1,7 +1,7 @@
 //! The `Atlas` kind (DESIGN §3.5): textures named by globs, trimmed, equal ones merged, packed
 //! onto pages (`packing::max_rects`), each page composited (`page`) and sent through the shared
 //! tail as `atlas.ktx2` / `atlas_N.ktx2`, with the table `atlas.json` (`table`). Being built
-//! (issue 14): the stable layout hint, the mesh remap and a recipe key come next.
+//! (issue 14): the previous layout as a hint (`pack_pages_keeping`) and the mesh remap come next.
 
 pub mod page;
 pub mod queries;

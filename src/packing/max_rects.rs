@@ -78,7 +78,7 @@ pub struct PagePlacement {
 }
 
 /// The pages (width, height in texels) and where each input rectangle went, in input order.
-#[derive(Clone, Debug, PartialEq, Eq)]
+#[derive(Clone, Debug, PartialEq, Eq, serde::Serialize, serde::Deserialize)]
 pub struct PagePacking {
     pub pages: Vec<(u32, u32)>,
     pub placements: Vec<PagePlacement>,
@@ -299,7 +299,6 @@ fn smallest_page(cells: &[Cell], settings: &PageSettings) -> Option<Packed> {
         return None;
     }
     let variants = pack_variants();
-    // Every variant on a strip of the first width, then the three best on wider strips.
     // The smallest page area found so far: a strip whose cells already need more is given up
     // (a page of equal area finishes, so ties are broken the same whichever thread was first).
     let smallest_area = AtomicU64::new(u64::MAX);
@@ -310,8 +309,12 @@ fn smallest_page(cells: &[Cell], settings: &PageSettings) -> Option<Packed> {
             place.y + if place.rotated { cell.width } else { cell.height }
         });
         let height = round(height.max().unwrap_or(1).max(1));
+        if height > max_blocks {
+            // Rounded up past the largest page: not a page, so not a bound on the others.
+            return None;
+        }
         smallest_area.fetch_min(width as u64 * height as u64, Ordering::Relaxed);
-        (height <= max_blocks).then_some(Packed { width, height, places })
+        Some(Packed { width, height, places })
     };
     let better = |a: &Packed, b: &Packed| {
         let key = |packed: &Packed| (packed.width as u64 * packed.height as u64, packed.width.abs_diff(packed.height));

@@ -55,7 +55,7 @@ impl Kind for Atlas {
             "layout" => {
                 let layout = atlas_layout(db, asset)?;
                 let name = asset.name(db);
-                Ok((0..layout.pages.len() as u32)
+                Ok((0..layout.packing.pages.len() as u32)
                     .map(|page| Job { asset, task: Task::Surface(page_surface(page)), after: 1, label: page_surface(page).label(name) })
                     .collect())
             }
@@ -78,7 +78,7 @@ impl Kind for Atlas {
         }
         pack.writes = vec![output_folder.join("atlas.json"), report.clone()];
         let container = asset.settings(db).encode.container;
-        let pages = atlas_layout(db, asset).map_or(0, |layout| layout.pages.len() as u32);
+        let pages = atlas_layout(db, asset).map_or(0, |layout| layout.packing.pages.len() as u32);
         let mut tails = Vec::new();
         for page in 0..pages {
             let composite = StageInstance::new(COMPOSITE, page_label(name, page), page_group(page)).reads_stage(&pack);
@@ -150,7 +150,7 @@ fn atlas_outputs(db: &dyn Db, asset: Asset, output_folder: &Path) -> Result<Asse
     let mut outputs = AssetOutputs::default();
     let mut pages = Vec::new();
     let mut surfaces = Vec::new();
-    for (page, &(width, height)) in layout.pages.iter().enumerate() {
+    for (page, &(width, height)) in layout.packing.pages.iter().enumerate() {
         let page = page as u32;
         let artifacts = crate::kinds::tail_queries::surface_artifacts(db, asset, page_surface(page))?;
         let [texture_path, preview_path] = page_files(output_folder, page, container);
@@ -162,10 +162,10 @@ fn atlas_outputs(db: &dyn Db, asset: Asset, output_folder: &Path) -> Result<Asse
     let mut entries: Vec<AtlasEntry> = layout
         .entries
         .iter()
-        .zip(&layout.placements)
+        .zip(&layout.packing.placements)
         .map(|(entry, place)| {
             let placement = place.placement;
-            let page_size = layout.pages[place.page as usize];
+            let page_size = layout.packing.pages[place.page as usize];
             let (uv_offset, uv_scale) = uv_transform(&placement, entry.trim, entry.source_size, page_size);
             AtlasEntry {
                 name: entry.name.clone(),
@@ -191,8 +191,8 @@ fn atlas_outputs(db: &dyn Db, asset: Asset, output_folder: &Path) -> Result<Asse
         "kind": Atlas::NAME,
         "entries": layout.entries.len(),
         "textures": atlas_texture_files(db, asset).len(),
-        "pages": layout.pages,
-        "occupancy": (layout.occupancy() * 1e4).round() / 1e4,
+        "pages": layout.packing.pages,
+        "occupancy": (layout.packing.occupancy() * 1e4).round() / 1e4,
         "surfaces": surfaces,
     });
     outputs.report = Some(serde_json::to_vec_pretty(&report).expect("reports serialise"));

@@ -8,12 +8,12 @@ use std::sync::Arc;
 use crate::cache::CacheKey;
 use crate::db::{asset_file, cached_json, decoded_texture, key_with_files, stage_key, timed, Asset, Db, Stage};
 use crate::diagnostic::{display_path, Diagnostic};
-use crate::packing::max_rects::{pack_pages, PagePacking, PagePlacement, PageSettings};
+use crate::packing::max_rects::{pack_pages, PagePacking, PageSettings};
 use crate::texture::Texture;
 
 use super::page::{composite_page, crop, opaque_bounds, TrimRect};
 
-pub const LAYOUT: Stage = Stage { name: "layout", version: 1 };
+pub const LAYOUT: Stage = Stage { name: "layout", version: 2 };
 pub const COMPOSITE: Stage = Stage { name: "composite", version: 1 };
 
 /// One rectangle of the atlas: the texture it shows (its file, trimmed to `trim`), and the other
@@ -29,20 +29,12 @@ pub struct LayoutEntry {
     pub trim: TrimRect,
 }
 
-/// The entries, the pages and where each entry went: all the table needs, kept in the
-/// persistent cache so that a restart with nothing changed decodes nothing.
+/// The entries and where each went (`packing.placements` in entry order): all the table needs,
+/// kept in the persistent cache so that a restart with nothing changed decodes nothing.
 #[derive(Clone, Debug, PartialEq, serde::Serialize, serde::Deserialize)]
 pub struct AtlasLayout {
     pub entries: Vec<LayoutEntry>,
-    pub pages: Vec<(u32, u32)>,
-    pub placements: Vec<PagePlacement>,
-}
-
-impl AtlasLayout {
-    /// Content texels over page texels.
-    pub fn occupancy(&self) -> f64 {
-        PagePacking { pages: self.pages.clone(), placements: self.placements.clone() }.occupancy()
-    }
+    pub packing: PagePacking,
 }
 
 /// The asset's texture files (matches of its `textures` globs), project-relative, sorted.
@@ -116,7 +108,7 @@ fn compute_atlas_layout(db: &dyn Db, asset: Asset) -> Result<AtlasLayout, Diagno
         };
         Diagnostic::new(&source_root, format!("atlas `{}`: {named}", asset.name(db)))
     })?;
-    Ok(AtlasLayout { entries, pages: packing.pages, placements: packing.placements })
+    Ok(AtlasLayout { entries, packing })
 }
 
 /// A texture of the atlas, decoded.
@@ -129,11 +121,11 @@ fn entry_texture(db: &dyn Db, asset: Asset, path: &PathBuf) -> Result<Arc<Textur
 #[salsa::tracked(returns(clone))]
 pub fn atlas_page(db: &dyn Db, asset: Asset, page: u32) -> Result<Arc<Texture>, Diagnostic> {
     let layout = atlas_layout(db, asset)?;
-    let Some(&(width, height)) = layout.pages.get(page as usize) else {
+    let Some(&(width, height)) = layout.packing.pages.get(page as usize) else {
         return Err(Diagnostic::new(asset.source_root(db), format!("atlas page {page} no longer exists")));
     };
     let mut kept = Vec::new();
-    for (entry, place) in layout.entries.iter().zip(&layout.placements).filter(|(_, place)| place.page == page) {
+    for (entry, place) in layout.entries.iter().zip(&layout.packing.placements).filter(|(_, place)| place.page == page) {
         kept.push((crop(&*entry_texture(db, asset, &entry.file)?, entry.trim), place.placement));
     }
     let entries: Vec<(&Texture, crate::packing::Placement)> = kept.iter().map(|(texture, placement)| (texture, *placement)).collect();

@@ -50,15 +50,16 @@
 //!
 //! Memos are not content addresses but an identity's last result, overwritten on every run:
 //! they only let the next run skip work, and what they hold is checked against the current
-//! inputs (group keys, settings, texels) before any of it is reused. Plane images and the last
-//! encodings are stored this way because they are large (on the oak, 36 MB of images in one
-//! entry instead of 1,245, which made a full bake 1.0 s slower; about 26 MB per atlas surface,
-//! kept for BC7 only, the one slow encoder).
+//! inputs (group keys, settings, block fingerprints) before any of it is reused. Plane images
+//! and the last encodings are stored this way because they are large (on the oak, 37 MB of
+//! images in one entry per material set instead of 1,245 entries, which made a full bake 1.0 s
+//! slower; 16 MB per atlas surface, kept for BC7 only, the one slow encoder).
 //!
 //! Blobs of images are zstd-compressed (level 1, in 4 MiB frames compressed and decompressed in
-//! parallel straight into each blob's buffer; surface files are compressed already and stored as
-//! they are); entries of 1 MiB or more, and memos gathered from shared images, are made and
-//! written on a thread of their own, and the build waits for them before it reports.
+//! parallel straight into each blob's buffer; surface files and encoding memos are stored as
+//! they are); entries are streamed to their file with the checksum computed on the way; entries
+//! of 1 MiB or more, and memos gathered from shared images, are made and written on a thread of
+//! their own, and the build waits for them before it reports.
 //!
 //! Bump an entry's version (or a stage's) whenever its result changes for the same parts.
 

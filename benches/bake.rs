@@ -47,6 +47,9 @@ fn main() {
             bench_watch(&corpus);
         }
     }
+    if corpus.join("pbr").is_dir() && wanted("atlas") {
+        bench_atlas(&corpus);
+    }
 }
 
 /// The page packer on 1,000 textures of mixed sizes (1 to 512 texels a side, mostly small, any
@@ -306,6 +309,140 @@ fn tree_project(corpus: &Path, assets: &str) -> tempfile::TempDir {
     }
     std::fs::write(dir.path().join("pipeline.ron"), format!(r#"Pipeline(source: "assets", output: "baked", assets: [{assets}])"#)).unwrap();
     dir
+}
+
+/// Runs `cirrus build --summary json` in `folder` as a child process: wall seconds, peak
+/// resident memory in MiB, and the summary.
+fn build_process(folder: &Path) -> (f64, f64, serde_json::Value) {
+    let start = Instant::now();
+    let mut child = std::process::Command::new(env!("CARGO_BIN_EXE_cirrus"))
+        .args(["build", "--summary", "json"])
+        .current_dir(folder)
+        .stdout(std::process::Stdio::piped())
+        .stderr(std::process::Stdio::null())
+        .spawn()
+        .expect("run cirrus");
+    let status_file = format!("/proc/{}/status", child.id());
+    let mut stdout = child.stdout.take().expect("stdout");
+    let reader = std::thread::spawn(move || {
+        let mut bytes = Vec::new();
+        std::io::Read::read_to_end(&mut stdout, &mut bytes).expect("summary");
+        bytes
+    });
+    let mut peak_kib = 0u64;
+    while child.try_wait().expect("child").is_none() {
+        if let Ok(status) = std::fs::read_to_string(&status_file) {
+            if let Some(line) = status.lines().find(|line| line.starts_with("VmHWM:")) {
+                peak_kib = peak_kib.max(line.split_whitespace().nth(1).and_then(|kib| kib.parse().ok()).unwrap_or(0));
+            }
+        }
+        std::thread::sleep(std::time::Duration::from_millis(5));
+    }
+    let seconds = start.elapsed().as_secs_f64();
+    let summary = serde_json::from_slice(&reader.join().expect("reader")).expect("summary JSON");
+    (seconds, peak_kib as f64 / 1024.0, summary)
+}
+
+/// How many stage instances ran, per stage, in an asset's summary.
+fn stages_that_ran(asset: &serde_json::Value) -> std::collections::BTreeMap<String, usize> {
+    let mut ran = std::collections::BTreeMap::new();
+    for stage in asset["stages"].as_array().expect("stages").iter().filter(|stage| stage["status"] == "ran") {
+        *ran.entry(stage["stage"].as_str().expect("stage name").to_string()).or_default() += 1;
+    }
+    ran
+}
+
+/// Turns one texel of a texture file red-ish (`step` picks the shade), keeping its size.
+fn edit_one_texel(path: &Path, step: u8) {
+    let mut image = image::open(path).expect("texture").into_rgba8();
+    image.get_pixel_mut(10, 10).0 = [255, step.wrapping_mul(50), 0, 255];
+    image.save(path).expect("save texture");
+}
+
+/// A texture atlas of the corpus's PBR sets and the flight helmet's maps (48 files, 8 of 1024²
+/// and the rest 512², the helmet's maps equal to the sets' and so aliases) onto 4096² pages:
+/// the full bake and a one-texture edit, each as a separate process, then in process.
+fn bench_atlas(corpus: &Path) {
+    let dir = tempfile::tempdir().expect("temporary folder");
+    for folder in ["pbr", "meshes/flight_helmet"] {
+        for entry in walk_files(&corpus.join(folder)) {
+            let relative = entry.strip_prefix(corpus).unwrap();
+            if matches!(relative.extension().and_then(|e| e.to_str()), Some("png" | "jpg")) {
+                let target = dir.path().join("assets").join(relative);
+                std::fs::create_dir_all(target.parent().unwrap()).unwrap();
+                std::fs::copy(&entry, target).unwrap();
+            }
+        }
+    }
+    std::fs::write(
+        dir.path().join("pipeline.ron"),
+        r#"Pipeline(source: "assets", output: "baked", assets: [
+            Atlas(name: "props", textures: ["pbr/**/*.png", "pbr/**/*.jpg", "meshes/flight_helmet/*.png"], pack: (max_size: 4096)),
+        ])"#,
+    )
+    .unwrap();
+    let (full, peak, _) = build_process(dir.path());
+    let report: serde_json::Value = serde_json::from_slice(&std::fs::read(dir.path().join("baked/props/report.json")).unwrap()).unwrap();
+    println!(
+        "atlas: {} textures, {} entries → pages {} occupancy {}: full bake (process) {:.2} s, peak memory {:.0} MiB",
+        report["textures"], report["entries"], report["pages"], report["occupancy"], full, peak
+    );
+    println!("atlas: full bake stage ms {}", report["stage_ms"]);
+    let edited = dir.path().join("assets/pbr/flighthelmet_rubberwood/albedo.png");
+    edit_one_texel(&edited, 0);
+    let (edit, _, summary) = build_process(dir.path());
+    println!(
+        "atlas: one-texture edit as a separate process: {:.0} ms vs full bake {:.0} ms: {:.1} % (bar ≤ 10 %); stages that ran: {:?}",
+        edit * 1e3,
+        full * 1e3,
+        100.0 * edit / full,
+        stages_that_ran(&summary["assets"][0])
+    );
+
+    let mut project = Project::open(
+        load_pipeline(&dir.path().join("pipeline.ron")).unwrap(),
+        ProjectOptions { persistent_cache: false, ..Default::default() },
+    );
+    let start = Instant::now();
+    project.build(&BuildOptions::default(), &|_| {}).unwrap();
+    let full = start.elapsed().as_secs_f64();
+    let mut edits = Vec::new();
+    let mut ran = None;
+    for step in 1..6u8 {
+        edit_one_texel(&edited, step);
+        let start = Instant::now();
+        let built = project.build(&BuildOptions::default(), &|_| {}).unwrap();
+        edits.push(start.elapsed().as_secs_f64());
+        ran.get_or_insert_with(|| stages_that_ran(&serde_json::to_value(&built.assets[0]).expect("summary")));
+    }
+    let mut sorted = edits.clone();
+    sorted.sort_by(f64::total_cmp);
+    println!(
+        "atlas: one-texture edit in process, median of 5: {:.0} ms vs full bake {:.0} ms: {:.1} % (bar ≤ 10 %); all {:?} ms; stages that ran first: {:?}",
+        sorted[2] * 1e3,
+        full * 1e3,
+        100.0 * sorted[2] / full,
+        edits.iter().map(|seconds| (seconds * 1e3).round() as u32).collect::<Vec<_>>(),
+        ran.expect("five edits")
+    );
+}
+
+/// Every file under a folder, recursively, sorted.
+fn walk_files(folder: &Path) -> Vec<std::path::PathBuf> {
+    let mut files = Vec::new();
+    let mut pending = vec![folder.to_path_buf()];
+    while let Some(folder) = pending.pop() {
+        for entry in std::fs::read_dir(&folder).expect("corpus folder").flatten() {
+            let path = entry.path();
+            if path.is_dir() {
+                pending.push(path);
+            } else {
+                files.push(path);
+            }
+        }
+    }
+    files.sort();
+    files
 }
 
 /// Billboard clouds: the oak's full bake (child process: wall time, peak memory, stage

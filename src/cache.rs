@@ -134,6 +134,12 @@ impl KeyPart for u32 {
     }
 }
 
+impl KeyPart for u64 {
+    fn add_to(&self, key: CacheKeyBuilder) -> CacheKeyBuilder {
+        key.bytes(&self.to_le_bytes())
+    }
+}
+
 impl KeyPart for i32 {
     fn add_to(&self, key: CacheKeyBuilder) -> CacheKeyBuilder {
         key.bytes(&self.to_le_bytes())

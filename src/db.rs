@@ -3,6 +3,7 @@
 //! stage, the boundary to the persistent cache (`cached_json`, key helpers), and the database
 //! with its run log and the previous encodings that let a surface's next encode reuse blocks.
 
+use std::any::Any;
 use std::collections::{BTreeMap, HashMap};
 use std::fmt;
 use std::path::PathBuf;
@@ -13,7 +14,6 @@ use crate::cache::{CacheEntry, CacheKey, CacheKeyBuilder, DiskCache};
 use crate::config::Settings;
 use crate::diagnostic::{display_path, Diagnostic};
 use crate::kinds::AssetKind;
-use crate::texture::tail::PreviousEncoding;
 use crate::texture::{decode_texture, Texture};
 
 /// The bytes of a source file and their blake3 hash. Equality is by hash.
@@ -135,9 +135,9 @@ struct Logs {
 pub trait Db: salsa::Database {
     fn disk_cache(&self) -> Option<&DiskCache>;
     fn record_run(&self, run: StageRun);
-    /// The last encoding of the surface labelled `label` in this process.
-    fn previous_encoding(&self, label: &str) -> Option<PreviousEncoding>;
-    fn remember_encoding(&self, label: &str, encoding: PreviousEncoding);
+    /// What a stage kept of its last run in this process under `name` (see [`recall`]).
+    fn recalled(&self, name: &str) -> Option<Arc<dyn Any + Send + Sync>>;
+    fn remember(&self, name: &str, value: Arc<dyn Any + Send + Sync>);
 }
 
 #[salsa::db]
@@ -146,12 +146,12 @@ pub struct Database {
     storage: salsa::Storage<Self>,
     cache: Option<DiskCache>,
     logs: Arc<Logs>,
-    encodings: Arc<Mutex<HashMap<String, PreviousEncoding>>>,
+    memos: Arc<Mutex<HashMap<String, Arc<dyn Any + Send + Sync>>>>,
 }
 
 impl Database {
     pub fn new(cache: Option<DiskCache>) -> Database {
-        Database { storage: salsa::Storage::default(), cache, logs: Arc::default(), encodings: Arc::default() }
+        Database { storage: salsa::Storage::default(), cache, logs: Arc::default(), memos: Arc::default() }
     }
 
     /// The stage bodies that ran since the last call, with their durations.
@@ -173,13 +173,25 @@ impl Db for Database {
         self.logs.runs.lock().expect("log lock").push(run);
     }
 
-    fn previous_encoding(&self, label: &str) -> Option<PreviousEncoding> {
-        self.encodings.lock().expect("encodings lock").get(label).cloned()
+    fn recalled(&self, name: &str) -> Option<Arc<dyn Any + Send + Sync>> {
+        self.memos.lock().expect("memo lock").get(name).cloned()
     }
 
-    fn remember_encoding(&self, label: &str, encoding: PreviousEncoding) {
-        self.encodings.lock().expect("encodings lock").insert(label.to_string(), encoding);
+    fn remember(&self, name: &str, value: Arc<dyn Any + Send + Sync>) {
+        self.memos.lock().expect("memo lock").insert(name.to_string(), value);
     }
+}
+
+/// What a stage kept of its last run in this process (its last encoding, layout or page),
+/// by a name of its choosing. Salsa does not track these memos: a stage reads one to do less
+/// work for the same result, or (the atlas layout) as the hint its design asks for.
+pub fn recall<T: Any + Send + Sync>(db: &dyn Db, name: &str) -> Option<Arc<T>> {
+    db.recalled(name)?.downcast::<T>().ok()
+}
+
+/// Keeps `value` for the next run of the stage that names it `name` (see [`recall`]).
+pub fn remember<T: Any + Send + Sync>(db: &dyn Db, name: &str, value: Arc<T>) {
+    db.remember(name, value);
 }
 
 /// Runs a stage body, timing it and recording the run under `label`.

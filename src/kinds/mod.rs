@@ -314,3 +314,14 @@ pub fn check_texture_file(config: &PipelineConfig, path: &Path) -> Result<(), St
 pub fn as_warning(diagnostic: &Diagnostic) -> Diagnostic {
     Diagnostic { message: format!("warning: {}", diagnostic.message), ..diagnostic.clone() }
 }
+
+/// Milliseconds each stage of an asset spent in this build (runs labelled by the asset's name
+/// or below it, cache hits left out), for its report.
+pub fn asset_stage_ms<'a>(asset_name: &str, runs: &'a [StageRun]) -> std::collections::BTreeMap<&'a str, f64> {
+    let mut stage_ms = std::collections::BTreeMap::new();
+    let below = format!("{asset_name}/");
+    for run in runs.iter().filter(|run| !run.from_cache && (run.label == asset_name || run.label.starts_with(&below))) {
+        *stage_ms.entry(run.stage).or_insert(0.0) += (run.ms * 10.0).round() / 10.0;
+    }
+    stage_ms
+}

@@ -7,7 +7,7 @@
 use std::sync::Arc;
 
 use crate::cache::{CacheEntry, CacheKey, CacheKeyBuilder};
-use crate::db::{load_cached, record_cache_hit, store_cached, store_cached_in_background, timed, Asset, Db, Stage};
+use crate::db::{load_cached, recall, record_cache_hit, remember, store_cached, store_cached_in_background, timed, Asset, Db, Stage};
 use crate::diagnostic::Diagnostic;
 use crate::kinds::SurfaceId;
 use crate::texture::fingerprint::BlockFingerprints;
@@ -67,7 +67,7 @@ pub fn surface_mips(db: &dyn Db, asset: Asset, surface: SurfaceId) -> Result<Arc
     let settings = mip_step_settings(db, asset, surface.clone())?;
     let label = surface.label(asset.name(db));
     let previous = previous_encoding(db, &label);
-    Ok(Arc::new(timed(db, MIPS, &label, || tail_mips(&image, settings, previous.as_ref()))))
+    Ok(Arc::new(timed(db, MIPS, &label, || tail_mips(&image, settings, previous.as_deref()))))
 }
 
 /// The blocks and their PSNR (stage `encode`), re-encoding only the blocks that changed.
@@ -77,13 +77,13 @@ pub fn surface_blocks(db: &dyn Db, asset: Asset, surface: SurfaceId) -> Result<A
     let (format, quality) = encode_step_settings(db, asset, surface.clone())?;
     let label = surface.label(asset.name(db));
     let previous = previous_encoding(db, &label);
-    let encoded = timed(db, ENCODE, &label, || tail_encode(&mips, surface.surface, format, quality, previous.as_ref()));
-    let remembered = PreviousEncoding::of(&mips, &encoded);
+    let encoded = timed(db, ENCODE, &label, || tail_encode(&mips, surface.surface, format, quality, previous.as_deref()));
+    let remembered = Arc::new(PreviousEncoding::of(&mips, &encoded));
     if memo_worth_storing(format) {
         let memo = remembered.clone();
         store_cached_in_background(db, ENCODING_MEMO, encoding_memo_key(&label), move || encoding_entry(&memo));
     }
-    db.remember_encoding(&label, remembered);
+    remember(db, &encoding_memo_name(&label), remembered);
     Ok(Arc::new(encoded))
 }
 
@@ -229,13 +229,18 @@ pub fn load_previous_encoding(db: &dyn Db, asset: Asset, surface: &SurfaceId) {
 }
 
 /// The surface's last encoding: from this process, else from the memo on disk.
-fn previous_encoding(db: &dyn Db, label: &str) -> Option<PreviousEncoding> {
-    if let Some(previous) = db.previous_encoding(label) {
+fn previous_encoding(db: &dyn Db, label: &str) -> Option<Arc<PreviousEncoding>> {
+    if let Some(previous) = recall(db, &encoding_memo_name(label)) {
         return Some(previous);
     }
-    let previous = load_cached(db, ENCODING_MEMO, encoding_memo_key(label), encoding_from_entry)?;
-    db.remember_encoding(label, previous.clone());
+    let previous = Arc::new(load_cached(db, ENCODING_MEMO, encoding_memo_key(label), encoding_from_entry)?);
+    remember(db, &encoding_memo_name(label), previous.clone());
     Some(previous)
+}
+
+/// The in-process memo's name for a surface's last encoding.
+fn encoding_memo_name(label: &str) -> String {
+    format!("{ENCODING_MEMO}:{label}")
 }
 
 fn encoding_entry(previous: &PreviousEncoding) -> CacheEntry {

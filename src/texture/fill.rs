@@ -70,3 +70,22 @@ pub fn texel_sources(width: u32, height: u32, covered: impl IntoIterator<Item = 
     }
     TexelSources((0..height).flat_map(|row| source[(row + 1) * stride + 1..(row + 1) * stride + 1 + width].iter().copied()).collect())
 }
+
+/// The fill itself: every texel of a `width`-wide RGBA8 image takes the values of the texel
+/// `sources` names in `drawn` (rows in parallel); with `clear_filled_alpha`, texels that are not
+/// their own source get alpha 0 (nothing is drawn there).
+pub fn fill_from_sources(drawn: &[u8], width: u32, sources: &TexelSources, clear_filled_alpha: bool) -> Vec<u8> {
+    let mut pixels = vec![0u8; drawn.len()];
+    let row = width as usize * 4;
+    pixels.par_chunks_mut(row.max(4)).enumerate().for_each(|(y, row_pixels)| {
+        let first = y * width as usize;
+        for (x, texel) in row_pixels.chunks_exact_mut(4).enumerate() {
+            let from = sources.0[first + x] as usize;
+            texel.copy_from_slice(&drawn[from * 4..][..4]);
+            if clear_filled_alpha && from != first + x {
+                texel[3] = 0;
+            }
+        }
+    });
+    pixels
+}

@@ -1,7 +1,8 @@
 //! The `Atlas` kind (DESIGN §3.5): textures named by globs, trimmed, equal ones merged, packed
 //! onto pages (`packing::max_rects`), each page composited (`page`) and sent through the shared
-//! tail as `atlas.ktx2` / `atlas_N.ktx2`, with the table `atlas.json` (`table`). Being built
-//! (issue 14): the previous layout as a hint (`pack_pages_keeping`) and the mesh remap come next.
+//! tail as `atlas.ktx2` / `atlas_N.ktx2`, with the table `atlas.json` (`table`). The last layout
+//! is the packer's hint (`pack_pages_keeping`), so an edit moves nothing; the last page is the
+//! composite's start, so an edit re-composites its own rectangle.
 
 pub mod page;
 pub mod queries;
@@ -18,7 +19,10 @@ use crate::kinds::{check_texture_file, tail_instances, AssetOutputs, Job, Kind, 
 use crate::texture::tail::TailSettings;
 use crate::texture::{SurfaceKind, Texture};
 
-use queries::{atlas_layout, atlas_page, atlas_texture_files, page_group, page_label, page_recipe_key, page_stem, COMPOSITE, LAYOUT};
+use queries::{
+    atlas_layout, atlas_layout_and_change, atlas_page, atlas_texture_files, page_group, page_label, page_recipe_key, page_stem, COMPOSITE,
+    LAYOUT, TRIM,
+};
 use table::{uv_transform, AtlasEntry, AtlasPage, AtlasTable};
 
 pub struct Atlas;
@@ -73,15 +77,23 @@ impl Kind for Atlas {
             let mut decode = StageInstance::new(DECODE, &label, &label);
             decode.reads.push(Read::File(path.clone()));
             decode.shared = true;
-            pack.reads.push(Read::Stage(DECODE, label));
-            instances.push(decode);
+            let mut trim = StageInstance::new(TRIM, &label, &label).reads_stage(&decode);
+            trim.shared = true;
+            pack = pack.reads_stage(&trim);
+            instances.extend([decode, trim]);
         }
         pack.writes = vec![output_folder.join("atlas.json"), report.clone()];
         let container = asset.settings(db).encode.container;
-        let pages = atlas_layout(db, asset).map_or(0, |layout| layout.packing.pages.len() as u32);
+        let layout = atlas_layout(db, asset).ok();
+        let pages = layout.as_ref().map_or(0, |layout| layout.packing.pages.len() as u32);
         let mut tails = Vec::new();
         for page in 0..pages {
-            let composite = StageInstance::new(COMPOSITE, page_label(name, page), page_group(page)).reads_stage(&pack);
+            // A page reads the layout, and the texels of its own entries only.
+            let mut composite = StageInstance::new(COMPOSITE, page_label(name, page), page_group(page)).reads_stage(&pack);
+            let layout = layout.as_ref().expect("pages come from the layout");
+            for (entry, _) in layout.entries.iter().zip(&layout.packing.placements).filter(|(_, place)| place.page == page) {
+                composite.reads.push(Read::Stage(DECODE, display_path(&entry.file)));
+            }
             let [mips, encode, mut write] =
                 tail_instances(name, &page_surface(page), &composite, page_files(output_folder, page, container));
             write.writes.push(report.clone());
@@ -95,11 +107,11 @@ impl Kind for Atlas {
         instances
     }
 
-    fn outputs(db: &dyn Db, asset: Asset, output_folder: &Path, errors: &mut Vec<Diagnostic>, _runs: &[StageRun]) -> AssetOutputs {
+    fn outputs(db: &dyn Db, asset: Asset, output_folder: &Path, errors: &mut Vec<Diagnostic>, runs: &[StageRun]) -> AssetOutputs {
         if !errors.is_empty() {
             return AssetOutputs::default();
         }
-        match atlas_outputs(db, asset, output_folder) {
+        match atlas_outputs(db, asset, output_folder, runs) {
             Ok(outputs) => outputs,
             Err(diagnostic) => {
                 errors.push(diagnostic);
@@ -139,13 +151,14 @@ impl Kind for Atlas {
     }
 
     fn surface_recipe_key(db: &dyn Db, asset: Asset, surface: &SurfaceId) -> Result<Option<CacheKey>, Diagnostic> {
-        Ok(surface_page(surface).map(|page| page_recipe_key(db, asset, page)))
+        surface_page(surface).map(|page| page_recipe_key(db, asset, page)).transpose()
     }
 }
 
 /// The pages, their previews, `atlas.json` and the report.
-fn atlas_outputs(db: &dyn Db, asset: Asset, output_folder: &Path) -> Result<AssetOutputs, Diagnostic> {
-    let layout = atlas_layout(db, asset)?;
+fn atlas_outputs(db: &dyn Db, asset: Asset, output_folder: &Path, runs: &[StageRun]) -> Result<AssetOutputs, Diagnostic> {
+    let laid_out = atlas_layout_and_change(db, asset)?;
+    let (layout, change) = (&laid_out.0, &laid_out.1);
     let container = asset.settings(db).encode.container;
     let mut outputs = AssetOutputs::default();
     let mut pages = Vec::new();
@@ -193,7 +206,9 @@ fn atlas_outputs(db: &dyn Db, asset: Asset, output_folder: &Path) -> Result<Asse
         "textures": atlas_texture_files(db, asset).len(),
         "pages": layout.packing.pages,
         "occupancy": (layout.packing.occupancy() * 1e4).round() / 1e4,
+        "layout": change,
         "surfaces": surfaces,
+        "stage_ms": crate::kinds::asset_stage_ms(asset.name(db), runs),
     });
     outputs.report = Some(serde_json::to_vec_pretty(&report).expect("reports serialise"));
     Ok(outputs)

@@ -3,6 +3,7 @@
 //! clamp of its own edge texels, the rest of the page the nearest entry texel).
 
 use crate::packing::Placement;
+use crate::texture::fill::{fill_from_sources, texel_sources, TexelSources};
 use crate::texture::Texture;
 
 /// The part of a texture an entry keeps: `x`, `y` is the trim offset inside the source.
@@ -55,63 +56,109 @@ pub fn page_texel(placement: &Placement, column: u32, row: u32) -> (u32, u32) {
     }
 }
 
+/// What the composite knows of one entry of a page: where it lies, what its kept texels are
+/// (a blake3 hash: the composite redoes only entries whose hash changed), and whether any of
+/// them is translucent (which decides the fill's alpha).
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub struct PageEntry {
+    pub placement: Placement,
+    pub kept_hash: [u8; 32],
+    pub translucent: bool,
+}
+
 /// A `width` × `height` page of `entries` (each texture with its placement, the texture's size
 /// being the placement's): each entry copied into place, the `padding` texels around it the
 /// nearest texel of its own edge, every other texel the colour of the nearest entry or padding
 /// texel (with alpha 0 when any entry has transparency).
 pub fn composite_page(width: u32, height: u32, entries: &[(&Texture, Placement)], padding: u32) -> Texture {
-    let (page_width, page_height) = (width as usize, height as usize);
-    let mut pixels = vec![0u8; page_width * page_height * 4];
-    let mut covered = vec![false; page_width * page_height];
+    composite_page_keeping_sources(width, height, entries, padding).0
+}
+
+/// [`composite_page`], also giving where each texel took its colour from, so that a later
+/// [`recomposite_page`] of the same placements needs no new search.
+pub fn composite_page_keeping_sources(width: u32, height: u32, entries: &[(&Texture, Placement)], padding: u32) -> (Texture, TexelSources) {
+    let mut pixels = vec![0u8; width as usize * height as usize * 4];
     for (texture, placement) in entries {
-        debug_assert_eq!((texture.width, texture.height), (placement.width, placement.height));
-        for row in 0..texture.height {
-            for column in 0..texture.width {
-                let (x, y) = page_texel(placement, column, row);
-                let index = y as usize * page_width + x as usize;
-                let source = (row as usize * texture.width as usize + column as usize) * 4;
-                pixels[index * 4..][..4].copy_from_slice(&texture.pixels[source..source + 4]);
-                covered[index] = true;
-            }
+        paste_entry(&mut pixels, width, height, texture, placement, padding);
+    }
+    let placements: Vec<Placement> = entries.iter().map(|(_, placement)| *placement).collect();
+    let sources = page_texel_sources(width, height, &placements, padding);
+    let transparent = entries.iter().any(|(texture, _)| texture.pixels.chunks_exact(4).any(|texel| texel[3] < 255));
+    (fill_page(&pixels, width, height, &sources, transparent), sources)
+}
+
+/// A page again after some of its entries' texels changed, their placements not: `previous`
+/// (the last composite of the same placements) with the `changed` entries (index into
+/// `entries`, texture) put back and the fill redone from `sources` (of the same placements).
+pub fn recomposite_page(
+    previous: &Texture,
+    sources: &TexelSources,
+    entries: &[PageEntry],
+    changed: &[(usize, &Texture)],
+    padding: u32,
+) -> Texture {
+    let mut pixels = previous.pixels.to_vec();
+    for &(index, texture) in changed {
+        paste_entry(&mut pixels, previous.width, previous.height, texture, &entries[index].placement, padding);
+    }
+    let transparent = entries.iter().any(|entry| entry.translucent);
+    fill_page(&pixels, previous.width, previous.height, sources, transparent)
+}
+
+/// Copies an entry into place, then its padding ring: each texel the clamp of its position
+/// onto the entry's content (rings never overlap: cells hold content and padding).
+fn paste_entry(pixels: &mut [u8], width: u32, height: u32, texture: &Texture, placement: &Placement, padding: u32) {
+    debug_assert_eq!((texture.width, texture.height), (placement.width, placement.height));
+    let page_width = width as usize;
+    for row in 0..texture.height {
+        for column in 0..texture.width {
+            let (x, y) = page_texel(placement, column, row);
+            let index = y as usize * page_width + x as usize;
+            let source = (row as usize * texture.width as usize + column as usize) * 4;
+            pixels[index * 4..][..4].copy_from_slice(&texture.pixels[source..source + 4]);
         }
-        // The padding ring: each texel the clamp of its position onto the entry's content.
+    }
+    let (span_x, span_y) = if placement.rotated { (placement.height, placement.width) } else { (placement.width, placement.height) };
+    let (left, top) = (placement.x.saturating_sub(padding), placement.y.saturating_sub(padding));
+    let right = (placement.x + span_x + padding).min(width);
+    let bottom = (placement.y + span_y + padding).min(height);
+    for y in top..bottom {
+        for x in left..right {
+            let inside = (placement.x..placement.x + span_x).contains(&x) && (placement.y..placement.y + span_y).contains(&y);
+            if inside {
+                continue;
+            }
+            let clamped_x = x.clamp(placement.x, placement.x + span_x - 1) as usize;
+            let clamped_y = y.clamp(placement.y, placement.y + span_y - 1) as usize;
+            let from = (clamped_y * page_width + clamped_x) * 4;
+            let index = y as usize * page_width + x as usize;
+            pixels.copy_within(from..from + 4, index * 4);
+        }
+    }
+}
+
+/// Where each texel of a page of these placements takes its colour from: itself inside an
+/// entry or its padding ring, else the nearest such texel.
+pub fn page_texel_sources(width: u32, height: u32, placements: &[Placement], padding: u32) -> TexelSources {
+    let mut covered = vec![false; width as usize * height as usize];
+    for placement in placements {
         let (span_x, span_y) = if placement.rotated { (placement.height, placement.width) } else { (placement.width, placement.height) };
         let (left, top) = (placement.x.saturating_sub(padding), placement.y.saturating_sub(padding));
         let right = (placement.x + span_x + padding).min(width);
         let bottom = (placement.y + span_y + padding).min(height);
         for y in top..bottom {
-            for x in left..right {
-                let index = y as usize * page_width + x as usize;
-                if covered[index] {
-                    continue;
-                }
-                let clamped_x = x.clamp(placement.x, placement.x + span_x - 1) as usize;
-                let clamped_y = y.clamp(placement.y, placement.y + span_y - 1) as usize;
-                let from = (clamped_y * page_width + clamped_x) * 4;
-                pixels.copy_within(from..from + 4, index * 4);
-                covered[index] = true;
-            }
+            covered[y as usize * width as usize..][left as usize..right as usize].fill(true);
         }
     }
-    let sources = crate::texture::fill::texel_sources(
-        width,
-        height,
-        covered.iter().enumerate().filter(|(_, &covered)| covered).map(|(index, _)| index as u32),
-    );
+    texel_sources(width, height, covered.iter().enumerate().filter(|(_, &covered)| covered).map(|(index, _)| index as u32))
+}
+
+/// The fill of a page: beyond the entries and their padding nothing is drawn, so those texels
+/// are transparent when any entry has transparency (previews and blending show nothing
+/// there), opaque otherwise (an opaque atlas stays opaque down its mips).
+fn fill_page(pixels: &[u8], width: u32, height: u32, sources: &TexelSources, transparent: bool) -> Texture {
     if sources.0.is_empty() {
-        return Texture::new(width, height, pixels);
+        return Texture::new(width, height, pixels.to_vec());
     }
-    // Beyond the entries and their padding nothing is drawn: transparent when any entry has
-    // transparency (so previews and blending show nothing there), opaque otherwise (so an
-    // opaque atlas stays opaque down its mips).
-    let transparent = pixels.chunks_exact(4).zip(&covered).any(|(texel, &covered)| covered && texel[3] < 255);
-    let mut filled = Vec::with_capacity(pixels.len());
-    for (index, &from) in sources.0.iter().enumerate() {
-        let mut texel: [u8; 4] = pixels[from as usize * 4..][..4].try_into().expect("four bytes");
-        if transparent && !covered[index] {
-            texel[3] = 0;
-        }
-        filled.extend_from_slice(&texel);
-    }
-    Texture::new(width, height, filled)
+    Texture::new(width, height, fill_from_sources(pixels, width, sources, transparent))
 }

@@ -1,20 +1,40 @@
 //! The atlas kind's tracked functions: thin glue from the asset's listed textures through the
-//! pure steps (decode → trim → aliases → pack → page composite) to the shared tail.
+//! pure steps (decode → trim → aliases → pack → page composite) to the shared tail, with the
+//! last layout as the packer's hint and the last page as the composite's starting point.
 
 use std::collections::HashMap;
 use std::path::PathBuf;
 use std::sync::Arc;
 
-use crate::cache::CacheKey;
-use crate::db::{asset_file, cached_json, decoded_texture, key_with_files, stage_key, timed, Asset, Db, Stage};
+use crate::cache::{CacheEntry, CacheKey, CacheKeyBuilder};
+use crate::db::{
+    asset_file, cached_json, decoded_texture, key_with_files, load_cached, recall, remember, stage_key, store_cached, texture_limits,
+    timed, Asset, Db, SourceFile, Stage,
+};
 use crate::diagnostic::{display_path, Diagnostic};
-use crate::packing::max_rects::{pack_pages, PagePacking, PageSettings};
+use crate::packing::max_rects::{pack_pages_keeping, PackError, PagePacking, PagePlacement, PageSettings, Repack};
+use crate::packing::Placement;
+use crate::texture::fill::TexelSources;
 use crate::texture::Texture;
 
-use super::page::{composite_page, crop, opaque_bounds, TrimRect};
+use super::page::{composite_page_keeping_sources, crop, opaque_bounds, recomposite_page, PageEntry, TrimRect};
 
-pub const LAYOUT: Stage = Stage { name: "layout", version: 2 };
-pub const COMPOSITE: Stage = Stage { name: "composite", version: 1 };
+pub const TRIM: Stage = Stage { name: "trim", version: 1 };
+/// 3: kept as a hint for the next layout; entries come from the trim stage.
+pub const LAYOUT: Stage = Stage { name: "layout", version: 3 };
+pub const COMPOSITE: Stage = Stage { name: "composite", version: 2 };
+
+/// What the layout needs of one texture file: its size, the rectangle trim keeps, and what
+/// the kept texels are (equal ones make aliases).
+#[derive(Clone, Copy, Debug, PartialEq, Eq, serde::Serialize, serde::Deserialize)]
+pub struct TrimmedTexture {
+    pub source_size: [u32; 2],
+    pub trim: TrimRect,
+    /// blake3 of the kept texels.
+    pub kept_hash: [u8; 32],
+    /// Some kept texel is not fully opaque.
+    pub translucent: bool,
+}
 
 /// One rectangle of the atlas: the texture it shows (its file, trimmed to `trim`), and the other
 /// textures with the same pixels.
@@ -29,12 +49,24 @@ pub struct LayoutEntry {
     pub trim: TrimRect,
 }
 
-/// The entries and where each went (`packing.placements` in entry order): all the table needs,
-/// kept in the persistent cache so that a restart with nothing changed decodes nothing.
+/// The entries and where each went (`packing.placements` in entry order): all the table needs.
 #[derive(Clone, Debug, PartialEq, serde::Serialize, serde::Deserialize)]
 pub struct AtlasLayout {
     pub entries: Vec<LayoutEntry>,
     pub packing: PagePacking,
+}
+
+/// How a layout came from the last one (for the report).
+#[derive(Clone, Debug, Default, PartialEq, Eq, serde::Serialize, serde::Deserialize)]
+pub struct LayoutChange {
+    /// `fresh` (no earlier layout with these settings), `kept` (the earlier layout, new or
+    /// resized entries put into free space) or `repacked` (kept would have been below 90 % of a
+    /// fresh pack's occupancy, or could not take the new entries).
+    pub how: String,
+    /// Entries put into the kept layout's free space.
+    pub placed: Vec<String>,
+    /// Entries that were in the earlier layout and now lie elsewhere.
+    pub moved: Vec<String>,
 }
 
 /// The asset's texture files (matches of its `textures` globs), project-relative, sorted.
@@ -42,29 +74,79 @@ pub fn atlas_texture_files(db: &dyn Db, asset: Asset) -> &[PathBuf] {
     asset.listed(db).first().map_or(&[], Vec::as_slice)
 }
 
+/// The packer's settings of the asset.
+#[salsa::tracked(returns(copy))]
+pub fn page_settings(db: &dyn Db, asset: Asset) -> PageSettings {
+    let pack = &asset.settings(db).pack;
+    PageSettings { max_size: pack.max_size, padding: pack.padding, rotate: pack.rotate, power_of_two: pack.power_of_two, pages: pack.pages }
+}
+
+/// Whether the asset trims transparent borders.
+#[salsa::tracked(returns(copy))]
+pub fn trims(db: &dyn Db, asset: Asset) -> bool {
+    asset.settings(db).pack.trim
+}
+
+/// A texture decoded, its kept rectangle found (stage `trim`, per file); from the persistent
+/// cache when the file was trimmed before, so that a layout after a restart decodes nothing.
+#[salsa::tracked(returns(clone))]
+pub fn trimmed_texture(db: &dyn Db, file: SourceFile, trim: bool) -> Result<TrimmedTexture, Diagnostic> {
+    let label = display_path(file.path(db));
+    let key = key_with_files(db, stage_key(TRIM).part(&trim).part(&texture_limits(db).working_set), [file]).finish();
+    cached_json(db, TRIM, &label, key, || {
+        let texture = decoded_texture(db, file)?;
+        Ok(timed(db, TRIM, &label, || trim_texture(&texture, trim)))
+    })
+}
+
+/// The pure trim: the kept rectangle and what it holds.
+fn trim_texture(texture: &Texture, trim: bool) -> TrimmedTexture {
+    let rect = if trim { opaque_bounds(texture) } else { TrimRect { x: 0, y: 0, width: texture.width, height: texture.height } };
+    let kept = crop(texture, rect);
+    TrimmedTexture {
+        source_size: [texture.width, texture.height],
+        trim: rect,
+        kept_hash: *kept.hash.as_bytes(),
+        translucent: kept.pixels.chunks_exact(4).any(|texel| texel[3] < 255),
+    }
+}
+
 /// What the layout is made of: every texture file's content, the source folder (entry names
-/// are relative to it) and the pack settings.
+/// are relative to it) and the pack settings. The layout cached under it is the one made last
+/// from these inputs (which earlier layout was its hint is not part of it).
 #[salsa::tracked(returns(copy))]
 pub fn layout_key(db: &dyn Db, asset: Asset) -> CacheKey {
-    let pack = &asset.settings(db).pack;
-    let key = stage_key(LAYOUT).part("atlas").part(asset.source_root(db)).part(&[pack.max_size, pack.padding, pack.pages]).part(&[
-        pack.rotate,
-        pack.trim,
-        pack.power_of_two,
-    ]);
+    let key = stage_key(LAYOUT).part("atlas").part(asset.source_root(db)).part(&settings_key(db, asset).0);
     let files = atlas_texture_files(db, asset).iter().filter_map(|path| asset_file(db, asset, path.clone())).collect::<Vec<_>>();
     key_with_files(db, key.part(&(files.len() as u32)), files).finish()
 }
 
-/// Every texture decoded, trimmed when asked, equal ones merged, and packed onto pages (stage
-/// `layout`); from the persistent cache when the textures and settings were laid out before.
-#[salsa::tracked(returns(clone))]
-pub fn atlas_layout(db: &dyn Db, asset: Asset) -> Result<Arc<AtlasLayout>, Diagnostic> {
-    cached_json(db, LAYOUT, asset.name(db), layout_key(db, asset), || compute_atlas_layout(db, asset)).map(Arc::new)
+/// The pack and trim settings, as a key part.
+fn settings_key(db: &dyn Db, asset: Asset) -> CacheKey {
+    let settings = page_settings(db, asset);
+    CacheKeyBuilder::new("atlas-settings", 1)
+        .part(&[settings.max_size, settings.padding, settings.pages])
+        .part(&[settings.rotate, settings.power_of_two, trims(db, asset)])
+        .finish()
 }
 
-fn compute_atlas_layout(db: &dyn Db, asset: Asset) -> Result<AtlasLayout, Diagnostic> {
-    let settings = asset.settings(db).pack.clone();
+/// The layout and how it came from the last one (stage `layout`); from the persistent cache
+/// when the same textures and settings were laid out before.
+#[salsa::tracked(returns(clone))]
+pub fn atlas_layout_and_change(db: &dyn Db, asset: Asset) -> Result<Arc<(AtlasLayout, LayoutChange)>, Diagnostic> {
+    let laid_out = cached_json(db, LAYOUT, asset.name(db), layout_key(db, asset), || compute_atlas_layout(db, asset))?;
+    remember_layout(db, asset, &laid_out.0);
+    Ok(Arc::new(laid_out))
+}
+
+/// The layout alone: unchanged (and so not re-run downstream) when an edit moved nothing.
+#[salsa::tracked(returns(clone))]
+pub fn atlas_layout(db: &dyn Db, asset: Asset) -> Result<Arc<AtlasLayout>, Diagnostic> {
+    atlas_layout_and_change(db, asset).map(|laid_out| Arc::new(laid_out.0.clone()))
+}
+
+fn compute_atlas_layout(db: &dyn Db, asset: Asset) -> Result<(AtlasLayout, LayoutChange), Diagnostic> {
+    let settings = page_settings(db, asset);
     let files = atlas_texture_files(db, asset);
     let source_root = asset.source_root(db).clone();
     if files.is_empty() {
@@ -72,43 +154,191 @@ fn compute_atlas_layout(db: &dyn Db, asset: Asset) -> Result<AtlasLayout, Diagno
     }
     let mut entries: Vec<LayoutEntry> = Vec::new();
     let mut sizes: Vec<(u32, u32)> = Vec::new();
-    let mut by_content: HashMap<(blake3::Hash, u32, u32), usize> = HashMap::new();
+    let mut by_content: HashMap<([u8; 32], u32, u32), usize> = HashMap::new();
     for path in files {
-        let texture = entry_texture(db, asset, path)?;
+        let file = asset_file(db, asset, path.clone()).ok_or_else(|| Diagnostic::new(path, "file not found"))?;
+        let trimmed = trimmed_texture(db, file, trims(db, asset))?;
         let name = display_path(path.strip_prefix(&source_root).unwrap_or(path));
-        let trim =
-            if settings.trim { opaque_bounds(&texture) } else { TrimRect { x: 0, y: 0, width: texture.width, height: texture.height } };
-        let kept = crop(&texture, trim);
-        match by_content.get(&(kept.hash, kept.width, kept.height)) {
+        let content = (trimmed.kept_hash, trimmed.trim.width, trimmed.trim.height);
+        match by_content.get(&content) {
             Some(&entry) => entries[entry].aliases.push(name),
             None => {
-                by_content.insert((kept.hash, kept.width, kept.height), entries.len());
+                by_content.insert(content, entries.len());
                 entries.push(LayoutEntry {
                     name,
                     aliases: Vec::new(),
                     file: path.clone(),
-                    source_size: [texture.width, texture.height],
-                    trim,
+                    source_size: trimmed.source_size,
+                    trim: trimmed.trim,
                 });
-                sizes.push((kept.width, kept.height));
+                sizes.push((trimmed.trim.width, trimmed.trim.height));
             }
         }
     }
-    let page_settings = PageSettings {
-        max_size: settings.max_size,
-        padding: settings.padding,
-        rotate: settings.rotate,
-        power_of_two: settings.power_of_two,
-        pages: settings.pages,
+    let previous = previous_layout(db, asset);
+    let hint = layout_hint(&entries, previous.as_deref());
+    let previous_pages = previous.as_ref().map_or(&[][..], |previous| &previous.packing.pages[..]);
+    let (packing, repack) =
+        timed(db, LAYOUT, asset.name(db), || pack_pages_keeping(&sizes, &settings, previous_pages, &hint)).map_err(|error| {
+            let named = match &error {
+                PackError::TooLarge { index, .. } => format!("{}: {error}", entries[*index].name),
+                _ => error.to_string(),
+            };
+            Diagnostic::new(&source_root, format!("atlas `{}`: {named}", asset.name(db)))
+        })?;
+    let moved = entries
+        .iter()
+        .zip(&hint)
+        .zip(&packing.placements)
+        .filter(|((_, before), now)| before.is_some_and(|before| before != **now))
+        .map(|((entry, _), _)| entry.name.clone())
+        .collect();
+    let change = match repack {
+        _ if previous.is_none() => LayoutChange { how: "fresh".into(), placed: Vec::new(), moved },
+        Repack::Kept { placed } => {
+            LayoutChange { how: "kept".into(), placed: placed.iter().map(|&index| entries[index].name.clone()).collect(), moved }
+        }
+        Repack::Repacked => LayoutChange { how: "repacked".into(), placed: Vec::new(), moved },
     };
-    let packing = timed(db, LAYOUT, asset.name(db), || pack_pages(&sizes, &page_settings)).map_err(|error| {
-        let named = match &error {
-            crate::packing::max_rects::PackError::TooLarge { index, .. } => format!("{}: {error}", entries[*index].name),
-            _ => error.to_string(),
-        };
-        Diagnostic::new(&source_root, format!("atlas `{}`: {named}", asset.name(db)))
-    })?;
-    Ok(AtlasLayout { entries, packing })
+    Ok((AtlasLayout { entries, packing }, change))
+}
+
+/// Each entry's place in the previous layout, found by any of its names (its own or an
+/// alias's, so that a texture whose alias sorts first now keeps its rectangle).
+fn layout_hint(entries: &[LayoutEntry], previous: Option<&AtlasLayout>) -> Vec<Option<PagePlacement>> {
+    let Some(previous) = previous else { return vec![None; entries.len()] };
+    let mut by_name: HashMap<&str, PagePlacement> = HashMap::new();
+    for (entry, place) in previous.entries.iter().zip(&previous.packing.placements) {
+        for name in std::iter::once(&entry.name).chain(&entry.aliases) {
+            by_name.insert(name, *place);
+        }
+    }
+    let mut taken = std::collections::HashSet::new();
+    entries
+        .iter()
+        .map(|entry| {
+            let place = std::iter::once(&entry.name).chain(&entry.aliases).find_map(|name| by_name.get(name.as_str()).copied())?;
+            // Two entries that were one (aliases whose pixels now differ): the first keeps it.
+            taken.insert((place.page, place.placement.x, place.placement.y)).then_some(place)
+        })
+        .collect()
+}
+
+/// The memo of the asset's last layout: not a content address but the asset's name and its
+/// pack settings (a layout made with other settings is no hint), overwritten by every layout.
+const LAYOUT_MEMO: &str = "atlas-layout-memo";
+
+fn layout_memo_key(db: &dyn Db, asset: Asset) -> CacheKey {
+    CacheKeyBuilder::new(LAYOUT_MEMO, LAYOUT.version).part(asset.name(db)).part(&settings_key(db, asset).0).finish()
+}
+
+fn layout_memo_name(db: &dyn Db, asset: Asset) -> String {
+    format!("{LAYOUT_MEMO}:{}:{}", asset.name(db), settings_key(db, asset).0.to_hex())
+}
+
+/// The asset's last layout with its settings: from this process, else from the memo on disk.
+fn previous_layout(db: &dyn Db, asset: Asset) -> Option<Arc<AtlasLayout>> {
+    if let Some(previous) = recall(db, &layout_memo_name(db, asset)) {
+        return Some(previous);
+    }
+    load_cached(db, LAYOUT_MEMO, layout_memo_key(db, asset), |entry| serde_json::from_value(entry.metadata).ok()).map(Arc::new)
+}
+
+fn remember_layout(db: &dyn Db, asset: Asset, layout: &AtlasLayout) {
+    let name = layout_memo_name(db, asset);
+    if recall::<AtlasLayout>(db, &name).is_some_and(|previous| *previous == *layout) {
+        return;
+    }
+    remember(db, &name, Arc::new(layout.clone()));
+    store_cached(db, LAYOUT_MEMO, layout_memo_key(db, asset), || CacheEntry {
+        metadata: serde_json::to_value(layout).expect("layouts serialise"),
+        blobs: Vec::new(),
+        compress: true,
+    });
+}
+
+/// The entries of one page: their layout entry, place, and trimmed texture facts.
+fn page_entries(db: &dyn Db, asset: Asset, layout: &AtlasLayout, page: u32) -> Result<Vec<(LayoutEntry, PageEntry)>, Diagnostic> {
+    let trim = trims(db, asset);
+    let mut found = Vec::new();
+    for (entry, place) in layout.entries.iter().zip(&layout.packing.placements).filter(|(_, place)| place.page == page) {
+        let file = asset_file(db, asset, entry.file.clone()).ok_or_else(|| Diagnostic::new(&entry.file, "file not found"))?;
+        let trimmed = trimmed_texture(db, file, trim)?;
+        found.push((
+            entry.clone(),
+            PageEntry { placement: place.placement, kept_hash: trimmed.kept_hash, translucent: trimmed.translucent },
+        ));
+    }
+    Ok(found)
+}
+
+/// One page with its entries in place (stage `composite`): starting from the page's last
+/// composite when only some entries' texels changed (then only those are decoded and put
+/// back), else from every entry.
+#[salsa::tracked(returns(clone))]
+pub fn atlas_page(db: &dyn Db, asset: Asset, page: u32) -> Result<Arc<Texture>, Diagnostic> {
+    let layout = atlas_layout(db, asset)?;
+    let Some(&(width, height)) = layout.packing.pages.get(page as usize) else {
+        return Err(Diagnostic::new(asset.source_root(db), format!("atlas page {page} no longer exists")));
+    };
+    let padding = page_settings(db, asset).padding;
+    let entries = page_entries(db, asset, &layout, page)?;
+    let recipe: Vec<PageEntry> = entries.iter().map(|(_, entry)| *entry).collect();
+    let memo_name = page_memo_name(asset.name(db), page);
+    let label = page_label(asset.name(db), page);
+    let previous = recall::<PageMemo>(db, &memo_name).filter(|previous| previous.fits(width, height, padding, &recipe));
+    let (texture, sources) = match previous {
+        Some(previous) => {
+            let changed: Vec<usize> =
+                (0..recipe.len()).filter(|&index| recipe[index].kept_hash != previous.entries[index].kept_hash).collect();
+            if changed.is_empty() {
+                return Ok(Arc::new(previous.texture.clone()));
+            }
+            let mut kept = Vec::new();
+            for &index in &changed {
+                let (entry, _) = &entries[index];
+                kept.push((index, crop(&*entry_texture(db, asset, &entry.file)?, entry.trim)));
+            }
+            let textures: Vec<(usize, &Texture)> = kept.iter().map(|(index, texture)| (*index, texture)).collect();
+            let texture =
+                timed(db, COMPOSITE, &label, || recomposite_page(&previous.texture, &previous.sources, &recipe, &textures, padding));
+            (texture, previous.sources.clone())
+        }
+        None => {
+            let mut kept = Vec::new();
+            for (entry, page_entry) in &entries {
+                kept.push((crop(&*entry_texture(db, asset, &entry.file)?, entry.trim), page_entry.placement));
+            }
+            let textures: Vec<(&Texture, Placement)> = kept.iter().map(|(texture, placement)| (texture, *placement)).collect();
+            let (texture, sources) = timed(db, COMPOSITE, &label, || composite_page_keeping_sources(width, height, &textures, padding));
+            (texture, Arc::new(sources))
+        }
+    };
+    remember(db, &memo_name, Arc::new(PageMemo { entries: recipe, padding, texture: texture.clone(), sources }));
+    Ok(Arc::new(texture))
+}
+
+/// A page's last composite in this process: its entries, the page, and where each uncovered
+/// texel takes its colour from (the same while the placements are).
+struct PageMemo {
+    entries: Vec<PageEntry>,
+    padding: u32,
+    texture: Texture,
+    sources: Arc<TexelSources>,
+}
+
+impl PageMemo {
+    /// Whether the page can start from this one: same size, padding, placements, and the same
+    /// translucency (which decides the fill's alpha) of every entry.
+    fn fits(&self, width: u32, height: u32, padding: u32, entries: &[PageEntry]) -> bool {
+        (self.texture.width, self.texture.height, self.padding) == (width, height, padding)
+            && self.entries.len() == entries.len()
+            && self.entries.iter().zip(entries).all(|(a, b)| a.placement == b.placement && a.translucent == b.translucent)
+    }
+}
+
+fn page_memo_name(asset_name: &str, page: u32) -> String {
+    format!("atlas-page:{}", page_label(asset_name, page))
 }
 
 /// A texture of the atlas, decoded.
@@ -117,26 +347,18 @@ fn entry_texture(db: &dyn Db, asset: Asset, path: &PathBuf) -> Result<Arc<Textur
     decoded_texture(db, file)
 }
 
-/// One page with its entries in place (stage `composite`).
-#[salsa::tracked(returns(clone))]
-pub fn atlas_page(db: &dyn Db, asset: Asset, page: u32) -> Result<Arc<Texture>, Diagnostic> {
+/// What a page is made of, cheap to compute once the layout is known: the page's size, each
+/// of its entries' place and file content, and the padding; so that a page already in the
+/// persistent cache needs no composite, and an edit elsewhere leaves this page's key alone.
+pub fn page_recipe_key(db: &dyn Db, asset: Asset, page: u32) -> Result<CacheKey, Diagnostic> {
     let layout = atlas_layout(db, asset)?;
-    let Some(&(width, height)) = layout.packing.pages.get(page as usize) else {
-        return Err(Diagnostic::new(asset.source_root(db), format!("atlas page {page} no longer exists")));
-    };
-    let mut kept = Vec::new();
+    let mut key = stage_key(COMPOSITE).part(&page).part(&page_settings(db, asset).padding).part(&[trims(db, asset)]);
+    key = key.part(&format!("{:?}", layout.packing.pages.get(page as usize)));
     for (entry, place) in layout.entries.iter().zip(&layout.packing.placements).filter(|(_, place)| place.page == page) {
-        kept.push((crop(&*entry_texture(db, asset, &entry.file)?, entry.trim), place.placement));
+        let file = asset_file(db, asset, entry.file.clone()).ok_or_else(|| Diagnostic::new(&entry.file, "file not found"))?;
+        key = key_with_files(db, key.part(&format!("{:?} {:?}", place.placement, entry.trim)), [file]);
     }
-    let entries: Vec<(&Texture, crate::packing::Placement)> = kept.iter().map(|(texture, placement)| (texture, *placement)).collect();
-    let padding = asset.settings(db).pack.padding;
-    Ok(Arc::new(timed(db, COMPOSITE, &page_label(asset.name(db), page), || composite_page(width, height, &entries, padding))))
-}
-
-/// What a page is made of, cheap to compute: the layout's key (every texture, the settings)
-/// and the page, so that a page already in the persistent cache needs no composite.
-pub fn page_recipe_key(db: &dyn Db, asset: Asset, page: u32) -> CacheKey {
-    stage_key(COMPOSITE).part(&layout_key(db, asset).0).part(&page).finish()
+    Ok(key.finish())
 }
 
 /// A page's name inside the asset: `page0`, `page1`, ….

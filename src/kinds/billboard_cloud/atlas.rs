@@ -112,18 +112,7 @@ pub fn composite_atlas_surface(
         }
         return Texture::new(layout.width, layout.height, drawn);
     }
-    let mut pixels = vec![0u8; texels * 4];
-    let row = layout.width as usize * 4;
-    pixels.par_chunks_mut(row.max(4)).enumerate().for_each(|(y, row_pixels)| {
-        let first = y * layout.width as usize;
-        for (x, texel) in row_pixels.chunks_exact_mut(4).enumerate() {
-            let from = sources.0[first + x] as usize;
-            texel.copy_from_slice(&drawn[from * 4..][..4]);
-            if surface == SurfaceKind::Albedo && from != first + x {
-                texel[3] = 0;
-            }
-        }
-    });
+    let pixels = crate::texture::fill::fill_from_sources(&drawn, layout.width, sources, surface == SurfaceKind::Albedo);
     Texture::new(layout.width, layout.height, pixels)
 }
 

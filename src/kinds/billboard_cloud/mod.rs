@@ -276,10 +276,7 @@ fn billboard_outputs(db: &dyn Db, asset: Asset, output_folder: &Path, runs: &[St
     }
     let settings = asset.settings(db);
     let name = asset.name(db);
-    let mut stage_ms: BTreeMap<&str, f64> = BTreeMap::new();
-    for run in runs.iter().filter(|run| !run.from_cache && (&run.label == name || run.label.starts_with(&format!("{name}/")))) {
-        *stage_ms.entry(run.stage).or_insert(0.0) += (run.ms * 10.0).round() / 10.0;
-    }
+    let stage_ms = crate::kinds::asset_stage_ms(name, runs);
     let atlas_coverage = queries::atlas_coverage_fraction(db, asset)?;
     let report = serde_json::json!({
         "asset": name,

@@ -117,10 +117,65 @@ fn a_same_size_edit_recomposites_its_page_and_leaves_the_table_alone() {
             "encode(ui/page0/albedo)",
             "layout(ui)",
             "mips(ui/page0/albedo)",
+            "trim(assets/ui/icon1.png)",
             "write(ui/page0/albedo)",
         ]
     "#]]
     .assert_debug_eq(&cirrus.take_executed_stages());
     assert_eq!(project.read("baked/ui/atlas.json"), table, "nothing moved");
     assert_eq!(std::fs::metadata(project.path("baked/ui/atlas.json")).unwrap().modified().unwrap(), written, "not rewritten");
+}
+
+/// Each entry's name → (page, x, y, rotated) in a built `atlas.json`.
+fn places(project: &TempProject) -> std::collections::BTreeMap<String, (u64, u64, u64, bool)> {
+    let table: serde_json::Value = serde_json::from_slice(&project.read("baked/ui/atlas.json")).unwrap();
+    table["entries"]
+        .as_array()
+        .unwrap()
+        .iter()
+        .map(|entry| {
+            let number = |key: &str| entry[key].as_u64().unwrap();
+            (entry["name"].as_str().unwrap().to_string(), (number("page"), number("x"), number("y"), entry["rotated"].as_bool().unwrap()))
+        })
+        .collect()
+}
+
+#[test]
+fn a_new_texture_goes_into_free_space_and_moves_nothing_also_after_a_restart() {
+    let project = atlas_project();
+    assert!(build(&mut project.open()).all_ok());
+    let before = places(&project);
+    let report: serde_json::Value = serde_json::from_slice(&project.read("baked/ui/report.json")).unwrap();
+    assert_eq!(report["layout"]["how"], "fresh");
+    // A new process: the last layout comes from the persistent cache's memo.
+    project.write("assets/extra/big.png", pattern_png(4, 4, 9));
+    assert!(build(&mut project.open()).all_ok());
+    let after = places(&project);
+    let report: serde_json::Value = serde_json::from_slice(&project.read("baked/ui/report.json")).unwrap();
+    assert_eq!(report["layout"], serde_json::json!({"how": "kept", "placed": ["extra/big.png"], "moved": []}));
+    assert!(after.contains_key("extra/big.png"));
+    for (name, place) in &before {
+        assert_eq!(after.get(name), Some(place), "{name} moved");
+    }
+    // Settings that change the cells give a fresh layout (the old one is no hint).
+    let pipeline = std::fs::read_to_string(project.path("pipeline.ron")).unwrap().replace("padding: 4", "padding: 8");
+    project.write("pipeline.ron", pipeline.as_bytes());
+    assert!(build(&mut project.open()).all_ok());
+    let report: serde_json::Value = serde_json::from_slice(&project.read("baked/ui/report.json")).unwrap();
+    assert_eq!(report["layout"]["how"], "fresh");
+}
+
+#[test]
+fn a_repack_happens_when_keeping_the_layout_would_waste_the_page_and_the_report_says_which_moved() {
+    let project = atlas_project();
+    let mut cirrus = project.open();
+    assert!(build(&mut cirrus).all_ok());
+    // The largest entries leave: the kept page would be mostly empty.
+    for name in ["icon0", "icon3", "icon1"] {
+        std::fs::remove_file(project.path(&format!("assets/ui/{name}.png"))).unwrap();
+    }
+    assert!(build(&mut cirrus).all_ok());
+    let report: serde_json::Value = serde_json::from_slice(&project.read("baked/ui/report.json")).unwrap();
+    assert_eq!(report["layout"]["how"], "repacked", "{report}");
+    assert!(!report["layout"]["moved"].as_array().unwrap().is_empty(), "{report}");
 }

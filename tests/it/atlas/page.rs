@@ -139,3 +139,39 @@ fn a_source_uv_through_the_table_lands_on_the_page_texel_of_that_source_texel() 
         }
     }
 }
+
+#[test]
+fn a_page_recomposited_from_its_last_composite_equals_one_composited_afresh() {
+    use cirrus::kinds::atlas::page::{composite_page_keeping_sources, recomposite_page, PageEntry};
+    let mut textures: Vec<Texture> =
+        [(40, 8), (8, 40), (33, 17), (64, 64), (3, 3)].iter().enumerate().map(|(index, &(w, h))| noise(w, h, index as u32)).collect();
+    let sizes: Vec<(u32, u32)> = textures.iter().map(|texture| (texture.width, texture.height)).collect();
+    let padding = 3;
+    let packing = pack_pages(&sizes, &PageSettings { max_size: 256, padding, rotate: true, power_of_two: false, pages: 1 }).unwrap();
+    let (width, height) = packing.pages[0];
+    let entries = |textures: &[Texture]| -> Vec<PageEntry> {
+        textures
+            .iter()
+            .zip(&packing.placements)
+            .map(|(texture, place)| PageEntry { placement: place.placement, kept_hash: *texture.hash.as_bytes(), translucent: true })
+            .collect()
+    };
+    let with_places = |textures: &[Texture]| -> Vec<(Texture, _)> {
+        textures.iter().cloned().zip(packing.placements.iter().map(|p| p.placement)).collect()
+    };
+    let before = with_places(&textures);
+    let before: Vec<(&Texture, _)> = before.iter().map(|(texture, placement)| (texture, *placement)).collect();
+    let (first, sources) = composite_page_keeping_sources(width, height, &before, padding);
+    // Two entries repainted, one of them turned on the page if any is.
+    let turned = packing.placements.iter().position(|place| place.placement.rotated).unwrap_or(1);
+    for index in [turned, 3] {
+        textures[index] = noise(textures[index].width, textures[index].height, 100 + index as u32);
+    }
+    let after = with_places(&textures);
+    let after: Vec<(&Texture, _)> = after.iter().map(|(texture, placement)| (texture, *placement)).collect();
+    let (fresh, _) = composite_page_keeping_sources(width, height, &after, padding);
+    let changed = [(turned, &textures[turned]), (3, &textures[3])];
+    let again = recomposite_page(&first, &sources, &entries(&textures), &changed, padding);
+    assert_ne!(first.hash, fresh.hash, "the edit changed the page");
+    assert!(again.pixels == fresh.pixels, "recomposited page differs from a fresh composite");
+}

@@ -572,14 +572,6 @@ impl Validator<'_> {
             }
             let source = match (asset, relative) {
                 (raw::Asset::Atlas { textures, meshes, .. }, _) => {
-                    if !meshes.is_empty() {
-                        // Not silently ignored: the remap is not written yet.
-                        self.error_at_key(
-                            "meshes",
-                            anchor,
-                            "Atlas `meshes` are not remapped by this version of cirrus yet: leave `meshes` out",
-                        );
-                    }
                     if textures.is_empty() {
                         self.error_at_value(name, anchor, &format!("asset `{name}`: an atlas needs at least one texture glob"));
                     }

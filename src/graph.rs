@@ -105,21 +105,27 @@ impl Graph {
         seen
     }
 
-    /// The part of the graph that belongs to `asset` or feeds it.
     /// Whether any node belongs to `asset`.
     pub fn has_asset(&self, asset: &str) -> bool {
         self.nodes.iter().any(|node| node.asset.as_deref() == Some(asset))
     }
 
+    /// The part of the graph that belongs to `asset` or feeds it, however far upstream (a
+    /// shared decode and the texture file it reads).
     pub fn for_asset(&self, asset: &str) -> Graph {
-        let own: BTreeSet<&str> =
+        let mut keep: BTreeSet<&str> =
             self.nodes.iter().filter(|node| node.asset.as_deref() == Some(asset)).map(|node| node.id.as_str()).collect();
-        let feeding: BTreeSet<&str> =
-            self.edges.iter().filter(|edge| own.contains(edge.to.as_str())).map(|edge| edge.from.as_str()).collect();
-        let keep = |id: &str| own.contains(id) || feeding.contains(id);
+        let mut pending: Vec<&str> = keep.iter().copied().collect();
+        while let Some(id) = pending.pop() {
+            for edge in self.edges.iter().filter(|edge| edge.to == id) {
+                if keep.insert(edge.from.as_str()) {
+                    pending.push(edge.from.as_str());
+                }
+            }
+        }
         Graph {
-            nodes: self.nodes.iter().filter(|node| keep(&node.id)).cloned().collect(),
-            edges: self.edges.iter().filter(|edge| keep(&edge.from) && keep(&edge.to)).cloned().collect(),
+            nodes: self.nodes.iter().filter(|node| keep.contains(node.id.as_str())).cloned().collect(),
+            edges: self.edges.iter().filter(|edge| keep.contains(edge.from.as_str()) && keep.contains(edge.to.as_str())).cloned().collect(),
         }
     }
 

@@ -6,6 +6,7 @@
 
 pub mod page;
 pub mod queries;
+pub mod remap;
 pub mod table;
 
 use std::path::{Path, PathBuf};
@@ -20,10 +21,10 @@ use crate::texture::tail::TailSettings;
 use crate::texture::{SurfaceKind, Texture};
 
 use queries::{
-    atlas_layout, atlas_layout_and_change, atlas_page, atlas_texture_files, page_group, page_label, page_recipe_key, page_stem, COMPOSITE,
-    LAYOUT, TRIM,
+    atlas_layout, atlas_layout_and_change, atlas_mesh_files, atlas_page, atlas_texture_files, mesh_library_paths, page_group, page_label,
+    page_recipe_key, page_stem, remapped_mesh, remapped_mesh_path, COMPOSITE, LAYOUT, REMAP, TRIM,
 };
-use table::{uv_transform, AtlasEntry, AtlasPage, AtlasTable};
+use table::{AtlasPage, AtlasTable};
 
 pub struct Atlas;
 
@@ -47,21 +48,40 @@ impl Kind for Atlas {
     const NAME: &'static str = "Atlas";
 
     fn files_to_read(db: &dyn Db, asset: Asset) -> Vec<PathBuf> {
-        asset.listed(db).iter().flatten().cloned().collect()
+        let mut files: Vec<PathBuf> = asset.listed(db).iter().flatten().cloned().collect();
+        for mesh in atlas_mesh_files(db, asset) {
+            files.extend(mesh_library_paths(db, asset, mesh));
+        }
+        files
     }
 
     fn first_jobs(db: &dyn Db, asset: Asset) -> Vec<Job> {
         vec![Job { asset, task: Task::Step("layout", 0), after: 0, label: asset.name(db).clone() }]
     }
 
-    fn run_step(db: &dyn Db, asset: Asset, step: &'static str, _index: u32) -> Result<Vec<Job>, Diagnostic> {
+    fn run_step(db: &dyn Db, asset: Asset, step: &'static str, index: u32) -> Result<Vec<Job>, Diagnostic> {
         match step {
             "layout" => {
                 let layout = atlas_layout(db, asset)?;
                 let name = asset.name(db);
-                Ok((0..layout.packing.pages.len() as u32)
-                    .map(|page| Job { asset, task: Task::Surface(page_surface(page)), after: 1, label: page_surface(page).label(name) })
-                    .collect())
+                let pages = (0..layout.packing.pages.len() as u32).map(|page| Job {
+                    asset,
+                    task: Task::Surface(page_surface(page)),
+                    after: 1,
+                    label: page_surface(page).label(name),
+                });
+                let meshes = atlas_mesh_files(db, asset).iter().enumerate().map(|(index, mesh)| Job {
+                    asset,
+                    task: Task::Step("remap", index as u32),
+                    after: 1,
+                    label: format!("{name}/meshes/{}", display_path(&remapped_mesh_path(db, asset, mesh))),
+                });
+                Ok(pages.chain(meshes).collect())
+            }
+            // The mesh's own failure is reported by `outputs` (the other meshes are written).
+            "remap" => {
+                let _ = remapped_mesh(db, asset, atlas_mesh_files(db, asset)[index as usize].clone());
+                Ok(Vec::new())
             }
             other => unreachable!("the atlas kind schedules no step `{other}`"),
         }
@@ -99,10 +119,28 @@ impl Kind for Atlas {
             write.writes.push(report.clone());
             tails.extend([composite, mips, encode, write]);
         }
+        let meshes = atlas_mesh_files(db, asset);
+        for mesh in meshes {
+            let relative = remapped_mesh_path(db, asset, mesh);
+            let label = format!("{name}/meshes/{}", display_path(&relative));
+            let mut remap = StageInstance::new(REMAP, &label, format!("meshes/{}", display_path(&relative))).reads_stage(&pack);
+            remap.reads.push(Read::File(mesh.clone()));
+            remap.reads.extend(mesh_library_paths(db, asset, mesh).into_iter().map(Read::File));
+            remap.writes = vec![output_folder.join("meshes").join(&relative), output_folder.join("atlas.mtl"), report.clone()];
+            tails.push(remap);
+        }
         instances.insert(0, pack);
         instances.extend(tails);
+        // A mesh that could not be remapped fails its own stage; any other error fails them all.
+        let mesh_error = |error: &Diagnostic| meshes.contains(&error.file);
+        let others_failed = errors.iter().any(|error| !mesh_error(error));
         for instance in &mut instances {
-            instance.failed = !errors.is_empty();
+            let own_mesh_failed = instance.stage == REMAP
+                && instance
+                    .reads
+                    .iter()
+                    .any(|read| matches!(read, Read::File(path) if errors.iter().any(|error| &error.file == path && mesh_error(error))));
+            instance.failed = others_failed || own_mesh_failed;
         }
         instances
     }
@@ -111,7 +149,7 @@ impl Kind for Atlas {
         if !errors.is_empty() {
             return AssetOutputs::default();
         }
-        match atlas_outputs(db, asset, output_folder, runs) {
+        match atlas_outputs(db, asset, output_folder, runs, errors) {
             Ok(outputs) => outputs,
             Err(diagnostic) => {
                 errors.push(diagnostic);
@@ -156,7 +194,13 @@ impl Kind for Atlas {
 }
 
 /// The pages, their previews, `atlas.json` and the report.
-fn atlas_outputs(db: &dyn Db, asset: Asset, output_folder: &Path, runs: &[StageRun]) -> Result<AssetOutputs, Diagnostic> {
+fn atlas_outputs(
+    db: &dyn Db,
+    asset: Asset,
+    output_folder: &Path,
+    runs: &[StageRun],
+    errors: &mut Vec<Diagnostic>,
+) -> Result<AssetOutputs, Diagnostic> {
     let laid_out = atlas_layout_and_change(db, asset)?;
     let (layout, change) = (&laid_out.0, &laid_out.1);
     let container = asset.settings(db).encode.container;
@@ -172,33 +216,10 @@ fn atlas_outputs(db: &dyn Db, asset: Asset, output_folder: &Path, runs: &[StageR
         outputs.files.push((preview_path, artifacts.preview_png.clone()));
         surfaces.push(artifacts.info.clone());
     }
-    let mut entries: Vec<AtlasEntry> = layout
-        .entries
-        .iter()
-        .zip(&layout.packing.placements)
-        .map(|(entry, place)| {
-            let placement = place.placement;
-            let page_size = layout.packing.pages[place.page as usize];
-            let (uv_offset, uv_scale) = uv_transform(&placement, entry.trim, entry.source_size, page_size);
-            AtlasEntry {
-                name: entry.name.clone(),
-                page: place.page,
-                x: placement.x,
-                y: placement.y,
-                width: placement.width,
-                height: placement.height,
-                rotated: placement.rotated,
-                source_size: entry.source_size,
-                trim_offset: [entry.trim.x, entry.trim.y],
-                uv_offset,
-                uv_scale,
-                aliases: entry.aliases.clone(),
-            }
-        })
-        .collect();
-    entries.sort_by(|a, b| a.name.cmp(&b.name));
+    let entries = queries::atlas_table_entries(layout);
     let table = AtlasTable { pages, entries };
     outputs.files.push((output_folder.join("atlas.json"), table.to_json().into_bytes().into()));
+    let meshes = mesh_outputs(db, asset, output_folder, &mut outputs, errors);
     let report = serde_json::json!({
         "asset": asset.name(db),
         "kind": Atlas::NAME,
@@ -207,9 +228,64 @@ fn atlas_outputs(db: &dyn Db, asset: Asset, output_folder: &Path, runs: &[StageR
         "pages": layout.packing.pages,
         "occupancy": (layout.packing.occupancy() * 1e4).round() / 1e4,
         "layout": change,
+        "meshes": meshes,
         "surfaces": surfaces,
         "stage_ms": crate::kinds::asset_stage_ms(asset.name(db), runs),
     });
     outputs.report = Some(serde_json::to_vec_pretty(&report).expect("reports serialise"));
     Ok(outputs)
+}
+
+/// The remapped meshes and `atlas.mtl` (one material per name): a mesh that cannot be remapped
+/// (repeating UVs, two rectangles in one material, a material named like another mesh's but
+/// different) fails alone with its diagnostic; the others are written. Gives the meshes written.
+fn mesh_outputs(db: &dyn Db, asset: Asset, output_folder: &Path, outputs: &mut AssetOutputs, errors: &mut Vec<Diagnostic>) -> Vec<String> {
+    let meshes = atlas_mesh_files(db, asset);
+    if meshes.is_empty() {
+        return Vec::new();
+    }
+    let container_folder = output_folder.to_path_buf();
+    let mut materials: std::collections::BTreeMap<String, (remap::RemappedMaterial, PathBuf)> = std::collections::BTreeMap::new();
+    let mut written = Vec::new();
+    for mesh in meshes {
+        let remapped = match remapped_mesh(db, asset, mesh.clone()) {
+            Ok(remapped) => remapped,
+            Err(diagnostic) => {
+                errors.push(diagnostic);
+                continue;
+            }
+        };
+        let clash = remapped.materials.iter().find_map(|material| {
+            let (other, other_mesh) = materials.get(&material.material.name)?;
+            (other != material).then(|| (material.material.name.clone(), other_mesh.clone()))
+        });
+        if let Some((name, other_mesh)) = clash {
+            errors.push(Diagnostic::new(
+                mesh,
+                format!(
+                    "mesh `{}`: material `{name}` differs from the material of that name in `{}`; atlas.mtl holds one material per name (rename one)",
+                    display_path(mesh),
+                    display_path(&other_mesh)
+                ),
+            ));
+            continue;
+        }
+        for material in &remapped.materials {
+            materials.entry(material.material.name.clone()).or_insert_with(|| (material.clone(), mesh.clone()));
+        }
+        let relative = remapped_mesh_path(db, asset, mesh);
+        outputs.files.push((output_folder.join("meshes").join(&relative), remapped.obj.clone().into_bytes().into()));
+        written.push(display_path(&relative));
+    }
+    let mut mtl = format!("# cirrus: materials of the meshes remapped onto atlas `{}`\n", asset.name(db));
+    for (material, _) in materials.values() {
+        mtl.push('\n');
+        mtl.push_str(&remap::mtl_material(
+            material,
+            |page| format!("{}.png", page_stem(page)),
+            |path| display_path(&remap::relative_path(&container_folder, path)),
+        ));
+    }
+    outputs.files.push((output_folder.join("atlas.mtl"), mtl.into_bytes().into()));
+    written
 }

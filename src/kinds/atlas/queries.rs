@@ -379,3 +379,95 @@ pub fn page_stem(page: u32) -> String {
         format!("atlas_{page}")
     }
 }
+
+/// The asset's mesh files (matches of its `meshes` globs), project-relative, sorted.
+pub fn atlas_mesh_files(db: &dyn Db, asset: Asset) -> &[PathBuf] {
+    asset.listed(db).get(1).map_or(&[], Vec::as_slice)
+}
+
+/// The MTL files a mesh of the asset names (as far as its OBJ has been read).
+pub fn mesh_library_paths(db: &dyn Db, asset: Asset, mesh: &std::path::Path) -> Vec<PathBuf> {
+    let Some(file) = asset_file(db, asset, mesh.to_path_buf()) else { return Vec::new() };
+    let Ok(contents) = file.contents(db) else { return Vec::new() };
+    crate::mesh::material_libraries(mesh, &contents.bytes, asset.source_root(db))
+}
+
+/// A mesh's path below the asset's `meshes/` output folder: its path in the source folder,
+/// with the extension `.obj`.
+pub fn remapped_mesh_path(db: &dyn Db, asset: Asset, mesh: &std::path::Path) -> PathBuf {
+    mesh.strip_prefix(asset.source_root(db)).unwrap_or(mesh).with_extension("obj")
+}
+
+/// The table the layout gives (entries in name order), as `atlas.json` has it.
+pub fn atlas_table_entries(layout: &AtlasLayout) -> Vec<super::table::AtlasEntry> {
+    let mut entries: Vec<super::table::AtlasEntry> = layout
+        .entries
+        .iter()
+        .zip(&layout.packing.placements)
+        .map(|(entry, place)| {
+            let placement = place.placement;
+            let page_size = layout.packing.pages[place.page as usize];
+            let (uv_offset, uv_scale) = super::table::uv_transform(&placement, entry.trim, entry.source_size, page_size);
+            super::table::AtlasEntry {
+                name: entry.name.clone(),
+                page: place.page,
+                x: placement.x,
+                y: placement.y,
+                width: placement.width,
+                height: placement.height,
+                rotated: placement.rotated,
+                source_size: entry.source_size,
+                trim_offset: [entry.trim.x, entry.trim.y],
+                uv_offset,
+                uv_scale,
+                aliases: entry.aliases.clone(),
+            }
+        })
+        .collect();
+    entries.sort_by(|a, b| a.name.cmp(&b.name));
+    entries
+}
+
+/// A mesh remapped onto the atlas (stage `remap`, per mesh): reads the OBJ, its MTL files and
+/// the layout, so that texel edits that move nothing leave it alone; from the persistent cache
+/// when the same files were remapped onto the same layout before.
+#[salsa::tracked(returns(clone))]
+pub fn remapped_mesh(db: &dyn Db, asset: Asset, mesh: PathBuf) -> Result<Arc<super::remap::RemappedMesh>, Diagnostic> {
+    let layout = atlas_layout(db, asset)?;
+    let label = format!("{}/meshes/{}", asset.name(db), display_path(&remapped_mesh_path(db, asset, &mesh)));
+    let file = asset_file(db, asset, mesh.clone()).ok_or_else(|| Diagnostic::new(&mesh, "file not found"))?;
+    let libraries: Vec<(PathBuf, Option<SourceFile>)> =
+        mesh_library_paths(db, asset, &mesh).into_iter().map(|path| (path.clone(), asset_file(db, asset, path))).collect();
+    let layout_bytes = serde_json::to_vec(&*layout).expect("layouts serialise");
+    let key = stage_key(REMAP).part(asset.source_root(db)).part(&blake3::hash(&layout_bytes));
+    let key = key_with_files(db, key, std::iter::once(file).chain(libraries.iter().filter_map(|(_, file)| *file))).finish();
+    cached_json(db, REMAP, &label, key, || {
+        let contents = crate::db::read_contents(db, file)?;
+        let library_bytes = libraries
+            .iter()
+            .map(|(path, file)| {
+                (path.clone(), file.and_then(|file| file.contents(db).as_ref().ok()).map(|contents| contents.bytes.to_vec()))
+            })
+            .collect();
+        timed(db, REMAP, &label, || {
+            let (loaded, _warnings) = crate::mesh::load_mesh(&mesh, &contents.bytes, &library_bytes, asset.source_root(db))?;
+            let entries = atlas_table_entries(&layout);
+            let by_path: HashMap<PathBuf, usize> = entries
+                .iter()
+                .enumerate()
+                .flat_map(|(index, entry)| {
+                    std::iter::once(&entry.name).chain(&entry.aliases).map(move |name| (asset.source_root(db).join(name), index))
+                })
+                .collect();
+            let remap_error = |error: super::remap::RemapError| Diagnostic::new(&mesh, format!("mesh `{}`: {error}", display_path(&mesh)));
+            let chosen = super::remap::material_entries(&loaded, &entries, |path| by_path.get(path).copied()).map_err(remap_error)?;
+            let depth = remapped_mesh_path(db, asset, &mesh).components().count();
+            let library = format!("{}atlas.mtl", "../".repeat(depth));
+            let header = format!("cirrus: {} remapped onto atlas `{}`", display_path(&mesh), asset.name(db));
+            super::remap::remap_mesh(&loaded, &entries, &chosen, &library, &header).map_err(remap_error)
+        })
+    })
+    .map(Arc::new)
+}
+
+pub const REMAP: Stage = Stage { name: "remap", version: 1 };

@@ -1,4 +1,6 @@
-//! The `Atlas` kind (being built): its page composite and trim, over the shared packer.
+//! The `Atlas` kind: its page composite and trim over the shared packer, whole bakes, and meshes
+//! remapped onto the pages.
 
 mod bake;
 mod page;
+mod remap;

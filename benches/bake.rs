@@ -388,7 +388,21 @@ fn bench_atlas(corpus: &Path) {
         report["textures"], report["entries"], report["pages"], report["occupancy"], full, peak
     );
     println!("atlas: full bake stage ms {}", report["stage_ms"]);
-    let edited = dir.path().join("assets/pbr/flighthelmet_rubberwood/albedo.png");
+    // A 512² PNG on the largest page (the worst place for an edit: most neighbours), and no
+    // alias's (an edit that splits an alias adds an entry, and so moves work elsewhere).
+    let table: serde_json::Value = serde_json::from_slice(&std::fs::read(dir.path().join("baked/props/atlas.json")).unwrap()).unwrap();
+    let on_first_page = table["entries"]
+        .as_array()
+        .unwrap()
+        .iter()
+        .find(|entry| {
+            let alone = entry["aliases"].as_array().is_some_and(|aliases| aliases.is_empty());
+            entry["page"] == 0 && entry["width"] == 512 && alone && entry["name"].as_str().unwrap().ends_with(".png")
+        })
+        .expect("a 512² PNG on page 0 without aliases");
+    let edited = dir.path().join("assets").join(on_first_page["name"].as_str().unwrap());
+    let page_entries = table["entries"].as_array().unwrap().iter().filter(|entry| entry["page"] == 0).count();
+    println!("atlas: editing {} (page 0 holds {page_entries} entries)", on_first_page["name"]);
     edit_one_texel(&edited, 0);
     let (edit, _, summary) = build_process(dir.path());
     println!(

@@ -85,14 +85,23 @@ pub fn rule_matches(config: &PipelineConfig) -> Vec<PathBuf> {
 }
 
 /// Files below the source folder that match one of `globs` (over paths relative to it),
-/// project-relative, sorted: the files an asset named by globs reads.
+/// project-relative, sorted: the files an asset named by globs reads. A plain path (no glob
+/// characters) is listed even when it is missing, so that reading it names it.
 pub fn glob_matches(config: &PipelineConfig, globs: &[String]) -> Vec<PathBuf> {
     let matchers: Vec<globset::GlobMatcher> = globs.iter().filter_map(|glob| crate::config::source_glob(glob).ok()).collect();
     if matchers.is_empty() {
         return Vec::new();
     }
     let found = source_files_where(config, |relative| matchers.iter().any(|matcher| matcher.is_match(relative)));
-    found.into_iter().map(|relative| config.source.join(relative)).collect()
+    let mut files: Vec<PathBuf> = found.into_iter().map(|relative| config.source.join(relative)).collect();
+    for plain in globs.iter().filter(|glob| !glob.contains(['*', '?', '[', ']', '{', '}'])) {
+        let Some(path) = crate::config::normalize_relative_path(&config.source.join(plain)) else { continue };
+        if path.starts_with(&config.source) && !files.contains(&path) {
+            files.push(path);
+        }
+    }
+    files.sort();
+    files
 }
 
 /// Files below the source folder (not below the output folder) for which `wanted` holds of

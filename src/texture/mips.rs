@@ -172,8 +172,14 @@ fn refilter_changed_tiles(
             (changed, false)
         })
         .collect();
+    // An alpha edit under coverage preservation moves whole levels' alpha scale; without it,
+    // alpha is filtered within the tile like colour, unless the edit decides whether any texel
+    // is fully transparent (which decides whether straight colour is kept at all).
     if changes.iter().any(|&(_, alpha_changed)| alpha_changed) {
-        return None;
+        let straight = settings.kind == SurfaceKind::Albedo && level0.pixels.par_chunks_exact(4).any(|texel| texel[3] == 0);
+        if settings.alpha_cutoff.is_some() || straight != previous.reuse.tile_level.straight.is_some() {
+            return None;
+        }
     }
     let changed_tiles: Vec<usize> = changes.iter().enumerate().filter(|(_, (changed, _))| *changed).map(|(tile, _)| tile).collect();
     // Each changed tile filtered on its own, with the arithmetic of a full chain: its bytes at

@@ -8,8 +8,8 @@ use std::sync::Arc;
 
 use crate::cache::{CacheEntry, CacheKey, CacheKeyBuilder};
 use crate::db::{
-    asset_file, cached_json, decoded_texture, key_with_files, load_cached, recall, remember, stage_key, store_cached, texture_limits,
-    timed, Asset, Db, SourceFile, Stage,
+    asset_file, cached_json, decoded_texture, key_with_files, load_cached, recall, remember, stage_key, store_cached,
+    store_cached_in_background, texture_limits, timed, Asset, Db, SourceFile, Stage,
 };
 use crate::diagnostic::{display_path, Diagnostic};
 use crate::packing::max_rects::{pack_pages_keeping, PackError, PagePacking, PagePlacement, PageSettings, Repack};
@@ -286,7 +286,7 @@ pub fn atlas_page(db: &dyn Db, asset: Asset, page: u32) -> Result<Arc<Texture>, 
     let recipe: Vec<PageEntry> = entries.iter().map(|(_, entry)| *entry).collect();
     let memo_name = page_memo_name(asset.name(db), page);
     let label = page_label(asset.name(db), page);
-    let previous = recall::<PageMemo>(db, &memo_name).filter(|previous| previous.fits(width, height, padding, &recipe));
+    let previous = previous_page(db, &memo_name).filter(|previous| previous.fits(width, height, padding, &recipe));
     let (texture, sources) = match previous {
         Some(previous) => {
             let changed: Vec<usize> =
@@ -314,8 +314,64 @@ pub fn atlas_page(db: &dyn Db, asset: Asset, page: u32) -> Result<Arc<Texture>, 
             (texture, Arc::new(sources))
         }
     };
-    remember(db, &memo_name, Arc::new(PageMemo { entries: recipe, padding, texture: texture.clone(), sources }));
+    let memo = Arc::new(PageMemo { entries: recipe, padding, texture: texture.clone(), sources });
+    remember(db, &memo_name, memo.clone());
+    store_cached_in_background(db, PAGE_MEMO, page_memo_key(&memo_name), move || page_memo_entry(&memo));
     Ok(Arc::new(texture))
+}
+
+/// The memo of a page's last composite on disk: not a content address but the page's name,
+/// overwritten by every composite, so that a new process after a texel edit decodes only the
+/// entries that changed. Pages equal a fresh composite either way.
+const PAGE_MEMO: &str = "atlas-page-memo";
+
+fn page_memo_key(memo_name: &str) -> CacheKey {
+    CacheKeyBuilder::new(PAGE_MEMO, COMPOSITE.version).part(memo_name).finish()
+}
+
+/// The page's last composite: from this process, else from the memo on disk.
+fn previous_page(db: &dyn Db, memo_name: &str) -> Option<Arc<PageMemo>> {
+    if let Some(previous) = recall(db, memo_name) {
+        return Some(previous);
+    }
+    load_cached(db, PAGE_MEMO, page_memo_key(memo_name), page_memo_from_entry).map(Arc::new)
+}
+
+fn page_memo_entry(memo: &PageMemo) -> CacheEntry {
+    let entries: Vec<(Placement, String, bool)> = memo
+        .entries
+        .iter()
+        .map(|entry| (entry.placement, blake3::Hash::from(entry.kept_hash).to_hex().to_string(), entry.translucent))
+        .collect();
+    CacheEntry {
+        metadata: serde_json::json!({
+            "entries": entries,
+            "padding": memo.padding,
+            "width": memo.texture.width,
+            "height": memo.texture.height,
+        }),
+        blobs: vec![memo.texture.pixels.to_vec(), crate::db::pod_blob(&memo.sources.to_offsets())],
+        compress: true,
+    }
+}
+
+fn page_memo_from_entry(entry: CacheEntry) -> Option<PageMemo> {
+    let metadata = &entry.metadata;
+    let listed: Vec<(Placement, String, bool)> = serde_json::from_value(metadata.get("entries")?.clone()).ok()?;
+    let mut entries = Vec::new();
+    for (placement, hash, translucent) in listed {
+        entries.push(PageEntry { placement, kept_hash: *blake3::Hash::from_hex(hash).ok()?.as_bytes(), translucent });
+    }
+    let padding = metadata.get("padding")?.as_u64()? as u32;
+    let width = metadata.get("width")?.as_u64()? as u32;
+    let height = metadata.get("height")?.as_u64()? as u32;
+    let [pixels, offsets]: [Vec<u8>; 2] = entry.blobs.try_into().ok()?;
+    let texels = width as usize * height as usize;
+    if pixels.len() != texels * 4 {
+        return None;
+    }
+    let sources = TexelSources::from_offsets(&crate::db::from_pod_blob::<u32>(&offsets)?, texels)?;
+    Some(PageMemo { entries, padding, texture: Texture::new(width, height, pixels), sources: Arc::new(sources) })
 }
 
 /// A page's last composite in this process: its entries, the page, and where each uncovered

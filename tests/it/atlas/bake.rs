@@ -9,7 +9,7 @@ use crate::support::{build, decode_png, ktx2_level, pattern_png, png_bytes, read
 fn atlas_project() -> TempProject {
     let project = TempProject::new(
         r#"Pipeline(source: "assets", output: "baked", assets: [
-            Atlas(name: "ui", textures: ["ui/*.png", "extra/big.png"], pack: (max_size: 512, padding: 4)),
+            Atlas(name: "ui", textures: ["ui/*.png", "extra/*.png"], pack: (max_size: 512, padding: 4)),
         ])"#,
     );
     for (index, (width, height)) in [(64, 32), (20, 72), (36, 36), (120, 16)].into_iter().enumerate() {
@@ -178,4 +178,16 @@ fn a_repack_happens_when_keeping_the_layout_would_waste_the_page_and_the_report_
     let report: serde_json::Value = serde_json::from_slice(&project.read("baked/ui/report.json")).unwrap();
     assert_eq!(report["layout"]["how"], "repacked", "{report}");
     assert!(!report["layout"]["moved"].as_array().unwrap().is_empty(), "{report}");
+}
+
+#[test]
+fn a_texture_named_by_plain_path_that_is_missing_is_named() {
+    let project = atlas_project();
+    let pipeline = std::fs::read_to_string(project.path("pipeline.ron")).unwrap().replace("\"extra/*.png\"", "\"extra/gone.png\"");
+    project.write("pipeline.ron", pipeline.as_bytes());
+    let summary = build(&mut project.open());
+    let errors: Vec<String> = summary.assets[0].errors.iter().map(|error| format!("{}: {}", error.file, error.message)).collect();
+    assert!(errors.iter().any(|error| error.starts_with("assets/extra/gone.png:")), "{errors:?}");
+    project.write("assets/extra/gone.png", pattern_png(8, 8, 5));
+    assert!(build(&mut project.open()).all_ok());
 }

@@ -336,6 +336,22 @@ fn refiltering_only_changed_mip_tiles_equals_a_full_chain() {
     let holes = edit(&cutout, 40..60, &|texel: &mut [u8]| texel[3] = 0);
     let (levels, _) = chain_after(&holes, albedo, Some((&old_levels, reuse.as_ref().unwrap())));
     assert_eq!(levels, mip_chain(&holes, albedo));
+    // Without coverage preservation, alpha edits reuse too: more holes where some already
+    // were, and a translucent albedo made partly opaque; each equal to a full chain.
+    let translucent = MipSettings { kind: SurfaceKind::Albedo, alpha_cutoff: None };
+    for (before, alpha) in [(&cutout, 0u8), (&edit(&cutout, 0..128, &|texel: &mut [u8]| texel[3] = 128), 255)] {
+        let (old_levels, reuse) = chain_after(before, translucent, None);
+        let after = edit(before, 40..60, &|texel: &mut [u8]| texel[3] = alpha);
+        let (levels, _) = chain_after(&after, translucent, Some((&old_levels, reuse.as_ref().unwrap())));
+        assert_eq!(levels, mip_chain(&after, translucent), "alpha {alpha}");
+        assert_ne!(levels[2], old_levels[2], "alpha {alpha}: the edit shows");
+        let mut planted = old_levels.clone();
+        let mut pixels = planted[1].pixels.to_vec();
+        pixels[(5 * 96 + 5) * 4] ^= 0xff;
+        planted[1] = Texture::new(96, 64, pixels);
+        let (from_planted, _) = chain_after(&after, translucent, Some((&planted, reuse.as_ref().unwrap())));
+        assert_eq!(from_planted[1].texel(5, 5), planted[1].texel(5, 5), "alpha {alpha}: reused, not a full chain");
+    }
     // Sizes that are not multiples of the tile keep nothing to reuse.
     assert!(chain_after(&Texture::constant(96, 64, [1, 2, 3, 255]), albedo, None).1.is_none());
 }

@@ -31,6 +31,11 @@
 //! | `atlas` (`atlas-coverage`, 1) | the billboard atlas recipe key | the atlas's coverage fraction (for the report) |
 //! | `atlas-fill` (`atlas-fill`, 1) | the coverage's content hash (atlas size, then every drawn texel's atlas texel, plane and plane texel as `u32`) | the fill search's source of every atlas texel (as offsets) |
 //! | `surface-recipe` (`surface`, 3) | the tail's parts; the atlas surface's parts key (below) | the content key of the surface's files |
+//! | `trim` (`trim`, `TRIM`) | the trim setting; the texture memory budget (`u64`); the texture file's path and content hash or read error | an atlas texture's size, kept rectangle, kept texels' hash, translucency |
+//! | `layout` (`layout`, `atlas::LAYOUT`) | `atlas`; the source folder; the pack settings key (`atlas-settings`, 1: max size, padding, pages; rotate, power of two, trim); the file count; per texture file its path and content hash or read error | an atlas layout (entries, pages, placements) and how it came from the last one |
+//! | `atlas-layout-memo` (`atlas-layout-memo`, `atlas::LAYOUT`) | the asset's name; the pack settings key | the asset's last layout, the packer's hint (a memo: overwritten) |
+//! | `atlas-page-memo` (`atlas-page-memo`, `COMPOSITE`) | the page's name (`atlas-page:asset/pageN`) | a page's last composite: its entries (placement, kept hash, translucency), the page, the fill sources as offsets (a memo: overwritten) |
+//! | `remap` (`remap`, `REMAP`) | the source folder; the blake3 of the layout's JSON; the OBJ's and its MTL files' paths and content hashes | a remapped mesh's OBJ text and materials |
 //! | `source-mips` (`source-mips`, 1) | decode and mips versions; the texture file's content hash; the material slot; the filter kind; the alpha cutoff bits (or `u32::MAX`) | the mip chain the renders sample |
 //!
 //! The tail's parts: the mips, encode and write versions; the surface name; block format;
@@ -46,7 +51,10 @@
 //! materials its path and content hash or read error. An atlas surface's parts key, asked when
 //! its recipe misses (after the renders, before compositing): (`atlas-parts`, 1), the atlas
 //! version, the `layout` key, the alpha cutoff, the surface, the coverage's content hash, and
-//! the hash of that surface's image of every render group (width, height, bytes).
+//! the hash of that surface's image of every render group (width, height, bytes). An atlas
+//! page's recipe: (`composite`, `COMPOSITE`), the page number, its width and height, the padding,
+//! the trim setting, then per entry on the page its placement (x, y, width, height; rotated), its
+//! trim rectangle (x, y, width, height), and its file's path and content hash.
 //!
 //! Memos are not content addresses but an identity's last result, overwritten on every run:
 //! they only let the next run skip work, and what they hold is checked against the current

@@ -325,3 +325,21 @@ pub fn asset_stage_ms<'a>(asset_name: &str, runs: &'a [StageRun]) -> std::collec
     }
     stage_ms
 }
+
+/// An OBJ of the source folder loaded for `cirrus check`, with the MTL files it names (a
+/// missing MTL is a load warning, as in a build); the load warnings come back as warnings.
+pub fn check_mesh_file(config: &PipelineConfig, mesh_file: &Path) -> Result<(crate::mesh::Mesh, Vec<Diagnostic>), Diagnostic> {
+    let read = |path: &Path| crate::sources::read_source(&config.root, &config.source, path);
+    let contents = read(mesh_file).map_err(|error| Diagnostic::new(mesh_file, error))?;
+    let mut libraries = std::collections::BTreeMap::new();
+    for library in crate::mesh::material_libraries(mesh_file, &contents.bytes, &config.source) {
+        let bytes = match read(&library) {
+            Ok(contents) => Some(contents.bytes.to_vec()),
+            Err(error) if error == crate::sources::FILE_NOT_FOUND => None,
+            Err(error) => return Err(Diagnostic::new(&library, error)),
+        };
+        libraries.insert(library, bytes);
+    }
+    let (mesh, warnings) = crate::mesh::load_mesh(mesh_file, &contents.bytes, &libraries, &config.source)?;
+    Ok((mesh, warnings.iter().map(as_warning).collect()))
+}

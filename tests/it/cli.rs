@@ -120,7 +120,15 @@ fn check_passes_on_the_bundled_pipeline_and_reports_each_kind_s_problems() {
             BillboardCloud(name: "tree", mesh: "tree.obj"),
             BillboardCloud(name: "broken", mesh: "broken.obj"),
             Material(name: "leaf", material: "leaf.mymaterial"),
+            Atlas(name: "props", textures: ["props/*.png", "props/gone.png"], meshes: ["props/*.obj"]),
         ])"#,
+    );
+    // An atlas: a texture path that is missing, and a mesh repeating an atlased texture.
+    project.write("assets/props/crate.png", crate::support::png_bytes(4, 4, &[90, 60, 30, 255].repeat(16)));
+    project.write("assets/props/crate.mtl", "newmtl wood\nmap_Kd crate.png\n");
+    project.write(
+        "assets/props/crate.obj",
+        "mtllib crate.mtl\nv 0 0 0\nv 1 0 0\nv 0 1 0\nvt 0 0\nvt 3 0\nvt 0 1\nusemtl wood\nf 1/1 2/2 3/3\n",
     );
     project.write("assets/tree.obj", "mtllib tree.mtl\nv 0 0 0\nv 1 0 0\nv 0 1 0\nvt 0 0\nvt 1 0\nvt 0 1\nusemtl bark\nf 1/1 2/2 3/3\n");
     project.write("assets/tree.mtl", "newmtl bark\nmap_Kd bark.png\nnorm ../../outside.png\n");
@@ -133,7 +141,9 @@ fn check_passes_on_the_bundled_pipeline_and_reports_each_kind_s_problems() {
         tree: assets/bark.png: file not found
         broken: assets/broken.obj:2:1: malformed OBJ: face vertex index out of bounds
         leaf: assets/leaf.mymaterial:1:48: texture "leaf.png" (assets/leaf.png): file not found
-        3 assets checked, 3 with problems
+        props: assets/props/gone.png: file not found
+        props: assets/props/crate.obj: material `wood` has UVs u ∈ [0, 3], v ∈ [0, 1] on the atlased texture `props/crate.png`: repeating UVs (outside [0, 1]) cannot be remapped onto an atlas rectangle
+        4 assets checked, 4 with problems
     "#]]
     .assert_eq(&String::from_utf8_lossy(&output.stdout));
 
@@ -141,10 +151,15 @@ fn check_passes_on_the_bundled_pipeline_and_reports_each_kind_s_problems() {
     project.write("assets/bark.png", crate::support::png_bytes(4, 4, &[90, 60, 30, 255].repeat(16)));
     project.write("assets/leaf.png", crate::support::png_bytes(4, 4, &[30, 90, 30, 255].repeat(16)));
     project.write("assets/broken.obj", "v 0 0 0\nv 1 0 0\nv 0 1 0\nf 1 2 3\n");
+    project.write("assets/props/gone.png", crate::support::png_bytes(4, 4, &[30, 90, 30, 255].repeat(16)));
+    project.write(
+        "assets/props/crate.obj",
+        "mtllib crate.mtl\nv 0 0 0\nv 1 0 0\nv 0 1 0\nvt 0 0\nvt 1 0\nvt 0 1\nusemtl wood\nf 1/1 2/2 3/3\n",
+    );
     let output = project.run_cli(&["check"]);
     expect![[r#"
         tree: assets/tree.mtl: warning: material `bark`: texture "../../outside.png" leaves the source folder; ignored
-        3 assets checked, 0 with problems, 1 with warnings only
+        4 assets checked, 0 with problems, 1 with warnings only
     "#]]
     .assert_eq(&String::from_utf8_lossy(&output.stdout));
     assert_eq!(output.status.code(), Some(0));

@@ -158,15 +158,35 @@ impl Kind for Atlas {
         }
     }
 
-    /// Every texture the globs match is readable and within the limits; globs that match
-    /// nothing are an error.
+    /// Every texture the globs match is readable and within the limits (globs that match
+    /// nothing are an error); every mesh loads, and its materials that use atlased maps keep
+    /// their UVs inside [0, 1].
     fn check(config: &PipelineConfig, asset: &AssetConfig) -> Vec<Diagnostic> {
-        let AssetSource::Atlas { textures, .. } = &asset.source else { return Vec::new() };
+        let AssetSource::Atlas { textures, meshes } = &asset.source else { return Vec::new() };
         let files = crate::sources::glob_matches(config, textures);
         if files.is_empty() {
             return vec![Diagnostic::new(&config.source, format!("atlas `{}`: no texture matches {textures:?}", asset.name))];
         }
-        files.iter().filter_map(|path| check_texture_file(config, path).err().map(|message| Diagnostic::new(path, message))).collect()
+        let mut problems: Vec<Diagnostic> =
+            files.iter().filter_map(|path| check_texture_file(config, path).err().map(|message| Diagnostic::new(path, message))).collect();
+        for mesh_file in crate::sources::glob_matches(config, meshes) {
+            let (mesh, warnings) = match crate::kinds::check_mesh_file(config, &mesh_file) {
+                Ok(loaded) => loaded,
+                Err(diagnostic) => {
+                    problems.push(diagnostic);
+                    continue;
+                }
+            };
+            problems.extend(warnings);
+            for (index, material) in mesh.materials.iter().enumerate() {
+                let Some(atlased) = material.maps.values().find(|path| files.contains(path)) else { continue };
+                let name = display_path(atlased.strip_prefix(&config.source).unwrap_or(atlased));
+                if let Err(error) = remap::repeating_uvs(&mesh, index, &name) {
+                    problems.push(Diagnostic::new(&mesh_file, error.to_string()));
+                }
+            }
+        }
+        problems
     }
 
     fn surface_image(db: &dyn Db, asset: Asset, surface: &SurfaceId) -> Result<Arc<Texture>, Diagnostic> {

@@ -408,11 +408,21 @@ fn entry_texture(db: &dyn Db, asset: Asset, path: &PathBuf) -> Result<Arc<Textur
 /// persistent cache needs no composite, and an edit elsewhere leaves this page's key alone.
 pub fn page_recipe_key(db: &dyn Db, asset: Asset, page: u32) -> Result<CacheKey, Diagnostic> {
     let layout = atlas_layout(db, asset)?;
-    let mut key = stage_key(COMPOSITE).part(&page).part(&page_settings(db, asset).padding).part(&[trims(db, asset)]);
-    key = key.part(&format!("{:?}", layout.packing.pages.get(page as usize)));
+    let Some(&(width, height)) = layout.packing.pages.get(page as usize) else {
+        return Err(Diagnostic::new(asset.source_root(db), format!("atlas page {page} no longer exists")));
+    };
+    let mut key = stage_key(COMPOSITE).part(&page).part(&[width, height]).part(&page_settings(db, asset).padding).part(&trims(db, asset));
     for (entry, place) in layout.entries.iter().zip(&layout.packing.placements).filter(|(_, place)| place.page == page) {
         let file = asset_file(db, asset, entry.file.clone()).ok_or_else(|| Diagnostic::new(&entry.file, "file not found"))?;
-        key = key_with_files(db, key.part(&format!("{:?} {:?}", place.placement, entry.trim)), [file]);
+        let placement = place.placement;
+        let trim = entry.trim;
+        key = key.part(&[placement.x, placement.y, placement.width, placement.height]).part(&placement.rotated).part(&[
+            trim.x,
+            trim.y,
+            trim.width,
+            trim.height,
+        ]);
+        key = key_with_files(db, key, [file]);
     }
     Ok(key.finish())
 }
@@ -515,7 +525,7 @@ pub fn remapped_mesh(db: &dyn Db, asset: Asset, mesh: PathBuf) -> Result<Arc<sup
                     std::iter::once(&entry.name).chain(&entry.aliases).map(move |name| (asset.source_root(db).join(name), index))
                 })
                 .collect();
-            let remap_error = |error: super::remap::RemapError| Diagnostic::new(&mesh, format!("mesh `{}`: {error}", display_path(&mesh)));
+            let remap_error = |error: super::remap::RemapError| Diagnostic::new(&mesh, error.to_string());
             let chosen = super::remap::material_entries(&loaded, &entries, |path| by_path.get(path).copied()).map_err(remap_error)?;
             let depth = remapped_mesh_path(db, asset, &mesh).components().count();
             let library = format!("{}atlas.mtl", "../".repeat(depth));

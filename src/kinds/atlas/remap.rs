@@ -88,24 +88,7 @@ pub fn remap_mesh(
     // Every atlased material's UV range first: the whole mesh fails or none of it.
     for (material, chosen) in material_entries.iter().enumerate() {
         let Some((entry, _)) = chosen else { continue };
-        let mut range = [f32::INFINITY, f32::NEG_INFINITY, f32::INFINITY, f32::NEG_INFINITY];
-        for (triangle, _) in mesh.triangles.iter().zip(&mesh.triangle_materials).filter(|(_, &used)| used as usize == material) {
-            for &vertex in triangle {
-                let [u, v] = uvs.get(vertex as usize).copied().unwrap_or([0.0, 0.0]);
-                range = [range[0].min(u), range[1].max(u), range[2].min(v), range[3].max(v)];
-            }
-        }
-        let outside = |low: f32, high: f32| low < -UV_TOLERANCE || high > 1.0 + UV_TOLERANCE;
-        if range[0] <= range[1] && (outside(range[0], range[1]) || outside(range[2], range[3])) {
-            return Err(RemapError::RepeatingUvs {
-                material: mesh.materials[material].name.clone(),
-                entry: entries[*entry].name.clone(),
-                u_min: range[0],
-                u_max: range[1],
-                v_min: range[2],
-                v_max: range[3],
-            });
-        }
+        repeating_uvs(mesh, material, &entries[*entry].name)?;
     }
     let mut obj = String::new();
     let _ = writeln!(obj, "# {header}\nmtllib {material_library}");
@@ -166,6 +149,32 @@ pub fn remap_mesh(
         })
         .collect();
     Ok(RemappedMesh { obj, materials })
+}
+
+/// Fails when the triangles of material `material` (index into the mesh's materials) use UVs
+/// outside [0, 1]: they repeat the texture, which an atlas rectangle cannot (`entry` names the
+/// atlased texture in the message).
+pub fn repeating_uvs(mesh: &Mesh, material: usize, entry: &str) -> Result<(), RemapError> {
+    let uvs = mesh.uvs.as_deref().unwrap_or(&[]);
+    let mut range = [f32::INFINITY, f32::NEG_INFINITY, f32::INFINITY, f32::NEG_INFINITY];
+    for (triangle, _) in mesh.triangles.iter().zip(&mesh.triangle_materials).filter(|(_, &used)| used as usize == material) {
+        for &vertex in triangle {
+            let [u, v] = uvs.get(vertex as usize).copied().unwrap_or([0.0, 0.0]);
+            range = [range[0].min(u), range[1].max(u), range[2].min(v), range[3].max(v)];
+        }
+    }
+    let outside = |low: f32, high: f32| low < -UV_TOLERANCE || high > 1.0 + UV_TOLERANCE;
+    if range[0] <= range[1] && (outside(range[0], range[1]) || outside(range[2], range[3])) {
+        return Err(RemapError::RepeatingUvs {
+            material: mesh.materials[material].name.clone(),
+            entry: entry.to_string(),
+            u_min: range[0],
+            u_max: range[1],
+            v_min: range[2],
+            v_max: range[3],
+        });
+    }
+    Ok(())
 }
 
 /// The MTL statement of a map slot.

@@ -25,7 +25,7 @@ use crate::cache::CacheKey;
 use crate::config::{AssetConfig, PipelineConfig};
 use crate::db::{Asset, Db, StageRun, DECODE};
 use crate::diagnostic::{display_path, Diagnostic};
-use crate::kinds::{as_warning, check_texture_file, tail_instances, AssetOutputs, Job, Kind, Read, StageInstance, SurfaceId, Task};
+use crate::kinds::{check_texture_file, tail_instances, AssetOutputs, Job, Kind, Read, StageInstance, SurfaceId, Task};
 use crate::summary::ErrorSummary;
 use crate::texture::tail::TailSettings;
 use crate::texture::{SurfaceKind, Texture, TextureSlot};
@@ -201,25 +201,10 @@ impl Kind for BillboardCloud {
     /// readable and within the limits; warnings are reported as problems too.
     fn check(config: &PipelineConfig, asset: &AssetConfig) -> Vec<Diagnostic> {
         let main_file = &config.source.join(asset.source.main_file());
-        let read = |path: &Path| crate::sources::read_source(&config.root, &config.source, path);
-        let contents = match read(main_file) {
-            Ok(contents) => contents,
-            Err(error) => return vec![Diagnostic::new(main_file, error)],
-        };
-        let mut libraries = BTreeMap::new();
-        for library in crate::mesh::material_libraries(main_file, &contents.bytes, &config.source) {
-            let bytes = match read(&library) {
-                Ok(contents) => Some(contents.bytes.to_vec()),
-                Err(error) if error == crate::sources::FILE_NOT_FOUND => None,
-                Err(error) => return vec![Diagnostic::new(&library, error)],
-            };
-            libraries.insert(library, bytes);
-        }
-        let (mesh, warnings) = match crate::mesh::load_mesh(main_file, &contents.bytes, &libraries, &config.source) {
+        let (mesh, mut problems) = match crate::kinds::check_mesh_file(config, main_file) {
             Ok(loaded) => loaded,
             Err(diagnostic) => return vec![diagnostic],
         };
-        let mut problems: Vec<Diagnostic> = warnings.iter().map(as_warning).collect();
         let textures: std::collections::BTreeSet<&PathBuf> = mesh.materials.iter().flat_map(|material| material.maps.values()).collect();
         for path in textures {
             if let Err(message) = check_texture_file(config, path) {

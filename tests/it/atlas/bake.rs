@@ -191,3 +191,72 @@ fn a_texture_named_by_plain_path_that_is_missing_is_named() {
     project.write("assets/extra/gone.png", pattern_png(8, 8, 5));
     assert!(build(&mut project.open()).all_ok());
 }
+
+#[test]
+fn palette_with_trns_16_bit_and_grey_alpha_pngs_read_back_from_the_page() {
+    let project = TempProject::new(
+        r#"Pipeline(source: "assets", output: "baked", assets: [
+            Atlas(name: "mixed", textures: ["mixed/*.png"], pack: (max_size: 2048, trim: false)),
+        ])"#,
+    );
+    // A palette PNG with tRNS alpha (the bundled aspen leaves).
+    let leaves =
+        std::fs::read(std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("examples/assets/trees/textures/aspen_color.png")).unwrap();
+    project.write("assets/mixed/palette.png", &leaves);
+    let encode = |image: image::DynamicImage| {
+        let mut bytes = std::io::Cursor::new(Vec::new());
+        image.write_to(&mut bytes, image::ImageFormat::Png).unwrap();
+        bytes.into_inner()
+    };
+    let sixteen = image::ImageBuffer::from_fn(40, 24, |x, y| image::Rgba([(x * 1600) as u16, (y * 2700) as u16, 40000u16, 65535u16]));
+    project.write("assets/mixed/sixteen.png", encode(image::DynamicImage::ImageRgba16(sixteen)));
+    let grey_alpha = image::ImageBuffer::from_fn(24, 36, |x, y| image::LumaA([(x * 10 + y) as u8, if (x + y) % 3 == 0 { 0 } else { 200 }]));
+    project.write("assets/mixed/grey_alpha.png", encode(image::DynamicImage::ImageLumaA8(grey_alpha)));
+    let summary = build(&mut project.open());
+    assert!(summary.all_ok(), "{}", summary.to_text());
+    let table: serde_json::Value = serde_json::from_slice(&project.read("baked/mixed/atlas.json")).unwrap();
+    let page = decode_png(&project.read("baked/mixed/atlas.png"));
+    for entry in table["entries"].as_array().unwrap() {
+        let name = entry["name"].as_str().unwrap();
+        // The source as the image crate reads it, in 8-bit RGBA (16-bit rounds to the nearest).
+        let source = image::load_from_memory(&project.read(&format!("assets/{name}"))).unwrap().into_rgba8();
+        let [x, y, width, height] = ["x", "y", "width", "height"].map(|key| entry[key].as_u64().unwrap() as u32);
+        assert_eq!((width, height), source.dimensions(), "{name}");
+        let rotated = entry["rotated"].as_bool().unwrap();
+        for row in 0..height {
+            for column in 0..width {
+                let (page_x, page_y) = if rotated { (x + height - 1 - row, y + column) } else { (x + column, y + row) };
+                assert_eq!(page.texel(page_x, page_y), source.get_pixel(column, row).0, "{name} texel ({column}, {row})");
+            }
+        }
+    }
+}
+
+#[test]
+fn two_projects_with_their_files_written_in_shuffled_orders_bake_identical_bytes() {
+    let sizes = [(64, 32), (20, 72), (36, 36), (120, 16), (8, 8), (44, 12), (16, 100), (30, 30)];
+    let bake = |order: &[usize]| -> Vec<(String, Vec<u8>)> {
+        let project = TempProject::new(
+            r#"Pipeline(source: "assets", output: "baked", assets: [
+                Atlas(name: "ui", textures: ["ui/**/*.png"], pack: (max_size: 256, padding: 2)),
+            ])"#,
+        );
+        for &index in order {
+            let (width, height) = sizes[index];
+            // Names whose listing order differs from creation order, in two folders.
+            project.write(&format!("assets/ui/{}/t{}.png", index % 2, 7 - index), pattern_png(width, height, index as u32));
+        }
+        assert!(build(&mut project.open()).all_ok());
+        ["atlas.json", "atlas.ktx2", "atlas.png", "atlas_1.ktx2"]
+            .iter()
+            .filter(|file| project.path(&format!("baked/ui/{file}")).exists())
+            .map(|file| (file.to_string(), project.read(&format!("baked/ui/{file}"))))
+            .collect()
+    };
+    let first = bake(&[0, 1, 2, 3, 4, 5, 6, 7]);
+    let second = bake(&[5, 2, 7, 0, 3, 6, 1, 4]);
+    assert!(first.len() >= 3);
+    for ((name, a), (_, b)) in first.iter().zip(&second) {
+        assert!(a == b, "{name} differs");
+    }
+}

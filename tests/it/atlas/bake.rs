@@ -260,3 +260,31 @@ fn two_projects_with_their_files_written_in_shuffled_orders_bake_identical_bytes
         assert!(a == b, "{name} differs");
     }
 }
+
+#[test]
+fn a_settings_change_reruns_only_the_stages_that_read_it() {
+    let project = atlas_project();
+    let mut cirrus = project.open();
+    assert!(build(&mut cirrus).all_ok());
+    cirrus.take_executed_stages();
+    let pipeline = std::fs::read_to_string(project.path("pipeline.ron")).unwrap();
+    // The block format: the encode and write of the page, nothing before them.
+    project.write("pipeline.ron", pipeline.replace("padding: 4)", "padding: 4), encode: (albedo: Bc3)").as_bytes());
+    cirrus.reconfigure(cirrus::config::load_pipeline(&project.path("pipeline.ron")).unwrap());
+    assert!(build(&mut cirrus).all_ok());
+    expect_test::expect![[r#"
+        [
+            "encode(ui/page0/albedo)",
+            "write(ui/page0/albedo)",
+        ]
+    "#]]
+    .assert_debug_eq(&cirrus.take_executed_stages());
+    // Trim off: every texture's trim, the layout and the page, no decode (in memory already).
+    project.write("pipeline.ron", pipeline.replace("padding: 4)", "padding: 4, trim: false), encode: (albedo: Bc3)").as_bytes());
+    cirrus.reconfigure(cirrus::config::load_pipeline(&project.path("pipeline.ron")).unwrap());
+    assert!(build(&mut cirrus).all_ok());
+    let ran = cirrus.take_executed_stages();
+    assert!(ran.iter().all(|stage| !stage.starts_with("decode")), "{ran:?}");
+    assert_eq!(ran.iter().filter(|stage| stage.starts_with("trim(")).count(), 6, "{ran:?}");
+    assert!(ran.contains(&"layout(ui)".to_string()) && ran.contains(&"composite(ui/page0)".to_string()), "{ran:?}");
+}

@@ -17,7 +17,7 @@ use std::time::Duration;
 
 use cirrus::gpu::{Gpu, ViewMesh, WindowSurface};
 use clap::Parser;
-use glam::{Mat4, Vec3};
+use glam::Vec3;
 
 #[derive(Parser, Debug, Clone)]
 #[command(about = "Shows a baked billboard-cloud LOD and reloads it on cirrus watch events")]
@@ -67,9 +67,10 @@ impl Camera {
     fn view_projection(&self, center: [f32; 3], radius: f32) -> [[f32; 4]; 4] {
         let (center, radius) = (Vec3::from(center), radius.max(1e-6));
         let direction = Vec3::new(self.pitch.cos() * self.yaw.sin(), self.pitch.sin(), self.pitch.cos() * self.yaw.cos());
-        let view = Mat4::look_at_rh(center + direction * 2.0 * radius, center, Vec3::Y);
+        let view = glam::camera::rh::view::look_at_mat4(center + direction * 2.0 * radius, center, Vec3::Y);
         let extent = radius / self.zoom;
-        (Mat4::orthographic_rh(-extent, extent, -extent, extent, 0.5 * radius, 3.5 * radius) * view).to_cols_array_2d()
+        (glam::camera::rh::proj::directx::orthographic(-extent, extent, -extent, extent, 0.5 * radius, 3.5 * radius) * view)
+            .to_cols_array_2d()
     }
 }
 

@@ -2,6 +2,9 @@
 //! (computed where missing), optional UVs and a material per triangle, each material with the
 //! maps of DESIGN §2.2 and constant fallbacks. Pure: the driver serves the MTL bytes.
 
+pub mod occlusion;
+pub mod rays;
+
 use std::collections::BTreeMap;
 use std::io::BufReader;
 use std::path::{Path, PathBuf};

@@ -14,6 +14,7 @@ mod conformance;
 mod fuzz;
 mod graph;
 mod hostile;
+mod occlusion;
 mod packing;
 mod tidy;
 mod watch;

@@ -8,7 +8,7 @@
 //! against itself moved a quarter pixel along both image axes scored 0.850 (ash) and 0.835
 //! (bush); with 16 samples, 0.905 and 0.886.
 
-use glam::{Mat4, Vec3};
+use glam::Vec3;
 use serde::Serialize;
 
 use rayon::prelude::*;
@@ -178,8 +178,8 @@ pub fn preview_light() -> [f32; 3] {
 pub fn view_projection(center: [f32; 3], radius: f32, direction: [f32; 3]) -> [[f32; 4]; 4] {
     let (center, radius, direction) = (Vec3::from(center), radius.max(1e-6), Vec3::from(direction));
     let up = if direction.y.abs() > 0.9 { Vec3::Z } else { Vec3::Y };
-    let view = Mat4::look_at_rh(center + direction * 2.0 * radius, center, up);
-    let projection = Mat4::orthographic_rh(-radius, radius, -radius, radius, 0.5 * radius, 3.5 * radius);
+    let view = glam::camera::rh::view::look_at_mat4(center + direction * 2.0 * radius, center, up);
+    let projection = glam::camera::rh::proj::directx::orthographic(-radius, radius, -radius, radius, 0.5 * radius, 3.5 * radius);
     (projection * view).to_cols_array_2d()
 }
 

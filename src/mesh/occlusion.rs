@@ -1,0 +1,116 @@
+//! Ambient occlusion at a surface point: the cosine-weighted fraction of the hemisphere above
+//! it from which nothing within `max_distance` blocks the sky. Rays follow a low-discrepancy
+//! sequence (R2, Roberts 2018) shifted per sample point by a hash of its index (Cranley–Patterson
+//! rotation), so results are deterministic and converge faster than random rays; directions are
+//! cosine-distributed (or uniform, weighted by the cosine). Pure: over [`TriangleBvh`].
+
+use glam::Vec3;
+
+use super::rays::{offset_ray_origin, BackFaces, TriangleBvh};
+
+/// How ray directions are spread over the hemisphere.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, serde::Serialize, serde::Deserialize)]
+pub enum RayDistribution {
+    /// Denser towards the normal (importance sampling of the cosine): the default.
+    Cosine,
+    /// Even over the hemisphere, each ray weighted by its cosine.
+    Uniform,
+}
+
+/// How a point's occlusion is measured.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct OcclusionSettings {
+    pub rays: u32,
+    pub distribution: RayDistribution,
+    /// Hits farther than this do not occlude (`f32::INFINITY` for any).
+    pub max_distance: f32,
+    /// Whether rays pass through back faces (else back faces occlude like front faces).
+    pub back_faces: BackFaces,
+}
+
+/// The occlusion of one point.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct Occlusion {
+    /// 1 where the whole hemisphere is open, 0 where it is fully blocked.
+    pub visibility: f32,
+    /// Rays whose nearest surface was a back face (more than half: the point is inside
+    /// geometry).
+    pub back_face_rays: u32,
+}
+
+/// The `index`-th point of the R2 sequence in [0, 1)².
+pub fn r2_point(index: u32) -> [f64; 2] {
+    // 1/φ₂ and 1/φ₂², φ₂ the plastic number (the real root of x³ = x + 1).
+    const A1: f64 = 0.754_877_666_246_692_8;
+    const A2: f64 = 0.569_840_290_998_053_3;
+    let index = index as f64;
+    [(0.5 + A1 * index).fract(), (0.5 + A2 * index).fract()]
+}
+
+/// A well-mixed 32-bit hash (the finaliser of MurmurHash3).
+fn mix(mut value: u32) -> u32 {
+    value ^= value >> 16;
+    value = value.wrapping_mul(0x85eb_ca6b);
+    value ^= value >> 13;
+    value = value.wrapping_mul(0xc2b2_ae35);
+    value ^ (value >> 16)
+}
+
+/// The shift of the sequence for the sample point `seed` (its texel or vertex index).
+pub fn sequence_shift(seed: u32) -> [f64; 2] {
+    let first = mix(seed ^ 0x9e37_79b9);
+    let second = mix(first ^ 0x7f4a_7c15);
+    [first as f64 / 4_294_967_296.0, second as f64 / 4_294_967_296.0]
+}
+
+/// A direction in the frame whose Z is the normal, from a point of [0, 1)², and its weight.
+fn local_direction(point: [f64; 2], distribution: RayDistribution) -> (Vec3, f32) {
+    let phi = std::f64::consts::TAU * point[1];
+    match distribution {
+        RayDistribution::Cosine => {
+            let radius = point[0].sqrt();
+            let z = (1.0 - point[0]).max(0.0).sqrt();
+            (Vec3::new((radius * phi.cos()) as f32, (radius * phi.sin()) as f32, z as f32), 1.0)
+        }
+        RayDistribution::Uniform => {
+            let z = 1.0 - point[0];
+            let radius = (1.0 - z * z).max(0.0).sqrt();
+            // Uniform density 1/2π against the cosine-weighted measure cos/π: weight 2 cos.
+            (Vec3::new((radius * phi.cos()) as f32, (radius * phi.sin()) as f32, z as f32), (2.0 * z) as f32)
+        }
+    }
+}
+
+/// An orthonormal frame around a unit normal (Duff et al., "Building an Orthonormal Basis,
+/// Revisited", 2017).
+pub fn orthonormal_frame(normal: Vec3) -> (Vec3, Vec3) {
+    let sign = 1.0f32.copysign(normal.z);
+    let a = -1.0 / (sign + normal.z);
+    let b = normal.x * normal.y * a;
+    (Vec3::new(1.0 + sign * normal.x * normal.x * a, sign * b, -sign * normal.x), Vec3::new(b, sign + normal.y * normal.y * a, -normal.y))
+}
+
+/// The occlusion at `point` on triangle `triangle` (whose rays skip it), over the hemisphere
+/// of the unit `normal`, with the sequence shifted by `seed`.
+pub fn occlusion_at(bvh: &TriangleBvh, point: Vec3, normal: Vec3, triangle: u32, settings: &OcclusionSettings, seed: u32) -> Occlusion {
+    let origin = offset_ray_origin(point, normal);
+    let (tangent, bitangent) = orthonormal_frame(normal);
+    let shift = sequence_shift(seed);
+    let (mut open, mut total, mut back_face_rays) = (0.0f64, 0.0f64, 0u32);
+    for ray in 0..settings.rays {
+        let base = r2_point(ray);
+        let point = [(base[0] + shift[0]).fract(), (base[1] + shift[1]).fract()];
+        let (local, weight) = local_direction(point, settings.distribution);
+        let direction = (tangent * local.x + bitangent * local.y + normal * local.z).normalize_or_zero();
+        let result = bvh.cast(origin, direction, settings.max_distance, triangle, settings.back_faces);
+        back_face_rays += result.nearest_is_back_face as u32;
+        if result.hit.is_none() {
+            open += weight as f64;
+        }
+        // Normalised by the weights drawn (a ratio estimator): exact for an open or a closed
+        // hemisphere, and less noisy than dividing by the ray count for uniform rays.
+        total += weight as f64;
+    }
+    let visibility = if total > 0.0 { (open / total).clamp(0.0, 1.0) as f32 } else { 1.0 };
+    Occlusion { visibility, back_face_rays }
+}

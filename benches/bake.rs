@@ -1,8 +1,9 @@
 //! Benchmark (`cargo bench [-- materials|packing|planes|billboard|watch]`): material-bake
 //! throughput next to the raw encoder's, no-op rebuild and warm restart next to a full bake, the
 //! page packer's time and occupancy beside Python `rectpack`, plane selection speed,
-//! billboard-cloud bake time, memory, edit re-bake and fidelity per ε, and the daemon's edit latency,
-//! burst handling and warm restart (`watch`). Prints figures.
+//! billboard-cloud bake time, memory, edit re-bake and fidelity per ε, the daemon's edit latency,
+//! burst handling and warm restart (`watch`), the texture atlas's full bake and one-texture edit
+//! (`atlas`), and occlusion rays per second (`occlusion`). Prints figures.
 
 use std::path::Path;
 use std::time::Instant;
@@ -49,6 +50,9 @@ fn main() {
     }
     if corpus.join("pbr").is_dir() && wanted("atlas") {
         bench_atlas(&corpus);
+    }
+    if corpus.join("meshes").is_dir() && wanted("occlusion") {
+        bench_occlusion(&corpus);
     }
 }
 
@@ -438,6 +442,71 @@ fn bench_atlas(corpus: &Path) {
         100.0 * sorted[2] / full,
         edits.iter().map(|seconds| (seconds * 1e3).round() as u32).collect::<Vec<_>>(),
         ran.expect("five edits")
+    );
+}
+
+/// Occlusion rays on the flight helmet (94,722 triangles): BVH build time, then 256 cosine rays
+/// from the centroid of every 4th triangle along its normal, on every core, with rays passing
+/// through back faces (nearest-hit queries) and with back faces blocking (any-hit queries):
+/// rays per second per core.
+fn bench_occlusion(corpus: &Path) {
+    use cirrus::mesh::occlusion::{occlusion_at, OcclusionSettings, RayDistribution};
+    use cirrus::mesh::rays::{build_triangle_bvh, BackFaces};
+    let folder = corpus.join("meshes/flight_helmet");
+    let obj = folder.join("FlightHelmet.obj");
+    let bytes = std::fs::read(&obj).expect("flight helmet OBJ");
+    let libraries = cirrus::mesh::material_libraries(&obj, &bytes, &folder)
+        .into_iter()
+        .map(|path| {
+            let contents = std::fs::read(&path).ok();
+            (path, contents)
+        })
+        .collect();
+    let (mesh, _) = cirrus::mesh::load_mesh(&obj, &bytes, &libraries, &folder).expect("flight helmet loads");
+    let start = Instant::now();
+    let bvh = build_triangle_bvh(&mesh.positions, &mesh.triangles);
+    let build_ms = start.elapsed().as_secs_f64() * 1e3;
+    let settings = OcclusionSettings {
+        rays: 256,
+        distribution: RayDistribution::Cosine,
+        max_distance: f32::INFINITY,
+        back_faces: BackFaces::PassThrough,
+    };
+    let points: Vec<(u32, glam::Vec3, glam::Vec3)> = (0..mesh.triangles.len() as u32)
+        .step_by(4)
+        .filter_map(|triangle| {
+            let normal = glam::Vec3::from(bvh.geometric_normal(triangle));
+            (normal != glam::Vec3::ZERO).then(|| {
+                let corners = mesh.triangles[triangle as usize].map(|vertex| glam::Vec3::from(mesh.positions[vertex as usize]));
+                (triangle, (corners[0] + corners[1] + corners[2]) / 3.0, normal)
+            })
+        })
+        .collect();
+    let start = Instant::now();
+    let visibility: f64 = points
+        .par_iter()
+        .map(|&(triangle, point, normal)| occlusion_at(&bvh, point, normal, triangle, &settings, triangle).visibility as f64)
+        .sum();
+    let seconds = start.elapsed().as_secs_f64();
+    let rays = points.len() as f64 * settings.rays as f64;
+    let threads = rayon::current_num_threads() as f64;
+    let blocking = OcclusionSettings { back_faces: BackFaces::Block, ..settings };
+    let start = Instant::now();
+    let blocked_visibility: f64 = points
+        .par_iter()
+        .map(|&(triangle, point, normal)| occlusion_at(&bvh, point, normal, triangle, &blocking, triangle).visibility as f64)
+        .sum();
+    println!(
+        "occlusion: back faces block (the first hit found ends a ray): {:.2} M rays/s/core, mean visibility {:.3}",
+        rays / start.elapsed().as_secs_f64() / threads / 1e6,
+        blocked_visibility / points.len() as f64
+    );
+    println!(
+        "occlusion: flight helmet {} triangles, BVH (obvhs CWBVH) built in {build_ms:.0} ms; {} points × 256 rays in {seconds:.2} s on {threads} threads: {:.2} M rays/s/core (bar ≥ 5), mean visibility {:.3}",
+        mesh.triangles.len(),
+        points.len(),
+        rays / seconds / threads / 1e6,
+        visibility / points.len() as f64
     );
 }
 

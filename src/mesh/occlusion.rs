@@ -33,8 +33,8 @@ pub struct OcclusionSettings {
 pub struct Occlusion {
     /// 1 where the whole hemisphere is open, 0 where it is fully blocked.
     pub visibility: f32,
-    /// Rays whose nearest surface was a back face (more than half: the point is inside
-    /// geometry).
+    /// Rays whose nearest surface was a back face, counted when rays pass through back faces
+    /// (more than half: the point is inside geometry).
     pub back_face_rays: u32,
 }
 
@@ -102,9 +102,16 @@ pub fn occlusion_at(bvh: &TriangleBvh, point: Vec3, normal: Vec3, triangle: u32,
         let point = [(base[0] + shift[0]).fract(), (base[1] + shift[1]).fract()];
         let (local, weight) = local_direction(point, settings.distribution);
         let direction = (tangent * local.x + bitangent * local.y + normal * local.z).normalize_or_zero();
-        let result = bvh.cast(origin, direction, settings.max_distance, triangle, settings.back_faces);
-        back_face_rays += result.nearest_is_back_face as u32;
-        if result.hit.is_none() {
+        let open_ray = match settings.back_faces {
+            // Any face blocks: the first hit found ends the ray (no nearest hit needed).
+            BackFaces::Block => !bvh.blocked(origin, direction, settings.max_distance, triangle),
+            BackFaces::PassThrough => {
+                let result = bvh.cast(origin, direction, settings.max_distance, triangle, BackFaces::PassThrough);
+                back_face_rays += result.nearest_is_back_face as u32;
+                result.hit.is_none()
+            }
+        };
+        if open_ray {
             open += weight as f64;
         }
         // Normalised by the weights drawn (a ratio estimator): exact for an open or a closed

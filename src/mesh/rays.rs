@@ -7,14 +7,18 @@ use glam::{IVec3, Vec3, Vec3A};
 use obvhs::cwbvh::builder::build_cwbvh_from_tris;
 use obvhs::cwbvh::CwBvh;
 use obvhs::ray::{Ray, RayHit};
+use obvhs::rt_triangle::RtTriangle;
 use obvhs::triangle::Triangle;
 use obvhs::BvhBuildParams;
 
 /// The triangles of a mesh and a BVH over them.
 pub struct TriangleBvh {
     bvh: CwBvh,
-    triangles: Vec<Triangle>,
-    /// Each triangle's geometric normal (unit; zero for a degenerate one).
+    /// The triangles in the BVH's primitive order, laid out for intersection.
+    ordered: Vec<RtTriangle>,
+    /// The mesh's index of each triangle of `ordered`.
+    mesh_index: Vec<u32>,
+    /// Each triangle's geometric normal, by mesh index (unit; zero for a degenerate one).
     normals: Vec<Vec3A>,
 }
 
@@ -55,14 +59,16 @@ pub fn build_triangle_bvh(positions: &[[f32; 3]], triangles: &[[u32; 3]]) -> Tri
     let bvh = if triangles.is_empty() {
         CwBvh::default()
     } else {
-        build_cwbvh_from_tris(&triangles, BvhBuildParams::medium_build(), &mut std::time::Duration::default())
+        build_cwbvh_from_tris(&triangles, BvhBuildParams::slow_build(), &mut std::time::Duration::default())
     };
-    TriangleBvh { bvh, triangles, normals }
+    let mesh_index: Vec<u32> = bvh.primitive_indices.clone();
+    let ordered = mesh_index.iter().map(|&index| RtTriangle::from(&triangles[index as usize])).collect();
+    TriangleBvh { bvh, ordered, mesh_index, normals }
 }
 
 impl TriangleBvh {
     pub fn triangle_count(&self) -> usize {
-        self.triangles.len()
+        self.normals.len()
     }
 
     /// A triangle's geometric normal (unit, by its winding; zero when degenerate).
@@ -73,7 +79,7 @@ impl TriangleBvh {
     /// Casts a ray from `origin` along `direction` (unit) up to `max_distance`, skipping the
     /// triangle `skip` (the one the ray leaves from; `u32::MAX` for none).
     pub fn cast(&self, origin: Vec3, direction: Vec3, max_distance: f32, skip: u32, back_faces: BackFaces) -> RayResult {
-        if self.triangles.is_empty() {
+        if self.ordered.is_empty() {
             return RayResult { hit: None, nearest_is_back_face: false };
         }
         let ray = Ray::new(origin.into(), direction.into(), 0.0, max_distance);
@@ -81,11 +87,11 @@ impl TriangleBvh {
         let mut nearest_back = f32::INFINITY;
         let mut hit = RayHit::none();
         let found = self.bvh.ray_traverse(ray, &mut hit, |ray, id| {
-            let triangle = self.bvh.primitive_indices[id];
+            let triangle = self.mesh_index[id];
             if triangle == skip {
                 return f32::INFINITY;
             }
-            let distance = self.triangles[triangle as usize].intersect(ray);
+            let distance = self.ordered[id].intersect(ray);
             if !(distance >= ray.tmin && distance < ray.tmax) {
                 return f32::INFINITY;
             }
@@ -95,9 +101,21 @@ impl TriangleBvh {
             }
             distance
         });
-        let hit = found.then(|| (self.bvh.primitive_indices[hit.primitive_id as usize], hit.t));
+        let hit = found.then(|| (self.mesh_index[hit.primitive_id as usize], hit.t));
         let nearest_front = hit.map_or(f32::INFINITY, |(_, distance)| distance);
         RayResult { hit, nearest_is_back_face: nearest_back < nearest_front }
+    }
+
+    /// Whether any face (front or back) lies within `max_distance` along the ray: traversal
+    /// stops at the first hit found, the cheap query of occlusion that needs no distance.
+    pub fn blocked(&self, origin: Vec3, direction: Vec3, max_distance: f32, skip: u32) -> bool {
+        if self.ordered.is_empty() {
+            return false;
+        }
+        let ray = Ray::new(origin.into(), direction.into(), 0.0, max_distance);
+        !self
+            .bvh
+            .ray_traverse_miss(ray, |ray, id| if self.mesh_index[id] == skip { f32::INFINITY } else { self.ordered[id].intersect(ray) })
     }
 }
 

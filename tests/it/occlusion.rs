@@ -125,3 +125,71 @@ fn the_robust_offset_keeps_rays_off_their_own_surface_at_every_scale() {
         }
     }
 }
+
+/// A floor with boxes of several sizes on it (every box a closed, outward-facing cube).
+fn cluttered_floor() -> (Vec<[f32; 3]>, Vec<[u32; 3]>) {
+    let (mut positions, mut triangles) = (Vec::new(), Vec::new());
+    square(100.0, 0.0, false, &mut positions, &mut triangles);
+    for (x, y, side, height) in [(1.5f32, 0.0f32, 1.0f32, 2.0f32), (-1.0, 1.2, 0.6, 0.8), (0.2, -1.6, 1.4, 0.5), (-1.8, -1.0, 0.4, 3.0)] {
+        let first = positions.len() as u32;
+        let h = side / 2.0;
+        for z in [0.0, height] {
+            positions.extend([[x - h, y - h, z], [x + h, y - h, z], [x + h, y + h, z], [x - h, y + h, z]]);
+        }
+        let quads = [[0, 3, 2, 1], [4, 5, 6, 7], [0, 1, 5, 4], [1, 2, 6, 5], [2, 3, 7, 6], [3, 0, 4, 7]];
+        for [a, b, c, d] in quads {
+            triangles.extend([[first + a, first + b, first + c], [first + a, first + c, first + d]]);
+        }
+    }
+    (positions, triangles)
+}
+
+#[test]
+fn occlusion_converges_256_rays_within_40_db_of_16384_and_error_falls_at_least_as_n_to_the_minus_0_6() {
+    let (positions, triangles) = cluttered_floor();
+    let bvh = build_triangle_bvh(&positions, &triangles);
+    // 400 floor points between the boxes (a 20 × 20 grid), each its own sequence shift.
+    let points: Vec<Vec3> =
+        (0..400).map(|index| Vec3::new(-2.5 + 0.25 * (index % 20) as f32, -2.5 + 0.25 * (index / 20) as f32, 0.0)).collect();
+    let bake = |rays: u32| -> Vec<f32> {
+        let settings = settings(rays, f32::INFINITY, RayDistribution::Cosine);
+        points.iter().enumerate().map(|(index, &point)| occlusion_at(&bvh, point, Vec3::Z, 0, &settings, index as u32).visibility).collect()
+    };
+    let reference = bake(16_384);
+    let rmse = |rays: u32| -> f64 {
+        let values = bake(rays);
+        (values.iter().zip(&reference).map(|(a, b)| ((a - b) as f64).powi(2)).sum::<f64>() / values.len() as f64).sqrt()
+    };
+    let counts = [16u32, 64, 256, 1024];
+    let errors: Vec<f64> = counts.iter().map(|&rays| rmse(rays)).collect();
+    let psnr_256 = 20.0 * (1.0 / errors[2]).log10();
+    assert!(psnr_256 >= 40.0, "256 rays: {psnr_256:.1} dB against 16,384 ({errors:?})");
+    // The least-squares slope of log RMSE against log N.
+    let xs: Vec<f64> = counts.iter().map(|&n| (n as f64).ln()).collect();
+    let ys: Vec<f64> = errors.iter().map(|e| e.ln()).collect();
+    let (mean_x, mean_y) = (xs.iter().sum::<f64>() / 4.0, ys.iter().sum::<f64>() / 4.0);
+    let slope =
+        xs.iter().zip(&ys).map(|(x, y)| (x - mean_x) * (y - mean_y)).sum::<f64>() / xs.iter().map(|x| (x - mean_x).powi(2)).sum::<f64>();
+    assert!(slope <= -0.6, "RMSE slope {slope:.2} ({errors:?})");
+}
+
+#[test]
+fn occlusion_is_the_same_whatever_the_thread_count() {
+    use rayon::prelude::*;
+    let (positions, triangles) = cluttered_floor();
+    let bvh = build_triangle_bvh(&positions, &triangles);
+    let settings = settings(64, 2.0, RayDistribution::Cosine);
+    let bake = |threads: usize| -> Vec<u32> {
+        let pool = rayon::ThreadPoolBuilder::new().num_threads(threads).build().unwrap();
+        pool.install(|| {
+            (0..2000u32)
+                .into_par_iter()
+                .map(|index| {
+                    let point = Vec3::new(-2.5 + 0.05 * (index % 100) as f32, -2.5 + 0.25 * (index / 100) as f32, 0.0);
+                    occlusion_at(&bvh, point, Vec3::Z, 0, &settings, index).visibility.to_bits()
+                })
+                .collect()
+        })
+    };
+    assert_eq!(bake(1), bake(3));
+}

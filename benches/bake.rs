@@ -1,4 +1,4 @@
-//! Benchmark (`cargo bench [-- materials|packing|planes|billboard|watch]`): material-bake
+//! Benchmark (`cargo bench [-- materials|packing|planes|billboard|watch|atlas|occlusion]`): material-bake
 //! throughput next to the raw encoder's, no-op rebuild and warm restart next to a full bake, the
 //! page packer's time and occupancy beside Python `rectpack`, plane selection speed,
 //! billboard-cloud bake time, memory, edit re-bake and fidelity per ε, the daemon's edit latency,

@@ -264,7 +264,6 @@ fn mesh_outputs(db: &dyn Db, asset: Asset, output_folder: &Path, outputs: &mut A
     if meshes.is_empty() {
         return Vec::new();
     }
-    let container_folder = output_folder.to_path_buf();
     let mut materials: std::collections::BTreeMap<String, (remap::RemappedMaterial, PathBuf)> = std::collections::BTreeMap::new();
     let mut written = Vec::new();
     for mesh in meshes {
@@ -303,7 +302,7 @@ fn mesh_outputs(db: &dyn Db, asset: Asset, output_folder: &Path, outputs: &mut A
         mtl.push_str(&remap::mtl_material(
             material,
             |page| format!("{}.png", page_stem(page)),
-            |path| display_path(&remap::relative_path(&container_folder, path)),
+            |path| display_path(&remap::relative_path(output_folder, path)),
         ));
     }
     outputs.files.push((output_folder.join("atlas.mtl"), mtl.into_bytes().into()));

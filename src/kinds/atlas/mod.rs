@@ -239,7 +239,8 @@ fn atlas_outputs(
     let entries = queries::atlas_table_entries(layout);
     let table = AtlasTable { pages, entries };
     outputs.files.push((output_folder.join("atlas.json"), table.to_json().into_bytes().into()));
-    let meshes = mesh_outputs(db, asset, output_folder, &mut outputs, errors);
+    let mut warnings = Vec::new();
+    let meshes = mesh_outputs(db, asset, output_folder, &mut outputs, errors, &mut warnings);
     let report = serde_json::json!({
         "asset": asset.name(db),
         "kind": Atlas::NAME,
@@ -249,6 +250,7 @@ fn atlas_outputs(
         "occupancy": (layout.packing.occupancy() * 1e4).round() / 1e4,
         "layout": change,
         "meshes": meshes,
+        "warnings": warnings.iter().map(crate::summary::ErrorSummary::from).collect::<Vec<_>>(),
         "surfaces": surfaces,
         "stage_ms": crate::kinds::asset_stage_ms(asset.name(db), runs),
     });
@@ -258,8 +260,16 @@ fn atlas_outputs(
 
 /// The remapped meshes and `atlas.mtl` (one material per name): a mesh that cannot be remapped
 /// (repeating UVs, two rectangles in one material, a material named like another mesh's but
-/// different) fails alone with its diagnostic; the others are written. Gives the meshes written.
-fn mesh_outputs(db: &dyn Db, asset: Asset, output_folder: &Path, outputs: &mut AssetOutputs, errors: &mut Vec<Diagnostic>) -> Vec<String> {
+/// different) fails alone with its diagnostic; the others are written, their load warnings
+/// gathered in `warnings` (for the report). Gives the meshes written.
+fn mesh_outputs(
+    db: &dyn Db,
+    asset: Asset,
+    output_folder: &Path,
+    outputs: &mut AssetOutputs,
+    errors: &mut Vec<Diagnostic>,
+    warnings: &mut Vec<Diagnostic>,
+) -> Vec<String> {
     let meshes = atlas_mesh_files(db, asset);
     if meshes.is_empty() {
         return Vec::new();
@@ -292,6 +302,7 @@ fn mesh_outputs(db: &dyn Db, asset: Asset, output_folder: &Path, outputs: &mut A
         for material in &remapped.materials {
             materials.entry(material.material.name.clone()).or_insert_with(|| (material.clone(), mesh.clone()));
         }
+        warnings.extend(remapped.warnings.iter().cloned());
         let relative = remapped_mesh_path(db, asset, mesh);
         outputs.files.push((output_folder.join("meshes").join(&relative), remapped.obj.clone().into_bytes().into()));
         written.push(display_path(&relative));

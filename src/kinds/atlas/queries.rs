@@ -516,7 +516,7 @@ pub fn remapped_mesh(db: &dyn Db, asset: Asset, mesh: PathBuf) -> Result<Arc<sup
             })
             .collect();
         timed(db, REMAP, &label, || {
-            let (loaded, _warnings) = crate::mesh::load_mesh(&mesh, &contents.bytes, &library_bytes, asset.source_root(db))?;
+            let (loaded, warnings) = crate::mesh::load_mesh(&mesh, &contents.bytes, &library_bytes, asset.source_root(db))?;
             let entries = atlas_table_entries(&layout);
             let by_path: HashMap<PathBuf, usize> = entries
                 .iter()
@@ -530,10 +530,12 @@ pub fn remapped_mesh(db: &dyn Db, asset: Asset, mesh: PathBuf) -> Result<Arc<sup
             let depth = remapped_mesh_path(db, asset, &mesh).components().count();
             let library = format!("{}atlas.mtl", "../".repeat(depth));
             let header = format!("cirrus: {} remapped onto atlas `{}`", display_path(&mesh), asset.name(db));
-            super::remap::remap_mesh(&loaded, &entries, &chosen, &library, &header).map_err(remap_error)
+            let remapped = super::remap::remap_mesh(&loaded, &entries, &chosen, &library, &header).map_err(remap_error)?;
+            Ok(super::remap::RemappedMesh { warnings, ..remapped })
         })
     })
     .map(Arc::new)
 }
 
-pub const REMAP: Stage = Stage { name: "remap", version: 1 };
+/// 2: with the mesh's load warnings.
+pub const REMAP: Stage = Stage { name: "remap", version: 2 };

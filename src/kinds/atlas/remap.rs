@@ -29,6 +29,9 @@ pub struct RemappedMaterial {
 pub struct RemappedMesh {
     pub obj: String,
     pub materials: Vec<RemappedMaterial>,
+    /// What loading the mesh warned of (a missing MTL, a map leaving the source folder).
+    #[serde(default)]
+    pub warnings: Vec<crate::diagnostic::Diagnostic>,
 }
 
 /// Why a mesh cannot be remapped.
@@ -148,7 +151,7 @@ pub fn remap_mesh(
             atlased: chosen.as_ref().map(|(_, slots)| slots.clone()).unwrap_or_default(),
         })
         .collect();
-    Ok(RemappedMesh { obj, materials })
+    Ok(RemappedMesh { obj, materials, warnings: Vec::new() })
 }
 
 /// Fails when the triangles of material `material` (index into the mesh's materials) use UVs

@@ -131,3 +131,15 @@ fn a_texel_edit_rewrites_neither_the_table_nor_the_meshes() {
     assert!(ran.contains(&"composite(props/page0)".to_string()), "{ran:?}");
     assert_eq!(project.read("baked/props/meshes/props/plank.obj"), mesh);
 }
+
+#[test]
+fn a_mesh_whose_material_library_is_missing_is_written_with_its_warning_in_the_report() {
+    let project = remap_project();
+    project.write("assets/props/lost.obj", quad_obj("plank", [0.0, 0.0, 1.0, 1.0]).replace("props.mtl", "lost.mtl"));
+    let summary = build(&mut project.open());
+    assert!(summary.all_ok(), "{}", summary.to_text());
+    assert!(project.path("baked/props/meshes/props/lost.obj").is_file());
+    let report: serde_json::Value = serde_json::from_slice(&project.read("baked/props/report.json")).unwrap();
+    let warnings = report["warnings"].to_string();
+    assert!(warnings.contains("lost.mtl") && warnings.contains("not found"), "{report}");
+}

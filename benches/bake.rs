@@ -532,33 +532,11 @@ fn walk_files(folder: &Path) -> Vec<std::path::PathBuf> {
 /// breakdown), a bark-texture edit next to it, and plane count and IoU per tree and ε.
 fn bench_billboards(corpus: &Path) {
     let dir = tree_project(corpus, r#"BillboardCloud(name: "oak", mesh: "trees/oak_medium.obj")"#);
-    let start = Instant::now();
-    let mut child = std::process::Command::new(env!("CARGO_BIN_EXE_cirrus"))
-        .args(["build", "--summary", "json"])
-        .current_dir(dir.path())
-        .stdout(std::process::Stdio::null())
-        .stderr(std::process::Stdio::null())
-        .spawn()
-        .expect("run cirrus");
-    let status_file = format!("/proc/{}/status", child.id());
-    let mut peak_kib = 0u64;
-    while child.try_wait().expect("child").is_none() {
-        if let Ok(status) = std::fs::read_to_string(&status_file) {
-            if let Some(line) = status.lines().find(|line| line.starts_with("VmHWM:")) {
-                peak_kib = peak_kib.max(line.split_whitespace().nth(1).and_then(|kib| kib.parse().ok()).unwrap_or(0));
-            }
-        }
-        std::thread::sleep(std::time::Duration::from_millis(5));
-    }
-    let full = start.elapsed().as_secs_f64();
+    let (full, peak_mib, _) = build_process(dir.path());
     let report: serde_json::Value = serde_json::from_slice(&std::fs::read(dir.path().join("baked/oak/report.json")).unwrap()).unwrap();
     println!(
         "billboard: oak_medium full bake (process) {:.2} s wall (bar ≤ 5 s), peak memory {:.0} MiB (bar ≤ 1536), {} planes → atlas {}x{}",
-        full,
-        peak_kib as f64 / 1024.0,
-        report["planes"],
-        report["atlas"]["width"],
-        report["atlas"]["height"]
+        full, peak_mib, report["planes"], report["atlas"]["width"], report["atlas"]["height"]
     );
     println!("billboard: oak stage ms {}", report["stage_ms"]);
 
@@ -568,19 +546,8 @@ fn bench_billboards(corpus: &Path) {
     let mut image = image::open(&bark).unwrap().into_rgb8();
     image.get_pixel_mut(10, 10).0 = [255, 0, 0];
     image.save(&bark).unwrap();
-    let start = Instant::now();
-    let output = std::process::Command::new(env!("CARGO_BIN_EXE_cirrus"))
-        .args(["build", "--summary", "json"])
-        .current_dir(dir.path())
-        .stderr(std::process::Stdio::null())
-        .output()
-        .expect("run cirrus");
-    let edit = start.elapsed().as_secs_f64();
-    let summary: serde_json::Value = serde_json::from_slice(&output.stdout).expect("summary");
-    let mut ran = std::collections::BTreeMap::<String, usize>::new();
-    for stage in summary["assets"][0]["stages"].as_array().unwrap().iter().filter(|stage| stage["status"] == "ran") {
-        *ran.entry(stage["stage"].as_str().unwrap().to_string()).or_default() += 1;
-    }
+    let (edit, _, summary) = build_process(dir.path());
+    let ran = stages_that_ran(&summary["assets"][0]);
     println!(
         "billboard: oak bark-texture edit as a separate process: {:.0} ms vs full bake {:.0} ms: {:.1} % (bar ≤ 25 %); stages that ran: {ran:?}",
         edit * 1e3,

@@ -142,3 +142,23 @@ pub fn ktx2_level(bytes: &[u8], ktx2: &Ktx2, level: usize) -> Vec<u8> {
         data.to_vec()
     }
 }
+
+/// The PSNR of texel pairs read back against their sources, gathered pair by pair.
+#[derive(Default)]
+pub struct PsnrSum {
+    squared: u64,
+    count: u64,
+}
+
+impl PsnrSum {
+    /// Adds the first `channels` channels of one pair.
+    pub fn add(&mut self, expected: [u8; 4], actual: [u8; 4], channels: usize) {
+        self.squared += (0..channels).map(|channel| (expected[channel] as i64 - actual[channel] as i64).pow(2) as u64).sum::<u64>();
+        self.count += channels as u64;
+    }
+
+    /// In dB (a large finite figure when every pair is equal).
+    pub fn psnr(&self) -> f64 {
+        10.0 * (255.0f64 * 255.0 / (self.squared as f64 / self.count.max(1) as f64).max(1e-9)).log10()
+    }
+}

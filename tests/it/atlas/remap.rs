@@ -3,7 +3,7 @@
 
 use cirrus::texture::Texture;
 
-use crate::support::{build, decode_png, pattern_png, TempProject};
+use crate::support::{build, decode_png, pattern_png, PsnrSum, TempProject};
 
 /// A two-triangle quad over UVs `[u0, u1] × [v0, v1]` with material `material` of `props.mtl`.
 fn quad_obj(material: &str, [u0, v0, u1, v1]: [f32; 4]) -> String {
@@ -78,19 +78,18 @@ fn a_remapped_mesh_sampled_through_the_atlas_shows_what_it_showed_through_its_ow
             }
             uv
         };
-        let (mut squared, mut count) = (0u64, 0u64);
+        let mut sum = PsnrSum::default();
         for triangle in 0..2 {
             for i in 1..20 {
                 for j in 1..(20 - i) {
                     let weights = [i as f32 / 20.0, j as f32 / 20.0, 1.0 - (i + j) as f32 / 20.0];
                     let expected = sample(&source, uv_at(&original[0], triangle, weights));
                     let actual = sample(&page, uv_at(&remapped[0], triangle, weights));
-                    squared += (0..3).map(|channel| (expected[channel] as i64 - actual[channel] as i64).pow(2) as u64).sum::<u64>();
-                    count += 3;
+                    sum.add(expected, actual, 3);
                 }
             }
         }
-        let psnr = 10.0 * (255.0f64 * 255.0 / (squared as f64 / count as f64).max(1e-9)).log10();
+        let psnr = sum.psnr();
         assert!(psnr > 30.0, "{mesh}: {psnr:.1} dB");
     }
 }

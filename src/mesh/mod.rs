@@ -4,6 +4,7 @@
 
 pub mod occlusion;
 pub mod rays;
+pub mod uv_raster;
 
 use std::collections::BTreeMap;
 use std::io::BufReader;

@@ -17,6 +17,7 @@ mod hostile;
 mod occlusion;
 mod packing;
 mod tidy;
+mod uv_raster;
 mod watch;
 
 /// The viewer example, compiled in so the tests drive the very code `cargo run --example viewer`

@@ -471,6 +471,7 @@ fn bench_occlusion(corpus: &Path) {
         distribution: RayDistribution::Cosine,
         max_distance: f32::INFINITY,
         back_faces: BackFaces::PassThrough,
+        ground_plane: None,
     };
     let points: Vec<(u32, glam::Vec3, glam::Vec3)> = (0..mesh.triangles.len() as u32)
         .step_by(4)

@@ -26,6 +26,8 @@ pub struct OcclusionSettings {
     pub max_distance: f32,
     /// Whether rays pass through back faces (else back faces occlude like front faces).
     pub back_faces: BackFaces,
+    /// The height (Y, OBJ's up) of an infinite floor that occludes too, if any.
+    pub ground_plane: Option<f32>,
 }
 
 /// The occlusion of one point.
@@ -93,7 +95,21 @@ pub fn orthonormal_frame(normal: Vec3) -> (Vec3, Vec3) {
 /// The occlusion at `point` on triangle `triangle` (whose rays skip it), over the hemisphere
 /// of the unit `normal`, with the sequence shifted by `seed`.
 pub fn occlusion_at(bvh: &TriangleBvh, point: Vec3, normal: Vec3, triangle: u32, settings: &OcclusionSettings, seed: u32) -> Occlusion {
-    let origin = offset_ray_origin(point, normal);
+    occlusion_from(bvh, point, normal, normal, triangle, settings, seed)
+}
+
+/// [`occlusion_at`] with the ray origins moved off the surface along `offset_normal` (the
+/// geometric normal on the hemisphere's side) and the hemisphere around `normal`.
+fn occlusion_from(
+    bvh: &TriangleBvh,
+    point: Vec3,
+    offset_normal: Vec3,
+    normal: Vec3,
+    triangle: u32,
+    settings: &OcclusionSettings,
+    seed: u32,
+) -> Occlusion {
+    let origin = offset_ray_origin(point, offset_normal);
     let (tangent, bitangent) = orthonormal_frame(normal);
     let shift = sequence_shift(seed);
     let (mut open, mut total, mut back_face_rays) = (0.0f64, 0.0f64, 0u32);
@@ -102,15 +118,19 @@ pub fn occlusion_at(bvh: &TriangleBvh, point: Vec3, normal: Vec3, triangle: u32,
         let point = [(base[0] + shift[0]).fract(), (base[1] + shift[1]).fract()];
         let (local, weight) = local_direction(point, settings.distribution);
         let direction = (tangent * local.x + bitangent * local.y + normal * local.z).normalize_or_zero();
-        let open_ray = match settings.back_faces {
-            // Any face blocks: the first hit found ends the ray (no nearest hit needed).
-            BackFaces::Block => !bvh.blocked(origin, direction, settings.max_distance, triangle),
-            BackFaces::PassThrough => {
-                let result = bvh.cast(origin, direction, settings.max_distance, triangle, BackFaces::PassThrough);
-                back_face_rays += result.nearest_is_back_face as u32;
-                result.hit.is_none()
-            }
-        };
+        let below_ground = settings
+            .ground_plane
+            .is_some_and(|ground| direction.y < 0.0 && (origin.y - ground) / -direction.y <= settings.max_distance && origin.y >= ground);
+        let open_ray = !below_ground
+            && match settings.back_faces {
+                // Any face blocks: the first hit found ends the ray (no nearest hit needed).
+                BackFaces::Block => !bvh.blocked(origin, direction, settings.max_distance, triangle),
+                BackFaces::PassThrough => {
+                    let result = bvh.cast(origin, direction, settings.max_distance, triangle, BackFaces::PassThrough);
+                    back_face_rays += result.nearest_is_back_face as u32;
+                    result.hit.is_none()
+                }
+            };
         if open_ray {
             open += weight as f64;
         }
@@ -120,4 +140,47 @@ pub fn occlusion_at(bvh: &TriangleBvh, point: Vec3, normal: Vec3, triangle: u32,
     }
     let visibility = if total > 0.0 { (open / total).clamp(0.0, 1.0) as f32 } else { 1.0 };
     Occlusion { visibility, back_face_rays }
+}
+
+/// The occlusion of every covered texel of a UV coverage (see `uv_raster`): each texel's point
+/// and normal interpolated over its triangle from `positions` and unit vertex `normals` (the
+/// hemisphere's axis; rays leave on its side of the geometric surface), its sequence shifted by
+/// its index in the `width`-wide image, so that a tile bakes what the whole image bakes there.
+pub fn occlusion_of_texels(
+    bvh: &TriangleBvh,
+    positions: &[[f32; 3]],
+    normals: &[[f32; 3]],
+    triangles: &[[u32; 3]],
+    coverage: &super::uv_raster::UvCoverage,
+    width: u32,
+    settings: &OcclusionSettings,
+) -> Vec<Option<Occlusion>> {
+    use rayon::prelude::*;
+    let region = coverage.region;
+    coverage
+        .samples
+        .par_iter()
+        .enumerate()
+        .map(|(index, sample)| {
+            let sample = (*sample)?;
+            let corners = triangles[sample.triangle as usize];
+            let interpolate = |values: &[[f32; 3]]| {
+                corners
+                    .iter()
+                    .zip(sample.barycentric)
+                    .fold(Vec3::ZERO, |sum, (&vertex, weight)| sum + Vec3::from(values[vertex as usize]) * weight)
+            };
+            let point = interpolate(positions);
+            let geometric = Vec3::from(bvh.geometric_normal(sample.triangle));
+            let mut normal = interpolate(normals).normalize_or_zero();
+            if normal == Vec3::ZERO {
+                normal = geometric;
+            }
+            // The origin leaves the surface on the hemisphere's side.
+            let side = if geometric.dot(normal) < 0.0 { -geometric } else { geometric };
+            let (x, y) = (region.x + index as u32 % region.width, region.y + index as u32 / region.width);
+            let seed = y * width + x;
+            Some(occlusion_from(bvh, point, side, normal, sample.triangle, settings, seed))
+        })
+        .collect()
 }

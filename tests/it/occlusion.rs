@@ -36,7 +36,7 @@ fn disc(radius: f32, z: f32, positions: &mut Vec<[f32; 3]>, triangles: &mut Vec<
 }
 
 fn settings(rays: u32, max_distance: f32, distribution: RayDistribution) -> OcclusionSettings {
-    OcclusionSettings { rays, distribution, max_distance, back_faces: BackFaces::PassThrough }
+    OcclusionSettings { rays, distribution, max_distance, back_faces: BackFaces::PassThrough, ground_plane: None }
 }
 
 /// Visibility at the centre of the floor (triangle 0 of a 1000-wide square at z = 0).
@@ -192,4 +192,59 @@ fn occlusion_is_the_same_whatever_the_thread_count() {
         })
     };
     assert_eq!(bake(1), bake(3));
+}
+
+#[test]
+fn a_wall_over_an_infinite_ground_plane_sees_half_its_hemisphere() {
+    // A vertical wall facing +X; the ground (y = 0) blocks every ray that goes down.
+    let positions = [[0.0f32, 1.0, -1.0], [0.0, 1.0, 1.0], [0.0, 3.0, 1.0], [0.0, 3.0, -1.0]];
+    let bvh = build_triangle_bvh(&positions, &[[0, 2, 1], [0, 3, 2]]);
+    assert!(Vec3::from(bvh.geometric_normal(0)).dot(Vec3::X) > 0.99);
+    for distribution in [RayDistribution::Cosine, RayDistribution::Uniform] {
+        let settings = OcclusionSettings { ground_plane: Some(0.0), ..settings(65_536, f32::INFINITY, distribution) };
+        let visibility = occlusion_at(&bvh, Vec3::new(0.0, 2.0, 0.1), Vec3::X, 0, &settings, 3).visibility;
+        assert!((visibility - 0.5).abs() < 0.002, "{distribution:?}: {visibility}");
+    }
+}
+
+#[test]
+fn texels_bake_the_occlusion_of_their_surface_point_and_tiles_bake_what_the_whole_image_does() {
+    use cirrus::mesh::occlusion::occlusion_of_texels;
+    use cirrus::mesh::uv_raster::{rasterize_uv, TexelRegion};
+    // A UV-mapped floor (4 × 4, UVs over [0, 1]², normals up) under a disc.
+    let mut positions = vec![[-2.0f32, 0.0, 2.0], [2.0, 0.0, 2.0], [2.0, 0.0, -2.0], [-2.0, 0.0, -2.0]];
+    let uvs = [[0.0f32, 0.0], [1.0, 0.0], [1.0, 1.0], [0.0, 1.0]];
+    let mut triangles = vec![[0u32, 1, 2], [0, 2, 3]];
+    // The disc over the floor, in the XZ plane at y = 1, facing down.
+    let (mut disc_positions, mut disc_triangles) = (Vec::new(), Vec::new());
+    disc(1.0, 1.0, &mut disc_positions, &mut disc_triangles);
+    let first = positions.len() as u32;
+    positions.extend(disc_positions.iter().map(|&[x, y, z]| [x, z, -y]));
+    triangles.extend(disc_triangles.iter().map(|&[a, b, c]| [a + first, b + first, c + first]));
+    let normals: Vec<[f32; 3]> = positions.iter().map(|_| [0.0, 1.0, 0.0]).collect();
+    let bvh = build_triangle_bvh(&positions, &triangles);
+    assert!(Vec3::from(bvh.geometric_normal(0)).dot(Vec3::Y) > 0.99, "the floor faces up");
+    let settings = settings(1024, f32::INFINITY, RayDistribution::Cosine);
+    let size = 16u32;
+    let whole = TexelRegion { x: 0, y: 0, width: size, height: size };
+    let coverage = rasterize_uv(&uvs, &triangles, &[0, 1], (size, size), whole);
+    let baked = occlusion_of_texels(&bvh, &positions, &normals, &triangles, &coverage, size, &settings);
+    // Texel (8, 8): its centre (u, v) = (0.53125, 0.46875) is floor point (0.125, 0, 0.125), seed 8 × 16 + 8.
+    let sample = coverage.sample(8, 8).unwrap();
+    let expected = occlusion_at(&bvh, Vec3::new(0.125, 0.0, 0.125), Vec3::Y, sample.triangle, &settings, 8 * size + 8);
+    let texel = baked[8 * size as usize + 8].unwrap();
+    assert!((texel.visibility - expected.visibility).abs() < 1e-6, "{texel:?} vs {expected:?}");
+    assert!(texel.visibility < 0.6 && baked[0].unwrap().visibility > 0.9, "under the disc darker than the corner");
+    // Four tiles bake the same bits.
+    for (x, y) in [(0, 0), (8, 0), (0, 8), (8, 8)] {
+        let region = TexelRegion { x, y, width: 8, height: 8 };
+        let tile = rasterize_uv(&uvs, &triangles, &[0, 1], (size, size), region);
+        let tile_baked = occlusion_of_texels(&bvh, &positions, &normals, &triangles, &tile, size, &settings);
+        for row in 0..8 {
+            for column in 0..8 {
+                let in_whole = baked[((y + row) * size + x + column) as usize].map(|o| o.visibility.to_bits());
+                assert_eq!(tile_baked[(row * 8 + column) as usize].map(|o| o.visibility.to_bits()), in_whole);
+            }
+        }
+    }
 }

@@ -35,10 +35,17 @@ pub struct OcclusionSettings {
 pub struct Occlusion {
     /// 1 where the whole hemisphere is open, 0 where it is fully blocked.
     pub visibility: f32,
-    /// Rays whose nearest surface was a back face, counted when rays pass through back faces
-    /// (more than half: the point is inside geometry).
+    /// Of the `probe_rays` (the first rays, up to [`INSIDE_PROBE_RAYS`], when rays pass through
+    /// back faces), those whose nearest surface was a back face: more than half, and the point
+    /// is inside geometry.
     pub back_face_rays: u32,
+    pub probe_rays: u32,
 }
+
+/// How many of a point's rays also look for the nearest surface (a full nearest-hit query)
+/// to tell whether the point is inside geometry; the others only ask whether anything blocks
+/// them (an any-hit query, about twice as fast on the flight helmet).
+pub const INSIDE_PROBE_RAYS: u32 = 32;
 
 /// The `index`-th point of the R2 sequence in [0, 1)².
 pub fn r2_point(index: u32) -> [f64; 2] {
@@ -123,13 +130,14 @@ fn occlusion_from(
             .is_some_and(|ground| direction.y < 0.0 && (origin.y - ground) / -direction.y <= settings.max_distance && origin.y >= ground);
         let open_ray = !below_ground
             && match settings.back_faces {
-                // Any face blocks: the first hit found ends the ray (no nearest hit needed).
-                BackFaces::Block => !bvh.blocked(origin, direction, settings.max_distance, triangle),
-                BackFaces::PassThrough => {
+                // The probes: a nearest-hit query, which also tells a back face in front.
+                BackFaces::PassThrough if ray < INSIDE_PROBE_RAYS => {
                     let result = bvh.cast(origin, direction, settings.max_distance, triangle, BackFaces::PassThrough);
                     back_face_rays += result.nearest_is_back_face as u32;
                     result.hit.is_none()
                 }
+                // The others: the first blocking face found ends the ray.
+                back_faces => !bvh.blocked(origin, direction, settings.max_distance, triangle, back_faces),
             };
         if open_ray {
             open += weight as f64;
@@ -139,7 +147,8 @@ fn occlusion_from(
         total += weight as f64;
     }
     let visibility = if total > 0.0 { (open / total).clamp(0.0, 1.0) as f32 } else { 1.0 };
-    Occlusion { visibility, back_face_rays }
+    let probe_rays = if settings.back_faces == BackFaces::PassThrough { settings.rays.min(INSIDE_PROBE_RAYS) } else { 0 };
+    Occlusion { visibility, back_face_rays, probe_rays }
 }
 
 /// The occlusion of every covered texel of a UV coverage (see `uv_raster`): each texel's point

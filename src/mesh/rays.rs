@@ -106,16 +106,24 @@ impl TriangleBvh {
         RayResult { hit, nearest_is_back_face: nearest_back < nearest_front }
     }
 
-    /// Whether any face (front or back) lies within `max_distance` along the ray: traversal
-    /// stops at the first hit found, the cheap query of occlusion that needs no distance.
-    pub fn blocked(&self, origin: Vec3, direction: Vec3, max_distance: f32, skip: u32) -> bool {
+    /// Whether any face that counts (`back_faces`) lies within `max_distance` along the ray:
+    /// traversal stops at the first such hit found, the cheap query of occlusion that needs no
+    /// distance.
+    pub fn blocked(&self, origin: Vec3, direction: Vec3, max_distance: f32, skip: u32, back_faces: BackFaces) -> bool {
         if self.ordered.is_empty() {
             return false;
         }
         let ray = Ray::new(origin.into(), direction.into(), 0.0, max_distance);
-        !self
-            .bvh
-            .ray_traverse_miss(ray, |ray, id| if self.mesh_index[id] == skip { f32::INFINITY } else { self.ordered[id].intersect(ray) })
+        let direction = Vec3A::from(direction);
+        !self.bvh.ray_traverse_miss(ray, |ray, id| {
+            let triangle = self.mesh_index[id];
+            let passes = back_faces == BackFaces::PassThrough && self.normals[triangle as usize].dot(direction) > 0.0;
+            if triangle == skip || passes {
+                f32::INFINITY
+            } else {
+                self.ordered[id].intersect(ray)
+            }
+        })
     }
 }
 

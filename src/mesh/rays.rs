@@ -14,10 +14,9 @@ use obvhs::BvhBuildParams;
 /// The triangles of a mesh and a BVH over them.
 pub struct TriangleBvh {
     bvh: CwBvh,
-    /// The triangles in the BVH's primitive order, laid out for intersection.
+    /// The triangles in the BVH's primitive order (`bvh.primitive_indices` gives each one's
+    /// mesh index), laid out for intersection.
     ordered: Vec<RtTriangle>,
-    /// The mesh's index of each triangle of `ordered`.
-    mesh_index: Vec<u32>,
     /// Each triangle's geometric normal, by mesh index (unit; zero for a degenerate one).
     normals: Vec<Vec3A>,
 }
@@ -61,9 +60,8 @@ pub fn build_triangle_bvh(positions: &[[f32; 3]], triangles: &[[u32; 3]]) -> Tri
     } else {
         build_cwbvh_from_tris(&triangles, BvhBuildParams::slow_build(), &mut std::time::Duration::default())
     };
-    let mesh_index: Vec<u32> = bvh.primitive_indices.clone();
-    let ordered = mesh_index.iter().map(|&index| RtTriangle::from(&triangles[index as usize])).collect();
-    TriangleBvh { bvh, ordered, mesh_index, normals }
+    let ordered = bvh.primitive_indices.iter().map(|&index| RtTriangle::from(&triangles[index as usize])).collect();
+    TriangleBvh { bvh, ordered, normals }
 }
 
 impl TriangleBvh {
@@ -87,7 +85,7 @@ impl TriangleBvh {
         let mut nearest_back = f32::INFINITY;
         let mut hit = RayHit::none();
         let found = self.bvh.ray_traverse(ray, &mut hit, |ray, id| {
-            let triangle = self.mesh_index[id];
+            let triangle = self.bvh.primitive_indices[id];
             if triangle == skip {
                 return f32::INFINITY;
             }
@@ -101,7 +99,7 @@ impl TriangleBvh {
             }
             distance
         });
-        let hit = found.then(|| (self.mesh_index[hit.primitive_id as usize], hit.t));
+        let hit = found.then(|| (self.bvh.primitive_indices[hit.primitive_id as usize], hit.t));
         let nearest_front = hit.map_or(f32::INFINITY, |(_, distance)| distance);
         RayResult { hit, nearest_is_back_face: nearest_back < nearest_front }
     }
@@ -116,7 +114,7 @@ impl TriangleBvh {
         let ray = Ray::new(origin.into(), direction.into(), 0.0, max_distance);
         let direction = Vec3A::from(direction);
         !self.bvh.ray_traverse_miss(ray, |ray, id| {
-            let triangle = self.mesh_index[id];
+            let triangle = self.bvh.primitive_indices[id];
             let passes = back_faces == BackFaces::PassThrough && self.normals[triangle as usize].dot(direction) > 0.0;
             if triangle == skip || passes {
                 f32::INFINITY

@@ -81,14 +81,19 @@ fn full_chain(level0: &Texture, settings: MipSettings) -> (Vec<Texture>, Option<
     // Straight (not alpha-weighted) linear colour, for albedo texels whose whole footprint is
     // transparent: alpha weighting would leave them black, and bilinear filtering at an
     // alpha-tested edge would then pull the visible colour toward black.
-    let straight = (settings.kind == SurfaceKind::Albedo && level0.pixels.chunks_exact(4).any(|texel| texel[3] == 0))
-        .then(|| straight_linear_colour(&level0.pixels));
+    let straight = keeps_straight_colour(level0, settings).then(|| straight_linear_colour(&level0.pixels));
     let coverage = settings.alpha_cutoff.map(|cutoff| alpha_coverage(&current, cutoff, 1.0));
     let mut chain = Chain { levels: vec![level0.clone()], alpha_scales: vec![1.0], tile_level: None };
     let keep_tile_level = reusable_size(level0.width, level0.height);
     extend_chain(&mut chain, current, straight, settings, coverage, keep_tile_level);
     let reuse = chain.tile_level.map(|tile_level| MipReuse { settings, coverage, alpha_scales: chain.alpha_scales, tile_level });
     (chain.levels, reuse)
+}
+
+/// Whether a chain keeps straight colour beside the alpha-weighted one: albedo with some fully
+/// transparent texel.
+fn keeps_straight_colour(level0: &Texture, settings: MipSettings) -> bool {
+    settings.kind == SurfaceKind::Albedo && level0.pixels.par_chunks_exact(4).any(|texel| texel[3] == 0)
 }
 
 /// Levels made so far, the alpha scale of each, and the tile level's texels once reached.
@@ -175,11 +180,11 @@ fn refilter_changed_tiles(
     // An alpha edit under coverage preservation moves whole levels' alpha scale; without it,
     // alpha is filtered within the tile like colour, unless the edit decides whether any texel
     // is fully transparent (which decides whether straight colour is kept at all).
-    if changes.iter().any(|&(_, alpha_changed)| alpha_changed) {
-        let straight = settings.kind == SurfaceKind::Albedo && level0.pixels.par_chunks_exact(4).any(|texel| texel[3] == 0);
-        if settings.alpha_cutoff.is_some() || straight != previous.reuse.tile_level.straight.is_some() {
-            return None;
-        }
+    let alpha_changed = changes.iter().any(|&(_, alpha_changed)| alpha_changed);
+    if alpha_changed
+        && (settings.alpha_cutoff.is_some() || keeps_straight_colour(level0, settings) != previous.reuse.tile_level.straight.is_some())
+    {
+        return None;
     }
     let changed_tiles: Vec<usize> = changes.iter().enumerate().filter(|(_, (changed, _))| *changed).map(|(tile, _)| tile).collect();
     // Each changed tile filtered on its own, with the arithmetic of a full chain: its bytes at

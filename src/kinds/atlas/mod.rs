@@ -105,12 +105,10 @@ impl Kind for Atlas {
         pack.writes = vec![output_folder.join("atlas.json"), report.clone()];
         let container = asset.settings(db).encode.container;
         let layout = atlas_layout(db, asset).ok();
-        let pages = layout.as_ref().map_or(0, |layout| layout.packing.pages.len() as u32);
         let mut tails = Vec::new();
-        for page in 0..pages {
+        for (page, layout) in layout.iter().flat_map(|layout| (0..layout.packing.pages.len() as u32).map(move |page| (page, layout))) {
             // A page reads the layout, and the texels of its own entries only.
             let mut composite = StageInstance::new(COMPOSITE, page_label(name, page), page_group(page)).reads_stage(&pack);
-            let layout = layout.as_ref().expect("pages come from the layout");
             for (entry, _) in layout.entries.iter().zip(&layout.packing.placements).filter(|(_, place)| place.page == page) {
                 composite.reads.push(Read::Stage(DECODE, display_path(&entry.file)));
             }

@@ -73,12 +73,49 @@ pub struct PackSettings {
     pub pages: u32,
 }
 
+/// How an `AmbientOcclusion` asset bakes: per texel (rays from every texel's surface point) or
+/// per vertex (the seed's method: rays from the vertices, interpolated across each triangle).
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Hash, Serialize, Deserialize)]
+pub enum AoMode {
+    Texels,
+    Vertices,
+}
+
+/// What occludes an `AmbientOcclusion` asset's points: each OBJ object only itself, or every
+/// object of the OBJ.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Hash, Serialize, Deserialize)]
+pub enum AoOccluders {
+    SelfOnly,
+    AllMeshes,
+}
+
+/// How an `AmbientOcclusion` asset is baked (DESIGN §3.3).
+#[derive(Clone, Debug, PartialEq, Serialize)]
+pub struct AoSettings {
+    /// Width and height of each material's map, in texels.
+    pub size: u32,
+    pub rays: u32,
+    pub mode: AoMode,
+    pub distribution: crate::mesh::occlusion::RayDistribution,
+    /// Hits farther than this fraction of the mesh's bounding-box diagonal do not occlude.
+    pub max_distance: Option<f32>,
+    pub occluders: AoOccluders,
+    /// Rays pass through back faces (and texels that see mostly back faces are inside geometry).
+    pub ignore_backfaces: bool,
+    /// An infinite floor under the mesh (at its lowest Y) occludes too.
+    pub ground_plane: bool,
+    /// The gutter around each UV island that takes the island's edge values (every texel is
+    /// filled, so this is a floor, always met).
+    pub padding: u32,
+}
+
 #[derive(Clone, Debug, PartialEq, Eq, Hash, Serialize)]
 pub struct EncodeSettings {
     pub albedo: BlockFormat,
     pub mra: BlockFormat,
     pub normal: BlockFormat,
     pub height: BlockFormat,
+    pub ao: BlockFormat,
     pub mips: bool,
     pub container: Container,
     /// zstd supercompression level for KTX2 (`None`: no supercompression).
@@ -94,6 +131,7 @@ impl EncodeSettings {
             crate::texture::SurfaceKind::Mra => self.mra,
             crate::texture::SurfaceKind::Normal => self.normal,
             crate::texture::SurfaceKind::Height => self.height,
+            crate::texture::SurfaceKind::Ao => self.ao,
         }
     }
 }
@@ -104,6 +142,7 @@ pub struct Settings {
     pub billboard: BillboardSettings,
     pub atlas: AtlasSettings,
     pub pack: PackSettings,
+    pub ao: AoSettings,
     pub encode: EncodeSettings,
 }
 
@@ -113,11 +152,23 @@ impl Default for Settings {
             billboard: BillboardSettings { epsilon: 0.02, max_planes: None, texel_density: None, alpha_cutoff: 0.5 },
             atlas: AtlasSettings { max_size: 2048, padding: 4, power_of_two: true },
             pack: PackSettings { max_size: 4096, padding: 4, rotate: true, trim: true, power_of_two: false, pages: 4 },
+            ao: AoSettings {
+                size: 1024,
+                rays: 256,
+                mode: AoMode::Texels,
+                distribution: crate::mesh::occlusion::RayDistribution::Cosine,
+                max_distance: None,
+                occluders: AoOccluders::SelfOnly,
+                ignore_backfaces: true,
+                ground_plane: false,
+                padding: 16,
+            },
             encode: EncodeSettings {
                 albedo: BlockFormat::Bc7,
                 mra: BlockFormat::Bc1,
                 normal: BlockFormat::Bc5,
                 height: BlockFormat::Bc4,
+                ao: BlockFormat::Bc4,
                 mips: true,
                 container: Container::Ktx2,
                 zstd: None,
@@ -132,6 +183,7 @@ pub enum AssetKindName {
     Material,
     BillboardCloud,
     Atlas,
+    AmbientOcclusion,
 }
 
 /// What an asset is made from.
@@ -143,6 +195,8 @@ pub enum AssetSource {
     BillboardCloud { mesh: PathBuf },
     /// Textures (and meshes to remap) by globs over the source folder.
     Atlas { textures: Vec<String>, meshes: Vec<String> },
+    /// An OBJ mesh with UVs, relative to the source folder.
+    AmbientOcclusion { mesh: PathBuf },
 }
 
 impl AssetSource {
@@ -151,13 +205,14 @@ impl AssetSource {
             AssetSource::Material { .. } => AssetKindName::Material,
             AssetSource::BillboardCloud { .. } => AssetKindName::BillboardCloud,
             AssetSource::Atlas { .. } => AssetKindName::Atlas,
+            AssetSource::AmbientOcclusion { .. } => AssetKindName::AmbientOcclusion,
         }
     }
 
     pub fn main_file(&self) -> &Path {
         match self {
             AssetSource::Material { material } => material,
-            AssetSource::BillboardCloud { mesh } => mesh,
+            AssetSource::BillboardCloud { mesh } | AssetSource::AmbientOcclusion { mesh } => mesh,
             // No one file: what concerns the whole asset is said of the source folder.
             AssetSource::Atlas { .. } => Path::new(""),
         }
@@ -232,6 +287,7 @@ impl PipelineConfig {
         let source = match rule.kind {
             AssetKindName::Material => AssetSource::Material { material: relative.to_path_buf() },
             AssetKindName::BillboardCloud => AssetSource::BillboardCloud { mesh: relative.to_path_buf() },
+            AssetKindName::AmbientOcclusion => AssetSource::AmbientOcclusion { mesh: relative.to_path_buf() },
             // Refused when the pipeline is read: a rule makes one asset per file.
             AssetKindName::Atlas => return None,
         };
@@ -250,7 +306,8 @@ pub struct ConfigError {
 mod raw {
     use serde::{Deserialize, Deserializer};
 
-    use super::{AssetKindName, BlockFormat, Container, EncodeQuality};
+    use super::{AoMode, AoOccluders, AssetKindName, BlockFormat, Container, EncodeQuality};
+    use crate::mesh::occlusion::RayDistribution;
 
     #[derive(Deserialize)]
     #[serde(deny_unknown_fields)]
@@ -286,7 +343,24 @@ mod raw {
         #[serde(default)]
         pub pack: PackOverrides,
         #[serde(default)]
+        pub ao: AoOverrides,
+        #[serde(default)]
         pub encode: EncodeOverrides,
+    }
+
+    #[derive(Deserialize, Default, Clone)]
+    #[serde(deny_unknown_fields)]
+    pub struct AoOverrides {
+        pub size: Option<u32>,
+        pub rays: Option<u32>,
+        pub mode: Option<AoMode>,
+        pub distribution: Option<RayDistribution>,
+        #[serde(default, deserialize_with = "explicit")]
+        pub max_distance: Option<Option<f32>>,
+        pub occluders: Option<AoOccluders>,
+        pub ignore_backfaces: Option<bool>,
+        pub ground_plane: Option<bool>,
+        pub padding: Option<u32>,
     }
 
     #[derive(Deserialize, Default, Clone)]
@@ -335,6 +409,7 @@ mod raw {
         pub mra: Option<BlockFormat>,
         pub normal: Option<BlockFormat>,
         pub height: Option<BlockFormat>,
+        pub ao: Option<BlockFormat>,
         pub mips: Option<bool>,
         pub container: Option<Container>,
         #[serde(default, deserialize_with = "explicit")]
@@ -372,6 +447,14 @@ mod raw {
             meshes: Vec<String>,
             #[serde(default)]
             pack: PackOverrides,
+            #[serde(default)]
+            encode: EncodeOverrides,
+        },
+        AmbientOcclusion {
+            name: String,
+            mesh: String,
+            #[serde(default)]
+            ao: AoOverrides,
             #[serde(default)]
             encode: EncodeOverrides,
         },
@@ -509,18 +592,27 @@ impl Validator<'_> {
         let mut assets = Vec::new();
         let mut names = BTreeSet::new();
         for asset in &raw.assets {
-            let default_pack = raw::PackOverrides::default();
-            let (name, path, (billboard, atlas, pack, encode), kind) = match asset {
+            // Each kind's own settings; the others keep the defaults.
+            let mut overrides = raw::SettingsOverrides::default();
+            let (name, path, encode, kind) = match asset {
                 raw::Asset::Material { name, material, billboard, atlas, encode } => {
-                    (name, Some(material), (billboard.clone(), atlas.clone(), default_pack.clone(), encode), AssetKindName::Material)
+                    (overrides.billboard, overrides.atlas) = (billboard.clone(), atlas.clone());
+                    (name, Some(material), encode, AssetKindName::Material)
                 }
                 raw::Asset::BillboardCloud { name, mesh, billboard, atlas, encode } => {
-                    (name, Some(mesh), (billboard.clone(), atlas.clone(), default_pack.clone(), encode), AssetKindName::BillboardCloud)
+                    (overrides.billboard, overrides.atlas) = (billboard.clone(), atlas.clone());
+                    (name, Some(mesh), encode, AssetKindName::BillboardCloud)
                 }
                 raw::Asset::Atlas { name, pack, encode, .. } => {
-                    (name, None, (Default::default(), Default::default(), pack.clone(), encode), AssetKindName::Atlas)
+                    overrides.pack = pack.clone();
+                    (name, None, encode, AssetKindName::Atlas)
+                }
+                raw::Asset::AmbientOcclusion { name, mesh, ao, encode } => {
+                    overrides.ao = ao.clone();
+                    (name, Some(mesh), encode, AssetKindName::AmbientOcclusion)
                 }
             };
+            overrides.encode = encode.clone();
             let anchor = self.offset_of_value(name, 0).unwrap_or(0);
             let normal_form = normalize_relative_path(Path::new(name)).map(|path| crate::diagnostic::display_path(&path));
             if valid_asset_name(&name.replace("//", "/").replace("/./", "/")) && normal_form.as_deref() != Some(name.as_str()) {
@@ -554,16 +646,20 @@ impl Validator<'_> {
                 },
                 None => None,
             };
-            let overrides = raw::SettingsOverrides { billboard, atlas, pack, encode: encode.clone() };
             let settings = self.merge_settings(&defaults, &overrides, anchor);
-            if kind == AssetKindName::BillboardCloud {
-                // Each atlas surface goes through the texture tail: the same budget holds.
-                let side = settings.atlas.max_size;
+            // Each atlas surface (each material's AO map) goes through the texture tail: the
+            // same budget holds.
+            let surface_side = match kind {
+                AssetKindName::BillboardCloud => Some(("atlas", settings.atlas.max_size, "max_size")),
+                AssetKindName::AmbientOcclusion => Some(("AO map", settings.ao.size, "size")),
+                _ => None,
+            };
+            if let Some((what, side, setting)) = surface_side {
                 let needed = crate::texture::TextureLimits::working_set_of(side, side);
                 if needed > limits.texture.working_set {
                     let message = format!(
-                        "asset `{name}`: a {side}² atlas needs about {} MiB per surface, more than the texture memory budget of {} MiB \
-                         (lower max_size or raise `limits: (texture_memory_mib: …)`)",
+                        "asset `{name}`: a {side}² {what} needs about {} MiB per surface, more than the texture memory budget of {} MiB \
+                         (lower {setting} or raise `limits: (texture_memory_mib: …)`)",
                         needed >> 20,
                         limits.texture.working_set >> 20
                     );
@@ -584,7 +680,8 @@ impl Validator<'_> {
                 }
                 (raw::Asset::Material { .. }, Some(relative)) => AssetSource::Material { material: relative },
                 (raw::Asset::BillboardCloud { .. }, Some(relative)) => AssetSource::BillboardCloud { mesh: relative },
-                _ => unreachable!("materials and billboard clouds name one file"),
+                (raw::Asset::AmbientOcclusion { .. }, Some(relative)) => AssetSource::AmbientOcclusion { mesh: relative },
+                _ => unreachable!("materials, billboard clouds and AO bakes name one file"),
             };
             assets.push(AssetConfig { name: name.clone(), source, settings });
         }
@@ -666,12 +763,14 @@ impl Validator<'_> {
         settings.pack.rotate = pack.rotate.unwrap_or(settings.pack.rotate);
         settings.pack.trim = pack.trim.unwrap_or(settings.pack.trim);
         settings.pack.power_of_two = pack.power_of_two.unwrap_or(settings.pack.power_of_two);
+        self.merge_ao(&mut settings.ao, &overrides.ao, anchor);
         let encode = &overrides.encode;
-        let surfaces: [(&str, Option<BlockFormat>, &[BlockFormat], &mut BlockFormat); 4] = [
+        let surfaces: [(&str, Option<BlockFormat>, &[BlockFormat], &mut BlockFormat); 5] = [
             ("albedo", encode.albedo, &[BlockFormat::Bc7, BlockFormat::Bc3, BlockFormat::Bc1], &mut settings.encode.albedo),
             ("mra", encode.mra, &[BlockFormat::Bc1, BlockFormat::Bc7], &mut settings.encode.mra),
             ("normal", encode.normal, &[BlockFormat::Bc5, BlockFormat::Bc7], &mut settings.encode.normal),
             ("height", encode.height, &[BlockFormat::Bc4], &mut settings.encode.height),
+            ("ao", encode.ao, &[BlockFormat::Bc4], &mut settings.encode.ao),
         ];
         let mut format_errors = Vec::new();
         for (key, value, allowed, target) in surfaces {
@@ -701,6 +800,38 @@ impl Validator<'_> {
             settings.encode.quality = quality;
         }
         settings
+    }
+
+    fn merge_ao(&mut self, settings: &mut AoSettings, ao: &raw::AoOverrides, anchor: usize) {
+        if let Some(size) = ao.size {
+            if !(16..=16384).contains(&size) || size % 4 != 0 {
+                self.error_at_key("size", anchor, "size must be a multiple of 4 between 16 and 16384");
+            }
+            settings.size = size;
+        }
+        if let Some(rays) = ao.rays {
+            if !(1..=1 << 20).contains(&rays) {
+                self.error_at_key("rays", anchor, "rays must be between 1 and 1048576");
+            }
+            settings.rays = rays;
+        }
+        if let Some(max_distance) = ao.max_distance {
+            if max_distance.is_some_and(|distance| !(distance > 0.0 && distance.is_finite())) {
+                self.error_at_key("max_distance", anchor, "max_distance must be a positive fraction of the bounding-box diagonal");
+            }
+            settings.max_distance = max_distance;
+        }
+        if let Some(padding) = ao.padding {
+            if padding > 256 {
+                self.error_at_key("padding", anchor, "padding must be at most 256 texels");
+            }
+            settings.padding = padding;
+        }
+        settings.mode = ao.mode.unwrap_or(settings.mode);
+        settings.distribution = ao.distribution.unwrap_or(settings.distribution);
+        settings.occluders = ao.occluders.unwrap_or(settings.occluders);
+        settings.ignore_backfaces = ao.ignore_backfaces.unwrap_or(settings.ignore_backfaces);
+        settings.ground_plane = ao.ground_plane.unwrap_or(settings.ground_plane);
     }
 
     /// A path relative to the project folder that must stay inside it.

@@ -14,10 +14,13 @@ use crate::texture::tail::TailSettings;
 use crate::texture::{SurfaceKind, Texture};
 
 pub mod tail_queries;
+pub mod mesh_queries;
 pub mod material;
 pub mod billboard_cloud;
 pub mod atlas;
+pub mod ambient_occlusion;
 
+use ambient_occlusion::AmbientOcclusion;
 use atlas::Atlas;
 use billboard_cloud::BillboardCloud;
 use material::Material;
@@ -73,6 +76,7 @@ pub enum AssetKind {
     Material,
     BillboardCloud,
     Atlas,
+    AmbientOcclusion,
 }
 
 impl AssetKind {
@@ -81,6 +85,7 @@ impl AssetKind {
             AssetSource::Material { .. } => AssetKind::Material,
             AssetSource::BillboardCloud { .. } => AssetKind::BillboardCloud,
             AssetSource::Atlas { .. } => AssetKind::Atlas,
+            AssetSource::AmbientOcclusion { .. } => AssetKind::AmbientOcclusion,
         }
     }
 
@@ -89,6 +94,7 @@ impl AssetKind {
             AssetKind::Material => Material::NAME,
             AssetKind::BillboardCloud => BillboardCloud::NAME,
             AssetKind::Atlas => Atlas::NAME,
+            AssetKind::AmbientOcclusion => AmbientOcclusion::NAME,
         }
     }
 
@@ -97,6 +103,7 @@ impl AssetKind {
             AssetKind::Material => Material::files_to_read(db, asset),
             AssetKind::BillboardCloud => BillboardCloud::files_to_read(db, asset),
             AssetKind::Atlas => Atlas::files_to_read(db, asset),
+            AssetKind::AmbientOcclusion => AmbientOcclusion::files_to_read(db, asset),
         }
     }
 
@@ -105,6 +112,7 @@ impl AssetKind {
             AssetKind::Material => Material::first_jobs(db, asset),
             AssetKind::BillboardCloud => BillboardCloud::first_jobs(db, asset),
             AssetKind::Atlas => Atlas::first_jobs(db, asset),
+            AssetKind::AmbientOcclusion => AmbientOcclusion::first_jobs(db, asset),
         }
     }
 
@@ -119,6 +127,7 @@ impl AssetKind {
             (Task::Step(step, index), AssetKind::Material) => Material::run_step(db, job.asset, step, *index),
             (Task::Step(step, index), AssetKind::BillboardCloud) => BillboardCloud::run_step(db, job.asset, step, *index),
             (Task::Step(step, index), AssetKind::Atlas) => Atlas::run_step(db, job.asset, step, *index),
+            (Task::Step(step, index), AssetKind::AmbientOcclusion) => AmbientOcclusion::run_step(db, job.asset, step, *index),
         }
     }
 
@@ -127,6 +136,7 @@ impl AssetKind {
             AssetKind::Material => Material::stage_instances(db, asset, output_folder, errors),
             AssetKind::BillboardCloud => BillboardCloud::stage_instances(db, asset, output_folder, errors),
             AssetKind::Atlas => Atlas::stage_instances(db, asset, output_folder, errors),
+            AssetKind::AmbientOcclusion => AmbientOcclusion::stage_instances(db, asset, output_folder, errors),
         }
     }
 
@@ -135,6 +145,7 @@ impl AssetKind {
             AssetKind::Material => Material::outputs(db, asset, output_folder, errors, runs),
             AssetKind::BillboardCloud => BillboardCloud::outputs(db, asset, output_folder, errors, runs),
             AssetKind::Atlas => Atlas::outputs(db, asset, output_folder, errors, runs),
+            AssetKind::AmbientOcclusion => AmbientOcclusion::outputs(db, asset, output_folder, errors, runs),
         }
     }
 
@@ -143,6 +154,7 @@ impl AssetKind {
             AssetKind::Material => Material::check(config, asset),
             AssetKind::BillboardCloud => BillboardCloud::check(config, asset),
             AssetKind::Atlas => Atlas::check(config, asset),
+            AssetKind::AmbientOcclusion => AmbientOcclusion::check(config, asset),
         }
     }
 
@@ -151,6 +163,7 @@ impl AssetKind {
             AssetKind::Material => Material::surface_image(db, asset, surface),
             AssetKind::BillboardCloud => BillboardCloud::surface_image(db, asset, surface),
             AssetKind::Atlas => Atlas::surface_image(db, asset, surface),
+            AssetKind::AmbientOcclusion => AmbientOcclusion::surface_image(db, asset, surface),
         }
     }
 
@@ -159,6 +172,7 @@ impl AssetKind {
             AssetKind::Material => Material::tail_settings(db, asset, surface),
             AssetKind::BillboardCloud => BillboardCloud::tail_settings(db, asset, surface),
             AssetKind::Atlas => Atlas::tail_settings(db, asset, surface),
+            AssetKind::AmbientOcclusion => AmbientOcclusion::tail_settings(db, asset, surface),
         }
     }
 
@@ -167,6 +181,7 @@ impl AssetKind {
             AssetKind::Material => Material::surface_parts_key(db, asset, surface),
             AssetKind::BillboardCloud => BillboardCloud::surface_parts_key(db, asset, surface),
             AssetKind::Atlas => Atlas::surface_parts_key(db, asset, surface),
+            AssetKind::AmbientOcclusion => AmbientOcclusion::surface_parts_key(db, asset, surface),
         }
     }
 
@@ -175,6 +190,7 @@ impl AssetKind {
             AssetKind::Material => Material::surface_recipe_key(db, asset, surface),
             AssetKind::BillboardCloud => BillboardCloud::surface_recipe_key(db, asset, surface),
             AssetKind::Atlas => Atlas::surface_recipe_key(db, asset, surface),
+            AssetKind::AmbientOcclusion => AmbientOcclusion::surface_recipe_key(db, asset, surface),
         }
     }
 }

@@ -16,6 +16,10 @@ use crate::config::normalize_relative_path;
 use crate::diagnostic::Diagnostic;
 use crate::texture::TextureSlot;
 
+/// Appended to the name of the copy of a material that faces without texture coordinates use
+/// (they take its constants, not its maps).
+pub const WITHOUT_UVS_SUFFIX: &str = " (no UVs)";
+
 /// One material of a mesh.
 #[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
 pub struct MeshMaterial {
@@ -58,6 +62,10 @@ pub struct Mesh {
     /// Index into `materials` per triangle.
     pub triangle_materials: Vec<u32>,
     pub materials: Vec<MeshMaterial>,
+    /// Index into `objects` per triangle: the OBJ object (`o`) or group (`g`) it was written in.
+    pub triangle_objects: Vec<u32>,
+    /// The OBJ's objects by name, in file order (one unnamed object when it names none).
+    pub objects: Vec<String>,
 }
 
 /// The `mtllib` files an OBJ names, resolved (project-relative) next to it; those outside the
@@ -186,6 +194,14 @@ pub fn load_mesh(
             }
         }
         let material = source.material_id.map_or(default_material, |id| (id as u32).min(default_material));
+        // tobj starts a model at each `usemtl` too, under the object's name.
+        let object = match mesh.objects.iter().position(|name| name == &model.name) {
+            Some(object) => object as u32,
+            None => {
+                mesh.objects.push(model.name.clone());
+                mesh.objects.len() as u32 - 1
+            }
+        };
         for triangle in source.indices.chunks_exact(3) {
             if triangle.iter().any(|&index| index as usize >= vertex_count) {
                 return Err(Diagnostic::new(obj_file, format!("object `{}`: a face index is out of range", model.name)));
@@ -195,6 +211,7 @@ pub fn load_mesh(
             }
             mesh.triangles.push([base + triangle[0], base + triangle[1], base + triangle[2]]);
             mesh.triangle_materials.push(material);
+            mesh.triangle_objects.push(object);
         }
     }
     if mesh.triangles.is_empty() {
@@ -207,7 +224,7 @@ pub fn load_mesh(
         for name in &objects_without_uvs {
             warnings.push(Diagnostic::new(
                 obj_file,
-                format!("object `{name}` has no texture coordinates: its faces bake their materials' constant colours, not their maps"),
+                format!("object `{name}` has no texture coordinates: its faces take their materials' constants, not their maps (and are not baked in UV space)"),
             ));
         }
         // Each material those faces use, once more without maps.
@@ -216,7 +233,7 @@ pub fn load_mesh(
             let material = mesh.triangle_materials[face];
             let copy = *without_maps.entry(material).or_insert_with(|| {
                 let mut copy = materials[material as usize].clone();
-                copy.name = format!("{} (no UVs)", copy.name);
+                copy.name = format!("{}{WITHOUT_UVS_SUFFIX}", copy.name);
                 copy.maps.clear();
                 materials.push(copy);
                 materials.len() as u32 - 1

@@ -6,7 +6,7 @@
 
 use glam::Vec3;
 
-use super::rays::{offset_ray_origin, BackFaces, TriangleBvh};
+use super::rays::{build_triangle_bvh, offset_ray_origin, BackFaces, TriangleBvh};
 
 /// How ray directions are spread over the hemisphere.
 #[derive(Clone, Copy, Debug, PartialEq, Eq, serde::Serialize, serde::Deserialize)]
@@ -151,12 +151,48 @@ fn occlusion_from(
     Occlusion { visibility, back_face_rays, probe_rays }
 }
 
+/// What occludes a mesh's points: one BVH over every triangle, or one per group of triangles
+/// (an OBJ's objects, when each occludes only itself).
+pub struct Occluders {
+    groups: Vec<TriangleBvh>,
+    /// Per mesh triangle: its group and its index in that group's BVH.
+    placement: Vec<(u32, u32)>,
+}
+
+impl Occluders {
+    /// The BVH a point on mesh triangle `triangle` casts its rays against, and the triangle's
+    /// index there.
+    fn of(&self, triangle: u32) -> (&TriangleBvh, u32) {
+        let (group, local) = self.placement[triangle as usize];
+        (&self.groups[group as usize], local)
+    }
+}
+
+/// The occluders of a mesh: every triangle occludes every point, or with `groups` (a group per
+/// triangle) a triangle occludes only the points of its own group.
+pub fn build_occluders(positions: &[[f32; 3]], triangles: &[[u32; 3]], groups: Option<&[u32]>) -> Occluders {
+    use rayon::prelude::*;
+    let Some(groups) = groups else {
+        let placement = (0..triangles.len() as u32).map(|triangle| (0, triangle)).collect();
+        return Occluders { groups: vec![build_triangle_bvh(positions, triangles)], placement };
+    };
+    let group_count = groups.iter().copied().max().map_or(0, |max| max as usize + 1);
+    let mut members: Vec<Vec<[u32; 3]>> = vec![Vec::new(); group_count];
+    let mut placement = Vec::with_capacity(triangles.len());
+    for (triangle, &group) in triangles.iter().zip(groups) {
+        placement.push((group, members[group as usize].len() as u32));
+        members[group as usize].push(*triangle);
+    }
+    let groups = members.par_iter().map(|triangles| build_triangle_bvh(positions, triangles)).collect();
+    Occluders { groups, placement }
+}
+
 /// The occlusion of every covered texel of a UV coverage (see `uv_raster`): each texel's point
 /// and normal interpolated over its triangle from `positions` and unit vertex `normals` (the
 /// hemisphere's axis; rays leave on its side of the geometric surface), its sequence shifted by
 /// its index in the `width`-wide image, so that a tile bakes what the whole image bakes there.
 pub fn occlusion_of_texels(
-    bvh: &TriangleBvh,
+    occluders: &Occluders,
     positions: &[[f32; 3]],
     normals: &[[f32; 3]],
     triangles: &[[u32; 3]],
@@ -180,7 +216,8 @@ pub fn occlusion_of_texels(
                     .fold(Vec3::ZERO, |sum, (&vertex, weight)| sum + Vec3::from(values[vertex as usize]) * weight)
             };
             let point = interpolate(positions);
-            let geometric = Vec3::from(bvh.geometric_normal(sample.triangle));
+            let (bvh, local) = occluders.of(sample.triangle);
+            let geometric = Vec3::from(bvh.geometric_normal(local));
             let mut normal = interpolate(normals).normalize_or_zero();
             if normal == Vec3::ZERO {
                 normal = geometric;
@@ -189,7 +226,47 @@ pub fn occlusion_of_texels(
             let side = if geometric.dot(normal) < 0.0 { -geometric } else { geometric };
             let (x, y) = (region.x + index as u32 % region.width, region.y + index as u32 / region.width);
             let seed = y * width + x;
-            Some(occlusion_from(bvh, point, side, normal, sample.triangle, settings, seed))
+            Some(occlusion_from(bvh, point, side, normal, local, settings, seed))
+        })
+        .collect()
+}
+
+/// The occlusion at every vertex of a mesh (the seed's per-vertex bake, libigl's
+/// `ambient_occlusion`): rays from the vertex moved `offset` along its unit normal, no
+/// triangle skipped, the sequence shifted by the vertex index. Vertices no triangle uses get
+/// none.
+pub fn occlusion_of_vertices(
+    occluders: &Occluders,
+    positions: &[[f32; 3]],
+    normals: &[[f32; 3]],
+    triangles: &[[u32; 3]],
+    offset: f32,
+    settings: &OcclusionSettings,
+) -> Vec<Option<Occlusion>> {
+    use rayon::prelude::*;
+    // Each vertex casts against the occluders of the first triangle that uses it.
+    let mut first_triangle = vec![u32::MAX; positions.len()];
+    for (index, triangle) in triangles.iter().enumerate() {
+        for &vertex in triangle {
+            if let Some(first) = first_triangle.get_mut(vertex as usize) {
+                if *first == u32::MAX {
+                    *first = index as u32;
+                }
+            }
+        }
+    }
+    (0..positions.len())
+        .into_par_iter()
+        .map(|vertex| {
+            let triangle = first_triangle[vertex];
+            if triangle == u32::MAX {
+                return None;
+            }
+            let (bvh, _) = occluders.of(triangle);
+            let normal = Vec3::from(normals[vertex]).normalize_or_zero();
+            let normal = if normal == Vec3::ZERO { Vec3::from(bvh.geometric_normal(occluders.of(triangle).1)) } else { normal };
+            let point = Vec3::from(positions[vertex]) + normal * offset;
+            Some(occlusion_from(bvh, point, normal, normal, u32::MAX, settings, vertex as u32))
         })
         .collect()
 }

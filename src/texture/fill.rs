@@ -1,6 +1,7 @@
 //! The one fill of uncovered texels, shared by every kind that lays images out on a page (the
-//! billboard atlas, the texture atlas): each uncovered texel copies the nearest covered one, so
-//! that filtering and mips never pull in a dark or foreign fringe.
+//! billboard atlas, the texture atlas) or bakes into UV space (ambient occlusion): each
+//! uncovered texel copies the nearest covered one, so that filtering and mips never pull in a
+//! dark or foreign fringe.
 
 use rayon::prelude::*;
 
@@ -88,4 +89,10 @@ pub fn fill_from_sources(drawn: &[u8], width: u32, sources: &TexelSources, clear
         }
     });
     pixels
+}
+
+/// The fill of a one-value-per-texel image (a bake's 16-bit values): every texel takes the
+/// value of the texel `sources` names.
+pub fn fill_values<T: Copy + Send + Sync>(drawn: &[T], sources: &TexelSources) -> Vec<T> {
+    sources.0.par_iter().map(|&source| drawn[source as usize]).collect()
 }

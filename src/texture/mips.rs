@@ -247,7 +247,7 @@ fn to_filter_space(pixels: &[u8], kind: SurfaceKind) -> Vec<[f32; 4]> {
                 let [x, y, z] = decode_normal([t[0], t[1], t[2]]);
                 [x, y, z, 1.0]
             }
-            SurfaceKind::Mra | SurfaceKind::Height => [t[0], t[1], t[2], t[3]].map(|c| c as f32 / 255.0),
+            SurfaceKind::Mra | SurfaceKind::Height | SurfaceKind::Ao => [t[0], t[1], t[2], t[3]].map(|c| c as f32 / 255.0),
         })
         .collect()
 }
@@ -295,7 +295,7 @@ fn texel_bytes([r, g, b, a]: [f32; 4], straight: Option<[f32; 4]>, kind: Surface
             [linear_to_srgb_u8(r), linear_to_srgb_u8(g), linear_to_srgb_u8(b), unorm_u8(a * alpha_scale)]
         }
         SurfaceKind::Normal => encode_normal(normalize_tangent_normal([r, g, b])),
-        SurfaceKind::Mra | SurfaceKind::Height => [unorm_u8(r), unorm_u8(g), unorm_u8(b), unorm_u8(a)],
+        SurfaceKind::Mra | SurfaceKind::Height | SurfaceKind::Ao => [unorm_u8(r), unorm_u8(g), unorm_u8(b), unorm_u8(a)],
     }
 }
 

@@ -114,6 +114,8 @@ pub enum SurfaceKind {
     Normal,
     /// Billboard clouds only: the surface's distance from its plane over ±ε.
     Height,
+    /// Ambient occlusion: the fraction of the hemisphere open to the sky (grey, linear).
+    Ao,
 }
 
 impl SurfaceKind {
@@ -128,6 +130,7 @@ impl SurfaceKind {
             SurfaceKind::Mra => "mra",
             SurfaceKind::Normal => "normal",
             SurfaceKind::Height => "height",
+            SurfaceKind::Ao => "ao",
         }
     }
 
@@ -138,6 +141,7 @@ impl SurfaceKind {
             SurfaceKind::Mra => &[TextureSlot::Metallic, TextureSlot::Roughness, TextureSlot::Ao],
             SurfaceKind::Normal => &[TextureSlot::Normal],
             SurfaceKind::Height => &[],
+            SurfaceKind::Ao => &[TextureSlot::Ao],
         }
     }
 
@@ -147,7 +151,7 @@ impl SurfaceKind {
             SurfaceKind::Albedo => 4,
             SurfaceKind::Mra => 3,
             SurfaceKind::Normal => 2,
-            SurfaceKind::Height => 1,
+            SurfaceKind::Height | SurfaceKind::Ao => 1,
         }
     }
 

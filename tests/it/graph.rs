@@ -94,7 +94,9 @@ fn edit(project: &TempProject, file: &str) -> bool {
             true
         }
         "mtl" => {
-            std::fs::write(&path, text().replace("Kd 0.8078 0.8000 0.7451", "Kd 0.5 0.3 0.2")).unwrap();
+            let edited = text().replace("Kd 0.8078 0.8000 0.7451", "Kd 0.5 0.3 0.2").replace("Kd 1 1 1", "Kd 0.5 0.3 0.2");
+            assert_ne!(edited, text(), "{file} edited");
+            std::fs::write(&path, edited).unwrap();
             false
         }
         other => panic!("no edit for .{other} files"),
@@ -113,6 +115,8 @@ fn editing_a_file_reruns_the_stages_downstream_of_it_in_the_dump() {
             "examples/assets/materials/bark.mymaterial",
             "examples/assets/materials/oak_leaves.mymaterial",
             "examples/assets/materials/painted_steel.mymaterial",
+            "examples/assets/meshes/spot/spot.mtl",
+            "examples/assets/meshes/spot/spot_triangulated_with_mtl.obj",
             "examples/assets/textures/bark_birch/albedo.jpg",
             "examples/assets/textures/bark_birch/ao.jpg",
             "examples/assets/textures/bark_birch/normal.jpg",

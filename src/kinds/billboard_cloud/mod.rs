@@ -25,12 +25,13 @@ use crate::cache::CacheKey;
 use crate::config::{AssetConfig, PipelineConfig};
 use crate::db::{Asset, Db, StageRun, DECODE};
 use crate::diagnostic::{display_path, Diagnostic};
+use crate::kinds::mesh_queries::{loaded_mesh, mesh_textures, LoadedMesh};
 use crate::kinds::{check_texture_file, tail_instances, AssetOutputs, Job, Kind, Read, StageInstance, SurfaceId, Task};
 use crate::summary::ErrorSummary;
 use crate::texture::tail::TailSettings;
 use crate::texture::{SurfaceKind, Texture, TextureSlot};
-use queries::{billboard_layout, billboard_planes, loaded_mesh, lod_files, mesh_libraries, mesh_textures, render_label};
-use queries::{ATLAS, LAYOUT, LOD, MESH, PLANES, RENDER};
+use queries::{billboard_layout, billboard_planes, lod_files, render_label};
+use queries::{ATLAS, LAYOUT, LOD, PLANES, RENDER};
 
 pub struct BillboardCloud;
 
@@ -39,7 +40,7 @@ fn atlas_surfaces() -> [SurfaceId; 4] {
 }
 
 /// Every (material, slot) whose texture the renders sample, in material order.
-fn material_texture_slots(loaded: &queries::LoadedMesh) -> Vec<(usize, TextureSlot)> {
+fn material_texture_slots(loaded: &LoadedMesh) -> Vec<(usize, TextureSlot)> {
     if loaded.mesh.uvs.is_none() {
         return Vec::new();
     }
@@ -52,7 +53,7 @@ impl Kind for BillboardCloud {
 
     fn files_to_read(db: &dyn Db, asset: Asset) -> Vec<PathBuf> {
         let mut files = vec![asset.main_file(db).clone()];
-        files.extend(queries::mesh_library_paths(db, asset).iter().cloned());
+        files.extend(crate::kinds::mesh_queries::mesh_library_paths(db, asset).iter().cloned());
         files.extend(mesh_textures(db, asset).iter().cloned());
         files
     }
@@ -132,10 +133,8 @@ impl Kind for BillboardCloud {
         let mesh_label = display_path(main_file);
         let failed = !errors.is_empty();
         let report = output_folder.join("report.json");
-        let mut mesh = StageInstance::new(MESH, name, &mesh_label);
-        mesh.reads.push(Read::File(main_file.clone()));
+        let mut mesh = crate::kinds::mesh_queries::mesh_instance(db, asset);
         mesh.writes.push(report.clone());
-        mesh.reads.extend(mesh_libraries(db, asset).keys().map(|path| Read::File(path.clone())));
         let planes = StageInstance::new(PLANES, name, &mesh_label).reads_stage(&mesh);
         let layout = StageInstance::new(LAYOUT, name, &mesh_label).reads_stage(&mesh).reads_stage(&planes);
         let mut atlas = StageInstance::new(ATLAS, name, &mesh_label).reads_stage(&layout);
@@ -370,7 +369,7 @@ pub fn read_lod_view_mesh(root: &Path, folder: &Path, alpha_cutoff: f32) -> Resu
 }
 
 /// The source mesh with its decoded maps (mipmapped as for rendering).
-fn source_view_mesh(db: &dyn Db, input: Asset, loaded: &queries::LoadedMesh) -> Result<crate::gpu::ViewMesh, Diagnostic> {
+fn source_view_mesh(db: &dyn Db, input: Asset, loaded: &LoadedMesh) -> Result<crate::gpu::ViewMesh, Diagnostic> {
     use crate::texture::TextureSlot;
     let cutoff = input.settings(db).billboard.alpha_cutoff;
     let mut materials = Vec::new();

@@ -53,6 +53,14 @@ pub fn pack_surface(kind: SurfaceKind, sources: &[Option<&Texture>], constants: 
             }
         }
         SurfaceKind::Height => pixels.chunks_exact_mut(4).for_each(|texel| texel.copy_from_slice(&[128, 0, 0, 255])),
+        // Not a material surface; grey from the AO map or constant, should a kind ask.
+        SurfaceKind::Ao => {
+            let constant = unorm_u8(constants.ao);
+            for (index, texel) in pixels.chunks_exact_mut(4).enumerate() {
+                let value = resampled[0].as_ref().map_or(constant, |map| map[index * 4]);
+                texel.copy_from_slice(&[value, value, value, 255]);
+            }
+        }
         SurfaceKind::Normal => {
             for (index, texel) in pixels.chunks_exact_mut(4).enumerate() {
                 let normal = match &resampled[0] {

@@ -1,0 +1,242 @@
+//! The `AmbientOcclusion` kind (DESIGN §3.3): ambient occlusion baked into an OBJ's UV space,
+//! one map per material (`<asset>/<material>/ao.png` 16-bit, `ao.ktx2` BC4 through the shared
+//! tail). Rays from every texel's surface point (`mode: Texels`) or from the vertices
+//! (`mode: Vertices`, the seed's method), UV tiles as stage instances (`bake`), each map put
+//! together and filled (`fill`).
+//!
+//! Jobs: `plan` (wave 0: the mesh), then one tail job per material, whose image asks for the
+//! map, which asks for its tiles. Stage instances: `mesh` → `bvh` (→ `vertices`) → a `bake` per
+//! tile → a `fill` per material → `mips → encode → write`.
+
+pub mod bake;
+pub mod queries;
+
+use std::path::{Path, PathBuf};
+use std::sync::Arc;
+
+use serde::Serialize;
+
+use crate::cache::CacheKey;
+use crate::config::{AoMode, AssetConfig, PipelineConfig};
+use crate::db::{Asset, Db, StageRun};
+use crate::diagnostic::{display_path, Diagnostic};
+use crate::kinds::mesh_queries::{loaded_mesh, mesh_instance};
+use crate::kinds::{tail_instances, AssetOutputs, Job, Kind, StageInstance, SurfaceId, Task};
+use crate::summary::ErrorSummary;
+use crate::texture::tail::{SurfaceInfo, TailSettings};
+use crate::texture::{SurfaceKind, Texture};
+use bake::material_tiles;
+use queries::{ao_map, ao_map_key, ao_settings, bake_geometry, material_label, tile_label, BakeGeometry, BAKE, BVH, FILL, VERTICES};
+
+pub struct AmbientOcclusion;
+
+/// The tail surface of a baked material.
+fn material_surface(folder: &str) -> SurfaceId {
+    SurfaceId { group: folder.to_string(), surface: SurfaceKind::Ao }
+}
+
+/// The baked material a tail surface is.
+fn surface_material(db: &dyn Db, asset: Asset, surface: &SurfaceId) -> Result<(Arc<BakeGeometry>, u32), Diagnostic> {
+    let geometry = bake_geometry(db, asset)?;
+    let index = geometry.materials.iter().find(|material| material.folder == surface.group).map(|material| material.index);
+    let index = index.ok_or_else(|| Diagnostic::new(asset.main_file(db), format!("no material `{}` any more", surface.group)))?;
+    Ok((geometry, index))
+}
+
+impl Kind for AmbientOcclusion {
+    const NAME: &'static str = "AmbientOcclusion";
+
+    fn files_to_read(db: &dyn Db, asset: Asset) -> Vec<PathBuf> {
+        queries::mesh_files(db, asset)
+    }
+
+    fn first_jobs(db: &dyn Db, asset: Asset) -> Vec<Job> {
+        vec![Job { asset, task: Task::Step("plan", 0), after: 0, label: asset.name(db).clone() }]
+    }
+
+    fn run_step(db: &dyn Db, asset: Asset, _step: &'static str, _index: u32) -> Result<Vec<Job>, Diagnostic> {
+        let geometry = bake_geometry(db, asset)?;
+        let name = asset.name(db);
+        Ok(geometry
+            .materials
+            .iter()
+            .map(|material| {
+                let surface = material_surface(&material.folder);
+                Job { asset, label: surface.label(name), task: Task::Surface(surface), after: 1 }
+            })
+            .collect())
+    }
+
+    fn stage_instances(db: &dyn Db, asset: Asset, output_folder: &Path, errors: &[Diagnostic]) -> Vec<StageInstance> {
+        let name = asset.name(db);
+        let report = output_folder.join("report.json");
+        let mut mesh = mesh_instance(db, asset);
+        mesh.writes.push(report.clone());
+        let mut instances = vec![mesh.clone()];
+        if let Ok(geometry) = bake_geometry(db, asset) {
+            let settings = ao_settings(db, asset);
+            let bvh = StageInstance::new(BVH, name, name).reads_stage(&mesh);
+            let rays = match settings.mode {
+                AoMode::Texels => bvh.clone(),
+                AoMode::Vertices => StageInstance::new(VERTICES, name, name).reads_stage(&bvh),
+            };
+            instances.push(bvh.clone());
+            if settings.mode == AoMode::Vertices {
+                instances.push(rays.clone());
+            }
+            let container = asset.settings(db).encode.container;
+            for material in &geometry.materials {
+                let mut fill = StageInstance::new(FILL, material_label(name, &material.folder), &material.folder);
+                for tile in material_tiles(material.index, settings.size) {
+                    let label = tile_label(name, &material.folder, tile);
+                    let instance = format!("{}/{}", material.folder, tile.name());
+                    let tile = StageInstance::new(BAKE, label, instance).reads_stage(&mesh).reads_stage(&rays);
+                    fill = fill.reads_stage(&tile);
+                    instances.push(tile);
+                }
+                let surface = material_surface(&material.folder);
+                let [mips, encode, mut write] = tail_instances(name, &surface, &fill, surface.artifact_paths(output_folder, container));
+                write.writes.push(report.clone());
+                instances.extend([fill, mips, encode, write]);
+            }
+        }
+        for instance in &mut instances {
+            instance.failed = !errors.is_empty();
+        }
+        instances
+    }
+
+    fn outputs(db: &dyn Db, asset: Asset, output_folder: &Path, errors: &mut Vec<Diagnostic>, runs: &[StageRun]) -> AssetOutputs {
+        if !errors.is_empty() {
+            return AssetOutputs::default();
+        }
+        match ao_outputs(db, asset, output_folder, runs) {
+            Ok(outputs) => outputs,
+            Err(diagnostic) => {
+                errors.push(diagnostic);
+                AssetOutputs::default()
+            }
+        }
+    }
+
+    /// The mesh loads with its material libraries and has texture coordinates; load warnings
+    /// are reported as problems too.
+    fn check(config: &PipelineConfig, asset: &AssetConfig) -> Vec<Diagnostic> {
+        let main_file = &config.source.join(asset.source.main_file());
+        let (mesh, mut problems) = match crate::kinds::check_mesh_file(config, main_file) {
+            Ok(loaded) => loaded,
+            Err(diagnostic) => return vec![diagnostic],
+        };
+        if mesh.uvs.is_none() {
+            problems
+                .push(Diagnostic::new(main_file, "the mesh has no texture coordinates: an AO bake needs a UV layout (`vt` in the OBJ)"));
+        }
+        problems
+    }
+
+    fn surface_image(db: &dyn Db, asset: Asset, surface: &SurfaceId) -> Result<Arc<Texture>, Diagnostic> {
+        let (_, material) = surface_material(db, asset, surface)?;
+        Ok(Arc::new(bake::map_texture(&ao_map(db, asset, material)?.map)))
+    }
+
+    fn tail_settings(db: &dyn Db, asset: Asset, surface: &SurfaceId) -> Result<TailSettings, Diagnostic> {
+        let encode = &asset.settings(db).encode;
+        Ok(TailSettings {
+            surface: surface.surface,
+            format: encode.format_of(surface.surface),
+            quality: encode.quality,
+            mips: encode.mips,
+            alpha_cutoff: None,
+            container: encode.container,
+            zstd: encode.zstd,
+        })
+    }
+
+    fn surface_recipe_key(db: &dyn Db, asset: Asset, surface: &SurfaceId) -> Result<Option<CacheKey>, Diagnostic> {
+        let (_, material) = surface_material(db, asset, surface)?;
+        ao_map_key(db, asset, material).map(Some)
+    }
+}
+
+/// `report.json` of an AO bake.
+#[derive(Clone, Debug, PartialEq, Serialize)]
+pub struct AoReport {
+    pub asset: String,
+    pub kind: &'static str,
+    pub mesh: String,
+    pub mode: AoMode,
+    pub rays_per_texel: u32,
+    /// `max_distance` in mesh units (none: unbounded).
+    pub max_distance: Option<f32>,
+    pub materials: Vec<AoMaterialReport>,
+    pub stage_ms: std::collections::BTreeMap<String, f64>,
+    pub warnings: Vec<ErrorSummary>,
+}
+
+#[derive(Clone, Debug, PartialEq, Serialize)]
+pub struct AoMaterialReport {
+    pub name: String,
+    pub folder: String,
+    /// The 16-bit map.
+    pub png: String,
+    pub texels_baked: u64,
+    /// Texels inside geometry (most of their probe rays met back faces): filled, not baked.
+    pub invalid_texels: u64,
+    /// Of the baked texels, those that two triangles with no shared vertex claim.
+    pub overlap_fraction: f64,
+    pub rays_cast: u64,
+    /// Rays per second of bake time (summed over the tiles; each tile runs on every core).
+    pub rays_per_second: Option<f64>,
+    pub texture: AoSurfaceReport,
+}
+
+#[derive(Clone, Debug, PartialEq, Serialize)]
+pub struct AoSurfaceReport {
+    pub path: String,
+    #[serde(flatten)]
+    pub info: SurfaceInfo,
+}
+
+fn ao_outputs(db: &dyn Db, asset: Asset, output_folder: &Path, runs: &[StageRun]) -> Result<AssetOutputs, Diagnostic> {
+    let geometry = bake_geometry(db, asset)?;
+    let loaded = loaded_mesh(db, asset)?;
+    let settings = ao_settings(db, asset);
+    let container = asset.settings(db).encode.container;
+    let mut outputs = AssetOutputs::default();
+    let mut materials = Vec::new();
+    for material in &geometry.materials {
+        let surface = material_surface(&material.folder);
+        let artifacts = crate::kinds::tail_queries::surface_artifacts(db, asset, surface.clone())?;
+        let files = ao_map(db, asset, material.index)?;
+        let [texture_path, png_path] = surface.artifact_paths(output_folder, container);
+        outputs.files.push((texture_path.clone(), artifacts.texture_file.clone()));
+        outputs.files.push((png_path.clone(), files.png16.clone()));
+        let map = &files.map;
+        let round = |value: f64, places: i32| (value * 10f64.powi(places)).round() / 10f64.powi(places);
+        materials.push(AoMaterialReport {
+            name: material.name.clone(),
+            folder: material.folder.clone(),
+            png: display_path(&png_path),
+            texels_baked: map.baked_texels,
+            invalid_texels: map.invalid_texels,
+            overlap_fraction: if map.baked_texels == 0 { 0.0 } else { round(map.overlapping_texels as f64 / map.baked_texels as f64, 5) },
+            rays_cast: map.rays,
+            rays_per_second: (map.rays > 0 && map.bake_ms > 0.0).then(|| round(map.rays as f64 / (map.bake_ms / 1000.0), 0)),
+            texture: AoSurfaceReport { path: display_path(&texture_path), info: artifacts.info.clone() },
+        });
+    }
+    let name = asset.name(db);
+    let report = AoReport {
+        asset: name.clone(),
+        kind: AmbientOcclusion::NAME,
+        mesh: display_path(asset.main_file(db)),
+        mode: settings.mode,
+        rays_per_texel: settings.rays,
+        max_distance: geometry.occlusion.max_distance.is_finite().then_some(geometry.occlusion.max_distance),
+        materials,
+        stage_ms: crate::kinds::asset_stage_ms(name, runs).into_iter().map(|(stage, ms)| (stage.to_string(), ms)).collect(),
+        warnings: loaded.warnings.iter().map(ErrorSummary::from).collect(),
+    };
+    outputs.report = Some(serde_json::to_vec_pretty(&report).expect("reports serialise"));
+    Ok(outputs)
+}

@@ -492,12 +492,37 @@ pub fn texture_file_from_statement(statement: &str) -> Option<String> {
 
 /// Area-weighted vertex normals.
 fn compute_normals(mesh: &mut Mesh) {
-    let mut normals = vec![glam::Vec3::ZERO; mesh.positions.len()];
-    for triangle in &mesh.triangles {
-        let [a, b, c] = triangle.map(|index| glam::Vec3::from(mesh.positions[index as usize]));
-        let face = (b - a).cross(c - a);
+    // Each vertex's own faces (area-weighted), then the faces of the other vertices at the same
+    // position whose normals lie within 60° of that: a UV seam (vertices split by their UVs
+    // only) stays smooth, a hard edge (a box's corner) stays hard.
+    let face_normals: Vec<glam::Vec3> = mesh
+        .triangles
+        .iter()
+        .map(|triangle| {
+            let [a, b, c] = triangle.map(|index| glam::Vec3::from(mesh.positions[index as usize]));
+            (b - a).cross(c - a)
+        })
+        .collect();
+    let mut own = vec![glam::Vec3::ZERO; mesh.positions.len()];
+    for (triangle, face) in mesh.triangles.iter().zip(&face_normals) {
         for &index in triangle {
-            normals[index as usize] += face;
+            own[index as usize] += *face;
+        }
+    }
+    let mut at_position: std::collections::HashMap<[u32; 3], Vec<u32>> = std::collections::HashMap::new();
+    for (index, position) in mesh.positions.iter().enumerate() {
+        at_position.entry(position.map(f32::to_bits)).or_default().push(index as u32);
+    }
+    let mut normals = own.clone();
+    for shared in at_position.values().filter(|shared| shared.len() > 1) {
+        for &index in shared {
+            let reference = own[index as usize].normalize_or_zero();
+            for &other in shared.iter().filter(|&&other| other != index) {
+                let neighbour = own[other as usize];
+                if neighbour.normalize_or_zero().dot(reference) > 0.5 {
+                    normals[index as usize] += neighbour;
+                }
+            }
         }
     }
     mesh.normals = normals.into_iter().map(|n| n.try_normalize().unwrap_or(glam::Vec3::Z).to_array()).collect();

@@ -125,9 +125,10 @@ fn occlusion_from(
         let point = [(base[0] + shift[0]).fract(), (base[1] + shift[1]).fract()];
         let (local, weight) = local_direction(point, settings.distribution);
         let direction = (tangent * local.x + bitangent * local.y + normal * local.z).normalize_or_zero();
-        let below_ground = settings
-            .ground_plane
-            .is_some_and(|ground| direction.y < 0.0 && (origin.y - ground) / -direction.y <= settings.max_distance && origin.y >= ground);
+        // The floor is solid below: a downward ray meets it within reach (at once from an
+        // origin that its offset moved just under a face lying on the floor).
+        let below_ground =
+            settings.ground_plane.is_some_and(|ground| direction.y < 0.0 && (origin.y - ground) / -direction.y <= settings.max_distance);
         let open_ray = !below_ground
             && match settings.back_faces {
                 // The probes: a nearest-hit query, which also tells a back face in front.

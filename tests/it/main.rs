@@ -6,6 +6,7 @@ mod support;
 mod material;
 mod billboard_cloud;
 mod atlas;
+mod ambient_occlusion;
 
 mod cache;
 mod cli;

@@ -211,6 +211,7 @@ pub fn bake_tile_from_vertices(mesh: &BakeMesh, own: &[u32], size: u32, region: 
 pub struct AoMap {
     pub size: u32,
     pub values: Vec<u16>,
+    /// Texels rays were cast from (those found inside geometry included).
     pub baked_texels: u64,
     pub invalid_texels: u64,
     pub overlapping_texels: u64,
@@ -231,7 +232,7 @@ impl PartialEq for AoMap {
 /// bilinear tap reaches background; all open (65535) when nothing is baked.
 pub fn assemble_map(size: u32, tiles: &[&TileBake]) -> AoMap {
     let mut values = vec![0u16; size as usize * size as usize];
-    let mut baked = Vec::new();
+    let mut fill_sources = Vec::new();
     let mut map = AoMap { size, values: Vec::new(), baked_texels: 0, invalid_texels: 0, overlapping_texels: 0, rays: 0, bake_ms: 0.0 };
     for tile in tiles {
         let region = tile.region;
@@ -241,18 +242,18 @@ pub fn assemble_map(size: u32, tiles: &[&TileBake]) -> AoMap {
                 let to = (region.y + row) * size + region.x + column;
                 values[to as usize] = tile.values[from];
                 if tile.states[from] == TexelState::Baked as u8 {
-                    baked.push(to);
+                    fill_sources.push(to);
                 }
             }
         }
+        map.baked_texels += (tile.count(TexelState::Baked) + tile.count(TexelState::Invalid)) as u64;
         map.invalid_texels += tile.count(TexelState::Invalid) as u64;
         map.overlapping_texels += tile.overlapping as u64;
         map.rays += tile.rays;
         map.bake_ms += tile.bake_ms;
     }
-    baked.sort_unstable();
-    map.baked_texels = baked.len() as u64;
-    let sources = crate::texture::fill::texel_sources(size, size, baked);
+    fill_sources.sort_unstable();
+    let sources = crate::texture::fill::texel_sources(size, size, fill_sources);
     map.values = if sources.0.is_empty() { vec![u16::MAX; values.len()] } else { crate::texture::fill::fill_values(&values, &sources) };
     map
 }

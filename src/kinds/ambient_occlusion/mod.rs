@@ -185,7 +185,8 @@ pub struct AoMaterialReport {
     /// Of the baked texels, those that two triangles with no shared vertex claim.
     pub overlap_fraction: f64,
     pub rays_cast: u64,
-    /// Rays per second of bake time (summed over the tiles; each tile runs on every core).
+    /// Rays per second of bake time (summed over the tiles; each tile runs on every core); none
+    /// per vertex.
     pub rays_per_second: Option<f64>,
     pub texture: AoSurfaceReport,
 }
@@ -212,6 +213,17 @@ fn ao_outputs(db: &dyn Db, asset: Asset, output_folder: &Path, runs: &[StageRun]
         outputs.files.push((texture_path.clone(), artifacts.texture_file.clone()));
         outputs.files.push((png_path.clone(), files.png16.clone()));
         let map = &files.map;
+        // Per vertex, the rays are cast from the material's vertices, not its texels.
+        let rays_cast = match settings.mode {
+            AoMode::Texels => map.rays,
+            AoMode::Vertices => {
+                let triangles = &geometry.loaded.mesh.triangles;
+                let mut vertices: Vec<u32> = material.triangles.iter().flat_map(|&triangle| triangles[triangle as usize]).collect();
+                vertices.sort_unstable();
+                vertices.dedup();
+                vertices.len() as u64 * settings.rays as u64
+            }
+        };
         let round = |value: f64, places: i32| (value * 10f64.powi(places)).round() / 10f64.powi(places);
         materials.push(AoMaterialReport {
             name: material.name.clone(),
@@ -220,7 +232,7 @@ fn ao_outputs(db: &dyn Db, asset: Asset, output_folder: &Path, runs: &[StageRun]
             texels_baked: map.baked_texels,
             invalid_texels: map.invalid_texels,
             overlap_fraction: if map.baked_texels == 0 { 0.0 } else { round(map.overlapping_texels as f64 / map.baked_texels as f64, 5) },
-            rays_cast: map.rays,
+            rays_cast,
             rays_per_second: (map.rays > 0 && map.bake_ms > 0.0).then(|| round(map.rays as f64 / (map.bake_ms / 1000.0), 0)),
             texture: AoSurfaceReport { path: display_path(&texture_path), info: artifacts.info.clone() },
         });

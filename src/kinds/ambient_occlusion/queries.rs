@@ -97,6 +97,16 @@ pub fn ao_settings(db: &dyn Db, asset: Asset) -> AoSettings {
     asset.settings(db).ao.clone()
 }
 
+/// Each triangle's occluder group (its OBJ object) when objects occlude only themselves and
+/// there are several; none when every triangle occludes every point.
+#[salsa::tracked(returns(clone))]
+pub fn occluder_groups(db: &dyn Db, asset: Asset) -> Result<Option<Arc<Vec<u32>>>, Diagnostic> {
+    let loaded = loaded_mesh(db, asset)?;
+    let mesh = &loaded.mesh;
+    let self_only = ao_settings(db, asset).occluders == AoOccluders::SelfOnly;
+    Ok((self_only && mesh.objects.len() > 1).then(|| Arc::new(mesh.triangle_objects.clone())))
+}
+
 /// The mesh and settings of the bake: a mesh without texture coordinates is an error naming it.
 #[salsa::tracked(returns(clone))]
 pub fn bake_geometry(db: &dyn Db, asset: Asset) -> Result<Arc<BakeGeometry>, Diagnostic> {
@@ -131,7 +141,7 @@ pub fn bake_geometry(db: &dyn Db, asset: Asset) -> Result<Arc<BakeGeometry>, Dia
         back_faces: if settings.ignore_backfaces { BackFaces::PassThrough } else { BackFaces::Block },
         ground_plane: settings.ground_plane.then_some(low.y),
     };
-    let groups = (settings.occluders == AoOccluders::SelfOnly && mesh.objects.len() > 1).then(|| mesh.triangle_objects.clone());
+    let groups = occluder_groups(db, asset)?.as_deref().cloned();
     let mut hasher = blake3::Hasher::new();
     for bytes in [
         pod_blob(&mesh.positions),
@@ -172,13 +182,20 @@ impl std::fmt::Debug for OccluderSet {
     }
 }
 
-/// The BVHs the rays are cast against (stage `bvh`): built only when some tile must bake.
+/// The BVHs the rays are cast against (stage `bvh`): built only when some tile must bake, from
+/// the positions and the groups alone (a settings change builds nothing).
 #[salsa::tracked(returns(clone))]
 pub fn occluder_set(db: &dyn Db, asset: Asset) -> Result<Arc<OccluderSet>, Diagnostic> {
-    let geometry = bake_geometry(db, asset)?;
-    let mesh = &geometry.loaded.mesh;
-    let occluders = timed(db, BVH, asset.name(db), || build_occluders(&mesh.positions, &mesh.triangles, geometry.groups.as_deref()));
-    Ok(Arc::new(OccluderSet { hash: geometry.whole_hash, occluders }))
+    let loaded = loaded_mesh(db, asset)?;
+    let groups = occluder_groups(db, asset)?;
+    let mesh = &loaded.mesh;
+    let mut hasher = blake3::Hasher::new();
+    hasher.update(bytemuck::cast_slice(&mesh.positions));
+    hasher.update(bytemuck::cast_slice(&mesh.triangles));
+    hasher.update(bytemuck::cast_slice(groups.as_deref().map_or(&[][..], |groups| &groups[..])));
+    let occluders =
+        timed(db, BVH, asset.name(db), || build_occluders(&mesh.positions, &mesh.triangles, groups.as_deref().map(|groups| &groups[..])));
+    Ok(Arc::new(OccluderSet { hash: hasher.finalize(), occluders }))
 }
 
 /// The occlusion settings' parts of a key.

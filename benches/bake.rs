@@ -1,9 +1,10 @@
-//! Benchmark (`cargo bench [-- materials|packing|planes|billboard|watch|atlas|occlusion]`): material-bake
+//! Benchmark (`cargo bench [-- materials|packing|planes|billboard|watch|atlas|occlusion|ao]`): material-bake
 //! throughput next to the raw encoder's, no-op rebuild and warm restart next to a full bake, the
 //! page packer's time and occupancy beside Python `rectpack`, plane selection speed,
 //! billboard-cloud bake time, memory, edit re-bake and fidelity per ε, the daemon's edit latency,
 //! burst handling and warm restart (`watch`), the texture atlas's full bake and one-texture edit
-//! (`atlas`), and occlusion rays per second (`occlusion`). Prints figures.
+//! (`atlas`), occlusion rays per second (`occlusion`), and the AmbientOcclusion kind's bake of the
+//! flight helmet with its quality beside per-vertex bakes (`ao`). Prints figures.
 
 use std::path::Path;
 use std::time::Instant;
@@ -53,6 +54,9 @@ fn main() {
     }
     if corpus.join("meshes").is_dir() && wanted("occlusion") {
         bench_occlusion(&corpus);
+    }
+    if corpus.join("meshes").is_dir() && wanted("ao") {
+        bench_ambient_occlusion(&corpus);
     }
 }
 
@@ -452,17 +456,7 @@ fn bench_atlas(corpus: &Path) {
 fn bench_occlusion(corpus: &Path) {
     use cirrus::mesh::occlusion::{occlusion_at, OcclusionSettings, RayDistribution};
     use cirrus::mesh::rays::{build_triangle_bvh, BackFaces};
-    let folder = corpus.join("meshes/flight_helmet");
-    let obj = folder.join("FlightHelmet.obj");
-    let bytes = std::fs::read(&obj).expect("flight helmet OBJ");
-    let libraries = cirrus::mesh::material_libraries(&obj, &bytes, &folder)
-        .into_iter()
-        .map(|path| {
-            let contents = std::fs::read(&path).ok();
-            (path, contents)
-        })
-        .collect();
-    let (mesh, _) = cirrus::mesh::load_mesh(&obj, &bytes, &libraries, &folder).expect("flight helmet loads");
+    let mesh = flight_helmet(corpus);
     let start = Instant::now();
     let bvh = build_triangle_bvh(&mesh.positions, &mesh.triangles);
     let build_ms = start.elapsed().as_secs_f64() * 1e3;
@@ -508,6 +502,161 @@ fn bench_occlusion(corpus: &Path) {
         points.len(),
         rays / seconds / threads / 1e6,
         visibility / points.len() as f64
+    );
+}
+
+/// The flight helmet (94,722 triangles, 6 materials) loaded with its MTL.
+fn flight_helmet(corpus: &Path) -> cirrus::mesh::Mesh {
+    let folder = corpus.join("meshes/flight_helmet");
+    let obj = folder.join("FlightHelmet.obj");
+    let bytes = std::fs::read(&obj).expect("flight helmet OBJ");
+    let libraries = cirrus::mesh::material_libraries(&obj, &bytes, &folder)
+        .into_iter()
+        .map(|path| {
+            let contents = std::fs::read(&path).ok();
+            (path, contents)
+        })
+        .collect();
+    cirrus::mesh::load_mesh(&obj, &bytes, &libraries, &folder).expect("flight helmet loads").0
+}
+
+/// The AmbientOcclusion kind on the flight helmet: a 1024², 256-ray bake of its six materials as
+/// a separate process (wall time, peak memory, rays per second), the same in per-vertex mode,
+/// then quality at equal rays on 128² maps (every object occluding every other): per texel, per
+/// vertex (cirrus's mode), and per vertex the libigl way (one set of uniformly random directions
+/// shared by every vertex, flipped into its hemisphere, unweighted), each against a 2,048-ray
+/// per-texel bake of the same texels, as PSNR over the baked texels.
+fn bench_ambient_occlusion(corpus: &Path) {
+    for (mode, bar) in [("Texels", " (bar ≤ 60 s on 2 cores)"), ("Vertices", "")] {
+        let dir = tempfile::tempdir().expect("temporary folder");
+        let folder = dir.path().join("assets");
+        std::fs::create_dir_all(&folder).unwrap();
+        for file in ["FlightHelmet.obj", "FlightHelmet.mtl"] {
+            std::fs::copy(corpus.join("meshes/flight_helmet").join(file), folder.join(file)).unwrap();
+        }
+        std::fs::write(
+            dir.path().join("pipeline.ron"),
+            format!(
+                r#"Pipeline(source: "assets", output: "baked", assets: [
+                    AmbientOcclusion(name: "helmet", mesh: "FlightHelmet.obj", ao: (size: 1024, rays: 256, mode: {mode})),
+                ])"#
+            ),
+        )
+        .unwrap();
+        let (seconds, peak_mib, summary) = build_process(dir.path());
+        assert_eq!(summary["assets"][0]["status"], "ok", "{summary}");
+        let report: serde_json::Value =
+            serde_json::from_slice(&std::fs::read(dir.path().join("baked/helmet/report.json")).unwrap()).unwrap();
+        let materials = report["materials"].as_array().unwrap();
+        let sum = |key: &str| materials.iter().map(|material| material[key].as_f64().unwrap_or(0.0)).sum::<f64>();
+        // Rays per second of wall time (the tiles of two materials bake at once, each on every
+        // core, so summed stage times would count the time twice); per vertex, of the
+        // `vertices` stage.
+        let bake_seconds = if mode == "Texels" { seconds } else { report["stage_ms"]["vertices"].as_f64().unwrap_or(0.0) / 1e3 };
+        println!(
+            "ao: flight helmet {mode}, 6 × 1024², 256 rays: {seconds:.1} s wall{bar}, peak memory {peak_mib:.0} MiB; {:.0} texels, {:.1} M rays ({:.2} M rays/s over {bake_seconds:.1} s, {:.2} M/s/core); stage ms {}",
+            sum("texels_baked"),
+            sum("rays_cast") / 1e6,
+            sum("rays_cast") / bake_seconds.max(1e-9) / 1e6,
+            sum("rays_cast") / bake_seconds.max(1e-9) / 1e6 / rayon::current_num_threads() as f64,
+            report["stage_ms"]
+        );
+    }
+
+    use cirrus::kinds::ambient_occlusion::bake::{bake_tile_from_vertices, bake_tile_with_rays, BakeMesh, TexelState, TileBake};
+    use cirrus::mesh::occlusion::{build_occluders, occlusion_of_vertices, OcclusionSettings, RayDistribution};
+    use cirrus::mesh::rays::{build_triangle_bvh, BackFaces};
+    use cirrus::mesh::uv_raster::TexelRegion;
+    let mesh = flight_helmet(corpus);
+    let uvs = mesh.uvs.clone().expect("the helmet has UVs");
+    let bake_mesh = BakeMesh { positions: &mesh.positions, normals: &mesh.normals, uvs: &uvs, triangles: &mesh.triangles, groups: None };
+    let occluders = build_occluders(&mesh.positions, &mesh.triangles, None);
+    let bvh = build_triangle_bvh(&mesh.positions, &mesh.triangles);
+    let settings = |rays| OcclusionSettings {
+        rays,
+        distribution: RayDistribution::Cosine,
+        max_distance: f32::INFINITY,
+        back_faces: BackFaces::PassThrough,
+        ground_plane: None,
+    };
+    let (low, high) = mesh.positions.iter().fold((glam::Vec3::INFINITY, glam::Vec3::NEG_INFINITY), |(low, high), &position| {
+        (low.min(position.into()), high.max(position.into()))
+    });
+    let offset = (high - low).length() * 1e-4;
+    let size = 128;
+    let region = TexelRegion { x: 0, y: 0, width: size, height: size };
+    let materials: Vec<Vec<u32>> = (0..mesh.materials.len() as u32)
+        .map(|material| {
+            (0..mesh.triangles.len() as u32).filter(|&triangle| mesh.triangle_materials[triangle as usize] == material).collect()
+        })
+        .filter(|triangles: &Vec<u32>| !triangles.is_empty())
+        .collect();
+    let texel_bake = |rays| -> (Vec<TileBake>, f64) {
+        let start = Instant::now();
+        let tiles = materials.iter().map(|own| bake_tile_with_rays(&occluders, &bake_mesh, own, size, region, &settings(rays))).collect();
+        (tiles, start.elapsed().as_secs_f64())
+    };
+    let vertex_maps = |visibility: &[f32]| -> Vec<TileBake> {
+        materials.iter().map(|own| bake_tile_from_vertices(&bake_mesh, own, size, region, visibility)).collect()
+    };
+    let (reference, reference_seconds) = texel_bake(2048);
+    let psnr = |tiles: &[TileBake]| {
+        let (mut squared, mut count) = (0.0f64, 0u64);
+        for (tile, reference) in tiles.iter().zip(&reference) {
+            for texel in 0..reference.values.len() {
+                if reference.states[texel] == TexelState::Baked as u8 && tile.states[texel] != TexelState::Empty as u8 {
+                    squared += ((tile.values[texel] as f64 - reference.values[texel] as f64) / 65535.0).powi(2);
+                    count += 1;
+                }
+            }
+        }
+        10.0 * (1.0 / (squared / count as f64).max(1e-12)).log10()
+    };
+    let (texels, texel_seconds) = texel_bake(256);
+    let start = Instant::now();
+    let visibility: Vec<f32> = occlusion_of_vertices(&occluders, &mesh.positions, &mesh.normals, &mesh.triangles, offset, &settings(256))
+        .into_iter()
+        .map(|occlusion| occlusion.map_or(1.0, |occlusion| occlusion.visibility))
+        .collect();
+    let vertices = vertex_maps(&visibility);
+    let vertex_seconds = start.elapsed().as_secs_f64();
+    // libigl's `ambient_occlusion`: the same random directions for every point, flipped into its
+    // hemisphere, every hit counted (both faces), unweighted.
+    let start = Instant::now();
+    let mut state = 0x1234_5678_u64;
+    let mut random = move || {
+        state = state.wrapping_mul(6364136223846793005).wrapping_add(1442695040888963407);
+        (state >> 11) as f64 / (1u64 << 53) as f64
+    };
+    let directions: Vec<glam::Vec3> = (0..256)
+        .map(|_| {
+            let (z, phi) = (2.0 * random() - 1.0, std::f64::consts::TAU * random());
+            let radius = (1.0 - z * z).max(0.0).sqrt();
+            glam::Vec3::new((radius * phi.cos()) as f32, (radius * phi.sin()) as f32, z as f32)
+        })
+        .collect();
+    let libigl: Vec<f32> = (0..mesh.positions.len())
+        .into_par_iter()
+        .map(|vertex| {
+            let normal = glam::Vec3::from(mesh.normals[vertex]).normalize_or_zero();
+            let origin = glam::Vec3::from(mesh.positions[vertex]) + normal * offset;
+            let hits = directions
+                .iter()
+                .filter(|&&direction| {
+                    let direction = if direction.dot(normal) < 0.0 { -direction } else { direction };
+                    bvh.blocked(origin, direction, f32::INFINITY, u32::MAX, BackFaces::Block)
+                })
+                .count();
+            1.0 - hits as f32 / directions.len() as f32
+        })
+        .collect();
+    let libigl_maps = vertex_maps(&libigl);
+    let libigl_seconds = start.elapsed().as_secs_f64();
+    println!(
+        "ao: quality at 256 rays on the helmet's 6 × 128² maps against a 2,048-ray per-texel bake ({reference_seconds:.1} s): per texel {:.1} dB in {texel_seconds:.2} s; per vertex (cirrus, R2 cosine) {:.1} dB in {vertex_seconds:.2} s; per vertex libigl-style (shared uniform random directions) {:.1} dB in {libigl_seconds:.2} s",
+        psnr(&texels),
+        psnr(&vertices),
+        psnr(&libigl_maps)
     );
 }
 

@@ -23,7 +23,7 @@
 //! | `surface-recipe` (`surface`, 3) | the tail's parts (below); the kind's recipe key | the content key of the surface's files |
 //! | `surface` (`surface`, 3) | the tail's parts; the image's width, height and content hash | the container file and PNG preview |
 //! | `encoding-memo` (`encoding-memo`, 4) | mips and encode versions; the surface's label (`asset/material/surface`, `asset/surface`) | a BC7 surface's last encoding: level 0's block fingerprints, the other levels, the blocks, the errors (a memo: overwritten) |
-//! | `mesh` (`mesh`, `MESH`) | the source folder; per file the mesh stage reads (the OBJ, then its MTL files), its path and its content hash or read error | the loaded mesh and tangents |
+//! | `mesh` (`mesh`, `MESH`) | the source folder; per file the mesh stage reads (the OBJ, then its MTL files), its path and its content hash or read error | the loaded mesh (with each triangle's OBJ object) and tangents |
 //! | `planes` (`planes`, `PLANES`) | the `mesh` key; ε; max planes option | the plane set |
 //! | `layout` (`layout`, `LAYOUT`) | the `planes` key; atlas settings (max size, padding, power of two); texel density option | rectangles, layout, render groups |
 //! | `lod` (`lod`, `LOD`) | the `layout` key | `lod.obj`, `lod.mtl` |
@@ -36,6 +36,9 @@
 //! | `atlas-layout-memo` (`atlas-layout-memo`, `atlas::LAYOUT`) | the asset's name; the pack settings key | the asset's last layout, the packer's hint (a memo: overwritten) |
 //! | `atlas-page-memo` (`atlas-page-memo`, `COMPOSITE`) | the page's name (`atlas-page:asset/pageN`) | a page's last composite: its entries (placement, kept hash, translucency), the page, the fill sources as offsets (a memo: overwritten) |
 //! | `remap` (`remap`, `REMAP`) | the source folder; the blake3 of the layout's JSON; the OBJ's and its MTL files' paths and content hashes | a remapped mesh's OBJ text and materials |
+//! | `vertices` (`vertices`, `VERTICES`) | the mesh's content hash (positions, normals, UVs, triangles, groups); rays; distribution; max distance in mesh units; back faces pass through; ground plane option; the vertex offset | an AO asset's visibility per vertex (`f32`) |
+//! | `ao-tile` (`bake`, `BAKE`) | the map size; the tile's region (x, y, width, height); the mode (`Texels`, `Vertices`); per texel the occlusion settings as for `vertices`, the hash of its own triangles' corners (UV, position and normal bits), then `within reach` and the hash of the occluders within reach (group, corner positions) or `whole mesh` and the mesh's content hash; per vertex the hash of its own triangles' corners and of their visibility | a baked tile: 16-bit values, texel states, overlap count, rays, bake time |
+//! | `ao-map` (`fill`, `FILL`) | the map size; every tile key of the material, in row order | a material's filled map (16-bit), its 16-bit PNG and its figures |
 //! | `source-mips` (`source-mips`, 1) | decode and mips versions; the texture file's content hash; the material slot; the filter kind; the alpha cutoff bits (or `u32::MAX`) | the mip chain the renders sample |
 //!
 //! The tail's parts: the mips, encode and write versions; the surface name; block format;

@@ -313,6 +313,37 @@ pub fn tail_instances(asset_name: &str, surface: &SurfaceId, image: &StageInstan
     [mips, encode, write]
 }
 
+/// The tail settings of a surface of kind `surface` in `format`, the rest from the asset's
+/// `encode` settings.
+pub fn tail_settings_from(
+    encode: &crate::config::EncodeSettings,
+    surface: SurfaceKind,
+    format: crate::config::BlockFormat,
+    alpha_cutoff: Option<f32>,
+) -> TailSettings {
+    TailSettings {
+        surface,
+        format,
+        quality: encode.quality,
+        mips: encode.mips,
+        alpha_cutoff,
+        container: encode.container,
+        zstd: encode.zstd,
+    }
+}
+
+/// An asset's outputs made by `make` when its stages left no error; the error of making them
+/// joins `errors` (and nothing is written).
+pub fn outputs_unless_failed(errors: &mut Vec<Diagnostic>, make: impl FnOnce() -> Result<AssetOutputs, Diagnostic>) -> AssetOutputs {
+    if !errors.is_empty() {
+        return AssetOutputs::default();
+    }
+    make().unwrap_or_else(|diagnostic| {
+        errors.push(diagnostic);
+        AssetOutputs::default()
+    })
+}
+
 /// What an asset writes: files (project-relative) and its `report.json`, written last.
 #[derive(Clone, Debug, Default)]
 pub struct AssetOutputs {

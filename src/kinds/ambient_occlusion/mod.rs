@@ -107,16 +107,7 @@ impl Kind for AmbientOcclusion {
     }
 
     fn outputs(db: &dyn Db, asset: Asset, output_folder: &Path, errors: &mut Vec<Diagnostic>, runs: &[StageRun]) -> AssetOutputs {
-        if !errors.is_empty() {
-            return AssetOutputs::default();
-        }
-        match ao_outputs(db, asset, output_folder, runs) {
-            Ok(outputs) => outputs,
-            Err(diagnostic) => {
-                errors.push(diagnostic);
-                AssetOutputs::default()
-            }
-        }
+        crate::kinds::outputs_unless_failed(errors, || ao_outputs(db, asset, output_folder, runs))
     }
 
     /// The mesh loads with its material libraries and has texture coordinates; load warnings
@@ -141,15 +132,7 @@ impl Kind for AmbientOcclusion {
 
     fn tail_settings(db: &dyn Db, asset: Asset, surface: &SurfaceId) -> Result<TailSettings, Diagnostic> {
         let encode = &asset.settings(db).encode;
-        Ok(TailSettings {
-            surface: surface.surface,
-            format: encode.format_of(surface.surface),
-            quality: encode.quality,
-            mips: encode.mips,
-            alpha_cutoff: None,
-            container: encode.container,
-            zstd: encode.zstd,
-        })
+        Ok(crate::kinds::tail_settings_from(encode, surface.surface, encode.format_of(surface.surface), None))
     }
 
     fn surface_recipe_key(db: &dyn Db, asset: Asset, surface: &SurfaceId) -> Result<Option<CacheKey>, Diagnostic> {

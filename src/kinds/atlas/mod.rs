@@ -195,15 +195,7 @@ impl Kind for Atlas {
 
     fn tail_settings(db: &dyn Db, asset: Asset, _surface: &SurfaceId) -> Result<TailSettings, Diagnostic> {
         let encode = &asset.settings(db).encode;
-        Ok(TailSettings {
-            surface: SurfaceKind::Albedo,
-            format: encode.albedo,
-            quality: encode.quality,
-            mips: encode.mips,
-            alpha_cutoff: None,
-            container: encode.container,
-            zstd: encode.zstd,
-        })
+        Ok(crate::kinds::tail_settings_from(encode, SurfaceKind::Albedo, encode.albedo, None))
     }
 
     fn surface_recipe_key(db: &dyn Db, asset: Asset, surface: &SurfaceId) -> Result<Option<CacheKey>, Diagnostic> {

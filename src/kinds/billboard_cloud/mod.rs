@@ -184,16 +184,7 @@ impl Kind for BillboardCloud {
     }
 
     fn outputs(db: &dyn Db, asset: Asset, output_folder: &Path, errors: &mut Vec<Diagnostic>, runs: &[StageRun]) -> AssetOutputs {
-        if !errors.is_empty() {
-            return AssetOutputs::default();
-        }
-        match billboard_outputs(db, asset, output_folder, runs) {
-            Ok(outputs) => outputs,
-            Err(diagnostic) => {
-                errors.push(diagnostic);
-                AssetOutputs::default()
-            }
-        }
+        crate::kinds::outputs_unless_failed(errors, || billboard_outputs(db, asset, output_folder, runs))
     }
 
     /// The mesh loads with its material libraries, and every texture its materials name is
@@ -220,15 +211,12 @@ impl Kind for BillboardCloud {
     fn tail_settings(db: &dyn Db, asset: Asset, surface: &SurfaceId) -> Result<TailSettings, Diagnostic> {
         let settings = asset.settings(db);
         let encode = &settings.encode;
-        Ok(TailSettings {
-            surface: surface.surface,
-            format: encode.format_of(surface.surface),
-            quality: encode.quality,
-            mips: encode.mips,
-            alpha_cutoff: (surface.surface == SurfaceKind::Albedo).then_some(settings.billboard.alpha_cutoff),
-            container: encode.container,
-            zstd: encode.zstd,
-        })
+        Ok(crate::kinds::tail_settings_from(
+            encode,
+            surface.surface,
+            encode.format_of(surface.surface),
+            (surface.surface == SurfaceKind::Albedo).then_some(settings.billboard.alpha_cutoff),
+        ))
     }
 
     fn surface_recipe_key(db: &dyn Db, asset: Asset, _surface: &SurfaceId) -> Result<Option<CacheKey>, Diagnostic> {

@@ -170,15 +170,7 @@ impl Kind for Material {
             }
             _ => None,
         };
-        Ok(TailSettings {
-            surface: surface.surface,
-            format: encode.format_of(surface.surface),
-            quality: encode.quality,
-            mips: encode.mips,
-            alpha_cutoff,
-            container: encode.container,
-            zstd: encode.zstd,
-        })
+        Ok(crate::kinds::tail_settings_from(encode, surface.surface, encode.format_of(surface.surface), alpha_cutoff))
     }
 
     fn surface_recipe_key(db: &dyn Db, asset: Asset, surface: &SurfaceId) -> Result<Option<CacheKey>, Diagnostic> {

@@ -32,6 +32,13 @@ pub fn mesh_library_paths(db: &dyn Db, asset: Asset) -> Arc<Vec<PathBuf>> {
     Arc::new(crate::mesh::material_libraries(asset.main_file(db), &contents.bytes, asset.source_root(db)))
 }
 
+/// The OBJ and the MTL files it names: what the mesh stage reads.
+pub fn mesh_files(db: &dyn Db, asset: Asset) -> Vec<PathBuf> {
+    let mut files = vec![asset.main_file(db).clone()];
+    files.extend(mesh_library_paths(db, asset).iter().cloned());
+    files
+}
+
 /// The MTL files the OBJ names, as far as read, by project-relative path.
 #[salsa::tracked(returns(clone))]
 pub fn mesh_libraries(db: &dyn Db, asset: Asset) -> Arc<BTreeMap<PathBuf, SourceFile>> {

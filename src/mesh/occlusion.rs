@@ -263,9 +263,9 @@ pub fn occlusion_of_vertices(
             if triangle == u32::MAX {
                 return None;
             }
-            let (bvh, _) = occluders.of(triangle);
+            let (bvh, local) = occluders.of(triangle);
             let normal = Vec3::from(normals[vertex]).normalize_or_zero();
-            let normal = if normal == Vec3::ZERO { Vec3::from(bvh.geometric_normal(occluders.of(triangle).1)) } else { normal };
+            let normal = if normal == Vec3::ZERO { Vec3::from(bvh.geometric_normal(local)) } else { normal };
             let point = Vec3::from(positions[vertex]) + normal * offset;
             Some(occlusion_from(bvh, point, normal, normal, u32::MAX, settings, vertex as u32))
         })

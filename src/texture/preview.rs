@@ -1,16 +1,23 @@
-//! PNG previews of uncompressed packed surfaces, for people to look at.
+//! PNG previews of uncompressed packed surfaces, for people to look at, and the one PNG
+//! encoder (16-bit maps use it too).
 
 use crate::texture::Texture;
 
 /// Encodes an RGBA8 texture as PNG bytes (deterministic).
 pub fn preview_png(texture: &Texture) -> Vec<u8> {
+    png_bytes(&texture.pixels, texture.width, texture.height, image::ExtendedColorType::Rgba8)
+}
+
+/// Encodes `samples` (native-endian for 16-bit colour types) as PNG bytes: fast compression,
+/// adaptive filters, deterministic.
+pub fn png_bytes(samples: &[u8], width: u32, height: u32, color: image::ExtendedColorType) -> Vec<u8> {
     let mut bytes = Vec::new();
     let encoder = image::codecs::png::PngEncoder::new_with_quality(
         &mut bytes,
         image::codecs::png::CompressionType::Fast,
         image::codecs::png::FilterType::Adaptive,
     );
-    image::ImageEncoder::write_image(encoder, &texture.pixels, texture.width, texture.height, image::ExtendedColorType::Rgba8)
-        .expect("PNG encoding into memory cannot fail for a valid RGBA8 buffer");
+    image::ImageEncoder::write_image(encoder, samples, width, height, color)
+        .expect("PNG encoding into memory cannot fail for a buffer of the right size");
     bytes
 }

@@ -273,14 +273,6 @@ pub fn map_texture(map: &AoMap) -> crate::texture::Texture {
 
 /// The map as a 16-bit greyscale PNG.
 pub fn map_png16(map: &AoMap) -> Vec<u8> {
-    let mut bytes = Vec::new();
-    let encoder = image::codecs::png::PngEncoder::new_with_quality(
-        &mut bytes,
-        image::codecs::png::CompressionType::Fast,
-        image::codecs::png::FilterType::Adaptive,
-    );
     let samples: Vec<u8> = map.values.iter().flat_map(|value| value.to_ne_bytes()).collect();
-    image::ImageEncoder::write_image(encoder, &samples, map.size, map.size, image::ExtendedColorType::L16)
-        .expect("PNG encoding into memory cannot fail for a valid L16 buffer");
-    bytes
+    crate::texture::preview::png_bytes(&samples, map.size, map.size, image::ExtendedColorType::L16)
 }

@@ -20,7 +20,7 @@ use crate::cache::CacheKey;
 use crate::config::{AoMode, AssetConfig, PipelineConfig};
 use crate::db::{Asset, Db, StageRun};
 use crate::diagnostic::{display_path, Diagnostic};
-use crate::kinds::mesh_queries::{loaded_mesh, mesh_instance};
+use crate::kinds::mesh_queries::mesh_instance;
 use crate::kinds::{tail_instances, AssetOutputs, Job, Kind, StageInstance, SurfaceId, Task};
 use crate::summary::ErrorSummary;
 use crate::texture::tail::{SurfaceInfo, TailSettings};
@@ -47,7 +47,7 @@ impl Kind for AmbientOcclusion {
     const NAME: &'static str = "AmbientOcclusion";
 
     fn files_to_read(db: &dyn Db, asset: Asset) -> Vec<PathBuf> {
-        queries::mesh_files(db, asset)
+        crate::kinds::mesh_queries::mesh_files(db, asset)
     }
 
     fn first_jobs(db: &dyn Db, asset: Asset) -> Vec<Job> {
@@ -183,7 +183,6 @@ pub struct AoSurfaceReport {
 
 fn ao_outputs(db: &dyn Db, asset: Asset, output_folder: &Path, runs: &[StageRun]) -> Result<AssetOutputs, Diagnostic> {
     let geometry = bake_geometry(db, asset)?;
-    let loaded = loaded_mesh(db, asset)?;
     let settings = ao_settings(db, asset);
     let container = asset.settings(db).encode.container;
     let mut outputs = AssetOutputs::default();
@@ -230,7 +229,7 @@ fn ao_outputs(db: &dyn Db, asset: Asset, output_folder: &Path, runs: &[StageRun]
         max_distance: geometry.occlusion.max_distance.is_finite().then_some(geometry.occlusion.max_distance),
         materials,
         stage_ms: crate::kinds::asset_stage_ms(name, runs).into_iter().map(|(stage, ms)| (stage.to_string(), ms)).collect(),
-        warnings: loaded.warnings.iter().map(ErrorSummary::from).collect(),
+        warnings: geometry.loaded.warnings.iter().map(ErrorSummary::from).collect(),
     };
     outputs.report = Some(serde_json::to_vec_pretty(&report).expect("reports serialise"));
     Ok(outputs)

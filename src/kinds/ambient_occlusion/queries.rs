@@ -5,7 +5,6 @@
 //! an edit re-bakes only the tiles it can change; each material's map is put together from its
 //! tiles, filled, and sent through the shared texture tail.
 
-use std::path::PathBuf;
 use std::sync::Arc;
 
 use glam::Vec3;
@@ -266,8 +265,8 @@ pub fn material_label(asset_name: &str, folder: &str) -> String {
     format!("{asset_name}/{folder}")
 }
 
-fn material_of(geometry: &BakeGeometry, path: &std::path::Path, material: u32) -> Result<BakedMaterial, Diagnostic> {
-    geometry.material(material).cloned().ok_or_else(|| Diagnostic::new(path, format!("no baked material {material}")))
+fn material_of<'a>(geometry: &'a BakeGeometry, path: &std::path::Path, material: u32) -> Result<&'a BakedMaterial, Diagnostic> {
+    geometry.material(material).ok_or_else(|| Diagnostic::new(path, format!("no baked material {material}")))
 }
 
 /// What a tile reads, as a key (cheap: no rays): the map size, the tile, the mode's settings,
@@ -425,8 +424,7 @@ const MAP_ENTRY: &str = "ao-map";
 pub fn ao_map(db: &dyn Db, asset: Asset, material: u32) -> Result<Arc<AoMapFiles>, Diagnostic> {
     let key = ao_map_key(db, asset, material)?;
     let geometry = bake_geometry(db, asset)?;
-    let folder = material_of(&geometry, asset.main_file(db), material)?.folder;
-    let label = material_label(asset.name(db), &folder);
+    let label = material_label(asset.name(db), &material_of(&geometry, asset.main_file(db), material)?.folder);
     if let Some(files) = load_cached(db, MAP_ENTRY, key, map_from_entry) {
         record_cache_hit(db, FILL, &label);
         return Ok(Arc::new(files));
@@ -474,11 +472,4 @@ fn map_from_entry(entry: CacheEntry) -> Option<AoMapFiles> {
         bake_ms: metadata.get("bake_ms")?.as_f64()?,
     };
     Some(AoMapFiles { map, png16: png16.into() })
-}
-
-/// The MTL files the OBJ names (what the asset reads besides it).
-pub fn mesh_files(db: &dyn Db, asset: Asset) -> Vec<PathBuf> {
-    let mut files = vec![asset.main_file(db).clone()];
-    files.extend(crate::kinds::mesh_queries::mesh_library_paths(db, asset).iter().cloned());
-    files
 }

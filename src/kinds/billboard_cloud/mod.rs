@@ -52,8 +52,7 @@ impl Kind for BillboardCloud {
     const NAME: &'static str = "BillboardCloud";
 
     fn files_to_read(db: &dyn Db, asset: Asset) -> Vec<PathBuf> {
-        let mut files = vec![asset.main_file(db).clone()];
-        files.extend(crate::kinds::mesh_queries::mesh_library_paths(db, asset).iter().cloned());
+        let mut files = crate::kinds::mesh_queries::mesh_files(db, asset);
         files.extend(mesh_textures(db, asset).iter().cloned());
         files
     }

@@ -3,6 +3,7 @@
 //! maps of DESIGN §2.2 and constant fallbacks. Pure: the driver serves the MTL bytes.
 
 pub mod occlusion;
+mod ray_kernels;
 pub mod rays;
 pub mod uv_raster;
 

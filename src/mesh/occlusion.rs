@@ -72,20 +72,39 @@ pub fn sequence_shift(seed: u32) -> [f64; 2] {
     [first as f64 / 4_294_967_296.0, second as f64 / 4_294_967_296.0]
 }
 
-/// A direction in the frame whose Z is the normal, from a point of [0, 1)², and its weight.
-fn local_direction(point: [f64; 2], distribution: RayDistribution) -> (Vec3, f32) {
-    let phi = std::f64::consts::TAU * point[1];
+/// The first coordinate of the `index`-th R2 point and the cosine and sine of 2π times its
+/// second, for every index up to the rays asked for: computed once per thread, so that a ray
+/// costs no trigonometry (the per-point shift of the second coordinate is a rotation of the
+/// point's frame, see [`occlusion_from`]).
+fn with_sequence_table<T>(rays: u32, use_table: impl FnOnce(&[(f64, f32, f32)]) -> T) -> T {
+    thread_local! {
+        static TABLE: std::cell::RefCell<Vec<(f64, f32, f32)>> = const { std::cell::RefCell::new(Vec::new()) };
+    }
+    TABLE.with(|table| {
+        let mut table = table.borrow_mut();
+        for index in table.len() as u32..rays {
+            let [radial, turn] = r2_point(index);
+            let (sin, cos) = (std::f64::consts::TAU * turn).sin_cos();
+            table.push((radial, cos as f32, sin as f32));
+        }
+        use_table(&table[..rays as usize])
+    })
+}
+
+/// A direction in the frame whose Z is the normal, from the first coordinate of a point of
+/// [0, 1)² and the cosine and sine of 2π times its second, and its weight.
+fn local_direction(radial: f64, cos_turn: f32, sin_turn: f32, distribution: RayDistribution) -> (Vec3, f32) {
     match distribution {
         RayDistribution::Cosine => {
-            let radius = point[0].sqrt();
-            let z = (1.0 - point[0]).max(0.0).sqrt();
-            (Vec3::new((radius * phi.cos()) as f32, (radius * phi.sin()) as f32, z as f32), 1.0)
+            let radius = radial.sqrt() as f32;
+            let z = (1.0 - radial).max(0.0).sqrt() as f32;
+            (Vec3::new(radius * cos_turn, radius * sin_turn, z), 1.0)
         }
         RayDistribution::Uniform => {
-            let z = 1.0 - point[0];
-            let radius = (1.0 - z * z).max(0.0).sqrt();
+            let z = 1.0 - radial;
+            let radius = (1.0 - z * z).max(0.0).sqrt() as f32;
             // Uniform density 1/2π against the cosine-weighted measure cos/π: weight 2 cos.
-            (Vec3::new((radius * phi.cos()) as f32, (radius * phi.sin()) as f32, z as f32), (2.0 * z) as f32)
+            (Vec3::new(radius * cos_turn, radius * sin_turn, z as f32), (2.0 * z) as f32)
         }
     }
 }
@@ -119,11 +138,33 @@ fn occlusion_from(
     let origin = offset_ray_origin(point, offset_normal);
     let (tangent, bitangent) = orthonormal_frame(normal);
     let shift = sequence_shift(seed);
+    // Shifting the second coordinate by s turns every direction by 2πs about the normal: the
+    // frame turns instead, once per point.
+    let (sin_shift, cos_shift) = (std::f64::consts::TAU * shift[1]).sin_cos();
+    let (sin_shift, cos_shift) = (sin_shift as f32, cos_shift as f32);
+    let (tangent, bitangent) = (tangent * cos_shift + bitangent * sin_shift, bitangent * cos_shift - tangent * sin_shift);
+    with_sequence_table(settings.rays, |table| {
+        occlusion_along(bvh, origin, [tangent, bitangent, normal], shift[0], table, triangle, settings)
+    })
+}
+
+/// The occlusion from `origin` over the hemisphere of the frame `[tangent, bitangent, normal]`
+/// along the rays of `table` with the first coordinate shifted by `radial_shift`.
+fn occlusion_along(
+    bvh: &TriangleBvh,
+    origin: Vec3,
+    [tangent, bitangent, normal]: [Vec3; 3],
+    radial_shift: f64,
+    table: &[(f64, f32, f32)],
+    triangle: u32,
+    settings: &OcclusionSettings,
+) -> Occlusion {
     let (mut open, mut total, mut back_face_rays) = (0.0f64, 0.0f64, 0u32);
-    for ray in 0..settings.rays {
-        let base = r2_point(ray);
-        let point = [(base[0] + shift[0]).fract(), (base[1] + shift[1]).fract()];
-        let (local, weight) = local_direction(point, settings.distribution);
+    for (ray, &(radial, cos_turn, sin_turn)) in (0u32..).zip(table) {
+        // Both in [0, 1): the sum wraps at most once.
+        let radial = radial + radial_shift;
+        let radial = if radial >= 1.0 { radial - 1.0 } else { radial };
+        let (local, weight) = local_direction(radial, cos_turn, sin_turn, settings.distribution);
         let direction = (tangent * local.x + bitangent * local.y + normal * local.z).normalize_or_zero();
         // The floor is solid below: a downward ray meets it within reach (at once from an
         // origin that its offset moved just under a face lying on the floor).

@@ -144,6 +144,9 @@ pub struct Settings {
     pub pack: PackSettings,
     pub ao: AoSettings,
     pub encode: EncodeSettings,
+    /// The `AmbientOcclusion` asset a `Material` takes its AO maps from (`ao_source`), by
+    /// asset name: per asset, never a default.
+    pub ao_source: Option<String>,
 }
 
 impl Default for Settings {
@@ -174,6 +177,7 @@ impl Default for Settings {
                 zstd: None,
                 quality: EncodeQuality::Basic,
             },
+            ao_source: None,
         }
     }
 }
@@ -423,6 +427,9 @@ mod raw {
         Material {
             name: String,
             material: String,
+            /// An `AmbientOcclusion` asset whose maps replace the materials' `ao` textures.
+            #[serde(default)]
+            ao_source: Option<String>,
             #[serde(default)]
             billboard: BillboardOverrides,
             #[serde(default)]
@@ -595,7 +602,7 @@ impl Validator<'_> {
             // Each kind's own settings; the others keep the defaults.
             let mut overrides = raw::SettingsOverrides::default();
             let (name, path, encode, kind) = match asset {
-                raw::Asset::Material { name, material, billboard, atlas, encode } => {
+                raw::Asset::Material { name, material, billboard, atlas, encode, .. } => {
                     (overrides.billboard, overrides.atlas) = (billboard.clone(), atlas.clone());
                     (name, Some(material), encode, AssetKindName::Material)
                 }
@@ -646,7 +653,10 @@ impl Validator<'_> {
                 },
                 None => None,
             };
-            let settings = self.merge_settings(&defaults, &overrides, anchor);
+            let mut settings = self.merge_settings(&defaults, &overrides, anchor);
+            if let raw::Asset::Material { ao_source, .. } = asset {
+                settings.ao_source = ao_source.clone();
+            }
             // Each atlas surface (each material's AO map) goes through the texture tail: the
             // same budget holds.
             let surface_side = match kind {
@@ -686,6 +696,8 @@ impl Validator<'_> {
             assets.push(AssetConfig { name: name.clone(), source, settings });
         }
 
+        self.check_ao_sources(&assets, &raw.rules);
+
         let mut rules = Vec::new();
         for rule in &raw.rules {
             if rule.kind == AssetKindName::Atlas {
@@ -701,6 +713,33 @@ impl Validator<'_> {
             Ok(PipelineConfig { file: self.file.to_path_buf(), root, source, output, server, defaults, assets, rules, limits })
         } else {
             Err(ConfigError { diagnostics: self.diagnostics })
+        }
+    }
+
+    /// Each `ao_source` names an `AmbientOcclusion` asset: a listed one, or (when a rule makes
+    /// AmbientOcclusion assets, whose names are known only once files are listed) any name
+    /// that is not a listed asset of another kind; the build reports a name no asset has.
+    fn check_ao_sources(&mut self, assets: &[AssetConfig], rules: &[raw::Rule]) {
+        let rules_make_ao = rules.iter().any(|rule| rule.kind == AssetKindName::AmbientOcclusion);
+        for asset in assets {
+            let Some(source) = &asset.settings.ao_source else { continue };
+            let anchor = self.offset_of_value(&asset.name, 0).unwrap_or(0);
+            match assets.iter().find(|other| &other.name == source) {
+                Some(other) if other.source.kind() == AssetKindName::AmbientOcclusion => {}
+                Some(other) => {
+                    let message = format!(
+                        "asset `{}`: ao_source `{source}` is a {:?} asset; it must name an AmbientOcclusion asset",
+                        asset.name,
+                        other.source.kind()
+                    );
+                    self.error_at_value(source, anchor, &message);
+                }
+                None if rules_make_ao => {}
+                None => {
+                    let message = format!("asset `{}`: ao_source `{source}` names no asset of the pipeline", asset.name);
+                    self.error_at_value(source, anchor, &message);
+                }
+            }
         }
     }
 

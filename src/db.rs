@@ -94,6 +94,19 @@ pub struct Asset {
     pub listed: Arc<Vec<Vec<PathBuf>>>,
 }
 
+/// The assets of the build by name, for an asset that reads another's output (a `Material`'s
+/// `ao_source`): set by the driver, one per database.
+#[salsa::input(singleton, debug)]
+pub struct AssetRegistry {
+    #[returns(ref)]
+    pub assets: Arc<BTreeMap<String, Asset>>,
+}
+
+/// The asset of the build named `name`, if any.
+pub fn asset_named(db: &dyn Db, name: &str) -> Option<Asset> {
+    AssetRegistry::try_get(db).and_then(|registry| registry.assets(db).get(name).copied())
+}
+
 /// The input of one file the asset read (cuts off when other files join or leave the asset).
 #[salsa::tracked(returns(copy))]
 pub fn asset_file(db: &dyn Db, asset: Asset, path: PathBuf) -> Option<SourceFile> {

@@ -301,6 +301,32 @@ impl Project {
         asset
     }
 
+    /// Names the built assets for those that read another's output (`ao_source`), syncing each
+    /// asset read that this build does not bake itself (`--asset` leaving it out): its result
+    /// is computed for the reader, its files are not written. Set only when it changed.
+    fn sync_registry(&mut self, all_assets: &[AssetConfig], built: &[(AssetConfig, Asset)]) {
+        let mut registry: BTreeMap<String, Asset> = built.iter().map(|(config, asset)| (config.name.clone(), *asset)).collect();
+        for (config, _) in built {
+            let Some(source) = &config.settings.ao_source else { continue };
+            if registry.contains_key(source) {
+                continue;
+            }
+            if let Some(read) = all_assets.iter().find(|asset| &asset.name == source) {
+                let asset = self.sync_asset(read);
+                registry.insert(read.name.clone(), asset);
+            }
+        }
+        match crate::db::AssetRegistry::try_get(&self.db) {
+            Some(current) if **current.assets(&self.db) == registry => {}
+            Some(current) => {
+                current.set_assets(&mut self.db).to(Arc::new(registry));
+            }
+            None => {
+                crate::db::AssetRegistry::new(&self.db, Arc::new(registry));
+            }
+        }
+    }
+
     /// Bakes the assets, writing only artifacts whose bytes changed.
     pub fn build(&mut self, options: &BuildOptions, progress: &(dyn Fn(Progress) + Sync)) -> Result<BuildSummary, BuildError> {
         let (all_assets, conflicts) = self.asset_list_and_conflicts();
@@ -331,6 +357,7 @@ impl Project {
             let asset = self.sync_asset(&config);
             assets.push((config, asset));
         }
+        self.sync_registry(&all_assets, &assets);
         let first_jobs = assets.iter().flat_map(|(_, asset)| asset.kind(&self.db).first_jobs(&self.db, *asset)).collect();
         let finished = crate::schedule::run_jobs(&self.db, first_jobs, progress, &cancel);
         let runs = self.db.take_runs();
@@ -546,9 +573,11 @@ impl Project {
         use crate::graph::{GraphBuilder, Node, NodeKind};
         let mut graph = GraphBuilder::default();
         let manifest = load_manifest(&self.config.output_dir());
+        let list = self.asset_list();
+        let assets: Vec<(AssetConfig, Asset)> = list.iter().map(|config| (config.clone(), self.sync_asset(config))).collect();
+        self.sync_registry(&list, &assets);
         let mut all_instances = Vec::new();
-        for config in self.asset_list() {
-            let asset = self.sync_asset(&config);
+        for (config, asset) in assets {
             let folder = self.config.output.join(&config.name);
             let instances = asset.kind(&self.db).stage_instances(&self.db, asset, &folder, &[]);
             all_instances.push((config.name, instances));

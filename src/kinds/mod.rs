@@ -68,6 +68,14 @@ pub trait Kind {
     fn surface_parts_key(_db: &dyn Db, _asset: Asset, _surface: &SurfaceId) -> Result<Option<CacheKey>, Diagnostic> {
         Ok(None)
     }
+
+    /// The stage whose result is the image of `surface`, for another asset that reads the
+    /// surface as a source (a `Material`'s `ao_source`): none when this kind makes no such
+    /// surface, an error when it would but cannot (no such group, a broken source).
+    /// `surface.group` may be the group's name or its folder.
+    fn provided_surface_stage(_db: &dyn Db, _asset: Asset, _surface: &SurfaceId) -> Result<Option<Read>, Diagnostic> {
+        Ok(None)
+    }
 }
 
 /// The kinds of asset cirrus bakes: one `match` per question of `Kind`.
@@ -182,6 +190,15 @@ impl AssetKind {
             AssetKind::BillboardCloud => BillboardCloud::surface_parts_key(db, asset, surface),
             AssetKind::Atlas => Atlas::surface_parts_key(db, asset, surface),
             AssetKind::AmbientOcclusion => AmbientOcclusion::surface_parts_key(db, asset, surface),
+        }
+    }
+
+    pub fn provided_surface_stage(self, db: &dyn Db, asset: Asset, surface: &SurfaceId) -> Result<Option<Read>, Diagnostic> {
+        match self {
+            AssetKind::Material => Material::provided_surface_stage(db, asset, surface),
+            AssetKind::BillboardCloud => BillboardCloud::provided_surface_stage(db, asset, surface),
+            AssetKind::Atlas => Atlas::provided_surface_stage(db, asset, surface),
+            AssetKind::AmbientOcclusion => AmbientOcclusion::provided_surface_stage(db, asset, surface),
         }
     }
 

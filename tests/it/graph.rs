@@ -72,11 +72,13 @@ fn edit(project: &TempProject, file: &str) -> bool {
                         "Texture (attrib = \"normal\") {string {\"../textures/bark_birch/normal.jpg\"}}\n    Param (attrib = \"metallic\")",
                     )
                 }
+                "spot.mymaterial" => text().replace("{float {0.6}}", "{float {0.3}}"),
                 other => panic!("no edit for {other}"),
             };
             assert_ne!(edited, text(), "{file} edited");
             std::fs::write(&path, edited).unwrap();
-            true
+            // The cow's edit changes its roughness only: its albedo and normal cut off.
+            !file.ends_with("spot.mymaterial")
         }
         "obj" => {
             // Stretch the mesh along x: new planes, rectangles, layout and renders.
@@ -116,6 +118,8 @@ fn editing_a_file_reruns_the_stages_downstream_of_it_in_the_dump() {
             "examples/assets/materials/oak_leaves.mymaterial",
             "examples/assets/materials/painted_steel.mymaterial",
             "examples/assets/meshes/spot/spot.mtl",
+            "examples/assets/meshes/spot/spot.mymaterial",
+            "examples/assets/meshes/spot/spot_texture.png",
             "examples/assets/meshes/spot/spot_triangulated_with_mtl.obj",
             "examples/assets/textures/bark_birch/albedo.jpg",
             "examples/assets/textures/bark_birch/ao.jpg",

@@ -21,6 +21,7 @@ use crate::config::{AoMode, AssetConfig, PipelineConfig};
 use crate::db::{Asset, Db, StageRun};
 use crate::diagnostic::{display_path, Diagnostic};
 use crate::kinds::mesh_queries::mesh_instance;
+use crate::kinds::Read;
 use crate::kinds::{tail_instances, AssetOutputs, Job, Kind, StageInstance, SurfaceId, Task};
 use crate::summary::ErrorSummary;
 use crate::texture::tail::{SurfaceInfo, TailSettings};
@@ -38,8 +39,14 @@ fn material_surface(folder: &str) -> SurfaceId {
 /// The baked material a tail surface is.
 fn surface_material(db: &dyn Db, asset: Asset, surface: &SurfaceId) -> Result<(Arc<BakeGeometry>, u32), Diagnostic> {
     let geometry = bake_geometry(db, asset)?;
-    let index = geometry.materials.iter().find(|material| material.folder == surface.group).map(|material| material.index);
-    let index = index.ok_or_else(|| Diagnostic::new(asset.main_file(db), format!("no material `{}` any more", surface.group)))?;
+    // By folder (the tail's surfaces), else by name (another asset reading the map).
+    let materials = &geometry.materials;
+    let found = materials
+        .iter()
+        .find(|material| material.folder == surface.group)
+        .or_else(|| materials.iter().find(|material| material.name == surface.group));
+    let index = found.map(|material| material.index);
+    let index = index.ok_or_else(|| Diagnostic::new(asset.main_file(db), format!("the mesh has no material `{}`", surface.group)))?;
     Ok((geometry, index))
 }
 
@@ -138,6 +145,15 @@ impl Kind for AmbientOcclusion {
     fn surface_recipe_key(db: &dyn Db, asset: Asset, surface: &SurfaceId) -> Result<Option<CacheKey>, Diagnostic> {
         let (_, material) = surface_material(db, asset, surface)?;
         ao_map_key(db, asset, material).map(Some)
+    }
+
+    fn provided_surface_stage(db: &dyn Db, asset: Asset, surface: &SurfaceId) -> Result<Option<Read>, Diagnostic> {
+        if surface.surface != SurfaceKind::Ao {
+            return Ok(None);
+        }
+        let (geometry, material) = surface_material(db, asset, surface)?;
+        let folder = geometry.material(material).map(|material| material.folder.clone()).unwrap_or_default();
+        Ok(Some(Read::Stage(FILL, queries::material_label(asset.name(db), &folder))))
     }
 }
 

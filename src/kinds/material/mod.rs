@@ -21,7 +21,7 @@ use crate::kinds::{as_warning, check_texture_file, tail_instances, AssetOutputs,
 use crate::summary::ErrorSummary;
 use crate::texture::tail::{SurfaceInfo, TailSettings};
 use crate::texture::{SurfaceKind, Texture};
-use queries::{material_file, packed_surface, referenced_textures, surface_recipe, PACK, PARSE};
+use queries::{material_file, packed_surface, referenced_textures, surface_recipe, MapSource, PACK, PARSE};
 
 pub struct Material;
 
@@ -81,7 +81,15 @@ impl Kind for Material {
         let name = asset.name(db);
         for surface in surfaces(&parsed) {
             let mut pack = StageInstance::new(PACK, surface.label(name), surface.instance()).reads_stage(&parse);
-            if let Some(material) = parsed.materials.iter().find(|material| material.name == surface.group) {
+            if let Ok(recipe) = surface_recipe(db, asset, surface.clone()) {
+                for source in recipe.sources.iter().flatten() {
+                    pack.reads.push(match source {
+                        MapSource::File(file) => Read::Stage(DECODE, display_path(file.path(db))),
+                        // Another asset's map (`ao_source`): the edge between the two assets.
+                        MapSource::Asset { stage, .. } => stage.clone(),
+                    });
+                }
+            } else if let Some(material) = parsed.materials.iter().find(|material| material.name == surface.group) {
                 for slot in surface.surface.slots() {
                     if let Some(reference) = material.textures.get(slot) {
                         pack.reads.push(Read::Stage(DECODE, display_path(&reference.path)));

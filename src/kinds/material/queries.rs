@@ -9,8 +9,8 @@ use super::definition::{parse_material_file, MaterialConstants, MaterialFile};
 use crate::cache::{CacheKey, CacheKeyBuilder, KeyPart};
 use crate::db::{cached_json, decoded_texture, read_contents, stage_key, timed, Asset, Db, SourceFile, Stage};
 use crate::diagnostic::{display_path, Diagnostic};
-use crate::kinds::SurfaceId;
-use crate::texture::Texture;
+use crate::kinds::{Read, SurfaceId};
+use crate::texture::{SurfaceKind, Texture, TextureSlot};
 
 pub const PARSE: Stage = Stage { name: "parse", version: 1 };
 // 2: opacity maps read alpha when the image has transparency. 3: linear → sRGB bytes from
@@ -43,12 +43,38 @@ pub fn material_file(db: &dyn Db, asset: Asset) -> Result<Arc<MaterialFile>, Dia
         .map(Arc::new)
 }
 
-/// What one surface is made of: its source files (one per slot) and constants.
+/// What one surface is made of: its sources (one per slot) and constants.
 #[derive(Clone, Debug, PartialEq)]
 pub struct SurfaceRecipe {
     /// One entry per slot of the surface; `None` where the material has no such map.
-    pub sources: Vec<Option<SourceFile>>,
+    pub sources: Vec<Option<MapSource>>,
     pub constants: MaterialConstants,
+}
+
+/// Where one slot's map comes from.
+#[derive(Clone, Debug, PartialEq)]
+pub enum MapSource {
+    /// A texture file the material names.
+    File(SourceFile),
+    /// Another asset's surface: the `ao_source` asset's AO map of the material's name, made
+    /// by `stage`.
+    Asset { asset: Asset, name: String, surface: SurfaceId, stage: Read },
+}
+
+/// The AO map of `material` from the asset's `ao_source`, if it names one.
+fn ao_source_map(db: &dyn Db, asset: Asset, material: &str) -> Result<Option<MapSource>, Diagnostic> {
+    let Some(name) = &asset.settings(db).ao_source else { return Ok(None) };
+    let reader = asset.main_file(db);
+    let Some(source) = crate::db::asset_named(db, name) else {
+        return Err(Diagnostic::new(reader, format!("ao_source `{name}` names no asset of the pipeline")));
+    };
+    let surface = SurfaceId { group: material.to_string(), surface: SurfaceKind::Ao };
+    let wrap =
+        |error: Diagnostic| Diagnostic { message: format!("ao_source `{name}` of `{}`: {}", asset.name(db), error.message), ..error };
+    match source.kind(db).provided_surface_stage(db, source, &surface).map_err(wrap)? {
+        Some(stage) => Ok(Some(MapSource::Asset { asset: source, name: name.clone(), surface, stage })),
+        None => Err(Diagnostic::new(reader, format!("ao_source `{name}` is not an AmbientOcclusion asset"))),
+    }
 }
 
 #[salsa::tracked(returns(clone))]
@@ -60,6 +86,12 @@ pub fn surface_recipe(db: &dyn Db, asset: Asset, surface: SurfaceId) -> Result<A
     };
     let mut sources = Vec::new();
     for slot in surface.surface.slots() {
+        if *slot == TextureSlot::Ao {
+            if let Some(map) = ao_source_map(db, asset, &material.name)? {
+                sources.push(Some(map));
+                continue;
+            }
+        }
         let Some(reference) = material.textures.get(slot) else {
             sources.push(None);
             continue;
@@ -74,7 +106,7 @@ pub fn surface_recipe(db: &dyn Db, asset: Asset, surface: SurfaceId) -> Result<A
                 format!("{} texture \"{}\" ({}): {error}", slot.name(), reference.written, display_path(&reference.path)),
             ));
         }
-        sources.push(Some(file));
+        sources.push(Some(MapSource::File(file)));
     }
     Ok(Arc::new(SurfaceRecipe { sources, constants: material.constants.clone() }))
 }
@@ -86,7 +118,11 @@ pub fn packed_surface(db: &dyn Db, asset: Asset, surface: SurfaceId) -> Result<A
     let mut decoded = Vec::new();
     for source in &recipe.sources {
         decoded.push(match source {
-            Some(file) => Some(decoded_texture(db, *file)?),
+            Some(MapSource::File(file)) => Some(decoded_texture(db, *file)?),
+            Some(MapSource::Asset { asset: source, name, surface, .. }) => {
+                let image = source.kind(db).surface_image(db, *source, surface);
+                Some(image.map_err(|error| Diagnostic { message: format!("ao_source `{name}`: {}", error.message), ..error })?)
+            }
             None => None,
         });
     }
@@ -104,7 +140,12 @@ pub fn surface_recipe_key(db: &dyn Db, asset: Asset, surface: SurfaceId) -> Resu
     let mut key = stage_key(PACK).part(&surface.surface).part(&recipe.constants);
     for source in &recipe.sources {
         key = match source {
-            Some(file) => key.part(&read_contents(db, *file)?.hash),
+            Some(MapSource::File(file)) => key.part(&read_contents(db, *file)?.hash),
+            Some(MapSource::Asset { asset: source, surface, .. }) => match source.kind(db).surface_recipe_key(db, *source, surface)? {
+                Some(recipe) => key.part("asset").part(&recipe.0),
+                // No cheap key: what the image holds.
+                None => key.part("image").part(&source.kind(db).surface_image(db, *source, surface)?.hash),
+            },
             None => key.part("none"),
         };
     }

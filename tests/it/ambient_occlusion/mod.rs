@@ -1,8 +1,10 @@
-//! AmbientOcclusion assets: what they write and how it reads back (`bake`), and which stages an
-//! edit re-runs (`incremental`). Scenes are OBJ text made here from quads, boxes and spheres.
+//! AmbientOcclusion assets: what they write and how it reads back (`bake`), which stages an
+//! edit re-runs (`incremental`), and a bake as a Material's AO source (`source`). Scenes are OBJ
+//! text made here from quads, boxes and spheres.
 
 mod bake;
 mod incremental;
+mod source;
 
 use crate::support::TempProject;
 

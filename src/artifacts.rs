@@ -68,13 +68,16 @@ pub fn sweep_temporary_files(output_dir: &Path) -> usize {
 }
 
 /// The bytes of the `report.json` at `path` when they say the same as `report` apart from the
-/// timings (`stage_ms`), which differ on every run: such a report is not rewritten, so a batch
-/// that changed nothing else lists no artifact.
+/// timings (`stage_ms`, and `timings`: any other figure measured in the run), which differ on
+/// every run: such a report is not rewritten, so a batch that changed nothing else lists no
+/// artifact.
 pub fn same_report_on_disk(path: &Path, report: &[u8]) -> Option<Vec<u8>> {
     let existing = crate::sources::read_regular_file(path, 64 << 20).ok()?;
     let without_timings = |bytes: &[u8]| -> Option<serde_json::Value> {
         let mut value: serde_json::Value = serde_json::from_slice(bytes).ok()?;
-        value.as_object_mut()?.remove("stage_ms");
+        let object = value.as_object_mut()?;
+        object.remove("stage_ms");
+        object.remove("timings");
         Some(value)
     };
     (without_timings(&existing)? == without_timings(report)?).then_some(existing)

@@ -135,6 +135,8 @@ pub struct StageRun {
     /// The stage instance, as its kind labels it (`first/one/mra`, `tree/plane3:bark`).
     pub label: String,
     pub ms: f64,
+    /// When the body began (for the wall time that runs in parallel span together).
+    pub started: Instant,
     /// The result came from the persistent cache; the stage itself did no work.
     pub from_cache: bool,
 }
@@ -211,12 +213,18 @@ pub fn remember<T: Any + Send + Sync>(db: &dyn Db, name: &str, value: Arc<T>) {
 pub fn timed<T>(db: &dyn Db, stage: Stage, label: &str, body: impl FnOnce() -> T) -> T {
     let start = Instant::now();
     let result = body();
-    db.record_run(StageRun { stage: stage.name, label: label.to_string(), ms: start.elapsed().as_secs_f64() * 1000.0, from_cache: false });
+    db.record_run(StageRun {
+        stage: stage.name,
+        label: label.to_string(),
+        ms: start.elapsed().as_secs_f64() * 1000.0,
+        started: start,
+        from_cache: false,
+    });
     result
 }
 
 pub fn record_cache_hit(db: &dyn Db, stage: Stage, label: &str) {
-    db.record_run(StageRun { stage: stage.name, label: label.to_string(), ms: 0.0, from_cache: true });
+    db.record_run(StageRun { stage: stage.name, label: label.to_string(), ms: 0.0, started: Instant::now(), from_cache: true });
 }
 
 /// A source texture decoded to RGBA8 (the decode stage, labelled by the file's path).

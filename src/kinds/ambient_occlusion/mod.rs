@@ -168,6 +168,8 @@ pub struct AoReport {
     /// `max_distance` in mesh units (none: unbounded).
     pub max_distance: Option<f32>,
     pub materials: Vec<AoMaterialReport>,
+    /// Figures of this build's work (not compared when deciding to rewrite the report).
+    pub timings: AoTimings,
     pub stage_ms: std::collections::BTreeMap<String, f64>,
     pub warnings: Vec<ErrorSummary>,
 }
@@ -184,10 +186,20 @@ pub struct AoMaterialReport {
     /// Of the baked texels, those that two triangles with no shared vertex claim.
     pub overlap_fraction: f64,
     pub rays_cast: u64,
-    /// Rays per second of bake time (summed over the tiles; each tile runs on every core); none
-    /// per vertex.
+    /// Rays per second of the material's tile bakes, over their summed time (a tile bakes on
+    /// every core, but materials bake at once and share them: the asset's `rays_per_second`
+    /// `timings.rays_per_second`
+    /// is the machine's rate); none per vertex.
     pub rays_per_second: Option<f64>,
     pub texture: AoSurfaceReport,
+}
+
+/// What this build's tile bakes took.
+#[derive(Clone, Debug, PartialEq, Serialize)]
+pub struct AoTimings {
+    /// Rays per second of this build's tile bakes, all materials together, over the wall time
+    /// from the first tile's start to the last tile's end (none when no tile baked).
+    pub rays_per_second: Option<f64>,
 }
 
 #[derive(Clone, Debug, PartialEq, Serialize)]
@@ -195,6 +207,28 @@ pub struct AoSurfaceReport {
     pub path: String,
     #[serde(flatten)]
     pub info: SurfaceInfo,
+}
+
+/// The rays of this build's tile bakes over the wall time they spanned together.
+fn bake_rays_per_second(db: &dyn Db, asset: Asset, geometry: &BakeGeometry, runs: &[StageRun]) -> Result<Option<f64>, Diagnostic> {
+    let name = asset.name(db);
+    let bakes: std::collections::HashMap<&str, &StageRun> =
+        runs.iter().filter(|run| run.stage == BAKE.name && !run.from_cache).map(|run| (run.label.as_str(), run)).collect();
+    let (mut rays, mut first, mut last) = (0u64, None::<std::time::Instant>, None::<std::time::Instant>);
+    for material in &geometry.materials {
+        for tile in material_tiles(material.index, ao_settings(db, asset).size) {
+            let Some(run) = bakes.get(tile_label(name, &material.folder, tile).as_str()) else { continue };
+            rays += queries::ao_tile(db, asset, tile)?.rays;
+            let end = run.started + std::time::Duration::from_secs_f64(run.ms / 1000.0);
+            first = Some(first.map_or(run.started, |first| first.min(run.started)));
+            last = Some(last.map_or(end, |last| last.max(end)));
+        }
+    }
+    let seconds = match (first, last) {
+        (Some(first), Some(last)) => (last - first).as_secs_f64(),
+        _ => 0.0,
+    };
+    Ok((rays > 0 && seconds > 0.0).then(|| (rays as f64 / seconds).round()))
 }
 
 fn ao_outputs(db: &dyn Db, asset: Asset, output_folder: &Path, runs: &[StageRun]) -> Result<AssetOutputs, Diagnostic> {
@@ -244,6 +278,7 @@ fn ao_outputs(db: &dyn Db, asset: Asset, output_folder: &Path, runs: &[StageRun]
         rays_per_texel: settings.rays,
         max_distance: geometry.occlusion.max_distance.is_finite().then_some(geometry.occlusion.max_distance),
         materials,
+        timings: AoTimings { rays_per_second: bake_rays_per_second(db, asset, &geometry, runs)? },
         stage_ms: crate::kinds::asset_stage_ms(name, runs).into_iter().map(|(stage, ms)| (stage.to_string(), ms)).collect(),
         warnings: geometry.loaded.warnings.iter().map(ErrorSummary::from).collect(),
     };

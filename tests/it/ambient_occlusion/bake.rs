@@ -51,6 +51,11 @@ fn a_box_on_a_floor_darkens_the_floor_around_it_and_every_file_is_written() {
     assert!((240..=300).contains(&invalid), "the box stands on a sixteenth of the floor: {invalid} invalid texels");
     assert_eq!(floor_report["overlap_fraction"], 0.0);
     assert!(floor_report["rays_per_second"].as_f64().unwrap() > 0.0);
+    // The asset's rate: both materials' rays over the wall time their tiles spanned together, so
+    // at least the rays over the summed tile times of either material alone would give.
+    let asset_rate = report["timings"]["rays_per_second"].as_f64().unwrap();
+    let slowest = materials.iter().map(|material| material["rays_per_second"].as_f64().unwrap()).fold(f64::INFINITY, f64::min);
+    assert!(asset_rate > slowest * 0.5, "asset {asset_rate} rays/s, slowest material {slowest}");
     assert_eq!(floor_report["texture"]["format"], "Bc4");
     assert_eq!(floor_report["texture"]["levels"], 7);
 

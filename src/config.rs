@@ -723,23 +723,15 @@ impl Validator<'_> {
         let rules_make_ao = rules.iter().any(|rule| rule.kind == AssetKindName::AmbientOcclusion);
         for asset in assets {
             let Some(source) = &asset.settings.ao_source else { continue };
-            let anchor = self.offset_of_value(&asset.name, 0).unwrap_or(0);
-            match assets.iter().find(|other| &other.name == source) {
-                Some(other) if other.source.kind() == AssetKindName::AmbientOcclusion => {}
-                Some(other) => {
-                    let message = format!(
-                        "asset `{}`: ao_source `{source}` is a {:?} asset; it must name an AmbientOcclusion asset",
-                        asset.name,
-                        other.source.kind()
-                    );
-                    self.error_at_value(source, anchor, &message);
-                }
-                None if rules_make_ao => {}
-                None => {
-                    let message = format!("asset `{}`: ao_source `{source}` names no asset of the pipeline", asset.name);
-                    self.error_at_value(source, anchor, &message);
-                }
-            }
+            let name = &asset.name;
+            let message = match assets.iter().find(|other| &other.name == source).map(|other| other.source.kind()) {
+                Some(AssetKindName::AmbientOcclusion) => continue,
+                Some(kind) => format!("asset `{name}`: ao_source `{source}` is a {kind:?} asset; it must name an AmbientOcclusion asset"),
+                None if rules_make_ao => continue,
+                None => format!("asset `{name}`: ao_source `{source}` names no asset of the pipeline"),
+            };
+            let anchor = self.offset_of_value(name, 0).unwrap_or(0);
+            self.error_at_value(source, anchor, &message);
         }
     }
 

@@ -214,9 +214,10 @@ fn bake_rays_per_second(db: &dyn Db, asset: Asset, geometry: &BakeGeometry, runs
     let name = asset.name(db);
     let bakes: std::collections::HashMap<&str, &StageRun> =
         runs.iter().filter(|run| run.stage == BAKE.name && !run.from_cache).map(|run| (run.label.as_str(), run)).collect();
+    let size = ao_settings(db, asset).size;
     let (mut rays, mut first, mut last) = (0u64, None::<std::time::Instant>, None::<std::time::Instant>);
     for material in &geometry.materials {
-        for tile in material_tiles(material.index, ao_settings(db, asset).size) {
+        for tile in material_tiles(material.index, size) {
             let Some(run) = bakes.get(tile_label(name, &material.folder, tile).as_str()) else { continue };
             rays += queries::ao_tile(db, asset, tile)?.rays;
             let end = run.started + std::time::Duration::from_secs_f64(run.ms / 1000.0);

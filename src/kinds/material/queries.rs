@@ -61,6 +61,11 @@ pub enum MapSource {
     Asset { asset: Asset, name: String, surface: SurfaceId, stage: Read },
 }
 
+/// An error of the `ao_source` asset `name`, as the reading asset reports it.
+fn from_ao_source(db: &dyn Db, asset: Asset, name: &str, error: Diagnostic) -> Diagnostic {
+    Diagnostic { message: format!("ao_source `{name}` of `{}`: {}", asset.name(db), error.message), ..error }
+}
+
 /// The AO map of `material` from the asset's `ao_source`, if it names one.
 fn ao_source_map(db: &dyn Db, asset: Asset, material: &str) -> Result<Option<MapSource>, Diagnostic> {
     let Some(name) = &asset.settings(db).ao_source else { return Ok(None) };
@@ -69,9 +74,7 @@ fn ao_source_map(db: &dyn Db, asset: Asset, material: &str) -> Result<Option<Map
         return Err(Diagnostic::new(reader, format!("ao_source `{name}` names no asset of the pipeline")));
     };
     let surface = SurfaceId { group: material.to_string(), surface: SurfaceKind::Ao };
-    let wrap =
-        |error: Diagnostic| Diagnostic { message: format!("ao_source `{name}` of `{}`: {}", asset.name(db), error.message), ..error };
-    match source.kind(db).provided_surface_stage(db, source, &surface).map_err(wrap)? {
+    match source.kind(db).provided_surface_stage(db, source, &surface).map_err(|error| from_ao_source(db, asset, name, error))? {
         Some(stage) => Ok(Some(MapSource::Asset { asset: source, name: name.clone(), surface, stage })),
         None => Err(Diagnostic::new(reader, format!("ao_source `{name}` is not an AmbientOcclusion asset"))),
     }
@@ -121,7 +124,7 @@ pub fn packed_surface(db: &dyn Db, asset: Asset, surface: SurfaceId) -> Result<A
             Some(MapSource::File(file)) => Some(decoded_texture(db, *file)?),
             Some(MapSource::Asset { asset: source, name, surface, .. }) => {
                 let image = source.kind(db).surface_image(db, *source, surface);
-                Some(image.map_err(|error| Diagnostic { message: format!("ao_source `{name}`: {}", error.message), ..error })?)
+                Some(image.map_err(|error| from_ao_source(db, asset, name, error))?)
             }
             None => None,
         });

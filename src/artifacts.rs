@@ -91,6 +91,10 @@ pub struct ManifestEntry {
     pub hash: String,
     /// The revision that last changed the file's bytes.
     pub revision: u64,
+    /// What the file's values mean, where its kind says (a height map: `distance` with
+    /// `center` and `magnitude`).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub meaning: Option<serde_json::Value>,
 }
 
 /// `<output>/manifest.json`: paths are relative to the project folder, with `/` separators.
@@ -129,10 +133,19 @@ pub fn read_artifact(root: &Path, path: &Path) -> Result<Vec<u8>, crate::diagnos
 }
 
 /// Records an artifact in the manifest; true when the entry is new or its bytes changed.
-pub fn record_artifact(manifest: &mut Manifest, revision: u64, asset: &str, path: &str, hash: &str) -> bool {
-    let unchanged = manifest.artifacts.get(path).is_some_and(|entry| entry.hash == hash && entry.asset == asset);
+pub fn record_artifact(
+    manifest: &mut Manifest,
+    revision: u64,
+    asset: &str,
+    path: &str,
+    hash: &str,
+    meaning: Option<&serde_json::Value>,
+) -> bool {
+    let unchanged =
+        manifest.artifacts.get(path).is_some_and(|entry| entry.hash == hash && entry.asset == asset && entry.meaning.as_ref() == meaning);
     if !unchanged {
-        manifest.artifacts.insert(path.to_string(), ManifestEntry { asset: asset.to_string(), hash: hash.to_string(), revision });
+        let entry = ManifestEntry { asset: asset.to_string(), hash: hash.to_string(), revision, meaning: meaning.cloned() };
+        manifest.artifacts.insert(path.to_string(), entry);
     }
     !unchanged
 }

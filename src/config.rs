@@ -109,6 +109,35 @@ pub struct AoSettings {
     pub padding: u32,
 }
 
+/// How a `Height` asset measures its high mesh from its low one (DESIGN §3.4).
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Hash, Serialize, Deserialize)]
+pub enum HeightProjection {
+    /// Per texel of the low mesh's UV space, along the low surface's interpolated normal.
+    Normals,
+    /// Orthographic depth along −Y over the low mesh's XZ footprint (terrain, relief).
+    TopDown,
+}
+
+/// How a `Height` asset's map is baked.
+#[derive(Clone, Debug, PartialEq, Serialize)]
+pub struct HeightSettings {
+    pub projection: HeightProjection,
+    /// Width and height of the map, in texels.
+    pub size: u32,
+    /// How far above the low surface (along its normal) the high one is looked for, as a
+    /// fraction of the low mesh's bounding-box diagonal.
+    pub frontal: f32,
+    /// How far below the low surface, likewise.
+    pub rear: f32,
+}
+
+/// A `Height` asset's tessellated mesh: `level` segments per edge, displaced or not.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Hash, Serialize)]
+pub struct TessellateSettings {
+    pub level: u32,
+    pub displace: bool,
+}
+
 #[derive(Clone, Debug, PartialEq, Eq, Hash, Serialize)]
 pub struct EncodeSettings {
     pub albedo: BlockFormat,
@@ -147,6 +176,11 @@ pub struct Settings {
     /// The `AmbientOcclusion` asset a `Material` takes its AO maps from (`ao_source`), by
     /// asset name: per asset, never a default.
     pub ao_source: Option<String>,
+    pub height: HeightSettings,
+    /// A `Height` asset's tessellated mesh (per asset, never a default; none: no tessellation).
+    pub tessellate: Option<TessellateSettings>,
+    /// The high mesh a `Height` asset measures (source-relative; per asset, never a default).
+    pub high_mesh: Option<PathBuf>,
 }
 
 impl Default for Settings {
@@ -178,6 +212,9 @@ impl Default for Settings {
                 quality: EncodeQuality::Basic,
             },
             ao_source: None,
+            height: HeightSettings { projection: HeightProjection::Normals, size: 1024, frontal: 0.02, rear: 0.02 },
+            tessellate: None,
+            high_mesh: None,
         }
     }
 }
@@ -188,6 +225,7 @@ pub enum AssetKindName {
     BillboardCloud,
     Atlas,
     AmbientOcclusion,
+    Height,
 }
 
 /// What an asset is made from.
@@ -201,6 +239,9 @@ pub enum AssetSource {
     Atlas { textures: Vec<String>, meshes: Vec<String> },
     /// An OBJ mesh with UVs, relative to the source folder.
     AmbientOcclusion { mesh: PathBuf },
+    /// A high and a low OBJ mesh, relative to the source folder (the low one is the main file:
+    /// the map lies in its UV space).
+    Height { high: PathBuf, low: PathBuf },
 }
 
 impl AssetSource {
@@ -210,6 +251,7 @@ impl AssetSource {
             AssetSource::BillboardCloud { .. } => AssetKindName::BillboardCloud,
             AssetSource::Atlas { .. } => AssetKindName::Atlas,
             AssetSource::AmbientOcclusion { .. } => AssetKindName::AmbientOcclusion,
+            AssetSource::Height { .. } => AssetKindName::Height,
         }
     }
 
@@ -217,6 +259,7 @@ impl AssetSource {
         match self {
             AssetSource::Material { material } => material,
             AssetSource::BillboardCloud { mesh } | AssetSource::AmbientOcclusion { mesh } => mesh,
+            AssetSource::Height { low, .. } => low,
             // No one file: what concerns the whole asset is said of the source folder.
             AssetSource::Atlas { .. } => Path::new(""),
         }
@@ -293,7 +336,7 @@ impl PipelineConfig {
             AssetKindName::BillboardCloud => AssetSource::BillboardCloud { mesh: relative.to_path_buf() },
             AssetKindName::AmbientOcclusion => AssetSource::AmbientOcclusion { mesh: relative.to_path_buf() },
             // Refused when the pipeline is read: a rule makes one asset per file.
-            AssetKindName::Atlas => return None,
+            AssetKindName::Atlas | AssetKindName::Height => return None,
         };
         Some(AssetConfig { name, source, settings: self.defaults.clone() })
     }
@@ -307,173 +350,7 @@ pub struct ConfigError {
 }
 
 /// The serde mirror of `pipeline.ron`: exactly what the file says, nothing resolved.
-mod raw {
-    use serde::{Deserialize, Deserializer};
-
-    use super::{AoMode, AoOccluders, AssetKindName, BlockFormat, Container, EncodeQuality};
-    use crate::mesh::occlusion::RayDistribution;
-
-    #[derive(Deserialize)]
-    #[serde(deny_unknown_fields)]
-    pub struct Pipeline {
-        pub source: String,
-        pub output: String,
-        #[serde(default)]
-        pub server: Option<String>,
-        #[serde(default)]
-        pub defaults: SettingsOverrides,
-        #[serde(default)]
-        pub assets: Vec<Asset>,
-        #[serde(default)]
-        pub rules: Vec<Rule>,
-        #[serde(default)]
-        pub limits: Limits,
-    }
-
-    #[derive(Deserialize, Default)]
-    #[serde(deny_unknown_fields)]
-    pub struct Limits {
-        /// MiB one texture's working set may take.
-        pub texture_memory_mib: Option<u64>,
-    }
-
-    #[derive(Deserialize, Default)]
-    #[serde(deny_unknown_fields)]
-    pub struct SettingsOverrides {
-        #[serde(default)]
-        pub billboard: BillboardOverrides,
-        #[serde(default)]
-        pub atlas: AtlasOverrides,
-        #[serde(default)]
-        pub pack: PackOverrides,
-        #[serde(default)]
-        pub ao: AoOverrides,
-        #[serde(default)]
-        pub encode: EncodeOverrides,
-    }
-
-    #[derive(Deserialize, Default, Clone)]
-    #[serde(deny_unknown_fields)]
-    pub struct AoOverrides {
-        pub size: Option<u32>,
-        pub rays: Option<u32>,
-        pub mode: Option<AoMode>,
-        pub distribution: Option<RayDistribution>,
-        #[serde(default, deserialize_with = "explicit")]
-        pub max_distance: Option<Option<f32>>,
-        pub occluders: Option<AoOccluders>,
-        pub ignore_backfaces: Option<bool>,
-        pub ground_plane: Option<bool>,
-        pub padding: Option<u32>,
-    }
-
-    #[derive(Deserialize, Default, Clone)]
-    #[serde(deny_unknown_fields)]
-    pub struct PackOverrides {
-        pub max_size: Option<u32>,
-        pub padding: Option<u32>,
-        pub rotate: Option<bool>,
-        pub trim: Option<bool>,
-        pub power_of_two: Option<bool>,
-        pub pages: Option<u32>,
-    }
-
-    /// `Some(None)` is an explicit `None` in the file; `None` is "not given".
-    fn explicit<'de, D, T>(deserializer: D) -> Result<Option<Option<T>>, D::Error>
-    where
-        D: Deserializer<'de>,
-        T: Deserialize<'de>,
-    {
-        Option::<T>::deserialize(deserializer).map(Some)
-    }
-
-    #[derive(Deserialize, Default, Clone)]
-    #[serde(deny_unknown_fields)]
-    pub struct BillboardOverrides {
-        pub epsilon: Option<f32>,
-        #[serde(default, deserialize_with = "explicit")]
-        pub max_planes: Option<Option<u32>>,
-        #[serde(default, deserialize_with = "explicit")]
-        pub texel_density: Option<Option<f32>>,
-        pub alpha_cutoff: Option<f32>,
-    }
-
-    #[derive(Deserialize, Default, Clone)]
-    #[serde(deny_unknown_fields)]
-    pub struct AtlasOverrides {
-        pub max_size: Option<u32>,
-        pub padding: Option<u32>,
-        pub power_of_two: Option<bool>,
-    }
-
-    #[derive(Deserialize, Default, Clone)]
-    #[serde(deny_unknown_fields)]
-    pub struct EncodeOverrides {
-        pub albedo: Option<BlockFormat>,
-        pub mra: Option<BlockFormat>,
-        pub normal: Option<BlockFormat>,
-        pub height: Option<BlockFormat>,
-        pub ao: Option<BlockFormat>,
-        pub mips: Option<bool>,
-        pub container: Option<Container>,
-        #[serde(default, deserialize_with = "explicit")]
-        pub zstd: Option<Option<i32>>,
-        pub quality: Option<EncodeQuality>,
-    }
-
-    #[derive(Deserialize)]
-    #[serde(deny_unknown_fields)]
-    pub enum Asset {
-        Material {
-            name: String,
-            material: String,
-            /// An `AmbientOcclusion` asset whose maps replace the materials' `ao` textures.
-            #[serde(default)]
-            ao_source: Option<String>,
-            #[serde(default)]
-            billboard: BillboardOverrides,
-            #[serde(default)]
-            atlas: AtlasOverrides,
-            #[serde(default)]
-            encode: EncodeOverrides,
-        },
-        BillboardCloud {
-            name: String,
-            mesh: String,
-            #[serde(default)]
-            billboard: BillboardOverrides,
-            #[serde(default)]
-            atlas: AtlasOverrides,
-            #[serde(default)]
-            encode: EncodeOverrides,
-        },
-        Atlas {
-            name: String,
-            textures: Vec<String>,
-            #[serde(default)]
-            meshes: Vec<String>,
-            #[serde(default)]
-            pack: PackOverrides,
-            #[serde(default)]
-            encode: EncodeOverrides,
-        },
-        AmbientOcclusion {
-            name: String,
-            mesh: String,
-            #[serde(default)]
-            ao: AoOverrides,
-            #[serde(default)]
-            encode: EncodeOverrides,
-        },
-    }
-
-    #[derive(Deserialize)]
-    #[serde(deny_unknown_fields)]
-    pub struct Rule {
-        pub glob: String,
-        pub kind: AssetKindName,
-    }
-}
+mod raw;
 
 /// A glob over paths relative to the source folder (`*` stops at `/`, `**` crosses folders).
 pub fn source_glob(glob: &str) -> Result<globset::GlobMatcher, String> {
@@ -618,6 +495,10 @@ impl Validator<'_> {
                     overrides.ao = ao.clone();
                     (name, Some(mesh), encode, AssetKindName::AmbientOcclusion)
                 }
+                raw::Asset::Height { name, low, height, encode, .. } => {
+                    overrides.height = height.clone();
+                    (name, Some(low), encode, AssetKindName::Height)
+                }
             };
             overrides.encode = encode.clone();
             let anchor = self.offset_of_value(name, 0).unwrap_or(0);
@@ -654,14 +535,21 @@ impl Validator<'_> {
                 None => None,
             };
             let mut settings = self.merge_settings(&defaults, &overrides, anchor);
-            if let raw::Asset::Material { ao_source, .. } = asset {
-                settings.ao_source = ao_source.clone();
+            match asset {
+                raw::Asset::Material { ao_source, .. } => settings.ao_source = ao_source.clone(),
+                raw::Asset::Height { high, tessellate, .. } => {
+                    let Some(high) = self.source_path(high, anchor) else { continue };
+                    settings.high_mesh = Some(high);
+                    settings.tessellate = tessellate.as_ref().map(|tessellate| self.tessellate_settings(tessellate, anchor));
+                }
+                _ => {}
             }
             // Each atlas surface (each material's AO map) goes through the texture tail: the
             // same budget holds.
             let surface_side = match kind {
                 AssetKindName::BillboardCloud => Some(("atlas", settings.atlas.max_size, "max_size")),
                 AssetKindName::AmbientOcclusion => Some(("AO map", settings.ao.size, "size")),
+                AssetKindName::Height => Some(("height map", settings.height.size, "size")),
                 _ => None,
             };
             if let Some((what, side, setting)) = surface_side {
@@ -691,7 +579,8 @@ impl Validator<'_> {
                 (raw::Asset::Material { .. }, Some(relative)) => AssetSource::Material { material: relative },
                 (raw::Asset::BillboardCloud { .. }, Some(relative)) => AssetSource::BillboardCloud { mesh: relative },
                 (raw::Asset::AmbientOcclusion { .. }, Some(relative)) => AssetSource::AmbientOcclusion { mesh: relative },
-                _ => unreachable!("materials, billboard clouds and AO bakes name one file"),
+                (raw::Asset::Height { .. }, Some(low)) => AssetSource::Height { high: settings.high_mesh.clone().unwrap_or_default(), low },
+                _ => unreachable!("materials, billboard clouds, AO and height bakes name their files"),
             };
             assets.push(AssetConfig { name: name.clone(), source, settings });
         }
@@ -700,8 +589,16 @@ impl Validator<'_> {
 
         let mut rules = Vec::new();
         for rule in &raw.rules {
-            if rule.kind == AssetKindName::Atlas {
-                self.error_at_value(&rule.glob, 0, "a rule makes one asset per file: an Atlas is listed under `assets` with its globs");
+            match rule.kind {
+                AssetKindName::Atlas => {
+                    self.error_at_value(&rule.glob, 0, "a rule makes one asset per file: an Atlas is listed under `assets` with its globs")
+                }
+                AssetKindName::Height => self.error_at_value(
+                    &rule.glob,
+                    0,
+                    "a rule makes one asset per file: a Height reads a high and a low mesh, listed under `assets`",
+                ),
+                _ => {}
             }
             match source_glob(&rule.glob) {
                 Ok(matcher) => rules.push(Rule { glob: rule.glob.clone(), matcher, kind: rule.kind }),
@@ -795,6 +692,7 @@ impl Validator<'_> {
         settings.pack.trim = pack.trim.unwrap_or(settings.pack.trim);
         settings.pack.power_of_two = pack.power_of_two.unwrap_or(settings.pack.power_of_two);
         self.merge_ao(&mut settings.ao, &overrides.ao, anchor);
+        self.merge_height(&mut settings.height, &overrides.height, anchor);
         let encode = &overrides.encode;
         let surfaces: [(&str, Option<BlockFormat>, &[BlockFormat], &mut BlockFormat); 5] = [
             ("albedo", encode.albedo, &[BlockFormat::Bc7, BlockFormat::Bc3, BlockFormat::Bc1], &mut settings.encode.albedo),
@@ -863,6 +761,35 @@ impl Validator<'_> {
         settings.occluders = ao.occluders.unwrap_or(settings.occluders);
         settings.ignore_backfaces = ao.ignore_backfaces.unwrap_or(settings.ignore_backfaces);
         settings.ground_plane = ao.ground_plane.unwrap_or(settings.ground_plane);
+    }
+
+    fn merge_height(&mut self, settings: &mut HeightSettings, height: &raw::HeightOverrides, anchor: usize) {
+        if let Some(size) = height.size {
+            if !(16..=16384).contains(&size) || size % 4 != 0 {
+                self.error_at_key("size", anchor, "size must be a multiple of 4 between 16 and 16384");
+            }
+            settings.size = size;
+        }
+        for (key, value, target) in [("frontal", height.frontal, &mut settings.frontal), ("rear", height.rear, &mut settings.rear)] {
+            if let Some(value) = value {
+                if !(0.0..=1.0).contains(&value) {
+                    self.error_at_key(key, anchor, &format!("{key} must be a fraction of the bounding-box diagonal in [0, 1]"));
+                }
+                *target = value;
+            }
+        }
+        if settings.frontal + settings.rear <= 0.0 {
+            self.error_at_key("frontal", anchor, "frontal and rear cannot both be 0: the rays would have no length");
+        }
+        settings.projection = height.projection.unwrap_or(settings.projection);
+    }
+
+    fn tessellate_settings(&mut self, tessellate: &raw::TessellateOverrides, anchor: usize) -> TessellateSettings {
+        let level = tessellate.level.unwrap_or(8);
+        if !(1..=64).contains(&level) {
+            self.error_at_key("level", anchor, "level must be between 1 and 64 segments per edge");
+        }
+        TessellateSettings { level, displace: tessellate.displace.unwrap_or(true) }
     }
 
     /// A path relative to the project folder that must stay inside it.

@@ -406,7 +406,8 @@ impl Project {
             }
             let asset_folder = format!("{}/", display_path(&folder));
             for (path, hash) in &produced {
-                if record_artifact(&mut manifest, next_revision, &config.name, path, hash) {
+                let meaning = outputs.meanings.iter().find(|(file, _)| display_path(file) == *path).map(|(_, meaning)| meaning);
+                if record_artifact(&mut manifest, next_revision, &config.name, path, hash, meaning) {
                     changed = true;
                     changed_artifacts.push(ChangedArtifact {
                         asset: config.name.clone(),

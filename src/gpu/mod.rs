@@ -1,9 +1,11 @@
 //! The GPU: the only holder of the wgpu device (created once, lazily, so material-only builds
 //! need no adapter), the pipelines and the helpers every renderer shares (uploads, buffers,
 //! read-back). One file per renderer: `plane_render` (billboard planes), `view_render`
-//! (preview views), `window` (the viewer's window surfaces).
+//! (preview views), `top_down_render` (a mesh's highest Y per texel, for height maps), `window`
+//! (the viewer's window surfaces).
 
 mod plane_render;
+pub mod top_down_render;
 mod view_render;
 mod window;
 
@@ -51,6 +53,7 @@ pub struct Gpu {
     view_material_layout: wgpu::BindGroupLayout,
     /// Material bind groups by content (constants, texture hashes, cutoff).
     material_groups: Mutex<HashMap<blake3::Hash, Arc<wgpu::BindGroup>>>,
+    top_down_pipeline: wgpu::RenderPipeline,
 }
 
 /// Mesa's Vulkan drivers probe for a Wayland display when the GPU starts, and libwayland prints
@@ -210,7 +213,9 @@ impl Gpu {
             ..Default::default()
         });
         let view_pipeline = mesh_pipeline(&device, "view", &view_layout, &view_shader, &[Some(ALBEDO_FORMAT.into())]);
+        let top_down_pipeline = top_down_render::top_down_pipeline(&device, &frame_layout);
         Ok(Gpu {
+            top_down_pipeline,
             instance,
             adapter,
             max_texture_size: device.limits().max_texture_dimension_2d,

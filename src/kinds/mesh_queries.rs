@@ -1,10 +1,11 @@
-//! The one mesh stage, shared by every kind whose asset is an OBJ (the billboard cloud, ambient
-//! occlusion): the OBJ and the MTL files it names loaded into a `mesh::Mesh` with vertex
+//! The one mesh stage, shared by every kind whose asset reads OBJs (the billboard cloud, ambient
+//! occlusion, height): an OBJ and the MTL files it names loaded into a `mesh::Mesh` with vertex
 //! tangents, kept in the persistent cache by the content of what it read. Thin glue over
-//! `mesh::load_mesh`; the asset's main file is the OBJ.
+//! `mesh::load_mesh`; one instance per OBJ (the asset's main file, or another it names: a
+//! height bake's high mesh).
 
 use std::collections::BTreeMap;
-use std::path::PathBuf;
+use std::path::{Path, PathBuf};
 use std::sync::Arc;
 
 use crate::cache::{CacheEntry, CacheKey};
@@ -18,45 +19,55 @@ use crate::diagnostic::Diagnostic;
 // OBJ object.
 pub const MESH: Stage = Stage { name: "mesh", version: 3 };
 
-/// The OBJ's input.
-fn mesh_source(db: &dyn Db, asset: Asset) -> Result<SourceFile, Diagnostic> {
-    let path = asset.main_file(db);
-    asset_file(db, asset, path.clone()).ok_or_else(|| Diagnostic::new(path, "was not read"))
+/// An OBJ's input.
+fn mesh_source(db: &dyn Db, asset: Asset, obj: &Path) -> Result<SourceFile, Diagnostic> {
+    asset_file(db, asset, obj.to_path_buf()).ok_or_else(|| Diagnostic::new(obj, "was not read"))
 }
 
-/// The MTL files the OBJ names (project-relative), read or not.
+/// The MTL files an OBJ of the asset names (project-relative), read or not.
 #[salsa::tracked(returns(clone))]
-pub fn mesh_library_paths(db: &dyn Db, asset: Asset) -> Arc<Vec<PathBuf>> {
-    let Ok(file) = mesh_source(db, asset) else { return Arc::default() };
+pub fn mesh_library_paths_of(db: &dyn Db, asset: Asset, obj: PathBuf) -> Arc<Vec<PathBuf>> {
+    let Ok(file) = mesh_source(db, asset, &obj) else { return Arc::default() };
     let Ok(contents) = file.contents(db) else { return Arc::default() };
-    Arc::new(crate::mesh::material_libraries(asset.main_file(db), &contents.bytes, asset.source_root(db)))
+    Arc::new(crate::mesh::material_libraries(&obj, &contents.bytes, asset.source_root(db)))
 }
 
-/// The OBJ and the MTL files it names: what the mesh stage reads.
-pub fn mesh_files(db: &dyn Db, asset: Asset) -> Vec<PathBuf> {
-    let mut files = vec![asset.main_file(db).clone()];
-    files.extend(mesh_library_paths(db, asset).iter().cloned());
+/// The MTL files the asset's main OBJ names.
+pub fn mesh_library_paths(db: &dyn Db, asset: Asset) -> Arc<Vec<PathBuf>> {
+    mesh_library_paths_of(db, asset, asset.main_file(db).clone())
+}
+
+/// An OBJ and the MTL files it names: what its mesh stage reads.
+pub fn mesh_files_of(db: &dyn Db, asset: Asset, obj: &Path) -> Vec<PathBuf> {
+    let mut files = vec![obj.to_path_buf()];
+    files.extend(mesh_library_paths_of(db, asset, obj.to_path_buf()).iter().cloned());
     files
 }
 
-/// The MTL files the OBJ names, as far as read, by project-relative path.
+/// The main OBJ and the MTL files it names.
+pub fn mesh_files(db: &dyn Db, asset: Asset) -> Vec<PathBuf> {
+    mesh_files_of(db, asset, asset.main_file(db))
+}
+
+/// The MTL files an OBJ names, as far as read, by project-relative path.
 #[salsa::tracked(returns(clone))]
-pub fn mesh_libraries(db: &dyn Db, asset: Asset) -> Arc<BTreeMap<PathBuf, SourceFile>> {
-    let paths = mesh_library_paths(db, asset);
+pub fn mesh_libraries_of(db: &dyn Db, asset: Asset, obj: PathBuf) -> Arc<BTreeMap<PathBuf, SourceFile>> {
+    let paths = mesh_library_paths_of(db, asset, obj);
     Arc::new(paths.iter().filter_map(|path| Some((path.clone(), asset_file(db, asset, path.clone())?))).collect())
 }
 
-fn library_bytes(db: &dyn Db, asset: Asset) -> BTreeMap<PathBuf, Option<Vec<u8>>> {
-    mesh_libraries(db, asset)
+fn library_bytes(db: &dyn Db, asset: Asset, obj: &Path) -> BTreeMap<PathBuf, Option<Vec<u8>>> {
+    mesh_libraries_of(db, asset, obj.to_path_buf())
         .iter()
         .map(|(path, file)| (path.clone(), file.contents(db).as_ref().ok().map(|contents| contents.bytes.to_vec())))
         .collect()
 }
 
-/// The texture files the mesh's materials name (cheap: the MTL files only).
+/// The texture files the main mesh's materials name (cheap: the MTL files only).
 #[salsa::tracked(returns(clone))]
 pub fn mesh_textures(db: &dyn Db, asset: Asset) -> Arc<Vec<PathBuf>> {
-    Arc::new(crate::mesh::texture_paths(asset.main_file(db), &library_bytes(db, asset), asset.source_root(db)))
+    let obj = asset.main_file(db);
+    Arc::new(crate::mesh::texture_paths(obj, &library_bytes(db, asset, obj), asset.source_root(db)))
 }
 
 /// A loaded mesh with its vertex tangents and load warnings.
@@ -67,14 +78,24 @@ pub struct LoadedMesh {
     pub warnings: Vec<Diagnostic>,
 }
 
-/// The content address of what the mesh stage reads: the OBJ and its MTL files (paths and
+/// The content address of what a mesh stage reads: the OBJ and its MTL files (paths and
 /// bytes), and the source folder texture paths must stay in.
 #[salsa::tracked(returns(copy))]
-pub fn mesh_cache_key(db: &dyn Db, asset: Asset) -> CacheKey {
+pub fn mesh_cache_key(db: &dyn Db, asset: Asset, obj: PathBuf) -> CacheKey {
     let key = stage_key(MESH).part(asset.source_root(db));
-    let libraries = mesh_libraries(db, asset);
-    let files = mesh_source(db, asset).ok().into_iter().chain(libraries.values().copied());
+    let libraries = mesh_libraries_of(db, asset, obj.clone());
+    let files = mesh_source(db, asset, &obj).ok().into_iter().chain(libraries.values().copied());
     key_with_files(db, key, files).finish()
+}
+
+/// A mesh stage's label: the asset's name for its main OBJ, `asset/<path>` for another.
+pub fn mesh_label(db: &dyn Db, asset: Asset, obj: &Path) -> String {
+    let name = asset.name(db);
+    if obj == asset.main_file(db) {
+        name.clone()
+    } else {
+        format!("{name}/{}", crate::diagnostic::display_path(obj))
+    }
 }
 
 fn loaded_mesh_entry(loaded: &LoadedMesh) -> CacheEntry {
@@ -115,27 +136,32 @@ fn loaded_mesh_from_entry(entry: CacheEntry) -> Option<LoadedMesh> {
     Some(LoadedMesh { mesh, tangents: from_pod_blob(&tangents)?, warnings })
 }
 
-/// The mesh (stage `mesh`): OBJ + MTL loaded, tangents computed.
-#[salsa::tracked(returns(clone))]
+/// The asset's main mesh (stage `mesh`).
 pub fn loaded_mesh(db: &dyn Db, asset: Asset) -> Result<Arc<LoadedMesh>, Diagnostic> {
-    let file = mesh_source(db, asset)?;
+    loaded_mesh_of(db, asset, asset.main_file(db).clone())
+}
+
+/// A mesh of the asset (stage `mesh`): OBJ + MTL loaded, tangents computed.
+#[salsa::tracked(returns(clone))]
+pub fn loaded_mesh_of(db: &dyn Db, asset: Asset, obj: PathBuf) -> Result<Arc<LoadedMesh>, Diagnostic> {
+    let file = mesh_source(db, asset, &obj)?;
     let contents = read_contents(db, file)?;
     // A missing MTL is a warning (its materials fall back to defaults); one that is there but
     // cannot be read (not a regular file, no permission) fails the mesh, naming why.
-    for (path, library) in mesh_libraries(db, asset).iter() {
+    for (path, library) in mesh_libraries_of(db, asset, obj.clone()).iter() {
         if let Err(why) = library.contents(db) {
             if why != crate::sources::FILE_NOT_FOUND {
                 return Err(Diagnostic::new(path, why.clone()));
             }
         }
     }
-    let name = asset.name(db);
-    let cache_key = mesh_cache_key(db, asset);
+    let name = &mesh_label(db, asset, &obj);
+    let cache_key = mesh_cache_key(db, asset, obj.clone());
     if let Some(loaded) = load_cached(db, MESH.name, cache_key, loaded_mesh_from_entry) {
         record_cache_hit(db, MESH, name);
         return Ok(Arc::new(loaded));
     }
-    let libraries = library_bytes(db, asset);
+    let libraries = library_bytes(db, asset, &obj);
     let loaded = timed(db, MESH, name, || {
         let (mesh, warnings) = crate::mesh::load_mesh(file.path(db), &contents.bytes, &libraries, asset.source_root(db))?;
         let tangents = match &mesh.uvs {
@@ -148,11 +174,15 @@ pub fn loaded_mesh(db: &dyn Db, asset: Asset) -> Result<Arc<LoadedMesh>, Diagnos
     Ok(Arc::new(loaded))
 }
 
-/// The mesh stage's instance: labelled by the asset, reading the OBJ and its MTL files.
+/// The main mesh stage's instance: labelled by the asset, reading the OBJ and its MTL files.
 pub fn mesh_instance(db: &dyn Db, asset: Asset) -> crate::kinds::StageInstance {
-    let main_file = asset.main_file(db);
-    let mut mesh = crate::kinds::StageInstance::new(MESH, asset.name(db), crate::diagnostic::display_path(main_file));
-    mesh.reads.push(crate::kinds::Read::File(main_file.clone()));
-    mesh.reads.extend(mesh_libraries(db, asset).keys().map(|path| crate::kinds::Read::File(path.clone())));
+    mesh_instance_of(db, asset, asset.main_file(db))
+}
+
+/// The instance of the mesh stage of one OBJ of the asset (see `mesh_label`).
+pub fn mesh_instance_of(db: &dyn Db, asset: Asset, obj: &Path) -> crate::kinds::StageInstance {
+    let mut mesh = crate::kinds::StageInstance::new(MESH, mesh_label(db, asset, obj), crate::diagnostic::display_path(obj));
+    mesh.reads.push(crate::kinds::Read::File(obj.to_path_buf()));
+    mesh.reads.extend(mesh_libraries_of(db, asset, obj.to_path_buf()).keys().map(|path| crate::kinds::Read::File(path.clone())));
     mesh
 }

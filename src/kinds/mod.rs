@@ -19,10 +19,12 @@ pub mod material;
 pub mod billboard_cloud;
 pub mod atlas;
 pub mod ambient_occlusion;
+pub mod height;
 
 use ambient_occlusion::AmbientOcclusion;
 use atlas::Atlas;
 use billboard_cloud::BillboardCloud;
+use height::Height;
 use material::Material;
 
 /// The questions the driver asks an asset kind. Every answer is computed from the database
@@ -85,6 +87,7 @@ pub enum AssetKind {
     BillboardCloud,
     Atlas,
     AmbientOcclusion,
+    Height,
 }
 
 impl AssetKind {
@@ -94,6 +97,7 @@ impl AssetKind {
             AssetSource::BillboardCloud { .. } => AssetKind::BillboardCloud,
             AssetSource::Atlas { .. } => AssetKind::Atlas,
             AssetSource::AmbientOcclusion { .. } => AssetKind::AmbientOcclusion,
+            AssetSource::Height { .. } => AssetKind::Height,
         }
     }
 
@@ -103,6 +107,7 @@ impl AssetKind {
             AssetKind::BillboardCloud => BillboardCloud::NAME,
             AssetKind::Atlas => Atlas::NAME,
             AssetKind::AmbientOcclusion => AmbientOcclusion::NAME,
+            AssetKind::Height => Height::NAME,
         }
     }
 
@@ -112,6 +117,7 @@ impl AssetKind {
             AssetKind::BillboardCloud => BillboardCloud::files_to_read(db, asset),
             AssetKind::Atlas => Atlas::files_to_read(db, asset),
             AssetKind::AmbientOcclusion => AmbientOcclusion::files_to_read(db, asset),
+            AssetKind::Height => Height::files_to_read(db, asset),
         }
     }
 
@@ -121,6 +127,7 @@ impl AssetKind {
             AssetKind::BillboardCloud => BillboardCloud::first_jobs(db, asset),
             AssetKind::Atlas => Atlas::first_jobs(db, asset),
             AssetKind::AmbientOcclusion => AmbientOcclusion::first_jobs(db, asset),
+            AssetKind::Height => Height::first_jobs(db, asset),
         }
     }
 
@@ -136,6 +143,7 @@ impl AssetKind {
             (Task::Step(step, index), AssetKind::BillboardCloud) => BillboardCloud::run_step(db, job.asset, step, *index),
             (Task::Step(step, index), AssetKind::Atlas) => Atlas::run_step(db, job.asset, step, *index),
             (Task::Step(step, index), AssetKind::AmbientOcclusion) => AmbientOcclusion::run_step(db, job.asset, step, *index),
+            (Task::Step(step, index), AssetKind::Height) => Height::run_step(db, job.asset, step, *index),
         }
     }
 
@@ -145,6 +153,7 @@ impl AssetKind {
             AssetKind::BillboardCloud => BillboardCloud::stage_instances(db, asset, output_folder, errors),
             AssetKind::Atlas => Atlas::stage_instances(db, asset, output_folder, errors),
             AssetKind::AmbientOcclusion => AmbientOcclusion::stage_instances(db, asset, output_folder, errors),
+            AssetKind::Height => Height::stage_instances(db, asset, output_folder, errors),
         }
     }
 
@@ -154,6 +163,7 @@ impl AssetKind {
             AssetKind::BillboardCloud => BillboardCloud::outputs(db, asset, output_folder, errors, runs),
             AssetKind::Atlas => Atlas::outputs(db, asset, output_folder, errors, runs),
             AssetKind::AmbientOcclusion => AmbientOcclusion::outputs(db, asset, output_folder, errors, runs),
+            AssetKind::Height => Height::outputs(db, asset, output_folder, errors, runs),
         }
     }
 
@@ -163,6 +173,7 @@ impl AssetKind {
             AssetKind::BillboardCloud => BillboardCloud::check(config, asset),
             AssetKind::Atlas => Atlas::check(config, asset),
             AssetKind::AmbientOcclusion => AmbientOcclusion::check(config, asset),
+            AssetKind::Height => Height::check(config, asset),
         }
     }
 
@@ -172,6 +183,7 @@ impl AssetKind {
             AssetKind::BillboardCloud => BillboardCloud::surface_image(db, asset, surface),
             AssetKind::Atlas => Atlas::surface_image(db, asset, surface),
             AssetKind::AmbientOcclusion => AmbientOcclusion::surface_image(db, asset, surface),
+            AssetKind::Height => Height::surface_image(db, asset, surface),
         }
     }
 
@@ -181,6 +193,7 @@ impl AssetKind {
             AssetKind::BillboardCloud => BillboardCloud::tail_settings(db, asset, surface),
             AssetKind::Atlas => Atlas::tail_settings(db, asset, surface),
             AssetKind::AmbientOcclusion => AmbientOcclusion::tail_settings(db, asset, surface),
+            AssetKind::Height => Height::tail_settings(db, asset, surface),
         }
     }
 
@@ -190,6 +203,7 @@ impl AssetKind {
             AssetKind::BillboardCloud => BillboardCloud::surface_parts_key(db, asset, surface),
             AssetKind::Atlas => Atlas::surface_parts_key(db, asset, surface),
             AssetKind::AmbientOcclusion => AmbientOcclusion::surface_parts_key(db, asset, surface),
+            AssetKind::Height => Height::surface_parts_key(db, asset, surface),
         }
     }
 
@@ -199,6 +213,7 @@ impl AssetKind {
             AssetKind::BillboardCloud => BillboardCloud::provided_surface_stage(db, asset, surface),
             AssetKind::Atlas => Atlas::provided_surface_stage(db, asset, surface),
             AssetKind::AmbientOcclusion => AmbientOcclusion::provided_surface_stage(db, asset, surface),
+            AssetKind::Height => Height::provided_surface_stage(db, asset, surface),
         }
     }
 
@@ -208,6 +223,7 @@ impl AssetKind {
             AssetKind::BillboardCloud => BillboardCloud::surface_recipe_key(db, asset, surface),
             AssetKind::Atlas => Atlas::surface_recipe_key(db, asset, surface),
             AssetKind::AmbientOcclusion => AmbientOcclusion::surface_recipe_key(db, asset, surface),
+            AssetKind::Height => Height::surface_recipe_key(db, asset, surface),
         }
     }
 }
@@ -366,6 +382,9 @@ pub fn outputs_unless_failed(errors: &mut Vec<Diagnostic>, make: impl FnOnce() -
 pub struct AssetOutputs {
     pub files: Vec<(PathBuf, Arc<[u8]>)>,
     pub report: Option<Vec<u8>>,
+    /// What some files' values mean (a height map's `center` and `magnitude`), listed beside
+    /// them in the manifest.
+    pub meanings: std::collections::BTreeMap<PathBuf, serde_json::Value>,
 }
 
 /// Reads a texture's header for `check`: readable, decodable, within the texture limits.

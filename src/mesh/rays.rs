@@ -399,6 +399,60 @@ impl TriangleBvh {
         unsafe { cast_with::<Portable>(self, &ray, max_distance, skip, back_faces) }
     }
 
+    /// The mesh's point nearest `point` within `max_distance`: its triangle and distance
+    /// (degenerate triangles are skipped). Children are visited nearest box first.
+    pub fn nearest_point(&self, point: Vec3, max_distance: f32) -> Option<(u32, f32)> {
+        if self.nodes.is_empty() {
+            return None;
+        }
+        let mut best = max_distance * max_distance;
+        let mut found = None;
+        let mut stack: Vec<(u32, f32)> = Vec::with_capacity(self.stack_size);
+        stack.push((0, 0.0));
+        while let Some((reference, squared)) = stack.pop() {
+            if squared > best {
+                continue;
+            }
+            if reference & LEAF != 0 {
+                let packet = &self.packets[(reference & !LEAF) as usize];
+                for lane in 0..WIDTH {
+                    let triangle = packet.triangles[lane];
+                    if triangle == u32::MAX || self.normals[triangle as usize] == Vec3A::ZERO {
+                        continue;
+                    }
+                    let axis = |planes: &[[f32; WIDTH]; 3]| Vec3::new(planes[0][lane], planes[1][lane], planes[2][lane]);
+                    let corner = axis(&packet.corner);
+                    let nearest = closest_point_on_triangle(point, corner, corner + axis(&packet.edge1), corner + axis(&packet.edge2));
+                    let squared = (nearest - point).length_squared();
+                    if squared < best || (found.is_none() && squared <= best) {
+                        best = squared;
+                        found = Some(triangle);
+                    }
+                }
+                continue;
+            }
+            let node = &self.nodes[reference as usize];
+            let base = stack.len();
+            for lane in 0..WIDTH {
+                if node.children[lane] == EMPTY {
+                    continue;
+                }
+                let mut squared = 0.0;
+                for axis in 0..3 {
+                    let (low, high) = (node.planes[2 * axis][lane], node.planes[2 * axis + 1][lane]);
+                    let outside = (low - point[axis]).max(point[axis] - high).max(0.0);
+                    squared += outside * outside;
+                }
+                if squared <= best {
+                    stack.push((node.children[lane], squared));
+                }
+            }
+            // Farthest first on the stack, so the nearest box is popped first.
+            stack[base..].sort_unstable_by(|a, b| b.1.total_cmp(&a.1));
+        }
+        found.map(|triangle| (triangle, best.sqrt()))
+    }
+
     /// Whether any face that counts (`back_faces`) lies within `max_distance` along the ray:
     /// traversal stops at the first such hit found, the cheap query of occlusion that needs no
     /// distance.
@@ -415,6 +469,39 @@ impl TriangleBvh {
         // Safety: the portable kernels run on any CPU.
         unsafe { blocked_with::<Portable>(self, &ray, max_distance, skip, back_faces) }
     }
+}
+
+/// The point of triangle `a b c` nearest `p` (Ericson, "Real-Time Collision Detection", 5.1.5).
+pub fn closest_point_on_triangle(p: Vec3, a: Vec3, b: Vec3, c: Vec3) -> Vec3 {
+    let (ab, ac, ap) = (b - a, c - a, p - a);
+    let (d1, d2) = (ab.dot(ap), ac.dot(ap));
+    if d1 <= 0.0 && d2 <= 0.0 {
+        return a;
+    }
+    let bp = p - b;
+    let (d3, d4) = (ab.dot(bp), ac.dot(bp));
+    if d3 >= 0.0 && d4 <= d3 {
+        return b;
+    }
+    let vc = d1 * d4 - d3 * d2;
+    if vc <= 0.0 && d1 >= 0.0 && d3 <= 0.0 {
+        return a + ab * (d1 / (d1 - d3));
+    }
+    let cp = p - c;
+    let (d5, d6) = (ab.dot(cp), ac.dot(cp));
+    if d6 >= 0.0 && d5 <= d6 {
+        return c;
+    }
+    let vb = d5 * d2 - d1 * d6;
+    if vb <= 0.0 && d2 >= 0.0 && d6 <= 0.0 {
+        return a + ac * (d2 / (d2 - d6));
+    }
+    let va = d3 * d6 - d5 * d4;
+    if va <= 0.0 && (d4 - d3) >= 0.0 && (d5 - d6) >= 0.0 {
+        return b + (c - b) * ((d4 - d3) / ((d4 - d3) + (d5 - d6)));
+    }
+    let denominator = 1.0 / (va + vb + vc);
+    a + ab * (vb * denominator) + ac * (vc * denominator)
 }
 
 /// A ray origin moved off the surface at `point` along `normal` (the side the ray leaves

@@ -318,3 +318,16 @@ pub fn opacity_channel(texture: &Texture) -> Texture {
         .collect();
     Texture::new(texture.width, texture.height, pixels)
 }
+
+/// One 16-bit value per texel (a bake's map) as an RGBA8 grey texture, rounded to 8 bits (for
+/// the texture tail: BC4 reads red).
+pub fn grey16_texture(width: u32, height: u32, values: &[u16]) -> Texture {
+    let pixels = values
+        .iter()
+        .flat_map(|&value| {
+            let grey = ((value as u32 * 255 + 32767) / 65535) as u8;
+            [grey, grey, grey, 255]
+        })
+        .collect();
+    Texture::new(width, height, pixels)
+}

@@ -32,7 +32,7 @@ fn every_bundled_kind_builds_rebuilds_for_free_checks_and_shows_in_the_graph() {
     let summary = build(&mut first);
     assert!(summary.all_ok(), "{}", summary.to_text());
     let kinds: BTreeSet<&str> = summary.assets.iter().map(|asset| asset.kind).collect();
-    assert_eq!(kinds, BTreeSet::from(["AmbientOcclusion", "Atlas", "BillboardCloud", "Material"]), "every kind is bundled");
+    assert_eq!(kinds, BTreeSet::from(["AmbientOcclusion", "Atlas", "BillboardCloud", "Height", "Material"]), "every kind is bundled");
 
     // The summary contract.
     let json: serde_json::Value = serde_json::from_str(&summary.to_json()).unwrap();

@@ -260,19 +260,10 @@ pub fn assemble_map(size: u32, tiles: &[&TileBake]) -> AoMap {
 
 /// The map as an RGBA8 grey texture (for the texture tail: BC4 reads red).
 pub fn map_texture(map: &AoMap) -> crate::texture::Texture {
-    let pixels = map
-        .values
-        .iter()
-        .flat_map(|&value| {
-            let grey = ((value as u32 * 255 + 32767) / 65535) as u8;
-            [grey, grey, grey, 255]
-        })
-        .collect();
-    crate::texture::Texture::new(map.size, map.size, pixels)
+    crate::texture::grey16_texture(map.size, map.size, &map.values)
 }
 
 /// The map as a 16-bit greyscale PNG.
 pub fn map_png16(map: &AoMap) -> Vec<u8> {
-    let samples: Vec<u8> = map.values.iter().flat_map(|value| value.to_ne_bytes()).collect();
-    crate::texture::preview::png_bytes(&samples, map.size, map.size, image::ExtendedColorType::L16)
+    crate::texture::preview::png16_grey(&map.values, map.size, map.size)
 }

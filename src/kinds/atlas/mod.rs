@@ -303,7 +303,7 @@ fn mesh_outputs(
         mtl.push_str(&remap::mtl_material(
             material,
             |page| format!("{}.png", page_stem(page)),
-            |path| display_path(&remap::relative_path(output_folder, path)),
+            |path| display_path(&crate::mesh::obj_text::relative_path(output_folder, path)),
         ));
     }
     outputs.files.push((output_folder.join("atlas.mtl"), mtl.into_bytes().into()));

@@ -5,7 +5,7 @@
 
 use std::collections::{BTreeMap, HashMap};
 use std::fmt::Write as _;
-use std::path::{Component, Path, PathBuf};
+use std::path::Path;
 
 use crate::mesh::{Mesh, MeshMaterial};
 use crate::texture::TextureSlot;
@@ -180,61 +180,11 @@ pub fn repeating_uvs(mesh: &Mesh, material: usize, entry: &str) -> Result<(), Re
     Ok(())
 }
 
-/// The MTL statement of a map slot.
-fn slot_keyword(slot: TextureSlot) -> &'static str {
-    match slot {
-        TextureSlot::Albedo => "map_Kd",
-        TextureSlot::Opacity => "map_d",
-        TextureSlot::Normal => "norm",
-        TextureSlot::Metallic => "map_Pm",
-        TextureSlot::Roughness => "map_Pr",
-        TextureSlot::Ao => "map_ao",
-    }
-}
-
 /// One material of `atlas.mtl`: atlased maps name the page's image (`page_file`), the others
 /// their source texture as seen from the MTL's folder (`path_from_mtl`).
 pub fn mtl_material(material: &RemappedMaterial, page_file: impl Fn(u32) -> String, path_from_mtl: impl Fn(&Path) -> String) -> String {
-    let source = &material.material;
-    let mut text = String::new();
-    let [r, g, b] = source.albedo_factor;
-    let _ = writeln!(text, "newmtl {}\nKd {r} {g} {b}", source.name);
-    if source.opacity < 1.0 {
-        let _ = writeln!(text, "d {}", source.opacity);
-    }
-    let _ = writeln!(text, "Pr {}\nPm {}", source.roughness, source.metallic);
-    let map_file = |slot: TextureSlot, path: &Path| match material.page {
+    crate::mesh::obj_text::mtl_material_text(&material.material, |slot, path| match material.page {
         Some(page) if material.atlased.contains(&slot) => page_file(page),
         _ => path_from_mtl(path),
-    };
-    for (&slot, path) in &source.maps {
-        let _ = writeln!(text, "{} {}", slot_keyword(slot), map_file(slot, path));
-    }
-    // A cut-out whose opacity is its albedo's alpha (the loader drops a `map_d` naming the
-    // albedo's own file): the alpha test stays.
-    if source.cut_out && !source.maps.contains_key(&TextureSlot::Opacity) {
-        if let Some(albedo) = source.maps.get(&TextureSlot::Albedo) {
-            let _ = writeln!(text, "map_d {}", map_file(TextureSlot::Albedo, albedo));
-        }
-    }
-    text
-}
-
-/// `to` as seen from the folder `from` (both relative to the same folder, or both absolute);
-/// `to` itself when one is absolute and the other not.
-pub fn relative_path(from: &Path, to: &Path) -> PathBuf {
-    if from.is_absolute() != to.is_absolute() {
-        return to.to_path_buf();
-    }
-    let from: Vec<Component> = from.components().filter(|component| *component != Component::CurDir).collect();
-    let to_components: Vec<Component> = to.components().filter(|component| *component != Component::CurDir).collect();
-    let common = from.iter().zip(&to_components).take_while(|(a, b)| a == b).count();
-    let mut path = PathBuf::new();
-    for _ in common..from.len() {
-        path.push("..");
-    }
-    for component in &to_components[common..] {
-        path.push(component.as_os_str());
-    }
-    path
+    })
 }

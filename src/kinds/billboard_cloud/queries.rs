@@ -53,7 +53,11 @@ pub fn plane_settings(db: &dyn Db, asset: Asset) -> super::planes::PlaneSettings
 #[salsa::tracked(returns(copy))]
 pub fn planes_cache_key(db: &dyn Db, asset: Asset) -> CacheKey {
     let settings = plane_settings(db, asset);
-    stage_key(PLANES).part(&mesh_cache_key(db, asset).0).part(&settings.epsilon).part(&settings.max_planes).finish()
+    stage_key(PLANES)
+        .part(&mesh_cache_key(db, asset, asset.main_file(db).clone()).0)
+        .part(&settings.epsilon)
+        .part(&settings.max_planes)
+        .finish()
 }
 
 /// The planes (stage `planes`).

@@ -1,0 +1,354 @@
+//! The `Height` kind (DESIGN §3.4): a height map from a high and a low mesh (`height.png` 16-bit,
+//! `height.ktx2` BC4 through the shared tail, and the mapping `distance = (value − center) ×
+//! magnitude`), measured along the low surface's normals per texel of its UV space (`Normals`)
+//! or from two top-down depth renders (`TopDown`); optionally the low mesh tessellated on its
+//! PN triangles and displaced by a second map measured from the PN surface
+//! (`tessellated.obj` + `.mtl`, and `height_pn.png`); the distance to the high mesh of the low,
+//! PN and displaced meshes in `report.json`.
+//!
+//! Jobs: `plan` (wave 0: both meshes), then the map's tail and the tessellation (wave 1).
+//! Stage instances: `mesh` ×2 → `bvh` → `bake` (→ `mips → encode → write`); `tessellate` →
+//! `bake(pn)` → `displace`; `distance` per measured mesh.
+
+pub mod bake;
+pub mod queries;
+
+use std::path::{Path, PathBuf};
+use std::sync::Arc;
+
+use serde::Serialize;
+
+use crate::cache::CacheKey;
+use crate::config::{AssetConfig, HeightProjection, PipelineConfig};
+use crate::db::{Asset, Db, StageRun};
+use crate::diagnostic::{display_path, Diagnostic};
+use crate::kinds::mesh_queries::{mesh_files_of, mesh_instance_of};
+use crate::kinds::{tail_instances, AssetOutputs, Job, Kind, StageInstance, SurfaceId, Task};
+use crate::mesh::surface_distance::SurfaceDistance;
+use crate::summary::ErrorSummary;
+use crate::texture::tail::{SurfaceInfo, TailSettings};
+use crate::texture::{SurfaceKind, Texture};
+use bake::Quantization;
+use queries::{
+    distance_label, distance_to_high, height_map, height_settings, high_geometry, high_path, low_geometry, map_key, map_label,
+    tessellate_settings, tessellated_files, MapReference, Measured, BAKE, BVH, DISPLACE, DISTANCE, TESSELLATE,
+};
+
+pub struct Height;
+
+/// The map's tail surface: the asset's own `height`.
+fn height_surface() -> SurfaceId {
+    SurfaceId { group: String::new(), surface: SurfaceKind::Height }
+}
+
+/// The meshes measured against the high one, as the settings ask.
+fn measured_meshes(db: &dyn Db, asset: Asset) -> Vec<Measured> {
+    match tessellate_settings(db, asset) {
+        None => vec![Measured::Low],
+        Some(settings) if settings.displace => vec![Measured::Low, Measured::Pn, Measured::Displaced],
+        Some(_) => vec![Measured::Low, Measured::Pn],
+    }
+}
+
+impl Kind for Height {
+    const NAME: &'static str = "Height";
+
+    fn files_to_read(db: &dyn Db, asset: Asset) -> Vec<PathBuf> {
+        let mut files = mesh_files_of(db, asset, asset.main_file(db));
+        files.extend(mesh_files_of(db, asset, &high_path(db, asset)));
+        files
+    }
+
+    fn first_jobs(db: &dyn Db, asset: Asset) -> Vec<Job> {
+        vec![Job { asset, task: Task::Step("plan", 0), after: 0, label: asset.name(db).clone() }]
+    }
+
+    fn run_step(db: &dyn Db, asset: Asset, step: &'static str, _index: u32) -> Result<Vec<Job>, Diagnostic> {
+        let name = asset.name(db);
+        match step {
+            "plan" => {
+                low_geometry(db, asset)?;
+                high_geometry(db, asset)?;
+                let surface = height_surface();
+                let mut jobs = vec![Job { asset, label: surface.label(name), task: Task::Surface(surface), after: 1 }];
+                for (index, measured) in measured_meshes(db, asset).into_iter().enumerate() {
+                    jobs.push(Job { asset, label: distance_label(name, measured), task: Task::Step("distance", index as u32), after: 1 });
+                }
+                if tessellate_settings(db, asset).is_some() {
+                    jobs.push(Job { asset, label: format!("{name}/tessellated"), task: Task::Step("tessellate", 0), after: 1 });
+                }
+                Ok(jobs)
+            }
+            "tessellate" => tessellated_files(db, asset).map(|_| Vec::new()),
+            _ => {
+                let measured = measured_meshes(db, asset).get(_index as usize).copied().unwrap_or(Measured::Low);
+                distance_to_high(db, asset, measured).map(|_| Vec::new())
+            }
+        }
+    }
+
+    fn stage_instances(db: &dyn Db, asset: Asset, output_folder: &Path, errors: &[Diagnostic]) -> Vec<StageInstance> {
+        let name = asset.name(db);
+        let report = output_folder.join("report.json");
+        let low = mesh_instance_of(db, asset, asset.main_file(db));
+        let high = mesh_instance_of(db, asset, &high_path(db, asset));
+        let bvh = StageInstance::new(BVH, name, name).reads_stage(&high);
+        let settings = height_settings(db, asset);
+        let mut map = StageInstance::new(BAKE, map_label(name, MapReference::Low), "height").reads_stage(&low);
+        map = match settings.projection {
+            HeightProjection::Normals => map.reads_stage(&bvh),
+            HeightProjection::TopDown => map.reads_stage(&high),
+        };
+        let surface = height_surface();
+        let container = asset.settings(db).encode.container;
+        let [mips, encode, mut write] = tail_instances(name, &surface, &map, surface.artifact_paths(output_folder, container));
+        write.writes.push(report.clone());
+        let mut instances = vec![low.clone(), high.clone(), bvh.clone(), map, mips, encode, write];
+        let distance = |measured: Measured, mesh: &StageInstance| {
+            let mut instance = StageInstance::new(DISTANCE, distance_label(name, measured), format!("distance/{}", measured.name()))
+                .reads_stage(mesh)
+                .reads_stage(&bvh);
+            instance.writes.push(report.clone());
+            instance
+        };
+        let low_distance = distance(Measured::Low, &low);
+        let mut more = vec![low_distance];
+        if let Some(tessellate) = tessellate_settings(db, asset) {
+            let pn = StageInstance::new(TESSELLATE, name, "tessellate").reads_stage(&low);
+            let mut displace = StageInstance::new(DISPLACE, name, "displace").reads_stage(&pn);
+            displace.writes = vec![output_folder.join("tessellated.obj"), output_folder.join("tessellated.mtl")];
+            more.push(distance(Measured::Pn, &pn));
+            if tessellate.displace {
+                let pn_map = StageInstance::new(BAKE, map_label(name, MapReference::Pn), "height_pn").reads_stage(&low).reads_stage(&bvh);
+                let mut pn_map_written = pn_map.clone();
+                pn_map_written.writes.push(output_folder.join("height_pn.png"));
+                displace = displace.reads_stage(&pn_map);
+                more.push(distance(Measured::Displaced, &displace));
+                instances.push(pn_map_written);
+            }
+            instances.push(pn);
+            instances.push(displace);
+        }
+        instances.extend(more);
+        for instance in &mut instances {
+            instance.failed = !errors.is_empty();
+        }
+        instances
+    }
+
+    fn outputs(db: &dyn Db, asset: Asset, output_folder: &Path, errors: &mut Vec<Diagnostic>, runs: &[StageRun]) -> AssetOutputs {
+        crate::kinds::outputs_unless_failed(errors, || height_outputs(db, asset, output_folder, runs))
+    }
+
+    /// Both meshes load with their material libraries; a Normals bake or a displaced
+    /// tessellation needs the low mesh's UVs.
+    fn check(config: &PipelineConfig, asset: &AssetConfig) -> Vec<Diagnostic> {
+        let low_file = &config.source.join(asset.source.main_file());
+        let mut problems = Vec::new();
+        match crate::kinds::check_mesh_file(config, low_file) {
+            Ok((mesh, warnings)) => {
+                problems.extend(warnings);
+                let settings = &asset.settings;
+                let needs_uvs = settings.height.projection == HeightProjection::Normals
+                    || settings.tessellate.is_some_and(|tessellate| tessellate.displace);
+                if mesh.triangles.is_empty() {
+                    problems.push(Diagnostic::new(low_file, "the low mesh has no triangles"));
+                } else if needs_uvs && mesh.uvs.is_none() {
+                    problems.push(Diagnostic::new(
+                        low_file,
+                        "the low mesh has no texture coordinates (`vt` in the OBJ): a Normals height bake and a displaced tessellation need its UV layout",
+                    ));
+                }
+            }
+            Err(diagnostic) => problems.push(diagnostic),
+        }
+        if let Some(high) = &asset.settings.high_mesh {
+            let high_file = &config.source.join(high);
+            match crate::kinds::check_mesh_file(config, high_file) {
+                Ok((mesh, warnings)) => {
+                    problems.extend(warnings);
+                    if mesh.triangles.is_empty() {
+                        problems.push(Diagnostic::new(high_file, "the high mesh has no triangles"));
+                    }
+                }
+                Err(diagnostic) => problems.push(diagnostic),
+            }
+        }
+        problems
+    }
+
+    fn surface_image(db: &dyn Db, asset: Asset, _surface: &SurfaceId) -> Result<Arc<Texture>, Diagnostic> {
+        let files = height_map(db, asset, MapReference::Low)?;
+        let map = &files.map;
+        Ok(Arc::new(crate::texture::grey16_texture(map.size, map.size, &map.values16())))
+    }
+
+    fn tail_settings(db: &dyn Db, asset: Asset, surface: &SurfaceId) -> Result<TailSettings, Diagnostic> {
+        let encode = &asset.settings(db).encode;
+        Ok(crate::kinds::tail_settings_from(encode, surface.surface, encode.format_of(surface.surface), None))
+    }
+
+    fn surface_recipe_key(db: &dyn Db, asset: Asset, _surface: &SurfaceId) -> Result<Option<CacheKey>, Diagnostic> {
+        map_key(db, asset, MapReference::Low).map(Some)
+    }
+}
+
+/// `report.json` of a height bake.
+#[derive(Clone, Debug, PartialEq, Serialize)]
+pub struct HeightReport {
+    pub asset: String,
+    pub kind: &'static str,
+    pub high: String,
+    pub low: String,
+    pub projection: HeightProjection,
+    /// The rays' reach in mesh units (`Normals`).
+    pub frontal: f32,
+    pub rear: f32,
+    pub map: HeightMapReport,
+    /// The map the tessellation is displaced by, measured from the PN surface.
+    pub pn_map: Option<HeightMapReport>,
+    pub tessellated: Option<TessellatedReport>,
+    /// Distances to the high mesh over its bounding-box diagonal: samples by area, both ways.
+    pub distance: DistanceReport,
+    pub stage_ms: std::collections::BTreeMap<String, f64>,
+    pub warnings: Vec<ErrorSummary>,
+}
+
+#[derive(Clone, Debug, PartialEq, Serialize)]
+pub struct HeightMapReport {
+    /// The 16-bit map.
+    pub png: String,
+    pub size: u32,
+    /// `distance = (value − center) × magnitude`, value = the 16-bit value / 65535.
+    #[serde(flatten)]
+    pub quantization: Quantization,
+    /// The smallest and largest measured distance, mesh units.
+    pub range: [f32; 2],
+    pub measured_texels: u64,
+    /// Texels on the surface with no high surface within reach: filled.
+    pub missed_texels: u64,
+    pub texture: Option<HeightTextureReport>,
+}
+
+#[derive(Clone, Debug, PartialEq, Serialize)]
+pub struct HeightTextureReport {
+    pub path: String,
+    #[serde(flatten)]
+    pub info: SurfaceInfo,
+}
+
+#[derive(Clone, Debug, PartialEq, Serialize)]
+pub struct TessellatedReport {
+    pub obj: String,
+    pub level: u32,
+    pub displace: bool,
+    pub vertices: u64,
+    pub triangles: u64,
+}
+
+#[derive(Clone, Debug, PartialEq, Serialize)]
+pub struct DistanceReport {
+    pub samples_per_surface: usize,
+    pub low: Option<SurfaceDistance>,
+    pub pn: Option<SurfaceDistance>,
+    pub pn_displaced: Option<SurfaceDistance>,
+}
+
+fn map_report(files: &queries::HeightMapFiles, png: &Path, texture: Option<HeightTextureReport>) -> HeightMapReport {
+    let map = &files.map;
+    HeightMapReport {
+        png: display_path(png),
+        size: map.size,
+        quantization: map.quantization(),
+        range: map.range,
+        measured_texels: map.measured_texels,
+        missed_texels: map.missed_texels,
+        texture,
+    }
+}
+
+fn height_outputs(db: &dyn Db, asset: Asset, output_folder: &Path, runs: &[StageRun]) -> Result<AssetOutputs, Diagnostic> {
+    let settings = height_settings(db, asset);
+    let container = asset.settings(db).encode.container;
+    let low = low_geometry(db, asset)?;
+    let mut outputs = AssetOutputs::default();
+    let surface = height_surface();
+    let artifacts = crate::kinds::tail_queries::surface_artifacts(db, asset, surface.clone())?;
+    let map = height_map(db, asset, MapReference::Low)?;
+    let [texture_path, png_path] = surface.artifact_paths(output_folder, container);
+    outputs.files.push((texture_path.clone(), artifacts.texture_file.clone()));
+    outputs.files.push((png_path.clone(), map.png16.clone()));
+    let meaning = |files: &queries::HeightMapFiles| serde_json::json!({ "distance": files.map.quantization() });
+    outputs.meanings.insert(png_path.clone(), meaning(&map));
+    outputs.meanings.insert(texture_path.clone(), meaning(&map));
+    let texture = HeightTextureReport { path: display_path(&texture_path), info: artifacts.info.clone() };
+    let low_map_report = map_report(&map, &png_path, Some(texture));
+    let mut pn_map_report = None;
+    let mut tessellated = None;
+    if let Some(tessellate) = tessellate_settings(db, asset) {
+        if tessellate.displace {
+            let pn_map = height_map(db, asset, MapReference::Pn)?;
+            let pn_png = output_folder.join("height_pn.png");
+            outputs.files.push((pn_png.clone(), pn_map.png16.clone()));
+            outputs.meanings.insert(pn_png.clone(), meaning(&pn_map));
+            pn_map_report = Some(map_report(&pn_map, &pn_png, None));
+        }
+        let files = tessellated_files(db, asset)?;
+        let obj_path = output_folder.join("tessellated.obj");
+        outputs.files.push((obj_path.clone(), files.obj.clone()));
+        let mtl: String = low
+            .loaded
+            .mesh
+            .materials
+            .iter()
+            .map(|material| {
+                crate::mesh::obj_text::mtl_material_text(material, |_, path| {
+                    display_path(&crate::mesh::obj_text::relative_path(output_folder, path))
+                })
+            })
+            .collect();
+        outputs.files.push((output_folder.join("tessellated.mtl"), mtl.into_bytes().into()));
+        tessellated = Some(TessellatedReport {
+            obj: display_path(&obj_path),
+            level: tessellate.level,
+            displace: tessellate.displace,
+            vertices: files.vertices,
+            triangles: files.triangles,
+        });
+    }
+    let measured = measured_meshes(db, asset);
+    let distance_of = |which: Measured| -> Result<Option<SurfaceDistance>, Diagnostic> {
+        if measured.contains(&which) {
+            distance_to_high(db, asset, which)
+        } else {
+            Ok(None)
+        }
+    };
+    let distance = DistanceReport {
+        samples_per_surface: queries::DISTANCE_SAMPLES,
+        low: distance_of(Measured::Low)?,
+        pn: distance_of(Measured::Pn)?,
+        pn_displaced: distance_of(Measured::Displaced)?,
+    };
+    let name = asset.name(db);
+    let high = high_geometry(db, asset)?;
+    let mut warnings: Vec<ErrorSummary> = low.loaded.warnings.iter().map(ErrorSummary::from).collect();
+    warnings.extend(high.loaded.warnings.iter().map(ErrorSummary::from));
+    let report = HeightReport {
+        asset: name.clone(),
+        kind: Height::NAME,
+        high: display_path(&high_path(db, asset)),
+        low: display_path(asset.main_file(db)),
+        projection: settings.projection,
+        frontal: settings.frontal * low.diagonal,
+        rear: settings.rear * low.diagonal,
+        map: low_map_report,
+        pn_map: pn_map_report,
+        tessellated,
+        distance,
+        stage_ms: crate::kinds::asset_stage_ms(name, runs).into_iter().map(|(stage, ms)| (stage.to_string(), ms)).collect(),
+        warnings,
+    };
+    outputs.report = Some(serde_json::to_vec_pretty(&report).expect("reports serialise"));
+    Ok(outputs)
+}

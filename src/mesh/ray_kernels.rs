@@ -50,7 +50,8 @@ impl PreparedRay {
             direction,
             inverse,
             origin_scaled: origin * inverse,
-            near_plane: [(direction.x < 0.0) as usize, 2 + (direction.y < 0.0) as usize, 4 + (direction.z < 0.0) as usize],
+            // By the inverse's sign: a zero component keeps its sign bit there (−0 → −tiny).
+            near_plane: [(inverse.x < 0.0) as usize, 2 + (inverse.y < 0.0) as usize, 4 + (inverse.z < 0.0) as usize],
         }
     }
 }

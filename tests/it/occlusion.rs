@@ -141,7 +141,8 @@ fn brute_force_hit(corners: [Vec3; 3], origin: Vec3, direction: Vec3, max_distan
 #[test]
 fn the_bvh_finds_what_testing_every_triangle_finds_with_either_kernel() {
     // A soup of 3,000 random triangles of mixed sizes in a cube, with degenerate ones, a stack
-    // of 40 coincident ones and a far outlier, and rays in random and axis-aligned directions.
+    // of 40 coincident ones and a far outlier, and rays in random and axis-aligned directions
+    // (negative zeros included).
     let mut random = Random(7);
     let (mut positions, mut triangles) = (Vec::new(), Vec::new());
     for index in 0..3000u32 {
@@ -163,12 +164,13 @@ fn the_bvh_finds_what_testing_every_triangle_finds_with_either_kernel() {
     let corners_of = |triangle: usize| triangles[triangle].map(|vertex| Vec3::from(positions[vertex as usize]));
     let bvhs =
         [("best", build_triangle_bvh(&positions, &triangles)), ("portable", build_triangle_bvh(&positions, &triangles).without_avx2())];
-    let axes = [Vec3::X, Vec3::NEG_X, Vec3::Y, Vec3::NEG_Y, Vec3::Z, Vec3::NEG_Z];
+    // `-Vec3::X` is (-1, -0, -0): zero components with their sign bit set, as a negated normal has.
+    let axes = [Vec3::X, Vec3::NEG_X, -Vec3::X, Vec3::Y, Vec3::NEG_Y, -Vec3::Y, Vec3::Z, Vec3::NEG_Z, -Vec3::Z];
     let (mut rays, mut disagreements) = (0, 0);
     for index in 0..4000usize {
         let origin = random.point(12.0) - Vec3::ONE;
         let direction =
-            if index % 4 == 0 { axes[index / 4 % 6] } else { (random.point(2.0) - Vec3::ONE).try_normalize().unwrap_or(Vec3::X) };
+            if index % 4 == 0 { axes[index / 4 % axes.len()] } else { (random.point(2.0) - Vec3::ONE).try_normalize().unwrap_or(Vec3::X) };
         let max_distance = if index % 3 == 0 { 4.0 } else { f32::INFINITY };
         let skip = if index % 5 == 0 { index as u32 % 3000 } else { u32::MAX };
         for back_faces in [BackFaces::Block, BackFaces::PassThrough] {

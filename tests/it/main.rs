@@ -7,6 +7,7 @@ mod material;
 mod billboard_cloud;
 mod atlas;
 mod ambient_occlusion;
+mod height;
 
 mod cache;
 mod cli;

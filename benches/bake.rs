@@ -1,10 +1,11 @@
-//! Benchmark (`cargo bench [-- materials|packing|planes|billboard|watch|atlas|occlusion|ao]`): material-bake
+//! Benchmark (`cargo bench [-- materials|packing|planes|billboard|watch|atlas|occlusion|ao|height]`): material-bake
 //! throughput next to the raw encoder's, no-op rebuild and warm restart next to a full bake, the
 //! page packer's time and occupancy beside Python `rectpack`, plane selection speed,
 //! billboard-cloud bake time, memory, edit re-bake and fidelity per ε, the daemon's edit latency,
 //! burst handling and warm restart (`watch`), the texture atlas's full bake and one-texture edit
 //! (`atlas`), occlusion rays per second (`occlusion`), and the AmbientOcclusion kind's bake of the
-//! flight helmet with its quality beside per-vertex bakes (`ao`). Prints figures.
+//! flight helmet with its quality beside per-vertex bakes (`ao`), and the Height kind's distances
+//! and times on the bundled and a corpus pair (`height`). Prints figures.
 
 use std::path::Path;
 use std::time::Instant;
@@ -57,6 +58,9 @@ fn main() {
     }
     if corpus.join("meshes").is_dir() && wanted("ao") {
         bench_ambient_occlusion(&corpus);
+    }
+    if wanted("height") {
+        bench_height(repository);
     }
 }
 
@@ -943,4 +947,70 @@ fn glob_reports(folder: &Path) -> Vec<std::path::PathBuf> {
     }
     found.sort();
     found
+}
+
+/// The Height kind (DESIGN §3.4) at a 1024² map and level 8 on the bundled pair and on the
+/// corpus pair `tools/make_height_pair.py` makes from the flight helmet's hose (under
+/// `target/height_pairs/hose`; the section says how to make it when it is missing): the
+/// distances to the high mesh of the low, PN and displaced meshes against the bars, and what
+/// the bake, the tessellation and the measures took.
+fn bench_height(repository: &Path) {
+    let pairs = [
+        ("bundled spot", repository.join("examples/assets/meshes/spot_height"), "spot"),
+        ("corpus hose", repository.join("target/height_pairs/hose"), "hose"),
+    ];
+    for (label, folder, name) in pairs {
+        if !folder.join(format!("{name}_low.obj")).is_file() {
+            println!("height: {label}: no pair in {}: make it with the second command in tools/make_height_pair.py", folder.display());
+            continue;
+        }
+        let dir = tempfile::tempdir().expect("temporary folder");
+        std::os::unix::fs::symlink(folder.canonicalize().unwrap(), dir.path().join("assets")).unwrap();
+        std::fs::write(
+            dir.path().join("pipeline.ron"),
+            format!(
+                r#"Pipeline(source: "assets", output: "baked", assets: [
+                    Height(name: "pair", high: "{name}_high.obj", low: "{name}_low.obj", height: (size: 1024),
+                           tessellate: Some((level: 8, displace: true))),
+                ])"#
+            ),
+        )
+        .unwrap();
+        let (seconds, peak_mib, summary) = build_process(dir.path());
+        assert_eq!(summary["assets"][0]["status"], "ok", "{summary}");
+        let report: serde_json::Value = serde_json::from_slice(&std::fs::read(dir.path().join("baked/pair/report.json")).unwrap()).unwrap();
+        let distance = &report["distance"];
+        let figure = |mesh: &str, what: &str| distance[mesh][what].as_f64().unwrap_or(f64::NAN);
+        let (rms_ratio, hausdorff_ratio) =
+            (figure("pn_displaced", "rms") / figure("low", "rms"), figure("pn_displaced", "hausdorff") / figure("low", "hausdorff"));
+        let met = |ratio: f64, bar: f64| if ratio <= bar { "met" } else { "MISSED" };
+        println!(
+            "height: {label}: RMS low {:.5} / PN {:.5} / PN+displaced {:.5} ({:.3}× low, bar ≤ 0.25: {}); Hausdorff low {:.5} / PN {:.5} / PN+displaced {:.5} ({:.3}× low, bar ≤ 0.5: {}) (over the high diagonal, {} samples each way)",
+            figure("low", "rms"),
+            figure("pn", "rms"),
+            figure("pn_displaced", "rms"),
+            rms_ratio,
+            met(rms_ratio, 0.25),
+            figure("low", "hausdorff"),
+            figure("pn", "hausdorff"),
+            figure("pn_displaced", "hausdorff"),
+            hausdorff_ratio,
+            met(hausdorff_ratio, 0.5),
+            distance["samples_per_surface"],
+        );
+        let stage = |name: &str| report["stage_ms"][name].as_f64().unwrap_or(0.0);
+        println!(
+            "height: {label}: whole build {seconds:.2} s wall, peak {peak_mib:.0} MiB; bake of both 1024² maps {:.0} ms ({} texels measured, {} missed), tessellation {:.0} ms + displacement {:.0} ms ({} triangles), distances {:.0} ms, mesh loads {:.0} ms, BVH {:.0} ms, mips + encode {:.0} ms",
+            stage("bake"),
+            report["map"]["measured_texels"],
+            report["map"]["missed_texels"],
+            stage("tessellate"),
+            stage("displace"),
+            report["tessellated"]["triangles"],
+            stage("distance"),
+            stage("mesh"),
+            stage("bvh"),
+            stage("mips") + stage("encode"),
+        );
+    }
 }

@@ -296,12 +296,13 @@ fn height_outputs(db: &dyn Db, asset: Asset, output_folder: &Path, runs: &[Stage
         let files = tessellated_files(db, asset)?;
         let obj_path = output_folder.join("tessellated.obj");
         outputs.files.push((obj_path.clone(), files.obj.clone()));
-        let mtl: String = low
-            .loaded
-            .mesh
+        let mesh = &low.loaded.mesh;
+        let mtl: String = mesh
             .materials
             .iter()
-            .map(|material| {
+            .enumerate()
+            .filter(|(index, _)| mesh.triangle_materials.contains(&(*index as u32)))
+            .map(|(_, material)| {
                 crate::mesh::obj_text::mtl_material_text(material, |_, path| {
                     display_path(&crate::mesh::obj_text::relative_path(output_folder, path))
                 })

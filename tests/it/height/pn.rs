@@ -84,7 +84,10 @@ fn a_spheres_pn_surface_is_closer_to_the_sphere_than_its_facets() {
 
 /// A cube with a normal and a UV rectangle per face (24 vertices): every edge a hard edge and
 /// a UV seam.
-fn split_cube() -> (Vec<[f32; 3]>, Vec<[f32; 3]>, Vec<[f32; 2]>, Vec<[u32; 3]>) {
+/// Positions, normals, UVs, triangles.
+type MeshArrays = (Vec<[f32; 3]>, Vec<[f32; 3]>, Vec<[f32; 2]>, Vec<[u32; 3]>);
+
+fn split_cube() -> MeshArrays {
     let (mut positions, mut normals, mut uvs, mut triangles) = (Vec::new(), Vec::new(), Vec::new(), Vec::new());
     for axis in 0..3 {
         for sign in [-1.0f32, 1.0] {

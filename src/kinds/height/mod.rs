@@ -63,7 +63,7 @@ impl Kind for Height {
         vec![Job { asset, task: Task::Step("plan", 0), after: 0, label: asset.name(db).clone() }]
     }
 
-    fn run_step(db: &dyn Db, asset: Asset, step: &'static str, _index: u32) -> Result<Vec<Job>, Diagnostic> {
+    fn run_step(db: &dyn Db, asset: Asset, step: &'static str, index: u32) -> Result<Vec<Job>, Diagnostic> {
         let name = asset.name(db);
         match step {
             "plan" => {
@@ -80,10 +80,11 @@ impl Kind for Height {
                 Ok(jobs)
             }
             "tessellate" => tessellated_files(db, asset).map(|_| Vec::new()),
-            _ => {
-                let measured = measured_meshes(db, asset).get(_index as usize).copied().unwrap_or(Measured::Low);
-                distance_to_high(db, asset, measured).map(|_| Vec::new())
-            }
+            "distance" => match measured_meshes(db, asset).get(index as usize) {
+                Some(&measured) => distance_to_high(db, asset, measured).map(|_| Vec::new()),
+                None => Ok(Vec::new()),
+            },
+            other => unreachable!("the Height kind schedules no step `{other}`"),
         }
     }
 

@@ -370,12 +370,24 @@ fn level_of(db: &dyn Db, asset: Asset) -> Result<TessellateSettings, Diagnostic>
     tessellate_settings(db, asset).ok_or_else(|| Diagnostic::new(asset.main_file(db), "the asset does not tessellate"))
 }
 
+/// The most triangles a tessellated mesh may have (its OBJ text is about 90 bytes a triangle).
+pub const MAX_TESSELLATED_TRIANGLES: u64 = 4_000_000;
+
 /// The low mesh on its PN surface, `level` segments per edge (stage `tessellate`).
 #[salsa::tracked(returns(clone))]
 pub fn pn_mesh(db: &dyn Db, asset: Asset) -> Result<Arc<HashedMesh>, Diagnostic> {
     let settings = level_of(db, asset)?;
     let low = low_geometry(db, asset)?;
     let mesh = &low.loaded.mesh;
+    let triangles = mesh.triangles.len() as u64 * settings.level as u64 * settings.level as u64;
+    if triangles > MAX_TESSELLATED_TRIANGLES {
+        let message = format!(
+            "level {} would tessellate the low mesh's {} triangles into {triangles}, more than the {MAX_TESSELLATED_TRIANGLES} a tessellated mesh may have: lower `level`",
+            settings.level,
+            mesh.triangles.len()
+        );
+        return Err(Diagnostic::new(asset.main_file(db), message));
+    }
     let input = PnInput { positions: &mesh.positions, normals: &mesh.normals, uvs: mesh.uvs.as_deref(), triangles: &mesh.triangles };
     Ok(timed(db, TESSELLATE, asset.name(db), || hashed(tessellate(&input, settings.level))))
 }

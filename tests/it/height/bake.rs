@@ -141,6 +141,12 @@ fn bad_input_fails_with_a_message_naming_the_file() {
         ),
         ("mtllib field.mtl\nv 0 0 0\n".to_string(), field(0.0), "", "relief: assets/low.obj: the OBJ has no faces"),
     ];
+    let cases = cases.into_iter().chain([(
+        height_field_obj(32, |_, _| 0.0, true, true),
+        field(0.01),
+        "tessellate: Some((level: 64))",
+        "relief: assets/low.obj: level 64 would tessellate the low mesh's 2048 triangles into 8388608, more than the 4000000",
+    )]);
     for (low, high, settings, expected) in cases {
         let project = height_project(&high, &low, settings);
         let mut cirrus = project.open();
@@ -152,6 +158,7 @@ fn bad_input_fails_with_a_message_naming_the_file() {
             .collect();
         assert!(errors.iter().any(|error| error.starts_with(expected)), "{expected}\n{errors:#?}");
         assert!(!project.path("baked/relief/height.png").exists(), "no artifact written");
+        assert!(!project.path("baked/relief/tessellated.obj").exists(), "no artifact written");
     }
     // `check` says the same of the missing UVs.
     let project = height_project(&field(0.01), &height_field_obj(2, |_, _| 0.0, false, true), "");

@@ -404,7 +404,11 @@ pub fn asset_stage_ms<'a>(asset_name: &str, runs: &'a [StageRun]) -> std::collec
     let mut stage_ms = std::collections::BTreeMap::new();
     let below = format!("{asset_name}/");
     for run in runs.iter().filter(|run| !run.from_cache && (run.label == asset_name || run.label.starts_with(&below))) {
-        *stage_ms.entry(run.stage).or_insert(0.0) += (run.ms * 10.0).round() / 10.0;
+        *stage_ms.entry(run.stage).or_insert(0.0) += run.ms;
+    }
+    // Rounded once, after summing, so that the report reads 59.4 and not 59.400000000000006.
+    for ms in stage_ms.values_mut() {
+        *ms = (*ms * 10.0).round() / 10.0;
     }
     stage_ms
 }

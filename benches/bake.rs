@@ -812,8 +812,12 @@ fn bench_planes(corpus: &Path) {
     };
     let helmet = load("meshes/flight_helmet/FlightHelmet.obj");
     let start = Instant::now();
-    let set =
-        select_planes(&helmet.positions, &helmet.triangles, &helmet.triangle_materials, PlaneSettings { epsilon: 0.02, max_planes: None });
+    let set = select_planes(
+        &helmet.positions,
+        &helmet.triangles,
+        &helmet.triangle_materials,
+        PlaneSettings { epsilon: 0.02, max_planes: None, max_quads: None },
+    );
     let seconds = start.elapsed().as_secs_f64();
     println!(
         "planes: flight helmet, {} faces → {} planes in {:.0} ms: {:.0} faces/s (bar ≥ 100k)",
@@ -828,8 +832,12 @@ fn bench_planes(corpus: &Path) {
             .iter()
             .map(|&epsilon| {
                 let start = Instant::now();
-                let set =
-                    select_planes(&mesh.positions, &mesh.triangles, &mesh.triangle_materials, PlaneSettings { epsilon, max_planes: None });
+                let set = select_planes(
+                    &mesh.positions,
+                    &mesh.triangles,
+                    &mesh.triangle_materials,
+                    PlaneSettings { epsilon, max_planes: None, max_quads: None },
+                );
                 format!("ε {epsilon}: {} planes ({:.0} ms)", set.planes.len(), start.elapsed().as_secs_f64() * 1e3)
             })
             .collect();

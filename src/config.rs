@@ -51,8 +51,28 @@ pub enum EncodeQuality {
 pub struct BillboardSettings {
     pub epsilon: f32,
     pub max_planes: Option<u32>,
+    /// The most the LOD may draw (a hard bound on `lod.obj`); with one, ε is searched for and
+    /// `epsilon` is ignored.
+    pub budget: Option<LodBudget>,
     pub texel_density: Option<f32>,
     pub alpha_cutoff: f32,
+}
+
+/// What a billboard-cloud LOD may cost: quads (two triangles each) or triangles.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Hash, Serialize, Deserialize)]
+pub enum LodBudget {
+    Quads(u32),
+    Triangles(u32),
+}
+
+impl LodBudget {
+    /// The most quads the budget allows.
+    pub fn quads(self) -> u32 {
+        match self {
+            LodBudget::Quads(quads) => quads,
+            LodBudget::Triangles(triangles) => triangles / 2,
+        }
+    }
 }
 
 #[derive(Clone, Debug, PartialEq, Eq, Hash, Serialize)]
@@ -186,7 +206,7 @@ pub struct Settings {
 impl Default for Settings {
     fn default() -> Settings {
         Settings {
-            billboard: BillboardSettings { epsilon: 0.02, max_planes: None, texel_density: None, alpha_cutoff: 0.5 },
+            billboard: BillboardSettings { epsilon: 0.02, max_planes: None, budget: None, texel_density: None, alpha_cutoff: 0.5 },
             atlas: AtlasSettings { max_size: 2048, padding: 4, power_of_two: true },
             pack: PackSettings { max_size: 4096, padding: 4, rotate: true, trim: true, power_of_two: false, pages: 4 },
             ao: AoSettings {
@@ -662,6 +682,12 @@ impl Validator<'_> {
                 self.error_at_key("max_planes", anchor, "max_planes must be at least 1");
             }
             settings.billboard.max_planes = max_planes;
+        }
+        if let Some(budget) = billboard.budget {
+            if budget.is_some_and(|budget| !(1..=1_000_000).contains(&budget.quads())) {
+                self.error_at_key("budget", anchor, "budget must allow between 1 and 1000000 quads (Triangles: at least 2)");
+            }
+            settings.billboard.budget = budget;
         }
         if let Some(density) = billboard.texel_density {
             if density.is_some_and(|d| !(d > 0.0 && d.is_finite())) {

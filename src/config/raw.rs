@@ -3,7 +3,7 @@
 
 use serde::{Deserialize, Deserializer};
 
-use super::{AoMode, AoOccluders, AssetKindName, BlockFormat, Container, EncodeQuality, HeightProjection};
+use super::{AoMode, AoOccluders, AssetKindName, BlockFormat, Container, EncodeQuality, HeightProjection, LodBudget};
 use crate::mesh::occlusion::RayDistribution;
 
 #[derive(Deserialize)]
@@ -104,6 +104,8 @@ pub struct BillboardOverrides {
     pub epsilon: Option<f32>,
     #[serde(default, deserialize_with = "explicit")]
     pub max_planes: Option<Option<u32>>,
+    #[serde(default, deserialize_with = "explicit")]
+    pub budget: Option<Option<LodBudget>>,
     #[serde(default, deserialize_with = "explicit")]
     pub texel_density: Option<Option<f32>>,
     pub alpha_cutoff: Option<f32>,

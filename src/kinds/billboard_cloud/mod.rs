@@ -256,10 +256,13 @@ fn billboard_outputs(db: &dyn Db, asset: Asset, output_folder: &Path, runs: &[St
         "faces": planes.face_count,
         "planes": planes.planes.len(),
         "quads": layout.layout.placements.len(),
+        "triangles": 2 * layout.layout.placements.len(),
+        // The quad budget (none: ε decides) and the ε it was met with.
+        "budget_quads": settings.billboard.budget.map(crate::config::LodBudget::quads),
         // Faces of solid materials drawn on another plane's quad too (crack filling).
         "faces_also_drawn": layout.rectangles.iter().map(|rectangle| rectangle.also_drawn.len()).sum::<usize>(),
         "alpha_cutoff": settings.billboard.alpha_cutoff,
-        "epsilon": settings.billboard.epsilon,
+        "epsilon": planes.epsilon_fraction,
         "epsilon_world": planes.epsilon,
         "max_error_world": planes.max_error,
         "atlas": {

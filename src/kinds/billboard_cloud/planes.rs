@@ -11,6 +11,9 @@ pub struct PlaneSettings {
     /// ε as a fraction of the bounding-sphere radius.
     pub epsilon: f32,
     pub max_planes: Option<u32>,
+    /// With a quad budget, ε is searched for (`epsilon` is ignored): see
+    /// [`select_planes_within_budget`].
+    pub max_quads: Option<u32>,
 }
 
 /// One plane: points `x` with `normal · x = distance`, and the faces assigned to it.
@@ -27,6 +30,8 @@ pub struct PlaneSet {
     pub planes: Vec<Plane>,
     /// ε in world units.
     pub epsilon: f32,
+    /// ε as a fraction of the bounding-sphere radius (the setting, or the one a budget found).
+    pub epsilon_fraction: f32,
     /// The largest distance of a vertex of an assigned face from its plane (≤ ε unless capped).
     pub max_error: f32,
     pub face_count: usize,
@@ -381,7 +386,57 @@ pub fn select_planes(positions: &[[f32; 3]], triangles: &[[u32; 3]], face_materi
             Plane { normal: normal.to_array(), distance: rho + normal.dot(grid.center), faces: members }
         })
         .collect();
-    PlaneSet { planes, epsilon: grid.epsilon, max_error, face_count: faces.len() }
+    PlaneSet { planes, epsilon: grid.epsilon, epsilon_fraction: settings.epsilon, max_error, face_count: faces.len() }
+}
+
+/// ε (as a fraction of the radius) is searched for between these.
+const BUDGET_EPSILON_RANGE: (f32, f32) = (0.002, 0.5);
+/// Bisection steps on log ε: the range is narrowed 2⁹ = 512 times (ε found within 1.2 %).
+const BUDGET_SEARCH_STEPS: usize = 9;
+
+/// The most faithful planes a quad budget allows: every plane is at least one quad, so the
+/// smallest ε for which the greedy selection (with its refits) needs at most `max_quads` planes,
+/// found by bisection on log ε (the count falls as ε grows, nearly monotonically: the smallest
+/// fitting ε tried is kept). When even the largest ε needs more planes, the planes are capped
+/// at `max_quads` there. The planes' clusters are merged down to the budget afterwards
+/// (`rectangles::merge_rectangles_to_budget`).
+pub fn select_planes_within_budget(
+    positions: &[[f32; 3]],
+    triangles: &[[u32; 3]],
+    face_materials: &[u32],
+    max_quads: u32,
+    max_planes: Option<u32>,
+) -> PlaneSet {
+    let cap = max_planes.map_or(max_quads, |planes| planes.min(max_quads)).max(1);
+    // A run stops choosing planes one past the cap: it has shown that ε does not fit, and no
+    // run costs more than the budget's worth of planes.
+    let run = |fraction: f32| {
+        let settings = PlaneSettings { epsilon: fraction, max_planes: Some(cap.saturating_add(1)), max_quads: None };
+        select_planes(positions, triangles, face_materials, settings)
+    };
+    // Fits: within the cap with every face within ε (none left over to the nearest plane).
+    let fits = |set: &PlaneSet| set.planes.len() <= cap as usize && set.max_error <= set.epsilon * (1.0 + 1e-4);
+    let (mut low, mut high) = (BUDGET_EPSILON_RANGE.0.ln(), BUDGET_EPSILON_RANGE.1.ln());
+    let mut best = None;
+    for _ in 0..BUDGET_SEARCH_STEPS {
+        let middle = 0.5 * (low + high);
+        let set = run(middle.exp());
+        if fits(&set) {
+            high = middle;
+            best = Some(set);
+        } else {
+            low = middle;
+        }
+    }
+    best.unwrap_or_else(|| {
+        let widest = run(BUDGET_EPSILON_RANGE.1);
+        if fits(&widest) {
+            widest
+        } else {
+            let settings = PlaneSettings { epsilon: BUDGET_EPSILON_RANGE.1, max_planes: Some(cap), max_quads: None };
+            select_planes(positions, triangles, face_materials, settings)
+        }
+    })
 }
 
 /// Moves every face to the plane nearest it among those holding its material, then fits the

@@ -27,7 +27,7 @@ use crate::texture::{SurfaceKind, Texture, TextureSlot};
 
 // Planes 2: each plane is fitted to its faces (least squares within ε). 3: faces then move to
 // their nearest plane holding their material (rounds of reassignment and refitting).
-pub const PLANES: Stage = Stage { name: "planes", version: 3 };
+pub const PLANES: Stage = Stage { name: "planes", version: 4 };
 // Layout 2: faces of solid materials are also drawn on other planes' rectangles they lie within
 // ε of (crack filling).
 pub const LAYOUT: Stage = Stage { name: "layout", version: 3 };
@@ -47,17 +47,22 @@ impl KeyPart for crate::config::AtlasSettings {
 #[salsa::tracked(returns(copy))]
 pub fn plane_settings(db: &dyn Db, asset: Asset) -> super::planes::PlaneSettings {
     let billboard = &asset.settings(db).billboard;
-    super::planes::PlaneSettings { epsilon: billboard.epsilon, max_planes: billboard.max_planes }
+    super::planes::PlaneSettings {
+        epsilon: billboard.epsilon,
+        max_planes: billboard.max_planes,
+        max_quads: billboard.budget.map(crate::config::LodBudget::quads),
+    }
 }
 
 #[salsa::tracked(returns(copy))]
 pub fn planes_cache_key(db: &dyn Db, asset: Asset) -> CacheKey {
     let settings = plane_settings(db, asset);
-    stage_key(PLANES)
-        .part(&mesh_cache_key(db, asset, asset.main_file(db).clone()).0)
-        .part(&settings.epsilon)
-        .part(&settings.max_planes)
-        .finish()
+    let key = stage_key(PLANES).part(&mesh_cache_key(db, asset, asset.main_file(db).clone()).0);
+    match settings.max_quads {
+        // ε is searched for: the setting does not enter the key.
+        Some(quads) => key.part("budget").part(&quads).part(&settings.max_planes).finish(),
+        None => key.part(&settings.epsilon).part(&settings.max_planes).finish(),
+    }
 }
 
 /// The planes (stage `planes`).
@@ -67,8 +72,18 @@ pub fn billboard_planes(db: &dyn Db, asset: Asset) -> Result<Arc<super::planes::
     cached_json(db, PLANES, name, planes_cache_key(db, asset), || {
         let loaded = loaded_mesh(db, asset)?;
         let settings = plane_settings(db, asset);
+        let mesh = &loaded.mesh;
         timed(db, PLANES, name, || {
-            Ok(super::planes::select_planes(&loaded.mesh.positions, &loaded.mesh.triangles, &loaded.mesh.triangle_materials, settings))
+            Ok(match settings.max_quads {
+                Some(quads) => super::planes::select_planes_within_budget(
+                    &mesh.positions,
+                    &mesh.triangles,
+                    &mesh.triangle_materials,
+                    quads,
+                    settings.max_planes,
+                ),
+                None => super::planes::select_planes(&mesh.positions, &mesh.triangles, &mesh.triangle_materials, settings),
+            })
         })
     })
     .map(Arc::new)
@@ -107,6 +122,15 @@ fn compute_billboard_layout(db: &dyn Db, asset: Asset) -> Result<BillboardLayout
     let (atlas, density) = atlas_layout_settings(db, asset);
     timed(db, LAYOUT, asset.name(db), || {
         let mut rectangles = super::rectangles::plane_rectangles(&loaded.mesh.positions, &loaded.mesh.triangles, &planes);
+        if let Some(quads) = plane_settings(db, asset).max_quads {
+            rectangles = super::rectangles::merge_rectangles_to_budget(
+                &loaded.mesh.positions,
+                &loaded.mesh.triangles,
+                &planes,
+                rectangles,
+                quads as usize,
+            );
+        }
         let solid_materials: Vec<bool> = loaded.mesh.materials.iter().map(|material| !material.cut_out).collect();
         let crack_filling = super::rectangles::CrackFillingInput {
             positions: &loaded.mesh.positions,

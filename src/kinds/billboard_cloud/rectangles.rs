@@ -31,40 +31,111 @@ impl PlaneRectangle {
     }
 }
 
+/// A plane's in-plane axes (any, fixed per normal) and its faces' projection onto them.
+fn plane_projection<'a>(positions: &'a [[f32; 3]], normal: Vec3) -> (Vec3, Vec3, impl Fn(u32) -> Vec2 + 'a) {
+    let u = normal.any_orthonormal_vector();
+    let v = normal.cross(u);
+    (u, v, move |vertex: u32| {
+        let p = Vec3::from(positions[vertex as usize]);
+        Vec2::new(p.dot(u), p.dot(v))
+    })
+}
+
+/// The minimum-area rectangle of `faces` (of plane `plane_index`) on their plane.
+fn cluster_rectangle(
+    positions: &[[f32; 3]],
+    triangles: &[[u32; 3]],
+    planes: &PlaneSet,
+    plane_index: usize,
+    faces: Vec<u32>,
+) -> PlaneRectangle {
+    let plane = &planes.planes[plane_index];
+    let normal = Vec3::from(plane.normal);
+    let (u, v, project) = plane_projection(positions, normal);
+    let points: Vec<Vec2> = faces.iter().flat_map(|&face| triangles[face as usize]).map(project).collect();
+    let (axis, min, max) = minimum_area_rectangle(&convex_hull(points));
+    let x_axis = u * axis.x + v * axis.y;
+    let y_axis = normal.cross(x_axis);
+    let on_plane = normal * plane.distance;
+    PlaneRectangle {
+        plane: plane_index as u32,
+        faces,
+        also_drawn: Vec::new(),
+        frame: RectangleFrame {
+            origin: (on_plane + x_axis * min.x + y_axis * min.y).to_array(),
+            x_axis: x_axis.to_array(),
+            y_axis: y_axis.to_array(),
+            normal: normal.to_array(),
+            width: (max.x - min.x).max(0.0),
+            height: (max.y - min.y).max(0.0),
+        },
+    }
+}
+
 /// The rectangles of every plane of `planes`, in plane order, clusters within a plane ordered by
 /// their first face. Faces closer than `2ε` on the plane share a rectangle.
 pub fn plane_rectangles(positions: &[[f32; 3]], triangles: &[[u32; 3]], planes: &PlaneSet) -> Vec<PlaneRectangle> {
     let mut rectangles = Vec::new();
     for (plane_index, plane) in planes.planes.iter().enumerate() {
-        let normal = Vec3::from(plane.normal);
-        let u = normal.any_orthonormal_vector();
-        let v = normal.cross(u);
-        let project = |vertex: u32| {
-            let p = Vec3::from(positions[vertex as usize]);
-            Vec2::new(p.dot(u), p.dot(v))
-        };
+        let (_, _, project) = plane_projection(positions, Vec3::from(plane.normal));
         for faces in clusters(&plane.faces, triangles, &project, 2.0 * planes.epsilon.max(1e-6)) {
-            let points: Vec<Vec2> = faces.iter().flat_map(|&face| triangles[face as usize]).map(project).collect();
-            let (axis, min, max) = minimum_area_rectangle(&convex_hull(points));
-            let x_axis = u * axis.x + v * axis.y;
-            let y_axis = normal.cross(x_axis);
-            let on_plane = normal * plane.distance;
-            rectangles.push(PlaneRectangle {
-                plane: plane_index as u32,
-                faces,
-                also_drawn: Vec::new(),
-                frame: RectangleFrame {
-                    origin: (on_plane + x_axis * min.x + y_axis * min.y).to_array(),
-                    x_axis: x_axis.to_array(),
-                    y_axis: y_axis.to_array(),
-                    normal: normal.to_array(),
-                    width: (max.x - min.x).max(0.0),
-                    height: (max.y - min.y).max(0.0),
-                },
-            });
+            rectangles.push(cluster_rectangle(positions, triangles, planes, plane_index, faces));
         }
     }
     rectangles
+}
+
+/// Merges rectangles of one plane, two at a time, until there are at most `max_quads` (or one
+/// per plane): each time the pair whose merged rectangle adds the least area to the two it
+/// replaces, so the atlas grows as little as the budget allows. Deterministic (ties go to the
+/// first pair); plane order and, within a plane, the order of first faces are kept.
+pub fn merge_rectangles_to_budget(
+    positions: &[[f32; 3]],
+    triangles: &[[u32; 3]],
+    planes: &PlaneSet,
+    rectangles: Vec<PlaneRectangle>,
+    max_quads: usize,
+) -> Vec<PlaneRectangle> {
+    let area = |rectangle: &PlaneRectangle| rectangle.frame.width as f64 * rectangle.frame.height as f64;
+    let merged_faces = |a: &PlaneRectangle, b: &PlaneRectangle| {
+        let mut faces: Vec<u32> = a.faces.iter().chain(&b.faces).copied().collect();
+        faces.sort_unstable();
+        faces
+    };
+    let mut by_plane: Vec<Vec<PlaneRectangle>> = vec![Vec::new(); planes.planes.len()];
+    for rectangle in rectangles {
+        by_plane[rectangle.plane as usize].push(rectangle);
+    }
+    let mut count: usize = by_plane.iter().map(Vec::len).sum();
+    // Per plane, its best pair: (added area, first, second, merged rectangle).
+    type Best = Option<(f64, usize, usize, PlaneRectangle)>;
+    let best_pair = |plane: usize, members: &[PlaneRectangle]| -> Best {
+        let mut best: Best = None;
+        for first in 0..members.len() {
+            for second in first + 1..members.len() {
+                let merged = cluster_rectangle(positions, triangles, planes, plane, merged_faces(&members[first], &members[second]));
+                let added = area(&merged) - area(&members[first]) - area(&members[second]);
+                if best.as_ref().is_none_or(|(least, ..)| added < *least) {
+                    best = Some((added, first, second, merged));
+                }
+            }
+        }
+        best
+    };
+    let mut bests: Vec<Best> = by_plane.par_iter().enumerate().map(|(plane, members)| best_pair(plane, members)).collect();
+    while count > max_quads {
+        let chosen = (0..bests.len())
+            .filter(|&plane| bests[plane].is_some())
+            .min_by(|&a, &b| bests[a].as_ref().unwrap().0.total_cmp(&bests[b].as_ref().unwrap().0).then(a.cmp(&b)));
+        let Some(plane) = chosen else { break };
+        let (_, first, second, merged) = bests[plane].take().expect("chosen");
+        let members = &mut by_plane[plane];
+        members.remove(second);
+        members[first] = merged;
+        count -= 1;
+        bests[plane] = best_pair(plane, members);
+    }
+    by_plane.into_iter().flatten().collect()
 }
 
 /// The mesh as [`add_crack_filling_faces`] needs it.

@@ -67,7 +67,7 @@ fn render_stages_showing(project: &TempProject, material: &str) -> BTreeSet<Stri
         &mesh.positions,
         &mesh.triangles,
         &mesh.triangle_materials,
-        cirrus::kinds::billboard_cloud::planes::PlaneSettings { epsilon: 0.02, max_planes: None },
+        cirrus::kinds::billboard_cloud::planes::PlaneSettings { epsilon: 0.02, max_planes: None, max_quads: None },
     );
     let rectangles = cirrus::kinds::billboard_cloud::rectangles::plane_rectangles(&mesh.positions, &mesh.triangles, &planes);
     let index = mesh.materials.iter().position(|m| m.name == material).expect("material") as u32;

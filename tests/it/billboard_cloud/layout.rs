@@ -26,7 +26,7 @@ fn plane_rectangles_frame_every_face_of_their_plane() {
     let positions: Vec<[f32; 3]> = (0..8).map(|i| [(i & 1) as f32 * 2.0, ((i >> 1) & 1) as f32, ((i >> 2) & 1) as f32 * 3.0]).collect();
     let quads = [[0u32, 1, 3, 2], [4, 6, 7, 5], [0, 4, 5, 1], [2, 3, 7, 6], [0, 2, 6, 4], [1, 5, 7, 3]];
     let triangles: Vec<[u32; 3]> = quads.iter().flat_map(|q| [[q[0], q[1], q[2]], [q[0], q[2], q[3]]]).collect();
-    let planes = select_planes(&positions, &triangles, &[], PlaneSettings { epsilon: 0.02, max_planes: None });
+    let planes = select_planes(&positions, &triangles, &[], PlaneSettings { epsilon: 0.02, max_planes: None, max_quads: None });
     let rectangles = plane_rectangles(&positions, &triangles, &planes);
     let mut areas: Vec<f32> = rectangles.iter().map(|r| r.frame.width * r.frame.height).collect();
     areas.sort_by(f32::total_cmp);
@@ -95,7 +95,7 @@ fn lod_obj_loads_back_with_every_quad_inside_its_atlas_placement() {
     let positions: Vec<[f32; 3]> = (0..8).map(|i| [(i & 1) as f32 * 2.0, ((i >> 1) & 1) as f32, ((i >> 2) & 1) as f32 * 3.0]).collect();
     let quads = [[0u32, 1, 3, 2], [4, 6, 7, 5], [0, 4, 5, 1], [2, 3, 7, 6], [0, 2, 6, 4], [1, 5, 7, 3]];
     let triangles: Vec<[u32; 3]> = quads.iter().flat_map(|q| [[q[0], q[1], q[2]], [q[0], q[2], q[3]]]).collect();
-    let planes = select_planes(&positions, &triangles, &[], PlaneSettings { epsilon: 0.02, max_planes: None });
+    let planes = select_planes(&positions, &triangles, &[], PlaneSettings { epsilon: 0.02, max_planes: None, max_quads: None });
     let rectangles = plane_rectangles(&positions, &triangles, &planes);
     let settings = AtlasSettings { max_size: 256, padding: 4, power_of_two: true };
     let layout = layout_rectangles(&rectangles.iter().map(|r| (r.frame.width, r.frame.height)).collect::<Vec<_>>(), &settings, None);

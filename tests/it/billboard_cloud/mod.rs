@@ -4,5 +4,6 @@
 
 pub mod bake;
 mod gpu;
+mod budget;
 mod layout;
 mod planes;

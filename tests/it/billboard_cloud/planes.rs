@@ -4,7 +4,7 @@
 use cirrus::kinds::billboard_cloud::planes::{select_planes, PlaneSet, PlaneSettings};
 
 fn settings(epsilon: f32) -> PlaneSettings {
-    PlaneSettings { epsilon, max_planes: None }
+    PlaneSettings { epsilon, max_planes: None, max_quads: None }
 }
 
 /// The largest distance of a vertex of each plane's faces from that plane, and a check that
@@ -82,7 +82,7 @@ fn every_face_is_assigned_within_epsilon_and_selection_is_deterministic() {
 #[test]
 fn max_planes_caps_the_count_and_reports_the_achieved_error() {
     let (positions, triangles) = soup(500);
-    let set = select_planes(&positions, &triangles, &[], PlaneSettings { epsilon: 0.02, max_planes: Some(8) });
+    let set = select_planes(&positions, &triangles, &[], PlaneSettings { epsilon: 0.02, max_planes: Some(8), max_quads: None });
     assert!(set.planes.len() <= 8);
     let worst = check_assignment(&positions, &triangles, &set);
     assert!(worst > set.epsilon, "capped: some faces move further than ε");

@@ -1,0 +1,96 @@
+//! LODs by budget (`billboard: (budget: Some(Quads(n)))`): the quads in `lod.obj` never exceed
+//! the budget, on the bundled bush and on a mesh that is hard to cover (hundreds of disjoint,
+//! randomly turned parts), and every face still lies on exactly one quad.
+
+use std::path::Path;
+
+use cirrus::kinds::billboard_cloud::planes::select_planes_within_budget;
+use cirrus::kinds::billboard_cloud::rectangles::{merge_rectangles_to_budget, plane_rectangles};
+
+use crate::support::{build, TempProject};
+
+/// Quads in an LOD's OBJ (two triangles each).
+fn lod_quads(obj: &[u8]) -> usize {
+    String::from_utf8_lossy(obj).lines().filter(|line| line.starts_with("f ")).count() / 2
+}
+
+/// Every face of the mesh on exactly one of the budget's rectangles, and no more rectangles
+/// than the budget.
+fn assert_budget_covers_every_face(positions: &[[f32; 3]], triangles: &[[u32; 3]], materials: &[u32], quads: u32) -> f32 {
+    let planes = select_planes_within_budget(positions, triangles, materials, quads, None);
+    assert!(planes.planes.len() <= quads as usize, "{} planes for {quads} quads", planes.planes.len());
+    let rectangles =
+        merge_rectangles_to_budget(positions, triangles, &planes, plane_rectangles(positions, triangles, &planes), quads as usize);
+    assert!(rectangles.len() <= quads as usize, "{} rectangles for {quads} quads", rectangles.len());
+    let mut drawn = vec![0u32; triangles.len()];
+    for rectangle in &rectangles {
+        for &face in &rectangle.faces {
+            drawn[face as usize] += 1;
+        }
+    }
+    assert!(drawn.iter().all(|&count| count == 1), "every face on exactly one quad");
+    planes.epsilon_fraction
+}
+
+/// 300 small boxes, each turned its own way, scattered in a cube: no plane holds two of them.
+fn scattered_boxes() -> (Vec<[f32; 3]>, Vec<[u32; 3]>) {
+    let (mut positions, mut triangles) = (Vec::new(), Vec::new());
+    let mut state = 12345u64;
+    let mut random = move || {
+        state = state.wrapping_mul(6364136223846793005).wrapping_add(1442695040888963407);
+        (state >> 40) as f32 / (1u64 << 24) as f32
+    };
+    for _ in 0..300 {
+        let centre = glam::Vec3::new(random(), random(), random()) * 10.0;
+        let turn = glam::Quat::from_euler(glam::EulerRot::XYZ, random() * 6.3, random() * 6.3, random() * 6.3);
+        let first = positions.len() as u32;
+        for corner in 0..8 {
+            let local = glam::Vec3::new((corner & 1) as f32, ((corner >> 1) & 1) as f32, ((corner >> 2) & 1) as f32) - 0.5;
+            positions.push((centre + turn * (local * 0.2)).to_array());
+        }
+        for [a, b, c, d] in [[0, 1, 3, 2], [4, 6, 7, 5], [0, 4, 5, 1], [2, 3, 7, 6], [0, 2, 6, 4], [1, 5, 7, 3]] {
+            triangles.push([first + a, first + b, first + c]);
+            triangles.push([first + a, first + c, first + d]);
+        }
+    }
+    (positions, triangles)
+}
+
+#[test]
+fn a_budget_bounds_the_quads_and_every_face_stays_drawn() {
+    let (positions, triangles) = scattered_boxes();
+    for quads in [1, 12, 40, 200] {
+        assert_budget_covers_every_face(&positions, &triangles, &[], quads);
+    }
+    // A bigger budget never needs a larger ε.
+    let root = Path::new(env!("CARGO_MANIFEST_DIR"));
+    let obj = std::fs::read(root.join("examples/assets/trees/bush_2.obj")).unwrap();
+    let (bush, _) = cirrus::mesh::load_mesh(Path::new("bush_2.obj"), &obj, &Default::default(), Path::new("")).unwrap();
+    let epsilons: Vec<f32> = [16, 64, 256]
+        .into_iter()
+        .map(|quads| assert_budget_covers_every_face(&bush.positions, &bush.triangles, &bush.triangle_materials, quads))
+        .collect();
+    assert!(epsilons.windows(2).all(|pair| pair[1] <= pair[0]), "{epsilons:?}");
+}
+
+#[test]
+fn a_budgeted_bake_writes_at_most_that_many_quads() {
+    let project = TempProject::new(
+        r#"Pipeline(source: "examples/assets", output: "baked", assets: [
+            BillboardCloud(name: "bush16", mesh: "trees/bush_2.obj", billboard: (budget: Some(Quads(16))), atlas: (max_size: 256)),
+            BillboardCloud(name: "bush48", mesh: "trees/bush_2.obj", billboard: (budget: Some(Triangles(96))), atlas: (max_size: 256)),
+        ])"#,
+    );
+    let root = Path::new(env!("CARGO_MANIFEST_DIR"));
+    std::os::unix::fs::symlink(root.join("examples"), project.path("examples")).unwrap();
+    let summary = build(&mut project.open());
+    assert!(summary.all_ok(), "{}", summary.to_text());
+    for (name, quads) in [("bush16", 16), ("bush48", 48)] {
+        let lod = lod_quads(&project.read(&format!("baked/{name}/lod.obj")));
+        let report: serde_json::Value = serde_json::from_slice(&project.read(&format!("baked/{name}/report.json"))).unwrap();
+        assert!(lod <= quads && lod > 0, "{name}: {lod} quads");
+        assert_eq!(report["quads"], lod, "{name}");
+        assert_eq!(report["budget_quads"], quads, "{name}");
+        assert!(report["max_error_world"].as_f64().unwrap() <= report["epsilon_world"].as_f64().unwrap() * 1.0001, "{report}");
+    }
+}

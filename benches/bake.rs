@@ -46,6 +46,9 @@ fn main() {
         if wanted("billboard-quality") {
             bench_billboard_quality(&corpus);
         }
+        if wanted("billboard-budget") {
+            bench_billboard_budget(&corpus);
+        }
         if wanted("watch") {
             bench_watch(&corpus);
         }
@@ -793,6 +796,70 @@ fn bench_billboard_quality(corpus: &Path) {
             ));
         }
         println!("billboard: {tree}: {}", figures.join("; "));
+    }
+}
+
+/// Mean silhouette IoU (16 samples per pixel) of each corpus tree's LOD at 32 to 512 quads: with
+/// `budget: Some(Quads(n))`, and beside it what ε alone gives within the same count (the
+/// smallest ε, found by bisection, whose cloud has at most n quads: what a user raising ε
+/// until the LOD fits would get); plane-selection time of the budget's search.
+fn bench_billboard_budget(corpus: &Path) {
+    use cirrus::kinds::billboard_cloud::planes::{select_planes, PlaneSettings};
+    use cirrus::kinds::billboard_cloud::rectangles::plane_rectangles;
+    for tree in ["oak_medium", "ash_small", "bush_2"] {
+        let obj = std::fs::read(corpus.join(format!("trees/{tree}.obj"))).unwrap();
+        let (mesh, _) = cirrus::mesh::load_mesh(Path::new("tree.obj"), &obj, &Default::default(), Path::new("")).unwrap();
+        let quads_at = |epsilon: f32| {
+            let planes = select_planes(
+                &mesh.positions,
+                &mesh.triangles,
+                &mesh.triangle_materials,
+                PlaneSettings { epsilon, max_planes: None, max_quads: None },
+            );
+            plane_rectangles(&mesh.positions, &mesh.triangles, &planes).len()
+        };
+        let mut figures = Vec::new();
+        for quads in [32usize, 64, 128, 256, 512] {
+            // The smallest ε whose cloud fits, by bisection on log ε.
+            let (mut low, mut high) = (0.002f32.ln(), 0.5f32.ln());
+            for _ in 0..9 {
+                let middle = 0.5 * (low + high);
+                if quads_at(middle.exp()) <= quads {
+                    high = middle;
+                } else {
+                    low = middle;
+                }
+            }
+            let epsilon_alone = high.exp();
+            let mut row = format!("{quads} quads:");
+            for (label, settings) in [("budget", format!("budget: Some(Quads({quads}))")), ("ε alone", format!("epsilon: {epsilon_alone}"))]
+            {
+                let dir =
+                    tree_project(corpus, &format!(r#"BillboardCloud(name: "tree", mesh: "trees/{tree}.obj", billboard: ({settings}))"#));
+                let mut project = Project::open(
+                    load_pipeline(&dir.path().join("pipeline.ron")).unwrap(),
+                    ProjectOptions { persistent_cache: false, ..Default::default() },
+                );
+                let options = cirrus::kinds::billboard_cloud::PreviewOptions {
+                    asset: "tree".into(),
+                    settings: Default::default(),
+                    out: "preview".into(),
+                };
+                let metrics = cirrus::kinds::billboard_cloud::preview(&mut project, &options).expect("preview");
+                let report: serde_json::Value =
+                    serde_json::from_slice(&std::fs::read(dir.path().join("baked/tree/report.json")).unwrap()).unwrap();
+                row.push_str(&format!(
+                    " {label} IoU {:.3} ({} quads, {} planes, ε {:.4}, planes stage {:.0} ms);",
+                    metrics.mean_iou,
+                    report["quads"],
+                    report["planes"],
+                    report["epsilon"].as_f64().unwrap_or(0.0),
+                    report["stage_ms"]["planes"].as_f64().unwrap_or(0.0)
+                ));
+            }
+            figures.push(row);
+        }
+        println!("billboard-budget: {tree}: {}", figures.join(" "));
     }
 }
 

@@ -1,5 +1,6 @@
 //! Block-compressed textures: every mip level encoded to BC1/BC3/BC4/BC5/BC7 by Intel's ISPC
-//! texture compressor (`intel_tex_2`), in parallel strips of block rows.
+//! texture compressor (`intel_tex_2`) for BC1/BC3/BC7 in parallel strips of block rows, and
+//! cirrus's own BC4 search (`bc4`) per block for BC4 and BC5.
 
 use std::fmt;
 use std::sync::Arc;
@@ -131,7 +132,7 @@ fn encode_block_list(blocks: &[&[u8]], settings: BlockEncodeSettings) -> Vec<u8>
     let mut encoded = vec![0u8; distinct.len() * size];
     for (numbers, quality) in [(visible, settings.quality), (fill, EncodeQuality::UltraFast)] {
         let blocks: Vec<&[u8]> = numbers.iter().map(|&number| distinct[number as usize]).collect();
-        let fresh = encode_blocks(&blocks, settings.format, channels, &bc7_settings(quality, settings.alpha));
+        let fresh = encode_blocks(&blocks, settings.format, channels, quality, &bc7_settings(quality, settings.alpha));
         for (index, &number) in numbers.iter().enumerate() {
             encoded[number as usize * size..][..size].copy_from_slice(&fresh[index * size..][..size]);
         }
@@ -144,9 +145,26 @@ fn encode_block_list(blocks: &[&[u8]], settings: BlockEncodeSettings) -> Vec<u8>
 }
 
 /// Encodes `blocks` (each 16 texels of `channels` bytes, rows top to bottom), in parallel.
-fn encode_blocks(blocks: &[&[u8]], format: BlockFormat, channels: usize, bc7_settings: &intel_tex_2::bc7::EncodeSettings) -> Vec<u8> {
+fn encode_blocks(
+    blocks: &[&[u8]],
+    format: BlockFormat,
+    channels: usize,
+    quality: EncodeQuality,
+    bc7_settings: &intel_tex_2::bc7::EncodeSettings,
+) -> Vec<u8> {
     let size = block_bytes(format);
     let mut encoded = vec![0u8; blocks.len() * size];
+    if matches!(format, BlockFormat::Bc4 | BlockFormat::Bc5) {
+        // cirrus's own BC4 search, one channel at a time (BC5: red, then green).
+        let search = super::bc4::Bc4Search::for_quality(quality);
+        encoded.par_chunks_mut(size).zip(blocks.par_iter()).with_min_len(64).for_each(|(output, block)| {
+            for (channel, output) in output.chunks_exact_mut(8).enumerate() {
+                let values: [u8; 16] = std::array::from_fn(|texel| block[texel * channels + channel]);
+                output.copy_from_slice(&super::bc4::encode_bc4_block(&values, search));
+            }
+        });
+        return encoded;
+    }
     encoded.par_chunks_mut(size * BLOCKS_PER_TASK).zip(blocks.par_chunks(BLOCKS_PER_TASK)).for_each(|(output, blocks)| {
         // The blocks side by side: one row of blocks, 4 texels high.
         let row_len = 4 * channels;

@@ -148,27 +148,27 @@ struct Candidate {
 /// six (e0 <= e1), keeping the better.
 #[inline(always)]
 fn consider(sorted: &[u8; 16], high: i32, low: i32, eight: bool, best: &mut Candidate) {
-    if !(0..=255).contains(&high) || !(0..=255).contains(&low) {
-        return;
-    }
-    let (e0, e1) = if eight {
-        if high <= low {
-            return;
-        }
-        (high as u8, low as u8)
-    } else {
-        if low > high {
-            return;
-        }
-        (low as u8, high as u8)
-    };
+    let Some((e0, e1)) = endpoint_pair(high, low, eight) else { return };
     let error = block_error(sorted, e0, e1, best.error);
     if error < best.error {
         *best = Candidate { e0, e1, error };
     }
 }
 
-/// Candidate endpoint pairs of one block, scored eight at a time.
+/// The bytes `e0`, `e1` of ends `high` and `low` in the eight-value (`e0 > e1`) or six-value
+/// (`e0 <= e1`) mode; none when they are out of range or cannot be in that mode.
+fn endpoint_pair(high: i32, low: i32, eight: bool) -> Option<(u8, u8)> {
+    if !(0..=255).contains(&high) || !(0..=255).contains(&low) {
+        return None;
+    }
+    match eight {
+        true if high > low => Some((high as u8, low as u8)),
+        false if low <= high => Some((low as u8, high as u8)),
+        _ => None,
+    }
+}
+
+/// Candidate endpoint pairs of one block, scored 32 at a time.
 struct Candidates {
     pairs: [(u8, u8); MAX_CANDIDATES],
     count: usize,
@@ -184,20 +184,7 @@ impl Candidates {
     /// Adds the pair with ends `high` and `low` in the eight-value (`e0 > e1`) or six-value
     /// (`e0 <= e1`) mode, when it is a valid one.
     fn add(&mut self, high: i32, low: i32, eight: bool) {
-        if self.count == MAX_CANDIDATES || !(0..=255).contains(&high) || !(0..=255).contains(&low) {
-            return;
-        }
-        let pair = if eight {
-            if high <= low {
-                return;
-            }
-            (high as u8, low as u8)
-        } else {
-            if low > high {
-                return;
-            }
-            (low as u8, high as u8)
-        };
+        let Some(pair) = endpoint_pair(high, low, eight).filter(|_| self.count < MAX_CANDIDATES) else { return };
         self.pairs[self.count] = pair;
         self.count += 1;
     }

@@ -768,19 +768,7 @@ fn bench_billboard_quality(corpus: &Path) {
     for tree in ["oak_medium", "ash_small", "bush_2"] {
         let mut figures = Vec::new();
         for epsilon in [0.01, 0.02, 0.04] {
-            let dir = tree_project(
-                corpus,
-                &format!(r#"BillboardCloud(name: "tree", mesh: "trees/{tree}.obj", billboard: (epsilon: {epsilon}))"#),
-            );
-            let mut project = Project::open(
-                load_pipeline(&dir.path().join("pipeline.ron")).unwrap(),
-                ProjectOptions { persistent_cache: false, ..Default::default() },
-            );
-            let options = cirrus::kinds::billboard_cloud::PreviewOptions {
-                asset: "tree".into(),
-                settings: Default::default(),
-                out: "preview".into(),
-            };
+            let (dir, mut project, options) = tree_preview(corpus, tree, &format!("epsilon: {epsilon}"));
             let metrics = cirrus::kinds::billboard_cloud::preview(&mut project, &options).expect("preview");
             let one_sample = cirrus::kinds::billboard_cloud::lod_preview::PreviewSettings { samples_per_axis: 1, ..Default::default() };
             let aliased = cirrus::kinds::billboard_cloud::preview(
@@ -797,6 +785,23 @@ fn bench_billboard_quality(corpus: &Path) {
         }
         println!("billboard: {tree}: {}", figures.join("; "));
     }
+}
+
+/// A corpus tree as a BillboardCloud with `billboard` settings (the text inside `billboard:
+/// (…)`), opened without the persistent cache, and the options of its preview.
+fn tree_preview(
+    corpus: &Path,
+    tree: &str,
+    billboard: &str,
+) -> (tempfile::TempDir, Project, cirrus::kinds::billboard_cloud::PreviewOptions) {
+    let dir = tree_project(corpus, &format!(r#"BillboardCloud(name: "tree", mesh: "trees/{tree}.obj", billboard: ({billboard}))"#));
+    let project = Project::open(
+        load_pipeline(&dir.path().join("pipeline.ron")).unwrap(),
+        ProjectOptions { persistent_cache: false, ..Default::default() },
+    );
+    let options =
+        cirrus::kinds::billboard_cloud::PreviewOptions { asset: "tree".into(), settings: Default::default(), out: "preview".into() };
+    (dir, project, options)
 }
 
 /// Mean silhouette IoU (16 samples per pixel) of each corpus tree's LOD at 32 to 512 quads: with
@@ -834,17 +839,7 @@ fn bench_billboard_budget(corpus: &Path) {
             let mut row = format!("{quads} quads:");
             for (label, settings) in [("budget", format!("budget: Some(Quads({quads}))")), ("ε alone", format!("epsilon: {epsilon_alone}"))]
             {
-                let dir =
-                    tree_project(corpus, &format!(r#"BillboardCloud(name: "tree", mesh: "trees/{tree}.obj", billboard: ({settings}))"#));
-                let mut project = Project::open(
-                    load_pipeline(&dir.path().join("pipeline.ron")).unwrap(),
-                    ProjectOptions { persistent_cache: false, ..Default::default() },
-                );
-                let options = cirrus::kinds::billboard_cloud::PreviewOptions {
-                    asset: "tree".into(),
-                    settings: Default::default(),
-                    out: "preview".into(),
-                };
+                let (dir, mut project, options) = tree_preview(corpus, tree, &settings);
                 let metrics = cirrus::kinds::billboard_cloud::preview(&mut project, &options).expect("preview");
                 let report: serde_json::Value =
                     serde_json::from_slice(&std::fs::read(dir.path().join("baked/tree/report.json")).unwrap()).unwrap();

@@ -102,17 +102,21 @@ fn block_bytes(values: &[u8; 16], e0: u8, e1: u8) -> [u8; 8] {
 /// all take one entry.
 fn least_squares_ends(sorted: &[u8; 16], e0: u8, e1: u8) -> Option<(i32, i32)> {
     let eight = e0 > e1;
-    let palette = bc4_palette(e0, e1);
-    // The weight of e0 in each entry.
+    let palette = ascending_palette(e0, e1);
+    // The weight of e0 in each entry of the ascending palette (negative: a constant).
     let weights: [f32; 8] = if eight {
-        [1.0, 0.0, 6.0 / 7.0, 5.0 / 7.0, 4.0 / 7.0, 3.0 / 7.0, 2.0 / 7.0, 1.0 / 7.0]
+        [0.0, 1.0 / 7.0, 2.0 / 7.0, 3.0 / 7.0, 4.0 / 7.0, 5.0 / 7.0, 6.0 / 7.0, 1.0]
     } else {
-        [1.0, 0.0, 0.8, 0.6, 0.4, 0.2, -1.0, -1.0]
+        [-1.0, 1.0, 0.8, 0.6, 0.4, 0.2, 0.0, -1.0]
     };
     let (mut aa, mut ab, mut bb, mut av, mut bv) = (0.0f32, 0.0f32, 0.0f32, 0.0f32, 0.0f32);
+    let mut entry = 0;
     for &value in sorted {
-        let nearest = (0..8).min_by_key(|&index| (value as i32 - palette[index] as i32).abs()).expect("eight entries");
-        let w = weights[nearest];
+        let value_i = value as i32;
+        while entry < 7 && palette[entry] + palette[entry + 1] <= 2 * value_i {
+            entry += 1;
+        }
+        let w = weights[entry];
         if w < 0.0 {
             continue;
         }

@@ -20,8 +20,8 @@
 //! | entry folder (key name, version) | parts, in order | holds |
 //! |---|---|---|
 //! | `parse` (`parse`, `PARSE`) | the `.mymaterial` content hash; its path; the source folder | the parsed material file |
-//! | `surface-recipe` (`surface`, 3) | the tail's parts (below); the kind's recipe key | the content key of the surface's files |
-//! | `surface` (`surface`, 3) | the tail's parts; the image's width, height and content hash | the container file and PNG preview |
+//! | `surface-recipe` (`surface`, 4) | the tail's parts (below); the kind's recipe key | the content key of the surface's files |
+//! | `surface` (`surface`, 4) | the tail's parts; the image's width, height and content hash | the container file and PNG preview |
 //! | `encoding-memo` (`encoding-memo`, 4) | mips and encode versions; the surface's label (`asset/material/surface`, `asset/surface`) | a BC7 surface's last encoding: level 0's block fingerprints, the other levels, the blocks, the errors (a memo: overwritten) |
 //! | `mesh` (`mesh`, `MESH`) | the source folder; per file the mesh stage reads (the OBJ, then its MTL files), its path and its content hash or read error | the loaded mesh (with each triangle's OBJ object) and tangents |
 //! | `planes` (`planes`, `PLANES`) | the `mesh` key; ε; max planes option | the plane set |
@@ -30,7 +30,7 @@
 //! | `render-memo` (`render-memo`, `RENDER`) | the `layout` key; a material set | the images of every render group that shows that set, each under its group key (a memo: overwritten) |
 //! | `atlas` (`atlas-coverage`, 1) | the billboard atlas recipe key | the atlas's coverage fraction (for the report) |
 //! | `atlas-fill` (`atlas-fill`, 1) | the coverage's content hash (atlas size, then every drawn texel's atlas texel, plane and plane texel as `u32`) | the fill search's source of every atlas texel (as offsets) |
-//! | `surface-recipe` (`surface`, 3) | the tail's parts; the atlas surface's parts key (below) | the content key of the surface's files |
+//! | `surface-recipe` (`surface`, 4) | the tail's parts; the atlas surface's parts key (below) | the content key of the surface's files |
 //! | `trim` (`trim`, `TRIM`) | the trim setting; the texture memory budget (`u64`); the texture file's path and content hash or read error | an atlas texture's size, kept rectangle, kept texels' hash, translucency |
 //! | `layout` (`layout`, `atlas::LAYOUT`) | `atlas`; the source folder; the pack settings key (`atlas-settings`, 1: max size, padding, pages; rotate, power of two, trim); the file count; per texture file its path and content hash or read error | an atlas layout (entries, pages, placements) and how it came from the last one |
 //! | `atlas-layout-memo` (`atlas-layout-memo`, `atlas::LAYOUT`) | the asset's name; the pack settings key | the asset's last layout, the packer's hint (a memo: overwritten) |

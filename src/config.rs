@@ -158,6 +158,25 @@ pub struct TessellateSettings {
     pub displace: bool,
 }
 
+/// The block formats a kind of surface may be encoded to (the first is the default).
+pub fn allowed_formats(surface: crate::texture::SurfaceKind) -> &'static [BlockFormat] {
+    use crate::texture::SurfaceKind;
+    match surface {
+        SurfaceKind::Albedo => &[BlockFormat::Bc7, BlockFormat::Bc3, BlockFormat::Bc1],
+        SurfaceKind::Mra => &[BlockFormat::Bc1, BlockFormat::Bc7],
+        SurfaceKind::Normal => &[BlockFormat::Bc5, BlockFormat::Bc7],
+        SurfaceKind::Height | SurfaceKind::Ao => &[BlockFormat::Bc4],
+    }
+}
+
+/// What a report says beyond the defaults.
+#[derive(Clone, Debug, Default, PartialEq, Eq, Hash, Serialize)]
+pub struct ReportSettings {
+    /// Each surface also encoded (level 0) in the other formats it may take, with their PSNR and
+    /// bits per texel, so that a format can be chosen with figures (costs an encode each).
+    pub compare_formats: bool,
+}
+
 #[derive(Clone, Debug, PartialEq, Eq, Hash, Serialize)]
 pub struct EncodeSettings {
     pub albedo: BlockFormat,
@@ -201,6 +220,7 @@ pub struct Settings {
     pub tessellate: Option<TessellateSettings>,
     /// The high mesh a `Height` asset measures (source-relative; per asset, never a default).
     pub high_mesh: Option<PathBuf>,
+    pub report: ReportSettings,
 }
 
 impl Default for Settings {
@@ -235,6 +255,7 @@ impl Default for Settings {
             height: HeightSettings { projection: HeightProjection::Normals, size: 1024, frontal: 0.02, rear: 0.02 },
             tessellate: None,
             high_mesh: None,
+            report: ReportSettings::default(),
         }
     }
 }
@@ -499,8 +520,9 @@ impl Validator<'_> {
             // Each kind's own settings; the others keep the defaults.
             let mut overrides = raw::SettingsOverrides::default();
             let (name, path, encode, kind) = match asset {
-                raw::Asset::Material { name, material, billboard, atlas, encode, .. } => {
+                raw::Asset::Material { name, material, billboard, atlas, encode, report, .. } => {
                     (overrides.billboard, overrides.atlas) = (billboard.clone(), atlas.clone());
+                    overrides.report = report.clone();
                     (name, Some(material), encode, AssetKindName::Material)
                 }
                 raw::Asset::BillboardCloud { name, mesh, billboard, atlas, encode } => {
@@ -720,12 +742,13 @@ impl Validator<'_> {
         self.merge_ao(&mut settings.ao, &overrides.ao, anchor);
         self.merge_height(&mut settings.height, &overrides.height, anchor);
         let encode = &overrides.encode;
+        use crate::texture::SurfaceKind;
         let surfaces: [(&str, Option<BlockFormat>, &[BlockFormat], &mut BlockFormat); 5] = [
-            ("albedo", encode.albedo, &[BlockFormat::Bc7, BlockFormat::Bc3, BlockFormat::Bc1], &mut settings.encode.albedo),
-            ("mra", encode.mra, &[BlockFormat::Bc1, BlockFormat::Bc7], &mut settings.encode.mra),
-            ("normal", encode.normal, &[BlockFormat::Bc5, BlockFormat::Bc7], &mut settings.encode.normal),
-            ("height", encode.height, &[BlockFormat::Bc4], &mut settings.encode.height),
-            ("ao", encode.ao, &[BlockFormat::Bc4], &mut settings.encode.ao),
+            ("albedo", encode.albedo, allowed_formats(SurfaceKind::Albedo), &mut settings.encode.albedo),
+            ("mra", encode.mra, allowed_formats(SurfaceKind::Mra), &mut settings.encode.mra),
+            ("normal", encode.normal, allowed_formats(SurfaceKind::Normal), &mut settings.encode.normal),
+            ("height", encode.height, allowed_formats(SurfaceKind::Height), &mut settings.encode.height),
+            ("ao", encode.ao, allowed_formats(SurfaceKind::Ao), &mut settings.encode.ao),
         ];
         let mut format_errors = Vec::new();
         for (key, value, allowed, target) in surfaces {
@@ -754,6 +777,7 @@ impl Validator<'_> {
         if let Some(quality) = encode.quality {
             settings.encode.quality = quality;
         }
+        settings.report.compare_formats = overrides.report.compare_formats.unwrap_or(settings.report.compare_formats);
         settings
     }
 

@@ -45,6 +45,14 @@ pub struct SettingsOverrides {
     pub height: HeightOverrides,
     #[serde(default)]
     pub encode: EncodeOverrides,
+    #[serde(default)]
+    pub report: ReportOverrides,
+}
+
+#[derive(Deserialize, Default, Clone)]
+#[serde(deny_unknown_fields)]
+pub struct ReportOverrides {
+    pub compare_formats: Option<bool>,
 }
 
 #[derive(Deserialize, Default, Clone)]
@@ -143,6 +151,8 @@ pub enum Asset {
         /// An `AmbientOcclusion` asset whose maps replace the materials' `ao` textures.
         #[serde(default)]
         ao_source: Option<String>,
+        #[serde(default)]
+        report: ReportOverrides,
         #[serde(default)]
         billboard: BillboardOverrides,
         #[serde(default)]

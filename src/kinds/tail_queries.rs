@@ -26,7 +26,8 @@ pub const WRITE: Stage = Stage { name: "write", version: 1 };
 
 /// The cache entry of a finished surface (under its recipe key and under its content key).
 const SURFACE_ENTRY: &str = "surface";
-const SURFACE_ENTRY_VERSION: u32 = 3;
+// 4: the surface's figures include bits per texel.
+const SURFACE_ENTRY_VERSION: u32 = 4;
 /// The entry under a surface's recipe key: the content key of its files.
 const SURFACE_RECIPE_ENTRY: &str = "surface-recipe";
 
@@ -85,6 +86,25 @@ pub fn surface_blocks(db: &dyn Db, asset: Asset, surface: SurfaceId) -> Result<A
     }
     remember(db, &encoding_memo_name(&label), remembered);
     Ok(Arc::new(encoded))
+}
+
+/// The surface in the other formats its kind allows, when the asset's report asks
+/// (`report: (compare_formats: true)`): level 0 encoded and measured again in each (not a
+/// stage of the build: only the report reads it).
+#[salsa::tracked(returns(clone))]
+pub fn surface_format_comparison(
+    db: &dyn Db,
+    asset: Asset,
+    surface: SurfaceId,
+) -> Result<Arc<Vec<crate::texture::tail::FormatFigure>>, Diagnostic> {
+    let (format, quality) = encode_step_settings(db, asset, surface.clone())?;
+    let others: Vec<crate::config::BlockFormat> =
+        crate::config::allowed_formats(surface.surface).iter().copied().filter(|&other| other != format).collect();
+    if others.is_empty() {
+        return Ok(Arc::default());
+    }
+    let mips = surface_mips(db, asset, surface.clone())?;
+    Ok(Arc::new(crate::texture::tail::format_comparison(&mips, surface.surface, &others, quality)))
 }
 
 /// The container and preview (stage `write`); from the persistent cache when a surface with

@@ -37,6 +37,11 @@ impl fmt::Debug for EncodedTexture {
     }
 }
 
+/// Bits per texel of a format (a block's bits over its 16 texels).
+pub fn bits_per_texel(format: BlockFormat) -> u32 {
+    block_bytes(format) as u32 * 8 / 16
+}
+
 pub fn block_bytes(format: BlockFormat) -> usize {
     match format {
         BlockFormat::Bc1 | BlockFormat::Bc4 => 8,

@@ -87,6 +87,8 @@ pub struct SurfaceInfo {
     pub height: u32,
     pub levels: u32,
     pub bytes: u64,
+    /// What the format costs: bits per texel of each level (4 for BC1 and BC4, 8 for the others).
+    pub bits_per_texel: u32,
     pub psnr_db: f64,
     pub alpha_tested: bool,
 }
@@ -176,6 +178,34 @@ pub fn tail_encode(
     EncodedSurface { settings, texture, block_errors: Arc::new(block_errors), psnr_db }
 }
 
+/// What a surface would measure in another format: its cost and level 0's PSNR.
+#[derive(Clone, Debug, PartialEq, serde::Serialize)]
+pub struct FormatFigure {
+    pub format: BlockFormat,
+    pub bits_per_texel: u32,
+    pub psnr_db: f64,
+}
+
+/// Level 0 of a surface (`mips`) encoded in each of `formats` and decoded again: what each
+/// would cost and give (`cirrus report: (compare_formats: true)`).
+pub fn format_comparison(mips: &MipLevels, surface: SurfaceKind, formats: &[BlockFormat], quality: EncodeQuality) -> Vec<FormatFigure> {
+    let image = &mips.levels[0];
+    formats
+        .iter()
+        .map(|&format| {
+            let settings = BlockEncodeSettings { format, quality, alpha: mips.alpha_tested, srgb: surface.is_srgb() };
+            let encoded = crate::texture::encode::encode_level(image, settings);
+            let decoded = crate::texture::quality::decode_blocks(format, &encoded, image.width, image.height);
+            let psnr_db = crate::texture::quality::psnr(image, &decoded, surface.channels());
+            FormatFigure {
+                format,
+                bits_per_texel: crate::texture::encode::bits_per_texel(format),
+                psnr_db: (psnr_db * 100.0).round() / 100.0,
+            }
+        })
+        .collect()
+}
+
 /// The container file and PNG preview of an encoded surface.
 pub fn tail_write(
     image: &Texture,
@@ -194,6 +224,7 @@ pub fn tail_write(
         height: encoded.texture.height,
         levels: encoded.texture.levels.len() as u32,
         bytes: texture_file.len() as u64,
+        bits_per_texel: crate::texture::encode::bits_per_texel(encoded.texture.format),
         psnr_db: encoded.psnr_db,
         alpha_tested: encoded.settings.alpha,
     };

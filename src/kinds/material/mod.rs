@@ -116,10 +116,16 @@ impl Kind for Material {
                 let id = SurfaceId { group: material.name.clone(), surface };
                 let Ok(artifacts) = crate::kinds::tail_queries::surface_artifacts(db, asset, id.clone()) else { continue };
                 let [texture_path, preview_path] = id.artifact_paths(output_folder, container);
+                let other_formats = if asset.settings(db).report.compare_formats {
+                    crate::kinds::tail_queries::surface_format_comparison(db, asset, id.clone()).ok().map(|figures| figures.to_vec())
+                } else {
+                    None
+                };
                 reports.push(SurfaceReport {
                     path: display_path(&texture_path),
                     preview: display_path(&preview_path),
                     info: artifacts.info.clone(),
+                    other_formats,
                 });
                 outputs.files.push((texture_path, artifacts.texture_file.clone()));
                 outputs.files.push((preview_path, artifacts.preview_png.clone()));
@@ -210,4 +216,8 @@ pub struct SurfaceReport {
     pub preview: String,
     #[serde(flatten)]
     pub info: SurfaceInfo,
+    /// With `report: (compare_formats: true)`: what the other formats the surface may take
+    /// would cost (bits per texel) and give (level 0's PSNR).
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub other_formats: Option<Vec<crate::texture::tail::FormatFigure>>,
 }

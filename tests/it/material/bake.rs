@@ -463,3 +463,48 @@ fn linear_to_srgb_bytes_round_like_the_formula() {
         assert_eq!(linear_to_srgb_u8(srgb_u8_to_linear(byte)), byte, "round trip of {byte}");
     }
 }
+
+#[test]
+fn the_report_gives_each_formats_cost_and_with_compare_formats_what_the_others_would_give() {
+    let project = material_project("");
+    let pipeline = String::from_utf8(project.read("pipeline.ron")).unwrap();
+    std::fs::write(
+        project.path("pipeline.ron"),
+        pipeline.replace(
+            r#"material: "materials/bark.mymaterial")"#,
+            r#"material: "materials/bark.mymaterial", report: (compare_formats: true))"#,
+        ),
+    )
+    .unwrap();
+    let summary = build(&mut project.open());
+    assert!(summary.all_ok(), "{}", summary.to_text());
+    let report: serde_json::Value = serde_json::from_slice(&project.read("baked/bark/report.json")).expect("report");
+    let surfaces = report["materials"][0]["surfaces"].as_array().expect("surfaces");
+    let figures: Vec<String> = surfaces
+        .iter()
+        .map(|surface| {
+            let others: Vec<String> = surface["other_formats"]
+                .as_array()
+                .expect("compared")
+                .iter()
+                .map(|other| format!("{} {} bpp", other["format"].as_str().unwrap(), other["bits_per_texel"]))
+                .collect();
+            format!("{} {} bpp; others: {}", surface["format"].as_str().unwrap(), surface["bits_per_texel"], others.join(", "))
+        })
+        .collect();
+    expect_test::expect![[r#"
+        [
+            "Bc7 8 bpp; others: Bc3 8 bpp, Bc1 4 bpp",
+            "Bc1 4 bpp; others: Bc7 8 bpp",
+            "Bc5 8 bpp; others: Bc7 8 bpp",
+        ]
+    "#]]
+    .assert_debug_eq(&figures);
+    // BC7 costs mra twice BC1's bits and gives more.
+    let mra = &surfaces[1];
+    let bc7 = &mra["other_formats"][0];
+    assert!(bc7["psnr_db"].as_f64().unwrap() > mra["psnr_db"].as_f64().unwrap(), "{mra}");
+    // Without the setting, no comparison is made.
+    let plain: serde_json::Value = serde_json::from_slice(&project.read("baked/mixed/report.json")).expect("report");
+    assert!(plain["materials"][0]["surfaces"][0].get("other_formats").is_none());
+}

@@ -182,7 +182,18 @@ fn encode_blocks(
         }
         let (data, width, height, stride) = (&data[..], 4 * blocks.len() as u32, 4, stride as u32);
         match format {
-            BlockFormat::Bc1 => intel_tex_2::bc1::compress_blocks_into(&intel_tex_2::RgbaSurface { data, width, height, stride }, output),
+            BlockFormat::Bc1 => {
+                intel_tex_2::bc1::compress_blocks_into(&intel_tex_2::RgbaSurface { data, width, height, stride }, output);
+                // Then cirrus's refinement of each block (all but the fastest settings).
+                if !matches!(quality, EncodeQuality::UltraFast | EncodeQuality::VeryFast) {
+                    for (block, bytes) in blocks.iter().zip(output.chunks_exact_mut(8)) {
+                        let texels: [[u8; 3]; 16] =
+                            std::array::from_fn(|texel| [block[texel * 4], block[texel * 4 + 1], block[texel * 4 + 2]]);
+                        let refined = super::bc1::refine_bc1_block(&texels, bytes.try_into().expect("eight bytes"));
+                        bytes.copy_from_slice(&refined);
+                    }
+                }
+            }
             BlockFormat::Bc3 => intel_tex_2::bc3::compress_blocks_into(&intel_tex_2::RgbaSurface { data, width, height, stride }, output),
             BlockFormat::Bc4 => intel_tex_2::bc4::compress_blocks_into(&intel_tex_2::RSurface { data, width, height, stride }, output),
             BlockFormat::Bc5 => intel_tex_2::bc5::compress_blocks_into(&intel_tex_2::RgSurface { data, width, height, stride }, output),

@@ -55,6 +55,10 @@ pub struct BillboardSettings {
     /// `epsilon` is ignored.
     pub budget: Option<LodBudget>,
     pub texel_density: Option<f32>,
+    /// The height in pixels at which the LOD is meant to be seen (its bounding sphere's
+    /// diameter on screen): the atlas gets one texel per pixel there, `texel_density` =
+    /// `screen_size / diameter` (none: `texel_density`, else the largest atlas).
+    pub screen_size: Option<u32>,
     pub alpha_cutoff: f32,
 }
 
@@ -226,7 +230,14 @@ pub struct Settings {
 impl Default for Settings {
     fn default() -> Settings {
         Settings {
-            billboard: BillboardSettings { epsilon: 0.02, max_planes: None, budget: None, texel_density: None, alpha_cutoff: 0.5 },
+            billboard: BillboardSettings {
+                epsilon: 0.02,
+                max_planes: None,
+                budget: None,
+                texel_density: None,
+                screen_size: None,
+                alpha_cutoff: 0.5,
+            },
             atlas: AtlasSettings { max_size: 2048, padding: 4, power_of_two: true },
             pack: PackSettings { max_size: 4096, padding: 4, rotate: true, trim: true, power_of_two: false, pages: 4 },
             ao: AoSettings {
@@ -716,6 +727,15 @@ impl Validator<'_> {
                 self.error_at_key("texel_density", anchor, "texel_density must be a positive number of texels per world unit");
             }
             settings.billboard.texel_density = density;
+        }
+        if let Some(screen_size) = billboard.screen_size {
+            if screen_size.is_some_and(|pixels| !(4..=16384).contains(&pixels)) {
+                self.error_at_key("screen_size", anchor, "screen_size must be between 4 and 16384 pixels");
+            }
+            settings.billboard.screen_size = screen_size;
+        }
+        if settings.billboard.screen_size.is_some() && settings.billboard.texel_density.is_some() {
+            self.error_at_key("screen_size", anchor, "give texel_density or screen_size, not both: each sets the atlas's texels per unit");
         }
         if let Some(cutoff) = billboard.alpha_cutoff {
             if !(0.0..=1.0).contains(&cutoff) {

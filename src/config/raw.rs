@@ -116,6 +116,8 @@ pub struct BillboardOverrides {
     pub budget: Option<Option<LodBudget>>,
     #[serde(default, deserialize_with = "explicit")]
     pub texel_density: Option<Option<f32>>,
+    #[serde(default, deserialize_with = "explicit")]
+    pub screen_size: Option<Option<u32>>,
     pub alpha_cutoff: Option<f32>,
 }
 

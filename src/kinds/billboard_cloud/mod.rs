@@ -269,6 +269,7 @@ fn billboard_outputs(db: &dyn Db, asset: Asset, output_folder: &Path, runs: &[St
             "width": layout.layout.width,
             "height": layout.layout.height,
             "texel_density": layout.layout.texel_density,
+            "screen_size": settings.billboard.screen_size,
             "occupancy": (layout.layout.occupancy * 1e4).round() / 1e4,
             "coverage": atlas_coverage,
         },

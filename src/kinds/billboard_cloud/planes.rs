@@ -63,6 +63,21 @@ struct Grid {
     centers: Vec<Vec3>,
 }
 
+/// The sphere ε is a fraction of: centred on the bounding box, through the farthest vertex.
+fn bounding_sphere(positions: &[[f32; 3]]) -> (Vec3, f32) {
+    let (min, max) = positions.iter().fold((Vec3::splat(f32::INFINITY), Vec3::splat(f32::NEG_INFINITY)), |(min, max), &p| {
+        (min.min(Vec3::from(p)), max.max(Vec3::from(p)))
+    });
+    let center = 0.5 * (min + max);
+    let radius = positions.iter().map(|&p| Vec3::from(p).distance(center)).fold(0.0, f32::max).max(1e-6);
+    (center, radius)
+}
+
+/// The radius of the mesh's bounding sphere (the one ε is a fraction of).
+pub fn bounding_sphere_radius(positions: &[[f32; 3]]) -> f32 {
+    bounding_sphere(positions).1
+}
+
 /// A region of plane space: θ, φ and ρ ranges.
 #[derive(Clone, Copy, Debug)]
 struct Region {
@@ -116,11 +131,7 @@ impl Face {
 
 impl Grid {
     fn new(positions: &[[f32; 3]], epsilon_fraction: f32) -> Grid {
-        let (min, max) = positions.iter().fold((Vec3::splat(f32::INFINITY), Vec3::splat(f32::NEG_INFINITY)), |(min, max), &p| {
-            (min.min(Vec3::from(p)), max.max(Vec3::from(p)))
-        });
-        let center = 0.5 * (min + max);
-        let radius = positions.iter().map(|&p| Vec3::from(p).distance(center)).fold(0.0, f32::max).max(1e-6);
+        let (center, radius) = bounding_sphere(positions);
         let epsilon = epsilon_fraction * radius;
         let rho_bins = ((2.0 * radius / epsilon).ceil() as usize).clamp(16, 256);
         let theta_cos_sin = (0..=THETA_BINS).map(|t| (Grid::theta(t).cos(), Grid::theta(t).sin())).collect();

@@ -98,16 +98,22 @@ pub struct BillboardLayout {
     pub render_groups: Vec<RenderGroup>,
 }
 
+/// The atlas settings, the texel density asked for, and the screen size the LOD is meant for.
 #[salsa::tracked(returns(clone))]
-pub fn atlas_layout_settings(db: &dyn Db, asset: Asset) -> (crate::config::AtlasSettings, Option<f32>) {
+pub fn atlas_layout_settings(db: &dyn Db, asset: Asset) -> (crate::config::AtlasSettings, Option<f32>, Option<u32>) {
     let settings = asset.settings(db);
-    (settings.atlas.clone(), settings.billboard.texel_density)
+    (settings.atlas.clone(), settings.billboard.texel_density, settings.billboard.screen_size)
 }
 
 #[salsa::tracked(returns(copy))]
 pub fn layout_cache_key(db: &dyn Db, asset: Asset) -> CacheKey {
-    let (atlas, density) = atlas_layout_settings(db, asset);
-    stage_key(LAYOUT).part(&planes_cache_key(db, asset).0).part(&atlas).part(&density).finish()
+    let (atlas, density, screen_size) = atlas_layout_settings(db, asset);
+    let key = stage_key(LAYOUT).part(&planes_cache_key(db, asset).0).part(&atlas).part(&density);
+    // Only when given, so that the keys of layouts without it stay as they were.
+    match screen_size {
+        Some(pixels) => key.part("screen size").part(&pixels).finish(),
+        None => key.finish(),
+    }
 }
 
 /// Rectangles, layout and render groups (stage `layout`).
@@ -119,7 +125,12 @@ pub fn billboard_layout(db: &dyn Db, asset: Asset) -> Result<Arc<BillboardLayout
 fn compute_billboard_layout(db: &dyn Db, asset: Asset) -> Result<BillboardLayout, Diagnostic> {
     let loaded = loaded_mesh(db, asset)?;
     let planes = billboard_planes(db, asset)?;
-    let (atlas, density) = atlas_layout_settings(db, asset);
+    let (atlas, density, screen_size) = atlas_layout_settings(db, asset);
+    // One texel per pixel when the bounding sphere's diameter spans `screen_size` pixels.
+    let density = density.or_else(|| {
+        let pixels = screen_size? as f32;
+        Some(pixels / (2.0 * super::planes::bounding_sphere_radius(&loaded.mesh.positions)))
+    });
     timed(db, LAYOUT, asset.name(db), || {
         let mut rectangles = super::rectangles::plane_rectangles(&loaded.mesh.positions, &loaded.mesh.triangles, &planes);
         if let Some(quads) = plane_settings(db, asset).max_quads {

@@ -94,3 +94,30 @@ fn a_budgeted_bake_writes_at_most_that_many_quads() {
         assert!(report["max_error_world"].as_f64().unwrap() <= report["epsilon_world"].as_f64().unwrap() * 1.0001, "{report}");
     }
 }
+
+#[test]
+fn the_atlas_follows_the_screen_size_the_lod_is_meant_for() {
+    let project = TempProject::new(
+        r#"Pipeline(source: "examples/assets", output: "baked", assets: [
+            BillboardCloud(name: "far", mesh: "trees/bush_2.obj", billboard: (budget: Some(Quads(64)), screen_size: Some(64))),
+            BillboardCloud(name: "near", mesh: "trees/bush_2.obj", billboard: (budget: Some(Quads(64)), screen_size: Some(512))),
+        ])"#,
+    );
+    let root = Path::new(env!("CARGO_MANIFEST_DIR"));
+    std::os::unix::fs::symlink(root.join("examples"), project.path("examples")).unwrap();
+    let summary = build(&mut project.open());
+    assert!(summary.all_ok(), "{}", summary.to_text());
+    let obj = std::fs::read(root.join("examples/assets/trees/bush_2.obj")).unwrap();
+    let (bush, _) = cirrus::mesh::load_mesh(Path::new("bush_2.obj"), &obj, &Default::default(), Path::new("")).unwrap();
+    let diameter = 2.0 * cirrus::kinds::billboard_cloud::planes::bounding_sphere_radius(&bush.positions) as f64;
+    let mut sides = Vec::new();
+    for (name, pixels) in [("far", 64.0), ("near", 512.0)] {
+        let report: serde_json::Value = serde_json::from_slice(&project.read(&format!("baked/{name}/report.json"))).unwrap();
+        let atlas = &report["atlas"];
+        // One texel per pixel at that size (lowered only if the atlas would pass max_size).
+        let density = atlas["texel_density"].as_f64().unwrap();
+        assert!((density - pixels / diameter).abs() < 1e-3 * density, "{name}: {density} texels per unit for {pixels} px over {diameter}");
+        sides.push(atlas["width"].as_u64().unwrap().max(atlas["height"].as_u64().unwrap()));
+    }
+    assert!(sides[0] * 4 <= sides[1], "an LOD meant for 64 px gets a far smaller atlas than one for 512: {sides:?}");
+}

@@ -304,6 +304,36 @@ pub fn key_with_files(db: &dyn Db, key: CacheKeyBuilder, files: impl IntoIterato
 }
 
 /// Plain values as raw bytes, for cache blobs (little-endian on every machine cirrus runs on).
+/// A stage result compared by the hash of what it was made from (a BVH, a tessellated mesh):
+/// exact, cheap equality for salsa's early cutoff on a value that has none of its own.
+pub struct ByHash<T> {
+    pub hash: blake3::Hash,
+    pub value: T,
+}
+
+impl<T> PartialEq for ByHash<T> {
+    fn eq(&self, other: &Self) -> bool {
+        self.hash == other.hash
+    }
+}
+
+impl<T> fmt::Debug for ByHash<T> {
+    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
+        write!(f, "ByHash({})", &self.hash.to_hex()[..12])
+    }
+}
+
+/// The blake3 of a list of byte strings, each prefixed by its length, so that no two lists
+/// hash alike by moving bytes from one part to the next.
+pub fn hash_of_parts(parts: &[&[u8]]) -> blake3::Hash {
+    let mut hasher = blake3::Hasher::new();
+    for part in parts {
+        hasher.update(&(part.len() as u64).to_le_bytes());
+        hasher.update(part);
+    }
+    hasher.finalize()
+}
+
 pub fn pod_blob<T: bytemuck::Pod>(values: &[T]) -> Vec<u8> {
     bytemuck::cast_slice(values).to_vec()
 }

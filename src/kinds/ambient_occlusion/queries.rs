@@ -16,7 +16,8 @@ use super::bake::{
 use crate::cache::{CacheEntry, CacheKey};
 use crate::config::{AoMode, AoOccluders, AoSettings};
 use crate::db::{
-    from_pod_blob, load_cached, pod_blob, recall, record_cache_hit, remember, stage_key, store_cached, timed, Asset, Db, Stage,
+    from_pod_blob, hash_of_parts, load_cached, pod_blob, recall, record_cache_hit, remember, stage_key, store_cached, timed, Asset, ByHash,
+    Db, Stage,
 };
 use crate::diagnostic::Diagnostic;
 use crate::kinds::mesh_queries::{loaded_mesh, LoadedMesh};
@@ -141,45 +142,18 @@ pub fn bake_geometry(db: &dyn Db, asset: Asset) -> Result<Arc<BakeGeometry>, Dia
         ground_plane: settings.ground_plane.then_some(low.y),
     };
     let groups = occluder_groups(db, asset)?.as_deref().cloned();
-    let mut hasher = blake3::Hasher::new();
-    for bytes in [
-        pod_blob(&mesh.positions),
-        pod_blob(&mesh.normals),
-        pod_blob(uvs),
-        pod_blob(&mesh.triangles),
-        groups.as_deref().map(pod_blob).unwrap_or_default(),
-    ] {
-        hasher.update(&(bytes.len() as u64).to_le_bytes());
-        hasher.update(&bytes);
-    }
-    Ok(Arc::new(BakeGeometry {
-        loaded: loaded.clone(),
-        materials,
-        boxes,
-        occlusion,
-        vertex_offset: diagonal * 1e-4,
-        groups,
-        whole_hash: hasher.finalize(),
-    }))
+    let whole_hash = hash_of_parts(&[
+        bytemuck::cast_slice(&mesh.positions),
+        bytemuck::cast_slice(&mesh.normals),
+        bytemuck::cast_slice(uvs),
+        bytemuck::cast_slice(&mesh.triangles),
+        groups.as_deref().map_or(&[][..], bytemuck::cast_slice),
+    ]);
+    Ok(Arc::new(BakeGeometry { loaded: loaded.clone(), materials, boxes, occlusion, vertex_offset: diagonal * 1e-4, groups, whole_hash }))
 }
 
 /// The occluders' BVHs, compared by the geometry they were built from.
-pub struct OccluderSet {
-    pub hash: blake3::Hash,
-    pub occluders: Occluders,
-}
-
-impl PartialEq for OccluderSet {
-    fn eq(&self, other: &Self) -> bool {
-        self.hash == other.hash
-    }
-}
-
-impl std::fmt::Debug for OccluderSet {
-    fn fmt(&self, formatter: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
-        write!(formatter, "OccluderSet({})", self.hash)
-    }
-}
+pub type OccluderSet = ByHash<Occluders>;
 
 /// The BVHs the rays are cast against (stage `bvh`): built only when some tile must bake, from
 /// the positions and the groups alone (a settings change builds nothing).
@@ -194,7 +168,7 @@ pub fn occluder_set(db: &dyn Db, asset: Asset) -> Result<Arc<OccluderSet>, Diagn
     hasher.update(bytemuck::cast_slice(groups.as_deref().map_or(&[][..], |groups| &groups[..])));
     let occluders =
         timed(db, BVH, asset.name(db), || build_occluders(&mesh.positions, &mesh.triangles, groups.as_deref().map(|groups| &groups[..])));
-    Ok(Arc::new(OccluderSet { hash: hasher.finalize(), occluders }))
+    Ok(Arc::new(OccluderSet { hash: hasher.finalize(), value: occluders }))
 }
 
 /// The occlusion settings' parts of a key.
@@ -228,7 +202,7 @@ pub fn vertex_visibility(db: &dyn Db, asset: Asset) -> Result<Arc<VertexVisibili
     let mesh = &geometry.loaded.mesh;
     let values: Vec<f32> = timed(db, VERTICES, name, || {
         occlusion_of_vertices(
-            &occluders.occluders,
+            &occluders.value,
             &mesh.positions,
             &mesh.normals,
             &mesh.triangles,
@@ -383,7 +357,7 @@ pub fn ao_tile(db: &dyn Db, asset: Asset, tile: TileId) -> Result<Arc<TileBake>,
                 AoMode::Texels => {
                     let occluders = occluder_set(db, asset)?;
                     timed(db, BAKE, &label, || {
-                        bake_tile_with_rays(&occluders.occluders, &mesh, &own, settings.size, region, &geometry.occlusion)
+                        bake_tile_with_rays(&occluders.value, &mesh, &own, settings.size, region, &geometry.occlusion)
                     })
                 }
                 AoMode::Vertices => {

@@ -13,7 +13,9 @@ use glam::Vec3;
 use super::bake::{bake_along_normals, bake_top_down, HeightMap, LowSurface, RayReach, RayStart};
 use crate::cache::{CacheEntry, CacheKey};
 use crate::config::{HeightProjection, HeightSettings, TessellateSettings};
-use crate::db::{from_pod_blob, load_cached, pod_blob, record_cache_hit, stage_key, store_cached, timed, Asset, Db, Stage};
+use crate::db::{
+    from_pod_blob, hash_of_parts, load_cached, pod_blob, record_cache_hit, stage_key, store_cached, timed, Asset, ByHash, Db, Stage,
+};
 use crate::diagnostic::Diagnostic;
 use crate::kinds::mesh_queries::{loaded_mesh, loaded_mesh_of, LoadedMesh};
 use crate::mesh::pn_triangles::{averaged_normals, pn_patch, tessellate, PnInput, PnMesh, PnPatch};
@@ -95,16 +97,12 @@ fn mesh_geometry(loaded: Arc<LoadedMesh>, path: &std::path::Path, which: &str) -
     if mesh.triangles.is_empty() {
         return Err(Diagnostic::new(path, format!("the {which} mesh has no triangles")));
     }
-    let mut hasher = blake3::Hasher::new();
-    for bytes in [
-        pod_blob(&mesh.positions),
-        pod_blob(&mesh.normals),
-        mesh.uvs.as_deref().map(pod_blob).unwrap_or_default(),
-        pod_blob(&mesh.triangles),
-    ] {
-        hasher.update(&(bytes.len() as u64).to_le_bytes());
-        hasher.update(&bytes);
-    }
+    let hash = hash_of_parts(&[
+        bytemuck::cast_slice(&mesh.positions),
+        bytemuck::cast_slice(&mesh.normals),
+        mesh.uvs.as_deref().map_or(&[][..], bytemuck::cast_slice),
+        bytemuck::cast_slice(&mesh.triangles),
+    ]);
     let (low, high) = mesh.triangles.iter().flatten().fold((Vec3::INFINITY, Vec3::NEG_INFINITY), |(low, high), &vertex| {
         let position = Vec3::from(mesh.positions[vertex as usize]);
         if position.is_finite() {
@@ -123,7 +121,7 @@ fn mesh_geometry(loaded: Arc<LoadedMesh>, path: &std::path::Path, which: &str) -
             !material.name.ends_with(crate::mesh::WITHOUT_UVS_SUFFIX)
         })
         .collect();
-    Ok(Arc::new(MeshGeometry { loaded, hash: hasher.finalize(), diagonal, baked }))
+    Ok(Arc::new(MeshGeometry { loaded, hash, diagonal, baked }))
 }
 
 #[salsa::tracked(returns(clone))]
@@ -138,22 +136,7 @@ pub fn high_geometry(db: &dyn Db, asset: Asset) -> Result<Arc<MeshGeometry>, Dia
 }
 
 /// A BVH compared by the geometry it was built from.
-pub struct HashedBvh {
-    pub hash: blake3::Hash,
-    pub bvh: TriangleBvh,
-}
-
-impl PartialEq for HashedBvh {
-    fn eq(&self, other: &Self) -> bool {
-        self.hash == other.hash
-    }
-}
-
-impl std::fmt::Debug for HashedBvh {
-    fn fmt(&self, formatter: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
-        write!(formatter, "HashedBvh({})", self.hash)
-    }
-}
+pub type HashedBvh = ByHash<TriangleBvh>;
 
 /// The high mesh's BVH (stage `bvh`): built only when a map or a distance must be computed.
 #[salsa::tracked(returns(clone))]
@@ -161,7 +144,7 @@ pub fn high_bvh(db: &dyn Db, asset: Asset) -> Result<Arc<HashedBvh>, Diagnostic>
     let high = high_geometry(db, asset)?;
     let mesh = &high.loaded.mesh;
     let bvh = timed(db, BVH, asset.name(db), || build_triangle_bvh(&mesh.positions, &mesh.triangles));
-    Ok(Arc::new(HashedBvh { hash: high.hash, bvh }))
+    Ok(Arc::new(HashedBvh { hash: high.hash, value: bvh }))
 }
 
 /// The low mesh's PN patches, each from its corners' averaged normals (the geometry's).
@@ -253,7 +236,7 @@ pub fn height_map(db: &dyn Db, asset: Asset, reference: MapReference) -> Result<
             let surface =
                 LowSurface { positions: &mesh.positions, normals: &mesh.normals, uvs, triangles: &mesh.triangles, baked: &low.baked };
             let reach = RayReach { frontal: settings.frontal * low.diagonal, rear: settings.rear * low.diagonal };
-            timed(db, BAKE, &label, || bake_along_normals(&bvh.bvh, &surface, start, settings.size, reach, low.diagonal * 1e-6))
+            timed(db, BAKE, &label, || bake_along_normals(&bvh.value, &surface, start, settings.size, reach, low.diagonal * 1e-6))
         }
         HeightProjection::TopDown => {
             let gpu = crate::gpu::gpu().map_err(|error| Diagnostic::new(low_path, error.to_string()))?;
@@ -344,26 +327,17 @@ fn map_from_entry(entry: CacheEntry) -> Option<HeightMapFiles> {
     Some(HeightMapFiles { map, png16: png16.into() })
 }
 
-/// A tessellated mesh compared by hash.
-#[derive(Debug)]
-pub struct HashedMesh {
-    pub hash: blake3::Hash,
-    pub mesh: PnMesh,
-}
-
-impl PartialEq for HashedMesh {
-    fn eq(&self, other: &Self) -> bool {
-        self.hash == other.hash
-    }
-}
+/// A tessellated mesh compared by the hash of its vertices and triangles.
+pub type HashedMesh = ByHash<PnMesh>;
 
 fn hashed(mesh: PnMesh) -> Arc<HashedMesh> {
-    let mut hasher = blake3::Hasher::new();
-    for bytes in [pod_blob(&mesh.positions), pod_blob(&mesh.normals), pod_blob(&mesh.uvs), pod_blob(&mesh.triangles)] {
-        hasher.update(&(bytes.len() as u64).to_le_bytes());
-        hasher.update(&bytes);
-    }
-    Arc::new(HashedMesh { hash: hasher.finalize(), mesh })
+    let hash = hash_of_parts(&[
+        bytemuck::cast_slice(&mesh.positions),
+        bytemuck::cast_slice(&mesh.normals),
+        bytemuck::cast_slice(&mesh.uvs),
+        bytemuck::cast_slice(&mesh.triangles),
+    ]);
+    Arc::new(HashedMesh { hash, value: mesh })
 }
 
 fn level_of(db: &dyn Db, asset: Asset) -> Result<TessellateSettings, Diagnostic> {
@@ -411,7 +385,7 @@ pub fn output_mesh(db: &dyn Db, asset: Asset) -> Result<Arc<HashedMesh>, Diagnos
         return Ok(pn);
     }
     let map = height_map(db, asset, MapReference::Pn)?;
-    Ok(timed(db, DISPLACE, asset.name(db), || hashed(crate::mesh::pn_triangles::displaced(&pn.mesh, |uv| map.map.sample(uv)))))
+    Ok(timed(db, DISPLACE, asset.name(db), || hashed(crate::mesh::pn_triangles::displaced(&pn.value, |uv| map.map.sample(uv)))))
 }
 
 /// The final tessellated mesh as OBJ text (`mtllib tessellated.mtl`), with its counts.
@@ -441,7 +415,7 @@ pub fn tessellated_files(db: &dyn Db, asset: Asset) -> Result<Arc<TessellatedFil
     }
     let output = output_mesh(db, asset)?;
     let low = low_geometry(db, asset)?;
-    let mesh = &output.mesh;
+    let mesh = &output.value;
     let materials: Vec<u32> = mesh.source_triangles.iter().map(|&triangle| low.loaded.mesh.triangle_materials[triangle as usize]).collect();
     let names: Vec<String> = low.loaded.mesh.materials.iter().map(|material| material.name.clone()).collect();
     let obj = crate::mesh::obj_text::obj_text(
@@ -497,26 +471,24 @@ pub fn distance_to_high(db: &dyn Db, asset: Asset, measured: Measured) -> Result
     }
     let high = high_geometry(db, asset)?;
     let bvh = high_bvh(db, asset)?;
+    // The measured mesh, borrowed from the stage that holds it.
+    let (low, tessellated);
     let (positions, triangles) = match measured {
         Measured::Low => {
-            let low = low_geometry(db, asset)?;
-            (low.loaded.mesh.positions.clone(), low.loaded.mesh.triangles.clone())
+            low = low_geometry(db, asset)?;
+            (&low.loaded.mesh.positions, &low.loaded.mesh.triangles)
         }
-        Measured::Pn => {
-            let pn = pn_mesh(db, asset)?;
-            (pn.mesh.positions.clone(), pn.mesh.triangles.clone())
-        }
-        Measured::Displaced => {
-            let output = output_mesh(db, asset)?;
-            (output.mesh.positions.clone(), output.mesh.triangles.clone())
+        Measured::Pn | Measured::Displaced => {
+            tessellated = if measured == Measured::Pn { pn_mesh(db, asset)? } else { output_mesh(db, asset)? };
+            (&tessellated.value.positions, &tessellated.value.triangles)
         }
     };
     let distance = timed(db, DISTANCE, &label, || {
-        let mesh_bvh = build_triangle_bvh(&positions, &triangles);
-        let mesh_samples = area_weighted_samples(&positions, &triangles, DISTANCE_SAMPLES);
+        let mesh_bvh = build_triangle_bvh(positions, triangles);
+        let mesh_samples = area_weighted_samples(positions, triangles, DISTANCE_SAMPLES);
         let high_mesh = &high.loaded.mesh;
         let high_samples = area_weighted_samples(&high_mesh.positions, &high_mesh.triangles, DISTANCE_SAMPLES);
-        surface_distance(&mesh_samples, &mesh_bvh, &high_samples, &bvh.bvh, high.diagonal)
+        surface_distance(&mesh_samples, &mesh_bvh, &high_samples, &bvh.value, high.diagonal)
     });
     store_cached(db, DISTANCE_ENTRY, key, || CacheEntry {
         metadata: serde_json::json!(distance.map(|distance| [distance.rms, distance.hausdorff])),

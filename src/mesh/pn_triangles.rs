@@ -177,14 +177,36 @@ pub struct PnMesh {
     pub displace_uvs: Vec<[f32; 2]>,
 }
 
-/// Where a tessellated vertex lies, for sharing it: by the input's vertices (`Vertex*`, one
-/// vertex per attribute set) or by position ids (`Position*`, one geometry per position).
+/// One vertex of a tessellation, before it joins the mesh.
+struct TessellatedVertex {
+    point: Vec3,
+    shading: Vec3,
+    uv: Option<glam::Vec2>,
+    direction: Vec3,
+    displace_uv: glam::Vec2,
+}
+
+impl PnMesh {
+    /// Appends a vertex; returns its index.
+    fn push_vertex(&mut self, vertex: &TessellatedVertex) -> u32 {
+        self.positions.push(vertex.point.into());
+        self.normals.push(vertex.shading.into());
+        if let Some(uv) = vertex.uv {
+            self.uvs.push(uv.into());
+        }
+        self.displace_normals.push(vertex.direction.into());
+        self.displace_uvs.push(vertex.displace_uv.into());
+        self.positions.len() as u32 - 1
+    }
+}
+
+/// Where a tessellated corner or edge vertex lies, for sharing it: by the input's vertices (one
+/// vertex per attribute set) or by position ids (one geometry per position).
 #[derive(Clone, Copy, PartialEq, Eq, Hash)]
 enum GridKey {
     Corner(u32),
     /// Ends (ordered), and the step from the first end.
     Edge(u32, u32, u32),
-    Interior(u32, u32, u32),
 }
 
 /// A grid point `(a, b)` of a triangle tessellated into `level` segments (barycentric
@@ -241,8 +263,15 @@ pub fn tessellate(input: &PnInput, level: u32) -> PnMesh {
             for b in 0..=level - a {
                 let weights = [(level - a - b) as f32 / level as f32, a as f32 / level as f32, b as f32 / level as f32];
                 let here_uv = uvs[0] * weights[0] + uvs[1] * weights[1] + uvs[2] * weights[2];
-                let (vertex_key, geometry_key, shading) = match grid_place(a, b, level) {
-                    Place::Corner(corner) => (GridKey::Corner(corners[corner]), GridKey::Corner(ids[corner]), normal(corners[corner])),
+                // Where the vertex is shared (corners and edges, by the input's vertices; none
+                // inside a triangle), and its geometry: by position, computed once, at corners
+                // and edges; straight from the patch inside.
+                let (vertex_key, (point, direction, displace_uv), shading) = match grid_place(a, b, level) {
+                    Place::Corner(corner) => {
+                        let geometry =
+                            *geometry.entry(GridKey::Corner(ids[corner])).or_insert((p[corner], averaged[ids[corner] as usize], here_uv));
+                        (Some(GridKey::Corner(corners[corner])), geometry, normal(corners[corner]))
+                    }
                     Place::Edge(from, to, steps) => {
                         let (first, second, steps_from_first, _) = edge_key(corners[from], corners[to], steps, level);
                         let (id_first, id_second, id_steps, flipped) = edge_key(ids[from], ids[to], steps, level);
@@ -253,33 +282,23 @@ pub fn tessellate(input: &PnInput, level: u32) -> PnMesh {
                             let t = steps_from_first as f32 / level as f32;
                             pn_edge_point(p[lo], normal(corners[lo]), p[hi], normal(corners[hi]), t).1
                         };
-                        geometry.entry(GridKey::Edge(id_first, id_second, id_steps)).or_insert_with(|| {
+                        let geometry = *geometry.entry(GridKey::Edge(id_first, id_second, id_steps)).or_insert_with(|| {
                             let (point, direction) =
                                 pn_edge_point(p[end_a], averaged[ids[end_a] as usize], p[end_b], averaged[ids[end_b] as usize], t);
                             (point, direction, here_uv)
                         });
-                        (GridKey::Edge(first, second, steps_from_first), GridKey::Edge(id_first, id_second, id_steps), shading)
+                        (Some(GridKey::Edge(first, second, steps_from_first)), geometry, shading)
                     }
                     Place::Interior => {
-                        let key = GridKey::Interior(triangle_index, a, b);
-                        geometry.insert(key, (geometry_patch.position(weights), geometry_patch.normal(weights), here_uv));
-                        (key, key, shading_patch.normal(weights))
+                        let geometry = (geometry_patch.position(weights), geometry_patch.normal(weights), here_uv);
+                        (None, geometry, shading_patch.normal(weights))
                     }
                 };
-                if let Place::Corner(corner) = grid_place(a, b, level) {
-                    geometry.entry(geometry_key).or_insert((p[corner], averaged[ids[corner] as usize], here_uv));
-                }
-                let index = *vertices.entry(vertex_key).or_insert_with(|| {
-                    let (point, direction, displace_uv) = geometry[&geometry_key];
-                    mesh.positions.push(point.into());
-                    mesh.normals.push(shading.into());
-                    if input.uvs.is_some() {
-                        mesh.uvs.push(here_uv.into());
-                    }
-                    mesh.displace_normals.push(direction.into());
-                    mesh.displace_uvs.push(displace_uv.into());
-                    mesh.positions.len() as u32 - 1
-                });
+                let vertex = TessellatedVertex { point, shading, uv: input.uvs.map(|_| here_uv), direction, displace_uv };
+                let index = match vertex_key {
+                    Some(key) => *vertices.entry(key).or_insert_with(|| mesh.push_vertex(&vertex)),
+                    None => mesh.push_vertex(&vertex),
+                };
                 grid[a as usize * per_side + b as usize] = index;
             }
         }

@@ -54,28 +54,6 @@ fn ascending_palette(e0: u8, e1: u8) -> [i32; 8] {
     }
 }
 
-/// The summed squared error of `sorted` (a block's values, ascending) under the palette of
-/// `e0`, `e1`, each value taking its nearest palette entry (one merge of the two ascending
-/// lists), stopping once it exceeds `limit`.
-#[inline(always)]
-fn block_error(sorted: &[u8; 16], e0: u8, e1: u8, limit: u32) -> u32 {
-    let palette = ascending_palette(e0, e1);
-    let mut entry = 0;
-    let mut total = 0u32;
-    for (index, &value) in sorted.iter().enumerate() {
-        let value = value as i32;
-        while entry < 7 && palette[entry] + palette[entry + 1] <= 2 * value {
-            entry += 1;
-        }
-        let difference = value - palette[entry];
-        total += (difference * difference) as u32;
-        if index % 4 == 3 && total > limit {
-            return total;
-        }
-    }
-    total
-}
-
 /// The block's bytes: endpoints, then each value's nearest palette index (3 bits each).
 fn block_bytes(values: &[u8; 16], e0: u8, e1: u8) -> [u8; 8] {
     let palette = bc4_palette(e0, e1);
@@ -146,17 +124,6 @@ struct Candidate {
     e0: u8,
     e1: u8,
     error: u32,
-}
-
-/// Tries endpoints `high` (the larger value's end) and `low` in the mode `eight` (e0 > e1) or
-/// six (e0 <= e1), keeping the better.
-#[inline(always)]
-fn consider(sorted: &[u8; 16], high: i32, low: i32, eight: bool, best: &mut Candidate) {
-    let Some((e0, e1)) = endpoint_pair(high, low, eight) else { return };
-    let error = block_error(sorted, e0, e1, best.error);
-    if error < best.error {
-        *best = Candidate { e0, e1, error };
-    }
 }
 
 /// The bytes `e0`, `e1` of ends `high` and `low` in the eight-value (`e0 > e1`) or six-value
@@ -321,22 +288,26 @@ pub fn encode_bc4_block(values: &[u8; 16], search: Bc4Search) -> [u8; 8] {
 /// `window` of the block's range (or of its range without 0 and 255): the reference the encoder
 /// is measured against (slow: every pair of the window).
 pub fn bc4_windowed_optimum(values: &[u8; 16], window: i32) -> u32 {
-    let mut sorted = *values;
-    sorted.sort_unstable();
-    let (min, max) = (sorted[0], sorted[15]);
+    let (min, max) = values.iter().fold((255u8, 0u8), |(min, max), &value| (min.min(value), max.max(value)));
     let inner = values
         .iter()
         .filter(|&&value| value != 0 && value != 255)
         .fold((255u8, 0u8), |(low, high), &value| (low.min(value), high.max(value)));
-    let mut best = Candidate { e0: min, e1: max, error: block_error(&sorted, min, max, u32::MAX) };
+    let mut best = Candidate { e0: min, e1: max, error: u32::MAX };
+    let mut batch = Candidates::new();
     for (high_start, low_start) in [(max as i32, min as i32), (inner.1 as i32, inner.0 as i32)] {
         for high in high_start - window..=high_start + window {
             for low in low_start - window..=low_start + window {
-                consider(&sorted, high, low, true, &mut best);
-                consider(&sorted, high, low, false, &mut best);
+                if batch.count + 2 > MAX_CANDIDATES {
+                    best_candidate(values, &batch, &mut best);
+                    batch = Candidates::new();
+                }
+                batch.add(high, low, true);
+                batch.add(high, low, false);
             }
         }
     }
+    best_candidate(values, &batch, &mut best);
     best.error
 }
 

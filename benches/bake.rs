@@ -3,7 +3,8 @@
 //! page packer's time and occupancy beside Python `rectpack`, plane selection speed,
 //! billboard-cloud bake time, memory, edit re-bake and fidelity per ε, the daemon's edit latency,
 //! burst handling and warm restart (`watch`), the texture atlas's full bake and one-texture edit
-//! (`atlas`), occlusion rays per second (`occlusion`), and the AmbientOcclusion kind's bake of the
+//! (`atlas`), a LOD chain's time beside a single bake and its levels' fidelity
+//! (`billboard-chain`), occlusion rays per second (`occlusion`), and the AmbientOcclusion kind's bake of the
 //! flight helmet with its quality beside per-vertex bakes (`ao`), and the Height kind's distances
 //! and times on the bundled and a corpus pair (`height`). Prints figures.
 
@@ -48,6 +49,9 @@ fn main() {
         }
         if wanted("billboard-budget") {
             bench_billboard_budget(&corpus);
+        }
+        if wanted("billboard-chain") {
+            bench_billboard_chain(&corpus);
         }
         if wanted("watch") {
             bench_watch(&corpus);
@@ -769,13 +773,10 @@ fn bench_billboard_quality(corpus: &Path) {
         let mut figures = Vec::new();
         for epsilon in [0.01, 0.02, 0.04] {
             let (dir, mut project, options) = tree_preview(corpus, tree, &format!("epsilon: {epsilon}"));
-            let metrics = cirrus::kinds::billboard_cloud::preview(&mut project, &options).expect("preview");
+            let metrics = preview_one_level(&mut project, &options);
             let one_sample = cirrus::kinds::billboard_cloud::lod_preview::PreviewSettings { samples_per_axis: 1, ..Default::default() };
-            let aliased = cirrus::kinds::billboard_cloud::preview(
-                &mut project,
-                &cirrus::kinds::billboard_cloud::PreviewOptions { settings: one_sample, ..options },
-            )
-            .expect("preview");
+            let aliased =
+                preview_one_level(&mut project, &cirrus::kinds::billboard_cloud::PreviewOptions { settings: one_sample, ..options });
             let report: serde_json::Value =
                 serde_json::from_slice(&std::fs::read(dir.path().join("baked/tree/report.json")).unwrap()).unwrap();
             figures.push(format!(
@@ -799,9 +800,23 @@ fn tree_preview(
         load_pipeline(&dir.path().join("pipeline.ron")).unwrap(),
         ProjectOptions { persistent_cache: false, ..Default::default() },
     );
-    let options =
-        cirrus::kinds::billboard_cloud::PreviewOptions { asset: "tree".into(), settings: Default::default(), out: "preview".into() };
+    let options = cirrus::kinds::billboard_cloud::PreviewOptions {
+        asset: "tree".into(),
+        settings: Default::default(),
+        out: "preview".into(),
+        lod: None,
+    };
     (dir, project, options)
+}
+
+/// The preview metrics of an asset with one LOD.
+fn preview_one_level(
+    project: &mut Project,
+    options: &cirrus::kinds::billboard_cloud::PreviewOptions,
+) -> cirrus::kinds::billboard_cloud::lod_preview::PreviewMetrics {
+    let mut levels = cirrus::kinds::billboard_cloud::preview(project, options).expect("preview");
+    assert_eq!(levels.len(), 1, "one level");
+    levels.remove(0).1
 }
 
 /// Mean silhouette IoU (16 samples per pixel) of each corpus tree's LOD at 32 to 512 quads: with
@@ -840,7 +855,7 @@ fn bench_billboard_budget(corpus: &Path) {
             for (label, settings) in [("budget", format!("budget: Some(Quads({quads}))")), ("ε alone", format!("epsilon: {epsilon_alone}"))]
             {
                 let (dir, mut project, options) = tree_preview(corpus, tree, &settings);
-                let metrics = cirrus::kinds::billboard_cloud::preview(&mut project, &options).expect("preview");
+                let metrics = preview_one_level(&mut project, &options);
                 let report: serde_json::Value =
                     serde_json::from_slice(&std::fs::read(dir.path().join("baked/tree/report.json")).unwrap()).unwrap();
                 row.push_str(&format!(
@@ -855,6 +870,39 @@ fn bench_billboard_budget(corpus: &Path) {
             figures.push(row);
         }
         println!("billboard-budget: {tree}: {}", figures.join(" "));
+    }
+}
+
+/// A three-level LOD chain (512, 128 and 32 quads) of each corpus tree as a process, beside a
+/// single default bake (ε 0.02) of the same tree (bar: chain ≤ 2×); each level's quads, ε,
+/// atlas, bytes and mean IoU (16 samples per pixel).
+fn bench_billboard_chain(corpus: &Path) {
+    const CHAIN: &str = "lods: [Quads(512), Quads(128), Quads(32)]";
+    for tree in ["oak_medium", "ash_small", "bush_2"] {
+        let single = tree_project(corpus, &format!(r#"BillboardCloud(name: "tree", mesh: "trees/{tree}.obj")"#));
+        let (single_seconds, single_mib, _) = build_process(single.path());
+        let chain = tree_project(corpus, &format!(r#"BillboardCloud(name: "tree", mesh: "trees/{tree}.obj", billboard: ({CHAIN}))"#));
+        let (chain_seconds, chain_mib, _) = build_process(chain.path());
+        let report: serde_json::Value = serde_json::from_slice(&std::fs::read(chain.path().join("baked/tree/report.json")).unwrap()).unwrap();
+        println!(
+            "billboard-chain: {tree}: chain [512, 128, 32] {chain_seconds:.2} s ({chain_mib:.0} MiB) vs single default bake {single_seconds:.2} s ({single_mib:.0} MiB): {:.2}× (bar ≤ 2×); stage ms {}",
+            chain_seconds / single_seconds,
+            report["stage_ms"]
+        );
+        let (_, mut project, options) = tree_preview(corpus, tree, CHAIN);
+        let levels = cirrus::kinds::billboard_cloud::preview(&mut project, &options).expect("preview");
+        for ((level, metrics), entry) in levels.iter().zip(report["levels"].as_array().expect("levels")) {
+            println!(
+                "billboard-chain: {tree}: lod{level}: {} quads (budget {}), ε {:.4}, atlas {}×{}, {:.2} MB, mean IoU {:.3}",
+                entry["quads"],
+                entry["budget_quads"],
+                entry["epsilon"].as_f64().unwrap_or(0.0),
+                entry["atlas"]["width"],
+                entry["atlas"]["height"],
+                entry["bytes"].as_f64().unwrap_or(0.0) / 1e6,
+                metrics.mean_iou
+            );
+        }
     }
 }
 

@@ -5,9 +5,10 @@
 //!     cargo run --release -- watch                      # in one terminal
 //!     cargo run --release --example viewer -- baked/bush --connect 127.0.0.1:7878
 //!
-//! opens a window (drag to orbit, wheel to zoom, R to reload, Esc to quit). For machines without
-//! a display, `--headless --screenshot FILE` renders into a PNG instead and rewrites it after
-//! every reload; `--reloads N` exits after N reloads (scripts and tests use it).
+//! opens a window (drag to orbit, wheel to zoom, R to reload, 0–9 to show that level of a LOD
+//! chain, Esc to quit). For machines without a display, `--headless --screenshot FILE` renders
+//! into a PNG instead and rewrites it after every reload; `--reloads N` exits after N reloads,
+//! and `--press KEYS` presses keys after loading (scripts and tests use them).
 
 use std::io::{BufRead, BufReader, Write};
 use std::net::TcpStream;
@@ -22,8 +23,16 @@ use glam::Vec3;
 #[derive(Parser, Debug, Clone)]
 #[command(about = "Shows a baked billboard-cloud LOD and reloads it on cirrus watch events")]
 pub struct Options {
-    /// The asset's output folder: holds lod.obj, albedo.ktx2, normal.ktx2 and report.json.
+    /// The asset's output folder: holds lod.obj, albedo.ktx2, normal.ktx2 and report.json, or a
+    /// chain's lod0/, lod1/, … each with its lod.obj and atlas.
     folder: PathBuf,
+    /// The level of a LOD chain to show first (keys 0–9 switch).
+    #[arg(long, default_value_t = 0)]
+    lod: u32,
+    /// Keys to press after loading, one character each (e.g. `20`: level 2, then level 0); a
+    /// headless viewer writes its screenshot again after each.
+    #[arg(long, default_value = "")]
+    press: String,
     /// The hot-reload server of `cirrus watch` (see PROTOCOL.md); without it nothing reloads.
     #[arg(long)]
     connect: Option<String>,
@@ -76,7 +85,11 @@ impl Camera {
 
 /// The shown LOD: its mesh, framing, and what the user did to the camera.
 struct Scene {
+    /// The asset's output folder.
     folder: PathBuf,
+    /// The levels of its LOD chain (0: not a chain) and the one shown.
+    levels: u32,
+    level: u32,
     alpha_cutoff: f32,
     mesh: ViewMesh,
     center: [f32; 3],
@@ -87,18 +100,56 @@ struct Scene {
 impl Scene {
     fn load(options: &Options) -> Result<Scene, String> {
         let alpha_cutoff = options.alpha_cutoff.unwrap_or_else(|| report_alpha_cutoff(&options.folder).unwrap_or(0.5));
-        let mesh = cirrus::kinds::billboard_cloud::read_lod_view_mesh(Path::new("."), &options.folder, alpha_cutoff)
+        let levels = (0..10).take_while(|level| options.folder.join(format!("lod{level}/lod.obj")).is_file()).count() as u32;
+        if options.lod > 0 && options.lod >= levels {
+            return Err(format!("{} has no LOD level {}", options.folder.display(), options.lod));
+        }
+        let folder = options.folder.clone();
+        let level_folder = level_folder(&folder, levels, options.lod);
+        let mesh = cirrus::kinds::billboard_cloud::read_lod_view_mesh(Path::new("."), &level_folder, alpha_cutoff)
             .map_err(|error| error.to_string())?;
         let (center, radius) = cirrus::kinds::billboard_cloud::lod_preview::bounding_sphere(&mesh);
         let camera = Camera { yaw: 0.6, pitch: 0.25, zoom: 1.0 };
-        Ok(Scene { folder: options.folder.clone(), alpha_cutoff, mesh, center, radius, camera })
+        Ok(Scene { folder, levels, level: options.lod, alpha_cutoff, mesh, center, radius, camera })
     }
 
-    /// Loads the artifacts again; on failure the old mesh stays and the error is returned.
+    /// Loads the shown level's artifacts again; on failure the old mesh stays and the error is
+    /// returned.
     fn reload(&mut self) -> Result<(), String> {
-        self.mesh = cirrus::kinds::billboard_cloud::read_lod_view_mesh(Path::new("."), &self.folder, self.alpha_cutoff)
+        let folder = level_folder(&self.folder, self.levels, self.level);
+        self.mesh = cirrus::kinds::billboard_cloud::read_lod_view_mesh(Path::new("."), &folder, self.alpha_cutoff)
             .map_err(|error| error.to_string())?;
         Ok(())
+    }
+
+    /// Whether a batch's files (relative to the asset's folder) touch the shown level.
+    fn shows_any(&self, files: &[String]) -> bool {
+        let shown = level_folder(Path::new(""), self.levels, self.level);
+        // A name without a folder in a chain is the resync marker, which touches every level.
+        files.iter().any(|file| Path::new(file).parent().is_none_or(|parent| parent.as_os_str().is_empty() || parent == shown))
+    }
+
+    /// What a key does: R reloads, a digit shows that level of the chain; `None` for other keys.
+    /// The camera stays where it was, so levels compare from the same view.
+    fn press(&mut self, key: &str) -> Option<Result<String, String>> {
+        if key.eq_ignore_ascii_case("r") {
+            return Some(self.reload().map(|()| "reloaded".to_string()));
+        }
+        let level = key.parse::<u32>().ok().filter(|_| key.len() == 1)?;
+        if self.levels == 0 {
+            return Some(Err(format!("key {key}: {} is not a LOD chain", self.folder.display())));
+        }
+        if level >= self.levels {
+            return Some(Err(format!("key {key}: no level {level}, the chain has lod0 to lod{}", self.levels - 1)));
+        }
+        let previous = std::mem::replace(&mut self.level, level);
+        Some(match self.reload() {
+            Ok(()) => Ok(format!("showing lod{level}")),
+            Err(error) => {
+                self.level = previous;
+                Err(format!("cannot show lod{level}, keeping lod{previous}: {error}"))
+            }
+        })
     }
 
     /// A `size`² RGBA8 image of the LOD (mid-grey background, alpha 0 there).
@@ -106,6 +157,15 @@ impl Scene {
         let matrix = self.camera.view_projection(self.center, self.radius);
         gpu.render_view(&self.mesh, matrix, cirrus::kinds::billboard_cloud::lod_preview::preview_light(), size)
             .map_err(|error| error.to_string())
+    }
+}
+
+/// The folder of a level: the asset's own, or its `lod<N>/` in a chain of `levels` levels.
+fn level_folder(folder: &Path, levels: u32, level: u32) -> PathBuf {
+    if levels == 0 {
+        folder.to_path_buf()
+    } else {
+        folder.join(format!("lod{level}"))
     }
 }
 
@@ -146,6 +206,13 @@ pub fn run(options: &Options, report: &mut dyn FnMut(String)) -> Result<(), Stri
 fn run_headless(gpu: &Gpu, mut scene: Scene, options: &Options, report: &mut dyn FnMut(String)) -> Result<(), String> {
     let screenshot = options.screenshot.as_deref().ok_or("--headless needs --screenshot FILE")?;
     report(write_screenshot(gpu, &scene, options.size, screenshot, "loaded")?);
+    for key in options.press.chars() {
+        match scene.press(&key.to_string()) {
+            Some(Ok(what)) => report(write_screenshot(gpu, &scene, options.size, screenshot, &what)?),
+            Some(Err(error)) => report(error),
+            None => report(format!("key {key} does nothing")),
+        }
+    }
     let Some(address) = options.connect.clone() else { return Ok(()) };
     let (sender, receiver) = std::sync::mpsc::channel();
     let folder = options.folder.clone();
@@ -154,6 +221,9 @@ fn run_headless(gpu: &Gpu, mut scene: Scene, options: &Options, report: &mut dyn
     while options.reloads.is_none_or(|limit| reloads < limit) {
         let Ok(event) = receiver.recv() else { return Err("the connection thread stopped".into()) };
         match event {
+            ViewerEvent::Reload { revision, files } if !scene.shows_any(&files) => {
+                report(format!("r{revision}: {} changed, not the level shown (lod{})", files.join(", "), scene.level))
+            }
             ViewerEvent::Reload { revision, files } => match scene.reload() {
                 Ok(()) => {
                     reloads += 1;
@@ -189,7 +259,8 @@ fn write_screenshot(gpu: &Gpu, scene: &Scene, size: u32, path: &Path, what: &str
     cirrus::artifacts::write_if_changed(path, &png).map_err(|error| format!("cannot write {}: {error}", path.display()))?;
     let quads = scene.mesh.batches.iter().map(|(_, vertices)| vertices.len() / 6).sum::<usize>();
     let coverage = 100.0 * covered as f64 / (size as f64 * size as f64);
-    Ok(format!("{what}: {quads} quads, {coverage:.1}% of the view covered; screenshot {}", path.display()))
+    let level = if scene.levels > 0 { format!("lod{} of {}, ", scene.level, scene.levels) } else { String::new() };
+    Ok(format!("{what}: {level}{quads} quads, {coverage:.1}% of the view covered; screenshot {}", path.display()))
 }
 
 /// Subscribes to the daemon and turns its batches into viewer events, reconnecting with `since`
@@ -218,8 +289,20 @@ fn follow_connection(mut stream: TcpStream, folder: &Path, since: &mut Option<u6
         return true;
     }
     // Artifact paths in batches are relative to the pipeline's folder; the shown folder ends with
-    // the same components.
-    let shown = |path: &str| Path::new(path).parent().is_some_and(|parent| folder.ends_with(parent));
+    // the same components. A chain's files are one folder deeper (`lod1/albedo.ktx2`).
+    let relative = |path: &str| -> Option<String> {
+        let path = Path::new(path);
+        let (parent, name) = (path.parent()?, path.file_name()?.to_string_lossy().into_owned());
+        if !["lod.obj", "albedo.ktx2", "normal.ktx2"].contains(&name.as_str()) {
+            return None;
+        }
+        if folder.ends_with(parent) {
+            return Some(name);
+        }
+        let level = parent.file_name()?.to_string_lossy();
+        let is_level = level.strip_prefix("lod").is_some_and(|digits| !digits.is_empty() && digits.bytes().all(|b| b.is_ascii_digit()));
+        (is_level && folder.ends_with(parent.parent()?)).then(|| format!("{level}/{name}"))
+    };
     for line in BufReader::new(stream).lines() {
         let Ok(line) = line else { return true };
         let Ok(event) = serde_json::from_str::<serde_json::Value>(&line) else { continue };
@@ -239,9 +322,7 @@ fn follow_connection(mut stream: TcpStream, folder: &Path, since: &mut Option<u6
                     .flatten()
                     .filter_map(|changed| changed["path"].as_str())
                     .chain(event["removed"].as_array().into_iter().flatten().filter_map(|removed| removed.as_str()))
-                    .filter(|path| shown(path))
-                    .filter_map(|path| Path::new(path).file_name().map(|name| name.to_string_lossy().into_owned()))
-                    .filter(|name| ["lod.obj", "albedo.ktx2", "normal.ktx2"].contains(&name.as_str()))
+                    .filter_map(relative)
                     .collect();
                 files.sort();
                 let messages: Vec<String> = event["failed"]
@@ -300,7 +381,8 @@ struct WindowApp<'a> {
 
 impl WindowApp<'_> {
     fn title(&self, status: &str) -> String {
-        format!("cirrus viewer: {} ({status})", self.scene.folder.display())
+        let level = if self.scene.levels > 0 { format!(" lod{}", self.scene.level) } else { String::new() };
+        format!("cirrus viewer: {}{level} ({status})", self.scene.folder.display())
     }
 
     fn fail(&mut self, event_loop: &winit::event_loop::ActiveEventLoop, error: String) {
@@ -332,6 +414,10 @@ impl winit::application::ApplicationHandler<ViewerEvent> for WindowApp<'_> {
 
     fn user_event(&mut self, _event_loop: &winit::event_loop::ActiveEventLoop, event: ViewerEvent) {
         let status = match event {
+            ViewerEvent::Reload { revision, files } if !self.scene.shows_any(&files) => {
+                (self.report)(format!("r{revision}: {} changed, not the level shown (lod{})", files.join(", "), self.scene.level));
+                format!("r{revision}")
+            }
             ViewerEvent::Reload { revision, files } => match self.scene.reload() {
                 Ok(()) => {
                     (self.report)(format!("reloaded r{revision} ({})", files.join(", ")));
@@ -367,12 +453,14 @@ impl winit::application::ApplicationHandler<ViewerEvent> for WindowApp<'_> {
             WindowEvent::CloseRequested => event_loop.exit(),
             WindowEvent::KeyboardInput { event, .. } if event.state == ElementState::Pressed => match event.logical_key.as_ref() {
                 Key::Named(NamedKey::Escape) => event_loop.exit(),
-                Key::Character("r") | Key::Character("R") => {
-                    if let Err(error) = self.scene.reload() {
-                        (self.report)(format!("cannot reload, keeping the last LOD: {error}"));
+                Key::Character(key) => match self.scene.press(key) {
+                    Some(Ok(what)) => {
+                        window.set_title(&self.title(&what));
+                        window.request_redraw();
                     }
-                    window.request_redraw();
-                }
+                    Some(Err(error)) => (self.report)(error),
+                    None => {}
+                },
                 _ => {}
             },
             WindowEvent::Resized(size) => {

@@ -55,6 +55,9 @@ pub enum Command {
         /// Output folder (default: <output>/<asset>/preview).
         #[arg(long)]
         out: Option<PathBuf>,
+        /// Only this level of a LOD chain (default: every level, and the chain's contact sheet).
+        #[arg(long, value_name = "N")]
+        lod: Option<u32>,
     },
     /// Bake, then watch the sources and re-bake what each edit invalidated; tell engines over TCP.
     Watch {
@@ -137,10 +140,10 @@ pub fn run(cli: Cli) -> ExitCode {
             }
         }
         Command::Graph { pipeline, asset, format } => graph(pipeline, asset, format),
-        Command::Preview { pipeline, asset, views, size, samples, out } => {
+        Command::Preview { pipeline, asset, views, size, samples, out, lod } => {
             let settings =
                 crate::kinds::billboard_cloud::lod_preview::PreviewSettings { views: views as usize, size, samples_per_axis: samples };
-            preview(pipeline, asset, settings, out)
+            preview(pipeline, asset, settings, out, lod)
         }
     }
 }
@@ -236,6 +239,7 @@ fn preview(
     asset: String,
     settings: crate::kinds::billboard_cloud::lod_preview::PreviewSettings,
     out: Option<PathBuf>,
+    lod: Option<u32>,
 ) -> ExitCode {
     let config = match load_pipeline_or_report(&pipeline) {
         Ok(config) => config,
@@ -243,22 +247,36 @@ fn preview(
     };
     let out = out.unwrap_or_else(|| config.output.join(&asset).join("preview"));
     let mut project = Project::open(config, ProjectOptions::default());
-    let options = crate::kinds::billboard_cloud::PreviewOptions { asset, settings, out: out.clone() };
+    let options = crate::kinds::billboard_cloud::PreviewOptions { asset, settings, out: out.clone(), lod };
     match crate::kinds::billboard_cloud::preview(&mut project, &options) {
-        Ok(metrics) => {
-            println!(
-                "{} views, {} per pixel: mean IoU {:.3}, min IoU {:.3}, mean PSNR {:.2} dB",
-                metrics.views.len(),
-                if metrics.samples_per_pixel == 1 { "1 sample".to_string() } else { format!("{} samples", metrics.samples_per_pixel) },
-                metrics.mean_iou,
-                metrics.min_iou,
-                metrics.mean_psnr
-            );
-            println!("wrote {}/contact_sheet.png and metrics.json", crate::diagnostic::display_path(&out));
+        Ok(levels) => {
+            let chain = levels.len() > 1 || levels.first().is_some_and(|&(level, _)| level > 0) || lod.is_some();
+            for (level, metrics) in &levels {
+                println!(
+                    "{}{} views, {} per pixel: mean IoU {:.3}, min IoU {:.3}, mean PSNR {:.2} dB",
+                    if chain { format!("lod{level}: ") } else { String::new() },
+                    metrics.views.len(),
+                    if metrics.samples_per_pixel == 1 { "1 sample".to_string() } else { format!("{} samples", metrics.samples_per_pixel) },
+                    metrics.mean_iou,
+                    metrics.min_iou,
+                    metrics.mean_psnr
+                );
+            }
+            if levels.len() > 1 {
+                println!(
+                    "wrote {0}/contact_sheet.png (each view: source, then lod0 to lod{1}) and lod<N>/contact_sheet.png, lod<N>/metrics.json",
+                    crate::diagnostic::display_path(&out),
+                    levels.len() - 1
+                );
+            } else {
+                println!("wrote contact_sheet.png and metrics.json under {}", crate::diagnostic::display_path(&out));
+            }
             ExitCode::SUCCESS
         }
         Err(
-            error @ (crate::kinds::billboard_cloud::PreviewError::Build(_) | crate::kinds::billboard_cloud::PreviewError::NotBillboard(_)),
+            error @ (crate::kinds::billboard_cloud::PreviewError::Build(_)
+            | crate::kinds::billboard_cloud::PreviewError::NotBillboard(_)
+            | crate::kinds::billboard_cloud::PreviewError::NoSuchLevel { .. }),
         ) => {
             eprintln!("error: {error}");
             ExitCode::from(EXIT_USAGE)

@@ -59,8 +59,16 @@ pub struct BillboardSettings {
     /// diameter on screen): the atlas gets one texel per pixel there, `texel_density` =
     /// `screen_size / diameter` (none: `texel_density`, else the largest atlas).
     pub screen_size: Option<u32>,
+    /// A LOD chain: one level per budget, most detailed first, each baked into `lod<N>/`. Level
+    /// N is meant for half the screen size of level N − 1: its `screen_size` or `texel_density`
+    /// is halved, and without either its atlas's largest side is `max_size / 2^N` (at least 64).
+    /// Empty: one LOD (`budget`, or ε) in the asset's folder.
+    pub lods: Vec<LodBudget>,
     pub alpha_cutoff: f32,
 }
+
+/// The most levels a LOD chain may have (the viewer switches them with keys 0–9).
+pub const MAX_LOD_LEVELS: usize = 10;
 
 /// What a billboard-cloud LOD may cost: quads (two triangles each) or triangles.
 #[derive(Clone, Copy, Debug, PartialEq, Eq, Hash, Serialize, Deserialize)]
@@ -236,6 +244,7 @@ impl Default for Settings {
                 budget: None,
                 texel_density: None,
                 screen_size: None,
+                lods: Vec::new(),
                 alpha_cutoff: 0.5,
             },
             atlas: AtlasSettings { max_size: 2048, padding: 4, power_of_two: true },
@@ -733,6 +742,18 @@ impl Validator<'_> {
                 self.error_at_key("screen_size", anchor, "screen_size must be between 4 and 16384 pixels");
             }
             settings.billboard.screen_size = screen_size;
+        }
+        if let Some(lods) = &billboard.lods {
+            if lods.len() > MAX_LOD_LEVELS {
+                self.error_at_key("lods", anchor, &format!("a LOD chain has at most {MAX_LOD_LEVELS} levels"));
+            }
+            if lods.iter().any(|budget| !(1..=1_000_000).contains(&budget.quads())) {
+                self.error_at_key("lods", anchor, "each level must allow between 1 and 1000000 quads (Triangles: at least 2)");
+            }
+            settings.billboard.lods = lods.clone();
+        }
+        if !settings.billboard.lods.is_empty() && settings.billboard.budget.is_some() {
+            self.error_at_key("lods", anchor, "give budget or lods, not both: a chain's levels carry their own budgets");
         }
         if settings.billboard.screen_size.is_some() && settings.billboard.texel_density.is_some() {
             self.error_at_key("screen_size", anchor, "give texel_density or screen_size, not both: each sets the atlas's texels per unit");

@@ -414,6 +414,7 @@ impl Project {
                         artifact: path.strip_prefix(&asset_folder).unwrap_or(path).to_string(),
                         path: path.clone(),
                         hash: hash.clone(),
+                        meaning: meaning.cloned(),
                     });
                 }
             }

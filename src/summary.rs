@@ -29,6 +29,10 @@ pub struct ChangedArtifact {
     pub path: String,
     /// blake3 hex digest of the file.
     pub hash: String,
+    /// What the file's values mean, where its kind says (a height map's mapping, the LOD level
+    /// of a chain's file), as the manifest lists it.
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub meaning: Option<serde_json::Value>,
 }
 
 #[derive(Clone, Copy, Debug, PartialEq, Eq, Serialize)]

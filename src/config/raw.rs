@@ -118,6 +118,7 @@ pub struct BillboardOverrides {
     pub texel_density: Option<Option<f32>>,
     #[serde(default, deserialize_with = "explicit")]
     pub screen_size: Option<Option<u32>>,
+    pub lods: Option<Vec<LodBudget>>,
     pub alpha_cutoff: Option<f32>,
 }
 

@@ -176,8 +176,11 @@ fn corpus_billboard_clouds_bake_and_keep_their_silhouettes() {
             asset: name.into(),
             settings: Default::default(),
             out: format!("baked/{name}/preview").into(),
+            lod: None,
         };
-        let metrics = cirrus::kinds::billboard_cloud::preview(&mut project, &options).expect("preview renders");
+        let [(0, metrics)] = &cirrus::kinds::billboard_cloud::preview(&mut project, &options).expect("preview renders")[..] else {
+            panic!("{name}: one level previewed")
+        };
         assert_eq!(metrics.views.len(), 26);
         // The bar of DESIGN §7, at the default ε and 16 samples per pixel.
         let floor = 0.85;

@@ -1,6 +1,8 @@
 //! LOD previews: the source mesh and its billboard cloud rendered from the 26 directions of a
 //! cube (face centres, edge midpoints, corners) under the same orthographic camera and light,
-//! compared by silhouette IoU and PSNR, and laid out side by side in a contact sheet.
+//! compared by silhouette IoU and PSNR, and laid out side by side in a contact sheet. A LOD
+//! chain's levels are all compared with the one source render of each view, and a chain sheet
+//! shows each view's source beside every level.
 //!
 //! Every pixel is resolved from several samples (4 × 4 by default): a pixel belongs to a
 //! silhouette when at least half of its samples are covered, and its colour is their mean. With
@@ -55,10 +57,17 @@ pub struct PreviewMetrics {
     pub mean_psnr: f64,
 }
 
-/// The result of a preview: metrics and the contact sheet (PNG bytes).
+/// The result of previewing one LOD: metrics and the contact sheet (PNG bytes).
 pub struct Preview {
     pub metrics: PreviewMetrics,
     pub contact_sheet: Vec<u8>,
+}
+
+/// The result of previewing several LODs of one source: each one's preview, and the chain sheet
+/// (each view's source, then every LOD, side by side; PNG bytes).
+pub struct ChainPreview {
+    pub levels: Vec<Preview>,
+    pub chain_sheet: Vec<u8>,
 }
 
 /// How a preview renders: how many of the 26 directions, the image size, and how many samples
@@ -86,29 +95,60 @@ pub fn preview(
     radius: f32,
     settings: PreviewSettings,
 ) -> Result<Preview, GpuError> {
+    let mut chain = preview_chain(gpu, source, &[lod], center, radius, settings)?;
+    Ok(chain.levels.remove(0))
+}
+
+/// Renders `source` and each of `lods` from the first `settings.views` directions (the source
+/// once per view), framing the sphere at `center` with `radius`.
+pub fn preview_chain(
+    gpu: &Gpu,
+    source: &ViewMesh,
+    lods: &[&ViewMesh],
+    center: [f32; 3],
+    radius: f32,
+    settings: PreviewSettings,
+) -> Result<ChainPreview, GpuError> {
     let light = preview_light();
-    let mut metrics = Vec::new();
-    let mut pairs = Vec::new();
+    let mut metrics: Vec<Vec<ViewMetrics>> = vec![Vec::new(); lods.len()];
+    // Per view: the source's image, then each LOD's.
+    let mut views: Vec<Vec<Vec<u8>>> = Vec::new();
     for direction in view_directions().into_iter().take(settings.views) {
         let matrix = view_projection(center, radius, direction);
         let source_view = render_resolved_view(gpu, source, matrix, light, settings)?;
-        let lod_view = render_resolved_view(gpu, lod, matrix, light, settings)?;
-        metrics.push(ViewMetrics {
-            direction,
-            iou: silhouette_iou(&source_view, &lod_view),
-            psnr: rgb_psnr(&source_view.rgba, &lod_view.rgba),
-        });
-        pairs.push((source_view.rgba, lod_view.rgba));
+        let mut images = Vec::with_capacity(1 + lods.len());
+        for (lod, level_metrics) in lods.iter().zip(&mut metrics) {
+            let lod_view = render_resolved_view(gpu, lod, matrix, light, settings)?;
+            level_metrics.push(ViewMetrics {
+                direction,
+                iou: silhouette_iou(&source_view, &lod_view),
+                psnr: rgb_psnr(&source_view.rgba, &lod_view.rgba),
+            });
+            images.push(lod_view.rgba);
+        }
+        images.insert(0, source_view.rgba);
+        views.push(images);
     }
-    let count = metrics.len().max(1) as f64;
-    let mean_iou = metrics.iter().map(|view| view.iou).sum::<f64>() / count;
-    let min_iou = metrics.iter().map(|view| view.iou).fold(1.0, f64::min);
-    let mean_psnr = metrics.iter().map(|view| view.psnr).sum::<f64>() / count;
     let samples_per_pixel = settings.samples_per_axis * settings.samples_per_axis;
-    Ok(Preview {
-        metrics: PreviewMetrics { samples_per_pixel, views: metrics, mean_iou, min_iou, mean_psnr },
-        contact_sheet: contact_sheet(&pairs, settings.size),
-    })
+    let levels = metrics
+        .into_iter()
+        .enumerate()
+        .map(|(level, views_metrics)| {
+            let pairs: Vec<Vec<&[u8]>> = views.iter().map(|images| vec![images[0].as_slice(), images[1 + level].as_slice()]).collect();
+            Preview { metrics: summarise_views(views_metrics, samples_per_pixel), contact_sheet: contact_sheet(&pairs, settings.size) }
+        })
+        .collect();
+    let groups: Vec<Vec<&[u8]>> = views.iter().map(|images| images.iter().map(Vec::as_slice).collect()).collect();
+    Ok(ChainPreview { levels, chain_sheet: contact_sheet(&groups, settings.size) })
+}
+
+/// The mean and worst of one LOD's per-view figures.
+fn summarise_views(views: Vec<ViewMetrics>, samples_per_pixel: u32) -> PreviewMetrics {
+    let count = views.len().max(1) as f64;
+    let mean_iou = views.iter().map(|view| view.iou).sum::<f64>() / count;
+    let min_iou = views.iter().map(|view| view.iou).fold(1.0, f64::min);
+    let mean_psnr = views.iter().map(|view| view.psnr).sum::<f64>() / count;
+    PreviewMetrics { samples_per_pixel, views, mean_iou, min_iou, mean_psnr }
 }
 
 /// A view resolved to its pixels: the sRGB colour (the mean of the pixel's samples, taken in
@@ -287,16 +327,19 @@ pub fn rgb_psnr(a: &[u8], b: &[u8]) -> f64 {
     (10.0 * (255.0f64 * 255.0 / (squared as f64 / samples)).log10()).min(100.0)
 }
 
-/// Source | LOD pairs, four pairs per row, as an opaque PNG.
-fn contact_sheet(pairs: &[(Vec<u8>, Vec<u8>)], size: u32) -> Vec<u8> {
-    let per_row = 4usize;
-    let rows = pairs.len().div_ceil(per_row).max(1);
-    let (width, height) = (per_row * 2 * size as usize + (per_row - 1) * 8, rows * size as usize + (rows - 1) * 8);
+/// Groups of views side by side (source | LOD, or source | every level of a chain), as many
+/// groups per row as make about eight images, 8 pixels between groups, as an opaque PNG.
+fn contact_sheet(groups: &[Vec<&[u8]>], size: u32) -> Vec<u8> {
+    let per_group = groups.first().map_or(2, Vec::len).max(1);
+    let per_row = (8 / per_group).max(1);
+    let rows = groups.len().div_ceil(per_row).max(1);
+    let group_width = per_group * size as usize;
+    let (width, height) = (per_row * group_width + (per_row - 1) * 8, rows * size as usize + (rows - 1) * 8);
     let mut pixels = vec![255u8; width * height * 4];
-    for (index, (source, lod)) in pairs.iter().enumerate() {
+    for (index, images) in groups.iter().enumerate() {
         let (row, column) = (index / per_row, index % per_row);
-        for (half, image) in [source, lod].into_iter().enumerate() {
-            let x0 = column * (2 * size as usize + 8) + half * size as usize;
+        for (half, image) in images.iter().enumerate() {
+            let x0 = column * (group_width + 8) + half * size as usize;
             let y0 = row * (size as usize + 8);
             for y in 0..size as usize {
                 for x in 0..size as usize {

@@ -3,10 +3,15 @@
 //! tail, plus `lod.obj` / `lod.mtl`; and `cirrus preview`, which compares the source with the
 //! baked LOD.
 //!
-//! Jobs: `layout` (mesh, planes and layout on a worker, wave 0), then the LOD and, when some
-//! atlas surface is not in the cache, the loads the renders need (`render-memo`, one `upload`
-//! per material texture, the surfaces' last encodings) followed by one `render` per render group
-//! (wave 1), then the four atlas surfaces through the tail (wave 2).
+//! A LOD chain (`lods: [Quads(512), Quads(128), …]`) bakes one level per budget into `lod<N>/`,
+//! each with its own planes, layout, renders, atlas and `lod.obj`, all reading the one mesh
+//! stage; without a chain the one level goes to the asset's folder.
+//!
+//! Jobs: one `layout` per level (mesh, planes and layout on a worker, wave 0), then the level's
+//! LOD and, when some of its atlas surfaces are not in the cache, the loads the renders need
+//! (`render-memo`, the surfaces' last encodings, and one `upload` per material texture from the
+//! first level that renders) followed by one `render` per render group (wave 1), then the four
+//! atlas surfaces through the tail (wave 2).
 
 pub mod planes;
 pub mod rectangles;
@@ -15,6 +20,7 @@ pub mod render_groups;
 pub mod atlas;
 pub mod lod_mesh;
 pub mod lod_preview;
+pub mod levels;
 pub mod queries;
 
 use std::collections::BTreeMap;
@@ -30,13 +36,30 @@ use crate::kinds::{check_texture_file, tail_instances, AssetOutputs, Job, Kind, 
 use crate::summary::ErrorSummary;
 use crate::texture::tail::TailSettings;
 use crate::texture::{SurfaceKind, Texture, TextureSlot};
-use queries::{billboard_layout, billboard_planes, lod_files, render_label};
+use queries::{billboard_layout, billboard_planes, level_label, lod_files, render_label};
 use queries::{ATLAS, LAYOUT, LOD, PLANES, RENDER};
 
 pub struct BillboardCloud;
 
-fn atlas_surfaces() -> [SurfaceId; 4] {
-    SurfaceKind::BILLBOARD.map(|surface| SurfaceId { group: String::new(), surface })
+/// A level's four atlas surfaces (their group is the level's folder).
+fn atlas_surfaces(db: &dyn Db, asset: Asset, level: u32) -> [SurfaceId; 4] {
+    let folder = levels::level_folder(asset.settings(db), level);
+    SurfaceKind::BILLBOARD.map(|surface| SurfaceId { group: folder.clone(), surface })
+}
+
+/// The level a surface belongs to (its group is the level's folder).
+fn level_of_surface(db: &dyn Db, asset: Asset, surface: &SurfaceId) -> Result<u32, Diagnostic> {
+    levels::level_of_folder(&surface.group)
+        .filter(|&level| level < levels::level_count(asset.settings(db)))
+        .ok_or_else(|| Diagnostic::new(asset.main_file(db), format!("no LOD level `{}`", surface.group)))
+}
+
+/// Render steps carry their level and group in one index: the level in the top byte.
+const GROUPS_PER_LEVEL: u32 = 1 << 24;
+
+/// Whether some of a level's atlas surfaces are not in the persistent cache (so it renders).
+fn level_renders(db: &dyn Db, asset: Asset, level: u32) -> bool {
+    !atlas_surfaces(db, asset, level).iter().all(|surface| crate::kinds::tail_queries::surface_in_cache(db, asset, surface))
 }
 
 /// Every (material, slot) whose texture the renders sample, in material order.
@@ -58,20 +81,24 @@ impl Kind for BillboardCloud {
     }
 
     fn first_jobs(db: &dyn Db, asset: Asset) -> Vec<Job> {
-        vec![Job { asset, task: Task::Step("layout", 0), after: 0, label: asset.name(db).clone() }]
+        (0..levels::level_count(asset.settings(db)))
+            .map(|level| Job { asset, task: Task::Step("layout", level), after: 0, label: level_label(db, asset, level).clone() })
+            .collect()
     }
 
     fn run_step(db: &dyn Db, asset: Asset, step: &'static str, index: u32) -> Result<Vec<Job>, Diagnostic> {
         let name = asset.name(db);
         match step {
             "layout" => {
-                let layout = billboard_layout(db, asset)?;
-                let lod = Job { asset, task: Task::Step("lod", 0), after: 1, label: format!("{name}/lod") };
-                let surfaces = atlas_surfaces();
+                let level = index;
+                let label = level_label(db, asset, level);
+                let layout = billboard_layout(db, asset, level)?;
+                let lod = Job { asset, task: Task::Step("lod", level), after: 1, label: format!("{label}/lod") };
+                let surfaces = atlas_surfaces(db, asset, level);
                 let surface_jobs =
                     surfaces.clone().map(|surface| Job { asset, label: surface.label(name), task: Task::Surface(surface), after: 2 });
                 // Renders are needed only for surfaces the persistent cache does not hold.
-                if surfaces.iter().all(|surface| crate::kinds::tail_queries::surface_in_cache(db, asset, surface)) {
+                if !level_renders(db, asset, level) {
                     return Ok([lod].into_iter().chain(surface_jobs).collect());
                 }
                 // Renders are likely (unless every group is in the render memo): the GPU starts
@@ -79,33 +106,36 @@ impl Kind for BillboardCloud {
                 // surfaces' last encodings) run as jobs of their own before the renders, on
                 // every worker, instead of one after the other inside the first render.
                 crate::gpu::start_gpu_in_background();
-                let mut jobs = vec![Job { asset, task: Task::Step("render-memo", 0), after: 1, label: format!("{name}/render-memo") }];
+                let mut jobs = vec![Job { asset, task: Task::Step("render-memo", level), after: 1, label: format!("{label}/render-memo") }];
                 jobs.extend(surfaces.iter().map(|surface| Job {
                     asset,
                     task: Task::LoadPreviousEncoding(surface.clone()),
                     after: 1,
                     label: surface.label(name),
                 }));
-                let uploads = material_texture_slots(&*loaded_mesh(db, asset)?).len() as u32;
-                jobs.extend((0..uploads).map(|texture| Job {
-                    asset,
-                    task: Task::Step("upload", texture),
-                    after: 1,
-                    label: format!("{name}/upload{texture}"),
-                }));
+                // Textures are uploaded once per content: by the first level that renders.
+                if (0..level).all(|earlier| !level_renders(db, asset, earlier)) {
+                    let uploads = material_texture_slots(&*loaded_mesh(db, asset)?).len() as u32;
+                    jobs.extend((0..uploads).map(|texture| Job {
+                        asset,
+                        task: Task::Step("upload", texture),
+                        after: 1,
+                        label: format!("{name}/upload{texture}"),
+                    }));
+                }
                 jobs.push(lod);
-                let groups = 0..layout.render_groups.len() as u32;
+                let groups = 0..(layout.render_groups.len() as u32).min(GROUPS_PER_LEVEL);
                 jobs.extend(groups.map(|group| Job {
                     asset,
-                    task: Task::Step("render", group),
+                    task: Task::Step("render", level * GROUPS_PER_LEVEL + group),
                     after: 1,
-                    label: format!("{name}/render{group}"),
+                    label: format!("{label}/render{group}"),
                 }));
                 jobs.extend(surface_jobs);
                 Ok(jobs)
             }
             "render-memo" => {
-                queries::stored_renders(db, asset);
+                queries::stored_renders(db, asset, index);
                 Ok(Vec::new())
             }
             "upload" => {
@@ -120,8 +150,8 @@ impl Kind for BillboardCloud {
                 }
                 Ok(Vec::new())
             }
-            "render" => queries::plane_images(db, asset, index).map(|_| Vec::new()),
-            "lod" => lod_files(db, asset).map(|_| Vec::new()),
+            "render" => queries::plane_images(db, asset, index / GROUPS_PER_LEVEL, index % GROUPS_PER_LEVEL).map(|_| Vec::new()),
+            "lod" => lod_files(db, asset, index).map(|_| Vec::new()),
             other => unreachable!("the billboard kind schedules no step `{other}`"),
         }
     }
@@ -134,47 +164,36 @@ impl Kind for BillboardCloud {
         let report = output_folder.join("report.json");
         let mut mesh = crate::kinds::mesh_queries::mesh_instance(db, asset);
         mesh.writes.push(report.clone());
-        let planes = StageInstance::new(PLANES, name, &mesh_label).reads_stage(&mesh);
-        let layout = StageInstance::new(LAYOUT, name, &mesh_label).reads_stage(&mesh).reads_stage(&planes);
-        let mut atlas = StageInstance::new(ATLAS, name, &mesh_label).reads_stage(&layout);
-        let mut lod = StageInstance::new(LOD, name, &mesh_label).reads_stage(&layout);
-        lod.writes = vec![output_folder.join("lod.obj"), output_folder.join("lod.mtl")];
-        let mut instances = vec![mesh.clone(), planes.clone(), layout.clone()];
+        let mut instances = vec![mesh.clone()];
         let mut decodes = BTreeMap::new();
-        if let (Ok(loaded), Ok(plane_layout)) = (loaded_mesh(db, asset), billboard_layout(db, asset)) {
-            for group in &plane_layout.render_groups {
-                let label = render_label(name, &loaded.mesh, group);
-                let instance = label.strip_prefix(&format!("{name}/")).unwrap_or(&label).to_string();
-                let mut render = StageInstance::new(RENDER, label, instance).reads_stage(&mesh).reads_stage(&planes).reads_stage(&layout);
-                if loaded.mesh.uvs.is_some() {
-                    for &material in &group.materials {
-                        for path in loaded.mesh.materials[material as usize].maps.values() {
-                            let label = display_path(path);
-                            render.reads.push(Read::Stage(DECODE, label.clone()));
-                            decodes.entry(label).or_insert_with(|| {
-                                let mut decode = StageInstance::new(DECODE, display_path(path), display_path(path));
-                                decode.reads.push(Read::File(path.clone()));
-                                decode.shared = true;
-                                decode
-                            });
-                        }
-                    }
-                }
-                atlas = atlas.reads_stage(&render);
-                instances.push(render);
+        for level in 0..levels::level_count(asset.settings(db)) {
+            let folder = levels::level_folder(asset.settings(db), level);
+            let label = level_label(db, asset, level);
+            let instance = if folder.is_empty() { mesh_label.clone() } else { folder.clone() };
+            let planes = StageInstance::new(PLANES, label, &instance).reads_stage(&mesh);
+            let layout = StageInstance::new(LAYOUT, label, &instance).reads_stage(&mesh).reads_stage(&planes);
+            let mut atlas = StageInstance::new(ATLAS, label, &instance).reads_stage(&layout);
+            let mut lod = StageInstance::new(LOD, label, &instance).reads_stage(&layout);
+            let level_folder = output_folder.join(&folder);
+            lod.writes = vec![level_folder.join("lod.obj"), level_folder.join("lod.mtl")];
+            instances.extend([planes.clone(), layout.clone()]);
+            let renders = level_render_instances(db, asset, level, [&mesh, &planes, &layout], &mut decodes);
+            for render in &renders {
+                atlas = atlas.reads_stage(render);
             }
+            instances.extend(renders);
+            let container = asset.settings(db).encode.container;
+            let mut tails = Vec::new();
+            for surface in atlas_surfaces(db, asset, level) {
+                let [mips, encode, mut write] = tail_instances(name, &surface, &atlas, surface.artifact_paths(output_folder, container));
+                write.writes.push(report.clone());
+                tails.extend([mips, encode, write]);
+            }
+            atlas.writes.push(report.clone());
+            instances.push(atlas);
+            instances.extend(tails);
+            instances.push(lod);
         }
-        let container = asset.settings(db).encode.container;
-        let mut tails = Vec::new();
-        for surface in atlas_surfaces() {
-            let [mips, encode, mut write] = tail_instances(name, &surface, &atlas, surface.artifact_paths(output_folder, container));
-            write.writes.push(report.clone());
-            tails.extend([mips, encode, write]);
-        }
-        atlas.writes.push(report.clone());
-        instances.push(atlas);
-        instances.extend(tails);
-        instances.push(lod);
         instances.extend(decodes.into_values());
         for instance in &mut instances {
             instance.failed = failed;
@@ -204,7 +223,7 @@ impl Kind for BillboardCloud {
     }
 
     fn surface_image(db: &dyn Db, asset: Asset, surface: &SurfaceId) -> Result<Arc<Texture>, Diagnostic> {
-        queries::atlas_surface(db, asset, surface.surface)
+        queries::atlas_surface(db, asset, level_of_surface(db, asset, surface)?, surface.surface)
     }
 
     fn tail_settings(db: &dyn Db, asset: Asset, surface: &SurfaceId) -> Result<TailSettings, Diagnostic> {
@@ -218,50 +237,132 @@ impl Kind for BillboardCloud {
         ))
     }
 
-    fn surface_recipe_key(db: &dyn Db, asset: Asset, _surface: &SurfaceId) -> Result<Option<CacheKey>, Diagnostic> {
-        Ok(Some(queries::atlas_recipe_key(db, asset)))
+    fn surface_recipe_key(db: &dyn Db, asset: Asset, surface: &SurfaceId) -> Result<Option<CacheKey>, Diagnostic> {
+        Ok(Some(queries::atlas_recipe_key(db, asset, level_of_surface(db, asset, surface)?)))
     }
 
     fn surface_parts_key(db: &dyn Db, asset: Asset, surface: &SurfaceId) -> Result<Option<CacheKey>, Diagnostic> {
-        queries::atlas_surface_parts_key(db, asset, surface.surface).map(Some)
+        queries::atlas_surface_parts_key(db, asset, level_of_surface(db, asset, surface)?, surface.surface).map(Some)
     }
 }
 
-/// The files of a baked billboard cloud: LOD mesh, textures, previews, report.
+/// A level's render stage instances, one per render group, each reading the decodes of its
+/// materials' textures (added to `decodes`, shared by every level).
+fn level_render_instances(
+    db: &dyn Db,
+    asset: Asset,
+    level: u32,
+    [mesh, planes, layout]: [&StageInstance; 3],
+    decodes: &mut BTreeMap<String, StageInstance>,
+) -> Vec<StageInstance> {
+    let (Ok(loaded), Ok(plane_layout)) = (loaded_mesh(db, asset), billboard_layout(db, asset, level)) else { return Vec::new() };
+    let prefix = format!("{}/", asset.name(db));
+    let mut renders = Vec::new();
+    for group in &plane_layout.render_groups {
+        let label = render_label(level_label(db, asset, level), &loaded.mesh, group);
+        let instance = label.strip_prefix(&prefix).unwrap_or(&label).to_string();
+        let mut render = StageInstance::new(RENDER, label, instance).reads_stage(mesh).reads_stage(planes).reads_stage(layout);
+        if loaded.mesh.uvs.is_some() {
+            for &material in &group.materials {
+                for path in loaded.mesh.materials[material as usize].maps.values() {
+                    let label = display_path(path);
+                    render.reads.push(Read::Stage(DECODE, label.clone()));
+                    decodes.entry(label).or_insert_with(|| {
+                        let mut decode = StageInstance::new(DECODE, display_path(path), display_path(path));
+                        decode.reads.push(Read::File(path.clone()));
+                        decode.shared = true;
+                        decode
+                    });
+                }
+            }
+        }
+        renders.push(render);
+    }
+    renders
+}
+
+/// The files of a baked billboard cloud: each level's LOD mesh, textures and previews, and the
+/// report.
 fn billboard_outputs(db: &dyn Db, asset: Asset, output_folder: &Path, runs: &[StageRun]) -> Result<AssetOutputs, Diagnostic> {
-    let (obj, mtl) = (*lod_files(db, asset)?).clone();
     let loaded = loaded_mesh(db, asset)?;
-    let planes = billboard_planes(db, asset)?;
-    let layout = billboard_layout(db, asset)?;
+    let settings = asset.settings(db);
+    let name = asset.name(db);
     let mut outputs = AssetOutputs::default();
-    outputs.files.push((output_folder.join("lod.obj"), obj.into_bytes().into()));
-    outputs.files.push((output_folder.join("lod.mtl"), mtl.into_bytes().into()));
-    let container = asset.settings(db).encode.container;
+    let mut level_reports = Vec::new();
+    for level in 0..levels::level_count(settings) {
+        level_reports.push(level_outputs(db, asset, level, output_folder, &mut outputs)?);
+    }
+    let mut report = serde_json::json!({
+        "asset": name,
+        "kind": BillboardCloud::NAME,
+        "mesh": display_path(asset.main_file(db)),
+        "faces": loaded.mesh.triangles.len(),
+        "alpha_cutoff": settings.billboard.alpha_cutoff,
+    });
+    let fields = report.as_object_mut().expect("an object");
+    if levels::is_chain(settings) {
+        fields.insert("levels".into(), serde_json::Value::Array(level_reports));
+    } else if let Some(serde_json::Value::Object(level)) = level_reports.pop() {
+        // One level: its figures are the asset's.
+        fields.extend(level.into_iter().filter(|(key, _)| key != "level" && key != "folder"));
+    }
+    fields.insert("stage_ms".into(), serde_json::to_value(crate::kinds::asset_stage_ms(name, runs)).expect("times serialise"));
+    fields.insert(
+        "warnings".into(),
+        serde_json::to_value(loaded.warnings.iter().map(ErrorSummary::from).collect::<Vec<_>>()).expect("warnings serialise"),
+    );
+    outputs.report = Some(serde_json::to_vec_pretty(&report).expect("reports serialise"));
+    Ok(outputs)
+}
+
+/// One level's files (added to `outputs`) and its part of the report: what it draws, the error
+/// it was made with, its atlas, its surfaces, and the bytes an engine loads (`lod.obj`,
+/// `lod.mtl` and the four textures; previews aside).
+fn level_outputs(
+    db: &dyn Db,
+    asset: Asset,
+    level: u32,
+    output_folder: &Path,
+    outputs: &mut AssetOutputs,
+) -> Result<serde_json::Value, Diagnostic> {
+    let settings = asset.settings(db);
+    let folder = levels::level_folder(settings, level);
+    let level_settings = queries::level_settings(db, asset, level);
+    let (obj, mtl) = (*lod_files(db, asset, level)?).clone();
+    let planes = billboard_planes(db, asset, level)?;
+    let layout = billboard_layout(db, asset, level)?;
+    let level_folder = output_folder.join(&folder);
+    let first_file = outputs.files.len();
+    let mut bytes = obj.len() + mtl.len();
+    outputs.files.push((level_folder.join("lod.obj"), obj.into_bytes().into()));
+    outputs.files.push((level_folder.join("lod.mtl"), mtl.into_bytes().into()));
+    let container = settings.encode.container;
     let mut surfaces = Vec::new();
-    for surface in atlas_surfaces() {
+    for surface in atlas_surfaces(db, asset, level) {
         let artifacts = crate::kinds::tail_queries::surface_artifacts(db, asset, surface.clone())?;
         let [texture_path, preview_path] = surface.artifact_paths(output_folder, container);
+        bytes += artifacts.texture_file.len();
         outputs.files.push((texture_path, artifacts.texture_file.clone()));
         outputs.files.push((preview_path, artifacts.preview_png.clone()));
         surfaces.push(artifacts.info.clone());
     }
-    let settings = asset.settings(db);
-    let name = asset.name(db);
-    let stage_ms = crate::kinds::asset_stage_ms(name, runs);
-    let atlas_coverage = queries::atlas_coverage_fraction(db, asset)?;
-    let report = serde_json::json!({
-        "asset": name,
-        "kind": BillboardCloud::NAME,
-        "mesh": display_path(asset.main_file(db)),
-        "faces": planes.face_count,
+    if levels::is_chain(settings) {
+        // The manifest and the hot-reload batches name each file's level.
+        for (path, _) in &outputs.files[first_file..] {
+            outputs.meanings.insert(path.clone(), serde_json::json!({ "lod": level }));
+        }
+    }
+    let atlas_coverage = queries::atlas_coverage_fraction(db, asset, level)?;
+    Ok(serde_json::json!({
+        "level": level,
+        "folder": folder,
         "planes": planes.planes.len(),
         "quads": layout.layout.placements.len(),
         "triangles": 2 * layout.layout.placements.len(),
         // The quad budget (none: ε decides) and the ε it was met with.
-        "budget_quads": settings.billboard.budget.map(crate::config::LodBudget::quads),
+        "budget_quads": level_settings.planes.max_quads,
         // Faces of solid materials drawn on another plane's quad too (crack filling).
         "faces_also_drawn": layout.rectangles.iter().map(|rectangle| rectangle.also_drawn.len()).sum::<usize>(),
-        "alpha_cutoff": settings.billboard.alpha_cutoff,
         "epsilon": planes.epsilon_fraction,
         "epsilon_world": planes.epsilon,
         "max_error_world": planes.max_error,
@@ -269,16 +370,13 @@ fn billboard_outputs(db: &dyn Db, asset: Asset, output_folder: &Path, runs: &[St
             "width": layout.layout.width,
             "height": layout.layout.height,
             "texel_density": layout.layout.texel_density,
-            "screen_size": settings.billboard.screen_size,
+            "screen_size": level_settings.screen_size,
             "occupancy": (layout.layout.occupancy * 1e4).round() / 1e4,
             "coverage": atlas_coverage,
         },
         "surfaces": surfaces,
-        "stage_ms": stage_ms,
-        "warnings": loaded.warnings.iter().map(ErrorSummary::from).collect::<Vec<_>>(),
-    });
-    outputs.report = Some(serde_json::to_vec_pretty(&report).expect("reports serialise"));
-    Ok(outputs)
+        "bytes": bytes,
+    }))
 }
 
 /// What `cirrus preview` renders.
@@ -286,8 +384,11 @@ fn billboard_outputs(db: &dyn Db, asset: Asset, output_folder: &Path, runs: &[St
 pub struct PreviewOptions {
     pub asset: String,
     pub settings: lod_preview::PreviewSettings,
-    /// Where `contact_sheet.png` and `metrics.json` go (project-relative or absolute).
+    /// Where `contact_sheet.png` and `metrics.json` go (project-relative or absolute); a chain's
+    /// levels each get theirs in `lod<N>/`, and the chain sheet is `contact_sheet.png`.
     pub out: PathBuf,
+    /// Only this level of a chain (none: every level).
+    pub lod: Option<u32>,
 }
 
 #[derive(Debug, thiserror::Error)]
@@ -296,6 +397,8 @@ pub enum PreviewError {
     Build(#[from] crate::project::BuildError),
     #[error("asset `{0}` is not a BillboardCloud: only billboard clouds have a LOD to preview")]
     NotBillboard(String),
+    #[error("asset `{name}` has no LOD level {level}: it has {levels} (0 to {})", levels - 1)]
+    NoSuchLevel { name: String, level: u32, levels: u32 },
     #[error("asset `{name}` failed to bake:\n{errors}")]
     Failed { name: String, errors: String },
     #[error("{0}")]
@@ -307,8 +410,12 @@ pub enum PreviewError {
 }
 
 /// `cirrus preview`: bakes the asset if needed, then renders it and its source from the view
-/// directions and writes the contact sheet and the metrics.
-pub fn preview(project: &mut crate::project::Project, options: &PreviewOptions) -> Result<lod_preview::PreviewMetrics, PreviewError> {
+/// directions and writes the contact sheet and the metrics of each level asked for (with
+/// several, also the chain sheet); returns each level's metrics.
+pub fn preview(
+    project: &mut crate::project::Project,
+    options: &PreviewOptions,
+) -> Result<Vec<(u32, lod_preview::PreviewMetrics)>, PreviewError> {
     let build = crate::project::BuildOptions { only_assets: vec![options.asset.clone()], ..Default::default() };
     let summary = project.build(&build, &|_| {})?;
     let asset = &summary.assets[0];
@@ -321,12 +428,25 @@ pub fn preview(project: &mut crate::project::Project, options: &PreviewOptions) 
     }
     let input = project.asset_input(&options.asset).expect("a built asset has an input");
     let db = project.database();
+    let settings = input.settings(db);
+    let level_count = levels::level_count(settings);
+    let chosen: Vec<u32> = match options.lod {
+        Some(level) if level >= level_count => {
+            return Err(PreviewError::NoSuchLevel { name: options.asset.clone(), level, levels: level_count })
+        }
+        Some(level) => vec![level],
+        None => (0..level_count).collect(),
+    };
     let loaded = loaded_mesh(db, input).map_err(PreviewError::Artifact)?;
     let source = source_view_mesh(db, input, &loaded).map_err(PreviewError::Artifact)?;
-    let cutoff = input.settings(db).billboard.alpha_cutoff;
+    let cutoff = settings.billboard.alpha_cutoff;
     let config = project.config();
     let folder = config.output.join(&options.asset);
-    let lod = read_lod_view_mesh(&config.root, &folder, cutoff).map_err(PreviewError::Artifact)?;
+    let lods = chosen
+        .iter()
+        .map(|&level| read_lod_view_mesh(&config.root, &folder.join(levels::level_folder(settings, level)), cutoff))
+        .collect::<Result<Vec<_>, _>>()
+        .map_err(PreviewError::Artifact)?;
     let positions = &loaded.mesh.positions;
     let (min, max) = positions.iter().fold((glam::Vec3::splat(f32::INFINITY), glam::Vec3::splat(f32::NEG_INFINITY)), |(min, max), &p| {
         (min.min(glam::Vec3::from(p)), max.max(glam::Vec3::from(p)))
@@ -334,13 +454,23 @@ pub fn preview(project: &mut crate::project::Project, options: &PreviewOptions) 
     let center = 0.5 * (min + max);
     let radius = positions.iter().map(|&p| glam::Vec3::from(p).distance(center)).fold(0.0, f32::max);
     let gpu = crate::gpu::gpu()?;
-    let preview = lod_preview::preview(gpu, &source, &lod, center.to_array(), radius, options.settings)?;
+    let lod_refs: Vec<&crate::gpu::ViewMesh> = lods.iter().collect();
+    let preview = lod_preview::preview_chain(gpu, &source, &lod_refs, center.to_array(), radius, options.settings)?;
     let out = config.root.join(&options.out);
-    let mut metrics = serde_json::to_vec_pretty(&preview.metrics).expect("metrics serialise");
-    metrics.push(b'\n');
-    crate::artifacts::write_if_changed(&out.join("contact_sheet.png"), &preview.contact_sheet).map_err(PreviewError::Write)?;
-    crate::artifacts::write_if_changed(&out.join("metrics.json"), &metrics).map_err(PreviewError::Write)?;
-    Ok(preview.metrics)
+    let write = |path: PathBuf, bytes: &[u8]| crate::artifacts::write_if_changed(&path, bytes).map_err(PreviewError::Write);
+    let mut results = Vec::new();
+    for (&level, level_preview) in chosen.iter().zip(preview.levels) {
+        let level_out = out.join(levels::level_folder(settings, level));
+        let mut metrics = serde_json::to_vec_pretty(&level_preview.metrics).expect("metrics serialise");
+        metrics.push(b'\n');
+        write(level_out.join("contact_sheet.png"), &level_preview.contact_sheet)?;
+        write(level_out.join("metrics.json"), &metrics)?;
+        results.push((level, level_preview.metrics));
+    }
+    if chosen.len() > 1 {
+        write(out.join("contact_sheet.png"), &preview.chain_sheet)?;
+    }
+    Ok(results)
 }
 
 /// The baked LOD in `folder` (relative to `root`) as an engine loads it: `lod.obj` with the

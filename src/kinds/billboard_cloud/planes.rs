@@ -325,51 +325,19 @@ impl Density {
 /// (empty: one material); faces only move between planes that already hold their material,
 /// see `reassign_to_nearest_planes`. Deterministic for the same input.
 pub fn select_planes(positions: &[[f32; 3]], triangles: &[[u32; 3]], face_materials: &[u32], settings: PlaneSettings) -> PlaneSet {
-    let grid = Grid::new(positions, settings.epsilon);
-    let faces: Vec<Face> = triangles
-        .iter()
-        .map(|triangle| {
-            let vertices = triangle.map(|index| Vec3::from(positions[index as usize]) - grid.center);
-            let cross = (vertices[1] - vertices[0]).cross(vertices[2] - vertices[0]);
-            Face { vertices, area: 0.5 * cross.length(), normal: cross.normalize_or_zero() }
-        })
-        .collect();
-
-    let (mut density, ranges) = Density::of_faces(&grid, &faces);
-
-    let mut assigned = vec![false; faces.len()];
-    let mut remaining: Vec<u32> = (0..faces.len() as u32).filter(|&index| faces[index as usize].area > 0.0).collect();
-    let mut planes: Vec<(Vec3, f32, Vec<u32>)> = Vec::new();
+    let (grid, faces) = grid_and_faces(positions, triangles, settings.epsilon);
     let cap = settings.max_planes.map_or(usize::MAX, |cap| cap as usize);
-    while !remaining.is_empty() && planes.len() < cap {
-        let region = density.best_bin().map(|bin| grid.region(bin));
-        let (normal, rho) =
-            region.and_then(|region| refine(&grid, &faces, &remaining, region)).unwrap_or_else(|| largest_face_plane(&faces, &remaining));
-        let holds = |(normal, rho): (Vec3, f32)| -> Vec<u32> {
-            remaining.par_iter().copied().filter(|&index| faces[index as usize].distance_to(normal, rho) <= grid.epsilon).collect()
-        };
-        let (mut normal, mut rho) = (normal, rho);
-        let mut members = holds((normal, rho));
-        if members.is_empty() {
-            // Numerical corner case: the refined plane holds nothing; use a face's own plane.
-            (normal, rho) = largest_face_plane(&faces, &remaining);
-            members = holds((normal, rho));
-        }
-        // Every member stays within ε of the fitted plane, so it holds a superset of them.
-        (normal, rho) = fit_plane(&faces, &members, normal, rho, grid.epsilon);
-        members = holds((normal, rho));
-        planes.push((normal, rho, Vec::new()));
-        density.remove_faces(&grid, &faces, &ranges, &members);
-        for &index in &members {
-            assigned[index as usize] = true;
-        }
-        planes.last_mut().expect("just pushed").2 = members;
-        remaining.retain(|&index| !assigned[index as usize]);
-    }
+    let greedy = greedy_planes(&grid, &faces, cap);
+    finish_planes(&grid, &faces, greedy, face_materials, settings.epsilon)
+}
 
+/// The plane set of a greedy pass: faces it left over go to the plane that moves them least,
+/// then rounds of moving faces to their nearest plane and refitting.
+fn finish_planes(grid: &Grid, faces: &[Face], greedy: GreedyPlanes, face_materials: &[u32], epsilon_fraction: f32) -> PlaneSet {
+    let GreedyPlanes { mut planes, assigned } = greedy;
     // Faces left over (degenerate ones, or beyond `max_planes`): to the plane that moves them least.
     if planes.is_empty() {
-        planes.push(largest_face_plane_any(&faces));
+        planes.push(largest_face_plane_any(faces));
     }
     for index in 0..faces.len() as u32 {
         if assigned[index as usize] {
@@ -383,7 +351,7 @@ pub fn select_planes(positions: &[[f32; 3]], triangles: &[[u32; 3]], face_materi
     }
 
     let face_materials: Vec<u32> = (0..faces.len()).map(|face| face_materials.get(face).copied().unwrap_or(0)).collect();
-    reassign_to_nearest_planes(&faces, &face_materials, &mut planes, grid.epsilon);
+    reassign_to_nearest_planes(faces, &face_materials, &mut planes, grid.epsilon);
 
     let mut max_error = 0.0f32;
     let planes = planes
@@ -397,7 +365,71 @@ pub fn select_planes(positions: &[[f32; 3]], triangles: &[[u32; 3]], face_materi
             Plane { normal: normal.to_array(), distance: rho + normal.dot(grid.center), faces: members }
         })
         .collect();
-    PlaneSet { planes, epsilon: grid.epsilon, epsilon_fraction: settings.epsilon, max_error, face_count: faces.len() }
+    PlaneSet { planes, epsilon: grid.epsilon, epsilon_fraction, max_error, face_count: faces.len() }
+}
+
+/// The plane-space grid for ε (a fraction of the bounding-sphere radius) and the mesh's faces
+/// relative to its centre.
+fn grid_and_faces(positions: &[[f32; 3]], triangles: &[[u32; 3]], epsilon_fraction: f32) -> (Grid, Vec<Face>) {
+    let grid = Grid::new(positions, epsilon_fraction);
+    let faces: Vec<Face> = triangles
+        .iter()
+        .map(|triangle| {
+            let vertices = triangle.map(|index| Vec3::from(positions[index as usize]) - grid.center);
+            let cross = (vertices[1] - vertices[0]).cross(vertices[2] - vertices[0]);
+            Face { vertices, area: 0.5 * cross.length(), normal: cross.normalize_or_zero() }
+        })
+        .collect();
+    (grid, faces)
+}
+
+/// What the greedy pass chose: each plane (normal, offset from the grid centre, faces within ε
+/// of it), and which faces those hold.
+struct GreedyPlanes {
+    planes: Vec<(Vec3, f32, Vec<u32>)>,
+    assigned: Vec<bool>,
+}
+
+impl GreedyPlanes {
+    /// Whether every face of positive area lies on a chosen plane.
+    fn holds_every_face(&self, faces: &[Face]) -> bool {
+        faces.iter().zip(&self.assigned).all(|(face, &assigned)| assigned || face.area <= 0.0)
+    }
+}
+
+/// The greedy pass of Décoret et al.: the densest bin of plane space, refined and fitted, takes
+/// every remaining face within ε of it; its faces leave the density; until no face remains or
+/// `cap` planes are chosen.
+fn greedy_planes(grid: &Grid, faces: &[Face], cap: usize) -> GreedyPlanes {
+    let (mut density, ranges) = Density::of_faces(grid, faces);
+    let mut assigned = vec![false; faces.len()];
+    let mut remaining: Vec<u32> = (0..faces.len() as u32).filter(|&index| faces[index as usize].area > 0.0).collect();
+    let mut planes: Vec<(Vec3, f32, Vec<u32>)> = Vec::new();
+    while !remaining.is_empty() && planes.len() < cap {
+        let region = density.best_bin().map(|bin| grid.region(bin));
+        let (normal, rho) =
+            region.and_then(|region| refine(grid, faces, &remaining, region)).unwrap_or_else(|| largest_face_plane(faces, &remaining));
+        let holds = |(normal, rho): (Vec3, f32)| -> Vec<u32> {
+            remaining.par_iter().copied().filter(|&index| faces[index as usize].distance_to(normal, rho) <= grid.epsilon).collect()
+        };
+        let (mut normal, mut rho) = (normal, rho);
+        let mut members = holds((normal, rho));
+        if members.is_empty() {
+            // Numerical corner case: the refined plane holds nothing; use a face's own plane.
+            (normal, rho) = largest_face_plane(faces, &remaining);
+            members = holds((normal, rho));
+        }
+        // Every member stays within ε of the fitted plane, so it holds a superset of them.
+        (normal, rho) = fit_plane(faces, &members, normal, rho, grid.epsilon);
+        members = holds((normal, rho));
+        density.remove_faces(grid, faces, &ranges, &members);
+        for &index in &members {
+            assigned[index as usize] = true;
+        }
+        planes.push((normal, rho, members));
+        remaining.retain(|&index| !assigned[index as usize]);
+    }
+    GreedyPlanes { planes, assigned }
 }
 
 /// ε (as a fraction of the radius) is searched for between these.
@@ -419,35 +451,28 @@ pub fn select_planes_within_budget(
     max_planes: Option<u32>,
 ) -> PlaneSet {
     let cap = max_planes.map_or(max_quads, |planes| planes.min(max_quads)).max(1);
-    // A run stops choosing planes one past the cap: it has shown that ε does not fit, and no
-    // run costs more than the budget's worth of planes.
-    let run = |fraction: f32| {
-        let settings = PlaneSettings { epsilon: fraction, max_planes: Some(cap.saturating_add(1)), max_quads: None };
-        select_planes(positions, triangles, face_materials, settings)
+    // A probe runs the greedy pass alone, stopped at the cap: it fits when it holds every face,
+    // and the fitting one with the smallest ε is finished into the plane set.
+    let probe = |fraction: f32| {
+        let (grid, faces) = grid_and_faces(positions, triangles, fraction);
+        let greedy = greedy_planes(&grid, &faces, cap as usize);
+        (greedy.holds_every_face(&faces), (grid, faces, greedy, fraction))
     };
-    // Fits: within the cap with every face within ε (none left over to the nearest plane).
-    let fits = |set: &PlaneSet| set.planes.len() <= cap as usize && set.max_error <= set.epsilon * (1.0 + 1e-4);
     let (mut low, mut high) = (BUDGET_EPSILON_RANGE.0.ln(), BUDGET_EPSILON_RANGE.1.ln());
     let mut best = None;
     for _ in 0..BUDGET_SEARCH_STEPS {
         let middle = 0.5 * (low + high);
-        let set = run(middle.exp());
-        if fits(&set) {
-            high = middle;
-            best = Some(set);
-        } else {
-            low = middle;
+        match probe(middle.exp()) {
+            (true, fitting) => {
+                high = middle;
+                best = Some(fitting);
+            }
+            (false, _) => low = middle,
         }
     }
-    best.unwrap_or_else(|| {
-        let widest = run(BUDGET_EPSILON_RANGE.1);
-        if fits(&widest) {
-            widest
-        } else {
-            let settings = PlaneSettings { epsilon: BUDGET_EPSILON_RANGE.1, max_planes: Some(cap), max_quads: None };
-            select_planes(positions, triangles, face_materials, settings)
-        }
-    })
+    // When even the widest ε does not fit, the planes are capped there.
+    let (grid, faces, greedy, fraction) = best.unwrap_or_else(|| probe(BUDGET_EPSILON_RANGE.1).1);
+    finish_planes(&grid, &faces, greedy, face_materials, fraction)
 }
 
 /// Moves every face to the plane nearest it among those holding its material, then fits the

@@ -44,19 +44,21 @@ impl KeyPart for crate::config::AtlasSettings {
     }
 }
 
+/// What a level is asked for (one level without a chain).
 #[salsa::tracked(returns(copy))]
-pub fn plane_settings(db: &dyn Db, asset: Asset) -> super::planes::PlaneSettings {
-    let billboard = &asset.settings(db).billboard;
-    super::planes::PlaneSettings {
-        epsilon: billboard.epsilon,
-        max_planes: billboard.max_planes,
-        max_quads: billboard.budget.map(crate::config::LodBudget::quads),
-    }
+pub fn level_settings(db: &dyn Db, asset: Asset, level: u32) -> super::levels::LevelSettings {
+    super::levels::level_settings(asset.settings(db), level)
+}
+
+/// A level's stage label: the asset's name, or `asset/lod<N>` in a chain.
+#[salsa::tracked(returns(ref))]
+pub fn level_label(db: &dyn Db, asset: Asset, level: u32) -> String {
+    super::levels::level_label(asset.name(db), &super::levels::level_folder(asset.settings(db), level))
 }
 
 #[salsa::tracked(returns(copy))]
-pub fn planes_cache_key(db: &dyn Db, asset: Asset) -> CacheKey {
-    let settings = plane_settings(db, asset);
+pub fn planes_cache_key(db: &dyn Db, asset: Asset, level: u32) -> CacheKey {
+    let settings = level_settings(db, asset, level).planes;
     let key = stage_key(PLANES).part(&mesh_cache_key(db, asset, asset.main_file(db).clone()).0);
     match settings.max_quads {
         // ε is searched for: the setting does not enter the key.
@@ -65,13 +67,13 @@ pub fn planes_cache_key(db: &dyn Db, asset: Asset) -> CacheKey {
     }
 }
 
-/// The planes (stage `planes`).
+/// A level's planes (stage `planes`).
 #[salsa::tracked(returns(clone))]
-pub fn billboard_planes(db: &dyn Db, asset: Asset) -> Result<Arc<super::planes::PlaneSet>, Diagnostic> {
-    let name = asset.name(db);
-    cached_json(db, PLANES, name, planes_cache_key(db, asset), || {
+pub fn billboard_planes(db: &dyn Db, asset: Asset, level: u32) -> Result<Arc<super::planes::PlaneSet>, Diagnostic> {
+    let name = level_label(db, asset, level);
+    cached_json(db, PLANES, name, planes_cache_key(db, asset, level), || {
         let loaded = loaded_mesh(db, asset)?;
-        let settings = plane_settings(db, asset);
+        let settings = level_settings(db, asset, level).planes;
         let mesh = &loaded.mesh;
         timed(db, PLANES, name, || {
             Ok(match settings.max_quads {
@@ -98,17 +100,17 @@ pub struct BillboardLayout {
     pub render_groups: Vec<RenderGroup>,
 }
 
-/// The atlas settings, the texel density asked for, and the screen size the LOD is meant for.
+/// A level's atlas settings, the texel density asked for, and the screen size it is meant for.
 #[salsa::tracked(returns(clone))]
-pub fn atlas_layout_settings(db: &dyn Db, asset: Asset) -> (crate::config::AtlasSettings, Option<f32>, Option<u32>) {
-    let settings = asset.settings(db);
-    (settings.atlas.clone(), settings.billboard.texel_density, settings.billboard.screen_size)
+pub fn atlas_layout_settings(db: &dyn Db, asset: Asset, level: u32) -> (crate::config::AtlasSettings, Option<f32>, Option<u32>) {
+    let settings = level_settings(db, asset, level);
+    (super::levels::level_atlas_settings(&asset.settings(db).atlas, &settings), settings.texel_density, settings.screen_size)
 }
 
 #[salsa::tracked(returns(copy))]
-pub fn layout_cache_key(db: &dyn Db, asset: Asset) -> CacheKey {
-    let (atlas, density, screen_size) = atlas_layout_settings(db, asset);
-    let key = stage_key(LAYOUT).part(&planes_cache_key(db, asset).0).part(&atlas).part(&density);
+pub fn layout_cache_key(db: &dyn Db, asset: Asset, level: u32) -> CacheKey {
+    let (atlas, density, screen_size) = atlas_layout_settings(db, asset, level);
+    let key = stage_key(LAYOUT).part(&planes_cache_key(db, asset, level).0).part(&atlas).part(&density);
     // Only when given, so that the keys of layouts without it stay as they were.
     match screen_size {
         Some(pixels) => key.part("screen size").part(&pixels).finish(),
@@ -116,24 +118,25 @@ pub fn layout_cache_key(db: &dyn Db, asset: Asset) -> CacheKey {
     }
 }
 
-/// Rectangles, layout and render groups (stage `layout`).
+/// A level's rectangles, layout and render groups (stage `layout`).
 #[salsa::tracked(returns(clone))]
-pub fn billboard_layout(db: &dyn Db, asset: Asset) -> Result<Arc<BillboardLayout>, Diagnostic> {
-    cached_json(db, LAYOUT, asset.name(db), layout_cache_key(db, asset), || compute_billboard_layout(db, asset)).map(Arc::new)
+pub fn billboard_layout(db: &dyn Db, asset: Asset, level: u32) -> Result<Arc<BillboardLayout>, Diagnostic> {
+    let label = level_label(db, asset, level);
+    cached_json(db, LAYOUT, label, layout_cache_key(db, asset, level), || compute_billboard_layout(db, asset, level)).map(Arc::new)
 }
 
-fn compute_billboard_layout(db: &dyn Db, asset: Asset) -> Result<BillboardLayout, Diagnostic> {
+fn compute_billboard_layout(db: &dyn Db, asset: Asset, level: u32) -> Result<BillboardLayout, Diagnostic> {
     let loaded = loaded_mesh(db, asset)?;
-    let planes = billboard_planes(db, asset)?;
-    let (atlas, density, screen_size) = atlas_layout_settings(db, asset);
+    let planes = billboard_planes(db, asset, level)?;
+    let (atlas, density, screen_size) = atlas_layout_settings(db, asset, level);
     // One texel per pixel when the bounding sphere's diameter spans `screen_size` pixels.
     let density = density.or_else(|| {
         let pixels = screen_size? as f32;
         Some(pixels / (2.0 * super::planes::bounding_sphere_radius(&loaded.mesh.positions)))
     });
-    timed(db, LAYOUT, asset.name(db), || {
+    timed(db, LAYOUT, level_label(db, asset, level), || {
         let mut rectangles = super::rectangles::plane_rectangles(&loaded.mesh.positions, &loaded.mesh.triangles, &planes);
-        if let Some(quads) = plane_settings(db, asset).max_quads {
+        if let Some(quads) = level_settings(db, asset, level).planes.max_quads {
             rectangles = super::rectangles::merge_rectangles_to_budget(
                 &loaded.mesh.positions,
                 &loaded.mesh.triangles,
@@ -157,13 +160,14 @@ fn compute_billboard_layout(db: &dyn Db, asset: Asset) -> Result<BillboardLayout
     })
 }
 
-/// `lod.obj` and `lod.mtl` (stage `lod`): planes and layout only, so texture edits leave them alone.
+/// A level's `lod.obj` and `lod.mtl` (stage `lod`): planes and layout only, so texture edits
+/// leave them alone.
 #[salsa::tracked(returns(clone))]
-pub fn lod_files(db: &dyn Db, asset: Asset) -> Result<Arc<(String, String)>, Diagnostic> {
-    let name = asset.name(db);
-    let key = stage_key(LOD).part(&layout_cache_key(db, asset).0).finish();
+pub fn lod_files(db: &dyn Db, asset: Asset, level: u32) -> Result<Arc<(String, String)>, Diagnostic> {
+    let name = level_label(db, asset, level);
+    let key = stage_key(LOD).part(&layout_cache_key(db, asset, level).0).finish();
     cached_json(db, LOD, name, key, || {
-        let layout = billboard_layout(db, asset)?;
+        let layout = billboard_layout(db, asset, level)?;
         timed(db, LOD, name, || Ok(super::lod_mesh::lod_mesh(&layout.rectangles, &layout.layout, "billboard_cloud")))
     })
     .map(Arc::new)
@@ -174,9 +178,10 @@ pub fn billboard_alpha_cutoff(db: &dyn Db, asset: Asset) -> f32 {
     asset.settings(db).billboard.alpha_cutoff
 }
 
-/// The label of a render group's stage instance: `asset/plane12:bark+leaves`.
-pub fn render_label(asset_name: &str, mesh: &crate::mesh::Mesh, group: &RenderGroup) -> String {
-    format!("{asset_name}/{}", super::render_groups::render_group_label(mesh, group))
+/// The label of a render group's stage instance: `asset/plane12:bark+leaves`, or
+/// `asset/lod1/plane12:bark+leaves` in a chain (`level_label` is the level's).
+pub fn render_label(level_label: &str, mesh: &crate::mesh::Mesh, group: &RenderGroup) -> String {
+    format!("{level_label}/{}", super::render_groups::render_group_label(mesh, group))
 }
 
 /// A decoded source map of the mesh's material, as a render reads it.
@@ -254,22 +259,22 @@ fn mip_levels_from_entry(entry: CacheEntry) -> Option<Vec<Texture>> {
     fits.then(|| sizes.into_iter().zip(entry.blobs).map(|((width, height), pixels)| Texture::new(width, height, pixels)).collect())
 }
 
-/// The images of one render group (four per rectangle, in rectangle order): one plane's
-/// rectangles that show the same materials, rendered on the GPU in one go (stage `render`);
-/// reads only the textures of those materials.
+/// The images of one render group of a level (four per rectangle, in rectangle order): one
+/// plane's rectangles that show the same materials, rendered on the GPU in one go (stage
+/// `render`); reads only the textures of those materials.
 #[salsa::tracked(returns(clone))]
-pub fn plane_images(db: &dyn Db, asset: Asset, group: u32) -> Result<Arc<Vec<PlaneImages>>, Diagnostic> {
+pub fn plane_images(db: &dyn Db, asset: Asset, level: u32, group: u32) -> Result<Arc<Vec<PlaneImages>>, Diagnostic> {
     let loaded = loaded_mesh(db, asset)?;
-    let layout = billboard_layout(db, asset)?;
+    let layout = billboard_layout(db, asset, level)?;
     let alpha_cutoff = billboard_alpha_cutoff(db, asset);
     let mesh_path = asset.main_file(db).clone();
     let group_index = group;
     let Some(group) = layout.render_groups.get(group as usize) else {
         return Err(Diagnostic::new(&mesh_path, format!("render group {group} no longer exists")));
     };
-    let label = render_label(asset.name(db), &loaded.mesh, group);
-    let stored = stored_renders(db, asset);
-    let remembered = stored.get(&render_group_key(db, asset, group_index)).filter(|images| {
+    let label = render_label(level_label(db, asset, level), &loaded.mesh, group);
+    let stored = stored_renders(db, asset, level);
+    let remembered = stored.get(&render_group_key(db, asset, level, group_index)).filter(|images| {
         // A memo that does not fit the group (a hand-made entry) is a miss, never a panic.
         images.len() == group.rectangles.len()
             && images.iter().zip(&group.rectangles).all(|(image, &rectangle)| {
@@ -281,7 +286,7 @@ pub fn plane_images(db: &dyn Db, asset: Asset, group: u32) -> Result<Arc<Vec<Pla
         record_cache_hit(db, RENDER, &label);
         return Ok(images.clone());
     }
-    let planes = billboard_planes(db, asset)?;
+    let planes = billboard_planes(db, asset, level)?;
     let mut materials = vec![crate::gpu::RenderMaterial::default(); loaded.mesh.materials.len()];
     for &material_index in &group.materials {
         let source = &loaded.mesh.materials[material_index as usize];
@@ -328,9 +333,9 @@ pub fn plane_images(db: &dyn Db, asset: Asset, group: u32) -> Result<Arc<Vec<Pla
     .map(Arc::new)
 }
 
-/// Every render group's images, in render-group order.
-fn render_group_images(db: &dyn Db, asset: Asset, layout: &BillboardLayout) -> Result<Vec<Arc<Vec<PlaneImages>>>, Diagnostic> {
-    (0..layout.render_groups.len() as u32).map(|group| plane_images(db, asset, group)).collect()
+/// Every render group's images of a level, in render-group order.
+fn render_group_images(db: &dyn Db, asset: Asset, level: u32, layout: &BillboardLayout) -> Result<Vec<Arc<Vec<PlaneImages>>>, Diagnostic> {
+    (0..layout.render_groups.len() as u32).map(|group| plane_images(db, asset, level, group)).collect()
 }
 
 /// The images of every rectangle, in layout order: each group's images belong to its
@@ -348,19 +353,21 @@ fn images_by_rectangle<'a>(layout: &BillboardLayout, images: &'a [Arc<Vec<PlaneI
 /// The atlas texels that faces cover (part of the atlas stage): unchanged by colour-only
 /// edits, which therefore skip the fill search below.
 #[salsa::tracked(returns(clone))]
-pub fn atlas_coverage(db: &dyn Db, asset: Asset) -> Result<Arc<super::atlas::AtlasCoverage>, Diagnostic> {
-    let layout = billboard_layout(db, asset)?;
-    let images = render_group_images(db, asset, &layout)?;
-    store_renders(db, asset, &images);
-    timed(db, ATLAS, asset.name(db), || Ok(Arc::new(super::atlas::atlas_coverage(&layout.layout, &images_by_rectangle(&layout, &images)))))
+pub fn atlas_coverage(db: &dyn Db, asset: Asset, level: u32) -> Result<Arc<super::atlas::AtlasCoverage>, Diagnostic> {
+    let layout = billboard_layout(db, asset, level)?;
+    let images = render_group_images(db, asset, level, &layout)?;
+    store_renders(db, asset, level, &images);
+    timed(db, ATLAS, level_label(db, asset, level), || {
+        Ok(Arc::new(super::atlas::atlas_coverage(&layout.layout, &images_by_rectangle(&layout, &images))))
+    })
 }
 
 /// Where each atlas texel takes its values from, uncovered ones by the fill search (part of the
 /// atlas stage). Kept in the persistent cache under the coverage's content hash: a colour-only
 /// edit in a new process loads it (about 15 ms on the oak) instead of searching (about 90 ms).
 #[salsa::tracked(returns(clone))]
-pub fn atlas_texel_sources(db: &dyn Db, asset: Asset) -> Result<Arc<crate::texture::fill::TexelSources>, Diagnostic> {
-    let coverage = atlas_coverage(db, asset)?;
+pub fn atlas_texel_sources(db: &dyn Db, asset: Asset, level: u32) -> Result<Arc<crate::texture::fill::TexelSources>, Diagnostic> {
+    let coverage = atlas_coverage(db, asset, level)?;
     let key = stage_key(ATLAS_FILL).part(&coverage.content_hash()).finish();
     let texels = coverage.width as usize * coverage.height as usize;
     let stored = load_cached(db, ATLAS_FILL.name, key, |entry| {
@@ -370,7 +377,7 @@ pub fn atlas_texel_sources(db: &dyn Db, asset: Asset) -> Result<Arc<crate::textu
     if let Some(sources) = stored {
         return Ok(Arc::new(sources));
     }
-    let sources = timed(db, ATLAS, asset.name(db), || super::atlas::texel_sources(&coverage));
+    let sources = timed(db, ATLAS, level_label(db, asset, level), || super::atlas::texel_sources(&coverage));
     if !sources.0.is_empty() {
         let offsets = sources.to_offsets();
         store_cached_in_background(db, ATLAS_FILL.name, key, move || CacheEntry {
@@ -385,14 +392,15 @@ pub fn atlas_texel_sources(db: &dyn Db, asset: Asset) -> Result<Arc<crate::textu
 /// The fill search's result in the persistent cache (an entry of the atlas stage).
 const ATLAS_FILL: Stage = Stage { name: "atlas-fill", version: 1 };
 
-/// One composited, filled atlas surface (stage `atlas`), shared with the tail, not copied.
+/// One composited, filled atlas surface of a level (stage `atlas`), shared with the tail, not
+/// copied.
 #[salsa::tracked(returns(clone))]
-pub fn atlas_surface(db: &dyn Db, asset: Asset, surface: SurfaceKind) -> Result<Arc<Texture>, Diagnostic> {
-    let layout = billboard_layout(db, asset)?;
-    let images = render_group_images(db, asset, &layout)?;
-    let coverage = atlas_coverage(db, asset)?;
-    let sources = atlas_texel_sources(db, asset)?;
-    timed(db, ATLAS, asset.name(db), || {
+pub fn atlas_surface(db: &dyn Db, asset: Asset, level: u32, surface: SurfaceKind) -> Result<Arc<Texture>, Diagnostic> {
+    let layout = billboard_layout(db, asset, level)?;
+    let images = render_group_images(db, asset, level, &layout)?;
+    let coverage = atlas_coverage(db, asset, level)?;
+    let sources = atlas_texel_sources(db, asset, level)?;
+    timed(db, ATLAS, level_label(db, asset, level), || {
         let planes = images_by_rectangle(&layout, &images);
         Ok(Arc::new(super::atlas::composite_atlas_surface(&layout.layout, &planes, &coverage, &sources, surface)))
     })
@@ -403,10 +411,10 @@ pub fn atlas_surface(db: &dyn Db, asset: Asset, surface: SurfaceKind) -> Result<
 /// texture edit that leaves a surface's renders alone (a colour-only edit leaves the normals)
 /// finds it in the cache by this key without compositing it.
 #[salsa::tracked(returns(clone))]
-pub fn atlas_surface_parts_key(db: &dyn Db, asset: Asset, surface: SurfaceKind) -> Result<CacheKey, Diagnostic> {
-    let layout = billboard_layout(db, asset)?;
-    let images = render_group_images(db, asset, &layout)?;
-    let coverage = atlas_coverage(db, asset)?;
+pub fn atlas_surface_parts_key(db: &dyn Db, asset: Asset, level: u32, surface: SurfaceKind) -> Result<CacheKey, Diagnostic> {
+    let layout = billboard_layout(db, asset, level)?;
+    let images = render_group_images(db, asset, level, &layout)?;
+    let coverage = atlas_coverage(db, asset, level)?;
     let mut hasher = blake3::Hasher::new();
     for group_images in &images {
         for image in group_images.iter() {
@@ -416,7 +424,7 @@ pub fn atlas_surface_parts_key(db: &dyn Db, asset: Asset, surface: SurfaceKind) 
     }
     let key = stage_key(Stage { name: "atlas-parts", version: 1 })
         .part(&ATLAS.version)
-        .part(&layout_cache_key(db, asset).0)
+        .part(&layout_cache_key(db, asset, level).0)
         .part(&billboard_alpha_cutoff(db, asset))
         .part(&surface)
         .part(&coverage.content_hash())
@@ -427,8 +435,8 @@ pub fn atlas_surface_parts_key(db: &dyn Db, asset: Asset, surface: SurfaceKind) 
 /// What the atlas is made of, cheap to compute: the layout's key (mesh, MTL, settings), every
 /// texture the materials name, the alpha cutoff, the render and atlas versions.
 #[salsa::tracked(returns(copy))]
-pub fn atlas_recipe_key(db: &dyn Db, asset: Asset) -> CacheKey {
-    let key = stage_key(ATLAS).part(&RENDER.version).part(&layout_cache_key(db, asset).0).part(&billboard_alpha_cutoff(db, asset));
+pub fn atlas_recipe_key(db: &dyn Db, asset: Asset, level: u32) -> CacheKey {
+    let key = stage_key(ATLAS).part(&RENDER.version).part(&layout_cache_key(db, asset, level).0).part(&billboard_alpha_cutoff(db, asset));
     let textures = mesh_textures(db, asset).iter().filter_map(|path| asset_file(db, asset, path.clone())).collect::<Vec<_>>();
     key_with_files(db, key, textures).finish()
 }
@@ -436,10 +444,10 @@ pub fn atlas_recipe_key(db: &dyn Db, asset: Asset) -> CacheKey {
 /// The fraction of atlas texels that faces cover, rounded to 1e-4, for the report: kept in the
 /// persistent cache under the atlas's recipe, so that a bake served from the cache needs no atlas.
 #[salsa::tracked(returns(clone))]
-pub fn atlas_coverage_fraction(db: &dyn Db, asset: Asset) -> Result<f64, Diagnostic> {
-    let key = stage_key(Stage { name: "atlas-coverage", version: 1 }).part(&atlas_recipe_key(db, asset).0).finish();
-    cached_json(db, ATLAS, asset.name(db), key, || {
-        let coverage = atlas_coverage(db, asset)?;
+pub fn atlas_coverage_fraction(db: &dyn Db, asset: Asset, level: u32) -> Result<f64, Diagnostic> {
+    let key = stage_key(Stage { name: "atlas-coverage", version: 1 }).part(&atlas_recipe_key(db, asset, level).0).finish();
+    cached_json(db, ATLAS, level_label(db, asset, level), key, || {
+        let coverage = atlas_coverage(db, asset, level)?;
         let fraction = coverage.drawn.len() as f32 / (coverage.width as usize * coverage.height as usize).max(1) as f32;
         Ok(((fraction * 1e4).round() / 1e4) as f64)
     })
@@ -448,9 +456,9 @@ pub fn atlas_coverage_fraction(db: &dyn Db, asset: Asset) -> Result<f64, Diagnos
 /// What one render group's images are made of: the layout (mesh, MTL, planes, settings), the
 /// group, the alpha cutoff, and the textures of the group's materials.
 #[salsa::tracked(returns(copy))]
-pub fn render_group_key(db: &dyn Db, asset: Asset, group: u32) -> CacheKey {
-    let key = stage_key(RENDER).part(&layout_cache_key(db, asset).0).part(&group).part(&billboard_alpha_cutoff(db, asset));
-    let (Ok(loaded), Ok(layout)) = (loaded_mesh(db, asset), billboard_layout(db, asset)) else { return key.finish() };
+pub fn render_group_key(db: &dyn Db, asset: Asset, level: u32, group: u32) -> CacheKey {
+    let key = stage_key(RENDER).part(&layout_cache_key(db, asset, level).0).part(&group).part(&billboard_alpha_cutoff(db, asset));
+    let (Ok(loaded), Ok(layout)) = (loaded_mesh(db, asset), billboard_layout(db, asset, level)) else { return key.finish() };
     let Some(render_group) = layout.render_groups.get(group as usize) else { return key.finish() };
     let mut paths: Vec<&PathBuf> = Vec::new();
     if loaded.mesh.uvs.is_some() {
@@ -471,8 +479,8 @@ pub fn render_group_key(db: &dyn Db, asset: Asset, group: u32) -> CacheKey {
 /// edit of the bark's texture rewrites the two sets that show bark (9 of the oak's 37 MB).
 const RENDER_MEMO: &str = "render-memo";
 
-fn render_memo_key(db: &dyn Db, asset: Asset, materials: &[u32]) -> CacheKey {
-    stage_key(Stage { name: RENDER_MEMO, version: RENDER.version }).part(&layout_cache_key(db, asset).0).part(materials).finish()
+fn render_memo_key(db: &dyn Db, asset: Asset, level: u32, materials: &[u32]) -> CacheKey {
+    stage_key(Stage { name: RENDER_MEMO, version: RENDER.version }).part(&layout_cache_key(db, asset, level).0).part(materials).finish()
 }
 
 /// The material sets of the layout's render groups, each with its groups' indices.
@@ -486,31 +494,32 @@ fn groups_by_material_set(layout: &BillboardLayout) -> BTreeMap<&[u32], Vec<u32>
 
 /// The render groups' images the memo on disk holds, by group key (read once per layout).
 #[salsa::tracked(returns(clone))]
-pub fn stored_renders(db: &dyn Db, asset: Asset) -> Arc<HashMap<CacheKey, Arc<Vec<PlaneImages>>>> {
-    let Ok(layout) = billboard_layout(db, asset) else { return Arc::default() };
+pub fn stored_renders(db: &dyn Db, asset: Asset, level: u32) -> Arc<HashMap<CacheKey, Arc<Vec<PlaneImages>>>> {
+    let Ok(layout) = billboard_layout(db, asset, level) else { return Arc::default() };
     let mut renders = HashMap::new();
     for materials in groups_by_material_set(&layout).keys() {
-        renders.extend(load_cached(db, RENDER_MEMO, render_memo_key(db, asset, materials), renders_from_entry).unwrap_or_default());
+        let key = render_memo_key(db, asset, level, materials);
+        renders.extend(load_cached(db, RENDER_MEMO, key, renders_from_entry).unwrap_or_default());
     }
     Arc::new(renders)
 }
 
 /// Stores the images of every material set some of whose groups were rendered (not all came
 /// from the memo).
-fn store_renders(db: &dyn Db, asset: Asset, images: &[Arc<Vec<PlaneImages>>]) {
+fn store_renders(db: &dyn Db, asset: Asset, level: u32, images: &[Arc<Vec<PlaneImages>>]) {
     if db.disk_cache().is_none() {
         return;
     }
-    let Ok(layout) = billboard_layout(db, asset) else { return };
-    let stored = stored_renders(db, asset);
+    let Ok(layout) = billboard_layout(db, asset, level) else { return };
+    let stored = stored_renders(db, asset, level);
     for (materials, groups) in groups_by_material_set(&layout) {
-        let keys: Vec<CacheKey> = groups.iter().map(|&group| render_group_key(db, asset, group)).collect();
+        let keys: Vec<CacheKey> = groups.iter().map(|&group| render_group_key(db, asset, level, group)).collect();
         if keys.iter().all(|key| stored.contains_key(key)) {
             continue;
         }
         // Gathering megabytes of images into one blob happens on the writer's thread.
         let images: Vec<Arc<Vec<PlaneImages>>> = groups.iter().map(|&group| images[group as usize].clone()).collect();
-        store_cached_in_background(db, RENDER_MEMO, render_memo_key(db, asset, materials), move || {
+        store_cached_in_background(db, RENDER_MEMO, render_memo_key(db, asset, level, materials), move || {
             let mut groups = Vec::new();
             let mut bytes = Vec::new();
             for (key, group_images) in keys.iter().zip(&images) {

@@ -5,5 +5,6 @@
 pub mod bake;
 mod gpu;
 mod budget;
+mod chain;
 mod layout;
 mod planes;

@@ -110,8 +110,8 @@ fn a_bark_edit_rerenders_only_the_bark_of_each_level_and_a_budget_edit_only_its_
         }
     }
     assert_eq!(executed, expected, "each level's bark renders, atlas and albedo tail");
-    for level in 0..2 {
-        assert_eq!(project.read(&format!("baked/tree/lod{level}/lod.obj")), lods[level], "texture edits leave lod{level}'s mesh alone");
+    for (level, lod) in lods.iter().enumerate() {
+        assert_eq!(&project.read(&format!("baked/tree/lod{level}/lod.obj")), lod, "texture edits leave lod{level}'s mesh alone");
     }
 
     // A new budget for level 1 re-runs level 1 only: level 0 keeps everything.

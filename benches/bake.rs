@@ -20,6 +20,7 @@ use cirrus::texture::Texture;
 use rayon::prelude::*;
 
 fn main() {
+    cirrus::gpu::quiet_wayland_probe();
     let repository = Path::new(env!("CARGO_MANIFEST_DIR"));
     let corpus = repository.join("../shared/assets");
     let mut sources = vec![("bundled examples", repository.join("examples/assets"), "materials/*.mymaterial")];
@@ -883,24 +884,34 @@ fn bench_billboard_chain(corpus: &Path) {
         let (single_seconds, single_mib, _) = build_process(single.path());
         let chain = tree_project(corpus, &format!(r#"BillboardCloud(name: "tree", mesh: "trees/{tree}.obj", billboard: ({CHAIN}))"#));
         let (chain_seconds, chain_mib, _) = build_process(chain.path());
-        let report: serde_json::Value = serde_json::from_slice(&std::fs::read(chain.path().join("baked/tree/report.json")).unwrap()).unwrap();
+        let report: serde_json::Value =
+            serde_json::from_slice(&std::fs::read(chain.path().join("baked/tree/report.json")).unwrap()).unwrap();
         println!(
             "billboard-chain: {tree}: chain [512, 128, 32] {chain_seconds:.2} s ({chain_mib:.0} MiB) vs single default bake {single_seconds:.2} s ({single_mib:.0} MiB): {:.2}× (bar ≤ 2×); stage ms {}",
             chain_seconds / single_seconds,
             report["stage_ms"]
         );
-        let (_, mut project, options) = tree_preview(corpus, tree, CHAIN);
+        let (_dir, mut project, options) = tree_preview(corpus, tree, CHAIN);
         let levels = cirrus::kinds::billboard_cloud::preview(&mut project, &options).expect("preview");
         for ((level, metrics), entry) in levels.iter().zip(report["levels"].as_array().expect("levels")) {
+            // Level N is meant for half the screen size of level N − 1: also seen at that size.
+            let size = options.settings.size >> level;
+            let settings = cirrus::kinds::billboard_cloud::lod_preview::PreviewSettings { size, ..options.settings };
+            let at_its_size = preview_one_level(
+                &mut project,
+                &cirrus::kinds::billboard_cloud::PreviewOptions { settings, lod: Some(*level), ..options.clone() },
+            );
             println!(
-                "billboard-chain: {tree}: lod{level}: {} quads (budget {}), ε {:.4}, atlas {}×{}, {:.2} MB, mean IoU {:.3}",
+                "billboard-chain: {tree}: lod{level}: {} quads (budget {}), ε {:.4}, atlas {}×{}, {:.2} MB, mean IoU {:.3} at {} px, {:.3} at {size} px",
                 entry["quads"],
                 entry["budget_quads"],
                 entry["epsilon"].as_f64().unwrap_or(0.0),
                 entry["atlas"]["width"],
                 entry["atlas"]["height"],
                 entry["bytes"].as_f64().unwrap_or(0.0) / 1e6,
-                metrics.mean_iou
+                metrics.mean_iou,
+                options.settings.size,
+                at_its_size.mean_iou
             );
         }
     }

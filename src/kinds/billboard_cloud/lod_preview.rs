@@ -328,10 +328,11 @@ pub fn rgb_psnr(a: &[u8], b: &[u8]) -> f64 {
 }
 
 /// Groups of views side by side (source | LOD, or source | every level of a chain), as many
-/// groups per row as make about eight images, 8 pixels between groups, as an opaque PNG.
+/// groups per row as make about eight images (fewer when there are fewer groups), 8 pixels
+/// between groups, as an opaque PNG.
 fn contact_sheet(groups: &[Vec<&[u8]>], size: u32) -> Vec<u8> {
     let per_group = groups.first().map_or(2, Vec::len).max(1);
-    let per_row = (8 / per_group).max(1);
+    let per_row = (8 / per_group).min(groups.len()).max(1);
     let rows = groups.len().div_ceil(per_row).max(1);
     let group_width = per_group * size as usize;
     let (width, height) = (per_row * group_width + (per_row - 1) * 8, rows * size as usize + (rows - 1) * 8);

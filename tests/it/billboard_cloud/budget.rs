@@ -121,3 +121,38 @@ fn the_atlas_follows_the_screen_size_the_lod_is_meant_for() {
     }
     assert!(sides[0] * 4 <= sides[1], "an LOD meant for 64 px gets a far smaller atlas than one for 512: {sides:?}");
 }
+
+#[test]
+fn the_epsilon_search_finds_the_smallest_fitting_step_in_few_probes() {
+    use cirrus::kinds::billboard_cloud::planes::{ladder_epsilon, search_epsilon_ladder, LadderProbe, BUDGET_LADDER_STEPS};
+    // Plane counts that follow a power of ε, failing probes reporting less than the truth (as
+    // the estimate from the faces the capped planes hold does).
+    let mut probes_per_search = Vec::new();
+    for alpha in [0.7f32, 1.3, 2.2, 3.5] {
+        for cap in [1u32, 4, 32, 64, 512, 5000] {
+            let count = |step: u32| (20.0 * ladder_epsilon(step).powf(-alpha)).floor();
+            let expected = (0..=BUDGET_LADDER_STEPS).find(|&step| count(step) <= cap as f32);
+            let mut probes = 0;
+            let found = search_epsilon_ladder(cap as f32, |step| {
+                probes += 1;
+                let planes = count(step);
+                let fits = planes <= cap as f32;
+                LadderProbe { fits, planes: if fits { planes } else { cap as f32 + 0.5 * (planes - cap as f32) } }
+            });
+            assert_eq!(found, expected, "α {alpha}, cap {cap}");
+            probes_per_search.push(probes);
+        }
+    }
+    let mean = probes_per_search.iter().sum::<u32>() as f32 / probes_per_search.len() as f32;
+    assert!(mean <= 6.0 && probes_per_search.iter().all(|&probes| probes <= 12), "bisection takes 9 or 10: {probes_per_search:?}");
+    // Any boundary, with counts that say nothing: never wrong, never more than twice bisection.
+    for boundary in [0, 1, 2, 100, 255, 256, 257, 400, 511, 512, 513] {
+        let mut probes = 0;
+        let found = search_epsilon_ladder(50.0, |step| {
+            probes += 1;
+            LadderProbe { fits: step >= boundary, planes: if step >= boundary { 50.0 } else { 51.0 } }
+        });
+        assert_eq!(found, (boundary <= BUDGET_LADDER_STEPS).then_some(boundary), "boundary {boundary}");
+        assert!(probes <= 20, "boundary {boundary}: {probes} probes");
+    }
+}

@@ -152,27 +152,29 @@ fn a_chain_restarts_with_no_stage_run() {
 #[test]
 fn the_preview_compares_every_level_and_lays_the_chain_side_by_side() {
     let project = chain_project("[Quads(12), Quads(4)]");
-    let output = project.run_cli(&["preview", "--asset", "tree", "--views", "3", "--size", "64", "--samples", "2"]);
+    let output = project.run_cli(&["preview", "--asset", "tree", "--size", "48", "--samples", "2"]);
     assert_eq!(output.status.code(), Some(0), "{}", String::from_utf8_lossy(&output.stderr));
     let stdout = String::from_utf8_lossy(&output.stdout);
     let mut iou = Vec::new();
     for level in 0..2 {
         let metrics: serde_json::Value =
             serde_json::from_slice(&project.read(&format!("baked/tree/preview/lod{level}/metrics.json"))).unwrap();
-        assert_eq!(metrics["views"].as_array().unwrap().len(), 3);
+        assert_eq!(metrics["views"].as_array().unwrap().len(), 26);
         iou.push(metrics["mean_iou"].as_f64().unwrap());
-        assert!(stdout.contains(&format!("lod{level}: 3 views, 4 samples per pixel: mean IoU {:.3}", iou[level])), "{stdout}");
+        assert!(stdout.contains(&format!("lod{level}: 26 views, 4 samples per pixel: mean IoU {:.3}", iou[level])), "{stdout}");
         let sheet = image::load_from_memory(&project.read(&format!("baked/tree/preview/lod{level}/contact_sheet.png"))).unwrap();
-        assert_eq!((sheet.width(), sheet.height()), (4 * 2 * 64 + 3 * 8, 64), "source | lod{level} pairs, four to a row");
+        assert_eq!((sheet.width(), sheet.height()), (4 * 2 * 48 + 3 * 8, 7 * 48 + 6 * 8), "source | lod{level} pairs, four to a row");
     }
     assert!(iou[0] >= iou[1] - 0.02 && iou[1] > 0.3, "twelve quads look at least as much like the tree as four: {iou:?}");
     // Each view: the source and both levels; two such groups per row.
     let sheet = image::load_from_memory(&project.read("baked/tree/preview/contact_sheet.png")).unwrap();
-    assert_eq!((sheet.width(), sheet.height()), (2 * 3 * 64 + 8, 2 * 64 + 8));
+    assert_eq!((sheet.width(), sheet.height()), (2 * 3 * 48 + 8, 13 * 48 + 12 * 8));
 
     let output = project.run_cli(&["preview", "--asset", "tree", "--lod", "1", "--views", "1", "--size", "32", "--out", "one"]);
     assert_eq!(output.status.code(), Some(0), "{}", String::from_utf8_lossy(&output.stderr));
     assert!(project.path("one/lod1/metrics.json").is_file() && !project.path("one/lod0").exists());
+    let sheet = image::load_from_memory(&project.read("one/lod1/contact_sheet.png")).unwrap();
+    assert_eq!((sheet.width(), sheet.height()), (2 * 32, 32), "one view: one pair, no empty columns");
     let output = project.run_cli(&["preview", "--asset", "tree", "--lod", "2"]);
     assert_eq!(output.status.code(), Some(2));
     assert!(String::from_utf8_lossy(&output.stderr).contains("asset `tree` has no LOD level 2: it has 2 (0 to 1)"), "{output:?}");

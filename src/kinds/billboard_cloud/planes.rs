@@ -507,6 +507,15 @@ pub fn search_epsilon_ladder(cap: f32, mut probe: impl FnMut(u32) -> LadderProbe
     }
 }
 
+/// A probe of the budget search: the greedy pass at one ladder step, with what it ran on.
+struct LadderStep {
+    step: u32,
+    grid: Grid,
+    faces: Vec<Face>,
+    greedy: GreedyPlanes,
+    epsilon_fraction: f32,
+}
+
 /// The most faithful planes a quad budget allows: every plane is at least one quad, so the
 /// smallest ε of the ladder for which the greedy selection needs at most `max_quads` planes
 /// (see [`search_epsilon_ladder`]; each probe runs the greedy pass alone, stopped at the cap).
@@ -522,32 +531,32 @@ pub fn select_planes_within_budget(
 ) -> PlaneSet {
     let cap = max_planes.map_or(max_quads, |planes| planes.min(max_quads)).max(1);
     let greedy_at = |step: u32| {
-        let fraction = ladder_epsilon(step);
-        let (grid, faces) = grid_and_faces(positions, triangles, fraction);
+        let epsilon_fraction = ladder_epsilon(step);
+        let (grid, faces) = grid_and_faces(positions, triangles, epsilon_fraction);
         let greedy = greedy_planes(&grid, &faces, cap as usize);
-        (grid, faces, greedy, fraction)
+        LadderStep { step, grid, faces, greedy, epsilon_fraction }
     };
     // The fitting probe of the smallest step is finished into the plane set.
-    let mut fitting: Option<(u32, (Grid, Vec<Face>, GreedyPlanes, f32))> = None;
+    let mut smallest_fitting: Option<LadderStep> = None;
     let found = search_epsilon_ladder(cap as f32, |step| {
         let probed = greedy_at(step);
-        let (faces, greedy) = (&probed.1, &probed.2);
+        let (faces, greedy) = (&probed.faces, &probed.greedy);
         let fits = greedy.holds_every_face(faces);
         // The faces left over need at least as many planes again as the last plane's faces go
         // into them (the greedy planes shrink as they go).
         let left_over = greedy.assigned.iter().zip(faces).filter(|(&held, face)| !held && face.area > 0.0).count();
         let last_plane_faces = greedy.planes.last().map_or(1, |(_, _, members)| members.len().max(1));
         let planes = greedy.planes.len() as f32 + (left_over as f32 / last_plane_faces as f32).ceil();
-        if fits && fitting.as_ref().is_none_or(|(smallest, _)| step < *smallest) {
-            fitting = Some((step, probed));
+        if fits && smallest_fitting.as_ref().is_none_or(|smallest| step < smallest.step) {
+            smallest_fitting = Some(probed);
         }
         LadderProbe { fits, planes }
     });
-    let (grid, faces, greedy, fraction) = match found {
-        Some(step) => fitting.filter(|(smallest, _)| *smallest == step).expect("the answer was probed and fits").1,
+    let chosen = match found {
+        Some(step) => smallest_fitting.filter(|smallest| smallest.step == step).expect("the answer was probed and fits"),
         None => greedy_at(BUDGET_LADDER_STEPS),
     };
-    finish_planes(&grid, &faces, greedy, face_materials, fraction)
+    finish_planes(&chosen.grid, &chosen.faces, chosen.greedy, face_materials, chosen.epsilon_fraction)
 }
 
 /// Moves every face to the plane nearest it among those holding its material, then fits the

@@ -162,3 +162,11 @@ impl PsnrSum {
         10.0 * (255.0f64 * 255.0 / (self.squared as f64 / self.count.max(1) as f64).max(1e-9)).log10()
     }
 }
+
+/// The viewer example's options for a headless run on `folder` that writes `screenshot`, with
+/// `arguments` (after the program name) in front.
+pub fn headless_viewer_options(arguments: &[&str], screenshot: &Path, folder: &Path) -> crate::viewer::Options {
+    let words = ["viewer", "--headless"].into_iter().chain(arguments.iter().copied()).map(str::to_string);
+    let paths = ["--screenshot".to_string(), screenshot.display().to_string(), folder.display().to_string()];
+    <crate::viewer::Options as clap::Parser>::try_parse_from(words.chain(paths)).expect("viewer options")
+}

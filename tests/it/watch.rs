@@ -446,14 +446,8 @@ fn the_viewer_keeps_the_last_good_lod_on_failure_and_reloads_on_a_texture_edit()
     assert!(client.batch()["failed"].as_array().unwrap().is_empty());
 
     let screenshot = project.path("shot.png");
-    let arguments = ["viewer", "--headless", "--size", "192", "--reloads", "1", "--connect", &daemon.address, "--screenshot"];
-    let options = <crate::viewer::Options as clap::Parser>::try_parse_from(
-        arguments
-            .iter()
-            .map(|argument| argument.to_string())
-            .chain([screenshot.display().to_string(), project.path("baked/tree").display().to_string()]),
-    )
-    .expect("viewer options");
+    let arguments = ["--size", "192", "--reloads", "1", "--connect", &daemon.address];
+    let options = crate::support::headless_viewer_options(&arguments, &screenshot, &project.path("baked/tree"));
     let lines = Arc::new(Mutex::new(Vec::<String>::new()));
     let viewer = {
         let lines = lines.clone();

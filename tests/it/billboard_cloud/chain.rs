@@ -185,14 +185,7 @@ fn the_viewer_switches_levels_with_the_digit_keys() {
     let project = chain_project("[Quads(12), Quads(4)]");
     build(&mut project.open());
     let screenshot = project.path("shot.png");
-    let arguments = ["viewer", "--headless", "--size", "96", "--press", "1x70", "--screenshot"];
-    let options = <crate::viewer::Options as clap::Parser>::try_parse_from(
-        arguments
-            .iter()
-            .map(|argument| argument.to_string())
-            .chain([screenshot.display().to_string(), project.path("baked/tree").display().to_string()]),
-    )
-    .expect("viewer options");
+    let options = crate::support::headless_viewer_options(&["--size", "96", "--press", "1x70"], &screenshot, &project.path("baked/tree"));
     let mut lines = Vec::new();
     crate::viewer::run(&options, &mut |line| lines.push(line)).expect("the viewer runs");
     assert_eq!(lines.len(), 5, "{lines:?}");

@@ -300,7 +300,7 @@ fn follow_connection(mut stream: TcpStream, folder: &Path, since: &mut Option<u6
             return Some(name);
         }
         let level = parent.file_name()?.to_string_lossy();
-        let is_level = level.strip_prefix("lod").is_some_and(|digits| !digits.is_empty() && digits.bytes().all(|b| b.is_ascii_digit()));
+        let is_level = cirrus::kinds::billboard_cloud::levels::level_of_folder(&level).is_some();
         (is_level && folder.ends_with(parent.parent()?)).then(|| format!("{level}/{name}"))
     };
     for line in BufReader::new(stream).lines() {

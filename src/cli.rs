@@ -1,4 +1,4 @@
-//! The command line: `build`, `watch`, `graph`, `preview` and `check`, their options, output and exit codes
+//! The command line: `build`, `watch`, `graph`, `preview`, `check` and `cache`, their options, output and exit codes
 //! (0: every asset baked, 1: some asset failed, 2: usage or configuration error).
 
 use std::io::IsTerminal;
@@ -7,6 +7,7 @@ use std::process::ExitCode;
 
 use clap::{Parser, Subcommand, ValueEnum};
 
+use crate::cache::remote::RemoteCacheOverride;
 use crate::config::load_pipeline;
 use crate::project::{BuildOptions, Progress, Project, ProjectOptions};
 
@@ -16,6 +17,14 @@ pub struct Cli {
     /// More log output (-v: info, -vv: debug, -vvv: trace). RUST_LOG overrides it.
     #[arg(short, long, action = clap::ArgAction::Count, global = true)]
     pub verbose: u8,
+    /// The shared cache, over `cache: (remote: …)` of the pipeline: s3://bucket/prefix,
+    /// file:///folder, or `off`. Endpoint, region and credentials come from the AWS_*
+    /// environment variables.
+    #[arg(long, value_name = "URL", env = "CIRRUS_REMOTE_CACHE", global = true)]
+    pub remote_cache: Option<String>,
+    /// read-write (build machines, CI) or read-only (artists' machines), over the pipeline's `mode`.
+    #[arg(long, value_name = "MODE", env = "CIRRUS_REMOTE_CACHE_MODE", global = true)]
+    pub remote_cache_mode: Option<String>,
     #[command(subcommand)]
     pub command: Command,
 }
@@ -89,6 +98,54 @@ pub enum Command {
         #[arg(long, default_value = "pipeline.ron")]
         pipeline: PathBuf,
     },
+    /// The stage cache: what the last build found where, why a stage missed, and bounding the
+    /// local folder.
+    Cache {
+        #[command(subcommand)]
+        command: CacheCommand,
+    },
+}
+
+#[derive(Debug, Subcommand)]
+pub enum CacheCommand {
+    /// Local entries and bytes, and the last build's hits and misses, local and remote.
+    Stats {
+        /// The pipeline file.
+        #[arg(long, default_value = "pipeline.ron")]
+        pipeline: PathBuf,
+    },
+    /// For each stage of an asset: where its result was found, or which part of its key
+    /// differs from the nearest entry.
+    Explain {
+        /// The pipeline file.
+        #[arg(long, default_value = "pipeline.ron")]
+        pipeline: PathBuf,
+        #[arg(long)]
+        asset: String,
+    },
+    /// Deletes the least recently used local entries until the folder holds at most BYTES
+    /// (suffixes K, M, G: 1024-based).
+    Gc {
+        /// The pipeline file.
+        #[arg(long, default_value = "pipeline.ron")]
+        pipeline: PathBuf,
+        #[arg(long, value_name = "BYTES", value_parser = parse_byte_size)]
+        max_size: u64,
+    },
+}
+
+/// `500M`, `2G`, `1048576`: bytes with an optional 1024-based suffix.
+fn parse_byte_size(text: &str) -> Result<u64, String> {
+    let text = text.trim();
+    let (digits, shift) = match text.char_indices().last() {
+        Some((at, 'k' | 'K')) => (&text[..at], 10),
+        Some((at, 'm' | 'M')) => (&text[..at], 20),
+        Some((at, 'g' | 'G')) => (&text[..at], 30),
+        Some((at, 't' | 'T')) => (&text[..at], 40),
+        _ => (text, 0),
+    };
+    let value: u64 = digits.trim().parse().map_err(|_| format!("`{text}` is not a size in bytes (e.g. 1048576, 500M, 2G)"))?;
+    value.checked_mul(1 << shift).ok_or_else(|| format!("`{text}` is too large"))
 }
 
 /// The graph formats on the command line (`graph` is a data module and knows nothing of clap).
@@ -125,12 +182,21 @@ pub fn init_logging(verbose: u8) {
 
 pub fn run(cli: Cli) -> ExitCode {
     init_logging(cli.verbose);
+    let remote_cache = match RemoteCacheOverride::parse(cli.remote_cache.as_deref(), cli.remote_cache_mode.as_deref()) {
+        Ok(remote_cache) => remote_cache,
+        Err(why) => {
+            eprintln!("error: --remote-cache: {why}");
+            return ExitCode::from(EXIT_USAGE);
+        }
+    };
+    let options = ProjectOptions { remote_cache: remote_cache.clone(), ..Default::default() };
     match cli.command {
-        Command::Build { pipeline, assets, summary } => build(pipeline, assets, summary),
+        Command::Build { pipeline, assets, summary } => build(pipeline, assets, summary, options),
         Command::Check { pipeline } => check(pipeline),
+        Command::Cache { command } => crate::cli_cache::run(command, options),
         Command::Watch { pipeline, listen, debounce_ms } => {
-            let settings =
-                crate::watch::WatchSettings { pipeline, listen, debounce: std::time::Duration::from_millis(debounce_ms), max_builds: None };
+            let debounce = std::time::Duration::from_millis(debounce_ms);
+            let settings = crate::watch::WatchSettings { pipeline, listen, debounce, max_builds: None, remote_cache };
             match crate::watch::watch(&settings) {
                 Ok(()) => ExitCode::SUCCESS,
                 Err(error) => {
@@ -139,29 +205,29 @@ pub fn run(cli: Cli) -> ExitCode {
                 }
             }
         }
-        Command::Graph { pipeline, asset, format } => graph(pipeline, asset, format),
+        Command::Graph { pipeline, asset, format } => graph(pipeline, asset, format, options),
         Command::Preview { pipeline, asset, views, size, samples, out, lod } => {
             let settings =
                 crate::kinds::billboard_cloud::lod_preview::PreviewSettings { views: views as usize, size, samples_per_axis: samples };
-            preview(pipeline, asset, settings, out, lod)
+            preview(pipeline, asset, settings, out, lod, options)
         }
     }
 }
 
 /// The validated pipeline, or the usage exit status after printing why it is not valid.
-fn load_pipeline_or_report(pipeline: &std::path::Path) -> Result<crate::config::PipelineConfig, ExitCode> {
+pub(crate) fn load_pipeline_or_report(pipeline: &std::path::Path) -> Result<crate::config::PipelineConfig, ExitCode> {
     load_pipeline(pipeline).map_err(|error| {
         eprintln!("{error}");
         ExitCode::from(EXIT_USAGE)
     })
 }
 
-fn build(pipeline: PathBuf, assets: Vec<String>, format: SummaryFormat) -> ExitCode {
+fn build(pipeline: PathBuf, assets: Vec<String>, format: SummaryFormat, options: ProjectOptions) -> ExitCode {
     let config = match load_pipeline_or_report(&pipeline) {
         Ok(config) => config,
         Err(code) => return code,
     };
-    let mut project = Project::open(config, ProjectOptions::default());
+    let mut project = Project::open(config, options);
     let bar = std::io::stderr().is_terminal().then(|| {
         let bar = indicatif::ProgressBar::new(0);
         bar.set_style(
@@ -240,13 +306,14 @@ fn preview(
     settings: crate::kinds::billboard_cloud::lod_preview::PreviewSettings,
     out: Option<PathBuf>,
     lod: Option<u32>,
+    options: ProjectOptions,
 ) -> ExitCode {
     let config = match load_pipeline_or_report(&pipeline) {
         Ok(config) => config,
         Err(code) => return code,
     };
     let out = out.unwrap_or_else(|| config.output.join(&asset).join("preview"));
-    let mut project = Project::open(config, ProjectOptions::default());
+    let mut project = Project::open(config, options);
     let options = crate::kinds::billboard_cloud::PreviewOptions { asset, settings, out: out.clone(), lod };
     match crate::kinds::billboard_cloud::preview(&mut project, &options) {
         Ok(levels) => {
@@ -288,12 +355,12 @@ fn preview(
     }
 }
 
-fn graph(pipeline: PathBuf, asset: Option<String>, format: crate::graph::GraphFormat) -> ExitCode {
+fn graph(pipeline: PathBuf, asset: Option<String>, format: crate::graph::GraphFormat, options: ProjectOptions) -> ExitCode {
     let config = match load_pipeline_or_report(&pipeline) {
         Ok(config) => config,
         Err(code) => return code,
     };
-    let mut project = Project::open(config, ProjectOptions::default());
+    let mut project = Project::open(config, options);
     if let Some(name) = &asset {
         if !project.asset_list().iter().any(|candidate| &candidate.name == name) {
             eprintln!("error: no asset named `{name}` in {}", crate::diagnostic::display_path(&pipeline));

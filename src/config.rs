@@ -99,6 +99,9 @@ pub struct PipelineConfig {
     pub assets: Vec<AssetConfig>,
     pub rules: Vec<Rule>,
     pub limits: Limits,
+    /// The shared cache behind the local one (`cache: (remote: …, mode: …)`), before the
+    /// command line's or the environment's override.
+    pub remote_cache: Option<crate::cache::remote::RemoteCacheSettings>,
 }
 
 /// Pipeline-wide resource limits.
@@ -265,6 +268,15 @@ impl Validator<'_> {
             }
             limits.texture.working_set = mib << 20;
         }
+        let remote_cache = raw.cache.remote.as_ref().and_then(|url| match crate::cache::remote::parse_remote_url(url) {
+            Ok(location) => {
+                Some(crate::cache::remote::RemoteCacheSettings { url: url.clone(), location, mode: raw.cache.mode.unwrap_or_default() })
+            }
+            Err(why) => {
+                self.error_at_value(url, 0, &why);
+                None
+            }
+        });
 
         let mut assets = Vec::new();
         let mut names = BTreeSet::new();
@@ -401,7 +413,18 @@ impl Validator<'_> {
         }
 
         if self.diagnostics.is_empty() {
-            Ok(PipelineConfig { file: self.file.to_path_buf(), root, source, output, server, defaults, assets, rules, limits })
+            Ok(PipelineConfig {
+                file: self.file.to_path_buf(),
+                root,
+                source,
+                output,
+                server,
+                defaults,
+                assets,
+                rules,
+                limits,
+                remote_cache,
+            })
         } else {
             Err(ConfigError { diagnostics: self.diagnostics })
         }

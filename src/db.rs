@@ -139,6 +139,8 @@ pub struct StageRun {
     pub started: Instant,
     /// The result came from the persistent cache; the stage itself did no work.
     pub from_cache: bool,
+    /// That result came from the shared store (the local cache did not have it).
+    pub from_remote: bool,
 }
 
 #[derive(Default)]
@@ -167,6 +169,11 @@ pub struct Database {
 impl Database {
     pub fn new(cache: Option<DiskCache>) -> Database {
         Database { storage: salsa::Storage::default(), cache, logs: Arc::default(), memos: Arc::default() }
+    }
+
+    /// Uses another persistent cache from now on (the pipeline's output or shared cache changed).
+    pub fn replace_disk_cache(&mut self, cache: Option<DiskCache>) {
+        self.cache = cache;
     }
 
     /// The stage bodies that ran since the last call, with their durations.
@@ -211,6 +218,8 @@ pub fn remember<T: Any + Send + Sync>(db: &dyn Db, name: &str, value: Arc<T>) {
 
 /// Runs a stage body, timing it and recording the run under `label`.
 pub fn timed<T>(db: &dyn Db, stage: Stage, label: &str, body: impl FnOnce() -> T) -> T {
+    // A remote hit on the way to running is not this stage's result.
+    crate::cache::take_remote_hit();
     let start = Instant::now();
     let result = body();
     db.record_run(StageRun {
@@ -219,12 +228,23 @@ pub fn timed<T>(db: &dyn Db, stage: Stage, label: &str, body: impl FnOnce() -> T
         ms: start.elapsed().as_secs_f64() * 1000.0,
         started: start,
         from_cache: false,
+        from_remote: false,
     });
     result
 }
 
+/// Records that a stage's result came from the persistent cache, and whether the shared store
+/// served it (a load on this thread since the last record, see `cache::take_remote_hit`).
 pub fn record_cache_hit(db: &dyn Db, stage: Stage, label: &str) {
-    db.record_run(StageRun { stage: stage.name, label: label.to_string(), ms: 0.0, started: Instant::now(), from_cache: true });
+    let from_remote = crate::cache::take_remote_hit();
+    db.record_run(StageRun {
+        stage: stage.name,
+        label: label.to_string(),
+        ms: 0.0,
+        started: Instant::now(),
+        from_cache: true,
+        from_remote,
+    });
 }
 
 /// A source texture decoded to RGBA8 (the decode stage, labelled by the file's path).

@@ -34,3 +34,4 @@ pub mod project;
 pub mod watch;
 pub mod server;
 pub mod cli;
+pub mod cli_cache;

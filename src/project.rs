@@ -28,11 +28,13 @@ pub struct ProjectOptions {
     pub persistent_cache: bool,
     /// When source files are read again.
     pub source_reading: SourceReading,
+    /// The command line's word on the shared cache (`pipeline.ron`'s `cache` otherwise).
+    pub remote_cache: crate::cache::remote::RemoteCacheOverride,
 }
 
 impl Default for ProjectOptions {
     fn default() -> Self {
-        ProjectOptions { persistent_cache: true, source_reading: SourceReading::EveryBuild }
+        ProjectOptions { persistent_cache: true, source_reading: SourceReading::EveryBuild, remote_cache: Default::default() }
     }
 }
 
@@ -94,11 +96,29 @@ pub struct Project {
     revision: u64,
     /// A source input was created or set since the last finished build (also by `graph`).
     sources_changed_since_build: bool,
+    options: ProjectOptions,
+}
+
+/// The local cache under `<output>/.cirrus/cache`, with the shared store behind it when the
+/// pipeline or the command line names one (one that cannot be opened is a warning).
+fn open_disk_cache(config: &PipelineConfig, options: &ProjectOptions) -> Option<DiskCache> {
+    if !options.persistent_cache {
+        return None;
+    }
+    let local = DiskCache::new(config.output_dir().join(".cirrus").join("cache"));
+    Some(match options.remote_cache.apply(config.remote_cache.as_ref()).map(crate::cache::remote::RemoteStore::open) {
+        None => local,
+        Some(Ok(remote)) => local.with_remote(remote),
+        Some(Err(error)) => {
+            tracing::warn!("{error}; building with the local cache only");
+            local
+        }
+    })
 }
 
 impl Project {
     pub fn open(config: PipelineConfig, options: ProjectOptions) -> Project {
-        let cache = options.persistent_cache.then(|| DiskCache::new(config.output_dir().join(".cirrus").join("cache")));
+        let cache = open_disk_cache(&config, &options);
         let revision = load_manifest(&config.output_dir()).revision;
         let swept = crate::artifacts::sweep_temporary_files(&config.output_dir());
         if swept > 0 {
@@ -117,6 +137,7 @@ impl Project {
             executed: BTreeSet::new(),
             revision,
             sources_changed_since_build: false,
+            options,
         };
         project.sync_limits();
         project
@@ -192,6 +213,13 @@ impl Project {
 
     /// Replaces the pipeline; settings changes reach only the stages that read them.
     pub fn reconfigure(&mut self, config: PipelineConfig) {
+        let remote = |config: &PipelineConfig| self.options.remote_cache.apply(config.remote_cache.as_ref());
+        if config.output != self.config.output || remote(&config) != remote(&self.config) {
+            if let Some(cache) = self.db.disk_cache() {
+                cache.flush();
+            }
+            self.db.replace_disk_cache(open_disk_cache(&config, &self.options));
+        }
         self.config = config;
         self.sync_limits();
     }
@@ -358,6 +386,10 @@ impl Project {
             assets.push((config, asset));
         }
         self.sync_registry(&all_assets, &assets);
+        if let Some(cache) = self.db.disk_cache() {
+            // This build's hits and misses start here.
+            cache.take_counts();
+        }
         let first_jobs = assets.iter().flat_map(|(_, asset)| asset.kind(&self.db).first_jobs(&self.db, *asset)).collect();
         let finished = crate::schedule::run_jobs(&self.db, first_jobs, progress, &cancel);
         let runs = self.db.take_runs();
@@ -428,11 +460,7 @@ impl Project {
             let instances = kind.stage_instances(&self.db, *asset, &folder, &errors);
             let stages = stage_summaries(&instances, &runs, !errors.is_empty(), &failed_jobs);
             for (instance, stage) in instances.iter().zip(&stages) {
-                let state = match stage.status {
-                    StageStatus::Ran => "ran",
-                    StageStatus::Cached => "cached",
-                    StageStatus::Failed => "failed",
-                };
+                let state = stage.status.name();
                 let ms = (stage.status == StageStatus::Ran).then_some((stage.ms * 10.0).round() / 10.0);
                 statuses.insert(instance.node_id(), (state, ms));
             }
@@ -474,6 +502,26 @@ impl Project {
         }
         self.revision = manifest.revision;
         self.sources_changed_since_build = false;
+        if let Some(cache) = self.db.disk_cache() {
+            let assets = summaries
+                .iter()
+                .map(|asset| crate::cache::upkeep::LastBuildAsset {
+                    name: asset.name.clone(),
+                    stages: asset
+                        .stages
+                        .iter()
+                        .map(|stage| (stage_node_id(stage.stage, &stage.instance), stage.status.name().to_string()))
+                        .collect(),
+                })
+                .collect();
+            let last = crate::cache::upkeep::LastBuild {
+                revision: manifest.revision,
+                counts: cache.take_counts(),
+                remote: cache.remote().map(|remote| remote.settings().url.clone()),
+                assets,
+            };
+            crate::cache::upkeep::write_last_build(cache.folder(), &last);
+        }
         self.record_runs(&runs, manifest.revision);
         self.last_statuses = statuses;
         self.last_revision = Some(manifest.revision);
@@ -649,18 +697,29 @@ impl Project {
 }
 
 /// The summary of each stage instance: ran when this build ran it, failed when the asset
-/// failed before it had a result (its kind says, or its job failed), cached otherwise.
+/// failed before it had a result (its kind says, or its job failed), remote when its result
+/// came from the shared cache, cached otherwise. A stage that needed no result of its own
+/// (what it feeds was found in a cache) is remote when every cache hit of its asset in this
+/// build came from the shared cache, and cached otherwise.
 fn stage_summaries(instances: &[StageInstance], runs: &[StageRun], asset_failed: bool, failed_jobs: &HashSet<String>) -> Vec<StageSummary> {
     let mut ran: HashMap<(&str, &str), f64> = HashMap::new();
     for run in runs.iter().filter(|run| !run.from_cache) {
         *ran.entry((run.stage, run.label.as_str())).or_insert(0.0) += run.ms;
     }
+    let ids: HashSet<(&str, &str)> = instances.iter().map(|instance| (instance.stage.name, instance.label.as_str())).collect();
+    let hits: Vec<&StageRun> = runs.iter().filter(|run| run.from_cache && ids.contains(&(run.stage, run.label.as_str()))).collect();
+    let remote_hits: HashSet<(&str, &str)> = hits.iter().filter(|run| run.from_remote).map(|run| (run.stage, run.label.as_str())).collect();
+    let every_hit_remote = !hits.is_empty() && hits.iter().all(|run| run.from_remote);
+    let local_hits: HashSet<(&str, &str)> = hits.iter().filter(|run| !run.from_remote).map(|run| (run.stage, run.label.as_str())).collect();
     instances
         .iter()
         .map(|instance| {
-            let (status, ms) = match ran.get(&(instance.stage.name, instance.label.as_str())) {
+            let id = (instance.stage.name, instance.label.as_str());
+            let (status, ms) = match ran.get(&id) {
                 Some(&ms) => (StageStatus::Ran, ms),
                 None if asset_failed && (instance.failed || failed_jobs.contains(&instance.label)) => (StageStatus::Failed, 0.0),
+                None if remote_hits.contains(&id) && !local_hits.contains(&id) => (StageStatus::Remote, 0.0),
+                None if every_hit_remote && !local_hits.contains(&id) => (StageStatus::Remote, 0.0),
                 None => (StageStatus::Cached, 0.0),
             };
             StageSummary { stage: instance.stage.name, instance: instance.instance.clone(), status, ms }

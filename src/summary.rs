@@ -46,8 +46,22 @@ pub enum AssetStatus {
 #[serde(rename_all = "lowercase")]
 pub enum StageStatus {
     Ran,
+    /// From memory or the local persistent cache.
     Cached,
+    /// From the shared cache (see `stage_summaries` in the driver for stages with no entry).
+    Remote,
     Failed,
+}
+
+impl StageStatus {
+    pub fn name(self) -> &'static str {
+        match self {
+            StageStatus::Ran => "ran",
+            StageStatus::Cached => "cached",
+            StageStatus::Remote => "remote",
+            StageStatus::Failed => "failed",
+        }
+    }
 }
 
 #[derive(Clone, Debug, PartialEq, Serialize)]
@@ -114,9 +128,13 @@ impl BuildSummary {
                 AssetStatus::Ok => "ok",
                 AssetStatus::Failed => "FAILED",
             };
+            let remote = match count(StageStatus::Remote) {
+                0 => String::new(),
+                remote => format!(", {remote} from the shared cache"),
+            };
             let _ = writeln!(
                 text,
-                "{status:<6} {} ({}): {} stages ran, {} cached, {} failed; {} artifacts; {ms:.0} ms of stage work",
+                "{status:<6} {} ({}): {} stages ran, {} cached{remote}, {} failed; {} artifacts; {ms:.0} ms of stage work",
                 asset.name,
                 asset.kind,
                 count(StageStatus::Ran),

@@ -30,6 +30,8 @@ pub struct WatchSettings {
     pub debounce: Duration,
     /// Stop after this many finished builds (tests and benchmarks); run forever when `None`.
     pub max_builds: Option<u64>,
+    /// The command line's word on the shared cache.
+    pub remote_cache: crate::cache::remote::RemoteCacheOverride,
 }
 
 #[derive(Debug, thiserror::Error)]
@@ -156,8 +158,14 @@ pub fn watch(settings: &WatchSettings) -> Result<(), WatchError> {
     };
     let root = absolute(&config.root)?;
     let pipeline = root.join(config.file.file_name().unwrap_or_default());
-    let mut project =
-        Project::open(config.clone(), ProjectOptions { persistent_cache: true, source_reading: SourceReading::WhenInvalidated });
+    let mut project = Project::open(
+        config.clone(),
+        ProjectOptions {
+            persistent_cache: true,
+            source_reading: SourceReading::WhenInvalidated,
+            remote_cache: settings.remote_cache.clone(),
+        },
+    );
 
     let listen = settings.listen.or(config.server);
     let server = match listen {

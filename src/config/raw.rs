@@ -21,6 +21,17 @@ pub struct Pipeline {
     pub rules: Vec<Rule>,
     #[serde(default)]
     pub limits: Limits,
+    #[serde(default)]
+    pub cache: Cache,
+}
+
+#[derive(Deserialize, Default)]
+#[serde(deny_unknown_fields)]
+pub struct Cache {
+    /// The shared cache's URL (`s3://bucket/prefix`).
+    #[serde(default)]
+    pub remote: Option<String>,
+    pub mode: Option<crate::cache::remote::RemoteCacheMode>,
 }
 
 #[derive(Deserialize, Default)]

@@ -15,6 +15,7 @@ mod config;
 mod conformance;
 mod fuzz;
 mod graph;
+mod shared_cache;
 mod hostile;
 mod occlusion;
 mod packing;

@@ -77,10 +77,18 @@
 //!
 //! Bump an entry's version (or a stage's) whenever its result changes for the same parts.
 
+use std::cell::Cell;
 use std::io::Write;
 use std::path::{Path, PathBuf};
+use std::sync::atomic::{AtomicU64, Ordering};
+use std::sync::Arc;
 
 use rayon::prelude::*;
+
+pub mod remote;
+pub mod upkeep;
+
+use remote::{RemoteCounts, RemoteStore};
 
 /// A content address: the blake3 hash of everything a stage result depends on.
 #[derive(Clone, Copy, Debug, PartialEq, Eq, Hash)]
@@ -231,12 +239,41 @@ impl KeyPart for crate::texture::SurfaceKind {
 /// Largest cache entry read back.
 const MAX_ENTRY_BYTES: u64 = 4 << 30;
 
-/// A cache folder: one file per entry, a header line of JSON followed by binary blobs.
+/// A cache folder: one file per entry, a header line of JSON followed by binary blobs; behind
+/// it, optionally, the shared store (`remote`), asked on a local miss and given what is stored.
 #[derive(Clone, Debug)]
 pub struct DiskCache {
     folder: PathBuf,
     /// Writes of large entries still running on their own threads (see `flush`).
-    pending: std::sync::Arc<std::sync::Mutex<Vec<std::thread::JoinHandle<()>>>>,
+    pending: Arc<std::sync::Mutex<Vec<std::thread::JoinHandle<()>>>>,
+    remote: Option<Arc<RemoteStore>>,
+    counters: Arc<LocalCounters>,
+}
+
+#[derive(Debug, Default)]
+struct LocalCounters {
+    hits: AtomicU64,
+    misses: AtomicU64,
+}
+
+/// What the caches did in one build: local hits and misses (a local miss may still be a remote
+/// hit), and the shared store's counts when there is one.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq, serde::Serialize, serde::Deserialize)]
+pub struct CacheCounts {
+    pub local_hits: u64,
+    pub local_misses: u64,
+    pub remote: Option<RemoteCounts>,
+}
+
+thread_local! {
+    /// Set when a load on this thread was served by the shared store; taken by the stage that
+    /// records the hit (`take_remote_hit`), so that the build summary can say `remote`.
+    static REMOTE_HIT: Cell<bool> = const { Cell::new(false) };
+}
+
+/// Whether a load on this thread was served by the shared store since the last call.
+pub fn take_remote_hit() -> bool {
+    REMOTE_HIT.with(|hit| hit.replace(false))
 }
 
 /// Entries at least this large (before compression) are compressed and written on a thread of
@@ -255,7 +292,25 @@ pub struct CacheEntry {
 
 impl DiskCache {
     pub fn new(folder: impl Into<PathBuf>) -> DiskCache {
-        DiskCache { folder: folder.into(), pending: Default::default() }
+        DiskCache { folder: folder.into(), pending: Default::default(), remote: None, counters: Default::default() }
+    }
+
+    /// The same folder with a shared store behind it.
+    pub fn with_remote(self, remote: RemoteStore) -> DiskCache {
+        DiskCache { remote: Some(Arc::new(remote)), ..self }
+    }
+
+    pub fn remote(&self) -> Option<&RemoteStore> {
+        self.remote.as_deref()
+    }
+
+    /// What the caches did since the last call (a build's figures).
+    pub fn take_counts(&self) -> CacheCounts {
+        CacheCounts {
+            local_hits: self.counters.hits.swap(0, Ordering::Relaxed),
+            local_misses: self.counters.misses.swap(0, Ordering::Relaxed),
+            remote: self.remote.as_ref().map(|remote| remote.take_counts()),
+        }
     }
 
     pub fn folder(&self) -> &Path {
@@ -267,14 +322,39 @@ impl DiskCache {
         self.folder.join(stage).join(&hex[..2]).join(&hex[2..])
     }
 
-    /// Whether an entry file exists under `key` (it may still turn out corrupt when loaded).
+    /// Whether an entry exists under `key`: a local file (it may still turn out corrupt when
+    /// loaded), or a verified object of the shared store, which is then copied here.
     pub fn contains(&self, stage: &str, key: CacheKey) -> bool {
-        self.entry_path(stage, key).is_file()
+        self.entry_path(stage, key).is_file() || self.fetch_remote(stage, key).is_some()
     }
 
+    /// The entry under `key`: the local file, else the shared store's object (verified, then
+    /// kept here); `None` when neither has a good one.
     pub fn load(&self, stage: &str, key: CacheKey) -> Option<CacheEntry> {
-        let bytes = crate::sources::read_regular_file(&self.entry_path(stage, key), MAX_ENTRY_BYTES).ok()?;
-        decode_entry(&bytes, stage, key)
+        let path = self.entry_path(stage, key);
+        let local = crate::sources::read_regular_file(&path, MAX_ENTRY_BYTES).ok().and_then(|bytes| decode_entry(&bytes, stage, key));
+        if local.is_some() {
+            self.counters.hits.fetch_add(1, Ordering::Relaxed);
+            upkeep::mark_used(&path);
+            return local;
+        }
+        self.counters.misses.fetch_add(1, Ordering::Relaxed);
+        self.fetch_remote(stage, key)
+    }
+
+    /// The shared store's entry under `key`, verified, kept in the local folder.
+    fn fetch_remote(&self, stage: &str, key: CacheKey) -> Option<CacheEntry> {
+        let remote = self.remote.as_ref()?;
+        let bytes = remote.fetch(stage, key)?;
+        let entry = decode_entry(&bytes, stage, key);
+        remote.verified(stage, key, entry.is_some());
+        let entry = entry?;
+        let path = self.entry_path(stage, key);
+        if let Err(error) = write_atomically(&path, |file| file.write_all(&bytes)) {
+            tracing::warn!("cannot write cache entry {}: {error}", path.display());
+        }
+        REMOTE_HIT.with(|hit| hit.set(true));
+        Some(entry)
     }
 
     /// Stores an entry; failures (full disk, permissions) only cost a future miss. Large entries
@@ -295,28 +375,43 @@ impl DiskCache {
         self.pending.lock().expect("pending writes lock").push(write);
     }
 
+    /// Writes an entry (temporary file, then rename) and gives its bytes to the shared store.
     fn write_entry(&self, stage: &str, key: CacheKey, entry: &CacheEntry) {
         let path = self.entry_path(stage, key);
-        let result = (|| -> std::io::Result<()> {
-            let folder = path.parent().expect("entry paths have a folder");
-            std::fs::create_dir_all(folder)?;
-            let mut temporary = tempfile::Builder::new().prefix(crate::artifacts::TEMPORARY_PREFIX).tempfile_in(folder)?;
-            write_entry_to(temporary.as_file_mut(), stage, key, entry)?;
-            temporary.persist(&path).map_err(|error| error.error)?;
-            Ok(())
-        })();
-        if let Err(error) = result {
+        if let Err(error) = write_atomically(&path, |file| write_entry_to(file, stage, key, entry)) {
             tracing::warn!("cannot write cache entry {}: {error}", path.display());
+            return;
+        }
+        if let Some(remote) = self.remote.as_ref().filter(|remote| remote.writes() && remote::shares(stage)) {
+            // The file as written (the page cache has it): the object is the entry, byte for byte.
+            match crate::sources::read_regular_file(&path, MAX_ENTRY_BYTES) {
+                Ok(bytes) => remote.upload(stage, key, bytes),
+                Err(error) => tracing::warn!("cannot read back cache entry {}: {error}", path.display()),
+            }
         }
     }
 
-    /// Waits for the entries still being written.
+    /// Waits for the entries still being written, and for their uploads.
     pub fn flush(&self) {
         let pending = std::mem::take(&mut *self.pending.lock().expect("pending writes lock"));
         for write in pending {
             let _ = write.join();
         }
+        if let Some(remote) = &self.remote {
+            remote.wait_for_uploads();
+        }
     }
+}
+
+/// Writes a file through a temporary file in its folder renamed into place, so that readers
+/// (other processes too) see the whole file or none.
+fn write_atomically(path: &Path, write: impl FnOnce(&mut std::fs::File) -> std::io::Result<()>) -> std::io::Result<()> {
+    let folder = path.parent().expect("entry paths have a folder");
+    std::fs::create_dir_all(folder)?;
+    let mut temporary = tempfile::Builder::new().prefix(crate::artifacts::TEMPORARY_PREFIX).tempfile_in(folder)?;
+    write(temporary.as_file_mut())?;
+    temporary.persist(path).map_err(|error| error.error)?;
+    Ok(())
 }
 
 fn entry_size(entry: &CacheEntry) -> usize {

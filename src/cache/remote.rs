@@ -1,0 +1,487 @@
+//! The shared cache's remote half (an IO edge): the disk cache's entries, byte for byte, on an
+//! object store (S3-compatible through `object_store`, or a folder or an in-memory store behind
+//! the same trait), fetched on a local miss and uploaded after a local store.
+//!
+//! - **Where.** An entry lives at `<prefix>/<stage>/<first two hex digits>/<the rest>`, the
+//!   local cache's own layout, so one store serves every checkout folder and every machine.
+//! - **Verified.** What comes back is the local entry format: its header names the stage and
+//!   key it was stored under and it ends with the blake3 of everything before it. The disk cache
+//!   decodes it before anything uses it, so a corrupt, truncated or foreign object is a miss.
+//!   A key found corrupt is overwritten by the next upload of it; every other upload is a
+//!   conditional create (`If-None-Match: *` on S3), so machines racing on a key are harmless.
+//! - **Never in the way.** Every request has a short deadline. The first request of a build
+//!   is a probe (a `HEAD` that must answer within `PROBE_TIMEOUT`); a store that does not answer,
+//!   or any request that fails other than by "not found", is a warning, and the store is left
+//!   alone for `RETRY_AFTER`, so a build goes on locally and a daemon uses the store again
+//!   when it comes back.
+//! - **Memos stay local.** Entries whose stage ends in `-memo` are an identity's last result,
+//!   overwritten on every run (see the module docs of `cache`); they are never shared.
+
+use std::collections::HashSet;
+use std::path::PathBuf;
+use std::sync::atomic::{AtomicU64, Ordering};
+use std::sync::{Arc, Mutex};
+use std::time::{Duration, Instant};
+
+use object_store::path::Path as StorePath;
+use object_store::{ObjectStore, ObjectStoreExt, PutMode, PutOptions, PutPayload};
+
+use super::CacheKey;
+
+/// Whether a machine may add entries to the shared store.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq, serde::Deserialize, serde::Serialize)]
+pub enum RemoteCacheMode {
+    /// Fetch and upload (build machines, CI).
+    #[default]
+    ReadWrite,
+    /// Fetch only (artists' machines).
+    ReadOnly,
+}
+
+impl RemoteCacheMode {
+    /// `read-write` / `read-only` (the command line's and `CIRRUS_REMOTE_CACHE_MODE`'s words),
+    /// or the names `pipeline.ron` uses.
+    pub fn parse(text: &str) -> Option<RemoteCacheMode> {
+        match text {
+            "read-write" | "ReadWrite" => Some(RemoteCacheMode::ReadWrite),
+            "read-only" | "ReadOnly" => Some(RemoteCacheMode::ReadOnly),
+            _ => None,
+        }
+    }
+}
+
+/// Where the shared entries live, as a URL names it.
+#[derive(Clone, Debug, PartialEq, Eq)]
+pub enum RemoteLocation {
+    /// `s3://bucket/prefix`: endpoint, region and credentials from the AWS environment variables.
+    S3 { bucket: String, prefix: String },
+    /// `file:///absolute/folder`: a shared folder (a network mount) through the same code.
+    Folder(PathBuf),
+    /// `memory://name`: a store that lives as long as the process (tests).
+    Memory(String),
+}
+
+/// The shared cache a build uses: where, and whether it may upload.
+#[derive(Clone, Debug, PartialEq, Eq)]
+pub struct RemoteCacheSettings {
+    /// The URL as the user wrote it (for messages).
+    pub url: String,
+    pub location: RemoteLocation,
+    pub mode: RemoteCacheMode,
+}
+
+/// Parses a shared cache URL; the error says what is wrong with it. Credentials never come
+/// from the URL (nor from `pipeline.ron`): a URL with a user, password or query is refused.
+pub fn parse_remote_url(url: &str) -> Result<RemoteLocation, String> {
+    let Some((scheme, rest)) = url.split_once("://") else {
+        return Err(format!("`{url}` is not a URL: write s3://bucket/prefix, file:///folder or memory://name"));
+    };
+    if rest.contains(['?', '#']) {
+        return Err(format!("`{url}` has a query or fragment; settings come from the AWS environment variables"));
+    }
+    match scheme {
+        "s3" => {
+            let (bucket, prefix) = rest.split_once('/').unwrap_or((rest, ""));
+            if bucket.contains('@') || bucket.contains(':') {
+                return Err(format!(
+                    "`{url}` names credentials or a port; they come from AWS_ACCESS_KEY_ID, AWS_SECRET_ACCESS_KEY and AWS_ENDPOINT_URL"
+                ));
+            }
+            let bucket_ok = (3..=63).contains(&bucket.len())
+                && bucket.bytes().all(|byte| byte.is_ascii_lowercase() || byte.is_ascii_digit() || byte == b'-' || byte == b'.');
+            if !bucket_ok {
+                return Err(format!("`{bucket}` is not an S3 bucket name (3 to 63 lowercase letters, digits, `-` and `.`)"));
+            }
+            let prefix = prefix.trim_matches('/');
+            if prefix.split('/').any(|part| part == "." || part == "..") || prefix.contains("//") {
+                return Err(format!("`{url}`: the prefix may not hold `.`, `..` or empty parts"));
+            }
+            Ok(RemoteLocation::S3 { bucket: bucket.to_string(), prefix: prefix.to_string() })
+        }
+        "file" => {
+            let path = PathBuf::from(rest);
+            if !path.is_absolute() {
+                return Err(format!("`{url}`: a file URL names an absolute folder (file:///srv/cirrus-cache)"));
+            }
+            Ok(RemoteLocation::Folder(path))
+        }
+        "memory" if !rest.is_empty() => Ok(RemoteLocation::Memory(rest.to_string())),
+        _ => Err(format!("`{url}`: the shared cache is an s3://, file:// or memory:// URL")),
+    }
+}
+
+/// The command line's (or the environment's) word on the shared cache, over `pipeline.ron`'s.
+#[derive(Clone, Debug, Default, PartialEq, Eq)]
+pub struct RemoteCacheOverride {
+    /// `Some(None)`: no shared cache (`--remote-cache off`); `Some(Some(…))`: this one.
+    pub location: Option<Option<(String, RemoteLocation)>>,
+    pub mode: Option<RemoteCacheMode>,
+}
+
+impl RemoteCacheOverride {
+    /// From `--remote-cache URL|off` and `--remote-cache-mode read-only|read-write`.
+    pub fn parse(url: Option<&str>, mode: Option<&str>) -> Result<RemoteCacheOverride, String> {
+        let location = match url {
+            None => None,
+            Some("off" | "none" | "") => Some(None),
+            Some(url) => Some(Some((url.to_string(), parse_remote_url(url)?))),
+        };
+        let mode = match mode {
+            None => None,
+            Some(text) => {
+                Some(RemoteCacheMode::parse(text).ok_or_else(|| format!("`{text}` is not a shared cache mode: read-write or read-only"))?)
+            }
+        };
+        Ok(RemoteCacheOverride { location, mode })
+    }
+
+    /// The shared cache a build uses: the override's, else the pipeline's, in the override's
+    /// mode if it names one.
+    pub fn apply(&self, pipeline: Option<&RemoteCacheSettings>) -> Option<RemoteCacheSettings> {
+        let mut settings = match &self.location {
+            Some(None) => return None,
+            Some(Some((url, location))) => RemoteCacheSettings {
+                url: url.clone(),
+                location: location.clone(),
+                mode: pipeline.map(|settings| settings.mode).unwrap_or_default(),
+            },
+            None => pipeline?.clone(),
+        };
+        if let Some(mode) = self.mode {
+            settings.mode = mode;
+        }
+        Some(settings)
+    }
+}
+
+/// Why a shared cache could not be opened (before any request is made).
+#[derive(Debug, thiserror::Error)]
+#[error("shared cache `{url}`: {why}")]
+pub struct RemoteCacheError {
+    pub url: String,
+    pub why: String,
+}
+
+/// A request that gets no answer within this is a store that does not answer.
+const PROBE_TIMEOUT: Duration = Duration::from_millis(1000);
+/// How long a download or upload of one entry may take.
+const TRANSFER_TIMEOUT: Duration = Duration::from_secs(30);
+/// How long a store that failed is left alone.
+pub const RETRY_AFTER: Duration = Duration::from_secs(10);
+
+/// What the store did in one build (see `RemoteStore::take_counts`).
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq, serde::Serialize, serde::Deserialize)]
+pub struct RemoteCounts {
+    pub hits: u64,
+    pub misses: u64,
+    /// Objects that were there but failed verification (then a miss).
+    pub corrupt: u64,
+    pub uploads: u64,
+    /// Uploads refused because another machine had created the key first.
+    pub already_present: u64,
+    pub bytes_downloaded: u64,
+    pub bytes_uploaded: u64,
+    /// Requests that failed (then the store is left alone for a while).
+    pub errors: u64,
+}
+
+#[derive(Default)]
+struct Counters {
+    hits: AtomicU64,
+    misses: AtomicU64,
+    corrupt: AtomicU64,
+    uploads: AtomicU64,
+    already_present: AtomicU64,
+    bytes_downloaded: AtomicU64,
+    bytes_uploaded: AtomicU64,
+    errors: AtomicU64,
+}
+
+/// Whether the store is used.
+enum Health {
+    /// Not asked yet since it was opened or last failed: the next request probes it.
+    Untried,
+    Answering,
+    /// Failed at this time: left alone until `RETRY_AFTER` has passed.
+    Failed(Instant),
+}
+
+/// The shared store, its runtime and what it did.
+pub struct RemoteStore {
+    runtime: tokio::runtime::Runtime,
+    /// What the upload tasks hold (never the runtime, which must not be dropped on its own threads).
+    shared: Arc<Shared>,
+    uploads: Mutex<Vec<tokio::task::JoinHandle<()>>>,
+}
+
+struct Shared {
+    settings: RemoteCacheSettings,
+    store: Arc<dyn ObjectStore>,
+    prefix: StorePath,
+    health: Mutex<Health>,
+    counters: Counters,
+    /// Keys whose object failed verification: the next upload overwrites them.
+    corrupt_keys: Mutex<HashSet<(String, CacheKey)>>,
+}
+
+impl std::fmt::Debug for RemoteStore {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        write!(f, "RemoteStore({})", self.shared.settings.url)
+    }
+}
+
+/// In-memory stores by name, so that two projects in one process share one.
+fn memory_store(name: &str) -> Arc<dyn ObjectStore> {
+    static STORES: Mutex<Vec<(String, Arc<dyn ObjectStore>)>> = Mutex::new(Vec::new());
+    let mut stores = STORES.lock().expect("memory stores lock");
+    if let Some((_, store)) = stores.iter().find(|(stored, _)| stored == name) {
+        return store.clone();
+    }
+    let store: Arc<dyn ObjectStore> = Arc::new(object_store::memory::InMemory::new());
+    stores.push((name.to_string(), store.clone()));
+    store
+}
+
+impl RemoteStore {
+    /// Opens the store without contacting it (the first request does).
+    pub fn open(settings: RemoteCacheSettings) -> Result<RemoteStore, RemoteCacheError> {
+        let error = |why: String| RemoteCacheError { url: settings.url.clone(), why };
+        let (store, prefix): (Arc<dyn ObjectStore>, String) = match &settings.location {
+            RemoteLocation::S3 { bucket, prefix } => {
+                let client = object_store::ClientOptions::new()
+                    .with_connect_timeout(PROBE_TIMEOUT)
+                    .with_timeout(TRANSFER_TIMEOUT)
+                    .with_allow_http(true);
+                let retry = object_store::RetryConfig {
+                    max_retries: 1,
+                    retry_timeout: Duration::from_secs(2),
+                    backoff: object_store::BackoffConfig {
+                        init_backoff: Duration::from_millis(50),
+                        max_backoff: Duration::from_millis(200),
+                        base: 2.0,
+                    },
+                };
+                let store = object_store::aws::AmazonS3Builder::from_env()
+                    .with_bucket_name(bucket)
+                    .with_client_options(client)
+                    .with_retry(retry)
+                    .build()
+                    .map_err(|why| error(why.to_string()))?;
+                (Arc::new(store), prefix.clone())
+            }
+            RemoteLocation::Folder(folder) => {
+                std::fs::create_dir_all(folder).map_err(|why| error(format!("cannot create {}: {why}", folder.display())))?;
+                let store = object_store::local::LocalFileSystem::new_with_prefix(folder).map_err(|why| error(why.to_string()))?;
+                (Arc::new(store), String::new())
+            }
+            RemoteLocation::Memory(name) => (memory_store(name), String::new()),
+        };
+        let runtime = tokio::runtime::Builder::new_multi_thread()
+            .worker_threads(2)
+            .thread_name("cirrus-remote-cache")
+            .enable_all()
+            .build()
+            .map_err(|why| error(format!("cannot start its IO threads: {why}")))?;
+        let shared = Shared {
+            settings,
+            store,
+            prefix: StorePath::from(prefix),
+            health: Mutex::new(Health::Untried),
+            counters: Counters::default(),
+            corrupt_keys: Mutex::default(),
+        };
+        Ok(RemoteStore { runtime, shared: Arc::new(shared), uploads: Mutex::default() })
+    }
+
+    pub fn settings(&self) -> &RemoteCacheSettings {
+        &self.shared.settings
+    }
+}
+
+impl Shared {
+    fn object_path(&self, stage: &str, key: CacheKey) -> StorePath {
+        let hex = key.0.to_hex();
+        let mut path = self.prefix.clone();
+        for part in [stage, &hex[..2], &hex[2..]] {
+            path = path.clone().join(part);
+        }
+        path
+    }
+
+    /// Whether a request may be made now: probes a store not asked yet (or whose pause is over).
+    fn usable(&self, runtime: &tokio::runtime::Runtime) -> bool {
+        let mut health = self.health.lock().expect("remote health lock");
+        match *health {
+            Health::Answering => return true,
+            Health::Failed(when) if when.elapsed() < RETRY_AFTER => return false,
+            _ => {}
+        }
+        // The probe: a HEAD of an object that need not exist (not found is an answer).
+        let probe = self.prefix.clone().join("cirrus-probe");
+        let answer = runtime.block_on(async { tokio::time::timeout(PROBE_TIMEOUT, self.store.head(&probe)).await });
+        let failure = match answer {
+            Err(_) => Some(format!("no answer within {} ms", PROBE_TIMEOUT.as_millis())),
+            Ok(Ok(_)) | Ok(Err(object_store::Error::NotFound { .. })) => None,
+            Ok(Err(error)) => Some(short_error(&error)),
+        };
+        match failure {
+            None => {
+                *health = Health::Answering;
+                true
+            }
+            Some(why) => {
+                self.counters.errors.fetch_add(1, Ordering::Relaxed);
+                tracing::warn!(
+                    "shared cache {} is not answering ({why}); building locally, trying again in {} s",
+                    self.settings.url,
+                    RETRY_AFTER.as_secs()
+                );
+                *health = Health::Failed(Instant::now());
+                false
+            }
+        }
+    }
+
+    /// Marks the store failed after a request went wrong.
+    fn failed(&self, doing: &str, error: &str) {
+        self.counters.errors.fetch_add(1, Ordering::Relaxed);
+        let mut health = self.health.lock().expect("remote health lock");
+        if !matches!(*health, Health::Failed(_)) {
+            tracing::warn!(
+                "shared cache {}: {doing} failed ({error}); building locally, trying again in {} s",
+                self.settings.url,
+                RETRY_AFTER.as_secs()
+            );
+        }
+        *health = Health::Failed(Instant::now());
+    }
+}
+
+/// Whether entries of `stage` are shared at all (memos are not).
+pub fn shares(stage: &str) -> bool {
+    !stage.ends_with("-memo")
+}
+
+impl RemoteStore {
+    /// The object stored under `stage` and `key`, unverified (the caller decodes it); `None` when
+    /// there is none, the store is not answering, or entries of `stage` are not shared.
+    pub fn fetch(&self, stage: &str, key: CacheKey) -> Option<Vec<u8>> {
+        let shared = &self.shared;
+        if !shares(stage) || shared.corrupt_keys.lock().expect("corrupt keys lock").contains(&(stage.to_string(), key)) {
+            // A key found corrupt is not fetched again: it is computed and overwritten.
+            return None;
+        }
+        if !shared.usable(&self.runtime) {
+            return None;
+        }
+        let path = shared.object_path(stage, key);
+        let fetched = self
+            .runtime
+            .block_on(async { tokio::time::timeout(TRANSFER_TIMEOUT, async { shared.store.get(&path).await?.bytes().await }).await });
+        match fetched {
+            Ok(Ok(bytes)) => {
+                shared.counters.bytes_downloaded.fetch_add(bytes.len() as u64, Ordering::Relaxed);
+                Some(bytes.to_vec())
+            }
+            Ok(Err(object_store::Error::NotFound { .. })) => {
+                shared.counters.misses.fetch_add(1, Ordering::Relaxed);
+                None
+            }
+            Ok(Err(error)) => {
+                shared.failed("a download", &short_error(&error));
+                None
+            }
+            Err(_) => {
+                shared.failed("a download", &format!("no answer within {} s", TRANSFER_TIMEOUT.as_secs()));
+                None
+            }
+        }
+    }
+
+    /// Counts a fetched object that verified (a hit) or did not (corrupt: a miss, and the key
+    /// is overwritten by its next upload).
+    pub fn verified(&self, stage: &str, key: CacheKey, good: bool) {
+        let shared = &self.shared;
+        if good {
+            shared.counters.hits.fetch_add(1, Ordering::Relaxed);
+        } else {
+            shared.counters.corrupt.fetch_add(1, Ordering::Relaxed);
+            shared.counters.misses.fetch_add(1, Ordering::Relaxed);
+            tracing::warn!(
+                "shared cache {}: the {stage} entry {} failed verification; computing it",
+                shared.settings.url,
+                &key.0.to_hex()[..16]
+            );
+            shared.corrupt_keys.lock().expect("corrupt keys lock").insert((stage.to_string(), key));
+        }
+    }
+
+    /// Whether this machine may upload.
+    pub fn writes(&self) -> bool {
+        self.shared.settings.mode == RemoteCacheMode::ReadWrite
+    }
+
+    /// Uploads an entry's bytes in the background (read-write stores only): a conditional
+    /// create, or an overwrite of a key found corrupt. `wait_for_uploads` waits for them.
+    pub fn upload(&self, stage: &str, key: CacheKey, bytes: Vec<u8>) {
+        if !self.writes() || !shares(stage) || !self.shared.usable(&self.runtime) {
+            return;
+        }
+        let overwrite = self.shared.corrupt_keys.lock().expect("corrupt keys lock").remove(&(stage.to_string(), key));
+        let mode = if overwrite { PutMode::Overwrite } else { PutMode::Create };
+        let (remote, path, length) = (self.shared.clone(), self.shared.object_path(stage, key), bytes.len() as u64);
+        let task = self.runtime.spawn(async move {
+            let options = PutOptions { mode, ..Default::default() };
+            let put = tokio::time::timeout(TRANSFER_TIMEOUT, remote.store.put_opts(&path, PutPayload::from(bytes), options)).await;
+            match put {
+                Ok(Ok(_)) => {
+                    remote.counters.uploads.fetch_add(1, Ordering::Relaxed);
+                    remote.counters.bytes_uploaded.fetch_add(length, Ordering::Relaxed);
+                }
+                Ok(Err(object_store::Error::AlreadyExists { .. } | object_store::Error::Precondition { .. })) => {
+                    remote.counters.already_present.fetch_add(1, Ordering::Relaxed);
+                }
+                Ok(Err(error)) => remote.failed("an upload", &short_error(&error)),
+                Err(_) => remote.failed("an upload", &format!("no answer within {} s", TRANSFER_TIMEOUT.as_secs())),
+            }
+        });
+        self.uploads.lock().expect("uploads lock").push(task);
+    }
+
+    /// Waits for the uploads still running (each has its own deadline).
+    pub fn wait_for_uploads(&self) {
+        let uploads = std::mem::take(&mut *self.uploads.lock().expect("uploads lock"));
+        self.runtime.block_on(async {
+            for upload in uploads {
+                let _ = upload.await;
+            }
+        });
+    }
+
+    /// What the store did since the last call.
+    pub fn take_counts(&self) -> RemoteCounts {
+        let take = |counter: &AtomicU64| counter.swap(0, Ordering::Relaxed);
+        let counters = &self.shared.counters;
+        RemoteCounts {
+            hits: take(&counters.hits),
+            misses: take(&counters.misses),
+            corrupt: take(&counters.corrupt),
+            uploads: take(&counters.uploads),
+            already_present: take(&counters.already_present),
+            bytes_downloaded: take(&counters.bytes_downloaded),
+            bytes_uploaded: take(&counters.bytes_uploaded),
+            errors: take(&counters.errors),
+        }
+    }
+}
+
+/// An object store error in one line (its sources joined), without the response body.
+fn short_error(error: &object_store::Error) -> String {
+    let text = error.to_string();
+    let line = text.lines().next().unwrap_or_default();
+    let mut line: String = line.chars().take(240).collect();
+    if line.len() < text.len() {
+        line.push('…');
+    }
+    line
+}

@@ -1,0 +1,154 @@
+//! `cirrus cache stats | explain | gc`: what the local cache folder holds, what the last build
+//! found where and why a stage ran, and bounding the folder (least recently used first).
+
+use std::collections::BTreeMap;
+use std::fmt::Write as _;
+use std::path::Path;
+use std::process::ExitCode;
+
+use crate::cache::upkeep::{collect_garbage, entry_files, read_last_build};
+use crate::cli::{load_pipeline_or_report, CacheCommand, EXIT_USAGE};
+use crate::diagnostic::display_path;
+use crate::project::ProjectOptions;
+
+pub fn run(command: CacheCommand, options: ProjectOptions) -> ExitCode {
+    match command {
+        CacheCommand::Stats { pipeline } => with_cache_folder(&pipeline, |folder, config| {
+            let remote = options.remote_cache.apply(config.remote_cache.as_ref());
+            print!("{}", stats_text(folder, remote.as_ref().map(|remote| remote.url.as_str())));
+            ExitCode::SUCCESS
+        }),
+        CacheCommand::Explain { pipeline, asset } => with_cache_folder(&pipeline, |folder, config| {
+            if !config.assets.iter().any(|listed| listed.name == asset) && !last_build_names(folder).contains(&asset) {
+                eprintln!("error: no asset named `{asset}` in {}", display_path(&pipeline));
+                return ExitCode::from(EXIT_USAGE);
+            }
+            match explain_text(folder, &asset) {
+                Some(text) => {
+                    print!("{text}");
+                    ExitCode::SUCCESS
+                }
+                None => {
+                    eprintln!("error: no build has recorded `{asset}` in {} yet: run `cirrus build` first", display_path(folder));
+                    ExitCode::from(EXIT_USAGE)
+                }
+            }
+        }),
+        CacheCommand::Gc { pipeline, max_size } => with_cache_folder(&pipeline, |folder, _| {
+            let collected = collect_garbage(folder, max_size);
+            println!(
+                "deleted {} entries ({}), kept {} entries ({}) in {}",
+                collected.deleted_entries,
+                human_bytes(collected.deleted_bytes),
+                collected.kept_entries,
+                human_bytes(collected.kept_bytes),
+                display_path(folder)
+            );
+            ExitCode::SUCCESS
+        }),
+    }
+}
+
+/// Runs `body` with the pipeline's local cache folder (`<output>/.cirrus/cache`).
+fn with_cache_folder(pipeline: &Path, body: impl FnOnce(&Path, &crate::config::PipelineConfig) -> ExitCode) -> ExitCode {
+    let config = match load_pipeline_or_report(pipeline) {
+        Ok(config) => config,
+        Err(code) => return code,
+    };
+    let folder = config.output_dir().join(".cirrus").join("cache");
+    body(&folder, &config)
+}
+
+fn last_build_names(folder: &Path) -> Vec<String> {
+    read_last_build(folder).map(|last| last.assets.into_iter().map(|asset| asset.name).collect()).unwrap_or_default()
+}
+
+/// `cirrus cache stats`: entries and bytes per stage, then the last build's counts.
+pub fn stats_text(folder: &Path, remote: Option<&str>) -> String {
+    let mut text = String::new();
+    let entries = entry_files(folder);
+    let mut per_stage: BTreeMap<&str, (u64, u64)> = BTreeMap::new();
+    for entry in &entries {
+        let figures = per_stage.entry(entry.stage.as_str()).or_default();
+        figures.0 += 1;
+        figures.1 += entry.bytes;
+    }
+    let total: u64 = entries.iter().map(|entry| entry.bytes).sum();
+    let _ = writeln!(text, "local cache {}: {} entries, {}", display_path(folder), entries.len(), human_bytes(total));
+    for (stage, (count, bytes)) in &per_stage {
+        let _ = writeln!(text, "  {stage:<20} {count:>7} entries {:>10}", human_bytes(*bytes));
+    }
+    let _ = writeln!(text, "shared cache: {}", remote.unwrap_or("none"));
+    match read_last_build(folder) {
+        None => {
+            let _ = writeln!(text, "last build: none recorded");
+        }
+        Some(last) => {
+            let counts = last.counts;
+            let _ = writeln!(text, "last build (revision {}):", last.revision);
+            let _ = writeln!(text, "  local: {} hits, {} misses", counts.local_hits, counts.local_misses);
+            match (counts.remote, &last.remote) {
+                (Some(remote), Some(url)) => {
+                    let _ = writeln!(
+                        text,
+                        "  remote {url}: {} hits, {} misses ({} corrupt), {} downloaded; {} uploads ({}), {} already there; {} errors",
+                        remote.hits,
+                        remote.misses,
+                        remote.corrupt,
+                        human_bytes(remote.bytes_downloaded),
+                        remote.uploads,
+                        human_bytes(remote.bytes_uploaded),
+                        remote.already_present,
+                        remote.errors
+                    );
+                }
+                _ => {
+                    let _ = writeln!(text, "  remote: none");
+                }
+            }
+            let mut statuses: BTreeMap<&str, usize> = BTreeMap::new();
+            for (_, status) in last.assets.iter().flat_map(|asset| &asset.stages) {
+                *statuses.entry(status.as_str()).or_default() += 1;
+            }
+            let statuses: Vec<String> = statuses.iter().map(|(status, count)| format!("{count} {status}")).collect();
+            let _ = writeln!(text, "  stages: {}", statuses.join(", "));
+        }
+    }
+    text
+}
+
+/// `cirrus cache explain --asset NAME`: every stage instance of the asset in the last build,
+/// where its result came from.
+pub fn explain_text(folder: &Path, asset: &str) -> Option<String> {
+    let last = read_last_build(folder)?;
+    let recorded = last.assets.iter().find(|recorded| recorded.name == asset)?;
+    let mut text = String::new();
+    let _ = writeln!(text, "{asset} in the build of revision {}:", last.revision);
+    for (stage, status) in &recorded.stages {
+        let said = match status.as_str() {
+            "ran" => "ran: no cache held its result",
+            "cached" => "cached: from memory or the local cache",
+            "remote" => "remote: from the shared cache",
+            "failed" => "failed",
+            other => other,
+        };
+        let _ = writeln!(text, "  {stage}: {said}");
+    }
+    Some(text)
+}
+
+/// Bytes in the largest unit that keeps the figure at or above 1 (1024-based).
+pub fn human_bytes(bytes: u64) -> String {
+    const UNITS: [&str; 5] = ["B", "KiB", "MiB", "GiB", "TiB"];
+    let mut value = bytes as f64;
+    let mut unit = 0;
+    while value >= 1024.0 && unit + 1 < UNITS.len() {
+        value /= 1024.0;
+        unit += 1;
+    }
+    if unit == 0 {
+        format!("{bytes} B")
+    } else {
+        format!("{value:.1} {}", UNITS[unit])
+    }
+}

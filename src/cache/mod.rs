@@ -39,7 +39,7 @@
 //! | `vertices` (`vertices`, `VERTICES`) | the mesh's content hash (positions, normals, UVs, triangles, groups); rays; distribution; max distance in mesh units; back faces pass through; ground plane option; the vertex offset | an AO asset's visibility per vertex (`f32`) |
 //! | `ao-tile` (`bake`, `BAKE`) | the map size; the tile's region (x, y, width, height); the mode (`Texels`, `Vertices`); per texel the occlusion settings as for `vertices`, the hash of its own triangles' corners (UV, position and normal bits), then `within reach` and the hash of the occluders within reach (group, corner positions) or `whole mesh` and the mesh's content hash; per vertex the hash of its own triangles' corners and of their visibility | a baked tile: 16-bit values, texel states, overlap count, rays, bake time |
 //! | `ao-map` (`fill`, `FILL`) | the map size; every tile key of the material, in row order | a material's filled map (16-bit), its 16-bit PNG and its figures |
-//! | `height-map` (`bake`, `height::BAKE`) | the projection (`Normals`, `TopDown`); `low` or `pn`; the map size; frontal; rear (fractions of the diagonal); the low and the high mesh's geometry hash (positions, normals, UVs, triangles) | a filled height map (`f32` distances), texel states, its 16-bit PNG, range and counts |
+//! | `height-map` (`bake`, `height::BAKE`) | the projection (`Normals`, `TopDown`); for `TopDown` (a GPU render) the GPU's driver family as an option (`gpu::adapter_family`), else none; `low` or `pn`; the map size; frontal; rear (fractions of the diagonal); the low and the high mesh's geometry hash (positions, normals, UVs, triangles) | a filled height map (`f32` distances), texel states, its 16-bit PNG, range and counts |
 //! | `height-tessellated` (`displace`, `DISPLACE`) | the tessellate version; level; displace; the low geometry hash; when displaced, the `pn` map's key | `tessellated.obj` and its counts |
 //! | `height-distance` (`distance`, `DISTANCE`) | `low`, `pn` or `displaced`; samples per surface (`u64`); the measured mesh's key (low: `distance` and the low geometry hash; pn: `tessellate`, level, the low geometry hash; displaced: the `height-tessellated` key); the high geometry hash | RMS and Hausdorff distance over the high mesh's diagonal, or none |
 //! | `source-mips` (`source-mips`, 1) | decode and mips versions; the texture file's content hash; the material slot; the filter kind; the alpha cutoff bits (or `u32::MAX`) | the mip chain the renders sample |
@@ -51,9 +51,10 @@
 //! cache needs no image): a material surface's is (`pack`, `PACK`), the surface name, the
 //! material's constants (albedo ×4, metallic, roughness, ao, alpha cutoff option), per slot of
 //! the surface the source's content hash or `none`; a billboard cloud's atlas surfaces share
-//! (`atlas`, `ATLAS`), the render version, the `layout` key, the alpha cutoff, per texture the
+//! (`atlas`, `ATLAS`), the render version, the GPU's driver family (`gpu::adapter_family`:
+//! backend, vendor id, driver, e.g. `Vulkan/0x10005/llvmpipe`), the `layout` key, the alpha cutoff, per texture the
 //! materials name its path and content hash or read error. A render group's key: (`render`,
-//! `RENDER`), the `layout` key, the group's index, the alpha cutoff, per texture of the group's
+//! `RENDER`), the GPU's driver family, the `layout` key, the group's index, the alpha cutoff, per texture of the group's
 //! materials its path and content hash or read error. An atlas surface's parts key, asked when
 //! its recipe misses (after the renders, before compositing): (`atlas-parts`, 1), the atlas
 //! version, the `layout` key, the alpha cutoff, the surface, the coverage's content hash, and
@@ -76,6 +77,16 @@
 //! their own, and the build waits for them before it reports.
 //!
 //! Bump an entry's version (or a stage's) whenever its result changes for the same parts.
+//!
+//! # The shared cache
+//!
+//! With `cache: (remote: Some("s3://bucket/prefix"))` (or `--remote-cache`), the same entries,
+//! byte for byte, also live on an object store (`remote`): a local miss asks it (a verified
+//! hit is copied here), and what is stored here is uploaded (read-write mode). Memos (stages
+//! ending in `-memo`) stay local. Keys hold no absolute path and no machine-specific value but
+//! the GPU's driver family, in the keys of what comes off the GPU. `upkeep` keeps the folder:
+//! an entry's modification time is its last use, `cirrus cache gc` deletes the least recently
+//! used, and each build records its hits and misses for `cirrus cache stats`.
 
 use std::cell::Cell;
 use std::io::Write;

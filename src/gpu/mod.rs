@@ -77,6 +77,31 @@ pub fn gpu() -> Result<&'static Gpu, GpuError> {
     GPU.get_or_init(|| pollster::block_on(Gpu::new())).as_ref().map_err(Clone::clone)
 }
 
+/// The GPU's driver family, `backend/vendor id/driver` (`Vulkan/0x10005/llvmpipe`), or `none`:
+/// a part of the cache keys of results that come off the GPU, whose bytes may differ from one
+/// driver to another, so that a shared cache never hands one driver's renders to a machine
+/// with another. Asked once per process, from the started GPU when there is one, else from an
+/// adapter request without a device (the one `gpu()` would choose).
+pub fn adapter_family() -> &'static str {
+    static FAMILY: OnceLock<String> = OnceLock::new();
+    FAMILY.get_or_init(|| {
+        let family = |info: wgpu::AdapterInfo| format!("{:?}/{:#x}/{}", info.backend, info.vendor, info.driver);
+        if let Some(Ok(gpu)) = GPU.get() {
+            return family(gpu.adapter.get_info());
+        }
+        let instance = wgpu::Instance::new(wgpu::InstanceDescriptor::new_without_display_handle());
+        match pollster::block_on(instance.request_adapter(&adapter_options())) {
+            Ok(adapter) => family(adapter.get_info()),
+            Err(_) => "none".to_string(),
+        }
+    })
+}
+
+/// How `gpu()` and `adapter_family()` choose the adapter.
+fn adapter_options() -> wgpu::RequestAdapterOptions<'static, 'static> {
+    wgpu::RequestAdapterOptions { power_preference: wgpu::PowerPreference::HighPerformance, ..Default::default() }
+}
+
 /// The thread `start_gpu_in_background` started, until someone waits for it.
 static GPU_STARTER: Mutex<Option<std::thread::JoinHandle<()>>> = Mutex::new(None);
 
@@ -123,13 +148,7 @@ pub struct RenderVertex {
 impl Gpu {
     async fn new() -> Result<Gpu, GpuError> {
         let instance = wgpu::Instance::new(wgpu::InstanceDescriptor::new_without_display_handle());
-        let adapter = instance
-            .request_adapter(&wgpu::RequestAdapterOptions {
-                power_preference: wgpu::PowerPreference::HighPerformance,
-                ..Default::default()
-            })
-            .await
-            .map_err(|error| GpuError::NoAdapter(error.to_string()))?;
+        let adapter = instance.request_adapter(&adapter_options()).await.map_err(|error| GpuError::NoAdapter(error.to_string()))?;
         let adapter_name = format!("{} ({:?})", adapter.get_info().name, adapter.get_info().backend);
         let (device, queue) = adapter
             .request_device(&wgpu::DeviceDescriptor {

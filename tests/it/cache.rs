@@ -59,3 +59,81 @@ fn the_same_project_in_two_folders_has_the_same_keys() {
     );
     assert_eq!(entries, cache_entries(&second.path("baked")));
 }
+
+#[test]
+fn two_builds_on_one_cache_folder_at_once_leave_it_whole() {
+    // Two checkouts whose local caches are one folder (the second's is a link to the first's).
+    let first = crate::material::bake::material_project("");
+    let second = crate::material::bake::material_project("");
+    std::fs::create_dir_all(first.path("baked/.cirrus/cache")).unwrap();
+    std::fs::create_dir_all(second.path("baked/.cirrus")).unwrap();
+    std::os::unix::fs::symlink(first.path("baked/.cirrus/cache"), second.path("baked/.cirrus/cache")).unwrap();
+    let spawn = |project: &crate::support::TempProject| {
+        std::process::Command::new(env!("CARGO_BIN_EXE_cirrus"))
+            .args(["build", "--summary", "json"])
+            .current_dir(project.root())
+            .stdout(std::process::Stdio::piped())
+            .stderr(std::process::Stdio::piped())
+            .spawn()
+            .unwrap()
+    };
+    let (one, two) = (spawn(&first), spawn(&second));
+    let (one, two) = (one.wait_with_output().unwrap(), two.wait_with_output().unwrap());
+    assert!(
+        one.status.success() && two.status.success(),
+        "{}\n{}",
+        String::from_utf8_lossy(&one.stderr),
+        String::from_utf8_lossy(&two.stderr)
+    );
+    // No temporary file is left, and every entry is whole: a third checkout on the same folder
+    // runs nothing and writes what the first two wrote.
+    let entries = cache_entries(&first.path("baked"));
+    assert!(entries.iter().all(|entry| !entry.to_string_lossy().contains(".cirrus-tmp")), "{entries:?}");
+    let third = crate::material::bake::material_project("");
+    std::fs::create_dir_all(third.path("baked/.cirrus")).unwrap();
+    std::os::unix::fs::symlink(first.path("baked/.cirrus/cache"), third.path("baked/.cirrus/cache")).unwrap();
+    let summary = build(&mut third.open());
+    let ran: Vec<_> =
+        summary.assets.iter().flat_map(|asset| &asset.stages).filter(|stage| stage.status == cirrus::summary::StageStatus::Ran).collect();
+    assert!(ran.is_empty(), "{ran:?}");
+    for path in ["baked/bark/oak_bark/albedo.ktx2", "baked/bark/oak_bark/normal.ktx2", "baked/mixed/leaf/albedo.ktx2"] {
+        assert_eq!(third.read(path), first.read(path), "{path}");
+        assert_eq!(second.read(path), first.read(path), "{path}");
+    }
+}
+
+#[test]
+fn cache_stats_explain_and_gc_tell_and_bound_the_local_folder() {
+    let project = crate::material::bake::material_project("");
+    let stats = |project: &crate::support::TempProject| String::from_utf8_lossy(&project.run_cli(&["cache", "stats"]).stdout).into_owned();
+    assert!(stats(&project).contains("0 entries, 0 B") && stats(&project).contains("last build: none recorded"), "{}", stats(&project));
+    assert!(build(&mut project.open()).all_ok());
+    let cold = stats(&project);
+    assert!(cold.contains("last build (revision 1):") && cold.contains(" misses") && cold.contains("remote: none") && cold.contains(" ran"), "{cold}");
+    let explain = String::from_utf8_lossy(&project.run_cli(&["cache", "explain", "--asset", "bark"]).stdout).into_owned();
+    assert!(explain.contains("encode(oak_bark/albedo): ran: no cache held its result"), "{explain}");
+    assert!(build(&mut project.open()).all_ok());
+    let explain = String::from_utf8_lossy(&project.run_cli(&["cache", "explain", "--asset", "bark"]).stdout).into_owned();
+    assert!(explain.contains("encode(oak_bark/albedo): cached") && !explain.contains("ran:"), "{explain}");
+    let unknown = project.run_cli(&["cache", "explain", "--asset", "nope"]);
+    assert_eq!(unknown.status.code(), Some(2));
+
+    // gc: the least recently used go first. Age every entry but the parsed materials'.
+    let root = project.path("baked/.cirrus/cache");
+    let entries = cirrus::cache::upkeep::entry_files(&root);
+    let old = std::time::SystemTime::now() - std::time::Duration::from_secs(3600);
+    for entry in entries.iter().filter(|entry| entry.stage != "parse") {
+        std::fs::File::options().append(true).open(&entry.path).unwrap().set_modified(old).unwrap();
+    }
+    let keep: u64 = entries.iter().filter(|entry| entry.stage == "parse").map(|entry| entry.bytes).sum();
+    let output = project.run_cli(&["cache", "gc", "--max-size", &keep.to_string()]);
+    assert!(output.status.success());
+    let said = String::from_utf8_lossy(&output.stdout);
+    assert!(said.starts_with(&format!("deleted {} entries", entries.len() - 2)), "{said}");
+    let left = cirrus::cache::upkeep::entry_files(&root);
+    assert!(left.len() == 2 && left.iter().all(|entry| entry.stage == "parse"), "{left:?}");
+    // A hit marks an entry used: a restart that reads the parsed materials keeps them newest.
+    assert!(build(&mut project.open()).all_ok());
+    let bad = project.run_cli(&["cache", "gc", "--max-size", "lots"]);
+    assert_eq!(bad.status.code(), Some(2));
+}

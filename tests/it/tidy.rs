@@ -54,13 +54,26 @@ fn salsa_wgpu_notify_sockets_and_file_io_stay_in_their_modules() {
     assert_eq!(modules_using(&["notify::", "notify_debouncer"]), ["watch.rs"], "only watch touches notify");
     assert_eq!(modules_using(&["std::net::Tcp", "TcpListener", "TcpStream"]), ["server.rs"], "only server touches sockets");
     let io = modules_using(&["std::fs", " File::", "OpenOptions", "canonicalize", "read_dir"]);
-    let edges = ["artifacts.rs", "cache.rs", "config.rs", "sources.rs", "watch.rs"];
+    let edges = ["artifacts.rs", "cache/mod.rs", "cache/remote.rs", "cache/upkeep.rs", "config.rs", "sources.rs", "watch.rs"];
     assert!(io.iter().all(|module| edges.contains(&module.as_str())), "file-system IO outside the edges: {io:?}");
+    assert_eq!(modules_using(&["object_store::", "tokio::"]), ["cache/remote.rs"], "only the shared cache's remote half talks to a store");
 }
 
 #[test]
 fn the_driver_and_the_machinery_name_no_kind() {
-    let machinery = ["project.rs", "schedule.rs", "db.rs", "cache.rs", "summary.rs", "graph.rs", "artifacts.rs", "sources.rs"];
+    let machinery = [
+        "project.rs",
+        "schedule.rs",
+        "db.rs",
+        "cache/mod.rs",
+        "cache/remote.rs",
+        "cache/upkeep.rs",
+        "summary.rs",
+        "graph.rs",
+        "artifacts.rs",
+        "sources.rs",
+        "cli_cache.rs",
+    ];
     for module in machinery {
         let path = Path::new(env!("CARGO_MANIFEST_DIR")).join("src").join(module);
         let code = code(&path).to_lowercase();

@@ -436,7 +436,11 @@ pub fn atlas_surface_parts_key(db: &dyn Db, asset: Asset, level: u32, surface: S
 /// texture the materials name, the alpha cutoff, the render and atlas versions.
 #[salsa::tracked(returns(copy))]
 pub fn atlas_recipe_key(db: &dyn Db, asset: Asset, level: u32) -> CacheKey {
-    let key = stage_key(ATLAS).part(&RENDER.version).part(&layout_cache_key(db, asset, level).0).part(&billboard_alpha_cutoff(db, asset));
+    let key = stage_key(ATLAS)
+        .part(&RENDER.version)
+        .part(crate::gpu::adapter_family())
+        .part(&layout_cache_key(db, asset, level).0)
+        .part(&billboard_alpha_cutoff(db, asset));
     let textures = mesh_textures(db, asset).iter().filter_map(|path| asset_file(db, asset, path.clone())).collect::<Vec<_>>();
     key_with_files(db, key, textures).finish()
 }
@@ -457,7 +461,11 @@ pub fn atlas_coverage_fraction(db: &dyn Db, asset: Asset, level: u32) -> Result<
 /// group, the alpha cutoff, and the textures of the group's materials.
 #[salsa::tracked(returns(copy))]
 pub fn render_group_key(db: &dyn Db, asset: Asset, level: u32, group: u32) -> CacheKey {
-    let key = stage_key(RENDER).part(&layout_cache_key(db, asset, level).0).part(&group).part(&billboard_alpha_cutoff(db, asset));
+    let key = stage_key(RENDER)
+        .part(crate::gpu::adapter_family())
+        .part(&layout_cache_key(db, asset, level).0)
+        .part(&group)
+        .part(&billboard_alpha_cutoff(db, asset));
     let (Ok(loaded), Ok(layout)) = (loaded_mesh(db, asset), billboard_layout(db, asset, level)) else { return key.finish() };
     let Some(render_group) = layout.render_groups.get(group as usize) else { return key.finish() };
     let mut paths: Vec<&PathBuf> = Vec::new();

@@ -186,8 +186,12 @@ pub fn map_key(db: &dyn Db, asset: Asset, reference: MapReference) -> Result<Cac
         MapReference::Low => "low",
         MapReference::Pn => "pn",
     };
+    let projection = map_projection(&settings, reference);
+    // A top-down map is rendered on the GPU: its driver family is part of what made it.
+    let gpu = (projection == HeightProjection::TopDown).then(crate::gpu::adapter_family);
     Ok(stage_key(BAKE)
-        .part(projection_name(map_projection(&settings, reference)))
+        .part(projection_name(projection))
+        .part(&gpu.map(str::to_string))
         .part(reference_name)
         .part(&settings.size)
         .part(&settings.frontal)

@@ -6,7 +6,7 @@ use std::fmt::Write as _;
 use std::path::Path;
 use std::process::ExitCode;
 
-use crate::cache::upkeep::{collect_garbage, entry_files, read_last_build};
+use crate::cache::upkeep::{collect_garbage, entry_files, read_last_build, recorded_key_parts, Miss};
 use crate::cli::{load_pipeline_or_report, CacheCommand, EXIT_USAGE};
 use crate::diagnostic::display_path;
 use crate::project::ProjectOptions;
@@ -134,7 +134,44 @@ pub fn explain_text(folder: &Path, asset: &str) -> Option<String> {
         };
         let _ = writeln!(text, "  {stage}: {said}");
     }
+    let mut seen = std::collections::HashSet::new();
+    let misses: Vec<&Miss> = last
+        .misses
+        .iter()
+        .filter(|miss| miss.asset.as_deref() == Some(asset) && seen.insert((miss.stage.as_str(), miss.key.as_str())))
+        .collect();
+    // Entries this build stored after missing them are not what an earlier build left.
+    let missed_keys: std::collections::HashSet<&str> = last.misses.iter().map(|miss| miss.key.as_str()).collect();
+    if !misses.is_empty() {
+        let _ = writeln!(text, "cache lookups that found nothing, with the nearest stored entry of the same stage:");
+    }
+    let mut recorded: BTreeMap<&str, Vec<(String, Vec<String>)>> = BTreeMap::new();
+    for miss in misses {
+        let candidates = recorded.entry(miss.stage.as_str()).or_insert_with(|| recorded_key_parts(folder, &miss.stage));
+        let earlier: Vec<&(String, Vec<String>)> = candidates.iter().filter(|(key, _)| !missed_keys.contains(key.as_str())).collect();
+        let _ = writeln!(text, "  {} {}: {}", miss.stage, &miss.key[..16.min(miss.key.len())], nearest_difference(miss, &earlier));
+    }
     Some(text)
+}
+
+/// Which parts of a missed key differ from the stored key of the same stage that shares the
+/// most parts with it (part numbers from 1; the stage name and version are parts 1 and 2).
+fn nearest_difference(miss: &Miss, candidates: &[&(String, Vec<String>)]) -> String {
+    let shared = |parts: &[String]| parts.iter().zip(&miss.parts).filter(|(a, b)| a == b).count();
+    let nearest =
+        candidates.iter().filter(|(key, _)| key != &miss.key).max_by_key(|(_, parts)| (shared(parts), parts.len() == miss.parts.len()));
+    let Some((key, parts)) = nearest else { return "no stored entry of this stage to compare with".to_string() };
+    let mut differences = Vec::new();
+    for index in 0..parts.len().max(miss.parts.len()) {
+        let (now, then) = (miss.parts.get(index), parts.get(index));
+        if now != then {
+            let show = |part: Option<&String>| part.map_or("(none)".to_string(), Clone::clone);
+            differences.push(format!("part {} is {} (the entry has {})", index + 1, show(now), show(then)));
+        }
+    }
+    let listed = differences.len().min(4);
+    let more = if differences.len() > listed { format!(", and {} more parts", differences.len() - listed) } else { String::new() };
+    format!("nearest {}: {}{more}", &key[..16.min(key.len())], differences[..listed].join("; "))
 }
 
 /// Bytes in the largest unit that keeps the figure at or above 1 (1024-based).

@@ -389,6 +389,7 @@ impl Project {
         if let Some(cache) = self.db.disk_cache() {
             // This build's hits and misses start here.
             cache.take_counts();
+            cache.take_misses();
         }
         let first_jobs = assets.iter().flat_map(|(_, asset)| asset.kind(&self.db).first_jobs(&self.db, *asset)).collect();
         let finished = crate::schedule::run_jobs(&self.db, first_jobs, progress, &cancel);
@@ -519,6 +520,7 @@ impl Project {
                 counts: cache.take_counts(),
                 remote: cache.remote().map(|remote| remote.settings().url.clone()),
                 assets,
+                misses: cache.take_misses(),
             };
             crate::cache::upkeep::write_last_build(cache.folder(), &last);
         }

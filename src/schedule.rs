@@ -59,7 +59,7 @@ pub fn run_jobs(
             db,
             &jobs,
             &|db, job: &Job| (job.asset.main_file(db).clone(), job.label.clone()),
-            &|db, job: &Job| job.asset.kind(db).run_job(db, job),
+            &|db, job: &Job| crate::cache::with_asset(job.asset.name(db), || job.asset.kind(db).run_job(db, job)),
             &report,
             cancel,
         );

@@ -86,7 +86,10 @@
 //! ending in `-memo`) stay local. Keys hold no absolute path and no machine-specific value but
 //! the GPU's driver family, in the keys of what comes off the GPU. `upkeep` keeps the folder:
 //! an entry's modification time is its last use, `cirrus cache gc` deletes the least recently
-//! used, and each build records its hits and misses for `cirrus cache stats`.
+//! used, and each build records its hits and misses for `cirrus cache stats`. A key builder
+//! keeps a short description of each part; stored entries' descriptions are appended to
+//! `key-parts/<stage>.jsonl` and a build records its misses with theirs, so that `cirrus cache
+//! explain` can say which part of a missed key differs from the nearest stored one.
 
 use std::cell::Cell;
 use std::io::Write;
@@ -105,20 +108,27 @@ use remote::{RemoteCounts, RemoteStore};
 #[derive(Clone, Copy, Debug, PartialEq, Eq, Hash)]
 pub struct CacheKey(pub blake3::Hash);
 
-/// Builds a `CacheKey` from a stage name, its version and every input that can change its result.
-pub struct CacheKeyBuilder(blake3::Hasher);
+/// Builds a `CacheKey` from a stage name, its version and every input that can change its
+/// result; it also keeps a short description of each part, for `cirrus cache explain`.
+pub struct CacheKeyBuilder {
+    hasher: blake3::Hasher,
+    parts: Vec<String>,
+}
 
 impl CacheKeyBuilder {
     pub fn new(stage: &str, version: u32) -> CacheKeyBuilder {
         let mut hasher = blake3::Hasher::new();
         hasher.update(b"cirrus-cache-v2\0");
-        CacheKeyBuilder(hasher).part(stage).part(&version)
+        CacheKeyBuilder { hasher, parts: Vec::new() }.part(stage).part(&version)
     }
 
     /// Adds raw bytes as one part (length-prefixed).
     pub fn bytes(mut self, bytes: &[u8]) -> Self {
-        self.0.update(&(bytes.len() as u64).to_le_bytes());
-        self.0.update(bytes);
+        self.hasher.update(&(bytes.len() as u64).to_le_bytes());
+        self.hasher.update(bytes);
+        if self.parts.len() < MAX_DESCRIBED_PARTS {
+            self.parts.push(describe_part(bytes));
+        }
         self
     }
 
@@ -128,7 +138,55 @@ impl CacheKeyBuilder {
     }
 
     pub fn finish(self) -> CacheKey {
-        CacheKey(self.0.finalize())
+        let key = CacheKey(self.hasher.finalize());
+        key_parts::remember(key, self.parts);
+        key
+    }
+}
+
+/// Parts described per key (the rest still enter the hash).
+const MAX_DESCRIBED_PARTS: usize = 256;
+
+/// A part as a person can compare it: short text as it is, numbers, hashes by their start.
+fn describe_part(bytes: &[u8]) -> String {
+    if let Ok(text) = std::str::from_utf8(bytes) {
+        if (2..=96).contains(&text.len()) && text.chars().all(|character| !character.is_control()) {
+            return format!("`{text}`");
+        }
+    }
+    match bytes.len() {
+        0 => "(empty)".to_string(),
+        1 => bytes[0].to_string(),
+        4 => u32::from_le_bytes(bytes.try_into().expect("four bytes")).to_string(),
+        8 => u64::from_le_bytes(bytes.try_into().expect("eight bytes")).to_string(),
+        32 => format!("hash {}", &blake3::Hash::from_bytes(bytes.try_into().expect("32 bytes")).to_hex()[..16]),
+        length => format!("{length} bytes, xxh3 {:016x}", xxhash_rust::xxh3::xxh3_64(bytes)),
+    }
+}
+
+/// The parts of the keys made in this process, for the lookups a build records.
+pub mod key_parts {
+    use std::collections::HashMap;
+    use std::sync::{Arc, Mutex};
+
+    use super::CacheKey;
+
+    /// Keys remembered at most; past it the oldest half is forgotten (explain then says less).
+    const MAX_KEYS: usize = 1 << 18;
+
+    static PARTS: Mutex<Option<HashMap<CacheKey, Arc<[String]>>>> = Mutex::new(None);
+
+    pub fn remember(key: CacheKey, parts: Vec<String>) {
+        let mut known = PARTS.lock().expect("key parts lock");
+        let known = known.get_or_insert_with(HashMap::new);
+        if known.len() >= MAX_KEYS {
+            known.clear();
+        }
+        known.insert(key, parts.into());
+    }
+
+    pub fn of(key: CacheKey) -> Option<Arc<[String]>> {
+        PARTS.lock().expect("key parts lock").as_ref()?.get(&key).cloned()
     }
 }
 
@@ -259,6 +317,8 @@ pub struct DiskCache {
     pending: Arc<std::sync::Mutex<Vec<std::thread::JoinHandle<()>>>>,
     remote: Option<Arc<RemoteStore>>,
     counters: Arc<LocalCounters>,
+    /// The misses of this build (see `take_misses`).
+    misses: Arc<std::sync::Mutex<Vec<upkeep::Miss>>>,
 }
 
 #[derive(Debug, Default)]
@@ -277,9 +337,19 @@ pub struct CacheCounts {
 }
 
 thread_local! {
+    /// The asset whose job runs on this thread (for the misses a build records).
+    static CURRENT_ASSET: std::cell::RefCell<Option<String>> = const { std::cell::RefCell::new(None) };
     /// Set when a load on this thread was served by the shared store; taken by the stage that
     /// records the hit (`take_remote_hit`), so that the build summary can say `remote`.
     static REMOTE_HIT: Cell<bool> = const { Cell::new(false) };
+}
+
+/// Runs `body` with lookups on this thread attributed to `asset` (a job of that asset).
+pub fn with_asset<T>(asset: &str, body: impl FnOnce() -> T) -> T {
+    let previous = CURRENT_ASSET.with(|current| current.replace(Some(asset.to_string())));
+    let result = body();
+    CURRENT_ASSET.with(|current| *current.borrow_mut() = previous);
+    result
 }
 
 /// Whether a load on this thread was served by the shared store since the last call.
@@ -303,7 +373,13 @@ pub struct CacheEntry {
 
 impl DiskCache {
     pub fn new(folder: impl Into<PathBuf>) -> DiskCache {
-        DiskCache { folder: folder.into(), pending: Default::default(), remote: None, counters: Default::default() }
+        DiskCache {
+            folder: folder.into(),
+            pending: Default::default(),
+            remote: None,
+            counters: Default::default(),
+            misses: Default::default(),
+        }
     }
 
     /// The same folder with a shared store behind it.
@@ -313,6 +389,12 @@ impl DiskCache {
 
     pub fn remote(&self) -> Option<&RemoteStore> {
         self.remote.as_deref()
+    }
+
+    /// The lookups that found nothing, local or remote, since the last call (at most
+    /// `upkeep::MAX_RECORDED_MISSES`), with their keys' parts.
+    pub fn take_misses(&self) -> Vec<upkeep::Miss> {
+        std::mem::take(&mut *self.misses.lock().expect("misses lock"))
     }
 
     /// What the caches did since the last call (a build's figures).
@@ -350,7 +432,19 @@ impl DiskCache {
             return local;
         }
         self.counters.misses.fetch_add(1, Ordering::Relaxed);
-        self.fetch_remote(stage, key)
+        let fetched = self.fetch_remote(stage, key);
+        if fetched.is_none() {
+            let mut misses = self.misses.lock().expect("misses lock");
+            if misses.len() < upkeep::MAX_RECORDED_MISSES {
+                misses.push(upkeep::Miss {
+                    asset: CURRENT_ASSET.with(|current| current.borrow().clone()),
+                    stage: stage.to_string(),
+                    key: key.0.to_hex().to_string(),
+                    parts: key_parts::of(key).map(|parts| parts.to_vec()).unwrap_or_default(),
+                });
+            }
+        }
+        fetched
     }
 
     /// The shared store's entry under `key`, verified, kept in the local folder.
@@ -392,6 +486,9 @@ impl DiskCache {
         if let Err(error) = write_atomically(&path, |file| write_entry_to(file, stage, key, entry)) {
             tracing::warn!("cannot write cache entry {}: {error}", path.display());
             return;
+        }
+        if let Some(parts) = key_parts::of(key) {
+            upkeep::record_key_parts(&self.folder, stage, key, &parts);
         }
         if let Some(remote) = self.remote.as_ref().filter(|remote| remote.writes() && remote::shares(stage)) {
             // The file as written (the page cache has it): the object is the entry, byte for byte.

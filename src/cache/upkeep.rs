@@ -101,7 +101,29 @@ pub fn collect_garbage(folder: &Path, max_bytes: u64) -> Collected {
             }
         }
     }
+    forget_deleted_key_parts(folder);
     collected
+}
+
+/// Rewrites each stage's key parts without the entries no longer there (each key once).
+fn forget_deleted_key_parts(folder: &Path) {
+    let Ok(files) = std::fs::read_dir(folder.join(KEY_PARTS_FOLDER)) else { return };
+    for file in files.flatten() {
+        let name = file.file_name().to_string_lossy().into_owned();
+        let Some(stage) = name.strip_suffix(".jsonl") else { continue };
+        let mut seen = std::collections::HashSet::new();
+        let mut kept = String::new();
+        for (key, parts) in recorded_key_parts(folder, stage) {
+            let present = key.len() == 64 && folder.join(stage).join(&key[..2]).join(&key[2..]).is_file();
+            if present && seen.insert(key.clone()) {
+                kept.push_str(&serde_json::to_string(&(key, parts)).expect("parts serialise"));
+                kept.push('\n');
+            }
+        }
+        if let Err(error) = super::write_atomically(&file.path(), |file| std::io::Write::write_all(file, kept.as_bytes())) {
+            tracing::warn!("cannot rewrite {}: {error}", file.path().display());
+        }
+    }
 }
 
 /// The file that holds the last build's counts.
@@ -116,6 +138,46 @@ pub struct LastBuild {
     pub remote: Option<String>,
     /// Per asset, each stage instance (`stage(instance)`) and its status in that build.
     pub assets: Vec<LastBuildAsset>,
+    /// The lookups that found no entry, local or remote.
+    #[serde(default)]
+    pub misses: Vec<Miss>,
+}
+
+/// Misses a build records at most.
+pub const MAX_RECORDED_MISSES: usize = 4096;
+
+/// A lookup that found no entry: the asset whose job made it, the entry's stage, its key and the
+/// key's parts (described).
+#[derive(Clone, Debug, Default, PartialEq, serde::Serialize, serde::Deserialize)]
+pub struct Miss {
+    pub asset: Option<String>,
+    pub stage: String,
+    pub key: String,
+    pub parts: Vec<String>,
+}
+
+/// The folder of the key parts of stored entries, one JSON line per entry and stage file.
+const KEY_PARTS_FOLDER: &str = "key-parts";
+
+/// Records the parts of a stored entry's key (a line appended to `key-parts/<stage>.jsonl`; a
+/// line under 4 KiB is appended whole even with another process appending).
+pub fn record_key_parts(folder: &Path, stage: &str, key: super::CacheKey, parts: &[String]) {
+    let mut line = serde_json::to_string(&(key.0.to_hex().as_str(), parts)).expect("parts serialise");
+    line.push('\n');
+    let path = folder.join(KEY_PARTS_FOLDER).join(format!("{stage}.jsonl"));
+    let written = std::fs::create_dir_all(folder.join(KEY_PARTS_FOLDER))
+        .and_then(|()| std::fs::File::options().create(true).append(true).open(&path))
+        .and_then(|mut file| std::io::Write::write_all(&mut file, line.as_bytes()));
+    if let Err(error) = written {
+        tracing::debug!("cannot record key parts in {}: {error}", path.display());
+    }
+}
+
+/// The recorded key parts of a stage's stored entries (unreadable lines skipped).
+pub fn recorded_key_parts(folder: &Path, stage: &str) -> Vec<(String, Vec<String>)> {
+    let path = folder.join(KEY_PARTS_FOLDER).join(format!("{stage}.jsonl"));
+    let Ok(bytes) = crate::sources::read_regular_file(&path, 256 << 20) else { return Vec::new() };
+    String::from_utf8_lossy(&bytes).lines().filter_map(|line| serde_json::from_str(line).ok()).collect()
 }
 
 #[derive(Clone, Debug, Default, PartialEq, serde::Serialize, serde::Deserialize)]

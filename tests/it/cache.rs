@@ -109,7 +109,10 @@ fn cache_stats_explain_and_gc_tell_and_bound_the_local_folder() {
     assert!(stats(&project).contains("0 entries, 0 B") && stats(&project).contains("last build: none recorded"), "{}", stats(&project));
     assert!(build(&mut project.open()).all_ok());
     let cold = stats(&project);
-    assert!(cold.contains("last build (revision 1):") && cold.contains(" misses") && cold.contains("remote: none") && cold.contains(" ran"), "{cold}");
+    assert!(
+        cold.contains("last build (revision 1):") && cold.contains(" misses") && cold.contains("remote: none") && cold.contains(" ran"),
+        "{cold}"
+    );
     let explain = String::from_utf8_lossy(&project.run_cli(&["cache", "explain", "--asset", "bark"]).stdout).into_owned();
     assert!(explain.contains("encode(oak_bark/albedo): ran: no cache held its result"), "{explain}");
     assert!(build(&mut project.open()).all_ok());
@@ -136,4 +139,11 @@ fn cache_stats_explain_and_gc_tell_and_bound_the_local_folder() {
     assert!(build(&mut project.open()).all_ok());
     let bad = project.run_cli(&["cache", "gc", "--max-size", "lots"]);
     assert_eq!(bad.status.code(), Some(2));
+
+    // After an edit, explain names the key part that differs from what an earlier build stored.
+    project.write("assets/textures/metal.png", crate::support::pattern_png(64, 64, 9));
+    assert!(build(&mut project.open()).all_ok());
+    let explain = String::from_utf8_lossy(&project.run_cli(&["cache", "explain", "--asset", "mixed"]).stdout).into_owned();
+    let line = explain.lines().find(|line| line.trim_start().starts_with("surface-recipe ")).unwrap_or_else(|| panic!("{explain}"));
+    assert!(line.contains(": nearest ") && line.contains(" is hash ") && line.contains("(the entry has hash "), "{explain}");
 }

@@ -55,8 +55,7 @@ fn with_cache_folder(pipeline: &Path, body: impl FnOnce(&Path, &crate::config::P
         Ok(config) => config,
         Err(code) => return code,
     };
-    let folder = config.output_dir().join(".cirrus").join("cache");
-    body(&folder, &config)
+    body(&config.cache_dir(), &config)
 }
 
 fn last_build_names(folder: &Path) -> Vec<String> {

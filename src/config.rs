@@ -119,6 +119,11 @@ impl PipelineConfig {
         self.root.join(&self.output)
     }
 
+    /// The local stage cache: `<output>/.cirrus/cache`.
+    pub fn cache_dir(&self) -> PathBuf {
+        self.output_dir().join(".cirrus").join("cache")
+    }
+
     /// The asset that a source file (relative to the source folder) becomes under `rules`,
     /// unless an explicit asset already uses it.
     pub fn asset_for_rule_match(&self, relative: &Path) -> Option<AssetConfig> {

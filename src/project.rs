@@ -105,7 +105,7 @@ fn open_disk_cache(config: &PipelineConfig, options: &ProjectOptions) -> Option<
     if !options.persistent_cache {
         return None;
     }
-    let local = DiskCache::new(config.output_dir().join(".cirrus").join("cache"));
+    let local = DiskCache::new(config.cache_dir());
     Some(match options.remote_cache.apply(config.remote_cache.as_ref()).map(crate::cache::remote::RemoteStore::open) {
         None => local,
         Some(Ok(remote)) => local.with_remote(remote),
@@ -720,8 +720,7 @@ fn stage_summaries(instances: &[StageInstance], runs: &[StageRun], asset_failed:
             let (status, ms) = match ran.get(&id) {
                 Some(&ms) => (StageStatus::Ran, ms),
                 None if asset_failed && (instance.failed || failed_jobs.contains(&instance.label)) => (StageStatus::Failed, 0.0),
-                None if remote_hits.contains(&id) && !local_hits.contains(&id) => (StageStatus::Remote, 0.0),
-                None if every_hit_remote && !local_hits.contains(&id) => (StageStatus::Remote, 0.0),
+                None if !local_hits.contains(&id) && (remote_hits.contains(&id) || every_hit_remote) => (StageStatus::Remote, 0.0),
                 None => (StageStatus::Cached, 0.0),
             };
             StageSummary { stage: instance.stage.name, instance: instance.instance.clone(), status, ms }

@@ -171,7 +171,8 @@ pub mod key_parts {
 
     use super::CacheKey;
 
-    /// Keys remembered at most; past it the oldest half is forgotten (explain then says less).
+    /// Keys remembered at most; past it every key is forgotten and remembering starts again
+    /// (explain then says less of the keys made before).
     const MAX_KEYS: usize = 1 << 18;
 
     static PARTS: Mutex<Option<HashMap<CacheKey, Arc<[String]>>>> = Mutex::new(None);
@@ -490,7 +491,7 @@ impl DiskCache {
         if let Some(parts) = key_parts::of(key) {
             upkeep::record_key_parts(&self.folder, stage, key, &parts);
         }
-        if let Some(remote) = self.remote.as_ref().filter(|remote| remote.writes() && remote::shares(stage)) {
+        if let Some(remote) = self.remote.as_ref().filter(|remote| remote.uploads(stage)) {
             // The file as written (the page cache has it): the object is the entry, byte for byte.
             match crate::sources::read_regular_file(&path, MAX_ENTRY_BYTES) {
                 Ok(bytes) => remote.upload(stage, key, bytes),

@@ -416,15 +416,15 @@ impl RemoteStore {
         }
     }
 
-    /// Whether this machine may upload.
-    pub fn writes(&self) -> bool {
-        self.shared.settings.mode == RemoteCacheMode::ReadWrite
+    /// Whether this machine uploads entries of `stage` (read-write mode, a shared stage).
+    pub fn uploads(&self, stage: &str) -> bool {
+        self.shared.settings.mode == RemoteCacheMode::ReadWrite && shares(stage)
     }
 
     /// Uploads an entry's bytes in the background (read-write stores only): a conditional
     /// create, or an overwrite of a key found corrupt. `wait_for_uploads` waits for them.
     pub fn upload(&self, stage: &str, key: CacheKey, bytes: Vec<u8>) {
-        if !self.writes() || !shares(stage) || !self.shared.usable(&self.runtime) {
+        if !self.uploads(stage) || !self.shared.usable(&self.runtime) {
             return;
         }
         let overwrite = self.shared.corrupt_keys.lock().expect("corrupt keys lock").remove(&(stage.to_string(), key));

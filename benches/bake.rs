@@ -5,8 +5,9 @@
 //! burst handling and warm restart (`watch`), the texture atlas's full bake and one-texture edit
 //! (`atlas`), a LOD chain's time beside a single bake and its levels' fidelity
 //! (`billboard-chain`), occlusion rays per second (`occlusion`), and the AmbientOcclusion kind's bake of the
-//! flight helmet with its quality beside per-vertex bakes (`ao`), and the Height kind's distances
-//! and times on the bundled and a corpus pair (`height`). Prints figures.
+//! flight helmet with its quality beside per-vertex bakes (`ao`), the Height kind's distances
+//! and times on the bundled and a corpus pair (`height`), and the block encoders' throughput and
+//! the oak full bake at each instruction-set level this CPU runs (`isa`). Prints figures.
 
 use std::path::Path;
 use std::time::Instant;
@@ -69,6 +70,9 @@ fn main() {
     }
     if wanted("height") {
         bench_height(repository);
+    }
+    if corpus.join("trees").is_dir() && wanted("isa") {
+        bench_isa(&corpus);
     }
 }
 
@@ -334,8 +338,14 @@ fn tree_project(corpus: &Path, assets: &str) -> tempfile::TempDir {
 /// Runs `cirrus build --summary json` in `folder` as a child process: wall seconds, peak
 /// resident memory in MiB, and the summary.
 fn build_process(folder: &Path) -> (f64, f64, serde_json::Value) {
+    build_process_with(folder, &[])
+}
+
+/// `build_process` with extra arguments before `build` (`--isa avx2`).
+fn build_process_with(folder: &Path, global_arguments: &[&str]) -> (f64, f64, serde_json::Value) {
     let start = Instant::now();
     let mut child = std::process::Command::new(env!("CARGO_BIN_EXE_cirrus"))
+        .args(global_arguments)
         .args(["build", "--summary", "json"])
         .current_dir(folder)
         .stdout(std::process::Stdio::piped())
@@ -1168,6 +1178,82 @@ fn bench_height(repository: &Path) {
             stage("mesh"),
             stage("bvh"),
             stage("mips") + stage("encode"),
+        );
+    }
+}
+
+/// What each instruction-set level gives (`crate::isa`; levels above this CPU's are skipped): the
+/// block encoders' throughput per format on the oak's baked atlas surfaces (2048², all mip
+/// levels, encoded as the bake encodes them), whether the bytes equal the top level's, and the oak
+/// full bake as a process with `--isa` (wall time, and its encode and render stages summed over
+/// threads).
+fn bench_isa(corpus: &Path) {
+    use cirrus::isa::{detected_isa, limit_isa, IsaLevel};
+    let cpu = detected_isa();
+    let levels: Vec<IsaLevel> = IsaLevel::ALL.into_iter().filter(|&level| level <= cpu).rev().collect();
+    println!("isa: this CPU runs up to {cpu}; levels measured: {levels:?}");
+    let dir = tree_project(corpus, r#"BillboardCloud(name: "oak", mesh: "trees/oak_medium.obj")"#);
+    let (seconds, _, _) = build_process(dir.path());
+    println!("isa: oak full bake at {cpu} (process) {seconds:.2} s (to make the surfaces)");
+    let report: serde_json::Value = serde_json::from_slice(&std::fs::read(dir.path().join("baked/oak/report.json")).unwrap()).unwrap();
+    let mut surfaces = Vec::new();
+    for surface in report["surfaces"].as_array().unwrap() {
+        let name = surface["surface"].as_str().unwrap().to_string();
+        let image = image::open(dir.path().join("baked/oak").join(format!("{}.png", name.to_lowercase()))).unwrap().into_rgba8();
+        let texture = Texture::new(image.width(), image.height(), image.into_raw());
+        let kind = match name.as_str() {
+            "Albedo" => SurfaceKind::Albedo,
+            "Mra" => SurfaceKind::Mra,
+            "Height" => SurfaceKind::Height,
+            _ => SurfaceKind::Normal,
+        };
+        let alpha = surface["alpha_tested"].as_bool().unwrap();
+        let format: BlockFormat = serde_json::from_value(surface["format"].clone()).unwrap();
+        let levels = mip_chain(&texture, MipSettings { kind, alpha_cutoff: alpha.then_some(0.5) });
+        let settings = BlockEncodeSettings { format, quality: EncodeQuality::Basic, alpha, srgb: kind.is_srgb() };
+        surfaces.push((name, levels, settings));
+    }
+    let mut reference: Vec<Vec<u8>> = Vec::new();
+    for &level in &levels {
+        limit_isa(level);
+        let mut figures = Vec::new();
+        for (index, (name, chain, settings)) in surfaces.iter().enumerate() {
+            let texels: f64 = chain.iter().map(|level| (level.width * level.height) as f64).sum();
+            let mut best = f64::INFINITY;
+            let mut bytes = Vec::new();
+            for _ in 0..3 {
+                let start = Instant::now();
+                let encoded = cirrus::texture::encode::encode_levels(chain, *settings);
+                best = best.min(start.elapsed().as_secs_f64());
+                bytes = encoded.levels.iter().flat_map(|level| level.iter().copied()).collect();
+            }
+            if reference.len() <= index {
+                reference.push(bytes.clone());
+            }
+            let same = if reference[index] == bytes { "same bytes" } else { "bytes differ" };
+            figures.push(format!("{name} {:?} {:.1} Mpix/s ({same})", settings.format, texels / best / 1e6));
+        }
+        println!("isa: {level}: {}", figures.join(", "));
+    }
+    limit_isa(IsaLevel::Avx512);
+    for &level in &levels {
+        let mut walls = Vec::new();
+        let mut stages = String::new();
+        for _ in 0..2 {
+            std::fs::remove_dir_all(dir.path().join("baked/.cirrus")).unwrap();
+            let (seconds, _, _) = build_process_with(dir.path(), &["--isa", level.name()]);
+            walls.push(seconds);
+            let report: serde_json::Value =
+                serde_json::from_slice(&std::fs::read(dir.path().join("baked/oak/report.json")).unwrap()).unwrap();
+            stages = format!(
+                "encode {} ms, render {} ms, mips {} ms",
+                report["stage_ms"]["encode"], report["stage_ms"]["render"], report["stage_ms"]["mips"]
+            );
+        }
+        println!(
+            "isa: oak full bake (process, --isa {level}): {:.2} s best of {:?} (bar ≤ 5 s); last run's stages summed over threads: {stages}",
+            walls.iter().copied().fold(f64::INFINITY, f64::min),
+            walls.iter().map(|seconds| format!("{seconds:.2}")).collect::<Vec<_>>()
         );
     }
 }

@@ -25,6 +25,11 @@ pub struct Cli {
     /// read-write (build machines, CI) or read-only (artists' machines), over the pipeline's `mode`.
     #[arg(long, value_name = "MODE", env = "CIRRUS_REMOTE_CACHE_MODE", global = true)]
     pub remote_cache_mode: Option<String>,
+    /// Run the CPU kernels (block encoders, ray casting) and the software renderer at most at
+    /// this instruction-set level: sse2, sse4, avx2 or avx512 (the default: the CPU's best).
+    /// For measuring what a machine without AVX-512 gets, or ruling out a wide kernel.
+    #[arg(long, value_name = "LEVEL", env = "CIRRUS_ISA", global = true)]
+    pub isa: Option<crate::isa::IsaLevel>,
     #[command(subcommand)]
     pub command: Command,
 }

@@ -7,6 +7,7 @@ pub mod config;
 pub mod diagnostic;
 
 // Shared libraries: pure functions over plain data (no salsa, no IO), named by role.
+pub mod isa;
 pub mod openddl;
 pub mod texture;
 pub mod mesh;

@@ -5,7 +5,12 @@ use std::process::ExitCode;
 use clap::Parser;
 
 fn main() -> ExitCode {
-    // First, while the process has one thread: it sets an environment variable.
+    let cli = cirrus::cli::Cli::parse();
+    // First, while the process has one thread: these set environment variables.
     cirrus::gpu::quiet_wayland_probe();
-    cirrus::cli::run(cirrus::cli::Cli::parse())
+    if let Some(level) = cli.isa {
+        cirrus::isa::limit_isa(level);
+        cirrus::gpu::limit_software_renderer_isa(level);
+    }
+    cirrus::cli::run(cli)
 }

@@ -70,6 +70,24 @@ pub fn quiet_wayland_probe() {
     }
 }
 
+/// Keeps Mesa's software renderer (llvmpipe, whose shaders LLVM compiles for this CPU) at or
+/// below `level`, as `isa::limit_isa` keeps cirrus's own kernels: through Mesa's
+/// `GALLIUM_OVERRIDE_CPU_CAPS`, unless the user set it. Hardware drivers ignore it.
+///
+/// Call it in `main`, while the process has one thread, as `quiet_wayland_probe`.
+pub fn limit_software_renderer_isa(level: crate::isa::IsaLevel) {
+    use crate::isa::IsaLevel;
+    let caps = match level {
+        IsaLevel::Avx512 => return,
+        IsaLevel::Avx2 => "avx",
+        IsaLevel::Sse4 => "sse4.1",
+        IsaLevel::Portable => "sse2",
+    };
+    if level < crate::isa::detected_isa() && std::env::var_os("GALLIUM_OVERRIDE_CPU_CAPS").is_none() {
+        std::env::set_var("GALLIUM_OVERRIDE_CPU_CAPS", caps);
+    }
+}
+
 static GPU: OnceLock<Result<Gpu, GpuError>> = OnceLock::new();
 
 /// The shared GPU, created on first use.

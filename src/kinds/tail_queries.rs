@@ -201,6 +201,7 @@ fn surface_key(settings: &TailSettings) -> CacheKeyBuilder {
         .part(&[MIPS.version, ENCODE.version, WRITE.version])
         .part(&settings.surface)
         .part(&settings.format)
+        .part(crate::texture::encode::encoder_family(settings.format))
         .part(&settings.quality)
         .part(&settings.mips)
         .part(&settings.alpha_cutoff)
@@ -237,10 +238,15 @@ fn memo_worth_storing(format: crate::config::BlockFormat) -> bool {
     format == crate::config::BlockFormat::Bc7
 }
 
-/// By the surface's label alone: settings are not part of the key (reading them would make
-/// the mips depend on encoder settings); the steps reuse only what was made with their settings.
+/// By the surface's label (and the kernels' output family) alone: settings are not part of the
+/// key (reading them would make the mips depend on encoder settings); the steps reuse only what
+/// was made with their settings.
 fn encoding_memo_key(label: &str) -> CacheKey {
-    CacheKeyBuilder::new(ENCODING_MEMO, ENCODING_MEMO_VERSION).part(&[MIPS.version, ENCODE.version]).part(label).finish()
+    CacheKeyBuilder::new(ENCODING_MEMO, ENCODING_MEMO_VERSION)
+        .part(&[MIPS.version, ENCODE.version])
+        .part(crate::texture::ispc::output_family())
+        .part(label)
+        .finish()
 }
 
 /// Loads the surface's last encoding into this process ahead of its tail (no-op when it is

@@ -144,7 +144,7 @@ pub struct Avx2;
 impl Avx2 {
     /// Whether this CPU can run them.
     pub fn available() -> bool {
-        std::is_x86_feature_detected!("avx2") && std::is_x86_feature_detected!("fma")
+        crate::isa::avx2_allowed()
     }
 }
 

@@ -230,7 +230,7 @@ fn best_candidate_with(values: &[u8; 16], candidates: &Candidates, best: &mut Ca
 
 fn best_candidate(values: &[u8; 16], candidates: &Candidates, best: &mut Candidate) {
     #[cfg(target_arch = "x86_64")]
-    if std::arch::is_x86_feature_detected!("avx2") {
+    if crate::isa::avx2_allowed() {
         // Safety: the CPU has AVX2.
         return unsafe { best_candidate_avx2(values, candidates, best) };
     }

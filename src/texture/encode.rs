@@ -1,6 +1,6 @@
-//! Block-compressed textures: every mip level encoded to BC1/BC3/BC4/BC5/BC7 by Intel's ISPC
-//! texture compressor (`intel_tex_2`) for BC1/BC3/BC7 in parallel strips of block rows, and
-//! cirrus's own BC4 search (`bc4`) per block for BC4 and BC5.
+//! Block-compressed textures: every mip level encoded to BC1/BC3/BC4/BC5/BC7, by Intel's ISPC
+//! texture compressor for BC1/BC3/BC7 (through `ispc`, at the process's ISA level) in parallel
+//! strips of blocks, and by cirrus's own BC4 search (`bc4`) per block for BC4 and BC5.
 
 use std::fmt;
 use std::sync::Arc;
@@ -46,6 +46,16 @@ pub fn block_bytes(format: BlockFormat) -> usize {
     match format {
         BlockFormat::Bc1 | BlockFormat::Bc4 => 8,
         BlockFormat::Bc3 | BlockFormat::Bc5 | BlockFormat::Bc7 => 16,
+    }
+}
+
+/// What a format's blocks depend on beyond the texels and settings, for cache keys that a
+/// shared cache hands between machines: the ISPC kernels' output differs between instruction-set
+/// levels (`ispc::output_family`); cirrus's BC4 search gives the same bytes on every CPU.
+pub fn encoder_family(format: BlockFormat) -> &'static str {
+    match format {
+        BlockFormat::Bc4 | BlockFormat::Bc5 => "cirrus-bc4",
+        BlockFormat::Bc1 | BlockFormat::Bc3 | BlockFormat::Bc7 => super::ispc::output_family(),
     }
 }
 
@@ -183,7 +193,7 @@ fn encode_blocks(
         let (data, width, height, stride) = (&data[..], 4 * blocks.len() as u32, 4, stride as u32);
         match format {
             BlockFormat::Bc1 => {
-                intel_tex_2::bc1::compress_blocks_into(&intel_tex_2::RgbaSurface { data, width, height, stride }, output);
+                super::ispc::compress_bc1(&intel_tex_2::RgbaSurface { data, width, height, stride }, output);
                 // Then cirrus's refinement of each block (all but the fastest settings).
                 if !matches!(quality, EncodeQuality::UltraFast | EncodeQuality::VeryFast) {
                     for (block, bytes) in blocks.iter().zip(output.chunks_exact_mut(8)) {
@@ -194,12 +204,9 @@ fn encode_blocks(
                     }
                 }
             }
-            BlockFormat::Bc3 => intel_tex_2::bc3::compress_blocks_into(&intel_tex_2::RgbaSurface { data, width, height, stride }, output),
-            BlockFormat::Bc4 => intel_tex_2::bc4::compress_blocks_into(&intel_tex_2::RSurface { data, width, height, stride }, output),
-            BlockFormat::Bc5 => intel_tex_2::bc5::compress_blocks_into(&intel_tex_2::RgSurface { data, width, height, stride }, output),
-            BlockFormat::Bc7 => {
-                intel_tex_2::bc7::compress_blocks_into(bc7_settings, &intel_tex_2::RgbaSurface { data, width, height, stride }, output)
-            }
+            BlockFormat::Bc3 => super::ispc::compress_bc3(&intel_tex_2::RgbaSurface { data, width, height, stride }, output),
+            BlockFormat::Bc4 | BlockFormat::Bc5 => unreachable!("BC4 and BC5 are encoded above, by cirrus's own search"),
+            BlockFormat::Bc7 => super::ispc::compress_bc7(bc7_settings, &intel_tex_2::RgbaSurface { data, width, height, stride }, output),
         }
     });
     encoded

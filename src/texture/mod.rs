@@ -9,6 +9,7 @@ pub mod fingerprint;
 pub mod fill;
 pub mod bc1;
 pub mod bc4;
+pub mod ispc;
 pub mod encode;
 pub mod quality;
 pub mod container;

@@ -17,6 +17,7 @@ mod fuzz;
 mod graph;
 mod shared_cache;
 mod hostile;
+mod isa;
 mod occlusion;
 mod packing;
 mod tidy;

@@ -55,9 +55,13 @@ fn weed_binary() -> PathBuf {
 /// A `weed mini` server on loopback: S3 on `port`, one bucket, killed when dropped.
 struct SeaweedServer {
     child: Option<Child>,
+    /// The first of its `PORTS_PER_SERVER` ports.
+    base: u16,
+    /// Its S3 port.
     port: u16,
     log: PathBuf,
-    _folder: tempfile::TempDir,
+    /// Its data (kept across `stop` and `restart`).
+    folder: tempfile::TempDir,
 }
 
 /// The ports `weed mini` listens on, from `base`: master, volume, filer, S3, admin, each with its
@@ -83,28 +87,36 @@ fn free_ports() -> u16 {
 
 impl SeaweedServer {
     fn start() -> SeaweedServer {
-        let weed = weed_binary();
         let folder = tempfile::tempdir().unwrap();
         let base = free_ports();
-        let port = |offset: u16| (base + offset).to_string();
         let log = folder.path().join("weed.log");
+        let mut server = SeaweedServer { child: None, base, port: base + 6, log, folder };
+        server.restart();
+        server
+    }
+
+    /// Starts (again, after `stop`) the server on its ports and data folder, and waits for it.
+    fn restart(&mut self) {
+        assert!(self.child.is_none(), "the server is running");
+        let weed = weed_binary();
+        let folder = self.folder.path();
+        let port = |offset: u16| (self.base + offset).to_string();
         let child = Command::new(&weed)
             .arg("mini")
-            .arg(format!("-dir={}", folder.path().display()))
+            .arg(format!("-dir={}", folder.display()))
             .args(["-ip=127.0.0.1", "-ip.bind=127.0.0.1", "-webdav=false", "-admin.ui=false", "-s3.metricsPort=0"])
             .arg(format!("-bucket={BUCKET}"))
             .args(["-master.port", &port(0), "-master.port.grpc", &port(1), "-volume.port", &port(2), "-volume.port.grpc", &port(3)])
             .args(["-filer.port", &port(4), "-filer.port.grpc", &port(5), "-s3.port", &port(6), "-s3.port.grpc", &port(7)])
             .args(["-s3.port.iceberg", &port(8), "-admin.port", &port(9), "-admin.port.grpc", &port(10), "-webdav.port", &port(11)])
             .args(["-s3.port.lance", &port(12)])
-            .current_dir(folder.path())
-            .stdout(std::fs::File::create(&log).unwrap())
-            .stderr(std::fs::File::create(folder.path().join("weed.err")).unwrap())
+            .current_dir(folder)
+            .stdout(std::fs::File::create(&self.log).unwrap())
+            .stderr(std::fs::File::create(folder.join("weed.err")).unwrap())
             .spawn()
             .unwrap_or_else(|error| panic!("cannot start {}: {error}", weed.display()));
-        let mut server = SeaweedServer { child: Some(child), port: base + 6, log, _folder: folder };
-        server.wait_until_ready();
-        server
+        self.child = Some(child);
+        self.wait_until_ready();
     }
 
     /// Waits until the bucket answers a listing (the server makes it after it starts).
@@ -463,6 +475,46 @@ fn a_store_that_stops_mid_build_is_a_warning_and_the_build_finishes_locally() {
     // Everything is in the local cache: a restart without the store runs nothing.
     let again = build_with(&project, &[], &[]);
     assert_eq!(again.count("ran"), 0, "{:?}", again.statuses);
+}
+
+#[test]
+fn the_daemon_keeps_baking_while_the_store_is_away_and_uses_it_again_when_it_comes_back() {
+    let mut server = SeaweedServer::start();
+    let bucket = server.bucket();
+    let project = crate::watch::watched_project();
+    let daemon = crate::watch::Daemon::start_in_environment(
+        &project,
+        &["--listen", "127.0.0.1:0", "--remote-cache", "s3://cirrus/daemon"],
+        &server.environment(),
+    );
+    let mut client = daemon.connect();
+    client.subscribe(Some(0));
+    let first = client.batch();
+    assert_eq!(first["failed"], serde_json::json!([]), "{first}");
+    let uploaded = bucket.objects("daemon").len();
+    assert!(uploaded > 0, "the first build uploads its entries");
+
+    // The store goes away: the next edit bakes locally, with one warning.
+    server.stop();
+    project.write("assets/ao.png", crate::support::pattern_png(32, 32, 101));
+    let away = client.batch();
+    assert_eq!(away["failed"], serde_json::json!([]), "{away}");
+    assert!(!away["changed"].as_array().unwrap().is_empty(), "{away}");
+    let log = daemon.log.lock().unwrap().clone();
+    assert!(log.contains("building locally"), "{log}");
+    let warnings = log.matches("building locally").count();
+
+    // It comes back (same data): after the pause, the next edit's entries are uploaded again.
+    server.restart();
+    assert_eq!(bucket.objects("daemon").len(), uploaded, "the data survived the restart");
+    std::thread::sleep(cirrus::cache::remote::RETRY_AFTER + Duration::from_millis(500));
+    project.write("assets/ao.png", crate::support::pattern_png(32, 32, 102));
+    let back = client.batch();
+    assert_eq!(back["failed"], serde_json::json!([]), "{back}");
+    let after = bucket.objects("daemon").len();
+    assert!(after > uploaded, "the edit after the store came back uploads its entries: {uploaded} → {after}");
+    let log = daemon.log.lock().unwrap().clone();
+    assert_eq!(log.matches("building locally").count(), warnings, "no new warning once the store answers: {log}");
 }
 
 #[test]

@@ -26,9 +26,15 @@ impl Daemon {
 
     /// Starts the daemon with `listen` arguments (`--listen ADDR`, or none for the pipeline's).
     pub fn start_with(project: &TempProject, listen: &[&str]) -> Daemon {
+        Daemon::start_in_environment(project, listen, &[])
+    }
+
+    /// Starts the daemon with `arguments` after `watch` and extra environment variables.
+    pub fn start_in_environment(project: &TempProject, arguments: &[&str], environment: &[(&str, String)]) -> Daemon {
         let mut child = Command::new(env!("CARGO_BIN_EXE_cirrus"))
             .arg("watch")
-            .args(listen)
+            .args(arguments)
+            .envs(environment.iter().map(|(name, value)| (name, value)))
             .args(["--debounce-ms", "100", "-v"])
             .current_dir(project.root())
             .stdout(Stdio::null())

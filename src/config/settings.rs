@@ -33,8 +33,8 @@ impl Container {
     }
 }
 
-/// Speed/quality trade-off of the block encoder.
-#[derive(Clone, Copy, Debug, PartialEq, Eq, Hash, Serialize, Deserialize)]
+/// Speed/quality trade-off of the block encoder, ordered fastest first.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, PartialOrd, Ord, Hash, Serialize, Deserialize)]
 pub enum EncodeQuality {
     UltraFast,
     VeryFast,

@@ -7,10 +7,15 @@
 //! (`billboard-chain`), occlusion rays per second (`occlusion`), and the AmbientOcclusion kind's bake of the
 //! flight helmet with its quality beside per-vertex bakes (`ao`), the Height kind's distances
 //! and times on the bundled and a corpus pair (`height`), and the block encoders' throughput and
-//! the oak full bake at each instruction-set level this CPU runs (`isa`). Prints figures.
+//! the oak full bake at each instruction-set level this CPU runs (`isa`), and the oak full bake
+//! against a shared cache on a local SeaweedFS server (`shared-cache`). Prints figures.
 
 use std::path::Path;
 use std::time::Instant;
+
+#[path = "../tests/it/seaweed.rs"]
+#[allow(dead_code)]
+mod seaweed;
 
 use cirrus::config::{load_pipeline, BlockFormat, EncodeQuality};
 use cirrus::project::{BuildOptions, Project, ProjectOptions};
@@ -73,6 +78,9 @@ fn main() {
     }
     if corpus.join("trees").is_dir() && wanted("isa") {
         bench_isa(&corpus);
+    }
+    if corpus.join("trees").is_dir() && wanted("shared-cache") {
+        bench_shared_cache(&corpus);
     }
 }
 
@@ -343,9 +351,15 @@ fn build_process(folder: &Path) -> (f64, f64, serde_json::Value) {
 
 /// `build_process` with extra arguments before `build` (`--isa avx2`).
 fn build_process_with(folder: &Path, global_arguments: &[&str]) -> (f64, f64, serde_json::Value) {
+    build_process_in(folder, global_arguments, &[])
+}
+
+/// `build_process_with` and extra environment variables.
+fn build_process_in(folder: &Path, global_arguments: &[&str], environment: &[(&str, String)]) -> (f64, f64, serde_json::Value) {
     let start = Instant::now();
     let mut child = std::process::Command::new(env!("CARGO_BIN_EXE_cirrus"))
         .args(global_arguments)
+        .envs(environment.iter().map(|(name, value)| (name, value)))
         .args(["build", "--summary", "json"])
         .current_dir(folder)
         .stdout(std::process::Stdio::piped())
@@ -1254,6 +1268,65 @@ fn bench_isa(corpus: &Path) {
             "isa: oak full bake (process, --isa {level}): {:.2} s best of {:?} (bar ≤ 5 s); last run's stages summed over threads: {stages}",
             walls.iter().copied().fold(f64::INFINITY, f64::min),
             walls.iter().map(|seconds| format!("{seconds:.2}")).collect::<Vec<_>>()
+        );
+    }
+}
+
+/// The oak full bake (as a process, best of two) with a shared cache on a `weed mini` server on
+/// loopback: cold without a store, cold uploading to it, from the warm store with an empty local
+/// cache, fully local, and against a store that refuses connections and one that accepts them
+/// and never answers (the bar: at most 1 s over the local build); the bytes uploaded.
+fn bench_shared_cache(corpus: &Path) {
+    let server = seaweed::SeaweedServer::start();
+    let bucket = server.bucket();
+    let dir = tree_project(corpus, r#"BillboardCloud(name: "oak", mesh: "trees/oak_medium.obj")"#);
+    let clear = || {
+        let _ = std::fs::remove_dir_all(dir.path().join("baked"));
+    };
+    let best = |runs: &mut dyn FnMut() -> f64| (0..2).map(|_| runs()).fold(f64::INFINITY, f64::min);
+    let remote = ["--remote-cache", "s3://cirrus/bench"];
+    let cold = best(&mut || {
+        clear();
+        build_process(dir.path()).0
+    });
+    clear();
+    let uploading = build_process_in(dir.path(), &remote, &server.environment()).0;
+    let objects = bucket.objects("bench");
+    let uploaded: usize = objects.values().map(Vec::len).sum();
+    let warm = best(&mut || {
+        clear();
+        build_process_in(dir.path(), &remote, &server.environment()).0
+    });
+    let local = best(&mut || build_process_in(dir.path(), &remote, &server.environment()).0);
+    println!(
+        "shared-cache: oak full bake (process): cold without a store {cold:.2} s, cold uploading {uploading:.2} s ({} objects, {:.1} MiB), from the store with an empty local cache {warm:.2} s, fully local {local:.2} s",
+        objects.len(),
+        uploaded as f64 / (1 << 20) as f64
+    );
+    // A closed port, and one that accepts connections and never answers.
+    let closed = std::net::TcpListener::bind("127.0.0.1:0").unwrap().local_addr().unwrap().port();
+    let silent = std::net::TcpListener::bind("127.0.0.1:0").unwrap();
+    let silent_port = silent.local_addr().unwrap().port();
+    std::thread::spawn(move || {
+        let mut held = Vec::new();
+        for stream in silent.incoming().flatten() {
+            held.push(stream);
+        }
+    });
+    for (label, port) in [("refusing connections", closed), ("silent", silent_port)] {
+        let environment = [
+            ("AWS_ACCESS_KEY_ID", "x".to_string()),
+            ("AWS_SECRET_ACCESS_KEY", "y".to_string()),
+            ("AWS_ENDPOINT_URL", format!("http://127.0.0.1:{port}")),
+            ("AWS_REGION", "us-east-1".to_string()),
+        ];
+        let away = best(&mut || {
+            clear();
+            build_process_in(dir.path(), &remote, &environment).0
+        });
+        println!(
+            "shared-cache: oak cold with a store {label}: {away:.2} s, {:+.2} s over the cold build without one (bar ≤ 1 s)",
+            away - cold
         );
     }
 }

@@ -163,7 +163,7 @@ pub struct RemoteCacheError {
 }
 
 /// A request that gets no answer within this is a store that does not answer.
-const PROBE_TIMEOUT: Duration = Duration::from_millis(1000);
+const PROBE_TIMEOUT: Duration = Duration::from_millis(750);
 /// How long a download or upload of one entry may take.
 const TRANSFER_TIMEOUT: Duration = Duration::from_secs(30);
 /// How long a store that failed is left alone.

@@ -15,6 +15,7 @@ mod config;
 mod conformance;
 mod fuzz;
 mod graph;
+mod seaweed;
 mod shared_cache;
 mod hostile;
 mod isa;

@@ -94,27 +94,24 @@ pub fn compress_bc7(settings: &intel_tex_2::bc7::EncodeSettings, surface: &RgbaS
 }
 
 /// Which of the kernels' outputs this process makes, for cache keys: measured on the corpus
-/// (`cargo bench -- isa`), the AVX2 and AVX-512 kernels give the same bytes, and the SSE2 and
-/// SSE4 ones others (no fused multiply-add, four lanes); AVX without AVX2 is kept apart, unmeasured.
+/// (`cargo bench -- isa`), the AVX2 and AVX-512 kernels give the same bytes, and the SSE4 and
+/// SSE2 ones others (no fused multiply-add, four lanes).
 pub fn output_family() -> &'static str {
+    if !cfg!(all(target_arch = "x86_64", unix)) {
+        return "ispc-native";
+    }
     match crate::isa::kernel_isa() {
         IsaLevel::Avx2 | IsaLevel::Avx512 => "ispc-avx2",
-        #[cfg(target_arch = "x86_64")]
-        level if level == crate::isa::detected_isa() && std::arch::is_x86_feature_detected!("avx") => "ispc-avx",
         IsaLevel::Sse4 => "ispc-sse4",
         IsaLevel::Portable => "ispc-sse2",
     }
 }
 
-/// The level to call: the kernel level when it is below the CPU's, else the library's own
-/// dispatch (`Avx512`), which picks the CPU's best.
+/// The level to call: below AVX-512, that level's own kernel (on a CPU with AVX but not AVX2
+/// the SSE4 one, not the crate's AVX choice, so that the output family stays known); at
+/// AVX-512, the crate's dispatch.
 fn at_level() -> IsaLevel {
-    let level = crate::isa::kernel_isa();
-    if level == crate::isa::detected_isa() {
-        IsaLevel::Avx512
-    } else {
-        level
-    }
+    crate::isa::kernel_isa()
 }
 
 /// Each kernel at one level: the symbols ISPC gives the per-target copies it links beside its

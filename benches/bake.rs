@@ -346,15 +346,10 @@ fn tree_project(corpus: &Path, assets: &str) -> tempfile::TempDir {
 /// Runs `cirrus build --summary json` in `folder` as a child process: wall seconds, peak
 /// resident memory in MiB, and the summary.
 fn build_process(folder: &Path) -> (f64, f64, serde_json::Value) {
-    build_process_with(folder, &[])
+    build_process_in(folder, &[], &[])
 }
 
-/// `build_process` with extra arguments before `build` (`--isa avx2`).
-fn build_process_with(folder: &Path, global_arguments: &[&str]) -> (f64, f64, serde_json::Value) {
-    build_process_in(folder, global_arguments, &[])
-}
-
-/// `build_process_with` and extra environment variables.
+/// `build_process` with extra arguments before `build` (`--isa avx2`) and environment variables.
 fn build_process_in(folder: &Path, global_arguments: &[&str], environment: &[(&str, String)]) -> (f64, f64, serde_json::Value) {
     let start = Instant::now();
     let mut child = std::process::Command::new(env!("CARGO_BIN_EXE_cirrus"))
@@ -1255,7 +1250,7 @@ fn bench_isa(corpus: &Path) {
         let mut stages = String::new();
         for _ in 0..2 {
             std::fs::remove_dir_all(dir.path().join("baked/.cirrus")).unwrap();
-            let (seconds, _, summary) = build_process_with(dir.path(), &["--isa", level.name()]);
+            let (seconds, _, summary) = build_process_in(dir.path(), &["--isa", level.name()], &[]);
             walls.push(seconds);
             // From the summary: the report keeps the timings of the build that last changed it.
             let mut stage_ms = std::collections::BTreeMap::<String, f64>::new();

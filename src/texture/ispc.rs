@@ -1,7 +1,7 @@
 //! Intel's ISPC texture compressor (`intel_tex_2`) for BC1, BC3 and BC7, run at the process's
 //! kernel instruction-set level (`crate::isa`): the crate's library holds each kernel compiled for
-//! SSE2, SSE4, AVX2 and AVX-512 and picks the CPU's best; a lower limit calls that level's kernel
-//! by its own symbol.
+//! SSE2, SSE4, AVX2 and AVX-512 and picks the CPU's best; below AVX-512 cirrus calls the level's
+//! kernel by its own symbol.
 
 use intel_tex_2::bindings::kernel;
 use intel_tex_2::RgbaSurface;
@@ -24,43 +24,58 @@ fn check_sizes(surface: &RgbaSurface, blocks: &[u8], block_bytes: usize) {
     assert!(surface.data.len() >= (surface.height as usize).saturating_sub(1) * surface.stride as usize + surface.width as usize * 4);
 }
 
+/// A kernel that compresses a surface's blocks.
+type SurfaceKernel = unsafe extern "C" fn(*mut kernel::rgba_surface, *mut u8);
+/// A kernel that compresses a surface's blocks with settings (BC7).
+type SettingsKernel = unsafe extern "C" fn(*mut kernel::rgba_surface, *mut u8, *mut kernel::bc7_enc_settings);
+
+/// One kernel per level, in `IsaLevel::ALL` order; the last is the crate's dispatch, which
+/// picks the CPU's best. Where the per-level symbols are not declared, every level dispatches.
+#[cfg(all(target_arch = "x86_64", unix))]
+mod kernels {
+    use super::per_level::*;
+    use super::{kernel, SettingsKernel, SurfaceKernel};
+
+    pub const BC1: [SurfaceKernel; 4] =
+        [CompressBlocksBC1_ispc_sse2, CompressBlocksBC1_ispc_sse4, CompressBlocksBC1_ispc_avx2, kernel::CompressBlocksBC1_ispc];
+    pub const BC3: [SurfaceKernel; 4] =
+        [CompressBlocksBC3_ispc_sse2, CompressBlocksBC3_ispc_sse4, CompressBlocksBC3_ispc_avx2, kernel::CompressBlocksBC3_ispc];
+    pub const BC7: [SettingsKernel; 4] =
+        [CompressBlocksBC7_ispc_sse2, CompressBlocksBC7_ispc_sse4, CompressBlocksBC7_ispc_avx2, kernel::CompressBlocksBC7_ispc];
+}
+
+#[cfg(not(all(target_arch = "x86_64", unix)))]
+mod kernels {
+    use super::{kernel, SettingsKernel, SurfaceKernel};
+
+    pub const BC1: [SurfaceKernel; 4] = [kernel::CompressBlocksBC1_ispc; 4];
+    pub const BC3: [SurfaceKernel; 4] = [kernel::CompressBlocksBC3_ispc; 4];
+    pub const BC7: [SettingsKernel; 4] = [kernel::CompressBlocksBC7_ispc; 4];
+}
+
+/// The kernel of the process's level: that level's own below AVX-512 (on a CPU with AVX but
+/// not AVX2 the SSE4 one, not the crate's AVX choice, so that the output family stays known),
+/// the crate's dispatch at AVX-512.
+fn at_kernel_level<K: Copy>(kernels: &[K; 4]) -> K {
+    kernels[crate::isa::kernel_isa() as usize]
+}
+
 /// BC1 blocks of `surface` into `blocks` (8 bytes each, row-major).
 pub fn compress_bc1(surface: &RgbaSurface, blocks: &mut [u8]) {
-    check_sizes(surface, blocks, 8);
-    let mut c = c_surface(surface);
-    let (src, dst) = (&mut c as *mut kernel::rgba_surface, blocks.as_mut_ptr());
-    // Safety: the sizes were checked; every symbol is the same kernel at one ISA level, and the
-    // level's kernel is only called when the CPU has it (`kernel_isa` ≤ `detected_isa`).
-    unsafe {
-        match at_level() {
-            #[cfg(all(target_arch = "x86_64", unix))]
-            IsaLevel::Portable => per_level::CompressBlocksBC1_ispc_sse2(src, dst),
-            #[cfg(all(target_arch = "x86_64", unix))]
-            IsaLevel::Sse4 => per_level::CompressBlocksBC1_ispc_sse4(src, dst),
-            #[cfg(all(target_arch = "x86_64", unix))]
-            IsaLevel::Avx2 => per_level::CompressBlocksBC1_ispc_avx2(src, dst),
-            _ => kernel::CompressBlocksBC1_ispc(src, dst),
-        }
-    }
+    compress_with(at_kernel_level(&kernels::BC1), surface, blocks, 8);
 }
 
 /// BC3 blocks of `surface` into `blocks` (16 bytes each, row-major).
 pub fn compress_bc3(surface: &RgbaSurface, blocks: &mut [u8]) {
-    check_sizes(surface, blocks, 16);
+    compress_with(at_kernel_level(&kernels::BC3), surface, blocks, 16);
+}
+
+fn compress_with(compress: SurfaceKernel, surface: &RgbaSurface, blocks: &mut [u8], block_bytes: usize) {
+    check_sizes(surface, blocks, block_bytes);
     let mut c = c_surface(surface);
-    let (src, dst) = (&mut c as *mut kernel::rgba_surface, blocks.as_mut_ptr());
-    // Safety: as in `compress_bc1`.
-    unsafe {
-        match at_level() {
-            #[cfg(all(target_arch = "x86_64", unix))]
-            IsaLevel::Portable => per_level::CompressBlocksBC3_ispc_sse2(src, dst),
-            #[cfg(all(target_arch = "x86_64", unix))]
-            IsaLevel::Sse4 => per_level::CompressBlocksBC3_ispc_sse4(src, dst),
-            #[cfg(all(target_arch = "x86_64", unix))]
-            IsaLevel::Avx2 => per_level::CompressBlocksBC3_ispc_avx2(src, dst),
-            _ => kernel::CompressBlocksBC3_ispc(src, dst),
-        }
-    }
+    // Safety: the sizes were checked; every kernel of a table is the same kernel at one ISA
+    // level, and a level's own is only called when the CPU has it (`kernel_isa` ≤ `detected_isa`).
+    unsafe { compress(&mut c, blocks.as_mut_ptr()) }
 }
 
 /// BC7 blocks of `surface` into `blocks` (16 bytes each, row-major).
@@ -78,19 +93,8 @@ pub fn compress_bc7(settings: &intel_tex_2::bc7::EncodeSettings, surface: &RgbaS
         refineIterations_channel: settings.refine_iterations_channel as i32,
         channels: settings.channels,
     };
-    let (src, dst, settings) = (&mut c as *mut kernel::rgba_surface, blocks.as_mut_ptr(), &mut settings as *mut kernel::bc7_enc_settings);
-    // Safety: as in `compress_bc1`.
-    unsafe {
-        match at_level() {
-            #[cfg(all(target_arch = "x86_64", unix))]
-            IsaLevel::Portable => per_level::CompressBlocksBC7_ispc_sse2(src, dst, settings),
-            #[cfg(all(target_arch = "x86_64", unix))]
-            IsaLevel::Sse4 => per_level::CompressBlocksBC7_ispc_sse4(src, dst, settings),
-            #[cfg(all(target_arch = "x86_64", unix))]
-            IsaLevel::Avx2 => per_level::CompressBlocksBC7_ispc_avx2(src, dst, settings),
-            _ => kernel::CompressBlocksBC7_ispc(src, dst, settings),
-        }
-    }
+    // Safety: as in `compress_with`.
+    unsafe { at_kernel_level(&kernels::BC7)(&mut c, blocks.as_mut_ptr(), &mut settings) }
 }
 
 /// Which of the kernels' outputs this process makes, for cache keys: measured on the corpus
@@ -105,13 +109,6 @@ pub fn output_family() -> &'static str {
         IsaLevel::Sse4 => "ispc-sse4",
         IsaLevel::Portable => "ispc-sse2",
     }
-}
-
-/// The level to call: below AVX-512, that level's own kernel (on a CPU with AVX but not AVX2
-/// the SSE4 one, not the crate's AVX choice, so that the output family stays known); at
-/// AVX-512, the crate's dispatch.
-fn at_level() -> IsaLevel {
-    crate::isa::kernel_isa()
 }
 
 /// Each kernel at one level: the symbols ISPC gives the per-target copies it links beside its

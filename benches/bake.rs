@@ -879,11 +879,15 @@ fn bench_billboard_budget(corpus: &Path) {
                 let report: serde_json::Value =
                     serde_json::from_slice(&std::fs::read(dir.path().join("baked/tree/report.json")).unwrap()).unwrap();
                 row.push_str(&format!(
-                    " {label} IoU {:.3} ({} quads, {} planes, ε {:.4}, planes stage {:.0} ms);",
+                    " {label} IoU {:.3} (missed {:.3}, extra {:.3}; {} quads, {} planes, ε {:.4}, mean error {:.4} R, planes stage {:.0} ms);",
                     metrics.mean_iou,
+                    metrics.mean_missed,
+                    metrics.mean_extra,
                     report["quads"],
                     report["planes"],
                     report["epsilon"].as_f64().unwrap_or(0.0),
+                    report["mean_error_world"].as_f64().unwrap_or(0.0) / report["epsilon_world"].as_f64().unwrap_or(1.0)
+                        * report["epsilon"].as_f64().unwrap_or(0.0),
                     report["stage_ms"]["planes"].as_f64().unwrap_or(0.0)
                 ));
             }

@@ -44,6 +44,11 @@ pub fn view_directions() -> Vec<[f32; 3]> {
 pub struct ViewMetrics {
     pub direction: [f32; 3],
     pub iou: f64,
+    /// The source's silhouette pixels the LOD misses, and the LOD's pixels outside the source's
+    /// silhouette, each as a fraction of the source's silhouette: a LOD that is too thin misses,
+    /// one drawn displaced does both.
+    pub missed: f64,
+    pub extra: f64,
     pub psnr: f64,
 }
 
@@ -54,6 +59,8 @@ pub struct PreviewMetrics {
     pub views: Vec<ViewMetrics>,
     pub mean_iou: f64,
     pub min_iou: f64,
+    pub mean_missed: f64,
+    pub mean_extra: f64,
     pub mean_psnr: f64,
 }
 
@@ -119,9 +126,12 @@ pub fn preview_chain(
         let mut images = Vec::with_capacity(1 + lods.len());
         for (lod, level_metrics) in lods.iter().zip(&mut metrics) {
             let lod_view = render_resolved_view(gpu, lod, matrix, light, settings)?;
+            let overlap = silhouette_overlap(&source_view, &lod_view);
             level_metrics.push(ViewMetrics {
                 direction,
-                iou: silhouette_iou(&source_view, &lod_view),
+                iou: overlap.iou,
+                missed: overlap.missed,
+                extra: overlap.extra,
                 psnr: rgb_psnr(&source_view.rgba, &lod_view.rgba),
             });
             images.push(lod_view.rgba);
@@ -147,8 +157,10 @@ fn summarise_views(views: Vec<ViewMetrics>, samples_per_pixel: u32) -> PreviewMe
     let count = views.len().max(1) as f64;
     let mean_iou = views.iter().map(|view| view.iou).sum::<f64>() / count;
     let min_iou = views.iter().map(|view| view.iou).fold(1.0, f64::min);
+    let mean_missed = views.iter().map(|view| view.missed).sum::<f64>() / count;
+    let mean_extra = views.iter().map(|view| view.extra).sum::<f64>() / count;
     let mean_psnr = views.iter().map(|view| view.psnr).sum::<f64>() / count;
-    PreviewMetrics { samples_per_pixel, views, mean_iou, min_iou, mean_psnr }
+    PreviewMetrics { samples_per_pixel, views, mean_iou, min_iou, mean_missed, mean_extra, mean_psnr }
 }
 
 /// A view resolved to its pixels: the sRGB colour (the mean of the pixel's samples, taken in
@@ -298,16 +310,36 @@ pub fn lod_view_mesh(files: &LodFiles) -> Result<ViewMesh, Diagnostic> {
 
 /// |A ∩ B| / |A ∪ B| of the silhouettes (pixels at least half covered); 1 when both are empty.
 pub fn silhouette_iou(a: &ResolvedView, b: &ResolvedView) -> f64 {
-    let (mut both, mut either) = (0u64, 0u64);
-    for index in 0..a.covered.len().min(b.covered.len()) {
-        let (in_a, in_b) = (a.in_silhouette(index), b.in_silhouette(index));
-        both += (in_a && in_b) as u64;
-        either += (in_a || in_b) as u64;
+    silhouette_overlap(a, b).iou
+}
+
+/// How the silhouette of `lod` overlaps that of `source`.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct SilhouetteOverlap {
+    /// |S ∩ L| / |S ∪ L|; 1 when both are empty.
+    pub iou: f64,
+    /// |S \ L| / |S| and |L \ S| / |S| (0 when the source is empty).
+    pub missed: f64,
+    pub extra: f64,
+}
+
+/// The overlap of the silhouettes (pixels at least half covered) of `source` and `lod`.
+pub fn silhouette_overlap(source: &ResolvedView, lod: &ResolvedView) -> SilhouetteOverlap {
+    let (mut both, mut source_only, mut lod_only) = (0u64, 0u64, 0u64);
+    for index in 0..source.covered.len().min(lod.covered.len()) {
+        match (source.in_silhouette(index), lod.in_silhouette(index)) {
+            (true, true) => both += 1,
+            (true, false) => source_only += 1,
+            (false, true) => lod_only += 1,
+            (false, false) => {}
+        }
     }
-    if either == 0 {
-        1.0
-    } else {
-        both as f64 / either as f64
+    let either = both + source_only + lod_only;
+    let source_area = (both + source_only).max(1) as f64;
+    SilhouetteOverlap {
+        iou: if either == 0 { 1.0 } else { both as f64 / either as f64 },
+        missed: source_only as f64 / source_area,
+        extra: lod_only as f64 / source_area,
     }
 }
 

@@ -366,6 +366,7 @@ fn level_outputs(
         "epsilon": planes.epsilon_fraction,
         "epsilon_world": planes.epsilon,
         "max_error_world": planes.max_error,
+        "mean_error_world": planes.mean_error,
         "atlas": {
             "width": layout.layout.width,
             "height": layout.layout.height,

@@ -32,8 +32,12 @@ pub struct PlaneSet {
     pub epsilon: f32,
     /// ε as a fraction of the bounding-sphere radius (the setting, or the one a budget found).
     pub epsilon_fraction: f32,
-    /// The largest distance of a vertex of an assigned face from its plane (≤ ε unless capped).
+    /// The largest distance of a vertex of an assigned face from its plane (≤ ε unless capped,
+    /// or refined under a budget).
     pub max_error: f32,
+    /// The faces' mean distance from their planes (each face's mean vertex distance, weighted by
+    /// its area), in world units: what the views see on average.
+    pub mean_error: f32,
     pub face_count: usize,
 }
 
@@ -126,6 +130,10 @@ impl Face {
 
     fn distance_to(&self, normal: Vec3, rho: f32) -> f32 {
         self.vertices.iter().map(|vertex| (vertex.dot(normal) - rho).abs()).fold(0.0, f32::max)
+    }
+
+    fn mean_distance_to(&self, normal: Vec3, rho: f32) -> f32 {
+        self.vertices.iter().map(|vertex| (vertex.dot(normal) - rho).abs()).sum::<f32>() / 3.0
     }
 }
 
@@ -328,12 +336,30 @@ pub fn select_planes(positions: &[[f32; 3]], triangles: &[[u32; 3]], face_materi
     let (grid, faces) = grid_and_faces(positions, triangles, settings.epsilon);
     let cap = settings.max_planes.map_or(usize::MAX, |cap| cap as usize);
     let greedy = greedy_planes(&grid, &faces, cap);
-    finish_planes(&grid, &faces, greedy, face_materials, settings.epsilon)
+    finish_planes(&grid, &faces, greedy, face_materials, settings.epsilon, Finish::WithinEpsilon)
+}
+
+/// How a greedy pass is finished into a plane set.
+#[derive(Clone, Copy, Debug, PartialEq)]
+enum Finish {
+    /// Every face stays within ε of its plane (unless `max_planes` left it over).
+    WithinEpsilon,
+    /// A budget of `planes` planes: the ε it found only seeds them, and k-planes rounds then move
+    /// faces and planes to lower the error the views see (see `refine_planes_for_budget`).
+    Budget { planes: usize },
 }
 
 /// The plane set of a greedy pass: faces it left over go to the plane that moves them least,
-/// then rounds of moving faces to their nearest plane and refitting.
-fn finish_planes(grid: &Grid, faces: &[Face], greedy: GreedyPlanes, face_materials: &[u32], epsilon_fraction: f32) -> PlaneSet {
+/// then rounds of moving faces to their nearest plane and refitting; under a budget, then the
+/// k-planes refinement.
+fn finish_planes(
+    grid: &Grid,
+    faces: &[Face],
+    greedy: GreedyPlanes,
+    face_materials: &[u32],
+    epsilon_fraction: f32,
+    finish: Finish,
+) -> PlaneSet {
     let GreedyPlanes { mut planes, assigned } = greedy;
     // Faces left over (degenerate ones, or beyond `max_planes`): to the plane that moves them least.
     if planes.is_empty() {
@@ -352,20 +378,27 @@ fn finish_planes(grid: &Grid, faces: &[Face], greedy: GreedyPlanes, face_materia
 
     let face_materials: Vec<u32> = (0..faces.len()).map(|face| face_materials.get(face).copied().unwrap_or(0)).collect();
     reassign_to_nearest_planes(faces, &face_materials, &mut planes, grid.epsilon);
+    if let Finish::Budget { planes: cap } = finish {
+        refine_planes_for_budget(faces, &face_materials, &mut planes, cap);
+    }
 
-    let mut max_error = 0.0f32;
+    let (mut max_error, mut weighted_error, mut area) = (0.0f32, 0.0f64, 0.0f64);
     let planes = planes
         .into_iter()
         .filter(|(_, _, members)| !members.is_empty())
         .map(|(normal, rho, mut members)| {
             members.sort_unstable();
             for &index in &members {
-                max_error = max_error.max(faces[index as usize].distance_to(normal, rho));
+                let face = &faces[index as usize];
+                max_error = max_error.max(face.distance_to(normal, rho));
+                weighted_error += face.area as f64 * face.mean_distance_to(normal, rho) as f64;
+                area += face.area as f64;
             }
             Plane { normal: normal.to_array(), distance: rho + normal.dot(grid.center), faces: members }
         })
         .collect();
-    PlaneSet { planes, epsilon: grid.epsilon, epsilon_fraction, max_error, face_count: faces.len() }
+    let mean_error = if area > 0.0 { (weighted_error / area) as f32 } else { 0.0 };
+    PlaneSet { planes, epsilon: grid.epsilon, epsilon_fraction, max_error, mean_error, face_count: faces.len() }
 }
 
 /// The plane-space grid for ε (a fraction of the bounding-sphere radius) and the mesh's faces
@@ -556,7 +589,124 @@ pub fn select_planes_within_budget(
         Some(step) => smallest_fitting.filter(|smallest| smallest.step == step).expect("the answer was probed and fits"),
         None => greedy_at(BUDGET_LADDER_STEPS),
     };
-    finish_planes(&chosen.grid, &chosen.faces, chosen.greedy, face_materials, chosen.epsilon_fraction)
+    let finish = Finish::Budget { planes: cap as usize };
+    finish_planes(&chosen.grid, &chosen.faces, chosen.greedy, face_materials, chosen.epsilon_fraction, finish)
+}
+
+/// Rounds of the k-planes refinement of a budget's planes (it stops early once no face moves).
+const BUDGET_REFINEMENT_ROUNDS: usize = 24;
+/// Planes seeded at most per round while a budget's planes are fewer than it allows.
+const BUDGET_SEEDS_PER_ROUND: usize = 16;
+/// What a face's misalignment with its plane costs, per unit of its size (√area), beside its
+/// distance: a face at angle α to its plane is drawn foreshortened by cos α in every view, so
+/// it loses a fraction 1 − |cos α| of its coverage. Chosen on the corpus trees at 64 quads
+/// (0.5 to 1.5 give mean IoUs within 0.006 of each other).
+const MISALIGNMENT_WEIGHT: f32 = 0.75;
+
+/// What drawing `face` on the plane (`normal`, `rho`) costs the views: its mean vertex distance
+/// from the plane (in a view at angle θ to the plane, the face is drawn displaced by that
+/// distance × sin θ) plus its misalignment, weighted by its size.
+fn placement_cost(face: &Face, normal: Vec3, rho: f32) -> f32 {
+    face.mean_distance_to(normal, rho) + MISALIGNMENT_WEIGHT * face.area.sqrt() * (1.0 - face.normal.dot(normal).abs())
+}
+
+/// Refines a budget's planes as k-planes (Lloyd's algorithm with planes for centres): every face
+/// moves to the plane, among those holding its material, where `placement_cost` is least, then
+/// every plane is refitted to its faces (area-weighted least squares), until no face moves or
+/// BUDGET_REFINEMENT_ROUNDS rounds have run. The ε the search found no longer binds: the budget
+/// does, and the mean error is what the views see, so faces may end farther than ε from their
+/// plane (`max_error` reports it). While there are fewer planes than `cap` (the greedy pass at
+/// the smallest fitting ε can stop short of the budget), every other round seeds up to
+/// BUDGET_SEEDS_PER_ROUND new planes, each the own plane of the costliest face of one of the
+/// costliest planes. On the corpus trees at 64 quads this raises the mean IoU by 0.013 to 0.033.
+/// Deterministic: faces decide alone, ties keep the current plane, seeds go in a stable order.
+fn refine_planes_for_budget(faces: &[Face], face_materials: &[u32], planes: &mut Vec<(Vec3, f32, Vec<u32>)>, cap: usize) {
+    for round in 0..BUDGET_REFINEMENT_ROUNDS {
+        let seeded = if round % 2 == 0 && planes.len() < cap { seed_costliest_faces(faces, planes, cap - planes.len()) } else { 0 };
+        let mut assignment = vec![usize::MAX; faces.len()];
+        for (plane, (_, _, members)) in planes.iter().enumerate() {
+            for &index in members {
+                assignment[index as usize] = plane;
+            }
+        }
+        let normals: Vec<Vec3> = planes.iter().map(|plane| plane.0).collect();
+        let offsets: Vec<f32> = planes.iter().map(|plane| plane.1).collect();
+        let materials: Vec<Vec<u32>> = planes.iter().map(|(_, _, members)| materials_of_faces(members, face_materials)).collect();
+        let candidates = Candidates { normals: &normals, offsets: &offsets, materials: &materials };
+        let moved: Vec<Option<usize>> = faces
+            .par_iter()
+            .zip(&assignment)
+            .enumerate()
+            .map(|(index, (face, &current))| {
+                (current != usize::MAX).then(|| cheaper_plane(face, face_materials[index], current, &candidates)).flatten()
+            })
+            .collect();
+        if seeded == 0 && moved.iter().all(Option::is_none) {
+            return;
+        }
+        for (slot, moved) in assignment.iter_mut().zip(moved) {
+            if let Some(plane) = moved {
+                *slot = plane;
+            }
+        }
+        for plane in planes.iter_mut() {
+            plane.2.clear();
+        }
+        for (index, &plane) in assignment.iter().enumerate() {
+            if plane != usize::MAX {
+                planes[plane].2.push(index as u32);
+            }
+        }
+        planes.retain(|(_, _, members)| !members.is_empty());
+        // No ε constraint: the plane nearest its faces in the least-squares sense.
+        planes.par_iter_mut().for_each(|(normal, rho, members)| (*normal, *rho) = fit_plane(faces, members, *normal, *rho, f32::INFINITY));
+    }
+}
+
+/// Adds up to `wanted` planes, each through the costliest face of one of the planes of the
+/// highest total `placement_cost` (area-weighted), holding that face; returns how many.
+fn seed_costliest_faces(faces: &[Face], planes: &mut Vec<(Vec3, f32, Vec<u32>)>, wanted: usize) -> usize {
+    let mut costliest: Vec<(f32, usize, u32)> = planes
+        .par_iter()
+        .enumerate()
+        .filter_map(|(plane, (normal, rho, members))| {
+            let costs = members.iter().map(|&index| (faces[index as usize].area * placement_cost(&faces[index as usize], *normal, *rho), index));
+            let (total, worst) = costs.fold((0.0f32, None::<(f32, u32)>), |(total, worst), (cost, index)| {
+                (total + cost, if worst.is_none_or(|(most, _)| cost > most) { Some((cost, index)) } else { worst })
+            });
+            worst.map(|(_, face)| (total, plane, face))
+        })
+        .collect();
+    costliest.sort_by(|a, b| b.0.total_cmp(&a.0).then(a.1.cmp(&b.1)));
+    let seeds: Vec<u32> = costliest.iter().take(wanted.min(BUDGET_SEEDS_PER_ROUND)).map(|&(_, _, face)| face).collect();
+    for &index in &seeds {
+        let face = &faces[index as usize];
+        // A plane and its flip are one plane: the grid's hemisphere (z ≥ 0).
+        let normal = if face.normal.z < 0.0 { -face.normal } else { face.normal };
+        let centroid = (face.vertices[0] + face.vertices[1] + face.vertices[2]) / 3.0;
+        planes.push((normal, normal.dot(centroid), vec![index]));
+    }
+    seeds.len()
+}
+
+/// The plane holding `material` where `placement_cost` of `face` is strictly below that on plane
+/// `current`, the cheapest, if any. The centroid's distance bounds the cost from below (a mean of
+/// the vertex distances is at least the distance of their mean), so the exact cost is computed
+/// only for planes that pass near the face.
+fn cheaper_plane(face: &Face, material: u32, current: usize, candidates: &Candidates) -> Option<usize> {
+    let centroid = (face.vertices[0] + face.vertices[1] + face.vertices[2]) / 3.0;
+    let mut best_cost = placement_cost(face, candidates.normals[current], candidates.offsets[current]);
+    let mut best = None;
+    for (plane, (&normal, &offset)) in candidates.normals.iter().zip(candidates.offsets).enumerate() {
+        if (normal.dot(centroid) - offset).abs() >= best_cost || plane == current {
+            continue;
+        }
+        let cost = placement_cost(face, normal, offset);
+        if cost < best_cost && candidates.materials[plane].binary_search(&material).is_ok() {
+            (best_cost, best) = (cost, Some(plane));
+        }
+    }
+    best
 }
 
 /// Moves every face to the plane nearest it among those holding its material, then fits the

@@ -26,8 +26,9 @@ use crate::kinds::mesh_queries::{loaded_mesh, mesh_cache_key, mesh_textures};
 use crate::texture::{SurfaceKind, Texture, TextureSlot};
 
 // Planes 2: each plane is fitted to its faces (least squares within ε). 3: faces then move to
-// their nearest plane holding their material (rounds of reassignment and refitting).
-pub const PLANES: Stage = Stage { name: "planes", version: 4 };
+// their nearest plane holding their material (rounds of reassignment and refitting). 5: a
+// budget's planes are refined as k-planes and filled up to the budget; the mean error.
+pub const PLANES: Stage = Stage { name: "planes", version: 5 };
 // Layout 2: faces of solid materials are also drawn on other planes' rectangles they lie within
 // ε of (crack filling).
 pub const LAYOUT: Stage = Stage { name: "layout", version: 3 };

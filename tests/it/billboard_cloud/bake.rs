@@ -195,6 +195,13 @@ fn preview_of_the_bundled_bush_writes_a_contact_sheet_and_metrics() {
     assert_eq!(views.len(), 26);
     let directions: BTreeSet<String> = views.iter().map(|view| view["direction"].to_string()).collect();
     assert_eq!(directions.len(), 26, "26 distinct directions");
+    // Per view, what the LOD misses and draws beyond the source (fractions of the source's
+    // silhouette) are the two sides of its IoU: (1 − missed) / (1 + extra).
+    for view in views {
+        let (iou, missed, extra) = (view["iou"].as_f64().unwrap(), view["missed"].as_f64().unwrap(), view["extra"].as_f64().unwrap());
+        assert!((iou - (1.0 - missed) / (1.0 + extra)).abs() < 1e-9 && missed > 0.0 && extra > 0.0, "{view}");
+    }
+    assert!(metrics["mean_missed"].as_f64().unwrap() > 0.0 && metrics["mean_extra"].as_f64().unwrap() > 0.0, "{metrics}");
     let mean = metrics["mean_iou"].as_f64().unwrap();
     println!("bundled bush, 1024² atlas: mean IoU {mean:.3}, {} samples per pixel", metrics["samples_per_pixel"]);
     assert_eq!(metrics["samples_per_pixel"], 16);

@@ -4,7 +4,7 @@
 
 use std::path::Path;
 
-use cirrus::kinds::billboard_cloud::planes::select_planes_within_budget;
+use cirrus::kinds::billboard_cloud::planes::{select_planes, select_planes_within_budget, PlaneSettings};
 use cirrus::kinds::billboard_cloud::rectangles::{merge_rectangles_to_budget, plane_rectangles};
 
 use crate::support::{build, TempProject};
@@ -73,6 +73,47 @@ fn a_budget_bounds_the_quads_and_every_face_stays_drawn() {
     assert!(epsilons.windows(2).all(|pair| pair[1] <= pair[0]), "{epsilons:?}");
 }
 
+/// The area-weighted mean of |cos| between each face's normal and its plane's (1: every face
+/// drawn unforeshortened).
+fn mean_alignment(positions: &[[f32; 3]], triangles: &[[u32; 3]], planes: &cirrus::kinds::billboard_cloud::planes::PlaneSet) -> f64 {
+    let (mut sum, mut area) = (0.0f64, 0.0f64);
+    for plane in &planes.planes {
+        for &face in &plane.faces {
+            let [a, b, c] = triangles[face as usize].map(|vertex| glam::Vec3::from(positions[vertex as usize]));
+            let cross = (b - a).cross(c - a);
+            sum += cross.normalize_or_zero().dot(glam::Vec3::from(plane.normal)).abs() as f64 * 0.5 * cross.length() as f64;
+            area += 0.5 * cross.length() as f64;
+        }
+    }
+    sum / area
+}
+
+#[test]
+fn a_budgets_planes_are_refined_past_the_greedy_selection() {
+    // The bush at 64 quads: the smallest fitting ε gives the greedy pass fewer planes than the
+    // budget allows; the refinement fills the budget and moves faces and planes so that faces
+    // lie nearer their planes and more nearly parallel to them than at that ε alone.
+    let root = Path::new(env!("CARGO_MANIFEST_DIR"));
+    let obj = std::fs::read(root.join("examples/assets/trees/bush_2.obj")).unwrap();
+    let (bush, _) = cirrus::mesh::load_mesh(Path::new("bush_2.obj"), &obj, &Default::default(), Path::new("")).unwrap();
+    let (positions, triangles, materials) = (&bush.positions, &bush.triangles, &bush.triangle_materials);
+    let budget = select_planes_within_budget(positions, triangles, materials, 64, None);
+    let settings = PlaneSettings { epsilon: budget.epsilon_fraction, max_planes: None, max_quads: None };
+    let at_epsilon = select_planes(positions, triangles, materials, settings);
+    assert!(at_epsilon.planes.len() < 64, "the greedy pass alone fills the budget: {}", at_epsilon.planes.len());
+    assert_eq!(budget.planes.len(), 64, "the refinement seeds planes up to the budget");
+    assert!(
+        budget.mean_error < 0.95 * at_epsilon.mean_error,
+        "mean error {} refined against {} at ε alone",
+        budget.mean_error,
+        at_epsilon.mean_error
+    );
+    let (refined, greedy) = (mean_alignment(positions, triangles, &budget), mean_alignment(positions, triangles, &at_epsilon));
+    assert!(refined > greedy + 0.03, "mean |cos| {refined} refined against {greedy} at ε alone");
+    assert!(budget.max_error > budget.epsilon, "the refinement is not held to ε");
+    assert_budget_covers_every_face(positions, triangles, materials, 64);
+}
+
 #[test]
 fn a_budgeted_bake_writes_at_most_that_many_quads() {
     let project = TempProject::new(
@@ -91,7 +132,9 @@ fn a_budgeted_bake_writes_at_most_that_many_quads() {
         assert!(lod <= quads && lod > 0, "{name}: {lod} quads");
         assert_eq!(report["quads"], lod, "{name}");
         assert_eq!(report["budget_quads"], quads, "{name}");
-        assert!(report["max_error_world"].as_f64().unwrap() <= report["epsilon_world"].as_f64().unwrap() * 1.0001, "{report}");
+        // The refinement lets a face leave its ε-slab; on average they lie well within it.
+        assert!(report["mean_error_world"].as_f64().unwrap() < report["epsilon_world"].as_f64().unwrap(), "{report}");
+        assert!(report["max_error_world"].as_f64().unwrap() >= report["mean_error_world"].as_f64().unwrap(), "{report}");
     }
 }
 
@@ -116,8 +159,11 @@ fn the_atlas_follows_the_screen_size_the_lod_is_meant_for() {
         let atlas = &report["atlas"];
         // One texel per pixel at that size (lowered only if the atlas would pass max_size).
         let density = atlas["texel_density"].as_f64().unwrap();
-        assert!((density - pixels / diameter).abs() < 1e-3 * density, "{name}: {density} texels per unit for {pixels} px over {diameter}");
-        sides.push(atlas["width"].as_u64().unwrap().max(atlas["height"].as_u64().unwrap()));
+        let side = atlas["width"].as_u64().unwrap().max(atlas["height"].as_u64().unwrap());
+        let wanted = pixels / diameter;
+        let exact = (density - wanted).abs() < 1e-3 * density;
+        assert!(exact || (side == 2048 && density < wanted), "{name}: {density} texels per unit for {pixels} px over {diameter}");
+        sides.push(side);
     }
     assert!(sides[0] * 4 <= sides[1], "an LOD meant for 64 px gets a far smaller atlas than one for 512: {sides:?}");
 }

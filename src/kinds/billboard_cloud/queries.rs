@@ -31,7 +31,8 @@ use crate::texture::{SurfaceKind, Texture, TextureSlot};
 pub const PLANES: Stage = Stage { name: "planes", version: 5 };
 // Layout 2: faces of solid materials are also drawn on other planes' rectangles they lie within
 // ε of (crack filling).
-pub const LAYOUT: Stage = Stage { name: "layout", version: 3 };
+// 4: the density fills the atlas as far as the packer can (bisection after the 5 % steps).
+pub const LAYOUT: Stage = Stage { name: "layout", version: 4 };
 // Render 2–5: coverage-preserving mips of alpha sources; transparent texels keep their
 // footprint's colour; sRGB bytes from tables; no coverage scaling when all or none pass.
 pub const RENDER: Stage = Stage { name: "render", version: 5 };

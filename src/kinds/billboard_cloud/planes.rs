@@ -495,7 +495,11 @@ pub struct LadderProbe {
 /// bisection. On power laws this takes 4 probes on average (at most 8) where bisection takes 9
 /// or 10, with the same answer wherever the count is monotone; on the corpus trees, whose counts
 /// wobble by a few planes from step to step near the answer, 5 to 9.
-pub fn search_epsilon_ladder(cap: f32, mut probe: impl FnMut(u32) -> LadderProbe) -> Option<u32> {
+///
+/// A fitting probe with at least `enough` planes ends the search at once (infinity: the smallest
+/// fitting step, always): a budget's planes are refined and filled up to the cap afterwards, so
+/// a step whose greedy pass comes near the cap serves as well as the smallest.
+pub fn search_epsilon_ladder(cap: f32, enough: f32, mut probe: impl FnMut(u32) -> LadderProbe) -> Option<u32> {
     let step_log = (BUDGET_EPSILON_RANGE.1 / BUDGET_EPSILON_RANGE.0).ln() / BUDGET_LADDER_STEPS as f32;
     // The highest step known not to fit and the lowest known to fit.
     let (mut highest_failing, mut lowest_fitting): (Option<u32>, Option<u32>) = (None, None);
@@ -508,6 +512,9 @@ pub fn search_epsilon_ladder(cap: f32, mut probe: impl FnMut(u32) -> LadderProbe
         let result = LadderProbe { planes: result.planes.max(1.0), ..result };
         same_side = if probes.last().is_some_and(|(_, last)| last.fits == result.fits) { same_side + 1 } else { 0 };
         if result.fits {
+            if result.planes >= enough {
+                return Some(next);
+            }
             lowest_fitting = Some(next);
         } else {
             highest_failing = Some(next);
@@ -540,6 +547,12 @@ pub fn search_epsilon_ladder(cap: f32, mut probe: impl FnMut(u32) -> LadderProbe
     }
 }
 
+/// The budget search stops at a fitting step whose greedy pass needs at least this fraction of
+/// the budget's planes (the refinement seeds the rest). On the corpus bush's LOD chain
+/// [512, 128, 32] this takes the three planes stages from 4.6 s to 1.6 s, each level's mean IoU
+/// within 0.003 of the smallest step's.
+const BUDGET_ENOUGH_PLANES: f32 = 0.9;
+
 /// A probe of the budget search: the greedy pass at one ladder step, with what it ran on.
 struct LadderStep {
     step: u32,
@@ -569,9 +582,11 @@ pub fn select_planes_within_budget(
         let greedy = greedy_planes(&grid, &faces, cap as usize);
         LadderStep { step, grid, faces, greedy, epsilon_fraction }
     };
-    // The fitting probe of the smallest step is finished into the plane set.
-    let mut smallest_fitting: Option<LadderStep> = None;
-    let found = search_epsilon_ladder(cap as f32, |step| {
+    // The fitting probe of the step found is finished into the plane set: the smallest, or the
+    // last probed when it had enough planes.
+    let mut fitting: Vec<LadderStep> = Vec::new();
+    let enough = (BUDGET_ENOUGH_PLANES * cap as f32).ceil();
+    let found = search_epsilon_ladder(cap as f32, enough, |step| {
         let probed = greedy_at(step);
         let (faces, greedy) = (&probed.faces, &probed.greedy);
         let fits = greedy.holds_every_face(faces);
@@ -580,13 +595,13 @@ pub fn select_planes_within_budget(
         let left_over = greedy.assigned.iter().zip(faces).filter(|(&held, face)| !held && face.area > 0.0).count();
         let last_plane_faces = greedy.planes.last().map_or(1, |(_, _, members)| members.len().max(1));
         let planes = greedy.planes.len() as f32 + (left_over as f32 / last_plane_faces as f32).ceil();
-        if fits && smallest_fitting.as_ref().is_none_or(|smallest| step < smallest.step) {
-            smallest_fitting = Some(probed);
+        if fits {
+            fitting.push(probed);
         }
         LadderProbe { fits, planes }
     });
     let chosen = match found {
-        Some(step) => smallest_fitting.filter(|smallest| smallest.step == step).expect("the answer was probed and fits"),
+        Some(step) => fitting.into_iter().find(|probed| probed.step == step).expect("the answer was probed and fits"),
         None => greedy_at(BUDGET_LADDER_STEPS),
     };
     let finish = Finish::Budget { planes: cap as usize };

@@ -179,7 +179,7 @@ fn the_epsilon_search_finds_the_smallest_fitting_step_in_few_probes() {
             let count = |step: u32| (20.0 * ladder_epsilon(step).powf(-alpha)).floor();
             let expected = (0..=BUDGET_LADDER_STEPS).find(|&step| count(step) <= cap as f32);
             let mut probes = 0;
-            let found = search_epsilon_ladder(cap as f32, |step| {
+            let found = search_epsilon_ladder(cap as f32, f32::INFINITY, |step| {
                 probes += 1;
                 let planes = count(step);
                 let fits = planes <= cap as f32;
@@ -194,11 +194,33 @@ fn the_epsilon_search_finds_the_smallest_fitting_step_in_few_probes() {
     // Any boundary, with counts that say nothing: never wrong, never more than twice bisection.
     for boundary in [0, 1, 2, 100, 255, 256, 257, 400, 511, 512, 513] {
         let mut probes = 0;
-        let found = search_epsilon_ladder(50.0, |step| {
+        let found = search_epsilon_ladder(50.0, f32::INFINITY, |step| {
             probes += 1;
             LadderProbe { fits: step >= boundary, planes: if step >= boundary { 50.0 } else { 51.0 } }
         });
         assert_eq!(found, (boundary <= BUDGET_LADDER_STEPS).then_some(boundary), "boundary {boundary}");
         assert!(probes <= 20, "boundary {boundary}: {probes} probes");
     }
+    // Enough planes end the search: a fitting step with at least 90 % of the cap, in fewer probes.
+    let (mut exact_probes, mut enough_probes) = (0, 0);
+    for alpha in [0.7f32, 1.3, 2.2, 3.5] {
+        for cap in [32u32, 64, 512, 5000] {
+            let count = |step: u32| (20.0 * ladder_epsilon(step).powf(-alpha)).floor();
+            let search = |enough: f32, probes: &mut u32| {
+                search_epsilon_ladder(cap as f32, enough, |step| {
+                    *probes += 1;
+                    LadderProbe { fits: count(step) <= cap as f32, planes: count(step) }
+                })
+            };
+            let (smallest, found) = (search(f32::INFINITY, &mut exact_probes), search((0.9 * cap as f32).ceil(), &mut enough_probes));
+            let (Some(smallest), Some(found)) = (smallest, found) else {
+                assert_eq!((smallest, found), (None, None), "α {alpha}, cap {cap}");
+                continue;
+            };
+            assert!(count(found) <= cap as f32, "α {alpha}, cap {cap}: step {found} does not fit");
+            assert!(found == smallest || count(found) >= (0.9 * cap as f32).ceil(), "α {alpha}, cap {cap}: {} planes", count(found));
+        }
+    }
+    println!("{enough_probes} probes with enough planes, {exact_probes} for the smallest step");
+    assert!(enough_probes < exact_probes, "{enough_probes} probes with enough planes, {exact_probes} for the smallest step");
 }

@@ -638,12 +638,7 @@ fn placement_cost(face: &Face, normal: Vec3, rho: f32) -> f32 {
 fn refine_planes_for_budget(faces: &[Face], face_materials: &[u32], planes: &mut Vec<(Vec3, f32, Vec<u32>)>, cap: usize) {
     for round in 0..BUDGET_REFINEMENT_ROUNDS {
         let seeded = if round % 2 == 0 && planes.len() < cap { seed_costliest_faces(faces, planes, cap - planes.len()) } else { 0 };
-        let mut assignment = vec![usize::MAX; faces.len()];
-        for (plane, (_, _, members)) in planes.iter().enumerate() {
-            for &index in members {
-                assignment[index as usize] = plane;
-            }
-        }
+        let mut assignment = plane_of_each_face(faces.len(), planes);
         let normals: Vec<Vec3> = planes.iter().map(|plane| plane.0).collect();
         let offsets: Vec<f32> = planes.iter().map(|plane| plane.1).collect();
         let materials: Vec<Vec<u32>> = planes.iter().map(|(_, _, members)| materials_of_faces(members, face_materials)).collect();
@@ -685,7 +680,8 @@ fn seed_costliest_faces(faces: &[Face], planes: &mut Vec<(Vec3, f32, Vec<u32>)>,
         .par_iter()
         .enumerate()
         .filter_map(|(plane, (normal, rho, members))| {
-            let costs = members.iter().map(|&index| (faces[index as usize].area * placement_cost(&faces[index as usize], *normal, *rho), index));
+            let costs =
+                members.iter().map(|&index| (faces[index as usize].area * placement_cost(&faces[index as usize], *normal, *rho), index));
             let (total, worst) = costs.fold((0.0f32, None::<(f32, u32)>), |(total, worst), (cost, index)| {
                 (total + cost, if worst.is_none_or(|(most, _)| cost > most) { Some((cost, index)) } else { worst })
             });
@@ -736,12 +732,7 @@ fn cheaper_plane(face: &Face, material: u32, current: usize, candidates: &Candid
 /// selection or fewer. Planes left without faces are dropped by the caller. Deterministic:
 /// every face decides alone, ties keep the current plane.
 fn reassign_to_nearest_planes(faces: &[Face], face_materials: &[u32], planes: &mut [(Vec3, f32, Vec<u32>)], epsilon: f32) {
-    let mut assignment = vec![usize::MAX; faces.len()];
-    for (plane, (_, _, members)) in planes.iter().enumerate() {
-        for &index in members {
-            assignment[index as usize] = plane;
-        }
-    }
+    let mut assignment = plane_of_each_face(faces.len(), planes);
     for round in 0..=REASSIGNMENT_ROUNDS {
         let normals: Vec<Vec3> = planes.iter().map(|plane| plane.0).collect();
         let offsets: Vec<f32> = planes.iter().map(|plane| plane.1).collect();
@@ -774,6 +765,17 @@ fn reassign_to_nearest_planes(faces: &[Face], face_materials: &[u32], planes: &m
         }
         planes.par_iter_mut().for_each(|(normal, rho, members)| (*normal, *rho) = fit_plane(faces, members, *normal, *rho, epsilon));
     }
+}
+
+/// Each face's plane (usize::MAX: none; a face listed by several planes: the last).
+fn plane_of_each_face(face_count: usize, planes: &[(Vec3, f32, Vec<u32>)]) -> Vec<usize> {
+    let mut assignment = vec![usize::MAX; face_count];
+    for (plane, (_, _, members)) in planes.iter().enumerate() {
+        for &index in members {
+            assignment[index as usize] = plane;
+        }
+    }
+    assignment
 }
 
 /// The materials `faces` use (`face_materials` per face; empty: one material), ascending.

@@ -154,12 +154,10 @@ pub fn preview_chain(
 
 /// The mean and worst of one LOD's per-view figures.
 fn summarise_views(views: Vec<ViewMetrics>, samples_per_pixel: u32) -> PreviewMetrics {
-    let count = views.len().max(1) as f64;
-    let mean_iou = views.iter().map(|view| view.iou).sum::<f64>() / count;
+    let mean = |figure: fn(&ViewMetrics) -> f64| views.iter().map(figure).sum::<f64>() / views.len().max(1) as f64;
+    let (mean_iou, mean_missed, mean_extra, mean_psnr) =
+        (mean(|view| view.iou), mean(|view| view.missed), mean(|view| view.extra), mean(|view| view.psnr));
     let min_iou = views.iter().map(|view| view.iou).fold(1.0, f64::min);
-    let mean_missed = views.iter().map(|view| view.missed).sum::<f64>() / count;
-    let mean_extra = views.iter().map(|view| view.extra).sum::<f64>() / count;
-    let mean_psnr = views.iter().map(|view| view.psnr).sum::<f64>() / count;
     PreviewMetrics { samples_per_pixel, views, mean_iou, min_iou, mean_missed, mean_extra, mean_psnr }
 }
 

@@ -639,34 +639,11 @@ fn refine_planes_for_budget(faces: &[Face], face_materials: &[u32], planes: &mut
     for round in 0..BUDGET_REFINEMENT_ROUNDS {
         let seeded = if round % 2 == 0 && planes.len() < cap { seed_costliest_faces(faces, planes, cap - planes.len()) } else { 0 };
         let mut assignment = plane_of_each_face(faces.len(), planes);
-        let normals: Vec<Vec3> = planes.iter().map(|plane| plane.0).collect();
-        let offsets: Vec<f32> = planes.iter().map(|plane| plane.1).collect();
-        let materials: Vec<Vec<u32>> = planes.iter().map(|(_, _, members)| materials_of_faces(members, face_materials)).collect();
-        let candidates = Candidates { normals: &normals, offsets: &offsets, materials: &materials };
-        let moved: Vec<Option<usize>> = faces
-            .par_iter()
-            .zip(&assignment)
-            .enumerate()
-            .map(|(index, (face, &current))| {
-                (current != usize::MAX).then(|| cheaper_plane(face, face_materials[index], current, &candidates)).flatten()
-            })
-            .collect();
-        if seeded == 0 && moved.iter().all(Option::is_none) {
+        let moved = move_faces_to_better_planes(faces, face_materials, planes, &mut assignment, placement_cost);
+        if seeded == 0 && !moved {
             return;
         }
-        for (slot, moved) in assignment.iter_mut().zip(moved) {
-            if let Some(plane) = moved {
-                *slot = plane;
-            }
-        }
-        for plane in planes.iter_mut() {
-            plane.2.clear();
-        }
-        for (index, &plane) in assignment.iter().enumerate() {
-            if plane != usize::MAX {
-                planes[plane].2.push(index as u32);
-            }
-        }
+        list_members(planes, &assignment);
         planes.retain(|(_, _, members)| !members.is_empty());
         // No ε constraint: the plane nearest its faces in the least-squares sense.
         planes.par_iter_mut().for_each(|(normal, rho, members)| (*normal, *rho) = fit_plane(faces, members, *normal, *rho, f32::INFINITY));
@@ -700,26 +677,6 @@ fn seed_costliest_faces(faces: &[Face], planes: &mut Vec<(Vec3, f32, Vec<u32>)>,
     seeds.len()
 }
 
-/// The plane holding `material` where `placement_cost` of `face` is strictly below that on plane
-/// `current`, the cheapest, if any. The centroid's distance bounds the cost from below (a mean of
-/// the vertex distances is at least the distance of their mean), so the exact cost is computed
-/// only for planes that pass near the face.
-fn cheaper_plane(face: &Face, material: u32, current: usize, candidates: &Candidates) -> Option<usize> {
-    let centroid = (face.vertices[0] + face.vertices[1] + face.vertices[2]) / 3.0;
-    let mut best_cost = placement_cost(face, candidates.normals[current], candidates.offsets[current]);
-    let mut best = None;
-    for (plane, (&normal, &offset)) in candidates.normals.iter().zip(candidates.offsets).enumerate() {
-        if (normal.dot(centroid) - offset).abs() >= best_cost || plane == current {
-            continue;
-        }
-        let cost = placement_cost(face, normal, offset);
-        if cost < best_cost && candidates.materials[plane].binary_search(&material).is_ok() {
-            (best_cost, best) = (cost, Some(plane));
-        }
-    }
-    best
-}
-
 /// Moves every face to the plane nearest it among those holding its material, then fits the
 /// planes to their new members, for up to REASSIGNMENT_ROUNDS rounds, and ends with one last
 /// move so each face sits on its nearest such plane. The greedy selection gives a chosen plane
@@ -734,32 +691,10 @@ fn cheaper_plane(face: &Face, material: u32, current: usize, candidates: &Candid
 fn reassign_to_nearest_planes(faces: &[Face], face_materials: &[u32], planes: &mut [(Vec3, f32, Vec<u32>)], epsilon: f32) {
     let mut assignment = plane_of_each_face(faces.len(), planes);
     for round in 0..=REASSIGNMENT_ROUNDS {
-        let normals: Vec<Vec3> = planes.iter().map(|plane| plane.0).collect();
-        let offsets: Vec<f32> = planes.iter().map(|plane| plane.1).collect();
-        let materials: Vec<Vec<u32>> = planes.iter().map(|(_, _, members)| materials_of_faces(members, face_materials)).collect();
-        let candidates = Candidates { normals: &normals, offsets: &offsets, materials: &materials };
-        let moved: Vec<Option<usize>> = faces
-            .par_iter()
-            .zip(&assignment)
-            .enumerate()
-            .map(|(index, (face, &current))| nearer_plane(face, face_materials[index], current, &candidates))
-            .collect();
-        let mut changed = false;
-        for (slot, moved) in assignment.iter_mut().zip(moved) {
-            if let Some(plane) = moved {
-                *slot = plane;
-                changed = true;
-            }
-        }
-        if !changed {
+        if !move_faces_to_better_planes(faces, face_materials, planes, &mut assignment, Face::distance_to) {
             return;
         }
-        for plane in planes.iter_mut() {
-            plane.2.clear();
-        }
-        for (index, &plane) in assignment.iter().enumerate() {
-            planes[plane].2.push(index as u32);
-        }
+        list_members(planes, &assignment);
         if round == REASSIGNMENT_ROUNDS {
             return;
         }
@@ -793,20 +728,72 @@ struct Candidates<'a> {
     materials: &'a [Vec<u32>],
 }
 
-/// The plane holding `material` strictly nearer `face` than plane `current` (largest vertex
-/// distance), if any. The centroid's distance is a lower bound (a mean of the vertex
-/// distances), so the exact test runs only for planes that pass near the face.
-fn nearer_plane(face: &Face, material: u32, current: usize, candidates: &Candidates) -> Option<usize> {
+/// One round of moves: every face with a plane (`assignment`, indices into `planes`) goes to the
+/// plane holding its material where `cost` is strictly below that on its own plane, the lowest
+/// (see `better_plane`); each face decides alone, in parallel. Whether any face moved. The
+/// planes' member lists are left as they were (see `list_members`).
+fn move_faces_to_better_planes(
+    faces: &[Face],
+    face_materials: &[u32],
+    planes: &[(Vec3, f32, Vec<u32>)],
+    assignment: &mut [usize],
+    cost: impl Fn(&Face, Vec3, f32) -> f32 + Sync,
+) -> bool {
+    let normals: Vec<Vec3> = planes.iter().map(|plane| plane.0).collect();
+    let offsets: Vec<f32> = planes.iter().map(|plane| plane.1).collect();
+    let materials: Vec<Vec<u32>> = planes.iter().map(|(_, _, members)| materials_of_faces(members, face_materials)).collect();
+    let candidates = Candidates { normals: &normals, offsets: &offsets, materials: &materials };
+    let moved: Vec<Option<usize>> = faces
+        .par_iter()
+        .zip(&*assignment)
+        .enumerate()
+        .map(|(index, (face, &current))| {
+            (current != usize::MAX).then(|| better_plane(face, face_materials[index], current, &candidates, &cost)).flatten()
+        })
+        .collect();
+    let mut changed = false;
+    for (slot, moved) in assignment.iter_mut().zip(moved) {
+        if let Some(plane) = moved {
+            *slot = plane;
+            changed = true;
+        }
+    }
+    changed
+}
+
+/// Rewrites every plane's members from `assignment` (faces in ascending order; usize::MAX: none).
+fn list_members(planes: &mut [(Vec3, f32, Vec<u32>)], assignment: &[usize]) {
+    for plane in planes.iter_mut() {
+        plane.2.clear();
+    }
+    for (index, &plane) in assignment.iter().enumerate() {
+        if plane != usize::MAX {
+            planes[plane].2.push(index as u32);
+        }
+    }
+}
+
+/// The plane holding `material` where `cost` of `face` is strictly below that on plane
+/// `current`, the lowest, if any (ties keep the earlier plane). `cost` must be at least the
+/// distance of the face's centroid from the plane (true of the largest and of the mean vertex
+/// distance), so the exact cost is computed only for planes that pass near the face.
+fn better_plane(
+    face: &Face,
+    material: u32,
+    current: usize,
+    candidates: &Candidates,
+    cost: &impl Fn(&Face, Vec3, f32) -> f32,
+) -> Option<usize> {
     let centroid = (face.vertices[0] + face.vertices[1] + face.vertices[2]) / 3.0;
-    let mut best_distance = face.distance_to(candidates.normals[current], candidates.offsets[current]);
+    let mut best_cost = cost(face, candidates.normals[current], candidates.offsets[current]);
     let mut best = None;
     for (plane, (&normal, &offset)) in candidates.normals.iter().zip(candidates.offsets).enumerate() {
-        if (normal.dot(centroid) - offset).abs() >= best_distance || plane == current {
+        if (normal.dot(centroid) - offset).abs() >= best_cost || plane == current {
             continue;
         }
-        let distance = face.distance_to(normal, offset);
-        if distance < best_distance && candidates.materials[plane].binary_search(&material).is_ok() {
-            (best_distance, best) = (distance, Some(plane));
+        let plane_cost = cost(face, normal, offset);
+        if plane_cost < best_cost && candidates.materials[plane].binary_search(&material).is_ok() {
+            (best_cost, best) = (plane_cost, Some(plane));
         }
     }
     best

@@ -59,7 +59,12 @@ pub struct SeaweedServer {
     log: PathBuf,
     /// Its data (kept across `stop` and `restart`).
     folder: tempfile::TempDir,
+    /// Whether `READINESS_PROBE` is in the bucket.
+    probe_written: bool,
 }
+
+/// The object each start reads back before the server counts as ready.
+const READINESS_PROBE: &str = "readiness-probe";
 
 /// The ports `weed mini` listens on, from `base`: master, volume, filer, S3, admin, each with its
 /// gRPC port, and the S3 gateway's other protocols.
@@ -87,7 +92,7 @@ impl SeaweedServer {
         let folder = tempfile::tempdir().unwrap();
         let base = free_ports();
         let log = folder.path().join("weed.log");
-        let mut server = SeaweedServer { child: None, base, port: base + 6, log, folder };
+        let mut server = SeaweedServer { child: None, base, port: base + 6, log, folder, probe_written: false };
         server.restart();
         server
     }
@@ -116,15 +121,26 @@ impl SeaweedServer {
         self.wait_until_ready();
     }
 
-    /// Waits until the bucket answers a listing (the server makes it after it starts).
+    /// Waits until the bucket answers a listing (the server makes it after it starts) and a
+    /// probe object reads back. The listing alone is not enough: after a restart the filer
+    /// answers before the volume server has registered again, and reads of the old data fail
+    /// with 500 for a few seconds. The probe is written on the first start (outside every
+    /// test's prefix) and read on each start, so a restart waits until the old data is served.
     fn wait_until_ready(&mut self) {
         let start = Instant::now();
+        let mut bucket = None;
         while start.elapsed() < Duration::from_secs(90) {
             if let Some(status) = self.child.as_mut().unwrap().try_wait().unwrap() {
                 panic!("weed mini exited ({status}) before it served S3: {}", self.log_tail());
             }
             if http_status(self.port, &format!("/{BUCKET}")) == Some(200) {
-                return;
+                let bucket = bucket.get_or_insert_with(|| self.bucket());
+                if !self.probe_written {
+                    self.probe_written = bucket.try_put(READINESS_PROBE, b"ready".to_vec());
+                }
+                if self.probe_written && bucket.try_get(READINESS_PROBE).as_deref() == Some(b"ready".as_slice()) {
+                    return;
+                }
             }
             std::thread::sleep(Duration::from_millis(100));
         }
@@ -208,6 +224,19 @@ impl Bucket {
                 }
             }
             objects
+        })
+    }
+
+    /// Writes an object, saying whether the store took it.
+    fn try_put(&self, path: &str, bytes: Vec<u8>) -> bool {
+        self.runtime.block_on(self.store.put(&object_store::path::Path::from(path), PutPayload::from(bytes))).is_ok()
+    }
+
+    /// An object's bytes, or `None` when the store does not give them now.
+    fn try_get(&self, path: &str) -> Option<Vec<u8>> {
+        self.runtime.block_on(async {
+            let found = self.store.get(&object_store::path::Path::from(path)).await.ok()?;
+            Some(found.bytes().await.ok()?.to_vec())
         })
     }
 

@@ -32,7 +32,8 @@ pub const PLANES: Stage = Stage { name: "planes", version: 5 };
 // Layout 2: faces of solid materials are also drawn on other planes' rectangles they lie within
 // ε of (crack filling).
 // 4: the density fills the atlas as far as the packer can (bisection after the 5 % steps).
-pub const LAYOUT: Stage = Stage { name: "layout", version: 4 };
+// 5: crack filling only next to the other plane's faces.
+pub const LAYOUT: Stage = Stage { name: "layout", version: 5 };
 // Render 2–5: coverage-preserving mips of alpha sources; transparent texels keep their
 // footprint's colour; sRGB bytes from tables; no coverage scaling when all or none pass.
 pub const RENDER: Stage = Stage { name: "render", version: 5 };

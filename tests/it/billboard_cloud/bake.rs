@@ -275,6 +275,47 @@ fn a_solid_trunk_split_between_planes_shows_no_cracks() {
     assert!(solid_min > cut_out_min + 0.1 && solid_mean > cut_out_mean, "{figures:?}");
 }
 
+#[test]
+fn crack_filling_draws_a_face_only_on_planes_it_meets() {
+    // The bundled bush at 64 quads, every material taken as solid: ε is large under a budget,
+    // and a face within ε of another plane is drawn there only when it shares a vertex (by
+    // position) with a face of that plane, where the surface passes from one plane to the other.
+    let root = Path::new(env!("CARGO_MANIFEST_DIR"));
+    let obj = std::fs::read(root.join("examples/assets/trees/bush_2.obj")).unwrap();
+    let (bush, _) = cirrus::mesh::load_mesh(Path::new("bush_2.obj"), &obj, &Default::default(), Path::new("")).unwrap();
+    let (positions, triangles) = (&bush.positions, &bush.triangles);
+    let planes =
+        cirrus::kinds::billboard_cloud::planes::select_planes_within_budget(positions, triangles, &bush.triangle_materials, 64, None);
+    let rectangles = cirrus::kinds::billboard_cloud::rectangles::plane_rectangles(positions, triangles, &planes);
+    let mut rectangles =
+        cirrus::kinds::billboard_cloud::rectangles::merge_rectangles_to_budget(positions, triangles, &planes, rectangles, 64);
+    let solid_materials = vec![true; bush.materials.len().max(1)];
+    let input = cirrus::kinds::billboard_cloud::rectangles::CrackFillingInput {
+        positions,
+        triangles,
+        face_materials: &bush.triangle_materials,
+        solid_materials: &solid_materials,
+    };
+    cirrus::kinds::billboard_cloud::rectangles::add_crack_filling_faces(&input, &planes, &mut rectangles);
+    let corners_of = |face: u32| triangles[face as usize].map(|vertex| positions[vertex as usize].map(f32::to_bits));
+    let mut also_drawn = 0;
+    for rectangle in &rectangles {
+        let plane = &planes.planes[rectangle.plane as usize];
+        let plane_corners: BTreeSet<[u32; 3]> = plane.faces.iter().flat_map(|&face| corners_of(face)).collect();
+        for &face in &rectangle.also_drawn {
+            assert!(!plane.faces.contains(&face), "face {face} is drawn twice on its own plane");
+            assert!(
+                corners_of(face).iter().any(|corner| plane_corners.contains(corner)),
+                "face {face} does not meet plane {}",
+                rectangle.plane
+            );
+            also_drawn += 1;
+        }
+    }
+    println!("bush at 64 quads: {also_drawn} faces also drawn of {}", triangles.len());
+    assert!(also_drawn > 0, "crack filling still draws the faces at the seams");
+}
+
 /// The stages of `asset` in a `build --summary json` printed on stdout: (stage, instance) → status.
 fn stage_statuses(output: &std::process::Output, asset: &str) -> Vec<(String, String, String)> {
     assert!(output.status.success(), "{}", String::from_utf8_lossy(&output.stderr));

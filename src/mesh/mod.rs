@@ -72,6 +72,21 @@ pub struct Mesh {
     pub objects: Vec<String>,
 }
 
+/// Per vertex, the id of its position among the distinct positions (by exact coordinates: a
+/// seam in the normals or texture coordinates splits vertices, not the surface), and how many
+/// distinct positions there are.
+pub fn position_ids(positions: &[[f32; 3]]) -> (Vec<u32>, usize) {
+    let mut ids: std::collections::HashMap<[u32; 3], u32> = std::collections::HashMap::new();
+    let per_vertex = positions
+        .iter()
+        .map(|position| {
+            let next = ids.len() as u32;
+            *ids.entry(position.map(f32::to_bits)).or_insert(next)
+        })
+        .collect();
+    (per_vertex, ids.len())
+}
+
 /// The `mtllib` files an OBJ names, resolved (project-relative) next to it; those outside the
 /// source folder `source_root` are left out (`load_mesh` then warns that they are not found).
 pub fn material_libraries(obj_file: &Path, obj_bytes: &[u8], source_root: &Path) -> Vec<PathBuf> {

@@ -116,24 +116,16 @@ pub struct PnInput<'a> {
 /// normals its vertices carry (the geometry's normal there; a face-area average where those
 /// cancel out).
 pub fn averaged_normals(input: &PnInput) -> (Vec<u32>, Vec<Vec3>) {
-    let mut ids: HashMap<[u32; 3], u32> = HashMap::new();
-    let position_ids: Vec<u32> = input
-        .positions
-        .iter()
-        .map(|position| {
-            let next = ids.len() as u32;
-            *ids.entry(position.map(f32::to_bits)).or_insert(next)
-        })
-        .collect();
+    let (position_ids, distinct_positions) = super::position_ids(input.positions);
     let mut seen: HashMap<(u32, [u32; 3]), ()> = HashMap::new();
-    let mut sums = vec![Vec3::ZERO; ids.len()];
+    let mut sums = vec![Vec3::ZERO; distinct_positions];
     for (vertex, normal) in input.normals.iter().enumerate() {
         let id = position_ids[vertex];
         if seen.insert((id, normal.map(f32::to_bits)), ()).is_none() {
             sums[id as usize] += Vec3::from(*normal);
         }
     }
-    let mut area_sums = vec![Vec3::ZERO; ids.len()];
+    let mut area_sums = vec![Vec3::ZERO; distinct_positions];
     for triangle in input.triangles {
         let [a, b, c] = triangle.map(|vertex| Vec3::from(input.positions[vertex as usize]));
         let face = (b - a).cross(c - a);

@@ -173,16 +173,8 @@ pub fn add_crack_filling_faces(input: &CrackFillingInput, planes: &PlaneSet, rec
     }
     // The planes of the faces around each position (vertices welded by position: a seam in the
     // texture coordinates splits vertices, not the surface).
-    let mut welded: std::collections::HashMap<[u32; 3], u32> = std::collections::HashMap::new();
-    let position_ids: Vec<u32> = input
-        .positions
-        .iter()
-        .map(|position| {
-            let next = welded.len() as u32;
-            *welded.entry(position.map(f32::to_bits)).or_insert(next)
-        })
-        .collect();
-    let mut planes_at_position: Vec<Vec<u32>> = vec![Vec::new(); welded.len()];
+    let (position_ids, distinct_positions) = crate::mesh::position_ids(input.positions);
+    let mut planes_at_position: Vec<Vec<u32>> = vec![Vec::new(); distinct_positions];
     for (face, triangle) in input.triangles.iter().enumerate() {
         if own_plane[face] == u32::MAX {
             continue;

@@ -136,7 +136,7 @@ impl SeaweedServer {
             if http_status(self.port, &format!("/{BUCKET}")) == Some(200) {
                 let bucket = bucket.get_or_insert_with(|| self.bucket());
                 if !self.probe_written {
-                    self.probe_written = bucket.try_put(READINESS_PROBE, b"ready".to_vec());
+                    self.probe_written = bucket.try_put(READINESS_PROBE, b"ready".to_vec()).is_ok();
                 }
                 if self.probe_written && bucket.try_get(READINESS_PROBE).as_deref() == Some(b"ready".as_slice()) {
                     return;
@@ -227,9 +227,9 @@ impl Bucket {
         })
     }
 
-    /// Writes an object, saying whether the store took it.
-    fn try_put(&self, path: &str, bytes: Vec<u8>) -> bool {
-        self.runtime.block_on(self.store.put(&object_store::path::Path::from(path), PutPayload::from(bytes))).is_ok()
+    /// Writes an object.
+    fn try_put(&self, path: &str, bytes: Vec<u8>) -> object_store::Result<object_store::PutResult> {
+        self.runtime.block_on(self.store.put(&object_store::path::Path::from(path), PutPayload::from(bytes)))
     }
 
     /// An object's bytes, or `None` when the store does not give them now.
@@ -241,6 +241,6 @@ impl Bucket {
     }
 
     pub fn put(&self, path: &str, bytes: Vec<u8>) {
-        self.runtime.block_on(self.store.put(&object_store::path::Path::from(path), PutPayload::from(bytes))).unwrap();
+        self.try_put(path, bytes).unwrap();
     }
 }

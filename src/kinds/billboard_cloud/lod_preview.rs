@@ -306,11 +306,6 @@ pub fn lod_view_mesh(files: &LodFiles) -> Result<ViewMesh, Diagnostic> {
     Ok(ViewMesh { batches: vec![(0, vertices)], materials: vec![material] })
 }
 
-/// |A ∩ B| / |A ∪ B| of the silhouettes (pixels at least half covered); 1 when both are empty.
-pub fn silhouette_iou(a: &ResolvedView, b: &ResolvedView) -> f64 {
-    silhouette_overlap(a, b).iou
-}
-
 /// How the silhouette of `lod` overlaps that of `source`.
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub struct SilhouetteOverlap {

@@ -171,8 +171,7 @@ pub fn add_crack_filling_faces(input: &CrackFillingInput, planes: &PlaneSet, rec
         rectangles_of_plane[rectangle.plane as usize].push(index);
         materials_of_rectangle.push(crate::kinds::billboard_cloud::planes::materials_of_faces(&rectangle.faces, input.face_materials));
     }
-    // The planes of the faces around each position (vertices welded by position: a seam in the
-    // texture coordinates splits vertices, not the surface).
+    // The planes of the faces around each position.
     let (position_ids, distinct_positions) = crate::mesh::position_ids(input.positions);
     let mut planes_at_position: Vec<Vec<u32>> = vec![Vec::new(); distinct_positions];
     for (face, triangle) in input.triangles.iter().enumerate() {

@@ -86,7 +86,7 @@ fn a_plane_render_covers_its_faces_cuts_alpha_and_encodes_normal_and_height() {
 
 #[test]
 fn a_resolved_pixel_is_in_the_silhouette_when_half_its_samples_are_covered() {
-    use cirrus::kinds::billboard_cloud::lod_preview::{resolve_samples, silhouette_iou, silhouette_overlap, ResolvedView};
+    use cirrus::kinds::billboard_cloud::lod_preview::{resolve_samples, silhouette_overlap, ResolvedView};
     // Two by two pixels of 4 × 4 samples: white where covered, black background. Covered samples
     // per pixel: 16, 8, 7, 0.
     let covered_per_pixel = [16, 8, 7, 0];
@@ -106,7 +106,7 @@ fn a_resolved_pixel_is_in_the_silhouette_when_half_its_samples_are_covered() {
     assert_eq!(view.rgba[12..16], [0, 0, 0, 0]);
     let one_pixel = resolve_samples(&samples[..4 * 4 * 4], 1, 1);
     assert_eq!((one_pixel.covered[0], one_pixel.in_silhouette(0)), (1, true));
-    assert_eq!(silhouette_iou(&view, &view), 1.0);
+    assert_eq!(silhouette_overlap(&view, &view).iou, 1.0);
     // A LOD covering pixels 0 and 2 of the source's 0 and 1: one of the source's two pixels
     // missed, one pixel extra.
     let lod = ResolvedView { rgba: vec![0; 16], covered: vec![16, 0, 9, 0], samples_per_pixel: 16 };

@@ -6,6 +6,7 @@ use std::sync::Arc;
 use bytemuck::{Pod, Zeroable};
 
 use super::*;
+use crate::texture::distance_alpha::SupersampledCutOut;
 use crate::texture::TextureSlot;
 
 #[repr(C)]
@@ -63,11 +64,24 @@ pub struct PlaneRenderInput<'a> {
     pub frame: RectangleFrame,
     pub epsilon: f32,
     pub alpha_cutoff: f32,
+    /// The images' size in texels.
     pub width: u32,
     pub height: u32,
+    /// Samples per texel along each axis: the faces are rendered at this many times the size,
+    /// then brought down with a distance-field alpha (`texture::distance_alpha`); 1 renders the
+    /// texels themselves, alpha 1 where a face covers the texel's centre.
+    pub supersampling: u32,
     /// (material index, that material's triangles' vertices).
     pub batches: Vec<(usize, Vec<RenderVertex>)>,
     pub materials: &'a [RenderMaterial],
+}
+
+impl PlaneRenderInput<'_> {
+    /// The size the faces are rendered at: the texels times the supersampling.
+    fn sampled_size(&self) -> (u32, u32) {
+        let factor = self.supersampling.max(1);
+        (self.width.max(1) * factor, self.height.max(1) * factor)
+    }
 }
 
 /// The four images of one plane, RGBA8, rows from the top (the plane's +Y edge), one after the
@@ -170,7 +184,7 @@ impl Gpu {
             // Rectangles are stacked from the top; a stack holds at least one of them.
             let (mut chunk_end, mut stack_width, mut stack_height) = (chunk_start, 0u32, 0u32);
             while let Some(input) = inputs.get(chunk_end) {
-                let (width, height) = (input.width.max(1), input.height.max(1));
+                let (width, height) = input.sampled_size();
                 let (grown_width, grown_height) = (stack_width.max(width), stack_height + height);
                 let too_big = grown_height > self.max_texture_size || grown_width as u64 * grown_height as u64 > MAX_STACK_TEXELS;
                 if chunk_end > chunk_start && too_big {
@@ -195,8 +209,10 @@ impl Gpu {
 
         struct StackedDraws {
             top: u32,
+            /// Size in samples.
             width: u32,
             height: u32,
+            supersampling: u32,
             frame_buffer: wgpu::Buffer,
             frame_group: wgpu::BindGroup,
             /// Vertex range in the stack's one vertex buffer, and the material.
@@ -232,8 +248,16 @@ impl Gpu {
                 all_vertices.extend_from_slice(vertices);
                 draws.push((first..all_vertices.len() as u32, self.material_group(material, input.alpha_cutoff)));
             }
-            let (rectangle_width, rectangle_height) = (input.width.max(1), input.height.max(1));
-            stacked.push(StackedDraws { top, width: rectangle_width, height: rectangle_height, frame_buffer, frame_group, draws });
+            let (rectangle_width, rectangle_height) = input.sampled_size();
+            stacked.push(StackedDraws {
+                top,
+                width: rectangle_width,
+                height: rectangle_height,
+                supersampling: input.supersampling.max(1),
+                frame_buffer,
+                frame_group,
+                draws,
+            });
             top += rectangle_height;
         }
 
@@ -297,7 +321,20 @@ impl Gpu {
                         pixels.extend_from_slice(&image[row as usize * width as usize * 4..][..row_bytes]);
                     }
                 }
-                PlaneImages::in_buffer(rectangle.width, rectangle.height, Arc::new(pixels), 0).expect("the buffer holds four images")
+                let factor = rectangle.supersampling;
+                if factor > 1 {
+                    let length = pixels.len() / PlaneImages::SURFACES.len();
+                    let surfaces: Vec<&[u8]> = pixels.chunks_exact(length).collect();
+                    pixels = crate::texture::distance_alpha::resolve_supersampled_cut_out(&SupersampledCutOut {
+                        surfaces: &surfaces,
+                        width: rectangle.width,
+                        height: rectangle.height,
+                        factor,
+                        first_surface_srgb: true,
+                    });
+                }
+                let (width, height) = (rectangle.width / factor, rectangle.height / factor);
+                PlaneImages::in_buffer(width, height, Arc::new(pixels), 0).expect("the buffer holds four images")
             })
             .collect())
     }

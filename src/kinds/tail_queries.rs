@@ -22,7 +22,7 @@ use crate::texture::Texture;
 // 4, 5: as mips 3, 4; 6: BC4 and BC5 by cirrus's own search (`texture::bc4`); 7: BC1 blocks
 // refined (`texture::bc1`); 8: the cut-out edges of alpha-tested BC7 at the very fast profile.
 pub const MIPS: Stage = Stage { name: "mips", version: 4 };
-pub const ENCODE: Stage = Stage { name: "encode", version: 8 };
+pub const ENCODE: Stage = Stage { name: "encode", version: 9 };
 pub const WRITE: Stage = Stage { name: "write", version: 1 };
 
 /// The cache entry of a finished surface (under its recipe key and under its content key).

@@ -7,6 +7,7 @@ pub mod color;
 pub mod mips;
 pub mod fingerprint;
 pub mod fill;
+pub mod distance_alpha;
 pub mod bc1;
 pub mod bc4;
 pub mod ispc;

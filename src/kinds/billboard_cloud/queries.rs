@@ -36,7 +36,7 @@ pub const PLANES: Stage = Stage { name: "planes", version: 5 };
 pub const LAYOUT: Stage = Stage { name: "layout", version: 5 };
 // Render 2–5: coverage-preserving mips of alpha sources; transparent texels keep their
 // footprint's colour; sRGB bytes from tables; no coverage scaling when all or none pass.
-pub const RENDER: Stage = Stage { name: "render", version: 5 };
+pub const RENDER: Stage = Stage { name: "render", version: 6 };
 pub const ATLAS: Stage = Stage { name: "atlas", version: 1 };
 pub const LOD: Stage = Stage { name: "lod", version: 1 };
 
@@ -322,6 +322,7 @@ pub fn plane_images(db: &dyn Db, asset: Asset, level: u32, group: u32) -> Result
                     alpha_cutoff,
                     width: placement.width,
                     height: placement.height,
+                    supersampling: super::render_groups::plane_supersampling(placement.width, placement.height),
                     batches: super::render_groups::face_batches(
                         &loaded.mesh,
                         &loaded.tangents,

@@ -10,6 +10,24 @@ use crate::gpu::RenderVertex;
 use crate::kinds::billboard_cloud::rectangles::PlaneRectangle;
 use crate::mesh::Mesh;
 
+/// Samples per texel along each axis of the plane renders: two, brought down with a
+/// distance-field alpha, put cut-out edges between texels where the samples put them (at 256
+/// quads, mean IoU: oak 0.896 → 0.904, ash 0.808 → 0.827, bush 0.852 → 0.863).
+pub const PLANE_SUPERSAMPLING: u32 = 2;
+
+/// The largest side a supersampled render may have: WebGPU's guaranteed texture size, so that
+/// every adapter renders the same; a larger rectangle renders one sample per texel.
+pub const MAX_SUPERSAMPLED_SIDE: u32 = 8192;
+
+/// The supersampling of a rectangle of `width` × `height` texels.
+pub fn plane_supersampling(width: u32, height: u32) -> u32 {
+    if width.max(height).max(1).saturating_mul(PLANE_SUPERSAMPLING) <= MAX_SUPERSAMPLED_SIDE {
+        PLANE_SUPERSAMPLING
+    } else {
+        1
+    }
+}
+
 /// The materials a rectangle's faces use, in index order.
 pub fn plane_materials(mesh: &Mesh, plane: &PlaneRectangle) -> Vec<u32> {
     crate::kinds::billboard_cloud::planes::materials_of_faces(&plane.faces, &mesh.triangle_materials)

@@ -56,6 +56,7 @@ fn a_plane_render_covers_its_faces_cuts_alpha_and_encodes_normal_and_height() {
         alpha_cutoff: 0.5,
         width: 64,
         height: 32,
+        supersampling: 1,
         batches: vec![(0, quad.to_vec())],
         materials: &materials,
     };
@@ -82,6 +83,59 @@ fn a_plane_render_covers_its_faces_cuts_alpha_and_encodes_normal_and_height() {
     assert_eq!(stacked[1], images, "the first rectangle, second in the stack");
     assert_eq!(stacked[0], gpu.render_rectangles(&[second]).expect("renders").remove(0), "the wide rectangle");
     assert!(stacked[0].surface(SurfaceKind::Albedo).chunks_exact(4).any(|texel| texel[3] == 255), "the wide rectangle sees the quad too");
+}
+
+#[test]
+fn a_supersampled_plane_render_puts_a_cut_out_edge_between_texels() {
+    let gpu = gpu().expect("a GPU adapter (install mesa-vulkan-drivers for the software one)");
+    // The plane z = 0 over [0, 2] × [0, 1] in 64 × 32 texels (32 per unit); a green quad over
+    // x ≤ 0.99, so its right edge lies at texel 31.68, not on a texel boundary.
+    let rectangle = RectangleFrame {
+        origin: [0.0; 3],
+        x_axis: [1.0, 0.0, 0.0],
+        y_axis: [0.0, 1.0, 0.0],
+        normal: [0.0, 0.0, 1.0],
+        width: 2.0,
+        height: 1.0,
+    };
+    let quad = [
+        vertex([0.0, 0.0, 0.0], [0.0, 0.0]),
+        vertex([0.99, 0.0, 0.0], [1.0, 0.0]),
+        vertex([0.99, 1.0, 0.0], [1.0, 1.0]),
+        vertex([0.0, 0.0, 0.0], [0.0, 0.0]),
+        vertex([0.99, 1.0, 0.0], [1.0, 1.0]),
+        vertex([0.0, 1.0, 0.0], [0.0, 1.0]),
+    ];
+    let materials = [RenderMaterial { albedo_factor: [0.0, 1.0, 0.0, 1.0], roughness_value: 0.5, ao_value: 1.0, ..Default::default() }];
+    let input = |supersampling| PlaneRenderInput {
+        frame: rectangle,
+        epsilon: 0.1,
+        alpha_cutoff: 0.5,
+        width: 64,
+        height: 32,
+        supersampling,
+        batches: vec![(0, quad.to_vec())],
+        materials: &materials,
+    };
+    // Where a bilinear fetch along row 16 crosses alpha one half.
+    let crossing = |images: &cirrus::gpu::PlaneImages| -> f32 {
+        let alpha: Vec<f32> = (0..64).map(|x| images.surface(SurfaceKind::Albedo)[(16 * 64 + x) * 4 + 3] as f32 / 255.0).collect();
+        let last = (0..63).find(|&x| alpha[x] >= 0.5 && alpha[x + 1] < 0.5).expect("an edge along the row");
+        last as f32 + 0.5 + (alpha[last] - 0.5) / (alpha[last] - alpha[last + 1])
+    };
+    let one = gpu.render_rectangles(&[input(1)]).expect("renders").remove(0);
+    let four = gpu.render_rectangles(&[input(2)]).expect("renders").remove(0);
+    assert_eq!((four.width, four.height), (64, 32), "brought down to the texels asked for");
+    let (one_edge, four_edge) = (crossing(&one), crossing(&four));
+    // One coverage test per texel: the edge halfway between texel centres 31.5 and 32.5; two
+    // by two samples put it halfway between samples 31.25 and 31.75.
+    assert!((one_edge - 32.0).abs() < 0.01, "one sample per texel: edge at {one_edge}");
+    assert!((four_edge - 31.68).abs() < 0.25, "2 × 2 samples: edge at {four_edge}, the quad's at 31.68");
+    // Inside, the texels are the quad's; well outside, nothing is drawn.
+    let texel = |x: usize| -> [u8; 4] { four.surface(SurfaceKind::Albedo)[(16 * 64 + x) * 4..][..4].try_into().unwrap() };
+    assert_eq!(texel(20), [0, 255, 0, 255]);
+    assert_eq!(texel(31)[..3], [0, 255, 0], "the edge texel keeps the quad's colour");
+    assert_eq!(texel(40), [0, 0, 0, 0]);
 }
 
 #[test]

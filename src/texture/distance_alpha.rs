@@ -46,10 +46,18 @@ pub fn resolve_supersampled_cut_out(input: &SupersampledCutOut) -> Vec<u8> {
     let distances = signed_sample_distances(&covered, sample_width, sample_height, reach);
     let linear = |surface: usize, channel: usize| input.first_surface_srgb && surface == 0 && channel < 3;
     let decode = |surface: usize, channel: usize, byte: u8| -> f32 {
-        if linear(surface, channel) { crate::texture::color::srgb_u8_to_linear(byte) } else { f32::from(byte) }
+        if linear(surface, channel) {
+            crate::texture::color::srgb_u8_to_linear(byte)
+        } else {
+            f32::from(byte)
+        }
     };
     let encode = |surface: usize, channel: usize, value: f32| -> u8 {
-        if linear(surface, channel) { crate::texture::color::linear_to_srgb_u8(value) } else { value.round().clamp(0.0, 255.0) as u8 }
+        if linear(surface, channel) {
+            crate::texture::color::linear_to_srgb_u8(value)
+        } else {
+            value.round().clamp(0.0, 255.0) as u8
+        }
     };
 
     // How many of each texel's samples are covered, and their mean (every surface's four
@@ -77,7 +85,11 @@ pub fn resolve_supersampled_cut_out(input: &SupersampledCutOut) -> Vec<u8> {
                 }
             }
             let means = std::array::from_fn(|channel| {
-                if count == 0 || channel >= channels { 0 } else { encode(channel / 4, channel % 4, sums[channel] / count as f32) }
+                if count == 0 || channel >= channels {
+                    0
+                } else {
+                    encode(channel / 4, channel % 4, sums[channel] / count as f32)
+                }
             });
             (count, means)
         })
@@ -271,7 +283,11 @@ fn signed_sample_distances(covered: &[bool], width: usize, height: usize, reach:
                 let length = (nearest.0 * nearest.0 + nearest.1 * nearest.1).sqrt();
                 let steps = nearest.0.max(nearest.1).max(1.0);
                 let distance = (length * (1.0 - 0.5 / steps)).min(reach as f32);
-                if inside { distance } else { -distance }
+                if inside {
+                    distance
+                } else {
+                    -distance
+                }
             })
         })
         .collect()
@@ -301,7 +317,8 @@ mod tests {
     /// border) is at least one half and where `inside` holds, on a grid of 16² points per texel.
     fn magnified_iou(alpha: &[u8], size: usize, inside: impl Fn(f32, f32) -> bool) -> f32 {
         let steps = 16;
-        let fetch = |x: i64, y: i64| alpha[y.clamp(0, size as i64 - 1) as usize * size + x.clamp(0, size as i64 - 1) as usize] as f32 / 255.0;
+        let fetch =
+            |x: i64, y: i64| alpha[y.clamp(0, size as i64 - 1) as usize * size + x.clamp(0, size as i64 - 1) as usize] as f32 / 255.0;
         let (mut both, mut either) = (0usize, 0usize);
         for row in 0..size * steps {
             for column in 0..size * steps {

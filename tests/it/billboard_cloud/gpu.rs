@@ -10,27 +10,30 @@ fn vertex(position: [f32; 3], uv: [f32; 2]) -> RenderVertex {
     RenderVertex { position, normal: [0.0, 0.0, 1.0], uv, tangent: [1.0, 0.0, 0.0, 1.0] }
 }
 
+/// The plane z = 0 over [0, 2] × [0, 1].
+fn plane_two_by_one() -> RectangleFrame {
+    RectangleFrame { origin: [0.0; 3], x_axis: [1.0, 0.0, 0.0], y_axis: [0.0, 1.0, 0.0], normal: [0.0, 0.0, 1.0], width: 2.0, height: 1.0 }
+}
+
+/// Two triangles over [0, `right`] × [0, 1] at height `z`, UVs over [0, 1]².
+fn quad_up_to(right: f32, z: f32) -> Vec<RenderVertex> {
+    vec![
+        vertex([0.0, 0.0, z], [0.0, 0.0]),
+        vertex([right, 0.0, z], [1.0, 0.0]),
+        vertex([right, 1.0, z], [1.0, 1.0]),
+        vertex([0.0, 0.0, z], [0.0, 0.0]),
+        vertex([right, 1.0, z], [1.0, 1.0]),
+        vertex([0.0, 1.0, z], [0.0, 1.0]),
+    ]
+}
+
 #[test]
 fn a_plane_render_covers_its_faces_cuts_alpha_and_encodes_normal_and_height() {
     let gpu = gpu().expect("a GPU adapter (install mesa-vulkan-drivers for the software one)");
     println!("adapter: {}", gpu.adapter_name);
     // The plane z = 0 over [0, 2] × [0, 1]; a quad over its left half, 0.05 above it (ε = 0.1).
-    let rectangle = RectangleFrame {
-        origin: [0.0; 3],
-        x_axis: [1.0, 0.0, 0.0],
-        y_axis: [0.0, 1.0, 0.0],
-        normal: [0.0, 0.0, 1.0],
-        width: 2.0,
-        height: 1.0,
-    };
-    let quad = [
-        vertex([0.0, 0.0, 0.05], [0.0, 0.0]),
-        vertex([1.0, 0.0, 0.05], [1.0, 0.0]),
-        vertex([1.0, 1.0, 0.05], [1.0, 1.0]),
-        vertex([0.0, 0.0, 0.05], [0.0, 0.0]),
-        vertex([1.0, 1.0, 0.05], [1.0, 1.0]),
-        vertex([0.0, 1.0, 0.05], [0.0, 1.0]),
-    ];
+    let rectangle = plane_two_by_one();
+    let quad = quad_up_to(1.0, 0.05);
     // Opaque top half, transparent bottom half (texture rows run down, UV v up).
     let mut pixels = Vec::new();
     for y in 0..8 {
@@ -57,7 +60,7 @@ fn a_plane_render_covers_its_faces_cuts_alpha_and_encodes_normal_and_height() {
         width: 64,
         height: 32,
         supersampling: 1,
-        batches: vec![(0, quad.to_vec())],
+        batches: vec![(0, quad.clone())],
         materials: &materials,
     };
     let images = gpu.render_rectangles(std::slice::from_ref(&input)).expect("renders").remove(0);
@@ -90,22 +93,8 @@ fn a_supersampled_plane_render_puts_a_cut_out_edge_between_texels() {
     let gpu = gpu().expect("a GPU adapter (install mesa-vulkan-drivers for the software one)");
     // The plane z = 0 over [0, 2] × [0, 1] in 64 × 32 texels (32 per unit); a green quad over
     // x ≤ 0.99, so its right edge lies at texel 31.68, not on a texel boundary.
-    let rectangle = RectangleFrame {
-        origin: [0.0; 3],
-        x_axis: [1.0, 0.0, 0.0],
-        y_axis: [0.0, 1.0, 0.0],
-        normal: [0.0, 0.0, 1.0],
-        width: 2.0,
-        height: 1.0,
-    };
-    let quad = [
-        vertex([0.0, 0.0, 0.0], [0.0, 0.0]),
-        vertex([0.99, 0.0, 0.0], [1.0, 0.0]),
-        vertex([0.99, 1.0, 0.0], [1.0, 1.0]),
-        vertex([0.0, 0.0, 0.0], [0.0, 0.0]),
-        vertex([0.99, 1.0, 0.0], [1.0, 1.0]),
-        vertex([0.0, 1.0, 0.0], [0.0, 1.0]),
-    ];
+    let rectangle = plane_two_by_one();
+    let quad = quad_up_to(0.99, 0.0);
     let materials = [RenderMaterial { albedo_factor: [0.0, 1.0, 0.0, 1.0], roughness_value: 0.5, ao_value: 1.0, ..Default::default() }];
     let input = |supersampling| PlaneRenderInput {
         frame: rectangle,
@@ -114,7 +103,7 @@ fn a_supersampled_plane_render_puts_a_cut_out_edge_between_texels() {
         width: 64,
         height: 32,
         supersampling,
-        batches: vec![(0, quad.to_vec())],
+        batches: vec![(0, quad.clone())],
         materials: &materials,
     };
     // Where a bilinear fetch along row 16 crosses alpha one half.

@@ -86,7 +86,8 @@ impl PlaneRenderInput<'_> {
 
 /// The four images of one plane, RGBA8, rows from the top (the plane's +Y edge), one after the
 /// other in a shared buffer: albedo (sRGB-encoded colour; alpha 1 where a face covers the texel,
-/// 0 elsewhere), normal, mra and height. The buffer may hold other planes' images too (a render
+/// 0 elsewhere, or the distance alpha of a supersampled render: 0 where nothing is near),
+/// normal, mra and height. The buffer may hold other planes' images too (a render
 /// memo read from disk holds a whole set of them), so that loading images copies nothing.
 #[derive(Clone, Debug)]
 pub struct PlaneImages {

@@ -227,13 +227,12 @@ fn centre_distance(distances: &[f32], sample_width: usize, factor: usize, texel_
 /// Every sample's signed distance to the edge between covered and uncovered samples, in
 /// samples (positive inside): the Euclidean distance to the nearest sample of the other kind,
 /// less half a sample step along the way to it, at most `reach` either way. The image's border
-/// is no edge: a shape cut by it keeps its alpha up to it. Exact
-/// within the reach: a row pass finds each sample's nearest other kind along its row, then a
-/// column pass takes the nearest over the rows within the reach.
+/// is no edge: a shape cut by it keeps its alpha up to it. Exact within the reach: a row pass
+/// finds each sample's nearest other kind along its row, then a column pass takes the nearest
+/// over the rows within the reach.
 fn signed_sample_distances(covered: &[bool], width: usize, height: usize, reach: usize) -> Vec<f32> {
     let far = reach as u32 + 1;
-    // Along each row: the distance to the nearest sample of the other kind (the image's border
-    // counts as uncovered).
+    // Along each row: the distance to the nearest sample of the other kind.
     let along_rows: Vec<u32> = covered
         .par_chunks_exact(width)
         .flat_map_iter(|row| {

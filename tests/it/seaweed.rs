@@ -227,6 +227,16 @@ impl Bucket {
         })
     }
 
+    /// Whether anything is listed under `prefix`, without reading it: while a build uploads, an
+    /// object can be listed before it reads back (GET 404), so a poll for the first upload only
+    /// lists.
+    pub fn lists_anything_under(&self, prefix: &str) -> bool {
+        self.runtime.block_on(async {
+            let listed = self.store.list_with_delimiter(Some(&object_store::path::Path::from(prefix))).await.unwrap();
+            !listed.objects.is_empty() || !listed.common_prefixes.is_empty()
+        })
+    }
+
     /// Writes an object.
     fn try_put(&self, path: &str, bytes: Vec<u8>) -> object_store::Result<object_store::PutResult> {
         self.runtime.block_on(self.store.put(&object_store::path::Path::from(path), PutPayload::from(bytes)))

@@ -26,6 +26,8 @@ use crate::texture::Texture;
 pub enum GpuError {
     #[error("no GPU adapter: wgpu found no Vulkan, Metal, DX12 or GL device ({0}). Billboard clouds render their textures on the GPU; on Linux without a GPU install a software Vulkan driver, e.g. `apt-get install mesa-vulkan-drivers` (llvmpipe)")]
     NoAdapter(String),
+    #[error("no GPU adapter can render cirrus's textures: {0}. On Linux without a GPU install a software Vulkan driver, e.g. `apt-get install mesa-vulkan-drivers` (llvmpipe), or name another backend with WGPU_BACKEND")]
+    Unsupported(String),
     #[error("the GPU device could not be created: {0}")]
     Device(String),
     #[error("GPU rendering failed: {0}")]
@@ -107,17 +109,82 @@ pub fn adapter_family() -> &'static str {
         if let Some(Ok(gpu)) = GPU.get() {
             return family(gpu.adapter.get_info());
         }
-        let instance = wgpu::Instance::new(wgpu::InstanceDescriptor::new_without_display_handle());
-        match pollster::block_on(instance.request_adapter(&adapter_options())) {
+        match pollster::block_on(choose_adapter(&new_instance())) {
             Ok(adapter) => family(adapter.get_info()),
             Err(_) => "none".to_string(),
         }
     })
 }
 
-/// How `gpu()` and `adapter_family()` choose the adapter.
-fn adapter_options() -> wgpu::RequestAdapterOptions<'static, 'static> {
-    wgpu::RequestAdapterOptions { power_preference: wgpu::PowerPreference::HighPerformance, ..Default::default() }
+/// The wgpu instance: every backend, or those `WGPU_BACKEND` names (`vulkan`, `gl`, …).
+fn new_instance() -> wgpu::Instance {
+    wgpu::Instance::new(wgpu::InstanceDescriptor::new_without_display_handle_from_env())
+}
+
+/// The adapter `gpu()` and `adapter_family()` use: wgpu's high-performance choice when it can
+/// render everything cirrus draws (see `adapter_shortfalls`), else the first other adapter that
+/// can. An adapter that cannot (OpenGL ES drivers without float render targets or storage
+/// buffers in vertex shaders) would fail pipeline creation, which wgpu treats as fatal.
+async fn choose_adapter(instance: &wgpu::Instance) -> Result<wgpu::Adapter, GpuError> {
+    let options = wgpu::RequestAdapterOptions { power_preference: wgpu::PowerPreference::HighPerformance, ..Default::default() };
+    let preferred = instance.request_adapter(&options).await;
+    let shortfalls_of = |adapter: &wgpu::Adapter| {
+        adapter_shortfalls(&|format| adapter.get_texture_format_features(format).allowed_usages, adapter.get_downlevel_capabilities().flags)
+    };
+    if let Ok(adapter) = &preferred {
+        if shortfalls_of(adapter).is_empty() {
+            return Ok(adapter.clone());
+        }
+    }
+    // Listing every adapter wakes every backend (EGL complains on stderr without a display), so
+    // only when the preferred one cannot serve.
+    let mut refusals = Vec::new();
+    let others = instance.enumerate_adapters(wgpu::Backends::all()).await;
+    for adapter in preferred.as_ref().ok().cloned().into_iter().chain(others) {
+        let shortfalls = shortfalls_of(&adapter);
+        if shortfalls.is_empty() {
+            return Ok(adapter);
+        }
+        let info = adapter.get_info();
+        let refusal = format!("{} ({:?}) lacks {}", info.name, info.backend, shortfalls.join(", "));
+        if !refusals.contains(&refusal) {
+            refusals.push(refusal);
+        }
+    }
+    match preferred {
+        Err(error) if refusals.is_empty() => Err(GpuError::NoAdapter(error.to_string())),
+        _ if refusals.is_empty() => Err(GpuError::NoAdapter("no adapter listed".into())),
+        _ => Err(GpuError::Unsupported(refusals.join("; "))),
+    }
+}
+
+/// What an adapter lacks of what cirrus's pipelines need, given the usages it allows per
+/// texture format and its downlevel flags: render targets of every format drawn to (sampled
+/// too where they are read back as textures), and read-only storage buffers in vertex and
+/// fragment shaders (every pipeline's per-draw constants). Empty: it can render everything.
+pub fn adapter_shortfalls(allowed_usages: &dyn Fn(wgpu::TextureFormat) -> wgpu::TextureUsages, flags: wgpu::DownlevelFlags) -> Vec<String> {
+    let mut shortfalls = Vec::new();
+    let render = wgpu::TextureUsages::RENDER_ATTACHMENT;
+    let render_and_sample = render | wgpu::TextureUsages::TEXTURE_BINDING;
+    for (format, needed) in [
+        (ALBEDO_FORMAT, render_and_sample),
+        (DATA_FORMAT, render_and_sample),
+        (DEPTH_FORMAT, render),
+        (top_down_render::HEIGHT_FORMAT, render),
+    ] {
+        if !allowed_usages(format).contains(needed) {
+            shortfalls.push(format!("{format:?} render targets"));
+        }
+    }
+    for (flag, what) in [
+        (wgpu::DownlevelFlags::VERTEX_STORAGE, "storage buffers in vertex shaders"),
+        (wgpu::DownlevelFlags::FRAGMENT_STORAGE, "storage buffers in fragment shaders"),
+    ] {
+        if !flags.contains(flag) {
+            shortfalls.push(what.to_string());
+        }
+    }
+    shortfalls
 }
 
 /// The thread `start_gpu_in_background` started, until someone waits for it.
@@ -165,8 +232,8 @@ pub struct RenderVertex {
 
 impl Gpu {
     async fn new() -> Result<Gpu, GpuError> {
-        let instance = wgpu::Instance::new(wgpu::InstanceDescriptor::new_without_display_handle());
-        let adapter = instance.request_adapter(&adapter_options()).await.map_err(|error| GpuError::NoAdapter(error.to_string()))?;
+        let instance = new_instance();
+        let adapter = choose_adapter(&instance).await?;
         let adapter_name = format!("{} ({:?})", adapter.get_info().name, adapter.get_info().backend);
         let (device, queue) = adapter
             .request_device(&wgpu::DeviceDescriptor {

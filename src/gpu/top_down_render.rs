@@ -70,7 +70,7 @@ pub(super) fn top_down_pipeline(device: &wgpu::Device, frame_layout: &wgpu::Bind
     })
 }
 
-const HEIGHT_FORMAT: wgpu::TextureFormat = wgpu::TextureFormat::R32Float;
+pub(super) const HEIGHT_FORMAT: wgpu::TextureFormat = wgpu::TextureFormat::R32Float;
 
 impl Gpu {
     /// The highest surface's Y above `footprint.low_y` at every texel centre of a `size`² grid

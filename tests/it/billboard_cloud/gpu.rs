@@ -208,3 +208,19 @@ fn sixteen_samples_per_pixel_keep_the_silhouette_iou_from_measuring_aliasing() {
     println!("quarter-pixel move: IoU {one_sample:.3} with 1 sample per pixel, {sixteen_samples:.3} with 16");
     assert!(sixteen_samples > 0.9 && sixteen_samples > one_sample + 0.1, "{one_sample} vs {sixteen_samples}");
 }
+
+#[test]
+fn an_adapter_that_cannot_draw_every_target_is_refused_with_what_it_lacks() {
+    use wgpu::{DownlevelFlags, TextureFormat, TextureUsages};
+    // An OpenGL ES driver as wgpu reports it: R32Float sampled but not rendered to, no storage
+    // buffers in vertex shaders. Choosing it used to panic in pipeline creation.
+    let gl_like = |format: TextureFormat| match format {
+        TextureFormat::R32Float => TextureUsages::TEXTURE_BINDING,
+        _ => TextureUsages::all(),
+    };
+    let shortfalls = cirrus::gpu::adapter_shortfalls(&gl_like, DownlevelFlags::all() - DownlevelFlags::VERTEX_STORAGE);
+    assert_eq!(shortfalls, ["R32Float render targets", "storage buffers in vertex shaders"]);
+    assert!(cirrus::gpu::adapter_shortfalls(&|_| TextureUsages::all(), DownlevelFlags::all()).is_empty());
+    // The adapter the tests run on passes the check (else `gpu()` would have refused it).
+    gpu().expect("a GPU adapter (install mesa-vulkan-drivers for the software one)");
+}

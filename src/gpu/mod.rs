@@ -338,6 +338,26 @@ impl Gpu {
         })
     }
 
+    /// Runs `work` with the device's validation, out-of-memory and internal errors caught (on
+    /// this thread) and returned as `GpuError::Render`: wgpu panics on an error no scope
+    /// catches, and a render the device refuses (a target too large for its memory) must fail
+    /// its asset, not end the process.
+    fn catching_device_errors<T>(&self, work: impl FnOnce() -> Result<T, GpuError>) -> Result<T, GpuError> {
+        let scopes = [wgpu::ErrorFilter::Internal, wgpu::ErrorFilter::OutOfMemory, wgpu::ErrorFilter::Validation]
+            .map(|filter| self.device.push_error_scope(filter));
+        let result = work();
+        // Popped innermost first.
+        let mut first_error = None;
+        for scope in scopes.into_iter().rev() {
+            let error = pollster::block_on(scope.pop());
+            first_error = first_error.or(error);
+        }
+        match first_error {
+            Some(error) => Err(GpuError::Render(error.to_string())),
+            None => result,
+        }
+    }
+
     /// The upload cached under `key`, made by `make` by the first thread that asks for it; other
     /// threads asking meanwhile wait for it instead of uploading it again.
     fn cached_upload(&self, key: UploadKey, make: impl FnOnce() -> wgpu::TextureView) -> Arc<wgpu::TextureView> {

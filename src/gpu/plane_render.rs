@@ -194,7 +194,8 @@ impl Gpu {
                 (stack_width, stack_height) = (grown_width, grown_height);
                 chunk_end += 1;
             }
-            images.extend(self.render_stack(&inputs[chunk_start..chunk_end], stack_width, stack_height)?);
+            let stack = &inputs[chunk_start..chunk_end];
+            images.extend(self.catching_device_errors(|| self.render_stack(stack, stack_width, stack_height))?);
             chunk_start = chunk_end;
         }
         Ok(images)

@@ -83,63 +83,70 @@ impl Gpu {
         footprint: Footprint,
         size: u32,
     ) -> Result<Vec<Option<f32>>, GpuError> {
-        if size == 0 || size > self.max_texture_size {
-            return Err(GpuError::Render(format!("a {size}² top-down render exceeds the device's {} texels", self.max_texture_size)));
-        }
-        let span = |low: f32, high: f32| if high > low { 1.0 / (high - low) } else { 1.0 };
-        let uniform = FootprintUniform {
-            area: [footprint.min[0], footprint.min[1], span(footprint.min[0], footprint.max[0]), span(footprint.min[1], footprint.max[1])],
-            heights: [footprint.low_y, span(footprint.low_y, footprint.high_y) * 0.999_9, 0.0, 0.0],
-        };
-        let constants = self.constants_buffer(bytemuck::bytes_of(&uniform));
-        let group = self.device.create_bind_group(&wgpu::BindGroupDescriptor {
-            label: Some("footprint"),
-            layout: &self.frame_layout,
-            entries: &[wgpu::BindGroupEntry { binding: 0, resource: constants.as_entire_binding() }],
-        });
-        let corners: Vec<[f32; 3]> = triangles
-            .iter()
-            .flat_map(|triangle| triangle.map(|vertex| positions.get(vertex as usize).copied().unwrap_or([f32::NAN; 3])))
-            .filter(|corner| corner.iter().all(|c| c.is_finite()))
-            .collect();
-        let target = self.target(size, size, HEIGHT_FORMAT);
-        let view = target.create_view(&Default::default());
-        let depth = self.target(size, size, DEPTH_FORMAT).create_view(&Default::default());
-        let mut encoder = self.device.create_command_encoder(&Default::default());
-        {
-            let mut pass = encoder.begin_render_pass(&wgpu::RenderPassDescriptor {
-                label: Some("top down"),
-                color_attachments: &[Some(wgpu::RenderPassColorAttachment {
-                    view: &view,
-                    depth_slice: None,
-                    resolve_target: None,
-                    ops: wgpu::Operations {
-                        load: wgpu::LoadOp::Clear(wgpu::Color { r: ABSENT, g: 0.0, b: 0.0, a: 0.0 }),
-                        store: wgpu::StoreOp::Store,
-                    },
-                })],
-                depth_stencil_attachment: Some(wgpu::RenderPassDepthStencilAttachment {
-                    view: &depth,
-                    depth_ops: Some(wgpu::Operations { load: wgpu::LoadOp::Clear(1.0), store: wgpu::StoreOp::Store }),
-                    stencil_ops: None,
-                }),
-                ..Default::default()
-            });
-            if corners.len() >= 3 {
-                let buffer = self.filled_buffer("positions", bytemuck::cast_slice(&corners), wgpu::BufferUsages::VERTEX);
-                pass.set_pipeline(&self.top_down_pipeline);
-                pass.set_bind_group(0, &group, &[]);
-                pass.set_vertex_buffer(0, buffer.slice(..));
-                pass.draw(0..(corners.len() / 3 * 3) as u32, 0..1);
+        self.catching_device_errors(|| {
+            if size == 0 || size > self.max_texture_size {
+                return Err(GpuError::Render(format!("a {size}² top-down render exceeds the device's {} texels", self.max_texture_size)));
             }
-        }
-        let [pixels]: [Vec<u8>; 1] = self.read_back(encoder, &[target], size, size)?.try_into().expect("one target");
-        Ok(pixels
-            .chunks_exact(4)
-            .map(|bytes| {
-                let relative = f32::from_ne_bytes(bytes.try_into().expect("four bytes"));
-                (relative > (ABSENT / 2.0) as f32).then_some(relative)
-            })
-            .collect())
+            let span = |low: f32, high: f32| if high > low { 1.0 / (high - low) } else { 1.0 };
+            let uniform = FootprintUniform {
+                area: [
+                    footprint.min[0],
+                    footprint.min[1],
+                    span(footprint.min[0], footprint.max[0]),
+                    span(footprint.min[1], footprint.max[1]),
+                ],
+                heights: [footprint.low_y, span(footprint.low_y, footprint.high_y) * 0.999_9, 0.0, 0.0],
+            };
+            let constants = self.constants_buffer(bytemuck::bytes_of(&uniform));
+            let group = self.device.create_bind_group(&wgpu::BindGroupDescriptor {
+                label: Some("footprint"),
+                layout: &self.frame_layout,
+                entries: &[wgpu::BindGroupEntry { binding: 0, resource: constants.as_entire_binding() }],
+            });
+            let corners: Vec<[f32; 3]> = triangles
+                .iter()
+                .flat_map(|triangle| triangle.map(|vertex| positions.get(vertex as usize).copied().unwrap_or([f32::NAN; 3])))
+                .filter(|corner| corner.iter().all(|c| c.is_finite()))
+                .collect();
+            let target = self.target(size, size, HEIGHT_FORMAT);
+            let view = target.create_view(&Default::default());
+            let depth = self.target(size, size, DEPTH_FORMAT).create_view(&Default::default());
+            let mut encoder = self.device.create_command_encoder(&Default::default());
+            {
+                let mut pass = encoder.begin_render_pass(&wgpu::RenderPassDescriptor {
+                    label: Some("top down"),
+                    color_attachments: &[Some(wgpu::RenderPassColorAttachment {
+                        view: &view,
+                        depth_slice: None,
+                        resolve_target: None,
+                        ops: wgpu::Operations {
+                            load: wgpu::LoadOp::Clear(wgpu::Color { r: ABSENT, g: 0.0, b: 0.0, a: 0.0 }),
+                            store: wgpu::StoreOp::Store,
+                        },
+                    })],
+                    depth_stencil_attachment: Some(wgpu::RenderPassDepthStencilAttachment {
+                        view: &depth,
+                        depth_ops: Some(wgpu::Operations { load: wgpu::LoadOp::Clear(1.0), store: wgpu::StoreOp::Store }),
+                        stencil_ops: None,
+                    }),
+                    ..Default::default()
+                });
+                if corners.len() >= 3 {
+                    let buffer = self.filled_buffer("positions", bytemuck::cast_slice(&corners), wgpu::BufferUsages::VERTEX);
+                    pass.set_pipeline(&self.top_down_pipeline);
+                    pass.set_bind_group(0, &group, &[]);
+                    pass.set_vertex_buffer(0, buffer.slice(..));
+                    pass.draw(0..(corners.len() / 3 * 3) as u32, 0..1);
+                }
+            }
+            let [pixels]: [Vec<u8>; 1] = self.read_back(encoder, &[target], size, size)?.try_into().expect("one target");
+            Ok(pixels
+                .chunks_exact(4)
+                .map(|bytes| {
+                    let relative = f32::from_ne_bytes(bytes.try_into().expect("four bytes"));
+                    (relative > (ABSENT / 2.0) as f32).then_some(relative)
+                })
+                .collect())
+        })
     }
 }

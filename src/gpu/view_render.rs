@@ -46,53 +46,55 @@ impl Gpu {
     /// Renders `mesh` under an orthographic camera into a `size`² RGBA8 image (sRGB colour on a
     /// mid-grey background; alpha 255 where a surface was drawn, 0 elsewhere).
     pub fn render_view(&self, mesh: &ViewMesh, view_projection: [[f32; 4]; 4], light: [f32; 3], size: u32) -> Result<Vec<u8>, GpuError> {
-        let camera = CameraUniform { view_projection, light: extend(light) };
-        let camera_buffer = self.constants_buffer(bytemuck::bytes_of(&camera));
-        let camera_group = self.device.create_bind_group(&wgpu::BindGroupDescriptor {
-            label: Some("camera"),
-            layout: &self.frame_layout,
-            entries: &[wgpu::BindGroupEntry { binding: 0, resource: camera_buffer.as_entire_binding() }],
-        });
-        let target = self.target(size, size, ALBEDO_FORMAT);
-        let view = target.create_view(&Default::default());
-        let depth = self.target(size, size, DEPTH_FORMAT).create_view(&Default::default());
-        let mut draws = Vec::new();
-        for (material_index, vertices) in &mesh.batches {
-            if vertices.is_empty() {
-                continue;
-            }
-            let buffer = self.vertex_buffer(vertices);
-            draws.push((buffer, vertices.len() as u32, self.view_material_group(&mesh.materials[*material_index])));
-        }
-        let mut encoder = self.device.create_command_encoder(&Default::default());
-        {
-            let mut pass = encoder.begin_render_pass(&wgpu::RenderPassDescriptor {
-                label: Some("view"),
-                color_attachments: &[Some(wgpu::RenderPassColorAttachment {
-                    view: &view,
-                    depth_slice: None,
-                    resolve_target: None,
-                    ops: wgpu::Operations {
-                        load: wgpu::LoadOp::Clear(wgpu::Color { r: 0.214, g: 0.214, b: 0.214, a: 0.0 }),
-                        store: wgpu::StoreOp::Store,
-                    },
-                })],
-                depth_stencil_attachment: Some(wgpu::RenderPassDepthStencilAttachment {
-                    view: &depth,
-                    depth_ops: Some(wgpu::Operations { load: wgpu::LoadOp::Clear(1.0), store: wgpu::StoreOp::Discard }),
-                    stencil_ops: None,
-                }),
-                ..Default::default()
+        self.catching_device_errors(|| {
+            let camera = CameraUniform { view_projection, light: extend(light) };
+            let camera_buffer = self.constants_buffer(bytemuck::bytes_of(&camera));
+            let camera_group = self.device.create_bind_group(&wgpu::BindGroupDescriptor {
+                label: Some("camera"),
+                layout: &self.frame_layout,
+                entries: &[wgpu::BindGroupEntry { binding: 0, resource: camera_buffer.as_entire_binding() }],
             });
-            pass.set_pipeline(&self.view_pipeline);
-            pass.set_bind_group(0, &camera_group, &[]);
-            for (buffer, count, group) in &draws {
-                pass.set_bind_group(1, group, &[]);
-                pass.set_vertex_buffer(0, buffer.slice(..));
-                pass.draw(0..*count, 0..1);
+            let target = self.target(size, size, ALBEDO_FORMAT);
+            let view = target.create_view(&Default::default());
+            let depth = self.target(size, size, DEPTH_FORMAT).create_view(&Default::default());
+            let mut draws = Vec::new();
+            for (material_index, vertices) in &mesh.batches {
+                if vertices.is_empty() {
+                    continue;
+                }
+                let buffer = self.vertex_buffer(vertices);
+                draws.push((buffer, vertices.len() as u32, self.view_material_group(&mesh.materials[*material_index])));
             }
-        }
-        self.read_back(encoder, &[target], size, size).map(|mut images| images.remove(0))
+            let mut encoder = self.device.create_command_encoder(&Default::default());
+            {
+                let mut pass = encoder.begin_render_pass(&wgpu::RenderPassDescriptor {
+                    label: Some("view"),
+                    color_attachments: &[Some(wgpu::RenderPassColorAttachment {
+                        view: &view,
+                        depth_slice: None,
+                        resolve_target: None,
+                        ops: wgpu::Operations {
+                            load: wgpu::LoadOp::Clear(wgpu::Color { r: 0.214, g: 0.214, b: 0.214, a: 0.0 }),
+                            store: wgpu::StoreOp::Store,
+                        },
+                    })],
+                    depth_stencil_attachment: Some(wgpu::RenderPassDepthStencilAttachment {
+                        view: &depth,
+                        depth_ops: Some(wgpu::Operations { load: wgpu::LoadOp::Clear(1.0), store: wgpu::StoreOp::Discard }),
+                        stencil_ops: None,
+                    }),
+                    ..Default::default()
+                });
+                pass.set_pipeline(&self.view_pipeline);
+                pass.set_bind_group(0, &camera_group, &[]);
+                for (buffer, count, group) in &draws {
+                    pass.set_bind_group(1, group, &[]);
+                    pass.set_vertex_buffer(0, buffer.slice(..));
+                    pass.draw(0..*count, 0..1);
+                }
+            }
+            self.read_back(encoder, &[target], size, size).map(|mut images| images.remove(0))
+        })
     }
 
     fn view_material_group(&self, material: &ViewMaterial) -> wgpu::BindGroup {

@@ -157,6 +157,26 @@ fn a_resolved_pixel_is_in_the_silhouette_when_half_its_samples_are_covered() {
     assert_eq!((overlap.iou, overlap.missed, overlap.extra), (1.0 / 3.0, 0.5, 0.5));
 }
 
+#[test]
+fn a_one_pixel_shift_costs_a_thin_silhouette_more_iou_than_a_solid_one() {
+    use cirrus::kinds::billboard_cloud::lod_preview::{one_pixel_shift_iou, ResolvedView};
+    // A 16-pixel view holding `inside` pixels, every sample of them covered.
+    let view = |inside: &dyn Fn(usize, usize) -> bool| ResolvedView {
+        rgba: vec![0; 16 * 16 * 4],
+        covered: (0..16 * 16).map(|index| if inside(index % 16, index / 16) { 16 } else { 0 }).collect(),
+        samples_per_pixel: 16,
+    };
+    // A 10 × 10 square moved one pixel either way: 90 pixels shared of 110 (at the edge of the
+    // image too: nothing moved out of it is lost).
+    let square = view(&|x, y| (6..16).contains(&x) && (6..16).contains(&y));
+    assert!((one_pixel_shift_iou(&square, 16) - 90.0 / 110.0).abs() < 1e-12);
+    // Five one-pixel strokes across the image: moved across them, nothing is shared; along
+    // them, 15 of 16 pixels of each are. So a pixel of displacement costs lacy foliage more.
+    let strokes = view(&|x, _| x % 3 == 0 && x < 15);
+    assert!((one_pixel_shift_iou(&strokes, 16) - 0.5 * (15.0 / 17.0)).abs() < 1e-12);
+    assert_eq!(one_pixel_shift_iou(&view(&|_, _| false), 16), 1.0);
+}
+
 /// A quad in the plane x = 0, seen along x, cut out by an alpha texture of 256² random texels
 /// (70 % opaque) that spans 48 pixels of a 64-pixel view: detail finer than a pixel, as foliage
 /// is at preview sizes.
@@ -223,4 +243,16 @@ fn an_adapter_that_cannot_draw_every_target_is_refused_with_what_it_lacks() {
     assert!(cirrus::gpu::adapter_shortfalls(&|_| TextureUsages::all(), DownlevelFlags::all()).is_empty());
     // The adapter the tests run on passes the check (else `gpu()` would have refused it).
     gpu().expect("a GPU adapter (install mesa-vulkan-drivers for the software one)");
+}
+
+#[test]
+fn a_render_the_device_refuses_is_an_error_and_the_device_still_renders() {
+    let gpu = gpu().expect("a GPU adapter (install mesa-vulkan-drivers for the software one)");
+    let quad = speckled_quad(0.0);
+    let camera = cirrus::kinds::billboard_cloud::lod_preview::view_projection([0.0; 3], 1.0, [1.0, 0.0, 0.0]);
+    // A 0-pixel target is invalid to wgpu, which panics on errors nothing catches.
+    let refused = gpu.render_view(&quad, camera, [0.0, 0.0, 1.0], 0);
+    assert!(matches!(&refused, Err(cirrus::gpu::GpuError::Render(message)) if message.contains("imension")), "{refused:?}");
+    let image = gpu.render_view(&quad, camera, [0.0, 0.0, 1.0], 16).expect("the next render");
+    assert!(image.chunks_exact(4).any(|pixel| pixel[3] == 255), "the quad is drawn");
 }

@@ -325,7 +325,7 @@ fn preview(
             let chain = levels.len() > 1 || levels.first().is_some_and(|&(level, _)| level > 0) || lod.is_some();
             for (level, metrics) in &levels {
                 println!(
-                    "{}{} views, {} per pixel: mean IoU {:.3}, min IoU {:.3} (missed {:.1} %, extra {:.1} % of the source's silhouette), mean PSNR {:.2} dB",
+                    "{}{} views, {} per pixel: mean IoU {:.3}, min IoU {:.3} (missed {:.1} %, extra {:.1} % of the source's silhouette), mean PSNR {:.2} dB; the source against itself moved 1 pixel: IoU {:.3}",
                     if chain { format!("lod{level}: ") } else { String::new() },
                     metrics.views.len(),
                     if metrics.samples_per_pixel == 1 { "1 sample".to_string() } else { format!("{} samples", metrics.samples_per_pixel) },
@@ -333,7 +333,8 @@ fn preview(
                     metrics.min_iou,
                     100.0 * metrics.mean_missed,
                     100.0 * metrics.mean_extra,
-                    metrics.mean_psnr
+                    metrics.mean_psnr,
+                    metrics.source_shift_iou
                 );
             }
             if levels.len() > 1 {

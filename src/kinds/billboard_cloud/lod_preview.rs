@@ -62,6 +62,11 @@ pub struct PreviewMetrics {
     pub mean_missed: f64,
     pub mean_extra: f64,
     pub mean_psnr: f64,
+    /// The source's silhouette against itself moved one pixel (the mean of a move along each
+    /// image axis), over the views: what a pixel of displacement costs this mesh's IoU. Lacy
+    /// foliage loses more than a dense crown (corpus: oak 0.912, ash 0.869, bush 0.846), so LODs
+    /// of different meshes drawn as displaced score different IoUs.
+    pub source_shift_iou: f64,
 }
 
 /// The result of previewing one LOD: metrics and the contact sheet (PNG bytes).
@@ -120,9 +125,11 @@ pub fn preview_chain(
     let mut metrics: Vec<Vec<ViewMetrics>> = vec![Vec::new(); lods.len()];
     // Per view: the source's image, then each LOD's.
     let mut views: Vec<Vec<Vec<u8>>> = Vec::new();
+    let mut shift_ious = Vec::new();
     for direction in view_directions().into_iter().take(settings.views) {
         let matrix = view_projection(center, radius, direction);
         let source_view = render_resolved_view(gpu, source, matrix, light, settings)?;
+        shift_ious.push(one_pixel_shift_iou(&source_view, settings.size));
         let mut images = Vec::with_capacity(1 + lods.len());
         for (lod, level_metrics) in lods.iter().zip(&mut metrics) {
             let lod_view = render_resolved_view(gpu, lod, matrix, light, settings)?;
@@ -145,7 +152,8 @@ pub fn preview_chain(
         .enumerate()
         .map(|(level, views_metrics)| {
             let pairs: Vec<Vec<&[u8]>> = views.iter().map(|images| vec![images[0].as_slice(), images[1 + level].as_slice()]).collect();
-            Preview { metrics: summarise_views(views_metrics, samples_per_pixel), contact_sheet: contact_sheet(&pairs, settings.size) }
+            let metrics = summarise_views(views_metrics, samples_per_pixel, &shift_ious);
+            Preview { metrics, contact_sheet: contact_sheet(&pairs, settings.size) }
         })
         .collect();
     let groups: Vec<Vec<&[u8]>> = views.iter().map(|images| images.iter().map(Vec::as_slice).collect()).collect();
@@ -153,12 +161,13 @@ pub fn preview_chain(
 }
 
 /// The mean and worst of one LOD's per-view figures.
-fn summarise_views(views: Vec<ViewMetrics>, samples_per_pixel: u32) -> PreviewMetrics {
+fn summarise_views(views: Vec<ViewMetrics>, samples_per_pixel: u32, source_shift_ious: &[f64]) -> PreviewMetrics {
     let mean = |figure: fn(&ViewMetrics) -> f64| views.iter().map(figure).sum::<f64>() / views.len().max(1) as f64;
     let (mean_iou, mean_missed, mean_extra, mean_psnr) =
         (mean(|view| view.iou), mean(|view| view.missed), mean(|view| view.extra), mean(|view| view.psnr));
     let min_iou = views.iter().map(|view| view.iou).fold(1.0, f64::min);
-    PreviewMetrics { samples_per_pixel, views, mean_iou, min_iou, mean_missed, mean_extra, mean_psnr }
+    let source_shift_iou = source_shift_ious.iter().sum::<f64>() / source_shift_ious.len().max(1) as f64;
+    PreviewMetrics { samples_per_pixel, views, mean_iou, min_iou, mean_missed, mean_extra, mean_psnr, source_shift_iou }
 }
 
 /// A view resolved to its pixels: the sRGB colour (the mean of the pixel's samples, taken in
@@ -334,6 +343,28 @@ pub fn silhouette_overlap(source: &ResolvedView, lod: &ResolvedView) -> Silhouet
         missed: source_only as f64 / source_area,
         extra: lod_only as f64 / source_area,
     }
+}
+
+/// The IoU of a `size`² view's silhouette with itself moved one pixel, the mean of a move along
+/// x and one along y (1 for an empty silhouette).
+pub fn one_pixel_shift_iou(view: &ResolvedView, size: u32) -> f64 {
+    let size = size as usize;
+    let inside = |x: usize, y: usize| x < size && y < size && view.in_silhouette(y * size + x);
+    let mut ious = [0.0; 2];
+    for (iou, (dx, dy)) in ious.iter_mut().zip([(1, 0), (0, 1)]) {
+        let (mut both, mut either) = (0u64, 0u64);
+        // Over the image grown by a pixel, so that nothing moved out of it is lost.
+        for y in 0..=size {
+            for x in 0..=size {
+                let here = inside(x, y);
+                let moved = x >= dx && y >= dy && inside(x - dx, y - dy);
+                both += (here && moved) as u64;
+                either += (here || moved) as u64;
+            }
+        }
+        *iou = if either == 0 { 1.0 } else { both as f64 / either as f64 };
+    }
+    0.5 * (ious[0] + ious[1])
 }
 
 /// PSNR of the colour (background included), capped at 100 dB.

@@ -208,6 +208,10 @@ fn preview_of_the_bundled_bush_writes_a_contact_sheet_and_metrics() {
     // The bar of DESIGN §7.
     assert!(mean >= 0.85, "mean IoU {mean}");
     assert!(metrics["min_iou"].as_f64().unwrap() <= mean && metrics["mean_psnr"].as_f64().unwrap() > 20.0);
+    // What a pixel of displacement costs the bush's lacy silhouette (a solid disc of the view's
+    // size would keep about 0.99).
+    let shift = metrics["source_shift_iou"].as_f64().unwrap();
+    assert!((0.6..0.95).contains(&shift), "the source against itself moved 1 pixel: IoU {shift}");
     let sheet = image::load_from_memory(&project.read("baked/bush/preview/contact_sheet.png")).expect("PNG");
     assert_eq!((sheet.width(), sheet.height()), (4 * 2 * 256 + 3 * 8, 7 * 256 + 6 * 8), "source | LOD pairs, four per row");
     assert_eq!(project.run_cli(&["preview", "--asset", "nope"]).status.code(), Some(2));

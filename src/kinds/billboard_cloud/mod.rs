@@ -367,6 +367,7 @@ fn level_outputs(
         "epsilon_world": planes.epsilon,
         "max_error_world": planes.max_error,
         "mean_error_world": planes.mean_error,
+        "seam_gap_world": planes.seam_gap,
         "atlas": {
             "width": layout.layout.width,
             "height": layout.layout.height,

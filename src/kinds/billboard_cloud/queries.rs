@@ -28,7 +28,7 @@ use crate::texture::{SurfaceKind, Texture, TextureSlot};
 // Planes 2: each plane is fitted to its faces (least squares within ε). 3: faces then move to
 // their nearest plane holding their material (rounds of reassignment and refitting). 5: a
 // budget's planes are refined as k-planes and filled up to the budget; the mean error.
-pub const PLANES: Stage = Stage { name: "planes", version: 5 };
+pub const PLANES: Stage = Stage { name: "planes", version: 6 };
 // Layout 2: faces of solid materials are also drawn on other planes' rectangles they lie within
 // ε of (crack filling).
 // 4: the density fills the atlas as far as the packer can (bisection after the 5 % steps).
@@ -86,6 +86,7 @@ pub fn billboard_planes(db: &dyn Db, asset: Asset, level: u32) -> Result<Arc<sup
                     &mesh.triangle_materials,
                     quads,
                     settings.max_planes,
+                    super::planes::SEAM_WEIGHT,
                 ),
                 None => super::planes::select_planes(&mesh.positions, &mesh.triangles, &mesh.triangle_materials, settings),
             })

@@ -288,8 +288,14 @@ fn crack_filling_draws_a_face_only_on_planes_it_meets() {
     let obj = std::fs::read(root.join("examples/assets/trees/bush_2.obj")).unwrap();
     let (bush, _) = cirrus::mesh::load_mesh(Path::new("bush_2.obj"), &obj, &Default::default(), Path::new("")).unwrap();
     let (positions, triangles) = (&bush.positions, &bush.triangles);
-    let planes =
-        cirrus::kinds::billboard_cloud::planes::select_planes_within_budget(positions, triangles, &bush.triangle_materials, 64, None);
+    let planes = cirrus::kinds::billboard_cloud::planes::select_planes_within_budget(
+        positions,
+        triangles,
+        &bush.triangle_materials,
+        64,
+        None,
+        cirrus::kinds::billboard_cloud::planes::SEAM_WEIGHT,
+    );
     let rectangles = cirrus::kinds::billboard_cloud::rectangles::plane_rectangles(positions, triangles, &planes);
     let mut rectangles =
         cirrus::kinds::billboard_cloud::rectangles::merge_rectangles_to_budget(positions, triangles, &planes, rectangles, 64);

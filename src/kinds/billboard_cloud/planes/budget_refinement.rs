@@ -102,9 +102,8 @@ pub(super) fn mean_seam_gap(faces: &[Face], neighbours: &[Vec<(u32, [usize; 2])>
             let ((normal, rho), (other_normal, other_rho)) =
                 ((planes[plane].0, planes[plane].1), (planes[other_plane].0, planes[other_plane].1));
             let (a, b) = (faces[index].vertices[corners[0]], faces[index].vertices[corners[1]]);
-            let gap = |v: Vec3| project(v, normal, rho).distance(project(v, other_normal, other_rho));
             let length = a.distance(b) as f64;
-            gaps += 0.5 * (gap(a) + gap(b)) as f64 * length;
+            gaps += edge_gap([a, b], (normal, rho), (other_normal, other_rho)) as f64 * length;
             lengths += length;
         }
     }
@@ -115,15 +114,18 @@ pub(super) fn mean_seam_gap(faces: &[Face], neighbours: &[Vec<(u32, [usize; 2])>
     }
 }
 
-/// Where a point drawn on plane `(normal, rho)` lands: its orthogonal projection.
-fn project(point: Vec3, normal: Vec3, rho: f32) -> Vec3 {
-    point - (point.dot(normal) - rho) * normal
+/// How far apart the edge `ends` is drawn on two planes `(normal, rho)`, each point drawn at its
+/// orthogonal projection: the mean of the distances at its two ends.
+fn edge_gap(ends: [Vec3; 2], (normal, rho): (Vec3, f32), (other_normal, other_rho): (Vec3, f32)) -> f32 {
+    let project = |point: Vec3, normal: Vec3, rho: f32| point - (point.dot(normal) - rho) * normal;
+    let gap = |point: Vec3| project(point, normal, rho).distance(project(point, other_normal, other_rho));
+    0.5 * (gap(ends[0]) + gap(ends[1]))
 }
 
 /// Iterated conditional modes over the budget's plane assignment: a face may move to a plane
 /// of one of its edge neighbours (holding its material) when its `placement_cost` plus the gaps
 /// its shared edges open (the distance between the edge drawn on its plane and on the
-/// neighbour's, weighted by `seam_weight`) is lower there; then the planes are refitted. A
+/// neighbour's, times `weight`) is lower there; then the planes are refitted. A
 /// trunk split between two planes at different depths shows as a step in every view at an
 /// angle; this pulls such splits to where the planes meet.
 pub(super) fn close_seams(
@@ -154,8 +156,7 @@ pub(super) fn close_seams(
                     }
                     let (other_normal, other_rho) = (planes[other_plane].0, planes[other_plane].1);
                     let (a, b) = (face.vertices[corners[0]], face.vertices[corners[1]]);
-                    let gap = |v: Vec3| project(v, normal, rho).distance(project(v, other_normal, other_rho));
-                    seams += 0.5 * (gap(a) + gap(b)) * a.distance(b) / perimeter;
+                    seams += edge_gap([a, b], (normal, rho), (other_normal, other_rho)) * a.distance(b) / perimeter;
                 }
                 placement_cost(face, normal, rho) + weight * seams
             };

@@ -170,3 +170,9 @@ pub fn headless_viewer_options(arguments: &[&str], screenshot: &Path, folder: &P
     let paths = ["--screenshot".to_string(), screenshot.display().to_string(), folder.display().to_string()];
     <crate::viewer::Options as clap::Parser>::try_parse_from(words.chain(paths)).expect("viewer options")
 }
+
+/// The bundled bush (`examples/assets/trees/bush_2.obj`) as cirrus loads it.
+pub fn bundled_bush() -> cirrus::mesh::Mesh {
+    let obj = std::fs::read(Path::new(env!("CARGO_MANIFEST_DIR")).join("examples/assets/trees/bush_2.obj")).expect("the bundled bush");
+    cirrus::mesh::load_mesh(Path::new("bush_2.obj"), &obj, &Default::default(), Path::new("")).expect("the bundled bush loads").0
+}

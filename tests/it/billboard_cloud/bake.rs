@@ -284,9 +284,7 @@ fn crack_filling_draws_a_face_only_on_planes_it_meets() {
     // The bundled bush at 64 quads, every material taken as solid: ε is large under a budget,
     // and a face within ε of another plane is drawn there only when it shares a vertex (by
     // position) with a face of that plane, where the surface passes from one plane to the other.
-    let root = Path::new(env!("CARGO_MANIFEST_DIR"));
-    let obj = std::fs::read(root.join("examples/assets/trees/bush_2.obj")).unwrap();
-    let (bush, _) = cirrus::mesh::load_mesh(Path::new("bush_2.obj"), &obj, &Default::default(), Path::new("")).unwrap();
+    let bush = crate::support::bundled_bush();
     let (positions, triangles) = (&bush.positions, &bush.triangles);
     let planes = cirrus::kinds::billboard_cloud::planes::select_planes_within_budget(
         positions,

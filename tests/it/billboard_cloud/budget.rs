@@ -63,9 +63,7 @@ fn a_budget_bounds_the_quads_and_every_face_stays_drawn() {
         assert_budget_covers_every_face(&positions, &triangles, &[], quads);
     }
     // A bigger budget never needs a larger ε.
-    let root = Path::new(env!("CARGO_MANIFEST_DIR"));
-    let obj = std::fs::read(root.join("examples/assets/trees/bush_2.obj")).unwrap();
-    let (bush, _) = cirrus::mesh::load_mesh(Path::new("bush_2.obj"), &obj, &Default::default(), Path::new("")).unwrap();
+    let bush = crate::support::bundled_bush();
     let epsilons: Vec<f32> = [16, 64, 256]
         .into_iter()
         .map(|quads| assert_budget_covers_every_face(&bush.positions, &bush.triangles, &bush.triangle_materials, quads))
@@ -93,9 +91,7 @@ fn a_budgets_planes_are_refined_past_the_greedy_selection() {
     // The bush at 64 quads: the smallest fitting ε gives the greedy pass fewer planes than the
     // budget allows; the refinement fills the budget and moves faces and planes so that faces
     // lie nearer their planes and more nearly parallel to them than at that ε alone.
-    let root = Path::new(env!("CARGO_MANIFEST_DIR"));
-    let obj = std::fs::read(root.join("examples/assets/trees/bush_2.obj")).unwrap();
-    let (bush, _) = cirrus::mesh::load_mesh(Path::new("bush_2.obj"), &obj, &Default::default(), Path::new("")).unwrap();
+    let bush = crate::support::bundled_bush();
     let (positions, triangles, materials) = (&bush.positions, &bush.triangles, &bush.triangle_materials);
     let budget = select_planes_within_budget(positions, triangles, materials, 64, None, SEAM_WEIGHT);
     let settings = PlaneSettings { epsilon: budget.epsilon_fraction, max_planes: None, max_quads: None };
@@ -120,9 +116,7 @@ fn a_budgets_planes_keep_adjacent_faces_together_where_splitting_them_opens_a_st
     // two places: a trunk split so shows a step in every view at an angle. On the bundled bush
     // at 64 quads, closing seams takes the mean gap at such edges down by a fifth or more and
     // costs the faces' mean distance from their planes at most a tenth.
-    let root = Path::new(env!("CARGO_MANIFEST_DIR"));
-    let obj = std::fs::read(root.join("examples/assets/trees/bush_2.obj")).unwrap();
-    let (bush, _) = cirrus::mesh::load_mesh(Path::new("bush_2.obj"), &obj, &Default::default(), Path::new("")).unwrap();
+    let bush = crate::support::bundled_bush();
     let (positions, triangles, materials) = (&bush.positions, &bush.triangles, &bush.triangle_materials);
     let closed = select_planes_within_budget(positions, triangles, materials, 64, None, SEAM_WEIGHT);
     let open = select_planes_within_budget(positions, triangles, materials, 64, None, 0.0);
@@ -171,8 +165,7 @@ fn the_atlas_follows_the_screen_size_the_lod_is_meant_for() {
     std::os::unix::fs::symlink(root.join("examples"), project.path("examples")).unwrap();
     let summary = build(&mut project.open());
     assert!(summary.all_ok(), "{}", summary.to_text());
-    let obj = std::fs::read(root.join("examples/assets/trees/bush_2.obj")).unwrap();
-    let (bush, _) = cirrus::mesh::load_mesh(Path::new("bush_2.obj"), &obj, &Default::default(), Path::new("")).unwrap();
+    let bush = crate::support::bundled_bush();
     let diameter = 2.0 * cirrus::kinds::billboard_cloud::planes::bounding_sphere_radius(&bush.positions) as f64;
     let mut sides = Vec::new();
     for (name, pixels) in [("far", 64.0), ("near", 512.0)] {

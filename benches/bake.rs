@@ -825,6 +825,7 @@ fn tree_preview(
         settings: Default::default(),
         out: "preview".into(),
         lod: None,
+        stand_in: Default::default(),
     };
     (dir, project, options)
 }
@@ -842,10 +843,15 @@ fn preview_one_level(
 /// Mean silhouette IoU (16 samples per pixel) of each corpus tree's LOD at 32 to 512 quads: with
 /// `budget: Some(Quads(n))`, and beside it what ε alone gives within the same count (the
 /// smallest ε, found by bisection, whose cloud has at most n quads: what a user raising ε
-/// until the LOD fits would get); plane-selection time of the budget's search.
+/// until the LOD fits would get); plane-selection time of the budget's search. Each loss also in
+/// units of the source's 1-pixel-shift loss, and beside the budget's LOD the source's faces
+/// moved onto its planes (`StandIn`): projected (the cloud's geometry with exact textures) and
+/// translated (displacement alone), the ceiling no texture work can pass.
 fn bench_billboard_budget(corpus: &Path) {
+    use cirrus::kinds::billboard_cloud::lod_preview::StandIn;
     use cirrus::kinds::billboard_cloud::planes::{select_planes, PlaneSettings};
     use cirrus::kinds::billboard_cloud::rectangles::plane_rectangles;
+    use cirrus::kinds::billboard_cloud::PreviewOptions;
     for tree in ["oak_medium", "ash_small", "bush_2"] {
         let obj = std::fs::read(corpus.join(format!("trees/{tree}.obj"))).unwrap();
         let (mesh, _) = cirrus::mesh::load_mesh(Path::new("tree.obj"), &obj, &Default::default(), Path::new("")).unwrap();
@@ -884,7 +890,7 @@ fn bench_billboard_budget(corpus: &Path) {
                 let mean_error_radii = report["mean_error_world"].as_f64().unwrap_or(0.0) / report["epsilon_world"].as_f64().unwrap_or(1.0)
                     * report["epsilon"].as_f64().unwrap_or(0.0);
                 row.push_str(&format!(
-                    " {label} IoU {:.3} (missed {:.3}, extra {:.3}; {} quads, {} planes, ε {:.4}, mean error {:.4} R = {:.2} px, planes stage {:.0} ms);",
+                    " {label} IoU {:.3} (missed {:.3}, extra {:.3}; {} quads, {} planes, ε {:.4}, mean error {:.4} R = {:.2} px, planes stage {:.0} ms)",
                     metrics.mean_iou,
                     metrics.mean_missed,
                     metrics.mean_extra,
@@ -896,6 +902,23 @@ fn bench_billboard_budget(corpus: &Path) {
                     report["stage_ms"]["planes"].as_f64().unwrap_or(0.0)
                 ));
                 source_shift_iou = metrics.source_shift_iou;
+                // What the planes alone allow: the source's own faces moved onto them, with their
+                // own textures; and the loss in units of what a 1-pixel shift of the source costs,
+                // which is how meshes of different lacework compare.
+                let in_shifts = |iou: f64| (1.0 - iou) / (1.0 - source_shift_iou).max(1e-9);
+                row.push_str(&format!(" loss {:.2} px-shifts", in_shifts(metrics.mean_iou)));
+                if label == "budget" {
+                    for stand_in in [StandIn::Projected, StandIn::Translated] {
+                        let stood_in = preview_one_level(&mut project, &PreviewOptions { stand_in, ..options.clone() });
+                        row.push_str(&format!(
+                            ", faces {} onto its planes IoU {:.3} ({:.2} px-shifts)",
+                            stand_in.name(),
+                            stood_in.mean_iou,
+                            in_shifts(stood_in.mean_iou)
+                        ));
+                    }
+                }
+                row.push(';');
             }
             figures.push(row);
         }

@@ -66,12 +66,19 @@ pub enum Command {
         /// least half of its samples are covered.
         #[arg(long, default_value_t = 4, value_parser = clap::value_parser!(u32).range(1..=4))]
         samples: u32,
-        /// Output folder (default: <output>/<asset>/preview).
+        /// Output folder (default: <output>/<asset>/preview, or preview_<stand-in>).
         #[arg(long)]
         out: Option<PathBuf>,
         /// Only this level of a LOD chain (default: every level, and the chain's contact sheet).
         #[arg(long, value_name = "N")]
         lod: Option<u32>,
+        /// What stands beside the source: the baked LOD, or the source's own faces moved onto
+        /// the LOD's planes with their own textures, to tell what the planes cost from what the
+        /// atlas costs: `projected` (each corner onto its face's plane: the cloud's geometry) or
+        /// `translated` (each face along its plane's normal, keeping its shape: displacement
+        /// alone).
+        #[arg(long, value_enum, default_value_t = crate::kinds::billboard_cloud::lod_preview::StandIn::Baked)]
+        stand_in: crate::kinds::billboard_cloud::lod_preview::StandIn,
     },
     /// Bake, then watch the sources and re-bake what each edit invalidated; tell engines over TCP.
     Watch {
@@ -153,6 +160,17 @@ fn parse_byte_size(text: &str) -> Result<u64, String> {
     value.checked_mul(1 << shift).ok_or_else(|| format!("`{text}` is too large"))
 }
 
+/// The preview's stand-ins on the command line (`lod_preview` knows nothing of clap).
+impl ValueEnum for crate::kinds::billboard_cloud::lod_preview::StandIn {
+    fn value_variants<'a>() -> &'a [Self] {
+        &crate::kinds::billboard_cloud::lod_preview::StandIn::ALL
+    }
+
+    fn to_possible_value(&self) -> Option<clap::builder::PossibleValue> {
+        Some(clap::builder::PossibleValue::new(self.name()))
+    }
+}
+
 /// The graph formats on the command line (`graph` is a data module and knows nothing of clap).
 impl ValueEnum for crate::graph::GraphFormat {
     fn value_variants<'a>() -> &'a [Self] {
@@ -211,10 +229,10 @@ pub fn run(cli: Cli) -> ExitCode {
             }
         }
         Command::Graph { pipeline, asset, format } => graph(pipeline, asset, format, options),
-        Command::Preview { pipeline, asset, views, size, samples, out, lod } => {
+        Command::Preview { pipeline, asset, views, size, samples, out, lod, stand_in } => {
             let settings =
                 crate::kinds::billboard_cloud::lod_preview::PreviewSettings { views: views as usize, size, samples_per_axis: samples };
-            preview(pipeline, asset, settings, out, lod, options)
+            preview(pipeline, asset, settings, out, lod, stand_in, options)
         }
     }
 }
@@ -311,21 +329,31 @@ fn preview(
     settings: crate::kinds::billboard_cloud::lod_preview::PreviewSettings,
     out: Option<PathBuf>,
     lod: Option<u32>,
+    stand_in: crate::kinds::billboard_cloud::lod_preview::StandIn,
     options: ProjectOptions,
 ) -> ExitCode {
     let config = match load_pipeline_or_report(&pipeline) {
         Ok(config) => config,
         Err(code) => return code,
     };
-    let out = out.unwrap_or_else(|| config.output.join(&asset).join("preview"));
+    // A stand-in's sheets go beside the baked LOD's, not over them.
+    let folder = match stand_in {
+        crate::kinds::billboard_cloud::lod_preview::StandIn::Baked => "preview".to_string(),
+        other => format!("preview_{}", other.name()),
+    };
+    let out = out.unwrap_or_else(|| config.output.join(&asset).join(folder));
     let mut project = Project::open(config, options);
-    let options = crate::kinds::billboard_cloud::PreviewOptions { asset, settings, out: out.clone(), lod };
+    let options = crate::kinds::billboard_cloud::PreviewOptions { asset, settings, out: out.clone(), lod, stand_in };
     match crate::kinds::billboard_cloud::preview(&mut project, &options) {
         Ok(levels) => {
             let chain = levels.len() > 1 || levels.first().is_some_and(|&(level, _)| level > 0) || lod.is_some();
             for (level, metrics) in &levels {
+                let stand_in = match stand_in {
+                    crate::kinds::billboard_cloud::lod_preview::StandIn::Baked => String::new(),
+                    other => format!("source faces {} onto the planes: ", other.name()),
+                };
                 println!(
-                    "{}{} views, {} per pixel: mean IoU {:.3}, min IoU {:.3} (missed {:.1} %, extra {:.1} % of the source's silhouette), mean PSNR {:.2} dB; the source against itself moved 1 pixel: IoU {:.3}",
+                    "{}{stand_in}{} views, {} per pixel: mean IoU {:.3}, min IoU {:.3} (missed {:.1} %, extra {:.1} % of the source's silhouette), mean PSNR {:.2} dB; the source against itself moved 1 pixel: IoU {:.3}",
                     if chain { format!("lod{level}: ") } else { String::new() },
                     metrics.views.len(),
                     if metrics.samples_per_pixel == 1 { "1 sample".to_string() } else { format!("{} samples", metrics.samples_per_pixel) },

@@ -177,6 +177,7 @@ fn corpus_billboard_clouds_bake_and_keep_their_silhouettes() {
             settings: Default::default(),
             out: format!("baked/{name}/preview").into(),
             lod: None,
+            stand_in: Default::default(),
         };
         let [(0, metrics)] = &cirrus::kinds::billboard_cloud::preview(&mut project, &options).expect("preview renders")[..] else {
             panic!("{name}: one level previewed")

@@ -254,6 +254,52 @@ pub fn bounding_sphere(mesh: &ViewMesh) -> ([f32; 3], f32) {
     (center.to_array(), positions().map(|p| p.distance(center)).fold(0.0, f32::max))
 }
 
+/// What a preview compares with the source: the baked LOD, or a stand-in that keeps some of the
+/// cloud's losses and not others. A stand-in is the source's own faces, drawn with the source's
+/// textures at full resolution (no atlas, no mips, no block compression), each moved onto the
+/// plane the cloud draws it on; so the baked LOD against `Projected` is what the atlas costs,
+/// `Projected` against `Translated` what foreshortening costs, and `Translated` what displacement
+/// alone costs, which no texture can win back.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
+pub enum StandIn {
+    /// The baked `lod.obj` with its decoded atlas.
+    #[default]
+    Baked,
+    /// Every corner of a face at its orthogonal projection on the face's plane: the cloud's
+    /// geometry.
+    Projected,
+    /// Every face moved along its plane's normal by its corners' mean distance from the plane:
+    /// displaced as the cloud displaces it on average, keeping its shape and orientation.
+    Translated,
+}
+
+impl StandIn {
+    pub const ALL: [StandIn; 3] = [StandIn::Baked, StandIn::Projected, StandIn::Translated];
+
+    pub fn name(self) -> &'static str {
+        match self {
+            StandIn::Baked => "baked",
+            StandIn::Projected => "projected",
+            StandIn::Translated => "translated",
+        }
+    }
+}
+
+/// Where `stand_in` draws corner `corner` of the face `corners` whose plane is the points `x`
+/// with `normal · x = distance` (`Baked` and a face without a plane: where it is).
+pub fn stand_in_position(stand_in: StandIn, corners: [[f32; 3]; 3], corner: usize, plane: Option<([f32; 3], f32)>) -> [f32; 3] {
+    let Some((normal, distance)) = plane else { return corners[corner] };
+    let normal = Vec3::from(normal);
+    let point = Vec3::from(corners[corner]);
+    let offset = |point: Vec3| point.dot(normal) - distance;
+    let moved = match stand_in {
+        StandIn::Baked => point,
+        StandIn::Projected => point - offset(point) * normal,
+        StandIn::Translated => point - corners.iter().map(|&corner| offset(Vec3::from(corner))).sum::<f32>() / 3.0 * normal,
+    };
+    moved.to_array()
+}
+
 /// The files of a baked LOD, each with its path (for messages) and bytes.
 pub struct LodFiles {
     pub obj: (PathBuf, Vec<u8>),

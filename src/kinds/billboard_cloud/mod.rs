@@ -391,6 +391,9 @@ pub struct PreviewOptions {
     pub out: PathBuf,
     /// Only this level of a chain (none: every level).
     pub lod: Option<u32>,
+    /// What stands for each level beside the source: the baked LOD, or the source's faces moved
+    /// onto the level's planes (see [`lod_preview::StandIn`]).
+    pub stand_in: lod_preview::StandIn,
 }
 
 #[derive(Debug, thiserror::Error)]
@@ -446,7 +449,13 @@ pub fn preview(
     let folder = config.output.join(&options.asset);
     let lods = chosen
         .iter()
-        .map(|&level| read_lod_view_mesh(&config.root, &folder.join(levels::level_folder(settings, level)), cutoff))
+        .map(|&level| match options.stand_in {
+            lod_preview::StandIn::Baked => read_lod_view_mesh(&config.root, &folder.join(levels::level_folder(settings, level)), cutoff),
+            stand_in => {
+                let planes = queries::billboard_planes(db, input, level)?;
+                Ok(crate::gpu::ViewMesh { batches: faces_on_planes(&loaded, &planes, stand_in), materials: source.materials.clone() })
+            }
+        })
         .collect::<Result<Vec<_>, _>>()
         .map_err(PreviewError::Artifact)?;
     let positions = &loaded.mesh.positions;
@@ -488,6 +497,32 @@ pub fn read_lod_view_mesh(root: &Path, folder: &Path, alpha_cutoff: f32) -> Resu
         albedo_ktx2: read("albedo.ktx2")?,
         normal_ktx2: read("normal.ktx2")?,
         alpha_cutoff,
+    })
+}
+
+/// The source's faces as `stand_in` draws them on the planes of `planes`.
+fn faces_on_planes(
+    loaded: &LoadedMesh,
+    planes: &planes::PlaneSet,
+    stand_in: lod_preview::StandIn,
+) -> Vec<(usize, Vec<crate::gpu::RenderVertex>)> {
+    let mesh = &loaded.mesh;
+    let mut plane_of_face = vec![None; mesh.triangles.len()];
+    for plane in &planes.planes {
+        for &face in &plane.faces {
+            if let Some(slot) = plane_of_face.get_mut(face as usize) {
+                *slot = Some((plane.normal, plane.distance));
+            }
+        }
+    }
+    render_groups::face_batches_placed(mesh, &loaded.tangents, 0..mesh.triangles.len() as u32, |face, corner| {
+        let triangle = mesh.triangles[face as usize];
+        lod_preview::stand_in_position(
+            stand_in,
+            triangle.map(|corner| mesh.positions[corner as usize]),
+            corner,
+            plane_of_face[face as usize],
+        )
     })
 }
 

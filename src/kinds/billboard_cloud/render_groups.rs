@@ -83,17 +83,28 @@ pub fn plane_texture_paths(mesh: &Mesh, plane: &PlaneRectangle) -> Vec<PathBuf> 
 /// `faces` as vertex batches per material (three vertices per triangle, in the order given): a
 /// rectangle's own faces then those it also draws, or every face for a view of the mesh.
 pub fn face_batches(mesh: &Mesh, tangents: &[[f32; 4]], faces: impl IntoIterator<Item = u32>) -> Vec<(usize, Vec<RenderVertex>)> {
+    face_batches_placed(mesh, tangents, faces, |face, corner| mesh.positions[mesh.triangles[face as usize][corner] as usize])
+}
+
+/// [`face_batches`] with each corner drawn at `position(face, corner)` (corner 0 to 2) instead of
+/// its vertex's position (normals, texture coordinates and tangents stay the vertex's).
+pub fn face_batches_placed(
+    mesh: &Mesh,
+    tangents: &[[f32; 4]],
+    faces: impl IntoIterator<Item = u32>,
+    position: impl Fn(u32, usize) -> [f32; 3],
+) -> Vec<(usize, Vec<RenderVertex>)> {
     let mut batches: BTreeMap<usize, Vec<RenderVertex>> = BTreeMap::new();
     for face in faces {
         let material = mesh.triangle_materials[face as usize] as usize;
         let batch = batches.entry(material).or_default();
-        for vertex in mesh.triangles[face as usize] {
-            let vertex = vertex as usize;
+        for (corner, vertex) in mesh.triangles[face as usize].into_iter().enumerate() {
+            let index = vertex as usize;
             batch.push(RenderVertex {
-                position: mesh.positions[vertex],
-                normal: mesh.normals[vertex],
-                uv: mesh.uvs.as_ref().map_or([0.0, 0.0], |uvs| uvs[vertex]),
-                tangent: tangents.get(vertex).copied().unwrap_or([1.0, 0.0, 0.0, 1.0]),
+                position: position(face, corner),
+                normal: mesh.normals[index],
+                uv: mesh.uvs.as_ref().map_or([0.0, 0.0], |uvs| uvs[index]),
+                tangent: tangents.get(index).copied().unwrap_or([1.0, 0.0, 0.0, 1.0]),
             });
         }
     }

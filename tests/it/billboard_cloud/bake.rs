@@ -217,6 +217,66 @@ fn preview_of_the_bundled_bush_writes_a_contact_sheet_and_metrics() {
     assert_eq!(project.run_cli(&["preview", "--asset", "nope"]).status.code(), Some(2));
 }
 
+#[test]
+fn a_stand_in_moves_each_face_onto_its_plane_as_asked() {
+    use cirrus::kinds::billboard_cloud::lod_preview::{stand_in_position, StandIn};
+    // A face tilted against the plane z = 1: its corners at heights 0, 2 and 4 above it.
+    let corners = [[0.0, 0.0, 1.0], [1.0, 0.0, 3.0], [0.0, 1.0, 5.0]];
+    let plane = Some(([0.0, 0.0, 1.0], 1.0));
+    let at = |stand_in, corner| stand_in_position(stand_in, corners, corner, plane);
+    for corner in 0..3 {
+        assert_eq!(at(StandIn::Baked, corner), corners[corner]);
+        assert_eq!(stand_in_position(StandIn::Projected, corners, corner, None), corners[corner], "a face without a plane stays");
+        // Projected: onto the plane, straight down.
+        assert_eq!(at(StandIn::Projected, corner), [corners[corner][0], corners[corner][1], 1.0]);
+        // Translated: the whole face down by its mean height (2), keeping its shape and tilt.
+        assert_eq!(at(StandIn::Translated, corner), [corners[corner][0], corners[corner][1], corners[corner][2] - 2.0]);
+    }
+}
+
+#[test]
+fn a_preview_with_a_stand_in_tells_what_the_planes_cost_from_what_the_atlas_costs() {
+    // Two unit squares 0.4 apart in depth and one budget quad: one plane through both, so every
+    // view at an angle sees them drawn displaced. Stacked, they are parallel to the plane between
+    // them: projecting them onto it is translating them, and a flat colour loses little in the
+    // atlas, so the baked LOD scores about what its plane allows. Side by side, the plane that
+    // fits them best is tilted: projected, they are also foreshortened.
+    let stacked = "v 0 0 0\nv 1 0 0\nv 1 1 0\nv 0 1 0\nv 0 0 0.4\nv 1 0 0.4\nv 1 1 0.4\nv 0 1 0.4\nf 1 2 3 4\nf 5 6 7 8\n";
+    let side_by_side = "v 0 0 0\nv 1 0 0\nv 1 1 0\nv 0 1 0\nv 1.2 0 0.4\nv 2.2 0 0.4\nv 2.2 1 0.4\nv 1.2 1 0.4\nf 1 2 3 4\nf 5 6 7 8\n";
+    let mut figures = Vec::new();
+    for obj in [stacked, side_by_side] {
+        let project = TempProject::new(
+            r#"Pipeline(source: "assets", output: "baked", assets: [
+                BillboardCloud(name: "squares", mesh: "squares.obj", billboard: (budget: Some(Quads(1))), atlas: (max_size: 512)),
+            ])"#,
+        );
+        project.write("assets/squares.obj", obj);
+        let mut ious = Vec::new();
+        for stand_in in ["baked", "projected", "translated"] {
+            let output = project.run_cli(&["preview", "--asset", "squares", "--stand-in", stand_in, "--size", "64"]);
+            assert_eq!(output.status.code(), Some(0), "{}", String::from_utf8_lossy(&output.stderr));
+            let stdout = String::from_utf8_lossy(&output.stdout);
+            assert_eq!(stdout.contains(&format!("source faces {stand_in} onto the planes")), stand_in != "baked", "{stdout}");
+            let folder = if stand_in == "baked" { "preview".to_string() } else { format!("preview_{stand_in}") };
+            let metrics: serde_json::Value =
+                serde_json::from_slice(&project.read(&format!("baked/squares/{folder}/metrics.json"))).unwrap();
+            ious.push(metrics["mean_iou"].as_f64().unwrap());
+        }
+        let report: serde_json::Value = serde_json::from_slice(&project.read("baked/squares/report.json")).unwrap();
+        assert_eq!(report["quads"], 1);
+        assert_eq!(project.run_cli(&["preview", "--asset", "squares", "--stand-in", "nope"]).status.code(), Some(2));
+        figures.push(ious);
+    }
+    println!("two squares on one plane, mean IoU (baked, projected, translated): stacked {:?}, side by side {:?}", figures[0], figures[1]);
+    let (&[baked, projected, translated], &[_, tilted_projected, tilted_translated]) = (&figures[0][..], &figures[1][..]) else {
+        unreachable!()
+    };
+    assert!(projected < 0.95, "the squares are drawn displaced: {figures:?}");
+    assert!((projected - translated).abs() < 0.01, "parallel faces: projecting is translating: {figures:?}");
+    assert!((baked - projected).abs() < 0.05, "a flat colour costs the atlas little: {figures:?}");
+    assert!(tilted_translated > tilted_projected + 0.1, "a tilted plane foreshortens what it projects: {figures:?}");
+}
+
 /// A trunk along y: `rings` rings of `segments` vertices, tapering from radius 0.35 to 0.2 over
 /// height 6 and twisting by a third of a segment per ring (as generated trees are), open ends.
 fn trunk_obj(segments: usize, rings: usize) -> String {

@@ -347,11 +347,11 @@ fn preview(
     match crate::kinds::billboard_cloud::preview(&mut project, &options) {
         Ok(levels) => {
             let chain = levels.len() > 1 || levels.first().is_some_and(|&(level, _)| level > 0) || lod.is_some();
+            let stand_in = match stand_in {
+                crate::kinds::billboard_cloud::lod_preview::StandIn::Baked => String::new(),
+                other => format!("source faces {} onto the planes: ", other.name()),
+            };
             for (level, metrics) in &levels {
-                let stand_in = match stand_in {
-                    crate::kinds::billboard_cloud::lod_preview::StandIn::Baked => String::new(),
-                    other => format!("source faces {} onto the planes: ", other.name()),
-                };
                 println!(
                     "{}{stand_in}{} views, {} per pixel: mean IoU {:.3}, min IoU {:.3} (missed {:.1} %, extra {:.1} % of the source's silhouette), mean PSNR {:.2} dB; the source against itself moved 1 pixel: IoU {:.3}",
                     if chain { format!("lod{level}: ") } else { String::new() },

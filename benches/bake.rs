@@ -8,7 +8,8 @@
 //! flight helmet with its quality beside per-vertex bakes (`ao`), the Height kind's distances
 //! and times on the bundled and a corpus pair (`height`), and the block encoders' throughput and
 //! the oak full bake at each instruction-set level this CPU runs (`isa`), and the oak full bake
-//! against a shared cache on a local SeaweedFS server (`shared-cache`). Prints figures.
+//! against a shared cache on a local SeaweedFS server (`shared-cache`), and the oak's full bake
+//! as a process beside another build's binary, alternating (`oak-bake`). Prints figures.
 
 use std::path::Path;
 use std::time::Instant;
@@ -78,6 +79,9 @@ fn main() {
     }
     if corpus.join("trees").is_dir() && wanted("isa") {
         bench_isa(&corpus);
+    }
+    if corpus.join("trees").is_dir() && wanted("oak-bake") {
+        bench_oak_bake(&corpus);
     }
     if corpus.join("trees").is_dir() && wanted("shared-cache") {
         bench_shared_cache(&corpus);
@@ -1357,6 +1361,150 @@ fn bench_shared_cache(corpus: &Path) {
         println!(
             "shared-cache: oak cold with a store {label}: {away:.2} s, {:+.2} s over the cold build without one (bar ≤ 1 s)",
             away - cold
+        );
+    }
+}
+
+/// What one bake process cost: wall and CPU seconds, peak resident memory in MiB, the summary.
+struct ProcessFigures {
+    wall: f64,
+    cpu: f64,
+    peak_mib: f64,
+    summary: serde_json::Value,
+}
+
+/// CPU seconds of every child process reaped so far (user + system).
+fn children_cpu_seconds() -> f64 {
+    let mut usage: libc::rusage = unsafe { std::mem::zeroed() };
+    // SAFETY: getrusage writes the struct it is given.
+    unsafe { libc::getrusage(libc::RUSAGE_CHILDREN, &mut usage) };
+    let seconds = |time: libc::timeval| time.tv_sec as f64 + time.tv_usec as f64 / 1e6;
+    seconds(usage.ru_utime) + seconds(usage.ru_stime)
+}
+
+/// `binary build --summary json` in `folder` with `global_arguments` before `build`, cold
+/// (the output folder removed first): wall, CPU and peak memory of the process.
+fn cold_bake(binary: &Path, folder: &Path, global_arguments: &[&str]) -> ProcessFigures {
+    let _ = std::fs::remove_dir_all(folder.join("baked"));
+    let cpu_before = children_cpu_seconds();
+    let start = Instant::now();
+    let mut child = std::process::Command::new(binary)
+        .args(global_arguments)
+        .args(["build", "--summary", "json"])
+        .current_dir(folder)
+        .stdout(std::process::Stdio::piped())
+        .stderr(std::process::Stdio::null())
+        .spawn()
+        .expect("run cirrus");
+    let status_file = format!("/proc/{}/status", child.id());
+    let mut stdout = child.stdout.take().expect("stdout");
+    let reader = std::thread::spawn(move || {
+        let mut bytes = Vec::new();
+        std::io::Read::read_to_end(&mut stdout, &mut bytes).expect("summary");
+        bytes
+    });
+    let mut peak_kib = 0u64;
+    while child.try_wait().expect("child").is_none() {
+        if let Ok(status) = std::fs::read_to_string(&status_file) {
+            if let Some(line) = status.lines().find(|line| line.starts_with("VmHWM:")) {
+                peak_kib = peak_kib.max(line.split_whitespace().nth(1).and_then(|kib| kib.parse().ok()).unwrap_or(0));
+            }
+        }
+        std::thread::sleep(std::time::Duration::from_millis(5));
+    }
+    let wall = start.elapsed().as_secs_f64();
+    let summary = serde_json::from_slice(&reader.join().expect("reader")).expect("summary JSON");
+    ProcessFigures { wall, cpu: children_cpu_seconds() - cpu_before, peak_mib: peak_kib as f64 / 1024.0, summary }
+}
+
+/// The oak's full bake (default settings, cold, as a process, llvmpipe or whatever adapter the
+/// machine has) by this build and by a baseline binary (`CIRRUS_BENCH_BASELINE`, e.g. the
+/// commit before a change, built with `tools/build_baseline.sh REV`), runs alternating, three
+/// each, at `--isa avx2` (where both binaries know the flag and the CPU has AVX2) and native:
+/// wall median (min–max), CPU, peak memory, stage sums over threads, then each build's mean
+/// IoU (26 views) and the albedo's PSNR, visible-texel PSNR and alpha-test IoU.
+fn bench_oak_bake(corpus: &Path) {
+    let current = Path::new(env!("CARGO_BIN_EXE_cirrus")).to_path_buf();
+    let baseline = std::env::var_os("CIRRUS_BENCH_BASELINE").map(std::path::PathBuf::from);
+    if baseline.is_none() {
+        println!("oak-bake: no baseline (set CIRRUS_BENCH_BASELINE to another build's cirrus, e.g. from tools/build_baseline.sh REV)");
+    }
+    let binaries: Vec<(String, std::path::PathBuf)> = std::iter::once(("this build".to_string(), current))
+        .chain(baseline.map(|path| (format!("baseline {}", path.display()), path)))
+        .collect();
+    let knows_isa = |binary: &Path| {
+        std::process::Command::new(binary)
+            .arg("--help")
+            .output()
+            .is_ok_and(|output| String::from_utf8_lossy(&output.stdout).contains("--isa"))
+    };
+    let cpu = cirrus::isa::detected_isa();
+    let dir = tree_project(corpus, r#"BillboardCloud(name: "oak", mesh: "trees/oak_medium.obj")"#);
+    println!("oak-bake: CPU up to {cpu}, 2 workers as the machine gives; adapter {}", cirrus::gpu::adapter_family());
+    let mut settings: Vec<Vec<&str>> = Vec::new();
+    if cpu >= cirrus::isa::IsaLevel::Avx2 {
+        settings.push(vec!["--isa", "avx2"]);
+    }
+    settings.push(Vec::new());
+    for arguments in &settings {
+        let label = if arguments.is_empty() { format!("native ({cpu})") } else { arguments.join(" ") };
+        let mut runs: Vec<Vec<ProcessFigures>> = binaries.iter().map(|_| Vec::new()).collect();
+        for _ in 0..3 {
+            for (index, (_, binary)) in binaries.iter().enumerate() {
+                if !arguments.is_empty() && !knows_isa(binary) {
+                    continue;
+                }
+                runs[index].push(cold_bake(binary, dir.path(), arguments));
+            }
+        }
+        for ((name, _), runs) in binaries.iter().zip(&runs) {
+            if runs.is_empty() {
+                println!("oak-bake: {label}: {name}: this binary has no --isa; not measured");
+                continue;
+            }
+            let mut walls: Vec<f64> = runs.iter().map(|run| run.wall).collect();
+            walls.sort_by(f64::total_cmp);
+            let mean = |value: fn(&ProcessFigures) -> f64| runs.iter().map(value).sum::<f64>() / runs.len() as f64;
+            let mut stages = std::collections::BTreeMap::<String, f64>::new();
+            for run in runs {
+                for stage in run.summary["assets"][0]["stages"].as_array().expect("stages").iter().filter(|stage| stage["status"] == "ran")
+                {
+                    *stages.entry(stage["stage"].as_str().expect("stage").to_string()).or_default() +=
+                        stage["ms"].as_f64().unwrap_or(0.0) / runs.len() as f64;
+                }
+            }
+            let stages: Vec<String> = stages.iter().map(|(stage, ms)| format!("{stage} {ms:.0}")).collect();
+            println!(
+                "oak-bake: {label}: {name}: wall {:.2} s ({:.2}–{:.2}), CPU {:.1} s, peak {:.0} MiB; stage ms summed over threads: {}",
+                walls[walls.len() / 2],
+                walls[0],
+                walls[walls.len() - 1],
+                mean(|run| run.cpu),
+                mean(|run| run.peak_mib),
+                stages.join(", ")
+            );
+        }
+    }
+    // Fidelity of what each build baked (native), from its own preview.
+    for (name, binary) in &binaries {
+        cold_bake(binary, dir.path(), &[]);
+        let preview =
+            std::process::Command::new(binary).args(["preview", "--asset", "oak"]).current_dir(dir.path()).output().expect("preview");
+        let metrics: serde_json::Value = std::fs::read(dir.path().join("baked/oak/preview/metrics.json"))
+            .ok()
+            .and_then(|bytes| serde_json::from_slice(&bytes).ok())
+            .unwrap_or_else(|| panic!("{name}'s preview wrote no metrics: {}", String::from_utf8_lossy(&preview.stderr)));
+        let report: serde_json::Value =
+            serde_json::from_slice(&std::fs::read(dir.path().join("baked/oak/report.json")).expect("report")).expect("JSON");
+        let albedo =
+            report["surfaces"].as_array().expect("surfaces").iter().find(|surface| surface["surface"] == "Albedo").expect("albedo");
+        println!(
+            "oak-bake: {name}: mean IoU {:.4} (26 views), mean PSNR {:.2} dB; albedo PSNR {} dB (all texels, RGBA), visible {} dB (RGB where the alpha test passes), alpha-test IoU {}",
+            metrics["mean_iou"].as_f64().unwrap_or(f64::NAN),
+            metrics["mean_psnr"].as_f64().unwrap_or(f64::NAN),
+            albedo["psnr_db"],
+            albedo.get("visible_psnr_db").map_or("—".to_string(), |value| value.to_string()),
+            albedo.get("alpha_test_iou").map_or("—".to_string(), |value| value.to_string()),
         );
     }
 }

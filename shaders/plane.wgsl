@@ -78,11 +78,31 @@ fn sample_or(map: texture_2d<f32>, has: f32, uv: vec2f, fallback: vec4f) -> vec4
     return select(fallback, value, has > 0.5);
 }
 
+fn albedo_at(uv: vec2f) -> vec4f {
+    return sample_or(albedo_map, material.has_a.x, uv, vec4f(1.0)) * vec4f(material.albedo.rgb, 1.0);
+}
+
+fn opacity_at(uv: vec2f, albedo: vec4f) -> f32 {
+    return albedo.a * sample_or(opacity_map, material.has_a.y, uv, vec4f(1.0)).a * material.albedo.a;
+}
+
+// Coverage alone, at several samples per texel (the distance-field alpha's edges): the same
+// alpha test as `fs_main`, one byte written, no depth, so that it costs a fraction of the
+// full shading that runs once per texel.
+@fragment
+fn fs_coverage(input: VertexOut) -> @location(0) vec4f {
+    let albedo = albedo_at(input.uv);
+    if (opacity_at(input.uv, albedo) < frame.size.w) {
+        discard;
+    }
+    return vec4f(1.0);
+}
+
 @fragment
 fn fs_main(input: VertexOut) -> Targets {
     let uv = input.uv;
-    let albedo = sample_or(albedo_map, material.has_a.x, uv, vec4f(1.0)) * vec4f(material.albedo.rgb, 1.0);
-    let opacity = albedo.a * sample_or(opacity_map, material.has_a.y, uv, vec4f(1.0)).a * material.albedo.a;
+    let albedo = albedo_at(uv);
+    let opacity = opacity_at(uv, albedo);
     if (opacity < frame.size.w) {
         discard;
     }

@@ -233,6 +233,27 @@ pub fn timed<T>(db: &dyn Db, stage: Stage, label: &str, body: impl FnOnce() -> T
     result
 }
 
+/// Runs one body that does the work of several instances of a stage (`labels`, each with its
+/// share of the work), recording a run for each with its share of the time.
+pub fn timed_together<T>(db: &dyn Db, stage: Stage, labels: &[(String, f64)], body: impl FnOnce() -> T) -> T {
+    crate::cache::take_remote_hit();
+    let start = Instant::now();
+    let result = body();
+    let ms = start.elapsed().as_secs_f64() * 1000.0;
+    let total: f64 = labels.iter().map(|(_, share)| share).sum();
+    for (label, share) in labels {
+        db.record_run(StageRun {
+            stage: stage.name,
+            label: label.clone(),
+            ms: if total > 0.0 { ms * share / total } else { ms / labels.len() as f64 },
+            started: start,
+            from_cache: false,
+            from_remote: false,
+        });
+    }
+    result
+}
+
 /// Records that a stage's result came from the persistent cache, and whether the shared store
 /// served it (a load on this thread since the last record, see `cache::take_remote_hit`).
 pub fn record_cache_hit(db: &dyn Db, stage: Stage, label: &str) {

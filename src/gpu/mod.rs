@@ -44,6 +44,8 @@ pub struct Gpu {
     /// The largest render target side the device allows.
     max_texture_size: u32,
     pipeline: wgpu::RenderPipeline,
+    /// The plane shader's alpha test alone (`fs_coverage`), into one byte per sample.
+    coverage_pipeline: wgpu::RenderPipeline,
     frame_layout: wgpu::BindGroupLayout,
     material_layout: wgpu::BindGroupLayout,
     sampler: wgpu::Sampler,
@@ -170,6 +172,7 @@ pub fn adapter_shortfalls(allowed_usages: &dyn Fn(wgpu::TextureFormat) -> wgpu::
         (ALBEDO_FORMAT, render_and_sample),
         (DATA_FORMAT, render_and_sample),
         (DEPTH_FORMAT, render),
+        (COVERAGE_FORMAT, render),
         (top_down_render::HEIGHT_FORMAT, render),
     ] {
         if !allowed_usages(format).contains(needed) {
@@ -217,8 +220,12 @@ type UploadKey = (blake3::Hash, bool, u32);
 const ALBEDO_FORMAT: wgpu::TextureFormat = wgpu::TextureFormat::Rgba8UnormSrgb;
 const DATA_FORMAT: wgpu::TextureFormat = wgpu::TextureFormat::Rgba8Unorm;
 const DEPTH_FORMAT: wgpu::TextureFormat = wgpu::TextureFormat::Depth32Float;
+/// Where a plane's faces pass the alpha test, one byte per sample of a supersampled render.
+const COVERAGE_FORMAT: wgpu::TextureFormat = wgpu::TextureFormat::R8Unorm;
 /// Texels of one stack of plane rectangles (about 40 MB of targets and as much to read back).
 const MAX_STACK_TEXELS: u64 = 2048 * 1024;
+/// The width of a stack's rows of plane rectangles (or its widest rectangle's).
+const STACK_ROW_TEXELS: u32 = 1024;
 
 /// One vertex of a plane's faces.
 #[repr(C)]
@@ -294,7 +301,10 @@ impl Gpu {
         });
         let targets: Vec<Option<wgpu::ColorTargetState>> =
             [ALBEDO_FORMAT, DATA_FORMAT, DATA_FORMAT, DATA_FORMAT].iter().map(|&format| Some(format.into())).collect();
-        let pipeline = mesh_pipeline(&device, "plane", &layout, &shader, &targets);
+        let pipeline = mesh_pipeline(&device, "plane", &layout, (&shader, "fs_main"), &targets, Some(depth_test()));
+        // Coverage is the union of every face's: no depth test.
+        let coverage_pipeline =
+            mesh_pipeline(&device, "plane coverage", &layout, (&shader, "fs_coverage"), &[Some(COVERAGE_FORMAT.into())], None);
         let sampler = device.create_sampler(&wgpu::SamplerDescriptor {
             label: Some("trilinear repeat"),
             address_mode_u: wgpu::AddressMode::Repeat,
@@ -316,7 +326,8 @@ impl Gpu {
             bind_group_layouts: &[Some(&frame_layout), Some(&view_material_layout)],
             ..Default::default()
         });
-        let view_pipeline = mesh_pipeline(&device, "view", &view_layout, &view_shader, &[Some(ALBEDO_FORMAT.into())]);
+        let view_pipeline =
+            mesh_pipeline(&device, "view", &view_layout, (&view_shader, "fs_main"), &[Some(ALBEDO_FORMAT.into())], Some(depth_test()));
         let top_down_pipeline = top_down_render::top_down_pipeline(&device, &frame_layout);
         Ok(Gpu {
             top_down_pipeline,
@@ -327,6 +338,7 @@ impl Gpu {
             queue,
             adapter_name,
             pipeline,
+            coverage_pipeline,
             frame_layout,
             material_layout,
             sampler,
@@ -365,21 +377,17 @@ impl Gpu {
         cell.get_or_init(|| Arc::new(make())).clone()
     }
 
-    /// Submits `encoder` after copying `targets` out, and returns their RGBA8 pixels.
-    fn read_back(
-        &self,
-        mut encoder: wgpu::CommandEncoder,
-        targets: &[wgpu::Texture],
-        width: u32,
-        height: u32,
-    ) -> Result<Vec<Vec<u8>>, GpuError> {
-        let padded_row = (width * 4).next_multiple_of(wgpu::COPY_BYTES_PER_ROW_ALIGNMENT);
+    /// Submits `encoder` after copying `targets` out, and returns each one's pixels (rows
+    /// without padding, as many bytes per texel as its format has).
+    fn read_back(&self, mut encoder: wgpu::CommandEncoder, targets: &[&wgpu::Texture]) -> Result<Vec<Vec<u8>>, GpuError> {
+        let row_bytes = |texture: &wgpu::Texture| texture.width() * texture.format().block_copy_size(None).unwrap_or(4);
+        let padded_row = |texture: &wgpu::Texture| row_bytes(texture).next_multiple_of(wgpu::COPY_BYTES_PER_ROW_ALIGNMENT);
         let readbacks: Vec<wgpu::Buffer> = targets
             .iter()
             .map(|texture| {
                 let buffer = self.device.create_buffer(&wgpu::BufferDescriptor {
                     label: Some("readback"),
-                    size: (padded_row * height) as u64,
+                    size: (padded_row(texture) * texture.height()) as u64,
                     usage: wgpu::BufferUsages::COPY_DST | wgpu::BufferUsages::MAP_READ,
                     mapped_at_creation: false,
                 });
@@ -387,9 +395,13 @@ impl Gpu {
                     texture.as_image_copy(),
                     wgpu::TexelCopyBufferInfo {
                         buffer: &buffer,
-                        layout: wgpu::TexelCopyBufferLayout { offset: 0, bytes_per_row: Some(padded_row), rows_per_image: Some(height) },
+                        layout: wgpu::TexelCopyBufferLayout {
+                            offset: 0,
+                            bytes_per_row: Some(padded_row(texture)),
+                            rows_per_image: Some(texture.height()),
+                        },
                     },
-                    wgpu::Extent3d { width, height, depth_or_array_layers: 1 },
+                    texture.size(),
                 );
                 buffer
             })
@@ -403,12 +415,12 @@ impl Gpu {
             .poll(wgpu::PollType::Wait { submission_index: Some(submission), timeout: None })
             .map_err(|error| GpuError::Render(error.to_string()))?;
         let mut images = Vec::with_capacity(targets.len());
-        for buffer in &readbacks {
+        for (buffer, texture) in readbacks.iter().zip(targets) {
             let mapped = buffer.slice(..).get_mapped_range().map_err(|error| GpuError::Render(format!("{error:?}")))?;
-            let mut pixels = Vec::with_capacity((width * height * 4) as usize);
-            for row in 0..height as usize {
-                let start = row * padded_row as usize;
-                pixels.extend_from_slice(&mapped[start..start + width as usize * 4]);
+            let (row_bytes, padded_row) = (row_bytes(texture) as usize, padded_row(texture) as usize);
+            let mut pixels = Vec::with_capacity(row_bytes * texture.height() as usize);
+            for row in 0..texture.height() as usize {
+                pixels.extend_from_slice(&mapped[row * padded_row..][..row_bytes]);
             }
             drop(mapped);
             buffer.unmap();
@@ -446,14 +458,27 @@ impl Gpu {
     }
 }
 
-/// A pipeline drawing `RenderVertex` triangles double-sided with a depth test: the one shape
-/// both the plane bake and the preview use.
+/// The depth test of the mesh pipelines: the nearest face wins.
+fn depth_test() -> wgpu::DepthStencilState {
+    wgpu::DepthStencilState {
+        format: DEPTH_FORMAT,
+        depth_write_enabled: Some(true),
+        depth_compare: Some(wgpu::CompareFunction::LessEqual),
+        stencil: Default::default(),
+        bias: Default::default(),
+    }
+}
+
+/// A pipeline drawing `RenderVertex` triangles double-sided (with `depth`'s test, when given)
+/// through the vertex shader `vs_main` and the fragment entry point named beside the shader:
+/// the one shape the plane bake, its coverage and the preview use.
 fn mesh_pipeline(
     device: &wgpu::Device,
     label: &str,
     layout: &wgpu::PipelineLayout,
-    shader: &wgpu::ShaderModule,
+    (shader, fragment_entry): (&wgpu::ShaderModule, &str),
     targets: &[Option<wgpu::ColorTargetState>],
+    depth: Option<wgpu::DepthStencilState>,
 ) -> wgpu::RenderPipeline {
     let attributes = wgpu::vertex_attr_array![0 => Float32x3, 1 => Float32x3, 2 => Float32x2, 3 => Float32x4];
     device.create_render_pipeline(&wgpu::RenderPipelineDescriptor {
@@ -471,18 +496,12 @@ fn mesh_pipeline(
         },
         fragment: Some(wgpu::FragmentState {
             module: shader,
-            entry_point: Some("fs_main"),
+            entry_point: Some(fragment_entry),
             compilation_options: Default::default(),
             targets,
         }),
         primitive: wgpu::PrimitiveState { cull_mode: None, ..Default::default() },
-        depth_stencil: Some(wgpu::DepthStencilState {
-            format: DEPTH_FORMAT,
-            depth_write_enabled: Some(true),
-            depth_compare: Some(wgpu::CompareFunction::LessEqual),
-            stencil: Default::default(),
-            bias: Default::default(),
-        }),
+        depth_stencil: depth,
         multisample: wgpu::MultisampleState::default(),
         multiview_mask: None,
         cache: None,

@@ -6,7 +6,7 @@ use std::sync::Arc;
 use bytemuck::{Pod, Zeroable};
 
 use super::*;
-use crate::texture::distance_alpha::SupersampledCutOut;
+use crate::texture::distance_alpha::DistanceAlpha;
 use crate::texture::TextureSlot;
 
 #[repr(C)]
@@ -74,14 +74,6 @@ pub struct PlaneRenderInput<'a> {
     /// (material index, that material's triangles' vertices).
     pub batches: Vec<(usize, Vec<RenderVertex>)>,
     pub materials: &'a [RenderMaterial],
-}
-
-impl PlaneRenderInput<'_> {
-    /// The size the faces are rendered at: the texels times the supersampling.
-    fn sampled_size(&self) -> (u32, u32) {
-        let factor = self.supersampling.max(1);
-        (self.width.max(1) * factor, self.height.max(1) * factor)
-    }
 }
 
 /// The four images of one plane, RGBA8, rows from the top (the plane's +Y edge), one after the
@@ -176,45 +168,81 @@ impl Gpu {
     }
 
     /// Renders the rectangles of one plane (or any set of rectangles): each under its own
-    /// orthographic camera, stacked in shared targets, in as few submissions and read-backs as
-    /// the stack size allows. Per-submission latency, not shading, dominates small renders.
+    /// orthographic camera, side by side in shared targets (rows of rectangles, tallest first),
+    /// in as few submissions and read-backs as the targets' size allows. On llvmpipe a
+    /// submission costs about a millisecond whatever it draws.
+    ///
+    /// Every rectangle is shaded once per texel; one with supersampling is also rendered at its
+    /// samples through the alpha test alone (one byte per sample, no depth), and its texels'
+    /// alpha becomes the distance alpha of those samples (`texture::distance_alpha`). Shading
+    /// every sample cost four times the fragments, read-backs and resolve work for colours that
+    /// differ only along edges.
     pub fn render_rectangles(&self, inputs: &[PlaneRenderInput]) -> Result<Vec<PlaneImages>, GpuError> {
-        let mut images = Vec::with_capacity(inputs.len());
-        let mut chunk_start = 0;
-        while chunk_start < inputs.len() {
-            // Rectangles are stacked from the top; a stack holds at least one of them.
-            let (mut chunk_end, mut stack_width, mut stack_height) = (chunk_start, 0u32, 0u32);
-            while let Some(input) = inputs.get(chunk_end) {
-                let (width, height) = input.sampled_size();
-                let (grown_width, grown_height) = (stack_width.max(width), stack_height + height);
-                let too_big = grown_height > self.max_texture_size || grown_width as u64 * grown_height as u64 > MAX_STACK_TEXELS;
-                if chunk_end > chunk_start && too_big {
+        let mut order: Vec<usize> = (0..inputs.len()).collect();
+        // Stacks of one supersampling each, tallest rectangles first.
+        order.sort_by_key(|&index| (inputs[index].supersampling.max(1), std::cmp::Reverse(inputs[index].height.max(1))));
+        let mut images: Vec<Option<PlaneImages>> = vec![None; inputs.len()];
+        let mut rest = &order[..];
+        while !rest.is_empty() {
+            let factor = inputs[rest[0]].supersampling.max(1);
+            let side_limit = self.max_texture_size / factor;
+            let row_width = rest.iter().map(|&index| inputs[index].width.max(1)).max().unwrap_or(1).max(STACK_ROW_TEXELS).min(side_limit);
+            let mut stack = Vec::new();
+            let (mut x, mut y, mut row_height, mut width) = (0u32, 0u32, 0u32, 0u32);
+            for &index in rest {
+                let input = &inputs[index];
+                if input.supersampling.max(1) != factor {
                     break;
                 }
-                (stack_width, stack_height) = (grown_width, grown_height);
-                chunk_end += 1;
+                let (rectangle_width, rectangle_height) = (input.width.max(1), input.height.max(1));
+                if x > 0 && x + rectangle_width > row_width {
+                    (x, y, row_height) = (0, y + row_height, 0);
+                }
+                let bottom = y + rectangle_height.max(row_height);
+                let too_big = bottom > side_limit || row_width as u64 * bottom as u64 > MAX_STACK_TEXELS;
+                if !stack.is_empty() && too_big {
+                    break;
+                }
+                stack.push((index, x, y));
+                x += rectangle_width;
+                row_height = row_height.max(rectangle_height);
+                width = width.max(x);
             }
-            let stack = &inputs[chunk_start..chunk_end];
-            images.extend(self.catching_device_errors(|| self.render_stack(stack, stack_width, stack_height))?);
-            chunk_start = chunk_end;
+            let height = y + row_height;
+            let placed: Vec<(&PlaneRenderInput, u32, u32)> = stack.iter().map(|&(index, x, y)| (&inputs[index], x, y)).collect();
+            let rendered = self.catching_device_errors(|| self.render_stack(&placed, (width, height), factor))?;
+            for (&(index, _, _), image) in stack.iter().zip(rendered) {
+                images[index] = Some(image);
+            }
+            rest = &rest[stack.len()..];
         }
-        Ok(images)
+        Ok(images.into_iter().map(|image| image.expect("every rectangle is rendered")).collect())
     }
 
-    /// One submission: `inputs` rendered one below the other into `width` × `height` targets.
-    fn render_stack(&self, inputs: &[PlaneRenderInput], width: u32, height: u32) -> Result<Vec<PlaneImages>, GpuError> {
-        let targets: Vec<wgpu::Texture> =
+    /// One submission: each input rendered at its place (x, y) in targets of `texels` (width,
+    /// height), and, with a supersampling `factor` above 1, its coverage at `factor` times the
+    /// place in a coverage target `factor` times the size.
+    fn render_stack(
+        &self,
+        inputs: &[(&PlaneRenderInput, u32, u32)],
+        texels: (u32, u32),
+        factor: u32,
+    ) -> Result<Vec<PlaneImages>, GpuError> {
+        let (width, height) = texels;
+        let mut targets: Vec<wgpu::Texture> =
             [ALBEDO_FORMAT, DATA_FORMAT, DATA_FORMAT, DATA_FORMAT].iter().map(|&format| self.target(width, height, format)).collect();
         let views: Vec<wgpu::TextureView> = targets.iter().map(|texture| texture.create_view(&Default::default())).collect();
         let depth_texture = self.target(width, height, DEPTH_FORMAT);
         let depth = depth_texture.create_view(&Default::default());
+        let coverage_texture = (factor > 1).then(|| self.target(width * factor, height * factor, COVERAGE_FORMAT));
+        let coverage_view = coverage_texture.as_ref().map(|texture| texture.create_view(&Default::default()));
 
-        struct StackedDraws {
-            top: u32,
-            /// Size in samples.
+        struct PlacedDraws {
+            /// Where the rectangle lies in the texel targets, and its size in texels.
+            x: u32,
+            y: u32,
             width: u32,
             height: u32,
-            supersampling: u32,
             frame_buffer: wgpu::Buffer,
             frame_group: wgpu::BindGroup,
             /// Vertex range in the stack's one vertex buffer, and the material.
@@ -223,9 +251,8 @@ impl Gpu {
         // Every draw of the stack reads one vertex buffer: one buffer to create and fill per
         // submission instead of one per draw.
         let mut all_vertices: Vec<RenderVertex> = Vec::new();
-        let mut stacked = Vec::with_capacity(inputs.len());
-        let mut top = 0;
-        for input in inputs {
+        let mut placed = Vec::with_capacity(inputs.len());
+        for &(input, x, y) in inputs {
             let rectangle = &input.frame;
             let frame = FrameUniform {
                 origin: extend(rectangle.origin),
@@ -250,32 +277,28 @@ impl Gpu {
                 all_vertices.extend_from_slice(vertices);
                 draws.push((first..all_vertices.len() as u32, self.material_group(material, input.alpha_cutoff)));
             }
-            let (rectangle_width, rectangle_height) = input.sampled_size();
-            stacked.push(StackedDraws {
-                top,
-                width: rectangle_width,
-                height: rectangle_height,
-                supersampling: input.supersampling.max(1),
-                frame_buffer,
-                frame_group,
-                draws,
-            });
-            top += rectangle_height;
+            placed.push(PlacedDraws { x, y, width: input.width.max(1), height: input.height.max(1), frame_buffer, frame_group, draws });
         }
 
         let vertex_buffer = (!all_vertices.is_empty()).then(|| self.vertex_buffer(&all_vertices));
         let mut encoder = self.device.create_command_encoder(&Default::default());
+        let clear = wgpu::Operations { load: wgpu::LoadOp::Clear(wgpu::Color::TRANSPARENT), store: wgpu::StoreOp::Store };
+        // A rectangle's draws under the camera that maps its clip square onto its place in a
+        // target `scale` times the texels' size.
+        let draw_rectangle = |pass: &mut wgpu::RenderPass, rectangle: &PlacedDraws, scale: u32| {
+            let (x, y, width, height) = (rectangle.x * scale, rectangle.y * scale, rectangle.width * scale, rectangle.height * scale);
+            pass.set_viewport(x as f32, y as f32, width as f32, height as f32, 0.0, 1.0);
+            pass.set_scissor_rect(x, y, width, height);
+            pass.set_bind_group(0, &rectangle.frame_group, &[]);
+            for (vertices, group) in &rectangle.draws {
+                pass.set_bind_group(1, group.as_ref(), &[]);
+                pass.draw(vertices.clone(), 0..1);
+            }
+        };
         {
             let attachments: Vec<Option<wgpu::RenderPassColorAttachment>> = views
                 .iter()
-                .map(|view| {
-                    Some(wgpu::RenderPassColorAttachment {
-                        view,
-                        depth_slice: None,
-                        resolve_target: None,
-                        ops: wgpu::Operations { load: wgpu::LoadOp::Clear(wgpu::Color::TRANSPARENT), store: wgpu::StoreOp::Store },
-                    })
-                })
+                .map(|view| Some(wgpu::RenderPassColorAttachment { view, depth_slice: None, resolve_target: None, ops: clear }))
                 .collect();
             let mut pass = encoder.begin_render_pass(&wgpu::RenderPassDescriptor {
                 label: Some("plane rectangles"),
@@ -291,54 +314,70 @@ impl Gpu {
             if let Some(buffer) = &vertex_buffer {
                 pass.set_vertex_buffer(0, buffer.slice(..));
             }
-            for rectangle in &stacked {
-                // The camera's clip square maps onto this rectangle's rows of the stack only.
-                pass.set_viewport(0.0, rectangle.top as f32, rectangle.width as f32, rectangle.height as f32, 0.0, 1.0);
-                pass.set_scissor_rect(0, rectangle.top, rectangle.width, rectangle.height);
-                pass.set_bind_group(0, &rectangle.frame_group, &[]);
-                for (vertices, group) in &rectangle.draws {
-                    pass.set_bind_group(1, group.as_ref(), &[]);
-                    pass.draw(vertices.clone(), 0..1);
-                }
+            for rectangle in &placed {
+                draw_rectangle(&mut pass, rectangle, 1);
             }
         }
-        let stack = self.read_back(encoder, &targets, width, height)?;
+        if let Some(view) = &coverage_view {
+            let mut pass = encoder.begin_render_pass(&wgpu::RenderPassDescriptor {
+                label: Some("plane coverage"),
+                color_attachments: &[Some(wgpu::RenderPassColorAttachment { view, depth_slice: None, resolve_target: None, ops: clear })],
+                ..Default::default()
+            });
+            pass.set_pipeline(&self.coverage_pipeline);
+            if let Some(buffer) = &vertex_buffer {
+                pass.set_vertex_buffer(0, buffer.slice(..));
+            }
+            for rectangle in &placed {
+                draw_rectangle(&mut pass, rectangle, factor);
+            }
+        }
+        targets.extend(coverage_texture);
+        let mut stack = self.read_back(encoder, &targets.iter().collect::<Vec<_>>())?;
+        let coverage = if factor > 1 { stack.pop().expect("the coverage target is read back") } else { Vec::new() };
         // Free device memory now rather than whenever wgpu next triages destroyed resources.
         targets.iter().for_each(wgpu::Texture::destroy);
         depth_texture.destroy();
-        for rectangle in &stacked {
+        for rectangle in &placed {
             rectangle.frame_buffer.destroy();
         }
         if let Some(buffer) = &vertex_buffer {
             buffer.destroy();
         }
-        // Each rectangle's rows of the four targets, one after the other in a buffer of its own.
-        Ok(stacked
+        // Each rectangle's texels of the four targets, one after the other in a buffer of its own.
+        let images = placed
             .iter()
             .map(|rectangle| {
-                let row_bytes = rectangle.width as usize * 4;
+                let (x, y, rectangle_width, rectangle_height) =
+                    (rectangle.x as usize, rectangle.y as usize, rectangle.width as usize, rectangle.height as usize);
                 let mut pixels = Vec::with_capacity(PlaneImages::byte_len(rectangle.width, rectangle.height));
                 for image in &stack {
-                    for row in rectangle.top..rectangle.top + rectangle.height {
-                        pixels.extend_from_slice(&image[row as usize * width as usize * 4..][..row_bytes]);
+                    for row in y..y + rectangle_height {
+                        pixels.extend_from_slice(&image[(row * width as usize + x) * 4..][..rectangle_width * 4]);
                     }
                 }
-                let factor = rectangle.supersampling;
                 if factor > 1 {
+                    let scale = factor as usize;
+                    let (sample_width, coverage_width) = (rectangle_width * scale, width as usize * scale);
+                    let mut covered = Vec::with_capacity(sample_width * rectangle_height * scale);
+                    for row in y * scale..(y + rectangle_height) * scale {
+                        covered.extend(coverage[row * coverage_width + x * scale..][..sample_width].iter().map(|&byte| byte != 0));
+                    }
                     let length = pixels.len() / PlaneImages::SURFACES.len();
-                    let surfaces: Vec<&[u8]> = pixels.chunks_exact(length).collect();
-                    pixels = crate::texture::distance_alpha::resolve_supersampled_cut_out(&SupersampledCutOut {
-                        surfaces: &surfaces,
+                    let mut surfaces: Vec<&mut [u8]> = pixels.chunks_exact_mut(length).collect();
+                    crate::texture::distance_alpha::apply_distance_alpha(&mut DistanceAlpha {
+                        surfaces: &mut surfaces,
                         width: rectangle.width,
                         height: rectangle.height,
                         factor,
+                        covered: &covered,
                         first_surface_srgb: true,
                     });
                 }
-                let (width, height) = (rectangle.width / factor, rectangle.height / factor);
-                PlaneImages::in_buffer(width, height, Arc::new(pixels), 0).expect("the buffer holds four images")
+                PlaneImages::in_buffer(rectangle.width, rectangle.height, Arc::new(pixels), 0).expect("the buffer holds four images")
             })
-            .collect())
+            .collect();
+        Ok(images)
     }
 
     fn material_group(&self, material: &RenderMaterial, alpha_cutoff: f32) -> Arc<wgpu::BindGroup> {

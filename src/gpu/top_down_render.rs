@@ -139,7 +139,7 @@ impl Gpu {
                     pass.draw(0..(corners.len() / 3 * 3) as u32, 0..1);
                 }
             }
-            let [pixels]: [Vec<u8>; 1] = self.read_back(encoder, &[target], size, size)?.try_into().expect("one target");
+            let [pixels]: [Vec<u8>; 1] = self.read_back(encoder, &[&target])?.try_into().expect("one target");
             Ok(pixels
                 .chunks_exact(4)
                 .map(|bytes| {

@@ -93,7 +93,7 @@ impl Gpu {
                     pass.draw(0..*count, 0..1);
                 }
             }
-            self.read_back(encoder, &[target], size, size).map(|mut images| images.remove(0))
+            self.read_back(encoder, &[&target]).map(|mut images| images.remove(0))
         })
     }
 

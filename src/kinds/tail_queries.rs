@@ -27,8 +27,9 @@ pub const WRITE: Stage = Stage { name: "write", version: 1 };
 
 /// The cache entry of a finished surface (under its recipe key and under its content key).
 const SURFACE_ENTRY: &str = "surface";
-// 4: the surface's figures include bits per texel.
-const SURFACE_ENTRY_VERSION: u32 = 4;
+// 4: the surface's figures include bits per texel; 5: and an alpha-tested one's visible PSNR
+// and alpha-test IoU.
+const SURFACE_ENTRY_VERSION: u32 = 5;
 /// The entry under a surface's recipe key: the content key of its files.
 const SURFACE_RECIPE_ENTRY: &str = "surface-recipe";
 
@@ -47,8 +48,8 @@ fn encode_step_settings(
     db: &dyn Db,
     asset: Asset,
     surface: SurfaceId,
-) -> Result<(crate::config::BlockFormat, crate::config::EncodeQuality), Diagnostic> {
-    tail_settings(db, asset, surface).map(|settings| (settings.format, settings.quality))
+) -> Result<(crate::config::BlockFormat, crate::config::EncodeQuality, Option<f32>), Diagnostic> {
+    tail_settings(db, asset, surface).map(|settings| (settings.format, settings.quality, settings.alpha_cutoff))
 }
 
 #[salsa::tracked(returns(clone))]
@@ -76,10 +77,10 @@ pub fn surface_mips(db: &dyn Db, asset: Asset, surface: SurfaceId) -> Result<Arc
 #[salsa::tracked(returns(clone))]
 pub fn surface_blocks(db: &dyn Db, asset: Asset, surface: SurfaceId) -> Result<Arc<EncodedSurface>, Diagnostic> {
     let mips = surface_mips(db, asset, surface.clone())?;
-    let (format, quality) = encode_step_settings(db, asset, surface.clone())?;
+    let (format, quality, alpha_cutoff) = encode_step_settings(db, asset, surface.clone())?;
     let label = surface.label(asset.name(db));
     let previous = previous_encoding(db, &label);
-    let encoded = timed(db, ENCODE, &label, || tail_encode(&mips, surface.surface, format, quality, previous.as_deref()));
+    let encoded = timed(db, ENCODE, &label, || tail_encode(&mips, surface.surface, (format, quality), alpha_cutoff, previous.as_deref()));
     let remembered = Arc::new(PreviousEncoding::of(&mips, &encoded));
     if memo_worth_storing(format) {
         let memo = remembered.clone();
@@ -98,7 +99,7 @@ pub fn surface_format_comparison(
     asset: Asset,
     surface: SurfaceId,
 ) -> Result<Arc<Vec<crate::texture::tail::FormatFigure>>, Diagnostic> {
-    let (format, quality) = encode_step_settings(db, asset, surface.clone())?;
+    let (format, quality, _) = encode_step_settings(db, asset, surface.clone())?;
     let others: Vec<crate::config::BlockFormat> =
         crate::config::allowed_formats(surface.surface).iter().copied().filter(|&other| other != format).collect();
     if others.is_empty() {
@@ -227,8 +228,8 @@ fn artifacts_from_entry(entry: CacheEntry) -> Option<SurfaceArtifacts> {
 /// identity (asset, surface, tail settings), overwritten by every encode, so that a new process
 /// re-encodes only the blocks an edit changed. Results equal a full encode either way.
 const ENCODING_MEMO: &str = "encoding-memo";
-/// 4: level 0 as block fingerprints.
-const ENCODING_MEMO_VERSION: u32 = 4;
+/// 4: level 0 as block fingerprints; 5: with the alpha test's figures per block.
+const ENCODING_MEMO_VERSION: u32 = 5;
 
 /// Whether a surface's last encoding is kept on disk: for BC7 only, whose encoder is the slow
 /// one (on the oak's 2048² albedo, re-encoding from scratch after a restart costs about 0.9 s;
@@ -281,11 +282,13 @@ fn encoding_entry(previous: &PreviousEncoding) -> CacheEntry {
         "height": encoded.texture.height,
         "psnr_db": encoded.psnr_db,
         "channels": encoded.block_errors.channels,
+        "alpha_threshold": encoded.block_errors.cut_out.as_ref().map(|(threshold, _)| threshold),
     });
     let mut blobs = vec![crate::db::pod_blob(&blocks.texels), crate::db::pod_blob(&blocks.alphas)];
     blobs.extend(previous.lower_levels.iter().map(|level| level.pixels.to_vec()));
     blobs.extend(encoded.texture.levels.iter().map(|level| level.to_vec()));
     blobs.push(crate::db::pod_blob(&encoded.block_errors.errors));
+    blobs.push(crate::db::pod_blob(encoded.block_errors.cut_out.as_ref().map_or(&[][..], |(_, blocks)| blocks)));
     // Uncompressed: fingerprints and blocks hardly compress, and writing 16 MB costs less than
     // compressing it (measured on the oak's albedo).
     CacheEntry { metadata, blobs, compress: false }
@@ -299,7 +302,7 @@ fn encoding_from_entry(entry: CacheEntry) -> Option<PreviousEncoding> {
     let width = metadata.get("width")?.as_u64()? as u32;
     let height = metadata.get("height")?.as_u64()? as u32;
     let level_count = sizes.len() + 1;
-    if entry.blobs.len() != 2 + sizes.len() + level_count + 1 {
+    if entry.blobs.len() != 2 + sizes.len() + level_count + 2 {
         return None;
     }
     let mut blobs = entry.blobs.into_iter();
@@ -316,6 +319,13 @@ fn encoding_from_entry(entry: CacheEntry) -> Option<PreviousEncoding> {
     }
     let encoded_levels: Vec<Arc<[u8]>> = blobs.by_ref().take(level_count).map(Arc::from).collect();
     let errors = crate::db::from_pod_blob::<u32>(&blobs.next()?)?;
+    let cut_out_blocks = crate::db::from_pod_blob::<crate::texture::quality::CutOutBlock>(&blobs.next()?)?;
+    let alpha_threshold: Option<u8> = serde_json::from_value(metadata.get("alpha_threshold")?.clone()).ok()?;
+    let cut_out = match alpha_threshold {
+        Some(threshold) if cut_out_blocks.len() == errors.len() => Some((threshold, cut_out_blocks)),
+        None if cut_out_blocks.is_empty() => None,
+        _ => return None,
+    };
     // Fingerprints, block data and errors must fit the levels (a hand-made entry is a miss,
     // never a panic).
     let blocks = |(width, height): (u32, u32)| width.div_ceil(4) as usize * height.div_ceil(4) as usize;
@@ -329,8 +339,12 @@ fn encoding_from_entry(entry: CacheEntry) -> Option<PreviousEncoding> {
         return None;
     }
     let texture = crate::texture::encode::EncodedTexture::from_levels(settings.format, settings.srgb, width, height, encoded_levels);
-    let block_errors =
-        crate::texture::quality::BlockErrors { format: settings.format, channels: metadata.get("channels")?.as_u64()? as usize, errors };
+    let block_errors = crate::texture::quality::BlockErrors {
+        format: settings.format,
+        channels: metadata.get("channels")?.as_u64()? as usize,
+        errors,
+        cut_out,
+    };
     Some(PreviousEncoding {
         level0_blocks: Arc::new(level0_blocks),
         lower_levels,

@@ -265,11 +265,13 @@ fn from_filter_space(
     kind: SurfaceKind,
     alpha_scale: f32,
 ) -> Texture {
-    let pixels = texels
-        .par_iter()
-        .enumerate()
-        .flat_map_iter(|(index, &texel)| texel_bytes(texel, straight.map(|straight| straight[index]), kind, alpha_scale))
-        .collect();
+    let mut pixels = vec![0u8; texels.len() * 4];
+    pixels.par_chunks_mut(4096 * 4).enumerate().for_each(|(chunk, bytes)| {
+        for (offset, texel) in bytes.chunks_exact_mut(4).enumerate() {
+            let index = chunk * 4096 + offset;
+            texel.copy_from_slice(&texel_bytes(texels[index], straight.map(|straight| straight[index]), kind, alpha_scale));
+        }
+    });
     Texture::new(width, height, pixels)
 }
 
@@ -302,6 +304,9 @@ fn texel_bytes([r, g, b, a]: [f32; 4], straight: Option<[f32; 4]>, kind: Surface
 /// Area-weighted box reduction (handles odd sizes: each target texel covers a fractional
 /// footprint of the source).
 fn reduce(source: &[[f32; 4]], width: u32, height: u32, new_width: u32, new_height: u32) -> Vec<[f32; 4]> {
+    if width == 2 * new_width && height == 2 * new_height {
+        return halve(source, width as usize, new_width as usize, new_height as usize);
+    }
     let scale_x = width as f32 / new_width as f32;
     let scale_y = height as f32 / new_height as f32;
     let weights = |index: u32, scale: f32, limit: u32| -> Vec<(u32, f32)> {
@@ -342,6 +347,26 @@ fn reduce(source: &[[f32; 4]], width: u32, height: u32, new_width: u32, new_heig
                 .collect::<Vec<_>>()
         })
         .collect()
+}
+
+/// [`reduce`] of a level with even sides to half its size: each texel is the sum of its four
+/// source texels weighted by a quarter, added in the order the general reduction adds them (so
+/// the sums are the same to the bit), without its per-texel weight lists.
+fn halve(source: &[[f32; 4]], width: usize, new_width: usize, new_height: usize) -> Vec<[f32; 4]> {
+    let mut reduced = vec![[0.0f32; 4]; new_width * new_height];
+    reduced.par_chunks_mut(new_width).enumerate().for_each(|(y, row)| {
+        let (top, bottom) = (&source[2 * y * width..][..width], &source[(2 * y + 1) * width..][..width]);
+        for (x, texel) in row.iter_mut().enumerate() {
+            let mut sum = [0.0f32; 4];
+            for corner in [top[2 * x], top[2 * x + 1], bottom[2 * x], bottom[2 * x + 1]] {
+                for channel in 0..4 {
+                    sum[channel] += corner[channel] * 0.25;
+                }
+            }
+            *texel = sum;
+        }
+    });
+    reduced
 }
 
 /// Fraction of texels whose alpha × `scale` passes `cutoff`.

@@ -67,12 +67,39 @@ fn decode_block(format: BlockFormat, block: &[u8]) -> [u8; 64] {
 
 /// The squared error of every 4×4 block of a level against `reference`, over its first
 /// `channels` channels (texels inside the level only): what a PSNR sums, kept so that a later
-/// measurement of the same surface decodes only the blocks that changed.
+/// measurement of the same surface decodes only the blocks that changed. For an alpha-tested
+/// surface, also what an engine sees of each block ([`CutOutBlock`]).
 #[derive(Clone, Debug, PartialEq)]
 pub struct BlockErrors {
     pub format: BlockFormat,
     pub channels: usize,
     pub errors: Vec<u32>,
+    /// The smallest alpha byte that passes the alpha test, and each block's [`CutOutBlock`];
+    /// `None` for surfaces that are not alpha-tested.
+    pub cut_out: Option<(u8, Vec<CutOutBlock>)>,
+}
+
+/// What an engine sees of one block of an alpha-tested surface: the colour where the alpha
+/// test passes on the uncompressed surface, and whether the decoded alpha passes it there too.
+#[repr(C)]
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq, bytemuck::Pod, bytemuck::Zeroable)]
+pub struct CutOutBlock {
+    /// Squared RGB error over the texels that pass on the uncompressed surface.
+    pub visible_error: u32,
+    /// Texels that pass on the uncompressed surface.
+    pub visible: u8,
+    /// Texels that pass on the uncompressed surface or the decoded one, and on both.
+    pub passing_either: u8,
+    pub passing_both: u8,
+    pub unused: u8,
+}
+
+/// The alpha-test figures of a surface: colour PSNR over the texels the test shows, and the
+/// intersection over union of where the test passes on the uncompressed and decoded surfaces.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct CutOutQuality {
+    pub visible_psnr_db: f64,
+    pub alpha_test_iou: f64,
 }
 
 impl BlockErrors {
@@ -81,6 +108,24 @@ impl BlockErrors {
         let squared_error: u64 = self.errors.iter().map(|&error| error as u64).sum();
         psnr_of_squared_error(squared_error, width as u64 * height as u64 * self.channels as u64)
     }
+
+    /// The alpha-test figures, for an alpha-tested surface.
+    pub fn cut_out_quality(&self) -> Option<CutOutQuality> {
+        let (_, blocks) = self.cut_out.as_ref()?;
+        let sum = |field: fn(&CutOutBlock) -> u64| blocks.iter().map(field).sum::<u64>();
+        let (error, visible) = (sum(|block| block.visible_error as u64), sum(|block| block.visible as u64));
+        let (either, both) = (sum(|block| block.passing_either as u64), sum(|block| block.passing_both as u64));
+        Some(CutOutQuality {
+            visible_psnr_db: psnr_of_squared_error(error, visible * 3),
+            alpha_test_iou: if either == 0 { 1.0 } else { both as f64 / either as f64 },
+        })
+    }
+}
+
+/// The smallest alpha byte that passes an alpha test at `cutoff` (as a shader tests the
+/// unorm value: passing when alpha / 255 ≥ cutoff).
+pub fn alpha_test_threshold(cutoff: f32) -> u8 {
+    (0..=255u8).find(|&alpha| alpha as f32 / 255.0 >= cutoff).unwrap_or(255)
 }
 
 /// [`BlockErrors`] of `blocks` (BC data of `reference`'s size), reusing `previous` (the same
@@ -92,9 +137,10 @@ pub fn block_errors_reusing(
     blocks: &[u8],
     reference: &Texture,
     reference_blocks: &BlockFingerprints,
-    channels: usize,
+    measure: Measure,
     previous: Option<(&BlockFingerprints, &[u8], &BlockErrors)>,
 ) -> BlockErrors {
+    let Measure { channels, alpha_threshold } = measure;
     let (width, height) = (reference.width as usize, reference.height as usize);
     let (blocks_x, blocks_y) = (width.div_ceil(4), height.div_ceil(4));
     let size = block_bytes(format);
@@ -103,8 +149,10 @@ pub fn block_errors_reusing(
             && (reference_blocks.width, reference_blocks.height) == (reference.width, reference.height)
             && old_blocks.len() == blocks.len()
             && (old.format, old.channels, old.errors.len()) == (format, channels, blocks_x * blocks_y)
+            && old.cut_out.as_ref().map(|(threshold, blocks)| (*threshold, blocks.len()))
+                == alpha_threshold.map(|threshold| (threshold, blocks_x * blocks_y))
     });
-    let mut errors = vec![0u32; blocks_x * blocks_y];
+    let mut errors = vec![(0u32, CutOutBlock::default()); blocks_x * blocks_y];
     errors.par_chunks_mut(blocks_x.max(1)).enumerate().for_each(|(by, row_errors)| {
         let rows = by * 4..(by * 4 + 4).min(height);
         for (bx, error) in row_errors.iter_mut().enumerate() {
@@ -115,12 +163,13 @@ pub fn block_errors_reusing(
             if let Some((old_reference, old_blocks, old)) = previous {
                 let unchanged = old_blocks[number * size..][..size] == *block && !reference_blocks.block_changed(old_reference, number);
                 if unchanged {
-                    *error = old.errors[number];
+                    let cut_out = old.cut_out.as_ref().map_or_else(CutOutBlock::default, |(_, blocks)| blocks[number]);
+                    *error = (old.errors[number], cut_out);
                     continue;
                 }
             }
             let decoded = decode_block(format, block);
-            let mut sum = 0u32;
+            let (mut sum, mut cut_out) = (0u32, CutOutBlock::default());
             for (row_in_block, row) in rows.clone().enumerate() {
                 let source = &reference.pixels[texels(row)];
                 for (column, texel) in source.chunks_exact(4).enumerate() {
@@ -129,12 +178,33 @@ pub fn block_errors_reusing(
                         let difference = texel[channel] as i32 - decoded[channel] as i32;
                         sum += (difference * difference) as u32;
                     }
+                    if let Some(threshold) = alpha_threshold {
+                        let (source_passes, decoded_passes) = (texel[3] >= threshold, decoded[3] >= threshold);
+                        if source_passes {
+                            cut_out.visible += 1;
+                            for channel in 0..3 {
+                                let difference = texel[channel] as i32 - decoded[channel] as i32;
+                                cut_out.visible_error += (difference * difference) as u32;
+                            }
+                        }
+                        cut_out.passing_either += u8::from(source_passes || decoded_passes);
+                        cut_out.passing_both += u8::from(source_passes && decoded_passes);
+                    }
                 }
             }
-            *error = sum;
+            *error = (sum, cut_out);
         }
     });
-    BlockErrors { format, channels, errors }
+    let cut_out = alpha_threshold.map(|threshold| (threshold, errors.iter().map(|(_, cut_out)| *cut_out).collect()));
+    BlockErrors { format, channels, errors: errors.into_iter().map(|(error, _)| error).collect(), cut_out }
+}
+
+/// What [`block_errors_reusing`] measures: the first `channels` channels, and for an
+/// alpha-tested surface, the alpha byte from which the test passes.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct Measure {
+    pub channels: usize,
+    pub alpha_threshold: Option<u8>,
 }
 
 /// PSNR in dB between two same-sized textures over their first `channels` channels.

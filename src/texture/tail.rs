@@ -13,7 +13,7 @@ use crate::texture::encode::{encode_levels_reusing, BlockEncodeSettings, Encoded
 use crate::texture::fingerprint::BlockFingerprints;
 use crate::texture::mips::{mip_chain_reusing, MipReuse, MipSettings, PreviousChain};
 use crate::texture::preview::preview_png;
-use crate::texture::quality::{block_errors_reusing, BlockErrors};
+use crate::texture::quality::{alpha_test_threshold, block_errors_reusing, BlockErrors, Measure};
 use crate::texture::{SurfaceKind, Texture};
 
 /// Everything the tail of one surface reads besides its image.
@@ -91,6 +91,14 @@ pub struct SurfaceInfo {
     pub bits_per_texel: u32,
     pub psnr_db: f64,
     pub alpha_tested: bool,
+    /// Alpha-tested surfaces: the colour's PSNR over the texels the alpha test shows on the
+    /// uncompressed surface (RGB, level 0), rounded to 0.01 dB: what an engine shows.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub visible_psnr_db: Option<f64>,
+    /// Alpha-tested surfaces: where the test passes on the decoded level 0 against where it
+    /// passes on the uncompressed one, as an intersection over union (rounded to 1e-5).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub alpha_test_iou: Option<f64>,
 }
 
 /// The files of one surface: the texture container and a PNG preview of the image.
@@ -145,12 +153,13 @@ pub fn tail_mips(image: &Texture, settings: MipStepSettings, previous: Option<&P
 }
 
 /// Block-compresses a mip chain, reusing the previous encoding's blocks where the texels are
-/// unchanged, and measures level 0's error per block (again only where something changed).
+/// unchanged, and measures level 0's error per block (again only where something changed); an
+/// alpha-tested surface also what its alpha test at `alpha_cutoff` shows.
 pub fn tail_encode(
     mips: &MipLevels,
     surface: SurfaceKind,
-    format: BlockFormat,
-    quality: EncodeQuality,
+    (format, quality): (BlockFormat, EncodeQuality),
+    alpha_cutoff: Option<f32>,
     previous: Option<&PreviousEncoding>,
 ) -> EncodedSurface {
     let settings = BlockEncodeSettings { format, quality, alpha: mips.alpha_tested, srgb: surface.is_srgb() };
@@ -171,7 +180,7 @@ pub fn tail_encode(
         &texture.levels[0],
         image,
         &mips.level0_blocks,
-        surface.channels(),
+        Measure { channels: surface.channels(), alpha_threshold: alpha_cutoff.filter(|_| mips.alpha_tested).map(alpha_test_threshold) },
         previous.map(|previous| (&*previous.level0_blocks, &previous.encoded.texture.levels[0][..], &*previous.encoded.block_errors)),
     );
     let psnr_db = (block_errors.psnr(image.width, image.height) * 100.0).round() / 100.0;
@@ -215,6 +224,7 @@ pub fn tail_write(
     zstd: Option<i32>,
 ) -> SurfaceArtifacts {
     let texture_file: Arc<[u8]> = write_container(&encoded.texture, container, zstd).into();
+    let cut_out = encoded.block_errors.cut_out_quality();
     let info = SurfaceInfo {
         surface,
         format: encoded.texture.format,
@@ -227,6 +237,8 @@ pub fn tail_write(
         bits_per_texel: crate::texture::encode::bits_per_texel(encoded.texture.format),
         psnr_db: encoded.psnr_db,
         alpha_tested: encoded.settings.alpha,
+        visible_psnr_db: cut_out.map(|quality| (quality.visible_psnr_db * 100.0).round() / 100.0),
+        alpha_test_iou: cut_out.map(|quality| (quality.alpha_test_iou * 1e5).round() / 1e5),
     };
     SurfaceArtifacts { info, texture_file, preview_png: preview_png(image).into() }
 }

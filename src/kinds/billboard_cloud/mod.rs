@@ -81,9 +81,25 @@ impl Kind for BillboardCloud {
     }
 
     fn first_jobs(db: &dyn Db, asset: Asset) -> Vec<Job> {
-        (0..levels::level_count(asset.settings(db)))
+        let levels = 0..levels::level_count(asset.settings(db));
+        let mut jobs: Vec<Job> = levels
+            .clone()
             .map(|level| Job { asset, task: Task::Step("layout", level), after: 0, label: level_label(db, asset, level).clone() })
-            .collect()
+            .collect();
+        // When some level will render, the GPU starts and the textures are decoded, filtered
+        // and uploaded beside the planes (which run on one thread), not after them.
+        if levels.clone().any(|level| level_renders(db, asset, level)) {
+            crate::gpu::start_gpu_in_background();
+            let uploads = loaded_mesh(db, asset).map_or(0, |loaded| material_texture_slots(&loaded).len() as u32);
+            let name = asset.name(db);
+            jobs.extend((0..uploads).map(|texture| Job {
+                asset,
+                task: Task::Step("upload", texture),
+                after: 0,
+                label: format!("{name}/upload{texture}"),
+            }));
+        }
+        jobs
     }
 
     fn run_step(db: &dyn Db, asset: Asset, step: &'static str, index: u32) -> Result<Vec<Job>, Diagnostic> {
@@ -92,7 +108,7 @@ impl Kind for BillboardCloud {
             "layout" => {
                 let level = index;
                 let label = level_label(db, asset, level);
-                let layout = billboard_layout(db, asset, level)?;
+                billboard_layout(db, asset, level)?;
                 let lod = Job { asset, task: Task::Step("lod", level), after: 1, label: format!("{label}/lod") };
                 let surfaces = atlas_surfaces(db, asset, level);
                 let surface_jobs =
@@ -101,11 +117,10 @@ impl Kind for BillboardCloud {
                 if !level_renders(db, asset, level) {
                     return Ok([lod].into_iter().chain(surface_jobs).collect());
                 }
-                // Renders are likely (unless every group is in the render memo): the GPU starts
-                // on its own thread, and the slow loads (the render memo, the textures, the
-                // surfaces' last encodings) run as jobs of their own before the renders, on
-                // every worker, instead of one after the other inside the first render.
-                crate::gpu::start_gpu_in_background();
+                // Renders are likely (unless every group is in the render memo): the slow loads
+                // (the render memo, the surfaces' last encodings; the textures went with the
+                // planes) run as jobs of their own before the renders, on every worker, instead
+                // of one after the other inside the first render.
                 let mut jobs = vec![Job { asset, task: Task::Step("render-memo", level), after: 1, label: format!("{label}/render-memo") }];
                 jobs.extend(surfaces.iter().map(|surface| Job {
                     asset,
@@ -113,23 +128,13 @@ impl Kind for BillboardCloud {
                     after: 1,
                     label: surface.label(name),
                 }));
-                // Textures are uploaded once per content: by the first level that renders.
-                if (0..level).all(|earlier| !level_renders(db, asset, earlier)) {
-                    let uploads = material_texture_slots(&*loaded_mesh(db, asset)?).len() as u32;
-                    jobs.extend((0..uploads).map(|texture| Job {
-                        asset,
-                        task: Task::Step("upload", texture),
-                        after: 1,
-                        label: format!("{name}/upload{texture}"),
-                    }));
-                }
                 jobs.push(lod);
-                let groups = 0..(layout.render_groups.len() as u32).min(GROUPS_PER_LEVEL);
-                jobs.extend(groups.map(|group| Job {
+                let batches = 0..(queries::level_render_batches(db, asset, level).len() as u32).min(GROUPS_PER_LEVEL);
+                jobs.extend(batches.map(|batch| Job {
                     asset,
-                    task: Task::Step("render", level * GROUPS_PER_LEVEL + group),
+                    task: Task::Step("render", level * GROUPS_PER_LEVEL + batch),
                     after: 1,
-                    label: format!("{label}/render{group}"),
+                    label: format!("{label}/render{batch}"),
                 }));
                 jobs.extend(surface_jobs);
                 Ok(jobs)
@@ -150,7 +155,14 @@ impl Kind for BillboardCloud {
                 }
                 Ok(Vec::new())
             }
-            "render" => queries::plane_images(db, asset, index / GROUPS_PER_LEVEL, index % GROUPS_PER_LEVEL).map(|_| Vec::new()),
+            "render" => {
+                let (level, batch) = (index / GROUPS_PER_LEVEL, index % GROUPS_PER_LEVEL);
+                let groups = queries::level_render_batches(db, asset, level).get(batch as usize).cloned().unwrap_or_default();
+                for group in groups {
+                    queries::plane_images(db, asset, level, group)?;
+                }
+                Ok(Vec::new())
+            }
             "lod" => lod_files(db, asset, index).map(|_| Vec::new()),
             other => unreachable!("the billboard kind schedules no step `{other}`"),
         }

@@ -18,7 +18,7 @@ use super::render_groups::RenderGroup;
 use crate::cache::{CacheEntry, CacheKey, CacheKeyBuilder, KeyPart};
 use crate::db::{
     asset_file, cached_json, decoded_texture, from_pod_blob, key_with_files, load_cached, opacity_texture, pod_blob, record_cache_hit,
-    stage_key, store_cached_in_background, timed, Asset, Db, SourceFile, Stage,
+    stage_key, store_cached_in_background, timed, timed_together, Asset, Db, SourceFile, Stage,
 };
 use crate::diagnostic::{display_path, Diagnostic};
 use crate::gpu::PlaneImages;
@@ -36,7 +36,9 @@ pub const PLANES: Stage = Stage { name: "planes", version: 6 };
 pub const LAYOUT: Stage = Stage { name: "layout", version: 5 };
 // Render 2–5: coverage-preserving mips of alpha sources; transparent texels keep their
 // footprint's colour; sRGB bytes from tables; no coverage scaling when all or none pass.
-pub const RENDER: Stage = Stage { name: "render", version: 6 };
+// 6: distance-field alpha from 2 × 2 samples; 7: colours shaded once per texel, coverage alone
+// at 2 × 2 samples.
+pub const RENDER: Stage = Stage { name: "render", version: 7 };
 pub const ATLAS: Stage = Stage { name: "atlas", version: 1 };
 pub const LOD: Stage = Stage { name: "lod", version: 1 };
 
@@ -264,58 +266,112 @@ fn mip_levels_from_entry(entry: CacheEntry) -> Option<Vec<Texture>> {
 }
 
 /// The images of one render group of a level (four per rectangle, in rectangle order): one
-/// plane's rectangles that show the same materials, rendered on the GPU in one go (stage
-/// `render`); reads only the textures of those materials.
+/// plane's rectangles that show the same materials (stage `render`), from the render memo when
+/// it holds them, else from its batch's render; reads only the textures of those materials.
 #[salsa::tracked(returns(clone))]
 pub fn plane_images(db: &dyn Db, asset: Asset, level: u32, group: u32) -> Result<Arc<Vec<PlaneImages>>, Diagnostic> {
     let loaded = loaded_mesh(db, asset)?;
     let layout = billboard_layout(db, asset, level)?;
+    let Some(render_group) = layout.render_groups.get(group as usize) else {
+        return Err(Diagnostic::new(asset.main_file(db), format!("render group {group} no longer exists")));
+    };
+    if let Some(images) = remembered_render(db, asset, level, group) {
+        record_cache_hit(db, RENDER, &render_label(level_label(db, asset, level), &loaded.mesh, render_group));
+        return Ok(images);
+    }
+    let batches = level_render_batches(db, asset, level);
+    let batch = batches.iter().position(|batch| batch.contains(&group)).expect("every render group is in a batch");
+    let rendered = rendered_batch(db, asset, level, batch as u32)?;
+    Ok(rendered.iter().find(|(rendered, _)| *rendered == group).map(|(_, images)| images.clone()).expect("the batch renders its groups"))
+}
+
+/// A render group's images from the render memo, when it holds ones that fit the group (a
+/// hand-made entry that does not is a miss, never a panic).
+fn remembered_render(db: &dyn Db, asset: Asset, level: u32, group: u32) -> Option<Arc<Vec<PlaneImages>>> {
+    let layout = billboard_layout(db, asset, level).ok()?;
+    let render_group = layout.render_groups.get(group as usize)?;
+    let stored = stored_renders(db, asset, level);
+    let images = stored.get(&render_group_key(db, asset, level, group))?;
+    let fits = images.len() == render_group.rectangles.len()
+        && images.iter().zip(&render_group.rectangles).all(|(image, &rectangle)| {
+            let placement = &layout.layout.placements[rectangle as usize];
+            (image.width, image.height) == (placement.width.max(1), placement.height.max(1))
+        });
+    fits.then(|| images.clone())
+}
+
+/// The level's render groups in the batches that render together (`render_groups::render_batches`).
+#[salsa::tracked(returns(clone))]
+pub fn level_render_batches(db: &dyn Db, asset: Asset, level: u32) -> Arc<Vec<Vec<u32>>> {
+    let Ok(layout) = billboard_layout(db, asset, level) else { return Arc::default() };
+    Arc::new(super::render_groups::render_batches(&layout.render_groups, |group| {
+        group
+            .rectangles
+            .iter()
+            .map(|&rectangle| layout.layout.placements[rectangle as usize])
+            .map(|p| p.width as u64 * p.height as u64)
+            .sum()
+    }))
+}
+
+/// The images of a batch's render groups that the render memo does not hold, rendered in one
+/// go (few GPU submissions for many small groups); each group's run is recorded under its own
+/// label with its share of the time, by texels. Every group of a batch shows the same
+/// materials, so the batch reads what each of its groups reads.
+#[salsa::tracked(returns(clone))]
+pub fn rendered_batch(db: &dyn Db, asset: Asset, level: u32, batch: u32) -> Result<Arc<Vec<(u32, Arc<Vec<PlaneImages>>)>>, Diagnostic> {
+    let loaded = loaded_mesh(db, asset)?;
+    let layout = billboard_layout(db, asset, level)?;
     let alpha_cutoff = billboard_alpha_cutoff(db, asset);
     let mesh_path = asset.main_file(db).clone();
-    let group_index = group;
-    let Some(group) = layout.render_groups.get(group as usize) else {
-        return Err(Diagnostic::new(&mesh_path, format!("render group {group} no longer exists")));
+    let batches = level_render_batches(db, asset, level);
+    let Some(groups) = batches.get(batch as usize) else {
+        return Err(Diagnostic::new(&mesh_path, format!("render batch {batch} no longer exists")));
     };
-    let label = render_label(level_label(db, asset, level), &loaded.mesh, group);
-    let stored = stored_renders(db, asset, level);
-    let remembered = stored.get(&render_group_key(db, asset, level, group_index)).filter(|images| {
-        // A memo that does not fit the group (a hand-made entry) is a miss, never a panic.
-        images.len() == group.rectangles.len()
-            && images.iter().zip(&group.rectangles).all(|(image, &rectangle)| {
-                let placement = &layout.layout.placements[rectangle as usize];
-                (image.width, image.height) == (placement.width.max(1), placement.height.max(1))
-            })
-    });
-    if let Some(images) = remembered {
-        record_cache_hit(db, RENDER, &label);
-        return Ok(images.clone());
-    }
+    let groups: Vec<u32> = groups.iter().copied().filter(|&group| remembered_render(db, asset, level, group).is_none()).collect();
     let planes = billboard_planes(db, asset, level)?;
     let mut materials = vec![crate::gpu::RenderMaterial::default(); loaded.mesh.materials.len()];
-    for &material_index in &group.materials {
-        let source = &loaded.mesh.materials[material_index as usize];
-        let map = |slot| if loaded.mesh.uvs.is_some() { material_texture_mips(db, asset, material_index, slot) } else { Ok(None) };
-        materials[material_index as usize] = crate::gpu::RenderMaterial {
-            albedo: map(TextureSlot::Albedo)?,
-            opacity: map(TextureSlot::Opacity)?,
-            normal: map(TextureSlot::Normal)?,
-            metallic: map(TextureSlot::Metallic)?,
-            roughness: map(TextureSlot::Roughness)?,
-            ao: map(TextureSlot::Ao)?,
-            albedo_factor: [source.albedo_factor[0], source.albedo_factor[1], source.albedo_factor[2], source.opacity],
-            metallic_value: source.metallic,
-            roughness_value: source.roughness,
-            ao_value: 1.0,
-        };
+    for &group in &groups {
+        for &material_index in &layout.render_groups[group as usize].materials {
+            let source = &loaded.mesh.materials[material_index as usize];
+            let map = |slot| if loaded.mesh.uvs.is_some() { material_texture_mips(db, asset, material_index, slot) } else { Ok(None) };
+            materials[material_index as usize] = crate::gpu::RenderMaterial {
+                albedo: map(TextureSlot::Albedo)?,
+                opacity: map(TextureSlot::Opacity)?,
+                normal: map(TextureSlot::Normal)?,
+                metallic: map(TextureSlot::Metallic)?,
+                roughness: map(TextureSlot::Roughness)?,
+                ao: map(TextureSlot::Ao)?,
+                albedo_factor: [source.albedo_factor[0], source.albedo_factor[1], source.albedo_factor[2], source.opacity],
+                metallic_value: source.metallic,
+                roughness_value: source.roughness,
+                ao_value: 1.0,
+            };
+        }
     }
     // The depth range covers every assigned face, also beyond ε when `max_planes` capped them.
     let depth_range = planes.epsilon.max(planes.max_error).max(1e-6);
-    timed(db, RENDER, &label, || {
+    let rectangles: Vec<(u32, u32)> = groups
+        .iter()
+        .flat_map(|&group| layout.render_groups[group as usize].rectangles.iter().map(move |&rectangle| (group, rectangle)))
+        .collect();
+    let texels_of = |rectangle: u32| {
+        let placement = &layout.layout.placements[rectangle as usize];
+        placement.width.max(1) as f64 * placement.height.max(1) as f64
+    };
+    let labels: Vec<(String, f64)> = groups
+        .iter()
+        .map(|&group| {
+            let render_group = &layout.render_groups[group as usize];
+            let texels = render_group.rectangles.iter().map(|&rectangle| texels_of(rectangle)).sum();
+            (render_label(level_label(db, asset, level), &loaded.mesh, render_group), texels)
+        })
+        .collect();
+    let images = timed_together(db, RENDER, &labels, || {
         let gpu = crate::gpu::gpu().map_err(|error| Diagnostic::new(&mesh_path, error.to_string()))?;
-        let inputs: Vec<crate::gpu::PlaneRenderInput> = group
-            .rectangles
+        let inputs: Vec<crate::gpu::PlaneRenderInput> = rectangles
             .iter()
-            .map(|&rectangle| {
+            .map(|&(_, rectangle)| {
                 let (placement, rectangle) = (&layout.layout.placements[rectangle as usize], &layout.rectangles[rectangle as usize]);
                 crate::gpu::PlaneRenderInput {
                     frame: rectangle.frame,
@@ -334,8 +390,13 @@ pub fn plane_images(db: &dyn Db, asset: Asset, level: u32, group: u32) -> Result
             })
             .collect();
         gpu.render_rectangles(&inputs).map_err(|error| Diagnostic::new(&mesh_path, error.to_string()))
-    })
-    .map(Arc::new)
+    })?;
+    let mut images = images.into_iter();
+    let by_group = groups
+        .iter()
+        .map(|&group| (group, Arc::new(images.by_ref().take(layout.render_groups[group as usize].rectangles.len()).collect())))
+        .collect();
+    Ok(Arc::new(by_group))
 }
 
 /// Every render group's images of a level, in render-group order.

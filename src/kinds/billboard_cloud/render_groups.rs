@@ -62,6 +62,33 @@ pub fn render_groups(mesh: &Mesh, rectangles: &[PlaneRectangle]) -> Vec<RenderGr
     groups
 }
 
+/// The most texels of one render batch: a few submissions per level instead of one per render
+/// group (on llvmpipe each submission costs about a millisecond whatever its size, and the oak
+/// has 1,245 groups), small enough that two workers share a level's renders evenly.
+pub const RENDER_BATCH_TEXELS: u64 = 1 << 19;
+
+/// The render groups in batches rendered together: groups of one material set (so that an edit
+/// of a material's texture re-renders only batches of groups that show it), in layout order,
+/// each batch up to [`RENDER_BATCH_TEXELS`] (a larger group is a batch alone). `texels(group)`
+/// is the group's size in texels.
+pub fn render_batches(groups: &[RenderGroup], texels: impl Fn(&RenderGroup) -> u64) -> Vec<Vec<u32>> {
+    let mut open: BTreeMap<&[u32], (Vec<u32>, u64)> = BTreeMap::new();
+    let mut batches: Vec<Vec<u32>> = Vec::new();
+    for (index, group) in groups.iter().enumerate() {
+        let size = texels(group);
+        let (batch, batch_texels) = open.entry(group.materials.as_slice()).or_default();
+        if !batch.is_empty() && *batch_texels + size > RENDER_BATCH_TEXELS {
+            batches.push(std::mem::take(batch));
+            *batch_texels = 0;
+        }
+        batch.push(index as u32);
+        *batch_texels += size;
+    }
+    batches.extend(open.into_values().map(|(batch, _)| batch).filter(|batch| !batch.is_empty()));
+    batches.sort_by_key(|batch| batch[0]);
+    batches
+}
+
 /// A render group's name in logs, summaries and the graph: `plane12:bark+leaves`.
 pub fn render_group_label(mesh: &Mesh, group: &RenderGroup) -> String {
     let names: Vec<&str> = group.materials.iter().map(|&material| mesh.materials[material as usize].name.as_str()).collect();

@@ -6,5 +6,6 @@ pub mod bake;
 mod gpu;
 mod budget;
 mod chain;
+mod distance_alpha;
 mod layout;
 mod planes;

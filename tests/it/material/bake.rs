@@ -108,6 +108,42 @@ fn alpha_tested_albedo_keeps_its_coverage_down_the_mip_chain() {
 }
 
 #[test]
+fn an_alpha_tested_albedo_reports_the_colour_where_the_test_passes_and_the_tests_agreement() {
+    // What an engine shows of a cut-out: the colour where the alpha test passes, and whether it
+    // passes where the uncompressed surface does. The report's figures must be those of the
+    // written level 0, decoded and compared by hand here.
+    let project = material_project("");
+    build(&mut project.open());
+    let report: serde_json::Value = serde_json::from_slice(&project.read("baked/mixed/report.json")).expect("report");
+    let surfaces = report["materials"][0]["surfaces"].as_array().expect("surfaces");
+    let albedo = surfaces.iter().find(|surface| surface["surface"] == "Albedo").expect("albedo");
+    let bytes = project.read("baked/mixed/leaf/albedo.ktx2");
+    let ktx2 = read_ktx2(&bytes);
+    let decoded = decode_blocks(BlockFormat::Bc7, &ktx2_level(&bytes, &ktx2, 0), ktx2.width, ktx2.height);
+    let source = decode_png(&project.read("baked/mixed/leaf/albedo.png"));
+    let (mut squared, mut visible, mut either, mut both) = (0u64, 0u64, 0u64, 0u64);
+    for (source, decoded) in source.pixels.chunks_exact(4).zip(decoded.pixels.chunks_exact(4)) {
+        let (passes, decoded_passes) = (source[3] >= 128, decoded[3] >= 128);
+        if passes {
+            visible += 1;
+            squared += (0..3).map(|channel| (source[channel] as i64 - decoded[channel] as i64).pow(2) as u64).sum::<u64>();
+        }
+        either += u64::from(passes || decoded_passes);
+        both += u64::from(passes && decoded_passes);
+    }
+    let visible_psnr = 10.0 * (255.0f64 * 255.0 / (squared as f64 / (visible * 3) as f64)).log10();
+    let reported = albedo["visible_psnr_db"].as_f64().expect("an alpha-tested albedo reports its visible PSNR");
+    assert!((reported - visible_psnr).abs() <= 0.006, "visible PSNR {reported} against {visible_psnr:.3} measured here");
+    let iou = both as f64 / either as f64;
+    let reported = albedo["alpha_test_iou"].as_f64().expect("and its alpha test's IoU");
+    assert!((reported - iou).abs() <= 1e-5, "alpha-test IoU {reported} against {iou:.5}");
+    assert!(iou > 0.9 && iou <= 1.0, "{iou}");
+    // Surfaces without an alpha test have neither figure.
+    let mra = surfaces.iter().find(|surface| surface["surface"] == "Mra").expect("mra");
+    assert!(mra.get("visible_psnr_db").is_none() && mra.get("alpha_test_iou").is_none(), "{mra}");
+}
+
+#[test]
 fn dds_and_pvr_containers_have_correct_headers() {
     for (container, check) in [("Dds", check_dds as fn(&[u8], u32, u32)), ("Pvr", check_pvr)] {
         let project = material_project(&format!("container: {container}"));
@@ -230,17 +266,18 @@ fn re_encoding_only_changed_blocks_equals_a_full_encode() {
         assert_eq!(reused, encode_levels(&new_levels, settings), "{format:?}: reuse is exact");
         assert_ne!(reused, old, "{format:?}: the edit shows");
         // The PSNR from per-block errors, measured again only where blocks or texels changed.
-        use cirrus::texture::quality::{block_errors_reusing, decode_blocks, psnr};
+        use cirrus::texture::quality::{block_errors_reusing, decode_blocks, psnr, Measure};
         let channels = 3;
-        let old_errors = block_errors_reusing(format, &old.levels[0], &old_levels[0], &old_blocks, channels, None);
-        let fresh = block_errors_reusing(format, &reused.levels[0], &new_levels[0], &new_blocks, channels, None);
+        let measure = Measure { channels, alpha_threshold: Some(128) };
+        let old_errors = block_errors_reusing(format, &old.levels[0], &old_levels[0], &old_blocks, measure, None);
+        let fresh = block_errors_reusing(format, &reused.levels[0], &new_levels[0], &new_blocks, measure, None);
         let measure_again = |previous_errors| {
             block_errors_reusing(
                 format,
                 &reused.levels[0],
                 &new_levels[0],
                 &new_blocks,
-                channels,
+                measure,
                 Some((&old_blocks, &old.levels[0][..], previous_errors)),
             )
         };

@@ -250,6 +250,15 @@ fn build(pipeline: PathBuf, assets: Vec<String>, format: SummaryFormat, options:
         Ok(config) => config,
         Err(code) => return code,
     };
+    // A shared cache on S3 with an endpoint no client can use is a configuration error: the
+    // build would otherwise run without the cache it was told to use.
+    let remote = options.remote_cache.apply(config.remote_cache.as_ref());
+    if let Some(settings) = remote.filter(|settings| matches!(settings.location, crate::cache::remote::RemoteLocation::S3 { .. })) {
+        if let Err(why) = crate::cache::remote::check_endpoint_environment() {
+            eprintln!("error: shared cache {}: {why}", settings.url);
+            return ExitCode::from(EXIT_USAGE);
+        }
+    }
     let mut project = Project::open(config, options);
     let bar = std::io::stderr().is_terminal().then(|| {
         let bar = indicatif::ProgressBar::new(0);

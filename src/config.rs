@@ -510,6 +510,21 @@ impl Validator<'_> {
             if lods.iter().any(|budget| !(1..=1_000_000).contains(&budget.quads())) {
                 self.error_at_key("lods", anchor, "each level must allow between 1 and 1000000 quads (Triangles: at least 2)");
             }
+            if lods.is_empty() {
+                self.error_at_key(
+                    "lods",
+                    anchor,
+                    "a LOD chain needs at least one level (`lods: [Quads(256), Quads(64)]`); leave `lods` out for a single LOD",
+                );
+            }
+            if lods.windows(2).any(|pair| pair[1].quads() >= pair[0].quads()) {
+                let quads: Vec<String> = lods.iter().map(|budget| budget.quads().to_string()).collect();
+                self.error_at_key(
+                    "lods",
+                    anchor,
+                    &format!("a LOD chain goes from the most detailed level to the least: each level must allow fewer quads than the one before ({})", quads.join(", ")),
+                );
+            }
             settings.billboard.lods = lods.clone();
         }
         if !settings.billboard.lods.is_empty() && settings.billboard.budget.is_some() {

@@ -59,6 +59,83 @@ pub fn texture_limits(db: &dyn Db) -> crate::texture::TextureLimits {
     PipelineLimits::try_get(db).map_or_else(Default::default, |limits| limits.texture(db))
 }
 
+/// The pipeline's source folder, relative to its project folder (set by the driver, one per
+/// database): cache keys and cached values hold paths relative to it, so that the same project
+/// with its source folder named otherwise shares every entry.
+#[salsa::input(singleton, debug)]
+pub struct SourceFolder {
+    #[returns(ref)]
+    pub path: PathBuf,
+}
+
+/// The source folder in force (empty before the driver set one).
+pub fn source_folder(db: &dyn Db) -> PathBuf {
+    SourceFolder::try_get(db).map_or_else(PathBuf::new, |folder| folder.path(db).clone())
+}
+
+/// `path` (project-relative) relative to the source folder, as cache keys name files.
+pub fn source_relative(db: &dyn Db, path: &std::path::Path) -> PathBuf {
+    let folder = source_folder(db);
+    path.strip_prefix(&folder).map_or_else(|_| path.to_path_buf(), std::path::Path::to_path_buf)
+}
+
+/// Cached values name files relative to the source folder: `$source/…` in a JSON string stands
+/// for the source folder of whoever reads the entry.
+const SOURCE_PLACEHOLDER: &str = "$source";
+
+/// `value` with every string that is the source folder's path, or a path below it, written
+/// with the placeholder instead of the folder (`to_placeholder`), or back (`from_placeholder`).
+fn relocate(value: &mut serde_json::Value, from: &str, to: &str) {
+    let moved = |text: &str| -> Option<String> {
+        if text == from {
+            Some(to.to_string())
+        } else {
+            text.strip_prefix(from).filter(|rest| rest.starts_with('/')).map(|rest| format!("{to}{rest}"))
+        }
+    };
+    match value {
+        serde_json::Value::String(text) => {
+            if let Some(moved) = moved(text) {
+                *text = moved;
+            }
+        }
+        serde_json::Value::Array(items) => items.iter_mut().for_each(|item| relocate(item, from, to)),
+        serde_json::Value::Object(fields) => {
+            // Maps keyed by path serialise their keys as strings too.
+            if fields.keys().any(|key| moved(key).is_some()) {
+                *fields = std::mem::take(fields).into_iter().map(|(key, field)| (moved(&key).unwrap_or(key), field)).collect();
+            }
+            fields.values_mut().for_each(|field| relocate(field, from, to));
+        }
+        _ => {}
+    }
+}
+
+/// A hash of `value` as JSON with paths relative to the source folder (for a key part made of
+/// a stage result that names files).
+pub fn relocatable_hash(db: &dyn Db, value: &impl serde::Serialize) -> blake3::Hash {
+    let mut json = serde_json::to_value(value).expect("stage results serialise");
+    let folder = display_path(&source_folder(db));
+    if !folder.is_empty() {
+        relocate(&mut json, &folder, SOURCE_PLACEHOLDER);
+    }
+    blake3::hash(json.to_string().as_bytes())
+}
+
+fn to_placeholder(folder: &std::path::Path, entry: &mut CacheEntry) {
+    let folder = display_path(folder);
+    if !folder.is_empty() {
+        relocate(&mut entry.metadata, &folder, SOURCE_PLACEHOLDER);
+    }
+}
+
+fn from_placeholder(folder: &std::path::Path, entry: &mut CacheEntry) {
+    let folder = display_path(folder);
+    if !folder.is_empty() {
+        relocate(&mut entry.metadata, SOURCE_PLACEHOLDER, &folder);
+    }
+}
+
 /// A source file; `path` is relative to the folder of `pipeline.ron`.
 #[salsa::input(debug)]
 pub struct SourceFile {
@@ -111,6 +188,13 @@ pub fn asset_named(db: &dyn Db, name: &str) -> Option<Asset> {
 #[salsa::tracked(returns(copy))]
 pub fn asset_file(db: &dyn Db, asset: Asset, path: PathBuf) -> Option<SourceFile> {
     asset.files(db).get(&path).copied()
+}
+
+/// Whether a file could be read: a stage that needs only that (not the bytes) is left alone by
+/// edits of the file.
+#[salsa::tracked(returns(copy))]
+pub fn file_readable(db: &dyn Db, file: SourceFile) -> bool {
+    file.contents(db).is_ok()
 }
 
 pub fn read_contents(db: &dyn Db, file: SourceFile) -> Result<&FileContents, Diagnostic> {
@@ -288,12 +372,16 @@ pub fn opacity_texture(db: &dyn Db, file: SourceFile) -> Result<Arc<Texture>, Di
 // the persistent cache boundary
 
 pub fn load_cached<T>(db: &dyn Db, entry: &str, key: CacheKey, decode: impl FnOnce(CacheEntry) -> Option<T>) -> Option<T> {
-    db.disk_cache()?.load(entry, key).and_then(decode)
+    let mut loaded = db.disk_cache()?.load(entry, key)?;
+    from_placeholder(&source_folder(db), &mut loaded);
+    decode(loaded)
 }
 
 pub fn store_cached(db: &dyn Db, entry: &str, key: CacheKey, make: impl FnOnce() -> CacheEntry) {
     if let Some(cache) = db.disk_cache() {
-        cache.store(entry, key, make());
+        let mut made = make();
+        to_placeholder(&source_folder(db), &mut made);
+        cache.store(entry, key, made);
     }
 }
 
@@ -301,7 +389,12 @@ pub fn store_cached(db: &dyn Db, entry: &str, key: CacheKey, make: impl FnOnce()
 /// owns what it needs: `Arc`s of the images it gathers).
 pub fn store_cached_in_background(db: &dyn Db, entry: &str, key: CacheKey, make: impl FnOnce() -> CacheEntry + Send + 'static) {
     if let Some(cache) = db.disk_cache() {
-        cache.store_in_background(entry, key, make);
+        let folder = source_folder(db);
+        cache.store_in_background(entry, key, move || {
+            let mut made = make();
+            to_placeholder(&folder, &mut made);
+            made
+        });
     }
 }
 
@@ -333,10 +426,11 @@ pub fn stage_key(stage: Stage) -> CacheKeyBuilder {
     CacheKeyBuilder::new(stage.name, stage.version)
 }
 
-/// Adds each file's path and its content hash (or why it could not be read) to a key.
+/// Adds each file's path (relative to the source folder) and its content hash (or why it could
+/// not be read) to a key.
 pub fn key_with_files(db: &dyn Db, key: CacheKeyBuilder, files: impl IntoIterator<Item = SourceFile>) -> CacheKeyBuilder {
     files.into_iter().fold(key, |key, file| {
-        let key = key.part(file.path(db));
+        let key = key.part(&source_relative(db, file.path(db)));
         match file.contents(db) {
             Ok(contents) => key.part(&contents.hash),
             Err(error) => key.part(error),

@@ -108,7 +108,10 @@ fn open_disk_cache(config: &PipelineConfig, options: &ProjectOptions) -> Option<
     let local = DiskCache::new(config.cache_dir());
     Some(match options.remote_cache.apply(config.remote_cache.as_ref()).map(crate::cache::remote::RemoteStore::open) {
         None => local,
-        Some(Ok(remote)) => local.with_remote(remote),
+        Some(Ok(remote)) => {
+            let limit = crate::cache::remote::largest_entry_bytes(config.limits.texture.working_set);
+            local.with_remote(remote.with_object_limit(limit))
+        }
         Some(Err(error)) => {
             tracing::warn!("{error}; building with the local cache only");
             local
@@ -224,7 +227,8 @@ impl Project {
         self.sync_limits();
     }
 
-    /// Sets the pipeline-wide limits input when they changed (setters never compare).
+    /// Sets the pipeline-wide inputs (limits, the source folder) when they changed (setters
+    /// never compare).
     fn sync_limits(&mut self) {
         let texture = self.config.limits.texture;
         match crate::db::PipelineLimits::try_get(&self.db) {
@@ -234,6 +238,16 @@ impl Project {
             }
             None => {
                 crate::db::PipelineLimits::new(&self.db, texture);
+            }
+        }
+        let source = self.config.source.clone();
+        match crate::db::SourceFolder::try_get(&self.db) {
+            Some(folder) if *folder.path(&self.db) == source => {}
+            Some(folder) => {
+                folder.set_path(&mut self.db).to(source);
+            }
+            None => {
+                crate::db::SourceFolder::new(&self.db, source);
             }
         }
     }

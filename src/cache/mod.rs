@@ -7,35 +7,40 @@
 //! # Keys
 //!
 //! A key is the blake3 hash of an explicit byte encoding, the same on every machine and in every
-//! checkout folder (no `Debug` text, no absolute paths), so that a cache can be shared:
+//! checkout folder, whatever the source folder is called (no `Debug` text, no absolute paths,
+//! file paths relative to the pipeline's `source` folder), so that a cache can be shared. The
+//! values follow suit: in an entry's metadata every string that is a path below the source
+//! folder is written `$source/…` and read back below the reader's own (`db::load_cached`).
 //!
 //! - the prefix `cirrus-cache-v2\0`, then the entry's stage name and format version;
 //! - then each part, in the order the table says, as `u64` little-endian length + bytes, where a
 //!   part's bytes are: integers little-endian (`u32`, `i32`); `f32` by its bit pattern; `bool` as
-//!   one byte; strings as UTF-8; paths project-relative with `/` separators; enums by their
+//!   one byte; strings as UTF-8; paths relative to the source folder with `/` separators; enums by their
 //!   names as written in `pipeline.ron` (`Bc7`, `Ktx2`, …) or their artifact names (`albedo`);
 //!   `Option` as a tag byte (0 none, 1 some) then the value; arrays, tuples and settings structs
 //!   as their fields in declaration order, each a part of its own; content as its blake3 hash.
 //!
 //! | entry folder (key name, version) | parts, in order | holds |
 //! |---|---|---|
-//! | `parse` (`parse`, `PARSE`) | the `.mymaterial` content hash; its path; the source folder | the parsed material file |
-//! | `surface-recipe` (`surface`, 4) | the tail's parts (below); the kind's recipe key | the content key of the surface's files |
-//! | `surface` (`surface`, 4) | the tail's parts; the image's width, height and content hash | the container file and PNG preview |
-//! | `encoding-memo` (`encoding-memo`, 4) | mips and encode versions; the surface's label (`asset/material/surface`, `asset/surface`) | a BC7 surface's last encoding: level 0's block fingerprints, the other levels, the blocks, the errors (a memo: overwritten) |
-//! | `mesh` (`mesh`, `MESH`) | the source folder; per file the mesh stage reads (the OBJ, then its MTL files), its path and its content hash or read error | the loaded mesh (with each triangle's OBJ object) and tangents |
+//! | `parse` (`parse`, `PARSE`) | the `.mymaterial` content hash; its path | the parsed material file |
+//! | `surface-recipe` (`surface`, 5) | the tail's parts (below); the kind's recipe key | the content key of the surface's files |
+//! | `surface` (`surface`, 5) | the tail's parts; the image's width, height and content hash | the container file and PNG preview |
+//! | `encoding-memo` (`encoding-memo`, 5) | mips and encode versions; the surface's label (`asset/material/surface`, `asset/surface`) | a BC7 surface's last encoding: level 0's block fingerprints, the other levels, the blocks, the errors and, alpha-tested, each block's alpha-test figures (a memo: overwritten) |
+//! | `mesh` (`mesh`, `MESH`) | per file the mesh stage reads (the OBJ, then its MTL files), its path and its content hash or read error | the loaded mesh (with each triangle's OBJ object) and tangents |
 //! | `planes` (`planes`, `PLANES`) | the `mesh` key; ε; max planes option | the plane set |
 //! | `layout` (`layout`, `LAYOUT`) | the `planes` key; atlas settings (max size, padding, power of two); texel density option | rectangles, layout, render groups |
 //! | `lod` (`lod`, `LOD`) | the `layout` key | `lod.obj`, `lod.mtl` |
 //! | `render-memo` (`render-memo`, `RENDER`) | the `layout` key; a material set | the images of every render group that shows that set, each under its group key (a memo: overwritten) |
 //! | `atlas` (`atlas-coverage`, 1) | the billboard atlas recipe key | the atlas's coverage fraction (for the report) |
 //! | `atlas-fill` (`atlas-fill`, 1) | the coverage's content hash (atlas size, then every drawn texel's atlas texel, plane and plane texel as `u32`) | the fill search's source of every atlas texel (as offsets) |
-//! | `surface-recipe` (`surface`, 4) | the tail's parts; the atlas surface's parts key (below) | the content key of the surface's files |
+//! | `surface-recipe` (`surface`, 5) | the tail's parts; the atlas surface's parts key (below) | the content key of the surface's files |
 //! | `trim` (`trim`, `TRIM`) | the trim setting; the texture memory budget (`u64`); the texture file's path and content hash or read error | an atlas texture's size, kept rectangle, kept texels' hash, translucency |
-//! | `layout` (`layout`, `atlas::LAYOUT`) | `atlas`; the source folder; the pack settings key (`atlas-settings`, 1: max size, padding, pages; rotate, power of two, trim); the file count; per texture file its path and content hash or read error | an atlas layout (entries, pages, placements) and how it came from the last one |
+//! | `trim` (`trim`, `TRIM`), kept | `kept`; the kept rectangle (x, y, width, height); the texture file's path and content hash or read error; the texture memory budget | a texture kept to a rectangle its meshes' UVs reach: size, rectangle, kept texels' hash, translucency |
+//! | `reach` (`reach`, `REACH`) | the atlas's texture paths; the OBJ's and its MTL files' paths and content hashes | per texture the mesh's materials map, the range of their UVs |
+//! | `layout` (`layout`, `atlas::LAYOUT`) | `atlas`; the pack settings key (`atlas-settings`, 1: max size, padding, pages; rotate, power of two, trim); the file count; per texture file its path and content hash or read error; the blake3 of the meshes' UV reach as JSON (paths `$source/…`) | an atlas layout (entries with their aliases, pages, placements) and how it came from the last one |
 //! | `atlas-layout-memo` (`atlas-layout-memo`, `atlas::LAYOUT`) | the asset's name; the pack settings key | the asset's last layout, the packer's hint (a memo: overwritten) |
 //! | `atlas-page-memo` (`atlas-page-memo`, `COMPOSITE`) | the page's name (`atlas-page:asset/pageN`) | a page's last composite: its entries (placement, kept hash, translucency), the page, the fill sources as offsets (a memo: overwritten) |
-//! | `remap` (`remap`, `REMAP`) | the source folder; the blake3 of the layout's JSON; the OBJ's and its MTL files' paths and content hashes | a remapped mesh's OBJ text and materials |
+//! | `remap` (`remap`, `REMAP`) | the blake3 of the layout's JSON (paths `$source/…`); the textures its materials name that are missing; the OBJ's and its MTL files' paths and content hashes | a remapped mesh's OBJ text and materials |
 //! | `vertices` (`vertices`, `VERTICES`) | the mesh's content hash (positions, normals, UVs, triangles, groups); rays; distribution; max distance in mesh units; back faces pass through; ground plane option; the vertex offset | an AO asset's visibility per vertex (`f32`) |
 //! | `ao-tile` (`bake`, `BAKE`) | the map size; the tile's region (x, y, width, height); the mode (`Texels`, `Vertices`); per texel the occlusion settings as for `vertices`, the hash of its own triangles' corners (UV, position and normal bits), then `within reach` and the hash of the occluders within reach (group, corner positions) or `whole mesh` and the mesh's content hash; per vertex the hash of its own triangles' corners and of their visibility | a baked tile: 16-bit values, texel states, overlap count, rays, bake time |
 //! | `ao-map` (`fill`, `FILL`) | the map size; every tile key of the material, in row order | a material's filled map (16-bit), its 16-bit PNG and its figures |

@@ -209,6 +209,8 @@ enum Health {
 /// The shared store, its runtime and what it did.
 pub struct RemoteStore {
     runtime: tokio::runtime::Runtime,
+    /// The largest object fetched: a larger one is no entry this project could have made.
+    max_object_bytes: u64,
     /// What the upload tasks hold (never the runtime, which must not be dropped on its own threads).
     shared: Arc<Shared>,
     uploads: Mutex<Vec<tokio::task::JoinHandle<()>>>,
@@ -248,6 +250,7 @@ impl RemoteStore {
         let error = |why: String| RemoteCacheError { url: settings.url.clone(), why };
         let (store, prefix): (Arc<dyn ObjectStore>, String) = match &settings.location {
             RemoteLocation::S3 { bucket, prefix } => {
+                check_endpoint_environment().map_err(error)?;
                 let client = object_store::ClientOptions::new()
                     .with_connect_timeout(PROBE_TIMEOUT)
                     .with_timeout(TRANSFER_TIMEOUT)
@@ -290,7 +293,12 @@ impl RemoteStore {
             counters: Counters::default(),
             corrupt_keys: Mutex::default(),
         };
-        Ok(RemoteStore { runtime, shared: Arc::new(shared), uploads: Mutex::default() })
+        Ok(RemoteStore { runtime, max_object_bytes: DEFAULT_MAX_OBJECT_BYTES, shared: Arc::new(shared), uploads: Mutex::default() })
+    }
+
+    /// The same store, refusing objects larger than `bytes` without downloading them.
+    pub fn with_object_limit(self, bytes: u64) -> RemoteStore {
+        RemoteStore { max_object_bytes: bytes, ..self }
     }
 
     pub fn settings(&self) -> &RemoteCacheSettings {
@@ -318,11 +326,16 @@ impl Shared {
         }
         // The probe: a HEAD of an object that need not exist (not found is an answer).
         let probe = self.prefix.clone().join("cirrus-probe");
-        let answer = runtime.block_on(async { tokio::time::timeout(PROBE_TIMEOUT, self.store.head(&probe)).await });
+        // The client panics on some inputs (an endpoint it cannot make a request of): that is
+        // a store that fails, not a build that aborts.
+        let answer = std::panic::catch_unwind(std::panic::AssertUnwindSafe(|| {
+            runtime.block_on(async { tokio::time::timeout(PROBE_TIMEOUT, self.store.head(&probe)).await })
+        }));
         let failure = match answer {
-            Err(_) => Some(format!("no answer within {} ms", PROBE_TIMEOUT.as_millis())),
-            Ok(Ok(_)) | Ok(Err(object_store::Error::NotFound { .. })) => None,
-            Ok(Err(error)) => Some(short_error(&error)),
+            Err(panic) => Some(format!("its client failed: {}", panic_text(&panic))),
+            Ok(Err(_)) => Some(format!("no answer within {} ms", PROBE_TIMEOUT.as_millis())),
+            Ok(Ok(Ok(_))) | Ok(Ok(Err(object_store::Error::NotFound { .. }))) => None,
+            Ok(Ok(Err(error))) => Some(short_error(&error)),
         };
         match failure {
             None => {
@@ -357,6 +370,51 @@ impl Shared {
     }
 }
 
+/// What a caught panic said.
+fn panic_text(panic: &Box<dyn std::any::Any + Send>) -> String {
+    panic
+        .downcast_ref::<String>()
+        .cloned()
+        .or_else(|| panic.downcast_ref::<&str>().map(|text| text.to_string()))
+        .unwrap_or_else(|| "a panic".into())
+}
+
+/// The environment variables that name an S3 endpoint (`object_store` reads them all).
+const ENDPOINT_VARIABLES: [&str; 3] = ["AWS_ENDPOINT_URL", "AWS_ENDPOINT", "AWS_ENDPOINT_URL_S3"];
+
+/// Whether the S3 endpoint the environment names (if any) is a URL a client can use:
+/// `http://` or `https://` with a host. `object_store` accepts any text there and panics on the
+/// first request.
+pub fn check_endpoint_environment() -> Result<(), String> {
+    for variable in ENDPOINT_VARIABLES {
+        let Some(value) = std::env::var_os(variable) else { continue };
+        let value = value.to_string_lossy();
+        let parsed = url::Url::parse(&value).map_err(|why| why.to_string()).and_then(|url| {
+            if !matches!(url.scheme(), "http" | "https") {
+                Err(format!("its scheme is `{}`, not http or https", url.scheme()))
+            } else if url.host_str().is_none_or(str::is_empty) {
+                Err("it names no host".to_string())
+            } else {
+                Ok(())
+            }
+        });
+        if let Err(why) = parsed {
+            return Err(format!("{variable}=`{value}` is not an endpoint URL ({why}); give e.g. http://127.0.0.1:8333 or unset it"));
+        }
+    }
+    Ok(())
+}
+
+/// The object limit of a store opened without one: the local cache's largest entry.
+const DEFAULT_MAX_OBJECT_BYTES: u64 = 4 << 30;
+
+/// The largest entry a project with `texture_working_set` bytes per texture can make: an image
+/// entry holds at most about 8 bytes per texel of the largest texture (whose bake may take 64),
+/// and a mesh entry about twice its source file (at most `sources::MAX_SOURCE_BYTES`).
+pub fn largest_entry_bytes(texture_working_set: u64) -> u64 {
+    (texture_working_set / 8).max(2 * crate::sources::MAX_SOURCE_BYTES)
+}
+
 /// Whether entries of `stage` are shared at all (memos are not).
 pub fn shares(stage: &str) -> bool {
     !stage.ends_with("-memo")
@@ -375,13 +433,43 @@ impl RemoteStore {
             return None;
         }
         let path = shared.object_path(stage, key);
-        let fetched = self
-            .runtime
-            .block_on(async { tokio::time::timeout(TRANSFER_TIMEOUT, async { shared.store.get(&path).await?.bytes().await }).await });
+        let limit = self.max_object_bytes;
+        // Streamed into a buffer of the announced size: an object larger than any entry (or than
+        // it announced) is refused as soon as that shows, and never held twice.
+        let fetched = self.runtime.block_on(async {
+            tokio::time::timeout(TRANSFER_TIMEOUT, async {
+                use futures_util::StreamExt;
+                let result = shared.store.get(&path).await?;
+                let size = result.meta.size;
+                if size > limit {
+                    return Ok(Err(size));
+                }
+                let mut bytes = Vec::with_capacity(size as usize);
+                let mut stream = result.into_stream();
+                while let Some(chunk) = stream.next().await {
+                    let chunk = chunk?;
+                    if (bytes.len() + chunk.len()) as u64 > size {
+                        return Ok(Err((bytes.len() + chunk.len()) as u64));
+                    }
+                    bytes.extend_from_slice(&chunk);
+                }
+                Ok::<_, object_store::Error>(Ok(bytes))
+            })
+            .await
+        });
         match fetched {
-            Ok(Ok(bytes)) => {
+            Ok(Ok(Ok(bytes))) => {
                 shared.counters.bytes_downloaded.fetch_add(bytes.len() as u64, Ordering::Relaxed);
-                Some(bytes.to_vec())
+                Some(bytes)
+            }
+            Ok(Ok(Err(size))) => {
+                tracing::warn!(
+                    "shared cache {}: the {stage} object {} is {size} bytes, more than an entry can be ({limit}); not downloaded, computing it",
+                    shared.settings.url,
+                    &key.0.to_hex()[..16]
+                );
+                self.verified(stage, key, false);
+                None
             }
             Ok(Err(object_store::Error::NotFound { .. })) => {
                 shared.counters.misses.fetch_add(1, Ordering::Relaxed);

@@ -78,11 +78,12 @@ pub struct LoadedMesh {
     pub warnings: Vec<Diagnostic>,
 }
 
-/// The content address of what a mesh stage reads: the OBJ and its MTL files (paths and
-/// bytes), and the source folder texture paths must stay in.
+/// The content address of what a mesh stage reads: the OBJ and its MTL files (paths relative
+/// to the source folder, and bytes); the mesh names its textures relative to that folder too
+/// in the cache (see `db::load_cached`).
 #[salsa::tracked(returns(copy))]
 pub fn mesh_cache_key(db: &dyn Db, asset: Asset, obj: PathBuf) -> CacheKey {
-    let key = stage_key(MESH).part(asset.source_root(db));
+    let key = stage_key(MESH);
     let libraries = mesh_libraries_of(db, asset, obj.clone());
     let files = mesh_source(db, asset, &obj).ok().into_iter().chain(libraries.values().copied());
     key_with_files(db, key, files).finish()

@@ -39,6 +39,9 @@ pub struct MeshMaterial {
     /// The MTL declares a cut-out surface: a `map_d`, or `d` below 1.
     #[serde(default)]
     pub cut_out: bool,
+    /// The options a map's statement gave before its file name (`-s 2 2 1`, `-bm 0.5`), by slot.
+    #[serde(default, skip_serializing_if = "BTreeMap::is_empty")]
+    pub map_options: BTreeMap<TextureSlot, String>,
 }
 
 impl Default for MeshMaterial {
@@ -51,6 +54,7 @@ impl Default for MeshMaterial {
             roughness: 1.0,
             maps: BTreeMap::new(),
             cut_out: false,
+            map_options: BTreeMap::new(),
         }
     }
 }
@@ -264,11 +268,70 @@ pub fn load_mesh(
         compute_normals(&mut mesh);
     }
     if mesh.uvs.as_ref().is_some_and(|uvs| uvs.iter().any(|uv| !uv[0].is_finite() || !uv[1].is_finite())) {
-        warnings.push(Diagnostic::new(obj_file, "non-finite texture coordinates: the mesh bakes constant colours"));
-        mesh.uvs = None;
+        // A `nan` or `inf` in a `vt` line is bad input, not a mesh without texture coordinates.
+        let message = "a texture coordinate (`vt`) is not a finite number";
+        return Err(match first_non_finite_statement(&text, "vt") {
+            Some(position) => Diagnostic::at(obj_file, position, message),
+            None => Diagnostic::new(obj_file, message),
+        });
     }
     mesh.materials = materials;
     Ok((mesh, warnings))
+}
+
+/// Where the first `keyword` statement (`vt`, `v`) with a number that is not finite starts.
+fn first_non_finite_statement(text: &str, keyword: &str) -> Option<crate::diagnostic::TextPosition> {
+    let mut offset = 0;
+    for line in text.split_inclusive('\n') {
+        let mut words = line.split_whitespace();
+        if words.next() == Some(keyword) && words.any(|word| word.parse::<f32>().is_ok_and(|value| !value.is_finite())) {
+            let indent = line.len() - line.trim_start().len();
+            return Some(crate::diagnostic::TextPosition::of_byte_offset(text, offset + indent));
+        }
+        offset += line.len();
+    }
+    None
+}
+
+/// Per material of `mesh` whose triangles use texture coordinates outside [0, 1] (beyond
+/// `1e-4`): the material, how many of its triangles do, of how many, and the UV range
+/// `[u_min, u_max, v_min, v_max]`. A bake in UV space covers [0, 1]: those texels are not in it.
+pub fn uvs_outside_unit_square(mesh: &Mesh) -> Vec<(usize, usize, usize, [f32; 4])> {
+    let Some(uvs) = mesh.uvs.as_deref() else { return Vec::new() };
+    let mut per_material: BTreeMap<usize, (usize, usize, [f32; 4])> = BTreeMap::new();
+    for (triangle, &material) in mesh.triangles.iter().zip(&mesh.triangle_materials) {
+        let entry =
+            per_material.entry(material as usize).or_insert((0, 0, [f32::INFINITY, f32::NEG_INFINITY, f32::INFINITY, f32::NEG_INFINITY]));
+        entry.1 += 1;
+        let mut outside = false;
+        for &vertex in triangle {
+            let [u, v] = uvs[vertex as usize];
+            outside |= !(-1e-4..=1.0 + 1e-4).contains(&u) || !(-1e-4..=1.0 + 1e-4).contains(&v);
+            entry.2 = [entry.2[0].min(u), entry.2[1].max(u), entry.2[2].min(v), entry.2[3].max(v)];
+        }
+        entry.0 += usize::from(outside);
+    }
+    per_material
+        .into_iter()
+        .filter(|(_, (outside, _, _))| *outside > 0)
+        .map(|(material, (outside, total, range))| (material, outside, total, range))
+        .collect()
+}
+
+/// The warnings of [`uvs_outside_unit_square`] for a mesh baked in UV space.
+pub fn uvs_outside_warnings(obj_file: &Path, mesh: &Mesh) -> Vec<Diagnostic> {
+    uvs_outside_unit_square(mesh)
+        .into_iter()
+        .map(|(material, outside, total, [u_min, u_max, v_min, v_max])| {
+            Diagnostic::new(
+                obj_file,
+                format!(
+                    "material `{}`: {outside} of its {total} triangles have texture coordinates outside [0, 1] (u ∈ [{u_min}, {u_max}], v ∈ [{v_min}, {v_max}]): a map covers [0, 1] only, so the parts outside are not baked",
+                    mesh.materials[material].name
+                ),
+            )
+        })
+        .collect()
 }
 
 fn decode_text<'a>(file: &Path, bytes: &'a [u8]) -> Result<std::borrow::Cow<'a, str>, Diagnostic> {
@@ -458,12 +521,15 @@ fn mesh_material(
     ];
     for (slot, statement) in statements {
         let Some(statement) = statement else { continue };
-        let Some(file) = texture_file_from_statement(&statement) else {
+        let Some((options, file)) = texture_statement_parts(&statement) else {
             continue;
         };
         match normalize_relative_path(&folder.join(file.replace('\\', "/"))) {
             Some(path) if path.starts_with(source_root) => {
                 result.maps.insert(slot, path);
+                if !options.is_empty() {
+                    result.map_options.insert(slot, options);
+                }
             }
             _ => warnings.push(Diagnostic::new(
                 library,
@@ -481,6 +547,12 @@ fn mesh_material(
 
 /// The file name of an MTL texture statement, after its options (`-bm 0.5`, `-s 1 1 1`, …).
 pub fn texture_file_from_statement(statement: &str) -> Option<String> {
+    texture_statement_parts(statement).map(|(_, file)| file)
+}
+
+/// An MTL texture statement's options (their words joined by spaces, empty without any) and
+/// file name.
+pub fn texture_statement_parts(statement: &str) -> Option<(String, String)> {
     let arguments = |option: &str| -> usize {
         match option {
             "-blendu" | "-blendv" | "-cc" | "-clamp" | "-imfchan" | "-texres" | "-bm" | "-boost" | "-type" => 1,
@@ -506,7 +578,7 @@ pub fn texture_file_from_statement(statement: &str) -> Option<String> {
         }
     }
     let file = words.get(index..)?.join(" ");
-    (!file.is_empty()).then_some(file)
+    (!file.is_empty()).then(|| (words[..index].join(" "), file))
 }
 
 /// Area-weighted vertex normals.

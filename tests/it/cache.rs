@@ -147,3 +147,123 @@ fn cache_stats_explain_and_gc_tell_and_bound_the_local_folder() {
     let line = explain.lines().find(|line| line.trim_start().starts_with("surface-recipe ")).unwrap_or_else(|| panic!("{explain}"));
     assert!(line.contains(": nearest ") && line.contains(" is hash ") && line.contains("(the entry has hash "), "{explain}");
 }
+
+/// The bundled project with its source folder named `folder` (the pipeline's `source` and
+/// every file moved there), its bush's atlas kept small so that the bake is quick.
+fn bundled_project_in(folder: &str) -> crate::support::TempProject {
+    let pipeline = std::fs::read_to_string(Path::new(env!("CARGO_MANIFEST_DIR")).join("pipeline.ron"))
+        .unwrap()
+        .replace("source: \"examples/assets\"", &format!("source: \"{folder}\""))
+        .replace("atlas: (max_size: 1024)", "atlas: (max_size: 256)");
+    let project = crate::support::TempProject::new(&pipeline);
+    let source = Path::new(env!("CARGO_MANIFEST_DIR")).join("examples/assets");
+    let mut folders = vec![source.clone()];
+    while let Some(current) = folders.pop() {
+        for entry in std::fs::read_dir(&current).unwrap().flatten() {
+            let path = entry.path();
+            if path.is_dir() {
+                folders.push(path);
+            } else {
+                let relative = path.strip_prefix(&source).unwrap().to_string_lossy().to_string();
+                project.write(&format!("{folder}/{relative}"), std::fs::read(&path).unwrap());
+            }
+        }
+    }
+    project
+}
+
+#[test]
+fn a_project_whose_source_folder_is_named_otherwise_shares_every_entry_and_bakes_the_same_bytes() {
+    // Keys hold paths relative to the source folder, and cached values name files relative to
+    // it: a teammate whose checkout calls the folder `assets` is served every stage by a cache
+    // filled under `src`, and bakes the same bytes.
+    let first = bundled_project_in("src");
+    let summary = build(&mut first.open());
+    assert!(summary.all_ok(), "{}", summary.to_text());
+    let second = bundled_project_in("assets");
+    let copy = |from: &Path, to: &Path| {
+        let mut folders = vec![from.to_path_buf()];
+        while let Some(folder) = folders.pop() {
+            for entry in std::fs::read_dir(&folder).unwrap().flatten() {
+                let path = entry.path();
+                let target = to.join(path.strip_prefix(from).unwrap());
+                if path.is_dir() {
+                    std::fs::create_dir_all(&target).unwrap();
+                    folders.push(path);
+                } else {
+                    std::fs::copy(&path, &target).unwrap();
+                }
+            }
+        }
+    };
+    std::fs::create_dir_all(second.path("baked/.cirrus/cache")).unwrap();
+    copy(&first.path("baked/.cirrus/cache"), &second.path("baked/.cirrus/cache"));
+    let summary = build(&mut second.open());
+    assert!(summary.all_ok(), "{}", summary.to_text());
+    let ran: Vec<String> = summary
+        .assets
+        .iter()
+        .flat_map(|asset| {
+            asset
+                .stages
+                .iter()
+                .filter(|stage| stage.status == cirrus::summary::StageStatus::Ran)
+                .map(move |stage| format!("{}:{}({})", asset.name, stage.stage, stage.instance))
+        })
+        .collect();
+    assert!(ran.is_empty(), "stages ran although another folder name baked them: {ran:?}");
+    let artifacts = |project: &crate::support::TempProject| -> Vec<(String, Vec<u8>)> {
+        let mut files = Vec::new();
+        let mut folders = vec![project.path("baked")];
+        while let Some(folder) = folders.pop() {
+            for entry in std::fs::read_dir(&folder).unwrap().flatten() {
+                let path = entry.path();
+                let relative = path.strip_prefix(project.path("baked")).unwrap().to_string_lossy().to_string();
+                if relative.starts_with(".cirrus") || relative == "manifest.json" {
+                    continue;
+                }
+                if path.is_dir() {
+                    folders.push(path);
+                } else {
+                    files.push((relative, std::fs::read(&path).unwrap()));
+                }
+            }
+        }
+        files.sort();
+        files
+    };
+    let (first_files, second_files) = (artifacts(&first), artifacts(&second));
+    assert_eq!(first_files.iter().map(|(name, _)| name).collect::<Vec<_>>(), second_files.iter().map(|(name, _)| name).collect::<Vec<_>>());
+    // Reports say how long each stage took (the second bake's came from the cache), and name the
+    // source folder (the mesh); MTL files name it where a path leads out of `baked/`.
+    let without_times = |bytes: &[u8], folder: &str| -> String {
+        let text = String::from_utf8_lossy(bytes).replace(&format!("{folder}/"), "SOURCE/");
+        match serde_json::from_str::<serde_json::Value>(&text) {
+            Ok(mut report) => {
+                fn strip(value: &mut serde_json::Value) {
+                    match value {
+                        serde_json::Value::Object(fields) => {
+                            fields.remove("stage_ms");
+                            fields.remove("timings");
+                            fields.values_mut().for_each(strip);
+                        }
+                        serde_json::Value::Array(items) => items.iter_mut().for_each(strip),
+                        _ => {}
+                    }
+                }
+                strip(&mut report);
+                report.to_string()
+            }
+            Err(_) => text,
+        }
+    };
+    for ((name, first_bytes), (_, second_bytes)) in first_files.iter().zip(&second_files) {
+        if first_bytes != second_bytes {
+            assert_eq!(
+                without_times(first_bytes, "src"),
+                without_times(second_bytes, "assets"),
+                "{name} differs beyond timings and the folder's name"
+            );
+        }
+    }
+}

@@ -81,15 +81,20 @@ fn edit(project: &TempProject, file: &str) -> bool {
             !file.ends_with("spot.mymaterial")
         }
         "obj" => {
-            // Stretch the mesh along x: new planes, rectangles, layout and renders.
+            // Stretch the mesh along x and its texture coordinates toward the origin: new
+            // planes, rectangles, layout and renders, and new places its UVs reach.
             let edited: String = text()
                 .lines()
-                .map(|line| match line.strip_prefix("v ") {
-                    Some(rest) => {
+                .map(|line| {
+                    if let Some(rest) = line.strip_prefix("v ") {
                         let values: Vec<f32> = rest.split_whitespace().map(|value| value.parse().unwrap()).collect();
                         format!("v {} {} {}\n", values[0] * 1.3, values[1], values[2])
+                    } else if let Some(rest) = line.strip_prefix("vt ") {
+                        let values: Vec<f32> = rest.split_whitespace().map(|value| value.parse().unwrap()).collect();
+                        format!("vt {} {}\n", values[0] * 0.9, values[1] * 0.9)
+                    } else {
+                        format!("{line}\n")
                     }
-                    None => format!("{line}\n"),
                 })
                 .collect();
             std::fs::write(&path, edited).unwrap();

@@ -608,3 +608,106 @@ fn protocol_edges_since_from_the_future_unknown_graph_assets_and_too_many_client
     assert!(refused, "connections beyond the cap are refused");
     drop(crowd);
 }
+
+/// Runs `cirrus ARGS` with `environment`, polling its peak resident memory (MiB): the output and
+/// the peak.
+fn run_measuring_memory(project: &TempProject, arguments: &[&str], environment: &[(&str, &str)], limit: Duration) -> (Output, u64) {
+    let mut child = Command::new(env!("CARGO_BIN_EXE_cirrus"))
+        .args(arguments)
+        .envs(environment.iter().copied())
+        .current_dir(project.root())
+        .stdin(Stdio::null())
+        .stdout(Stdio::piped())
+        .stderr(Stdio::piped())
+        .spawn()
+        .expect("run cirrus");
+    let status_file = format!("/proc/{}/status", child.id());
+    let (start, mut peak_kib) = (Instant::now(), 0u64);
+    while child.try_wait().expect("status").is_none() {
+        if let Some(line) = std::fs::read_to_string(&status_file)
+            .ok()
+            .and_then(|status| status.lines().find(|line| line.starts_with("VmHWM:")).map(str::to_string))
+        {
+            peak_kib = peak_kib.max(line.split_whitespace().nth(1).and_then(|kib| kib.parse().ok()).unwrap_or(0));
+        }
+        assert!(start.elapsed() < limit, "`cirrus {}` still ran after {limit:?}", arguments.join(" "));
+        std::thread::sleep(Duration::from_millis(10));
+    }
+    (child.wait_with_output().expect("output"), peak_kib / 1024)
+}
+
+#[test]
+fn a_shared_store_object_larger_than_any_entry_is_refused_without_being_read() {
+    // Three 3 GiB objects in a file:// store took a build to 12 GB and 68 s: each was read
+    // whole before its checksum said it was no entry. Sparse files cost no disk here.
+    let store = tempfile::tempdir().unwrap();
+    let project = material_project();
+    let pipeline = std::fs::read_to_string(project.path("pipeline.ron")).unwrap();
+    let with_store = pipeline.replacen("Pipeline(", &format!("Pipeline(cache: (remote: Some(\"file://{}\")), ", store.path().display()), 1);
+    project.write("pipeline.ron", with_store);
+    let (output, _) = run_measuring_memory(&project, &["build"], &[], Duration::from_secs(120));
+    assert!(output.status.success(), "{}", text(&output));
+    let mut objects = Vec::new();
+    let mut folders = vec![store.path().to_path_buf()];
+    while let Some(folder) = folders.pop() {
+        for entry in std::fs::read_dir(folder).unwrap().flatten() {
+            if entry.path().is_dir() {
+                folders.push(entry.path());
+            } else if !entry.path().to_string_lossy().contains("cirrus-probe") {
+                objects.push(entry.path());
+            }
+        }
+    }
+    assert!(objects.len() >= 3, "the build uploaded its entries: {objects:?}");
+    for object in &objects {
+        let file = std::fs::OpenOptions::new().write(true).open(object).unwrap();
+        file.set_len(3 << 30).unwrap();
+    }
+    std::fs::remove_dir_all(project.path("baked")).unwrap();
+    let (output, peak_mib) = run_measuring_memory(&project, &["build"], &[], Duration::from_secs(120));
+    assert!(output.status.success(), "{}", text(&output));
+    assert!(peak_mib < 400, "peak {peak_mib} MiB: an oversized object was read");
+    assert!(text(&output).contains("more than an entry can be"), "{}", text(&output));
+    assert!(project.path("baked/rock/rock/albedo.ktx2").is_file());
+}
+
+#[test]
+fn a_malformed_s3_endpoint_is_a_configuration_error_not_a_panic_and_the_daemon_bakes_locally() {
+    let project = material_project();
+    let pipeline = std::fs::read_to_string(project.path("pipeline.ron")).unwrap();
+    project.write("pipeline.ron", pipeline.replacen("Pipeline(", "Pipeline(cache: (remote: Some(\"s3://bucket/prefix\")), ", 1));
+    let credentials = [("AWS_ACCESS_KEY_ID", "a"), ("AWS_SECRET_ACCESS_KEY", "b"), ("AWS_REGION", "us-east-1")];
+    for endpoint in ["notaurl", "http://[::1", "ftp://example.com", ""] {
+        let mut environment = credentials.to_vec();
+        environment.push(("AWS_ENDPOINT_URL", endpoint));
+        let (output, _) = run_measuring_memory(&project, &["build"], &environment, Duration::from_secs(60));
+        assert_eq!(output.status.code(), Some(2), "{endpoint}: {}", text(&output));
+        let message = text(&output);
+        assert!(
+            message.contains(&format!("AWS_ENDPOINT_URL=`{endpoint}` is not an endpoint URL")) && !message.contains("panicked"),
+            "{message}"
+        );
+    }
+    // The daemon warns and bakes without the store.
+    let mut environment = credentials.to_vec();
+    environment.push(("AWS_ENDPOINT_URL", "notaurl"));
+    let mut child = Command::new(env!("CARGO_BIN_EXE_cirrus"))
+        .args(["watch", "--listen", "127.0.0.1:0"])
+        .envs(environment)
+        .current_dir(project.root())
+        .stdin(Stdio::null())
+        .stdout(Stdio::null())
+        .stderr(Stdio::piped())
+        .spawn()
+        .expect("run the daemon");
+    let start = Instant::now();
+    while !project.path("baked/rock/rock/albedo.ktx2").is_file() && start.elapsed() < Duration::from_secs(60) {
+        assert!(child.try_wait().unwrap().is_none(), "the daemon exited");
+        std::thread::sleep(Duration::from_millis(50));
+    }
+    let _ = child.kill();
+    let output = child.wait_with_output().unwrap();
+    let log = String::from_utf8_lossy(&output.stderr);
+    assert!(project.path("baked/rock/rock/albedo.ktx2").is_file(), "{log}");
+    assert!(log.contains("not an endpoint URL") && !log.contains("panicked"), "{log}");
+}

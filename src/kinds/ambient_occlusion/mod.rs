@@ -129,6 +129,7 @@ impl Kind for AmbientOcclusion {
             problems
                 .push(Diagnostic::new(main_file, "the mesh has no texture coordinates: an AO bake needs a UV layout (`vt` in the OBJ)"));
         }
+        problems.extend(crate::mesh::uvs_outside_warnings(main_file, &mesh).iter().map(crate::kinds::as_warning));
         problems
     }
 
@@ -246,6 +247,15 @@ fn ao_outputs(db: &dyn Db, asset: Asset, output_folder: &Path, runs: &[StageRun]
         outputs.files.push((texture_path.clone(), artifacts.texture_file.clone()));
         outputs.files.push((png_path.clone(), files.png16.clone()));
         let map = &files.map;
+        if map.baked_texels == 0 {
+            return Err(Diagnostic::new(
+                asset.main_file(db),
+                format!(
+                    "material `{}`: its UV layout covers no texel of the {}² map (every triangle's texture coordinates are degenerate or lie outside [0, 1]): there is nothing to bake",
+                    material.name, settings.size
+                ),
+            ));
+        }
         // Per vertex, the rays are cast from the material's vertices, not its texels.
         let rays_cast = match settings.mode {
             AoMode::Texels => map.rays,
@@ -281,7 +291,13 @@ fn ao_outputs(db: &dyn Db, asset: Asset, output_folder: &Path, runs: &[StageRun]
         materials,
         timings: AoTimings { rays_per_second: bake_rays_per_second(db, asset, &geometry, runs)? },
         stage_ms: crate::kinds::asset_stage_ms(name, runs).into_iter().map(|(stage, ms)| (stage.to_string(), ms)).collect(),
-        warnings: geometry.loaded.warnings.iter().map(ErrorSummary::from).collect(),
+        warnings: geometry
+            .loaded
+            .warnings
+            .iter()
+            .chain(&crate::mesh::uvs_outside_warnings(asset.main_file(db), &geometry.loaded.mesh))
+            .map(ErrorSummary::from)
+            .collect(),
     };
     outputs.report = Some(serde_json::to_vec_pretty(&report).expect("reports serialise"));
     Ok(outputs)

@@ -21,8 +21,8 @@ use crate::texture::tail::TailSettings;
 use crate::texture::{SurfaceKind, Texture};
 
 use queries::{
-    atlas_layout, atlas_layout_and_change, atlas_mesh_files, atlas_page, atlas_texture_files, mesh_library_paths, page_group, page_label,
-    page_recipe_key, page_stem, remapped_mesh, remapped_mesh_path, COMPOSITE, LAYOUT, REMAP, TRIM,
+    atlas_layout, atlas_layout_and_change, atlas_mesh_files, atlas_page, atlas_texture_files, mesh_library_paths, mesh_map_paths,
+    page_group, page_label, page_recipe_key, page_stem, remapped_mesh, remapped_mesh_path, COMPOSITE, LAYOUT, REACH, REMAP, TRIM,
 };
 use table::{AtlasPage, AtlasTable};
 
@@ -51,7 +51,11 @@ impl Kind for Atlas {
         let mut files: Vec<PathBuf> = asset.listed(db).iter().flatten().cloned().collect();
         for mesh in atlas_mesh_files(db, asset) {
             files.extend(mesh_library_paths(db, asset, mesh));
+            // The maps they name: a remapped mesh must not point at a texture that is gone.
+            files.extend(mesh_map_paths(db, asset, mesh));
         }
+        files.sort();
+        files.dedup();
         files
     }
 
@@ -92,6 +96,18 @@ impl Kind for Atlas {
         let report = output_folder.join("report.json");
         let mut pack = StageInstance::new(LAYOUT, name, name);
         let mut instances = Vec::new();
+        // Where each mesh's UVs reach: an entry keeps at least that much of its texture.
+        let meshes = atlas_mesh_files(db, asset);
+        let mut reaches = Vec::new();
+        for mesh in meshes {
+            let relative = display_path(&remapped_mesh_path(db, asset, mesh));
+            let mut reach = StageInstance::new(REACH, format!("{name}/meshes/{relative}"), format!("reach/{relative}"));
+            reach.reads.push(Read::File(mesh.clone()));
+            reach.reads.extend(mesh_library_paths(db, asset, mesh).into_iter().map(Read::File));
+            pack = pack.reads_stage(&reach);
+            reaches.push(reach);
+        }
+        let reached = queries::mesh_uv_reach(db, asset);
         for path in atlas_texture_files(db, asset) {
             let label = display_path(path);
             let mut decode = StageInstance::new(DECODE, &label, &label);
@@ -99,9 +115,15 @@ impl Kind for Atlas {
             decode.shared = true;
             let mut trim = StageInstance::new(TRIM, &label, &label).reads_stage(&decode);
             trim.shared = true;
+            if reached.contains_key(path) {
+                for reach in &reaches {
+                    trim = trim.reads_stage(reach);
+                }
+            }
             pack = pack.reads_stage(&trim);
             instances.extend([decode, trim]);
         }
+        instances.extend(reaches);
         pack.writes = vec![output_folder.join("atlas.json"), report.clone()];
         let container = asset.settings(db).encode.container;
         let layout = atlas_layout(db, asset).ok();
@@ -117,7 +139,6 @@ impl Kind for Atlas {
             write.writes.push(report.clone());
             tails.extend([composite, mips, encode, write]);
         }
-        let meshes = atlas_mesh_files(db, asset);
         for mesh in meshes {
             let relative = remapped_mesh_path(db, asset, mesh);
             let label = format!("{name}/meshes/{}", display_path(&relative));
@@ -176,12 +197,19 @@ impl Kind for Atlas {
                 }
             };
             problems.extend(warnings);
-            for (index, material) in mesh.materials.iter().enumerate() {
+            let mut used = vec![false; mesh.materials.len()];
+            for &material in &mesh.triangle_materials {
+                used[material as usize] = true;
+            }
+            for (index, material) in mesh.materials.iter().enumerate().filter(|(index, _)| used[*index]) {
                 let Some(atlased) = material.maps.values().find(|path| files.contains(path)) else { continue };
                 let name = display_path(atlased.strip_prefix(&config.source).unwrap_or(atlased));
                 if let Err(error) = remap::repeating_uvs(&mesh, index, &name) {
                     problems.push(Diagnostic::new(&mesh_file, error.to_string()));
                 }
+            }
+            if asset.settings.pack.trim {
+                problems.extend(uvs_beyond_trim(config, &mesh_file, &mesh, &files));
             }
         }
         problems
@@ -201,6 +229,41 @@ impl Kind for Atlas {
     fn surface_recipe_key(db: &dyn Db, asset: Asset, surface: &SurfaceId) -> Result<Option<CacheKey>, Diagnostic> {
         surface_page(surface).map(|page| page_recipe_key(db, asset, page)).transpose()
     }
+}
+
+/// Warnings for the textures whose transparent border a mesh's UVs reach: the entry keeps those
+/// texels too (trimming them would move the remapped UVs off the rectangle).
+fn uvs_beyond_trim(config: &PipelineConfig, mesh_file: &Path, mesh: &crate::mesh::Mesh, files: &[PathBuf]) -> Vec<Diagnostic> {
+    let mut warnings = Vec::new();
+    for (texture, reach) in remap::material_uv_reach(mesh, |path| files.iter().any(|file| file == path)) {
+        let Ok(contents) = crate::sources::read_source(&config.root, &config.source, &texture) else { continue };
+        let Ok(decoded) = crate::texture::decode_texture(&texture, &contents.bytes, config.limits.texture) else { continue };
+        let trimmed = page::opaque_bounds(&decoded);
+        let wanted = page::uv_texel_rect(reach.u, reach.v, [decoded.width, decoded.height]);
+        if !trimmed.contains(wanted) {
+            let kept = trimmed.union(wanted);
+            warnings.push(Diagnostic::new(
+                mesh_file,
+                format!(
+                    "warning: its UVs (u ∈ [{}, {}], v ∈ [{}, {}]) reach the transparent border of `{}`: the atlas keeps {}×{} texels at ({}, {}) of it, not the {}×{} at ({}, {}) trimming alone would keep",
+                    reach.u[0],
+                    reach.u[1],
+                    reach.v[0],
+                    reach.v[1],
+                    display_path(texture.strip_prefix(&config.source).unwrap_or(&texture)),
+                    kept.width,
+                    kept.height,
+                    kept.x,
+                    kept.y,
+                    trimmed.width,
+                    trimmed.height,
+                    trimmed.x,
+                    trimmed.y
+                ),
+            ));
+        }
+    }
+    warnings
 }
 
 /// The pages, their previews, `atlas.json` and the report.
@@ -239,6 +302,15 @@ fn atlas_outputs(
         "pages": layout.packing.pages,
         "occupancy": (layout.packing.occupancy() * 1e4).round() / 1e4,
         "layout": change,
+        // Entries that keep more than their opaque texels, because a mesh's UVs reach there.
+        "kept_for_meshes": layout.entries.iter().filter_map(|entry| {
+            let trimmed = entry.trimmed?;
+            Some(serde_json::json!({
+                "entry": entry.name,
+                "trimmed": [trimmed.x, trimmed.y, trimmed.width, trimmed.height],
+                "kept": [entry.trim.x, entry.trim.y, entry.trim.width, entry.trim.height],
+            }))
+        }).collect::<Vec<_>>(),
         "meshes": meshes,
         "warnings": warnings.iter().map(crate::summary::ErrorSummary::from).collect::<Vec<_>>(),
         "surfaces": surfaces,

@@ -7,12 +7,40 @@ use crate::texture::fill::{fill_from_sources, texel_sources, TexelSources};
 use crate::texture::Texture;
 
 /// The part of a texture an entry keeps: `x`, `y` is the trim offset inside the source.
-#[derive(Clone, Copy, Debug, PartialEq, Eq, serde::Serialize, serde::Deserialize)]
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Hash, serde::Serialize, serde::Deserialize)]
 pub struct TrimRect {
     pub x: u32,
     pub y: u32,
     pub width: u32,
     pub height: u32,
+}
+
+impl TrimRect {
+    /// The smallest rectangle holding both.
+    pub fn union(self, other: TrimRect) -> TrimRect {
+        let (left, top) = (self.x.min(other.x), self.y.min(other.y));
+        let (right, bottom) = ((self.x + self.width).max(other.x + other.width), (self.y + self.height).max(other.y + other.height));
+        TrimRect { x: left, y: top, width: right - left, height: bottom - top }
+    }
+
+    /// Whether `other` lies inside.
+    pub fn contains(self, other: TrimRect) -> bool {
+        other.x >= self.x
+            && other.y >= self.y
+            && other.x + other.width <= self.x + self.width
+            && other.y + other.height <= self.y + self.height
+    }
+}
+
+/// The texels a mesh's texture coordinates in `u` × `v` (OBJ convention: origin bottom-left,
+/// v up; clamped to [0, 1]) fall on, in a `size` texture: what a remapped mesh samples.
+pub fn uv_texel_rect(u: [f32; 2], v: [f32; 2], size: [u32; 2]) -> TrimRect {
+    let (width, height) = (size[0] as f32, size[1] as f32);
+    let column = |u: f32| (u.clamp(0.0, 1.0) * width).floor().clamp(0.0, width - 1.0) as u32;
+    let row = |v: f32| ((1.0 - v.clamp(0.0, 1.0)) * height).floor().clamp(0.0, height - 1.0) as u32;
+    let (left, right) = (column(u[0]), column(u[1]));
+    let (top, bottom) = (row(v[1]), row(v[0]));
+    TrimRect { x: left, y: top, width: right - left + 1, height: bottom - top + 1 }
 }
 
 /// The smallest rectangle holding every texel whose alpha is not zero; a fully transparent

@@ -17,11 +17,14 @@ use crate::packing::Placement;
 use crate::texture::fill::TexelSources;
 use crate::texture::Texture;
 
-use super::page::{composite_page_keeping_sources, crop, opaque_bounds, recomposite_page, PageEntry, TrimRect};
+use super::page::{composite_page_keeping_sources, crop, opaque_bounds, recomposite_page, uv_texel_rect, PageEntry, TrimRect};
 
 pub const TRIM: Stage = Stage { name: "trim", version: 1 };
-/// 3: kept as a hint for the next layout; entries come from the trim stage.
-pub const LAYOUT: Stage = Stage { name: "layout", version: 3 };
+/// 3: kept as a hint for the next layout; entries come from the trim stage. 4: an entry keeps
+/// what the remapped meshes' UVs reach; aliases with their own canvases.
+pub const LAYOUT: Stage = Stage { name: "layout", version: 4 };
+/// Where the remapped meshes' UVs reach on each atlased texture.
+pub const REACH: Stage = Stage { name: "reach", version: 1 };
 pub const COMPOSITE: Stage = Stage { name: "composite", version: 2 };
 
 /// What the layout needs of one texture file: its size, the rectangle trim keeps, and what
@@ -37,14 +40,27 @@ pub struct TrimmedTexture {
 }
 
 /// One rectangle of the atlas: the texture it shows (its file, trimmed to `trim`), and the other
-/// textures with the same pixels.
+/// textures whose kept texels are the same pixels.
 #[derive(Clone, Debug, PartialEq, serde::Serialize, serde::Deserialize)]
 pub struct LayoutEntry {
     /// The source path relative to the source folder (the first in name order of its aliases).
     pub name: String,
-    pub aliases: Vec<String>,
+    pub aliases: Vec<LayoutAlias>,
     /// The texture file it shows, project-relative.
     pub file: PathBuf,
+    pub source_size: [u32; 2],
+    pub trim: TrimRect,
+    /// What trimming transparent borders alone would keep, when the meshes' UVs made it keep
+    /// more (`trim` then holds both).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub trimmed: Option<TrimRect>,
+}
+
+/// A texture that shares an entry's rectangle: its own name, canvas and where the shared texels
+/// lie in it (two textures with the same pixels and different transparent borders).
+#[derive(Clone, Debug, PartialEq, serde::Serialize, serde::Deserialize)]
+pub struct LayoutAlias {
+    pub name: String,
     pub source_size: [u32; 2],
     pub trim: TrimRect,
 }
@@ -102,6 +118,10 @@ pub fn trimmed_texture(db: &dyn Db, file: SourceFile, trim: bool) -> Result<Trim
 /// The pure trim: the kept rectangle and what it holds.
 fn trim_texture(texture: &Texture, trim: bool) -> TrimmedTexture {
     let rect = if trim { opaque_bounds(texture) } else { TrimRect { x: 0, y: 0, width: texture.width, height: texture.height } };
+    kept_part(texture, rect)
+}
+
+fn kept_part(texture: &Texture, rect: TrimRect) -> TrimmedTexture {
     let kept = crop(texture, rect);
     TrimmedTexture {
         source_size: [texture.width, texture.height],
@@ -111,14 +131,86 @@ fn trim_texture(texture: &Texture, trim: bool) -> TrimmedTexture {
     }
 }
 
+/// A texture kept to `rect` rather than to its trim (part of the stage `trim`, per file): where
+/// a remapped mesh's UVs reach beyond the opaque texels.
+#[salsa::tracked(returns(clone))]
+pub fn kept_texture(db: &dyn Db, file: SourceFile, rect: TrimRect) -> Result<TrimmedTexture, Diagnostic> {
+    let label = display_path(file.path(db));
+    let key = key_with_files(db, stage_key(TRIM).part("kept").part(&[rect.x, rect.y, rect.width, rect.height]), [file]);
+    cached_json(db, TRIM, &label, key.part(&texture_limits(db).working_set).finish(), || {
+        let texture = decoded_texture(db, file)?;
+        if rect.x + rect.width > texture.width || rect.y + rect.height > texture.height {
+            return Err(Diagnostic::new(
+                file.path(db),
+                format!("the kept rectangle {rect:?} leaves the {}×{} texture", texture.width, texture.height),
+            ));
+        }
+        Ok(timed(db, TRIM, &label, || kept_part(&texture, rect)))
+    })
+}
+
+/// The texture coordinates a material of a mesh uses on an atlased texture: their range.
+#[derive(Clone, Copy, Debug, PartialEq, serde::Serialize, serde::Deserialize)]
+pub struct UvReach {
+    pub u: [f32; 2],
+    pub v: [f32; 2],
+}
+
+impl UvReach {
+    pub fn union(self, other: UvReach) -> UvReach {
+        UvReach { u: [self.u[0].min(other.u[0]), self.u[1].max(other.u[1])], v: [self.v[0].min(other.v[0]), self.v[1].max(other.v[1])] }
+    }
+}
+
+/// Where the asset's meshes sample each of its textures (stage `reach`): for every texture a
+/// material of some mesh maps (any slot), the range of that material's triangles' texture
+/// coordinates (finite ones), over every mesh and material. A mesh that does not load is the
+/// remap's to report.
+#[salsa::tracked(returns(clone))]
+pub fn mesh_uv_reach(db: &dyn Db, asset: Asset) -> Arc<std::collections::BTreeMap<PathBuf, UvReach>> {
+    let mut reach = std::collections::BTreeMap::new();
+    let textures: std::collections::BTreeSet<&PathBuf> = atlas_texture_files(db, asset).iter().collect();
+    for mesh in atlas_mesh_files(db, asset) {
+        let Some(file) = asset_file(db, asset, mesh.clone()) else { continue };
+        let Ok(contents) = file.contents(db) else { continue };
+        let libraries: std::collections::BTreeMap<PathBuf, Option<Vec<u8>>> = mesh_library_paths(db, asset, mesh)
+            .into_iter()
+            .map(|path| {
+                let bytes = asset_file(db, asset, path.clone())
+                    .and_then(|file| file.contents(db).as_ref().ok().map(|contents| contents.bytes.to_vec()));
+                (path, bytes)
+            })
+            .collect();
+        let label = format!("{}/meshes/{}", asset.name(db), display_path(&remapped_mesh_path(db, asset, mesh)));
+        // Keyed by the mesh, its libraries and which textures are atlased (by path).
+        let library_files = mesh_library_paths(db, asset, mesh).into_iter().filter_map(|path| asset_file(db, asset, path));
+        let atlased: Vec<String> = textures.iter().map(|path| display_path(&crate::db::source_relative(db, path))).collect();
+        let key = key_with_files(db, stage_key(REACH).part(&atlased[..]), std::iter::once(file).chain(library_files)).finish();
+        let found: Result<Vec<(PathBuf, UvReach)>, Diagnostic> = cached_json(db, REACH, &label, key, || {
+            Ok(timed(db, REACH, &label, || {
+                let Ok((loaded, _)) = crate::mesh::load_mesh(mesh, &contents.bytes, &libraries, asset.source_root(db)) else {
+                    return Vec::new();
+                };
+                super::remap::material_uv_reach(&loaded, |path| textures.contains(&path.to_path_buf()))
+            }))
+        });
+        let found = found.unwrap_or_default();
+        for (texture, range) in found {
+            reach.entry(texture).and_modify(|known: &mut UvReach| *known = known.union(range)).or_insert(range);
+        }
+    }
+    Arc::new(reach)
+}
+
 /// What the layout is made of: every texture file's content, the source folder (entry names
 /// are relative to it) and the pack settings. The layout cached under it is the one made last
 /// from these inputs (which earlier layout was its hint is not part of it).
 #[salsa::tracked(returns(copy))]
 pub fn layout_key(db: &dyn Db, asset: Asset) -> CacheKey {
-    let key = stage_key(LAYOUT).part("atlas").part(asset.source_root(db)).part(&settings_key(db, asset).0);
+    let key = stage_key(LAYOUT).part("atlas").part(&settings_key(db, asset).0);
     let files = atlas_texture_files(db, asset).iter().filter_map(|path| asset_file(db, asset, path.clone())).collect::<Vec<_>>();
-    key_with_files(db, key.part(&(files.len() as u32)), files).finish()
+    let reach = crate::db::relocatable_hash(db, &*mesh_uv_reach(db, asset));
+    key_with_files(db, key.part(&(files.len() as u32)), files).part(&reach).finish()
 }
 
 /// The pack and trim settings, as a key part.
@@ -155,23 +247,25 @@ fn compute_atlas_layout(db: &dyn Db, asset: Asset) -> Result<(AtlasLayout, Layou
     let mut entries: Vec<LayoutEntry> = Vec::new();
     let mut sizes: Vec<(u32, u32)> = Vec::new();
     let mut by_content: HashMap<([u8; 32], u32, u32), usize> = HashMap::new();
+    let reach = mesh_uv_reach(db, asset);
     for path in files {
         let file = asset_file(db, asset, path.clone()).ok_or_else(|| Diagnostic::new(path, "file not found"))?;
-        let trimmed = trimmed_texture(db, file, trims(db, asset))?;
+        let kept = kept_for_meshes(db, asset, file, path, &reach)?;
         let name = display_path(path.strip_prefix(&source_root).unwrap_or(path));
-        let content = (trimmed.kept_hash, trimmed.trim.width, trimmed.trim.height);
+        let content = (kept.texels.kept_hash, kept.texels.trim.width, kept.texels.trim.height);
         match by_content.get(&content) {
-            Some(&entry) => entries[entry].aliases.push(name),
+            Some(&entry) => entries[entry].aliases.push(LayoutAlias { name, source_size: kept.texels.source_size, trim: kept.texels.trim }),
             None => {
                 by_content.insert(content, entries.len());
                 entries.push(LayoutEntry {
                     name,
                     aliases: Vec::new(),
                     file: path.clone(),
-                    source_size: trimmed.source_size,
-                    trim: trimmed.trim,
+                    source_size: kept.texels.source_size,
+                    trim: kept.texels.trim,
+                    trimmed: kept.widened_from,
                 });
-                sizes.push((trimmed.trim.width, trimmed.trim.height));
+                sizes.push((kept.texels.trim.width, kept.texels.trim.height));
             }
         }
     }
@@ -203,13 +297,36 @@ fn compute_atlas_layout(db: &dyn Db, asset: Asset) -> Result<(AtlasLayout, Layou
     Ok((AtlasLayout { entries, packing }, change))
 }
 
+/// What an entry keeps of a texture: its trim, widened to what the asset's meshes' UVs reach on
+/// it (a remapped mesh must find its texels on the page), and the trim alone when it was.
+struct KeptTexels {
+    texels: TrimmedTexture,
+    widened_from: Option<TrimRect>,
+}
+
+fn kept_for_meshes(
+    db: &dyn Db,
+    asset: Asset,
+    file: SourceFile,
+    path: &PathBuf,
+    reach: &std::collections::BTreeMap<PathBuf, UvReach>,
+) -> Result<KeptTexels, Diagnostic> {
+    let trimmed = trimmed_texture(db, file, trims(db, asset))?;
+    let Some(range) = reach.get(path) else { return Ok(KeptTexels { texels: trimmed, widened_from: None }) };
+    let wanted = uv_texel_rect(range.u, range.v, trimmed.source_size);
+    if trimmed.trim.contains(wanted) {
+        return Ok(KeptTexels { texels: trimmed, widened_from: None });
+    }
+    Ok(KeptTexels { texels: kept_texture(db, file, trimmed.trim.union(wanted))?, widened_from: Some(trimmed.trim) })
+}
+
 /// Each entry's place in the previous layout, found by any of its names (its own or an
 /// alias's, so that a texture whose alias sorts first now keeps its rectangle).
 fn layout_hint(entries: &[LayoutEntry], previous: Option<&AtlasLayout>) -> Vec<Option<PagePlacement>> {
     let Some(previous) = previous else { return vec![None; entries.len()] };
     let mut by_name: HashMap<&str, PagePlacement> = HashMap::new();
     for (entry, place) in previous.entries.iter().zip(&previous.packing.placements) {
-        for name in std::iter::once(&entry.name).chain(&entry.aliases) {
+        for name in std::iter::once(&entry.name).chain(entry.aliases.iter().map(|alias| &alias.name)) {
             by_name.insert(name, *place);
         }
     }
@@ -217,7 +334,9 @@ fn layout_hint(entries: &[LayoutEntry], previous: Option<&AtlasLayout>) -> Vec<O
     entries
         .iter()
         .map(|entry| {
-            let place = std::iter::once(&entry.name).chain(&entry.aliases).find_map(|name| by_name.get(name.as_str()).copied())?;
+            let place = std::iter::once(&entry.name)
+                .chain(entry.aliases.iter().map(|alias| &alias.name))
+                .find_map(|name| by_name.get(name.as_str()).copied())?;
             // Two entries that were one (aliases whose pixels now differ): the first keeps it.
             taken.insert((place.page, place.placement.x, place.placement.y)).then_some(place)
         })
@@ -263,7 +382,10 @@ fn page_entries(db: &dyn Db, asset: Asset, layout: &AtlasLayout, page: u32) -> R
     let mut found = Vec::new();
     for (entry, place) in layout.entries.iter().zip(&layout.packing.placements).filter(|(_, place)| place.page == page) {
         let file = asset_file(db, asset, entry.file.clone()).ok_or_else(|| Diagnostic::new(&entry.file, "file not found"))?;
-        let trimmed = trimmed_texture(db, file, trim)?;
+        let trimmed = match entry.trimmed {
+            Some(_) => kept_texture(db, file, entry.trim)?,
+            None => trimmed_texture(db, file, trim)?,
+        };
         found.push((
             entry.clone(),
             PageEntry { placement: place.placement, kept_hash: trimmed.kept_hash, translucent: trimmed.translucent },
@@ -458,6 +580,19 @@ pub fn mesh_library_paths(db: &dyn Db, asset: Asset, mesh: &std::path::Path) -> 
     crate::mesh::material_libraries(mesh, &contents.bytes, asset.source_root(db))
 }
 
+/// The texture files a mesh's materials name (as far as its MTL files have been read).
+pub fn mesh_map_paths(db: &dyn Db, asset: Asset, mesh: &std::path::Path) -> Vec<PathBuf> {
+    let libraries: std::collections::BTreeMap<PathBuf, Option<Vec<u8>>> = mesh_library_paths(db, asset, mesh)
+        .into_iter()
+        .map(|path| {
+            let bytes = asset_file(db, asset, path.clone())
+                .and_then(|file| file.contents(db).as_ref().ok().map(|contents| contents.bytes.to_vec()));
+            (path, bytes)
+        })
+        .collect();
+    crate::mesh::texture_paths(mesh, &libraries, asset.source_root(db))
+}
+
 /// A mesh's path below the asset's `meshes/` output folder: its path in the source folder,
 /// with the extension `.obj`.
 pub fn remapped_mesh_path(db: &dyn Db, asset: Asset, mesh: &std::path::Path) -> PathBuf {
@@ -466,15 +601,30 @@ pub fn remapped_mesh_path(db: &dyn Db, asset: Asset, mesh: &std::path::Path) -> 
 
 /// The table the layout gives (entries in name order), as `atlas.json` has it.
 pub fn atlas_table_entries(layout: &AtlasLayout) -> Vec<super::table::AtlasEntry> {
-    let mut entries: Vec<super::table::AtlasEntry> = layout
+    use super::table::{AtlasAlias, AtlasEntry, UvTransform};
+    let mut entries: Vec<AtlasEntry> = layout
         .entries
         .iter()
         .zip(&layout.packing.placements)
         .map(|(entry, place)| {
             let placement = place.placement;
             let page_size = layout.packing.pages[place.page as usize];
-            let (uv_offset, uv_scale) = super::table::uv_transform(&placement, entry.trim, entry.source_size, page_size);
-            super::table::AtlasEntry {
+            let transform = UvTransform::of(&placement, entry.trim, entry.source_size, page_size);
+            let aliases = entry
+                .aliases
+                .iter()
+                .map(|alias| {
+                    let transform = UvTransform::of(&placement, alias.trim, alias.source_size, page_size);
+                    AtlasAlias {
+                        name: alias.name.clone(),
+                        source_size: alias.source_size,
+                        trim_offset: [alias.trim.x, alias.trim.y],
+                        uv_offset: transform.uv_offset,
+                        uv_scale: transform.uv_scale,
+                    }
+                })
+                .collect();
+            AtlasEntry {
                 name: entry.name.clone(),
                 page: place.page,
                 x: placement.x,
@@ -484,9 +634,9 @@ pub fn atlas_table_entries(layout: &AtlasLayout) -> Vec<super::table::AtlasEntry
                 rotated: placement.rotated,
                 source_size: entry.source_size,
                 trim_offset: [entry.trim.x, entry.trim.y],
-                uv_offset,
-                uv_scale,
-                aliases: entry.aliases.clone(),
+                uv_offset: transform.uv_offset,
+                uv_scale: transform.uv_scale,
+                aliases,
             }
         })
         .collect();
@@ -504,8 +654,19 @@ pub fn remapped_mesh(db: &dyn Db, asset: Asset, mesh: PathBuf) -> Result<Arc<sup
     let file = asset_file(db, asset, mesh.clone()).ok_or_else(|| Diagnostic::new(&mesh, "file not found"))?;
     let libraries: Vec<(PathBuf, Option<SourceFile>)> =
         mesh_library_paths(db, asset, &mesh).into_iter().map(|path| (path.clone(), asset_file(db, asset, path))).collect();
-    let layout_bytes = serde_json::to_vec(&*layout).expect("layouts serialise");
-    let key = stage_key(REMAP).part(asset.source_root(db)).part(&blake3::hash(&layout_bytes));
+    // Whether each texture the mesh's materials name exists (not its texels: a texel edit
+    // leaves the remap alone).
+    let map_files: HashMap<PathBuf, bool> = mesh_map_paths(db, asset, &mesh)
+        .into_iter()
+        .map(|path| {
+            let exists = asset_file(db, asset, path.clone()).is_some_and(|file| crate::db::file_readable(db, file));
+            (path, exists)
+        })
+        .collect();
+    let mut missing: Vec<String> =
+        map_files.iter().filter(|(_, exists)| !**exists).map(|(path, _)| display_path(&crate::db::source_relative(db, path))).collect();
+    missing.sort();
+    let key = stage_key(REMAP).part(&crate::db::relocatable_hash(db, &*layout)).part(&missing[..]);
     let key = key_with_files(db, key, std::iter::once(file).chain(libraries.iter().filter_map(|(_, file)| *file))).finish();
     cached_json(db, REMAP, &label, key, || {
         let contents = crate::db::read_contents(db, file)?;
@@ -517,25 +678,32 @@ pub fn remapped_mesh(db: &dyn Db, asset: Asset, mesh: PathBuf) -> Result<Arc<sup
             .collect();
         timed(db, REMAP, &label, || {
             let (loaded, warnings) = crate::mesh::load_mesh(&mesh, &contents.bytes, &library_bytes, asset.source_root(db))?;
-            let entries = atlas_table_entries(&layout);
-            let by_path: HashMap<PathBuf, usize> = entries
-                .iter()
-                .enumerate()
-                .flat_map(|(index, entry)| {
-                    std::iter::once(&entry.name).chain(&entry.aliases).map(move |name| (asset.source_root(db).join(name), index))
-                })
-                .collect();
+            let targets = super::remap::remap_targets(&atlas_table_entries(&layout));
+            let by_path: HashMap<PathBuf, usize> =
+                targets.iter().enumerate().map(|(index, target)| (asset.source_root(db).join(&target.name), index)).collect();
             let remap_error = |error: super::remap::RemapError| Diagnostic::new(&mesh, error.to_string());
-            let chosen = super::remap::material_entries(&loaded, &entries, |path| by_path.get(path).copied()).map_err(remap_error)?;
+            // A map of a used material that does not exist would leave the mesh pointing at it.
+            for &material in loaded.triangle_materials.iter().collect::<std::collections::BTreeSet<_>>() {
+                let Some(material) = loaded.materials.get(material as usize) else { continue };
+                for path in material.maps.values() {
+                    if !map_files.get(path).copied().unwrap_or(true) {
+                        let texture = display_path(path.strip_prefix(asset.source_root(db)).unwrap_or(path));
+                        return Err(remap_error(super::remap::RemapError::MissingMap { material: material.name.clone(), texture }));
+                    }
+                }
+            }
+            let chosen = super::remap::material_entries(&loaded, &targets, |path| by_path.get(path).copied()).map_err(remap_error)?;
             let depth = remapped_mesh_path(db, asset, &mesh).components().count();
             let library = format!("{}atlas.mtl", "../".repeat(depth));
             let header = format!("cirrus: {} remapped onto atlas `{}`", display_path(&mesh), asset.name(db));
-            let remapped = super::remap::remap_mesh(&loaded, &entries, &chosen, &library, &header).map_err(remap_error)?;
-            Ok(super::remap::RemappedMesh { warnings, ..remapped })
+            let remapped = super::remap::remap_mesh(&loaded, &targets, &chosen, &library, &header).map_err(remap_error)?;
+            let remap_warnings = remapped.warnings.iter().map(|warning| Diagnostic::new(&mesh, warning.message.clone()));
+            Ok(super::remap::RemappedMesh { warnings: warnings.into_iter().chain(remap_warnings).collect(), ..remapped })
         })
     })
     .map(Arc::new)
 }
 
 /// 2: with the mesh's load warnings.
-pub const REMAP: Stage = Stage { name: "remap", version: 2 };
+/// 3: UVs onto each texture's own place (aliases), maps' -s and -o kept, unused materials ignored.
+pub const REMAP: Stage = Stage { name: "remap", version: 3 };

@@ -2,7 +2,8 @@
 //! transform that takes a texture coordinate of the source texture onto the page:
 //! `uv' = uv_offset + uv × uv_scale` for an entry as it was, and for a turned one
 //! `u' = uv_offset.u + v × uv_scale.u`, `v' = uv_offset.v − u × uv_scale.v` (UVs as OBJ has
-//! them: origin bottom-left, v up).
+//! them: origin bottom-left, v up). An alias (another texture with the same kept pixels) shares
+//! its entry's rectangle with a transform of its own: its canvas and trim offset may differ.
 
 use crate::packing::Placement;
 
@@ -32,7 +33,18 @@ pub struct AtlasEntry {
     pub trim_offset: [u32; 2],
     pub uv_offset: [f64; 2],
     pub uv_scale: [f64; 2],
-    pub aliases: Vec<String>,
+    pub aliases: Vec<AtlasAlias>,
+}
+
+/// A texture that shows the entry's pixels from a canvas of its own: where they lie in it and
+/// its own UV transform onto the shared rectangle.
+#[derive(Clone, Debug, PartialEq, serde::Serialize, serde::Deserialize)]
+pub struct AtlasAlias {
+    pub name: String,
+    pub source_size: [u32; 2],
+    pub trim_offset: [u32; 2],
+    pub uv_offset: [f64; 2],
+    pub uv_scale: [f64; 2],
 }
 
 /// The table: pages, then entries in name order.
@@ -42,24 +54,33 @@ pub struct AtlasTable {
     pub entries: Vec<AtlasEntry>,
 }
 
-/// The UV offset and scale of an entry of a `source_size` texture trimmed to `trim`, placed at
-/// `placement` on a `page_size` page (see the module's formulas).
-pub fn uv_transform(placement: &Placement, trim: TrimRect, source_size: [u32; 2], page_size: (u32, u32)) -> ([f64; 2], [f64; 2]) {
-    let (page_width, page_height) = (page_size.0 as f64, page_size.1 as f64);
-    let (source_width, source_height) = (source_size[0] as f64, source_size[1] as f64);
-    let (x, y) = (placement.x as f64, placement.y as f64);
-    let (trim_x, trim_y) = (trim.x as f64, trim.y as f64);
-    if placement.rotated {
-        // The source's X axis runs down the page, its Y axis (up) to the right.
-        let offset = [(x + placement.height as f64 + trim_y - source_height) / page_width, 1.0 - (y - trim_x) / page_height];
-        (offset, [source_height / page_width, source_width / page_height])
-    } else {
-        let offset = [(x - trim_x) / page_width, 1.0 - (y - trim_y + source_height) / page_height];
-        (offset, [source_width / page_width, source_height / page_height])
-    }
+/// How a source texture's coordinates land on a page (see the module's formulas).
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct UvTransform {
+    pub rotated: bool,
+    pub uv_offset: [f64; 2],
+    pub uv_scale: [f64; 2],
 }
 
-impl AtlasEntry {
+impl UvTransform {
+    /// The transform of a `source_size` texture trimmed to `trim`, placed at `placement` on a
+    /// `page_size` page.
+    pub fn of(placement: &Placement, trim: TrimRect, source_size: [u32; 2], page_size: (u32, u32)) -> UvTransform {
+        let (page_width, page_height) = (page_size.0 as f64, page_size.1 as f64);
+        let (source_width, source_height) = (source_size[0] as f64, source_size[1] as f64);
+        let (x, y) = (placement.x as f64, placement.y as f64);
+        let (trim_x, trim_y) = (trim.x as f64, trim.y as f64);
+        let (uv_offset, uv_scale) = if placement.rotated {
+            // The source's X axis runs down the page, its Y axis (up) to the right.
+            let offset = [(x + placement.height as f64 + trim_y - source_height) / page_width, 1.0 - (y - trim_x) / page_height];
+            (offset, [source_height / page_width, source_width / page_height])
+        } else {
+            let offset = [(x - trim_x) / page_width, 1.0 - (y - trim_y + source_height) / page_height];
+            (offset, [source_width / page_width, source_height / page_height])
+        };
+        UvTransform { rotated: placement.rotated, uv_offset, uv_scale }
+    }
+
     /// A source texture coordinate on the page.
     pub fn page_uv(&self, uv: [f64; 2]) -> [f64; 2] {
         if self.rotated {
@@ -67,6 +88,36 @@ impl AtlasEntry {
         } else {
             [self.uv_offset[0] + uv[0] * self.uv_scale[0], self.uv_offset[1] + uv[1] * self.uv_scale[1]]
         }
+    }
+}
+
+impl AtlasEntry {
+    /// The entry's own texture's transform.
+    pub fn transform(&self) -> UvTransform {
+        UvTransform { rotated: self.rotated, uv_offset: self.uv_offset, uv_scale: self.uv_scale }
+    }
+
+    /// A source texture coordinate of the entry's own texture on the page.
+    pub fn page_uv(&self, uv: [f64; 2]) -> [f64; 2] {
+        self.transform().page_uv(uv)
+    }
+
+    /// The page's UV rectangle of the entry's texels, `[u_min, v_min, u_max, v_max]` (UVs as OBJ
+    /// has them), of a `page_size` page.
+    pub fn page_uv_bounds(&self, page_size: (u32, u32)) -> [f64; 4] {
+        let (page_width, page_height) = (page_size.0 as f64, page_size.1 as f64);
+        [
+            self.x as f64 / page_width,
+            1.0 - (self.y + self.height) as f64 / page_height,
+            (self.x + self.width) as f64 / page_width,
+            1.0 - self.y as f64 / page_height,
+        ]
+    }
+}
+
+impl AtlasAlias {
+    pub fn transform(&self, rotated: bool) -> UvTransform {
+        UvTransform { rotated, uv_offset: self.uv_offset, uv_scale: self.uv_scale }
     }
 }
 

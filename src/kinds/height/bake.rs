@@ -63,9 +63,16 @@ pub struct HeightMap {
     pub range: [f32; 2],
     pub measured_texels: u64,
     pub missed_texels: u64,
+    /// How far the bake looked for the high surface, end to end (mesh units): a measured range
+    /// under [`FLAT_FRACTION`] of it is noise on a flat map, not relief.
+    pub search_span: f32,
     /// How long its bake took (not part of its equality).
     pub bake_ms: f64,
 }
+
+/// Heights that span less than this fraction of the search span are a flat map: the high mesh
+/// lies on the low one (float noise of the rays, about 1e-7 of the mesh's size, is far below).
+pub const FLAT_FRACTION: f32 = 1e-4;
 
 impl PartialEq for HeightMap {
     fn eq(&self, other: &Self) -> bool {
@@ -78,7 +85,7 @@ impl HeightMap {
     /// Assembles a map from per-texel measures (`None` on the surface with no hit; texels off
     /// the surface are `covered = false`), filling every unmeasured texel from its nearest
     /// measured one.
-    pub fn from_measures(size: u32, measures: &[Option<f32>], covered: &[bool], bake_ms: f64) -> HeightMap {
+    pub fn from_measures(size: u32, measures: &[Option<f32>], covered: &[bool], search_span: f32, bake_ms: f64) -> HeightMap {
         let mut states = vec![HeightTexel::Empty as u8; measures.len()];
         let mut drawn = vec![0.0f32; measures.len()];
         let mut sources = Vec::new();
@@ -104,12 +111,24 @@ impl HeightMap {
             let sources = crate::texture::fill::texel_sources(size, size, sources);
             crate::texture::fill::fill_values(&drawn, &sources)
         };
-        HeightMap { size, distances, states, range: [low, high], measured_texels, missed_texels, bake_ms }
+        HeightMap { size, distances, states, range: [low, high], measured_texels, missed_texels, search_span, bake_ms }
     }
 
-    /// The mapping of its 16-bit values: the measured range spread over 0..=65535.
+    /// Whether the measured heights are flat: they span less than [`FLAT_FRACTION`] of the
+    /// search span.
+    pub fn is_flat(&self) -> bool {
+        self.range[1] - self.range[0] < FLAT_FRACTION * self.search_span
+    }
+
+    /// The mapping of its 16-bit values: the measured range spread over 0..=65535; a flat map's
+    /// middle at the middle value and the whole search span over the range, so that its noise
+    /// is not stretched into relief.
     pub fn quantization(&self) -> Quantization {
         let [low, high] = self.range.map(f64::from);
+        if self.is_flat() {
+            let magnitude = f64::from(self.search_span).max(1e-30);
+            return Quantization { center: 0.5 - 0.5 * (low + high) / magnitude, magnitude };
+        }
         let magnitude = if high > low { high - low } else { low.abs().max(1e-30) };
         Quantization { center: -low / magnitude, magnitude }
     }
@@ -216,13 +235,13 @@ pub fn bake_along_normals(high: &TriangleBvh, low: &LowSurface, start: RayStart,
         })
         .collect();
     let covered: Vec<bool> = coverage.samples.iter().map(Option::is_some).collect();
-    HeightMap::from_measures(size, &measures, &covered, clock.elapsed().as_secs_f64() * 1000.0)
+    HeightMap::from_measures(size, &measures, &covered, reach.frontal + reach.rear, clock.elapsed().as_secs_f64() * 1000.0)
 }
 
 /// A `TopDown` bake: the high render minus the low one per texel (both relative to one
 /// footprint), measured where both surfaces are.
-pub fn bake_top_down(size: u32, high: &[Option<f32>], low: &[Option<f32>], bake_ms: f64) -> HeightMap {
+pub fn bake_top_down(size: u32, high: &[Option<f32>], low: &[Option<f32>], search_span: f32, bake_ms: f64) -> HeightMap {
     let measures: Vec<Option<f32>> = high.iter().zip(low).map(|(high, low)| Some((*high)? - (*low)?)).collect();
     let covered: Vec<bool> = low.iter().map(Option::is_some).collect();
-    HeightMap::from_measures(size, &measures, &covered, bake_ms)
+    HeightMap::from_measures(size, &measures, &covered, search_span, bake_ms)
 }

@@ -159,6 +159,8 @@ impl Kind for Height {
                         low_file,
                         "the low mesh has no texture coordinates (`vt` in the OBJ): a Normals height bake and a displaced tessellation need its UV layout",
                     ));
+                } else if settings.height.projection == HeightProjection::Normals {
+                    problems.extend(crate::mesh::uvs_outside_warnings(low_file, &mesh).iter().map(crate::kinds::as_warning));
                 }
             }
             Err(diagnostic) => problems.push(diagnostic),
@@ -228,6 +230,9 @@ pub struct HeightMapReport {
     pub measured_texels: u64,
     /// Texels on the surface with no high surface within reach: filled.
     pub missed_texels: u64,
+    /// The heights span less than `bake::FLAT_FRACTION` of the search: the high mesh lies on
+    /// the low one, and the map is flat (its values sit at the middle, noise unstretched).
+    pub flat: bool,
     pub texture: Option<HeightTextureReport>,
 }
 
@@ -264,8 +269,31 @@ fn map_report(files: &queries::HeightMapFiles, png: &Path, texture: Option<Heigh
         range: map.range,
         measured_texels: map.measured_texels,
         missed_texels: map.missed_texels,
+        flat: map.is_flat(),
         texture,
     }
+}
+
+/// The warning of a flat map: what the heights span, against the search.
+fn flat_map_warning(files: &queries::HeightMapFiles, high: &Path, which: &str) -> Option<ErrorSummary> {
+    let map = &files.map;
+    map.is_flat().then(|| {
+        let middle = 0.5 * (map.range[0] + map.range[1]);
+        let what = if middle.abs() < bake::FLAT_FRACTION * map.search_span {
+            "the high mesh lies on the low one".to_string()
+        } else {
+            format!("the high surface lies at a constant {middle} from the low one")
+        };
+        ErrorSummary::from(&Diagnostic::new(
+            high,
+            format!(
+                "warning: the {which} map is flat: every measured height lies within {:e} of the others (under {} of the {:e} searched): {what}, and the map holds no relief (its values sit at the middle of the 16-bit range, not stretched over noise)",
+                map.range[1] - map.range[0],
+                bake::FLAT_FRACTION,
+                map.search_span
+            ),
+        ))
+    })
 }
 
 fn height_outputs(db: &dyn Db, asset: Asset, output_folder: &Path, runs: &[StageRun]) -> Result<AssetOutputs, Diagnostic> {
@@ -336,6 +364,10 @@ fn height_outputs(db: &dyn Db, asset: Asset, output_folder: &Path, runs: &[Stage
     let high = high_geometry(db, asset)?;
     let mut warnings: Vec<ErrorSummary> = low.loaded.warnings.iter().map(ErrorSummary::from).collect();
     warnings.extend(high.loaded.warnings.iter().map(ErrorSummary::from));
+    if settings.projection == HeightProjection::Normals {
+        warnings.extend(crate::mesh::uvs_outside_warnings(asset.main_file(db), &low.loaded.mesh).iter().map(ErrorSummary::from));
+    }
+    warnings.extend(flat_map_warning(&*height_map(db, asset, MapReference::Low)?, &high_path(db, asset), "height"));
     let report = HeightReport {
         asset: name.clone(),
         kind: Height::NAME,

@@ -23,7 +23,8 @@ use crate::mesh::rays::{build_triangle_bvh, TriangleBvh};
 use crate::mesh::surface_distance::{area_weighted_samples, surface_distance, SurfaceDistance};
 
 pub const BVH: Stage = Stage { name: "bvh", version: 1 };
-pub const BAKE: Stage = Stage { name: "bake", version: 1 };
+/// 2: a flat map (heights within 1e-4 of the search) centred, its noise not stretched.
+pub const BAKE: Stage = Stage { name: "bake", version: 2 };
 pub const TESSELLATE: Stage = Stage { name: "tessellate", version: 1 };
 pub const DISPLACE: Stage = Stage { name: "displace", version: 1 };
 pub const DISTANCE: Stage = Stage { name: "distance", version: 1 };
@@ -254,7 +255,8 @@ pub fn height_map(db: &dyn Db, asset: Asset, reference: MapReference) -> Result<
                 };
                 let low_heights = render(&low, low_path)?;
                 let high_heights = render(&high, &high_path(db, asset))?;
-                Ok(bake_top_down(settings.size, &high_heights, &low_heights, clock.elapsed().as_secs_f64() * 1000.0))
+                let span = footprint.high_y - footprint.low_y;
+                Ok(bake_top_down(settings.size, &high_heights, &low_heights, span, clock.elapsed().as_secs_f64() * 1000.0))
             })?
         }
     };
@@ -305,6 +307,7 @@ fn map_entry(files: &HeightMapFiles) -> CacheEntry {
             "range": map.range,
             "measured_texels": map.measured_texels,
             "missed_texels": map.missed_texels,
+            "search_span": map.search_span,
             "bake_ms": map.bake_ms,
         }),
         blobs: vec![pod_blob(&map.distances), map.states.clone(), files.png16.to_vec()],
@@ -326,6 +329,7 @@ fn map_from_entry(entry: CacheEntry) -> Option<HeightMapFiles> {
         range: serde_json::from_value(metadata.get("range")?.clone()).ok()?,
         measured_texels: metadata.get("measured_texels")?.as_u64()?,
         missed_texels: metadata.get("missed_texels")?.as_u64()?,
+        search_span: metadata.get("search_span")?.as_f64()? as f32,
         bake_ms: metadata.get("bake_ms")?.as_f64()?,
     };
     Some(HeightMapFiles { map, png16: png16.into() })

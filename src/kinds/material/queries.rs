@@ -37,7 +37,7 @@ pub fn material_file(db: &dyn Db, asset: Asset) -> Result<Arc<MaterialFile>, Dia
     let contents = read_contents(db, file)?;
     let path = file.path(db);
     let source_root = asset.source_root(db);
-    let key = stage_key(PARSE).part(&contents.hash).part(path).part(source_root).finish();
+    let key = stage_key(PARSE).part(&contents.hash).part(&crate::db::source_relative(db, path)).finish();
     let label = display_path(path);
     cached_json(db, PARSE, &label, key, || timed(db, PARSE, &label, || parse_material_file(path, &contents.bytes, source_root)))
         .map(Arc::new)

@@ -233,3 +233,55 @@ fn meshes_without_uvs_or_with_bad_numbers_fail_with_a_message_naming_the_file() 
     let stdout = String::from_utf8_lossy(&output.stdout);
     assert!(stdout.contains("assets/plain.obj: the mesh has no texture coordinates"), "{stdout}");
 }
+
+#[test]
+fn degenerate_uvs_fail_and_a_non_finite_one_is_named_with_its_line() {
+    let project = TempProject::new(
+        r#"Pipeline(source: "assets", output: "baked", assets: [
+            AmbientOcclusion(name: "point", mesh: "point.obj", ao: (size: 16, rays: 8)),
+            AmbientOcclusion(name: "nan", mesh: "nan_uv.obj", ao: (size: 16, rays: 8)),
+        ])"#,
+    );
+    // Every corner at one UV: nothing of the map is covered (it used to bake all white, ok).
+    project.write("assets/point.obj", "v 0 0 0\nv 1 0 0\nv 0 0 -1\nv 1 0 -1\nvt 0.5 0.5\nf 1/1 2/1 3/1\nf 2/1 4/1 3/1\n");
+    // One `nan` among the texture coordinates (it used to read "the mesh has no texture coordinates").
+    project.write("assets/nan_uv.obj", "v 0 0 0\nv 1 0 0\nv 0 0 -1\nvt 0 0\n  vt nan 0\nvt 0 1\nf 1/1 2/2 3/3\n");
+    let summary = build(&mut project.open());
+    let errors = |name: &str| {
+        let asset = summary.assets.iter().find(|asset| asset.name == name).unwrap();
+        asset
+            .errors
+            .iter()
+            .map(|error| match (error.line, error.column) {
+                (Some(line), Some(column)) => format!("{}:{line}:{column}: {}", error.file, error.message),
+                _ => format!("{}: {}", error.file, error.message),
+            })
+            .collect::<Vec<_>>()
+    };
+    let point = errors("point");
+    assert!(point.len() == 1 && point[0].contains("point.obj") && point[0].contains("covers no texel"), "{point:?}");
+    assert!(!project.path("baked/point/default/ao.png").exists());
+    assert_eq!(errors("nan"), ["assets/nan_uv.obj:5:3: a texture coordinate (`vt`) is not a finite number"]);
+}
+
+#[test]
+fn uvs_outside_the_unit_square_are_reported() {
+    let project = TempProject::new(
+        r#"Pipeline(source: "assets", output: "baked", assets: [
+            AmbientOcclusion(name: "wide", mesh: "wide.obj", ao: (size: 16, rays: 8)),
+        ])"#,
+    );
+    project
+        .write("assets/wide.obj", "v 0 0 0\nv 1 0 0\nv 0 0 -1\nv 1 0 -1\nvt 0 0\nvt 1 0\nvt 0 1\nvt 1.5 1\nf 1/1 2/2 3/3\nf 2/2 4/4 3/3\n");
+    let summary = build(&mut project.open());
+    assert!(summary.all_ok(), "{}", summary.to_text());
+    let warnings = report_of(&project, "wide")["warnings"].to_string();
+    assert!(
+        warnings.contains("1 of its 2 triangles have texture coordinates outside [0, 1]") && warnings.contains("u ∈ [0, 1.5]"),
+        "{warnings}"
+    );
+}
+
+fn report_of(project: &TempProject, asset: &str) -> serde_json::Value {
+    serde_json::from_slice(&project.read(&format!("baked/{asset}/report.json"))).unwrap()
+}

@@ -76,7 +76,7 @@ fn trim_keeps_the_smallest_rectangle_with_any_alpha_and_where_it_was() {
 
 #[test]
 fn a_source_uv_through_the_table_lands_on_the_page_texel_of_that_source_texel() {
-    use cirrus::kinds::atlas::table::{uv_transform, AtlasEntry};
+    use cirrus::kinds::atlas::table::{AtlasEntry, UvTransform};
     // Sprites with transparent borders (trimmed), some long enough to be turned.
     let sprites: Vec<Texture> = [(40, 12, 3), (12, 50, 5), (30, 30, 0), (64, 9, 2), (7, 33, 1)]
         .iter()
@@ -112,7 +112,7 @@ fn a_source_uv_through_the_table_lands_on_the_page_texel_of_that_source_texel() 
     let page = composite_page(page_width, page_height, &entries, 2);
     for ((sprite, trim), placement) in sprites.iter().zip(&trims).zip(&placements) {
         let source_size = [sprite.width, sprite.height];
-        let (uv_offset, uv_scale) = uv_transform(placement, *trim, source_size, (page_width, page_height));
+        let UvTransform { uv_offset, uv_scale, .. } = UvTransform::of(placement, *trim, source_size, (page_width, page_height));
         let entry = AtlasEntry {
             name: String::new(),
             page: 0,

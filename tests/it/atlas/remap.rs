@@ -142,3 +142,234 @@ fn a_mesh_whose_material_library_is_missing_is_written_with_its_warning_in_the_r
     let warnings = report["warnings"].to_string();
     assert!(warnings.contains("lost.mtl") && warnings.contains("not found"), "{report}");
 }
+
+/// The triangles of `material` in an OBJ's text (tobj, one index per corner) as UV triples.
+fn material_uv_triangles(obj: &[u8], mtl: Option<&[u8]>, material: &str) -> Vec<[[f32; 2]; 3]> {
+    let (models, materials) = tobj::load_obj_buf(
+        &mut &obj[..],
+        &tobj::LoadOptions { single_index: true, triangulate: true, ..Default::default() },
+        |_| match mtl {
+            Some(mtl) => tobj::load_mtl_buf(&mut &mtl[..]),
+            None => Err(tobj::LoadError::OpenFileFailed),
+        },
+    )
+    .expect("the OBJ loads");
+    let materials = materials.expect("its MTL loads");
+    let wanted = materials.iter().position(|candidate| candidate.name == material).expect("the material exists");
+    let mut triangles = Vec::new();
+    for model in models.iter().filter(|model| model.mesh.material_id == Some(wanted)) {
+        let mesh = &model.mesh;
+        for corners in mesh.indices.chunks_exact(3) {
+            let uv = |vertex: u32| [mesh.texcoords[vertex as usize * 2], mesh.texcoords[vertex as usize * 2 + 1]];
+            triangles.push([uv(corners[0]), uv(corners[1]), uv(corners[2])]);
+        }
+    }
+    triangles
+}
+
+/// Points of a triangle on a barycentric grid (`steps` per edge, away from the corners).
+fn triangle_points(triangle: &[[f32; 2]; 3], steps: usize) -> Vec<[f32; 2]> {
+    let mut points = Vec::new();
+    for i in 1..steps {
+        for j in 1..(steps - i) {
+            let weights = [i as f32 / steps as f32, j as f32 / steps as f32, 1.0 - (i + j) as f32 / steps as f32];
+            let mut point = [0.0f32; 2];
+            for (corner, weight) in triangle.iter().zip(weights) {
+                point[0] += weight * corner[0];
+                point[1] += weight * corner[1];
+            }
+            points.push(point);
+        }
+    }
+    points
+}
+
+/// The bundled foliage asset as `pipeline.ron` bakes it: the two leaf cards and the bush.
+fn bundled_foliage() -> TempProject {
+    let project = TempProject::new(
+        r#"Pipeline(source: "assets", output: "baked", assets: [
+            Atlas(name: "foliage", textures: ["textures/leaves/*.png", "trees/textures/aspen_color.png"], meshes: ["trees/bush_2.obj"],
+                  pack: (max_size: 2048)),
+        ])"#,
+    );
+    let bundled = std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("examples/assets");
+    for file in [
+        "textures/leaves/oak_leaves.png",
+        "trees/bush_2.obj",
+        "trees/bush_2.mtl",
+        "trees/textures/aspen_color.png",
+        "trees/textures/oak_color_1k.jpg",
+        "trees/textures/oak_normal_1k.jpg",
+        "trees/textures/oak_roughness_1k.jpg",
+        "trees/textures/oak_ao_1k.jpg",
+    ] {
+        project.write(&format!("assets/{file}"), std::fs::read(bundled.join(file)).expect("bundled file"));
+    }
+    project
+}
+
+#[test]
+fn the_bundled_bush_remapped_onto_foliage_samples_only_its_own_texels_with_its_own_alpha_test() {
+    // The leaf cards' UVs span the whole aspen texture, whose left and right thirds are
+    // transparent: trimmed to its opaque texels, the remapped UVs reached v = −0.21, a quarter
+    // of the leaf area sampled off the page or the oak leaves beside it, and 8.9 % of the points
+    // passed the alpha test differently from the source.
+    let project = bundled_foliage();
+    let summary = build(&mut project.open());
+    assert!(summary.all_ok(), "{}", summary.to_text());
+    let table: serde_json::Value = serde_json::from_slice(&project.read("baked/foliage/atlas.json")).unwrap();
+    let entry = table["entries"].as_array().unwrap().iter().find(|entry| entry["name"] == "trees/textures/aspen_color.png").unwrap();
+    let page = decode_png(&project.read("baked/foliage/atlas.png"));
+    let [x, y, width, height] = ["x", "y", "width", "height"].map(|key| entry[key].as_f64().unwrap() as f32);
+    let (page_width, page_height) = (page.width as f32, page.height as f32);
+    let inside = |[u, v]: [f32; 2]| {
+        let (column, row) = (u * page_width, (1.0 - v) * page_height);
+        column >= x - 0.01 && column <= x + width + 0.01 && row >= y - 0.01 && row <= y + height + 0.01
+    };
+    let source = decode_png(&project.read("assets/trees/textures/aspen_color.png"));
+    let mtl = project.read("assets/trees/bush_2.mtl");
+    let original = material_uv_triangles(&project.read("assets/trees/bush_2.obj"), Some(&mtl), "leaves");
+    let atlas_mtl = project.read("baked/foliage/atlas.mtl");
+    let remapped = material_uv_triangles(&project.read("baked/foliage/meshes/trees/bush_2.obj"), Some(&atlas_mtl), "leaves");
+    assert_eq!(original.len(), remapped.len());
+    let (mut points, mut outside, mut disagreeing) = (0usize, 0usize, 0usize);
+    for (before, after) in original.iter().zip(&remapped) {
+        for (source_uv, page_uv) in triangle_points(before, 8).into_iter().zip(triangle_points(after, 8)) {
+            points += 1;
+            if !inside(page_uv) {
+                outside += 1;
+                continue;
+            }
+            let (from_source, from_page) = (sample(&source, source_uv)[3] >= 128, sample(&page, page_uv)[3] >= 128);
+            disagreeing += usize::from(from_source != from_page);
+        }
+    }
+    assert_eq!(outside, 0, "{outside} of {points} leaf points sample outside the aspen's rectangle");
+    let disagreement = disagreeing as f64 / points as f64;
+    // Nearest texels on either side of a turned, moved grid: a few points on alpha edges differ.
+    assert!(disagreement < 0.01, "{:.2} % of the leaf points pass the alpha test differently", disagreement * 100.0);
+    let report: serde_json::Value = serde_json::from_slice(&project.read("baked/foliage/report.json")).unwrap();
+    assert_eq!(
+        report["kept_for_meshes"],
+        serde_json::json!([{"entry": "trees/textures/aspen_color.png", "trimmed": [260, 0, 503, 1024], "kept": [0, 0, 1024, 1024]}])
+    );
+    let check = project.run_cli(&["check"]);
+    let text = String::from_utf8_lossy(&check.stdout);
+    assert!(check.status.success(), "{text}");
+    assert!(text.contains("reach the transparent border of `trees/textures/aspen_color.png`"), "{text}");
+}
+
+/// A `size`² texture whose middle `core`² texels are a pattern and the rest transparent.
+fn bordered_png(size: u32, core: u32, seed: u32) -> Vec<u8> {
+    let pattern = decode_png(&pattern_png(core, core, seed));
+    let border = (size - core) / 2;
+    let mut pixels = vec![0u8; (size * size * 4) as usize];
+    for row in 0..core {
+        for column in 0..core {
+            let texel = pattern.texel(column, row);
+            pixels[(((row + border) * size + column + border) * 4) as usize..][..4].copy_from_slice(&[texel[0], texel[1], texel[2], 255]);
+        }
+    }
+    crate::support::png_bytes(size, size, &pixels)
+}
+
+#[test]
+fn aliases_with_other_canvases_get_their_own_transform_and_their_meshes_sample_their_texels() {
+    // The same 16² pixels in a 32² canvas (border 8) and a 24² one (border 4): one rectangle,
+    // two transforms. Each quad's UVs cover its texture's opaque core only.
+    let project = TempProject::new(
+        r#"Pipeline(source: "assets", output: "baked", assets: [
+            Atlas(name: "props", textures: ["props/*.png"], meshes: ["props/*.obj"], pack: (max_size: 256, padding: 2)),
+        ])"#,
+    );
+    project.write("assets/props/big.png", bordered_png(32, 16, 5));
+    project.write("assets/props/small.png", bordered_png(24, 16, 5));
+    project.write("assets/props/props.mtl", "newmtl big\nmap_Kd big.png\nnewmtl small\nmap_Kd small.png\n");
+    project.write("assets/props/big.obj", quad_obj("big", [8.0 / 32.0, 8.0 / 32.0, 24.0 / 32.0, 24.0 / 32.0]));
+    project.write("assets/props/small.obj", quad_obj("small", [4.0 / 24.0, 4.0 / 24.0, 20.0 / 24.0, 20.0 / 24.0]));
+    let summary = build(&mut project.open());
+    assert!(summary.all_ok(), "{}", summary.to_text());
+    let table: serde_json::Value = serde_json::from_slice(&project.read("baked/props/atlas.json")).unwrap();
+    let entries = table["entries"].as_array().unwrap();
+    assert_eq!(entries.len(), 1, "one rectangle: {table}");
+    let alias = &entries[0]["aliases"][0];
+    assert_eq!(alias["name"], "props/small.png");
+    assert_eq!((alias["source_size"].clone(), alias["trim_offset"].clone()), (serde_json::json!([24, 24]), serde_json::json!([4, 4])));
+    assert_eq!(
+        (entries[0]["source_size"].clone(), entries[0]["trim_offset"].clone()),
+        (serde_json::json!([32, 32]), serde_json::json!([8, 8]))
+    );
+    assert_ne!(alias["uv_scale"], entries[0]["uv_scale"]);
+    let page = decode_png(&project.read("baked/props/atlas.png"));
+    let mtl = project.read("baked/props/atlas.mtl");
+    for mesh in ["big", "small"] {
+        let source = decode_png(&project.read(&format!("assets/props/{mesh}.png")));
+        let before =
+            material_uv_triangles(&project.read(&format!("assets/props/{mesh}.obj")), Some(&project.read("assets/props/props.mtl")), mesh);
+        let after = material_uv_triangles(&project.read(&format!("baked/props/meshes/props/{mesh}.obj")), Some(&mtl), mesh);
+        let mut sum = PsnrSum::default();
+        for (before, after) in before.iter().zip(&after) {
+            for (source_uv, page_uv) in triangle_points(before, 12).into_iter().zip(triangle_points(after, 12)) {
+                sum.add(sample(&source, source_uv), sample(&page, page_uv), 4);
+            }
+        }
+        assert!(sum.psnr() > 30.0, "{mesh}: {:.1} dB", sum.psnr());
+    }
+}
+
+#[test]
+fn a_remapped_mesh_whose_texture_is_deleted_fails_naming_it_and_the_others_are_written() {
+    let project = remap_project();
+    assert!(build(&mut project.open()).all_ok());
+    std::fs::remove_file(project.path("assets/props/crate.png")).unwrap();
+    let summary = build(&mut project.open());
+    let messages: Vec<String> = summary.assets[0].errors.iter().map(|error| format!("{}: {}", error.file, error.message)).collect();
+    assert_eq!(messages.len(), 1, "{messages:?}");
+    for part in ["assets/props/crate.obj", "material `crate`", "props/crate.png", "does not exist"] {
+        assert!(messages[0].contains(part), "{part} not in {}", messages[0]);
+    }
+    assert!(project.path("baked/props/meshes/props/plank.obj").is_file());
+}
+
+#[test]
+fn a_material_no_triangle_uses_does_not_fail_a_mesh_that_shares_its_library() {
+    // `both` maps two textures that lie in two rectangles: a mesh that uses it cannot be
+    // remapped, the ones that only share the library can.
+    let project = remap_project();
+    let mtl = String::from_utf8(project.read("assets/props/props.mtl")).unwrap();
+    project.write("assets/props/props.mtl", format!("{mtl}newmtl both\nmap_Kd plank.png\nmap_d crate.png\n"));
+    let summary = build(&mut project.open());
+    assert!(summary.all_ok(), "{}", summary.to_text());
+    project.write("assets/props/both.obj", quad_obj("both", [0.0, 0.0, 1.0, 1.0]));
+    let summary = build(&mut project.open());
+    let messages: Vec<String> = summary.assets[0].errors.iter().map(|error| format!("{}: {}", error.file, error.message)).collect();
+    assert_eq!(messages.len(), 1, "{messages:?}");
+    assert!(messages[0].contains("both.obj") && messages[0].contains("material `both`"), "{messages:?}");
+}
+
+#[test]
+fn scale_and_offset_options_of_an_atlased_map_are_kept_in_the_remapped_uvs_and_others_are_reported() {
+    let project = remap_project();
+    project.write(
+        "assets/props/props.mtl",
+        "newmtl plank\nmap_Kd plank.png\nnewmtl crate\nmap_Kd -s 0.5 0.5 1 -o 0.25 0.5 0 -bm 0.3 crate.png\nnewmtl rope\nmap_Kd rope.png\n",
+    );
+    let summary = build(&mut project.open());
+    assert!(summary.all_ok(), "{}", summary.to_text());
+    let page = decode_png(&project.read("baked/props/atlas.png"));
+    let source = decode_png(&project.read("assets/props/crate.png"));
+    let before = material_uv_triangles(&project.read("assets/props/crate.obj"), Some(&project.read("assets/props/props.mtl")), "crate");
+    let after =
+        material_uv_triangles(&project.read("baked/props/meshes/props/crate.obj"), Some(&project.read("baked/props/atlas.mtl")), "crate");
+    let mut sum = PsnrSum::default();
+    for (before, after) in before.iter().zip(&after) {
+        for (uv, page_uv) in triangle_points(before, 12).into_iter().zip(triangle_points(after, 12)) {
+            // What the source shows: the texture at uv × s + o.
+            sum.add(sample(&source, [uv[0] * 0.5 + 0.25, uv[1] * 0.5 + 0.5]), sample(&page, page_uv), 4);
+        }
+    }
+    assert!(sum.psnr() > 30.0, "{:.1} dB", sum.psnr());
+    let report: serde_json::Value = serde_json::from_slice(&project.read("baked/props/report.json")).unwrap();
+    let warnings = report["warnings"].to_string();
+    assert!(warnings.contains("material `crate`") && warnings.contains("`-bm 0.3`") && warnings.contains("dropped"), "{report}");
+}

@@ -166,3 +166,45 @@ fn bad_input_fails_with_a_message_naming_the_file() {
     let stdout = String::from_utf8_lossy(&output.stdout);
     assert!(!output.status.success() && stdout.contains("relief: assets/low.obj: the low mesh has no texture coordinates"), "{stdout}");
 }
+
+#[test]
+fn coinciding_meshes_give_a_flat_map_with_a_warning_instead_of_noise_stretched_over_16_bits() {
+    // The high mesh is the low one: every ray meets it at a distance of float noise, which
+    // the map used to spread over 0..=65535.
+    let low = height_field_obj(4, |x, z| 0.1 * x * z, true, true);
+    let project = height_project(&low, &low, "height: (size: 32)");
+    let summary = build(&mut project.open());
+    assert!(summary.all_ok(), "{}", summary.to_text());
+    let report = report(&project);
+    assert_eq!(report["map"]["flat"], true, "{report}");
+    let warnings = report["warnings"].to_string();
+    assert!(warnings.contains("the height map is flat") && warnings.contains("the high mesh lies on the low one"), "{warnings}");
+    let (_, values) = png16_values(&project.read("baked/relief/height.png"));
+    let (low_value, high_value) = (values.iter().min().copied().unwrap(), values.iter().max().copied().unwrap());
+    assert!(high_value - low_value <= 2 && (32766..=32769).contains(&low_value), "values {low_value}..={high_value}");
+    // A relief is no flat map.
+    let high = height_field_obj(3, |x, _| 0.02 * x, false, false);
+    let project = height_project(&high, &height_field_obj(4, |_, _| 0.0, true, true), "height: (size: 32)");
+    assert!(build(&mut project.open()).all_ok());
+    let report = self::report(&project);
+    assert_eq!(report["map"]["flat"], false);
+    assert!(!report["warnings"].to_string().contains("flat"));
+}
+
+#[test]
+fn low_mesh_uvs_outside_the_unit_square_are_reported_not_skipped_silently() {
+    let low = height_field_obj(4, |_, _| 0.0, true, true).replace("vt 1 1\n", "vt 1.5 1.25\n");
+    assert!(low.contains("vt 1.5 1.25"), "the fixture has a corner UV at (1, 1)");
+    let high = height_field_obj(3, |_, _| 0.01, false, false);
+    let project = height_project(&high, &low, "height: (size: 32)");
+    assert!(build(&mut project.open()).all_ok());
+    let warnings = report(&project)["warnings"].to_string();
+    assert!(
+        warnings.contains("material `field`: 2 of its 32 triangles have texture coordinates outside [0, 1]")
+            && warnings.contains("u ∈ [0, 1.5]"),
+        "{warnings}"
+    );
+    let check = project.run_cli(&["check"]);
+    let text = String::from_utf8_lossy(&check.stdout);
+    assert!(check.status.success() && text.contains("outside [0, 1]"), "{text}");
+}

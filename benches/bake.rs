@@ -628,7 +628,10 @@ fn bench_ambient_occlusion(corpus: &Path) {
         .collect();
     let texel_bake = |rays| -> (Vec<TileBake>, f64) {
         let start = Instant::now();
-        let tiles = materials.iter().map(|own| bake_tile_with_rays(&occluders, &bake_mesh, own, size, region, &settings(rays))).collect();
+        let tiles = materials
+            .iter()
+            .map(|own| bake_tile_with_rays(&occluders, &bake_mesh, own, size, region, &settings(rays), &cirrus::mesh::never).unwrap())
+            .collect();
         (tiles, start.elapsed().as_secs_f64())
     };
     let vertex_maps = |visibility: &[f32]| -> Vec<TileBake> {
@@ -649,10 +652,12 @@ fn bench_ambient_occlusion(corpus: &Path) {
     };
     let (texels, texel_seconds) = texel_bake(256);
     let start = Instant::now();
-    let visibility: Vec<f32> = occlusion_of_vertices(&occluders, &mesh.positions, &mesh.normals, &mesh.triangles, offset, &settings(256))
-        .into_iter()
-        .map(|occlusion| occlusion.map_or(1.0, |occlusion| occlusion.visibility))
-        .collect();
+    let visibility: Vec<f32> =
+        occlusion_of_vertices(&occluders, &mesh.positions, &mesh.normals, &mesh.triangles, offset, &settings(256), &cirrus::mesh::never)
+            .unwrap()
+            .into_iter()
+            .map(|occlusion| occlusion.map_or(1.0, |occlusion| occlusion.visibility))
+            .collect();
     let vertices = vertex_maps(&visibility);
     let vertex_seconds = start.elapsed().as_secs_f64();
     // libigl's `ambient_occlusion`: the same random directions for every point, flipped into its

@@ -203,8 +203,80 @@ pub fn init_logging(verbose: u8) {
     let _ = tracing_subscriber::fmt().with_env_filter(filter).with_writer(std::io::stderr).with_target(false).try_init();
 }
 
+/// Set when a write to standard output failed (a full disk, `/dev/full`, a closed pipe): said
+/// once on stderr, and the command exits with [`EXIT_ASSET_FAILED`] instead of panicking.
+static STDOUT_FAILED: std::sync::atomic::AtomicBool = std::sync::atomic::AtomicBool::new(false);
+
+/// Writes to standard output (through the `out!` and `outln!` macros); a failure is recorded in
+/// [`STDOUT_FAILED`].
+pub(crate) fn write_stdout(arguments: std::fmt::Arguments) {
+    use std::io::Write;
+    use std::sync::atomic::Ordering;
+    if STDOUT_FAILED.load(Ordering::Relaxed) {
+        return;
+    }
+    let mut stdout = std::io::stdout().lock();
+    if let Err(error) = stdout.write_fmt(arguments).and_then(|()| stdout.flush()) {
+        STDOUT_FAILED.store(true, Ordering::Relaxed);
+        eprintln!("error: could not write to standard output: {error}");
+    }
+}
+
+/// `print!` that reports a failed write instead of panicking.
+macro_rules! out {
+    ($($argument:tt)*) => { $crate::cli::write_stdout(format_args!($($argument)*)) };
+}
+
+/// `println!` that reports a failed write instead of panicking.
+macro_rules! outln {
+    ($($argument:tt)*) => { $crate::cli::write_stdout(format_args!("{}\n", format_args!($($argument)*))) };
+}
+pub(crate) use {out, outln};
+
+/// A file grown past `ulimit -f` fails its write (`EFBIG`, reported like any failed write)
+/// instead of the signal killing the process without a word.
+fn ignore_file_size_signal() {
+    #[cfg(unix)]
+    // SAFETY: setting a signal's disposition to SIG_IGN touches no memory of this process.
+    unsafe {
+        libc::signal(libc::SIGXFSZ, libc::SIG_IGN);
+    }
+}
+
 pub fn run(cli: Cli) -> ExitCode {
+    let status = run_command(cli);
+    if STDOUT_FAILED.load(std::sync::atomic::Ordering::Relaxed) && status == ExitCode::SUCCESS {
+        return ExitCode::from(EXIT_ASSET_FAILED);
+    }
+    status
+}
+
+/// The worker threads: `RAYON_NUM_THREADS` when it asks for at most this machine's cores, else
+/// one per core (thousands of threads on a few cores only spin: `RAYON_NUM_THREADS=2000` took a
+/// two-core build from 8 s to past two minutes).
+fn configure_threads() {
+    let cores = std::thread::available_parallelism().map_or(2, |count| count.get());
+    let asked = std::env::var("RAYON_NUM_THREADS").ok();
+    let threads = match asked.as_deref().map(|text| text.trim().parse::<usize>()) {
+        None | Some(Ok(0)) => cores,
+        Some(Ok(threads)) if threads <= cores => threads,
+        Some(Ok(threads)) => {
+            tracing::warn!("RAYON_NUM_THREADS={threads} is more than this machine's {cores} cores: cirrus works on {cores} threads");
+            cores
+        }
+        Some(Err(_)) => {
+            tracing::warn!("RAYON_NUM_THREADS={:?} is not a number of threads: cirrus works on {cores} threads", asked.unwrap_or_default());
+            cores
+        }
+    };
+    // Fails only when the pool exists already (a second `run` in one process): that one stays.
+    let _ = rayon::ThreadPoolBuilder::new().num_threads(threads).build_global();
+}
+
+fn run_command(cli: Cli) -> ExitCode {
+    ignore_file_size_signal();
     init_logging(cli.verbose);
+    configure_threads();
     let remote_cache = match RemoteCacheOverride::parse(cli.remote_cache.as_deref(), cli.remote_cache_mode.as_deref()) {
         Ok(remote_cache) => remote_cache,
         Err(why) => {
@@ -288,8 +360,8 @@ fn build(pipeline: PathBuf, assets: Vec<String>, format: SummaryFormat, options:
         }
     };
     match format {
-        SummaryFormat::Json => println!("{}", summary.to_json()),
-        SummaryFormat::Text => print!("{}", summary.to_text()),
+        SummaryFormat::Json => outln!("{}", summary.to_json()),
+        SummaryFormat::Text => out!("{}", summary.to_text()),
     }
     // The process ends here: freeing every memo one by one would only delay the exit (about
     // 7 ms on the oak). The cache's background writes finished inside `build`.
@@ -310,7 +382,7 @@ fn check(pipeline: PathBuf) -> ExitCode {
     let problems = project.check();
     for (asset, diagnostics) in &problems {
         for diagnostic in diagnostics {
-            println!("{asset}: {diagnostic}");
+            outln!("{asset}: {diagnostic}");
         }
     }
     // Warnings are printed but do not fail the check: the bake goes ahead past them.
@@ -321,9 +393,9 @@ fn check(pipeline: PathBuf) -> ExitCode {
         .filter(|(_, diagnostics)| !diagnostics.is_empty() && diagnostics.iter().all(crate::diagnostic::Diagnostic::is_warning))
         .count();
     if warned == 0 {
-        println!("{assets} assets checked, {failed} with problems");
+        outln!("{assets} assets checked, {failed} with problems");
     } else {
-        println!("{assets} assets checked, {failed} with problems, {warned} with warnings only");
+        outln!("{assets} assets checked, {failed} with problems, {warned} with warnings only");
     }
     if failed == 0 {
         ExitCode::SUCCESS
@@ -361,7 +433,7 @@ fn preview(
                 other => format!("source faces {} onto the planes: ", other.name()),
             };
             for (level, metrics) in &levels {
-                println!(
+                outln!(
                     "{}{stand_in}{} views, {} per pixel: mean IoU {:.3}, min IoU {:.3} (missed {:.1} %, extra {:.1} % of the source's silhouette), mean PSNR {:.2} dB; the source against itself moved 1 pixel: IoU {:.3}",
                     if chain { format!("lod{level}: ") } else { String::new() },
                     metrics.views.len(),
@@ -375,13 +447,13 @@ fn preview(
                 );
             }
             if levels.len() > 1 {
-                println!(
+                outln!(
                     "wrote {0}/contact_sheet.png (each view: source, then lod0 to lod{1}) and lod<N>/contact_sheet.png, lod<N>/metrics.json",
                     crate::diagnostic::display_path(&out),
                     levels.len() - 1
                 );
             } else {
-                println!("wrote contact_sheet.png and metrics.json under {}", crate::diagnostic::display_path(&out));
+                outln!("wrote contact_sheet.png and metrics.json under {}", crate::diagnostic::display_path(&out));
             }
             ExitCode::SUCCESS
         }
@@ -425,7 +497,7 @@ fn graph(pipeline: PathBuf, asset: Option<String>, format: crate::graph::GraphFo
         Some(name) => graph.for_asset(name),
         None => graph,
     };
-    print!("{}", graph.render(format));
+    out!("{}", graph.render(format));
     if summary.all_ok() {
         ExitCode::SUCCESS
     } else {

@@ -15,7 +15,7 @@ pub fn run(command: CacheCommand, options: ProjectOptions) -> ExitCode {
     match command {
         CacheCommand::Stats { pipeline } => with_cache_folder(&pipeline, |folder, config| {
             let remote = options.remote_cache.apply(config.remote_cache.as_ref());
-            print!("{}", stats_text(folder, remote.as_ref().map(|remote| remote.url.as_str())));
+            crate::cli::out!("{}", stats_text(folder, remote.as_ref().map(|remote| remote.url.as_str())));
             ExitCode::SUCCESS
         }),
         CacheCommand::Explain { pipeline, asset } => with_cache_folder(&pipeline, |folder, config| {
@@ -25,7 +25,7 @@ pub fn run(command: CacheCommand, options: ProjectOptions) -> ExitCode {
             }
             match explain_text(folder, &asset) {
                 Some(text) => {
-                    print!("{text}");
+                    crate::cli::out!("{text}");
                     ExitCode::SUCCESS
                 }
                 None => {
@@ -36,7 +36,7 @@ pub fn run(command: CacheCommand, options: ProjectOptions) -> ExitCode {
         }),
         CacheCommand::Gc { pipeline, max_size } => with_cache_folder(&pipeline, |folder, _| {
             let collected = collect_garbage(folder, max_size);
-            println!(
+            crate::cli::outln!(
                 "deleted {} entries ({}), kept {} entries ({}) in {}",
                 collected.deleted_entries,
                 human_bytes(collected.deleted_bytes),

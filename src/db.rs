@@ -339,6 +339,21 @@ pub fn timed_together<T>(db: &dyn Db, stage: Stage, labels: &[(String, f64)], bo
 }
 
 /// Records that a stage's result came from the persistent cache, and whether the shared store
+/// Runs long `work` that asks its [`ShouldStop`](crate::mesh::ShouldStop) between units (points,
+/// batches of rays): a cancellation of this database (a newer edit under `watch`) stops it within
+/// a unit, and the query unwinds as salsa's cancellation does, leaving no result behind.
+pub fn stoppable<T>(db: &dyn Db, work: impl FnOnce(crate::mesh::ShouldStop) -> Result<T, crate::mesh::Stopped>) -> T {
+    let token = db.cancellation_token();
+    let should_stop = move || token.is_cancelled();
+    match work(&should_stop) {
+        Ok(value) => value,
+        Err(crate::mesh::Stopped) => {
+            db.unwind_if_revision_cancelled();
+            std::panic::resume_unwind(Box::new(salsa::Cancelled::Local))
+        }
+    }
+}
+
 /// served it (a load on this thread since the last record, see `cache::take_remote_hit`).
 pub fn record_cache_hit(db: &dyn Db, stage: Stage, label: &str) {
     let from_remote = crate::cache::take_remote_hit();

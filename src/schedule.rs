@@ -32,6 +32,11 @@ impl CancelFlag {
     }
 }
 
+/// The cores this process works on (the worker threads of its thread pool): one job worker each.
+pub fn cores() -> usize {
+    rayon::current_num_threads()
+}
+
 /// Progress of the stage work of a build, for progress bars and logs.
 #[derive(Clone, Debug)]
 pub struct Progress {
@@ -96,7 +101,7 @@ pub fn run_parallel<T: Sync, R: Send>(
     let next = AtomicUsize::new(0);
     let done = AtomicUsize::new(0);
     let running = AtomicUsize::new(0);
-    let workers = std::thread::available_parallelism().map_or(2, |count| count.get()).min(items.len().max(1));
+    let workers = cores().min(items.len().max(1));
     let clones: Vec<Database> = (0..workers).map(|_| db.clone()).collect();
     let tokens: Vec<salsa::CancellationToken> = clones.iter().map(salsa::Database::cancellation_token).collect();
     std::thread::scope(|scope| {
@@ -142,4 +147,59 @@ pub fn run_parallel<T: Sync, R: Send>(
         }
     });
     results.into_inner().expect("results lock")
+}
+
+/// A memory budget shared by threads: work reserves its working set before it runs and gives
+/// it back when done, waiting while others hold so much that both would not fit. Work alone
+/// always proceeds (a single working set larger than the budget is refused earlier, from the
+/// texture's header).
+pub struct MemoryBudget {
+    reserved: Mutex<u64>,
+    released: std::sync::Condvar,
+}
+
+/// The process's texture memory budget: every texture's mips and encode reserve from it, so
+/// that the budget bounds the whole process, not each texture (more cores run more jobs, not
+/// more of them at once than the memory allows).
+pub static TEXTURE_MEMORY: MemoryBudget = MemoryBudget::new();
+
+/// Memory reserved from a [`MemoryBudget`], given back when dropped.
+pub struct MemoryReservation<'a> {
+    budget: &'a MemoryBudget,
+    bytes: u64,
+}
+
+impl MemoryBudget {
+    pub const fn new() -> MemoryBudget {
+        MemoryBudget { reserved: Mutex::new(0), released: std::sync::Condvar::new() }
+    }
+
+    /// Reserves `bytes` of `limit`, waiting while others hold so much that both would not fit.
+    /// Hold it over pure work only (no query inside), so that no job waits on another's query.
+    pub fn reserve(&self, bytes: u64, limit: u64) -> MemoryReservation<'_> {
+        let mut in_use = self.reserved.lock().unwrap_or_else(|poisoned| poisoned.into_inner());
+        while *in_use > 0 && in_use.saturating_add(bytes) > limit {
+            in_use = self.released.wait(in_use).unwrap_or_else(|poisoned| poisoned.into_inner());
+        }
+        *in_use += bytes;
+        MemoryReservation { budget: self, bytes }
+    }
+
+    /// The bytes reserved now.
+    pub fn reserved(&self) -> u64 {
+        *self.reserved.lock().unwrap_or_else(|poisoned| poisoned.into_inner())
+    }
+}
+
+impl Default for MemoryBudget {
+    fn default() -> Self {
+        MemoryBudget::new()
+    }
+}
+
+impl Drop for MemoryReservation<'_> {
+    fn drop(&mut self) {
+        *self.budget.reserved.lock().unwrap_or_else(|poisoned| poisoned.into_inner()) -= self.bytes;
+        self.budget.released.notify_all();
+    }
 }

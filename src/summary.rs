@@ -155,3 +155,12 @@ impl BuildSummary {
         text
     }
 }
+
+/// A duration for people: `45 s`, `17 min`, `2.3 h`.
+pub fn rough_duration(seconds: f64) -> String {
+    match seconds {
+        seconds if seconds < 90.0 => format!("{:.0} s", seconds.max(0.0)),
+        seconds if seconds < 5400.0 => format!("{:.0} min", seconds / 60.0),
+        seconds => format!("{:.1} h", seconds / 3600.0),
+    }
+}

@@ -63,6 +63,13 @@ pub fn surface_image(db: &dyn Db, asset: Asset, surface: SurfaceId) -> Result<Ar
     asset.kind(db).surface_image(db, asset, &surface)
 }
 
+/// A `width` × `height` texture's working set reserved from the process's texture memory budget
+/// (held over pure work only: no query may run while it is held).
+fn texture_memory(db: &dyn Db, width: u32, height: u32) -> crate::schedule::MemoryReservation<'static> {
+    let bytes = crate::texture::TextureLimits::working_set_of(width, height);
+    crate::schedule::TEXTURE_MEMORY.reserve(bytes, crate::db::texture_limits(db).working_set)
+}
+
 /// The mip chain (stage `mips`), re-filtering only the tiles that changed since the last run.
 #[salsa::tracked(returns(clone))]
 pub fn surface_mips(db: &dyn Db, asset: Asset, surface: SurfaceId) -> Result<Arc<MipLevels>, Diagnostic> {
@@ -70,6 +77,7 @@ pub fn surface_mips(db: &dyn Db, asset: Asset, surface: SurfaceId) -> Result<Arc
     let settings = mip_step_settings(db, asset, surface.clone())?;
     let label = surface.label(asset.name(db));
     let previous = previous_encoding(db, &label);
+    let _memory = texture_memory(db, image.width, image.height);
     Ok(Arc::new(timed(db, MIPS, &label, || tail_mips(&image, settings, previous.as_deref()))))
 }
 
@@ -80,7 +88,9 @@ pub fn surface_blocks(db: &dyn Db, asset: Asset, surface: SurfaceId) -> Result<A
     let (format, quality, alpha_cutoff) = encode_step_settings(db, asset, surface.clone())?;
     let label = surface.label(asset.name(db));
     let previous = previous_encoding(db, &label);
+    let memory = texture_memory(db, mips.levels[0].width, mips.levels[0].height);
     let encoded = timed(db, ENCODE, &label, || tail_encode(&mips, surface.surface, (format, quality), alpha_cutoff, previous.as_deref()));
+    drop(memory);
     let remembered = Arc::new(PreviousEncoding::of(&mips, &encoded));
     if memo_worth_storing(format) {
         let memo = remembered.clone();

@@ -7,6 +7,11 @@
 use glam::Vec3;
 
 use super::rays::{build_triangle_bvh, offset_ray_origin, BackFaces, TriangleBvh};
+use super::{ShouldStop, Stopped};
+
+/// How many rays a point casts between two asks whether to stop (each point asks before its
+/// first ray): a point of a million rays stops within about a millisecond of being asked.
+const RAYS_BETWEEN_STOP_CHECKS: u32 = 4096;
 
 /// How ray directions are spread over the hemisphere.
 #[derive(Clone, Copy, Debug, PartialEq, Eq, serde::Serialize, serde::Deserialize)]
@@ -121,7 +126,7 @@ pub fn orthonormal_frame(normal: Vec3) -> (Vec3, Vec3) {
 /// The occlusion at `point` on triangle `triangle` (whose rays skip it), over the hemisphere
 /// of the unit `normal`, with the sequence shifted by `seed`.
 pub fn occlusion_at(bvh: &TriangleBvh, point: Vec3, normal: Vec3, triangle: u32, settings: &OcclusionSettings, seed: u32) -> Occlusion {
-    occlusion_from(bvh, point, normal, normal, triangle, settings, seed)
+    occlusion_from(bvh, point, normal, normal, triangle, settings, seed, &super::never).expect("never stops")
 }
 
 /// [`occlusion_at`] with the ray origins moved off the surface along `offset_normal` (the
@@ -134,7 +139,8 @@ fn occlusion_from(
     triangle: u32,
     settings: &OcclusionSettings,
     seed: u32,
-) -> Occlusion {
+    should_stop: ShouldStop,
+) -> Result<Occlusion, Stopped> {
     let origin = offset_ray_origin(point, offset_normal);
     let (tangent, bitangent) = orthonormal_frame(normal);
     let shift = sequence_shift(seed);
@@ -144,7 +150,7 @@ fn occlusion_from(
     let (sin_shift, cos_shift) = (sin_shift as f32, cos_shift as f32);
     let (tangent, bitangent) = (tangent * cos_shift + bitangent * sin_shift, bitangent * cos_shift - tangent * sin_shift);
     with_sequence_table(settings.rays, |table| {
-        occlusion_along(bvh, origin, [tangent, bitangent, normal], shift[0], table, triangle, settings)
+        occlusion_along(bvh, origin, [tangent, bitangent, normal], shift[0], table, triangle, settings, should_stop)
     })
 }
 
@@ -158,9 +164,13 @@ fn occlusion_along(
     table: &[(f64, f32, f32)],
     triangle: u32,
     settings: &OcclusionSettings,
-) -> Occlusion {
+    should_stop: ShouldStop,
+) -> Result<Occlusion, Stopped> {
     let (mut open, mut total, mut back_face_rays) = (0.0f64, 0.0f64, 0u32);
     for (ray, &(radial, cos_turn, sin_turn)) in (0u32..).zip(table) {
+        if ray % RAYS_BETWEEN_STOP_CHECKS == 0 && should_stop() {
+            return Err(Stopped);
+        }
         // Both in [0, 1): the sum wraps at most once.
         let radial = radial + radial_shift;
         let radial = if radial >= 1.0 { radial - 1.0 } else { radial };
@@ -190,7 +200,7 @@ fn occlusion_along(
     }
     let visibility = if total > 0.0 { (open / total).clamp(0.0, 1.0) as f32 } else { 1.0 };
     let probe_rays = if settings.back_faces == BackFaces::PassThrough { settings.rays.min(INSIDE_PROBE_RAYS) } else { 0 };
-    Occlusion { visibility, back_face_rays, probe_rays }
+    Ok(Occlusion { visibility, back_face_rays, probe_rays })
 }
 
 /// What occludes a mesh's points: one BVH over every triangle, or one per group of triangles
@@ -241,7 +251,8 @@ pub fn occlusion_of_texels(
     coverage: &super::uv_raster::UvCoverage,
     width: u32,
     settings: &OcclusionSettings,
-) -> Vec<Option<Occlusion>> {
+    should_stop: ShouldStop,
+) -> Result<Vec<Option<Occlusion>>, Stopped> {
     use rayon::prelude::*;
     let region = coverage.region;
     coverage
@@ -249,7 +260,7 @@ pub fn occlusion_of_texels(
         .par_iter()
         .enumerate()
         .map(|(index, sample)| {
-            let sample = (*sample)?;
+            let Some(sample) = *sample else { return Ok(None) };
             let corners = triangles[sample.triangle as usize];
             let interpolate = |values: &[[f32; 3]]| {
                 corners
@@ -268,7 +279,7 @@ pub fn occlusion_of_texels(
             let side = if geometric.dot(normal) < 0.0 { -geometric } else { geometric };
             let (x, y) = (region.x + index as u32 % region.width, region.y + index as u32 / region.width);
             let seed = y * width + x;
-            Some(occlusion_from(bvh, point, side, normal, local, settings, seed))
+            occlusion_from(bvh, point, side, normal, local, settings, seed, should_stop).map(Some)
         })
         .collect()
 }
@@ -284,7 +295,8 @@ pub fn occlusion_of_vertices(
     triangles: &[[u32; 3]],
     offset: f32,
     settings: &OcclusionSettings,
-) -> Vec<Option<Occlusion>> {
+    should_stop: ShouldStop,
+) -> Result<Vec<Option<Occlusion>>, Stopped> {
     use rayon::prelude::*;
     // Each vertex casts against the occluders of the first triangle that uses it.
     let mut first_triangle = vec![u32::MAX; positions.len()];
@@ -302,13 +314,13 @@ pub fn occlusion_of_vertices(
         .map(|vertex| {
             let triangle = first_triangle[vertex];
             if triangle == u32::MAX {
-                return None;
+                return Ok(None);
             }
             let (bvh, local) = occluders.of(triangle);
             let normal = Vec3::from(normals[vertex]).normalize_or_zero();
             let normal = if normal == Vec3::ZERO { Vec3::from(bvh.geometric_normal(local)) } else { normal };
             let point = Vec3::from(positions[vertex]) + normal * offset;
-            Some(occlusion_from(bvh, point, normal, normal, u32::MAX, settings, vertex as u32))
+            occlusion_from(bvh, point, normal, normal, u32::MAX, settings, vertex as u32, should_stop).map(Some)
         })
         .collect()
 }

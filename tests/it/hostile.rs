@@ -14,24 +14,21 @@ use crate::watch::{changed_paths, output_hashes, watched_project, Client, Daemon
 
 /// Runs `cirrus ARGS` in the project folder; fails the test when it runs past `limit` (a hang).
 fn run_with_deadline(project: &TempProject, arguments: &[&str], limit: Duration) -> Output {
-    let mut child = Command::new(env!("CARGO_BIN_EXE_cirrus"))
-        .args(arguments)
-        .current_dir(project.root())
-        .stdin(Stdio::null())
-        .stdout(Stdio::piped())
-        .stderr(Stdio::piped())
-        .spawn()
-        .expect("run cirrus");
+    let mut command = Command::new(env!("CARGO_BIN_EXE_cirrus"));
+    command.args(arguments).current_dir(project.root()).stdout(Stdio::piped());
+    run_command_with_deadline(&mut command, limit)
+}
+
+/// Runs `command` (its stdout set by the caller) with stdin closed and stderr captured; fails the
+/// test when it runs past `limit`.
+fn run_command_with_deadline(command: &mut Command, limit: Duration) -> Output {
+    let mut child = command.stdin(Stdio::null()).stderr(Stdio::piped()).spawn().expect("run cirrus");
     let start = Instant::now();
     while child.try_wait().expect("status").is_none() {
         if start.elapsed() > limit {
             let _ = child.kill();
             let output = child.wait_with_output().expect("output");
-            panic!(
-                "`cirrus {}` still ran after {limit:?}: it hangs\nstderr: {}",
-                arguments.join(" "),
-                String::from_utf8_lossy(&output.stderr)
-            );
+            panic!("`{command:?}` still ran after {limit:?}: it hangs\nstderr: {}", String::from_utf8_lossy(&output.stderr));
         }
         std::thread::sleep(Duration::from_millis(20));
     }
@@ -710,4 +707,88 @@ fn a_malformed_s3_endpoint_is_a_configuration_error_not_a_panic_and_the_daemon_b
     let log = String::from_utf8_lossy(&output.stderr);
     assert!(project.path("baked/rock/rock/albedo.ktx2").is_file(), "{log}");
     assert!(log.contains("not an endpoint URL") && !log.contains("panicked"), "{log}");
+}
+
+#[test]
+fn an_ao_bake_of_minutes_is_warned_about_and_a_fix_under_watch_cancels_it_within_seconds() {
+    use crate::ambient_occlusion::{ao_project, floor_and_box};
+    // 256² maps at a million rays a texel: hours on two cores.
+    let project = ao_project(&floor_and_box(false), "size: 256, rays: 1048576, occluders: AllMeshes");
+    let check = text(&run_with_deadline(&project, &["check"], Duration::from_secs(60)));
+    assert!(check.contains("at `rays: 1048576`: the bake takes about") && check.contains(" h on "), "{check}");
+
+    let daemon = Daemon::start(&project);
+    let mut client = daemon.connect();
+    client.subscribe(Some(0));
+    // The first build is inside its tiles now; the user lowers the rays.
+    std::thread::sleep(Duration::from_secs(3));
+    let pipeline = String::from_utf8(project.read("pipeline.ron")).unwrap();
+    project.write("pipeline.ron", pipeline.replace("rays: 1048576", "rays: 16"));
+    let edited = Instant::now();
+    let batch = next_batch(&daemon, &mut client);
+    let waited = edited.elapsed();
+    assert_eq!(batch["failed"], serde_json::json!([]), "{batch}");
+    assert!(waited < Duration::from_secs(30), "the fix waited {waited:?} for the long tiles");
+    let log = daemon.log.lock().unwrap().clone();
+    assert!(log.contains("build cancelled by a newer edit"), "{log}");
+    let report: serde_json::Value = serde_json::from_slice(&project.read("baked/scene/report.json")).unwrap();
+    assert_eq!(report["rays_per_texel"], 16);
+}
+
+#[test]
+fn texture_work_on_many_threads_holds_no_more_than_one_budget_at_once() {
+    use std::sync::atomic::{AtomicU64, Ordering};
+    let budget = cirrus::schedule::MemoryBudget::new();
+    let (held, most) = (AtomicU64::new(0), AtomicU64::new(0));
+    std::thread::scope(|scope| {
+        for _ in 0..8 {
+            scope.spawn(|| {
+                let _reservation = budget.reserve(600, 1000);
+                let now = held.fetch_add(600, Ordering::SeqCst) + 600;
+                most.fetch_max(now, Ordering::SeqCst);
+                std::thread::sleep(Duration::from_millis(10));
+                held.fetch_sub(600, Ordering::SeqCst);
+            });
+        }
+    });
+    assert_eq!(most.load(Ordering::SeqCst), 600, "two 600-byte working sets never share a 1000-byte budget");
+    // A working set larger than the budget still runs when it is alone.
+    drop(budget.reserve(5000, 1000));
+    assert_eq!(budget.reserved(), 0);
+}
+
+#[test]
+fn a_full_stdout_a_file_size_limit_and_thousands_of_threads_give_messages_not_crashes() {
+    let binary = env!("CARGO_BIN_EXE_cirrus");
+    // The summary written to a full device: a message and exit 1, not a panic (101).
+    let project = material_project();
+    let full = std::fs::File::create("/dev/full").expect("/dev/full");
+    let output =
+        run_command_with_deadline(Command::new(binary).arg("build").current_dir(project.root()).stdout(full), Duration::from_secs(60));
+    assert_eq!(output.status.code(), Some(1), "{}", text(&output));
+    assert!(text(&output).contains("could not write to standard output: No space left on device"), "{}", text(&output));
+    assert!(project.path("baked/rock/rock/albedo.ktx2").is_file(), "the artifacts were baked");
+
+    // Files limited to 16 KiB (`ulimit -f`) and a 256² albedo (its BC7 file is larger): the
+    // writes past the limit fail with a message; no signal kills the process.
+    let project = material_project();
+    project.write("assets/albedo.png", pattern_png(256, 256, 1));
+    let output = run_command_with_deadline(
+        Command::new("sh")
+            .args(["-c", &format!("ulimit -f 16 && exec '{binary}' build")])
+            .current_dir(project.root())
+            .stdout(Stdio::piped()),
+        Duration::from_secs(60),
+    );
+    assert_eq!(output.status.code(), Some(1), "killed by a signal? {:?}\n{}", output.status, text(&output));
+    assert!(text(&output).contains("File too large"), "{}", text(&output));
+
+    // Far more threads than cores: warned about and capped, the build finishes as usual.
+    let project = material_project();
+    let output = run_command_with_deadline(
+        Command::new(binary).arg("build").env("RAYON_NUM_THREADS", "2000").current_dir(project.root()).stdout(Stdio::piped()),
+        Duration::from_secs(60),
+    );
+    assert!(output.status.success(), "{}", text(&output));
+    assert!(text(&output).contains("RAYON_NUM_THREADS=2000 is more than this machine's"), "{}", text(&output));
 }

@@ -343,7 +343,8 @@ fn texels_bake_the_occlusion_of_their_surface_point_and_tiles_bake_what_the_whol
     let whole = TexelRegion { x: 0, y: 0, width: size, height: size };
     let coverage = rasterize_uv(&uvs, &triangles, &[0, 1], (size, size), whole);
     let occluders = build_occluders(&positions, &triangles, None);
-    let baked = occlusion_of_texels(&occluders, &positions, &normals, &triangles, &coverage, size, &settings);
+    let baked =
+        occlusion_of_texels(&occluders, &positions, &normals, &triangles, &coverage, size, &settings, &cirrus::mesh::never).unwrap();
     // Texel (8, 8): its centre (u, v) = (0.53125, 0.46875) is floor point (0.125, 0, 0.125), seed 8 × 16 + 8.
     let sample = coverage.sample(8, 8).unwrap();
     let expected = occlusion_at(&bvh, Vec3::new(0.125, 0.0, 0.125), Vec3::Y, sample.triangle, &settings, 8 * size + 8);
@@ -354,7 +355,8 @@ fn texels_bake_the_occlusion_of_their_surface_point_and_tiles_bake_what_the_whol
     for (x, y) in [(0, 0), (8, 0), (0, 8), (8, 8)] {
         let region = TexelRegion { x, y, width: 8, height: 8 };
         let tile = rasterize_uv(&uvs, &triangles, &[0, 1], (size, size), region);
-        let tile_baked = occlusion_of_texels(&occluders, &positions, &normals, &triangles, &tile, size, &settings);
+        let tile_baked =
+            occlusion_of_texels(&occluders, &positions, &normals, &triangles, &tile, size, &settings, &cirrus::mesh::never).unwrap();
         for row in 0..8 {
             for column in 0..8 {
                 let in_whole = baked[((y + row) * size + x + column) as usize].map(|o| o.visibility.to_bits());

@@ -130,6 +130,8 @@ impl Kind for AmbientOcclusion {
                 .push(Diagnostic::new(main_file, "the mesh has no texture coordinates: an AO bake needs a UV layout (`vt` in the OBJ)"));
         }
         problems.extend(crate::mesh::uvs_outside_warnings(main_file, &mesh).iter().map(crate::kinds::as_warning));
+        let long_bake = bake::long_bake_warning(main_file, &mesh, &asset.settings.ao, crate::schedule::cores());
+        problems.extend(long_bake.as_ref().map(crate::kinds::as_warning));
         problems
     }
 
@@ -296,6 +298,7 @@ fn ao_outputs(db: &dyn Db, asset: Asset, output_folder: &Path, runs: &[StageRun]
             .warnings
             .iter()
             .chain(&crate::mesh::uvs_outside_warnings(asset.main_file(db), &geometry.loaded.mesh))
+            .chain(&bake::long_bake_warning(asset.main_file(db), &geometry.loaded.mesh, &settings, crate::schedule::cores()))
             .map(ErrorSummary::from)
             .collect(),
     };

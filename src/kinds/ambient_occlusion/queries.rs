@@ -16,8 +16,8 @@ use super::bake::{
 use crate::cache::{CacheEntry, CacheKey};
 use crate::config::{AoMode, AoOccluders, AoSettings};
 use crate::db::{
-    from_pod_blob, hash_of_parts, load_cached, pod_blob, recall, record_cache_hit, remember, stage_key, store_cached, timed, Asset, ByHash,
-    Db, Stage,
+    from_pod_blob, hash_of_parts, load_cached, pod_blob, recall, record_cache_hit, remember, stage_key, stoppable, store_cached, timed,
+    Asset, ByHash, Db, Stage,
 };
 use crate::diagnostic::Diagnostic;
 use crate::kinds::mesh_queries::{loaded_mesh, LoadedMesh};
@@ -142,6 +142,9 @@ pub fn bake_geometry(db: &dyn Db, asset: Asset) -> Result<Arc<BakeGeometry>, Dia
         ground_plane: settings.ground_plane.then_some(low.y),
     };
     let groups = occluder_groups(db, asset)?.as_deref().cloned();
+    if let Some(warning) = super::bake::long_bake_warning(path, mesh, &settings, crate::schedule::cores()) {
+        tracing::warn!("{warning}");
+    }
     let whole_hash = hash_of_parts(&[
         bytemuck::cast_slice(&mesh.positions),
         bytemuck::cast_slice(&mesh.normals),
@@ -201,14 +204,17 @@ pub fn vertex_visibility(db: &dyn Db, asset: Asset) -> Result<Arc<VertexVisibili
     let occluders = occluder_set(db, asset)?;
     let mesh = &geometry.loaded.mesh;
     let values: Vec<f32> = timed(db, VERTICES, name, || {
-        occlusion_of_vertices(
-            &occluders.value,
-            &mesh.positions,
-            &mesh.normals,
-            &mesh.triangles,
-            geometry.vertex_offset,
-            &geometry.occlusion,
-        )
+        stoppable(db, |should_stop| {
+            occlusion_of_vertices(
+                &occluders.value,
+                &mesh.positions,
+                &mesh.normals,
+                &mesh.triangles,
+                geometry.vertex_offset,
+                &geometry.occlusion,
+                should_stop,
+            )
+        })
         .into_iter()
         .map(|occlusion| occlusion.map_or(1.0, |occlusion| occlusion.visibility))
         .collect()
@@ -357,7 +363,9 @@ pub fn ao_tile(db: &dyn Db, asset: Asset, tile: TileId) -> Result<Arc<TileBake>,
                 AoMode::Texels => {
                     let occluders = occluder_set(db, asset)?;
                     timed(db, BAKE, &label, || {
-                        bake_tile_with_rays(&occluders.value, &mesh, &own, settings.size, region, &geometry.occlusion)
+                        stoppable(db, |should_stop| {
+                            bake_tile_with_rays(&occluders.value, &mesh, &own, settings.size, region, &geometry.occlusion, should_stop)
+                        })
                     })
                 }
                 AoMode::Vertices => {

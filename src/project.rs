@@ -445,6 +445,7 @@ impl Project {
             for (path, bytes) in &outputs.files {
                 all_written &= self.write_artifact(path, bytes, &mut errors, &mut produced);
             }
+            let warnings = outputs.report.as_deref().map(crate::summary::report_warnings).unwrap_or_default();
             // The report comes last and describes the files above: it is written only when they
             // all are (a failed write keeps the last good report with its files).
             if let (Some(mut report), true) = (outputs.report, all_written) {
@@ -486,6 +487,7 @@ impl Project {
                 stages,
                 artifacts: asset_artifacts(&manifest, &config.name),
                 errors: errors.iter().map(ErrorSummary::from).collect(),
+                warnings,
             });
         }
         if options.only_assets.is_empty() && self.config.source_dir().is_dir() {

@@ -5,6 +5,7 @@
 //! hot-reload server.
 
 use std::collections::BTreeSet;
+use std::io::Write as _;
 use std::net::SocketAddr;
 use std::path::{Path, PathBuf};
 use std::sync::mpsc::channel;
@@ -423,8 +424,11 @@ fn log_batch(summary: &BuildSummary, changed_files: &[PathBuf], graph: &crate::g
         .flat_map(|asset| asset.stages.iter().filter(|stage| stage.status == StageStatus::Ran).map(move |stage| (asset, stage)))
         .map(|(asset, stage)| format!("{}:{}({})", asset.name, stage.stage, stage.instance))
         .collect();
-    tracing::info!(
-        "batch r{}: {} file(s) changed, {} stage(s) ran, {} artifact(s) changed, {} failed asset(s), {ms:.0} ms",
+    // One line per batch whatever the log level: the daemon is seen to work.
+    let rebuilt = summary.assets.iter().filter(|asset| asset.stages.iter().any(|stage| stage.status == StageStatus::Ran)).count();
+    let _ = writeln!(
+        std::io::stderr(),
+        "cirrus watch: batch r{}: {} file(s) changed, {rebuilt} asset(s) rebuilt, {} stage(s) ran, {} artifact(s) changed, {} failed asset(s), {ms:.0} ms",
         summary.revision,
         changed_files.len(),
         ran.len(),

@@ -242,3 +242,14 @@ fn every_corpus_normal_and_ao_channel_comes_within_half_a_db_of_the_bc4_optimum(
     assert!(figures.len() >= 12, "{figures:?}");
     println!("{}", figures.join("\n"));
 }
+
+/// The GPU starts in this process, where Mesa's Wayland probe prints "error: XDG_RUNTIME_DIR is
+/// invalid or not set" unless the variable is set (or a Wayland session is): `.cargo/config.toml`
+/// sets it for every test binary.
+#[test]
+fn the_gpu_tests_run_where_mesa_prints_no_wayland_error() {
+    assert!(
+        std::env::var_os("XDG_RUNTIME_DIR").is_some() || std::env::var_os("WAYLAND_DISPLAY").is_some(),
+        "XDG_RUNTIME_DIR is unset: Mesa's Wayland probe would print an error into the test output"
+    );
+}

@@ -792,3 +792,50 @@ fn a_full_stdout_a_file_size_limit_and_thousands_of_threads_give_messages_not_cr
     assert!(output.status.success(), "{}", text(&output));
     assert!(text(&output).contains("RAYON_NUM_THREADS=2000 is more than this machine's"), "{}", text(&output));
 }
+
+#[test]
+fn the_daemon_hears_a_source_folder_deleted_and_created_again_at_once() {
+    let project = watched_project();
+    let daemon = Daemon::start(&project);
+    let mut client = daemon.connect();
+    client.subscribe(Some(0));
+    next_batch(&daemon, &mut client);
+    let saved = tempfile::tempdir().unwrap();
+    let status = Command::new("cp").arg("-r").arg(project.path("assets")).arg(saved.path()).status().unwrap();
+    assert!(status.success());
+    for (round, gap) in [0, 50, 150, 400, 700].into_iter().enumerate() {
+        // A branch switch: the folder goes and comes back within a second.
+        std::fs::remove_dir_all(project.path("assets")).unwrap();
+        std::thread::sleep(Duration::from_millis(gap));
+        let status = Command::new("cp").arg("-r").arg(saved.path().join("assets")).arg(project.root()).status().unwrap();
+        assert!(status.success());
+        std::thread::sleep(Duration::from_millis(400));
+        project.write("assets/ao.png", pattern_png(32, 32, 20 + round as u32));
+        let mut heard = false;
+        while !heard {
+            let batch = next_batch(&daemon, &mut client);
+            heard = changed_paths(&project, &batch).contains(&"baked/rock/rock/mra.ktx2".to_string());
+        }
+    }
+}
+
+#[test]
+fn the_daemon_prints_a_plain_line_per_batch_into_a_log_that_is_not_a_terminal() {
+    let project = watched_project();
+    let daemon = Daemon::start(&project);
+    let mut client = daemon.connect();
+    client.subscribe(Some(0));
+    next_batch(&daemon, &mut client);
+    project.write("assets/ao.png", pattern_png(32, 32, 30));
+    next_batch(&daemon, &mut client);
+    // The line follows the batch's publication.
+    let start = Instant::now();
+    while daemon.log.lock().unwrap().matches("cirrus watch: batch r").count() < 2 && start.elapsed() < Duration::from_secs(10) {
+        std::thread::sleep(Duration::from_millis(20));
+    }
+    let log = daemon.log.lock().unwrap().clone();
+    assert!(!log.contains('\u{1b}'), "colour codes in a log that is not a terminal:\n{log}");
+    let batch_lines: Vec<&str> = log.lines().filter(|line| line.starts_with("cirrus watch: batch r")).collect();
+    assert_eq!(batch_lines.len(), 2, "{log}");
+    assert!(batch_lines[1].contains("1 file(s) changed, 1 asset(s) rebuilt") && batch_lines[1].ends_with(" ms"), "{}", batch_lines[1]);
+}

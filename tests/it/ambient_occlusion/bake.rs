@@ -280,6 +280,12 @@ fn uvs_outside_the_unit_square_are_reported() {
         warnings.contains("1 of its 2 triangles have texture coordinates outside [0, 1]") && warnings.contains("u ∈ [0, 1.5]"),
         "{warnings}"
     );
+    // `build` prints them under the asset too, and its JSON summary carries them.
+    let text = summary.to_text();
+    assert!(text.contains("warning: assets/wide.obj: material `default`") || text.contains("warning: assets/wide.obj: material"), "{text}");
+    let output = project.run_cli(&["build", "--summary", "json"]);
+    let json: serde_json::Value = serde_json::from_slice(&output.stdout).unwrap();
+    assert!(json["assets"][0]["warnings"][0]["message"].as_str().unwrap().contains("outside [0, 1]"), "{json}");
 }
 
 fn report_of(project: &TempProject, asset: &str) -> serde_json::Value {

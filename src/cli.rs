@@ -109,6 +109,13 @@ pub enum Command {
         /// The pipeline file.
         #[arg(long, default_value = "pipeline.ron")]
         pipeline: PathBuf,
+        /// Check only this asset (repeatable).
+        #[arg(long = "asset", value_name = "NAME")]
+        assets: Vec<String>,
+        /// Print one JSON object instead of text: `{"assets":[{"name","problems":[{"file",
+        /// "line","column","severity","message"}]}],"checked","failed","warned"}`.
+        #[arg(long)]
+        json: bool,
     },
     /// The stage cache: what the last build found where, why a stage missed, and bounding the
     /// local folder.
@@ -246,6 +253,23 @@ fn ignore_file_size_signal() {
     }
 }
 
+/// The environment variables that stand for flags, and the flag each stands for.
+const FLAG_VARIABLES: [(&str, &str); 3] =
+    [("CIRRUS_ISA", "--isa"), ("CIRRUS_REMOTE_CACHE", "--remote-cache"), ("CIRRUS_REMOTE_CACHE_MODE", "--remote-cache-mode")];
+
+/// The command line, or the usage exit status after saying why not. A flag's environment
+/// variable set to nothing (`CIRRUS_ISA=`, often an unset shell variable passed on) is refused
+/// under its own name, before the parser would blame the flag.
+pub fn parse_command_line() -> Result<Cli, ExitCode> {
+    for (variable, flag) in FLAG_VARIABLES {
+        if std::env::var_os(variable).is_some_and(|value| value.is_empty()) {
+            eprintln!("error: {variable} is set but empty (it stands for {flag}): unset it or give it a value");
+            return Err(ExitCode::from(EXIT_USAGE));
+        }
+    }
+    Ok(Cli::parse())
+}
+
 pub fn run(cli: Cli) -> ExitCode {
     let status = run_command(cli);
     if STDOUT_FAILED.load(std::sync::atomic::Ordering::Relaxed) && status == ExitCode::SUCCESS {
@@ -290,7 +314,7 @@ fn run_command(cli: Cli) -> ExitCode {
     let options = ProjectOptions { remote_cache: remote_cache.clone(), ..Default::default() };
     match cli.command {
         Command::Build { pipeline, assets, summary } => build(pipeline, assets, summary, options),
-        Command::Check { pipeline } => check(pipeline),
+        Command::Check { pipeline, assets, json } => check(pipeline, &assets, json),
         Command::Cache { command } => crate::cli_cache::run(command, options),
         Command::Watch { pipeline, listen, debounce_ms } => {
             let debounce = std::time::Duration::from_millis(debounce_ms);
@@ -376,29 +400,58 @@ fn build(pipeline: PathBuf, assets: Vec<String>, format: SummaryFormat, options:
     }
 }
 
-fn check(pipeline: PathBuf) -> ExitCode {
+fn check(pipeline: PathBuf, only: &[String], json: bool) -> ExitCode {
     let config = match load_pipeline_or_report(&pipeline) {
         Ok(config) => config,
         Err(code) => return code,
     };
     let project = Project::open(config, ProjectOptions { persistent_cache: false, ..Default::default() });
-    let problems = project.check();
-    for (asset, diagnostics) in &problems {
-        for diagnostic in diagnostics {
-            outln!("{asset}: {diagnostic}");
+    let problems = match project.check_assets(only) {
+        Ok(problems) => problems,
+        Err(error) => {
+            eprintln!("error: {error}");
+            return ExitCode::from(EXIT_USAGE);
         }
-    }
+    };
     // Warnings are printed but do not fail the check: the bake goes ahead past them.
-    let assets = project.asset_list().len();
+    let checked = problems.iter().filter(|(asset, _)| asset != "rules").count();
     let failed = problems.iter().filter(|(_, diagnostics)| diagnostics.iter().any(|diagnostic| !diagnostic.is_warning())).count();
     let warned = problems
         .iter()
         .filter(|(_, diagnostics)| !diagnostics.is_empty() && diagnostics.iter().all(crate::diagnostic::Diagnostic::is_warning))
         .count();
-    if warned == 0 {
-        outln!("{assets} assets checked, {failed} with problems");
+    if json {
+        let assets: Vec<serde_json::Value> = problems
+            .iter()
+            .map(|(asset, diagnostics)| {
+                let problems: Vec<serde_json::Value> = diagnostics
+                    .iter()
+                    .map(|diagnostic| {
+                        let message = diagnostic.message.strip_prefix("warning: ").unwrap_or(&diagnostic.message);
+                        serde_json::json!({
+                            "file": crate::diagnostic::display_path(&diagnostic.file),
+                            "line": diagnostic.line(),
+                            "column": diagnostic.column(),
+                            "severity": if diagnostic.is_warning() { "warning" } else { "error" },
+                            "message": message,
+                        })
+                    })
+                    .collect();
+                serde_json::json!({ "name": asset, "problems": problems })
+            })
+            .collect();
+        outln!("{}", serde_json::json!({ "assets": assets, "checked": checked, "failed": failed, "warned": warned }));
     } else {
-        outln!("{assets} assets checked, {failed} with problems, {warned} with warnings only");
+        for (asset, diagnostics) in &problems {
+            for diagnostic in diagnostics {
+                outln!("{asset}: {diagnostic}");
+            }
+        }
+        if warned == 0 {
+            outln!("{checked} assets checked, {failed} with problems");
+        } else {
+            outln!("{checked} assets checked, {failed} with problems, {warned} with warnings only");
+        }
     }
     if failed == 0 {
         ExitCode::SUCCESS
@@ -482,8 +535,10 @@ fn graph(pipeline: PathBuf, asset: Option<String>, format: crate::graph::GraphFo
     };
     let mut project = Project::open(config, options);
     if let Some(name) = &asset {
-        if !project.asset_list().iter().any(|candidate| &candidate.name == name) {
-            eprintln!("error: no asset named `{name}` in {}", crate::diagnostic::display_path(&pipeline));
+        let assets = project.asset_list();
+        if !assets.iter().any(|candidate| &candidate.name == name) {
+            let hint = crate::diagnostic::did_you_mean(name, assets.iter().map(|candidate| candidate.name.as_str()));
+            eprintln!("error: no asset named `{name}` in {}{hint}", crate::diagnostic::display_path(&pipeline));
             return ExitCode::from(EXIT_USAGE);
         }
     }

@@ -20,7 +20,8 @@ pub fn run(command: CacheCommand, options: ProjectOptions) -> ExitCode {
         }),
         CacheCommand::Explain { pipeline, asset } => with_cache_folder(&pipeline, |folder, config| {
             if !config.assets.iter().any(|listed| listed.name == asset) && !last_build_names(folder).contains(&asset) {
-                eprintln!("error: no asset named `{asset}` in {}", display_path(&pipeline));
+                let hint = crate::diagnostic::did_you_mean(&asset, config.assets.iter().map(|listed| listed.name.as_str()));
+                eprintln!("error: no asset named `{asset}` in {}{hint}", display_path(&pipeline));
                 return ExitCode::from(EXIT_USAGE);
             }
             match explain_text(folder, &asset) {

@@ -236,12 +236,98 @@ pub fn parse_pipeline(file: &Path, text: &str) -> Result<PipelineConfig, ConfigE
         diagnostics: vec![Diagnostic::at(
             file,
             TextPosition { line: error.position.line as u32, column: error.position.col as u32 },
-            error.code.to_string(),
+            ron_message(&error, text),
         )],
     })?;
     let root = file.parent().map(Path::to_path_buf).unwrap_or_default();
     let root = if root.as_os_str().is_empty() { PathBuf::from(".") } else { root };
     Validator { file, text, diagnostics: Vec::new() }.validate(raw, root)
+}
+
+/// What a RON error means to the person who wrote the file: an unknown kind or field with the
+/// closest known one, and other errors with the field whose value they are in (RON says only
+/// "Expected comma" of `max_size: 2048.0`).
+fn ron_message(error: &ron::error::SpannedError, text: &str) -> String {
+    use crate::diagnostic::did_you_mean;
+    let list = |names: &[&str]| names.iter().map(|name| format!("`{name}`")).collect::<Vec<_>>().join(", ");
+    match &error.code {
+        ron::Error::NoSuchEnumVariant { expected, found, outer } => {
+            let what = if outer.as_deref() == Some("Asset") {
+                "asset kind".to_string()
+            } else {
+                format!("`{}` value", outer.as_deref().unwrap_or("enum"))
+            };
+            format!("unknown {what} `{found}`{}; expected one of {}", did_you_mean(found, expected.iter().copied()), list(expected))
+        }
+        ron::Error::NoSuchStructField { expected, found, outer } => {
+            let outer = outer.as_deref().map_or("this structure".to_string(), |outer| {
+                format!("`{}`", outer.trim_end_matches("Overrides").trim_start_matches("Raw").to_lowercase())
+            });
+            format!(
+                "unknown field `{found}` in {outer}{}; expected one of {}",
+                did_you_mean(found, expected.iter().copied()),
+                list(expected)
+            )
+        }
+        ron::Error::MissingStructField { field, outer } => {
+            let outer = outer.as_deref().map_or("this structure".to_string(), |outer| format!("`{outer}`"));
+            format!("{outer} needs the field `{field}`")
+        }
+        // Errors in a value: said with the field the value is for.
+        code @ (ron::Error::ExpectedComma
+        | ron::Error::ExpectedFloat
+        | ron::Error::ExpectedInteger
+        | ron::Error::ExpectedBoolean
+        | ron::Error::ExpectedString
+        | ron::Error::ExpectedArray
+        | ron::Error::ExpectedStructLike
+        | ron::Error::ExpectedOption
+        | ron::Error::IntegerOutOfBounds) => {
+            let offset = byte_offset(text, error.position.line, error.position.col);
+            match field_before(text, offset) {
+                Some((field, value)) => {
+                    let hint = match code {
+                        ron::Error::ExpectedComma if text[offset..].starts_with('.') && value.bytes().all(|byte| byte.is_ascii_digit()) => {
+                            ": it takes a whole number"
+                        }
+                        ron::Error::ExpectedFloat | ron::Error::ExpectedInteger if text[offset..].starts_with('"') => {
+                            ": write the number without quotes"
+                        }
+                        _ => "",
+                    };
+                    format!("in `{field}`: {}{hint}", code.to_string().to_lowercase())
+                }
+                None => code.to_string(),
+            }
+        }
+        code => code.to_string(),
+    }
+}
+
+/// The byte offset of a 1-based line and (character) column.
+fn byte_offset(text: &str, line: usize, column: usize) -> usize {
+    let line_start: usize = text.split_inclusive('\n').take(line.saturating_sub(1)).map(str::len).sum();
+    let rest = &text[line_start.min(text.len())..];
+    line_start + rest.char_indices().nth(column.saturating_sub(1)).map_or(rest.len(), |(index, _)| index)
+}
+
+/// The field whose value runs up to `offset` (`name: value` with no separator or bracket in
+/// between), and the value written so far.
+fn field_before(text: &str, offset: usize) -> Option<(&str, &str)> {
+    let before = &text[..offset.min(text.len())];
+    let colon = before.rfind(':')?;
+    let value = before[colon + 1..].trim();
+    if value.contains([',', '(', ')', '[', ']', '{', '}', ':']) {
+        return None;
+    }
+    let name_part = before[..colon].trim_end();
+    let start = name_part
+        .char_indices()
+        .rev()
+        .find(|(_, character)| !(character.is_alphanumeric() || *character == '_'))
+        .map_or(0, |(index, character)| index + character.len_utf8());
+    let name = &name_part[start..];
+    (!name.is_empty() && !name.starts_with(|character: char| character.is_ascii_digit())).then_some((name, value))
 }
 
 struct Validator<'a> {

@@ -2,10 +2,11 @@
 
 use std::process::ExitCode;
 
-use clap::Parser;
-
 fn main() -> ExitCode {
-    let cli = cirrus::cli::Cli::parse();
+    let cli = match cirrus::cli::parse_command_line() {
+        Ok(cli) => cli,
+        Err(status) => return status,
+    };
     // First, while the process has one thread: these set environment variables.
     cirrus::gpu::quiet_wayland_probe();
     if let Some(level) = cli.isa {

@@ -63,8 +63,8 @@ pub struct BuildOptions {
 
 #[derive(Debug, thiserror::Error)]
 pub enum BuildError {
-    #[error("no asset named `{name}` in {pipeline}")]
-    UnknownAsset { name: String, pipeline: String },
+    #[error("no asset named `{name}` in {pipeline}{hint}")]
+    UnknownAsset { name: String, pipeline: String, hint: String },
     #[error("the build was cancelled by a newer edit")]
     Cancelled,
 }
@@ -377,7 +377,8 @@ impl Project {
         }
         for name in &options.only_assets {
             if !all_assets.iter().any(|asset| &asset.name == name) {
-                return Err(BuildError::UnknownAsset { name: name.clone(), pipeline: display_path(&self.config.file) });
+                let hint = crate::diagnostic::did_you_mean(name, all_assets.iter().map(|asset| asset.name.as_str()));
+                return Err(BuildError::UnknownAsset { name: name.clone(), pipeline: display_path(&self.config.file), hint });
             }
         }
         let selected: Vec<AssetConfig> = all_assets
@@ -563,17 +564,30 @@ impl Project {
     /// Validates every asset's sources without baking (its kind's `check`), and reports
     /// rule-matched files that do not become assets.
     pub fn check(&self) -> Vec<(String, Vec<Diagnostic>)> {
+        self.check_assets(&[]).expect("no asset named")
+    }
+
+    /// [`Project::check`] of the assets named in `only` (every asset, and the rules' conflicts,
+    /// when it is empty); an unknown name is an error, with the closest known one.
+    pub fn check_assets(&self, only: &[String]) -> Result<Vec<(String, Vec<Diagnostic>)>, BuildError> {
         let (assets, conflicts) = self.asset_list_and_conflicts();
+        for name in only {
+            if !assets.iter().any(|asset| &asset.name == name) {
+                let hint = crate::diagnostic::did_you_mean(name, assets.iter().map(|asset| asset.name.as_str()));
+                return Err(BuildError::UnknownAsset { name: name.clone(), pipeline: display_path(&self.config.file), hint });
+            }
+        }
         // Rule-matched files that do not become assets are reported under `rules`.
-        let conflicts = conflicts.into_iter().map(|conflict| ("rules".to_string(), vec![conflict]));
-        assets
+        let conflicts = conflicts.into_iter().filter(|_| only.is_empty()).map(|conflict| ("rules".to_string(), vec![conflict]));
+        Ok(assets
             .into_iter()
+            .filter(|asset| only.is_empty() || only.contains(&asset.name))
             .map(|asset| {
                 let problems = AssetKind::of(&asset.source).check(&self.config, &asset);
                 (asset.name, problems)
             })
             .chain(conflicts)
-            .collect()
+            .collect())
     }
 
     /// The stage instances that ran since the last call, as `stage(instance)`, sorted.

@@ -27,13 +27,24 @@ pub struct ServerSettings {
     pub history: usize,
     /// Messages queued for one client before it is disconnected as too slow.
     pub client_queue: usize,
-    /// Clients connected at once; more are answered with an error and closed.
+    /// Clients connected at once; more are answered with an error and closed, unless one of
+    /// them is idle (see `idle_grace`).
     pub max_clients: usize,
+    /// A client that has neither subscribed nor sent a request for this long is idle: when every
+    /// slot is taken, a new client takes the slot of the longest idle one, so that idle
+    /// connections cannot lock everyone out.
+    pub idle_grace: std::time::Duration,
 }
 
 impl Default for ServerSettings {
     fn default() -> Self {
-        ServerSettings { max_line_bytes: 64 * 1024, history: 1024, client_queue: 4096, max_clients: 64 }
+        ServerSettings {
+            max_line_bytes: 64 * 1024,
+            history: 1024,
+            client_queue: 4096,
+            max_clients: 64,
+            idle_grace: std::time::Duration::from_secs(5),
+        }
     }
 }
 
@@ -110,6 +121,8 @@ struct Client {
     queue: SyncSender<Arc<str>>,
     stream: TcpStream,
     subscribed: bool,
+    /// When it connected or last sent a request.
+    last_request: std::time::Instant,
 }
 
 struct State {
@@ -192,6 +205,28 @@ impl Server {
         let id = {
             let mut state = self.state.lock().expect("server state");
             if state.clients.len() >= self.settings.max_clients {
+                // The longest idle client (never subscribed, silent past the grace) makes room.
+                let idle = state
+                    .clients
+                    .iter()
+                    .enumerate()
+                    .filter(|(_, client)| !client.subscribed && client.last_request.elapsed() >= self.settings.idle_grace)
+                    .min_by_key(|(_, client)| client.last_request)
+                    .map(|(position, _)| position);
+                if let Some(position) = idle {
+                    let client = state.clients.remove(position);
+                    let notice = line(&Outgoing::Error {
+                        message: format!(
+                            "idle for {:.0} s while every slot was taken: disconnected",
+                            client.last_request.elapsed().as_secs_f64()
+                        ),
+                    });
+                    let _ = client.queue.try_send(notice);
+                    let _ = client.stream.shutdown(Shutdown::Read);
+                    tracing::info!("hot-reload client {} was idle: its slot went to a new client", client.id);
+                }
+            }
+            if state.clients.len() >= self.settings.max_clients {
                 let refusal =
                     line(&Outgoing::Error { message: format!("too many clients ({} connected): try again later", state.clients.len()) });
                 let mut stream = stream;
@@ -204,7 +239,7 @@ impl Server {
             let id = state.next_client;
             state.next_client += 1;
             let hello = line(&Outgoing::Hello { protocol: PROTOCOL_VERSION, revision: state.revision });
-            let client = Client { id, queue, stream, subscribed: false };
+            let client = Client { id, queue, stream, subscribed: false, last_request: std::time::Instant::now() };
             if !send(&client, hello) {
                 return;
             }
@@ -220,6 +255,13 @@ impl Server {
             server.disconnect(id);
             tracing::info!("hot-reload client {id} disconnected");
         });
+    }
+
+    /// Notes a request from client `id`; false when it is no longer connected.
+    fn touch(&self, id: u64) -> bool {
+        let mut state = self.state.lock().expect("server state");
+        let client = state.clients.iter_mut().find(|client| client.id == id);
+        client.map(|client| client.last_request = std::time::Instant::now()).is_some()
     }
 
     fn disconnect(&self, id: u64) {
@@ -238,6 +280,8 @@ impl Server {
                 ClientLine::TooLong => {
                     self.reply(id, Outgoing::Error { message: format!("line longer than {} bytes", self.settings.max_line_bytes) })
                 }
+                // A client whose slot went to another (idle) reads no more.
+                ClientLine::Line(_) if !self.touch(id) => return,
                 ClientLine::Line(bytes) => match parse_request(&bytes) {
                     Ok(Some(request)) => self.handle(id, request),
                     Ok(None) => {}

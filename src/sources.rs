@@ -20,7 +20,27 @@ pub fn read_source(root: &Path, source: &Path, relative: &Path) -> FileRead {
     if !root.join(source).is_dir() {
         return Err(format!("the source folder {} does not exist", crate::diagnostic::display_path(source)));
     }
-    read_regular_file(&root.join(relative), MAX_SOURCE_BYTES).map(FileContents::new)
+    read_regular_file(&root.join(relative), MAX_SOURCE_BYTES).map(FileContents::new).map_err(|why| {
+        if why == FILE_NOT_FOUND {
+            format!("{FILE_NOT_FOUND}{}", similar_file_hint(root, source, relative))
+        } else {
+            why
+        }
+    })
+}
+
+/// ` (did you mean `trees/bush_2.obj`?)` when the missing file's folder holds a file whose name
+/// is a slip away (`bush2.obj`), as the pipeline would name it (relative to `source`).
+fn similar_file_hint(root: &Path, source: &Path, relative: &Path) -> String {
+    let (Some(parent), Some(name)) = (relative.parent(), relative.file_name().and_then(|name| name.to_str())) else {
+        return String::new();
+    };
+    let Ok(entries) = std::fs::read_dir(root.join(parent)) else { return String::new() };
+    let names: Vec<String> = entries.take(10_000).filter_map(|entry| entry.ok()?.file_name().into_string().ok()).collect();
+    let Some(closest) = crate::diagnostic::closest(name, names.iter().map(String::as_str)) else { return String::new() };
+    let suggestion = parent.join(closest);
+    let suggestion = suggestion.strip_prefix(source).unwrap_or(&suggestion);
+    format!(" (did you mean `{}`?)", crate::diagnostic::display_path(suggestion))
 }
 
 /// Reads the file at `path` when it is a regular file (symbolic links followed) of at most

@@ -45,6 +45,78 @@ pub enum WatchError {
     Watch { path: String, source: notify::Error },
     #[error("cannot resolve the project folder {path}: {source}")]
     Root { path: String, source: std::io::Error },
+    #[error("another `cirrus watch` ({holder}) bakes into {folder}: two daemons would issue the same revisions for different batches; stop that one first")]
+    Locked { folder: String, holder: String },
+    #[error("cannot lock the output folder {folder}: {source}")]
+    Lock { folder: String, source: std::io::Error },
+}
+
+/// The daemon's hold on its output folder: `<output>/.cirrus/watch.lock`, locked (`flock`) for
+/// as long as the daemon runs, holding its process id and server address for the next one to
+/// name. The lock goes with the process, however it ends.
+struct OutputLock {
+    file: std::fs::File,
+}
+
+impl OutputLock {
+    fn take(output: &Path) -> Result<OutputLock, WatchError> {
+        use std::io::Read as _;
+        let folder = display_path(output);
+        let lock_error = |source| WatchError::Lock { folder: folder.clone(), source };
+        let state = output.join(".cirrus");
+        std::fs::create_dir_all(&state).map_err(lock_error)?;
+        let mut file = std::fs::OpenOptions::new()
+            .read(true)
+            .write(true)
+            .create(true)
+            .truncate(false)
+            .open(state.join("watch.lock"))
+            .map_err(lock_error)?;
+        if !try_lock(&file).map_err(lock_error)? {
+            let mut holder = String::new();
+            let _ = file.read_to_string(&mut holder);
+            let holder = holder.lines().collect::<Vec<_>>().join(", ");
+            let holder = if holder.is_empty() { "starting".to_string() } else { holder };
+            return Err(WatchError::Locked { folder, holder });
+        }
+        let mut lock = OutputLock { file };
+        lock.describe(None);
+        Ok(lock)
+    }
+
+    /// Writes who holds the lock: this process, and its server's address once it listens.
+    fn describe(&mut self, address: Option<SocketAddr>) {
+        use std::io::{Seek as _, Write as _};
+        let mut text = format!("pid {}", std::process::id());
+        if let Some(address) = address {
+            text.push_str(&format!("\nlistening on {address}"));
+        }
+        let _ = self.file.set_len(0);
+        let _ = self.file.seek(std::io::SeekFrom::Start(0));
+        let _ = self.file.write_all(text.as_bytes());
+    }
+}
+
+/// Takes an exclusive advisory lock on `file` without waiting: false when another holds it.
+#[cfg(unix)]
+fn try_lock(file: &std::fs::File) -> std::io::Result<bool> {
+    use std::os::fd::AsRawFd;
+    // SAFETY: flock on a descriptor this process owns; no memory is passed.
+    if unsafe { libc::flock(file.as_raw_fd(), libc::LOCK_EX | libc::LOCK_NB) } == 0 {
+        return Ok(true);
+    }
+    let error = std::io::Error::last_os_error();
+    if error.raw_os_error() == Some(libc::EWOULDBLOCK) {
+        Ok(false)
+    } else {
+        Err(error)
+    }
+}
+
+/// Elsewhere the folder is not locked (two daemons there are the user's to avoid).
+#[cfg(not(unix))]
+fn try_lock(_file: &std::fs::File) -> std::io::Result<bool> {
+    Ok(true)
 }
 
 /// What the watcher thread needs to tell relevant events from noise, kept current by the owner.
@@ -159,6 +231,7 @@ pub fn watch(settings: &WatchSettings) -> Result<(), WatchError> {
     };
     let root = absolute(&config.root)?;
     let pipeline = root.join(config.file.file_name().unwrap_or_default());
+    let mut output_lock = OutputLock::take(&root.join(&config.output))?;
     let mut project = Project::open(
         config.clone(),
         ProjectOptions {
@@ -174,6 +247,7 @@ pub fn watch(settings: &WatchSettings) -> Result<(), WatchError> {
         None => None,
     };
     if let Some(server) = &server {
+        output_lock.describe(Some(server.address()));
         tracing::info!("hot-reload server listening on {}", server.address());
         eprintln!("cirrus watch: hot-reload server on {}", server.address());
         if !server.address().ip().is_loopback() {

@@ -123,11 +123,15 @@ impl RemoteCacheOverride {
     pub fn parse(url: Option<&str>, mode: Option<&str>) -> Result<RemoteCacheOverride, String> {
         let location = match url {
             None => None,
-            Some("off" | "none" | "") => Some(None),
+            Some("") => {
+                return Err("it is empty (an unset shell variable?): name a URL (s3://bucket/prefix, file:///folder) or `off`".into())
+            }
+            Some("off" | "none") => Some(None),
             Some(url) => Some(Some((url.to_string(), parse_remote_url(url)?))),
         };
         let mode = match mode {
             None => None,
+            Some("") => return Err("the mode is empty (an unset shell variable?): read-write or read-only".into()),
             Some(text) => {
                 Some(RemoteCacheMode::parse(text).ok_or_else(|| format!("`{text}` is not a shared cache mode: read-write or read-only"))?)
             }

@@ -151,7 +151,7 @@ pub fn loaded_mesh_of(db: &dyn Db, asset: Asset, obj: PathBuf) -> Result<Arc<Loa
     // cannot be read (not a regular file, no permission) fails the mesh, naming why.
     for (path, library) in mesh_libraries_of(db, asset, obj.clone()).iter() {
         if let Err(why) = library.contents(db) {
-            if why != crate::sources::FILE_NOT_FOUND {
+            if !why.starts_with(crate::sources::FILE_NOT_FOUND) {
                 return Err(Diagnostic::new(path, why.clone()));
             }
         }

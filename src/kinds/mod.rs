@@ -422,7 +422,7 @@ pub fn check_mesh_file(config: &PipelineConfig, mesh_file: &Path) -> Result<(cra
     for library in crate::mesh::material_libraries(mesh_file, &contents.bytes, &config.source) {
         let bytes = match read(&library) {
             Ok(contents) => Some(contents.bytes.to_vec()),
-            Err(error) if error == crate::sources::FILE_NOT_FOUND => None,
+            Err(error) if error.starts_with(crate::sources::FILE_NOT_FOUND) => None,
             Err(error) => return Err(Diagnostic::new(&library, error)),
         };
         libraries.insert(library, bytes);

@@ -77,7 +77,7 @@ fn bad_pipeline_is_a_configuration_error_with_exit_status_2() {
     let output = project.run_cli(&["build"]);
     assert_eq!(output.status.code(), Some(2));
     expect![[r#"
-        pipeline.ron:4:30: Unexpected missing field `material` in `Material`
+        pipeline.ron:4:30: `Material` needs the field `material`
     "#]]
     .assert_eq(&String::from_utf8_lossy(&output.stderr).replace(&format!("{}/", project.root().display()), ""));
     let output = project.run_cli(&["check"]);

@@ -839,3 +839,93 @@ fn the_daemon_prints_a_plain_line_per_batch_into_a_log_that_is_not_a_terminal() 
     assert_eq!(batch_lines.len(), 2, "{log}");
     assert!(batch_lines[1].contains("1 file(s) changed, 1 asset(s) rebuilt") && batch_lines[1].ends_with(" ms"), "{}", batch_lines[1]);
 }
+
+#[test]
+fn idle_connections_filling_every_slot_give_way_to_a_new_client() {
+    let project = material_project();
+    let daemon = Daemon::start(&project);
+    let mut first = daemon.connect();
+    first.subscribe(Some(0));
+    next_batch(&daemon, &mut first);
+    // 70 connections that never say a word: every slot but the subscriber's is taken.
+    let crowd: Vec<std::net::TcpStream> = (0..70).map(|_| std::net::TcpStream::connect(&daemon.address).unwrap()).collect();
+    std::thread::sleep(Duration::from_millis(5500));
+    // Past the grace, a newcomer gets an idle one's slot and its batches.
+    let mut late = daemon.connect();
+    late.subscribe(Some(0));
+    let batch = next_batch(&daemon, &mut late);
+    assert_eq!(batch["revision"], 1, "{batch}");
+    project.write("assets/normal.png", pattern_png(32, 32, 9));
+    assert_eq!(next_batch(&daemon, &mut late)["revision"], 2);
+    assert_eq!(next_batch(&daemon, &mut first)["revision"], 2, "the subscriber kept its slot");
+    drop(crowd);
+}
+
+#[test]
+fn a_second_daemon_on_one_output_folder_is_refused_naming_the_first() {
+    let project = material_project();
+    let daemon = Daemon::start(&project);
+    let output = run_command_with_deadline(
+        Command::new(env!("CARGO_BIN_EXE_cirrus"))
+            .args(["watch", "--listen", "127.0.0.1:0"])
+            .current_dir(project.root())
+            .stdout(Stdio::piped()),
+        Duration::from_secs(30),
+    );
+    assert_eq!(output.status.code(), Some(2), "{}", text(&output));
+    let message = text(&output);
+    let pid = format!("pid {}", daemon.child.id());
+    assert!(message.contains("another `cirrus watch`") && message.contains(&pid), "{message}");
+    assert!(message.contains(&format!("listening on {}", daemon.address)), "{message}");
+    // Once the first is gone, the folder is free.
+    drop(daemon);
+    let again = Daemon::start(&project);
+    assert!(again.address.starts_with("127.0.0.1:"));
+}
+
+#[test]
+fn misspelled_files_and_asset_names_get_the_closest_existing_one() {
+    let project = material_project();
+    let pipeline = String::from_utf8(project.read("pipeline.ron")).unwrap();
+    project.write("pipeline.ron", pipeline.replace("material: \"rock.mymaterial\"", "material: \"rocks.mymaterial\""));
+    let check = text(&run_with_deadline(&project, &["check"], Duration::from_secs(30)));
+    assert!(check.contains("assets/rocks.mymaterial: file not found (did you mean `rock.mymaterial`?)"), "{check}");
+    let build = text(&run_with_deadline(&project, &["build", "--asset", "mos"], Duration::from_secs(30)));
+    assert!(build.contains("no asset named `mos`") && build.contains("(did you mean `moss`?)"), "{build}");
+    // Nothing close: no guess.
+    let build = text(&run_with_deadline(&project, &["build", "--asset", "granite"], Duration::from_secs(30)));
+    assert!(build.contains("no asset named `granite`") && !build.contains("did you mean"), "{build}");
+}
+
+#[test]
+fn a_flag_variable_set_to_nothing_is_refused_under_its_own_name() {
+    let project = material_project();
+    let mut command = Command::new(env!("CARGO_BIN_EXE_cirrus"));
+    command.arg("check").env("CIRRUS_ISA", "").current_dir(project.root()).stdout(Stdio::piped());
+    let output = run_command_with_deadline(&mut command, Duration::from_secs(30));
+    assert_eq!(output.status.code(), Some(2), "{}", text(&output));
+    assert!(text(&output).contains("CIRRUS_ISA is set but empty (it stands for --isa)"), "{}", text(&output));
+    let output = run_with_deadline(&project, &["--remote-cache", "", "build"], Duration::from_secs(30));
+    assert_eq!(output.status.code(), Some(2), "{}", text(&output));
+    assert!(text(&output).contains("--remote-cache: it is empty"), "{}", text(&output));
+}
+
+#[test]
+fn check_answers_in_json_and_for_one_asset() {
+    let project = material_project();
+    project.write("assets/moss.mymaterial", "Material $moss { Texture (attrib = \"diffuse\") {string {\"missing.png\"}} }\n");
+    let output = run_with_deadline(&project, &["check", "--json"], Duration::from_secs(30));
+    assert_eq!(output.status.code(), Some(1), "{}", text(&output));
+    let json: serde_json::Value = serde_json::from_slice(&output.stdout).unwrap_or_else(|error| panic!("{error}: {}", text(&output)));
+    assert_eq!((json["checked"].clone(), json["failed"].clone()), (serde_json::json!(2), serde_json::json!(1)), "{json}");
+    let moss = json["assets"].as_array().unwrap().iter().find(|asset| asset["name"] == "moss").unwrap();
+    assert_eq!(moss["problems"][0]["severity"], "error", "{json}");
+    assert!(moss["problems"][0]["message"].as_str().unwrap().contains("missing.png"), "{json}");
+    // One asset: only it is checked.
+    let output = run_with_deadline(&project, &["check", "--asset", "rock"], Duration::from_secs(30));
+    assert!(output.status.success(), "{}", text(&output));
+    assert!(text(&output).contains("1 assets checked, 0 with problems"), "{}", text(&output));
+    let output = run_with_deadline(&project, &["check", "--asset", "mos"], Duration::from_secs(30));
+    assert_eq!(output.status.code(), Some(2));
+    assert!(text(&output).contains("(did you mean `moss`?)"), "{}", text(&output));
+}

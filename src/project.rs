@@ -435,11 +435,30 @@ impl Project {
         let mut removed_artifacts = Vec::new();
         let mut summaries = Vec::new();
         let mut statuses = HashMap::new();
+        // Every asset's files are put together before any is written: an edit meanwhile (a
+        // folder of sources deleted) still cancels the build, and nothing of it is published.
+        let mut all_outputs = Vec::with_capacity(assets.len());
         for (config, asset) in &assets {
+            if cancel.is_raised() {
+                return Err(BuildError::Cancelled);
+            }
             let (mut errors, failed_jobs) = failures.remove(asset).unwrap_or_default();
             let folder = self.config.output.join(&config.name);
+            let outputs = asset.kind(&self.db).outputs(&self.db, *asset, &folder, &mut errors, &runs);
+            all_outputs.push((errors, failed_jobs, folder, outputs));
+        }
+        if cancel.is_raised() {
+            return Err(BuildError::Cancelled);
+        }
+        for ((config, asset), (mut errors, failed_jobs, folder, outputs)) in assets.iter().zip(all_outputs) {
+            // Writing is not interrupted (the manifest must list what was written), but an asset
+            // baked from a source that went away meanwhile (a folder deleted while it baked, whose
+            // event may not have arrived yet) is not published: the next build, which that
+            // deletion asks for, removes what it had. (A failure is still reported.)
+            if errors.is_empty() && !self.config.source_dir().join(config.source.main_file()).exists() {
+                continue;
+            }
             let kind = asset.kind(&self.db);
-            let outputs = kind.outputs(&self.db, *asset, &folder, &mut errors, &runs);
             // Project-relative artifact path → blake3 hex of what this build wrote there.
             let mut produced = BTreeMap::new();
             let mut all_written = true;

@@ -371,6 +371,13 @@ pub fn watch(settings: &WatchSettings) -> Result<(), WatchError> {
             continue;
         }
         force_build = false;
+        // The files this build is about to read count as sources already: a folder of new
+        // rule-matched files deleted while they bake (one event for the folder) cancels it.
+        {
+            let main_files: Vec<PathBuf> =
+                project.asset_list().iter().map(|asset| project.config().source.join(asset.source.main_file())).collect();
+            filter.write().expect("event filter").sources.extend(main_files);
+        }
         let start = Instant::now();
         let options = BuildOptions { cancel: Some(cancel.clone()), always_new_revision: !first, ..Default::default() };
         let summary = match project.build(&options, &|_| {}) {

@@ -3,6 +3,7 @@
 //! of the hardening issue; the process-level ones run the `cirrus` binary with a deadline, so that
 //! a hang or an abort fails the test instead of the test run.
 
+use std::collections::BTreeSet;
 use std::path::Path;
 use std::process::{Command, Output, Stdio};
 use std::time::{Duration, Instant};
@@ -928,4 +929,47 @@ fn check_answers_in_json_and_for_one_asset() {
     let output = run_with_deadline(&project, &["check", "--asset", "mos"], Duration::from_secs(30));
     assert_eq!(output.status.code(), Some(2));
     assert!(text(&output).contains("(did you mean `moss`?)"), "{}", text(&output));
+}
+
+#[test]
+fn rule_matched_files_deleted_while_they_bake_leave_at_once_and_what_was_published_is_withdrawn() {
+    fn files_under(folder: &Path) -> usize {
+        let Ok(entries) = std::fs::read_dir(folder) else { return 0 };
+        entries.flatten().map(|entry| if entry.path().is_dir() { files_under(&entry.path()) } else { 1 }).sum()
+    }
+    let paths = |batch: &serde_json::Value, key: &str| -> Vec<String> {
+        let entries = batch[key].as_array().cloned().unwrap_or_default();
+        entries.iter().filter_map(|entry| entry.as_str().or_else(|| entry["path"].as_str()).map(str::to_string)).collect()
+    };
+    let project = watched_project();
+    let daemon = Daemon::start(&project);
+    let mut client = daemon.connect();
+    client.subscribe(Some(0));
+    next_batch(&daemon, &mut client);
+    for index in 0..300 {
+        project.write(
+            &format!("assets/extra/gone/burst_{index:03}.mymaterial"),
+            format!("Material $m {{ Texture (attrib = \"diffuse\") {{string {{\"../../albedo.png\"}}}} Param (attrib = \"roughness\") {{float {{{}}}}} }}\n", index as f32 / 300.0),
+        );
+    }
+    // The rule takes them in: the daemon bakes them; the folder goes while it does.
+    let pipeline = String::from_utf8(project.read("pipeline.ron")).unwrap();
+    project.write("pipeline.ron", pipeline.replace("extra/*.mymaterial", "extra/**/*.mymaterial"));
+    std::thread::sleep(Duration::from_millis(400));
+    std::fs::remove_dir_all(project.path("assets/extra/gone")).unwrap();
+    let deleted = Instant::now();
+    let (mut published, mut withdrawn) = (BTreeSet::new(), BTreeSet::new());
+    loop {
+        let batch = next_batch(&daemon, &mut client);
+        published.extend(paths(&batch, "changed").into_iter().filter(|path| path.starts_with("baked/extra/gone/")));
+        withdrawn.extend(paths(&batch, "removed"));
+        if files_under(&project.path("baked/extra/gone")) == 0 || deleted.elapsed() > Duration::from_secs(15) {
+            break;
+        }
+    }
+    let log = daemon.log.lock().unwrap().clone();
+    assert_eq!(files_under(&project.path("baked/extra/gone")), 0, "the deleted assets' artifacts are gone within 15 s\n{log}");
+    assert!(deleted.elapsed() < Duration::from_secs(5), "they went {:?} after the deletion\n{log}", deleted.elapsed());
+    let never_withdrawn: Vec<&String> = published.difference(&withdrawn).collect();
+    assert!(never_withdrawn.is_empty(), "published as changed, never as removed: {never_withdrawn:?}");
 }

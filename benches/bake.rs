@@ -599,7 +599,7 @@ fn bench_ambient_occlusion(corpus: &Path) {
     }
 
     use cirrus::kinds::ambient_occlusion::bake::{bake_tile_from_vertices, bake_tile_with_rays, BakeMesh, TexelState, TileBake};
-    use cirrus::mesh::occlusion::{build_occluders, occlusion_of_vertices, OcclusionSettings, RayDistribution};
+    use cirrus::mesh::occlusion::{build_occluders, occlusion_of_vertices, Casting, OcclusionSettings, RayDistribution};
     use cirrus::mesh::rays::{build_triangle_bvh, BackFaces};
     use cirrus::mesh::uv_raster::TexelRegion;
     let mesh = flight_helmet(corpus);
@@ -652,12 +652,18 @@ fn bench_ambient_occlusion(corpus: &Path) {
     };
     let (texels, texel_seconds) = texel_bake(256);
     let start = Instant::now();
-    let visibility: Vec<f32> =
-        occlusion_of_vertices(&occluders, &mesh.positions, &mesh.normals, &mesh.triangles, offset, &settings(256), &cirrus::mesh::never)
-            .unwrap()
-            .into_iter()
-            .map(|occlusion| occlusion.map_or(1.0, |occlusion| occlusion.visibility))
-            .collect();
+    let visibility: Vec<f32> = occlusion_of_vertices(
+        &occluders,
+        &mesh.positions,
+        &mesh.normals,
+        &mesh.triangles,
+        offset,
+        Casting { settings: &settings(256), should_stop: &cirrus::mesh::never },
+    )
+    .unwrap()
+    .into_iter()
+    .map(|occlusion| occlusion.map_or(1.0, |occlusion| occlusion.visibility))
+    .collect();
     let vertices = vertex_maps(&visibility);
     let vertex_seconds = start.elapsed().as_secs_f64();
     // libigl's `ambient_occlusion`: the same random directions for every point, flipped into its

@@ -9,6 +9,13 @@ use glam::Vec3;
 use super::rays::{build_triangle_bvh, offset_ray_origin, BackFaces, TriangleBvh};
 use super::{ShouldStop, Stopped};
 
+/// The rays a point casts and when to stop casting them.
+#[derive(Clone, Copy)]
+pub struct Casting<'a> {
+    pub settings: &'a OcclusionSettings,
+    pub should_stop: ShouldStop<'a>,
+}
+
 /// How many rays a point casts between two asks whether to stop (each point asks before its
 /// first ray): a point of a million rays stops within about a millisecond of being asked.
 const RAYS_BETWEEN_STOP_CHECKS: u32 = 4096;
@@ -126,7 +133,7 @@ pub fn orthonormal_frame(normal: Vec3) -> (Vec3, Vec3) {
 /// The occlusion at `point` on triangle `triangle` (whose rays skip it), over the hemisphere
 /// of the unit `normal`, with the sequence shifted by `seed`.
 pub fn occlusion_at(bvh: &TriangleBvh, point: Vec3, normal: Vec3, triangle: u32, settings: &OcclusionSettings, seed: u32) -> Occlusion {
-    occlusion_from(bvh, point, normal, normal, triangle, settings, seed, &super::never).expect("never stops")
+    occlusion_from(bvh, point, normal, normal, triangle, seed, Casting { settings, should_stop: &super::never }).expect("never stops")
 }
 
 /// [`occlusion_at`] with the ray origins moved off the surface along `offset_normal` (the
@@ -137,9 +144,8 @@ fn occlusion_from(
     offset_normal: Vec3,
     normal: Vec3,
     triangle: u32,
-    settings: &OcclusionSettings,
     seed: u32,
-    should_stop: ShouldStop,
+    casting: Casting,
 ) -> Result<Occlusion, Stopped> {
     let origin = offset_ray_origin(point, offset_normal);
     let (tangent, bitangent) = orthonormal_frame(normal);
@@ -149,8 +155,8 @@ fn occlusion_from(
     let (sin_shift, cos_shift) = (std::f64::consts::TAU * shift[1]).sin_cos();
     let (sin_shift, cos_shift) = (sin_shift as f32, cos_shift as f32);
     let (tangent, bitangent) = (tangent * cos_shift + bitangent * sin_shift, bitangent * cos_shift - tangent * sin_shift);
-    with_sequence_table(settings.rays, |table| {
-        occlusion_along(bvh, origin, [tangent, bitangent, normal], shift[0], table, triangle, settings, should_stop)
+    with_sequence_table(casting.settings.rays, |table| {
+        occlusion_along(bvh, origin, [tangent, bitangent, normal], shift[0], table, triangle, casting)
     })
 }
 
@@ -163,8 +169,7 @@ fn occlusion_along(
     radial_shift: f64,
     table: &[(f64, f32, f32)],
     triangle: u32,
-    settings: &OcclusionSettings,
-    should_stop: ShouldStop,
+    Casting { settings, should_stop }: Casting,
 ) -> Result<Occlusion, Stopped> {
     let (mut open, mut total, mut back_face_rays) = (0.0f64, 0.0f64, 0u32);
     for (ray, &(radial, cos_turn, sin_turn)) in (0u32..).zip(table) {
@@ -250,8 +255,7 @@ pub fn occlusion_of_texels(
     triangles: &[[u32; 3]],
     coverage: &super::uv_raster::UvCoverage,
     width: u32,
-    settings: &OcclusionSettings,
-    should_stop: ShouldStop,
+    casting: Casting,
 ) -> Result<Vec<Option<Occlusion>>, Stopped> {
     use rayon::prelude::*;
     let region = coverage.region;
@@ -279,7 +283,7 @@ pub fn occlusion_of_texels(
             let side = if geometric.dot(normal) < 0.0 { -geometric } else { geometric };
             let (x, y) = (region.x + index as u32 % region.width, region.y + index as u32 / region.width);
             let seed = y * width + x;
-            occlusion_from(bvh, point, side, normal, local, settings, seed, should_stop).map(Some)
+            occlusion_from(bvh, point, side, normal, local, seed, casting).map(Some)
         })
         .collect()
 }
@@ -294,8 +298,7 @@ pub fn occlusion_of_vertices(
     normals: &[[f32; 3]],
     triangles: &[[u32; 3]],
     offset: f32,
-    settings: &OcclusionSettings,
-    should_stop: ShouldStop,
+    casting: Casting,
 ) -> Result<Vec<Option<Occlusion>>, Stopped> {
     use rayon::prelude::*;
     // Each vertex casts against the occluders of the first triangle that uses it.
@@ -320,7 +323,7 @@ pub fn occlusion_of_vertices(
             let normal = Vec3::from(normals[vertex]).normalize_or_zero();
             let normal = if normal == Vec3::ZERO { Vec3::from(bvh.geometric_normal(local)) } else { normal };
             let point = Vec3::from(positions[vertex]) + normal * offset;
-            occlusion_from(bvh, point, normal, normal, u32::MAX, settings, vertex as u32, should_stop).map(Some)
+            occlusion_from(bvh, point, normal, normal, u32::MAX, vertex as u32, casting).map(Some)
         })
         .collect()
 }

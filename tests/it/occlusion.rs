@@ -323,7 +323,7 @@ fn a_wall_over_an_infinite_ground_plane_sees_half_its_hemisphere() {
 
 #[test]
 fn texels_bake_the_occlusion_of_their_surface_point_and_tiles_bake_what_the_whole_image_does() {
-    use cirrus::mesh::occlusion::{build_occluders, occlusion_of_texels};
+    use cirrus::mesh::occlusion::{build_occluders, occlusion_of_texels, Casting};
     use cirrus::mesh::uv_raster::{rasterize_uv, TexelRegion};
     // A UV-mapped floor (4 × 4, UVs over [0, 1]², normals up) under a disc.
     let mut positions = vec![[-2.0f32, 0.0, 2.0], [2.0, 0.0, 2.0], [2.0, 0.0, -2.0], [-2.0, 0.0, -2.0]];
@@ -343,8 +343,16 @@ fn texels_bake_the_occlusion_of_their_surface_point_and_tiles_bake_what_the_whol
     let whole = TexelRegion { x: 0, y: 0, width: size, height: size };
     let coverage = rasterize_uv(&uvs, &triangles, &[0, 1], (size, size), whole);
     let occluders = build_occluders(&positions, &triangles, None);
-    let baked =
-        occlusion_of_texels(&occluders, &positions, &normals, &triangles, &coverage, size, &settings, &cirrus::mesh::never).unwrap();
+    let baked = occlusion_of_texels(
+        &occluders,
+        &positions,
+        &normals,
+        &triangles,
+        &coverage,
+        size,
+        Casting { settings: &settings, should_stop: &cirrus::mesh::never },
+    )
+    .unwrap();
     // Texel (8, 8): its centre (u, v) = (0.53125, 0.46875) is floor point (0.125, 0, 0.125), seed 8 × 16 + 8.
     let sample = coverage.sample(8, 8).unwrap();
     let expected = occlusion_at(&bvh, Vec3::new(0.125, 0.0, 0.125), Vec3::Y, sample.triangle, &settings, 8 * size + 8);
@@ -355,8 +363,16 @@ fn texels_bake_the_occlusion_of_their_surface_point_and_tiles_bake_what_the_whol
     for (x, y) in [(0, 0), (8, 0), (0, 8), (8, 8)] {
         let region = TexelRegion { x, y, width: 8, height: 8 };
         let tile = rasterize_uv(&uvs, &triangles, &[0, 1], (size, size), region);
-        let tile_baked =
-            occlusion_of_texels(&occluders, &positions, &normals, &triangles, &tile, size, &settings, &cirrus::mesh::never).unwrap();
+        let tile_baked = occlusion_of_texels(
+            &occluders,
+            &positions,
+            &normals,
+            &triangles,
+            &tile,
+            size,
+            Casting { settings: &settings, should_stop: &cirrus::mesh::never },
+        )
+        .unwrap();
         for row in 0..8 {
             for column in 0..8 {
                 let in_whole = baked[((y + row) * size + x + column) as usize].map(|o| o.visibility.to_bits());

@@ -5,7 +5,7 @@
 
 use glam::Vec3;
 
-use crate::mesh::occlusion::{occlusion_of_texels, Occluders, OcclusionSettings};
+use crate::mesh::occlusion::{occlusion_of_texels, Casting, Occluders, OcclusionSettings};
 use crate::mesh::rays::BackFaces;
 use crate::mesh::uv_raster::{rasterize_uv, TexelRegion};
 use crate::mesh::{ShouldStop, Stopped};
@@ -174,7 +174,8 @@ pub fn bake_tile_with_rays(
 ) -> Result<TileBake, Stopped> {
     let start = std::time::Instant::now();
     let coverage = rasterize_uv(mesh.uvs, mesh.triangles, own, (size, size), region);
-    let occlusion = occlusion_of_texels(occluders, mesh.positions, mesh.normals, mesh.triangles, &coverage, size, settings, should_stop)?;
+    let occlusion =
+        occlusion_of_texels(occluders, mesh.positions, mesh.normals, mesh.triangles, &coverage, size, Casting { settings, should_stop })?;
     let mut values = vec![0u16; occlusion.len()];
     let mut states = vec![TexelState::Empty as u8; occlusion.len()];
     let mut rays = 0u64;

@@ -211,8 +211,7 @@ pub fn vertex_visibility(db: &dyn Db, asset: Asset) -> Result<Arc<VertexVisibili
                 &mesh.normals,
                 &mesh.triangles,
                 geometry.vertex_offset,
-                &geometry.occlusion,
-                should_stop,
+                crate::mesh::occlusion::Casting { settings: &geometry.occlusion, should_stop },
             )
         })
         .into_iter()

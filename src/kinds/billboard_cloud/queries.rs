@@ -314,12 +314,15 @@ pub fn level_render_batches(db: &dyn Db, asset: Asset, level: u32) -> Arc<Vec<Ve
     }))
 }
 
+/// A render batch's images: each render group's index and its planes' images.
+pub type BatchImages = Vec<(u32, Arc<Vec<PlaneImages>>)>;
+
 /// The images of a batch's render groups that the render memo does not hold, rendered in one
 /// go (few GPU submissions for many small groups); each group's run is recorded under its own
 /// label with its share of the time, by texels. Every group of a batch shows the same
 /// materials, so the batch reads what each of its groups reads.
 #[salsa::tracked(returns(clone))]
-pub fn rendered_batch(db: &dyn Db, asset: Asset, level: u32, batch: u32) -> Result<Arc<Vec<(u32, Arc<Vec<PlaneImages>>)>>, Diagnostic> {
+pub fn rendered_batch(db: &dyn Db, asset: Asset, level: u32, batch: u32) -> Result<Arc<BatchImages>, Diagnostic> {
     let loaded = loaded_mesh(db, asset)?;
     let layout = billboard_layout(db, asset, level)?;
     let alpha_cutoff = billboard_alpha_cutoff(db, asset);

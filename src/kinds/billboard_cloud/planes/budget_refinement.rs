@@ -58,10 +58,13 @@ const SEAM_ROUNDS: usize = 4;
 /// 3.3–3.9 view pixels, the mean error up 4–5 % and the mean IoU within 0.001; 3 does no better.
 pub const SEAM_WEIGHT: f32 = 1.0;
 
+/// A face's neighbour across an edge and the edge's two vertices (indices into the face's).
+pub(super) type EdgeNeighbour = (u32, [usize; 2]);
+
 /// Each face's edge neighbours: the neighbour and the shared edge's two vertices (indices into
 /// the face's vertices).
-pub(super) fn edge_neighbours(triangles: &[[u32; 3]]) -> Vec<Vec<(u32, [usize; 2])>> {
-    let mut edges: std::collections::HashMap<(u32, u32), Vec<(u32, [usize; 2])>> = std::collections::HashMap::new();
+pub(super) fn edge_neighbours(triangles: &[[u32; 3]]) -> Vec<Vec<EdgeNeighbour>> {
+    let mut edges: std::collections::HashMap<(u32, u32), Vec<EdgeNeighbour>> = std::collections::HashMap::new();
     for (face, triangle) in triangles.iter().enumerate() {
         for corner in 0..3 {
             let (a, b) = (triangle[corner], triangle[(corner + 1) % 3]);

@@ -359,21 +359,27 @@ fn build(pipeline: PathBuf, assets: Vec<String>, format: SummaryFormat, options:
         }
     }
     let mut project = Project::open(config, options);
+    // The bar moves with the estimated time of the work, not the count of jobs (a few AO tiles
+    // or renders outweigh hundreds of surfaces), and says about how long is left.
     let bar = std::io::stderr().is_terminal().then(|| {
-        let bar = indicatif::ProgressBar::new(0);
+        let bar = indicatif::ProgressBar::new(1000);
         bar.set_style(
-            indicatif::ProgressStyle::with_template("{spinner} [{elapsed_precise}] {bar:30} {pos}/{len} {wide_msg}")
-                .expect("valid progress template"),
+            indicatif::ProgressStyle::with_template("{spinner} [{elapsed_precise}] {bar:30} {wide_msg}").expect("valid progress template"),
         );
         bar
     });
-    let report_progress = |progress: Progress| match &bar {
-        Some(bar) => {
-            bar.set_length(progress.total as u64);
-            bar.set_position(progress.done as u64);
-            bar.set_message(progress.item);
+    let report_progress = |progress: Progress| {
+        let left = progress
+            .remaining_seconds
+            .map(|seconds| format!(", about {} left", crate::summary::rough_duration(seconds)))
+            .unwrap_or_default();
+        match &bar {
+            Some(bar) => {
+                bar.set_position((progress.fraction() * 1000.0) as u64);
+                bar.set_message(format!("{}/{} jobs{left}: {}", progress.done, progress.total, progress.item));
+            }
+            None => tracing::info!("baked {} ({}/{}{left})", progress.item, progress.done, progress.total),
         }
-        None => tracing::info!("baked {} ({}/{})", progress.item, progress.done, progress.total),
     };
     let result = project.build(&BuildOptions { only_assets: assets, ..Default::default() }, &report_progress);
     if let Some(bar) = &bar {

@@ -44,6 +44,40 @@ pub struct Progress {
     pub total: usize,
     /// What just finished, e.g. `bark/oak_bark/albedo`.
     pub item: String,
+    /// Its index among the items of its run.
+    pub index: usize,
+    /// Seconds of work the jobs known so far still need on the workers, estimated from the jobs
+    /// of each sort finished so far (see [`remaining_seconds`]); `None` before any finished.
+    pub remaining_seconds: Option<f64>,
+    /// Seconds the finished jobs took, summed over the workers (in a run's own report: the
+    /// item's alone).
+    pub worked_seconds: f64,
+}
+
+impl Progress {
+    /// How far the build is, weighted by each job's cost (finished: what it took; waiting: the
+    /// estimate), in [0, 1]; by job count before any estimate.
+    pub fn fraction(&self) -> f64 {
+        match self.remaining_seconds {
+            Some(remaining) if self.worked_seconds + remaining > 0.0 => self.worked_seconds / (self.worked_seconds + remaining),
+            _ => self.done as f64 / self.total.max(1) as f64,
+        }
+    }
+}
+
+/// The seconds the `waiting` jobs (a count per sort: a kind's step, a texture surface) will take
+/// on `workers` workers, each sort at the mean of its `finished` jobs (seconds summed, count),
+/// a sort not seen yet at the mean of all: so that a bar over a few long AO tiles and hundreds
+/// of quick surfaces moves with the time, not the count. `None` before any job finished.
+pub fn remaining_seconds(finished: &BTreeMap<&str, (f64, usize)>, waiting: &BTreeMap<&str, usize>, workers: usize) -> Option<f64> {
+    let (sum, count) = finished.values().fold((0.0, 0), |(sum, count), (seconds, jobs)| (sum + seconds, count + jobs));
+    if count == 0 {
+        return None;
+    }
+    let overall = sum / count as f64;
+    let mean = |sort: &str| finished.get(sort).filter(|(_, jobs)| *jobs > 0).map_or(overall, |(seconds, jobs)| seconds / *jobs as f64);
+    let total: f64 = waiting.iter().map(|(sort, jobs)| mean(sort) * *jobs as f64).sum();
+    Some(total / workers.max(1) as f64)
 }
 
 /// Runs every job and the jobs they schedule, wave by wave; each finished job with its result.
@@ -57,9 +91,30 @@ pub fn run_jobs(
     let mut waves: BTreeMap<u32, Vec<Job>> = BTreeMap::from([(0, first)]);
     let mut finished = Vec::new();
     let mut total = waves[&0].len();
+    // Seconds and count of the finished jobs per sort, and the jobs known but not finished.
+    let finished_by_sort: Mutex<BTreeMap<&'static str, (f64, usize)>> = Mutex::new(BTreeMap::new());
+    let mut waiting_by_sort: BTreeMap<&'static str, usize> = BTreeMap::new();
+    for job in &waves[&0] {
+        *waiting_by_sort.entry(job.task.sort()).or_default() += 1;
+    }
+    let waiting_by_sort = Mutex::new(waiting_by_sort);
+    let worked = Mutex::new(0.0f64);
     while let Some((wave, jobs)) = waves.pop_first() {
         let done_before = finished.len();
-        let report = |Progress { done, item, .. }: Progress| progress(Progress { done: done_before + done, total, item });
+        let report = |Progress { done, item, index, worked_seconds: seconds, .. }: Progress| {
+            let sort = jobs[index].task.sort();
+            let mut by_sort = finished_by_sort.lock().expect("progress lock");
+            let entry = by_sort.entry(sort).or_default();
+            *entry = (entry.0 + seconds, entry.1 + 1);
+            let mut waiting = waiting_by_sort.lock().expect("progress lock");
+            if let Some(count) = waiting.get_mut(sort) {
+                *count = count.saturating_sub(1);
+            }
+            let remaining_seconds = remaining_seconds(&by_sort, &waiting, cores());
+            let mut worked = worked.lock().expect("progress lock");
+            *worked += seconds;
+            progress(Progress { done: done_before + done, total, item, index, remaining_seconds, worked_seconds: *worked })
+        };
         let results = run_parallel(
             db,
             &jobs,
@@ -74,6 +129,7 @@ pub fn run_jobs(
                 Ok(follow_ups) => {
                     total += follow_ups.len();
                     for follow_up in follow_ups {
+                        *waiting_by_sort.lock().expect("progress lock").entry(follow_up.task.sort()).or_default() += 1;
                         waves.entry(wave + follow_up.after.max(1)).or_default().push(follow_up);
                     }
                     finished.push((job, Ok(())));
@@ -115,6 +171,7 @@ pub fn run_parallel<T: Sync, R: Send>(
                     }
                     let index = next.fetch_add(1, Ordering::Relaxed);
                     let Some(item) = items.get(index) else { break };
+                    let started = std::time::Instant::now();
                     let result = match std::panic::catch_unwind(AssertUnwindSafe(|| work(&db, item))) {
                         Ok(result) => result,
                         Err(panic) if panic.is::<salsa::Cancelled>() => break,
@@ -130,7 +187,15 @@ pub fn run_parallel<T: Sync, R: Send>(
                     };
                     results.lock().expect("results lock")[index] = Some(result);
                     let finished = done.fetch_add(1, Ordering::Relaxed) + 1;
-                    progress(Progress { done: finished, total: items.len(), item: describe(&db, item).1 });
+                    let worked_seconds = started.elapsed().as_secs_f64();
+                    progress(Progress {
+                        done: finished,
+                        total: items.len(),
+                        item: describe(&db, item).1,
+                        index,
+                        remaining_seconds: None,
+                        worked_seconds,
+                    });
                 }
                 // The clone is dropped here, before the writer can set the next inputs.
                 drop(db);

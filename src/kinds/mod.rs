@@ -269,6 +269,18 @@ pub struct Job {
     pub label: String,
 }
 
+impl Task {
+    /// The sort of work a task is, for estimating how long the waiting ones take: a step's name,
+    /// or `surface`.
+    pub fn sort(&self) -> &'static str {
+        match self {
+            Task::Step(name, _) => name,
+            Task::Surface(_) => "surface",
+            Task::LoadPreviousEncoding(_) => "previous-encoding",
+        }
+    }
+}
+
 #[derive(Clone, Debug, PartialEq)]
 pub enum Task {
     /// A step of the kind's own, with an index (a render group, a tile).

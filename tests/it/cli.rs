@@ -164,3 +164,30 @@ fn check_passes_on_the_bundled_pipeline_and_reports_each_kind_s_problems() {
     .assert_eq(&String::from_utf8_lossy(&output.stdout));
     assert_eq!(output.status.code(), Some(0));
 }
+
+#[test]
+fn the_progress_estimate_weights_each_sort_of_job_by_what_it_took() {
+    use cirrus::schedule::{remaining_seconds, Progress};
+    use std::collections::BTreeMap;
+    let finished = BTreeMap::from([("tile", (4.0, 2)), ("surface", (0.2, 2))]);
+    // Three tiles at 2 s, a hundred surfaces at 0.1 s, one render at the mean of all (1.05 s),
+    // on two workers.
+    let waiting = BTreeMap::from([("tile", 3), ("surface", 100), ("render", 1)]);
+    let left = remaining_seconds(&finished, &waiting, 2).unwrap();
+    assert!((left - 8.525).abs() < 1e-9, "{left}");
+    assert_eq!(remaining_seconds(&BTreeMap::new(), &waiting, 2), None);
+    // Four jobs of 107 done, but 4.2 s of about 21.25 s of work: the bar stands at a fifth.
+    let progress = Progress { done: 4, total: 107, item: String::new(), index: 0, remaining_seconds: Some(17.05), worked_seconds: 4.2 };
+    assert!((progress.fraction() - 4.2 / 21.25).abs() < 1e-9, "{}", progress.fraction());
+}
+
+#[test]
+fn a_build_without_a_terminal_logs_how_long_is_left() {
+    let project = crate::watch::watched_project();
+    let output = project.run_cli(&["build", "-v"]);
+    assert!(output.status.success());
+    let log = String::from_utf8_lossy(&output.stderr);
+    let lines: Vec<&str> = log.lines().filter(|line| line.contains(" baked ")).collect();
+    assert!(!lines.is_empty(), "{log}");
+    assert!(lines.iter().skip(1).all(|line| line.contains(" left)")), "{log}");
+}

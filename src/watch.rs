@@ -315,7 +315,24 @@ pub fn watch(settings: &WatchSettings) -> Result<(), WatchError> {
         }
         let mut reconfigured = false;
         if pending.remove(Path::new(pipeline.file_name().unwrap_or_default())) {
-            match load_pipeline(&project.config().file) {
+            // A new output folder is locked before the configuration is taken; one that another
+            // daemon holds is refused like a configuration error, keeping the old one.
+            let loaded = load_pipeline(&project.config().file).and_then(|new_config| {
+                if new_config.output == project.config().output {
+                    return Ok(new_config);
+                }
+                match OutputLock::take(&root.join(&new_config.output)) {
+                    Ok(mut lock) => {
+                        lock.describe(server.as_ref().map(Server::address));
+                        output_lock = lock;
+                        Ok(new_config)
+                    }
+                    Err(error) => Err(crate::config::ConfigError {
+                        diagnostics: vec![crate::diagnostic::Diagnostic::new(&new_config.file, format!("`output`: {error}"))],
+                    }),
+                }
+            });
+            match loaded {
                 Ok(new_config) => {
                     tracing::info!("{} changed: reconfigured", display_path(&new_config.file));
                     if new_config.server != project.config().server && settings.listen.is_none() {

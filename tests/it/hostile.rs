@@ -878,6 +878,20 @@ fn a_second_daemon_on_one_output_folder_is_refused_naming_the_first() {
     let pid = format!("pid {}", daemon.child.id());
     assert!(message.contains("another `cirrus watch`") && message.contains(&pid), "{message}");
     assert!(message.contains(&format!("listening on {}", daemon.address)), "{message}");
+    // Reconfigured to another output folder, it holds that one and lets the old one go.
+    let mut client = daemon.connect();
+    client.subscribe(Some(0));
+    next_batch(&daemon, &mut client);
+    let pipeline = String::from_utf8(project.read("pipeline.ron")).unwrap();
+    project.write("pipeline.ron", pipeline.replace(r#"output: "baked""#, r#"output: "baked2""#));
+    next_batch(&daemon, &mut client);
+    let free = |folder: &str| {
+        let lock = project.path(&format!("{folder}/.cirrus/watch.lock"));
+        Command::new("flock").arg("-n").arg(&lock).arg("true").status().expect("flock(1)").success()
+    };
+    assert!(free("baked") && !free("baked2"), "the lock moved with the output folder");
+    project.write("pipeline.ron", &pipeline);
+    next_batch(&daemon, &mut client);
     // Once the first is gone, the folder is free.
     drop(daemon);
     let again = Daemon::start(&project);

@@ -242,11 +242,17 @@ fn bench_watch(corpus: &Path) {
     for round in 0..3u8 {
         image.get_pixel_mut(10, 10).0 = [255, round * 40, 0];
         let mut bytes = Vec::new();
-        image::DynamicImage::ImageRgb8(image.clone()).write_to(&mut std::io::Cursor::new(&mut bytes), image::ImageFormat::Jpeg).unwrap();
+        image::DynamicImage::ImageRgb8(image.clone())
+            .write_to(&mut std::io::Cursor::new(&mut bytes), image::ImageFormat::Jpeg)
+            .unwrap();
         let start = Instant::now();
         std::fs::write(&bark, &bytes).unwrap();
         let batch = daemon.batch();
-        latencies.push((start.elapsed().as_secs_f64() * 1e3, batch["ms"].as_f64().unwrap(), batch["changed"].as_array().unwrap().len()));
+        latencies.push((
+            start.elapsed().as_secs_f64() * 1e3,
+            batch["ms"].as_f64().unwrap(),
+            batch["changed"].as_array().unwrap().len(),
+        ));
     }
     for (latency, build, changed) in &latencies {
         println!(
@@ -256,8 +262,10 @@ fn bench_watch(corpus: &Path) {
     }
     for (round, value) in ["0.5", "0.3", "0.9"].iter().enumerate() {
         let text = std::fs::read_to_string(materials.join("bark.mymaterial")).unwrap();
-        let edited =
-            text.replace(&text[text.find("{float {").unwrap()..text.find("}}\n}").unwrap() + 2], &format!("{{float {{{value}}}}}"));
+        let edited = text.replace(
+            &text[text.find("{float {").unwrap()..text.find("}}\n}").unwrap() + 2],
+            &format!("{{float {{{value}}}}}"),
+        );
         let start = Instant::now();
         std::fs::write(materials.join("bark.mymaterial"), edited).unwrap();
         let batch = daemon.batch();
@@ -336,14 +344,21 @@ fn tree_project(corpus: &Path, assets: &str) -> tempfile::TempDir {
     let dir = tempfile::tempdir().expect("temporary folder");
     let trees = dir.path().join("assets/trees");
     std::fs::create_dir_all(trees.join("textures")).unwrap();
-    for entry in std::fs::read_dir(corpus.join("trees")).unwrap().chain(std::fs::read_dir(corpus.join("trees/textures")).unwrap()).flatten()
+    for entry in std::fs::read_dir(corpus.join("trees"))
+        .unwrap()
+        .chain(std::fs::read_dir(corpus.join("trees/textures")).unwrap())
+        .flatten()
     {
         if entry.path().is_file() {
             let relative = entry.path().strip_prefix(corpus.join("trees")).unwrap().to_path_buf();
             std::fs::copy(entry.path(), trees.join(relative)).unwrap();
         }
     }
-    std::fs::write(dir.path().join("pipeline.ron"), format!(r#"Pipeline(source: "assets", output: "baked", assets: [{assets}])"#)).unwrap();
+    std::fs::write(
+        dir.path().join("pipeline.ron"),
+        format!(r#"Pipeline(source: "assets", output: "baked", assets: [{assets}])"#),
+    )
+    .unwrap();
     dir
 }
 
@@ -354,7 +369,11 @@ fn build_process(folder: &Path) -> (f64, f64, serde_json::Value) {
 }
 
 /// `build_process` with extra arguments before `build` (`--isa avx2`) and environment variables.
-fn build_process_in(folder: &Path, global_arguments: &[&str], environment: &[(&str, String)]) -> (f64, f64, serde_json::Value) {
+fn build_process_in(
+    folder: &Path,
+    global_arguments: &[&str],
+    environment: &[(&str, String)],
+) -> (f64, f64, serde_json::Value) {
     let start = Instant::now();
     let mut child = std::process::Command::new(env!("CARGO_BIN_EXE_cirrus"))
         .args(global_arguments)
@@ -425,7 +444,8 @@ fn bench_atlas(corpus: &Path) {
     )
     .unwrap();
     let (full, peak, _) = build_process(dir.path());
-    let report: serde_json::Value = serde_json::from_slice(&std::fs::read(dir.path().join("baked/props/report.json")).unwrap()).unwrap();
+    let report: serde_json::Value =
+        serde_json::from_slice(&std::fs::read(dir.path().join("baked/props/report.json")).unwrap()).unwrap();
     println!(
         "atlas: {} textures, {} entries → pages {} occupancy {}: full bake (process) {:.2} s, peak memory {:.0} MiB",
         report["textures"], report["entries"], report["pages"], report["occupancy"], full, peak
@@ -433,7 +453,8 @@ fn bench_atlas(corpus: &Path) {
     println!("atlas: full bake stage ms {}", report["stage_ms"]);
     // A 512² PNG on the largest page (the worst place for an edit: most neighbours), and no
     // alias's (an edit that splits an alias adds an entry, and so moves work elsewhere).
-    let table: serde_json::Value = serde_json::from_slice(&std::fs::read(dir.path().join("baked/props/atlas.json")).unwrap()).unwrap();
+    let table: serde_json::Value =
+        serde_json::from_slice(&std::fs::read(dir.path().join("baked/props/atlas.json")).unwrap()).unwrap();
     let on_first_page = table["entries"]
         .as_array()
         .unwrap()
@@ -501,7 +522,8 @@ fn bench_occlusion(corpus: &Path) {
         .filter_map(|triangle| {
             let normal = glam::Vec3::from(best.geometric_normal(triangle));
             (normal != glam::Vec3::ZERO).then(|| {
-                let corners = mesh.triangles[triangle as usize].map(|vertex| glam::Vec3::from(mesh.positions[vertex as usize]));
+                let corners =
+                    mesh.triangles[triangle as usize].map(|vertex| glam::Vec3::from(mesh.positions[vertex as usize]));
                 (triangle, (corners[0] + corners[1] + corners[2]) / 3.0, normal)
             })
         })
@@ -514,7 +536,9 @@ fn bench_occlusion(corpus: &Path) {
         if cirrus::mesh::rays::avx2_available() { "AVX2 + FMA" } else { "portable (no AVX2 on this CPU)" }
     );
     for (label, bvh) in [("best kernels", &best), ("portable kernels", &portable)] {
-        for (faces, back_faces) in [("back faces pass (the AO default)", BackFaces::PassThrough), ("back faces block", BackFaces::Block)] {
+        for (faces, back_faces) in
+            [("back faces pass (the AO default)", BackFaces::PassThrough), ("back faces block", BackFaces::Block)]
+        {
             let settings = OcclusionSettings {
                 rays: 256,
                 distribution: RayDistribution::Cosine,
@@ -525,7 +549,9 @@ fn bench_occlusion(corpus: &Path) {
             let bake = |bvh: &TriangleBvh| {
                 points
                     .par_iter()
-                    .map(|&(triangle, point, normal)| occlusion_at(bvh, point, normal, triangle, &settings, triangle).visibility as f64)
+                    .map(|&(triangle, point, normal)| {
+                        occlusion_at(bvh, point, normal, triangle, &settings, triangle).visibility as f64
+                    })
                     .sum::<f64>()
             };
             let start = Instant::now();
@@ -587,7 +613,8 @@ fn bench_ambient_occlusion(corpus: &Path) {
         // Rays per second of wall time (the tiles of two materials bake at once, each on every
         // core, so summed stage times would count the time twice); per vertex, of the
         // `vertices` stage.
-        let bake_seconds = if mode == "Texels" { seconds } else { report["stage_ms"]["vertices"].as_f64().unwrap_or(0.0) / 1e3 };
+        let bake_seconds =
+            if mode == "Texels" { seconds } else { report["stage_ms"]["vertices"].as_f64().unwrap_or(0.0) / 1e3 };
         println!(
             "ao: flight helmet {mode}, 6 × 1024², 256 rays: {seconds:.1} s wall{bar}, peak memory {peak_mib:.0} MiB; {:.0} texels, {:.1} M rays ({:.2} M rays/s over {bake_seconds:.1} s, {:.2} M/s/core); stage ms {}",
             sum("texels_baked"),
@@ -598,13 +625,23 @@ fn bench_ambient_occlusion(corpus: &Path) {
         );
     }
 
-    use cirrus::kinds::ambient_occlusion::bake::{bake_tile_from_vertices, bake_tile_with_rays, BakeMesh, TexelState, TileBake};
-    use cirrus::mesh::occlusion::{build_occluders, occlusion_of_vertices, Casting, OcclusionSettings, RayDistribution};
+    use cirrus::kinds::ambient_occlusion::bake::{
+        bake_tile_from_vertices, bake_tile_with_rays, BakeMesh, TexelState, TileBake,
+    };
+    use cirrus::mesh::occlusion::{
+        build_occluders, occlusion_of_vertices, Casting, OcclusionSettings, RayDistribution,
+    };
     use cirrus::mesh::rays::{build_triangle_bvh, BackFaces};
     use cirrus::mesh::uv_raster::TexelRegion;
     let mesh = flight_helmet(corpus);
     let uvs = mesh.uvs.clone().expect("the helmet has UVs");
-    let bake_mesh = BakeMesh { positions: &mesh.positions, normals: &mesh.normals, uvs: &uvs, triangles: &mesh.triangles, groups: None };
+    let bake_mesh = BakeMesh {
+        positions: &mesh.positions,
+        normals: &mesh.normals,
+        uvs: &uvs,
+        triangles: &mesh.triangles,
+        groups: None,
+    };
     let occluders = build_occluders(&mesh.positions, &mesh.triangles, None);
     let bvh = build_triangle_bvh(&mesh.positions, &mesh.triangles);
     let settings = |rays| OcclusionSettings {
@@ -614,15 +651,18 @@ fn bench_ambient_occlusion(corpus: &Path) {
         back_faces: BackFaces::PassThrough,
         ground_plane: None,
     };
-    let (low, high) = mesh.positions.iter().fold((glam::Vec3::INFINITY, glam::Vec3::NEG_INFINITY), |(low, high), &position| {
-        (low.min(position.into()), high.max(position.into()))
-    });
+    let (low, high) =
+        mesh.positions.iter().fold((glam::Vec3::INFINITY, glam::Vec3::NEG_INFINITY), |(low, high), &position| {
+            (low.min(position.into()), high.max(position.into()))
+        });
     let offset = (high - low).length() * 1e-4;
     let size = 128;
     let region = TexelRegion { x: 0, y: 0, width: size, height: size };
     let materials: Vec<Vec<u32>> = (0..mesh.materials.len() as u32)
         .map(|material| {
-            (0..mesh.triangles.len() as u32).filter(|&triangle| mesh.triangle_materials[triangle as usize] == material).collect()
+            (0..mesh.triangles.len() as u32)
+                .filter(|&triangle| mesh.triangle_materials[triangle as usize] == material)
+                .collect()
         })
         .filter(|triangles: &Vec<u32>| !triangles.is_empty())
         .collect();
@@ -630,7 +670,10 @@ fn bench_ambient_occlusion(corpus: &Path) {
         let start = Instant::now();
         let tiles = materials
             .iter()
-            .map(|own| bake_tile_with_rays(&occluders, &bake_mesh, own, size, region, &settings(rays), &cirrus::mesh::never).unwrap())
+            .map(|own| {
+                bake_tile_with_rays(&occluders, &bake_mesh, own, size, region, &settings(rays), &cirrus::mesh::never)
+                    .unwrap()
+            })
             .collect();
         (tiles, start.elapsed().as_secs_f64())
     };
@@ -729,7 +772,8 @@ fn walk_files(folder: &Path) -> Vec<std::path::PathBuf> {
 fn bench_billboards(corpus: &Path) {
     let dir = tree_project(corpus, r#"BillboardCloud(name: "oak", mesh: "trees/oak_medium.obj")"#);
     let (full, peak_mib, _) = build_process(dir.path());
-    let report: serde_json::Value = serde_json::from_slice(&std::fs::read(dir.path().join("baked/oak/report.json")).unwrap()).unwrap();
+    let report: serde_json::Value =
+        serde_json::from_slice(&std::fs::read(dir.path().join("baked/oak/report.json")).unwrap()).unwrap();
     println!(
         "billboard: oak_medium full bake (process) {:.2} s wall (bar ≤ 5 s), peak memory {:.0} MiB (bar ≤ 1536), {} planes → atlas {}x{}",
         full, peak_mib, report["planes"], report["atlas"]["width"], report["atlas"]["height"]
@@ -809,9 +853,14 @@ fn bench_billboard_quality(corpus: &Path) {
         for epsilon in [0.01, 0.02, 0.04] {
             let (dir, mut project, options) = tree_preview(corpus, tree, &format!("epsilon: {epsilon}"));
             let metrics = preview_one_level(&mut project, &options);
-            let one_sample = cirrus::kinds::billboard_cloud::lod_preview::PreviewSettings { samples_per_axis: 1, ..Default::default() };
-            let aliased =
-                preview_one_level(&mut project, &cirrus::kinds::billboard_cloud::PreviewOptions { settings: one_sample, ..options });
+            let one_sample = cirrus::kinds::billboard_cloud::lod_preview::PreviewSettings {
+                samples_per_axis: 1,
+                ..Default::default()
+            };
+            let aliased = preview_one_level(
+                &mut project,
+                &cirrus::kinds::billboard_cloud::PreviewOptions { settings: one_sample, ..options },
+            );
             let report: serde_json::Value =
                 serde_json::from_slice(&std::fs::read(dir.path().join("baked/tree/report.json")).unwrap()).unwrap();
             figures.push(format!(
@@ -830,7 +879,10 @@ fn tree_preview(
     tree: &str,
     billboard: &str,
 ) -> (tempfile::TempDir, Project, cirrus::kinds::billboard_cloud::PreviewOptions) {
-    let dir = tree_project(corpus, &format!(r#"BillboardCloud(name: "tree", mesh: "trees/{tree}.obj", billboard: ({billboard}))"#));
+    let dir = tree_project(
+        corpus,
+        &format!(r#"BillboardCloud(name: "tree", mesh: "trees/{tree}.obj", billboard: ({billboard}))"#),
+    );
     let project = Project::open(
         load_pipeline(&dir.path().join("pipeline.ron")).unwrap(),
         ProjectOptions { persistent_cache: false, ..Default::default() },
@@ -869,7 +921,8 @@ fn bench_billboard_budget(corpus: &Path) {
     use cirrus::kinds::billboard_cloud::PreviewOptions;
     for tree in ["oak_medium", "ash_small", "bush_2"] {
         let obj = std::fs::read(corpus.join(format!("trees/{tree}.obj"))).unwrap();
-        let (mesh, _) = cirrus::mesh::load_mesh(Path::new("tree.obj"), &obj, &Default::default(), Path::new("")).unwrap();
+        let (mesh, _) =
+            cirrus::mesh::load_mesh(Path::new("tree.obj"), &obj, &Default::default(), Path::new("")).unwrap();
         let quads_at = |epsilon: f32| {
             let planes = select_planes(
                 &mesh.positions,
@@ -894,7 +947,8 @@ fn bench_billboard_budget(corpus: &Path) {
             }
             let epsilon_alone = high.exp();
             let mut row = format!("{quads} quads:");
-            for (label, settings) in [("budget", format!("budget: Some(Quads({quads}))")), ("ε alone", format!("epsilon: {epsilon_alone}"))]
+            for (label, settings) in
+                [("budget", format!("budget: Some(Quads({quads}))")), ("ε alone", format!("epsilon: {epsilon_alone}"))]
             {
                 let (dir, mut project, options) = tree_preview(corpus, tree, &settings);
                 let metrics = preview_one_level(&mut project, &options);
@@ -902,7 +956,8 @@ fn bench_billboard_budget(corpus: &Path) {
                     serde_json::from_slice(&std::fs::read(dir.path().join("baked/tree/report.json")).unwrap()).unwrap();
                 // The mean error in preview pixels: the views frame the bounding sphere (2R) in
                 // their 256 pixels.
-                let mean_error_radii = report["mean_error_world"].as_f64().unwrap_or(0.0) / report["epsilon_world"].as_f64().unwrap_or(1.0)
+                let mean_error_radii = report["mean_error_world"].as_f64().unwrap_or(0.0)
+                    / report["epsilon_world"].as_f64().unwrap_or(1.0)
                     * report["epsilon"].as_f64().unwrap_or(0.0);
                 row.push_str(&format!(
                     " {label} IoU {:.3} (missed {:.3}, extra {:.3}; {} quads, {} planes, ε {:.4}, mean error {:.4} R = {:.2} px, planes stage {:.0} ms)",
@@ -937,7 +992,10 @@ fn bench_billboard_budget(corpus: &Path) {
             }
             figures.push(row);
         }
-        println!("billboard-budget: {tree} (the source against itself moved 1 pixel: IoU {source_shift_iou:.3}): {}", figures.join(" "));
+        println!(
+            "billboard-budget: {tree} (the source against itself moved 1 pixel: IoU {source_shift_iou:.3}): {}",
+            figures.join(" ")
+        );
     }
 }
 
@@ -949,7 +1007,10 @@ fn bench_billboard_chain(corpus: &Path) {
     for tree in ["oak_medium", "ash_small", "bush_2"] {
         let single = tree_project(corpus, &format!(r#"BillboardCloud(name: "tree", mesh: "trees/{tree}.obj")"#));
         let (single_seconds, single_mib, _) = build_process(single.path());
-        let chain = tree_project(corpus, &format!(r#"BillboardCloud(name: "tree", mesh: "trees/{tree}.obj", billboard: ({CHAIN}))"#));
+        let chain = tree_project(
+            corpus,
+            &format!(r#"BillboardCloud(name: "tree", mesh: "trees/{tree}.obj", billboard: ({CHAIN}))"#),
+        );
         let (chain_seconds, chain_mib, _) = build_process(chain.path());
         let report: serde_json::Value =
             serde_json::from_slice(&std::fs::read(chain.path().join("baked/tree/report.json")).unwrap()).unwrap();
@@ -1037,8 +1098,11 @@ fn bench_project(label: &str, source: &Path, glob: &str) {
     let dir = tempfile::tempdir().expect("temporary folder");
     std::os::unix::fs::symlink(source, dir.path().join("assets")).expect("link sources");
     let pipeline = dir.path().join("pipeline.ron");
-    std::fs::write(&pipeline, format!(r#"Pipeline(source: "assets", output: "baked", rules: [(glob: "{glob}", kind: Material)])"#))
-        .unwrap();
+    std::fs::write(
+        &pipeline,
+        format!(r#"Pipeline(source: "assets", output: "baked", rules: [(glob: "{glob}", kind: Material)])"#),
+    )
+    .unwrap();
     let open = || Project::open(load_pipeline(&pipeline).expect("pipeline"), ProjectOptions::default());
 
     let mut project = open();
@@ -1053,7 +1117,10 @@ fn bench_project(label: &str, source: &Path, glob: &str) {
     let start = Instant::now();
     let warm = open().build(&BuildOptions::default(), &|_| {}).expect("build");
     let restart = start.elapsed().as_secs_f64();
-    assert!(warm.assets.iter().all(|asset| asset.stages.iter().all(|stage| stage.status == cirrus::summary::StageStatus::Cached)));
+    assert!(warm
+        .assets
+        .iter()
+        .all(|asset| asset.stages.iter().all(|stage| stage.status == cirrus::summary::StageStatus::Cached)));
 
     // The raw encoder on the same packed surfaces (mips prepared outside the timing).
     let mut chains = Vec::new();
@@ -1071,11 +1138,15 @@ fn bench_project(label: &str, source: &Path, glob: &str) {
                 let format: BlockFormat = serde_json::from_value(surface["format"].clone()).unwrap();
                 let alpha = surface["alpha_tested"].as_bool().unwrap();
                 let levels = mip_chain(&texture, MipSettings { kind, alpha_cutoff: alpha.then_some(0.5) });
-                chains.push((levels, BlockEncodeSettings { format, quality: EncodeQuality::Basic, alpha, srgb: kind.is_srgb() }));
+                chains.push((
+                    levels,
+                    BlockEncodeSettings { format, quality: EncodeQuality::Basic, alpha, srgb: kind.is_srgb() },
+                ));
             }
         }
     }
-    let texels: f64 = chains.iter().flat_map(|(levels, _)| levels.iter().map(|level| (level.width * level.height) as f64)).sum();
+    let texels: f64 =
+        chains.iter().flat_map(|(levels, _)| levels.iter().map(|level| (level.width * level.height) as f64)).sum();
     let start = Instant::now();
     for (levels, settings) in &chains {
         for level in levels {
@@ -1086,14 +1157,25 @@ fn bench_project(label: &str, source: &Path, glob: &str) {
     let bake_rate = texels / full / 1e6;
     let raw_rate = texels / raw / 1e6;
     println!("{label}: {} surfaces, {:.1} Mpix encoded (all mip levels)", chains.len(), texels / 1e6);
-    println!("  full bake        {:>8.1} ms  {bake_rate:>6.2} Mpix/s (decode + pack + mips + encode + write)", full * 1e3);
+    println!(
+        "  full bake        {:>8.1} ms  {bake_rate:>6.2} Mpix/s (decode + pack + mips + encode + write)",
+        full * 1e3
+    );
     println!(
         "  raw encoder      {:>8.1} ms  {raw_rate:>6.2} Mpix/s (the encoders directly on the same levels: intel_tex_2, cirrus's BC1 refinement and BC4)",
         raw * 1e3
     );
     println!("  bake / raw       {:>8.2} ×   (bar ≥ 0.8)", bake_rate / raw_rate);
-    println!("  no-op rebuild    {:>8.1} ms  {:>6.1} % of the full bake (bar ≤ 5 %)", no_op * 1e3, 100.0 * no_op / full);
-    println!("  warm restart     {:>8.1} ms  {:>6.1} % of the full bake (bar ≤ 5 %)", restart * 1e3, 100.0 * restart / full);
+    println!(
+        "  no-op rebuild    {:>8.1} ms  {:>6.1} % of the full bake (bar ≤ 5 %)",
+        no_op * 1e3,
+        100.0 * no_op / full
+    );
+    println!(
+        "  warm restart     {:>8.1} ms  {:>6.1} % of the full bake (bar ≤ 5 %)",
+        restart * 1e3,
+        100.0 * restart / full
+    );
 }
 
 /// The raw encoder: `intel_tex_2` over the whole level in parallel strips of 8 block rows, no
@@ -1108,7 +1190,8 @@ fn raw_encode_level(level: &Texture, settings: BlockEncodeSettings) -> Vec<u8> {
     let mut padded = Vec::with_capacity(blocks_x * 4 * blocks_y * 4 * channels);
     for y in 0..blocks_y * 4 {
         for x in 0..blocks_x * 4 {
-            let source = ((y.min(level.height as usize - 1) * level.width as usize) + x.min(level.width as usize - 1)) * 4;
+            let source =
+                ((y.min(level.height as usize - 1) * level.width as usize) + x.min(level.width as usize - 1)) * 4;
             padded.extend_from_slice(&level.pixels[source..source + channels]);
         }
     }
@@ -1121,27 +1204,46 @@ fn raw_encode_level(level: &Texture, settings: BlockEncodeSettings) -> Vec<u8> {
         output.par_chunks_mut(block_size).enumerate().for_each(|(block, bytes)| {
             let (bx, by) = (block % blocks_x, block / blocks_x);
             for (channel, bytes) in bytes.chunks_exact_mut(8).enumerate() {
-                let values: [u8; 16] =
-                    std::array::from_fn(|texel| padded[((by * 4 + texel / 4) * blocks_x * 4 + bx * 4 + texel % 4) * channels + channel]);
+                let values: [u8; 16] = std::array::from_fn(|texel| {
+                    padded[((by * 4 + texel / 4) * blocks_x * 4 + bx * 4 + texel % 4) * channels + channel]
+                });
                 bytes.copy_from_slice(&cirrus::texture::bc4::encode_bc4_block(&values, search));
             }
         });
         return output;
     }
-    let bc7 = if settings.alpha { intel_tex_2::bc7::alpha_basic_settings() } else { intel_tex_2::bc7::opaque_basic_settings() };
+    let bc7 = if settings.alpha {
+        intel_tex_2::bc7::alpha_basic_settings()
+    } else {
+        intel_tex_2::bc7::opaque_basic_settings()
+    };
     output.par_chunks_mut(block_row_bytes * 8).zip(padded.par_chunks(row_bytes * 32)).for_each(|(blocks, data)| {
         let (width, height, stride) = ((blocks_x * 4) as u32, (data.len() / row_bytes) as u32, row_bytes as u32);
         match settings.format {
-            BlockFormat::Bc1 => intel_tex_2::bc1::compress_blocks_into(&intel_tex_2::RgbaSurface { data, width, height, stride }, blocks),
-            BlockFormat::Bc3 => intel_tex_2::bc3::compress_blocks_into(&intel_tex_2::RgbaSurface { data, width, height, stride }, blocks),
-            BlockFormat::Bc4 => intel_tex_2::bc4::compress_blocks_into(&intel_tex_2::RSurface { data, width, height, stride }, blocks),
-            BlockFormat::Bc5 => intel_tex_2::bc5::compress_blocks_into(&intel_tex_2::RgSurface { data, width, height, stride }, blocks),
-            BlockFormat::Bc7 => {
-                intel_tex_2::bc7::compress_blocks_into(&bc7, &intel_tex_2::RgbaSurface { data, width, height, stride }, blocks)
+            BlockFormat::Bc1 => intel_tex_2::bc1::compress_blocks_into(
+                &intel_tex_2::RgbaSurface { data, width, height, stride },
+                blocks,
+            ),
+            BlockFormat::Bc3 => intel_tex_2::bc3::compress_blocks_into(
+                &intel_tex_2::RgbaSurface { data, width, height, stride },
+                blocks,
+            ),
+            BlockFormat::Bc4 => {
+                intel_tex_2::bc4::compress_blocks_into(&intel_tex_2::RSurface { data, width, height, stride }, blocks)
             }
+            BlockFormat::Bc5 => {
+                intel_tex_2::bc5::compress_blocks_into(&intel_tex_2::RgSurface { data, width, height, stride }, blocks)
+            }
+            BlockFormat::Bc7 => intel_tex_2::bc7::compress_blocks_into(
+                &bc7,
+                &intel_tex_2::RgbaSurface { data, width, height, stride },
+                blocks,
+            ),
         }
     });
-    if settings.format == BlockFormat::Bc1 && !matches!(settings.quality, EncodeQuality::UltraFast | EncodeQuality::VeryFast) {
+    if settings.format == BlockFormat::Bc1
+        && !matches!(settings.quality, EncodeQuality::UltraFast | EncodeQuality::VeryFast)
+    {
         // cirrus's refinement of each block, as the bake runs it.
         output.par_chunks_mut(8).enumerate().for_each(|(block, bytes)| {
             let (bx, by) = (block % blocks_x, block / blocks_x);
@@ -1185,7 +1287,10 @@ fn bench_height(repository: &Path) {
     ];
     for (label, folder, name) in pairs {
         if !folder.join(format!("{name}_low.obj")).is_file() {
-            println!("height: {label}: no pair in {}: make it with the second command in tools/make_height_pair.py", folder.display());
+            println!(
+                "height: {label}: no pair in {}: make it with the second command in tools/make_height_pair.py",
+                folder.display()
+            );
             continue;
         }
         let dir = tempfile::tempdir().expect("temporary folder");
@@ -1202,11 +1307,14 @@ fn bench_height(repository: &Path) {
         .unwrap();
         let (seconds, peak_mib, summary) = build_process(dir.path());
         assert_eq!(summary["assets"][0]["status"], "ok", "{summary}");
-        let report: serde_json::Value = serde_json::from_slice(&std::fs::read(dir.path().join("baked/pair/report.json")).unwrap()).unwrap();
+        let report: serde_json::Value =
+            serde_json::from_slice(&std::fs::read(dir.path().join("baked/pair/report.json")).unwrap()).unwrap();
         let distance = &report["distance"];
         let figure = |mesh: &str, what: &str| distance[mesh][what].as_f64().unwrap_or(f64::NAN);
-        let (rms_ratio, hausdorff_ratio) =
-            (figure("pn_displaced", "rms") / figure("low", "rms"), figure("pn_displaced", "hausdorff") / figure("low", "hausdorff"));
+        let (rms_ratio, hausdorff_ratio) = (
+            figure("pn_displaced", "rms") / figure("low", "rms"),
+            figure("pn_displaced", "hausdorff") / figure("low", "hausdorff"),
+        );
         let met = |ratio: f64, bar: f64| if ratio <= bar { "met" } else { "MISSED" };
         println!(
             "height: {label}: RMS low {:.5} / PN {:.5} / PN+displaced {:.5} ({:.3}× low, bar ≤ 0.25: {}); Hausdorff low {:.5} / PN {:.5} / PN+displaced {:.5} ({:.3}× low, bar ≤ 0.5: {}) (over the high diagonal, {} samples each way)",
@@ -1252,11 +1360,14 @@ fn bench_isa(corpus: &Path) {
     let dir = tree_project(corpus, r#"BillboardCloud(name: "oak", mesh: "trees/oak_medium.obj")"#);
     let (seconds, _, _) = build_process(dir.path());
     println!("isa: oak full bake at {cpu} (process) {seconds:.2} s (to make the surfaces)");
-    let report: serde_json::Value = serde_json::from_slice(&std::fs::read(dir.path().join("baked/oak/report.json")).unwrap()).unwrap();
+    let report: serde_json::Value =
+        serde_json::from_slice(&std::fs::read(dir.path().join("baked/oak/report.json")).unwrap()).unwrap();
     let mut surfaces = Vec::new();
     for surface in report["surfaces"].as_array().unwrap() {
         let name = surface["surface"].as_str().unwrap().to_string();
-        let image = image::open(dir.path().join("baked/oak").join(format!("{}.png", name.to_lowercase()))).unwrap().into_rgba8();
+        let image = image::open(dir.path().join("baked/oak").join(format!("{}.png", name.to_lowercase())))
+            .unwrap()
+            .into_rgba8();
         let texture = Texture::new(image.width(), image.height(), image.into_raw());
         let kind = match name.as_str() {
             "Albedo" => SurfaceKind::Albedo,
@@ -1302,8 +1413,11 @@ fn bench_isa(corpus: &Path) {
             walls.push(seconds);
             // From the summary: the report keeps the timings of the build that last changed it.
             let mut stage_ms = std::collections::BTreeMap::<String, f64>::new();
-            for stage in summary["assets"][0]["stages"].as_array().unwrap().iter().filter(|stage| stage["status"] == "ran") {
-                *stage_ms.entry(stage["stage"].as_str().unwrap().to_string()).or_default() += stage["ms"].as_f64().unwrap();
+            for stage in
+                summary["assets"][0]["stages"].as_array().unwrap().iter().filter(|stage| stage["status"] == "ran")
+            {
+                *stage_ms.entry(stage["stage"].as_str().unwrap().to_string()).or_default() +=
+                    stage["ms"].as_f64().unwrap();
             }
             stages = ["encode", "render", "mips"]
                 .map(|stage| format!("{stage} {:.0} ms", stage_ms.get(stage).copied().unwrap_or(0.0)))
@@ -1478,7 +1592,11 @@ fn bench_oak_bake(corpus: &Path) {
             let mean = |value: fn(&ProcessFigures) -> f64| runs.iter().map(value).sum::<f64>() / runs.len() as f64;
             let mut stages = std::collections::BTreeMap::<String, f64>::new();
             for run in runs {
-                for stage in run.summary["assets"][0]["stages"].as_array().expect("stages").iter().filter(|stage| stage["status"] == "ran")
+                for stage in run.summary["assets"][0]["stages"]
+                    .as_array()
+                    .expect("stages")
+                    .iter()
+                    .filter(|stage| stage["status"] == "ran")
                 {
                     *stages.entry(stage["stage"].as_str().expect("stage").to_string()).or_default() +=
                         stage["ms"].as_f64().unwrap_or(0.0) / runs.len() as f64;
@@ -1499,16 +1617,26 @@ fn bench_oak_bake(corpus: &Path) {
     // Fidelity of what each build baked (native), from its own preview.
     for (name, binary) in &binaries {
         cold_bake(binary, dir.path(), &[]);
-        let preview =
-            std::process::Command::new(binary).args(["preview", "--asset", "oak"]).current_dir(dir.path()).output().expect("preview");
+        let preview = std::process::Command::new(binary)
+            .args(["preview", "--asset", "oak"])
+            .current_dir(dir.path())
+            .output()
+            .expect("preview");
         let metrics: serde_json::Value = std::fs::read(dir.path().join("baked/oak/preview/metrics.json"))
             .ok()
             .and_then(|bytes| serde_json::from_slice(&bytes).ok())
-            .unwrap_or_else(|| panic!("{name}'s preview wrote no metrics: {}", String::from_utf8_lossy(&preview.stderr)));
+            .unwrap_or_else(|| {
+                panic!("{name}'s preview wrote no metrics: {}", String::from_utf8_lossy(&preview.stderr))
+            });
         let report: serde_json::Value =
-            serde_json::from_slice(&std::fs::read(dir.path().join("baked/oak/report.json")).expect("report")).expect("JSON");
-        let albedo =
-            report["surfaces"].as_array().expect("surfaces").iter().find(|surface| surface["surface"] == "Albedo").expect("albedo");
+            serde_json::from_slice(&std::fs::read(dir.path().join("baked/oak/report.json")).expect("report"))
+                .expect("JSON");
+        let albedo = report["surfaces"]
+            .as_array()
+            .expect("surfaces")
+            .iter()
+            .find(|surface| surface["surface"] == "Albedo")
+            .expect("albedo");
         println!(
             "oak-bake: {name}: mean IoU {:.4} (26 views), mean PSNR {:.2} dB; albedo PSNR {} dB (all texels, RGBA), visible {} dB (RGB where the alpha test passes), alpha-test IoU {}",
             metrics["mean_iou"].as_f64().unwrap_or(f64::NAN),

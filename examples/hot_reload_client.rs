@@ -41,7 +41,11 @@ fn follow(mut stream: TcpStream, since: &mut Option<u64>) -> std::io::Result<()>
                 *since = event["revision"].as_u64();
                 println!("batch r{} ({} ms)", event["revision"], event["ms"]);
                 for changed in event["changed"].as_array().into_iter().flatten() {
-                    println!("  reload {} ({})", changed["path"].as_str().unwrap_or("?"), &changed["hash"].as_str().unwrap_or("?")[..12]);
+                    println!(
+                        "  reload {} ({})",
+                        changed["path"].as_str().unwrap_or("?"),
+                        &changed["hash"].as_str().unwrap_or("?")[..12]
+                    );
                 }
                 for removed in event["removed"].as_array().into_iter().flatten() {
                     println!("  removed {}", removed.as_str().unwrap_or("?"));

@@ -75,10 +75,12 @@ struct Camera {
 impl Camera {
     fn view_projection(&self, center: [f32; 3], radius: f32) -> [[f32; 4]; 4] {
         let (center, radius) = (Vec3::from(center), radius.max(1e-6));
-        let direction = Vec3::new(self.pitch.cos() * self.yaw.sin(), self.pitch.sin(), self.pitch.cos() * self.yaw.cos());
+        let direction =
+            Vec3::new(self.pitch.cos() * self.yaw.sin(), self.pitch.sin(), self.pitch.cos() * self.yaw.cos());
         let view = glam::camera::rh::view::look_at_mat4(center + direction * 2.0 * radius, center, Vec3::Y);
         let extent = radius / self.zoom;
-        (glam::camera::rh::proj::directx::orthographic(-extent, extent, -extent, extent, 0.5 * radius, 3.5 * radius) * view)
+        (glam::camera::rh::proj::directx::orthographic(-extent, extent, -extent, extent, 0.5 * radius, 3.5 * radius)
+            * view)
             .to_cols_array_2d()
     }
 }
@@ -100,7 +102,8 @@ struct Scene {
 impl Scene {
     fn load(options: &Options) -> Result<Scene, String> {
         let alpha_cutoff = options.alpha_cutoff.unwrap_or_else(|| report_alpha_cutoff(&options.folder).unwrap_or(0.5));
-        let levels = (0..10).take_while(|level| options.folder.join(format!("lod{level}/lod.obj")).is_file()).count() as u32;
+        let levels =
+            (0..10).take_while(|level| options.folder.join(format!("lod{level}/lod.obj")).is_file()).count() as u32;
         if options.lod > 0 && options.lod >= levels {
             return Err(format!("{} has no LOD level {}", options.folder.display(), options.lod));
         }
@@ -126,7 +129,9 @@ impl Scene {
     fn shows_any(&self, files: &[String]) -> bool {
         let shown = level_folder(Path::new(""), self.levels, self.level);
         // A name without a folder in a chain is the resync marker, which touches every level.
-        files.iter().any(|file| Path::new(file).parent().is_none_or(|parent| parent.as_os_str().is_empty() || parent == shown))
+        files
+            .iter()
+            .any(|file| Path::new(file).parent().is_none_or(|parent| parent.as_os_str().is_empty() || parent == shown))
     }
 
     /// What a key does: R reloads, a digit shows that level of the chain; `None` for other keys.
@@ -256,7 +261,8 @@ fn write_screenshot(gpu: &Gpu, scene: &Scene, size: u32, path: &Path, what: &str
         texel[3] = 255;
     }
     let png = cirrus::texture::preview::preview_png(&cirrus::texture::Texture::new(size, size, pixels));
-    cirrus::artifacts::write_if_changed(path, &png).map_err(|error| format!("cannot write {}: {error}", path.display()))?;
+    cirrus::artifacts::write_if_changed(path, &png)
+        .map_err(|error| format!("cannot write {}: {error}", path.display()))?;
     let quads = scene.mesh.batches.iter().map(|(_, vertices)| vertices.len() / 6).sum::<usize>();
     let coverage = 100.0 * covered as f64 / (size as f64 * size as f64);
     let level = if scene.levels > 0 { format!("lod{} of {}, ", scene.level, scene.levels) } else { String::new() };
@@ -283,7 +289,12 @@ fn follow_server(address: &str, folder: &Path, deliver: &mut dyn FnMut(ViewerEve
 }
 
 /// One connection's events; false when `deliver` refused one.
-fn follow_connection(mut stream: TcpStream, folder: &Path, since: &mut Option<u64>, deliver: &mut dyn FnMut(ViewerEvent) -> bool) -> bool {
+fn follow_connection(
+    mut stream: TcpStream,
+    folder: &Path,
+    since: &mut Option<u64>,
+    deliver: &mut dyn FnMut(ViewerEvent) -> bool,
+) -> bool {
     let request = serde_json::json!({ "type": "subscribe", "since": *since });
     if stream.write_all(format!("{request}\n").as_bytes()).is_err() {
         return true;
@@ -332,7 +343,11 @@ fn follow_connection(mut stream: TcpStream, folder: &Path, since: &mut Option<u6
                     .filter(|failed| failed["asset"].as_str().is_some_and(|asset| folder.ends_with(asset)))
                     .map(|failed| {
                         let line = failed["line"].as_u64().map(|line| format!(":{line}")).unwrap_or_default();
-                        format!("{}{line}: {}", failed["file"].as_str().unwrap_or("?"), failed["message"].as_str().unwrap_or("?"))
+                        format!(
+                            "{}{line}: {}",
+                            failed["file"].as_str().unwrap_or("?"),
+                            failed["message"].as_str().unwrap_or("?")
+                        )
                     })
                     .collect();
                 if !messages.is_empty() {
@@ -353,16 +368,22 @@ fn follow_connection(mut stream: TcpStream, folder: &Path, since: &mut Option<u6
 }
 
 /// The windowed viewer: winit's event loop, with reload events from the connection thread.
-fn run_window(gpu: &'static Gpu, scene: Scene, options: &Options, report: &mut dyn FnMut(String)) -> Result<(), String> {
-    let event_loop = winit::event_loop::EventLoop::<ViewerEvent>::with_user_event()
-        .build()
-        .map_err(|error| format!("cannot open a window ({error}); on a machine without a display use --headless --screenshot FILE"))?;
+fn run_window(
+    gpu: &'static Gpu,
+    scene: Scene,
+    options: &Options,
+    report: &mut dyn FnMut(String),
+) -> Result<(), String> {
+    let event_loop = winit::event_loop::EventLoop::<ViewerEvent>::with_user_event().build().map_err(|error| {
+        format!("cannot open a window ({error}); on a machine without a display use --headless --screenshot FILE")
+    })?;
     if let Some(address) = options.connect.clone() {
         let proxy = event_loop.create_proxy();
         let folder = options.folder.clone();
         std::thread::spawn(move || follow_server(&address, &folder, &mut |event| proxy.send_event(event).is_ok()));
     }
-    let mut app = WindowApp { gpu, scene, window: None, surface: None, drag_from: None, cursor: (0.0, 0.0), error: None, report };
+    let mut app =
+        WindowApp { gpu, scene, window: None, surface: None, drag_from: None, cursor: (0.0, 0.0), error: None, report };
     event_loop.run_app(&mut app).map_err(|error| error.to_string())?;
     app.error.map_or(Ok(()), Err)
 }
@@ -415,7 +436,11 @@ impl winit::application::ApplicationHandler<ViewerEvent> for WindowApp<'_> {
     fn user_event(&mut self, _event_loop: &winit::event_loop::ActiveEventLoop, event: ViewerEvent) {
         let status = match event {
             ViewerEvent::Reload { revision, files } if !self.scene.shows_any(&files) => {
-                (self.report)(format!("r{revision}: {} changed, not the level shown (lod{})", files.join(", "), self.scene.level));
+                (self.report)(format!(
+                    "r{revision}: {} changed, not the level shown (lod{})",
+                    files.join(", "),
+                    self.scene.level
+                ));
                 format!("r{revision}")
             }
             ViewerEvent::Reload { revision, files } => match self.scene.reload() {
@@ -451,18 +476,20 @@ impl winit::application::ApplicationHandler<ViewerEvent> for WindowApp<'_> {
         let Some(window) = self.window.clone() else { return };
         match event {
             WindowEvent::CloseRequested => event_loop.exit(),
-            WindowEvent::KeyboardInput { event, .. } if event.state == ElementState::Pressed => match event.logical_key.as_ref() {
-                Key::Named(NamedKey::Escape) => event_loop.exit(),
-                Key::Character(key) => match self.scene.press(key) {
-                    Some(Ok(what)) => {
-                        window.set_title(&self.title(&what));
-                        window.request_redraw();
-                    }
-                    Some(Err(error)) => (self.report)(error),
-                    None => {}
-                },
-                _ => {}
-            },
+            WindowEvent::KeyboardInput { event, .. } if event.state == ElementState::Pressed => {
+                match event.logical_key.as_ref() {
+                    Key::Named(NamedKey::Escape) => event_loop.exit(),
+                    Key::Character(key) => match self.scene.press(key) {
+                        Some(Ok(what)) => {
+                            window.set_title(&self.title(&what));
+                            window.request_redraw();
+                        }
+                        Some(Err(error)) => (self.report)(error),
+                        None => {}
+                    },
+                    _ => {}
+                }
+            }
             WindowEvent::Resized(size) => {
                 if let Some(surface) = &mut self.surface {
                     self.gpu.resize_window_surface(surface, size.width, size.height);
@@ -477,7 +504,8 @@ impl winit::application::ApplicationHandler<ViewerEvent> for WindowApp<'_> {
                 if let Some(((x0, y0), camera)) = self.drag_from {
                     let height = window.inner_size().height.max(1) as f64;
                     self.scene.camera.yaw = camera.yaw - (3.0 * (position.x - x0) / height) as f32;
-                    self.scene.camera.pitch = (camera.pitch + (3.0 * (position.y - y0) / height) as f32).clamp(-1.5, 1.5);
+                    self.scene.camera.pitch =
+                        (camera.pitch + (3.0 * (position.y - y0) / height) as f32).clamp(-1.5, 1.5);
                     window.request_redraw();
                 }
             }

@@ -141,10 +141,13 @@ pub fn record_artifact(
     hash: &str,
     meaning: Option<&serde_json::Value>,
 ) -> bool {
-    let unchanged =
-        manifest.artifacts.get(path).is_some_and(|entry| entry.hash == hash && entry.asset == asset && entry.meaning.as_ref() == meaning);
+    let unchanged = manifest
+        .artifacts
+        .get(path)
+        .is_some_and(|entry| entry.hash == hash && entry.asset == asset && entry.meaning.as_ref() == meaning);
     if !unchanged {
-        let entry = ManifestEntry { asset: asset.to_string(), hash: hash.to_string(), revision, meaning: meaning.cloned() };
+        let entry =
+            ManifestEntry { asset: asset.to_string(), hash: hash.to_string(), revision, meaning: meaning.cloned() };
         manifest.artifacts.insert(path.to_string(), entry);
     }
     !unchanged
@@ -155,8 +158,13 @@ pub fn record_artifact(
 /// when it lies inside the output folder and the file there is the one cirrus wrote (its blake3
 /// matches the entry). Any other entry is dropped from the manifest with a warning, its file
 /// left alone.
-pub fn remove_artifacts(config: &PipelineConfig, manifest: &mut Manifest, doomed: impl Fn(&str, &ManifestEntry) -> bool) -> Vec<String> {
-    let paths: Vec<String> = manifest.artifacts.iter().filter(|(path, entry)| doomed(path, entry)).map(|(path, _)| path.clone()).collect();
+pub fn remove_artifacts(
+    config: &PipelineConfig,
+    manifest: &mut Manifest,
+    doomed: impl Fn(&str, &ManifestEntry) -> bool,
+) -> Vec<String> {
+    let paths: Vec<String> =
+        manifest.artifacts.iter().filter(|(path, entry)| doomed(path, entry)).map(|(path, _)| path.clone()).collect();
     let mut removed = Vec::new();
     for path in paths {
         let Some(entry) = manifest.artifacts.remove(&path) else { continue };

@@ -12,7 +12,11 @@ use crate::config::load_pipeline;
 use crate::project::{BuildOptions, Progress, Project, ProjectOptions};
 
 #[derive(Debug, Parser)]
-#[command(name = "cirrus", version, about = "Incremental asset pipeline: billboard-cloud LODs and baked, block-compressed materials")]
+#[command(
+    name = "cirrus",
+    version,
+    about = "Incremental asset pipeline: billboard-cloud LODs and baked, block-compressed materials"
+)]
 pub struct Cli {
     /// More log output (-v: info, -vv: debug, -vvv: trace). RUST_LOG overrides it.
     #[arg(short, long, action = clap::ArgAction::Count, global = true)]
@@ -163,7 +167,8 @@ fn parse_byte_size(text: &str) -> Result<u64, String> {
         Some((at, 't' | 'T')) => (&text[..at], 40),
         _ => (text, 0),
     };
-    let value: u64 = digits.trim().parse().map_err(|_| format!("`{text}` is not a size in bytes (e.g. 1048576, 500M, 2G)"))?;
+    let value: u64 =
+        digits.trim().parse().map_err(|_| format!("`{text}` is not a size in bytes (e.g. 1048576, 500M, 2G)"))?;
     value.checked_mul(1 << shift).ok_or_else(|| format!("`{text}` is too large"))
 }
 
@@ -210,7 +215,12 @@ pub fn init_logging(verbose: u8) {
     // Colour only for a person at a terminal: logs redirected to a file or a pipe stay plain
     // text (and `NO_COLOR` turns colour off anywhere).
     let ansi = std::io::stderr().is_terminal() && std::env::var_os("NO_COLOR").is_none();
-    let _ = tracing_subscriber::fmt().with_env_filter(filter).with_writer(std::io::stderr).with_target(false).with_ansi(ansi).try_init();
+    let _ = tracing_subscriber::fmt()
+        .with_env_filter(filter)
+        .with_writer(std::io::stderr)
+        .with_target(false)
+        .with_ansi(ansi)
+        .try_init();
 }
 
 /// Set when a write to standard output failed (a full disk, `/dev/full`, a closed pipe): said
@@ -254,8 +264,11 @@ fn ignore_file_size_signal() {
 }
 
 /// The environment variables that stand for flags, and the flag each stands for.
-const FLAG_VARIABLES: [(&str, &str); 3] =
-    [("CIRRUS_ISA", "--isa"), ("CIRRUS_REMOTE_CACHE", "--remote-cache"), ("CIRRUS_REMOTE_CACHE_MODE", "--remote-cache-mode")];
+const FLAG_VARIABLES: [(&str, &str); 3] = [
+    ("CIRRUS_ISA", "--isa"),
+    ("CIRRUS_REMOTE_CACHE", "--remote-cache"),
+    ("CIRRUS_REMOTE_CACHE_MODE", "--remote-cache-mode"),
+];
 
 /// The command line, or the usage exit status after saying why not. A flag's environment
 /// variable set to nothing (`CIRRUS_ISA=`, often an unset shell variable passed on) is refused
@@ -292,7 +305,10 @@ fn configure_threads() {
             cores
         }
         Some(Err(_)) => {
-            tracing::warn!("RAYON_NUM_THREADS={:?} is not a number of threads: cirrus works on {cores} threads", asked.unwrap_or_default());
+            tracing::warn!(
+                "RAYON_NUM_THREADS={:?} is not a number of threads: cirrus works on {cores} threads",
+                asked.unwrap_or_default()
+            );
             cores
         }
     };
@@ -329,8 +345,11 @@ fn run_command(cli: Cli) -> ExitCode {
         }
         Command::Graph { pipeline, asset, format } => graph(pipeline, asset, format, options),
         Command::Preview { pipeline, asset, views, size, samples, out, lod, stand_in } => {
-            let settings =
-                crate::kinds::billboard_cloud::lod_preview::PreviewSettings { views: views as usize, size, samples_per_axis: samples };
+            let settings = crate::kinds::billboard_cloud::lod_preview::PreviewSettings {
+                views: views as usize,
+                size,
+                samples_per_axis: samples,
+            };
             preview(pipeline, asset, settings, out, lod, stand_in, options)
         }
     }
@@ -352,7 +371,9 @@ fn build(pipeline: PathBuf, assets: Vec<String>, format: SummaryFormat, options:
     // A shared cache on S3 with an endpoint no client can use is a configuration error: the
     // build would otherwise run without the cache it was told to use.
     let remote = options.remote_cache.apply(config.remote_cache.as_ref());
-    if let Some(settings) = remote.filter(|settings| matches!(settings.location, crate::cache::remote::RemoteLocation::S3 { .. })) {
+    if let Some(settings) =
+        remote.filter(|settings| matches!(settings.location, crate::cache::remote::RemoteLocation::S3 { .. }))
+    {
         if let Err(why) = crate::cache::remote::check_endpoint_environment() {
             eprintln!("error: shared cache {}: {why}", settings.url);
             return ExitCode::from(EXIT_USAGE);
@@ -364,7 +385,8 @@ fn build(pipeline: PathBuf, assets: Vec<String>, format: SummaryFormat, options:
     let bar = std::io::stderr().is_terminal().then(|| {
         let bar = indicatif::ProgressBar::new(1000);
         bar.set_style(
-            indicatif::ProgressStyle::with_template("{spinner} [{elapsed_precise}] {bar:30} {wide_msg}").expect("valid progress template"),
+            indicatif::ProgressStyle::with_template("{spinner} [{elapsed_precise}] {bar:30} {wide_msg}")
+                .expect("valid progress template"),
         );
         bar
     });
@@ -421,10 +443,15 @@ fn check(pipeline: PathBuf, only: &[String], json: bool) -> ExitCode {
     };
     // Warnings are printed but do not fail the check: the bake goes ahead past them.
     let checked = problems.iter().filter(|(asset, _)| asset != "rules").count();
-    let failed = problems.iter().filter(|(_, diagnostics)| diagnostics.iter().any(|diagnostic| !diagnostic.is_warning())).count();
+    let failed = problems
+        .iter()
+        .filter(|(_, diagnostics)| diagnostics.iter().any(|diagnostic| !diagnostic.is_warning()))
+        .count();
     let warned = problems
         .iter()
-        .filter(|(_, diagnostics)| !diagnostics.is_empty() && diagnostics.iter().all(crate::diagnostic::Diagnostic::is_warning))
+        .filter(|(_, diagnostics)| {
+            !diagnostics.is_empty() && diagnostics.iter().all(crate::diagnostic::Diagnostic::is_warning)
+        })
         .count();
     if json {
         let assets: Vec<serde_json::Value> = problems
@@ -534,7 +561,12 @@ fn preview(
     }
 }
 
-fn graph(pipeline: PathBuf, asset: Option<String>, format: crate::graph::GraphFormat, options: ProjectOptions) -> ExitCode {
+fn graph(
+    pipeline: PathBuf,
+    asset: Option<String>,
+    format: crate::graph::GraphFormat,
+    options: ProjectOptions,
+) -> ExitCode {
     let config = match load_pipeline_or_report(&pipeline) {
         Ok(config) => config,
         Err(code) => return code,

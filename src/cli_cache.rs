@@ -20,7 +20,8 @@ pub fn run(command: CacheCommand, options: ProjectOptions) -> ExitCode {
         }),
         CacheCommand::Explain { pipeline, asset } => with_cache_folder(&pipeline, |folder, config| {
             if !config.assets.iter().any(|listed| listed.name == asset) && !last_build_names(folder).contains(&asset) {
-                let hint = crate::diagnostic::did_you_mean(&asset, config.assets.iter().map(|listed| listed.name.as_str()));
+                let hint =
+                    crate::diagnostic::did_you_mean(&asset, config.assets.iter().map(|listed| listed.name.as_str()));
                 eprintln!("error: no asset named `{asset}` in {}{hint}", display_path(&pipeline));
                 return ExitCode::from(EXIT_USAGE);
             }
@@ -30,7 +31,10 @@ pub fn run(command: CacheCommand, options: ProjectOptions) -> ExitCode {
                     ExitCode::SUCCESS
                 }
                 None => {
-                    eprintln!("error: no build has recorded `{asset}` in {} yet: run `cirrus build` first", display_path(folder));
+                    eprintln!(
+                        "error: no build has recorded `{asset}` in {} yet: run `cirrus build` first",
+                        display_path(folder)
+                    );
                     ExitCode::from(EXIT_USAGE)
                 }
             }
@@ -51,7 +55,10 @@ pub fn run(command: CacheCommand, options: ProjectOptions) -> ExitCode {
 }
 
 /// Runs `body` with the pipeline's local cache folder (`<output>/.cirrus/cache`).
-fn with_cache_folder(pipeline: &Path, body: impl FnOnce(&Path, &crate::config::PipelineConfig) -> ExitCode) -> ExitCode {
+fn with_cache_folder(
+    pipeline: &Path,
+    body: impl FnOnce(&Path, &crate::config::PipelineConfig) -> ExitCode,
+) -> ExitCode {
     let config = match load_pipeline_or_report(pipeline) {
         Ok(config) => config,
         Err(code) => return code,
@@ -148,8 +155,15 @@ pub fn explain_text(folder: &Path, asset: &str) -> Option<String> {
     let mut recorded: BTreeMap<&str, Vec<(String, Vec<String>)>> = BTreeMap::new();
     for miss in misses {
         let candidates = recorded.entry(miss.stage.as_str()).or_insert_with(|| recorded_key_parts(folder, &miss.stage));
-        let earlier: Vec<&(String, Vec<String>)> = candidates.iter().filter(|(key, _)| !missed_keys.contains(key.as_str())).collect();
-        let _ = writeln!(text, "  {} {}: {}", miss.stage, &miss.key[..16.min(miss.key.len())], nearest_difference(miss, &earlier));
+        let earlier: Vec<&(String, Vec<String>)> =
+            candidates.iter().filter(|(key, _)| !missed_keys.contains(key.as_str())).collect();
+        let _ = writeln!(
+            text,
+            "  {} {}: {}",
+            miss.stage,
+            &miss.key[..16.min(miss.key.len())],
+            nearest_difference(miss, &earlier)
+        );
     }
     Some(text)
 }
@@ -158,8 +172,10 @@ pub fn explain_text(folder: &Path, asset: &str) -> Option<String> {
 /// most parts with it (part numbers from 1; the stage name and version are parts 1 and 2).
 fn nearest_difference(miss: &Miss, candidates: &[&(String, Vec<String>)]) -> String {
     let shared = |parts: &[String]| parts.iter().zip(&miss.parts).filter(|(a, b)| a == b).count();
-    let nearest =
-        candidates.iter().filter(|(key, _)| key != &miss.key).max_by_key(|(_, parts)| (shared(parts), parts.len() == miss.parts.len()));
+    let nearest = candidates
+        .iter()
+        .filter(|(key, _)| key != &miss.key)
+        .max_by_key(|(_, parts)| (shared(parts), parts.len() == miss.parts.len()));
     let Some((key, parts)) = nearest else { return "no stored entry of this stage to compare with".to_string() };
     let mut differences = Vec::new();
     for index in 0..parts.len().max(miss.parts.len()) {
@@ -170,7 +186,11 @@ fn nearest_difference(miss: &Miss, candidates: &[&(String, Vec<String>)]) -> Str
         }
     }
     let listed = differences.len().min(4);
-    let more = if differences.len() > listed { format!(", and {} more parts", differences.len() - listed) } else { String::new() };
+    let more = if differences.len() > listed {
+        format!(", and {} more parts", differences.len() - listed)
+    } else {
+        String::new()
+    };
     format!("nearest {}: {}{more}", &key[..16.min(key.len())], differences[..listed].join("; "))
 }
 

@@ -171,17 +171,27 @@ pub fn load_pipeline(file: &Path) -> Result<PipelineConfig, ConfigError> {
     let fail = |message: String| ConfigError { diagnostics: vec![Diagnostic::new(file, message)] };
     let bytes = crate::sources::read_regular_file(file, MAX_PIPELINE_BYTES).map_err(|why| {
         // "is not a regular file", "is larger than …" read as a sentence; the rest are reasons.
-        fail(if why.starts_with("is ") { format!("the pipeline file {why}") } else { format!("cannot read the pipeline file: {why}") })
+        fail(if why.starts_with("is ") {
+            format!("the pipeline file {why}")
+        } else {
+            format!("cannot read the pipeline file: {why}")
+        })
     })?;
     let text = String::from_utf8(bytes).map_err(|error| {
-        let position = TextPosition::of_byte_offset(&String::from_utf8_lossy(error.as_bytes()), error.utf8_error().valid_up_to());
+        let position =
+            TextPosition::of_byte_offset(&String::from_utf8_lossy(error.as_bytes()), error.utf8_error().valid_up_to());
         ConfigError { diagnostics: vec![Diagnostic::at(file, position, "the pipeline file is not UTF-8 text")] }
     })?;
     let config = parse_pipeline(file, &text)?;
-    let (source, output) = (resolve_existing_prefix(&config.source_dir()), resolve_existing_prefix(&config.output_dir()));
+    let (source, output) =
+        (resolve_existing_prefix(&config.source_dir()), resolve_existing_prefix(&config.output_dir()));
     if let Some(overlap) = folder_overlap(&source, &output) {
         let position = find_key(&text, "output").map(|offset| TextPosition::of_byte_offset(&text, offset));
-        let message = format!("{overlap} (after following symbolic links: source {}, output {})", source.display(), output.display());
+        let message = format!(
+            "{overlap} (after following symbolic links: source {}, output {})",
+            source.display(),
+            output.display()
+        );
         return Err(ConfigError {
             diagnostics: vec![match position {
                 Some(position) => Diagnostic::at(file, position, message),
@@ -257,7 +267,11 @@ fn ron_message(error: &ron::error::SpannedError, text: &str) -> String {
             } else {
                 format!("`{}` value", outer.as_deref().unwrap_or("enum"))
             };
-            format!("unknown {what} `{found}`{}; expected one of {}", did_you_mean(found, expected.iter().copied()), list(expected))
+            format!(
+                "unknown {what} `{found}`{}; expected one of {}",
+                did_you_mean(found, expected.iter().copied()),
+                list(expected)
+            )
         }
         ron::Error::NoSuchStructField { expected, found, outer } => {
             let outer = outer.as_deref().map_or("this structure".to_string(), |outer| {
@@ -287,7 +301,9 @@ fn ron_message(error: &ron::error::SpannedError, text: &str) -> String {
             match field_before(text, offset) {
                 Some((field, value)) => {
                     let hint = match code {
-                        ron::Error::ExpectedComma if text[offset..].starts_with('.') && value.bytes().all(|byte| byte.is_ascii_digit()) => {
+                        ron::Error::ExpectedComma
+                            if text[offset..].starts_with('.') && value.bytes().all(|byte| byte.is_ascii_digit()) =>
+                        {
                             ": it takes a whole number"
                         }
                         ron::Error::ExpectedFloat | ron::Error::ExpectedInteger if text[offset..].starts_with('"') => {
@@ -340,7 +356,9 @@ impl Validator<'_> {
     fn validate(mut self, raw: raw::Pipeline, root: PathBuf) -> Result<PipelineConfig, ConfigError> {
         let source = self.project_path(&raw.source, "source", 0);
         let output = self.project_path(&raw.output, "output", 0);
-        if let Some(overlap) = source.as_ref().zip(output.as_ref()).and_then(|(source, output)| folder_overlap(source, output)) {
+        if let Some(overlap) =
+            source.as_ref().zip(output.as_ref()).and_then(|(source, output)| folder_overlap(source, output))
+        {
             self.error_at_value(&raw.output, 0, overlap);
         }
         let (source, output) = (source.unwrap_or_default(), output.unwrap_or_default());
@@ -359,15 +377,18 @@ impl Validator<'_> {
             }
             limits.texture.working_set = mib << 20;
         }
-        let remote_cache = raw.cache.remote.as_ref().and_then(|url| match crate::cache::remote::parse_remote_url(url) {
-            Ok(location) => {
-                Some(crate::cache::remote::RemoteCacheSettings { url: url.clone(), location, mode: raw.cache.mode.unwrap_or_default() })
-            }
-            Err(why) => {
-                self.error_at_value(url, 0, &why);
-                None
-            }
-        });
+        let remote_cache =
+            raw.cache.remote.as_ref().and_then(|url| match crate::cache::remote::parse_remote_url(url) {
+                Ok(location) => Some(crate::cache::remote::RemoteCacheSettings {
+                    url: url.clone(),
+                    location,
+                    mode: raw.cache.mode.unwrap_or_default(),
+                }),
+                Err(why) => {
+                    self.error_at_value(url, 0, &why);
+                    None
+                }
+            });
 
         let mut assets = Vec::new();
         let mut names = BTreeSet::new();
@@ -399,15 +420,24 @@ impl Validator<'_> {
             };
             overrides.encode = encode.clone();
             let anchor = self.offset_of_value(name, 0).unwrap_or(0);
-            let normal_form = normalize_relative_path(Path::new(name)).map(|path| crate::diagnostic::display_path(&path));
-            if valid_asset_name(&name.replace("//", "/").replace("/./", "/")) && normal_form.as_deref() != Some(name.as_str()) {
+            let normal_form =
+                normalize_relative_path(Path::new(name)).map(|path| crate::diagnostic::display_path(&path));
+            if valid_asset_name(&name.replace("//", "/").replace("/./", "/"))
+                && normal_form.as_deref() != Some(name.as_str())
+            {
                 let normal_form = normal_form.unwrap_or_default();
-                self.error_at_value(name, 0, &format!("asset name `{name}` names the folder `{normal_form}`: write `{normal_form}`"));
+                self.error_at_value(
+                    name,
+                    0,
+                    &format!("asset name `{name}` names the folder `{normal_form}`: write `{normal_form}`"),
+                );
             } else if !valid_asset_name(name) {
                 self.error_at_value(
                     name,
                     0,
-                    &format!("asset name `{name}` must be non-empty and use only letters, digits, `_`, `-`, `.` and `/`"),
+                    &format!(
+                        "asset name `{name}` must be non-empty and use only letters, digits, `_`, `-`, `.` and `/`"
+                    ),
                 );
             }
             if let Some(reserved) = reserved_asset_name(name) {
@@ -416,7 +446,8 @@ impl Validator<'_> {
             if !names.insert(name.clone()) {
                 let second = self.offset_of_value(name, anchor + name.len() + 2).unwrap_or(anchor);
                 self.error_at_value(name, second, &format!("asset name `{name}` is used twice"));
-            } else if let Some(other) = names.iter().find(|other| *other != name && asset_folders_collide(other, name)) {
+            } else if let Some(other) = names.iter().find(|other| *other != name && asset_folders_collide(other, name))
+            {
                 let other = other.clone();
                 self.error_at_value(
                     name,
@@ -437,7 +468,8 @@ impl Validator<'_> {
                 raw::Asset::Height { high, tessellate, .. } => {
                     let Some(high) = self.source_path(high, anchor) else { continue };
                     settings.high_mesh = Some(high);
-                    settings.tessellate = tessellate.as_ref().map(|tessellate| self.tessellate_settings(tessellate, anchor));
+                    settings.tessellate =
+                        tessellate.as_ref().map(|tessellate| self.tessellate_settings(tessellate, anchor));
                 }
                 _ => {}
             }
@@ -464,7 +496,11 @@ impl Validator<'_> {
             let source = match (asset, relative) {
                 (raw::Asset::Atlas { textures, meshes, .. }, _) => {
                     if textures.is_empty() {
-                        self.error_at_value(name, anchor, &format!("asset `{name}`: an atlas needs at least one texture glob"));
+                        self.error_at_value(
+                            name,
+                            anchor,
+                            &format!("asset `{name}`: an atlas needs at least one texture glob"),
+                        );
                     }
                     for glob in textures.iter().chain(meshes) {
                         if let Err(error) = source_glob(glob) {
@@ -475,8 +511,12 @@ impl Validator<'_> {
                 }
                 (raw::Asset::Material { .. }, Some(relative)) => AssetSource::Material { material: relative },
                 (raw::Asset::BillboardCloud { .. }, Some(relative)) => AssetSource::BillboardCloud { mesh: relative },
-                (raw::Asset::AmbientOcclusion { .. }, Some(relative)) => AssetSource::AmbientOcclusion { mesh: relative },
-                (raw::Asset::Height { .. }, Some(low)) => AssetSource::Height { high: settings.high_mesh.clone().unwrap_or_default(), low },
+                (raw::Asset::AmbientOcclusion { .. }, Some(relative)) => {
+                    AssetSource::AmbientOcclusion { mesh: relative }
+                }
+                (raw::Asset::Height { .. }, Some(low)) => {
+                    AssetSource::Height { high: settings.high_mesh.clone().unwrap_or_default(), low }
+                }
                 _ => unreachable!("materials, billboard clouds, AO and height bakes name their files"),
             };
             assets.push(AssetConfig { name: name.clone(), source, settings });
@@ -487,9 +527,11 @@ impl Validator<'_> {
         let mut rules = Vec::new();
         for rule in &raw.rules {
             match rule.kind {
-                AssetKindName::Atlas => {
-                    self.error_at_value(&rule.glob, 0, "a rule makes one asset per file: an Atlas is listed under `assets` with its globs")
-                }
+                AssetKindName::Atlas => self.error_at_value(
+                    &rule.glob,
+                    0,
+                    "a rule makes one asset per file: an Atlas is listed under `assets` with its globs",
+                ),
                 AssetKindName::Height => self.error_at_value(
                     &rule.glob,
                     0,
@@ -531,7 +573,9 @@ impl Validator<'_> {
             let name = &asset.name;
             let message = match assets.iter().find(|other| &other.name == source).map(|other| other.source.kind()) {
                 Some(AssetKindName::AmbientOcclusion) => continue,
-                Some(kind) => format!("asset `{name}`: ao_source `{source}` is a {kind:?} asset; it must name an AmbientOcclusion asset"),
+                Some(kind) => format!(
+                    "asset `{name}`: ao_source `{source}` is a {kind:?} asset; it must name an AmbientOcclusion asset"
+                ),
                 None if rules_make_ao => continue,
                 None => format!("asset `{name}`: ao_source `{source}` names no asset of the pipeline"),
             };
@@ -541,7 +585,14 @@ impl Validator<'_> {
     }
 
     /// A page's `max_size` and `padding` (a billboard atlas, a texture atlas), checked.
-    fn page_size_overrides(&mut self, max_size: Option<u32>, padding: Option<u32>, anchor: usize, size: &mut u32, pad: &mut u32) {
+    fn page_size_overrides(
+        &mut self,
+        max_size: Option<u32>,
+        padding: Option<u32>,
+        anchor: usize,
+        size: &mut u32,
+        pad: &mut u32,
+    ) {
         if let Some(max_size) = max_size {
             if !(16..=16384).contains(&max_size) || max_size % 4 != 0 {
                 self.error_at_key("max_size", anchor, "max_size must be a multiple of 4 between 16 and 16384");
@@ -561,7 +612,11 @@ impl Validator<'_> {
         let billboard = &overrides.billboard;
         if let Some(epsilon) = billboard.epsilon {
             if !(epsilon > 0.0 && epsilon < 1.0) {
-                self.error_at_key("epsilon", anchor, "epsilon must be in (0, 1): it is a fraction of the bounding-sphere radius");
+                self.error_at_key(
+                    "epsilon",
+                    anchor,
+                    "epsilon must be in (0, 1): it is a fraction of the bounding-sphere radius",
+                );
             }
             settings.billboard.epsilon = epsilon;
         }
@@ -573,13 +628,21 @@ impl Validator<'_> {
         }
         if let Some(budget) = billboard.budget {
             if budget.is_some_and(|budget| !(1..=1_000_000).contains(&budget.quads())) {
-                self.error_at_key("budget", anchor, "budget must allow between 1 and 1000000 quads (Triangles: at least 2)");
+                self.error_at_key(
+                    "budget",
+                    anchor,
+                    "budget must allow between 1 and 1000000 quads (Triangles: at least 2)",
+                );
             }
             settings.billboard.budget = budget;
         }
         if let Some(density) = billboard.texel_density {
             if density.is_some_and(|d| !(d > 0.0 && d.is_finite())) {
-                self.error_at_key("texel_density", anchor, "texel_density must be a positive number of texels per world unit");
+                self.error_at_key(
+                    "texel_density",
+                    anchor,
+                    "texel_density must be a positive number of texels per world unit",
+                );
             }
             settings.billboard.texel_density = density;
         }
@@ -594,7 +657,11 @@ impl Validator<'_> {
                 self.error_at_key("lods", anchor, &format!("a LOD chain has at most {MAX_LOD_LEVELS} levels"));
             }
             if lods.iter().any(|budget| !(1..=1_000_000).contains(&budget.quads())) {
-                self.error_at_key("lods", anchor, "each level must allow between 1 and 1000000 quads (Triangles: at least 2)");
+                self.error_at_key(
+                    "lods",
+                    anchor,
+                    "each level must allow between 1 and 1000000 quads (Triangles: at least 2)",
+                );
             }
             if lods.is_empty() {
                 self.error_at_key(
@@ -614,10 +681,18 @@ impl Validator<'_> {
             settings.billboard.lods = lods.clone();
         }
         if !settings.billboard.lods.is_empty() && settings.billboard.budget.is_some() {
-            self.error_at_key("lods", anchor, "give budget or lods, not both: a chain's levels carry their own budgets");
+            self.error_at_key(
+                "lods",
+                anchor,
+                "give budget or lods, not both: a chain's levels carry their own budgets",
+            );
         }
         if settings.billboard.screen_size.is_some() && settings.billboard.texel_density.is_some() {
-            self.error_at_key("screen_size", anchor, "give texel_density or screen_size, not both: each sets the atlas's texels per unit");
+            self.error_at_key(
+                "screen_size",
+                anchor,
+                "give texel_density or screen_size, not both: each sets the atlas's texels per unit",
+            );
         }
         if let Some(cutoff) = billboard.alpha_cutoff {
             if !(0.0..=1.0).contains(&cutoff) {
@@ -626,12 +701,24 @@ impl Validator<'_> {
             settings.billboard.alpha_cutoff = cutoff;
         }
         let atlas = &overrides.atlas;
-        self.page_size_overrides(atlas.max_size, atlas.padding, anchor, &mut settings.atlas.max_size, &mut settings.atlas.padding);
+        self.page_size_overrides(
+            atlas.max_size,
+            atlas.padding,
+            anchor,
+            &mut settings.atlas.max_size,
+            &mut settings.atlas.padding,
+        );
         if let Some(power_of_two) = atlas.power_of_two {
             settings.atlas.power_of_two = power_of_two;
         }
         let pack = &overrides.pack;
-        self.page_size_overrides(pack.max_size, pack.padding, anchor, &mut settings.pack.max_size, &mut settings.pack.padding);
+        self.page_size_overrides(
+            pack.max_size,
+            pack.padding,
+            anchor,
+            &mut settings.pack.max_size,
+            &mut settings.pack.padding,
+        );
         if let Some(pages) = pack.pages {
             if !(1..=64).contains(&pages) {
                 self.error_at_key("pages", anchor, "pages must be between 1 and 64");
@@ -656,7 +743,8 @@ impl Validator<'_> {
         for (key, value, allowed, target) in surfaces {
             if let Some(format) = value {
                 if !allowed.contains(&format) {
-                    format_errors.push((key, format!("{format:?} cannot hold the {key} surface; use one of {allowed:?}")));
+                    format_errors
+                        .push((key, format!("{format:?} cannot hold the {key} surface; use one of {allowed:?}")));
                 }
                 *target = format;
             }
@@ -698,7 +786,11 @@ impl Validator<'_> {
         }
         if let Some(max_distance) = ao.max_distance {
             if max_distance.is_some_and(|distance| !(distance > 0.0 && distance.is_finite())) {
-                self.error_at_key("max_distance", anchor, "max_distance must be a positive fraction of the bounding-box diagonal");
+                self.error_at_key(
+                    "max_distance",
+                    anchor,
+                    "max_distance must be a positive fraction of the bounding-box diagonal",
+                );
             }
             settings.max_distance = max_distance;
         }
@@ -722,10 +814,16 @@ impl Validator<'_> {
             }
             settings.size = size;
         }
-        for (key, value, target) in [("frontal", height.frontal, &mut settings.frontal), ("rear", height.rear, &mut settings.rear)] {
+        for (key, value, target) in
+            [("frontal", height.frontal, &mut settings.frontal), ("rear", height.rear, &mut settings.rear)]
+        {
             if let Some(value) = value {
                 if !(0.0..=1.0).contains(&value) {
-                    self.error_at_key(key, anchor, &format!("{key} must be a fraction of the bounding-box diagonal in [0, 1]"));
+                    self.error_at_key(
+                        key,
+                        anchor,
+                        &format!("{key} must be a fraction of the bounding-box diagonal in [0, 1]"),
+                    );
                 }
                 *target = value;
             }
@@ -752,7 +850,9 @@ impl Validator<'_> {
                 self.error_at_value(
                     value,
                     anchor,
-                    &format!("the {what} path `{value}` must be relative and stay inside the folder of the pipeline file"),
+                    &format!(
+                        "the {what} path `{value}` must be relative and stay inside the folder of the pipeline file"
+                    ),
                 );
                 None
             }

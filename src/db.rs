@@ -103,7 +103,10 @@ fn relocate(value: &mut serde_json::Value, from: &str, to: &str) {
         serde_json::Value::Object(fields) => {
             // Maps keyed by path serialise their keys as strings too.
             if fields.keys().any(|key| moved(key).is_some()) {
-                *fields = std::mem::take(fields).into_iter().map(|(key, field)| (moved(&key).unwrap_or(key), field)).collect();
+                *fields = std::mem::take(fields)
+                    .into_iter()
+                    .map(|(key, field)| (moved(&key).unwrap_or(key), field))
+                    .collect();
             }
             fields.values_mut().for_each(|field| relocate(field, from, to));
         }
@@ -386,7 +389,12 @@ pub fn opacity_texture(db: &dyn Db, file: SourceFile) -> Result<Arc<Texture>, Di
 // ---------------------------------------------------------------------------------------------
 // the persistent cache boundary
 
-pub fn load_cached<T>(db: &dyn Db, entry: &str, key: CacheKey, decode: impl FnOnce(CacheEntry) -> Option<T>) -> Option<T> {
+pub fn load_cached<T>(
+    db: &dyn Db,
+    entry: &str,
+    key: CacheKey,
+    decode: impl FnOnce(CacheEntry) -> Option<T>,
+) -> Option<T> {
     let mut loaded = db.disk_cache()?.load(entry, key)?;
     from_placeholder(&source_folder(db), &mut loaded);
     decode(loaded)
@@ -402,7 +410,12 @@ pub fn store_cached(db: &dyn Db, entry: &str, key: CacheKey, make: impl FnOnce()
 
 /// Like `store_cached`, but the entry is also made on the cache's background thread (`make`
 /// owns what it needs: `Arc`s of the images it gathers).
-pub fn store_cached_in_background(db: &dyn Db, entry: &str, key: CacheKey, make: impl FnOnce() -> CacheEntry + Send + 'static) {
+pub fn store_cached_in_background(
+    db: &dyn Db,
+    entry: &str,
+    key: CacheKey,
+    make: impl FnOnce() -> CacheEntry + Send + 'static,
+) {
     if let Some(cache) = db.disk_cache() {
         let folder = source_folder(db);
         cache.store_in_background(entry, key, move || {
@@ -443,7 +456,11 @@ pub fn stage_key(stage: Stage) -> CacheKeyBuilder {
 
 /// Adds each file's path (relative to the source folder) and its content hash (or why it could
 /// not be read) to a key.
-pub fn key_with_files(db: &dyn Db, key: CacheKeyBuilder, files: impl IntoIterator<Item = SourceFile>) -> CacheKeyBuilder {
+pub fn key_with_files(
+    db: &dyn Db,
+    key: CacheKeyBuilder,
+    files: impl IntoIterator<Item = SourceFile>,
+) -> CacheKeyBuilder {
     files.into_iter().fold(key, |key, file| {
         let key = key.part(&source_relative(db, file.path(db)));
         match file.contents(db) {

@@ -113,8 +113,12 @@ impl Graph {
     /// The part of the graph that belongs to `asset` or feeds it, however far upstream (a
     /// shared decode and the texture file it reads).
     pub fn for_asset(&self, asset: &str) -> Graph {
-        let mut keep: BTreeSet<&str> =
-            self.nodes.iter().filter(|node| node.asset.as_deref() == Some(asset)).map(|node| node.id.as_str()).collect();
+        let mut keep: BTreeSet<&str> = self
+            .nodes
+            .iter()
+            .filter(|node| node.asset.as_deref() == Some(asset))
+            .map(|node| node.id.as_str())
+            .collect();
         let mut pending: Vec<&str> = keep.iter().copied().collect();
         while let Some(id) = pending.pop() {
             for edge in self.edges.iter().filter(|edge| edge.to == id) {
@@ -125,7 +129,12 @@ impl Graph {
         }
         Graph {
             nodes: self.nodes.iter().filter(|node| keep.contains(node.id.as_str())).cloned().collect(),
-            edges: self.edges.iter().filter(|edge| keep.contains(edge.from.as_str()) && keep.contains(edge.to.as_str())).cloned().collect(),
+            edges: self
+                .edges
+                .iter()
+                .filter(|edge| keep.contains(edge.from.as_str()) && keep.contains(edge.to.as_str()))
+                .cloned()
+                .collect(),
         }
     }
 
@@ -148,7 +157,8 @@ impl Graph {
     }
 
     fn to_dot(&self) -> String {
-        let quote = |text: &str| format!("\"{}\"", text.replace('\\', "\\\\").replace('"', "\\\"").replace('\n', "\\n"));
+        let quote =
+            |text: &str| format!("\"{}\"", text.replace('\\', "\\\\").replace('"', "\\\"").replace('\n', "\\n"));
         let mut text = String::from("digraph cirrus {\n  rankdir=LR;\n  node [fontname=\"Helvetica\", fontsize=10];\n");
         for node in &self.nodes {
             let (shape, colour) = match (node.kind, node.state.as_str()) {
@@ -175,7 +185,8 @@ impl Graph {
 
     fn to_mermaid(&self) -> String {
         // Mermaid ids must be plain words: number the nodes.
-        let index: BTreeMap<&str, usize> = self.nodes.iter().enumerate().map(|(i, node)| (node.id.as_str(), i)).collect();
+        let index: BTreeMap<&str, usize> =
+            self.nodes.iter().enumerate().map(|(i, node)| (node.id.as_str(), i)).collect();
         let mut text = String::from("flowchart LR\n");
         for (i, node) in self.nodes.iter().enumerate() {
             let caption = Self::node_caption(node).replace('"', "#quot;").replace('\n', "<br/>");

@@ -282,7 +282,9 @@ impl<'a> Lexer<'a> {
             }
             '$' | '%' => {
                 self.offset += 1;
-                let identifier = self.identifier().ok_or_else(|| self.error(start, format!("`{first}` must be followed by a name")))?;
+                let identifier = self
+                    .identifier()
+                    .ok_or_else(|| self.error(start, format!("`{first}` must be followed by a name")))?;
                 TokenKind::Name(Name { global: first == '$', identifier })
             }
             '"' => TokenKind::String(self.string()?),
@@ -314,16 +316,19 @@ impl<'a> Lexer<'a> {
             length += 1;
         }
         let body = &rest[length..];
-        let is_prefixed =
-            body.len() > 1 && body.as_bytes()[0] == b'0' && matches!(body.as_bytes()[1], b'x' | b'X' | b'o' | b'O' | b'b' | b'B');
+        let is_prefixed = body.len() > 1
+            && body.as_bytes()[0] == b'0'
+            && matches!(body.as_bytes()[1], b'x' | b'X' | b'o' | b'O' | b'b' | b'B');
         if is_prefixed {
             length += 2;
-            length += rest[length..].find(|c: char| !(c.is_ascii_hexdigit() || c == '_')).unwrap_or(rest.len() - length);
+            length +=
+                rest[length..].find(|c: char| !(c.is_ascii_hexdigit() || c == '_')).unwrap_or(rest.len() - length);
         } else {
             let mut seen_exponent = false;
             while length < bytes.len() {
                 let c = bytes[length];
-                let sign_after_exponent = (c == b'-' || c == b'+') && seen_exponent && matches!(bytes[length - 1], b'e' | b'E');
+                let sign_after_exponent =
+                    (c == b'-' || c == b'+') && seen_exponent && matches!(bytes[length - 1], b'e' | b'E');
                 if c.is_ascii_digit() || c == b'.' || c == b'_' || sign_after_exponent {
                     length += 1;
                 } else if (c == b'e' || c == b'E') && !seen_exponent {
@@ -398,7 +403,9 @@ impl<'a> Lexer<'a> {
             match c {
                 c if c == quote => return Ok(text),
                 '\\' => text.push(self.escape(start)?),
-                '\n' | '\r' => return Err(self.error(start, "unterminated string (line break before the closing quote)")),
+                '\n' | '\r' => {
+                    return Err(self.error(start, "unterminated string (line break before the closing quote)"))
+                }
                 c => text.push(c),
             }
         }
@@ -489,7 +496,9 @@ impl Parser<'_> {
         let token = self.next()?;
         let position = TextPosition::of_byte_offset(self.lexer.text, token.offset);
         let TokenKind::Identifier(identifier) = token.kind else {
-            return Err(self.error(token.offset, format!("expected a structure identifier, found {}", describe(&token.kind))));
+            return Err(
+                self.error(token.offset, format!("expected a structure identifier, found {}", describe(&token.kind)))
+            );
         };
         if let Some(data_type) = DataType::from_identifier(&identifier) {
             return self.primitive(data_type, position);
@@ -507,7 +516,9 @@ impl Parser<'_> {
         }
         let open = self.expect('{', &format!("to open the `{identifier}` structure"))?;
         if self.depth >= MAX_NESTING {
-            return Err(self.error(open.offset, format!("structures nested too deeply (more than {MAX_NESTING} levels)")));
+            return Err(
+                self.error(open.offset, format!("structures nested too deeply (more than {MAX_NESTING} levels)"))
+            );
         }
         self.depth += 1;
         let mut children = Vec::new();
@@ -552,7 +563,9 @@ impl Parser<'_> {
                 number_value(text).ok_or_else(|| self.error(token.offset, format!("`{text}` is not a valid number")))?
             }
             TokenKind::Name(first) => Value::Ref(self.reference_rest(first)?),
-            ref other => return Err(self.error(token.offset, format!("expected a property value, found {}", describe(other)))),
+            ref other => {
+                return Err(self.error(token.offset, format!("expected a property value, found {}", describe(other))))
+            }
         };
         Ok(Property { key, value, position })
     }
@@ -578,7 +591,8 @@ impl Parser<'_> {
                 _ => None,
             };
             let Some(size) = size else {
-                return Err(self.error(token.offset, format!("expected a positive array size, found {}", describe(&token.kind))));
+                return Err(self
+                    .error(token.offset, format!("expected a positive array size, found {}", describe(&token.kind))));
             };
             array_size = Some(size as u32);
             self.expect(']', "after the array size")?;
@@ -605,8 +619,10 @@ impl Parser<'_> {
                         self.expect(',', "between values")?;
                     }
                     if count != size {
-                        return Err(self
-                            .error(sub_open.offset, format!("this element of `{data_type}[{size}]` has {count} values, expected {size}")));
+                        return Err(self.error(
+                            sub_open.offset,
+                            format!("this element of `{data_type}[{size}]` has {count} values, expected {size}"),
+                        ));
                     }
                 }
             }
@@ -624,9 +640,13 @@ impl Parser<'_> {
 
     fn literal(&mut self, data_type: DataType) -> Result<Value, OpenDdlError> {
         let token = self.next()?;
-        let mismatch = |parser: &Self, found: &str| parser.error(token.offset, format!("expected a {data_type} value, found {found}"));
+        let mismatch = |parser: &Self, found: &str| {
+            parser.error(token.offset, format!("expected a {data_type} value, found {found}"))
+        };
         match (data_type, &token.kind) {
-            (DataType::Bool, TokenKind::Identifier(word)) if word == "true" || word == "false" => Ok(Value::Bool(word == "true")),
+            (DataType::Bool, TokenKind::Identifier(word)) if word == "true" || word == "false" => {
+                Ok(Value::Bool(word == "true"))
+            }
             (DataType::String, TokenKind::String(text)) => Ok(Value::String(text.clone())),
             (DataType::Ref, TokenKind::Identifier(word)) if word == "null" => Ok(Value::Ref(Vec::new())),
             (DataType::Ref, TokenKind::Name(first)) => Ok(Value::Ref(self.reference_rest(first.clone())?)),
@@ -634,7 +654,8 @@ impl Parser<'_> {
                 DataType::from_identifier(word).map(Value::Type).ok_or_else(|| mismatch(self, &format!("`{word}`")))
             }
             (DataType::Half | DataType::Float | DataType::Double, TokenKind::Number(text)) => {
-                float_value(text, data_type).ok_or_else(|| self.error(token.offset, format!("`{text}` is not a valid {data_type}")))
+                float_value(text, data_type)
+                    .ok_or_else(|| self.error(token.offset, format!("`{text}` is not a valid {data_type}")))
             }
             (_, TokenKind::Number(text)) if data_type.integer_range().is_some() => {
                 let (min, max) = data_type.integer_range().expect("checked");

@@ -17,7 +17,9 @@ use crate::db::{Asset, Database, Db, SourceFile, StageRun};
 use crate::diagnostic::{display_path, Diagnostic};
 use crate::kinds::{stage_node_id, AssetKind, Read, StageInstance};
 use crate::sources::{read_source, rule_matches};
-use crate::summary::{ArtifactSummary, AssetStatus, AssetSummary, BuildSummary, ChangedArtifact, ErrorSummary, StageStatus, StageSummary};
+use crate::summary::{
+    ArtifactSummary, AssetStatus, AssetSummary, BuildSummary, ChangedArtifact, ErrorSummary, StageStatus, StageSummary,
+};
 
 pub use crate::schedule::{CancelFlag, Progress};
 
@@ -34,7 +36,11 @@ pub struct ProjectOptions {
 
 impl Default for ProjectOptions {
     fn default() -> Self {
-        ProjectOptions { persistent_cache: true, source_reading: SourceReading::EveryBuild, remote_cache: Default::default() }
+        ProjectOptions {
+            persistent_cache: true,
+            source_reading: SourceReading::EveryBuild,
+            remote_cache: Default::default(),
+        }
     }
 }
 
@@ -267,7 +273,9 @@ impl Project {
             let file = self.config.source.join(&relative);
             if let Some(reserved) = crate::config::reserved_asset_name(&asset.name) {
                 conflicts.push(Diagnostic::new(file, format!("warning: matches a rule but is not baked: {reserved}")));
-            } else if let Some(other) = assets.iter().find(|other| crate::config::asset_folders_collide(&other.name, &asset.name)) {
+            } else if let Some(other) =
+                assets.iter().find(|other| crate::config::asset_folders_collide(&other.name, &asset.name))
+            {
                 conflicts.push(Diagnostic::new(
                     file,
                     format!(
@@ -322,8 +330,12 @@ impl Project {
         };
         // Sources named by globs: listed on every build, so that new files join and deleted
         // ones leave.
-        let listed: Vec<Vec<PathBuf>> =
-            config.source.glob_lists().into_iter().map(|globs| crate::sources::glob_matches(&self.config, globs)).collect();
+        let listed: Vec<Vec<PathBuf>> = config
+            .source
+            .glob_lists()
+            .into_iter()
+            .map(|globs| crate::sources::glob_matches(&self.config, globs))
+            .collect();
         if **asset.listed(&self.db) != listed {
             asset.set_listed(&mut self.db).to(Arc::new(listed));
         }
@@ -334,7 +346,8 @@ impl Project {
                 self.source_file(&path);
             }
             let wanted = kind.files_to_read(&self.db, asset);
-            let files: BTreeMap<PathBuf, SourceFile> = wanted.into_iter().map(|path| (path.clone(), self.source_file(&path))).collect();
+            let files: BTreeMap<PathBuf, SourceFile> =
+                wanted.into_iter().map(|path| (path.clone(), self.source_file(&path))).collect();
             if **asset.files(&self.db) == files {
                 break;
             }
@@ -347,7 +360,8 @@ impl Project {
     /// asset read that this build does not bake itself (`--asset` leaving it out): its result
     /// is computed for the reader, its files are not written. Set only when it changed.
     fn sync_registry(&mut self, all_assets: &[AssetConfig], built: &[(AssetConfig, Asset)]) {
-        let mut registry: BTreeMap<String, Asset> = built.iter().map(|(config, asset)| (config.name.clone(), *asset)).collect();
+        let mut registry: BTreeMap<String, Asset> =
+            built.iter().map(|(config, asset)| (config.name.clone(), *asset)).collect();
         for (config, _) in built {
             let Some(source) = &config.settings.ao_source else { continue };
             if registry.contains_key(source) {
@@ -370,7 +384,11 @@ impl Project {
     }
 
     /// Bakes the assets, writing only artifacts whose bytes changed.
-    pub fn build(&mut self, options: &BuildOptions, progress: &(dyn Fn(Progress) + Sync)) -> Result<BuildSummary, BuildError> {
+    pub fn build(
+        &mut self,
+        options: &BuildOptions,
+        progress: &(dyn Fn(Progress) + Sync),
+    ) -> Result<BuildSummary, BuildError> {
         let (all_assets, conflicts) = self.asset_list_and_conflicts();
         for conflict in &conflicts {
             tracing::warn!("{conflict}");
@@ -378,7 +396,11 @@ impl Project {
         for name in &options.only_assets {
             if !all_assets.iter().any(|asset| &asset.name == name) {
                 let hint = crate::diagnostic::did_you_mean(name, all_assets.iter().map(|asset| asset.name.as_str()));
-                return Err(BuildError::UnknownAsset { name: name.clone(), pipeline: display_path(&self.config.file), hint });
+                return Err(BuildError::UnknownAsset {
+                    name: name.clone(),
+                    pipeline: display_path(&self.config.file),
+                    hint,
+                });
             }
         }
         let selected: Vec<AssetConfig> = all_assets
@@ -406,7 +428,8 @@ impl Project {
             cache.take_counts();
             cache.take_misses();
         }
-        let first_jobs = assets.iter().flat_map(|(_, asset)| asset.kind(&self.db).first_jobs(&self.db, *asset)).collect();
+        let first_jobs =
+            assets.iter().flat_map(|(_, asset)| asset.kind(&self.db).first_jobs(&self.db, *asset)).collect();
         let finished = crate::schedule::run_jobs(&self.db, first_jobs, progress, &cancel);
         let runs = self.db.take_runs();
         crate::gpu::wait_for_gpu_start();
@@ -474,7 +497,8 @@ impl Project {
             }
             let asset_folder = format!("{}/", display_path(&folder));
             for (path, hash) in &produced {
-                let meaning = outputs.meanings.iter().find(|(file, _)| display_path(file) == *path).map(|(_, meaning)| meaning);
+                let meaning =
+                    outputs.meanings.iter().find(|(file, _)| display_path(file) == *path).map(|(_, meaning)| meaning);
                 if record_artifact(&mut manifest, next_revision, &config.name, path, hash, meaning) {
                     changed = true;
                     changed_artifacts.push(ChangedArtifact {
@@ -514,11 +538,14 @@ impl Project {
             // Artifacts of assets that left the pipeline (not of those that a vanished source
             // folder took along: they failed, and keep their last good artifacts).
             let names: BTreeSet<&str> = all_assets.iter().map(|asset| asset.name.as_str()).collect();
-            removed_artifacts.extend(remove_artifacts(&self.config, &mut manifest, |_, entry| !names.contains(entry.asset.as_str())));
+            removed_artifacts.extend(remove_artifacts(&self.config, &mut manifest, |_, entry| {
+                !names.contains(entry.asset.as_str())
+            }));
         }
         // A failure is news too: its batch gets a revision of its own, so that a client that
         // subscribes after it (with `since` = the revision before) still hears of it.
-        changed |= !removed_artifacts.is_empty() || summaries.iter().any(|summary| summary.status == AssetStatus::Failed);
+        changed |=
+            !removed_artifacts.is_empty() || summaries.iter().any(|summary| summary.status == AssetStatus::Failed);
         if changed {
             manifest.revision = next_revision;
             if let Err(error) = save_manifest(&output_dir, &manifest) {
@@ -564,7 +591,12 @@ impl Project {
         self.last_statuses = statuses;
         self.last_revision = Some(manifest.revision);
         changed_artifacts.sort_by(|a, b| a.path.cmp(&b.path));
-        Ok(BuildSummary { revision: manifest.revision, assets: summaries, changed: changed_artifacts, removed: removed_artifacts })
+        Ok(BuildSummary {
+            revision: manifest.revision,
+            assets: summaries,
+            changed: changed_artifacts,
+            removed: removed_artifacts,
+        })
     }
 
     /// Adds stage runs to the history (revision, milliseconds) and the executed log.
@@ -593,11 +625,16 @@ impl Project {
         for name in only {
             if !assets.iter().any(|asset| &asset.name == name) {
                 let hint = crate::diagnostic::did_you_mean(name, assets.iter().map(|asset| asset.name.as_str()));
-                return Err(BuildError::UnknownAsset { name: name.clone(), pipeline: display_path(&self.config.file), hint });
+                return Err(BuildError::UnknownAsset {
+                    name: name.clone(),
+                    pipeline: display_path(&self.config.file),
+                    hint,
+                });
             }
         }
         // Rule-matched files that do not become assets are reported under `rules`.
-        let conflicts = conflicts.into_iter().filter(|_| only.is_empty()).map(|conflict| ("rules".to_string(), vec![conflict]));
+        let conflicts =
+            conflicts.into_iter().filter(|_| only.is_empty()).map(|conflict| ("rules".to_string(), vec![conflict]));
         Ok(assets
             .into_iter()
             .filter(|asset| only.is_empty() || only.contains(&asset.name))
@@ -646,7 +683,13 @@ impl Project {
 
     /// Writes one artifact (project-relative `path`) if its bytes changed and records its hash;
     /// false when it could not be written. A report that differs only in its timings is kept.
-    fn write_artifact(&self, path: &Path, bytes: &[u8], errors: &mut Vec<Diagnostic>, produced: &mut BTreeMap<String, String>) -> bool {
+    fn write_artifact(
+        &self,
+        path: &Path,
+        bytes: &[u8],
+        errors: &mut Vec<Diagnostic>,
+        produced: &mut BTreeMap<String, String>,
+    ) -> bool {
         let absolute = self.config.root.join(path);
         if path.file_name().is_some_and(|name| name == "report.json") {
             if let Some(existing) = crate::artifacts::same_report_on_disk(&absolute, bytes) {
@@ -675,7 +718,8 @@ impl Project {
         let mut graph = GraphBuilder::default();
         let manifest = load_manifest(&self.config.output_dir());
         let list = self.asset_list();
-        let assets: Vec<(AssetConfig, Asset)> = list.iter().map(|config| (config.clone(), self.sync_asset(config))).collect();
+        let assets: Vec<(AssetConfig, Asset)> =
+            list.iter().map(|config| (config.clone(), self.sync_asset(config))).collect();
         self.sync_registry(&list, &assets);
         let mut all_instances = Vec::new();
         for (config, asset) in assets {
@@ -752,24 +796,37 @@ impl Project {
 /// came from the shared cache, cached otherwise. A stage that needed no result of its own
 /// (what it feeds was found in a cache) is remote when every cache hit of its asset in this
 /// build came from the shared cache, and cached otherwise.
-fn stage_summaries(instances: &[StageInstance], runs: &[StageRun], asset_failed: bool, failed_jobs: &HashSet<String>) -> Vec<StageSummary> {
+fn stage_summaries(
+    instances: &[StageInstance],
+    runs: &[StageRun],
+    asset_failed: bool,
+    failed_jobs: &HashSet<String>,
+) -> Vec<StageSummary> {
     let mut ran: HashMap<(&str, &str), f64> = HashMap::new();
     for run in runs.iter().filter(|run| !run.from_cache) {
         *ran.entry((run.stage, run.label.as_str())).or_insert(0.0) += run.ms;
     }
-    let ids: HashSet<(&str, &str)> = instances.iter().map(|instance| (instance.stage.name, instance.label.as_str())).collect();
-    let hits: Vec<&StageRun> = runs.iter().filter(|run| run.from_cache && ids.contains(&(run.stage, run.label.as_str()))).collect();
-    let remote_hits: HashSet<(&str, &str)> = hits.iter().filter(|run| run.from_remote).map(|run| (run.stage, run.label.as_str())).collect();
+    let ids: HashSet<(&str, &str)> =
+        instances.iter().map(|instance| (instance.stage.name, instance.label.as_str())).collect();
+    let hits: Vec<&StageRun> =
+        runs.iter().filter(|run| run.from_cache && ids.contains(&(run.stage, run.label.as_str()))).collect();
+    let remote_hits: HashSet<(&str, &str)> =
+        hits.iter().filter(|run| run.from_remote).map(|run| (run.stage, run.label.as_str())).collect();
     let every_hit_remote = !hits.is_empty() && hits.iter().all(|run| run.from_remote);
-    let local_hits: HashSet<(&str, &str)> = hits.iter().filter(|run| !run.from_remote).map(|run| (run.stage, run.label.as_str())).collect();
+    let local_hits: HashSet<(&str, &str)> =
+        hits.iter().filter(|run| !run.from_remote).map(|run| (run.stage, run.label.as_str())).collect();
     instances
         .iter()
         .map(|instance| {
             let id = (instance.stage.name, instance.label.as_str());
             let (status, ms) = match ran.get(&id) {
                 Some(&ms) => (StageStatus::Ran, ms),
-                None if asset_failed && (instance.failed || failed_jobs.contains(&instance.label)) => (StageStatus::Failed, 0.0),
-                None if !local_hits.contains(&id) && (remote_hits.contains(&id) || every_hit_remote) => (StageStatus::Remote, 0.0),
+                None if asset_failed && (instance.failed || failed_jobs.contains(&instance.label)) => {
+                    (StageStatus::Failed, 0.0)
+                }
+                None if !local_hits.contains(&id) && (remote_hits.contains(&id) || every_hit_remote) => {
+                    (StageStatus::Remote, 0.0)
+                }
                 None => (StageStatus::Cached, 0.0),
             };
             StageSummary { stage: instance.stage.name, instance: instance.instance.clone(), status, ms }

@@ -59,7 +59,9 @@ impl Progress {
     /// estimate), in [0, 1]; by job count before any estimate.
     pub fn fraction(&self) -> f64 {
         match self.remaining_seconds {
-            Some(remaining) if self.worked_seconds + remaining > 0.0 => self.worked_seconds / (self.worked_seconds + remaining),
+            Some(remaining) if self.worked_seconds + remaining > 0.0 => {
+                self.worked_seconds / (self.worked_seconds + remaining)
+            }
             _ => self.done as f64 / self.total.max(1) as f64,
         }
     }
@@ -69,13 +71,19 @@ impl Progress {
 /// on `workers` workers, each sort at the mean of its `finished` jobs (seconds summed, count),
 /// a sort not seen yet at the mean of all: so that a bar over a few long AO tiles and hundreds
 /// of quick surfaces moves with the time, not the count. `None` before any job finished.
-pub fn remaining_seconds(finished: &BTreeMap<&str, (f64, usize)>, waiting: &BTreeMap<&str, usize>, workers: usize) -> Option<f64> {
+pub fn remaining_seconds(
+    finished: &BTreeMap<&str, (f64, usize)>,
+    waiting: &BTreeMap<&str, usize>,
+    workers: usize,
+) -> Option<f64> {
     let (sum, count) = finished.values().fold((0.0, 0), |(sum, count), (seconds, jobs)| (sum + seconds, count + jobs));
     if count == 0 {
         return None;
     }
     let overall = sum / count as f64;
-    let mean = |sort: &str| finished.get(sort).filter(|(_, jobs)| *jobs > 0).map_or(overall, |(seconds, jobs)| seconds / *jobs as f64);
+    let mean = |sort: &str| {
+        finished.get(sort).filter(|(_, jobs)| *jobs > 0).map_or(overall, |(seconds, jobs)| seconds / *jobs as f64)
+    };
     let total: f64 = waiting.iter().map(|(sort, jobs)| mean(sort) * *jobs as f64).sum();
     Some(total / workers.max(1) as f64)
 }
@@ -113,7 +121,14 @@ pub fn run_jobs(
             let remaining_seconds = remaining_seconds(&by_sort, &waiting, cores());
             let mut worked = worked.lock().expect("progress lock");
             *worked += seconds;
-            progress(Progress { done: done_before + done, total, item, index, remaining_seconds, worked_seconds: *worked })
+            progress(Progress {
+                done: done_before + done,
+                total,
+                item,
+                index,
+                remaining_seconds,
+                worked_seconds: *worked,
+            })
         };
         let results = run_parallel(
             db,

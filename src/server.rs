@@ -155,7 +155,8 @@ impl Server {
     pub fn start(address: SocketAddr, settings: ServerSettings, revision: u64) -> Result<Server, ServerError> {
         let listener = TcpListener::bind(address).map_err(|source| ServerError { address, source })?;
         let address = listener.local_addr().map_err(|source| ServerError { address, source })?;
-        let state = State { revision, history: VecDeque::new(), clients: Vec::new(), graph: Arc::default(), next_client: 0 };
+        let state =
+            State { revision, history: VecDeque::new(), clients: Vec::new(), graph: Arc::default(), next_client: 0 };
         let server = Server { state: Arc::new(Mutex::new(state)), settings, address };
         let accepting = server.clone();
         std::thread::Builder::new()
@@ -210,7 +211,9 @@ impl Server {
                     .clients
                     .iter()
                     .enumerate()
-                    .filter(|(_, client)| !client.subscribed && client.last_request.elapsed() >= self.settings.idle_grace)
+                    .filter(|(_, client)| {
+                        !client.subscribed && client.last_request.elapsed() >= self.settings.idle_grace
+                    })
                     .min_by_key(|(_, client)| client.last_request)
                     .map(|(position, _)| position);
                 if let Some(position) = idle {
@@ -227,8 +230,9 @@ impl Server {
                 }
             }
             if state.clients.len() >= self.settings.max_clients {
-                let refusal =
-                    line(&Outgoing::Error { message: format!("too many clients ({} connected): try again later", state.clients.len()) });
+                let refusal = line(&Outgoing::Error {
+                    message: format!("too many clients ({} connected): try again later", state.clients.len()),
+                });
                 let mut stream = stream;
                 let _ = stream.set_write_timeout(Some(std::time::Duration::from_millis(200)));
                 let _ = stream.write_all(refusal.as_bytes());
@@ -248,7 +252,9 @@ impl Server {
         };
         let peer = writer_stream.peer_addr().map(|address| address.to_string()).unwrap_or_default();
         tracing::info!("hot-reload client {id} connected from {peer}");
-        let _ = std::thread::Builder::new().name(format!("cirrus-client-{id}-write")).spawn(move || write_loop(writer_stream, outgoing));
+        let _ = std::thread::Builder::new()
+            .name(format!("cirrus-client-{id}-write"))
+            .spawn(move || write_loop(writer_stream, outgoing));
         let server = self.clone();
         let _ = std::thread::Builder::new().name(format!("cirrus-client-{id}-read")).spawn(move || {
             server.read_loop(id, reader_stream);
@@ -277,9 +283,10 @@ impl Server {
         loop {
             match read_bounded_line(&mut reader, self.settings.max_line_bytes) {
                 ClientLine::End => return,
-                ClientLine::TooLong => {
-                    self.reply(id, Outgoing::Error { message: format!("line longer than {} bytes", self.settings.max_line_bytes) })
-                }
+                ClientLine::TooLong => self.reply(
+                    id,
+                    Outgoing::Error { message: format!("line longer than {} bytes", self.settings.max_line_bytes) },
+                ),
                 // A client whose slot went to another (idle) reads no more.
                 ClientLine::Line(_) if !self.touch(id) => return,
                 ClientLine::Line(bytes) => match parse_request(&bytes) {
@@ -307,13 +314,17 @@ impl Server {
                                  daemon or cleaned): reload every artifact"
                             ),
                         }));
-                    } else if oldest.is_some_and(|oldest| since + 1 < oldest) || (oldest.is_none() && since < revision) {
+                    } else if oldest.is_some_and(|oldest| since + 1 < oldest) || (oldest.is_none() && since < revision)
+                    {
                         replay.push(line(&Outgoing::Resync {
                             revision,
-                            message: format!("revision {since} is older than the daemon's history: reload every artifact"),
+                            message: format!(
+                                "revision {since} is older than the daemon's history: reload every artifact"
+                            ),
                         }));
                     }
-                    replay.extend(state.history.iter().filter(|(batch, _)| *batch > since).map(|(_, line)| line.clone()));
+                    replay
+                        .extend(state.history.iter().filter(|(batch, _)| *batch > since).map(|(_, line)| line.clone()));
                 }
                 let Some(client) = state.clients.iter_mut().find(|client| client.id == id) else { return };
                 client.subscribed = true;
@@ -326,20 +337,28 @@ impl Server {
             Request::Graph { format, asset } => {
                 let name = format.as_deref().unwrap_or("json");
                 let Some(format) = GraphFormat::ALL.into_iter().find(|format| format.name() == name) else {
-                    return self.reply(id, Outgoing::Error { message: format!("unknown graph format `{name}`: json, dot or mermaid") });
+                    return self.reply(
+                        id,
+                        Outgoing::Error { message: format!("unknown graph format `{name}`: json, dot or mermaid") },
+                    );
                 };
                 let graph = self.state.lock().expect("server state").graph.clone();
                 let graph = match &asset {
                     Some(asset) if !graph.has_asset(asset) => {
-                        return self.reply(id, Outgoing::Error { message: format!("no asset named `{asset}` in the graph") });
+                        return self
+                            .reply(id, Outgoing::Error { message: format!("no asset named `{asset}` in the graph") });
                     }
                     Some(asset) => Arc::new(graph.for_asset(asset)),
                     None => graph,
                 };
                 let message = match format {
                     GraphFormat::Json => Outgoing::Graph { format: "json", graph: Some(&graph), text: None },
-                    GraphFormat::Dot => Outgoing::Graph { format: "dot", graph: None, text: Some(graph.render(format)) },
-                    GraphFormat::Mermaid => Outgoing::Graph { format: "mermaid", graph: None, text: Some(graph.render(format)) },
+                    GraphFormat::Dot => {
+                        Outgoing::Graph { format: "dot", graph: None, text: Some(graph.render(format)) }
+                    }
+                    GraphFormat::Mermaid => {
+                        Outgoing::Graph { format: "mermaid", graph: None, text: Some(graph.render(format)) }
+                    }
                 };
                 self.reply(id, message);
             }

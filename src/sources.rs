@@ -36,8 +36,11 @@ fn similar_file_hint(root: &Path, source: &Path, relative: &Path) -> String {
         return String::new();
     };
     let Ok(entries) = std::fs::read_dir(root.join(parent)) else { return String::new() };
-    let names: Vec<String> = entries.take(10_000).filter_map(|entry| entry.ok()?.file_name().into_string().ok()).collect();
-    let Some(closest) = crate::diagnostic::closest(name, names.iter().map(String::as_str)) else { return String::new() };
+    let names: Vec<String> =
+        entries.take(10_000).filter_map(|entry| entry.ok()?.file_name().into_string().ok()).collect();
+    let Some(closest) = crate::diagnostic::closest(name, names.iter().map(String::as_str)) else {
+        return String::new();
+    };
     let suggestion = parent.join(closest);
     let suggestion = suggestion.strip_prefix(source).unwrap_or(&suggestion);
     format!(" (did you mean `{}`?)", crate::diagnostic::display_path(suggestion))
@@ -108,7 +111,8 @@ pub fn rule_matches(config: &PipelineConfig) -> Vec<PathBuf> {
 /// project-relative, sorted: the files an asset named by globs reads. A plain path (no glob
 /// characters) is listed even when it is missing, so that reading it names it.
 pub fn glob_matches(config: &PipelineConfig, globs: &[String]) -> Vec<PathBuf> {
-    let matchers: Vec<globset::GlobMatcher> = globs.iter().filter_map(|glob| crate::config::source_glob(glob).ok()).collect();
+    let matchers: Vec<globset::GlobMatcher> =
+        globs.iter().filter_map(|glob| crate::config::source_glob(glob).ok()).collect();
     if matchers.is_empty() {
         return Vec::new();
     }

@@ -169,7 +169,9 @@ impl BuildSummary {
 pub fn report_warnings(report: &[u8]) -> Vec<ErrorSummary> {
     let Ok(report) = serde_json::from_slice::<serde_json::Value>(report) else { return Vec::new() };
     let Some(warnings) = report.get("warnings").and_then(|warnings| warnings.as_array()) else { return Vec::new() };
-    let number = |warning: &serde_json::Value, key: &str| warning.get(key).and_then(|value| value.as_u64()).map(|value| value as u32);
+    let number = |warning: &serde_json::Value, key: &str| {
+        warning.get(key).and_then(|value| value.as_u64()).map(|value| value as u32)
+    };
     warnings
         .iter()
         .filter_map(|warning| {

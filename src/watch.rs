@@ -158,8 +158,10 @@ impl EventFilter {
     fn message(&self, events: &[notify_debouncer_full::DebouncedEvent]) -> Option<WatchMessage> {
         let mut changed = BTreeSet::new();
         for event in events.iter().filter(|event| !matches!(event.kind, EventKind::Access(_))) {
-            let structural =
-                matches!(event.kind, EventKind::Create(_) | EventKind::Remove(_) | EventKind::Modify(notify::event::ModifyKind::Name(_)));
+            let structural = matches!(
+                event.kind,
+                EventKind::Create(_) | EventKind::Remove(_) | EventKind::Modify(notify::event::ModifyKind::Name(_))
+            );
             for path in &event.paths {
                 match self.relevance(path, structural) {
                     Relevance::Noise => {}
@@ -191,8 +193,12 @@ impl EventFilter {
         }
         // A folder deleted or moved away takes the sources inside it along (one event, no
         // event per file).
-        let inside: Vec<PathBuf> =
-            self.sources.range(relative.to_path_buf()..).take_while(|source| source.starts_with(relative)).cloned().collect();
+        let inside: Vec<PathBuf> = self
+            .sources
+            .range(relative.to_path_buf()..)
+            .take_while(|source| source.starts_with(relative))
+            .cloned()
+            .collect();
         if !inside.is_empty() {
             return Relevance::Files(inside);
         }
@@ -288,7 +294,9 @@ pub fn watch(settings: &WatchSettings) -> Result<(), WatchError> {
         let _ = sender.send(message);
     })
     .map_err(|source| WatchError::Watch { path: display_path(&root), source })?;
-    debouncer.watch(&root, RecursiveMode::NonRecursive).map_err(|source| WatchError::Watch { path: display_path(&root), source })?;
+    debouncer
+        .watch(&root, RecursiveMode::NonRecursive)
+        .map_err(|source| WatchError::Watch { path: display_path(&root), source })?;
     let mut watched = watch_folders(&mut debouncer, &root, &config, &[]);
 
     let mut builds = 0u64;
@@ -328,7 +336,10 @@ pub fn watch(settings: &WatchSettings) -> Result<(), WatchError> {
                         Ok(new_config)
                     }
                     Err(error) => Err(crate::config::ConfigError {
-                        diagnostics: vec![crate::diagnostic::Diagnostic::new(&new_config.file, format!("`output`: {error}"))],
+                        diagnostics: vec![crate::diagnostic::Diagnostic::new(
+                            &new_config.file,
+                            format!("`output`: {error}"),
+                        )],
                     }),
                 }
             });
@@ -370,8 +381,13 @@ pub fn watch(settings: &WatchSettings) -> Result<(), WatchError> {
                         .collect();
                     // Keep running on the last good configuration; report the broken file.
                     if let Some(server) = &server {
-                        let batch =
-                            BatchEvent { revision: project.revision() + 1, changed: Vec::new(), removed: Vec::new(), failed, ms: 0.0 };
+                        let batch = BatchEvent {
+                            revision: project.revision() + 1,
+                            changed: Vec::new(),
+                            removed: Vec::new(),
+                            failed,
+                            ms: 0.0,
+                        };
                         project.skip_revision();
                         server.publish(&batch);
                     }
@@ -391,8 +407,11 @@ pub fn watch(settings: &WatchSettings) -> Result<(), WatchError> {
         // The files this build is about to read count as sources already: a folder of new
         // rule-matched files deleted while they bake (one event for the folder) cancels it.
         {
-            let main_files: Vec<PathBuf> =
-                project.asset_list().iter().map(|asset| project.config().source.join(asset.source.main_file())).collect();
+            let main_files: Vec<PathBuf> = project
+                .asset_list()
+                .iter()
+                .map(|asset| project.config().source.join(asset.source.main_file()))
+                .collect();
             filter.write().expect("event filter").sources.extend(main_files);
         }
         let start = Instant::now();
@@ -400,7 +419,10 @@ pub fn watch(settings: &WatchSettings) -> Result<(), WatchError> {
         let summary = match project.build(&options, &|_| {}) {
             Ok(summary) => summary,
             Err(BuildError::Cancelled) => {
-                tracing::info!("build cancelled by a newer edit after {:.0} ms; restarting", start.elapsed().as_secs_f64() * 1e3);
+                tracing::info!(
+                    "build cancelled by a newer edit after {:.0} ms; restarting",
+                    start.elapsed().as_secs_f64() * 1e3
+                );
                 // The next build covers this batch's edits too (their inputs are set already).
                 pending.extend(changed_files);
                 force_build = true;
@@ -443,7 +465,10 @@ fn apply_message(message: WatchMessage, pending: &mut BTreeSet<PathBuf>, project
             pending.extend(project.source_paths());
         }
         WatchMessage::Rearm => {
-            tracing::info!("the source folder {} appeared, moved or vanished: watching it again", display_path(&project.config().source));
+            tracing::info!(
+                "the source folder {} appeared, moved or vanished: watching it again",
+                display_path(&project.config().source)
+            );
             project.invalidate_all_sources();
             pending.extend(project.source_paths());
         }
@@ -458,7 +483,10 @@ fn apply_message(message: WatchMessage, pending: &mut BTreeSet<PathBuf>, project
 /// exist are skipped, not errors: the daemon keeps running and reports the missing sources.
 /// Returns the folders watched now.
 fn watch_folders(
-    debouncer: &mut notify_debouncer_full::Debouncer<notify::RecommendedWatcher, notify_debouncer_full::RecommendedCache>,
+    debouncer: &mut notify_debouncer_full::Debouncer<
+        notify::RecommendedWatcher,
+        notify_debouncer_full::RecommendedCache,
+    >,
     root: &Path,
     config: &PipelineConfig,
     previous: &[(PathBuf, RecursiveMode)],
@@ -493,7 +521,8 @@ fn watch_folders(
 pub fn batch_event(summary: &BuildSummary, ms: f64) -> BatchEvent {
     let mut failed = Vec::new();
     for asset in summary.assets.iter().filter(|asset| asset.status == AssetStatus::Failed) {
-        let stage = asset.stages.iter().find(|stage| stage.status == StageStatus::Failed).map_or("parse", |stage| stage.stage);
+        let stage =
+            asset.stages.iter().find(|stage| stage.status == StageStatus::Failed).map_or("parse", |stage| stage.stage);
         for error in &asset.errors {
             failed.push(FailedEntry {
                 asset: Some(asset.name.clone()),
@@ -519,11 +548,14 @@ fn log_batch(summary: &BuildSummary, changed_files: &[PathBuf], graph: &crate::g
     let ran: Vec<String> = summary
         .assets
         .iter()
-        .flat_map(|asset| asset.stages.iter().filter(|stage| stage.status == StageStatus::Ran).map(move |stage| (asset, stage)))
+        .flat_map(|asset| {
+            asset.stages.iter().filter(|stage| stage.status == StageStatus::Ran).map(move |stage| (asset, stage))
+        })
         .map(|(asset, stage)| format!("{}:{}({})", asset.name, stage.stage, stage.instance))
         .collect();
     // One line per batch whatever the log level: the daemon is seen to work.
-    let rebuilt = summary.assets.iter().filter(|asset| asset.stages.iter().any(|stage| stage.status == StageStatus::Ran)).count();
+    let rebuilt =
+        summary.assets.iter().filter(|asset| asset.stages.iter().any(|stage| stage.status == StageStatus::Ran)).count();
     let _ = writeln!(
         std::io::stderr(),
         "cirrus watch: batch r{}: {} file(s) changed, {rebuilt} asset(s) rebuilt, {} stage(s) ran, {} artifact(s) changed, {} failed asset(s), {ms:.0} ms",

@@ -431,7 +431,9 @@ impl DiskCache {
     /// kept here); `None` when neither has a good one.
     pub fn load(&self, stage: &str, key: CacheKey) -> Option<CacheEntry> {
         let path = self.entry_path(stage, key);
-        let local = crate::sources::read_regular_file(&path, MAX_ENTRY_BYTES).ok().and_then(|bytes| decode_entry(&bytes, stage, key));
+        let local = crate::sources::read_regular_file(&path, MAX_ENTRY_BYTES)
+            .ok()
+            .and_then(|bytes| decode_entry(&bytes, stage, key));
         if local.is_some() {
             self.counters.hits.fetch_add(1, Ordering::Relaxed);
             upkeep::mark_used(&path);
@@ -555,7 +557,8 @@ const ENTRY_FRAME_BYTES: usize = 4 << 20;
 /// and a blake3 checksum of everything before it. Written straight to `file` as it is made
 /// (a 30 MB entry is never gathered into one buffer first).
 fn write_entry_to(file: &mut std::fs::File, stage: &str, key: CacheKey, entry: &CacheEntry) -> std::io::Result<()> {
-    let mut writer = ChecksummedWriter { inner: std::io::BufWriter::with_capacity(1 << 20, file), hasher: blake3::Hasher::new() };
+    let mut writer =
+        ChecksummedWriter { inner: std::io::BufWriter::with_capacity(1 << 20, file), hasher: blake3::Hasher::new() };
     let metadata = serde_json::to_vec(&entry.metadata).expect("JSON values serialise");
     writer.write(&entry_header(stage, key))?;
     writer.write(&[entry.compress as u8])?;
@@ -564,8 +567,10 @@ fn write_entry_to(file: &mut std::fs::File, stage: &str, key: CacheKey, entry: &
     writer.write(&(entry.blobs.len() as u64).to_le_bytes())?;
     if entry.compress {
         let frames: Vec<&[u8]> = entry.blobs.iter().flat_map(|blob| blob.chunks(ENTRY_FRAME_BYTES)).collect();
-        let compressed: Vec<Vec<u8>> =
-            frames.par_iter().map(|frame| zstd::bulk::compress(frame, ENTRY_ZSTD_LEVEL).expect("zstd compresses in memory")).collect();
+        let compressed: Vec<Vec<u8>> = frames
+            .par_iter()
+            .map(|frame| zstd::bulk::compress(frame, ENTRY_ZSTD_LEVEL).expect("zstd compresses in memory"))
+            .collect();
         let mut compressed = compressed.into_iter();
         for blob in &entry.blobs {
             let frame_count = blob.len().div_ceil(ENTRY_FRAME_BYTES);

@@ -88,9 +88,13 @@ pub fn parse_remote_url(url: &str) -> Result<RemoteLocation, String> {
                 ));
             }
             let bucket_ok = (3..=63).contains(&bucket.len())
-                && bucket.bytes().all(|byte| byte.is_ascii_lowercase() || byte.is_ascii_digit() || byte == b'-' || byte == b'.');
+                && bucket
+                    .bytes()
+                    .all(|byte| byte.is_ascii_lowercase() || byte.is_ascii_digit() || byte == b'-' || byte == b'.');
             if !bucket_ok {
-                return Err(format!("`{bucket}` is not an S3 bucket name (3 to 63 lowercase letters, digits, `-` and `.`)"));
+                return Err(format!(
+                    "`{bucket}` is not an S3 bucket name (3 to 63 lowercase letters, digits, `-` and `.`)"
+                ));
             }
             let prefix = prefix.trim_matches('/');
             if prefix.split('/').any(|part| part == "." || part == "..") || prefix.contains("//") {
@@ -121,20 +125,23 @@ pub struct RemoteCacheOverride {
 impl RemoteCacheOverride {
     /// From `--remote-cache URL|off` and `--remote-cache-mode read-only|read-write`.
     pub fn parse(url: Option<&str>, mode: Option<&str>) -> Result<RemoteCacheOverride, String> {
-        let location = match url {
-            None => None,
-            Some("") => {
-                return Err("it is empty (an unset shell variable?): name a URL (s3://bucket/prefix, file:///folder) or `off`".into())
-            }
-            Some("off" | "none") => Some(None),
-            Some(url) => Some(Some((url.to_string(), parse_remote_url(url)?))),
-        };
+        let location =
+            match url {
+                None => None,
+                Some("") => return Err(
+                    "it is empty (an unset shell variable?): name a URL (s3://bucket/prefix, file:///folder) or `off`"
+                        .into(),
+                ),
+                Some("off" | "none") => Some(None),
+                Some(url) => Some(Some((url.to_string(), parse_remote_url(url)?))),
+            };
         let mode = match mode {
             None => None,
             Some("") => return Err("the mode is empty (an unset shell variable?): read-write or read-only".into()),
-            Some(text) => {
-                Some(RemoteCacheMode::parse(text).ok_or_else(|| format!("`{text}` is not a shared cache mode: read-write or read-only"))?)
-            }
+            Some(text) => Some(
+                RemoteCacheMode::parse(text)
+                    .ok_or_else(|| format!("`{text}` is not a shared cache mode: read-write or read-only"))?,
+            ),
         };
         Ok(RemoteCacheOverride { location, mode })
     }
@@ -277,8 +284,10 @@ impl RemoteStore {
                 (Arc::new(store), prefix.clone())
             }
             RemoteLocation::Folder(folder) => {
-                std::fs::create_dir_all(folder).map_err(|why| error(format!("cannot create {}: {why}", folder.display())))?;
-                let store = object_store::local::LocalFileSystem::new_with_prefix(folder).map_err(|why| error(why.to_string()))?;
+                std::fs::create_dir_all(folder)
+                    .map_err(|why| error(format!("cannot create {}: {why}", folder.display())))?;
+                let store = object_store::local::LocalFileSystem::new_with_prefix(folder)
+                    .map_err(|why| error(why.to_string()))?;
                 (Arc::new(store), String::new())
             }
             RemoteLocation::Memory(name) => (memory_store(name), String::new()),
@@ -297,7 +306,12 @@ impl RemoteStore {
             counters: Counters::default(),
             corrupt_keys: Mutex::default(),
         };
-        Ok(RemoteStore { runtime, max_object_bytes: DEFAULT_MAX_OBJECT_BYTES, shared: Arc::new(shared), uploads: Mutex::default() })
+        Ok(RemoteStore {
+            runtime,
+            max_object_bytes: DEFAULT_MAX_OBJECT_BYTES,
+            shared: Arc::new(shared),
+            uploads: Mutex::default(),
+        })
     }
 
     /// The same store, refusing objects larger than `bytes` without downloading them.
@@ -403,7 +417,9 @@ pub fn check_endpoint_environment() -> Result<(), String> {
             }
         });
         if let Err(why) = parsed {
-            return Err(format!("{variable}=`{value}` is not an endpoint URL ({why}); give e.g. http://127.0.0.1:8333 or unset it"));
+            return Err(format!(
+                "{variable}=`{value}` is not an endpoint URL ({why}); give e.g. http://127.0.0.1:8333 or unset it"
+            ));
         }
     }
     Ok(())
@@ -429,7 +445,8 @@ impl RemoteStore {
     /// there is none, the store is not answering, or entries of `stage` are not shared.
     pub fn fetch(&self, stage: &str, key: CacheKey) -> Option<Vec<u8>> {
         let shared = &self.shared;
-        if !shares(stage) || shared.corrupt_keys.lock().expect("corrupt keys lock").contains(&(stage.to_string(), key)) {
+        if !shares(stage) || shared.corrupt_keys.lock().expect("corrupt keys lock").contains(&(stage.to_string(), key))
+        {
             // A key found corrupt is not fetched again: it is computed and overwritten.
             return None;
         }
@@ -524,7 +541,9 @@ impl RemoteStore {
         let (remote, path, length) = (self.shared.clone(), self.shared.object_path(stage, key), bytes.len() as u64);
         let task = self.runtime.spawn(async move {
             let options = PutOptions { mode, ..Default::default() };
-            let put = tokio::time::timeout(TRANSFER_TIMEOUT, remote.store.put_opts(&path, PutPayload::from(bytes), options)).await;
+            let put =
+                tokio::time::timeout(TRANSFER_TIMEOUT, remote.store.put_opts(&path, PutPayload::from(bytes), options))
+                    .await;
             match put {
                 Ok(Ok(_)) => {
                     remote.counters.uploads.fetch_add(1, Ordering::Relaxed);

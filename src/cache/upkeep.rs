@@ -42,7 +42,8 @@ pub fn entry_files(folder: &Path) -> Vec<EntryFile> {
         let Ok(shards) = std::fs::read_dir(stage.path()) else { continue };
         for shard in shards.flatten() {
             let shard_name = shard.file_name();
-            let shard_is_hex = shard_name.len() == 2 && shard_name.to_string_lossy().bytes().all(|byte| byte.is_ascii_hexdigit());
+            let shard_is_hex =
+                shard_name.len() == 2 && shard_name.to_string_lossy().bytes().all(|byte| byte.is_ascii_hexdigit());
             if !shard_is_hex || !shard.file_type().is_ok_and(|kind| kind.is_dir()) {
                 continue;
             }
@@ -120,7 +121,9 @@ fn forget_deleted_key_parts(folder: &Path) {
                 kept.push('\n');
             }
         }
-        if let Err(error) = super::write_atomically(&file.path(), |file| std::io::Write::write_all(file, kept.as_bytes())) {
+        if let Err(error) =
+            super::write_atomically(&file.path(), |file| std::io::Write::write_all(file, kept.as_bytes()))
+        {
             tracing::warn!("cannot rewrite {}: {error}", file.path().display());
         }
     }

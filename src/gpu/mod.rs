@@ -128,10 +128,14 @@ fn new_instance() -> wgpu::Instance {
 /// can. An adapter that cannot (OpenGL ES drivers without float render targets or storage
 /// buffers in vertex shaders) would fail pipeline creation, which wgpu treats as fatal.
 async fn choose_adapter(instance: &wgpu::Instance) -> Result<wgpu::Adapter, GpuError> {
-    let options = wgpu::RequestAdapterOptions { power_preference: wgpu::PowerPreference::HighPerformance, ..Default::default() };
+    let options =
+        wgpu::RequestAdapterOptions { power_preference: wgpu::PowerPreference::HighPerformance, ..Default::default() };
     let preferred = instance.request_adapter(&options).await;
     let shortfalls_of = |adapter: &wgpu::Adapter| {
-        adapter_shortfalls(&|format| adapter.get_texture_format_features(format).allowed_usages, adapter.get_downlevel_capabilities().flags)
+        adapter_shortfalls(
+            &|format| adapter.get_texture_format_features(format).allowed_usages,
+            adapter.get_downlevel_capabilities().flags,
+        )
     };
     if let Ok(adapter) = &preferred {
         if shortfalls_of(adapter).is_empty() {
@@ -164,7 +168,10 @@ async fn choose_adapter(instance: &wgpu::Instance) -> Result<wgpu::Adapter, GpuE
 /// texture format and its downlevel flags: render targets of every format drawn to (sampled
 /// too where they are read back as textures), and read-only storage buffers in vertex and
 /// fragment shaders (every pipeline's per-draw constants). Empty: it can render everything.
-pub fn adapter_shortfalls(allowed_usages: &dyn Fn(wgpu::TextureFormat) -> wgpu::TextureUsages, flags: wgpu::DownlevelFlags) -> Vec<String> {
+pub fn adapter_shortfalls(
+    allowed_usages: &dyn Fn(wgpu::TextureFormat) -> wgpu::TextureUsages,
+    flags: wgpu::DownlevelFlags,
+) -> Vec<String> {
     let mut shortfalls = Vec::new();
     let render = wgpu::TextureUsages::RENDER_ATTACHMENT;
     let render_and_sample = render | wgpu::TextureUsages::TEXTURE_BINDING;
@@ -269,8 +276,10 @@ impl Gpu {
             },
             count: None,
         };
-        let frame_layout =
-            device.create_bind_group_layout(&wgpu::BindGroupLayoutDescriptor { label: Some("frame"), entries: &[constants_entry(0)] });
+        let frame_layout = device.create_bind_group_layout(&wgpu::BindGroupLayoutDescriptor {
+            label: Some("frame"),
+            entries: &[constants_entry(0)],
+        });
         let mut material_entries = vec![
             constants_entry(0),
             wgpu::BindGroupLayoutEntry {
@@ -292,8 +301,10 @@ impl Gpu {
                 count: None,
             });
         }
-        let material_layout =
-            device.create_bind_group_layout(&wgpu::BindGroupLayoutDescriptor { label: Some("material"), entries: &material_entries });
+        let material_layout = device.create_bind_group_layout(&wgpu::BindGroupLayoutDescriptor {
+            label: Some("material"),
+            entries: &material_entries,
+        });
         let layout = device.create_pipeline_layout(&wgpu::PipelineLayoutDescriptor {
             label: Some("plane"),
             bind_group_layouts: &[Some(&frame_layout), Some(&material_layout)],
@@ -303,8 +314,14 @@ impl Gpu {
             [ALBEDO_FORMAT, DATA_FORMAT, DATA_FORMAT, DATA_FORMAT].iter().map(|&format| Some(format.into())).collect();
         let pipeline = mesh_pipeline(&device, "plane", &layout, (&shader, "fs_main"), &targets, Some(depth_test()));
         // Coverage is the union of every face's: no depth test.
-        let coverage_pipeline =
-            mesh_pipeline(&device, "plane coverage", &layout, (&shader, "fs_coverage"), &[Some(COVERAGE_FORMAT.into())], None);
+        let coverage_pipeline = mesh_pipeline(
+            &device,
+            "plane coverage",
+            &layout,
+            (&shader, "fs_coverage"),
+            &[Some(COVERAGE_FORMAT.into())],
+            None,
+        );
         let sampler = device.create_sampler(&wgpu::SamplerDescriptor {
             label: Some("trilinear repeat"),
             address_mode_u: wgpu::AddressMode::Repeat,
@@ -319,15 +336,23 @@ impl Gpu {
             label: Some("view.wgsl"),
             source: wgpu::ShaderSource::Wgsl(include_str!("../../shaders/view.wgsl").into()),
         });
-        let view_material_layout = device
-            .create_bind_group_layout(&wgpu::BindGroupLayoutDescriptor { label: Some("view material"), entries: &material_entries[..5] });
+        let view_material_layout = device.create_bind_group_layout(&wgpu::BindGroupLayoutDescriptor {
+            label: Some("view material"),
+            entries: &material_entries[..5],
+        });
         let view_layout = device.create_pipeline_layout(&wgpu::PipelineLayoutDescriptor {
             label: Some("view"),
             bind_group_layouts: &[Some(&frame_layout), Some(&view_material_layout)],
             ..Default::default()
         });
-        let view_pipeline =
-            mesh_pipeline(&device, "view", &view_layout, (&view_shader, "fs_main"), &[Some(ALBEDO_FORMAT.into())], Some(depth_test()));
+        let view_pipeline = mesh_pipeline(
+            &device,
+            "view",
+            &view_layout,
+            (&view_shader, "fs_main"),
+            &[Some(ALBEDO_FORMAT.into())],
+            Some(depth_test()),
+        );
         let top_down_pipeline = top_down_render::top_down_pipeline(&device, &frame_layout);
         Ok(Gpu {
             top_down_pipeline,
@@ -379,9 +404,14 @@ impl Gpu {
 
     /// Submits `encoder` after copying `targets` out, and returns each one's pixels (rows
     /// without padding, as many bytes per texel as its format has).
-    fn read_back(&self, mut encoder: wgpu::CommandEncoder, targets: &[&wgpu::Texture]) -> Result<Vec<Vec<u8>>, GpuError> {
+    fn read_back(
+        &self,
+        mut encoder: wgpu::CommandEncoder,
+        targets: &[&wgpu::Texture],
+    ) -> Result<Vec<Vec<u8>>, GpuError> {
         let row_bytes = |texture: &wgpu::Texture| texture.width() * texture.format().block_copy_size(None).unwrap_or(4);
-        let padded_row = |texture: &wgpu::Texture| row_bytes(texture).next_multiple_of(wgpu::COPY_BYTES_PER_ROW_ALIGNMENT);
+        let padded_row =
+            |texture: &wgpu::Texture| row_bytes(texture).next_multiple_of(wgpu::COPY_BYTES_PER_ROW_ALIGNMENT);
         let readbacks: Vec<wgpu::Buffer> = targets
             .iter()
             .map(|texture| {
@@ -513,7 +543,12 @@ fn extend([x, y, z]: [f32; 3]) -> [f32; 4] {
 }
 
 /// Uploads a mip chain (level 0 first) as one texture.
-fn upload(device: &wgpu::Device, queue: &wgpu::Queue, levels: &[Texture], format: wgpu::TextureFormat) -> wgpu::TextureView {
+fn upload(
+    device: &wgpu::Device,
+    queue: &wgpu::Queue,
+    levels: &[Texture],
+    format: wgpu::TextureFormat,
+) -> wgpu::TextureView {
     let texture = device.create_texture(&wgpu::TextureDescriptor {
         label: Some("source"),
         size: wgpu::Extent3d { width: levels[0].width, height: levels[0].height, depth_or_array_layers: 1 },
@@ -533,7 +568,11 @@ fn upload(device: &wgpu::Device, queue: &wgpu::Queue, levels: &[Texture], format
                 aspect: wgpu::TextureAspect::All,
             },
             &image.pixels,
-            wgpu::TexelCopyBufferLayout { offset: 0, bytes_per_row: Some(image.width * 4), rows_per_image: Some(image.height) },
+            wgpu::TexelCopyBufferLayout {
+                offset: 0,
+                bytes_per_row: Some(image.width * 4),
+                rows_per_image: Some(image.height),
+            },
             wgpu::Extent3d { width: image.width, height: image.height, depth_or_array_layers: 1 },
         );
     }

@@ -91,7 +91,8 @@ pub struct PlaneImages {
 
 impl PlaneImages {
     /// The surfaces in buffer order.
-    pub const SURFACES: [SurfaceKind; 4] = [SurfaceKind::Albedo, SurfaceKind::Normal, SurfaceKind::Mra, SurfaceKind::Height];
+    pub const SURFACES: [SurfaceKind; 4] =
+        [SurfaceKind::Albedo, SurfaceKind::Normal, SurfaceKind::Mra, SurfaceKind::Height];
 
     /// The bytes of one `width` × `height` plane's four images.
     pub fn byte_len(width: u32, height: u32) -> usize {
@@ -133,9 +134,13 @@ impl PartialEq for PlaneImages {
 /// coverage-preserving mips at the cutoff, the others as data.
 pub fn material_mip_settings(slot: TextureSlot, alpha_cutoff: f32) -> MipSettings {
     match slot {
-        TextureSlot::Albedo | TextureSlot::Opacity => MipSettings { kind: SurfaceKind::Albedo, alpha_cutoff: Some(alpha_cutoff) },
+        TextureSlot::Albedo | TextureSlot::Opacity => {
+            MipSettings { kind: SurfaceKind::Albedo, alpha_cutoff: Some(alpha_cutoff) }
+        }
         TextureSlot::Normal => MipSettings { kind: SurfaceKind::Normal, alpha_cutoff: None },
-        TextureSlot::Metallic | TextureSlot::Roughness | TextureSlot::Ao => MipSettings { kind: SurfaceKind::Mra, alpha_cutoff: None },
+        TextureSlot::Metallic | TextureSlot::Roughness | TextureSlot::Ao => {
+            MipSettings { kind: SurfaceKind::Mra, alpha_cutoff: None }
+        }
     }
 }
 
@@ -162,9 +167,16 @@ impl Gpu {
     }
 
     /// A material's mip chain for `slot` on the GPU (uploaded once per content).
-    fn material_texture_view(&self, levels: &[Texture], slot: TextureSlot, alpha_cutoff: f32) -> Arc<wgpu::TextureView> {
+    fn material_texture_view(
+        &self,
+        levels: &[Texture],
+        slot: TextureSlot,
+        alpha_cutoff: f32,
+    ) -> Arc<wgpu::TextureView> {
         let settings = material_mip_settings(slot, alpha_cutoff);
-        self.cached_upload(upload_key(&levels[0], settings), || upload(&self.device, &self.queue, levels, view_format(settings)))
+        self.cached_upload(upload_key(&levels[0], settings), || {
+            upload(&self.device, &self.queue, levels, view_format(settings))
+        })
     }
 
     /// Renders the rectangles of one plane (or any set of rectangles): each under its own
@@ -180,13 +192,20 @@ impl Gpu {
     pub fn render_rectangles(&self, inputs: &[PlaneRenderInput]) -> Result<Vec<PlaneImages>, GpuError> {
         let mut order: Vec<usize> = (0..inputs.len()).collect();
         // Stacks of one supersampling each, tallest rectangles first.
-        order.sort_by_key(|&index| (inputs[index].supersampling.max(1), std::cmp::Reverse(inputs[index].height.max(1))));
+        order
+            .sort_by_key(|&index| (inputs[index].supersampling.max(1), std::cmp::Reverse(inputs[index].height.max(1))));
         let mut images: Vec<Option<PlaneImages>> = vec![None; inputs.len()];
         let mut rest = &order[..];
         while !rest.is_empty() {
             let factor = inputs[rest[0]].supersampling.max(1);
             let side_limit = self.max_texture_size / factor;
-            let row_width = rest.iter().map(|&index| inputs[index].width.max(1)).max().unwrap_or(1).max(STACK_ROW_TEXELS).min(side_limit);
+            let row_width = rest
+                .iter()
+                .map(|&index| inputs[index].width.max(1))
+                .max()
+                .unwrap_or(1)
+                .max(STACK_ROW_TEXELS)
+                .min(side_limit);
             let mut stack = Vec::new();
             let (mut x, mut y, mut row_height, mut width) = (0u32, 0u32, 0u32, 0u32);
             for &index in rest {
@@ -209,7 +228,8 @@ impl Gpu {
                 width = width.max(x);
             }
             let height = y + row_height;
-            let placed: Vec<(&PlaneRenderInput, u32, u32)> = stack.iter().map(|&(index, x, y)| (&inputs[index], x, y)).collect();
+            let placed: Vec<(&PlaneRenderInput, u32, u32)> =
+                stack.iter().map(|&(index, x, y)| (&inputs[index], x, y)).collect();
             let rendered = self.catching_device_errors(|| self.render_stack(&placed, (width, height), factor))?;
             for (&(index, _, _), image) in stack.iter().zip(rendered) {
                 images[index] = Some(image);
@@ -229,9 +249,12 @@ impl Gpu {
         factor: u32,
     ) -> Result<Vec<PlaneImages>, GpuError> {
         let (width, height) = texels;
-        let mut targets: Vec<wgpu::Texture> =
-            [ALBEDO_FORMAT, DATA_FORMAT, DATA_FORMAT, DATA_FORMAT].iter().map(|&format| self.target(width, height, format)).collect();
-        let views: Vec<wgpu::TextureView> = targets.iter().map(|texture| texture.create_view(&Default::default())).collect();
+        let mut targets: Vec<wgpu::Texture> = [ALBEDO_FORMAT, DATA_FORMAT, DATA_FORMAT, DATA_FORMAT]
+            .iter()
+            .map(|&format| self.target(width, height, format))
+            .collect();
+        let views: Vec<wgpu::TextureView> =
+            targets.iter().map(|texture| texture.create_view(&Default::default())).collect();
         let depth_texture = self.target(width, height, DEPTH_FORMAT);
         let depth = depth_texture.create_view(&Default::default());
         let coverage_texture = (factor > 1).then(|| self.target(width * factor, height * factor, COVERAGE_FORMAT));
@@ -259,7 +282,12 @@ impl Gpu {
                 x_axis: extend(rectangle.x_axis),
                 y_axis: extend(rectangle.y_axis),
                 normal: extend(rectangle.normal),
-                size: [rectangle.width.max(1e-6), rectangle.height.max(1e-6), input.epsilon.max(1e-6), input.alpha_cutoff],
+                size: [
+                    rectangle.width.max(1e-6),
+                    rectangle.height.max(1e-6),
+                    input.epsilon.max(1e-6),
+                    input.alpha_cutoff,
+                ],
             };
             let frame_buffer = self.constants_buffer(bytemuck::bytes_of(&frame));
             let frame_group = self.device.create_bind_group(&wgpu::BindGroupDescriptor {
@@ -277,16 +305,26 @@ impl Gpu {
                 all_vertices.extend_from_slice(vertices);
                 draws.push((first..all_vertices.len() as u32, self.material_group(material, input.alpha_cutoff)));
             }
-            placed.push(PlacedDraws { x, y, width: input.width.max(1), height: input.height.max(1), frame_buffer, frame_group, draws });
+            placed.push(PlacedDraws {
+                x,
+                y,
+                width: input.width.max(1),
+                height: input.height.max(1),
+                frame_buffer,
+                frame_group,
+                draws,
+            });
         }
 
         let vertex_buffer = (!all_vertices.is_empty()).then(|| self.vertex_buffer(&all_vertices));
         let mut encoder = self.device.create_command_encoder(&Default::default());
-        let clear = wgpu::Operations { load: wgpu::LoadOp::Clear(wgpu::Color::TRANSPARENT), store: wgpu::StoreOp::Store };
+        let clear =
+            wgpu::Operations { load: wgpu::LoadOp::Clear(wgpu::Color::TRANSPARENT), store: wgpu::StoreOp::Store };
         // A rectangle's draws under the camera that maps its clip square onto its place in a
         // target `scale` times the texels' size.
         let draw_rectangle = |pass: &mut wgpu::RenderPass, rectangle: &PlacedDraws, scale: u32| {
-            let (x, y, width, height) = (rectangle.x * scale, rectangle.y * scale, rectangle.width * scale, rectangle.height * scale);
+            let (x, y, width, height) =
+                (rectangle.x * scale, rectangle.y * scale, rectangle.width * scale, rectangle.height * scale);
             pass.set_viewport(x as f32, y as f32, width as f32, height as f32, 0.0, 1.0);
             pass.set_scissor_rect(x, y, width, height);
             pass.set_bind_group(0, &rectangle.frame_group, &[]);
@@ -298,7 +336,9 @@ impl Gpu {
         {
             let attachments: Vec<Option<wgpu::RenderPassColorAttachment>> = views
                 .iter()
-                .map(|view| Some(wgpu::RenderPassColorAttachment { view, depth_slice: None, resolve_target: None, ops: clear }))
+                .map(|view| {
+                    Some(wgpu::RenderPassColorAttachment { view, depth_slice: None, resolve_target: None, ops: clear })
+                })
                 .collect();
             let mut pass = encoder.begin_render_pass(&wgpu::RenderPassDescriptor {
                 label: Some("plane rectangles"),
@@ -321,7 +361,12 @@ impl Gpu {
         if let Some(view) = &coverage_view {
             let mut pass = encoder.begin_render_pass(&wgpu::RenderPassDescriptor {
                 label: Some("plane coverage"),
-                color_attachments: &[Some(wgpu::RenderPassColorAttachment { view, depth_slice: None, resolve_target: None, ops: clear })],
+                color_attachments: &[Some(wgpu::RenderPassColorAttachment {
+                    view,
+                    depth_slice: None,
+                    resolve_target: None,
+                    ops: clear,
+                })],
                 ..Default::default()
             });
             pass.set_pipeline(&self.coverage_pipeline);
@@ -361,7 +406,9 @@ impl Gpu {
                     let (sample_width, coverage_width) = (rectangle_width * scale, width as usize * scale);
                     let mut covered = Vec::with_capacity(sample_width * rectangle_height * scale);
                     for row in y * scale..(y + rectangle_height) * scale {
-                        covered.extend(coverage[row * coverage_width + x * scale..][..sample_width].iter().map(|&byte| byte != 0));
+                        covered.extend(
+                            coverage[row * coverage_width + x * scale..][..sample_width].iter().map(|&byte| byte != 0),
+                        );
                     }
                     let length = pixels.len() / PlaneImages::SURFACES.len();
                     let mut surfaces: Vec<&mut [u8]> = pixels.chunks_exact_mut(length).collect();
@@ -374,7 +421,8 @@ impl Gpu {
                         first_surface_srgb: true,
                     });
                 }
-                PlaneImages::in_buffer(rectangle.width, rectangle.height, Arc::new(pixels), 0).expect("the buffer holds four images")
+                PlaneImages::in_buffer(rectangle.width, rectangle.height, Arc::new(pixels), 0)
+                    .expect("the buffer holds four images")
             })
             .collect();
         Ok(images)
@@ -391,7 +439,14 @@ impl Gpu {
         let mut key = blake3::Hasher::new();
         key.update(bytemuck::bytes_of(&uniform));
         key.update(&alpha_cutoff.to_bits().to_le_bytes());
-        for texture in [&material.albedo, &material.opacity, &material.normal, &material.metallic, &material.roughness, &material.ao] {
+        for texture in [
+            &material.albedo,
+            &material.opacity,
+            &material.normal,
+            &material.metallic,
+            &material.roughness,
+            &material.ao,
+        ] {
             key.update(texture.as_ref().map_or(&[0u8; 32], |levels| levels[0].hash.as_bytes()));
         }
         let key = key.finalize();
@@ -418,7 +473,10 @@ impl Gpu {
             wgpu::BindGroupEntry { binding: 1, resource: wgpu::BindingResource::Sampler(&self.sampler) },
         ];
         for (index, view) in views.iter().enumerate() {
-            entries.push(wgpu::BindGroupEntry { binding: 2 + index as u32, resource: wgpu::BindingResource::TextureView(view) });
+            entries.push(wgpu::BindGroupEntry {
+                binding: 2 + index as u32,
+                resource: wgpu::BindingResource::TextureView(view),
+            });
         }
         let group = Arc::new(self.device.create_bind_group(&wgpu::BindGroupDescriptor {
             label: Some("material"),

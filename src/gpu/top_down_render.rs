@@ -85,7 +85,10 @@ impl Gpu {
     ) -> Result<Vec<Option<f32>>, GpuError> {
         self.catching_device_errors(|| {
             if size == 0 || size > self.max_texture_size {
-                return Err(GpuError::Render(format!("a {size}² top-down render exceeds the device's {} texels", self.max_texture_size)));
+                return Err(GpuError::Render(format!(
+                    "a {size}² top-down render exceeds the device's {} texels",
+                    self.max_texture_size
+                )));
             }
             let span = |low: f32, high: f32| if high > low { 1.0 / (high - low) } else { 1.0 };
             let uniform = FootprintUniform {
@@ -105,7 +108,9 @@ impl Gpu {
             });
             let corners: Vec<[f32; 3]> = triangles
                 .iter()
-                .flat_map(|triangle| triangle.map(|vertex| positions.get(vertex as usize).copied().unwrap_or([f32::NAN; 3])))
+                .flat_map(|triangle| {
+                    triangle.map(|vertex| positions.get(vertex as usize).copied().unwrap_or([f32::NAN; 3]))
+                })
                 .filter(|corner| corner.iter().all(|c| c.is_finite()))
                 .collect();
             let target = self.target(size, size, HEIGHT_FORMAT);
@@ -126,13 +131,17 @@ impl Gpu {
                     })],
                     depth_stencil_attachment: Some(wgpu::RenderPassDepthStencilAttachment {
                         view: &depth,
-                        depth_ops: Some(wgpu::Operations { load: wgpu::LoadOp::Clear(1.0), store: wgpu::StoreOp::Store }),
+                        depth_ops: Some(wgpu::Operations {
+                            load: wgpu::LoadOp::Clear(1.0),
+                            store: wgpu::StoreOp::Store,
+                        }),
                         stencil_ops: None,
                     }),
                     ..Default::default()
                 });
                 if corners.len() >= 3 {
-                    let buffer = self.filled_buffer("positions", bytemuck::cast_slice(&corners), wgpu::BufferUsages::VERTEX);
+                    let buffer =
+                        self.filled_buffer("positions", bytemuck::cast_slice(&corners), wgpu::BufferUsages::VERTEX);
                     pass.set_pipeline(&self.top_down_pipeline);
                     pass.set_bind_group(0, &group, &[]);
                     pass.set_vertex_buffer(0, buffer.slice(..));

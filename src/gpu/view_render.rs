@@ -45,7 +45,13 @@ struct ViewMaterialUniform {
 impl Gpu {
     /// Renders `mesh` under an orthographic camera into a `size`² RGBA8 image (sRGB colour on a
     /// mid-grey background; alpha 255 where a surface was drawn, 0 elsewhere).
-    pub fn render_view(&self, mesh: &ViewMesh, view_projection: [[f32; 4]; 4], light: [f32; 3], size: u32) -> Result<Vec<u8>, GpuError> {
+    pub fn render_view(
+        &self,
+        mesh: &ViewMesh,
+        view_projection: [[f32; 4]; 4],
+        light: [f32; 3],
+        size: u32,
+    ) -> Result<Vec<u8>, GpuError> {
         self.catching_device_errors(|| {
             let camera = CameraUniform { view_projection, light: extend(light) };
             let camera_buffer = self.constants_buffer(bytemuck::bytes_of(&camera));
@@ -80,7 +86,10 @@ impl Gpu {
                     })],
                     depth_stencil_attachment: Some(wgpu::RenderPassDepthStencilAttachment {
                         view: &depth,
-                        depth_ops: Some(wgpu::Operations { load: wgpu::LoadOp::Clear(1.0), store: wgpu::StoreOp::Discard }),
+                        depth_ops: Some(wgpu::Operations {
+                            load: wgpu::LoadOp::Clear(1.0),
+                            store: wgpu::StoreOp::Discard,
+                        }),
                         stencil_ops: None,
                     }),
                     ..Default::default()
@@ -110,19 +119,23 @@ impl Gpu {
             params: [material.alpha_cutoff, 0.0, 0.0, 0.0],
         };
         let buffer = self.constants_buffer(bytemuck::bytes_of(&uniform));
-        let views: Vec<Arc<wgpu::TextureView>> = [(&material.albedo, true), (&material.opacity, false), (&material.normal, false)]
-            .into_iter()
-            .map(|(levels, srgb)| match levels {
-                Some(levels) => self.levels_view(levels, srgb),
-                None => Arc::new(self.white.clone()),
-            })
-            .collect();
+        let views: Vec<Arc<wgpu::TextureView>> =
+            [(&material.albedo, true), (&material.opacity, false), (&material.normal, false)]
+                .into_iter()
+                .map(|(levels, srgb)| match levels {
+                    Some(levels) => self.levels_view(levels, srgb),
+                    None => Arc::new(self.white.clone()),
+                })
+                .collect();
         let mut entries = vec![
             wgpu::BindGroupEntry { binding: 0, resource: buffer.as_entire_binding() },
             wgpu::BindGroupEntry { binding: 1, resource: wgpu::BindingResource::Sampler(&self.sampler) },
         ];
         for (index, view) in views.iter().enumerate() {
-            entries.push(wgpu::BindGroupEntry { binding: 2 + index as u32, resource: wgpu::BindingResource::TextureView(view) });
+            entries.push(wgpu::BindGroupEntry {
+                binding: 2 + index as u32,
+                resource: wgpu::BindingResource::TextureView(view),
+            });
         }
         self.device.create_bind_group(&wgpu::BindGroupDescriptor {
             label: Some("view material"),
@@ -134,6 +147,8 @@ impl Gpu {
     /// A texture with explicit mip levels on the GPU (uploaded once per content).
     fn levels_view(&self, levels: &[Texture], srgb: bool) -> Arc<wgpu::TextureView> {
         let key = (levels[0].hash, srgb, levels.len() as u32);
-        self.cached_upload(key, || upload(&self.device, &self.queue, levels, if srgb { ALBEDO_FORMAT } else { DATA_FORMAT }))
+        self.cached_upload(key, || {
+            upload(&self.device, &self.queue, levels, if srgb { ALBEDO_FORMAT } else { DATA_FORMAT })
+        })
     }
 }

@@ -20,8 +20,10 @@ impl Gpu {
         width: u32,
         height: u32,
     ) -> Result<WindowSurface, GpuError> {
-        let surface =
-            self.instance.create_surface(window).map_err(|error| GpuError::Render(format!("cannot create a window surface: {error}")))?;
+        let surface = self
+            .instance
+            .create_surface(window)
+            .map_err(|error| GpuError::Render(format!("cannot create a window surface: {error}")))?;
         let capabilities = surface.get_capabilities(&self.adapter);
         // Formats that store the image's bytes as they are come first; an sRGB one decodes in the shader.
         let preference = [
@@ -30,13 +32,12 @@ impl Gpu {
             wgpu::TextureFormat::Bgra8UnormSrgb,
             wgpu::TextureFormat::Rgba8UnormSrgb,
         ];
-        let format = preference
-            .into_iter()
-            .find(|format| capabilities.formats.contains(format))
-            .ok_or_else(|| GpuError::Render(format!("the window offers no 8-bit RGBA surface format ({:?})", capabilities.formats)))?;
-        let mut config = surface
-            .get_default_config(&self.adapter, width.max(1), height.max(1))
-            .ok_or_else(|| GpuError::Render(format!("the adapter {} cannot present to this window", self.adapter_name)))?;
+        let format = preference.into_iter().find(|format| capabilities.formats.contains(format)).ok_or_else(|| {
+            GpuError::Render(format!("the window offers no 8-bit RGBA surface format ({:?})", capabilities.formats))
+        })?;
+        let mut config = surface.get_default_config(&self.adapter, width.max(1), height.max(1)).ok_or_else(|| {
+            GpuError::Render(format!("the adapter {} cannot present to this window", self.adapter_name))
+        })?;
         config.format = format;
         config.view_formats = vec![];
         surface.configure(&self.device, &config);
@@ -115,7 +116,9 @@ impl Gpu {
                 return Ok(());
             }
             wgpu::CurrentSurfaceTexture::Timeout | wgpu::CurrentSurfaceTexture::Occluded => return Ok(()),
-            wgpu::CurrentSurfaceTexture::Validation => return Err(GpuError::Render("the window surface failed validation".into())),
+            wgpu::CurrentSurfaceTexture::Validation => {
+                return Err(GpuError::Render("the window surface failed validation".into()))
+            }
         };
         let image = upload(&self.device, &self.queue, &[Texture::new(size, size, rgba.to_vec())], DATA_FORMAT);
         let offset = [
@@ -142,7 +145,10 @@ impl Gpu {
                     view: &view,
                     depth_slice: None,
                     resolve_target: None,
-                    ops: wgpu::Operations { load: wgpu::LoadOp::Clear(wgpu::Color::BLACK), store: wgpu::StoreOp::Store },
+                    ops: wgpu::Operations {
+                        load: wgpu::LoadOp::Clear(wgpu::Color::BLACK),
+                        store: wgpu::StoreOp::Store,
+                    },
                 })],
                 ..Default::default()
             });

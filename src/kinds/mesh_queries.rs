@@ -10,8 +10,8 @@ use std::sync::Arc;
 
 use crate::cache::{CacheEntry, CacheKey};
 use crate::db::{
-    asset_file, from_pod_blob, key_with_files, load_cached, pod_blob, read_contents, record_cache_hit, stage_key, store_cached, timed,
-    Asset, Db, SourceFile, Stage,
+    asset_file, from_pod_blob, key_with_files, load_cached, pod_blob, read_contents, record_cache_hit, stage_key,
+    store_cached, timed, Asset, Db, SourceFile, Stage,
 };
 use crate::diagnostic::Diagnostic;
 
@@ -122,7 +122,8 @@ fn loaded_mesh_entry(loaded: &LoadedMesh) -> CacheEntry {
 }
 
 fn loaded_mesh_from_entry(entry: CacheEntry) -> Option<LoadedMesh> {
-    let [positions, normals, uvs, triangles, triangle_materials, tangents, triangle_objects]: [Vec<u8>; 7] = entry.blobs.try_into().ok()?;
+    let [positions, normals, uvs, triangles, triangle_materials, tangents, triangle_objects]: [Vec<u8>; 7] =
+        entry.blobs.try_into().ok()?;
     let mesh = crate::mesh::Mesh {
         positions: from_pod_blob(&positions)?,
         normals: from_pod_blob(&normals)?,
@@ -164,7 +165,8 @@ pub fn loaded_mesh_of(db: &dyn Db, asset: Asset, obj: PathBuf) -> Result<Arc<Loa
     }
     let libraries = library_bytes(db, asset, &obj);
     let loaded = timed(db, MESH, name, || {
-        let (mesh, warnings) = crate::mesh::load_mesh(file.path(db), &contents.bytes, &libraries, asset.source_root(db))?;
+        let (mesh, warnings) =
+            crate::mesh::load_mesh(file.path(db), &contents.bytes, &libraries, asset.source_root(db))?;
         let tangents = match &mesh.uvs {
             Some(uvs) => crate::mesh::vertex_tangents(&mesh.positions, &mesh.normals, uvs, &mesh.triangles),
             None => Vec::new(),
@@ -182,8 +184,11 @@ pub fn mesh_instance(db: &dyn Db, asset: Asset) -> crate::kinds::StageInstance {
 
 /// The instance of the mesh stage of one OBJ of the asset (see `mesh_label`).
 pub fn mesh_instance_of(db: &dyn Db, asset: Asset, obj: &Path) -> crate::kinds::StageInstance {
-    let mut mesh = crate::kinds::StageInstance::new(MESH, mesh_label(db, asset, obj), crate::diagnostic::display_path(obj));
+    let mut mesh =
+        crate::kinds::StageInstance::new(MESH, mesh_label(db, asset, obj), crate::diagnostic::display_path(obj));
     mesh.reads.push(crate::kinds::Read::File(obj.to_path_buf()));
-    mesh.reads.extend(mesh_libraries_of(db, asset, obj.to_path_buf()).keys().map(|path| crate::kinds::Read::File(path.clone())));
+    mesh.reads.extend(
+        mesh_libraries_of(db, asset, obj.to_path_buf()).keys().map(|path| crate::kinds::Read::File(path.clone())),
+    );
     mesh
 }

@@ -49,7 +49,13 @@ pub trait Kind {
 
     /// The files to write (project-relative paths inside `output_folder`) and the report, from
     /// the finished stages; `runs` are this build's stage runs (for timings in the report).
-    fn outputs(db: &dyn Db, asset: Asset, output_folder: &Path, errors: &mut Vec<Diagnostic>, runs: &[StageRun]) -> AssetOutputs;
+    fn outputs(
+        db: &dyn Db,
+        asset: Asset,
+        output_folder: &Path,
+        errors: &mut Vec<Diagnostic>,
+        runs: &[StageRun],
+    ) -> AssetOutputs;
 
     /// `cirrus check`: the asset's sources validated without baking.
     fn check(config: &PipelineConfig, asset: &AssetConfig) -> Vec<Diagnostic>;
@@ -134,20 +140,32 @@ impl AssetKind {
     /// Runs a job on a worker: a surface through the shared tail, a step by its kind.
     pub fn run_job(self, db: &dyn Db, job: &Job) -> Result<Vec<Job>, Diagnostic> {
         match (&job.task, self) {
-            (Task::Surface(surface), _) => tail_queries::surface_artifacts(db, job.asset, surface.clone()).map(|_| Vec::new()),
+            (Task::Surface(surface), _) => {
+                tail_queries::surface_artifacts(db, job.asset, surface.clone()).map(|_| Vec::new())
+            }
             (Task::LoadPreviousEncoding(surface), _) => {
                 tail_queries::load_previous_encoding(db, job.asset, surface);
                 Ok(Vec::new())
             }
             (Task::Step(step, index), AssetKind::Material) => Material::run_step(db, job.asset, step, *index),
-            (Task::Step(step, index), AssetKind::BillboardCloud) => BillboardCloud::run_step(db, job.asset, step, *index),
+            (Task::Step(step, index), AssetKind::BillboardCloud) => {
+                BillboardCloud::run_step(db, job.asset, step, *index)
+            }
             (Task::Step(step, index), AssetKind::Atlas) => Atlas::run_step(db, job.asset, step, *index),
-            (Task::Step(step, index), AssetKind::AmbientOcclusion) => AmbientOcclusion::run_step(db, job.asset, step, *index),
+            (Task::Step(step, index), AssetKind::AmbientOcclusion) => {
+                AmbientOcclusion::run_step(db, job.asset, step, *index)
+            }
             (Task::Step(step, index), AssetKind::Height) => Height::run_step(db, job.asset, step, *index),
         }
     }
 
-    pub fn stage_instances(self, db: &dyn Db, asset: Asset, output_folder: &Path, errors: &[Diagnostic]) -> Vec<StageInstance> {
+    pub fn stage_instances(
+        self,
+        db: &dyn Db,
+        asset: Asset,
+        output_folder: &Path,
+        errors: &[Diagnostic],
+    ) -> Vec<StageInstance> {
         match self {
             AssetKind::Material => Material::stage_instances(db, asset, output_folder, errors),
             AssetKind::BillboardCloud => BillboardCloud::stage_instances(db, asset, output_folder, errors),
@@ -157,7 +175,14 @@ impl AssetKind {
         }
     }
 
-    pub fn outputs(self, db: &dyn Db, asset: Asset, output_folder: &Path, errors: &mut Vec<Diagnostic>, runs: &[StageRun]) -> AssetOutputs {
+    pub fn outputs(
+        self,
+        db: &dyn Db,
+        asset: Asset,
+        output_folder: &Path,
+        errors: &mut Vec<Diagnostic>,
+        runs: &[StageRun],
+    ) -> AssetOutputs {
         match self {
             AssetKind::Material => Material::outputs(db, asset, output_folder, errors, runs),
             AssetKind::BillboardCloud => BillboardCloud::outputs(db, asset, output_folder, errors, runs),
@@ -197,7 +222,12 @@ impl AssetKind {
         }
     }
 
-    pub fn surface_parts_key(self, db: &dyn Db, asset: Asset, surface: &SurfaceId) -> Result<Option<CacheKey>, Diagnostic> {
+    pub fn surface_parts_key(
+        self,
+        db: &dyn Db,
+        asset: Asset,
+        surface: &SurfaceId,
+    ) -> Result<Option<CacheKey>, Diagnostic> {
         match self {
             AssetKind::Material => Material::surface_parts_key(db, asset, surface),
             AssetKind::BillboardCloud => BillboardCloud::surface_parts_key(db, asset, surface),
@@ -207,7 +237,12 @@ impl AssetKind {
         }
     }
 
-    pub fn provided_surface_stage(self, db: &dyn Db, asset: Asset, surface: &SurfaceId) -> Result<Option<Read>, Diagnostic> {
+    pub fn provided_surface_stage(
+        self,
+        db: &dyn Db,
+        asset: Asset,
+        surface: &SurfaceId,
+    ) -> Result<Option<Read>, Diagnostic> {
         match self {
             AssetKind::Material => Material::provided_surface_stage(db, asset, surface),
             AssetKind::BillboardCloud => BillboardCloud::provided_surface_stage(db, asset, surface),
@@ -217,7 +252,12 @@ impl AssetKind {
         }
     }
 
-    pub fn surface_recipe_key(self, db: &dyn Db, asset: Asset, surface: &SurfaceId) -> Result<Option<CacheKey>, Diagnostic> {
+    pub fn surface_recipe_key(
+        self,
+        db: &dyn Db,
+        asset: Asset,
+        surface: &SurfaceId,
+    ) -> Result<Option<CacheKey>, Diagnostic> {
         match self {
             AssetKind::Material => Material::surface_recipe_key(db, asset, surface),
             AssetKind::BillboardCloud => BillboardCloud::surface_recipe_key(db, asset, surface),
@@ -254,7 +294,10 @@ impl SurfaceId {
     /// Its texture and preview files inside the asset folder.
     pub fn artifact_paths(&self, output_folder: &Path, container: crate::config::Container) -> [PathBuf; 2] {
         let folder = if self.group.is_empty() { output_folder.to_path_buf() } else { output_folder.join(&self.group) };
-        [folder.join(format!("{}.{}", self.surface.name(), container.extension())), folder.join(format!("{}.png", self.surface.name()))]
+        [
+            folder.join(format!("{}.{}", self.surface.name(), container.extension())),
+            folder.join(format!("{}.png", self.surface.name())),
+        ]
     }
 }
 
@@ -348,7 +391,12 @@ pub fn stage_node_id(stage: &str, label: &str) -> String {
 
 /// The shared tail stages of one surface (mips → encode → write), reading `image` (the stage
 /// that made the surface's image) and writing its two files.
-pub fn tail_instances(asset_name: &str, surface: &SurfaceId, image: &StageInstance, files: [PathBuf; 2]) -> [StageInstance; 3] {
+pub fn tail_instances(
+    asset_name: &str,
+    surface: &SurfaceId,
+    image: &StageInstance,
+    files: [PathBuf; 2],
+) -> [StageInstance; 3] {
     let label = surface.label(asset_name);
     let instance = surface.instance();
     let mips = StageInstance::new(tail_queries::MIPS, &label, &instance).reads_stage(image);
@@ -379,7 +427,10 @@ pub fn tail_settings_from(
 
 /// An asset's outputs made by `make` when its stages left no error; the error of making them
 /// joins `errors` (and nothing is written).
-pub fn outputs_unless_failed(errors: &mut Vec<Diagnostic>, make: impl FnOnce() -> Result<AssetOutputs, Diagnostic>) -> AssetOutputs {
+pub fn outputs_unless_failed(
+    errors: &mut Vec<Diagnostic>,
+    make: impl FnOnce() -> Result<AssetOutputs, Diagnostic>,
+) -> AssetOutputs {
     if !errors.is_empty() {
         return AssetOutputs::default();
     }
@@ -402,7 +453,9 @@ pub struct AssetOutputs {
 /// Reads a texture's header for `check`: readable, decodable, within the texture limits.
 pub fn check_texture_file(config: &PipelineConfig, path: &Path) -> Result<(), String> {
     let contents = crate::sources::read_source(&config.root, &config.source, path)?;
-    crate::texture::probe_texture(path, &contents.bytes, config.limits.texture).map(|_| ()).map_err(|diagnostic| diagnostic.message)
+    crate::texture::probe_texture(path, &contents.bytes, config.limits.texture)
+        .map(|_| ())
+        .map_err(|diagnostic| diagnostic.message)
 }
 
 /// A warning reported by `check`: the diagnostic with its message marked.
@@ -427,7 +480,10 @@ pub fn asset_stage_ms<'a>(asset_name: &str, runs: &'a [StageRun]) -> std::collec
 
 /// An OBJ of the source folder loaded for `cirrus check`, with the MTL files it names (a
 /// missing MTL is a load warning, as in a build); the load warnings come back as warnings.
-pub fn check_mesh_file(config: &PipelineConfig, mesh_file: &Path) -> Result<(crate::mesh::Mesh, Vec<Diagnostic>), Diagnostic> {
+pub fn check_mesh_file(
+    config: &PipelineConfig,
+    mesh_file: &Path,
+) -> Result<(crate::mesh::Mesh, Vec<Diagnostic>), Diagnostic> {
     let read = |path: &Path| crate::sources::read_source(&config.root, &config.source, path);
     let contents = read(mesh_file).map_err(|error| Diagnostic::new(mesh_file, error))?;
     let mut libraries = std::collections::BTreeMap::new();

@@ -7,12 +7,15 @@
 use std::sync::Arc;
 
 use crate::cache::{CacheEntry, CacheKey, CacheKeyBuilder};
-use crate::db::{load_cached, recall, record_cache_hit, remember, store_cached, store_cached_in_background, timed, Asset, Db, Stage};
+use crate::db::{
+    load_cached, recall, record_cache_hit, remember, store_cached, store_cached_in_background, timed, Asset, Db, Stage,
+};
 use crate::diagnostic::Diagnostic;
 use crate::kinds::SurfaceId;
 use crate::texture::fingerprint::BlockFingerprints;
 use crate::texture::tail::{
-    tail_encode, tail_mips, tail_write, EncodedSurface, MipLevels, MipStepSettings, PreviousEncoding, SurfaceArtifacts, TailSettings,
+    tail_encode, tail_mips, tail_write, EncodedSurface, MipLevels, MipStepSettings, PreviousEncoding, SurfaceArtifacts,
+    TailSettings,
 };
 use crate::texture::Texture;
 
@@ -53,7 +56,11 @@ fn encode_step_settings(
 }
 
 #[salsa::tracked(returns(clone))]
-fn write_step_settings(db: &dyn Db, asset: Asset, surface: SurfaceId) -> Result<(crate::config::Container, Option<i32>), Diagnostic> {
+fn write_step_settings(
+    db: &dyn Db,
+    asset: Asset,
+    surface: SurfaceId,
+) -> Result<(crate::config::Container, Option<i32>), Diagnostic> {
     tail_settings(db, asset, surface).map(|settings| (settings.container, settings.zstd))
 }
 
@@ -89,7 +96,9 @@ pub fn surface_blocks(db: &dyn Db, asset: Asset, surface: SurfaceId) -> Result<A
     let label = surface.label(asset.name(db));
     let previous = previous_encoding(db, &label);
     let memory = texture_memory(db, mips.levels[0].width, mips.levels[0].height);
-    let encoded = timed(db, ENCODE, &label, || tail_encode(&mips, surface.surface, (format, quality), alpha_cutoff, previous.as_deref()));
+    let encoded = timed(db, ENCODE, &label, || {
+        tail_encode(&mips, surface.surface, (format, quality), alpha_cutoff, previous.as_deref())
+    });
     drop(memory);
     let remembered = Arc::new(PreviousEncoding::of(&mips, &encoded));
     if memo_worth_storing(format) {
@@ -145,13 +154,16 @@ pub fn surface_files(db: &dyn Db, asset: Asset, surface: SurfaceId) -> Result<Ar
 pub fn surface_artifacts(db: &dyn Db, asset: Asset, surface: SurfaceId) -> Result<Arc<SurfaceArtifacts>, Diagnostic> {
     let settings = tail_settings(db, asset, surface.clone())?;
     let kind = asset.kind(db);
-    let recipe_key = kind.surface_recipe_key(db, asset, &surface)?.map(|recipe| surface_key(&settings).part(&recipe.0).finish());
+    let recipe_key =
+        kind.surface_recipe_key(db, asset, &surface)?.map(|recipe| surface_key(&settings).part(&recipe.0).finish());
     if let Some(artifacts) = recipe_key.and_then(|key| artifacts_by_recipe(db, key)) {
         record_cache_hit(db, WRITE, &surface.label(asset.name(db)));
         return Ok(Arc::new(artifacts));
     }
-    let parts_key = kind.surface_parts_key(db, asset, &surface)?.map(|parts| surface_key(&settings).part(&parts.0).finish());
-    let from_parts = parts_key.and_then(|key| artifacts_by_recipe(db, key).map(|artifacts| (Arc::new(artifacts), None)));
+    let parts_key =
+        kind.surface_parts_key(db, asset, &surface)?.map(|parts| surface_key(&settings).part(&parts.0).finish());
+    let from_parts =
+        parts_key.and_then(|key| artifacts_by_recipe(db, key).map(|artifacts| (Arc::new(artifacts), None)));
     let (artifacts, content) = match from_parts {
         Some(found) => {
             record_cache_hit(db, WRITE, &surface.label(asset.name(db)));
@@ -183,7 +195,9 @@ pub fn surface_artifacts(db: &dyn Db, asset: Asset, surface: SurfaceId) -> Resul
 
 /// The content key a recipe (or parts) entry names.
 fn recipe_target(db: &dyn Db, key: CacheKey) -> Option<CacheKey> {
-    load_cached(db, SURFACE_RECIPE_ENTRY, key, |entry| Some(CacheKey(blake3::Hash::from_hex(entry.metadata.as_str()?).ok()?)))
+    load_cached(db, SURFACE_RECIPE_ENTRY, key, |entry| {
+        Some(CacheKey(blake3::Hash::from_hex(entry.metadata.as_str()?).ok()?))
+    })
 }
 
 /// The files a recipe (or parts) entry leads to.
@@ -194,7 +208,9 @@ fn artifacts_by_recipe(db: &dyn Db, key: CacheKey) -> Option<SurfaceArtifacts> {
 /// Whether the persistent cache holds the surface's files under its recipe (a kind can then
 /// skip making the image).
 pub fn surface_in_cache(db: &dyn Db, asset: Asset, surface: &SurfaceId) -> bool {
-    let (Some(cache), Ok(settings)) = (db.disk_cache(), tail_settings(db, asset, surface.clone())) else { return false };
+    let (Some(cache), Ok(settings)) = (db.disk_cache(), tail_settings(db, asset, surface.clone())) else {
+        return false;
+    };
     match asset.kind(db).surface_recipe_key(db, asset, surface) {
         Ok(Some(recipe)) => cache.contains(SURFACE_RECIPE_ENTRY, surface_key(&settings).part(&recipe.0).finish()),
         _ => false,
@@ -307,7 +323,8 @@ fn encoding_entry(previous: &PreviousEncoding) -> CacheEntry {
 fn encoding_from_entry(entry: CacheEntry) -> Option<PreviousEncoding> {
     let metadata = &entry.metadata;
     let sizes: Vec<(u32, u32)> = serde_json::from_value(metadata.get("levels")?.clone()).ok()?;
-    let settings: crate::texture::encode::BlockEncodeSettings = serde_json::from_value(metadata.get("settings")?.clone()).ok()?;
+    let settings: crate::texture::encode::BlockEncodeSettings =
+        serde_json::from_value(metadata.get("settings")?.clone()).ok()?;
     let reuse: Option<crate::texture::mips::MipReuse> = serde_json::from_value(metadata.get("reuse")?.clone()).ok()?;
     let width = metadata.get("width")?.as_u64()? as u32;
     let height = metadata.get("height")?.as_u64()? as u32;
@@ -348,7 +365,13 @@ fn encoding_from_entry(entry: CacheEntry) -> Option<PreviousEncoding> {
     {
         return None;
     }
-    let texture = crate::texture::encode::EncodedTexture::from_levels(settings.format, settings.srgb, width, height, encoded_levels);
+    let texture = crate::texture::encode::EncodedTexture::from_levels(
+        settings.format,
+        settings.srgb,
+        width,
+        height,
+        encoded_levels,
+    );
     let block_errors = crate::texture::quality::BlockErrors {
         format: settings.format,
         channels: metadata.get("channels")?.as_u64()? as usize,
@@ -359,6 +382,11 @@ fn encoding_from_entry(entry: CacheEntry) -> Option<PreviousEncoding> {
         level0_blocks: Arc::new(level0_blocks),
         lower_levels,
         mip_reuse: reuse.map(Arc::new),
-        encoded: EncodedSurface { settings, texture, block_errors: Arc::new(block_errors), psnr_db: metadata.get("psnr_db")?.as_f64()? },
+        encoded: EncodedSurface {
+            settings,
+            texture,
+            block_errors: Arc::new(block_errors),
+            psnr_db: metadata.get("psnr_db")?.as_f64()?,
+        },
     })
 }

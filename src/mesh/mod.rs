@@ -146,7 +146,9 @@ pub fn load_mesh(
         let Some(path) = path else {
             warnings.borrow_mut().push(Diagnostic::new(
                 obj_file,
-                format!("material library \"{written}\" lies outside the source folder; ignored, default materials used"),
+                format!(
+                    "material library \"{written}\" lies outside the source folder; ignored, default materials used"
+                ),
             ));
             return Err(tobj::LoadError::OpenFileFailed);
         };
@@ -159,12 +161,17 @@ pub fn load_mesh(
                     }
                 })
                 .inspect_err(|error| {
-                    warnings.borrow_mut().push(Diagnostic::new(&path, format!("malformed MTL ({error}); its materials use defaults")));
+                    warnings
+                        .borrow_mut()
+                        .push(Diagnostic::new(&path, format!("malformed MTL ({error}); its materials use defaults")));
                 }),
             _ => {
                 warnings.borrow_mut().push(Diagnostic::new(
                     obj_file,
-                    format!("material library {} not found; default materials used", crate::diagnostic::display_path(&path)),
+                    format!(
+                        "material library {} not found; default materials used",
+                        crate::diagnostic::display_path(&path)
+                    ),
                 ));
                 Err(tobj::LoadError::OpenFileFailed)
             }
@@ -208,7 +215,10 @@ pub fn load_mesh(
         let vertex_count = source.positions.len() / 3;
         for (index, position) in source.positions.chunks_exact(3).enumerate() {
             if position.iter().any(|c| !c.is_finite()) {
-                return Err(Diagnostic::new(obj_file, format!("object `{}`: vertex {} has a non-finite position", model.name, index + 1)));
+                return Err(Diagnostic::new(
+                    obj_file,
+                    format!("object `{}`: vertex {} has a non-finite position", model.name, index + 1),
+                ));
             }
             mesh.positions.push([position[0], position[1], position[2]]);
         }
@@ -240,7 +250,10 @@ pub fn load_mesh(
         };
         for triangle in source.indices.chunks_exact(3) {
             if triangle.iter().any(|&index| index as usize >= vertex_count) {
-                return Err(Diagnostic::new(obj_file, format!("object `{}`: a face index is out of range", model.name)));
+                return Err(Diagnostic::new(
+                    obj_file,
+                    format!("object `{}`: a face index is out of range", model.name),
+                ));
             }
             if !has_uvs {
                 faces_without_uvs.push(mesh.triangles.len());
@@ -297,7 +310,8 @@ fn first_non_finite_statement(text: &str, keyword: &str) -> Option<crate::diagno
     let mut offset = 0;
     for line in text.split_inclusive('\n') {
         let mut words = line.split_whitespace();
-        if words.next() == Some(keyword) && words.any(|word| word.parse::<f32>().is_ok_and(|value| !value.is_finite())) {
+        if words.next() == Some(keyword) && words.any(|word| word.parse::<f32>().is_ok_and(|value| !value.is_finite()))
+        {
             let indent = line.len() - line.trim_start().len();
             return Some(crate::diagnostic::TextPosition::of_byte_offset(text, offset + indent));
         }
@@ -313,8 +327,11 @@ pub fn uvs_outside_unit_square(mesh: &Mesh) -> Vec<(usize, usize, usize, [f32; 4
     let Some(uvs) = mesh.uvs.as_deref() else { return Vec::new() };
     let mut per_material: BTreeMap<usize, (usize, usize, [f32; 4])> = BTreeMap::new();
     for (triangle, &material) in mesh.triangles.iter().zip(&mesh.triangle_materials) {
-        let entry =
-            per_material.entry(material as usize).or_insert((0, 0, [f32::INFINITY, f32::NEG_INFINITY, f32::INFINITY, f32::NEG_INFINITY]));
+        let entry = per_material.entry(material as usize).or_insert((
+            0,
+            0,
+            [f32::INFINITY, f32::NEG_INFINITY, f32::INFINITY, f32::NEG_INFINITY],
+        ));
         entry.1 += 1;
         let mut outside = false;
         for &vertex in triangle {
@@ -353,9 +370,17 @@ fn decode_text<'a>(file: &Path, bytes: &'a [u8]) -> Result<std::borrow::Cow<'a, 
         let big_endian = bytes[0] == 0xFE;
         let units: Vec<u16> = bytes[2..]
             .chunks_exact(2)
-            .map(|pair| if big_endian { u16::from_be_bytes([pair[0], pair[1]]) } else { u16::from_le_bytes([pair[0], pair[1]]) })
+            .map(|pair| {
+                if big_endian {
+                    u16::from_be_bytes([pair[0], pair[1]])
+                } else {
+                    u16::from_le_bytes([pair[0], pair[1]])
+                }
+            })
             .collect();
-        return String::from_utf16(&units).map(std::borrow::Cow::Owned).map_err(|_| Diagnostic::new(file, "invalid UTF-16 text"));
+        return String::from_utf16(&units)
+            .map(std::borrow::Cow::Owned)
+            .map_err(|_| Diagnostic::new(file, "invalid UTF-16 text"));
     }
     let bytes = bytes.strip_prefix(&[0xEF, 0xBB, 0xBF]).unwrap_or(bytes);
     Ok(String::from_utf8_lossy(bytes))
@@ -427,7 +452,9 @@ fn check_scale(obj_file: &Path, mesh: &Mesh) -> Result<(), Diagnostic> {
 /// error names no statement or no line fails the test.
 fn obj_error_line(text: &str, error: &tobj::LoadError) -> Option<u32> {
     use tobj::LoadError;
-    let floats = |words: &[&str], count: usize| words.len() >= count && words[..count].iter().all(|word| word.parse::<f32>().is_ok());
+    let floats = |words: &[&str], count: usize| {
+        words.len() >= count && words[..count].iter().all(|word| word.parse::<f32>().is_ok())
+    };
     let totals = text.lines().fold([0i64; 3], |mut totals, line| {
         match line.split_whitespace().next() {
             Some("v") => totals[0] += 1,
@@ -462,8 +489,12 @@ fn obj_error_line(text: &str, error: &tobj::LoadError) -> Option<u32> {
                     };
                     // Positive indices may point forward (checked against the file's total),
                     // negative ones back from here.
-                    let valid = |value: i64| (value > 0 && value <= totals[slot.min(2)]) || (value < 0 && -value <= seen[slot.min(2)]);
-                    checked && !(index.is_empty() && slot > 0) && index.parse::<i64>().map_or(true, |value| !valid(value))
+                    let valid = |value: i64| {
+                        (value > 0 && value <= totals[slot.min(2)]) || (value < 0 && -value <= seen[slot.min(2)])
+                    };
+                    checked
+                        && !(index.is_empty() && slot > 0)
+                        && index.parse::<i64>().map_or(true, |value| !valid(value))
                 })
             }),
             _ => false,
@@ -487,15 +518,24 @@ fn undefined_material_uses(obj_file: &Path, text: &str, materials: &[tobj::Mater
     let mut warned = std::collections::BTreeSet::new();
     let mut warnings = Vec::new();
     for (index, line) in text.lines().enumerate() {
-        let Some(name) = line.trim_start().strip_prefix("usemtl").filter(|rest| rest.starts_with(char::is_whitespace)).map(str::trim)
+        let Some(name) = line
+            .trim_start()
+            .strip_prefix("usemtl")
+            .filter(|rest| rest.starts_with(char::is_whitespace))
+            .map(str::trim)
         else {
             continue;
         };
-        if !name.is_empty() && !materials.iter().any(|material| material.name == name) && warned.insert(name.to_string()) {
+        if !name.is_empty()
+            && !materials.iter().any(|material| material.name == name)
+            && warned.insert(name.to_string())
+        {
             warnings.push(Diagnostic::at(
                 obj_file,
                 crate::diagnostic::TextPosition { line: index as u32 + 1, column: 1 },
-                format!("`usemtl {name}` names no material of the mesh's MTL files: those faces use the default material"),
+                format!(
+                    "`usemtl {name}` names no material of the mesh's MTL files: those faces use the default material"
+                ),
             ));
         }
     }
@@ -552,7 +592,11 @@ fn mesh_material(
     }
     // `map_d` naming the albedo texture itself (foliage exporters write that): the albedo's
     // alpha is the opacity; applying it twice would square it.
-    if result.maps.get(&TextureSlot::Opacity).is_some_and(|opacity| result.maps.get(&TextureSlot::Albedo) == Some(opacity)) {
+    if result
+        .maps
+        .get(&TextureSlot::Opacity)
+        .is_some_and(|opacity| result.maps.get(&TextureSlot::Albedo) == Some(opacity))
+    {
         result.maps.remove(&TextureSlot::Opacity);
     }
     result
@@ -634,7 +678,11 @@ fn compute_normals(mesh: &mut Mesh) {
 
 /// The texture files the materials of an OBJ's MTL libraries name (project-relative, sorted),
 /// without parsing the OBJ itself: what a billboard cloud reads besides its mesh.
-pub fn texture_paths(obj_file: &Path, libraries: &BTreeMap<PathBuf, Option<Vec<u8>>>, source_root: &Path) -> Vec<PathBuf> {
+pub fn texture_paths(
+    obj_file: &Path,
+    libraries: &BTreeMap<PathBuf, Option<Vec<u8>>>,
+    source_root: &Path,
+) -> Vec<PathBuf> {
     let folder = obj_file.parent().unwrap_or(Path::new(""));
     let mut paths = Vec::new();
     let mut ignored = Vec::new();
@@ -652,12 +700,18 @@ pub fn texture_paths(obj_file: &Path, libraries: &BTreeMap<PathBuf, Option<Vec<u
 }
 
 /// Per-vertex tangents (xyz, handedness in w) from UV derivatives, for normal mapping.
-pub fn vertex_tangents(positions: &[[f32; 3]], normals: &[[f32; 3]], uvs: &[[f32; 2]], triangles: &[[u32; 3]]) -> Vec<[f32; 4]> {
+pub fn vertex_tangents(
+    positions: &[[f32; 3]],
+    normals: &[[f32; 3]],
+    uvs: &[[f32; 2]],
+    triangles: &[[u32; 3]],
+) -> Vec<[f32; 4]> {
     let mut tangents = vec![glam::Vec3::ZERO; positions.len()];
     let mut bitangents = vec![glam::Vec3::ZERO; positions.len()];
     for triangle in triangles {
         let [a, b, c] = triangle.map(|index| index as usize);
-        let (p0, p1, p2) = (glam::Vec3::from(positions[a]), glam::Vec3::from(positions[b]), glam::Vec3::from(positions[c]));
+        let (p0, p1, p2) =
+            (glam::Vec3::from(positions[a]), glam::Vec3::from(positions[b]), glam::Vec3::from(positions[c]));
         let (t0, t1, t2) = (glam::Vec2::from(uvs[a]), glam::Vec2::from(uvs[b]), glam::Vec2::from(uvs[c]));
         let (e1, e2, d1, d2) = (p1 - p0, p2 - p0, t1 - t0, t2 - t0);
         let determinant = d1.x * d2.y - d2.x * d1.y;
@@ -678,7 +732,9 @@ pub fn vertex_tangents(positions: &[[f32; 3]], normals: &[[f32; 3]], uvs: &[[f32
         .zip(normals)
         .map(|((&tangent, &bitangent), &normal)| {
             let normal = glam::Vec3::from(normal);
-            let orthogonal = (tangent - normal * normal.dot(tangent)).try_normalize().unwrap_or_else(|| normal.any_orthonormal_vector());
+            let orthogonal = (tangent - normal * normal.dot(tangent))
+                .try_normalize()
+                .unwrap_or_else(|| normal.any_orthonormal_vector());
             let handedness = if normal.cross(orthogonal).dot(bitangent) < 0.0 { -1.0 } else { 1.0 };
             [orthogonal.x, orthogonal.y, orthogonal.z, handedness]
         })

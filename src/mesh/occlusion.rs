@@ -127,13 +127,24 @@ pub fn orthonormal_frame(normal: Vec3) -> (Vec3, Vec3) {
     let sign = 1.0f32.copysign(normal.z);
     let a = -1.0 / (sign + normal.z);
     let b = normal.x * normal.y * a;
-    (Vec3::new(1.0 + sign * normal.x * normal.x * a, sign * b, -sign * normal.x), Vec3::new(b, sign + normal.y * normal.y * a, -normal.y))
+    (
+        Vec3::new(1.0 + sign * normal.x * normal.x * a, sign * b, -sign * normal.x),
+        Vec3::new(b, sign + normal.y * normal.y * a, -normal.y),
+    )
 }
 
 /// The occlusion at `point` on triangle `triangle` (whose rays skip it), over the hemisphere
 /// of the unit `normal`, with the sequence shifted by `seed`.
-pub fn occlusion_at(bvh: &TriangleBvh, point: Vec3, normal: Vec3, triangle: u32, settings: &OcclusionSettings, seed: u32) -> Occlusion {
-    occlusion_from(bvh, point, normal, normal, triangle, seed, Casting { settings, should_stop: &super::never }).expect("never stops")
+pub fn occlusion_at(
+    bvh: &TriangleBvh,
+    point: Vec3,
+    normal: Vec3,
+    triangle: u32,
+    settings: &OcclusionSettings,
+    seed: u32,
+) -> Occlusion {
+    occlusion_from(bvh, point, normal, normal, triangle, seed, Casting { settings, should_stop: &super::never })
+        .expect("never stops")
 }
 
 /// [`occlusion_at`] with the ray origins moved off the surface along `offset_normal` (the
@@ -154,7 +165,8 @@ fn occlusion_from(
     // frame turns instead, once per point.
     let (sin_shift, cos_shift) = (std::f64::consts::TAU * shift[1]).sin_cos();
     let (sin_shift, cos_shift) = (sin_shift as f32, cos_shift as f32);
-    let (tangent, bitangent) = (tangent * cos_shift + bitangent * sin_shift, bitangent * cos_shift - tangent * sin_shift);
+    let (tangent, bitangent) =
+        (tangent * cos_shift + bitangent * sin_shift, bitangent * cos_shift - tangent * sin_shift);
     with_sequence_table(casting.settings.rays, |table| {
         occlusion_along(bvh, origin, [tangent, bitangent, normal], shift[0], table, triangle, casting)
     })
@@ -183,8 +195,9 @@ fn occlusion_along(
         let direction = (tangent * local.x + bitangent * local.y + normal * local.z).normalize_or_zero();
         // The floor is solid below: a downward ray meets it within reach (at once from an
         // origin that its offset moved just under a face lying on the floor).
-        let below_ground =
-            settings.ground_plane.is_some_and(|ground| direction.y < 0.0 && (origin.y - ground) / -direction.y <= settings.max_distance);
+        let below_ground = settings
+            .ground_plane
+            .is_some_and(|ground| direction.y < 0.0 && (origin.y - ground) / -direction.y <= settings.max_distance);
         let open_ray = !below_ground
             && match settings.back_faces {
                 // The probes: a nearest-hit query, which also tells a back face in front.
@@ -204,7 +217,8 @@ fn occlusion_along(
         total += weight as f64;
     }
     let visibility = if total > 0.0 { (open / total).clamp(0.0, 1.0) as f32 } else { 1.0 };
-    let probe_rays = if settings.back_faces == BackFaces::PassThrough { settings.rays.min(INSIDE_PROBE_RAYS) } else { 0 };
+    let probe_rays =
+        if settings.back_faces == BackFaces::PassThrough { settings.rays.min(INSIDE_PROBE_RAYS) } else { 0 };
     Ok(Occlusion { visibility, back_face_rays, probe_rays })
 }
 

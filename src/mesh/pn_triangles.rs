@@ -61,7 +61,14 @@ pub fn pn_patch(p: [Vec3; 3], n: [Vec3; 3]) -> PnPatch {
     let b111 = e + (e - v) / 2.0;
     PnPatch {
         b: [p1, p2, p3, b210, b120, b021, b012, b102, b201, b111],
-        n: [n1, n2, n3, mid_edge_normal(p1, p2, n1, n2), mid_edge_normal(p2, p3, n2, n3), mid_edge_normal(p3, p1, n3, n1)],
+        n: [
+            n1,
+            n2,
+            n3,
+            mid_edge_normal(p1, p2, n1, n2),
+            mid_edge_normal(p2, p3, n2, n3),
+            mid_edge_normal(p3, p1, n3, n1),
+        ],
     }
 }
 
@@ -86,7 +93,8 @@ impl PnPatch {
     /// `n200 w² + n020 u² + n002 v² + n110 w u + n011 u v + n101 w v`, normalised.
     pub fn normal(&self, [w, u, v]: [f32; 3]) -> Vec3 {
         let n = &self.n;
-        (n[0] * (w * w) + n[1] * (u * u) + n[2] * (v * v) + n[3] * (w * u) + n[4] * (u * v) + n[5] * (w * v)).normalize_or_zero()
+        (n[0] * (w * w) + n[1] * (u * u) + n[2] * (v * v) + n[3] * (w * u) + n[4] * (u * v) + n[5] * (w * v))
+            .normalize_or_zero()
     }
 }
 
@@ -260,8 +268,11 @@ pub fn tessellate(input: &PnInput, level: u32) -> PnMesh {
                 // and edges; straight from the patch inside.
                 let (vertex_key, (point, direction, displace_uv), shading) = match grid_place(a, b, level) {
                     Place::Corner(corner) => {
-                        let geometry =
-                            *geometry.entry(GridKey::Corner(ids[corner])).or_insert((p[corner], averaged[ids[corner] as usize], here_uv));
+                        let geometry = *geometry.entry(GridKey::Corner(ids[corner])).or_insert((
+                            p[corner],
+                            averaged[ids[corner] as usize],
+                            here_uv,
+                        ));
                         (Some(GridKey::Corner(corners[corner])), geometry, normal(corners[corner]))
                     }
                     Place::Edge(from, to, steps) => {
@@ -274,11 +285,17 @@ pub fn tessellate(input: &PnInput, level: u32) -> PnMesh {
                             let t = steps_from_first as f32 / level as f32;
                             pn_edge_point(p[lo], normal(corners[lo]), p[hi], normal(corners[hi]), t).1
                         };
-                        let geometry = *geometry.entry(GridKey::Edge(id_first, id_second, id_steps)).or_insert_with(|| {
-                            let (point, direction) =
-                                pn_edge_point(p[end_a], averaged[ids[end_a] as usize], p[end_b], averaged[ids[end_b] as usize], t);
-                            (point, direction, here_uv)
-                        });
+                        let geometry =
+                            *geometry.entry(GridKey::Edge(id_first, id_second, id_steps)).or_insert_with(|| {
+                                let (point, direction) = pn_edge_point(
+                                    p[end_a],
+                                    averaged[ids[end_a] as usize],
+                                    p[end_b],
+                                    averaged[ids[end_b] as usize],
+                                    t,
+                                );
+                                (point, direction, here_uv)
+                            });
                         (Some(GridKey::Edge(first, second, steps_from_first)), geometry, shading)
                     }
                     Place::Interior => {
@@ -286,7 +303,8 @@ pub fn tessellate(input: &PnInput, level: u32) -> PnMesh {
                         (None, geometry, shading_patch.normal(weights))
                     }
                 };
-                let vertex = TessellatedVertex { point, shading, uv: input.uvs.map(|_| here_uv), direction, displace_uv };
+                let vertex =
+                    TessellatedVertex { point, shading, uv: input.uvs.map(|_| here_uv), direction, displace_uv };
                 let index = match vertex_key {
                     Some(key) => *vertices.entry(key).or_insert_with(|| mesh.push_vertex(&vertex)),
                     None => mesh.push_vertex(&vertex),

@@ -110,8 +110,10 @@ impl Kernels for Portable {
         let ([dx, dy, dz], origin) = (splat(ray.direction), splat(ray.origin));
         for half in 0..2 {
             let lanes = half * 4..half * 4 + 4;
-            let load = |values: &[[f32; WIDTH]; 3]| values.each_ref().map(|axis| Vec4::from_slice(&axis[lanes.clone()]));
-            let ([cx, cy, cz], [e1x, e1y, e1z], [e2x, e2y, e2z]) = (load(&packet.corner), load(&packet.edge1), load(&packet.edge2));
+            let load =
+                |values: &[[f32; WIDTH]; 3]| values.each_ref().map(|axis| Vec4::from_slice(&axis[lanes.clone()]));
+            let ([cx, cy, cz], [e1x, e1y, e1z], [e2x, e2y, e2z]) =
+                (load(&packet.corner), load(&packet.edge1), load(&packet.edge2));
             // p = d × e2; det = e1 · p (negative where the triangle faces away).
             let (px, py, pz) = (dy * e2z - dz * e2y, dz * e2x - dx * e2z, dx * e2y - dy * e2x);
             let det = e1x * px + e1y * py + e1z * pz;
@@ -178,7 +180,8 @@ impl Kernels for Avx2 {
         let load = |values: &[f32; WIDTH]| _mm256_loadu_ps(values.as_ptr());
         let (add, sub, mul) = (|a, b| _mm256_add_ps(a, b), |a, b| _mm256_sub_ps(a, b), |a, b| _mm256_mul_ps(a, b));
         let dot = |ax, ay, az, bx, by, bz| add(add(mul(ax, bx), mul(ay, by)), mul(az, bz));
-        let (dx, dy, dz) = (_mm256_set1_ps(ray.direction.x), _mm256_set1_ps(ray.direction.y), _mm256_set1_ps(ray.direction.z));
+        let (dx, dy, dz) =
+            (_mm256_set1_ps(ray.direction.x), _mm256_set1_ps(ray.direction.y), _mm256_set1_ps(ray.direction.z));
         let (e1x, e1y, e1z) = (load(&packet.edge1[0]), load(&packet.edge1[1]), load(&packet.edge1[2]));
         let (e2x, e2y, e2z) = (load(&packet.edge2[0]), load(&packet.edge2[1]), load(&packet.edge2[2]));
         let px = sub(mul(dy, e2z), mul(dz, e2y));
@@ -198,10 +201,15 @@ impl Kernels for Avx2 {
         let zero = _mm256_setzero_ps();
         let inside = _mm256_and_ps(
             _mm256_and_ps(_mm256_cmp_ps::<_CMP_GE_OQ>(u, zero), _mm256_cmp_ps::<_CMP_GE_OQ>(v, zero)),
-            _mm256_and_ps(_mm256_cmp_ps::<_CMP_LE_OQ>(_mm256_add_ps(u, v), _mm256_set1_ps(1.0)), _mm256_cmp_ps::<_CMP_NEQ_OQ>(det, zero)),
+            _mm256_and_ps(
+                _mm256_cmp_ps::<_CMP_LE_OQ>(_mm256_add_ps(u, v), _mm256_set1_ps(1.0)),
+                _mm256_cmp_ps::<_CMP_NEQ_OQ>(det, zero),
+            ),
         );
-        let within =
-            _mm256_and_ps(_mm256_cmp_ps::<_CMP_GT_OQ>(distance, zero), _mm256_cmp_ps::<_CMP_LT_OQ>(distance, _mm256_set1_ps(max_distance)));
+        let within = _mm256_and_ps(
+            _mm256_cmp_ps::<_CMP_GT_OQ>(distance, zero),
+            _mm256_cmp_ps::<_CMP_LT_OQ>(distance, _mm256_set1_ps(max_distance)),
+        );
         let mut result = PacketHits {
             distances: [0.0; WIDTH],
             hits: _mm256_movemask_ps(_mm256_and_ps(inside, within)) as u32,

@@ -70,13 +70,19 @@ pub fn build_triangle_bvh(positions: &[[f32; 3]], triangles: &[[u32; 3]]) -> Tri
             Vec3A::ZERO
         }
     };
-    let triangles: Vec<Triangle> = triangles.iter().map(|&[a, b, c]| Triangle { v0: vertex(a), v1: vertex(b), v2: vertex(c) }).collect();
+    let triangles: Vec<Triangle> =
+        triangles.iter().map(|&[a, b, c]| Triangle { v0: vertex(a), v1: vertex(b), v2: vertex(c) }).collect();
     let normals = triangles.iter().map(|triangle| triangle.compute_normal()).collect();
-    let mut bvh = TriangleBvh { nodes: Vec::new(), packets: Vec::new(), normals, stack_size: 1, avx2: avx2_available() };
+    let mut bvh =
+        TriangleBvh { nodes: Vec::new(), packets: Vec::new(), normals, stack_size: 1, avx2: avx2_available() };
     if !triangles.is_empty() {
         // Fuller leaves than obvhs's default (a traversal cost of 3): eight-lane packets make a
         // leaf's triangles cheap next to a node's (about 4 % more rays per second).
-        let params = BvhBuildParams { max_prims_per_leaf: WIDTH as u32, collapse_traversal_cost: 8.0, ..BvhBuildParams::slow_build() };
+        let params = BvhBuildParams {
+            max_prims_per_leaf: WIDTH as u32,
+            collapse_traversal_cost: 8.0,
+            ..BvhBuildParams::slow_build()
+        };
         let binary = build_bvh2_from_tris(&triangles, params, &mut std::time::Duration::default());
         let depth = collapse_into_wide_nodes(&mut bvh, &binary, &triangles);
         bvh.stack_size = depth * (WIDTH - 1) + 1;
@@ -126,7 +132,12 @@ fn bounds_of(triangles: &[Triangle], members: &[u32]) -> (Vec3A, Vec3A) {
 
 /// The reference to a leaf of up to `WIDTH` triangles: one packet.
 fn packet_leaf(bvh: &mut TriangleBvh, triangles: &[Triangle], members: &[u32]) -> u32 {
-    let mut packet = Packet { corner: [[0.0; WIDTH]; 3], edge1: [[0.0; WIDTH]; 3], edge2: [[0.0; WIDTH]; 3], triangles: [u32::MAX; WIDTH] };
+    let mut packet = Packet {
+        corner: [[0.0; WIDTH]; 3],
+        edge1: [[0.0; WIDTH]; 3],
+        edge2: [[0.0; WIDTH]; 3],
+        triangles: [u32::MAX; WIDTH],
+    };
     for (lane, &member) in members.iter().enumerate() {
         let triangle = &triangles[member as usize];
         let (edge1, edge2) = (triangle.v1 - triangle.v0, triangle.v2 - triangle.v0);
@@ -276,7 +287,13 @@ impl Stack<'_, (u32, f32)> {
 /// Whether anything that counts blocks the ray before `max_distance`: the first such hit ends
 /// the traversal.
 #[inline(always)]
-unsafe fn blocked_with<K: Kernels>(bvh: &TriangleBvh, ray: &PreparedRay, max_distance: f32, skip: u32, back_faces: BackFaces) -> bool {
+unsafe fn blocked_with<K: Kernels>(
+    bvh: &TriangleBvh,
+    ray: &PreparedRay,
+    max_distance: f32,
+    skip: u32,
+    back_faces: BackFaces,
+) -> bool {
     let (mut inline, mut heap) = ([MaybeUninit::uninit(); INLINE_STACK], Vec::new());
     let mut stack = Stack { slots: stack_slots(bvh.stack_size, &mut inline, &mut heap), top: 0 };
     stack.push(0u32);
@@ -310,7 +327,13 @@ unsafe fn blocked_with<K: Kernels>(bvh: &TriangleBvh, ray: &PreparedRay, max_dis
 
 /// The nearest hit that counts before `max_distance`, children visited nearest first.
 #[inline(always)]
-unsafe fn cast_with<K: Kernels>(bvh: &TriangleBvh, ray: &PreparedRay, max_distance: f32, skip: u32, back_faces: BackFaces) -> RayResult {
+unsafe fn cast_with<K: Kernels>(
+    bvh: &TriangleBvh,
+    ray: &PreparedRay,
+    max_distance: f32,
+    skip: u32,
+    back_faces: BackFaces,
+) -> RayResult {
     let (mut inline, mut heap) = ([MaybeUninit::uninit(); INLINE_STACK], Vec::new());
     let mut stack = Stack { slots: stack_slots(bvh.stack_size, &mut inline, &mut heap), top: 0 };
     stack.push((0u32, 0.0f32));
@@ -356,13 +379,25 @@ unsafe fn cast_with<K: Kernels>(bvh: &TriangleBvh, ray: &PreparedRay, max_distan
 
 #[cfg(target_arch = "x86_64")]
 #[target_feature(enable = "avx2,fma")]
-unsafe fn blocked_avx2(bvh: &TriangleBvh, ray: &PreparedRay, max_distance: f32, skip: u32, back_faces: BackFaces) -> bool {
+unsafe fn blocked_avx2(
+    bvh: &TriangleBvh,
+    ray: &PreparedRay,
+    max_distance: f32,
+    skip: u32,
+    back_faces: BackFaces,
+) -> bool {
     blocked_with::<super::ray_kernels::Avx2>(bvh, ray, max_distance, skip, back_faces)
 }
 
 #[cfg(target_arch = "x86_64")]
 #[target_feature(enable = "avx2,fma")]
-unsafe fn cast_avx2(bvh: &TriangleBvh, ray: &PreparedRay, max_distance: f32, skip: u32, back_faces: BackFaces) -> RayResult {
+unsafe fn cast_avx2(
+    bvh: &TriangleBvh,
+    ray: &PreparedRay,
+    max_distance: f32,
+    skip: u32,
+    back_faces: BackFaces,
+) -> RayResult {
     cast_with::<super::ray_kernels::Avx2>(bvh, ray, max_distance, skip, back_faces)
 }
 
@@ -385,7 +420,14 @@ impl TriangleBvh {
 
     /// Casts a ray from `origin` along `direction` (unit) up to `max_distance`, skipping the
     /// triangle `skip` (the one the ray leaves from; `u32::MAX` for none).
-    pub fn cast(&self, origin: Vec3, direction: Vec3, max_distance: f32, skip: u32, back_faces: BackFaces) -> RayResult {
+    pub fn cast(
+        &self,
+        origin: Vec3,
+        direction: Vec3,
+        max_distance: f32,
+        skip: u32,
+        back_faces: BackFaces,
+    ) -> RayResult {
         if self.nodes.is_empty() {
             return RayResult { hit: None, nearest_is_back_face: false };
         }
@@ -420,9 +462,15 @@ impl TriangleBvh {
                     if triangle == u32::MAX || self.normals[triangle as usize] == Vec3A::ZERO {
                         continue;
                     }
-                    let axis = |planes: &[[f32; WIDTH]; 3]| Vec3::new(planes[0][lane], planes[1][lane], planes[2][lane]);
+                    let axis =
+                        |planes: &[[f32; WIDTH]; 3]| Vec3::new(planes[0][lane], planes[1][lane], planes[2][lane]);
                     let corner = axis(&packet.corner);
-                    let nearest = closest_point_on_triangle(point, corner, corner + axis(&packet.edge1), corner + axis(&packet.edge2));
+                    let nearest = closest_point_on_triangle(
+                        point,
+                        corner,
+                        corner + axis(&packet.edge1),
+                        corner + axis(&packet.edge2),
+                    );
                     let squared = (nearest - point).length_squared();
                     if squared < best || (found.is_none() && squared <= best) {
                         best = squared;
@@ -512,7 +560,8 @@ pub fn offset_ray_origin(point: Vec3, normal: Vec3) -> Vec3 {
     const ORIGIN: f32 = 1.0 / 32.0;
     const FLOAT_SCALE: f32 = 1.0 / 65536.0;
     const INT_SCALE: f32 = 256.0;
-    let offset = IVec3::new((INT_SCALE * normal.x) as i32, (INT_SCALE * normal.y) as i32, (INT_SCALE * normal.z) as i32);
+    let offset =
+        IVec3::new((INT_SCALE * normal.x) as i32, (INT_SCALE * normal.y) as i32, (INT_SCALE * normal.z) as i32);
     let step = |coordinate: f32, ulps: i32| {
         let ulps = if coordinate < 0.0 { -ulps } else { ulps };
         f32::from_bits((coordinate.to_bits() as i32).wrapping_add(ulps) as u32)

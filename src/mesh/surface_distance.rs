@@ -53,7 +53,13 @@ pub fn distances_to(samples: &[Vec3], target: &TriangleBvh) -> Option<Vec<f32>> 
 }
 
 /// The distance between surfaces `a` and `b` (their samples and BVHs), over `length`.
-pub fn surface_distance(a_samples: &[Vec3], a: &TriangleBvh, b_samples: &[Vec3], b: &TriangleBvh, length: f32) -> Option<SurfaceDistance> {
+pub fn surface_distance(
+    a_samples: &[Vec3],
+    a: &TriangleBvh,
+    b_samples: &[Vec3],
+    b: &TriangleBvh,
+    length: f32,
+) -> Option<SurfaceDistance> {
     let a_to_b = distances_to(a_samples, b)?;
     let b_to_a = distances_to(b_samples, a)?;
     let all: Vec<f32> = a_to_b.into_iter().chain(b_to_a).collect();
@@ -63,5 +69,8 @@ pub fn surface_distance(a_samples: &[Vec3], a: &TriangleBvh, b_samples: &[Vec3],
     let squares: f64 = all.iter().map(|&distance| distance as f64 * distance as f64).sum();
     let largest = all.iter().copied().fold(0.0f32, f32::max) as f64;
     let round = |value: f64| (value * 1e7).round() / 1e7;
-    Some(SurfaceDistance { rms: round((squares / all.len() as f64).sqrt() / length as f64), hausdorff: round(largest / length as f64) })
+    Some(SurfaceDistance {
+        rms: round((squares / all.len() as f64).sqrt() / length as f64),
+        hausdorff: round(largest / length as f64),
+    })
 }

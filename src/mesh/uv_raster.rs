@@ -50,14 +50,19 @@ fn cross(a: [f64; 2], b: [f64; 2], c: [f64; 2]) -> f64 {
 
 /// Barycentric weights of `point` in the triangle `corners` (of signed twice-area `area`).
 fn barycentric(corners: &[[f64; 2]; 3], area: f64, point: [f64; 2]) -> [f64; 3] {
-    [cross(corners[1], corners[2], point) / area, cross(corners[2], corners[0], point) / area, cross(corners[0], corners[1], point) / area]
+    [
+        cross(corners[1], corners[2], point) / area,
+        cross(corners[2], corners[0], point) / area,
+        cross(corners[0], corners[1], point) / area,
+    ]
 }
 
 /// The point of segment `a`–`b` nearest `point`.
 fn nearest_on_segment(a: [f64; 2], b: [f64; 2], point: [f64; 2]) -> [f64; 2] {
     let (dx, dy) = (b[0] - a[0], b[1] - a[1]);
     let length = dx * dx + dy * dy;
-    let t = if length > 0.0 { (((point[0] - a[0]) * dx + (point[1] - a[1]) * dy) / length).clamp(0.0, 1.0) } else { 0.0 };
+    let t =
+        if length > 0.0 { (((point[0] - a[0]) * dx + (point[1] - a[1]) * dy) / length).clamp(0.0, 1.0) } else { 0.0 };
     [a[0] + t * dx, a[1] + t * dy]
 }
 
@@ -126,7 +131,8 @@ pub fn rasterize_uv(
                 let slot = &mut samples[index];
                 match slot {
                     Some(existing) if existing.centre_inside => {
-                        let shares_vertex = triangles[existing.triangle as usize].iter().any(|vertex| corner_indices.contains(vertex));
+                        let shares_vertex =
+                            triangles[existing.triangle as usize].iter().any(|vertex| corner_indices.contains(vertex));
                         overlapped[index] |= inside && !shares_vertex;
                         continue;
                     }

@@ -87,7 +87,8 @@ pub struct PagePacking {
 impl PagePacking {
     /// Content texels over page texels.
     pub fn occupancy(&self) -> f64 {
-        let content: u64 = self.placements.iter().map(|place| place.placement.width as u64 * place.placement.height as u64).sum();
+        let content: u64 =
+            self.placements.iter().map(|place| place.placement.width as u64 * place.placement.height as u64).sum();
         let pages: u64 = self.pages.iter().map(|&(width, height)| width as u64 * height as u64).sum();
         content as f64 / pages.max(1) as f64
     }
@@ -119,21 +120,33 @@ pub fn pack_pages(sizes: &[(u32, u32)], settings: &PageSettings) -> Result<PageP
     for (index, cell) in cells.iter().enumerate() {
         // Pages are square at their largest: turning a cell does not make it fit.
         if cell.width > max_blocks || cell.height > max_blocks {
-            return Err(PackError::TooLarge { index, width: cell.width * 4, height: cell.height * 4, max_size: settings.max_size });
+            return Err(PackError::TooLarge {
+                index,
+                width: cell.width * 4,
+                height: cell.height * 4,
+                max_size: settings.max_size,
+            });
         }
     }
     let mut left: Vec<usize> = (0..cells.len()).collect();
     let mut pages = Vec::new();
     let mut placements =
-        vec![PagePlacement { page: 0, placement: Placement { x: 0, y: 0, width: 0, height: 0, rotated: false } }; sizes.len()];
+        vec![
+            PagePlacement { page: 0, placement: Placement { x: 0, y: 0, width: 0, height: 0, rotated: false } };
+            sizes.len()
+        ];
     loop {
         let page = pages.len() as u32;
         let subset: Vec<Cell> = left.iter().map(|&index| cells[index]).collect();
         // The rest fits on one page: the smallest one.
         if let Some(found) = smallest_page(&subset, settings) {
             for (&index, cell_place) in left.iter().zip(&found.places) {
-                placements[index] =
-                    page_placement(page, cell_place.expect("a page search places everything"), sizes[index], settings.padding);
+                placements[index] = page_placement(
+                    page,
+                    cell_place.expect("a page search places everything"),
+                    sizes[index],
+                    settings.padding,
+                );
             }
             pages.push((found.width * 4, found.height * 4));
             return Ok(PagePacking { pages, placements });
@@ -148,7 +161,8 @@ pub fn pack_pages(sizes: &[(u32, u32)], settings: &PageSettings) -> Result<PageP
             }
         }
         if page + 1 >= settings.pages {
-            let left_texels = still_left.iter().map(|&index| cells[index].width as u64 * cells[index].height as u64 * 16).sum();
+            let left_texels =
+                still_left.iter().map(|&index| cells[index].width as u64 * cells[index].height as u64 * 16).sum();
             return Err(PackError::DoesNotFit {
                 count: sizes.len(),
                 left: still_left.len(),
@@ -209,10 +223,14 @@ fn keep_layout(
             && height <= settings.max_size
             && (!settings.power_of_two || (width.is_power_of_two() && height.is_power_of_two()))
     };
-    if previous_pages.is_empty() || previous_pages.len() as u32 > settings.pages || !previous_pages.iter().all(page_fits) {
+    if previous_pages.is_empty()
+        || previous_pages.len() as u32 > settings.pages
+        || !previous_pages.iter().all(page_fits)
+    {
         return None;
     }
-    let mut bins: Vec<Bin> = previous_pages.iter().map(|&(width, height)| Bin::new(width / 4, height / 4, false)).collect();
+    let mut bins: Vec<Bin> =
+        previous_pages.iter().map(|&(width, height)| Bin::new(width / 4, height / 4, false)).collect();
     let cell_of = |(width, height): (u32, u32), rotated: bool| {
         let (span_x, span_y) = if rotated { (height, width) } else { (width, height) };
         ((span_x + 2 * settings.padding).div_ceil(4), (span_y + 2 * settings.padding).div_ceil(4))
@@ -225,7 +243,8 @@ fn keep_layout(
         if (placement.width, placement.height) != size || (placement.rotated && !settings.rotate) {
             continue;
         }
-        let (Some(x), Some(y)) = (placement.x.checked_sub(settings.padding), placement.y.checked_sub(settings.padding)) else {
+        let (Some(x), Some(y)) = (placement.x.checked_sub(settings.padding), placement.y.checked_sub(settings.padding))
+        else {
             return None;
         };
         let (width, height) = cell_of(size, placement.rotated);
@@ -244,10 +263,9 @@ fn keep_layout(
     placed.sort_by_key(|&index| (std::cmp::Reverse(sizes[index].0 as u64 * sizes[index].1 as u64), index));
     for &index in &placed {
         let (width, height) = cell_of(sizes[index], false);
-        let (page, place) = bins
-            .iter()
-            .enumerate()
-            .find_map(|(page, bin)| Some((page, bin.find(width, height, settings.rotate, PlacementRule::BestShortSideFit)?)))?;
+        let (page, place) = bins.iter().enumerate().find_map(|(page, bin)| {
+            Some((page, bin.find(width, height, settings.rotate, PlacementRule::BestShortSideFit)?))
+        })?;
         let (w, h) = if place.rotated { (height, width) } else { (width, height) };
         bins[page].place(Rect { x: place.x, y: place.y, width: w, height: h });
         placements[index] = Some(page_placement(page as u32, place, sizes[index], settings.padding));
@@ -260,7 +278,13 @@ fn keep_layout(
 fn page_placement(page: u32, place: CellPlace, (width, height): (u32, u32), padding: u32) -> PagePlacement {
     PagePlacement {
         page,
-        placement: Placement { x: place.x * 4 + padding, y: place.y * 4 + padding, width, height, rotated: place.rotated },
+        placement: Placement {
+            x: place.x * 4 + padding,
+            y: place.y * 4 + padding,
+            width,
+            height,
+            rotated: place.rotated,
+        },
     }
 }
 
@@ -292,7 +316,11 @@ fn smallest_page(cells: &[Cell], settings: &PageSettings) -> Option<Packed> {
     let max_blocks = settings.max_size / 4;
     let area: u64 = cells.iter().map(|cell| cell.width as u64 * cell.height as u64).sum();
     // No page is narrower than the widest cell can be made.
-    let narrowest = cells.iter().map(|cell| if settings.rotate { cell.width.min(cell.height) } else { cell.width }).max().unwrap_or(1);
+    let narrowest = cells
+        .iter()
+        .map(|cell| if settings.rotate { cell.width.min(cell.height) } else { cell.width })
+        .max()
+        .unwrap_or(1);
     let round = |side: u32| if settings.power_of_two { side.next_power_of_two() } else { side };
     let first_width = round(narrowest.max((area as f64).sqrt().ceil() as u32).max(1));
     if first_width > max_blocks {
@@ -321,9 +349,15 @@ fn smallest_page(cells: &[Cell], settings: &PageSettings) -> Option<Packed> {
         key(a) < key(b)
     };
     let wider = if settings.power_of_two {
-        std::iter::successors(Some(first_width * 2), |width| Some(width * 2)).take_while(|&width| width <= max_blocks).take(2).collect()
+        std::iter::successors(Some(first_width * 2), |width| Some(width * 2))
+            .take_while(|&width| width <= max_blocks)
+            .take(2)
+            .collect()
     } else {
-        (1..=6u32).map(|step| first_width + (first_width * step).div_ceil(16)).filter(|&width| width <= max_blocks).collect::<Vec<_>>()
+        (1..=6u32)
+            .map(|step| first_width + (first_width * step).div_ceil(16))
+            .filter(|&width| width <= max_blocks)
+            .collect::<Vec<_>>()
     };
     // Every variant on strips of every width, at once: the bound gives up on the losers early.
     // Pages of the smallest area always finish, so the one kept (by area, squareness, then the
@@ -356,7 +390,13 @@ fn full_page(cells: &[Cell], side: u32, rotate: bool) -> Packed {
         })
         .collect();
     let placed_area = |packed: &Packed| -> u64 {
-        packed.places.iter().zip(cells).filter(|(place, _)| place.is_some()).map(|(_, cell)| cell.width as u64 * cell.height as u64).sum()
+        packed
+            .places
+            .iter()
+            .zip(cells)
+            .filter(|(place, _)| place.is_some())
+            .map(|(_, cell)| cell.width as u64 * cell.height as u64)
+            .sum()
     };
     let mut best: Option<Packed> = None;
     for packed in tries {

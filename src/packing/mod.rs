@@ -62,7 +62,11 @@ pub fn pack_smallest(cells: &[(u32, u32)], settings: &AtlasSettings) -> Option<(
 fn pack_skyline(cells: &[(u32, u32)], width: u32, padding: u32) -> Option<(u32, Vec<Placement>)> {
     let mut order: Vec<usize> = (0..cells.len()).collect();
     order.sort_by_key(|&index| {
-        (std::cmp::Reverse(cells[index].0.max(cells[index].1)), std::cmp::Reverse(cells[index].0.min(cells[index].1)), index)
+        (
+            std::cmp::Reverse(cells[index].0.max(cells[index].1)),
+            std::cmp::Reverse(cells[index].0.min(cells[index].1)),
+            index,
+        )
     });
     // Skyline segments: (x, y, width).
     let mut skyline: Vec<(u32, u32, u32)> = vec![(0, 0, width)];
@@ -72,7 +76,8 @@ fn pack_skyline(cells: &[(u32, u32)], width: u32, padding: u32) -> Option<(u32, 
         let (w, h) = cells[index];
         let mut best: Option<(u32, u32, usize, bool)> = None; // (top, x, segment, rotated)
         for rotated in [false, true] {
-            let (cell_w, cell_h) = if rotated { (h + 2 * padding, w + 2 * padding) } else { (w + 2 * padding, h + 2 * padding) };
+            let (cell_w, cell_h) =
+                if rotated { (h + 2 * padding, w + 2 * padding) } else { (w + 2 * padding, h + 2 * padding) };
             if cell_w > width {
                 continue;
             }
@@ -100,7 +105,8 @@ fn pack_skyline(cells: &[(u32, u32)], width: u32, padding: u32) -> Option<(u32, 
             }
         }
         let (top, x, _, rotated) = best?;
-        let (cell_w, cell_h) = if rotated { (h + 2 * padding, w + 2 * padding) } else { (w + 2 * padding, h + 2 * padding) };
+        let (cell_w, cell_h) =
+            if rotated { (h + 2 * padding, w + 2 * padding) } else { (w + 2 * padding, h + 2 * padding) };
         let y = top - cell_h;
         placements[index] = Placement { x: x + padding, y: y + padding, width: w, height: h, rotated };
         used_height = used_height.max(top);

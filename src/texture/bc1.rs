@@ -10,7 +10,11 @@ fn palette(c0: u16, c1: u16) -> [[i32; 3]; 4] {
     let (a, b) = (unpack(c0), unpack(c1));
     let expand = |v: [i32; 3]| [(v[0] * 527 + 23) >> 6, (v[1] * 259 + 33) >> 6, (v[2] * 527 + 23) >> 6];
     let third = |x: [i32; 3], y: [i32; 3]| {
-        [((2 * x[0] + y[0]) * 351 + 61) >> 7, ((2 * x[1] + y[1]) * 2763 + 1039) >> 11, ((2 * x[2] + y[2]) * 351 + 61) >> 7]
+        [
+            ((2 * x[0] + y[0]) * 351 + 61) >> 7,
+            ((2 * x[1] + y[1]) * 2763 + 1039) >> 11,
+            ((2 * x[2] + y[2]) * 351 + 61) >> 7,
+        ]
     };
     [expand(a), expand(b), third(a, b), third(b, a)]
 }
@@ -34,7 +38,9 @@ fn error_and_indices(texels: &[[u8; 3]; 16], c0: u16, c1: u16) -> (u32, u32) {
 }
 
 fn pack(channels: [i32; 3]) -> u16 {
-    ((channels[0].clamp(0, 31) as u16) << 11) | ((channels[1].clamp(0, 63) as u16) << 5) | channels[2].clamp(0, 31) as u16
+    ((channels[0].clamp(0, 31) as u16) << 11)
+        | ((channels[1].clamp(0, 63) as u16) << 5)
+        | channels[2].clamp(0, 31) as u16
 }
 
 fn unpack(c: u16) -> [i32; 3] {

@@ -75,7 +75,9 @@ fn write_ktx2(texture: &EncodedTexture, zstd_level: Option<i32>) -> Vec<u8> {
         .levels
         .iter()
         .map(|level| match zstd_level {
-            Some(compression) => zstd::bulk::compress(level, compression).expect("zstd compression of an in-memory buffer"),
+            Some(compression) => {
+                zstd::bulk::compress(level, compression).expect("zstd compression of an in-memory buffer")
+            }
             None => level.to_vec(),
         })
         .collect();
@@ -255,7 +257,8 @@ pub fn read_ktx2(bytes: &[u8]) -> Result<Ktx2Texture, String> {
         return Err("not a KTX2 file".into());
     }
     let u32_at = |offset: usize| u32::from_le_bytes(bytes[offset..offset + 4].try_into().expect("4 bytes"));
-    let u64_at = |offset: usize| bytes.get(offset..offset + 8).map(|b| u64::from_le_bytes(b.try_into().expect("8 bytes")));
+    let u64_at =
+        |offset: usize| bytes.get(offset..offset + 8).map(|b| u64::from_le_bytes(b.try_into().expect("8 bytes")));
     let vk_format = u32_at(12);
     let (format, srgb) = [BlockFormat::Bc1, BlockFormat::Bc3, BlockFormat::Bc4, BlockFormat::Bc5, BlockFormat::Bc7]
         .into_iter()
@@ -267,7 +270,9 @@ pub fn read_ktx2(bytes: &[u8]) -> Result<Ktx2Texture, String> {
     for level in 0..level_count {
         let at = 80 + level * 24;
         let (offset, length, uncompressed) = match (u64_at(at), u64_at(at + 8), u64_at(at + 16)) {
-            (Some(offset), Some(length), Some(uncompressed)) => (offset as usize, length as usize, uncompressed as usize),
+            (Some(offset), Some(length), Some(uncompressed)) => {
+                (offset as usize, length as usize, uncompressed as usize)
+            }
             _ => return Err("truncated level index".into()),
         };
         let data = bytes.get(offset..offset.saturating_add(length)).ok_or("a level lies outside the file")?;

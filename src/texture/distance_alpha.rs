@@ -70,8 +70,10 @@ pub fn apply_distance_alpha(input: &mut DistanceAlpha) {
     let covered_samples = input.covered.iter().filter(|&&inside| inside).count();
     let offset = area_keeping_offset(&texel_distances, (width, height), factor, reach as f32, covered_samples);
     let ramp = 2.0 * DISTANCE_SPREAD_TEXELS * factor as f32;
-    let alphas: Vec<u8> =
-        texel_distances.iter().map(|&distance| ((0.5 + (distance + offset) / ramp).clamp(0.0, 1.0) * 255.0).round() as u8).collect();
+    let alphas: Vec<u8> = texel_distances
+        .iter()
+        .map(|&distance| ((0.5 + (distance + offset) / ramp).clamp(0.0, 1.0) * 255.0).round() as u8)
+        .collect();
 
     let srgb = input.first_surface_srgb;
     let decode = |surface: usize, channel: usize, byte: u8| -> f32 {
@@ -100,9 +102,12 @@ pub fn apply_distance_alpha(input: &mut DistanceAlpha) {
         let Some(neighbours) = (1..=BORROW_REACH).find_map(|reach| {
             let ring: Vec<usize> = (row.saturating_sub(reach)..(row + reach + 1).min(height))
                 .flat_map(|other_row| {
-                    (column.saturating_sub(reach)..(column + reach + 1).min(width)).map(move |other_column| (other_row, other_column))
+                    (column.saturating_sub(reach)..(column + reach + 1).min(width))
+                        .map(move |other_column| (other_row, other_column))
                 })
-                .filter(|&(other_row, other_column)| other_row.abs_diff(row).max(other_column.abs_diff(column)) == reach)
+                .filter(|&(other_row, other_column)| {
+                    other_row.abs_diff(row).max(other_column.abs_diff(column)) == reach
+                })
                 .map(|(other_row, other_column)| other_row * width + other_column)
                 .filter(|&other| has_colour[other])
                 .collect();
@@ -113,7 +118,8 @@ pub fn apply_distance_alpha(input: &mut DistanceAlpha) {
         let mut values = Vec::with_capacity(surfaces.len() * 4);
         for (surface, image) in surfaces.iter().enumerate() {
             for channel in 0..4 {
-                let sum: f32 = neighbours.iter().map(|&other| decode(surface, channel, image[other * 4 + channel])).sum();
+                let sum: f32 =
+                    neighbours.iter().map(|&other| decode(surface, channel, image[other * 4 + channel])).sum();
                 values.push(encode(surface, channel, sum / neighbours.len() as f32));
             }
         }
@@ -147,7 +153,13 @@ pub fn apply_distance_alpha(input: &mut DistanceAlpha) {
 /// Samples whose four texels are all `far` inside filter to exactly `far` (the weights are
 /// binary fractions that sum to 1), the largest value there is: they are counted, not stored,
 /// so that only samples near an edge are sorted.
-fn area_keeping_offset(texel_distances: &[f32], (width, height): (usize, usize), factor: usize, far: f32, covered_samples: usize) -> f32 {
+fn area_keeping_offset(
+    texel_distances: &[f32],
+    (width, height): (usize, usize),
+    factor: usize,
+    far: f32,
+    covered_samples: usize,
+) -> f32 {
     if covered_samples == 0 {
         return 0.0;
     }
@@ -173,7 +185,10 @@ fn area_keeping_offset(texel_distances: &[f32], (width, height): (usize, usize),
                 continue;
             }
             near_edge.push(
-                corners[0] * (1.0 - fx) * (1.0 - fy) + corners[1] * fx * (1.0 - fy) + corners[2] * (1.0 - fx) * fy + corners[3] * fx * fy,
+                corners[0] * (1.0 - fx) * (1.0 - fy)
+                    + corners[1] * fx * (1.0 - fy)
+                    + corners[2] * (1.0 - fx) * fy
+                    + corners[3] * fx * fy,
             );
         }
         (near_edge, deep)
@@ -201,7 +216,13 @@ fn area_keeping_offset(texel_distances: &[f32], (width, height): (usize, usize),
 
 /// The signed distance at a texel's centre (in samples): the mean of the samples' distances
 /// around it (the four nearest for an even factor, the middle one for an odd one).
-fn centre_distance(distances: &[f32], sample_width: usize, factor: usize, texel_row: usize, texel_column: usize) -> f32 {
+fn centre_distance(
+    distances: &[f32],
+    sample_width: usize,
+    factor: usize,
+    texel_row: usize,
+    texel_column: usize,
+) -> f32 {
     let (first_row, first_column) = (texel_row * factor, texel_column * factor);
     let middle = factor / 2;
     if factor % 2 == 1 {
@@ -282,7 +303,8 @@ pub fn signed_sample_distances(covered: &[bool], width: usize, height: usize, re
         }
         (0..width)
             .map(|column| {
-                let distance = table[nearest_rows[column] as usize * (far as usize + 1) + nearest_across[column] as usize];
+                let distance =
+                    table[nearest_rows[column] as usize * (far as usize + 1) + nearest_across[column] as usize];
                 if own[column] {
                     distance
                 } else {

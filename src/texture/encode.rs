@@ -33,7 +33,15 @@ impl Eq for EncodedTexture {}
 
 impl fmt::Debug for EncodedTexture {
     fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
-        write!(f, "EncodedTexture({:?} {}x{} ×{}, {})", self.format, self.width, self.height, self.levels.len(), &self.hash.to_hex()[..12])
+        write!(
+            f,
+            "EncodedTexture({:?} {}x{} ×{}, {})",
+            self.format,
+            self.width,
+            self.height,
+            self.levels.len(),
+            &self.hash.to_hex()[..12]
+        )
     }
 }
 
@@ -82,7 +90,13 @@ fn encoded_texture(levels: &[Texture], settings: BlockEncodeSettings, encoded: V
 
 impl EncodedTexture {
     /// An encoded texture from its block data per level (level 0 first).
-    pub fn from_levels(format: BlockFormat, srgb: bool, width: u32, height: u32, levels: Vec<Arc<[u8]>>) -> EncodedTexture {
+    pub fn from_levels(
+        format: BlockFormat,
+        srgb: bool,
+        width: u32,
+        height: u32,
+        levels: Vec<Arc<[u8]>>,
+    ) -> EncodedTexture {
         let mut hasher = blake3::Hasher::new();
         for level in &levels {
             hasher.update(level);
@@ -224,42 +238,55 @@ fn encode_blocks(
         });
         return encoded;
     }
-    encoded.par_chunks_mut(size * BLOCKS_PER_TASK).zip(blocks.par_chunks(BLOCKS_PER_TASK)).for_each(|(output, blocks)| {
-        // The blocks side by side: one row of blocks, 4 texels high.
-        let row_len = 4 * channels;
-        let stride = blocks.len() * row_len;
-        let mut data = vec![0u8; stride * 4];
-        for (index, block) in blocks.iter().enumerate() {
-            for row in 0..4 {
-                data[row * stride + index * row_len..][..row_len].copy_from_slice(&block[row * row_len..][..row_len]);
-            }
-        }
-        let (data, width, height, stride) = (&data[..], 4 * blocks.len() as u32, 4, stride as u32);
-        match format {
-            BlockFormat::Bc1 => {
-                super::ispc::compress_bc1(&intel_tex_2::RgbaSurface { data, width, height, stride }, output);
-                // Then cirrus's refinement of each block (all but the fastest settings).
-                if !matches!(quality, EncodeQuality::UltraFast | EncodeQuality::VeryFast) {
-                    for (block, bytes) in blocks.iter().zip(output.chunks_exact_mut(8)) {
-                        let texels: [[u8; 3]; 16] =
-                            std::array::from_fn(|texel| [block[texel * 4], block[texel * 4 + 1], block[texel * 4 + 2]]);
-                        let refined = super::bc1::refine_bc1_block(&texels, bytes.try_into().expect("eight bytes"));
-                        bytes.copy_from_slice(&refined);
-                    }
+    encoded.par_chunks_mut(size * BLOCKS_PER_TASK).zip(blocks.par_chunks(BLOCKS_PER_TASK)).for_each(
+        |(output, blocks)| {
+            // The blocks side by side: one row of blocks, 4 texels high.
+            let row_len = 4 * channels;
+            let stride = blocks.len() * row_len;
+            let mut data = vec![0u8; stride * 4];
+            for (index, block) in blocks.iter().enumerate() {
+                for row in 0..4 {
+                    data[row * stride + index * row_len..][..row_len]
+                        .copy_from_slice(&block[row * row_len..][..row_len]);
                 }
             }
-            BlockFormat::Bc3 => super::ispc::compress_bc3(&intel_tex_2::RgbaSurface { data, width, height, stride }, output),
-            BlockFormat::Bc4 | BlockFormat::Bc5 => unreachable!("BC4 and BC5 are encoded above, by cirrus's own search"),
-            BlockFormat::Bc7 => super::ispc::compress_bc7(bc7_settings, &intel_tex_2::RgbaSurface { data, width, height, stride }, output),
-        }
-    });
+            let (data, width, height, stride) = (&data[..], 4 * blocks.len() as u32, 4, stride as u32);
+            match format {
+                BlockFormat::Bc1 => {
+                    super::ispc::compress_bc1(&intel_tex_2::RgbaSurface { data, width, height, stride }, output);
+                    // Then cirrus's refinement of each block (all but the fastest settings).
+                    if !matches!(quality, EncodeQuality::UltraFast | EncodeQuality::VeryFast) {
+                        for (block, bytes) in blocks.iter().zip(output.chunks_exact_mut(8)) {
+                            let texels: [[u8; 3]; 16] = std::array::from_fn(|texel| {
+                                [block[texel * 4], block[texel * 4 + 1], block[texel * 4 + 2]]
+                            });
+                            let refined = super::bc1::refine_bc1_block(&texels, bytes.try_into().expect("eight bytes"));
+                            bytes.copy_from_slice(&refined);
+                        }
+                    }
+                }
+                BlockFormat::Bc3 => {
+                    super::ispc::compress_bc3(&intel_tex_2::RgbaSurface { data, width, height, stride }, output)
+                }
+                BlockFormat::Bc4 | BlockFormat::Bc5 => {
+                    unreachable!("BC4 and BC5 are encoded above, by cirrus's own search")
+                }
+                BlockFormat::Bc7 => super::ispc::compress_bc7(
+                    bc7_settings,
+                    &intel_tex_2::RgbaSurface { data, width, height, stride },
+                    output,
+                ),
+            }
+        },
+    );
     encoded
 }
 
 /// A 64-bit hash of a block's bytes (FxHash over 8-byte words; blocks are 16, 32 or 64 bytes).
 fn block_hash(block: &[u8]) -> u64 {
     block.chunks_exact(8).fold(0u64, |hash, word| {
-        (hash.rotate_left(5) ^ u64::from_le_bytes(word.try_into().expect("8 bytes"))).wrapping_mul(0x51_7c_c1_b7_27_22_0a_95)
+        (hash.rotate_left(5) ^ u64::from_le_bytes(word.try_into().expect("8 bytes")))
+            .wrapping_mul(0x51_7c_c1_b7_27_22_0a_95)
     })
 }
 
@@ -285,7 +312,8 @@ fn copy_block(level: &Texture, bx: usize, by: usize, channels: usize, block: &mu
         for column in 0..4 {
             let x = (bx * 4 + column).min(width - 1);
             let source = (y * width + x) * 4;
-            block[(row * 4 + column) * channels..][..channels].copy_from_slice(&level.pixels[source..source + channels]);
+            block[(row * 4 + column) * channels..][..channels]
+                .copy_from_slice(&level.pixels[source..source + channels]);
         }
     }
 }

@@ -23,7 +23,8 @@ impl TexelSources {
         if offsets.len() != texels {
             return None;
         }
-        let sources: Vec<u32> = offsets.par_iter().enumerate().map(|(texel, &offset)| offset.wrapping_add(texel as u32)).collect();
+        let sources: Vec<u32> =
+            offsets.par_iter().enumerate().map(|(texel, &offset)| offset.wrapping_add(texel as u32)).collect();
         sources.par_iter().all(|&source| (source as usize) < texels).then_some(TexelSources(sources))
     }
 }
@@ -69,7 +70,11 @@ pub fn texel_sources(width: u32, height: u32, covered: impl IntoIterator<Item = 
             }
         }
     }
-    TexelSources((0..height).flat_map(|row| source[(row + 1) * stride + 1..(row + 1) * stride + 1 + width].iter().copied()).collect())
+    TexelSources(
+        (0..height)
+            .flat_map(|row| source[(row + 1) * stride + 1..(row + 1) * stride + 1 + width].iter().copied())
+            .collect(),
+    )
 }
 
 /// The fill itself: every texel of a `width`-wide RGBA8 image takes the values of the texel

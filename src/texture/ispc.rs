@@ -20,8 +20,17 @@ fn c_surface(surface: &RgbaSurface) -> kernel::rgba_surface {
 
 fn check_sizes(surface: &RgbaSurface, blocks: &[u8], block_bytes: usize) {
     let block_count = (surface.width as usize).div_ceil(4) * (surface.height as usize).div_ceil(4);
-    assert_eq!(blocks.len(), block_count * block_bytes, "output size of a {}x{} surface", surface.width, surface.height);
-    assert!(surface.data.len() >= (surface.height as usize).saturating_sub(1) * surface.stride as usize + surface.width as usize * 4);
+    assert_eq!(
+        blocks.len(),
+        block_count * block_bytes,
+        "output size of a {}x{} surface",
+        surface.width,
+        surface.height
+    );
+    assert!(
+        surface.data.len()
+            >= (surface.height as usize).saturating_sub(1) * surface.stride as usize + surface.width as usize * 4
+    );
 }
 
 /// A kernel that compresses a surface's blocks.
@@ -36,12 +45,24 @@ mod kernels {
     use super::per_level::*;
     use super::{kernel, SettingsKernel, SurfaceKernel};
 
-    pub const BC1: [SurfaceKernel; 4] =
-        [CompressBlocksBC1_ispc_sse2, CompressBlocksBC1_ispc_sse4, CompressBlocksBC1_ispc_avx2, kernel::CompressBlocksBC1_ispc];
-    pub const BC3: [SurfaceKernel; 4] =
-        [CompressBlocksBC3_ispc_sse2, CompressBlocksBC3_ispc_sse4, CompressBlocksBC3_ispc_avx2, kernel::CompressBlocksBC3_ispc];
-    pub const BC7: [SettingsKernel; 4] =
-        [CompressBlocksBC7_ispc_sse2, CompressBlocksBC7_ispc_sse4, CompressBlocksBC7_ispc_avx2, kernel::CompressBlocksBC7_ispc];
+    pub const BC1: [SurfaceKernel; 4] = [
+        CompressBlocksBC1_ispc_sse2,
+        CompressBlocksBC1_ispc_sse4,
+        CompressBlocksBC1_ispc_avx2,
+        kernel::CompressBlocksBC1_ispc,
+    ];
+    pub const BC3: [SurfaceKernel; 4] = [
+        CompressBlocksBC3_ispc_sse2,
+        CompressBlocksBC3_ispc_sse4,
+        CompressBlocksBC3_ispc_avx2,
+        kernel::CompressBlocksBC3_ispc,
+    ];
+    pub const BC7: [SettingsKernel; 4] = [
+        CompressBlocksBC7_ispc_sse2,
+        CompressBlocksBC7_ispc_sse4,
+        CompressBlocksBC7_ispc_avx2,
+        kernel::CompressBlocksBC7_ispc,
+    ];
 }
 
 #[cfg(not(all(target_arch = "x86_64", unix)))]

@@ -4,7 +4,9 @@
 
 use rayon::prelude::*;
 
-use crate::texture::color::{decode_normal, encode_normal, linear_to_srgb_u8, normalize_tangent_normal, srgb_u8_to_linear, unorm_u8};
+use crate::texture::color::{
+    decode_normal, encode_normal, linear_to_srgb_u8, normalize_tangent_normal, srgb_u8_to_linear, unorm_u8,
+};
 use crate::texture::fingerprint::BlockFingerprints;
 use crate::texture::SurfaceKind;
 use crate::texture::Texture;
@@ -86,7 +88,12 @@ fn full_chain(level0: &Texture, settings: MipSettings) -> (Vec<Texture>, Option<
     let mut chain = Chain { levels: vec![level0.clone()], alpha_scales: vec![1.0], tile_level: None };
     let keep_tile_level = reusable_size(level0.width, level0.height);
     extend_chain(&mut chain, current, straight, settings, coverage, keep_tile_level);
-    let reuse = chain.tile_level.map(|tile_level| MipReuse { settings, coverage, alpha_scales: chain.alpha_scales, tile_level });
+    let reuse = chain.tile_level.map(|tile_level| MipReuse {
+        settings,
+        coverage,
+        alpha_scales: chain.alpha_scales,
+        tile_level,
+    });
     (chain.levels, reuse)
 }
 
@@ -182,11 +189,13 @@ fn refilter_changed_tiles(
     // is fully transparent (which decides whether straight colour is kept at all).
     let alpha_changed = changes.iter().any(|&(_, alpha_changed)| alpha_changed);
     if alpha_changed
-        && (settings.alpha_cutoff.is_some() || keeps_straight_colour(level0, settings) != previous.reuse.tile_level.straight.is_some())
+        && (settings.alpha_cutoff.is_some()
+            || keeps_straight_colour(level0, settings) != previous.reuse.tile_level.straight.is_some())
     {
         return None;
     }
-    let changed_tiles: Vec<usize> = changes.iter().enumerate().filter(|(_, (changed, _))| *changed).map(|(tile, _)| tile).collect();
+    let changed_tiles: Vec<usize> =
+        changes.iter().enumerate().filter(|(_, (changed, _))| *changed).map(|(tile, _)| tile).collect();
     // Each changed tile filtered on its own, with the arithmetic of a full chain: its bytes at
     // levels 1 to REUSE_TILE_LEVELS, and its one texel at the last of them.
     type Refiltered = (usize, Vec<Vec<u8>>, [f32; 4], Option<[f32; 4]>);
@@ -202,7 +211,12 @@ fn refilter_changed_tiles(
                 current = reduce(&current, side, side, side / 2, side / 2);
                 straight = straight.map(|colour| reduce(&colour, side, side, side / 2, side / 2));
                 side /= 2;
-                bytes.push(filter_space_bytes(&current, straight.as_deref(), settings.kind, previous.reuse.alpha_scales[level]));
+                bytes.push(filter_space_bytes(
+                    &current,
+                    straight.as_deref(),
+                    settings.kind,
+                    previous.reuse.alpha_scales[level],
+                ));
             }
             (tile, bytes, current[0], straight.map(|colour| colour[0]))
         })
@@ -227,8 +241,16 @@ fn refilter_changed_tiles(
             straight[*tile] = *texel;
         }
     }
-    let mut chain = Chain { levels, alpha_scales: previous.reuse.alpha_scales[..=REUSE_TILE_LEVELS].to_vec(), tile_level: None };
-    extend_chain(&mut chain, tile_level.texels.clone(), tile_level.straight.clone(), settings, previous.reuse.coverage, false);
+    let mut chain =
+        Chain { levels, alpha_scales: previous.reuse.alpha_scales[..=REUSE_TILE_LEVELS].to_vec(), tile_level: None };
+    extend_chain(
+        &mut chain,
+        tile_level.texels.clone(),
+        tile_level.straight.clone(),
+        settings,
+        previous.reuse.coverage,
+        false,
+    );
     let reuse = MipReuse { settings, coverage: previous.reuse.coverage, alpha_scales: chain.alpha_scales, tile_level };
     Some((chain.levels, Some(reuse)))
 }
@@ -241,20 +263,30 @@ fn to_filter_space(pixels: &[u8], kind: SurfaceKind) -> Vec<[f32; 4]> {
         .map(|t| match kind {
             SurfaceKind::Albedo => {
                 let alpha = t[3] as f32 / 255.0;
-                [srgb_u8_to_linear(t[0]) * alpha, srgb_u8_to_linear(t[1]) * alpha, srgb_u8_to_linear(t[2]) * alpha, alpha]
+                [
+                    srgb_u8_to_linear(t[0]) * alpha,
+                    srgb_u8_to_linear(t[1]) * alpha,
+                    srgb_u8_to_linear(t[2]) * alpha,
+                    alpha,
+                ]
             }
             SurfaceKind::Normal => {
                 let [x, y, z] = decode_normal([t[0], t[1], t[2]]);
                 [x, y, z, 1.0]
             }
-            SurfaceKind::Mra | SurfaceKind::Height | SurfaceKind::Ao => [t[0], t[1], t[2], t[3]].map(|c| c as f32 / 255.0),
+            SurfaceKind::Mra | SurfaceKind::Height | SurfaceKind::Ao => {
+                [t[0], t[1], t[2], t[3]].map(|c| c as f32 / 255.0)
+            }
         })
         .collect()
 }
 
 /// Linear colour of every texel, not weighted by alpha.
 fn straight_linear_colour(pixels: &[u8]) -> Vec<[f32; 4]> {
-    pixels.par_chunks_exact(4).map(|t| [srgb_u8_to_linear(t[0]), srgb_u8_to_linear(t[1]), srgb_u8_to_linear(t[2]), 1.0]).collect()
+    pixels
+        .par_chunks_exact(4)
+        .map(|t| [srgb_u8_to_linear(t[0]), srgb_u8_to_linear(t[1]), srgb_u8_to_linear(t[2]), 1.0])
+        .collect()
 }
 
 fn from_filter_space(
@@ -269,14 +301,24 @@ fn from_filter_space(
     pixels.par_chunks_mut(4096 * 4).enumerate().for_each(|(chunk, bytes)| {
         for (offset, texel) in bytes.chunks_exact_mut(4).enumerate() {
             let index = chunk * 4096 + offset;
-            texel.copy_from_slice(&texel_bytes(texels[index], straight.map(|straight| straight[index]), kind, alpha_scale));
+            texel.copy_from_slice(&texel_bytes(
+                texels[index],
+                straight.map(|straight| straight[index]),
+                kind,
+                alpha_scale,
+            ));
         }
     });
     Texture::new(width, height, pixels)
 }
 
 /// [`from_filter_space`] of a few texels, on this thread.
-fn filter_space_bytes(texels: &[[f32; 4]], straight: Option<&[[f32; 4]]>, kind: SurfaceKind, alpha_scale: f32) -> Vec<u8> {
+fn filter_space_bytes(
+    texels: &[[f32; 4]],
+    straight: Option<&[[f32; 4]]>,
+    kind: SurfaceKind,
+    alpha_scale: f32,
+) -> Vec<u8> {
     texels
         .iter()
         .enumerate()
@@ -297,7 +339,9 @@ fn texel_bytes([r, g, b, a]: [f32; 4], straight: Option<[f32; 4]>, kind: Surface
             [linear_to_srgb_u8(r), linear_to_srgb_u8(g), linear_to_srgb_u8(b), unorm_u8(a * alpha_scale)]
         }
         SurfaceKind::Normal => encode_normal(normalize_tangent_normal([r, g, b])),
-        SurfaceKind::Mra | SurfaceKind::Height | SurfaceKind::Ao => [unorm_u8(r), unorm_u8(g), unorm_u8(b), unorm_u8(a)],
+        SurfaceKind::Mra | SurfaceKind::Height | SurfaceKind::Ao => {
+            [unorm_u8(r), unorm_u8(g), unorm_u8(b), unorm_u8(a)]
+        }
     }
 }
 

@@ -126,7 +126,8 @@ impl SurfaceKind {
     /// The surfaces of a baked material.
     pub const MATERIAL: [SurfaceKind; 3] = [SurfaceKind::Albedo, SurfaceKind::Mra, SurfaceKind::Normal];
     /// The surfaces of a billboard-cloud atlas.
-    pub const BILLBOARD: [SurfaceKind; 4] = [SurfaceKind::Albedo, SurfaceKind::Mra, SurfaceKind::Normal, SurfaceKind::Height];
+    pub const BILLBOARD: [SurfaceKind; 4] =
+        [SurfaceKind::Albedo, SurfaceKind::Mra, SurfaceKind::Normal, SurfaceKind::Height];
 
     pub fn name(self) -> &'static str {
         match self {
@@ -177,7 +178,11 @@ impl Texture {
     pub fn new(width: u32, height: u32, pixels: Vec<u8>) -> Texture {
         assert_eq!(pixels.len(), (width * height * 4) as usize, "RGBA8 pixel count");
         // The same hash either way; large images hash on every core (atlas surfaces are 16 MB).
-        let hash = if pixels.len() >= 1 << 20 { blake3::Hasher::new().update_rayon(&pixels).finalize() } else { blake3::hash(&pixels) };
+        let hash = if pixels.len() >= 1 << 20 {
+            blake3::Hasher::new().update_rayon(&pixels).finalize()
+        } else {
+            blake3::hash(&pixels)
+        };
         Texture { width, height, pixels: Arc::new(pixels), hash }
     }
 
@@ -210,8 +215,9 @@ impl fmt::Debug for Texture {
 /// beyond `limits`.
 pub fn probe_texture(file: &Path, bytes: &[u8], limits: TextureLimits) -> Result<(u32, u32), Diagnostic> {
     let reader = image_reader(file, bytes)?;
-    let (width, height) =
-        reader.into_dimensions().map_err(|error| Diagnostic::new(file, format!("cannot read the image header: {error}")))?;
+    let (width, height) = reader
+        .into_dimensions()
+        .map_err(|error| Diagnostic::new(file, format!("cannot read the image header: {error}")))?;
     if width > MAX_TEXTURE_SIDE || height > MAX_TEXTURE_SIDE {
         return Err(Diagnostic::new(
             file,
@@ -237,7 +243,8 @@ fn is_truncated_jpeg(bytes: &[u8]) -> bool {
     }
     let mut at = 2;
     loop {
-        let Some(&[prefix, marker]) = bytes.get(at..at + 2).map(|pair| <&[u8; 2]>::try_from(pair).expect("two bytes")) else {
+        let Some(&[prefix, marker]) = bytes.get(at..at + 2).map(|pair| <&[u8; 2]>::try_from(pair).expect("two bytes"))
+        else {
             return true;
         };
         if prefix != 0xFF {
@@ -250,7 +257,9 @@ fn is_truncated_jpeg(bytes: &[u8]) -> bool {
             0xD9 => return false,
             0x01 | 0xD0..=0xD7 => at += 2,
             _ => {
-                let Some(length) = bytes.get(at + 2..at + 4).map(|pair| u16::from_be_bytes([pair[0], pair[1]])) else { return true };
+                let Some(length) = bytes.get(at + 2..at + 4).map(|pair| u16::from_be_bytes([pair[0], pair[1]])) else {
+                    return true;
+                };
                 at += 2 + usize::from(length);
             }
         }
@@ -270,7 +279,10 @@ pub fn decode_texture(file: &Path, bytes: &[u8], limits: TextureLimits) -> Resul
     let image = reader.decode().map_err(|error| {
         let message = match error {
             image::ImageError::Limits(_) => {
-                format!("the image is larger than the decoder limits ({MAX_TEXTURE_SIDE}² texels, {} MiB)", MAX_DECODE_BYTES >> 20)
+                format!(
+                    "the image is larger than the decoder limits ({MAX_TEXTURE_SIDE}² texels, {} MiB)",
+                    MAX_DECODE_BYTES >> 20
+                )
             }
             other => format!("cannot decode the image: {other}"),
         };
@@ -288,8 +300,10 @@ fn image_reader<'a>(file: &Path, bytes: &'a [u8]) -> Result<image::ImageReader<C
         .with_guessed_format()
         .map_err(|error| Diagnostic::new(file, format!("cannot read the image: {error}")))?;
     if reader.format().is_none() {
-        reader
-            .set_format(image::ImageFormat::from_path(file).map_err(|_| Diagnostic::new(file, "not a PNG, JPEG, TGA, BMP or GIF image"))?);
+        reader.set_format(
+            image::ImageFormat::from_path(file)
+                .map_err(|_| Diagnostic::new(file, "not a PNG, JPEG, TGA, BMP or GIF image"))?,
+        );
     }
     let format = reader.format();
     if !matches!(

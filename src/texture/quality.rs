@@ -58,7 +58,12 @@ fn decode_block(format: BlockFormat, block: &[u8]) -> [u8; 64] {
             let mut red_green = [0u8; 32];
             bcdec_rs::bc5(block, &mut red_green, 8, false);
             for index in 0..16 {
-                rgba[index * 4..index * 4 + 4].copy_from_slice(&[red_green[index * 2], red_green[index * 2 + 1], 0, 255]);
+                rgba[index * 4..index * 4 + 4].copy_from_slice(&[
+                    red_green[index * 2],
+                    red_green[index * 2 + 1],
+                    0,
+                    255,
+                ]);
             }
         }
     }
@@ -161,7 +166,8 @@ pub fn block_errors_reusing(
             let columns = bx * 4 * 4..((bx * 4 + 4).min(width)) * 4;
             let texels = |row: usize| row * width * 4 + columns.start..row * width * 4 + columns.end;
             if let Some((old_reference, old_blocks, old)) = previous {
-                let unchanged = old_blocks[number * size..][..size] == *block && !reference_blocks.block_changed(old_reference, number);
+                let unchanged = old_blocks[number * size..][..size] == *block
+                    && !reference_blocks.block_changed(old_reference, number);
                 if unchanged {
                     let cut_out = old.cut_out.as_ref().map_or_else(CutOutBlock::default, |(_, blocks)| blocks[number]);
                     *error = (old.errors[number], cut_out);

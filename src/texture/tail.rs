@@ -140,7 +140,8 @@ pub fn tail_mips(image: &Texture, settings: MipStepSettings, previous: Option<&P
     if !settings.mips {
         return MipLevels { levels: Arc::new(vec![image.clone()]), alpha_tested, level0_blocks, reuse: None };
     }
-    let mip_settings = MipSettings { kind: settings.surface, alpha_cutoff: settings.alpha_cutoff.filter(|_| alpha_tested) };
+    let mip_settings =
+        MipSettings { kind: settings.surface, alpha_cutoff: settings.alpha_cutoff.filter(|_| alpha_tested) };
     let previous = previous.and_then(|previous| {
         Some(PreviousChain {
             level0_blocks: &previous.level0_blocks,
@@ -180,8 +181,13 @@ pub fn tail_encode(
         &texture.levels[0],
         image,
         &mips.level0_blocks,
-        Measure { channels: surface.channels(), alpha_threshold: alpha_cutoff.filter(|_| mips.alpha_tested).map(alpha_test_threshold) },
-        previous.map(|previous| (&*previous.level0_blocks, &previous.encoded.texture.levels[0][..], &*previous.encoded.block_errors)),
+        Measure {
+            channels: surface.channels(),
+            alpha_threshold: alpha_cutoff.filter(|_| mips.alpha_tested).map(alpha_test_threshold),
+        },
+        previous.map(|previous| {
+            (&*previous.level0_blocks, &previous.encoded.texture.levels[0][..], &*previous.encoded.block_errors)
+        }),
     );
     let psnr_db = (block_errors.psnr(image.width, image.height) * 100.0).round() / 100.0;
     EncodedSurface { settings, texture, block_errors: Arc::new(block_errors), psnr_db }
@@ -197,7 +203,12 @@ pub struct FormatFigure {
 
 /// Level 0 of a surface (`mips`) encoded in each of `formats` and decoded again: what each
 /// would cost and give (`cirrus report: (compare_formats: true)`).
-pub fn format_comparison(mips: &MipLevels, surface: SurfaceKind, formats: &[BlockFormat], quality: EncodeQuality) -> Vec<FormatFigure> {
+pub fn format_comparison(
+    mips: &MipLevels,
+    surface: SurfaceKind,
+    formats: &[BlockFormat],
+    quality: EncodeQuality,
+) -> Vec<FormatFigure> {
     let image = &mips.levels[0];
     formats
         .iter()

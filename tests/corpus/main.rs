@@ -14,8 +14,12 @@ fn corpus() -> PathBuf {
 
 /// Surfaces whose BC1/BC5 result is below the DESIGN §7 bar with the current encoder, and the
 /// floor each must still clear (measured minus 0.5 dB): a regression guard, listed openly.
-const BELOW_BAR: &[(&str, f64)] =
-    &[("birch_bark/Mra", 30.4), ("birch_bark/Normal", 39.7), ("helmet_metalparts/Mra", 32.8), ("helmet_rubberwood/Mra", 35.3)];
+const BELOW_BAR: &[(&str, f64)] = &[
+    ("birch_bark/Mra", 30.4),
+    ("birch_bark/Normal", 39.7),
+    ("helmet_metalparts/Mra", 32.8),
+    ("helmet_rubberwood/Mra", 35.3),
+];
 
 /// rgbcx (Python `quicktex` 0.3.1, BC1 level 18) on each corpus material's packed mra surface,
 /// decoded as `bcdec` decodes, PSNR over R, G, B: measured once with `tools/rgbcx_mra.py`.
@@ -44,9 +48,10 @@ fn every_corpus_material_bakes_and_meets_the_psnr_bars() {
     assert!(summary.all_ok(), "{}", summary.to_text());
     let mut figures = Vec::new();
     for asset in &summary.assets {
-        let report: serde_json::Value =
-            serde_json::from_slice(&std::fs::read(dir.path().join("baked").join(&asset.name).join("report.json")).expect("report"))
-                .expect("report JSON");
+        let report: serde_json::Value = serde_json::from_slice(
+            &std::fs::read(dir.path().join("baked").join(&asset.name).join("report.json")).expect("report"),
+        )
+        .expect("report JSON");
         for material in report["materials"].as_array().expect("materials") {
             for surface in material["surfaces"].as_array().expect("surfaces") {
                 let name = format!("{}/{}", material["name"].as_str().unwrap(), surface["surface"].as_str().unwrap());
@@ -65,14 +70,20 @@ fn every_corpus_material_bakes_and_meets_the_psnr_bars() {
     // mra (BC1) within 0.3 dB of rgbcx at its top level on the same surface (DESIGN §7).
     for (name, psnr) in figures.iter().filter_map(|figure| figure.split_once("/Mra: ")) {
         let psnr: f64 = psnr.split(' ').next().unwrap().parse().unwrap();
-        let reference = RGBCX_MRA.iter().find(|(known, _)| *known == name).unwrap_or_else(|| panic!("no rgbcx figure for {name}")).1;
+        let reference = RGBCX_MRA
+            .iter()
+            .find(|(known, _)| *known == name)
+            .unwrap_or_else(|| panic!("no rgbcx figure for {name}"))
+            .1;
         assert!(psnr >= reference - 0.3, "{name}/Mra: {psnr:.2} dB against rgbcx's {reference:.2} dB");
     }
     println!("{}", figures.join("\n"));
 }
 
 /// Loads `relative` (inside the corpus) the way the driver does: MTL files served by path.
-fn load_corpus_mesh(relative: &str) -> Result<(cirrus::mesh::Mesh, Vec<cirrus::diagnostic::Diagnostic>), cirrus::diagnostic::Diagnostic> {
+fn load_corpus_mesh(
+    relative: &str,
+) -> Result<(cirrus::mesh::Mesh, Vec<cirrus::diagnostic::Diagnostic>), cirrus::diagnostic::Diagnostic> {
     let root = corpus();
     let path = Path::new(relative);
     let bytes = std::fs::read(root.join(path)).expect("read OBJ");
@@ -111,7 +122,10 @@ fn every_obj_conformance_file_loads_or_fails_cleanly() {
                 loaded += 1;
                 assert_eq!(mesh.triangles.len(), mesh.triangle_materials.len(), "{file}");
                 assert!(mesh.normals.iter().all(|n| n.iter().all(|c| c.is_finite())), "{file}: finite normals");
-                assert!(mesh.triangles.iter().flatten().all(|&index| (index as usize) < mesh.positions.len()), "{file}");
+                assert!(
+                    mesh.triangles.iter().flatten().all(|&index| (index as usize) < mesh.positions.len()),
+                    "{file}"
+                );
             }
             Ok(Err(diagnostic)) => {
                 assert!(
@@ -142,13 +156,20 @@ fn corpus_meshes_load_with_their_documented_triangle_counts_and_maps() {
         assert!(warnings.is_empty(), "{file}: {warnings:?}");
     }
     let (oak, _) = load_corpus_mesh("trees/oak_medium.obj").unwrap();
-    let bark = oak.materials.iter().find(|material| material.maps.contains_key(&TextureSlot::Normal)).expect("a bark material");
+    let bark = oak
+        .materials
+        .iter()
+        .find(|material| material.maps.contains_key(&TextureSlot::Normal))
+        .expect("a bark material");
     for slot in [TextureSlot::Albedo, TextureSlot::Normal, TextureSlot::Roughness, TextureSlot::Ao] {
         assert!(bark.maps.contains_key(&slot), "bark has {slot:?}: {:?}", bark.maps);
     }
     let leaves = oak.materials.iter().find(|material| material.name == "leaves").expect("a leaf material");
     assert!(leaves.maps.contains_key(&TextureSlot::Albedo));
-    assert!(!leaves.maps.contains_key(&TextureSlot::Opacity), "map_d naming the albedo PNG: its alpha is the opacity, applied once");
+    assert!(
+        !leaves.maps.contains_key(&TextureSlot::Opacity),
+        "map_d naming the albedo PNG: its alpha is the opacity, applied once"
+    );
 }
 
 #[test]
@@ -179,22 +200,33 @@ fn corpus_billboard_clouds_bake_and_keep_their_silhouettes() {
             lod: None,
             stand_in: Default::default(),
         };
-        let [(0, metrics)] = &cirrus::kinds::billboard_cloud::preview(&mut project, &options).expect("preview renders")[..] else {
+        let [(0, metrics)] =
+            &cirrus::kinds::billboard_cloud::preview(&mut project, &options).expect("preview renders")[..]
+        else {
             panic!("{name}: one level previewed")
         };
         assert_eq!(metrics.views.len(), 26);
         // The bar of DESIGN §7, at the default ε and 16 samples per pixel.
         let floor = 0.85;
-        figures
-            .push(format!("{name}: mean IoU {:.3} (min {:.3}), mean PSNR {:.2} dB", metrics.mean_iou, metrics.min_iou, metrics.mean_psnr));
+        figures.push(format!(
+            "{name}: mean IoU {:.3} (min {:.3}), mean PSNR {:.2} dB",
+            metrics.mean_iou, metrics.min_iou, metrics.mean_psnr
+        ));
         assert!(metrics.mean_iou >= floor, "{name}: mean IoU {:.3} < {floor}", metrics.mean_iou);
         assert!(dir.path().join(format!("baked/{name}/preview/contact_sheet.png")).exists());
     }
     for name in ["spot", "helmet"] {
         let report: serde_json::Value =
-            serde_json::from_slice(&std::fs::read(dir.path().join(format!("baked/{name}/report.json"))).unwrap()).unwrap();
-        assert!(report["planes"].as_u64().unwrap() > 0 && report["atlas"]["coverage"].as_f64().unwrap() > 0.01, "{name}: {report}");
-        figures.push(format!("{name}: {} faces, {} planes, coverage {}", report["faces"], report["planes"], report["atlas"]["coverage"]));
+            serde_json::from_slice(&std::fs::read(dir.path().join(format!("baked/{name}/report.json"))).unwrap())
+                .unwrap();
+        assert!(
+            report["planes"].as_u64().unwrap() > 0 && report["atlas"]["coverage"].as_f64().unwrap() > 0.01,
+            "{name}: {report}"
+        );
+        figures.push(format!(
+            "{name}: {} faces, {} planes, coverage {}",
+            report["faces"], report["planes"], report["atlas"]["coverage"]
+        ));
     }
     println!("{}", figures.join("\n"));
 }
@@ -208,11 +240,15 @@ fn every_corpus_normal_and_ao_channel_comes_within_half_a_db_of_the_bc4_optimum(
     use cirrus::texture::bc4::{bc4_block_error, bc4_windowed_optimum, encode_bc4_block, Bc4Search};
     use rayon::prelude::*;
     let mut figures = Vec::new();
-    let mut maps: Vec<PathBuf> = std::fs::read_dir(corpus().join("pbr")).expect("pbr folder").flatten().map(|entry| entry.path()).collect();
+    let mut maps: Vec<PathBuf> =
+        std::fs::read_dir(corpus().join("pbr")).expect("pbr folder").flatten().map(|entry| entry.path()).collect();
     maps.sort();
     for folder in maps {
         for (file, channels) in [("normal", 2), ("ao", 1)] {
-            let Some(path) = ["png", "jpg"].iter().map(|extension| folder.join(format!("{file}.{extension}"))).find(|path| path.is_file())
+            let Some(path) = ["png", "jpg"]
+                .iter()
+                .map(|extension| folder.join(format!("{file}.{extension}")))
+                .find(|path| path.is_file())
             else {
                 continue;
             };
@@ -224,18 +260,31 @@ fn every_corpus_normal_and_ao_channel_comes_within_half_a_db_of_the_bc4_optimum(
                     .step_by(37)
                     .map(|block| {
                         let (bx, by) = (block % (width / 4) * 4, block / (width / 4) * 4);
-                        std::array::from_fn(|texel| image.get_pixel(bx + texel as u32 % 4, by + texel as u32 / 4).0[channel])
+                        std::array::from_fn(|texel| {
+                            image.get_pixel(bx + texel as u32 % 4, by + texel as u32 / 4).0[channel]
+                        })
                     })
                     .collect();
                 let search = Bc4Search::for_quality(EncodeQuality::Basic);
                 let (ours, optimum): (f64, f64) = blocks
                     .par_iter()
-                    .map(|block| (bc4_block_error(block, &encode_bc4_block(block, search)) as f64, bc4_windowed_optimum(block, 8) as f64))
+                    .map(|block| {
+                        (
+                            bc4_block_error(block, &encode_bc4_block(block, search)) as f64,
+                            bc4_windowed_optimum(block, 8) as f64,
+                        )
+                    })
                     .reduce(|| (0.0, 0.0), |a, b| (a.0 + b.0, a.1 + b.1));
-                let psnr = |error: f64| 10.0 * (255.0f64 * 255.0 / (error / (blocks.len() * 16) as f64).max(1e-9)).log10();
+                let psnr =
+                    |error: f64| 10.0 * (255.0f64 * 255.0 / (error / (blocks.len() * 16) as f64).max(1e-9)).log10();
                 let name = format!("{}/{file} channel {channel}", folder.file_name().unwrap().to_string_lossy());
                 figures.push(format!("{name}: {:.2} dB, optimum {:.2} dB", psnr(ours), psnr(optimum)));
-                assert!(psnr(ours) >= psnr(optimum) - 0.5, "{name}: {:.2} dB against the optimum's {:.2}", psnr(ours), psnr(optimum));
+                assert!(
+                    psnr(ours) >= psnr(optimum) - 0.5,
+                    "{name}: {:.2} dB against the optimum's {:.2}",
+                    psnr(ours),
+                    psnr(optimum)
+                );
             }
         }
     }

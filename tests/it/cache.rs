@@ -54,7 +54,8 @@ fn the_same_project_in_two_folders_has_the_same_keys() {
     assert!(build(&mut second.open()).all_ok());
     let entries = cache_entries(&first.path("baked"));
     assert!(
-        entries.iter().any(|entry| entry.starts_with("surface")) && entries.iter().any(|entry| entry.starts_with("parse")),
+        entries.iter().any(|entry| entry.starts_with("surface"))
+            && entries.iter().any(|entry| entry.starts_with("parse")),
         "{entries:?}"
     );
     assert_eq!(entries, cache_entries(&second.path("baked")));
@@ -93,8 +94,12 @@ fn two_builds_on_one_cache_folder_at_once_leave_it_whole() {
     std::fs::create_dir_all(third.path("baked/.cirrus")).unwrap();
     std::os::unix::fs::symlink(first.path("baked/.cirrus/cache"), third.path("baked/.cirrus/cache")).unwrap();
     let summary = build(&mut third.open());
-    let ran: Vec<_> =
-        summary.assets.iter().flat_map(|asset| &asset.stages).filter(|stage| stage.status == cirrus::summary::StageStatus::Ran).collect();
+    let ran: Vec<_> = summary
+        .assets
+        .iter()
+        .flat_map(|asset| &asset.stages)
+        .filter(|stage| stage.status == cirrus::summary::StageStatus::Ran)
+        .collect();
     assert!(ran.is_empty(), "{ran:?}");
     for path in ["baked/bark/oak_bark/albedo.ktx2", "baked/bark/oak_bark/normal.ktx2", "baked/mixed/leaf/albedo.ktx2"] {
         assert_eq!(third.read(path), first.read(path), "{path}");
@@ -105,18 +110,29 @@ fn two_builds_on_one_cache_folder_at_once_leave_it_whole() {
 #[test]
 fn cache_stats_explain_and_gc_tell_and_bound_the_local_folder() {
     let project = crate::material::bake::material_project("");
-    let stats = |project: &crate::support::TempProject| String::from_utf8_lossy(&project.run_cli(&["cache", "stats"]).stdout).into_owned();
-    assert!(stats(&project).contains("0 entries, 0 B") && stats(&project).contains("last build: none recorded"), "{}", stats(&project));
+    let stats = |project: &crate::support::TempProject| {
+        String::from_utf8_lossy(&project.run_cli(&["cache", "stats"]).stdout).into_owned()
+    };
+    assert!(
+        stats(&project).contains("0 entries, 0 B") && stats(&project).contains("last build: none recorded"),
+        "{}",
+        stats(&project)
+    );
     assert!(build(&mut project.open()).all_ok());
     let cold = stats(&project);
     assert!(
-        cold.contains("last build (revision 1):") && cold.contains(" misses") && cold.contains("remote: none") && cold.contains(" ran"),
+        cold.contains("last build (revision 1):")
+            && cold.contains(" misses")
+            && cold.contains("remote: none")
+            && cold.contains(" ran"),
         "{cold}"
     );
-    let explain = String::from_utf8_lossy(&project.run_cli(&["cache", "explain", "--asset", "bark"]).stdout).into_owned();
+    let explain =
+        String::from_utf8_lossy(&project.run_cli(&["cache", "explain", "--asset", "bark"]).stdout).into_owned();
     assert!(explain.contains("encode(oak_bark/albedo): ran: no cache held its result"), "{explain}");
     assert!(build(&mut project.open()).all_ok());
-    let explain = String::from_utf8_lossy(&project.run_cli(&["cache", "explain", "--asset", "bark"]).stdout).into_owned();
+    let explain =
+        String::from_utf8_lossy(&project.run_cli(&["cache", "explain", "--asset", "bark"]).stdout).into_owned();
     assert!(explain.contains("encode(oak_bark/albedo): cached") && !explain.contains("ran:"), "{explain}");
     let unknown = project.run_cli(&["cache", "explain", "--asset", "nope"]);
     assert_eq!(unknown.status.code(), Some(2));
@@ -143,9 +159,16 @@ fn cache_stats_explain_and_gc_tell_and_bound_the_local_folder() {
     // After an edit, explain names the key part that differs from what an earlier build stored.
     project.write("assets/textures/metal.png", crate::support::pattern_png(64, 64, 9));
     assert!(build(&mut project.open()).all_ok());
-    let explain = String::from_utf8_lossy(&project.run_cli(&["cache", "explain", "--asset", "mixed"]).stdout).into_owned();
-    let line = explain.lines().find(|line| line.trim_start().starts_with("surface-recipe ")).unwrap_or_else(|| panic!("{explain}"));
-    assert!(line.contains(": nearest ") && line.contains(" is hash ") && line.contains("(the entry has hash "), "{explain}");
+    let explain =
+        String::from_utf8_lossy(&project.run_cli(&["cache", "explain", "--asset", "mixed"]).stdout).into_owned();
+    let line = explain
+        .lines()
+        .find(|line| line.trim_start().starts_with("surface-recipe "))
+        .unwrap_or_else(|| panic!("{explain}"));
+    assert!(
+        line.contains(": nearest ") && line.contains(" is hash ") && line.contains("(the entry has hash "),
+        "{explain}"
+    );
 }
 
 /// The bundled project with its source folder named `folder` (the pipeline's `source` and
@@ -233,7 +256,10 @@ fn a_project_whose_source_folder_is_named_otherwise_shares_every_entry_and_bakes
         files
     };
     let (first_files, second_files) = (artifacts(&first), artifacts(&second));
-    assert_eq!(first_files.iter().map(|(name, _)| name).collect::<Vec<_>>(), second_files.iter().map(|(name, _)| name).collect::<Vec<_>>());
+    assert_eq!(
+        first_files.iter().map(|(name, _)| name).collect::<Vec<_>>(),
+        second_files.iter().map(|(name, _)| name).collect::<Vec<_>>()
+    );
     // Reports say how long each stage took (the second bake's came from the cache), and name the
     // source folder (the mesh); MTL files name it where a path leads out of `baked/`.
     let without_times = |bytes: &[u8], folder: &str| -> String {

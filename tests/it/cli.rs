@@ -13,7 +13,8 @@ fn project_with_a_broken_material(broken: &str) -> TempProject {
         ])"#,
     );
     project.write("assets/albedo.png", pattern_png(16, 16, 1));
-    project.write("assets/good.mymaterial", r#"Material $good { Texture (attrib = "diffuse") {string {"albedo.png"}} }"#);
+    project
+        .write("assets/good.mymaterial", r#"Material $good { Texture (attrib = "diffuse") {string {"albedo.png"}} }"#);
     project.write("assets/broken.mymaterial", broken);
     project
 }
@@ -47,11 +48,13 @@ fn wrong_data_type_fails_its_asset() {
 
 #[test]
 fn missing_texture_names_the_material_file_and_the_missing_path() {
-    let project =
-        project_with_a_broken_material("Material $m {\n  Texture (attrib = \"roughness\") {string {\"../nowhere/rough.png\"}}\n}\n");
+    let project = project_with_a_broken_material(
+        "Material $m {\n  Texture (attrib = \"roughness\") {string {\"../nowhere/rough.png\"}}\n}\n",
+    );
     std::fs::create_dir_all(project.path("nowhere")).unwrap();
-    let project_inside =
-        project_with_a_broken_material("Material $m {\n  Texture (attrib = \"roughness\") {string {\"maps/rough.png\"}}\n}\n");
+    let project_inside = project_with_a_broken_material(
+        "Material $m {\n  Texture (attrib = \"roughness\") {string {\"maps/rough.png\"}}\n}\n",
+    );
     expect![[r#"[{"column":35,"file":"assets/broken.mymaterial","line":2,"message":"texture path \"../nowhere/rough.png\" must be relative and stay inside the source folder"}]"#]]
         .assert_eq(&broken_asset_errors(&project).to_string().replace(":41,", ":3,"));
     expect![[r#"[{"column":35,"file":"assets/broken.mymaterial","line":2,"message":"roughness texture \"maps/rough.png\" (assets/maps/rough.png): file not found"}]"#]]
@@ -60,7 +63,8 @@ fn missing_texture_names_the_material_file_and_the_missing_path() {
 
 #[test]
 fn unreadable_image_names_the_image_and_keeps_the_last_good_artifacts() {
-    let project = project_with_a_broken_material("Material $m {\n  Texture (attrib = \"diffuse\") {string {\"bad.png\"}}\n}\n");
+    let project =
+        project_with_a_broken_material("Material $m {\n  Texture (attrib = \"diffuse\") {string {\"bad.png\"}}\n}\n");
     project.write("assets/bad.png", pattern_png(8, 8, 5));
     assert_eq!(project.run_cli(&["build"]).status.code(), Some(0));
     let good_bytes = project.read("baked/broken/m/albedo.ktx2");
@@ -73,7 +77,9 @@ fn unreadable_image_names_the_image_and_keeps_the_last_good_artifacts() {
 
 #[test]
 fn bad_pipeline_is_a_configuration_error_with_exit_status_2() {
-    let project = TempProject::new("Pipeline(\n  source: \"assets\",\n  output: \"baked\",\n  assets: [Material(name: \"x\")],\n)\n");
+    let project = TempProject::new(
+        "Pipeline(\n  source: \"assets\",\n  output: \"baked\",\n  assets: [Material(name: \"x\")],\n)\n",
+    );
     let output = project.run_cli(&["build"]);
     assert_eq!(output.status.code(), Some(2));
     expect![[r#"
@@ -110,7 +116,8 @@ fn summary_json_follows_the_contract_and_asset_selection_works() {
 #[test]
 fn check_passes_on_the_bundled_pipeline_and_reports_each_kind_s_problems() {
     let root = std::path::Path::new(env!("CARGO_MANIFEST_DIR"));
-    let output = std::process::Command::new(env!("CARGO_BIN_EXE_cirrus")).args(["check"]).current_dir(root).output().unwrap();
+    let output =
+        std::process::Command::new(env!("CARGO_BIN_EXE_cirrus")).args(["check"]).current_dir(root).output().unwrap();
     assert_eq!(output.status.code(), Some(0), "{}", String::from_utf8_lossy(&output.stdout));
 
     // A billboard cloud: a missing map, an MTL map leaving the source folder, a mesh that does
@@ -130,10 +137,14 @@ fn check_passes_on_the_bundled_pipeline_and_reports_each_kind_s_problems() {
         "assets/props/crate.obj",
         "mtllib crate.mtl\nv 0 0 0\nv 1 0 0\nv 0 1 0\nvt 0 0\nvt 3 0\nvt 0 1\nusemtl wood\nf 1/1 2/2 3/3\n",
     );
-    project.write("assets/tree.obj", "mtllib tree.mtl\nv 0 0 0\nv 1 0 0\nv 0 1 0\nvt 0 0\nvt 1 0\nvt 0 1\nusemtl bark\nf 1/1 2/2 3/3\n");
+    project.write(
+        "assets/tree.obj",
+        "mtllib tree.mtl\nv 0 0 0\nv 1 0 0\nv 0 1 0\nvt 0 0\nvt 1 0\nvt 0 1\nusemtl bark\nf 1/1 2/2 3/3\n",
+    );
     project.write("assets/tree.mtl", "newmtl bark\nmap_Kd bark.png\nnorm ../../outside.png\n");
     project.write("assets/broken.obj", "v 0 0 0\nf 1 2 3\n");
-    project.write("assets/leaf.mymaterial", "Material $leaf { Texture (attrib = \"diffuse\") {string {\"leaf.png\"}} }\n");
+    project
+        .write("assets/leaf.mymaterial", "Material $leaf { Texture (attrib = \"diffuse\") {string {\"leaf.png\"}} }\n");
     let output = project.run_cli(&["check"]);
     assert_eq!(output.status.code(), Some(1));
     expect![[r#"
@@ -177,7 +188,14 @@ fn the_progress_estimate_weights_each_sort_of_job_by_what_it_took() {
     assert!((left - 8.525).abs() < 1e-9, "{left}");
     assert_eq!(remaining_seconds(&BTreeMap::new(), &waiting, 2), None);
     // Four jobs of 107 done, but 4.2 s of about 21.25 s of work: the bar stands at a fifth.
-    let progress = Progress { done: 4, total: 107, item: String::new(), index: 0, remaining_seconds: Some(17.05), worked_seconds: 4.2 };
+    let progress = Progress {
+        done: 4,
+        total: 107,
+        item: String::new(),
+        index: 0,
+        remaining_seconds: Some(17.05),
+        worked_seconds: 4.2,
+    };
     assert!((progress.fraction() - 4.2 / 21.25).abs() < 1e-9, "{}", progress.fraction());
 }
 

@@ -39,7 +39,8 @@ fn defaults_apply_and_assets_override_them() {
 #[test]
 fn malformed_pipelines_report_file_line_and_column() {
     let folder = Path::new(env!("CARGO_MANIFEST_DIR")).join("tests/fixtures/pipeline_errors");
-    let mut files: Vec<_> = std::fs::read_dir(&folder).expect("fixture folder").flatten().map(|entry| entry.path()).collect();
+    let mut files: Vec<_> =
+        std::fs::read_dir(&folder).expect("fixture folder").flatten().map(|entry| entry.path()).collect();
     files.retain(|path| path.extension().is_some_and(|extension| extension == "ron"));
     files.sort();
     assert!(files.len() >= 6, "fixtures present");

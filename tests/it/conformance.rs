@@ -32,7 +32,11 @@ fn every_bundled_kind_builds_rebuilds_for_free_checks_and_shows_in_the_graph() {
     let summary = build(&mut first);
     assert!(summary.all_ok(), "{}", summary.to_text());
     let kinds: BTreeSet<&str> = summary.assets.iter().map(|asset| asset.kind).collect();
-    assert_eq!(kinds, BTreeSet::from(["AmbientOcclusion", "Atlas", "BillboardCloud", "Height", "Material"]), "every kind is bundled");
+    assert_eq!(
+        kinds,
+        BTreeSet::from(["AmbientOcclusion", "Atlas", "BillboardCloud", "Height", "Material"]),
+        "every kind is bundled"
+    );
 
     // The summary contract.
     let json: serde_json::Value = serde_json::from_str(&summary.to_json()).unwrap();
@@ -75,7 +79,11 @@ fn every_bundled_kind_builds_rebuilds_for_free_checks_and_shows_in_the_graph() {
 
     // check passes, for every asset: warnings at most (the bundled bush's leaf cards reach the
     // transparent border of their texture, which the foliage atlas keeps for them).
-    let problems: Vec<_> = first.check().into_iter().filter(|(_, problems)| problems.iter().any(|problem| !problem.is_warning())).collect();
+    let problems: Vec<_> = first
+        .check()
+        .into_iter()
+        .filter(|(_, problems)| problems.iter().any(|problem| !problem.is_warning()))
+        .collect();
     assert!(problems.is_empty(), "{problems:?}");
 
     // The graph holds every asset and every artifact the build wrote.

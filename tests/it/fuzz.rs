@@ -78,13 +78,19 @@ fn fuzz(name: &str, seeds: Vec<Vec<u8>>, tokens: &[&str], target: impl Fn(&[u8])
     let mut failure = None;
     while Instant::now() < deadline && failure.is_none() {
         let parent = &pool[rng.below(pool.len())];
-        let input =
-            if executions < seeds.len() as u64 { seeds[executions as usize].clone() } else { mutate(&mut rng, parent, &seeds, tokens) };
+        let input = if executions < seeds.len() as u64 {
+            seeds[executions as usize].clone()
+        } else {
+            mutate(&mut rng, parent, &seeds, tokens)
+        };
         executions += 1;
         let accepted = match std::panic::catch_unwind(AssertUnwindSafe(|| target(&input))) {
             Ok(accepted) => accepted,
             Err(panic) => {
-                let message = panic.downcast_ref::<String>().cloned().or_else(|| panic.downcast_ref::<&str>().map(|text| text.to_string()));
+                let message = panic
+                    .downcast_ref::<String>()
+                    .cloned()
+                    .or_else(|| panic.downcast_ref::<&str>().map(|text| text.to_string()));
                 failure = Some((input, message.unwrap_or_default()));
                 break;
             }
@@ -170,7 +176,12 @@ fn fuzz_openddl_material_files() {
         "\u{feff}",
     ];
     let executions = fuzz("openddl", seeds, &tokens, |bytes| {
-        cirrus::kinds::material::definition::parse_material_file(Path::new("assets/m.mymaterial"), bytes, Path::new("assets")).is_ok()
+        cirrus::kinds::material::definition::parse_material_file(
+            Path::new("assets/m.mymaterial"),
+            bytes,
+            Path::new("assets"),
+        )
+        .is_ok()
     });
     assert!(executions > 0);
 }
@@ -231,8 +242,9 @@ newmtl leaf\nd 0.5\nmap_d leaf.png\nmap_Kd leaf.png\n"
         .to_vec();
     let seeds = vec![[obj.as_slice(), b"\0", mtl.as_slice()].concat(), b"v 1 2 3\nf 1 1 1\n".to_vec(), b"\0".to_vec()];
     let tokens = [
-        "v ", "vt ", "vn ", "f ", "o ", "g ", "s off", "usemtl ", "mtllib ", "newmtl ", "map_Kd ", "map_d ", "-1", "0", "/", "//", " 1e38",
-        " -1e38", " nan", " inf", "\n", "\r\n", "\\", "../", "\t", "#", "Kd", "d", "Pm", "Pr", "-o", "-s", "-bm", "\u{feff}",
+        "v ", "vt ", "vn ", "f ", "o ", "g ", "s off", "usemtl ", "mtllib ", "newmtl ", "map_Kd ", "map_d ", "-1", "0",
+        "/", "//", " 1e38", " -1e38", " nan", " inf", "\n", "\r\n", "\\", "../", "\t", "#", "Kd", "d", "Pm", "Pr",
+        "-o", "-s", "-bm", "\u{feff}",
     ];
     let executions = fuzz("obj", seeds, &tokens, |bytes| {
         // One input carries the OBJ, then (after the first NUL) the MTL it names.
@@ -242,7 +254,10 @@ newmtl leaf\nd 0.5\nmap_d leaf.png\nmap_Kd leaf.png\n"
         };
         let path = Path::new("assets/m.obj");
         let libraries: BTreeMap<PathBuf, Option<Vec<u8>>> =
-            cirrus::mesh::material_libraries(path, obj, Path::new("assets")).into_iter().map(|library| (library, mtl.clone())).collect();
+            cirrus::mesh::material_libraries(path, obj, Path::new("assets"))
+                .into_iter()
+                .map(|library| (library, mtl.clone()))
+                .collect();
         let _ = cirrus::mesh::texture_paths(path, &libraries, Path::new("assets"));
         let Ok((mesh, _)) = cirrus::mesh::load_mesh(path, obj, &libraries, Path::new("assets")) else { return false };
         // What later stages rely on: indices in range, one material per face.
@@ -267,7 +282,24 @@ fn fuzz_protocol_request_lines() {
     .iter()
     .map(|line| line.as_bytes().to_vec())
     .collect();
-    let tokens = ["{", "}", "[", "]", "\"", ":", ",", "null", "-1", "1e400", "\"type\"", "\"since\"", "\\u0000", "\\ud800", "\u{feff}"];
-    let executions = fuzz("protocol", seeds, &tokens, |bytes| matches!(cirrus::server::parse_request(bytes), Ok(Some(_))));
+    let tokens = [
+        "{",
+        "}",
+        "[",
+        "]",
+        "\"",
+        ":",
+        ",",
+        "null",
+        "-1",
+        "1e400",
+        "\"type\"",
+        "\"since\"",
+        "\\u0000",
+        "\\ud800",
+        "\u{feff}",
+    ];
+    let executions =
+        fuzz("protocol", seeds, &tokens, |bytes| matches!(cirrus::server::parse_request(bytes), Ok(Some(_))));
     assert!(executions > 0);
 }

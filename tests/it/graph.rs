@@ -14,7 +14,8 @@ use crate::support::{build, TempProject};
 
 /// A copy of the repository's `pipeline.ron` and `examples/assets`.
 fn bundled_project() -> TempProject {
-    let project = TempProject::new(&std::fs::read_to_string(Path::new(env!("CARGO_MANIFEST_DIR")).join("pipeline.ron")).unwrap());
+    let project =
+        TempProject::new(&std::fs::read_to_string(Path::new(env!("CARGO_MANIFEST_DIR")).join("pipeline.ron")).unwrap());
     let source = Path::new(env!("CARGO_MANIFEST_DIR")).join("examples/assets");
     let mut folders = vec![source.clone()];
     while let Some(folder) = folders.pop() {
@@ -32,7 +33,8 @@ fn bundled_project() -> TempProject {
 }
 
 fn stage_ids(graph: &Graph, ids: impl IntoIterator<Item = String>) -> BTreeSet<String> {
-    let stages: BTreeSet<&str> = graph.nodes.iter().filter(|node| node.kind == NodeKind::Stage).map(|node| node.id.as_str()).collect();
+    let stages: BTreeSet<&str> =
+        graph.nodes.iter().filter(|node| node.kind == NodeKind::Stage).map(|node| node.id.as_str()).collect();
     ids.into_iter().filter(|id| stages.contains(id.as_str())).collect()
 }
 
@@ -101,7 +103,8 @@ fn edit(project: &TempProject, file: &str) -> bool {
             true
         }
         "mtl" => {
-            let edited = text().replace("Kd 0.8078 0.8000 0.7451", "Kd 0.5 0.3 0.2").replace("Kd 1 1 1", "Kd 0.5 0.3 0.2");
+            let edited =
+                text().replace("Kd 0.8078 0.8000 0.7451", "Kd 0.5 0.3 0.2").replace("Kd 1 1 1", "Kd 0.5 0.3 0.2");
             assert_ne!(edited, text(), "{file} edited");
             std::fs::write(&path, edited).unwrap();
             false
@@ -116,7 +119,8 @@ fn editing_a_file_reruns_the_stages_downstream_of_it_in_the_dump() {
     let config = load_pipeline(&project.path("pipeline.ron")).unwrap();
     let mut cirrus = Project::open(config, ProjectOptions { persistent_cache: false, ..Default::default() });
     assert!(build(&mut cirrus).all_ok());
-    let files: Vec<String> = cirrus.graph().nodes.iter().filter(|node| node.kind == NodeKind::File).map(|node| node.id.clone()).collect();
+    let files: Vec<String> =
+        cirrus.graph().nodes.iter().filter(|node| node.kind == NodeKind::File).map(|node| node.id.clone()).collect();
     expect![[r#"
         [
             "examples/assets/materials/bark.mymaterial",
@@ -181,8 +185,9 @@ fn editing_a_file_reruns_the_stages_downstream_of_it_in_the_dump() {
 
 #[test]
 fn graph_renders_as_dot_json_and_mermaid() {
-    let project =
-        TempProject::new(r#"Pipeline(source: "assets", output: "baked", assets: [Material(name: "m", material: "m.mymaterial")])"#);
+    let project = TempProject::new(
+        r#"Pipeline(source: "assets", output: "baked", assets: [Material(name: "m", material: "m.mymaterial")])"#,
+    );
     project.write("assets/ao.png", crate::support::pattern_png(8, 8, 1));
     project.write("assets/m.mymaterial", r#"Material $m { Texture (attrib = "ao") {string {"ao.png"}} }"#);
     let output = project.run_cli(&["graph", "--format", "json"]);
@@ -192,7 +197,14 @@ fn graph_renders_as_dot_json_and_mermaid() {
         .as_array()
         .unwrap()
         .iter()
-        .map(|node| format!("{} {} {}", node["kind"].as_str().unwrap(), node["id"].as_str().unwrap(), node["state"].as_str().unwrap()))
+        .map(|node| {
+            format!(
+                "{} {} {}",
+                node["kind"].as_str().unwrap(),
+                node["id"].as_str().unwrap(),
+                node["state"].as_str().unwrap()
+            )
+        })
         .collect();
     nodes.sort();
     expect![[r#"
@@ -229,7 +241,10 @@ fn graph_renders_as_dot_json_and_mermaid() {
     assert!(!edges.iter().any(|edge| edge["from"] == "decode(assets/ao.png)" && edge["to"] == "pack(m/m/albedo)"));
 
     let dot = String::from_utf8(project.run_cli(&["graph", "--format", "dot"]).stdout).unwrap();
-    assert!(dot.starts_with("digraph cirrus {") && dot.contains(r#""assets/ao.png" -> "decode(assets/ao.png)";"#), "{dot}");
+    assert!(
+        dot.starts_with("digraph cirrus {") && dot.contains(r#""assets/ao.png" -> "decode(assets/ao.png)";"#),
+        "{dot}"
+    );
     let mermaid = String::from_utf8(project.run_cli(&["graph", "--format", "mermaid"]).stdout).unwrap();
     assert!(mermaid.starts_with("flowchart LR\n") && mermaid.contains(" --> "), "{mermaid}");
 }

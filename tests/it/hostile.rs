@@ -29,7 +29,10 @@ fn run_command_with_deadline(command: &mut Command, limit: Duration) -> Output {
         if start.elapsed() > limit {
             let _ = child.kill();
             let output = child.wait_with_output().expect("output");
-            panic!("`{command:?}` still ran after {limit:?}: it hangs\nstderr: {}", String::from_utf8_lossy(&output.stderr));
+            panic!(
+                "`{command:?}` still ran after {limit:?}: it hangs\nstderr: {}",
+                String::from_utf8_lossy(&output.stderr)
+            );
         }
         std::thread::sleep(Duration::from_millis(20));
     }
@@ -54,7 +57,10 @@ fn material_project() -> TempProject {
         "assets/rock.mymaterial",
         "Material $rock {\n  Texture (attrib = \"diffuse\") {string {\"albedo.png\"}}\n  Texture (attrib = \"normal\") {string {\"normal.png\"}}\n}\n",
     );
-    project.write("assets/moss.mymaterial", "Material $moss { Texture (attrib = \"diffuse\") {string {\"albedo.png\"}} }\n");
+    project.write(
+        "assets/moss.mymaterial",
+        "Material $moss { Texture (attrib = \"diffuse\") {string {\"albedo.png\"}} }\n",
+    );
     project
 }
 
@@ -118,7 +124,11 @@ fn stale_artifact_cleanup_deletes_only_files_cirrus_wrote_inside_the_output_fold
     assert!(text(&output).contains("not deleted"), "the refusals are reported: {}", text(&output));
     let after = manifest(&project);
     assert!(
-        after["artifacts"].as_object().unwrap().keys().all(|path| path.starts_with("baked/rock/") || path.starts_with("baked/moss/")),
+        after["artifacts"]
+            .as_object()
+            .unwrap()
+            .keys()
+            .all(|path| path.starts_with("baked/rock/") || path.starts_with("baked/moss/")),
         "refused entries leave the manifest: {after}"
     );
 }
@@ -139,7 +149,8 @@ fn structures_nested_ten_thousand_deep_fail_with_a_position_instead_of_aborting(
     assert!(project.path("baked/rock/rock/albedo.ktx2").exists(), "the other asset still bakes");
 
     // pipeline.ron and the protocol's JSON have their parsers' own limits.
-    let deep_ron = format!("Pipeline(source: \"assets\", output: \"baked\", assets: {}{})", "[".repeat(depth), "]".repeat(depth));
+    let deep_ron =
+        format!("Pipeline(source: \"assets\", output: \"baked\", assets: {}{})", "[".repeat(depth), "]".repeat(depth));
     let error = parse_pipeline(Path::new("pipeline.ron"), &deep_ron).expect_err("too deep");
     assert!(error.to_string().contains("pipeline.ron:1:"), "{error}");
     let deep_json = format!("{}{}", "[".repeat(depth), "]".repeat(depth));
@@ -209,7 +220,10 @@ fn a_missing_source_folder_fails_the_assets_and_the_daemon_waits_for_it() {
     let batch = next_batch(&daemon, &mut client);
     let failed = batch["failed"].as_array().unwrap();
     assert!(!failed.is_empty(), "{batch}");
-    assert!(failed.iter().all(|entry| entry["message"].as_str().unwrap().contains("source folder assets does not exist")), "{batch}");
+    assert!(
+        failed.iter().all(|entry| entry["message"].as_str().unwrap().contains("source folder assets does not exist")),
+        "{batch}"
+    );
     assert!(daemon.alive(), "watch keeps running without its source folder");
 
     // The folder appears: everything bakes.
@@ -238,10 +252,16 @@ fn a_missing_source_folder_fails_the_assets_and_the_daemon_waits_for_it() {
 
 #[test]
 fn an_output_folder_that_is_holds_or_lies_inside_the_source_is_refused() {
-    for (source, output) in [("assets", "."), ("assets", ""), ("assets", "./"), ("src", "src/.."), ("src", "src"), ("src", "src/baked")] {
+    for (source, output) in
+        [("assets", "."), ("assets", ""), ("assets", "./"), ("src", "src/.."), ("src", "src"), ("src", "src/baked")]
+    {
         let text = format!(r#"Pipeline(source: "{source}", output: "{output}")"#);
-        let error = parse_pipeline(Path::new("pipeline.ron"), &text).expect_err(&format!("output {output:?} beside source {source:?}"));
-        assert!(error.to_string().contains("pipeline.ron:1:") && error.to_string().contains("output folder must not"), "{error}");
+        let error = parse_pipeline(Path::new("pipeline.ron"), &text)
+            .expect_err(&format!("output {output:?} beside source {source:?}"));
+        assert!(
+            error.to_string().contains("pipeline.ron:1:") && error.to_string().contains("output folder must not"),
+            "{error}"
+        );
     }
     // Through a symbolic link: `out` is the source folder under another name.
     let project = TempProject::new(r#"Pipeline(source: "assets", output: "out")"#);
@@ -258,9 +278,15 @@ fn the_daemon_hears_its_source_folder_again_after_it_is_deleted_or_moved_and_bac
     let pipeline = String::from_utf8(project.read("pipeline.ron")).unwrap();
     project.write(
         "pipeline.ron",
-        pipeline.replace("assets: [", "assets: [\n            Material(name: \"stone\", material: \"sub/stone.mymaterial\"),"),
+        pipeline.replace(
+            "assets: [",
+            "assets: [\n            Material(name: \"stone\", material: \"sub/stone.mymaterial\"),",
+        ),
     );
-    project.write("assets/sub/stone.mymaterial", "Material $stone { Texture (attrib = \"diffuse\") {string {\"../albedo.png\"}} }\n");
+    project.write(
+        "assets/sub/stone.mymaterial",
+        "Material $stone { Texture (attrib = \"diffuse\") {string {\"../albedo.png\"}} }\n",
+    );
     let daemon = Daemon::start(&project);
     let mut client = daemon.connect();
     client.subscribe(Some(0));
@@ -275,7 +301,10 @@ fn the_daemon_hears_its_source_folder_again_after_it_is_deleted_or_moved_and_bac
     assert_eq!(batch["failed"], serde_json::json!([]), "{batch}");
     project.write("assets/ao.png", pattern_png(32, 32, 11));
     let batch = next_batch(&daemon, &mut client);
-    assert!(changed_paths(&project, &batch).contains(&"baked/rock/rock/mra.ktx2".to_string()), "heard after a move: {batch}");
+    assert!(
+        changed_paths(&project, &batch).contains(&"baked/rock/rock/mra.ktx2".to_string()),
+        "heard after a move: {batch}"
+    );
 
     // Deleted and created again.
     let saved = tempfile::tempdir().unwrap();
@@ -292,12 +321,16 @@ fn the_daemon_hears_its_source_folder_again_after_it_is_deleted_or_moved_and_bac
     assert_eq!(batch["failed"], serde_json::json!([]), "{batch}");
     project.write("assets/ao.png", pattern_png(32, 32, 12));
     let batch = next_batch(&daemon, &mut client);
-    assert!(changed_paths(&project, &batch).contains(&"baked/rock/rock/mra.ktx2".to_string()), "heard after re-creation: {batch}");
+    assert!(
+        changed_paths(&project, &batch).contains(&"baked/rock/rock/mra.ktx2".to_string()),
+        "heard after re-creation: {batch}"
+    );
 
     // A subfolder moved away (one event, none per file) fails the listed asset inside it.
     std::fs::rename(project.path("assets/sub"), saved.path().join("sub")).unwrap();
     let batch = next_batch(&daemon, &mut client);
-    let failed: Vec<&str> = batch["failed"].as_array().unwrap().iter().filter_map(|entry| entry["asset"].as_str()).collect();
+    let failed: Vec<&str> =
+        batch["failed"].as_array().unwrap().iter().filter_map(|entry| entry["asset"].as_str()).collect();
     assert_eq!(failed, ["stone"], "{batch}");
     assert!(project.path("baked/stone/stone/albedo.ktx2").exists(), "its last good artifacts stay");
 }
@@ -315,7 +348,8 @@ fn textures_whose_working_set_exceeds_the_budget_fail_from_their_header() {
     huge[height_offset..height_offset + 4].copy_from_slice(&16384u32.to_be_bytes());
     let crc = crc32(&huge[12..29]);
     huge[29..33].copy_from_slice(&crc.to_be_bytes());
-    let error = cirrus::texture::probe_texture(Path::new("huge.png"), &huge, Default::default()).expect_err("over budget");
+    let error =
+        cirrus::texture::probe_texture(Path::new("huge.png"), &huge, Default::default()).expect_err("over budget");
     assert!(error.to_string().contains("16384×16384") && error.to_string().contains("texture_memory_mib"), "{error}");
 
     // The budget is a setting: 16 MiB refuses a 1024² texture (64 MiB), admits 256² (4 MiB).
@@ -328,17 +362,28 @@ fn textures_whose_working_set_exceeds_the_budget_fail_from_their_header() {
     project.write("assets/big.png", pattern_png(1024, 1024, 1));
     project.write("assets/small.png", pattern_png(256, 256, 2));
     project.write("assets/big.mymaterial", "Material $big { Texture (attrib = \"diffuse\") {string {\"big.png\"}} }");
-    project.write("assets/small.mymaterial", "Material $small { Texture (attrib = \"diffuse\") {string {\"small.png\"}} }");
+    project.write(
+        "assets/small.mymaterial",
+        "Material $small { Texture (attrib = \"diffuse\") {string {\"small.png\"}} }",
+    );
     let summary = build(&mut project.open());
     let big = summary.assets.iter().find(|asset| asset.name == "big").unwrap();
-    assert!(big.errors.iter().any(|error| error.message.contains("texture memory budget of 16 MiB")), "{}", summary.to_text());
-    assert!(summary.assets.iter().find(|asset| asset.name == "small").unwrap().status == cirrus::summary::AssetStatus::Ok);
+    assert!(
+        big.errors.iter().any(|error| error.message.contains("texture memory budget of 16 MiB")),
+        "{}",
+        summary.to_text()
+    );
+    assert!(
+        summary.assets.iter().find(|asset| asset.name == "small").unwrap().status == cirrus::summary::AssetStatus::Ok
+    );
     let output = run_with_deadline(&project, &["check"], Duration::from_secs(60));
     assert!(text(&output).contains("texture memory budget"), "check reports it too: {}", text(&output));
 
     // A billboard atlas is a texture too: 16384² is over the default budget, 8192² within it.
     let atlas = |side: u32| {
-        format!(r#"Pipeline(source: "a", output: "b", assets: [BillboardCloud(name: "t", mesh: "t.obj", atlas: (max_size: {side}))])"#)
+        format!(
+            r#"Pipeline(source: "a", output: "b", assets: [BillboardCloud(name: "t", mesh: "t.obj", atlas: (max_size: {side}))])"#
+        )
     };
     let error = parse_pipeline(Path::new("pipeline.ron"), &atlas(16384)).expect_err("over budget");
     assert!(error.to_string().contains("a 16384² atlas needs about 16384 MiB per surface"), "{error}");
@@ -363,11 +408,19 @@ fn crc32(bytes: &[u8]) -> u32 {
 #[test]
 fn a_truncated_jpeg_fails_instead_of_baking_grey() {
     let project = material_project();
-    let jpeg = std::fs::read(Path::new(env!("CARGO_MANIFEST_DIR")).join("examples/assets/textures/bark_oak/albedo.jpg")).unwrap();
+    let jpeg =
+        std::fs::read(Path::new(env!("CARGO_MANIFEST_DIR")).join("examples/assets/textures/bark_oak/albedo.jpg"))
+            .unwrap();
     project.write("assets/albedo.jpg", &jpeg[..jpeg.len() / 2]);
     project.write("assets/whole.jpg", &jpeg);
-    project.write("assets/moss.mymaterial", "Material $moss { Texture (attrib = \"diffuse\") {string {\"albedo.jpg\"}} }\n");
-    project.write("assets/rock.mymaterial", "Material $rock { Texture (attrib = \"diffuse\") {string {\"whole.jpg\"}} }\n");
+    project.write(
+        "assets/moss.mymaterial",
+        "Material $moss { Texture (attrib = \"diffuse\") {string {\"albedo.jpg\"}} }\n",
+    );
+    project.write(
+        "assets/rock.mymaterial",
+        "Material $rock { Texture (attrib = \"diffuse\") {string {\"whole.jpg\"}} }\n",
+    );
     let summary = build(&mut project.open());
     let moss = summary.assets.iter().find(|asset| asset.name == "moss").unwrap();
     assert!(
@@ -382,8 +435,8 @@ fn a_truncated_jpeg_fails_instead_of_baking_grey() {
     );
     // A truncated PNG fails in the decoder.
     let png = pattern_png(64, 64, 3);
-    let error =
-        cirrus::texture::decode_texture(Path::new("cut.png"), &png[..png.len() - 40], Default::default()).expect_err("truncated PNG");
+    let error = cirrus::texture::decode_texture(Path::new("cut.png"), &png[..png.len() - 40], Default::default())
+        .expect_err("truncated PNG");
     assert!(error.to_string().starts_with("cut.png: "), "{error}");
 }
 
@@ -411,7 +464,10 @@ fn an_object_without_uvs_keeps_the_other_objects_textured() {
     assert!(!material_of(0).maps.is_empty(), "trunk keeps its maps");
     assert!(material_of(1).maps.is_empty(), "branch bakes constants");
     assert_eq!(material_of(1).albedo_factor, material_of(0).albedo_factor);
-    assert!(warnings.iter().any(|warning| warning.message.contains("object `branch` has no texture coordinates")), "{warnings:?}");
+    assert!(
+        warnings.iter().any(|warning| warning.message.contains("object `branch` has no texture coordinates")),
+        "{warnings:?}"
+    );
 }
 
 #[test]
@@ -442,7 +498,11 @@ fn asset_names_that_share_a_folder_or_name_cirrus_files_are_refused() {
     project.write("pipeline.ron", pipeline.replace("])", "], rules: [(glob: \"**/*.mymaterial\", kind: Material)])"));
     project.write("assets/rock/extra.mymaterial", "Material $x { }\n");
     let output = run_with_deadline(&project, &["check"], Duration::from_secs(60));
-    assert!(text(&output).contains("rules: assets/rock/extra.mymaterial: warning: matches a rule but is not baked"), "{}", text(&output));
+    assert!(
+        text(&output).contains("rules: assets/rock/extra.mymaterial: warning: matches a rule but is not baked"),
+        "{}",
+        text(&output)
+    );
 
     // A manifest that cannot be written fails the build.
     let project = material_project();
@@ -457,7 +517,11 @@ fn material_libraries_and_textures_outside_the_source_folder_are_not_read() {
     let obj = "mtllib ../../etc/passwd\nmtllib ../pipeline.ron\nv 0 0 0\nv 1 0 0\nv 0 1 0\nf 1 2 3\n";
     assert!(cirrus::mesh::material_libraries(Path::new("assets/m.obj"), obj.as_bytes(), Path::new("assets")).is_empty());
     let (_, warnings) = load_obj(obj, None).expect("loads with default materials");
-    assert_eq!(warnings.iter().filter(|warning| warning.message.contains("lies outside the source folder")).count(), 2, "{warnings:?}");
+    assert_eq!(
+        warnings.iter().filter(|warning| warning.message.contains("lies outside the source folder")).count(),
+        2,
+        "{warnings:?}"
+    );
 
     // Symbolic links placed in the source folder are the user's (a shared library linked in):
     // followed wherever they lead, as long as they lead to a regular file.
@@ -473,10 +537,15 @@ fn material_libraries_and_textures_outside_the_source_folder_are_not_read() {
 
 #[test]
 fn server_addresses_take_host_names_and_a_public_one_is_warned_about() {
-    let config =
-        parse_pipeline(Path::new("pipeline.ron"), r#"Pipeline(source: "a", output: "b", server: Some("localhost:7878"))"#).unwrap();
+    let config = parse_pipeline(
+        Path::new("pipeline.ron"),
+        r#"Pipeline(source: "a", output: "b", server: Some("localhost:7878"))"#,
+    )
+    .unwrap();
     assert_eq!(config.server.map(|address| (address.ip().is_loopback(), address.port())), Some((true, 7878)));
-    let error = parse_pipeline(Path::new("pipeline.ron"), r#"Pipeline(source: "a", output: "b", server: Some("localhost"))"#).unwrap_err();
+    let error =
+        parse_pipeline(Path::new("pipeline.ron"), r#"Pipeline(source: "a", output: "b", server: Some("localhost"))"#)
+            .unwrap_err();
     assert!(error.to_string().contains("localhost:7878"), "{error}");
 
     let project = watched_project();
@@ -542,24 +611,33 @@ fn the_cheap_low_ones() {
     assert!(parse_pipeline(Path::new("pipeline.ron"), "\u{feff}Pipeline(source: \"a\", output: \"b\")").is_ok());
 
     // `usemtl` of a material no MTL defines is warned about, with its line.
-    let (_, warnings) = load_obj("mtllib m.mtl\nv 0 0 0\nv 1 0 0\nv 0 1 0\nusemtl nope\nf 1 2 3\n", Some("newmtl bark\n")).unwrap();
+    let (_, warnings) =
+        load_obj("mtllib m.mtl\nv 0 0 0\nv 1 0 0\nv 0 1 0\nusemtl nope\nf 1 2 3\n", Some("newmtl bark\n")).unwrap();
     let warning = warnings.iter().find(|warning| warning.message.contains("usemtl nope")).expect("a warning");
     assert_eq!((warning.file.as_path(), warning.line()), (Path::new("assets/m.obj"), Some(5)));
 
     // OBJ errors carry their line.
-    for (obj, line) in
-        [("v 0 0 0\nv 1 0 0\nv 0 1 0\nf 1 2 3\nf 1 2 9\n", 5), ("v 0 0 0\nv 1 oops 0\n", 2), ("v 0 0 0\nvt 0 0\nf 1/1 1/7 1/1\n", 3)]
-    {
+    for (obj, line) in [
+        ("v 0 0 0\nv 1 0 0\nv 0 1 0\nf 1 2 3\nf 1 2 9\n", 5),
+        ("v 0 0 0\nv 1 oops 0\n", 2),
+        ("v 0 0 0\nvt 0 0\nf 1/1 1/7 1/1\n", 3),
+    ] {
         let error = load_obj(obj, None).expect_err(obj);
         assert_eq!(error.line(), Some(line), "{error}");
         assert!(error.message.starts_with("malformed OBJ: "), "{error}");
     }
 
     // MTL warnings name the MTL file.
-    let (_, warnings) =
-        load_obj("mtllib m.mtl\nv 0 0 0\nv 1 0 0\nv 0 1 0\nusemtl bark\nf 1 2 3\n", Some("newmtl bark\nmap_Kd ../../x.png\n")).unwrap();
+    let (_, warnings) = load_obj(
+        "mtllib m.mtl\nv 0 0 0\nv 1 0 0\nv 0 1 0\nusemtl bark\nf 1 2 3\n",
+        Some("newmtl bark\nmap_Kd ../../x.png\n"),
+    )
+    .unwrap();
     assert!(
-        warnings.iter().any(|warning| warning.file == Path::new("assets/m.mtl") && warning.message.contains("leaves the source folder")),
+        warnings
+            .iter()
+            .any(|warning| warning.file == Path::new("assets/m.mtl")
+                && warning.message.contains("leaves the source folder")),
         "{warnings:?}"
     );
 
@@ -567,7 +645,11 @@ fn the_cheap_low_ones() {
     let project = material_project();
     project.write("baked/rock/.cirrus-tmp-old", "partial");
     project.write("baked/rock/.cirrus-tmp-fresh", "partial");
-    let status = Command::new("touch").args(["-d", "2 minutes ago"]).arg(project.path("baked/rock/.cirrus-tmp-old")).status().unwrap();
+    let status = Command::new("touch")
+        .args(["-d", "2 minutes ago"])
+        .arg(project.path("baked/rock/.cirrus-tmp-old"))
+        .status()
+        .unwrap();
     assert!(status.success());
     build(&mut project.open());
     assert!(!project.path("baked/rock/.cirrus-tmp-old").exists());
@@ -609,7 +691,12 @@ fn protocol_edges_since_from_the_future_unknown_graph_assets_and_too_many_client
 
 /// Runs `cirrus ARGS` with `environment`, polling its peak resident memory (MiB): the output and
 /// the peak.
-fn run_measuring_memory(project: &TempProject, arguments: &[&str], environment: &[(&str, &str)], limit: Duration) -> (Output, u64) {
+fn run_measuring_memory(
+    project: &TempProject,
+    arguments: &[&str],
+    environment: &[(&str, &str)],
+    limit: Duration,
+) -> (Output, u64) {
     let mut child = Command::new(env!("CARGO_BIN_EXE_cirrus"))
         .args(arguments)
         .envs(environment.iter().copied())
@@ -641,7 +728,11 @@ fn a_shared_store_object_larger_than_any_entry_is_refused_without_being_read() {
     let store = tempfile::tempdir().unwrap();
     let project = material_project();
     let pipeline = std::fs::read_to_string(project.path("pipeline.ron")).unwrap();
-    let with_store = pipeline.replacen("Pipeline(", &format!("Pipeline(cache: (remote: Some(\"file://{}\")), ", store.path().display()), 1);
+    let with_store = pipeline.replacen(
+        "Pipeline(",
+        &format!("Pipeline(cache: (remote: Some(\"file://{}\")), ", store.path().display()),
+        1,
+    );
     project.write("pipeline.ron", with_store);
     let (output, _) = run_measuring_memory(&project, &["build"], &[], Duration::from_secs(120));
     assert!(output.status.success(), "{}", text(&output));
@@ -673,7 +764,10 @@ fn a_shared_store_object_larger_than_any_entry_is_refused_without_being_read() {
 fn a_malformed_s3_endpoint_is_a_configuration_error_not_a_panic_and_the_daemon_bakes_locally() {
     let project = material_project();
     let pipeline = std::fs::read_to_string(project.path("pipeline.ron")).unwrap();
-    project.write("pipeline.ron", pipeline.replacen("Pipeline(", "Pipeline(cache: (remote: Some(\"s3://bucket/prefix\")), ", 1));
+    project.write(
+        "pipeline.ron",
+        pipeline.replacen("Pipeline(", "Pipeline(cache: (remote: Some(\"s3://bucket/prefix\")), ", 1),
+    );
     let credentials = [("AWS_ACCESS_KEY_ID", "a"), ("AWS_SECRET_ACCESS_KEY", "b"), ("AWS_REGION", "us-east-1")];
     for endpoint in ["notaurl", "http://[::1", "ftp://example.com", ""] {
         let mut environment = credentials.to_vec();
@@ -682,7 +776,8 @@ fn a_malformed_s3_endpoint_is_a_configuration_error_not_a_panic_and_the_daemon_b
         assert_eq!(output.status.code(), Some(2), "{endpoint}: {}", text(&output));
         let message = text(&output);
         assert!(
-            message.contains(&format!("AWS_ENDPOINT_URL=`{endpoint}` is not an endpoint URL")) && !message.contains("panicked"),
+            message.contains(&format!("AWS_ENDPOINT_URL=`{endpoint}` is not an endpoint URL"))
+                && !message.contains("panicked"),
             "{message}"
         );
     }
@@ -764,8 +859,10 @@ fn a_full_stdout_a_file_size_limit_and_thousands_of_threads_give_messages_not_cr
     // The summary written to a full device: a message and exit 1, not a panic (101).
     let project = material_project();
     let full = std::fs::File::create("/dev/full").expect("/dev/full");
-    let output =
-        run_command_with_deadline(Command::new(binary).arg("build").current_dir(project.root()).stdout(full), Duration::from_secs(60));
+    let output = run_command_with_deadline(
+        Command::new(binary).arg("build").current_dir(project.root()).stdout(full),
+        Duration::from_secs(60),
+    );
     assert_eq!(output.status.code(), Some(1), "{}", text(&output));
     assert!(text(&output).contains("could not write to standard output: No space left on device"), "{}", text(&output));
     assert!(project.path("baked/rock/rock/albedo.ktx2").is_file(), "the artifacts were baked");
@@ -787,7 +884,11 @@ fn a_full_stdout_a_file_size_limit_and_thousands_of_threads_give_messages_not_cr
     // Far more threads than cores: warned about and capped, the build finishes as usual.
     let project = material_project();
     let output = run_command_with_deadline(
-        Command::new(binary).arg("build").env("RAYON_NUM_THREADS", "2000").current_dir(project.root()).stdout(Stdio::piped()),
+        Command::new(binary)
+            .arg("build")
+            .env("RAYON_NUM_THREADS", "2000")
+            .current_dir(project.root())
+            .stdout(Stdio::piped()),
         Duration::from_secs(60),
     );
     assert!(output.status.success(), "{}", text(&output));
@@ -808,7 +909,8 @@ fn the_daemon_hears_a_source_folder_deleted_and_created_again_at_once() {
         // A branch switch: the folder goes and comes back within a second.
         std::fs::remove_dir_all(project.path("assets")).unwrap();
         std::thread::sleep(Duration::from_millis(gap));
-        let status = Command::new("cp").arg("-r").arg(saved.path().join("assets")).arg(project.root()).status().unwrap();
+        let status =
+            Command::new("cp").arg("-r").arg(saved.path().join("assets")).arg(project.root()).status().unwrap();
         assert!(status.success());
         std::thread::sleep(Duration::from_millis(400));
         project.write("assets/ao.png", pattern_png(32, 32, 20 + round as u32));
@@ -831,14 +933,20 @@ fn the_daemon_prints_a_plain_line_per_batch_into_a_log_that_is_not_a_terminal() 
     next_batch(&daemon, &mut client);
     // The line follows the batch's publication.
     let start = Instant::now();
-    while daemon.log.lock().unwrap().matches("cirrus watch: batch r").count() < 2 && start.elapsed() < Duration::from_secs(10) {
+    while daemon.log.lock().unwrap().matches("cirrus watch: batch r").count() < 2
+        && start.elapsed() < Duration::from_secs(10)
+    {
         std::thread::sleep(Duration::from_millis(20));
     }
     let log = daemon.log.lock().unwrap().clone();
     assert!(!log.contains('\u{1b}'), "colour codes in a log that is not a terminal:\n{log}");
     let batch_lines: Vec<&str> = log.lines().filter(|line| line.starts_with("cirrus watch: batch r")).collect();
     assert_eq!(batch_lines.len(), 2, "{log}");
-    assert!(batch_lines[1].contains("1 file(s) changed, 1 asset(s) rebuilt") && batch_lines[1].ends_with(" ms"), "{}", batch_lines[1]);
+    assert!(
+        batch_lines[1].contains("1 file(s) changed, 1 asset(s) rebuilt") && batch_lines[1].ends_with(" ms"),
+        "{}",
+        batch_lines[1]
+    );
 }
 
 #[test]
@@ -849,7 +957,8 @@ fn idle_connections_filling_every_slot_give_way_to_a_new_client() {
     first.subscribe(Some(0));
     next_batch(&daemon, &mut first);
     // 70 connections that never say a word: every slot but the subscriber's is taken.
-    let crowd: Vec<std::net::TcpStream> = (0..70).map(|_| std::net::TcpStream::connect(&daemon.address).unwrap()).collect();
+    let crowd: Vec<std::net::TcpStream> =
+        (0..70).map(|_| std::net::TcpStream::connect(&daemon.address).unwrap()).collect();
     std::thread::sleep(Duration::from_millis(5500));
     // Past the grace, a newcomer gets an idle one's slot and its batches.
     let mut late = daemon.connect();
@@ -928,11 +1037,19 @@ fn a_flag_variable_set_to_nothing_is_refused_under_its_own_name() {
 #[test]
 fn check_answers_in_json_and_for_one_asset() {
     let project = material_project();
-    project.write("assets/moss.mymaterial", "Material $moss { Texture (attrib = \"diffuse\") {string {\"missing.png\"}} }\n");
+    project.write(
+        "assets/moss.mymaterial",
+        "Material $moss { Texture (attrib = \"diffuse\") {string {\"missing.png\"}} }\n",
+    );
     let output = run_with_deadline(&project, &["check", "--json"], Duration::from_secs(30));
     assert_eq!(output.status.code(), Some(1), "{}", text(&output));
-    let json: serde_json::Value = serde_json::from_slice(&output.stdout).unwrap_or_else(|error| panic!("{error}: {}", text(&output)));
-    assert_eq!((json["checked"].clone(), json["failed"].clone()), (serde_json::json!(2), serde_json::json!(1)), "{json}");
+    let json: serde_json::Value =
+        serde_json::from_slice(&output.stdout).unwrap_or_else(|error| panic!("{error}: {}", text(&output)));
+    assert_eq!(
+        (json["checked"].clone(), json["failed"].clone()),
+        (serde_json::json!(2), serde_json::json!(1)),
+        "{json}"
+    );
     let moss = json["assets"].as_array().unwrap().iter().find(|asset| asset["name"] == "moss").unwrap();
     assert_eq!(moss["problems"][0]["severity"], "error", "{json}");
     assert!(moss["problems"][0]["message"].as_str().unwrap().contains("missing.png"), "{json}");
@@ -953,7 +1070,10 @@ fn rule_matched_files_deleted_while_they_bake_leave_at_once_and_what_was_publish
     }
     let paths = |batch: &serde_json::Value, key: &str| -> Vec<String> {
         let entries = batch[key].as_array().cloned().unwrap_or_default();
-        entries.iter().filter_map(|entry| entry.as_str().or_else(|| entry["path"].as_str()).map(str::to_string)).collect()
+        entries
+            .iter()
+            .filter_map(|entry| entry.as_str().or_else(|| entry["path"].as_str()).map(str::to_string))
+            .collect()
     };
     let project = watched_project();
     let daemon = Daemon::start(&project);
@@ -982,7 +1102,11 @@ fn rule_matched_files_deleted_while_they_bake_leave_at_once_and_what_was_publish
         }
     }
     let log = daemon.log.lock().unwrap().clone();
-    assert_eq!(files_under(&project.path("baked/extra/gone")), 0, "the deleted assets' artifacts are gone within 15 s\n{log}");
+    assert_eq!(
+        files_under(&project.path("baked/extra/gone")),
+        0,
+        "the deleted assets' artifacts are gone within 15 s\n{log}"
+    );
     assert!(deleted.elapsed() < Duration::from_secs(5), "they went {:?} after the deletion\n{log}", deleted.elapsed());
     let never_withdrawn: Vec<&String> = published.difference(&withdrawn).collect();
     assert!(never_withdrawn.is_empty(), "published as changed, never as removed: {never_withdrawn:?}");

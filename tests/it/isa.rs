@@ -13,7 +13,8 @@ use crate::support::TempProject;
 fn surfaces(project: &TempProject) -> BTreeMap<String, (String, f64)> {
     let mut surfaces = BTreeMap::new();
     for asset in ["bark", "mixed"] {
-        let report: serde_json::Value = serde_json::from_slice(&project.read(&format!("baked/{asset}/report.json"))).unwrap();
+        let report: serde_json::Value =
+            serde_json::from_slice(&project.read(&format!("baked/{asset}/report.json"))).unwrap();
         for material in report["materials"].as_array().unwrap() {
             for surface in material["surfaces"].as_array().unwrap() {
                 let entry = (surface["format"].as_str().unwrap().to_string(), surface["psnr_db"].as_f64().unwrap());
@@ -45,7 +46,10 @@ fn a_lower_instruction_set_level_bakes_the_same_quality_and_keeps_its_own_entrie
     let native = crate::material::bake::material_project("");
     build_at(&native, &[]);
     let (native_surfaces, native_bytes) = (surfaces(&native), crate::watch::output_hashes(&native));
-    assert!(native_surfaces.values().any(|(format, _)| format == "Bc7") && native_surfaces.values().any(|(format, _)| format == "Bc5"));
+    assert!(
+        native_surfaces.values().any(|(format, _)| format == "Bc7")
+            && native_surfaces.values().any(|(format, _)| format == "Bc5")
+    );
 
     // The same sources baked at SSE2 in another folder: BC4/BC5 byte for byte, BC1/BC7 within a
     // tenth of a dB of the native bake.
@@ -57,7 +61,11 @@ fn a_lower_instruction_set_level_bakes_the_same_quality_and_keeps_its_own_entrie
         if format == "Bc4" || format == "Bc5" {
             assert_eq!(portable_bytes[&path], native_bytes[&path], "{path} ({format})");
         }
-        assert!((psnr - native_psnr).abs() <= 0.1, "{path} ({format}): {psnr} dB at sse2, {native_psnr} dB at {}", detected_isa());
+        assert!(
+            (psnr - native_psnr).abs() <= 0.1,
+            "{path} ({format}): {psnr} dB at sse2, {native_psnr} dB at {}",
+            detected_isa()
+        );
     }
 
     // At AVX2 on a machine that has it: the same family as AVX-512, so its bake is the native

@@ -25,7 +25,8 @@ fn disc(radius: f32, z: f32, positions: &mut Vec<[f32; 3]>, triangles: &mut Vec<
     positions.push([0.0, 0.0, z]);
     let sides = 1024u32;
     // The polygon of the same area as the circle.
-    let radius = radius * (std::f32::consts::TAU / (sides as f32 * (std::f32::consts::TAU / sides as f32).sin())).sqrt();
+    let radius =
+        radius * (std::f32::consts::TAU / (sides as f32 * (std::f32::consts::TAU / sides as f32).sin())).sqrt();
     for side in 0..sides {
         let angle = std::f32::consts::TAU * side as f32 / sides as f32;
         positions.push([radius * angle.cos(), radius * angle.sin(), z]);
@@ -64,7 +65,10 @@ fn a_disc_overhead_leaves_h2_over_h2_plus_r2_within_0_002() {
         let expected = height * height / (height * height + radius * radius);
         for distribution in [RayDistribution::Cosine, RayDistribution::Uniform] {
             let visibility = visibility_at_floor(&bvh, &settings(65_536, f32::INFINITY, distribution));
-            assert!((visibility - expected).abs() < 0.002, "h {height} r {radius} {distribution:?}: {visibility} vs {expected}");
+            assert!(
+                (visibility - expected).abs() < 0.002,
+                "h {height} r {radius} {distribution:?}: {visibility} vs {expected}"
+            );
         }
     }
 }
@@ -79,7 +83,10 @@ fn an_infinite_plane_at_h_with_rays_of_length_r_leaves_h_over_r_squared_within_0
         let expected = (height / reach).powi(2);
         for distribution in [RayDistribution::Cosine, RayDistribution::Uniform] {
             let visibility = visibility_at_floor(&bvh, &settings(65_536, reach, distribution));
-            assert!((visibility - expected).abs() < 0.002, "h {height} R {reach} {distribution:?}: {visibility} vs {expected}");
+            assert!(
+                (visibility - expected).abs() < 0.002,
+                "h {height} R {reach} {distribution:?}: {visibility} vs {expected}"
+            );
         }
     }
 }
@@ -94,12 +101,22 @@ fn back_faces_block_or_let_rays_through_and_are_told_apart() {
     // Off the squares' diagonals (a ray exactly along a shared edge is no test of faces).
     let origin = offset_ray_origin(Vec3::new(0.01, 0.02, 0.0), Vec3::Z);
     let blocked = bvh.cast(origin, Vec3::Z, f32::INFINITY, 0, BackFaces::Block);
-    assert!(blocked.hit.is_some_and(|(triangle, distance)| triangle >= 2 && (distance - 1.0).abs() < 1e-4), "{blocked:?}");
+    assert!(
+        blocked.hit.is_some_and(|(triangle, distance)| triangle >= 2 && (distance - 1.0).abs() < 1e-4),
+        "{blocked:?}"
+    );
     let through = bvh.cast(origin, Vec3::Z, f32::INFINITY, 0, BackFaces::PassThrough);
     assert_eq!(through.hit, None);
     assert!(through.nearest_is_back_face);
     // Under a ceiling facing away, every ray's nearest surface is a back face.
-    let occlusion = occlusion_at(&bvh, Vec3::new(0.01, 0.02, 0.0), Vec3::Z, 0, &settings(256, f32::INFINITY, RayDistribution::Cosine), 1);
+    let occlusion = occlusion_at(
+        &bvh,
+        Vec3::new(0.01, 0.02, 0.0),
+        Vec3::Z,
+        0,
+        &settings(256, f32::INFINITY, RayDistribution::Cosine),
+        1,
+    );
     assert_eq!((occlusion.visibility, occlusion.back_face_rays, occlusion.probe_rays), (1.0, 32, 32));
     // The source triangle is skipped; its neighbour in the same plane is never hit.
     let along = bvh.cast(origin, Vec3::new(1.0, 1.0, 0.0).normalize(), f32::INFINITY, 0, BackFaces::Block);
@@ -162,15 +179,20 @@ fn the_bvh_finds_what_testing_every_triangle_finds_with_either_kernel() {
         triangles.push([3 * index, 3 * index + 1, 3 * index + 2]);
     }
     let corners_of = |triangle: usize| triangles[triangle].map(|vertex| Vec3::from(positions[vertex as usize]));
-    let bvhs =
-        [("best", build_triangle_bvh(&positions, &triangles)), ("portable", build_triangle_bvh(&positions, &triangles).without_avx2())];
+    let bvhs = [
+        ("best", build_triangle_bvh(&positions, &triangles)),
+        ("portable", build_triangle_bvh(&positions, &triangles).without_avx2()),
+    ];
     // `-Vec3::X` is (-1, -0, -0): zero components with their sign bit set, as a negated normal has.
     let axes = [Vec3::X, Vec3::NEG_X, -Vec3::X, Vec3::Y, Vec3::NEG_Y, -Vec3::Y, Vec3::Z, Vec3::NEG_Z, -Vec3::Z];
     let (mut rays, mut disagreements) = (0, 0);
     for index in 0..4000usize {
         let origin = random.point(12.0) - Vec3::ONE;
-        let direction =
-            if index % 4 == 0 { axes[index / 4 % axes.len()] } else { (random.point(2.0) - Vec3::ONE).try_normalize().unwrap_or(Vec3::X) };
+        let direction = if index % 4 == 0 {
+            axes[index / 4 % axes.len()]
+        } else {
+            (random.point(2.0) - Vec3::ONE).try_normalize().unwrap_or(Vec3::X)
+        };
         let max_distance = if index % 3 == 0 { 4.0 } else { f32::INFINITY };
         let skip = if index % 5 == 0 { index as u32 % 3000 } else { u32::MAX };
         for back_faces in [BackFaces::Block, BackFaces::PassThrough] {
@@ -180,7 +202,9 @@ fn the_bvh_finds_what_testing_every_triangle_finds_with_either_kernel() {
                 if triangle as u32 == skip {
                     continue;
                 }
-                let Some((distance, faces_away)) = brute_force_hit(corners_of(triangle), origin, direction, max_distance) else {
+                let Some((distance, faces_away)) =
+                    brute_force_hit(corners_of(triangle), origin, direction, max_distance)
+                else {
                     continue;
                 };
                 if back_faces == BackFaces::PassThrough && faces_away {
@@ -244,7 +268,9 @@ fn the_robust_offset_keeps_rays_off_their_own_surface_at_every_scale() {
 fn cluttered_floor() -> (Vec<[f32; 3]>, Vec<[u32; 3]>) {
     let (mut positions, mut triangles) = (Vec::new(), Vec::new());
     square(100.0, 0.0, false, &mut positions, &mut triangles);
-    for (x, y, side, height) in [(1.5f32, 0.0f32, 1.0f32, 2.0f32), (-1.0, 1.2, 0.6, 0.8), (0.2, -1.6, 1.4, 0.5), (-1.8, -1.0, 0.4, 3.0)] {
+    for (x, y, side, height) in
+        [(1.5f32, 0.0f32, 1.0f32, 2.0f32), (-1.0, 1.2, 0.6, 0.8), (0.2, -1.6, 1.4, 0.5), (-1.8, -1.0, 0.4, 3.0)]
+    {
         let first = positions.len() as u32;
         let h = side / 2.0;
         for z in [0.0, height] {
@@ -263,11 +289,16 @@ fn occlusion_converges_256_rays_within_40_db_of_16384_and_error_falls_at_least_a
     let (positions, triangles) = cluttered_floor();
     let bvh = build_triangle_bvh(&positions, &triangles);
     // 400 floor points between the boxes (a 20 × 20 grid), each its own sequence shift.
-    let points: Vec<Vec3> =
-        (0..400).map(|index| Vec3::new(-2.5 + 0.25 * (index % 20) as f32, -2.5 + 0.25 * (index / 20) as f32, 0.0)).collect();
+    let points: Vec<Vec3> = (0..400)
+        .map(|index| Vec3::new(-2.5 + 0.25 * (index % 20) as f32, -2.5 + 0.25 * (index / 20) as f32, 0.0))
+        .collect();
     let bake = |rays: u32| -> Vec<f32> {
         let settings = settings(rays, f32::INFINITY, RayDistribution::Cosine);
-        points.iter().enumerate().map(|(index, &point)| occlusion_at(&bvh, point, Vec3::Z, 0, &settings, index as u32).visibility).collect()
+        points
+            .iter()
+            .enumerate()
+            .map(|(index, &point)| occlusion_at(&bvh, point, Vec3::Z, 0, &settings, index as u32).visibility)
+            .collect()
     };
     let reference = bake(16_384);
     let rmse = |rays: u32| -> f64 {
@@ -282,8 +313,8 @@ fn occlusion_converges_256_rays_within_40_db_of_16384_and_error_falls_at_least_a
     let xs: Vec<f64> = counts.iter().map(|&n| (n as f64).ln()).collect();
     let ys: Vec<f64> = errors.iter().map(|e| e.ln()).collect();
     let (mean_x, mean_y) = (xs.iter().sum::<f64>() / 4.0, ys.iter().sum::<f64>() / 4.0);
-    let slope =
-        xs.iter().zip(&ys).map(|(x, y)| (x - mean_x) * (y - mean_y)).sum::<f64>() / xs.iter().map(|x| (x - mean_x).powi(2)).sum::<f64>();
+    let slope = xs.iter().zip(&ys).map(|(x, y)| (x - mean_x) * (y - mean_y)).sum::<f64>()
+        / xs.iter().map(|x| (x - mean_x).powi(2)).sum::<f64>();
     assert!(slope <= -0.6, "RMSE slope {slope:.2} ({errors:?})");
 }
 

@@ -26,7 +26,10 @@ fn assert_valid(sizes: &[(u32, u32)], settings: &PageSettings, packing: &cirrus:
     assert_eq!(packing.placements.len(), sizes.len());
     assert!(packing.pages.len() as u32 <= settings.pages);
     for &(width, height) in &packing.pages {
-        assert!(width <= settings.max_size && height <= settings.max_size && width % 4 == 0 && height % 4 == 0, "{width}×{height}");
+        assert!(
+            width <= settings.max_size && height <= settings.max_size && width % 4 == 0 && height % 4 == 0,
+            "{width}×{height}"
+        );
         if settings.power_of_two {
             assert!(width.is_power_of_two() && height.is_power_of_two(), "{width}×{height}");
         }
@@ -78,7 +81,11 @@ fn packed_rectangles_lie_inside_their_page_on_whole_blocks_and_never_overlap() {
             .sum();
         let page = packing.pages[0].0 as u64 * packing.pages[0].1 as u64;
         let least = if power_of_two { 0.5 } else { 0.95 };
-        assert!(cells as f64 / page as f64 > least, "padding {padding}, rotate {rotate}: {cells} cell texels on {:?}", packing.pages);
+        assert!(
+            cells as f64 / page as f64 > least,
+            "padding {padding}, rotate {rotate}: {cells} cell texels on {:?}",
+            packing.pages
+        );
     }
 }
 
@@ -127,7 +134,10 @@ fn a_rectangle_larger_than_a_page_is_named() {
     let settings = PageSettings { max_size: 256, padding: 4, rotate: true, power_of_two: false, pages: 4 };
     let error = pack_pages(&[(16, 16), (252, 10)], &settings).unwrap_err();
     assert_eq!(error, PackError::TooLarge { index: 1, width: 260, height: 20, max_size: 256 });
-    assert_eq!(error.to_string(), "rectangle 1 is 260×20 texels with its padding, larger than a page of at most 256×256");
+    assert_eq!(
+        error.to_string(),
+        "rectangle 1 is 260×20 texels with its padding, larger than a page of at most 256×256"
+    );
 }
 
 #[test]
@@ -159,7 +169,8 @@ fn a_kept_layout_moves_nothing_and_new_rectangles_go_into_free_space() {
     assert_eq!(repacked, pack_pages(few, &settings).unwrap());
     // A hint that does not fit the settings (other padding: cells off the block grid, or
     // overlapping) is not kept.
-    let (_, how) = pack_pages_keeping(&sizes, &PageSettings { padding: 3, ..settings }, &first.pages, &previous).unwrap();
+    let (_, how) =
+        pack_pages_keeping(&sizes, &PageSettings { padding: 3, ..settings }, &first.pages, &previous).unwrap();
     assert_eq!(how, Repack::Repacked);
     let mut overlapping = previous.clone();
     overlapping[1] = overlapping[0].map(|mut place| {

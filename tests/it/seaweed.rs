@@ -22,7 +22,13 @@ fn weed_binary() -> PathBuf {
         if let Some(path) = std::env::var_os("CIRRUS_WEED") {
             return Ok(PathBuf::from(path));
         }
-        if Command::new("weed").arg("version").stdout(Stdio::null()).stderr(Stdio::null()).status().is_ok_and(|status| status.success()) {
+        if Command::new("weed")
+            .arg("version")
+            .stdout(Stdio::null())
+            .stderr(Stdio::null())
+            .status()
+            .is_ok_and(|status| status.success())
+        {
             return Ok(PathBuf::from("weed"));
         }
         let venv = Path::new(env!("CARGO_TARGET_TMPDIR")).join("seaweedfs");
@@ -108,9 +114,36 @@ impl SeaweedServer {
             .arg(format!("-dir={}", folder.display()))
             .args(["-ip=127.0.0.1", "-ip.bind=127.0.0.1", "-webdav=false", "-admin.ui=false", "-s3.metricsPort=0"])
             .arg(format!("-bucket={BUCKET}"))
-            .args(["-master.port", &port(0), "-master.port.grpc", &port(1), "-volume.port", &port(2), "-volume.port.grpc", &port(3)])
-            .args(["-filer.port", &port(4), "-filer.port.grpc", &port(5), "-s3.port", &port(6), "-s3.port.grpc", &port(7)])
-            .args(["-s3.port.iceberg", &port(8), "-admin.port", &port(9), "-admin.port.grpc", &port(10), "-webdav.port", &port(11)])
+            .args([
+                "-master.port",
+                &port(0),
+                "-master.port.grpc",
+                &port(1),
+                "-volume.port",
+                &port(2),
+                "-volume.port.grpc",
+                &port(3),
+            ])
+            .args([
+                "-filer.port",
+                &port(4),
+                "-filer.port.grpc",
+                &port(5),
+                "-s3.port",
+                &port(6),
+                "-s3.port.grpc",
+                &port(7),
+            ])
+            .args([
+                "-s3.port.iceberg",
+                &port(8),
+                "-admin.port",
+                &port(9),
+                "-admin.port.grpc",
+                &port(10),
+                "-webdav.port",
+                &port(11),
+            ])
             .args(["-s3.port.lance", &port(12)])
             .current_dir(folder)
             .stdout(std::fs::File::create(&self.log).unwrap())

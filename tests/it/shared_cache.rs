@@ -71,8 +71,9 @@ fn build_command(project: &TempProject, environment: &[(&str, String)], argument
 
 fn build_run(output: std::process::Output) -> BuildRun {
     let stderr = String::from_utf8_lossy(&output.stderr).into_owned();
-    let summary: serde_json::Value = serde_json::from_slice(&output.stdout)
-        .unwrap_or_else(|error| panic!("summary JSON ({error}): {}\n{stderr}", String::from_utf8_lossy(&output.stdout)));
+    let summary: serde_json::Value = serde_json::from_slice(&output.stdout).unwrap_or_else(|error| {
+        panic!("summary JSON ({error}): {}\n{stderr}", String::from_utf8_lossy(&output.stdout))
+    });
     let mut statuses = BTreeMap::new();
     for asset in summary["assets"].as_array().unwrap() {
         for stage in asset["stages"].as_array().unwrap() {
@@ -184,7 +185,10 @@ fn a_second_checkout_bakes_from_the_shared_cache_with_identical_artifacts_and_up
         .output()
         .unwrap();
     let text = String::from_utf8_lossy(&text.stdout);
-    assert!(text.lines().filter(|line| line.starts_with("ok")).all(|line| line.contains("0 stages ran, 0 cached, ")), "{text}");
+    assert!(
+        text.lines().filter(|line| line.starts_with("ok")).all(|line| line.contains("0 stages ran, 0 cached, ")),
+        "{text}"
+    );
     assert_eq!(text.matches("from the shared cache").count(), 2, "{text}");
 }
 
@@ -204,7 +208,10 @@ fn a_read_only_machine_fetches_but_never_uploads() {
     let ci = checkout_of(&artist);
     let mut environment = server.environment();
     environment.push(("CIRRUS_REMOTE_CACHE", "s3://cirrus/ro".to_string()));
-    let output = build_command(&ci, &[], &[]).envs(environment.iter().map(|(name, value)| (*name, value.as_str()))).output().unwrap();
+    let output = build_command(&ci, &[], &[])
+        .envs(environment.iter().map(|(name, value)| (*name, value.as_str())))
+        .output()
+        .unwrap();
     assert!(build_run(output).success);
     let filled = bucket.objects("ro");
     assert!(filled.len() > 20, "{}", filled.len());
@@ -316,7 +323,11 @@ fn builds_racing_on_the_same_keys_both_succeed_and_leave_good_entries() {
     let remote = ["--remote-cache", "s3://cirrus/race"];
     let (one, two) = (team_project(), team_project());
     let spawn = |project: &TempProject| {
-        build_command(project, &server.environment(), &remote).stdout(Stdio::piped()).stderr(Stdio::piped()).spawn().unwrap()
+        build_command(project, &server.environment(), &remote)
+            .stdout(Stdio::piped())
+            .stderr(Stdio::piped())
+            .spawn()
+            .unwrap()
     };
     let (first, second) = (spawn(&one), spawn(&two));
     let (first, second) = (build_run(first.wait_with_output().unwrap()), build_run(second.wait_with_output().unwrap()));

@@ -45,7 +45,11 @@ impl TempProject {
 
     /// Runs the `cirrus` binary in the project folder.
     pub fn run_cli(&self, arguments: &[&str]) -> std::process::Output {
-        std::process::Command::new(env!("CARGO_BIN_EXE_cirrus")).args(arguments).current_dir(self.root()).output().expect("run cirrus")
+        std::process::Command::new(env!("CARGO_BIN_EXE_cirrus"))
+            .args(arguments)
+            .current_dir(self.root())
+            .output()
+            .expect("run cirrus")
     }
 }
 
@@ -90,8 +94,14 @@ pub fn cutout_png(width: u32, height: u32) -> Vec<u8> {
 
 pub fn png_bytes(width: u32, height: u32, rgba: &[u8]) -> Vec<u8> {
     let mut bytes = Vec::new();
-    image::ImageEncoder::write_image(image::codecs::png::PngEncoder::new(&mut bytes), rgba, width, height, image::ExtendedColorType::Rgba8)
-        .expect("encode PNG");
+    image::ImageEncoder::write_image(
+        image::codecs::png::PngEncoder::new(&mut bytes),
+        rgba,
+        width,
+        height,
+        image::ExtendedColorType::Rgba8,
+    )
+    .expect("encode PNG");
     bytes
 }
 
@@ -153,7 +163,8 @@ pub struct PsnrSum {
 impl PsnrSum {
     /// Adds the first `channels` channels of one pair.
     pub fn add(&mut self, expected: [u8; 4], actual: [u8; 4], channels: usize) {
-        self.squared += (0..channels).map(|channel| (expected[channel] as i64 - actual[channel] as i64).pow(2) as u64).sum::<u64>();
+        self.squared +=
+            (0..channels).map(|channel| (expected[channel] as i64 - actual[channel] as i64).pow(2) as u64).sum::<u64>();
         self.count += channels as u64;
     }
 
@@ -173,6 +184,9 @@ pub fn headless_viewer_options(arguments: &[&str], screenshot: &Path, folder: &P
 
 /// The bundled bush (`examples/assets/trees/bush_2.obj`) as cirrus loads it.
 pub fn bundled_bush() -> cirrus::mesh::Mesh {
-    let obj = std::fs::read(Path::new(env!("CARGO_MANIFEST_DIR")).join("examples/assets/trees/bush_2.obj")).expect("the bundled bush");
-    cirrus::mesh::load_mesh(Path::new("bush_2.obj"), &obj, &Default::default(), Path::new("")).expect("the bundled bush loads").0
+    let obj = std::fs::read(Path::new(env!("CARGO_MANIFEST_DIR")).join("examples/assets/trees/bush_2.obj"))
+        .expect("the bundled bush");
+    cirrus::mesh::load_mesh(Path::new("bush_2.obj"), &obj, &Default::default(), Path::new(""))
+        .expect("the bundled bush loads")
+        .0
 }

@@ -27,36 +27,67 @@ fn module(path: &Path) -> String {
 
 /// The code of a file without its comments (doc comments name salsa and wgpu freely).
 fn code(path: &Path) -> String {
-    std::fs::read_to_string(path).unwrap().lines().filter(|line| !line.trim_start().starts_with("//")).collect::<Vec<_>>().join("\n")
+    std::fs::read_to_string(path)
+        .unwrap()
+        .lines()
+        .filter(|line| !line.trim_start().starts_with("//"))
+        .collect::<Vec<_>>()
+        .join("\n")
 }
 
 /// The modules under `src/` whose code contains any of `needles`.
 fn modules_using(needles: &[&str]) -> Vec<String> {
-    rust_files("src").iter().filter(|path| needles.iter().any(|needle| code(path).contains(needle))).map(|path| module(path)).collect()
+    rust_files("src")
+        .iter()
+        .filter(|path| needles.iter().any(|needle| code(path).contains(needle)))
+        .map(|path| module(path))
+        .collect()
 }
 
 #[test]
 fn every_file_starts_by_saying_what_it_is_for() {
-    let files: Vec<PathBuf> = ["src", "tests", "benches", "examples"].iter().flat_map(|folder| rust_files(folder)).collect();
+    let files: Vec<PathBuf> =
+        ["src", "tests", "benches", "examples"].iter().flat_map(|folder| rust_files(folder)).collect();
     assert!(files.len() > 40);
-    let silent: Vec<&PathBuf> = files.iter().filter(|path| !std::fs::read_to_string(path).unwrap().starts_with("//!")).collect();
+    let silent: Vec<&PathBuf> =
+        files.iter().filter(|path| !std::fs::read_to_string(path).unwrap().starts_with("//!")).collect();
     assert!(silent.is_empty(), "files without a `//!` line first: {silent:?}");
 }
 
 #[test]
 fn salsa_wgpu_notify_sockets_and_file_io_stay_in_their_modules() {
     let salsa = modules_using(&["salsa::", "#[salsa"]);
-    let glue = |module: &String| ["db.rs", "project.rs", "schedule.rs"].contains(&module.as_str()) || module.ends_with("queries.rs");
-    assert!(salsa.iter().all(glue), "salsa outside the database, the driver, the scheduler and the kinds' queries.rs: {salsa:?}");
-    assert!(salsa.iter().any(|module| module == "kinds/material/queries.rs"), "the check sees the kinds' queries: {salsa:?}");
+    let glue = |module: &String| {
+        ["db.rs", "project.rs", "schedule.rs"].contains(&module.as_str()) || module.ends_with("queries.rs")
+    };
+    assert!(
+        salsa.iter().all(glue),
+        "salsa outside the database, the driver, the scheduler and the kinds' queries.rs: {salsa:?}"
+    );
+    assert!(
+        salsa.iter().any(|module| module == "kinds/material/queries.rs"),
+        "the check sees the kinds' queries: {salsa:?}"
+    );
     let wgpu = modules_using(&["wgpu::"]);
-    assert!(!wgpu.is_empty() && wgpu.iter().all(|module| module.starts_with("gpu/")), "only gpu/ holds the wgpu device: {wgpu:?}");
+    assert!(
+        !wgpu.is_empty() && wgpu.iter().all(|module| module.starts_with("gpu/")),
+        "only gpu/ holds the wgpu device: {wgpu:?}"
+    );
     assert_eq!(modules_using(&["notify::", "notify_debouncer"]), ["watch.rs"], "only watch touches notify");
-    assert_eq!(modules_using(&["std::net::Tcp", "TcpListener", "TcpStream"]), ["server.rs"], "only server touches sockets");
+    assert_eq!(
+        modules_using(&["std::net::Tcp", "TcpListener", "TcpStream"]),
+        ["server.rs"],
+        "only server touches sockets"
+    );
     let io = modules_using(&["std::fs", " File::", "OpenOptions", "canonicalize", "read_dir"]);
-    let edges = ["artifacts.rs", "cache/mod.rs", "cache/remote.rs", "cache/upkeep.rs", "config.rs", "sources.rs", "watch.rs"];
+    let edges =
+        ["artifacts.rs", "cache/mod.rs", "cache/remote.rs", "cache/upkeep.rs", "config.rs", "sources.rs", "watch.rs"];
     assert!(io.iter().all(|module| edges.contains(&module.as_str())), "file-system IO outside the edges: {io:?}");
-    assert_eq!(modules_using(&["object_store::", "tokio::"]), ["cache/remote.rs"], "only the shared cache's remote half talks to a store");
+    assert_eq!(
+        modules_using(&["object_store::", "tokio::"]),
+        ["cache/remote.rs"],
+        "only the shared cache's remote half talks to a store"
+    );
 }
 
 #[test]

@@ -62,7 +62,10 @@ fn both_windings_cover_alike_and_a_texel_smaller_triangle_still_covers_its_texel
         assert_eq!(a.is_some(), b.is_some());
         if let (Some(a), Some(b)) = (a, b) {
             assert_eq!(a.centre_inside, b.centre_inside);
-            assert!((a.barycentric[1] - b.barycentric[2]).abs() < 1e-5 && (a.barycentric[0] - b.barycentric[0]).abs() < 1e-5);
+            assert!(
+                (a.barycentric[1] - b.barycentric[2]).abs() < 1e-5
+                    && (a.barycentric[0] - b.barycentric[0]).abs() < 1e-5
+            );
         }
     }
     // A sliver inside texel (5, 7), not over its centre: covered, sampled on its border.

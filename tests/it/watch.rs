@@ -138,7 +138,10 @@ pub fn watched_project() -> TempProject {
         "assets/rock.mymaterial",
         "Material $rock {\n  Texture (attrib = \"diffuse\") {string {\"albedo.png\"}}\n  Texture (attrib = \"normal\") {string {\"normal.png\"}}\n  Texture (attrib = \"ao\") {string {\"ao.png\"}}\n  Texture (attrib = \"roughness\") {string {\"roughness.png\"}}\n}\n",
     );
-    project.write("assets/extra/moss.mymaterial", "Material $moss { Texture (attrib = \"diffuse\") {string {\"../albedo.png\"}} }\n");
+    project.write(
+        "assets/extra/moss.mymaterial",
+        "Material $moss { Texture (attrib = \"diffuse\") {string {\"../albedo.png\"}} }\n",
+    );
     project
 }
 
@@ -194,7 +197,8 @@ fn edits_become_one_batch_each_naming_exactly_the_changed_artifacts() {
     assert_eq!(first["failed"], serde_json::json!([]), "{first}");
     let paths = changed_paths(&project, &first);
     assert!(
-        paths.contains(&"baked/rock/rock/mra.ktx2".to_string()) && paths.contains(&"baked/extra/moss/moss/albedo.ktx2".to_string()),
+        paths.contains(&"baked/rock/rock/mra.ktx2".to_string())
+            && paths.contains(&"baked/extra/moss/moss/albedo.ktx2".to_string()),
         "{paths:?}"
     );
 
@@ -204,7 +208,10 @@ fn edits_become_one_batch_each_naming_exactly_the_changed_artifacts() {
     let batch = client.batch();
     let after = output_hashes(&project);
     assert_eq!(changed_paths(&project, &batch), differing(&before, &after));
-    assert_eq!(changed_paths(&project, &batch), ["baked/rock/report.json", "baked/rock/rock/mra.ktx2", "baked/rock/rock/mra.png"]);
+    assert_eq!(
+        changed_paths(&project, &batch),
+        ["baked/rock/report.json", "baked/rock/rock/mra.ktx2", "baked/rock/rock/mra.png"]
+    );
     assert!(client.quiet_for(Duration::from_millis(600)), "one edit is one batch");
 
     // Written to a temporary file and renamed over the original.
@@ -225,7 +232,10 @@ fn edits_become_one_batch_each_naming_exactly_the_changed_artifacts() {
     assert_eq!(batch["failed"], serde_json::json!([]), "{batch}");
     let after = output_hashes(&project);
     assert_eq!(changed_paths(&project, &batch), differing(&before, &after));
-    assert_eq!(changed_paths(&project, &batch), ["baked/rock/report.json", "baked/rock/rock/normal.ktx2", "baked/rock/rock/normal.png"]);
+    assert_eq!(
+        changed_paths(&project, &batch),
+        ["baked/rock/report.json", "baked/rock/rock/normal.ktx2", "baked/rock/rock/normal.png"]
+    );
     assert!(client.quiet_for(Duration::from_millis(600)), "a delete + create save is one batch");
 
     // A touch with identical bytes does nothing at all.
@@ -259,7 +269,10 @@ fn broken_materials_fail_with_their_line_keep_their_artifacts_and_recover() {
     assert_eq!(batch["changed"], serde_json::json!([]), "same artifacts as before: {batch}");
 
     // A new file matching a rule becomes an asset.
-    project.write("assets/extra/lichen.mymaterial", "Material $lichen { Texture (attrib = \"diffuse\") {string {\"../ao.png\"}} }\n");
+    project.write(
+        "assets/extra/lichen.mymaterial",
+        "Material $lichen { Texture (attrib = \"diffuse\") {string {\"../ao.png\"}} }\n",
+    );
     let batch = client.batch();
     let paths = changed_paths(&project, &batch);
     assert!(paths.contains(&"baked/extra/lichen/lichen/albedo.ktx2".to_string()), "{paths:?}");
@@ -268,7 +281,8 @@ fn broken_materials_fail_with_their_line_keep_their_artifacts_and_recover() {
     let albedo = project.read("assets/albedo.png");
     std::fs::remove_file(project.path("assets/albedo.png")).unwrap();
     let batch = client.batch();
-    let mut failed: Vec<&str> = batch["failed"].as_array().unwrap().iter().map(|entry| entry["asset"].as_str().unwrap_or("")).collect();
+    let mut failed: Vec<&str> =
+        batch["failed"].as_array().unwrap().iter().map(|entry| entry["asset"].as_str().unwrap_or("")).collect();
     failed.sort();
     assert_eq!(failed, ["extra/moss", "rock"], "{batch}");
     assert!(batch["failed"][0]["message"].as_str().unwrap().contains("albedo.png"), "{batch}");
@@ -280,7 +294,8 @@ fn broken_materials_fail_with_their_line_keep_their_artifacts_and_recover() {
     let pipeline = String::from_utf8(project.read("pipeline.ron")).unwrap();
     project.write(
         "pipeline.ron",
-        pipeline.replace(r#"material: "rock.mymaterial")"#, r#"material: "rock.mymaterial", encode: (container: Dds))"#),
+        pipeline
+            .replace(r#"material: "rock.mymaterial")"#, r#"material: "rock.mymaterial", encode: (container: Dds))"#),
     );
     let batch = client.batch();
     let paths = changed_paths(&project, &batch);
@@ -335,7 +350,11 @@ fn reconnecting_with_since_replays_the_missed_batches() {
     let replayed = [client.batch(), client.batch()];
     assert_eq!(replayed.each_ref().map(|batch| batch["revision"].as_u64().unwrap()), [first_missed, second_missed]);
     // The older batch names files that the newer one replaced; the newer one matches the disk.
-    assert!(replayed[0]["changed"].as_array().unwrap().iter().any(|entry| entry["path"] == "baked/rock/rock/mra.png"), "{}", replayed[0]);
+    assert!(
+        replayed[0]["changed"].as_array().unwrap().iter().any(|entry| entry["path"] == "baked/rock/rock/mra.png"),
+        "{}",
+        replayed[0]
+    );
     assert!(changed_paths(&project, &replayed[1]).contains(&"baked/rock/rock/mra.png".to_string()), "{}", replayed[1]);
     assert!(client.quiet_for(Duration::from_millis(300)), "nothing else replayed");
 
@@ -439,8 +458,13 @@ fn an_edit_during_a_build_cancels_it_and_the_next_build_uses_the_newest_bytes() 
     assert!(crate::support::build(&mut cirrus).all_ok());
     let expected = reference.read("baked/rock/rock/albedo.ktx2");
     assert_eq!(project.read("baked/rock/rock/albedo.ktx2"), expected);
-    let albedo = last["changed"].as_array().unwrap().iter().find(|entry| entry["path"] == "baked/rock/rock/albedo.ktx2");
-    assert_eq!(albedo.map(|entry| entry["hash"].clone()), Some(serde_json::json!(blake3::hash(&expected).to_hex().to_string())), "{last}");
+    let albedo =
+        last["changed"].as_array().unwrap().iter().find(|entry| entry["path"] == "baked/rock/rock/albedo.ktx2");
+    assert_eq!(
+        albedo.map(|entry| entry["hash"].clone()),
+        Some(serde_json::json!(blake3::hash(&expected).to_hex().to_string())),
+        "{last}"
+    );
 }
 
 #[test]
@@ -506,7 +530,10 @@ fn the_viewer_keeps_the_last_good_lod_on_failure_and_reloads_on_a_texture_edit()
     assert_eq!(quads, obj.lines().filter(|line| line.starts_with("f ")).count() / 2, "every quad of lod.obj is shown");
     assert_eq!(reloaded_quads, quads, "{lines:?}");
     // Only the colour changed; BC7 may move a few alpha-tested edge texels.
-    assert!(coverage > 5.0 && (reloaded_coverage - coverage).abs() < 0.5, "a texture edit keeps the silhouette: {lines:?}");
+    assert!(
+        coverage > 5.0 && (reloaded_coverage - coverage).abs() < 0.5,
+        "a texture edit keeps the silhouette: {lines:?}"
+    );
     let second = crate::support::decode_png(&std::fs::read(&screenshot).unwrap());
     let differing = first.pixels.chunks_exact(4).zip(second.pixels.chunks_exact(4)).filter(|(a, b)| a != b).count();
     assert!(differing > 100, "the reloaded bark shows in the screenshot ({differing} pixels differ)");

@@ -60,8 +60,10 @@ fn uv_box_meets(mesh: &BakeMesh, triangle: u32, size: u32, region: TexelRegion) 
     }
     let xs = corners.map(|uv| uv[0] as f64 * size as f64);
     let ys = corners.map(|uv| (1.0 - uv[1] as f64) * size as f64);
-    let (min_x, max_x) = (xs.iter().copied().fold(f64::INFINITY, f64::min), xs.iter().copied().fold(f64::NEG_INFINITY, f64::max));
-    let (min_y, max_y) = (ys.iter().copied().fold(f64::INFINITY, f64::min), ys.iter().copied().fold(f64::NEG_INFINITY, f64::max));
+    let (min_x, max_x) =
+        (xs.iter().copied().fold(f64::INFINITY, f64::min), xs.iter().copied().fold(f64::NEG_INFINITY, f64::max));
+    let (min_y, max_y) =
+        (ys.iter().copied().fold(f64::INFINITY, f64::min), ys.iter().copied().fold(f64::NEG_INFINITY, f64::max));
     max_x.ceil() > region.x as f64
         && min_x.floor() < (region.x + region.width) as f64
         && max_y.ceil() > region.y as f64
@@ -110,7 +112,8 @@ pub fn occluders_within_reach(mesh: &BakeMesh, boxes: &[[Vec3; 2]], own: &[u32],
     (0..boxes.len() as u32)
         .filter(|&triangle| {
             let [box_low, box_high] = boxes[triangle as usize];
-            let in_group = mesh.groups.is_none_or(|groups| own_groups.binary_search(&groups[triangle as usize]).is_ok());
+            let in_group =
+                mesh.groups.is_none_or(|groups| own_groups.binary_search(&groups[triangle as usize]).is_ok());
             in_group && box_low.cmple(high).all() && box_high.cmpge(low).all()
         })
         .collect()
@@ -174,8 +177,15 @@ pub fn bake_tile_with_rays(
 ) -> Result<TileBake, Stopped> {
     let start = std::time::Instant::now();
     let coverage = rasterize_uv(mesh.uvs, mesh.triangles, own, (size, size), region);
-    let occlusion =
-        occlusion_of_texels(occluders, mesh.positions, mesh.normals, mesh.triangles, &coverage, size, Casting { settings, should_stop })?;
+    let occlusion = occlusion_of_texels(
+        occluders,
+        mesh.positions,
+        mesh.normals,
+        mesh.triangles,
+        &coverage,
+        size,
+        Casting { settings, should_stop },
+    )?;
     let mut values = vec![0u16; occlusion.len()];
     let mut states = vec![TexelState::Empty as u8; occlusion.len()];
     let mut rays = 0u64;
@@ -188,12 +198,25 @@ pub fn bake_tile_with_rays(
             *value = unorm16(texel.visibility);
         }
     }
-    Ok(TileBake { region, values, states, overlapping: coverage.overlapping, rays, bake_ms: start.elapsed().as_secs_f64() * 1000.0 })
+    Ok(TileBake {
+        region,
+        values,
+        states,
+        overlapping: coverage.overlapping,
+        rays,
+        bake_ms: start.elapsed().as_secs_f64() * 1000.0,
+    })
 }
 
 /// Bakes a tile from per-vertex visibility (`None` where a vertex has none): each covered
 /// texel interpolates its triangle's corners.
-pub fn bake_tile_from_vertices(mesh: &BakeMesh, own: &[u32], size: u32, region: TexelRegion, vertex_visibility: &[f32]) -> TileBake {
+pub fn bake_tile_from_vertices(
+    mesh: &BakeMesh,
+    own: &[u32],
+    size: u32,
+    region: TexelRegion,
+    vertex_visibility: &[f32],
+) -> TileBake {
     let start = std::time::Instant::now();
     let coverage = rasterize_uv(mesh.uvs, mesh.triangles, own, (size, size), region);
     let mut values = vec![0u16; coverage.samples.len()];
@@ -201,12 +224,22 @@ pub fn bake_tile_from_vertices(mesh: &BakeMesh, own: &[u32], size: u32, region: 
     for ((sample, value), state) in coverage.samples.iter().zip(&mut values).zip(&mut states) {
         let Some(sample) = sample else { continue };
         let corners = mesh.triangles[sample.triangle as usize];
-        let visibility: f32 =
-            corners.iter().zip(sample.barycentric).map(|(&vertex, weight)| vertex_visibility[vertex as usize] * weight).sum();
+        let visibility: f32 = corners
+            .iter()
+            .zip(sample.barycentric)
+            .map(|(&vertex, weight)| vertex_visibility[vertex as usize] * weight)
+            .sum();
         *value = unorm16(visibility);
         *state = TexelState::Baked as u8;
     }
-    TileBake { region, values, states, overlapping: coverage.overlapping, rays: 0, bake_ms: start.elapsed().as_secs_f64() * 1000.0 }
+    TileBake {
+        region,
+        values,
+        states,
+        overlapping: coverage.overlapping,
+        rays: 0,
+        bake_ms: start.elapsed().as_secs_f64() * 1000.0,
+    }
 }
 
 /// A material's finished map: 16-bit visibility with every texel filled, and its figures.
@@ -226,7 +259,14 @@ pub struct AoMap {
 impl PartialEq for AoMap {
     fn eq(&self, other: &Self) -> bool {
         (self.size, &self.values, self.baked_texels, self.invalid_texels, self.overlapping_texels, self.rays)
-            == (other.size, &other.values, other.baked_texels, other.invalid_texels, other.overlapping_texels, other.rays)
+            == (
+                other.size,
+                &other.values,
+                other.baked_texels,
+                other.invalid_texels,
+                other.overlapping_texels,
+                other.rays,
+            )
     }
 }
 
@@ -236,7 +276,15 @@ impl PartialEq for AoMap {
 pub fn assemble_map(size: u32, tiles: &[&TileBake]) -> AoMap {
     let mut values = vec![0u16; size as usize * size as usize];
     let mut fill_sources = Vec::new();
-    let mut map = AoMap { size, values: Vec::new(), baked_texels: 0, invalid_texels: 0, overlapping_texels: 0, rays: 0, bake_ms: 0.0 };
+    let mut map = AoMap {
+        size,
+        values: Vec::new(),
+        baked_texels: 0,
+        invalid_texels: 0,
+        overlapping_texels: 0,
+        rays: 0,
+        bake_ms: 0.0,
+    };
     for tile in tiles {
         let region = tile.region;
         for row in 0..region.height {
@@ -257,7 +305,11 @@ pub fn assemble_map(size: u32, tiles: &[&TileBake]) -> AoMap {
     }
     fill_sources.sort_unstable();
     let sources = crate::texture::fill::texel_sources(size, size, fill_sources);
-    map.values = if sources.0.is_empty() { vec![u16::MAX; values.len()] } else { crate::texture::fill::fill_values(&values, &sources) };
+    map.values = if sources.0.is_empty() {
+        vec![u16::MAX; values.len()]
+    } else {
+        crate::texture::fill::fill_values(&values, &sources)
+    };
     map
 }
 

@@ -27,7 +27,9 @@ use crate::summary::ErrorSummary;
 use crate::texture::tail::{SurfaceInfo, TailSettings};
 use crate::texture::{SurfaceKind, Texture};
 use bake::material_tiles;
-use queries::{ao_map, ao_map_key, ao_settings, bake_geometry, material_label, tile_label, BakeGeometry, BAKE, BVH, FILL, VERTICES};
+use queries::{
+    ao_map, ao_map_key, ao_settings, bake_geometry, material_label, tile_label, BakeGeometry, BAKE, BVH, FILL, VERTICES,
+};
 
 pub struct AmbientOcclusion;
 
@@ -46,7 +48,8 @@ fn surface_material(db: &dyn Db, asset: Asset, surface: &SurfaceId) -> Result<(A
         .find(|material| material.folder == surface.group)
         .or_else(|| materials.iter().find(|material| material.name == surface.group));
     let index = found.map(|material| material.index);
-    let index = index.ok_or_else(|| Diagnostic::new(asset.main_file(db), format!("the mesh has no material `{}`", surface.group)))?;
+    let index = index
+        .ok_or_else(|| Diagnostic::new(asset.main_file(db), format!("the mesh has no material `{}`", surface.group)))?;
     Ok((geometry, index))
 }
 
@@ -102,7 +105,8 @@ impl Kind for AmbientOcclusion {
                     instances.push(tile);
                 }
                 let surface = material_surface(&material.folder);
-                let [mips, encode, mut write] = tail_instances(name, &surface, &fill, surface.artifact_paths(output_folder, container));
+                let [mips, encode, mut write] =
+                    tail_instances(name, &surface, &fill, surface.artifact_paths(output_folder, container));
                 write.writes.push(report.clone());
                 instances.extend([fill, mips, encode, write]);
             }
@@ -113,7 +117,13 @@ impl Kind for AmbientOcclusion {
         instances
     }
 
-    fn outputs(db: &dyn Db, asset: Asset, output_folder: &Path, errors: &mut Vec<Diagnostic>, runs: &[StageRun]) -> AssetOutputs {
+    fn outputs(
+        db: &dyn Db,
+        asset: Asset,
+        output_folder: &Path,
+        errors: &mut Vec<Diagnostic>,
+        runs: &[StageRun],
+    ) -> AssetOutputs {
         crate::kinds::outputs_unless_failed(errors, || ao_outputs(db, asset, output_folder, runs))
     }
 
@@ -126,8 +136,10 @@ impl Kind for AmbientOcclusion {
             Err(diagnostic) => return vec![diagnostic],
         };
         if mesh.uvs.is_none() {
-            problems
-                .push(Diagnostic::new(main_file, "the mesh has no texture coordinates: an AO bake needs a UV layout (`vt` in the OBJ)"));
+            problems.push(Diagnostic::new(
+                main_file,
+                "the mesh has no texture coordinates: an AO bake needs a UV layout (`vt` in the OBJ)",
+            ));
         }
         problems.extend(crate::mesh::uvs_outside_warnings(main_file, &mesh).iter().map(crate::kinds::as_warning));
         let long_bake = bake::long_bake_warning(main_file, &mesh, &asset.settings.ao, crate::schedule::cores());
@@ -213,10 +225,18 @@ pub struct AoSurfaceReport {
 }
 
 /// The rays of this build's tile bakes over the wall time they spanned together.
-fn bake_rays_per_second(db: &dyn Db, asset: Asset, geometry: &BakeGeometry, runs: &[StageRun]) -> Result<Option<f64>, Diagnostic> {
+fn bake_rays_per_second(
+    db: &dyn Db,
+    asset: Asset,
+    geometry: &BakeGeometry,
+    runs: &[StageRun],
+) -> Result<Option<f64>, Diagnostic> {
     let name = asset.name(db);
-    let bakes: std::collections::HashMap<&str, &StageRun> =
-        runs.iter().filter(|run| run.stage == BAKE.name && !run.from_cache).map(|run| (run.label.as_str(), run)).collect();
+    let bakes: std::collections::HashMap<&str, &StageRun> = runs
+        .iter()
+        .filter(|run| run.stage == BAKE.name && !run.from_cache)
+        .map(|run| (run.label.as_str(), run))
+        .collect();
     let size = ao_settings(db, asset).size;
     let (mut rays, mut first, mut last) = (0u64, None::<std::time::Instant>, None::<std::time::Instant>);
     for material in &geometry.materials {
@@ -263,7 +283,8 @@ fn ao_outputs(db: &dyn Db, asset: Asset, output_folder: &Path, runs: &[StageRun]
             AoMode::Texels => map.rays,
             AoMode::Vertices => {
                 let triangles = &geometry.loaded.mesh.triangles;
-                let mut vertices: Vec<u32> = material.triangles.iter().flat_map(|&triangle| triangles[triangle as usize]).collect();
+                let mut vertices: Vec<u32> =
+                    material.triangles.iter().flat_map(|&triangle| triangles[triangle as usize]).collect();
                 vertices.sort_unstable();
                 vertices.dedup();
                 vertices.len() as u64 * settings.rays as u64
@@ -276,9 +297,14 @@ fn ao_outputs(db: &dyn Db, asset: Asset, output_folder: &Path, runs: &[StageRun]
             png: display_path(&png_path),
             texels_baked: map.baked_texels,
             invalid_texels: map.invalid_texels,
-            overlap_fraction: if map.baked_texels == 0 { 0.0 } else { round(map.overlapping_texels as f64 / map.baked_texels as f64, 5) },
+            overlap_fraction: if map.baked_texels == 0 {
+                0.0
+            } else {
+                round(map.overlapping_texels as f64 / map.baked_texels as f64, 5)
+            },
             rays_cast,
-            rays_per_second: (map.rays > 0 && map.bake_ms > 0.0).then(|| round(map.rays as f64 / (map.bake_ms / 1000.0), 0)),
+            rays_per_second: (map.rays > 0 && map.bake_ms > 0.0)
+                .then(|| round(map.rays as f64 / (map.bake_ms / 1000.0), 0)),
             texture: AoSurfaceReport { path: display_path(&texture_path), info: artifacts.info.clone() },
         });
     }
@@ -292,13 +318,21 @@ fn ao_outputs(db: &dyn Db, asset: Asset, output_folder: &Path, runs: &[StageRun]
         max_distance: geometry.occlusion.max_distance.is_finite().then_some(geometry.occlusion.max_distance),
         materials,
         timings: AoTimings { rays_per_second: bake_rays_per_second(db, asset, &geometry, runs)? },
-        stage_ms: crate::kinds::asset_stage_ms(name, runs).into_iter().map(|(stage, ms)| (stage.to_string(), ms)).collect(),
+        stage_ms: crate::kinds::asset_stage_ms(name, runs)
+            .into_iter()
+            .map(|(stage, ms)| (stage.to_string(), ms))
+            .collect(),
         warnings: geometry
             .loaded
             .warnings
             .iter()
             .chain(&crate::mesh::uvs_outside_warnings(asset.main_file(db), &geometry.loaded.mesh))
-            .chain(&bake::long_bake_warning(asset.main_file(db), &geometry.loaded.mesh, &settings, crate::schedule::cores()))
+            .chain(&bake::long_bake_warning(
+                asset.main_file(db),
+                &geometry.loaded.mesh,
+                &settings,
+                crate::schedule::cores(),
+            ))
             .map(ErrorSummary::from)
             .collect(),
     };

@@ -10,14 +10,14 @@ use std::sync::Arc;
 use glam::Vec3;
 
 use super::bake::{
-    assemble_map, bake_tile_from_vertices, bake_tile_with_rays, map_png16, material_tiles, occluders_within_reach, tile_triangles,
-    triangle_boxes, AoMap, BakeMesh, TileBake, TileId,
+    assemble_map, bake_tile_from_vertices, bake_tile_with_rays, map_png16, material_tiles, occluders_within_reach,
+    tile_triangles, triangle_boxes, AoMap, BakeMesh, TileBake, TileId,
 };
 use crate::cache::{CacheEntry, CacheKey};
 use crate::config::{AoMode, AoOccluders, AoSettings};
 use crate::db::{
-    from_pod_blob, hash_of_parts, load_cached, pod_blob, recall, record_cache_hit, remember, stage_key, stoppable, store_cached, timed,
-    Asset, ByHash, Db, Stage,
+    from_pod_blob, hash_of_parts, load_cached, pod_blob, recall, record_cache_hit, remember, stage_key, stoppable,
+    store_cached, timed, Asset, ByHash, Db, Stage,
 };
 use crate::diagnostic::Diagnostic;
 use crate::kinds::mesh_queries::{loaded_mesh, LoadedMesh};
@@ -115,15 +115,19 @@ pub fn bake_geometry(db: &dyn Db, asset: Asset) -> Result<Arc<BakeGeometry>, Dia
     let mesh = &loaded.mesh;
     let path = asset.main_file(db);
     let Some(uvs) = &mesh.uvs else {
-        return Err(Diagnostic::new(path, "the mesh has no texture coordinates: an AO bake needs a UV layout (`vt` in the OBJ)"));
+        return Err(Diagnostic::new(
+            path,
+            "the mesh has no texture coordinates: an AO bake needs a UV layout (`vt` in the OBJ)",
+        ));
     };
     let mut materials: Vec<BakedMaterial> = Vec::new();
     for (index, material) in mesh.materials.iter().enumerate() {
         if material.name.ends_with(crate::mesh::WITHOUT_UVS_SUFFIX) {
             continue;
         }
-        let triangles: Vec<u32> =
-            (0..mesh.triangles.len() as u32).filter(|&triangle| mesh.triangle_materials[triangle as usize] == index as u32).collect();
+        let triangles: Vec<u32> = (0..mesh.triangles.len() as u32)
+            .filter(|&triangle| mesh.triangle_materials[triangle as usize] == index as u32)
+            .collect();
         if triangles.is_empty() {
             continue;
         }
@@ -132,7 +136,8 @@ pub fn bake_geometry(db: &dyn Db, asset: Asset) -> Result<Arc<BakeGeometry>, Dia
         materials.push(BakedMaterial { index: index as u32, name: material.name.clone(), folder, triangles });
     }
     let boxes = triangle_boxes(&mesh.positions, &mesh.triangles);
-    let (low, high) = boxes.iter().fold((Vec3::INFINITY, Vec3::NEG_INFINITY), |(low, high), [a, b]| (low.min(*a), high.max(*b)));
+    let (low, high) =
+        boxes.iter().fold((Vec3::INFINITY, Vec3::NEG_INFINITY), |(low, high), [a, b]| (low.min(*a), high.max(*b)));
     let diagonal = (high - low).length().max(f32::MIN_POSITIVE);
     let occlusion = OcclusionSettings {
         rays: settings.rays,
@@ -152,7 +157,15 @@ pub fn bake_geometry(db: &dyn Db, asset: Asset) -> Result<Arc<BakeGeometry>, Dia
         bytemuck::cast_slice(&mesh.triangles),
         groups.as_deref().map_or(&[][..], bytemuck::cast_slice),
     ]);
-    Ok(Arc::new(BakeGeometry { loaded: loaded.clone(), materials, boxes, occlusion, vertex_offset: diagonal * 1e-4, groups, whole_hash }))
+    Ok(Arc::new(BakeGeometry {
+        loaded: loaded.clone(),
+        materials,
+        boxes,
+        occlusion,
+        vertex_offset: diagonal * 1e-4,
+        groups,
+        whole_hash,
+    }))
 }
 
 /// The occluders' BVHs, compared by the geometry they were built from.
@@ -169,8 +182,9 @@ pub fn occluder_set(db: &dyn Db, asset: Asset) -> Result<Arc<OccluderSet>, Diagn
     hasher.update(bytemuck::cast_slice(&mesh.positions));
     hasher.update(bytemuck::cast_slice(&mesh.triangles));
     hasher.update(bytemuck::cast_slice(groups.as_deref().map_or(&[][..], |groups| &groups[..])));
-    let occluders =
-        timed(db, BVH, asset.name(db), || build_occluders(&mesh.positions, &mesh.triangles, groups.as_deref().map(|groups| &groups[..])));
+    let occluders = timed(db, BVH, asset.name(db), || {
+        build_occluders(&mesh.positions, &mesh.triangles, groups.as_deref().map(|groups| &groups[..]))
+    });
     Ok(Arc::new(OccluderSet { hash: hasher.finalize(), value: occluders }))
 }
 
@@ -195,7 +209,9 @@ pub struct VertexVisibility(pub Vec<f32>);
 #[salsa::tracked(returns(clone))]
 pub fn vertex_visibility(db: &dyn Db, asset: Asset) -> Result<Arc<VertexVisibility>, Diagnostic> {
     let geometry = bake_geometry(db, asset)?;
-    let key = occlusion_key(stage_key(VERTICES).part(&geometry.whole_hash), &geometry.occlusion).part(&geometry.vertex_offset).finish();
+    let key = occlusion_key(stage_key(VERTICES).part(&geometry.whole_hash), &geometry.occlusion)
+        .part(&geometry.vertex_offset)
+        .finish();
     let name = asset.name(db);
     if let Some(values) = load_cached(db, VERTICES.name, key, |entry| from_pod_blob::<f32>(entry.blobs.first()?)) {
         record_cache_hit(db, VERTICES, name);
@@ -244,7 +260,11 @@ pub fn material_label(asset_name: &str, folder: &str) -> String {
     format!("{asset_name}/{folder}")
 }
 
-fn material_of<'a>(geometry: &'a BakeGeometry, path: &std::path::Path, material: u32) -> Result<&'a BakedMaterial, Diagnostic> {
+fn material_of<'a>(
+    geometry: &'a BakeGeometry,
+    path: &std::path::Path,
+    material: u32,
+) -> Result<&'a BakedMaterial, Diagnostic> {
     geometry.material(material).ok_or_else(|| Diagnostic::new(path, format!("no baked material {material}")))
 }
 
@@ -363,13 +383,23 @@ pub fn ao_tile(db: &dyn Db, asset: Asset, tile: TileId) -> Result<Arc<TileBake>,
                     let occluders = occluder_set(db, asset)?;
                     timed(db, BAKE, &label, || {
                         stoppable(db, |should_stop| {
-                            bake_tile_with_rays(&occluders.value, &mesh, &own, settings.size, region, &geometry.occlusion, should_stop)
+                            bake_tile_with_rays(
+                                &occluders.value,
+                                &mesh,
+                                &own,
+                                settings.size,
+                                region,
+                                &geometry.occlusion,
+                                should_stop,
+                            )
                         })
                     })
                 }
                 AoMode::Vertices => {
                     let visibility = vertex_visibility(db, asset)?;
-                    timed(db, BAKE, &label, || bake_tile_from_vertices(&mesh, &own, settings.size, region, &visibility.0))
+                    timed(db, BAKE, &label, || {
+                        bake_tile_from_vertices(&mesh, &own, settings.size, region, &visibility.0)
+                    })
                 }
             };
             store_cached(db, TILE_ENTRY, key, || tile_entry(&bake));
@@ -411,7 +441,10 @@ pub fn ao_map(db: &dyn Db, asset: Asset, material: u32) -> Result<Arc<AoMapFiles
         return Ok(Arc::new(files));
     }
     let size = ao_settings(db, asset).size;
-    let tiles = material_tiles(material, size).into_iter().map(|tile| ao_tile(db, asset, tile)).collect::<Result<Vec<_>, _>>()?;
+    let tiles = material_tiles(material, size)
+        .into_iter()
+        .map(|tile| ao_tile(db, asset, tile))
+        .collect::<Result<Vec<_>, _>>()?;
     let files = timed(db, FILL, &label, || {
         let map = assemble_map(size, &tiles.iter().map(|tile| &**tile).collect::<Vec<_>>());
         let png16 = map_png16(&map).into();

@@ -21,8 +21,9 @@ use crate::texture::tail::TailSettings;
 use crate::texture::{SurfaceKind, Texture};
 
 use queries::{
-    atlas_layout, atlas_layout_and_change, atlas_mesh_files, atlas_page, atlas_texture_files, mesh_library_paths, mesh_map_paths,
-    page_group, page_label, page_recipe_key, page_stem, remapped_mesh, remapped_mesh_path, COMPOSITE, LAYOUT, REACH, REMAP, TRIM,
+    atlas_layout, atlas_layout_and_change, atlas_mesh_files, atlas_page, atlas_texture_files, mesh_library_paths,
+    mesh_map_paths, page_group, page_label, page_recipe_key, page_stem, remapped_mesh, remapped_mesh_path, COMPOSITE,
+    LAYOUT, REACH, REMAP, TRIM,
 };
 use table::{AtlasPage, AtlasTable};
 
@@ -128,10 +129,15 @@ impl Kind for Atlas {
         let container = asset.settings(db).encode.container;
         let layout = atlas_layout(db, asset).ok();
         let mut tails = Vec::new();
-        for (page, layout) in layout.iter().flat_map(|layout| (0..layout.packing.pages.len() as u32).map(move |page| (page, layout))) {
+        for (page, layout) in
+            layout.iter().flat_map(|layout| (0..layout.packing.pages.len() as u32).map(move |page| (page, layout)))
+        {
             // A page reads the layout, and the texels of its own entries only.
-            let mut composite = StageInstance::new(COMPOSITE, page_label(name, page), page_group(page)).reads_stage(&pack);
-            for (entry, _) in layout.entries.iter().zip(&layout.packing.placements).filter(|(_, place)| place.page == page) {
+            let mut composite =
+                StageInstance::new(COMPOSITE, page_label(name, page), page_group(page)).reads_stage(&pack);
+            for (entry, _) in
+                layout.entries.iter().zip(&layout.packing.placements).filter(|(_, place)| place.page == page)
+            {
                 composite.reads.push(Read::Stage(DECODE, display_path(&entry.file)));
             }
             let [mips, encode, mut write] =
@@ -142,10 +148,12 @@ impl Kind for Atlas {
         for mesh in meshes {
             let relative = remapped_mesh_path(db, asset, mesh);
             let label = format!("{name}/meshes/{}", display_path(&relative));
-            let mut remap = StageInstance::new(REMAP, &label, format!("meshes/{}", display_path(&relative))).reads_stage(&pack);
+            let mut remap =
+                StageInstance::new(REMAP, &label, format!("meshes/{}", display_path(&relative))).reads_stage(&pack);
             remap.reads.push(Read::File(mesh.clone()));
             remap.reads.extend(mesh_library_paths(db, asset, mesh).into_iter().map(Read::File));
-            remap.writes = vec![output_folder.join("meshes").join(&relative), output_folder.join("atlas.mtl"), report.clone()];
+            remap.writes =
+                vec![output_folder.join("meshes").join(&relative), output_folder.join("atlas.mtl"), report.clone()];
             tails.push(remap);
         }
         instances.insert(0, pack);
@@ -164,7 +172,13 @@ impl Kind for Atlas {
         instances
     }
 
-    fn outputs(db: &dyn Db, asset: Asset, output_folder: &Path, errors: &mut Vec<Diagnostic>, runs: &[StageRun]) -> AssetOutputs {
+    fn outputs(
+        db: &dyn Db,
+        asset: Asset,
+        output_folder: &Path,
+        errors: &mut Vec<Diagnostic>,
+        runs: &[StageRun],
+    ) -> AssetOutputs {
         if !errors.is_empty() {
             return AssetOutputs::default();
         }
@@ -184,10 +198,15 @@ impl Kind for Atlas {
         let AssetSource::Atlas { textures, meshes } = &asset.source else { return Vec::new() };
         let files = crate::sources::glob_matches(config, textures);
         if files.is_empty() {
-            return vec![Diagnostic::new(&config.source, format!("atlas `{}`: no texture matches {textures:?}", asset.name))];
+            return vec![Diagnostic::new(
+                &config.source,
+                format!("atlas `{}`: no texture matches {textures:?}", asset.name),
+            )];
         }
-        let mut problems: Vec<Diagnostic> =
-            files.iter().filter_map(|path| check_texture_file(config, path).err().map(|message| Diagnostic::new(path, message))).collect();
+        let mut problems: Vec<Diagnostic> = files
+            .iter()
+            .filter_map(|path| check_texture_file(config, path).err().map(|message| Diagnostic::new(path, message)))
+            .collect();
         for mesh_file in crate::sources::glob_matches(config, meshes) {
             let (mesh, warnings) = match crate::kinds::check_mesh_file(config, &mesh_file) {
                 Ok(loaded) => loaded,
@@ -216,8 +235,8 @@ impl Kind for Atlas {
     }
 
     fn surface_image(db: &dyn Db, asset: Asset, surface: &SurfaceId) -> Result<Arc<Texture>, Diagnostic> {
-        let page =
-            surface_page(surface).ok_or_else(|| Diagnostic::new(asset.source_root(db), format!("no atlas page {}", surface.group)))?;
+        let page = surface_page(surface)
+            .ok_or_else(|| Diagnostic::new(asset.source_root(db), format!("no atlas page {}", surface.group)))?;
         atlas_page(db, asset, page)
     }
 
@@ -233,11 +252,18 @@ impl Kind for Atlas {
 
 /// Warnings for the textures whose transparent border a mesh's UVs reach: the entry keeps those
 /// texels too (trimming them would move the remapped UVs off the rectangle).
-fn uvs_beyond_trim(config: &PipelineConfig, mesh_file: &Path, mesh: &crate::mesh::Mesh, files: &[PathBuf]) -> Vec<Diagnostic> {
+fn uvs_beyond_trim(
+    config: &PipelineConfig,
+    mesh_file: &Path,
+    mesh: &crate::mesh::Mesh,
+    files: &[PathBuf],
+) -> Vec<Diagnostic> {
     let mut warnings = Vec::new();
     for (texture, reach) in remap::material_uv_reach(mesh, |path| files.iter().any(|file| file == path)) {
         let Ok(contents) = crate::sources::read_source(&config.root, &config.source, &texture) else { continue };
-        let Ok(decoded) = crate::texture::decode_texture(&texture, &contents.bytes, config.limits.texture) else { continue };
+        let Ok(decoded) = crate::texture::decode_texture(&texture, &contents.bytes, config.limits.texture) else {
+            continue;
+        };
         let trimmed = page::opaque_bounds(&decoded);
         let wanted = page::uv_texel_rect(reach.u, reach.v, [decoded.width, decoded.height]);
         if !trimmed.contains(wanted) {
@@ -284,7 +310,11 @@ fn atlas_outputs(
         let page = page as u32;
         let artifacts = crate::kinds::tail_queries::surface_artifacts(db, asset, page_surface(page))?;
         let [texture_path, preview_path] = page_files(output_folder, page, container);
-        pages.push(AtlasPage { file: display_path(texture_path.strip_prefix(output_folder).unwrap_or(&texture_path)), width, height });
+        pages.push(AtlasPage {
+            file: display_path(texture_path.strip_prefix(output_folder).unwrap_or(&texture_path)),
+            width,
+            height,
+        });
         outputs.files.push((texture_path, artifacts.texture_file.clone()));
         outputs.files.push((preview_path, artifacts.preview_png.clone()));
         surfaces.push(artifacts.info.clone());
@@ -336,7 +366,8 @@ fn mesh_outputs(
     if meshes.is_empty() {
         return Vec::new();
     }
-    let mut materials: std::collections::BTreeMap<String, (remap::RemappedMaterial, PathBuf)> = std::collections::BTreeMap::new();
+    let mut materials: std::collections::BTreeMap<String, (remap::RemappedMaterial, PathBuf)> =
+        std::collections::BTreeMap::new();
     let mut written = Vec::new();
     for mesh in meshes {
         let remapped = match remapped_mesh(db, asset, mesh.clone()) {

@@ -19,7 +19,8 @@ impl TrimRect {
     /// The smallest rectangle holding both.
     pub fn union(self, other: TrimRect) -> TrimRect {
         let (left, top) = (self.x.min(other.x), self.y.min(other.y));
-        let (right, bottom) = ((self.x + self.width).max(other.x + other.width), (self.y + self.height).max(other.y + other.height));
+        let (right, bottom) =
+            ((self.x + self.width).max(other.x + other.width), (self.y + self.height).max(other.y + other.height));
         TrimRect { x: left, y: top, width: right - left, height: bottom - top }
     }
 
@@ -104,7 +105,12 @@ pub fn composite_page(width: u32, height: u32, entries: &[(&Texture, Placement)]
 
 /// [`composite_page`], also giving where each texel took its colour from, so that a later
 /// [`recomposite_page`] of the same placements needs no new search.
-pub fn composite_page_keeping_sources(width: u32, height: u32, entries: &[(&Texture, Placement)], padding: u32) -> (Texture, TexelSources) {
+pub fn composite_page_keeping_sources(
+    width: u32,
+    height: u32,
+    entries: &[(&Texture, Placement)],
+    padding: u32,
+) -> (Texture, TexelSources) {
     let mut pixels = vec![0u8; width as usize * height as usize * 4];
     for (texture, placement) in entries {
         paste_entry(&mut pixels, width, height, texture, placement, padding);
@@ -146,13 +152,15 @@ fn paste_entry(pixels: &mut [u8], width: u32, height: u32, texture: &Texture, pl
             pixels[index * 4..][..4].copy_from_slice(&texture.pixels[source..source + 4]);
         }
     }
-    let (span_x, span_y) = if placement.rotated { (placement.height, placement.width) } else { (placement.width, placement.height) };
+    let (span_x, span_y) =
+        if placement.rotated { (placement.height, placement.width) } else { (placement.width, placement.height) };
     let (left, top) = (placement.x.saturating_sub(padding), placement.y.saturating_sub(padding));
     let right = (placement.x + span_x + padding).min(width);
     let bottom = (placement.y + span_y + padding).min(height);
     for y in top..bottom {
         for x in left..right {
-            let inside = (placement.x..placement.x + span_x).contains(&x) && (placement.y..placement.y + span_y).contains(&y);
+            let inside =
+                (placement.x..placement.x + span_x).contains(&x) && (placement.y..placement.y + span_y).contains(&y);
             if inside {
                 continue;
             }
@@ -170,7 +178,8 @@ fn paste_entry(pixels: &mut [u8], width: u32, height: u32, texture: &Texture, pl
 pub fn page_texel_sources(width: u32, height: u32, placements: &[Placement], padding: u32) -> TexelSources {
     let mut covered = vec![false; width as usize * height as usize];
     for placement in placements {
-        let (span_x, span_y) = if placement.rotated { (placement.height, placement.width) } else { (placement.width, placement.height) };
+        let (span_x, span_y) =
+            if placement.rotated { (placement.height, placement.width) } else { (placement.width, placement.height) };
         let (left, top) = (placement.x.saturating_sub(padding), placement.y.saturating_sub(padding));
         let right = (placement.x + span_x + padding).min(width);
         let bottom = (placement.y + span_y + padding).min(height);
@@ -178,7 +187,11 @@ pub fn page_texel_sources(width: u32, height: u32, placements: &[Placement], pad
             covered[y as usize * width as usize..][left as usize..right as usize].fill(true);
         }
     }
-    texel_sources(width, height, covered.iter().enumerate().filter(|(_, &covered)| covered).map(|(index, _)| index as u32))
+    texel_sources(
+        width,
+        height,
+        covered.iter().enumerate().filter(|(_, &covered)| covered).map(|(index, _)| index as u32),
+    )
 }
 
 /// The fill of a page: beyond the entries and their padding nothing is drawn, so those texels

@@ -17,7 +17,9 @@ use crate::packing::Placement;
 use crate::texture::fill::TexelSources;
 use crate::texture::Texture;
 
-use super::page::{composite_page_keeping_sources, crop, opaque_bounds, recomposite_page, uv_texel_rect, PageEntry, TrimRect};
+use super::page::{
+    composite_page_keeping_sources, crop, opaque_bounds, recomposite_page, uv_texel_rect, PageEntry, TrimRect,
+};
 
 pub const TRIM: Stage = Stage { name: "trim", version: 1 };
 /// 3: kept as a hint for the next layout; entries come from the trim stage. 4: an entry keeps
@@ -94,7 +96,13 @@ pub fn atlas_texture_files(db: &dyn Db, asset: Asset) -> &[PathBuf] {
 #[salsa::tracked(returns(copy))]
 pub fn page_settings(db: &dyn Db, asset: Asset) -> PageSettings {
     let pack = &asset.settings(db).pack;
-    PageSettings { max_size: pack.max_size, padding: pack.padding, rotate: pack.rotate, power_of_two: pack.power_of_two, pages: pack.pages }
+    PageSettings {
+        max_size: pack.max_size,
+        padding: pack.padding,
+        rotate: pack.rotate,
+        power_of_two: pack.power_of_two,
+        pages: pack.pages,
+    }
 }
 
 /// Whether the asset trims transparent borders.
@@ -117,7 +125,11 @@ pub fn trimmed_texture(db: &dyn Db, file: SourceFile, trim: bool) -> Result<Trim
 
 /// The pure trim: the kept rectangle and what it holds.
 fn trim_texture(texture: &Texture, trim: bool) -> TrimmedTexture {
-    let rect = if trim { opaque_bounds(texture) } else { TrimRect { x: 0, y: 0, width: texture.width, height: texture.height } };
+    let rect = if trim {
+        opaque_bounds(texture)
+    } else {
+        TrimRect { x: 0, y: 0, width: texture.width, height: texture.height }
+    };
     kept_part(texture, rect)
 }
 
@@ -158,7 +170,10 @@ pub struct UvReach {
 
 impl UvReach {
     pub fn union(self, other: UvReach) -> UvReach {
-        UvReach { u: [self.u[0].min(other.u[0]), self.u[1].max(other.u[1])], v: [self.v[0].min(other.v[0]), self.v[1].max(other.v[1])] }
+        UvReach {
+            u: [self.u[0].min(other.u[0]), self.u[1].max(other.u[1])],
+            v: [self.v[0].min(other.v[0]), self.v[1].max(other.v[1])],
+        }
     }
 }
 
@@ -183,12 +198,16 @@ pub fn mesh_uv_reach(db: &dyn Db, asset: Asset) -> Arc<std::collections::BTreeMa
             .collect();
         let label = format!("{}/meshes/{}", asset.name(db), display_path(&remapped_mesh_path(db, asset, mesh)));
         // Keyed by the mesh, its libraries and which textures are atlased (by path).
-        let library_files = mesh_library_paths(db, asset, mesh).into_iter().filter_map(|path| asset_file(db, asset, path));
-        let atlased: Vec<String> = textures.iter().map(|path| display_path(&crate::db::source_relative(db, path))).collect();
-        let key = key_with_files(db, stage_key(REACH).part(&atlased[..]), std::iter::once(file).chain(library_files)).finish();
+        let library_files =
+            mesh_library_paths(db, asset, mesh).into_iter().filter_map(|path| asset_file(db, asset, path));
+        let atlased: Vec<String> =
+            textures.iter().map(|path| display_path(&crate::db::source_relative(db, path))).collect();
+        let key = key_with_files(db, stage_key(REACH).part(&atlased[..]), std::iter::once(file).chain(library_files))
+            .finish();
         let found: Result<Vec<(PathBuf, UvReach)>, Diagnostic> = cached_json(db, REACH, &label, key, || {
             Ok(timed(db, REACH, &label, || {
-                let Ok((loaded, _)) = crate::mesh::load_mesh(mesh, &contents.bytes, &libraries, asset.source_root(db)) else {
+                let Ok((loaded, _)) = crate::mesh::load_mesh(mesh, &contents.bytes, &libraries, asset.source_root(db))
+                else {
                     return Vec::new();
                 };
                 super::remap::material_uv_reach(&loaded, |path| textures.contains(&path.to_path_buf()))
@@ -208,7 +227,10 @@ pub fn mesh_uv_reach(db: &dyn Db, asset: Asset) -> Arc<std::collections::BTreeMa
 #[salsa::tracked(returns(copy))]
 pub fn layout_key(db: &dyn Db, asset: Asset) -> CacheKey {
     let key = stage_key(LAYOUT).part("atlas").part(&settings_key(db, asset).0);
-    let files = atlas_texture_files(db, asset).iter().filter_map(|path| asset_file(db, asset, path.clone())).collect::<Vec<_>>();
+    let files = atlas_texture_files(db, asset)
+        .iter()
+        .filter_map(|path| asset_file(db, asset, path.clone()))
+        .collect::<Vec<_>>();
     let reach = crate::db::relocatable_hash(db, &*mesh_uv_reach(db, asset));
     key_with_files(db, key.part(&(files.len() as u32)), files).part(&reach).finish()
 }
@@ -254,7 +276,11 @@ fn compute_atlas_layout(db: &dyn Db, asset: Asset) -> Result<(AtlasLayout, Layou
         let name = display_path(path.strip_prefix(&source_root).unwrap_or(path));
         let content = (kept.texels.kept_hash, kept.texels.trim.width, kept.texels.trim.height);
         match by_content.get(&content) {
-            Some(&entry) => entries[entry].aliases.push(LayoutAlias { name, source_size: kept.texels.source_size, trim: kept.texels.trim }),
+            Some(&entry) => entries[entry].aliases.push(LayoutAlias {
+                name,
+                source_size: kept.texels.source_size,
+                trim: kept.texels.trim,
+            }),
             None => {
                 by_content.insert(content, entries.len());
                 entries.push(LayoutEntry {
@@ -273,13 +299,15 @@ fn compute_atlas_layout(db: &dyn Db, asset: Asset) -> Result<(AtlasLayout, Layou
     let hint = layout_hint(&entries, previous.as_deref());
     let previous_pages = previous.as_ref().map_or(&[][..], |previous| &previous.packing.pages[..]);
     let (packing, repack) =
-        timed(db, LAYOUT, asset.name(db), || pack_pages_keeping(&sizes, &settings, previous_pages, &hint)).map_err(|error| {
-            let named = match &error {
-                PackError::TooLarge { index, .. } => format!("{}: {error}", entries[*index].name),
-                _ => error.to_string(),
-            };
-            Diagnostic::new(&source_root, format!("atlas `{}`: {named}", asset.name(db)))
-        })?;
+        timed(db, LAYOUT, asset.name(db), || pack_pages_keeping(&sizes, &settings, previous_pages, &hint)).map_err(
+            |error| {
+                let named = match &error {
+                    PackError::TooLarge { index, .. } => format!("{}: {error}", entries[*index].name),
+                    _ => error.to_string(),
+                };
+                Diagnostic::new(&source_root, format!("atlas `{}`: {named}", asset.name(db)))
+            },
+        )?;
     let moved = entries
         .iter()
         .zip(&hint)
@@ -289,9 +317,11 @@ fn compute_atlas_layout(db: &dyn Db, asset: Asset) -> Result<(AtlasLayout, Layou
         .collect();
     let change = match repack {
         _ if previous.is_none() => LayoutChange { how: "fresh".into(), placed: Vec::new(), moved },
-        Repack::Kept { placed } => {
-            LayoutChange { how: "kept".into(), placed: placed.iter().map(|&index| entries[index].name.clone()).collect(), moved }
-        }
+        Repack::Kept { placed } => LayoutChange {
+            how: "kept".into(),
+            placed: placed.iter().map(|&index| entries[index].name.clone()).collect(),
+            moved,
+        },
         Repack::Repacked => LayoutChange { how: "repacked".into(), placed: Vec::new(), moved },
     };
     Ok((AtlasLayout { entries, packing }, change))
@@ -360,7 +390,8 @@ fn previous_layout(db: &dyn Db, asset: Asset) -> Option<Arc<AtlasLayout>> {
     if let Some(previous) = recall(db, &layout_memo_name(db, asset)) {
         return Some(previous);
     }
-    load_cached(db, LAYOUT_MEMO, layout_memo_key(db, asset), |entry| serde_json::from_value(entry.metadata).ok()).map(Arc::new)
+    load_cached(db, LAYOUT_MEMO, layout_memo_key(db, asset), |entry| serde_json::from_value(entry.metadata).ok())
+        .map(Arc::new)
 }
 
 fn remember_layout(db: &dyn Db, asset: Asset, layout: &AtlasLayout) {
@@ -377,11 +408,18 @@ fn remember_layout(db: &dyn Db, asset: Asset, layout: &AtlasLayout) {
 }
 
 /// The entries of one page: their layout entry, place, and trimmed texture facts.
-fn page_entries(db: &dyn Db, asset: Asset, layout: &AtlasLayout, page: u32) -> Result<Vec<(LayoutEntry, PageEntry)>, Diagnostic> {
+fn page_entries(
+    db: &dyn Db,
+    asset: Asset,
+    layout: &AtlasLayout,
+    page: u32,
+) -> Result<Vec<(LayoutEntry, PageEntry)>, Diagnostic> {
     let trim = trims(db, asset);
     let mut found = Vec::new();
-    for (entry, place) in layout.entries.iter().zip(&layout.packing.placements).filter(|(_, place)| place.page == page) {
-        let file = asset_file(db, asset, entry.file.clone()).ok_or_else(|| Diagnostic::new(&entry.file, "file not found"))?;
+    for (entry, place) in layout.entries.iter().zip(&layout.packing.placements).filter(|(_, place)| place.page == page)
+    {
+        let file =
+            asset_file(db, asset, entry.file.clone()).ok_or_else(|| Diagnostic::new(&entry.file, "file not found"))?;
         let trimmed = match entry.trimmed {
             Some(_) => kept_texture(db, file, entry.trim)?,
             None => trimmed_texture(db, file, trim)?,
@@ -411,8 +449,9 @@ pub fn atlas_page(db: &dyn Db, asset: Asset, page: u32) -> Result<Arc<Texture>, 
     let previous = previous_page(db, &memo_name).filter(|previous| previous.fits(width, height, padding, &recipe));
     let (texture, sources) = match previous {
         Some(previous) => {
-            let changed: Vec<usize> =
-                (0..recipe.len()).filter(|&index| recipe[index].kept_hash != previous.entries[index].kept_hash).collect();
+            let changed: Vec<usize> = (0..recipe.len())
+                .filter(|&index| recipe[index].kept_hash != previous.entries[index].kept_hash)
+                .collect();
             if changed.is_empty() {
                 return Ok(Arc::new(previous.texture.clone()));
             }
@@ -422,8 +461,9 @@ pub fn atlas_page(db: &dyn Db, asset: Asset, page: u32) -> Result<Arc<Texture>, 
                 kept.push((index, crop(&*entry_texture(db, asset, &entry.file)?, entry.trim)));
             }
             let textures: Vec<(usize, &Texture)> = kept.iter().map(|(index, texture)| (*index, texture)).collect();
-            let texture =
-                timed(db, COMPOSITE, &label, || recomposite_page(&previous.texture, &previous.sources, &recipe, &textures, padding));
+            let texture = timed(db, COMPOSITE, &label, || {
+                recomposite_page(&previous.texture, &previous.sources, &recipe, &textures, padding)
+            });
             (texture, previous.sources.clone())
         }
         None => {
@@ -431,8 +471,10 @@ pub fn atlas_page(db: &dyn Db, asset: Asset, page: u32) -> Result<Arc<Texture>, 
             for (entry, page_entry) in &entries {
                 kept.push((crop(&*entry_texture(db, asset, &entry.file)?, entry.trim), page_entry.placement));
             }
-            let textures: Vec<(&Texture, Placement)> = kept.iter().map(|(texture, placement)| (texture, *placement)).collect();
-            let (texture, sources) = timed(db, COMPOSITE, &label, || composite_page_keeping_sources(width, height, &textures, padding));
+            let textures: Vec<(&Texture, Placement)> =
+                kept.iter().map(|(texture, placement)| (texture, *placement)).collect();
+            let (texture, sources) =
+                timed(db, COMPOSITE, &label, || composite_page_keeping_sources(width, height, &textures, padding));
             (texture, Arc::new(sources))
         }
     };
@@ -511,7 +553,11 @@ impl PageMemo {
     fn fits(&self, width: u32, height: u32, padding: u32, entries: &[PageEntry]) -> bool {
         (self.texture.width, self.texture.height, self.padding) == (width, height, padding)
             && self.entries.len() == entries.len()
-            && self.entries.iter().zip(entries).all(|(a, b)| a.placement == b.placement && a.translucent == b.translucent)
+            && self
+                .entries
+                .iter()
+                .zip(entries)
+                .all(|(a, b)| a.placement == b.placement && a.translucent == b.translucent)
     }
 }
 
@@ -533,17 +579,21 @@ pub fn page_recipe_key(db: &dyn Db, asset: Asset, page: u32) -> Result<CacheKey,
     let Some(&(width, height)) = layout.packing.pages.get(page as usize) else {
         return Err(Diagnostic::new(asset.source_root(db), format!("atlas page {page} no longer exists")));
     };
-    let mut key = stage_key(COMPOSITE).part(&page).part(&[width, height]).part(&page_settings(db, asset).padding).part(&trims(db, asset));
-    for (entry, place) in layout.entries.iter().zip(&layout.packing.placements).filter(|(_, place)| place.page == page) {
-        let file = asset_file(db, asset, entry.file.clone()).ok_or_else(|| Diagnostic::new(&entry.file, "file not found"))?;
+    let mut key = stage_key(COMPOSITE)
+        .part(&page)
+        .part(&[width, height])
+        .part(&page_settings(db, asset).padding)
+        .part(&trims(db, asset));
+    for (entry, place) in layout.entries.iter().zip(&layout.packing.placements).filter(|(_, place)| place.page == page)
+    {
+        let file =
+            asset_file(db, asset, entry.file.clone()).ok_or_else(|| Diagnostic::new(&entry.file, "file not found"))?;
         let placement = place.placement;
         let trim = entry.trim;
-        key = key.part(&[placement.x, placement.y, placement.width, placement.height]).part(&placement.rotated).part(&[
-            trim.x,
-            trim.y,
-            trim.width,
-            trim.height,
-        ]);
+        key = key
+            .part(&[placement.x, placement.y, placement.width, placement.height])
+            .part(&placement.rotated)
+            .part(&[trim.x, trim.y, trim.width, trim.height]);
         key = key_with_files(db, key, [file]);
     }
     Ok(key.finish())
@@ -652,8 +702,10 @@ pub fn remapped_mesh(db: &dyn Db, asset: Asset, mesh: PathBuf) -> Result<Arc<sup
     let layout = atlas_layout(db, asset)?;
     let label = format!("{}/meshes/{}", asset.name(db), display_path(&remapped_mesh_path(db, asset, &mesh)));
     let file = asset_file(db, asset, mesh.clone()).ok_or_else(|| Diagnostic::new(&mesh, "file not found"))?;
-    let libraries: Vec<(PathBuf, Option<SourceFile>)> =
-        mesh_library_paths(db, asset, &mesh).into_iter().map(|path| (path.clone(), asset_file(db, asset, path))).collect();
+    let libraries: Vec<(PathBuf, Option<SourceFile>)> = mesh_library_paths(db, asset, &mesh)
+        .into_iter()
+        .map(|path| (path.clone(), asset_file(db, asset, path)))
+        .collect();
     // Whether each texture the mesh's materials name exists (not its texels: a texel edit
     // leaves the remap alone).
     let map_files: HashMap<PathBuf, bool> = mesh_map_paths(db, asset, &mesh)
@@ -663,24 +715,35 @@ pub fn remapped_mesh(db: &dyn Db, asset: Asset, mesh: PathBuf) -> Result<Arc<sup
             (path, exists)
         })
         .collect();
-    let mut missing: Vec<String> =
-        map_files.iter().filter(|(_, exists)| !**exists).map(|(path, _)| display_path(&crate::db::source_relative(db, path))).collect();
+    let mut missing: Vec<String> = map_files
+        .iter()
+        .filter(|(_, exists)| !**exists)
+        .map(|(path, _)| display_path(&crate::db::source_relative(db, path)))
+        .collect();
     missing.sort();
     let key = stage_key(REMAP).part(&crate::db::relocatable_hash(db, &*layout)).part(&missing[..]);
-    let key = key_with_files(db, key, std::iter::once(file).chain(libraries.iter().filter_map(|(_, file)| *file))).finish();
+    let key =
+        key_with_files(db, key, std::iter::once(file).chain(libraries.iter().filter_map(|(_, file)| *file))).finish();
     cached_json(db, REMAP, &label, key, || {
         let contents = crate::db::read_contents(db, file)?;
         let library_bytes = libraries
             .iter()
             .map(|(path, file)| {
-                (path.clone(), file.and_then(|file| file.contents(db).as_ref().ok()).map(|contents| contents.bytes.to_vec()))
+                (
+                    path.clone(),
+                    file.and_then(|file| file.contents(db).as_ref().ok()).map(|contents| contents.bytes.to_vec()),
+                )
             })
             .collect();
         timed(db, REMAP, &label, || {
-            let (loaded, warnings) = crate::mesh::load_mesh(&mesh, &contents.bytes, &library_bytes, asset.source_root(db))?;
+            let (loaded, warnings) =
+                crate::mesh::load_mesh(&mesh, &contents.bytes, &library_bytes, asset.source_root(db))?;
             let targets = super::remap::remap_targets(&atlas_table_entries(&layout));
-            let by_path: HashMap<PathBuf, usize> =
-                targets.iter().enumerate().map(|(index, target)| (asset.source_root(db).join(&target.name), index)).collect();
+            let by_path: HashMap<PathBuf, usize> = targets
+                .iter()
+                .enumerate()
+                .map(|(index, target)| (asset.source_root(db).join(&target.name), index))
+                .collect();
             let remap_error = |error: super::remap::RemapError| Diagnostic::new(&mesh, error.to_string());
             // A map of a used material that does not exist would leave the mesh pointing at it.
             for &material in loaded.triangle_materials.iter().collect::<std::collections::BTreeSet<_>>() {
@@ -688,17 +751,26 @@ pub fn remapped_mesh(db: &dyn Db, asset: Asset, mesh: PathBuf) -> Result<Arc<sup
                 for path in material.maps.values() {
                     if !map_files.get(path).copied().unwrap_or(true) {
                         let texture = display_path(path.strip_prefix(asset.source_root(db)).unwrap_or(path));
-                        return Err(remap_error(super::remap::RemapError::MissingMap { material: material.name.clone(), texture }));
+                        return Err(remap_error(super::remap::RemapError::MissingMap {
+                            material: material.name.clone(),
+                            texture,
+                        }));
                     }
                 }
             }
-            let chosen = super::remap::material_entries(&loaded, &targets, |path| by_path.get(path).copied()).map_err(remap_error)?;
+            let chosen = super::remap::material_entries(&loaded, &targets, |path| by_path.get(path).copied())
+                .map_err(remap_error)?;
             let depth = remapped_mesh_path(db, asset, &mesh).components().count();
             let library = format!("{}atlas.mtl", "../".repeat(depth));
             let header = format!("cirrus: {} remapped onto atlas `{}`", display_path(&mesh), asset.name(db));
-            let remapped = super::remap::remap_mesh(&loaded, &targets, &chosen, &library, &header).map_err(remap_error)?;
-            let remap_warnings = remapped.warnings.iter().map(|warning| Diagnostic::new(&mesh, warning.message.clone()));
-            Ok(super::remap::RemappedMesh { warnings: warnings.into_iter().chain(remap_warnings).collect(), ..remapped })
+            let remapped =
+                super::remap::remap_mesh(&loaded, &targets, &chosen, &library, &header).map_err(remap_error)?;
+            let remap_warnings =
+                remapped.warnings.iter().map(|warning| Diagnostic::new(&mesh, warning.message.clone()));
+            Ok(super::remap::RemappedMesh {
+                warnings: warnings.into_iter().chain(remap_warnings).collect(),
+                ..remapped
+            })
         })
     })
     .map(Arc::new)

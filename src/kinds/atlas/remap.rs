@@ -45,7 +45,9 @@ pub enum RemapError {
     RepeatingUvs { material: String, entry: String, u_min: f32, u_max: f32, v_min: f32, v_max: f32 },
     #[error("material `{material}` uses the atlased textures `{first}` and `{second}`, which lie in different rectangles or at different places in one: one UV set cannot address both")]
     TwoRectangles { material: String, first: String, second: String },
-    #[error("material `{material}` maps `{texture}`, which does not exist: the remapped mesh would point at a missing file")]
+    #[error(
+        "material `{material}` maps `{texture}`, which does not exist: the remapped mesh would point at a missing file"
+    )]
     MissingMap { material: String, texture: String },
 }
 
@@ -65,7 +67,11 @@ pub fn remap_targets(entries: &[AtlasEntry]) -> Vec<RemapTarget> {
     for entry in entries {
         targets.push(RemapTarget { name: entry.name.clone(), page: entry.page, transform: entry.transform() });
         for alias in &entry.aliases {
-            targets.push(RemapTarget { name: alias.name.clone(), page: entry.page, transform: alias.transform(entry.rotated) });
+            targets.push(RemapTarget {
+                name: alias.name.clone(),
+                page: entry.page,
+                transform: alias.transform(entry.rotated),
+            });
         }
     }
     targets
@@ -97,7 +103,8 @@ pub fn material_entries(
             match &mut chosen {
                 None => chosen = Some((target, vec![slot])),
                 Some((first, slots))
-                    if targets[*first].page == targets[target].page && targets[*first].transform == targets[target].transform =>
+                    if targets[*first].page == targets[target].page
+                        && targets[*first].transform == targets[target].transform =>
                 {
                     slots.push(slot)
                 }
@@ -147,7 +154,10 @@ fn map_transform(options: &str) -> ([f32; 2], [f32; 2], Vec<String>) {
 /// The texture coordinates of an atlased material before the remap: its UVs with its atlased
 /// map's `-s` and `-o` applied (what the texture is sampled at), and the options dropped. The
 /// slots of one material share a UV set: the first atlased slot's options stand for all.
-fn material_uv_transform(material: &MeshMaterial, slots: &[TextureSlot]) -> (impl Fn([f32; 2]) -> [f32; 2], Vec<String>) {
+fn material_uv_transform(
+    material: &MeshMaterial,
+    slots: &[TextureSlot],
+) -> (impl Fn([f32; 2]) -> [f32; 2], Vec<String>) {
     let options = slots.iter().find_map(|slot| material.map_options.get(slot)).cloned().unwrap_or_default();
     let (scale, offset, dropped) = map_transform(&options);
     (move |[u, v]: [f32; 2]| [u * scale[0] + offset[0], v * scale[1] + offset[1]], dropped)
@@ -199,7 +209,8 @@ pub fn remap_mesh(
     let mut faces_by_material: BTreeMap<u32, Vec<[(u32, u32); 3]>> = BTreeMap::new();
     let has_uvs = mesh.uvs.is_some();
     for (triangle, &material) in mesh.triangles.iter().zip(&mesh.triangle_materials) {
-        let chosen = material_entries.get(material as usize).and_then(|chosen| chosen.as_ref().map(|(target, _)| *target));
+        let chosen =
+            material_entries.get(material as usize).and_then(|chosen| chosen.as_ref().map(|(target, _)| *target));
         let corners = triangle.map(|vertex| {
             let next = uv_index.len() as u32;
             let uv = *uv_index.entry((vertex, chosen.map(|_| material))).or_insert_with(|| {
@@ -207,7 +218,10 @@ pub fn remap_mesh(
                 let [u, v] = match (chosen, sampled_at.get(material as usize).and_then(Option::as_ref)) {
                     (Some(target), Some(transform)) => {
                         let [u, v] = transform(uv);
-                        targets[target].transform.page_uv([u.clamp(0.0, 1.0) as f64, v.clamp(0.0, 1.0) as f64]).map(|c| c as f32)
+                        targets[target]
+                            .transform
+                            .page_uv([u.clamp(0.0, 1.0) as f64, v.clamp(0.0, 1.0) as f64])
+                            .map(|c| c as f32)
                     }
                     _ => uv,
                 };
@@ -246,7 +260,8 @@ pub fn remap_mesh(
             atlased: chosen.as_ref().map(|(_, slots)| slots.clone()).unwrap_or_default(),
         })
         .collect();
-    let warnings = warnings.into_iter().map(|message| crate::diagnostic::Diagnostic::new(Path::new(header), message)).collect();
+    let warnings =
+        warnings.into_iter().map(|message| crate::diagnostic::Diagnostic::new(Path::new(header), message)).collect();
     Ok(RemappedMesh { obj, materials, warnings })
 }
 
@@ -258,7 +273,12 @@ pub fn repeating_uvs(mesh: &Mesh, material: usize, entry: &str) -> Result<(), Re
 }
 
 /// [`repeating_uvs`] of the coordinates `transform` makes of the UVs (a map's `-s` and `-o`).
-fn repeating_uvs_through(mesh: &Mesh, material: usize, entry: &str, transform: &dyn Fn([f32; 2]) -> [f32; 2]) -> Result<(), RemapError> {
+fn repeating_uvs_through(
+    mesh: &Mesh,
+    material: usize,
+    entry: &str,
+    transform: &dyn Fn([f32; 2]) -> [f32; 2],
+) -> Result<(), RemapError> {
     let Some(range) = material_uv_range(mesh, material, transform) else { return Ok(()) };
     let outside = |low: f32, high: f32| low < -UV_TOLERANCE || high > 1.0 + UV_TOLERANCE;
     if outside(range[0], range[1]) || outside(range[2], range[3]) {
@@ -279,7 +299,9 @@ fn repeating_uvs_through(mesh: &Mesh, material: usize, entry: &str, transform: &
 fn material_uv_range(mesh: &Mesh, material: usize, transform: &dyn Fn([f32; 2]) -> [f32; 2]) -> Option<[f32; 4]> {
     let uvs = mesh.uvs.as_deref().unwrap_or(&[]);
     let mut range = [f32::INFINITY, f32::NEG_INFINITY, f32::INFINITY, f32::NEG_INFINITY];
-    for (triangle, _) in mesh.triangles.iter().zip(&mesh.triangle_materials).filter(|(_, &used)| used as usize == material) {
+    for (triangle, _) in
+        mesh.triangles.iter().zip(&mesh.triangle_materials).filter(|(_, &used)| used as usize == material)
+    {
         for &vertex in triangle {
             let [u, v] = transform(uvs.get(vertex as usize).copied().unwrap_or([0.0, 0.0]));
             if u.is_finite() && v.is_finite() {
@@ -293,10 +315,14 @@ fn material_uv_range(mesh: &Mesh, material: usize, transform: &dyn Fn([f32; 2]) 
 /// Where the materials of `mesh` that some triangle uses sample each texture `atlased` accepts
 /// (any slot): the range of their texture coordinates (after the map's `-s` and `-o`), per
 /// texture, over the materials that map it.
-pub fn material_uv_reach(mesh: &Mesh, atlased: impl Fn(&Path) -> bool) -> Vec<(std::path::PathBuf, super::queries::UvReach)> {
+pub fn material_uv_reach(
+    mesh: &Mesh,
+    atlased: impl Fn(&Path) -> bool,
+) -> Vec<(std::path::PathBuf, super::queries::UvReach)> {
     let mut reach: BTreeMap<std::path::PathBuf, super::queries::UvReach> = BTreeMap::new();
     for (index, material) in mesh.materials.iter().enumerate() {
-        let slots: Vec<TextureSlot> = material.maps.iter().filter(|(_, path)| atlased(path)).map(|(&slot, _)| slot).collect();
+        let slots: Vec<TextureSlot> =
+            material.maps.iter().filter(|(_, path)| atlased(path)).map(|(&slot, _)| slot).collect();
         if slots.is_empty() {
             continue;
         }
@@ -313,7 +339,11 @@ pub fn material_uv_reach(mesh: &Mesh, atlased: impl Fn(&Path) -> bool) -> Vec<(s
 
 /// One material of `atlas.mtl`: atlased maps name the page's image (`page_file`), the others
 /// their source texture as seen from the MTL's folder (`path_from_mtl`).
-pub fn mtl_material(material: &RemappedMaterial, page_file: impl Fn(u32) -> String, path_from_mtl: impl Fn(&Path) -> String) -> String {
+pub fn mtl_material(
+    material: &RemappedMaterial,
+    page_file: impl Fn(u32) -> String,
+    path_from_mtl: impl Fn(&Path) -> String,
+) -> String {
     crate::mesh::obj_text::mtl_material_text(&material.material, |slot, path| match material.page {
         Some(page) if material.atlased.contains(&slot) => page_file(page),
         _ => path_from_mtl(path),

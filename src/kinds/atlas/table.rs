@@ -72,7 +72,8 @@ impl UvTransform {
         let (trim_x, trim_y) = (trim.x as f64, trim.y as f64);
         let (uv_offset, uv_scale) = if placement.rotated {
             // The source's X axis runs down the page, its Y axis (up) to the right.
-            let offset = [(x + placement.height as f64 + trim_y - source_height) / page_width, 1.0 - (y - trim_x) / page_height];
+            let offset =
+                [(x + placement.height as f64 + trim_y - source_height) / page_width, 1.0 - (y - trim_x) / page_height];
             (offset, [source_height / page_width, source_width / page_height])
         } else {
             let offset = [(x - trim_x) / page_width, 1.0 - (y - trim_y + source_height) / page_height];

@@ -67,8 +67,12 @@ fn drawn_texels(layout: &Layout, placement: &crate::packing::Placement, images: 
 /// traced in parallel, then laid down in layout order (a later plane wins a shared texel).
 pub fn atlas_coverage(layout: &Layout, planes: &[&PlaneImages]) -> AtlasCoverage {
     let texels = layout.width as usize * layout.height as usize;
-    let per_plane: Vec<Vec<(u32, u32)>> =
-        layout.placements.par_iter().zip(planes.par_iter()).map(|(placement, images)| drawn_texels(layout, placement, images)).collect();
+    let per_plane: Vec<Vec<(u32, u32)>> = layout
+        .placements
+        .par_iter()
+        .zip(planes.par_iter())
+        .map(|(placement, images)| drawn_texels(layout, placement, images))
+        .collect();
     let mut last_drawn = vec![(u32::MAX, 0u32); texels];
     for (plane, drawn) in per_plane.iter().enumerate() {
         for &(atlas_texel, plane_texel) in drawn {
@@ -119,5 +123,9 @@ pub fn composite_atlas_surface(
 /// Where every atlas texel takes its values from: the nearest covered texel (see
 /// [`crate::texture::fill`]).
 pub fn texel_sources(coverage: &AtlasCoverage) -> TexelSources {
-    crate::texture::fill::texel_sources(coverage.width, coverage.height, coverage.drawn.iter().map(|drawn| drawn.atlas_texel))
+    crate::texture::fill::texel_sources(
+        coverage.width,
+        coverage.height,
+        coverage.drawn.iter().map(|drawn| drawn.atlas_texel),
+    )
 }

@@ -22,7 +22,8 @@ pub fn layout_rectangles(sizes: &[(f32, f32)], settings: &AtlasSettings, texel_d
     let area: f32 = sizes.iter().map(|(w, h)| w.max(1e-6) * h.max(1e-6)).sum::<f32>().max(1e-12);
     let max_side = settings.max_size as f32;
     let pack_at = |density: f32| {
-        let cells: Vec<(u32, u32)> = sizes.iter().map(|&(w, h)| (block_size(w * density), block_size(h * density))).collect();
+        let cells: Vec<(u32, u32)> =
+            sizes.iter().map(|&(w, h)| (block_size(w * density), block_size(h * density))).collect();
         pack_smallest(&cells, settings).map(|(width, height, placements)| {
             let used: u64 = cells.iter().map(|&(w, h)| w as u64 * h as u64).sum();
             let occupancy = used as f32 / (width as f32 * height as f32);

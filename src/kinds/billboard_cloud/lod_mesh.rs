@@ -11,8 +11,13 @@ use crate::kinds::billboard_cloud::rectangles::PlaneRectangle;
 pub fn lod_mesh(rectangles: &[PlaneRectangle], layout: &Layout, material: &str) -> (String, String) {
     let mut obj = String::new();
     let planes = rectangles.iter().map(|rectangle| rectangle.plane).collect::<std::collections::BTreeSet<_>>().len();
-    let _ =
-        writeln!(obj, "# cirrus billboard cloud: {} quads on {planes} planes, atlas {}x{}", rectangles.len(), layout.width, layout.height);
+    let _ = writeln!(
+        obj,
+        "# cirrus billboard cloud: {} quads on {planes} planes, atlas {}x{}",
+        rectangles.len(),
+        layout.width,
+        layout.height
+    );
     let _ = writeln!(obj, "mtllib lod.mtl");
     let _ = writeln!(obj, "o {material}");
     let _ = writeln!(obj, "usemtl {material}");

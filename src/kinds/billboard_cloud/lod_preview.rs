@@ -151,7 +151,8 @@ pub fn preview_chain(
         .into_iter()
         .enumerate()
         .map(|(level, views_metrics)| {
-            let pairs: Vec<Vec<&[u8]>> = views.iter().map(|images| vec![images[0].as_slice(), images[1 + level].as_slice()]).collect();
+            let pairs: Vec<Vec<&[u8]>> =
+                views.iter().map(|images| vec![images[0].as_slice(), images[1 + level].as_slice()]).collect();
             let metrics = summarise_views(views_metrics, samples_per_pixel, &shift_ious);
             Preview { metrics, contact_sheet: contact_sheet(&pairs, settings.size) }
         })
@@ -204,26 +205,28 @@ pub fn resolve_samples(samples: &[u8], size: u32, samples_per_axis: u32) -> Reso
     let sample_row = size * per_axis * 4;
     let mut rgba = vec![0u8; size * size * 4];
     let mut covered = vec![0u16; size * size];
-    rgba.par_chunks_mut(size * 4).zip(covered.par_chunks_mut(size)).enumerate().for_each(|(y, (rgba_row, covered_row))| {
-        for x in 0..size {
-            let (mut linear, mut count) = ([0.0f32; 3], 0u16);
-            for sample_y in y * per_axis..(y + 1) * per_axis {
-                let row = &samples[sample_y * sample_row..(sample_y + 1) * sample_row];
-                for sample in row[x * per_axis * 4..(x + 1) * per_axis * 4].chunks_exact(4) {
-                    for (sum, &value) in linear.iter_mut().zip(sample) {
-                        *sum += crate::texture::color::srgb_u8_to_linear(value);
+    rgba.par_chunks_mut(size * 4).zip(covered.par_chunks_mut(size)).enumerate().for_each(
+        |(y, (rgba_row, covered_row))| {
+            for x in 0..size {
+                let (mut linear, mut count) = ([0.0f32; 3], 0u16);
+                for sample_y in y * per_axis..(y + 1) * per_axis {
+                    let row = &samples[sample_y * sample_row..(sample_y + 1) * sample_row];
+                    for sample in row[x * per_axis * 4..(x + 1) * per_axis * 4].chunks_exact(4) {
+                        for (sum, &value) in linear.iter_mut().zip(sample) {
+                            *sum += crate::texture::color::srgb_u8_to_linear(value);
+                        }
+                        count += (sample[3] > 0) as u16;
                     }
-                    count += (sample[3] > 0) as u16;
                 }
+                let scale = 1.0 / (per_axis * per_axis) as f32;
+                for (channel, sum) in linear.iter().enumerate() {
+                    rgba_row[x * 4 + channel] = crate::texture::color::linear_to_srgb_u8(sum * scale);
+                }
+                rgba_row[x * 4 + 3] = if count > 0 { 255 } else { 0 };
+                covered_row[x] = count;
             }
-            let scale = 1.0 / (per_axis * per_axis) as f32;
-            for (channel, sum) in linear.iter().enumerate() {
-                rgba_row[x * 4 + channel] = crate::texture::color::linear_to_srgb_u8(sum * scale);
-            }
-            rgba_row[x * 4 + 3] = if count > 0 { 255 } else { 0 };
-            covered_row[x] = count;
-        }
-    });
+        },
+    );
     ResolvedView { rgba, covered, samples_per_pixel: (per_axis * per_axis) as u16 }
 }
 
@@ -238,15 +241,17 @@ pub fn view_projection(center: [f32; 3], radius: f32, direction: [f32; 3]) -> [[
     let (center, radius, direction) = (Vec3::from(center), radius.max(1e-6), Vec3::from(direction));
     let up = if direction.y.abs() > 0.9 { Vec3::Z } else { Vec3::Y };
     let view = glam::camera::rh::view::look_at_mat4(center + direction * 2.0 * radius, center, up);
-    let projection = glam::camera::rh::proj::directx::orthographic(-radius, radius, -radius, radius, 0.5 * radius, 3.5 * radius);
+    let projection =
+        glam::camera::rh::proj::directx::orthographic(-radius, radius, -radius, radius, 0.5 * radius, 3.5 * radius);
     (projection * view).to_cols_array_2d()
 }
 
 /// The centre of the bounding box of `mesh`'s vertices and the radius around it that holds them.
 pub fn bounding_sphere(mesh: &ViewMesh) -> ([f32; 3], f32) {
-    let positions = || mesh.batches.iter().flat_map(|(_, vertices)| vertices.iter().map(|vertex| Vec3::from(vertex.position)));
-    let (min, max) =
-        positions().fold((Vec3::splat(f32::INFINITY), Vec3::splat(f32::NEG_INFINITY)), |(min, max), p| (min.min(p), max.max(p)));
+    let positions =
+        || mesh.batches.iter().flat_map(|(_, vertices)| vertices.iter().map(|vertex| Vec3::from(vertex.position)));
+    let (min, max) = positions()
+        .fold((Vec3::splat(f32::INFINITY), Vec3::splat(f32::NEG_INFINITY)), |(min, max), p| (min.min(p), max.max(p)));
     if min.x > max.x {
         return ([0.0; 3], 1.0);
     }
@@ -287,7 +292,12 @@ impl StandIn {
 
 /// Where `stand_in` draws corner `corner` of the face `corners` whose plane is the points `x`
 /// with `normal · x = distance` (`Baked` and a face without a plane: where it is).
-pub fn stand_in_position(stand_in: StandIn, corners: [[f32; 3]; 3], corner: usize, plane: Option<([f32; 3], f32)>) -> [f32; 3] {
+pub fn stand_in_position(
+    stand_in: StandIn,
+    corners: [[f32; 3]; 3],
+    corner: usize,
+    plane: Option<([f32; 3], f32)>,
+) -> [f32; 3] {
     let Some((normal, distance)) = plane else { return corners[corner] };
     let normal = Vec3::from(normal);
     let point = Vec3::from(corners[corner]);
@@ -295,7 +305,9 @@ pub fn stand_in_position(stand_in: StandIn, corners: [[f32; 3]; 3], corner: usiz
     let moved = match stand_in {
         StandIn::Baked => point,
         StandIn::Projected => point - offset(point) * normal,
-        StandIn::Translated => point - corners.iter().map(|&corner| offset(Vec3::from(corner))).sum::<f32>() / 3.0 * normal,
+        StandIn::Translated => {
+            point - corners.iter().map(|&corner| offset(Vec3::from(corner))).sum::<f32>() / 3.0 * normal
+        }
     };
     moved.to_array()
 }

@@ -59,7 +59,9 @@ const GROUPS_PER_LEVEL: u32 = 1 << 24;
 
 /// Whether some of a level's atlas surfaces are not in the persistent cache (so it renders).
 fn level_renders(db: &dyn Db, asset: Asset, level: u32) -> bool {
-    !atlas_surfaces(db, asset, level).iter().all(|surface| crate::kinds::tail_queries::surface_in_cache(db, asset, surface))
+    !atlas_surfaces(db, asset, level)
+        .iter()
+        .all(|surface| crate::kinds::tail_queries::surface_in_cache(db, asset, surface))
 }
 
 /// Every (material, slot) whose texture the renders sample, in material order.
@@ -84,7 +86,12 @@ impl Kind for BillboardCloud {
         let levels = 0..levels::level_count(asset.settings(db));
         let mut jobs: Vec<Job> = levels
             .clone()
-            .map(|level| Job { asset, task: Task::Step("layout", level), after: 0, label: level_label(db, asset, level).clone() })
+            .map(|level| Job {
+                asset,
+                task: Task::Step("layout", level),
+                after: 0,
+                label: level_label(db, asset, level).clone(),
+            })
             .collect();
         // When some level will render, the GPU starts and the textures are decoded, filtered
         // and uploaded beside the planes (which run on one thread), not after them.
@@ -111,8 +118,12 @@ impl Kind for BillboardCloud {
                 billboard_layout(db, asset, level)?;
                 let lod = Job { asset, task: Task::Step("lod", level), after: 1, label: format!("{label}/lod") };
                 let surfaces = atlas_surfaces(db, asset, level);
-                let surface_jobs =
-                    surfaces.clone().map(|surface| Job { asset, label: surface.label(name), task: Task::Surface(surface), after: 2 });
+                let surface_jobs = surfaces.clone().map(|surface| Job {
+                    asset,
+                    label: surface.label(name),
+                    task: Task::Surface(surface),
+                    after: 2,
+                });
                 // Renders are needed only for surfaces the persistent cache does not hold.
                 if !level_renders(db, asset, level) {
                     return Ok([lod].into_iter().chain(surface_jobs).collect());
@@ -121,7 +132,12 @@ impl Kind for BillboardCloud {
                 // (the render memo, the surfaces' last encodings; the textures went with the
                 // planes) run as jobs of their own before the renders, on every worker, instead
                 // of one after the other inside the first render.
-                let mut jobs = vec![Job { asset, task: Task::Step("render-memo", level), after: 1, label: format!("{label}/render-memo") }];
+                let mut jobs = vec![Job {
+                    asset,
+                    task: Task::Step("render-memo", level),
+                    after: 1,
+                    label: format!("{label}/render-memo"),
+                }];
                 jobs.extend(surfaces.iter().map(|surface| Job {
                     asset,
                     task: Task::LoadPreviousEncoding(surface.clone()),
@@ -157,7 +173,8 @@ impl Kind for BillboardCloud {
             }
             "render" => {
                 let (level, batch) = (index / GROUPS_PER_LEVEL, index % GROUPS_PER_LEVEL);
-                let groups = queries::level_render_batches(db, asset, level).get(batch as usize).cloned().unwrap_or_default();
+                let groups =
+                    queries::level_render_batches(db, asset, level).get(batch as usize).cloned().unwrap_or_default();
                 for group in groups {
                     queries::plane_images(db, asset, level, group)?;
                 }
@@ -197,7 +214,8 @@ impl Kind for BillboardCloud {
             let container = asset.settings(db).encode.container;
             let mut tails = Vec::new();
             for surface in atlas_surfaces(db, asset, level) {
-                let [mips, encode, mut write] = tail_instances(name, &surface, &atlas, surface.artifact_paths(output_folder, container));
+                let [mips, encode, mut write] =
+                    tail_instances(name, &surface, &atlas, surface.artifact_paths(output_folder, container));
                 write.writes.push(report.clone());
                 tails.extend([mips, encode, write]);
             }
@@ -213,7 +231,13 @@ impl Kind for BillboardCloud {
         instances
     }
 
-    fn outputs(db: &dyn Db, asset: Asset, output_folder: &Path, errors: &mut Vec<Diagnostic>, runs: &[StageRun]) -> AssetOutputs {
+    fn outputs(
+        db: &dyn Db,
+        asset: Asset,
+        output_folder: &Path,
+        errors: &mut Vec<Diagnostic>,
+        runs: &[StageRun],
+    ) -> AssetOutputs {
         crate::kinds::outputs_unless_failed(errors, || billboard_outputs(db, asset, output_folder, runs))
     }
 
@@ -225,7 +249,8 @@ impl Kind for BillboardCloud {
             Ok(loaded) => loaded,
             Err(diagnostic) => return vec![diagnostic],
         };
-        let textures: std::collections::BTreeSet<&PathBuf> = mesh.materials.iter().flat_map(|material| material.maps.values()).collect();
+        let textures: std::collections::BTreeSet<&PathBuf> =
+            mesh.materials.iter().flat_map(|material| material.maps.values()).collect();
         for path in textures {
             if let Err(message) = check_texture_file(config, path) {
                 problems.push(Diagnostic::new(path, message));
@@ -267,13 +292,16 @@ fn level_render_instances(
     [mesh, planes, layout]: [&StageInstance; 3],
     decodes: &mut BTreeMap<String, StageInstance>,
 ) -> Vec<StageInstance> {
-    let (Ok(loaded), Ok(plane_layout)) = (loaded_mesh(db, asset), billboard_layout(db, asset, level)) else { return Vec::new() };
+    let (Ok(loaded), Ok(plane_layout)) = (loaded_mesh(db, asset), billboard_layout(db, asset, level)) else {
+        return Vec::new();
+    };
     let prefix = format!("{}/", asset.name(db));
     let mut renders = Vec::new();
     for group in &plane_layout.render_groups {
         let label = render_label(level_label(db, asset, level), &loaded.mesh, group);
         let instance = label.strip_prefix(&prefix).unwrap_or(&label).to_string();
-        let mut render = StageInstance::new(RENDER, label, instance).reads_stage(mesh).reads_stage(planes).reads_stage(layout);
+        let mut render =
+            StageInstance::new(RENDER, label, instance).reads_stage(mesh).reads_stage(planes).reads_stage(layout);
         if loaded.mesh.uvs.is_some() {
             for &material in &group.materials {
                 for path in loaded.mesh.materials[material as usize].maps.values() {
@@ -295,7 +323,12 @@ fn level_render_instances(
 
 /// The files of a baked billboard cloud: each level's LOD mesh, textures and previews, and the
 /// report.
-fn billboard_outputs(db: &dyn Db, asset: Asset, output_folder: &Path, runs: &[StageRun]) -> Result<AssetOutputs, Diagnostic> {
+fn billboard_outputs(
+    db: &dyn Db,
+    asset: Asset,
+    output_folder: &Path,
+    runs: &[StageRun],
+) -> Result<AssetOutputs, Diagnostic> {
     let loaded = loaded_mesh(db, asset)?;
     let settings = asset.settings(db);
     let name = asset.name(db);
@@ -318,10 +351,14 @@ fn billboard_outputs(db: &dyn Db, asset: Asset, output_folder: &Path, runs: &[St
         // One level: its figures are the asset's.
         fields.extend(level.into_iter().filter(|(key, _)| key != "level" && key != "folder"));
     }
-    fields.insert("stage_ms".into(), serde_json::to_value(crate::kinds::asset_stage_ms(name, runs)).expect("times serialise"));
+    fields.insert(
+        "stage_ms".into(),
+        serde_json::to_value(crate::kinds::asset_stage_ms(name, runs)).expect("times serialise"),
+    );
     fields.insert(
         "warnings".into(),
-        serde_json::to_value(loaded.warnings.iter().map(ErrorSummary::from).collect::<Vec<_>>()).expect("warnings serialise"),
+        serde_json::to_value(loaded.warnings.iter().map(ErrorSummary::from).collect::<Vec<_>>())
+            .expect("warnings serialise"),
     );
     outputs.report = Some(serde_json::to_vec_pretty(&report).expect("reports serialise"));
     Ok(outputs)
@@ -440,7 +477,12 @@ pub fn preview(
         return Err(PreviewError::NotBillboard(options.asset.clone()));
     }
     if asset.status != crate::summary::AssetStatus::Ok {
-        let errors = asset.errors.iter().map(|error| format!("  {}: {}", error.file, error.message)).collect::<Vec<_>>().join("\n");
+        let errors = asset
+            .errors
+            .iter()
+            .map(|error| format!("  {}: {}", error.file, error.message))
+            .collect::<Vec<_>>()
+            .join("\n");
         return Err(PreviewError::Failed { name: options.asset.clone(), errors });
     }
     let input = project.asset_input(&options.asset).expect("a built asset has an input");
@@ -462,25 +504,33 @@ pub fn preview(
     let lods = chosen
         .iter()
         .map(|&level| match options.stand_in {
-            lod_preview::StandIn::Baked => read_lod_view_mesh(&config.root, &folder.join(levels::level_folder(settings, level)), cutoff),
+            lod_preview::StandIn::Baked => {
+                read_lod_view_mesh(&config.root, &folder.join(levels::level_folder(settings, level)), cutoff)
+            }
             stand_in => {
                 let planes = queries::billboard_planes(db, input, level)?;
-                Ok(crate::gpu::ViewMesh { batches: faces_on_planes(&loaded, &planes, stand_in), materials: source.materials.clone() })
+                Ok(crate::gpu::ViewMesh {
+                    batches: faces_on_planes(&loaded, &planes, stand_in),
+                    materials: source.materials.clone(),
+                })
             }
         })
         .collect::<Result<Vec<_>, _>>()
         .map_err(PreviewError::Artifact)?;
     let positions = &loaded.mesh.positions;
-    let (min, max) = positions.iter().fold((glam::Vec3::splat(f32::INFINITY), glam::Vec3::splat(f32::NEG_INFINITY)), |(min, max), &p| {
-        (min.min(glam::Vec3::from(p)), max.max(glam::Vec3::from(p)))
-    });
+    let (min, max) = positions
+        .iter()
+        .fold((glam::Vec3::splat(f32::INFINITY), glam::Vec3::splat(f32::NEG_INFINITY)), |(min, max), &p| {
+            (min.min(glam::Vec3::from(p)), max.max(glam::Vec3::from(p)))
+        });
     let center = 0.5 * (min + max);
     let radius = positions.iter().map(|&p| glam::Vec3::from(p).distance(center)).fold(0.0, f32::max);
     let gpu = crate::gpu::gpu()?;
     let lod_refs: Vec<&crate::gpu::ViewMesh> = lods.iter().collect();
     let preview = lod_preview::preview_chain(gpu, &source, &lod_refs, center.to_array(), radius, options.settings)?;
     let out = config.root.join(&options.out);
-    let write = |path: PathBuf, bytes: &[u8]| crate::artifacts::write_if_changed(&path, bytes).map_err(PreviewError::Write);
+    let write =
+        |path: PathBuf, bytes: &[u8]| crate::artifacts::write_if_changed(&path, bytes).map_err(PreviewError::Write);
     let mut results = Vec::new();
     for (&level, level_preview) in chosen.iter().zip(preview.levels) {
         let level_out = out.join(levels::level_folder(settings, level));
@@ -544,21 +594,34 @@ fn source_view_mesh(db: &dyn Db, input: Asset, loaded: &LoadedMesh) -> Result<cr
     let cutoff = input.settings(db).billboard.alpha_cutoff;
     let mut materials = Vec::new();
     for material in &loaded.mesh.materials {
-        let levels = |slot: TextureSlot, kind: SurfaceKind| -> Result<Option<Arc<Vec<crate::texture::Texture>>>, Diagnostic> {
+        let levels = |slot: TextureSlot,
+                      kind: SurfaceKind|
+         -> Result<Option<Arc<Vec<crate::texture::Texture>>>, Diagnostic> {
             let Some(path) = material.maps.get(&slot).filter(|_| loaded.mesh.uvs.is_some()) else { return Ok(None) };
             let Some(file) = crate::db::asset_file(db, input, path.clone()) else { return Ok(None) };
-            let texture =
-                if slot == TextureSlot::Opacity { crate::db::opacity_texture(db, file)? } else { crate::db::decoded_texture(db, file)? };
+            let texture = if slot == TextureSlot::Opacity {
+                crate::db::opacity_texture(db, file)?
+            } else {
+                crate::db::decoded_texture(db, file)?
+            };
             // The reference keeps alpha-tested coverage at every distance, as the bake does.
             let alpha_cutoff = matches!(slot, TextureSlot::Albedo | TextureSlot::Opacity).then_some(cutoff);
-            Ok(Some(Arc::new(crate::texture::mips::mip_chain(&texture, crate::texture::mips::MipSettings { kind, alpha_cutoff }))))
+            Ok(Some(Arc::new(crate::texture::mips::mip_chain(
+                &texture,
+                crate::texture::mips::MipSettings { kind, alpha_cutoff },
+            ))))
         };
         materials.push(crate::gpu::ViewMaterial {
             albedo: levels(TextureSlot::Albedo, SurfaceKind::Albedo)?,
             opacity: levels(TextureSlot::Opacity, SurfaceKind::Albedo)?,
             normal: levels(TextureSlot::Normal, SurfaceKind::Normal)?,
             normal_has_z: true,
-            albedo_factor: [material.albedo_factor[0], material.albedo_factor[1], material.albedo_factor[2], material.opacity],
+            albedo_factor: [
+                material.albedo_factor[0],
+                material.albedo_factor[1],
+                material.albedo_factor[2],
+                material.opacity,
+            ],
             alpha_cutoff: cutoff,
         });
     }

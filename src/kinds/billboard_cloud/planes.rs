@@ -79,9 +79,10 @@ struct Grid {
 
 /// The sphere ε is a fraction of: centred on the bounding box, through the farthest vertex.
 fn bounding_sphere(positions: &[[f32; 3]]) -> (Vec3, f32) {
-    let (min, max) = positions.iter().fold((Vec3::splat(f32::INFINITY), Vec3::splat(f32::NEG_INFINITY)), |(min, max), &p| {
-        (min.min(Vec3::from(p)), max.max(Vec3::from(p)))
-    });
+    let (min, max) =
+        positions.iter().fold((Vec3::splat(f32::INFINITY), Vec3::splat(f32::NEG_INFINITY)), |(min, max), &p| {
+            (min.min(Vec3::from(p)), max.max(Vec3::from(p)))
+        });
     let center = 0.5 * (min + max);
     let radius = positions.iter().map(|&p| Vec3::from(p).distance(center)).fold(0.0, f32::max).max(1e-6);
     (center, radius)
@@ -212,7 +213,8 @@ impl Grid {
         let (mut lows, mut highs) = ([f32::NEG_INFINITY; PHI_BINS], [f32::INFINITY; PHI_BINS]);
         let ((cos_row, sin_row), (cos_next, sin_next)) = (self.theta_cos_sin[t], self.theta_cos_sin[t + 1]);
         for vertex in &face.vertices {
-            let (along_row, along_next) = (vertex.x * cos_row + vertex.y * sin_row, vertex.x * cos_next + vertex.y * sin_next);
+            let (along_row, along_next) =
+                (vertex.x * cos_row + vertex.y * sin_row, vertex.x * cos_next + vertex.y * sin_next);
             let (mut row, mut next) = ([0.0f32; ROW], [0.0f32; ROW]);
             for p in 0..ROW {
                 row[p] = self.sin_phi[p] * along_row + vertex.z * self.cos_phi[p];
@@ -231,7 +233,8 @@ impl Grid {
                 continue;
             }
             let cosine = face.normal.dot(self.centers[t * PHI_BINS + p]);
-            let (front_low, front_high) = if cosine >= 0.0 { (high, high + self.epsilon) } else { (low - self.epsilon, low) };
+            let (front_low, front_high) =
+                if cosine >= 0.0 { (high, high + self.epsilon) } else { (low - self.epsilon, low) };
             *range = BinRanges {
                 valid: (self.rho_bin(low) as u8, self.rho_bin(high) as u8),
                 front: (self.rho_bin(front_low) as u8, self.rho_bin(front_high) as u8),
@@ -244,7 +247,15 @@ impl Grid {
     /// `front` are that row's slices, `ranges` the face's from `row_ranges`): area × |cos| to
     /// every bin where a valid plane exists, and to the bins just in front of the face (weighted
     /// by PENALTY when scoring).
-    fn contribute_to_row(&self, face: &Face, ranges: &[BinRanges], sign: f32, t: usize, valid: &mut [f32], front: &mut [f32]) {
+    fn contribute_to_row(
+        &self,
+        face: &Face,
+        ranges: &[BinRanges],
+        sign: f32,
+        t: usize,
+        valid: &mut [f32],
+        front: &mut [f32],
+    ) {
         for (p, range) in ranges.iter().enumerate() {
             let (first, end) = (range.valid.0 as usize, range.valid.1 as usize);
             if first > end {
@@ -317,18 +328,29 @@ impl Density {
     fn remove_faces(&mut self, grid: &Grid, faces: &[Face], ranges: &[BinRanges], removed: &[u32]) {
         let row = PHI_BINS * grid.rho_bins;
         let per_row = faces.len() * PHI_BINS;
-        self.valid.par_chunks_mut(row).zip(self.front.par_chunks_mut(row)).enumerate().for_each(|(t, (valid, front))| {
-            for &index in removed {
-                let start = t * per_row + index as usize * PHI_BINS;
-                grid.contribute_to_row(&faces[index as usize], &ranges[start..start + PHI_BINS], -1.0, t, valid, front);
-            }
-        });
+        self.valid.par_chunks_mut(row).zip(self.front.par_chunks_mut(row)).enumerate().for_each(
+            |(t, (valid, front))| {
+                for &index in removed {
+                    let start = t * per_row + index as usize * PHI_BINS;
+                    grid.contribute_to_row(
+                        &faces[index as usize],
+                        &ranges[start..start + PHI_BINS],
+                        -1.0,
+                        t,
+                        valid,
+                        front,
+                    );
+                }
+            },
+        );
     }
 
     /// The densest bin: valid area minus the near-tangent penalty; where every bin is
     /// penalised below zero (dense foliage), the bin with the most valid area.
     fn best_bin(&self) -> Option<usize> {
-        let argmax = |score: &dyn Fn(usize) -> f32| (0..self.valid.len()).max_by(|&a, &b| score(a).total_cmp(&score(b)).then(b.cmp(&a)));
+        let argmax = |score: &dyn Fn(usize) -> f32| {
+            (0..self.valid.len()).max_by(|&a, &b| score(a).total_cmp(&score(b)).then(b.cmp(&a)))
+        };
         let penalised = |bin: usize| self.valid[bin] - PENALTY * self.front[bin];
         let best = argmax(&penalised)?;
         if penalised(best) > 0.0 {
@@ -342,7 +364,12 @@ impl Density {
 /// Chooses planes for the triangles of a mesh. `face_materials` holds each triangle's material
 /// (empty: one material); faces only move between planes that already hold their material,
 /// see `reassign_to_nearest_planes`. Deterministic for the same input.
-pub fn select_planes(positions: &[[f32; 3]], triangles: &[[u32; 3]], face_materials: &[u32], settings: PlaneSettings) -> PlaneSet {
+pub fn select_planes(
+    positions: &[[f32; 3]],
+    triangles: &[[u32; 3]],
+    face_materials: &[u32],
+    settings: PlaneSettings,
+) -> PlaneSet {
     let (grid, faces) = grid_and_faces(positions, triangles, settings.epsilon);
     let cap = settings.max_planes.map_or(usize::MAX, |cap| cap as usize);
     let greedy = greedy_planes(&grid, &faces, cap);
@@ -382,12 +409,15 @@ fn finish_planes(
         }
         let face = &faces[index as usize];
         let best = (0..planes.len())
-            .min_by(|&a, &b| face.distance_to(planes[a].0, planes[a].1).total_cmp(&face.distance_to(planes[b].0, planes[b].1)))
+            .min_by(|&a, &b| {
+                face.distance_to(planes[a].0, planes[a].1).total_cmp(&face.distance_to(planes[b].0, planes[b].1))
+            })
             .expect("at least one plane");
         planes[best].2.push(index);
     }
 
-    let face_materials: Vec<u32> = (0..faces.len()).map(|face| face_materials.get(face).copied().unwrap_or(0)).collect();
+    let face_materials: Vec<u32> =
+        (0..faces.len()).map(|face| face_materials.get(face).copied().unwrap_or(0)).collect();
     reassign_to_nearest_planes(faces, &face_materials, &mut planes, grid.epsilon);
     let neighbours = edge_neighbours(triangles);
     if let Finish::Budget { planes: cap, seam_weight } = finish {
@@ -414,7 +444,15 @@ fn finish_planes(
         })
         .collect();
     let mean_error = if area > 0.0 { (weighted_error / area) as f32 } else { 0.0 };
-    PlaneSet { planes, epsilon: grid.epsilon, epsilon_fraction, max_error, mean_error, seam_gap, face_count: faces.len() }
+    PlaneSet {
+        planes,
+        epsilon: grid.epsilon,
+        epsilon_fraction,
+        max_error,
+        mean_error,
+        seam_gap,
+        face_count: faces.len(),
+    }
 }
 
 /// The plane-space grid for ε (a fraction of the bounding-sphere radius) and the mesh's faces
@@ -456,10 +494,15 @@ fn greedy_planes(grid: &Grid, faces: &[Face], cap: usize) -> GreedyPlanes {
     let mut planes: Vec<(Vec3, f32, Vec<u32>)> = Vec::new();
     while !remaining.is_empty() && planes.len() < cap {
         let region = density.best_bin().map(|bin| grid.region(bin));
-        let (normal, rho) =
-            region.and_then(|region| refine(grid, faces, &remaining, region)).unwrap_or_else(|| largest_face_plane(faces, &remaining));
+        let (normal, rho) = region
+            .and_then(|region| refine(grid, faces, &remaining, region))
+            .unwrap_or_else(|| largest_face_plane(faces, &remaining));
         let holds = |(normal, rho): (Vec3, f32)| -> Vec<u32> {
-            remaining.par_iter().copied().filter(|&index| faces[index as usize].distance_to(normal, rho) <= grid.epsilon).collect()
+            remaining
+                .par_iter()
+                .copied()
+                .filter(|&index| faces[index as usize].distance_to(normal, rho) <= grid.epsilon)
+                .collect()
         };
         let (mut normal, mut rho) = (normal, rho);
         let mut members = holds((normal, rho));
@@ -550,9 +593,9 @@ pub fn search_epsilon_ladder(cap: f32, enough: f32, mut probe: impl FnMut(u32) -
             first + (highest_candidate - first) / 2
         } else {
             let slope = match previous {
-                Some((step, earlier)) if step != next => {
-                    ((earlier.planes.ln() - result.planes.ln()) / ((next as f32 - step as f32) * step_log)).clamp(0.3, 6.0)
-                }
+                Some((step, earlier)) if step != next => ((earlier.planes.ln() - result.planes.ln())
+                    / ((next as f32 - step as f32) * step_log))
+                    .clamp(0.3, 6.0),
                 _ => 1.5,
             };
             let root = next as f32 + (result.planes.ln() - cap.max(1.0).ln()) / (slope * step_log);
@@ -622,7 +665,15 @@ pub fn select_planes_within_budget(
         None => greedy_at(BUDGET_LADDER_STEPS),
     };
     let finish = Finish::Budget { planes: cap as usize, seam_weight };
-    finish_planes(&chosen.grid, &chosen.faces, chosen.greedy, triangles, face_materials, chosen.epsilon_fraction, finish)
+    finish_planes(
+        &chosen.grid,
+        &chosen.faces,
+        chosen.greedy,
+        triangles,
+        face_materials,
+        chosen.epsilon_fraction,
+        finish,
+    )
 }
 
 /// Moves every face to the plane nearest it among those holding its material, then fits the
@@ -636,7 +687,12 @@ pub fn select_planes_within_budget(
 /// render groups, and the renders a texture edit invalidates, stay those of the greedy
 /// selection or fewer. Planes left without faces are dropped by the caller. Deterministic:
 /// every face decides alone, ties keep the current plane.
-fn reassign_to_nearest_planes(faces: &[Face], face_materials: &[u32], planes: &mut [(Vec3, f32, Vec<u32>)], epsilon: f32) {
+fn reassign_to_nearest_planes(
+    faces: &[Face],
+    face_materials: &[u32],
+    planes: &mut [(Vec3, f32, Vec<u32>)],
+    epsilon: f32,
+) {
     let mut assignment = plane_of_each_face(faces.len(), planes);
     for round in 0..=REASSIGNMENT_ROUNDS {
         if !move_faces_to_better_planes(faces, face_materials, planes, &mut assignment, Face::distance_to) {
@@ -646,7 +702,9 @@ fn reassign_to_nearest_planes(faces: &[Face], face_materials: &[u32], planes: &m
         if round == REASSIGNMENT_ROUNDS {
             return;
         }
-        planes.par_iter_mut().for_each(|(normal, rho, members)| (*normal, *rho) = fit_plane(faces, members, *normal, *rho, epsilon));
+        planes
+            .par_iter_mut()
+            .for_each(|(normal, rho, members)| (*normal, *rho) = fit_plane(faces, members, *normal, *rho, epsilon));
     }
 }
 
@@ -663,7 +721,8 @@ fn plane_of_each_face(face_count: usize, planes: &[(Vec3, f32, Vec<u32>)]) -> Ve
 
 /// The materials `faces` use (`face_materials` per face; empty: one material), ascending.
 pub fn materials_of_faces(faces: &[u32], face_materials: &[u32]) -> Vec<u32> {
-    let mut materials: Vec<u32> = faces.iter().map(|&face| face_materials.get(face as usize).copied().unwrap_or(0)).collect();
+    let mut materials: Vec<u32> =
+        faces.iter().map(|&face| face_materials.get(face as usize).copied().unwrap_or(0)).collect();
     materials.sort_unstable();
     materials.dedup();
     materials
@@ -689,14 +748,17 @@ fn move_faces_to_better_planes(
 ) -> bool {
     let normals: Vec<Vec3> = planes.iter().map(|plane| plane.0).collect();
     let offsets: Vec<f32> = planes.iter().map(|plane| plane.1).collect();
-    let materials: Vec<Vec<u32>> = planes.iter().map(|(_, _, members)| materials_of_faces(members, face_materials)).collect();
+    let materials: Vec<Vec<u32>> =
+        planes.iter().map(|(_, _, members)| materials_of_faces(members, face_materials)).collect();
     let candidates = Candidates { normals: &normals, offsets: &offsets, materials: &materials };
     let moved: Vec<Option<usize>> = faces
         .par_iter()
         .zip(&*assignment)
         .enumerate()
         .map(|(index, (face, &current))| {
-            (current != usize::MAX).then(|| better_plane(face, face_materials[index], current, &candidates, &cost)).flatten()
+            (current != usize::MAX)
+                .then(|| better_plane(face, face_materials[index], current, &candidates, &cost))
+                .flatten()
         })
         .collect();
     let mut changed = false;
@@ -753,8 +815,14 @@ fn better_plane(
 fn refine(grid: &Grid, faces: &[Face], remaining: &[u32], region: Region) -> Option<(Vec3, f32)> {
     // The validity set of the region and its neighbours (loose test: hull over the corners).
     let grown = Region {
-        theta: (region.theta.0 - 0.5 * (region.theta.1 - region.theta.0), region.theta.1 + 0.5 * (region.theta.1 - region.theta.0)),
-        phi: ((region.phi.0 - 0.5 * (region.phi.1 - region.phi.0)).max(0.0), region.phi.1 + 0.5 * (region.phi.1 - region.phi.0)),
+        theta: (
+            region.theta.0 - 0.5 * (region.theta.1 - region.theta.0),
+            region.theta.1 + 0.5 * (region.theta.1 - region.theta.0),
+        ),
+        phi: (
+            (region.phi.0 - 0.5 * (region.phi.1 - region.phi.0)).max(0.0),
+            region.phi.1 + 0.5 * (region.phi.1 - region.phi.0),
+        ),
         rho: (region.rho.0 - grid.epsilon, region.rho.1 + grid.epsilon),
     };
     let corners = grown.corners();
@@ -762,7 +830,9 @@ fn refine(grid: &Grid, faces: &[Face], remaining: &[u32], region: Region) -> Opt
         .par_iter()
         .copied()
         .filter(|&index| {
-            faces[index as usize].valid_rho(&corners, grid.epsilon).is_some_and(|(low, high)| low <= grown.rho.1 && high >= grown.rho.0)
+            faces[index as usize]
+                .valid_rho(&corners, grid.epsilon)
+                .is_some_and(|(low, high)| low <= grown.rho.1 && high >= grown.rho.0)
         })
         .collect();
     if set.is_empty() {
@@ -780,14 +850,18 @@ fn refine(grid: &Grid, faces: &[Face], remaining: &[u32], region: Region) -> Opt
         let candidates: Vec<(f32, f32)> = (-1..=1)
             .flat_map(|dt| (-1..=1).map(move |dp| (dt, dp)))
             .map(|(dt, dp)| {
-                (center_theta + dt as f32 * step_theta, (center_phi + dp as f32 * step_phi).clamp(0.0, std::f32::consts::FRAC_PI_2))
+                (
+                    center_theta + dt as f32 * step_theta,
+                    (center_phi + dp as f32 * step_phi).clamp(0.0, std::f32::consts::FRAC_PI_2),
+                )
             })
             .collect();
         let scored: Vec<Option<(f32, f32, f32)>> = candidates
             .par_iter()
             .map_init(Vec::new, |events, &(candidate_theta, candidate_phi)| {
                 let normal = direction(candidate_theta, candidate_phi);
-                best_offset(faces, &sample, normal, grid.epsilon, events).map(|(score, _)| (score, candidate_theta, candidate_phi))
+                best_offset(faces, &sample, normal, grid.epsilon, events)
+                    .map(|(score, _)| (score, candidate_theta, candidate_phi))
             })
             .collect();
         // In candidate order, so ties resolve the same way on every run.
@@ -829,7 +903,9 @@ fn fit_plane(faces: &[Face], members: &[u32], normal: Vec3, rho: f32, epsilon: f
     }
     // The smallest eigenvector of the covariance, by power iteration on (trace − covariance),
     // started from the found normal.
-    let shifted = glam::Mat3::from_diagonal(Vec3::splat(covariance.x_axis.x + covariance.y_axis.y + covariance.z_axis.z)) - covariance;
+    let shifted =
+        glam::Mat3::from_diagonal(Vec3::splat(covariance.x_axis.x + covariance.y_axis.y + covariance.z_axis.z))
+            - covariance;
     let mut fitted = normal;
     for _ in 0..32 {
         fitted = (shifted * fitted).normalize_or_zero();
@@ -927,6 +1003,7 @@ fn largest_face_plane(faces: &[Face], remaining: &[u32]) -> (Vec3, f32) {
 
 fn largest_face_plane_any(faces: &[Face]) -> (Vec3, f32, Vec<u32>) {
     let all: Vec<u32> = (0..faces.len() as u32).collect();
-    let (normal, rho) = if faces.iter().any(|face| face.area > 0.0) { largest_face_plane(faces, &all) } else { (Vec3::Z, 0.0) };
+    let (normal, rho) =
+        if faces.iter().any(|face| face.area > 0.0) { largest_face_plane(faces, &all) } else { (Vec3::Z, 0.0) };
     (normal, rho, Vec::new())
 }

@@ -17,8 +17,8 @@ use super::rectangles::PlaneRectangle;
 use super::render_groups::RenderGroup;
 use crate::cache::{CacheEntry, CacheKey, CacheKeyBuilder, KeyPart};
 use crate::db::{
-    asset_file, cached_json, decoded_texture, from_pod_blob, key_with_files, load_cached, opacity_texture, pod_blob, record_cache_hit,
-    stage_key, store_cached_in_background, timed, timed_together, Asset, Db, SourceFile, Stage,
+    asset_file, cached_json, decoded_texture, from_pod_blob, key_with_files, load_cached, opacity_texture, pod_blob,
+    record_cache_hit, stage_key, store_cached_in_background, timed, timed_together, Asset, Db, SourceFile, Stage,
 };
 use crate::diagnostic::{display_path, Diagnostic};
 use crate::gpu::PlaneImages;
@@ -90,7 +90,9 @@ pub fn billboard_planes(db: &dyn Db, asset: Asset, level: u32) -> Result<Arc<sup
                     settings.max_planes,
                     super::planes::SEAM_WEIGHT,
                 ),
-                None => super::planes::select_planes(&mesh.positions, &mesh.triangles, &mesh.triangle_materials, settings),
+                None => {
+                    super::planes::select_planes(&mesh.positions, &mesh.triangles, &mesh.triangle_materials, settings)
+                }
             })
         })
     })
@@ -108,9 +110,17 @@ pub struct BillboardLayout {
 
 /// A level's atlas settings, the texel density asked for, and the screen size it is meant for.
 #[salsa::tracked(returns(clone))]
-pub fn atlas_layout_settings(db: &dyn Db, asset: Asset, level: u32) -> (crate::config::AtlasSettings, Option<f32>, Option<u32>) {
+pub fn atlas_layout_settings(
+    db: &dyn Db,
+    asset: Asset,
+    level: u32,
+) -> (crate::config::AtlasSettings, Option<f32>, Option<u32>) {
     let settings = level_settings(db, asset, level);
-    (super::levels::level_atlas_settings(&asset.settings(db).atlas, &settings), settings.texel_density, settings.screen_size)
+    (
+        super::levels::level_atlas_settings(&asset.settings(db).atlas, &settings),
+        settings.texel_density,
+        settings.screen_size,
+    )
 }
 
 #[salsa::tracked(returns(copy))]
@@ -128,7 +138,8 @@ pub fn layout_cache_key(db: &dyn Db, asset: Asset, level: u32) -> CacheKey {
 #[salsa::tracked(returns(clone))]
 pub fn billboard_layout(db: &dyn Db, asset: Asset, level: u32) -> Result<Arc<BillboardLayout>, Diagnostic> {
     let label = level_label(db, asset, level);
-    cached_json(db, LAYOUT, label, layout_cache_key(db, asset, level), || compute_billboard_layout(db, asset, level)).map(Arc::new)
+    cached_json(db, LAYOUT, label, layout_cache_key(db, asset, level), || compute_billboard_layout(db, asset, level))
+        .map(Arc::new)
 }
 
 fn compute_billboard_layout(db: &dyn Db, asset: Asset, level: u32) -> Result<BillboardLayout, Diagnostic> {
@@ -141,7 +152,8 @@ fn compute_billboard_layout(db: &dyn Db, asset: Asset, level: u32) -> Result<Bil
         Some(pixels / (2.0 * super::planes::bounding_sphere_radius(&loaded.mesh.positions)))
     });
     timed(db, LAYOUT, level_label(db, asset, level), || {
-        let mut rectangles = super::rectangles::plane_rectangles(&loaded.mesh.positions, &loaded.mesh.triangles, &planes);
+        let mut rectangles =
+            super::rectangles::plane_rectangles(&loaded.mesh.positions, &loaded.mesh.triangles, &planes);
         if let Some(quads) = level_settings(db, asset, level).planes.max_quads {
             rectangles = super::rectangles::merge_rectangles_to_budget(
                 &loaded.mesh.positions,
@@ -159,7 +171,8 @@ fn compute_billboard_layout(db: &dyn Db, asset: Asset, level: u32) -> Result<Bil
             solid_materials: &solid_materials,
         };
         super::rectangles::add_crack_filling_faces(&crack_filling, &planes, &mut rectangles);
-        let sizes: Vec<(f32, f32)> = rectangles.iter().map(|rectangle| (rectangle.frame.width, rectangle.frame.height)).collect();
+        let sizes: Vec<(f32, f32)> =
+            rectangles.iter().map(|rectangle| (rectangle.frame.width, rectangle.frame.height)).collect();
         let layout = super::layout::layout_rectangles(&sizes, &atlas, density);
         let render_groups = super::render_groups::render_groups(&loaded.mesh, &rectangles);
         Ok(BillboardLayout { rectangles, layout, render_groups })
@@ -215,11 +228,17 @@ fn material_map(
 /// texture), kept in the persistent cache under the file's content: after a restart, textures
 /// that did not change are neither decoded nor filtered again (on the oak, about 50 ms each).
 #[salsa::tracked(returns(clone))]
-pub fn material_texture_mips(db: &dyn Db, asset: Asset, material: u32, slot: TextureSlot) -> Result<Option<Arc<Vec<Texture>>>, Diagnostic> {
+pub fn material_texture_mips(
+    db: &dyn Db,
+    asset: Asset,
+    material: u32,
+    slot: TextureSlot,
+) -> Result<Option<Arc<Vec<Texture>>>, Diagnostic> {
     let loaded = loaded_mesh(db, asset)?;
     let Some(source) = loaded.mesh.materials.get(material as usize) else { return Ok(None) };
     let Some(path) = source.maps.get(&slot) else { return Ok(None) };
-    let contents = asset_file(db, asset, path.clone()).and_then(|file| file.contents(db).as_ref().ok().map(|contents| contents.hash));
+    let contents = asset_file(db, asset, path.clone())
+        .and_then(|file| file.contents(db).as_ref().ok().map(|contents| contents.hash));
     let settings = crate::gpu::material_mip_settings(slot, billboard_alpha_cutoff(db, asset));
     let key = contents.map(|hash| {
         stage_key(SOURCE_MIPS)
@@ -261,8 +280,17 @@ fn mip_levels_from_entry(entry: CacheEntry) -> Option<Vec<Texture>> {
     {
         return None;
     }
-    let fits = sizes.iter().zip(&entry.blobs).all(|(&(width, height), pixels)| pixels.len() == width as usize * height as usize * 4);
-    fits.then(|| sizes.into_iter().zip(entry.blobs).map(|((width, height), pixels)| Texture::new(width, height, pixels)).collect())
+    let fits = sizes
+        .iter()
+        .zip(&entry.blobs)
+        .all(|(&(width, height), pixels)| pixels.len() == width as usize * height as usize * 4);
+    fits.then(|| {
+        sizes
+            .into_iter()
+            .zip(entry.blobs)
+            .map(|((width, height), pixels)| Texture::new(width, height, pixels))
+            .collect()
+    })
 }
 
 /// The images of one render group of a level (four per rectangle, in rectangle order): one
@@ -282,7 +310,11 @@ pub fn plane_images(db: &dyn Db, asset: Asset, level: u32, group: u32) -> Result
     let batches = level_render_batches(db, asset, level);
     let batch = batches.iter().position(|batch| batch.contains(&group)).expect("every render group is in a batch");
     let rendered = rendered_batch(db, asset, level, batch as u32)?;
-    Ok(rendered.iter().find(|(rendered, _)| *rendered == group).map(|(_, images)| images.clone()).expect("the batch renders its groups"))
+    Ok(rendered
+        .iter()
+        .find(|(rendered, _)| *rendered == group)
+        .map(|(_, images)| images.clone())
+        .expect("the batch renders its groups"))
 }
 
 /// A render group's images from the render memo, when it holds ones that fit the group (a
@@ -331,13 +363,20 @@ pub fn rendered_batch(db: &dyn Db, asset: Asset, level: u32, batch: u32) -> Resu
     let Some(groups) = batches.get(batch as usize) else {
         return Err(Diagnostic::new(&mesh_path, format!("render batch {batch} no longer exists")));
     };
-    let groups: Vec<u32> = groups.iter().copied().filter(|&group| remembered_render(db, asset, level, group).is_none()).collect();
+    let groups: Vec<u32> =
+        groups.iter().copied().filter(|&group| remembered_render(db, asset, level, group).is_none()).collect();
     let planes = billboard_planes(db, asset, level)?;
     let mut materials = vec![crate::gpu::RenderMaterial::default(); loaded.mesh.materials.len()];
     for &group in &groups {
         for &material_index in &layout.render_groups[group as usize].materials {
             let source = &loaded.mesh.materials[material_index as usize];
-            let map = |slot| if loaded.mesh.uvs.is_some() { material_texture_mips(db, asset, material_index, slot) } else { Ok(None) };
+            let map = |slot| {
+                if loaded.mesh.uvs.is_some() {
+                    material_texture_mips(db, asset, material_index, slot)
+                } else {
+                    Ok(None)
+                }
+            };
             materials[material_index as usize] = crate::gpu::RenderMaterial {
                 albedo: map(TextureSlot::Albedo)?,
                 opacity: map(TextureSlot::Opacity)?,
@@ -345,7 +384,12 @@ pub fn rendered_batch(db: &dyn Db, asset: Asset, level: u32, batch: u32) -> Resu
                 metallic: map(TextureSlot::Metallic)?,
                 roughness: map(TextureSlot::Roughness)?,
                 ao: map(TextureSlot::Ao)?,
-                albedo_factor: [source.albedo_factor[0], source.albedo_factor[1], source.albedo_factor[2], source.opacity],
+                albedo_factor: [
+                    source.albedo_factor[0],
+                    source.albedo_factor[1],
+                    source.albedo_factor[2],
+                    source.opacity,
+                ],
                 metallic_value: source.metallic,
                 roughness_value: source.roughness,
                 ao_value: 1.0,
@@ -356,7 +400,9 @@ pub fn rendered_batch(db: &dyn Db, asset: Asset, level: u32, batch: u32) -> Resu
     let depth_range = planes.epsilon.max(planes.max_error).max(1e-6);
     let rectangles: Vec<(u32, u32)> = groups
         .iter()
-        .flat_map(|&group| layout.render_groups[group as usize].rectangles.iter().map(move |&rectangle| (group, rectangle)))
+        .flat_map(|&group| {
+            layout.render_groups[group as usize].rectangles.iter().map(move |&rectangle| (group, rectangle))
+        })
         .collect();
     let texels_of = |rectangle: u32| {
         let placement = &layout.layout.placements[rectangle as usize];
@@ -375,7 +421,8 @@ pub fn rendered_batch(db: &dyn Db, asset: Asset, level: u32, batch: u32) -> Resu
         let inputs: Vec<crate::gpu::PlaneRenderInput> = rectangles
             .iter()
             .map(|&(_, rectangle)| {
-                let (placement, rectangle) = (&layout.layout.placements[rectangle as usize], &layout.rectangles[rectangle as usize]);
+                let (placement, rectangle) =
+                    (&layout.layout.placements[rectangle as usize], &layout.rectangles[rectangle as usize]);
                 crate::gpu::PlaneRenderInput {
                     frame: rectangle.frame,
                     epsilon: depth_range,
@@ -397,13 +444,20 @@ pub fn rendered_batch(db: &dyn Db, asset: Asset, level: u32, batch: u32) -> Resu
     let mut images = images.into_iter();
     let by_group = groups
         .iter()
-        .map(|&group| (group, Arc::new(images.by_ref().take(layout.render_groups[group as usize].rectangles.len()).collect())))
+        .map(|&group| {
+            (group, Arc::new(images.by_ref().take(layout.render_groups[group as usize].rectangles.len()).collect()))
+        })
         .collect();
     Ok(Arc::new(by_group))
 }
 
 /// Every render group's images of a level, in render-group order.
-fn render_group_images(db: &dyn Db, asset: Asset, level: u32, layout: &BillboardLayout) -> Result<Vec<Arc<Vec<PlaneImages>>>, Diagnostic> {
+fn render_group_images(
+    db: &dyn Db,
+    asset: Asset,
+    level: u32,
+    layout: &BillboardLayout,
+) -> Result<Vec<Arc<Vec<PlaneImages>>>, Diagnostic> {
     (0..layout.render_groups.len() as u32).map(|group| plane_images(db, asset, level, group)).collect()
 }
 
@@ -435,7 +489,11 @@ pub fn atlas_coverage(db: &dyn Db, asset: Asset, level: u32) -> Result<Arc<super
 /// atlas stage). Kept in the persistent cache under the coverage's content hash: a colour-only
 /// edit in a new process loads it (about 15 ms on the oak) instead of searching (about 90 ms).
 #[salsa::tracked(returns(clone))]
-pub fn atlas_texel_sources(db: &dyn Db, asset: Asset, level: u32) -> Result<Arc<crate::texture::fill::TexelSources>, Diagnostic> {
+pub fn atlas_texel_sources(
+    db: &dyn Db,
+    asset: Asset,
+    level: u32,
+) -> Result<Arc<crate::texture::fill::TexelSources>, Diagnostic> {
     let coverage = atlas_coverage(db, asset, level)?;
     let key = stage_key(ATLAS_FILL).part(&coverage.content_hash()).finish();
     let texels = coverage.width as usize * coverage.height as usize;
@@ -480,7 +538,12 @@ pub fn atlas_surface(db: &dyn Db, asset: Asset, level: u32, surface: SurfaceKind
 /// texture edit that leaves a surface's renders alone (a colour-only edit leaves the normals)
 /// finds it in the cache by this key without compositing it.
 #[salsa::tracked(returns(clone))]
-pub fn atlas_surface_parts_key(db: &dyn Db, asset: Asset, level: u32, surface: SurfaceKind) -> Result<CacheKey, Diagnostic> {
+pub fn atlas_surface_parts_key(
+    db: &dyn Db,
+    asset: Asset,
+    level: u32,
+    surface: SurfaceKind,
+) -> Result<CacheKey, Diagnostic> {
     let layout = billboard_layout(db, asset, level)?;
     let images = render_group_images(db, asset, level, &layout)?;
     let coverage = atlas_coverage(db, asset, level)?;
@@ -510,7 +573,8 @@ pub fn atlas_recipe_key(db: &dyn Db, asset: Asset, level: u32) -> CacheKey {
         .part(crate::gpu::adapter_family())
         .part(&layout_cache_key(db, asset, level).0)
         .part(&billboard_alpha_cutoff(db, asset));
-    let textures = mesh_textures(db, asset).iter().filter_map(|path| asset_file(db, asset, path.clone())).collect::<Vec<_>>();
+    let textures =
+        mesh_textures(db, asset).iter().filter_map(|path| asset_file(db, asset, path.clone())).collect::<Vec<_>>();
     key_with_files(db, key, textures).finish()
 }
 
@@ -518,7 +582,8 @@ pub fn atlas_recipe_key(db: &dyn Db, asset: Asset, level: u32) -> CacheKey {
 /// persistent cache under the atlas's recipe, so that a bake served from the cache needs no atlas.
 #[salsa::tracked(returns(clone))]
 pub fn atlas_coverage_fraction(db: &dyn Db, asset: Asset, level: u32) -> Result<f64, Diagnostic> {
-    let key = stage_key(Stage { name: "atlas-coverage", version: 1 }).part(&atlas_recipe_key(db, asset, level).0).finish();
+    let key =
+        stage_key(Stage { name: "atlas-coverage", version: 1 }).part(&atlas_recipe_key(db, asset, level).0).finish();
     cached_json(db, ATLAS, level_label(db, asset, level), key, || {
         let coverage = atlas_coverage(db, asset, level)?;
         let fraction = coverage.drawn.len() as f32 / (coverage.width as usize * coverage.height as usize).max(1) as f32;
@@ -535,7 +600,9 @@ pub fn render_group_key(db: &dyn Db, asset: Asset, level: u32, group: u32) -> Ca
         .part(&layout_cache_key(db, asset, level).0)
         .part(&group)
         .part(&billboard_alpha_cutoff(db, asset));
-    let (Ok(loaded), Ok(layout)) = (loaded_mesh(db, asset), billboard_layout(db, asset, level)) else { return key.finish() };
+    let (Ok(loaded), Ok(layout)) = (loaded_mesh(db, asset), billboard_layout(db, asset, level)) else {
+        return key.finish();
+    };
     let Some(render_group) = layout.render_groups.get(group as usize) else { return key.finish() };
     let mut paths: Vec<&PathBuf> = Vec::new();
     if loaded.mesh.uvs.is_some() {
@@ -557,7 +624,10 @@ pub fn render_group_key(db: &dyn Db, asset: Asset, level: u32, group: u32) -> Ca
 const RENDER_MEMO: &str = "render-memo";
 
 fn render_memo_key(db: &dyn Db, asset: Asset, level: u32, materials: &[u32]) -> CacheKey {
-    stage_key(Stage { name: RENDER_MEMO, version: RENDER.version }).part(&layout_cache_key(db, asset, level).0).part(materials).finish()
+    stage_key(Stage { name: RENDER_MEMO, version: RENDER.version })
+        .part(&layout_cache_key(db, asset, level).0)
+        .part(materials)
+        .finish()
 }
 
 /// The material sets of the layout's render groups, each with its groups' indices.

@@ -26,7 +26,8 @@ impl PlaneRectangle {
     /// The four corners: origin, +x, +x+y, +y.
     pub fn corners(&self) -> [Vec3; 4] {
         let frame = &self.frame;
-        let (origin, x, y) = (Vec3::from(frame.origin), Vec3::from(frame.x_axis) * frame.width, Vec3::from(frame.y_axis) * frame.height);
+        let (origin, x, y) =
+            (Vec3::from(frame.origin), Vec3::from(frame.x_axis) * frame.width, Vec3::from(frame.y_axis) * frame.height);
         [origin, origin + x, origin + x + y, origin + y]
     }
 }
@@ -113,7 +114,13 @@ pub fn merge_rectangles_to_budget(
         let mut best: Best = None;
         for first in 0..members.len() {
             for second in first + 1..members.len() {
-                let merged = cluster_rectangle(positions, triangles, planes, plane, merged_faces(&members[first], &members[second]));
+                let merged = cluster_rectangle(
+                    positions,
+                    triangles,
+                    planes,
+                    plane,
+                    merged_faces(&members[first], &members[second]),
+                );
                 let added = area(&merged) - area(&members[first]) - area(&members[second]);
                 if best.as_ref().is_none_or(|(least, ..)| added < *least) {
                     best = Some((added, first, second, merged));
@@ -122,7 +129,8 @@ pub fn merge_rectangles_to_budget(
         }
         best
     };
-    let mut bests: Vec<Best> = by_plane.par_iter().enumerate().map(|(plane, members)| best_pair(plane, members)).collect();
+    let mut bests: Vec<Best> =
+        by_plane.par_iter().enumerate().map(|(plane, members)| best_pair(plane, members)).collect();
     while count > max_quads {
         let chosen = (0..bests.len())
             .filter(|&plane| bests[plane].is_some())
@@ -169,7 +177,8 @@ pub fn add_crack_filling_faces(input: &CrackFillingInput, planes: &PlaneSet, rec
     let mut materials_of_rectangle: Vec<Vec<u32>> = Vec::with_capacity(rectangles.len());
     for (index, rectangle) in rectangles.iter().enumerate() {
         rectangles_of_plane[rectangle.plane as usize].push(index);
-        materials_of_rectangle.push(crate::kinds::billboard_cloud::planes::materials_of_faces(&rectangle.faces, input.face_materials));
+        materials_of_rectangle
+            .push(crate::kinds::billboard_cloud::planes::materials_of_faces(&rectangle.faces, input.face_materials));
     }
     // The planes of the faces around each position.
     let (position_ids, distinct_positions) = crate::mesh::position_ids(input.positions);
@@ -186,10 +195,14 @@ pub fn add_crack_filling_faces(input: &CrackFillingInput, planes: &PlaneSet, rec
         }
     }
     let touches_plane = |face: u32, plane: u32| {
-        input.triangles[face as usize].iter().any(|&vertex| planes_at_position[position_ids[vertex as usize] as usize].contains(&plane))
+        input.triangles[face as usize]
+            .iter()
+            .any(|&vertex| planes_at_position[position_ids[vertex as usize] as usize].contains(&plane))
     };
     let solid_faces: Vec<u32> = (0..input.triangles.len() as u32)
-        .filter(|&face| input.solid_materials.get(input.face_materials[face as usize] as usize).copied().unwrap_or(false))
+        .filter(|&face| {
+            input.solid_materials.get(input.face_materials[face as usize] as usize).copied().unwrap_or(false)
+        })
         .collect();
     let pairs: Vec<(usize, u32)> = solid_faces
         .par_iter()
@@ -201,10 +214,13 @@ pub fn add_crack_filling_faces(input: &CrackFillingInput, planes: &PlaneSet, rec
             let mut found = Vec::new();
             for (index, plane) in planes.planes.iter().enumerate() {
                 let normal = Vec3::from(plane.normal);
-                if index as u32 == own_plane[face as usize] || (normal.dot(centroid) - plane.distance).abs() > epsilon + radius {
+                if index as u32 == own_plane[face as usize]
+                    || (normal.dot(centroid) - plane.distance).abs() > epsilon + radius
+                {
                     continue;
                 }
-                if corners.iter().any(|corner| (normal.dot(*corner) - plane.distance).abs() > epsilon) || !touches_plane(face, index as u32)
+                if corners.iter().any(|corner| (normal.dot(*corner) - plane.distance).abs() > epsilon)
+                    || !touches_plane(face, index as u32)
                 {
                     continue;
                 }
@@ -213,14 +229,21 @@ pub fn add_crack_filling_faces(input: &CrackFillingInput, planes: &PlaneSet, rec
                     if materials_of_rectangle[rectangle_index].binary_search(&material).is_err() {
                         continue;
                     }
-                    let (origin, x_axis, y_axis) =
-                        (Vec3::from(rectangle.frame.origin), Vec3::from(rectangle.frame.x_axis), Vec3::from(rectangle.frame.y_axis));
+                    let (origin, x_axis, y_axis) = (
+                        Vec3::from(rectangle.frame.origin),
+                        Vec3::from(rectangle.frame.x_axis),
+                        Vec3::from(rectangle.frame.y_axis),
+                    );
                     let (mut low, mut high) = (Vec2::splat(f32::INFINITY), Vec2::splat(f32::NEG_INFINITY));
                     for corner in corners {
                         let on_plane = Vec2::new((corner - origin).dot(x_axis), (corner - origin).dot(y_axis));
                         (low, high) = (low.min(on_plane), high.max(on_plane));
                     }
-                    if high.x >= 0.0 && high.y >= 0.0 && low.x <= rectangle.frame.width && low.y <= rectangle.frame.height {
+                    if high.x >= 0.0
+                        && high.y >= 0.0
+                        && low.x <= rectangle.frame.width
+                        && low.y <= rectangle.frame.height
+                    {
                         found.push((rectangle_index, face));
                     }
                 }
@@ -257,7 +280,8 @@ fn clusters(faces: &[u32], triangles: &[[u32; 3]], project: &dyn Fn(u32) -> Vec2
     let mut owners: std::collections::HashMap<(i64, i64), usize> = std::collections::HashMap::new();
     for (index, (min, max)) in boxes.iter().enumerate() {
         // Cells the box grown by half the gap touches; faces sharing a cell are joined.
-        let (x0, x1, y0, y1) = (cell(min.x - 0.5 * gap), cell(max.x + 0.5 * gap), cell(min.y - 0.5 * gap), cell(max.y + 0.5 * gap));
+        let (x0, x1, y0, y1) =
+            (cell(min.x - 0.5 * gap), cell(max.x + 0.5 * gap), cell(min.y - 0.5 * gap), cell(max.y + 0.5 * gap));
         let too_many = (x1 - x0 + 1).saturating_mul(y1 - y0 + 1) > 4096;
         let step = if too_many { ((x1 - x0 + 1).max(y1 - y0 + 1) / 64).max(1) } else { 1 };
         let mut x = x0;
@@ -307,7 +331,8 @@ pub fn convex_hull(mut points: Vec<Vec2>) -> Vec<Vec2> {
     let mut hull: Vec<Vec2> = Vec::with_capacity(points.len() * 2);
     for pass in 0..2 {
         let start = hull.len();
-        let iterator: Box<dyn Iterator<Item = &Vec2>> = if pass == 0 { Box::new(points.iter()) } else { Box::new(points.iter().rev()) };
+        let iterator: Box<dyn Iterator<Item = &Vec2>> =
+            if pass == 0 { Box::new(points.iter()) } else { Box::new(points.iter().rev()) };
         for &point in iterator {
             while hull.len() >= start + 2 && cross(hull[hull.len() - 2], hull[hull.len() - 1], point) <= 0.0 {
                 hull.pop();

@@ -91,7 +91,8 @@ pub fn render_batches(groups: &[RenderGroup], texels: impl Fn(&RenderGroup) -> u
 
 /// A render group's name in logs, summaries and the graph: `plane12:bark+leaves`.
 pub fn render_group_label(mesh: &Mesh, group: &RenderGroup) -> String {
-    let names: Vec<&str> = group.materials.iter().map(|&material| mesh.materials[material as usize].name.as_str()).collect();
+    let names: Vec<&str> =
+        group.materials.iter().map(|&material| mesh.materials[material as usize].name.as_str()).collect();
     format!("plane{}:{}", group.plane, names.join("+"))
 }
 
@@ -100,8 +101,10 @@ pub fn plane_texture_paths(mesh: &Mesh, plane: &PlaneRectangle) -> Vec<PathBuf> 
     if mesh.uvs.is_none() {
         return Vec::new();
     }
-    let mut paths: Vec<PathBuf> =
-        plane_materials(mesh, plane).iter().flat_map(|&material| mesh.materials[material as usize].maps.values().cloned()).collect();
+    let mut paths: Vec<PathBuf> = plane_materials(mesh, plane)
+        .iter()
+        .flat_map(|&material| mesh.materials[material as usize].maps.values().cloned())
+        .collect();
     paths.sort();
     paths.dedup();
     paths
@@ -109,8 +112,14 @@ pub fn plane_texture_paths(mesh: &Mesh, plane: &PlaneRectangle) -> Vec<PathBuf> 
 
 /// `faces` as vertex batches per material (three vertices per triangle, in the order given): a
 /// rectangle's own faces then those it also draws, or every face for a view of the mesh.
-pub fn face_batches(mesh: &Mesh, tangents: &[[f32; 4]], faces: impl IntoIterator<Item = u32>) -> Vec<(usize, Vec<RenderVertex>)> {
-    face_batches_placed(mesh, tangents, faces, |face, corner| mesh.positions[mesh.triangles[face as usize][corner] as usize])
+pub fn face_batches(
+    mesh: &Mesh,
+    tangents: &[[f32; 4]],
+    faces: impl IntoIterator<Item = u32>,
+) -> Vec<(usize, Vec<RenderVertex>)> {
+    face_batches_placed(mesh, tangents, faces, |face, corner| {
+        mesh.positions[mesh.triangles[face as usize][corner] as usize]
+    })
 }
 
 /// [`face_batches`] with each corner drawn at `position(face, corner)` (corner 0 to 2) instead of

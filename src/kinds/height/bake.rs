@@ -85,7 +85,13 @@ impl HeightMap {
     /// Assembles a map from per-texel measures (`None` on the surface with no hit; texels off
     /// the surface are `covered = false`), filling every unmeasured texel from its nearest
     /// measured one.
-    pub fn from_measures(size: u32, measures: &[Option<f32>], covered: &[bool], search_span: f32, bake_ms: f64) -> HeightMap {
+    pub fn from_measures(
+        size: u32,
+        measures: &[Option<f32>],
+        covered: &[bool],
+        search_span: f32,
+        bake_ms: f64,
+    ) -> HeightMap {
         let mut states = vec![HeightTexel::Empty as u8; measures.len()];
         let mut drawn = vec![0.0f32; measures.len()];
         let mut sources = Vec::new();
@@ -198,7 +204,14 @@ pub fn distance_along(high: &TriangleBvh, point: Vec3, direction: Vec3, reach: R
 
 /// A `Normals` bake: per texel of the low mesh's `size`² UV space, the distance to the high
 /// surface along the surface's normal (the low surface's, or its PN surface's).
-pub fn bake_along_normals(high: &TriangleBvh, low: &LowSurface, start: RayStart, size: u32, reach: RayReach, hair: f32) -> HeightMap {
+pub fn bake_along_normals(
+    high: &TriangleBvh,
+    low: &LowSurface,
+    start: RayStart,
+    size: u32,
+    reach: RayReach,
+    hair: f32,
+) -> HeightMap {
     let clock = std::time::Instant::now();
     let region = TexelRegion { x: 0, y: 0, width: size, height: size };
     let coverage = rasterize_uv(low.uvs, low.triangles, low.baked, (size, size), region);
@@ -211,10 +224,9 @@ pub fn bake_along_normals(high: &TriangleBvh, low: &LowSurface, start: RayStart,
                 RayStart::Flat => {
                     let corners = low.triangles[sample.triangle as usize];
                     let interpolate = |values: &[[f32; 3]]| {
-                        corners
-                            .iter()
-                            .zip(sample.barycentric)
-                            .fold(Vec3::ZERO, |sum, (&vertex, weight)| sum + Vec3::from(values[vertex as usize]) * weight)
+                        corners.iter().zip(sample.barycentric).fold(Vec3::ZERO, |sum, (&vertex, weight)| {
+                            sum + Vec3::from(values[vertex as usize]) * weight
+                        })
                     };
                     let mut normal = interpolate(low.normals).normalize_or_zero();
                     if normal == Vec3::ZERO {
@@ -235,12 +247,24 @@ pub fn bake_along_normals(high: &TriangleBvh, low: &LowSurface, start: RayStart,
         })
         .collect();
     let covered: Vec<bool> = coverage.samples.iter().map(Option::is_some).collect();
-    HeightMap::from_measures(size, &measures, &covered, reach.frontal + reach.rear, clock.elapsed().as_secs_f64() * 1000.0)
+    HeightMap::from_measures(
+        size,
+        &measures,
+        &covered,
+        reach.frontal + reach.rear,
+        clock.elapsed().as_secs_f64() * 1000.0,
+    )
 }
 
 /// A `TopDown` bake: the high render minus the low one per texel (both relative to one
 /// footprint), measured where both surfaces are.
-pub fn bake_top_down(size: u32, high: &[Option<f32>], low: &[Option<f32>], search_span: f32, bake_ms: f64) -> HeightMap {
+pub fn bake_top_down(
+    size: u32,
+    high: &[Option<f32>],
+    low: &[Option<f32>],
+    search_span: f32,
+    bake_ms: f64,
+) -> HeightMap {
     let measures: Vec<Option<f32>> = high.iter().zip(low).map(|(high, low)| Some((*high)? - (*low)?)).collect();
     let covered: Vec<bool> = low.iter().map(Option::is_some).collect();
     HeightMap::from_measures(size, &measures, &covered, search_span, bake_ms)

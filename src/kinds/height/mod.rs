@@ -30,8 +30,9 @@ use crate::texture::tail::{SurfaceInfo, TailSettings};
 use crate::texture::{SurfaceKind, Texture};
 use bake::Quantization;
 use queries::{
-    distance_label, distance_to_high, height_map, height_settings, high_geometry, high_path, low_geometry, map_key, map_label,
-    tessellate_settings, tessellated_files, MapReference, Measured, BAKE, BVH, DISPLACE, DISTANCE, TESSELLATE,
+    distance_label, distance_to_high, height_map, height_settings, high_geometry, high_path, low_geometry, map_key,
+    map_label, tessellate_settings, tessellated_files, MapReference, Measured, BAKE, BVH, DISPLACE, DISTANCE,
+    TESSELLATE,
 };
 
 pub struct Height;
@@ -72,10 +73,20 @@ impl Kind for Height {
                 let surface = height_surface();
                 let mut jobs = vec![Job { asset, label: surface.label(name), task: Task::Surface(surface), after: 1 }];
                 for (index, measured) in measured_meshes(db, asset).into_iter().enumerate() {
-                    jobs.push(Job { asset, label: distance_label(name, measured), task: Task::Step("distance", index as u32), after: 1 });
+                    jobs.push(Job {
+                        asset,
+                        label: distance_label(name, measured),
+                        task: Task::Step("distance", index as u32),
+                        after: 1,
+                    });
                 }
                 if tessellate_settings(db, asset).is_some() {
-                    jobs.push(Job { asset, label: format!("{name}/tessellated"), task: Task::Step("tessellate", 0), after: 1 });
+                    jobs.push(Job {
+                        asset,
+                        label: format!("{name}/tessellated"),
+                        task: Task::Step("tessellate", 0),
+                        after: 1,
+                    });
                 }
                 Ok(jobs)
             }
@@ -102,13 +113,15 @@ impl Kind for Height {
         };
         let surface = height_surface();
         let container = asset.settings(db).encode.container;
-        let [mips, encode, mut write] = tail_instances(name, &surface, &map, surface.artifact_paths(output_folder, container));
+        let [mips, encode, mut write] =
+            tail_instances(name, &surface, &map, surface.artifact_paths(output_folder, container));
         write.writes.push(report.clone());
         let mut instances = vec![low.clone(), high.clone(), bvh.clone(), map, mips, encode, write];
         let distance = |measured: Measured, mesh: &StageInstance| {
-            let mut instance = StageInstance::new(DISTANCE, distance_label(name, measured), format!("distance/{}", measured.name()))
-                .reads_stage(mesh)
-                .reads_stage(&bvh);
+            let mut instance =
+                StageInstance::new(DISTANCE, distance_label(name, measured), format!("distance/{}", measured.name()))
+                    .reads_stage(mesh)
+                    .reads_stage(&bvh);
             instance.writes.push(report.clone());
             instance
         };
@@ -120,7 +133,9 @@ impl Kind for Height {
             displace.writes = vec![output_folder.join("tessellated.obj"), output_folder.join("tessellated.mtl")];
             more.push(distance(Measured::Pn, &pn));
             if tessellate.displace {
-                let pn_map = StageInstance::new(BAKE, map_label(name, MapReference::Pn), "height_pn").reads_stage(&low).reads_stage(&bvh);
+                let pn_map = StageInstance::new(BAKE, map_label(name, MapReference::Pn), "height_pn")
+                    .reads_stage(&low)
+                    .reads_stage(&bvh);
                 let mut pn_map_written = pn_map.clone();
                 pn_map_written.writes.push(output_folder.join("height_pn.png"));
                 displace = displace.reads_stage(&pn_map);
@@ -137,7 +152,13 @@ impl Kind for Height {
         instances
     }
 
-    fn outputs(db: &dyn Db, asset: Asset, output_folder: &Path, errors: &mut Vec<Diagnostic>, runs: &[StageRun]) -> AssetOutputs {
+    fn outputs(
+        db: &dyn Db,
+        asset: Asset,
+        output_folder: &Path,
+        errors: &mut Vec<Diagnostic>,
+        runs: &[StageRun],
+    ) -> AssetOutputs {
         crate::kinds::outputs_unless_failed(errors, || height_outputs(db, asset, output_folder, runs))
     }
 
@@ -160,7 +181,9 @@ impl Kind for Height {
                         "the low mesh has no texture coordinates (`vt` in the OBJ): a Normals height bake and a displaced tessellation need its UV layout",
                     ));
                 } else if settings.height.projection == HeightProjection::Normals {
-                    problems.extend(crate::mesh::uvs_outside_warnings(low_file, &mesh).iter().map(crate::kinds::as_warning));
+                    problems.extend(
+                        crate::mesh::uvs_outside_warnings(low_file, &mesh).iter().map(crate::kinds::as_warning),
+                    );
                 }
             }
             Err(diagnostic) => problems.push(diagnostic),
@@ -296,7 +319,12 @@ fn flat_map_warning(files: &queries::HeightMapFiles, high: &Path, which: &str) -
     })
 }
 
-fn height_outputs(db: &dyn Db, asset: Asset, output_folder: &Path, runs: &[StageRun]) -> Result<AssetOutputs, Diagnostic> {
+fn height_outputs(
+    db: &dyn Db,
+    asset: Asset,
+    output_folder: &Path,
+    runs: &[StageRun],
+) -> Result<AssetOutputs, Diagnostic> {
     let settings = height_settings(db, asset);
     let container = asset.settings(db).encode.container;
     let low = low_geometry(db, asset)?;
@@ -365,7 +393,9 @@ fn height_outputs(db: &dyn Db, asset: Asset, output_folder: &Path, runs: &[Stage
     let mut warnings: Vec<ErrorSummary> = low.loaded.warnings.iter().map(ErrorSummary::from).collect();
     warnings.extend(high.loaded.warnings.iter().map(ErrorSummary::from));
     if settings.projection == HeightProjection::Normals {
-        warnings.extend(crate::mesh::uvs_outside_warnings(asset.main_file(db), &low.loaded.mesh).iter().map(ErrorSummary::from));
+        warnings.extend(
+            crate::mesh::uvs_outside_warnings(asset.main_file(db), &low.loaded.mesh).iter().map(ErrorSummary::from),
+        );
     }
     warnings.extend(flat_map_warning(&*height_map(db, asset, MapReference::Low)?, &high_path(db, asset), "height"));
     let report = HeightReport {
@@ -380,7 +410,10 @@ fn height_outputs(db: &dyn Db, asset: Asset, output_folder: &Path, runs: &[Stage
         pn_map: pn_map_report,
         tessellated,
         distance,
-        stage_ms: crate::kinds::asset_stage_ms(name, runs).into_iter().map(|(stage, ms)| (stage.to_string(), ms)).collect(),
+        stage_ms: crate::kinds::asset_stage_ms(name, runs)
+            .into_iter()
+            .map(|(stage, ms)| (stage.to_string(), ms))
+            .collect(),
         warnings,
     };
     outputs.report = Some(serde_json::to_vec_pretty(&report).expect("reports serialise"));

@@ -14,7 +14,8 @@ use super::bake::{bake_along_normals, bake_top_down, HeightMap, LowSurface, RayR
 use crate::cache::{CacheEntry, CacheKey};
 use crate::config::{HeightProjection, HeightSettings, TessellateSettings};
 use crate::db::{
-    from_pod_blob, hash_of_parts, load_cached, pod_blob, record_cache_hit, stage_key, store_cached, timed, Asset, ByHash, Db, Stage,
+    from_pod_blob, hash_of_parts, load_cached, pod_blob, record_cache_hit, stage_key, store_cached, timed, Asset,
+    ByHash, Db, Stage,
 };
 use crate::diagnostic::Diagnostic;
 use crate::kinds::mesh_queries::{loaded_mesh, loaded_mesh_of, LoadedMesh};
@@ -93,7 +94,11 @@ pub struct MeshGeometry {
     pub baked: Vec<u32>,
 }
 
-fn mesh_geometry(loaded: Arc<LoadedMesh>, path: &std::path::Path, which: &str) -> Result<Arc<MeshGeometry>, Diagnostic> {
+fn mesh_geometry(
+    loaded: Arc<LoadedMesh>,
+    path: &std::path::Path,
+    which: &str,
+) -> Result<Arc<MeshGeometry>, Diagnostic> {
     let mesh = &loaded.mesh;
     if mesh.triangles.is_empty() {
         return Err(Diagnostic::new(path, format!("the {which} mesh has no triangles")));
@@ -104,14 +109,15 @@ fn mesh_geometry(loaded: Arc<LoadedMesh>, path: &std::path::Path, which: &str) -
         mesh.uvs.as_deref().map_or(&[][..], bytemuck::cast_slice),
         bytemuck::cast_slice(&mesh.triangles),
     ]);
-    let (low, high) = mesh.triangles.iter().flatten().fold((Vec3::INFINITY, Vec3::NEG_INFINITY), |(low, high), &vertex| {
-        let position = Vec3::from(mesh.positions[vertex as usize]);
-        if position.is_finite() {
-            (low.min(position), high.max(position))
-        } else {
-            (low, high)
-        }
-    });
+    let (low, high) =
+        mesh.triangles.iter().flatten().fold((Vec3::INFINITY, Vec3::NEG_INFINITY), |(low, high), &vertex| {
+            let position = Vec3::from(mesh.positions[vertex as usize]);
+            if position.is_finite() {
+                (low.min(position), high.max(position))
+            } else {
+                (low, high)
+            }
+        });
     let diagonal = (high - low).length();
     if !(diagonal.is_finite() && diagonal > 0.0) {
         return Err(Diagnostic::new(path, format!("the {which} mesh has no extent (all its vertices at one point)")));
@@ -233,15 +239,25 @@ pub fn height_map(db: &dyn Db, asset: Asset, reference: MapReference) -> Result<
                     MapReference::Low => "a Normals height bake needs its UV layout",
                     MapReference::Pn => "a displaced tessellation reads its height map in UV space",
                 };
-                return Err(Diagnostic::new(low_path, format!("the low mesh has no texture coordinates (`vt` in the OBJ): {why}")));
+                return Err(Diagnostic::new(
+                    low_path,
+                    format!("the low mesh has no texture coordinates (`vt` in the OBJ): {why}"),
+                ));
             };
             let bvh = high_bvh(db, asset)?;
             let patches = (reference == MapReference::Pn).then(|| pn_patches(&low));
             let start = patches.as_deref().map_or(RayStart::Flat, RayStart::Pn);
-            let surface =
-                LowSurface { positions: &mesh.positions, normals: &mesh.normals, uvs, triangles: &mesh.triangles, baked: &low.baked };
+            let surface = LowSurface {
+                positions: &mesh.positions,
+                normals: &mesh.normals,
+                uvs,
+                triangles: &mesh.triangles,
+                baked: &low.baked,
+            };
             let reach = RayReach { frontal: settings.frontal * low.diagonal, rear: settings.rear * low.diagonal };
-            timed(db, BAKE, &label, || bake_along_normals(&bvh.value, &surface, start, settings.size, reach, low.diagonal * 1e-6))
+            timed(db, BAKE, &label, || {
+                bake_along_normals(&bvh.value, &surface, start, settings.size, reach, low.diagonal * 1e-6)
+            })
         }
         HeightProjection::TopDown => {
             let gpu = crate::gpu::gpu().map_err(|error| Diagnostic::new(low_path, error.to_string()))?;
@@ -256,7 +272,13 @@ pub fn height_map(db: &dyn Db, asset: Asset, reference: MapReference) -> Result<
                 let low_heights = render(&low, low_path)?;
                 let high_heights = render(&high, &high_path(db, asset))?;
                 let span = footprint.high_y - footprint.low_y;
-                Ok(bake_top_down(settings.size, &high_heights, &low_heights, span, clock.elapsed().as_secs_f64() * 1000.0))
+                Ok(bake_top_down(
+                    settings.size,
+                    &high_heights,
+                    &low_heights,
+                    span,
+                    clock.elapsed().as_secs_f64() * 1000.0,
+                ))
             })?
         }
     };
@@ -370,7 +392,12 @@ pub fn pn_mesh(db: &dyn Db, asset: Asset) -> Result<Arc<HashedMesh>, Diagnostic>
         );
         return Err(Diagnostic::new(asset.main_file(db), message));
     }
-    let input = PnInput { positions: &mesh.positions, normals: &mesh.normals, uvs: mesh.uvs.as_deref(), triangles: &mesh.triangles };
+    let input = PnInput {
+        positions: &mesh.positions,
+        normals: &mesh.normals,
+        uvs: mesh.uvs.as_deref(),
+        triangles: &mesh.triangles,
+    };
     Ok(timed(db, TESSELLATE, asset.name(db), || hashed(tessellate(&input, settings.level))))
 }
 
@@ -379,8 +406,11 @@ pub fn pn_mesh(db: &dyn Db, asset: Asset) -> Result<Arc<HashedMesh>, Diagnostic>
 #[salsa::tracked(returns(clone))]
 pub fn output_mesh_key(db: &dyn Db, asset: Asset) -> Result<CacheKey, Diagnostic> {
     let settings = level_of(db, asset)?;
-    let key =
-        stage_key(DISPLACE).part(&TESSELLATE.version).part(&settings.level).part(&settings.displace).part(&low_geometry(db, asset)?.hash);
+    let key = stage_key(DISPLACE)
+        .part(&TESSELLATE.version)
+        .part(&settings.level)
+        .part(&settings.displace)
+        .part(&low_geometry(db, asset)?.hash);
     Ok(if settings.displace { key.part(&map_key(db, asset, MapReference::Pn)?.0) } else { key }.finish())
 }
 
@@ -393,7 +423,9 @@ pub fn output_mesh(db: &dyn Db, asset: Asset) -> Result<Arc<HashedMesh>, Diagnos
         return Ok(pn);
     }
     let map = height_map(db, asset, MapReference::Pn)?;
-    Ok(timed(db, DISPLACE, asset.name(db), || hashed(crate::mesh::pn_triangles::displaced(&pn.value, |uv| map.map.sample(uv)))))
+    Ok(timed(db, DISPLACE, asset.name(db), || {
+        hashed(crate::mesh::pn_triangles::displaced(&pn.value, |uv| map.map.sample(uv)))
+    }))
 }
 
 /// The final tessellated mesh as OBJ text (`mtllib tessellated.mtl`), with its counts.
@@ -424,7 +456,8 @@ pub fn tessellated_files(db: &dyn Db, asset: Asset) -> Result<Arc<TessellatedFil
     let output = output_mesh(db, asset)?;
     let low = low_geometry(db, asset)?;
     let mesh = &output.value;
-    let materials: Vec<u32> = mesh.source_triangles.iter().map(|&triangle| low.loaded.mesh.triangle_materials[triangle as usize]).collect();
+    let materials: Vec<u32> =
+        mesh.source_triangles.iter().map(|&triangle| low.loaded.mesh.triangle_materials[triangle as usize]).collect();
     let names: Vec<String> = low.loaded.mesh.materials.iter().map(|material| material.name.clone()).collect();
     let obj = crate::mesh::obj_text::obj_text(
         &crate::mesh::obj_text::ObjMesh {
@@ -438,8 +471,11 @@ pub fn tessellated_files(db: &dyn Db, asset: Asset) -> Result<Arc<TessellatedFil
         &format!("{} tessellated by cirrus", asset.name(db)),
         "tessellated.mtl",
     );
-    let files =
-        TessellatedFiles { obj: obj.into_bytes().into(), vertices: mesh.positions.len() as u64, triangles: mesh.triangles.len() as u64 };
+    let files = TessellatedFiles {
+        obj: obj.into_bytes().into(),
+        vertices: mesh.positions.len() as u64,
+        triangles: mesh.triangles.len() as u64,
+    };
     store_cached(db, MESH_ENTRY, key, || CacheEntry {
         metadata: serde_json::json!({ "vertices": files.vertices, "triangles": files.triangles }),
         blobs: vec![files.obj.to_vec()],

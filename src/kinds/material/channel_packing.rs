@@ -3,7 +3,9 @@
 //! smaller sources resampled with a Catmull-Rom filter, constants where a map is missing.
 
 use super::definition::MaterialConstants;
-use crate::texture::color::{decode_normal, encode_normal, linear_to_srgb_u8, normalize_tangent_normal, srgb_u8_to_linear, unorm_u8};
+use crate::texture::color::{
+    decode_normal, encode_normal, linear_to_srgb_u8, normalize_tangent_normal, srgb_u8_to_linear, unorm_u8,
+};
 use crate::texture::{SurfaceKind, Texture, TextureSlot};
 
 /// Size of a surface with no source map at all: one BC block.
@@ -30,11 +32,17 @@ pub fn pack_surface(kind: SurfaceKind, sources: &[Option<&Texture>], constants: 
     match kind {
         SurfaceKind::Albedo => {
             let constant = constants.albedo.map(|c| c.clamp(0.0, 1.0));
-            let constant_rgba =
-                [linear_to_srgb_u8(constant[0]), linear_to_srgb_u8(constant[1]), linear_to_srgb_u8(constant[2]), unorm_u8(constant[3])];
+            let constant_rgba = [
+                linear_to_srgb_u8(constant[0]),
+                linear_to_srgb_u8(constant[1]),
+                linear_to_srgb_u8(constant[2]),
+                unorm_u8(constant[3]),
+            ];
             for (index, texel) in pixels.chunks_exact_mut(4).enumerate() {
                 let mut rgba = match &resampled[0] {
-                    Some(albedo) => [albedo[index * 4], albedo[index * 4 + 1], albedo[index * 4 + 2], albedo[index * 4 + 3]],
+                    Some(albedo) => {
+                        [albedo[index * 4], albedo[index * 4 + 1], albedo[index * 4 + 2], albedo[index * 4 + 3]]
+                    }
                     None => constant_rgba,
                 };
                 if let Some(opacity) = &resampled[1] {
@@ -64,7 +72,11 @@ pub fn pack_surface(kind: SurfaceKind, sources: &[Option<&Texture>], constants: 
         SurfaceKind::Normal => {
             for (index, texel) in pixels.chunks_exact_mut(4).enumerate() {
                 let normal = match &resampled[0] {
-                    Some(map) => normalize_tangent_normal(decode_normal([map[index * 4], map[index * 4 + 1], map[index * 4 + 2]])),
+                    Some(map) => normalize_tangent_normal(decode_normal([
+                        map[index * 4],
+                        map[index * 4 + 1],
+                        map[index * 4 + 2],
+                    ])),
                     None => [0.0, 0.0, 1.0],
                 };
                 texel.copy_from_slice(&encode_normal(normal));

@@ -72,7 +72,8 @@ pub struct MaterialFile {
 /// stay inside `source_root` (both relative to the project folder).
 pub fn parse_material_file(file: &Path, bytes: &[u8], source_root: &Path) -> Result<MaterialFile, Diagnostic> {
     let text = std::str::from_utf8(bytes).map_err(|error| {
-        let position = TextPosition::of_byte_offset(&String::from_utf8_lossy(&bytes[..error.valid_up_to()]), error.valid_up_to());
+        let position =
+            TextPosition::of_byte_offset(&String::from_utf8_lossy(&bytes[..error.valid_up_to()]), error.valid_up_to());
         Diagnostic::at(file, position, "the file is not valid UTF-8 text")
     })?;
     let structures = openddl::parse(text).map_err(|error| Diagnostic::at(file, error.position, error.message))?;
@@ -175,7 +176,10 @@ impl Reader<'_> {
                             continue;
                         }
                         _ => {
-                            self.warn(child.position, format!("param attrib \"{attrib}\" is not used by the PBR baker"));
+                            self.warn(
+                                child.position,
+                                format!("param attrib \"{attrib}\" is not used by the PBR baker"),
+                            );
                             continue;
                         }
                     };
@@ -190,13 +194,13 @@ impl Reader<'_> {
     fn attrib(&mut self, structure: &Structure) -> Result<Option<String>, Diagnostic> {
         let identifier = structure.identifier();
         match structure.property("attrib") {
-            Some(property) => {
-                match &property.value {
-                    Value::String(text) => Ok(Some(text.clone())),
-                    other => Err(self
-                        .error(property.position, format!("the `attrib` of `{identifier}` must be a string, found {}", other.describe()))),
-                }
-            }
+            Some(property) => match &property.value {
+                Value::String(text) => Ok(Some(text.clone())),
+                other => Err(self.error(
+                    property.position,
+                    format!("the `attrib` of `{identifier}` must be a string, found {}", other.describe()),
+                )),
+            },
             None => {
                 self.warn(structure.position, format!("`{identifier}` without an `attrib` property ignored"));
                 Ok(None)
@@ -205,7 +209,11 @@ impl Reader<'_> {
     }
 
     /// The single primitive child of `structure`, which must hold data of `expected` type.
-    fn data<'s>(&self, structure: &'s Structure, expected: &str) -> Result<(&'s [Value], Option<u32>, TextPosition), Diagnostic> {
+    fn data<'s>(
+        &self,
+        structure: &'s Structure,
+        expected: &str,
+    ) -> Result<(&'s [Value], Option<u32>, TextPosition), Diagnostic> {
         let identifier = structure.identifier();
         let mut primitives = structure.children().iter().filter_map(|child| match &child.body {
             StructureBody::Primitive { data_type, array_size, values } => Some((child, data_type, array_size, values)),
@@ -215,10 +223,14 @@ impl Reader<'_> {
             Some((child, data_type, array_size, values)) => {
                 let type_ok = match expected {
                     "string" => *data_type == openddl::DataType::String,
-                    _ => matches!(data_type, openddl::DataType::Half | openddl::DataType::Float | openddl::DataType::Double),
+                    _ => matches!(
+                        data_type,
+                        openddl::DataType::Half | openddl::DataType::Float | openddl::DataType::Double
+                    ),
                 };
                 if !type_ok {
-                    return Err(self.error(child.position, format!("`{identifier}` expects {expected} data, found {data_type}")));
+                    return Err(self
+                        .error(child.position, format!("`{identifier}` expects {expected} data, found {data_type}")));
                 }
                 Ok((values, *array_size, child.position))
             }
@@ -230,7 +242,10 @@ impl Reader<'_> {
         let (values, _, position) = self.data(structure, "string")?;
         match values {
             [Value::String(text)] => Ok((text.clone(), position)),
-            _ => Err(self.error(position, format!("`{}` expects exactly one string, found {}", structure.identifier(), values.len()))),
+            _ => Err(self.error(
+                position,
+                format!("`{}` expects exactly one string, found {}", structure.identifier(), values.len()),
+            )),
         }
     }
 
@@ -239,9 +254,10 @@ impl Reader<'_> {
         let floats: Vec<f32> = values.iter().filter_map(Value::as_f64).map(|value| value as f32).collect();
         if !counts.contains(&floats.len()) {
             let expected = counts.iter().map(ToString::to_string).collect::<Vec<_>>().join(" or ");
-            return Err(
-                self.error(position, format!("`{}` expects {expected} float values, found {}", structure.identifier(), floats.len()))
-            );
+            return Err(self.error(
+                position,
+                format!("`{}` expects {expected} float values, found {}", structure.identifier(), floats.len()),
+            ));
         }
         if floats.iter().any(|value| !value.is_finite()) {
             return Err(self.error(position, format!("`{}` holds a value that is not finite", structure.identifier())));
@@ -255,7 +271,10 @@ impl Reader<'_> {
         let joined = folder.join(written.replace('\\', "/"));
         match normalize_relative_path(&joined) {
             Some(path) if path.starts_with(self.source_root) && path != self.source_root => Ok(path),
-            _ => Err(self.error(position, format!("texture path \"{written}\" must be relative and stay inside the source folder"))),
+            _ => Err(self.error(
+                position,
+                format!("texture path \"{written}\" must be relative and stay inside the source folder"),
+            )),
         }
     }
 }

@@ -17,7 +17,9 @@ use crate::cache::CacheKey;
 use crate::config::{AssetConfig, PipelineConfig};
 use crate::db::{Asset, Db, StageRun, DECODE};
 use crate::diagnostic::{display_path, Diagnostic};
-use crate::kinds::{as_warning, check_texture_file, tail_instances, AssetOutputs, Job, Kind, Read, StageInstance, SurfaceId, Task};
+use crate::kinds::{
+    as_warning, check_texture_file, tail_instances, AssetOutputs, Job, Kind, Read, StageInstance, SurfaceId, Task,
+};
 use crate::summary::ErrorSummary;
 use crate::texture::tail::{SurfaceInfo, TailSettings};
 use crate::texture::{SurfaceKind, Texture};
@@ -28,7 +30,9 @@ pub struct Material;
 /// The surfaces of every material of the asset, in file order.
 fn surfaces(parsed: &definition::MaterialFile) -> Vec<SurfaceId> {
     let materials = parsed.materials.iter();
-    materials.flat_map(|material| SurfaceKind::MATERIAL.map(|surface| SurfaceId { group: material.name.clone(), surface })).collect()
+    materials
+        .flat_map(|material| SurfaceKind::MATERIAL.map(|surface| SurfaceId { group: material.name.clone(), surface }))
+        .collect()
 }
 
 impl Kind for Material {
@@ -96,7 +100,8 @@ impl Kind for Material {
                     }
                 }
             }
-            let [mut mips, encode, mut write] = tail_instances(name, &surface, &pack, surface.artifact_paths(output_folder, container));
+            let [mut mips, encode, mut write] =
+                tail_instances(name, &surface, &pack, surface.artifact_paths(output_folder, container));
             // The alpha cutoff of an albedo's mips comes from the material's constants.
             mips = mips.reads_stage(&parse);
             write.writes.push(report.clone());
@@ -105,7 +110,13 @@ impl Kind for Material {
         instances
     }
 
-    fn outputs(db: &dyn Db, asset: Asset, output_folder: &Path, errors: &mut Vec<Diagnostic>, _runs: &[StageRun]) -> AssetOutputs {
+    fn outputs(
+        db: &dyn Db,
+        asset: Asset,
+        output_folder: &Path,
+        errors: &mut Vec<Diagnostic>,
+        _runs: &[StageRun],
+    ) -> AssetOutputs {
         let Ok(parsed) = material_file(db, asset) else { return AssetOutputs::default() };
         let container = asset.settings(db).encode.container;
         let mut outputs = AssetOutputs::default();
@@ -114,10 +125,14 @@ impl Kind for Material {
             let mut reports = Vec::new();
             for surface in SurfaceKind::MATERIAL {
                 let id = SurfaceId { group: material.name.clone(), surface };
-                let Ok(artifacts) = crate::kinds::tail_queries::surface_artifacts(db, asset, id.clone()) else { continue };
+                let Ok(artifacts) = crate::kinds::tail_queries::surface_artifacts(db, asset, id.clone()) else {
+                    continue;
+                };
                 let [texture_path, preview_path] = id.artifact_paths(output_folder, container);
                 let other_formats = if asset.settings(db).report.compare_formats {
-                    crate::kinds::tail_queries::surface_format_comparison(db, asset, id.clone()).ok().map(|figures| figures.to_vec())
+                    crate::kinds::tail_queries::surface_format_comparison(db, asset, id.clone())
+                        .ok()
+                        .map(|figures| figures.to_vec())
                 } else {
                     None
                 };
@@ -163,7 +178,8 @@ impl Kind for Material {
         let mut problems: Vec<Diagnostic> = parsed.warnings.iter().map(as_warning).collect();
         for reference in parsed.materials.iter().flat_map(|material| material.textures.values()) {
             if let Err(message) = check_texture_file(config, &reference.path) {
-                let message = format!("texture \"{}\" ({}): {message}", reference.written, display_path(&reference.path));
+                let message =
+                    format!("texture \"{}\" ({}): {message}", reference.written, display_path(&reference.path));
                 problems.push(Diagnostic::at(main_file, reference.position, message));
             }
         }

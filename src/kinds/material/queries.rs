@@ -39,8 +39,10 @@ pub fn material_file(db: &dyn Db, asset: Asset) -> Result<Arc<MaterialFile>, Dia
     let source_root = asset.source_root(db);
     let key = stage_key(PARSE).part(&contents.hash).part(&crate::db::source_relative(db, path)).finish();
     let label = display_path(path);
-    cached_json(db, PARSE, &label, key, || timed(db, PARSE, &label, || parse_material_file(path, &contents.bytes, source_root)))
-        .map(Arc::new)
+    cached_json(db, PARSE, &label, key, || {
+        timed(db, PARSE, &label, || parse_material_file(path, &contents.bytes, source_root))
+    })
+    .map(Arc::new)
 }
 
 /// What one surface is made of: its sources (one per slot) and constants.
@@ -74,7 +76,11 @@ fn ao_source_map(db: &dyn Db, asset: Asset, material: &str) -> Result<Option<Map
         return Err(Diagnostic::new(reader, format!("ao_source `{name}` names no asset of the pipeline")));
     };
     let surface = SurfaceId { group: material.to_string(), surface: SurfaceKind::Ao };
-    match source.kind(db).provided_surface_stage(db, source, &surface).map_err(|error| from_ao_source(db, asset, name, error))? {
+    match source
+        .kind(db)
+        .provided_surface_stage(db, source, &surface)
+        .map_err(|error| from_ao_source(db, asset, name, error))?
+    {
         Some(stage) => Ok(Some(MapSource::Asset { asset: source, name: name.clone(), surface, stage })),
         None => Err(Diagnostic::new(reader, format!("ao_source `{name}` is not an AmbientOcclusion asset"))),
     }
@@ -100,13 +106,22 @@ pub fn surface_recipe(db: &dyn Db, asset: Asset, surface: SurfaceId) -> Result<A
             continue;
         };
         let Some(file) = crate::db::asset_file(db, asset, reference.path.clone()) else {
-            return Err(Diagnostic::at(material_path, reference.position, format!("texture \"{}\" was not read", reference.written)));
+            return Err(Diagnostic::at(
+                material_path,
+                reference.position,
+                format!("texture \"{}\" was not read", reference.written),
+            ));
         };
         if let Err(error) = file.contents(db) {
             return Err(Diagnostic::at(
                 material_path,
                 reference.position,
-                format!("{} texture \"{}\" ({}): {error}", slot.name(), reference.written, display_path(&reference.path)),
+                format!(
+                    "{} texture \"{}\" ({}): {error}",
+                    slot.name(),
+                    reference.written,
+                    display_path(&reference.path)
+                ),
             ));
         }
         sources.push(Some(MapSource::File(file)));
@@ -144,11 +159,13 @@ pub fn surface_recipe_key(db: &dyn Db, asset: Asset, surface: SurfaceId) -> Resu
     for source in &recipe.sources {
         key = match source {
             Some(MapSource::File(file)) => key.part(&read_contents(db, *file)?.hash),
-            Some(MapSource::Asset { asset: source, surface, .. }) => match source.kind(db).surface_recipe_key(db, *source, surface)? {
-                Some(recipe) => key.part("asset").part(&recipe.0),
-                // No cheap key: what the image holds.
-                None => key.part("image").part(&source.kind(db).surface_image(db, *source, surface)?.hash),
-            },
+            Some(MapSource::Asset { asset: source, surface, .. }) => {
+                match source.kind(db).surface_recipe_key(db, *source, surface)? {
+                    Some(recipe) => key.part("asset").part(&recipe.0),
+                    // No cheap key: what the image holds.
+                    None => key.part("image").part(&source.kind(db).surface_image(db, *source, surface)?.hash),
+                }
+            }
             None => key.part("none"),
         };
     }
@@ -157,8 +174,12 @@ pub fn surface_recipe_key(db: &dyn Db, asset: Asset, surface: SurfaceId) -> Resu
 
 /// Every texture the material file references (project-relative), once each.
 pub fn referenced_textures(parsed: &MaterialFile) -> Vec<PathBuf> {
-    let mut paths: Vec<PathBuf> =
-        parsed.materials.iter().flat_map(|material| material.textures.values()).map(|reference| reference.path.clone()).collect();
+    let mut paths: Vec<PathBuf> = parsed
+        .materials
+        .iter()
+        .flat_map(|material| material.textures.values())
+        .map(|reference| reference.path.clone())
+        .collect();
     paths.sort();
     paths.dedup();
     paths

@@ -54,7 +54,8 @@ fn a_box_on_a_floor_darkens_the_floor_around_it_and_every_file_is_written() {
     // The asset's rate: both materials' rays over the wall time their tiles spanned together, so
     // at least the rays over the summed tile times of either material alone would give.
     let asset_rate = report["timings"]["rays_per_second"].as_f64().unwrap();
-    let slowest = materials.iter().map(|material| material["rays_per_second"].as_f64().unwrap()).fold(f64::INFINITY, f64::min);
+    let slowest =
+        materials.iter().map(|material| material["rays_per_second"].as_f64().unwrap()).fold(f64::INFINITY, f64::min);
     assert!(asset_rate > slowest * 0.5, "asset {asset_rate} rays/s, slowest material {slowest}");
     assert_eq!(floor_report["texture"]["format"], "Bc4");
     assert_eq!(floor_report["texture"]["levels"], 7);
@@ -64,9 +65,13 @@ fn a_box_on_a_floor_darkens_the_floor_around_it_and_every_file_is_written() {
     let ktx2 = read_ktx2(&bytes);
     assert_eq!((ktx2.width, ktx2.height, ktx2.levels.len()), (64, 64, 7));
     let decoded = decode_blocks(BlockFormat::Bc4, &ktx2_level(&bytes, &ktx2, 0), 64, 64);
-    let squared: f64 =
-        floor.1.iter().enumerate().map(|(texel, &value)| (value as f64 / 257.0 - decoded.pixels[texel * 4] as f64).powi(2)).sum::<f64>()
-            / floor.1.len() as f64;
+    let squared: f64 = floor
+        .1
+        .iter()
+        .enumerate()
+        .map(|(texel, &value)| (value as f64 / 257.0 - decoded.pixels[texel * 4] as f64).powi(2))
+        .sum::<f64>()
+        / floor.1.len() as f64;
     let psnr = 10.0 * (255.0f64 * 255.0 / squared.max(1e-12)).log10();
     assert!(psnr > 40.0, "BC4 against the 16-bit map: {psnr:.1} dB");
 }
@@ -105,10 +110,16 @@ fn every_texel_outside_the_islands_takes_a_baked_value_so_no_mip_reaches_backgro
     assert!(build(&mut project.open()).all_ok());
     let (size, values) = ao_map(&project, "floor");
     let island = |x: u32, y: u32| (16..48).contains(&x) && (16..48).contains(&y);
-    let baked: std::collections::BTreeSet<u16> =
-        (0..size * size).filter(|texel| island(texel % size, texel / size)).map(|texel| values[texel as usize]).collect();
+    let baked: std::collections::BTreeSet<u16> = (0..size * size)
+        .filter(|texel| island(texel % size, texel / size))
+        .map(|texel| values[texel as usize])
+        .collect();
     for texel in (0..size * size).filter(|texel| !island(texel % size, texel / size)) {
-        assert!(baked.contains(&values[texel as usize]), "texel {texel} holds {}, no baked value", values[texel as usize]);
+        assert!(
+            baked.contains(&values[texel as usize]),
+            "texel {texel} holds {}, no baked value",
+            values[texel as usize]
+        );
     }
     // Each border texel next to the island copies the island's edge texel beside it.
     for y in 16..48 {
@@ -223,7 +234,10 @@ fn meshes_without_uvs_or_with_bad_numbers_fail_with_a_message_naming_the_file() 
         let asset = summary.assets.iter().find(|asset| asset.name == name).unwrap();
         asset.errors.iter().map(|error| format!("{}: {}", error.file, error.message)).collect::<Vec<_>>()
     };
-    assert_eq!(errors("plain"), ["assets/plain.obj: the mesh has no texture coordinates: an AO bake needs a UV layout (`vt` in the OBJ)"]);
+    assert_eq!(
+        errors("plain"),
+        ["assets/plain.obj: the mesh has no texture coordinates: an AO bake needs a UV layout (`vt` in the OBJ)"]
+    );
     let nan = errors("nan");
     assert!(nan.len() == 1 && nan[0].starts_with("assets/nan.obj: ") && nan[0].contains("non-finite"), "{nan:?}");
     assert!(errors("flat").is_empty(), "{:?}", errors("flat"));
@@ -243,7 +257,8 @@ fn degenerate_uvs_fail_and_a_non_finite_one_is_named_with_its_line() {
         ])"#,
     );
     // Every corner at one UV: nothing of the map is covered (it used to bake all white, ok).
-    project.write("assets/point.obj", "v 0 0 0\nv 1 0 0\nv 0 0 -1\nv 1 0 -1\nvt 0.5 0.5\nf 1/1 2/1 3/1\nf 2/1 4/1 3/1\n");
+    project
+        .write("assets/point.obj", "v 0 0 0\nv 1 0 0\nv 0 0 -1\nv 1 0 -1\nvt 0.5 0.5\nf 1/1 2/1 3/1\nf 2/1 4/1 3/1\n");
     // One `nan` among the texture coordinates (it used to read "the mesh has no texture coordinates").
     project.write("assets/nan_uv.obj", "v 0 0 0\nv 1 0 0\nv 0 0 -1\nvt 0 0\n  vt nan 0\nvt 0 1\nf 1/1 2/2 3/3\n");
     let summary = build(&mut project.open());
@@ -271,18 +286,25 @@ fn uvs_outside_the_unit_square_are_reported() {
             AmbientOcclusion(name: "wide", mesh: "wide.obj", ao: (size: 16, rays: 8)),
         ])"#,
     );
-    project
-        .write("assets/wide.obj", "v 0 0 0\nv 1 0 0\nv 0 0 -1\nv 1 0 -1\nvt 0 0\nvt 1 0\nvt 0 1\nvt 1.5 1\nf 1/1 2/2 3/3\nf 2/2 4/4 3/3\n");
+    project.write(
+        "assets/wide.obj",
+        "v 0 0 0\nv 1 0 0\nv 0 0 -1\nv 1 0 -1\nvt 0 0\nvt 1 0\nvt 0 1\nvt 1.5 1\nf 1/1 2/2 3/3\nf 2/2 4/4 3/3\n",
+    );
     let summary = build(&mut project.open());
     assert!(summary.all_ok(), "{}", summary.to_text());
     let warnings = report_of(&project, "wide")["warnings"].to_string();
     assert!(
-        warnings.contains("1 of its 2 triangles have texture coordinates outside [0, 1]") && warnings.contains("u ∈ [0, 1.5]"),
+        warnings.contains("1 of its 2 triangles have texture coordinates outside [0, 1]")
+            && warnings.contains("u ∈ [0, 1.5]"),
         "{warnings}"
     );
     // `build` prints them under the asset too, and its JSON summary carries them.
     let text = summary.to_text();
-    assert!(text.contains("warning: assets/wide.obj: material `default`") || text.contains("warning: assets/wide.obj: material"), "{text}");
+    assert!(
+        text.contains("warning: assets/wide.obj: material `default`")
+            || text.contains("warning: assets/wide.obj: material"),
+        "{text}"
+    );
     let output = project.run_cli(&["build", "--summary", "json"]);
     let json: serde_json::Value = serde_json::from_slice(&output.stdout).unwrap();
     assert!(json["assets"][0]["warnings"][0]["message"].as_str().unwrap().contains("outside [0, 1]"), "{json}");

@@ -118,7 +118,10 @@ fn with_a_finite_reach_a_mesh_edit_rebakes_only_the_tiles_near_it_with_a_full_ba
     let fresh = ao_project(&two_islands(0.7), REACH);
     assert!(build(&mut fresh.open()).all_ok());
     for file in ["ground/ao.png", "ground/ao.ktx2", "box/ao.png", "box/ao.ktx2"] {
-        assert!(project.read(&format!("baked/scene/{file}")) == fresh.read(&format!("baked/scene/{file}")), "{file} differs");
+        assert!(
+            project.read(&format!("baked/scene/{file}")) == fresh.read(&format!("baked/scene/{file}")),
+            "{file} differs"
+        );
     }
 
     // After a restart the persistent cache does the same: the far tiles are found by their keys.
@@ -127,10 +130,14 @@ fn with_a_finite_reach_a_mesh_edit_rebakes_only_the_tiles_near_it_with_a_full_ba
     restarted.write("assets/scene.obj", &edited_obj);
     let mut again = restarted.open();
     assert!(build(&mut again).all_ok());
-    let after_restart: Vec<String> = again.take_executed_stages().into_iter().filter(|stage| !stage.starts_with("write(")).collect();
+    let after_restart: Vec<String> =
+        again.take_executed_stages().into_iter().filter(|stage| !stage.starts_with("write(")).collect();
     let expected: Vec<String> = in_process.iter().filter(|stage| !stage.starts_with("write(")).cloned().collect();
     assert_eq!(after_restart, expected);
     for file in ["ground/ao.png", "box/ao.png"] {
-        assert!(restarted.read(&format!("baked/scene/{file}")) == fresh.read(&format!("baked/scene/{file}")), "{file} differs");
+        assert!(
+            restarted.read(&format!("baked/scene/{file}")) == fresh.read(&format!("baked/scene/{file}")),
+            "{file} differs"
+        );
     }
 }

@@ -43,7 +43,12 @@ impl Part {
                     ([-half + 2.0 * half * s, y, half - 2.0 * half * t], [u, uv[1] + t * (uv[3] - uv[1])])
                 };
                 let first = self.vertices.len() as u32;
-                self.vertices.extend([at(column, row), at(column + 1, row), at(column + 1, row + 1), at(column, row + 1)]);
+                self.vertices.extend([
+                    at(column, row),
+                    at(column + 1, row),
+                    at(column + 1, row + 1),
+                    at(column, row + 1),
+                ]);
                 self.triangles.extend([[first, first + 1, first + 2], [first, first + 2, first + 3]]);
             }
         }

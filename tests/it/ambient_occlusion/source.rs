@@ -68,16 +68,23 @@ fn rebaking_the_source_repacks_only_the_mra_surfaces_that_read_it_and_the_graph_
     let graph = cirrus.graph();
     for material in ["floor", "box"] {
         let edge = (format!("fill(scene/{material})"), format!("pack(mat/{material}/mra)"));
-        assert!(graph.edges.iter().any(|found| (&found.from, &found.to) == (&edge.0, &edge.1)), "{edge:?} in the graph");
+        assert!(
+            graph.edges.iter().any(|found| (&found.from, &found.to) == (&edge.0, &edge.1)),
+            "{edge:?} in the graph"
+        );
     }
-    assert!(!graph.edges.iter().any(|edge| edge.from == "decode(assets/white.png)" && edge.to == "pack(mat/floor/mra)"));
+    assert!(!graph
+        .edges
+        .iter()
+        .any(|edge| edge.from == "decode(assets/white.png)" && edge.to == "pack(mat/floor/mra)"));
     cirrus.take_executed_stages();
 
     let pipeline = String::from_utf8(project.read("pipeline.ron")).unwrap();
     std::fs::write(project.path("pipeline.ron"), pipeline.replace("rays: 16", "rays: 32")).unwrap();
     cirrus.reconfigure(cirrus::config::load_pipeline(&project.path("pipeline.ron")).unwrap());
     assert!(build(&mut cirrus).all_ok());
-    let material_stages: Vec<String> = cirrus.take_executed_stages().into_iter().filter(|stage| stage.contains("(mat/")).collect();
+    let material_stages: Vec<String> =
+        cirrus.take_executed_stages().into_iter().filter(|stage| stage.contains("(mat/")).collect();
     expect![[r#"
         [
             "encode(mat/box/mra)",
@@ -95,7 +102,9 @@ fn rebaking_the_source_repacks_only_the_mra_surfaces_that_read_it_and_the_graph_
 
 #[test]
 fn a_material_the_ao_mesh_lacks_is_an_error_naming_both_and_the_others_bake() {
-    let project = project_with_ao_source(&format!("{MATERIALS}Material $roof {{ Param (attrib = \"metallic\") {{float {{0.0}}}} }}\n"));
+    let project = project_with_ao_source(&format!(
+        "{MATERIALS}Material $roof {{ Param (attrib = \"metallic\") {{float {{0.0}}}} }}\n"
+    ));
     let mut cirrus = project.open();
     let summary = build(&mut cirrus);
     let scene = summary.assets.iter().find(|asset| asset.name == "scene").unwrap();

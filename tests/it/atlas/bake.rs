@@ -46,14 +46,20 @@ fn every_entry_reads_back_from_the_page_at_its_rectangle_and_aliases_share_one()
         assert_eq!(alias[key], copy[key], "{key}");
     }
     let sprite = &entries[4];
-    assert_eq!((sprite["source_size"].clone(), sprite["trim_offset"].clone()), (serde_json::json!([30, 20]), serde_json::json!([3, 3])));
+    assert_eq!(
+        (sprite["source_size"].clone(), sprite["trim_offset"].clone()),
+        (serde_json::json!([30, 20]), serde_json::json!([3, 3]))
+    );
     assert_eq!((sprite["width"].as_u64(), sprite["height"].as_u64()), (Some(24), Some(14)));
     // The page decoded from its blocks: each entry where the table says (BC7 on patterns).
     let page = &table["pages"][0];
     assert_eq!(page["file"], "atlas.ktx2");
     let bytes = project.read("baked/ui/atlas.ktx2");
     let ktx2 = read_ktx2(&bytes);
-    assert_eq!((ktx2.width as u64, ktx2.height as u64), (page["width"].as_u64().unwrap(), page["height"].as_u64().unwrap()));
+    assert_eq!(
+        (ktx2.width as u64, ktx2.height as u64),
+        (page["width"].as_u64().unwrap(), page["height"].as_u64().unwrap())
+    );
     let decoded = decode_blocks(BlockFormat::Bc7, &ktx2_level(&bytes, &ktx2, 0), ktx2.width, ktx2.height);
     for entry in entries {
         let name = entry["name"].as_str().unwrap();
@@ -95,7 +101,9 @@ fn a_texture_larger_than_a_page_and_an_unreadable_one_are_named() {
     let summary = build(&mut project.open());
     let ui = &summary.assets[0];
     assert!(
-        ui.errors.iter().any(|error| error.message.contains("extra/big.png") && error.message.contains("larger than a page")),
+        ui.errors
+            .iter()
+            .any(|error| error.message.contains("extra/big.png") && error.message.contains("larger than a page")),
         "{}",
         summary.to_text()
     );
@@ -127,7 +135,11 @@ fn a_same_size_edit_recomposites_its_page_and_leaves_the_table_alone() {
     "#]]
     .assert_debug_eq(&cirrus.take_executed_stages());
     assert_eq!(project.read("baked/ui/atlas.json"), table, "nothing moved");
-    assert_eq!(std::fs::metadata(project.path("baked/ui/atlas.json")).unwrap().modified().unwrap(), written, "not rewritten");
+    assert_eq!(
+        std::fs::metadata(project.path("baked/ui/atlas.json")).unwrap().modified().unwrap(),
+        written,
+        "not rewritten"
+    );
 }
 
 /// Each entry's name → (page, x, y, rotated) in a built `atlas.json`.
@@ -139,7 +151,10 @@ fn places(project: &TempProject) -> std::collections::BTreeMap<String, (u64, u64
         .iter()
         .map(|entry| {
             let number = |key: &str| entry[key].as_u64().unwrap();
-            (entry["name"].as_str().unwrap().to_string(), (number("page"), number("x"), number("y"), entry["rotated"].as_bool().unwrap()))
+            (
+                entry["name"].as_str().unwrap().to_string(),
+                (number("page"), number("x"), number("y"), entry["rotated"].as_bool().unwrap()),
+            )
         })
         .collect()
 }
@@ -187,10 +202,12 @@ fn a_repack_happens_when_keeping_the_layout_would_waste_the_page_and_the_report_
 #[test]
 fn a_texture_named_by_plain_path_that_is_missing_is_named() {
     let project = atlas_project();
-    let pipeline = std::fs::read_to_string(project.path("pipeline.ron")).unwrap().replace("\"extra/*.png\"", "\"extra/gone.png\"");
+    let pipeline =
+        std::fs::read_to_string(project.path("pipeline.ron")).unwrap().replace("\"extra/*.png\"", "\"extra/gone.png\"");
     project.write("pipeline.ron", pipeline.as_bytes());
     let summary = build(&mut project.open());
-    let errors: Vec<String> = summary.assets[0].errors.iter().map(|error| format!("{}: {}", error.file, error.message)).collect();
+    let errors: Vec<String> =
+        summary.assets[0].errors.iter().map(|error| format!("{}: {}", error.file, error.message)).collect();
     assert!(errors.iter().any(|error| error.starts_with("assets/extra/gone.png:")), "{errors:?}");
     project.write("assets/extra/gone.png", pattern_png(8, 8, 5));
     assert!(build(&mut project.open()).all_ok());
@@ -204,17 +221,23 @@ fn palette_with_trns_16_bit_and_grey_alpha_pngs_read_back_from_the_page() {
         ])"#,
     );
     // A palette PNG with tRNS alpha (the bundled aspen leaves).
-    let leaves =
-        std::fs::read(std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("examples/assets/trees/textures/aspen_color.png")).unwrap();
+    let leaves = std::fs::read(
+        std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("examples/assets/trees/textures/aspen_color.png"),
+    )
+    .unwrap();
     project.write("assets/mixed/palette.png", &leaves);
     let encode = |image: image::DynamicImage| {
         let mut bytes = std::io::Cursor::new(Vec::new());
         image.write_to(&mut bytes, image::ImageFormat::Png).unwrap();
         bytes.into_inner()
     };
-    let sixteen = image::ImageBuffer::from_fn(40, 24, |x, y| image::Rgba([(x * 1600) as u16, (y * 2700) as u16, 40000u16, 65535u16]));
+    let sixteen = image::ImageBuffer::from_fn(40, 24, |x, y| {
+        image::Rgba([(x * 1600) as u16, (y * 2700) as u16, 40000u16, 65535u16])
+    });
     project.write("assets/mixed/sixteen.png", encode(image::DynamicImage::ImageRgba16(sixteen)));
-    let grey_alpha = image::ImageBuffer::from_fn(24, 36, |x, y| image::LumaA([(x * 10 + y) as u8, if (x + y) % 3 == 0 { 0 } else { 200 }]));
+    let grey_alpha = image::ImageBuffer::from_fn(24, 36, |x, y| {
+        image::LumaA([(x * 10 + y) as u8, if (x + y) % 3 == 0 { 0 } else { 200 }])
+    });
     project.write("assets/mixed/grey_alpha.png", encode(image::DynamicImage::ImageLumaA8(grey_alpha)));
     let summary = build(&mut project.open());
     assert!(summary.all_ok(), "{}", summary.to_text());
@@ -230,7 +253,11 @@ fn palette_with_trns_16_bit_and_grey_alpha_pngs_read_back_from_the_page() {
         for row in 0..height {
             for column in 0..width {
                 let (page_x, page_y) = if rotated { (x + height - 1 - row, y + column) } else { (x + column, y + row) };
-                assert_eq!(page.texel(page_x, page_y), source.get_pixel(column, row).0, "{name} texel ({column}, {row})");
+                assert_eq!(
+                    page.texel(page_x, page_y),
+                    source.get_pixel(column, row).0,
+                    "{name} texel ({column}, {row})"
+                );
             }
         }
     }
@@ -248,7 +275,10 @@ fn two_projects_with_their_files_written_in_shuffled_orders_bake_identical_bytes
         for &index in order {
             let (width, height) = sizes[index];
             // Names whose listing order differs from creation order, in two folders.
-            project.write(&format!("assets/ui/{}/t{}.png", index % 2, 7 - index), pattern_png(width, height, index as u32));
+            project.write(
+                &format!("assets/ui/{}/t{}.png", index % 2, 7 - index),
+                pattern_png(width, height, index as u32),
+            );
         }
         assert!(build(&mut project.open()).all_ok());
         ["atlas.json", "atlas.ktx2", "atlas.png", "atlas_1.ktx2"]
@@ -284,7 +314,10 @@ fn a_settings_change_reruns_only_the_stages_that_read_it() {
     "#]]
     .assert_debug_eq(&cirrus.take_executed_stages());
     // Trim off: every texture's trim, the layout and the page, no decode (in memory already).
-    project.write("pipeline.ron", pipeline.replace("padding: 4)", "padding: 4, trim: false), encode: (albedo: Bc3)").as_bytes());
+    project.write(
+        "pipeline.ron",
+        pipeline.replace("padding: 4)", "padding: 4, trim: false), encode: (albedo: Bc3)").as_bytes(),
+    );
     cirrus.reconfigure(cirrus::config::load_pipeline(&project.path("pipeline.ron")).unwrap());
     assert!(build(&mut cirrus).all_ok());
     let ran = cirrus.take_executed_stages();

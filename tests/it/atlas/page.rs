@@ -7,7 +7,9 @@ use cirrus::texture::Texture;
 
 /// A texture whose every texel differs from its neighbours and from other textures' (`seed`).
 fn noise(width: u32, height: u32, seed: u32) -> Texture {
-    let pixels = (0..width * height * 4).map(|byte| ((byte.wrapping_mul(2654435761) ^ seed.wrapping_mul(40503)) >> 7) as u8 | 1).collect();
+    let pixels = (0..width * height * 4)
+        .map(|byte| ((byte.wrapping_mul(2654435761) ^ seed.wrapping_mul(40503)) >> 7) as u8 | 1)
+        .collect();
     Texture::new(width, height, pixels)
 }
 
@@ -21,10 +23,13 @@ fn every_entry_reads_back_from_its_place_and_its_padding_repeats_its_own_edge() 
         .collect();
     let sizes: Vec<(u32, u32)> = textures.iter().map(|texture| (texture.width, texture.height)).collect();
     let padding = 4;
-    let packing = pack_pages(&sizes, &PageSettings { max_size: 512, padding, rotate: true, power_of_two: false, pages: 1 }).unwrap();
+    let packing =
+        pack_pages(&sizes, &PageSettings { max_size: 512, padding, rotate: true, power_of_two: false, pages: 1 })
+            .unwrap();
     assert!(packing.placements.iter().any(|place| place.placement.rotated), "some entry is turned");
     let (width, height) = packing.pages[0];
-    let entries: Vec<(&Texture, _)> = textures.iter().zip(&packing.placements).map(|(texture, place)| (texture, place.placement)).collect();
+    let entries: Vec<(&Texture, _)> =
+        textures.iter().zip(&packing.placements).map(|(texture, place)| (texture, place.placement)).collect();
     let page = composite_page(width, height, &entries, padding);
     for (texture, placement) in &entries {
         for row in 0..texture.height {
@@ -34,7 +39,8 @@ fn every_entry_reads_back_from_its_place_and_its_padding_repeats_its_own_edge() 
             }
         }
         // The padding: beyond each corner and each edge, the entry's own nearest edge texel.
-        let (span_x, span_y) = if placement.rotated { (placement.height, placement.width) } else { (placement.width, placement.height) };
+        let (span_x, span_y) =
+            if placement.rotated { (placement.height, placement.width) } else { (placement.width, placement.height) };
         let (right, bottom) = (placement.x + span_x - 1, placement.y + span_y - 1);
         for step in 1..=padding {
             assert_eq!(page.texel(placement.x - step, placement.y - step), page.texel(placement.x, placement.y));
@@ -103,16 +109,19 @@ fn a_source_uv_through_the_table_lands_on_the_page_texel_of_that_source_texel() 
         .enumerate()
         .map(|(index, texture)| {
             let rotated = index % 2 == 1;
-            let placement = cirrus::packing::Placement { x, y: 4, width: texture.width, height: texture.height, rotated };
+            let placement =
+                cirrus::packing::Placement { x, y: 4, width: texture.width, height: texture.height, rotated };
             x += if rotated { texture.height } else { texture.width } + 8;
             placement
         })
         .collect();
-    let entries: Vec<(&Texture, _)> = kept.iter().zip(&placements).map(|(texture, &placement)| (texture, placement)).collect();
+    let entries: Vec<(&Texture, _)> =
+        kept.iter().zip(&placements).map(|(texture, &placement)| (texture, placement)).collect();
     let page = composite_page(page_width, page_height, &entries, 2);
     for ((sprite, trim), placement) in sprites.iter().zip(&trims).zip(&placements) {
         let source_size = [sprite.width, sprite.height];
-        let UvTransform { uv_offset, uv_scale, .. } = UvTransform::of(placement, *trim, source_size, (page_width, page_height));
+        let UvTransform { uv_offset, uv_scale, .. } =
+            UvTransform::of(placement, *trim, source_size, (page_width, page_height));
         let entry = AtlasEntry {
             name: String::new(),
             page: 0,
@@ -133,7 +142,11 @@ fn a_source_uv_through_the_table_lands_on_the_page_texel_of_that_source_texel() 
                 let uv = [(column as f64 + 0.5) / sprite.width as f64, 1.0 - (row as f64 + 0.5) / sprite.height as f64];
                 let [u, v] = entry.page_uv(uv);
                 let (x, y) = ((u * page_width as f64).floor() as u32, ((1.0 - v) * page_height as f64).floor() as u32);
-                assert_eq!((x, y), page_texel(placement, column - trim.x, row - trim.y), "{entry:?} texel ({column}, {row})");
+                assert_eq!(
+                    (x, y),
+                    page_texel(placement, column - trim.x, row - trim.y),
+                    "{entry:?} texel ({column}, {row})"
+                );
                 assert_eq!(page.texel(x, y), sprite.texel(column, row));
             }
         }
@@ -143,17 +156,26 @@ fn a_source_uv_through_the_table_lands_on_the_page_texel_of_that_source_texel() 
 #[test]
 fn a_page_recomposited_from_its_last_composite_equals_one_composited_afresh() {
     use cirrus::kinds::atlas::page::{composite_page_keeping_sources, recomposite_page, PageEntry};
-    let mut textures: Vec<Texture> =
-        [(40, 8), (8, 40), (33, 17), (64, 64), (3, 3)].iter().enumerate().map(|(index, &(w, h))| noise(w, h, index as u32)).collect();
+    let mut textures: Vec<Texture> = [(40, 8), (8, 40), (33, 17), (64, 64), (3, 3)]
+        .iter()
+        .enumerate()
+        .map(|(index, &(w, h))| noise(w, h, index as u32))
+        .collect();
     let sizes: Vec<(u32, u32)> = textures.iter().map(|texture| (texture.width, texture.height)).collect();
     let padding = 3;
-    let packing = pack_pages(&sizes, &PageSettings { max_size: 256, padding, rotate: true, power_of_two: false, pages: 1 }).unwrap();
+    let packing =
+        pack_pages(&sizes, &PageSettings { max_size: 256, padding, rotate: true, power_of_two: false, pages: 1 })
+            .unwrap();
     let (width, height) = packing.pages[0];
     let entries = |textures: &[Texture]| -> Vec<PageEntry> {
         textures
             .iter()
             .zip(&packing.placements)
-            .map(|(texture, place)| PageEntry { placement: place.placement, kept_hash: *texture.hash.as_bytes(), translucent: true })
+            .map(|(texture, place)| PageEntry {
+                placement: place.placement,
+                kept_hash: *texture.hash.as_bytes(),
+                translucent: true,
+            })
             .collect()
     };
     let with_places = |textures: &[Texture]| -> Vec<(Texture, _)> {

@@ -45,7 +45,10 @@ fn a_remapped_mesh_sampled_through_the_atlas_shows_what_it_showed_through_its_ow
     let summary = build(&mut project.open());
     assert!(summary.all_ok(), "{}", summary.to_text());
     let table: serde_json::Value = serde_json::from_slice(&project.read("baked/props/atlas.json")).unwrap();
-    assert!(table["entries"].as_array().unwrap().iter().any(|entry| entry["rotated"] == true), "some entry is turned: {table}");
+    assert!(
+        table["entries"].as_array().unwrap().iter().any(|entry| entry["rotated"] == true),
+        "some entry is turned: {table}"
+    );
     let page = decode_png(&project.read("baked/props/atlas.png"));
     let mtl = String::from_utf8(project.read("baked/props/atlas.mtl")).unwrap();
     assert!(mtl.contains("newmtl plank") && mtl.contains("map_Kd atlas.png"), "{mtl}");
@@ -218,7 +221,12 @@ fn the_bundled_bush_remapped_onto_foliage_samples_only_its_own_texels_with_its_o
     let summary = build(&mut project.open());
     assert!(summary.all_ok(), "{}", summary.to_text());
     let table: serde_json::Value = serde_json::from_slice(&project.read("baked/foliage/atlas.json")).unwrap();
-    let entry = table["entries"].as_array().unwrap().iter().find(|entry| entry["name"] == "trees/textures/aspen_color.png").unwrap();
+    let entry = table["entries"]
+        .as_array()
+        .unwrap()
+        .iter()
+        .find(|entry| entry["name"] == "trees/textures/aspen_color.png")
+        .unwrap();
     let page = decode_png(&project.read("baked/foliage/atlas.png"));
     let [x, y, width, height] = ["x", "y", "width", "height"].map(|key| entry[key].as_f64().unwrap() as f32);
     let (page_width, page_height) = (page.width as f32, page.height as f32);
@@ -230,7 +238,8 @@ fn the_bundled_bush_remapped_onto_foliage_samples_only_its_own_texels_with_its_o
     let mtl = project.read("assets/trees/bush_2.mtl");
     let original = material_uv_triangles(&project.read("assets/trees/bush_2.obj"), Some(&mtl), "leaves");
     let atlas_mtl = project.read("baked/foliage/atlas.mtl");
-    let remapped = material_uv_triangles(&project.read("baked/foliage/meshes/trees/bush_2.obj"), Some(&atlas_mtl), "leaves");
+    let remapped =
+        material_uv_triangles(&project.read("baked/foliage/meshes/trees/bush_2.obj"), Some(&atlas_mtl), "leaves");
     assert_eq!(original.len(), remapped.len());
     let (mut points, mut outside, mut disagreeing) = (0usize, 0usize, 0usize);
     for (before, after) in original.iter().zip(&remapped) {
@@ -267,7 +276,8 @@ fn bordered_png(size: u32, core: u32, seed: u32) -> Vec<u8> {
     for row in 0..core {
         for column in 0..core {
             let texel = pattern.texel(column, row);
-            pixels[(((row + border) * size + column + border) * 4) as usize..][..4].copy_from_slice(&[texel[0], texel[1], texel[2], 255]);
+            pixels[(((row + border) * size + column + border) * 4) as usize..][..4]
+                .copy_from_slice(&[texel[0], texel[1], texel[2], 255]);
         }
     }
     crate::support::png_bytes(size, size, &pixels)
@@ -294,7 +304,10 @@ fn aliases_with_other_canvases_get_their_own_transform_and_their_meshes_sample_t
     assert_eq!(entries.len(), 1, "one rectangle: {table}");
     let alias = &entries[0]["aliases"][0];
     assert_eq!(alias["name"], "props/small.png");
-    assert_eq!((alias["source_size"].clone(), alias["trim_offset"].clone()), (serde_json::json!([24, 24]), serde_json::json!([4, 4])));
+    assert_eq!(
+        (alias["source_size"].clone(), alias["trim_offset"].clone()),
+        (serde_json::json!([24, 24]), serde_json::json!([4, 4]))
+    );
     assert_eq!(
         (entries[0]["source_size"].clone(), entries[0]["trim_offset"].clone()),
         (serde_json::json!([32, 32]), serde_json::json!([8, 8]))
@@ -304,9 +317,13 @@ fn aliases_with_other_canvases_get_their_own_transform_and_their_meshes_sample_t
     let mtl = project.read("baked/props/atlas.mtl");
     for mesh in ["big", "small"] {
         let source = decode_png(&project.read(&format!("assets/props/{mesh}.png")));
-        let before =
-            material_uv_triangles(&project.read(&format!("assets/props/{mesh}.obj")), Some(&project.read("assets/props/props.mtl")), mesh);
-        let after = material_uv_triangles(&project.read(&format!("baked/props/meshes/props/{mesh}.obj")), Some(&mtl), mesh);
+        let before = material_uv_triangles(
+            &project.read(&format!("assets/props/{mesh}.obj")),
+            Some(&project.read("assets/props/props.mtl")),
+            mesh,
+        );
+        let after =
+            material_uv_triangles(&project.read(&format!("baked/props/meshes/props/{mesh}.obj")), Some(&mtl), mesh);
         let mut sum = PsnrSum::default();
         for (before, after) in before.iter().zip(&after) {
             for (source_uv, page_uv) in triangle_points(before, 12).into_iter().zip(triangle_points(after, 12)) {
@@ -323,7 +340,8 @@ fn a_remapped_mesh_whose_texture_is_deleted_fails_naming_it_and_the_others_are_w
     assert!(build(&mut project.open()).all_ok());
     std::fs::remove_file(project.path("assets/props/crate.png")).unwrap();
     let summary = build(&mut project.open());
-    let messages: Vec<String> = summary.assets[0].errors.iter().map(|error| format!("{}: {}", error.file, error.message)).collect();
+    let messages: Vec<String> =
+        summary.assets[0].errors.iter().map(|error| format!("{}: {}", error.file, error.message)).collect();
     assert_eq!(messages.len(), 1, "{messages:?}");
     for part in ["assets/props/crate.obj", "material `crate`", "props/crate.png", "does not exist"] {
         assert!(messages[0].contains(part), "{part} not in {}", messages[0]);
@@ -342,7 +360,8 @@ fn a_material_no_triangle_uses_does_not_fail_a_mesh_that_shares_its_library() {
     assert!(summary.all_ok(), "{}", summary.to_text());
     project.write("assets/props/both.obj", quad_obj("both", [0.0, 0.0, 1.0, 1.0]));
     let summary = build(&mut project.open());
-    let messages: Vec<String> = summary.assets[0].errors.iter().map(|error| format!("{}: {}", error.file, error.message)).collect();
+    let messages: Vec<String> =
+        summary.assets[0].errors.iter().map(|error| format!("{}: {}", error.file, error.message)).collect();
     assert_eq!(messages.len(), 1, "{messages:?}");
     assert!(messages[0].contains("both.obj") && messages[0].contains("material `both`"), "{messages:?}");
 }
@@ -358,9 +377,16 @@ fn scale_and_offset_options_of_an_atlased_map_are_kept_in_the_remapped_uvs_and_o
     assert!(summary.all_ok(), "{}", summary.to_text());
     let page = decode_png(&project.read("baked/props/atlas.png"));
     let source = decode_png(&project.read("assets/props/crate.png"));
-    let before = material_uv_triangles(&project.read("assets/props/crate.obj"), Some(&project.read("assets/props/props.mtl")), "crate");
-    let after =
-        material_uv_triangles(&project.read("baked/props/meshes/props/crate.obj"), Some(&project.read("baked/props/atlas.mtl")), "crate");
+    let before = material_uv_triangles(
+        &project.read("assets/props/crate.obj"),
+        Some(&project.read("assets/props/props.mtl")),
+        "crate",
+    );
+    let after = material_uv_triangles(
+        &project.read("baked/props/meshes/props/crate.obj"),
+        Some(&project.read("baked/props/atlas.mtl")),
+        "crate",
+    );
     let mut sum = PsnrSum::default();
     for (before, after) in before.iter().zip(&after) {
         for (uv, page_uv) in triangle_points(before, 12).into_iter().zip(triangle_points(after, 12)) {
@@ -371,5 +397,8 @@ fn scale_and_offset_options_of_an_atlased_map_are_kept_in_the_remapped_uvs_and_o
     assert!(sum.psnr() > 30.0, "{:.1} dB", sum.psnr());
     let report: serde_json::Value = serde_json::from_slice(&project.read("baked/props/report.json")).unwrap();
     let warnings = report["warnings"].to_string();
-    assert!(warnings.contains("material `crate`") && warnings.contains("`-bm 0.3`") && warnings.contains("dropped"), "{report}");
+    assert!(
+        warnings.contains("material `crate`") && warnings.contains("`-bm 0.3`") && warnings.contains("dropped"),
+        "{report}"
+    );
 }

@@ -33,7 +33,12 @@ fn tree_obj(leaf_tilt: f32) -> String {
         let (dx, dz) = (0.4 * (angle + leaf_tilt).cos(), 0.4 * (angle + leaf_tilt).sin());
         quad(
             &mut obj,
-            [[cx - dx, cy - 0.4, cz - dz], [cx + dx, cy - 0.4, cz + dz], [cx + dx, cy + 0.4, cz + dz], [cx - dx, cy + 0.4, cz - dz]],
+            [
+                [cx - dx, cy - 0.4, cz - dz],
+                [cx + dx, cy - 0.4, cz + dz],
+                [cx + dx, cy + 0.4, cz + dz],
+                [cx - dx, cy + 0.4, cz - dz],
+            ],
             "leaves",
         );
     }
@@ -61,20 +66,25 @@ pub(crate) fn tree_project() -> TempProject {
 /// pure stages.
 fn render_stages_showing(project: &TempProject, material: &str) -> BTreeSet<String> {
     let obj = project.read("assets/tree.obj");
-    let libraries = [(Path::new("assets/tree.mtl").to_path_buf(), Some(project.read("assets/tree.mtl")))].into_iter().collect();
-    let (mesh, _) = cirrus::mesh::load_mesh(Path::new("assets/tree.obj"), &obj, &libraries, Path::new("assets")).expect("loads");
+    let libraries =
+        [(Path::new("assets/tree.mtl").to_path_buf(), Some(project.read("assets/tree.mtl")))].into_iter().collect();
+    let (mesh, _) =
+        cirrus::mesh::load_mesh(Path::new("assets/tree.obj"), &obj, &libraries, Path::new("assets")).expect("loads");
     let planes = cirrus::kinds::billboard_cloud::planes::select_planes(
         &mesh.positions,
         &mesh.triangles,
         &mesh.triangle_materials,
         cirrus::kinds::billboard_cloud::planes::PlaneSettings { epsilon: 0.02, max_planes: None, max_quads: None },
     );
-    let rectangles = cirrus::kinds::billboard_cloud::rectangles::plane_rectangles(&mesh.positions, &mesh.triangles, &planes);
+    let rectangles =
+        cirrus::kinds::billboard_cloud::rectangles::plane_rectangles(&mesh.positions, &mesh.triangles, &planes);
     let index = mesh.materials.iter().position(|m| m.name == material).expect("material") as u32;
     cirrus::kinds::billboard_cloud::render_groups::render_groups(&mesh, &rectangles)
         .iter()
         .filter(|group| group.materials.contains(&index))
-        .map(|group| format!("render(tree/{})", cirrus::kinds::billboard_cloud::render_groups::render_group_label(&mesh, group)))
+        .map(|group| {
+            format!("render(tree/{})", cirrus::kinds::billboard_cloud::render_groups::render_group_label(&mesh, group))
+        })
         .collect()
 }
 
@@ -86,7 +96,11 @@ fn a_billboard_cloud_bakes_its_lod_and_atlas() {
     let report: serde_json::Value = serde_json::from_slice(&project.read("baked/tree/report.json")).expect("report");
     assert_eq!(report["faces"], 56);
     assert!(report["max_error_world"].as_f64().unwrap() <= report["epsilon_world"].as_f64().unwrap() * 1.0001);
-    assert!(report["atlas"]["coverage"].as_f64().unwrap() > 0.05, "the atlas holds rendered texels: {}", report["atlas"]);
+    assert!(
+        report["atlas"]["coverage"].as_f64().unwrap() > 0.05,
+        "the atlas holds rendered texels: {}",
+        report["atlas"]
+    );
     for surface in ["albedo", "mra", "normal", "height"] {
         let ktx2 = crate::support::read_ktx2(&project.read(&format!("baked/tree/{surface}.ktx2")));
         assert_eq!(
@@ -114,7 +128,8 @@ fn a_bark_texture_edit_rerenders_only_bark_planes_and_leaves_the_lod_alone() {
     let leaf_only: Vec<String> = render_stages_showing(&project, "leaves").difference(&expected).cloned().collect();
     assert!(!expected.is_empty() && !leaf_only.is_empty(), "the fixture has bark render stages and leaf-only ones");
     expected.extend(
-        ["decode(assets/bark.png)", "atlas(tree)", "mips(tree/albedo)", "encode(tree/albedo)", "write(tree/albedo)"].map(String::from),
+        ["decode(assets/bark.png)", "atlas(tree)", "mips(tree/albedo)", "encode(tree/albedo)", "write(tree/albedo)"]
+            .map(String::from),
     );
     assert_eq!(executed, expected, "exactly the render stages showing bark, the atlas and the albedo surface's tail");
     assert_eq!(project.read("baked/tree/lod.obj"), lod, "lod.obj is untouched by texture edits");
@@ -133,20 +148,33 @@ fn a_bark_texture_edit_rerenders_only_bark_planes_and_leaves_the_lod_alone() {
     let pipeline = String::from_utf8(project.read("pipeline.ron")).unwrap();
     std::fs::write(
         project.path("pipeline.ron"),
-        pipeline.replace("atlas: (max_size: 256, padding: 2)", "atlas: (max_size: 256, padding: 2), encode: (mra: Bc7)"),
+        pipeline
+            .replace("atlas: (max_size: 256, padding: 2)", "atlas: (max_size: 256, padding: 2), encode: (mra: Bc7)"),
     )
     .unwrap();
     cirrus.reconfigure(cirrus::config::load_pipeline(&project.path("pipeline.ron")).unwrap());
     build(&mut cirrus);
     // The bark edit found the mra surface in the cache by its parts without compositing it:
     // it is composited now, with the same texels, so its mips do not run again.
-    assert_eq!(cirrus.take_executed_stages(), ["atlas(tree)", "encode(tree/mra)", "write(tree/mra)"], "the mips are the same");
+    assert_eq!(
+        cirrus.take_executed_stages(),
+        ["atlas(tree)", "encode(tree/mra)", "write(tree/mra)"],
+        "the mips are the same"
+    );
 
     // A mesh edit re-runs everything downstream of it.
     project.write("assets/tree.obj", tree_obj(0.3));
     build(&mut cirrus);
     let executed = cirrus.take_executed_stages();
-    for stage in ["mesh(tree)", "planes(tree)", "layout(tree)", "atlas(tree)", "lod(tree)", "encode(tree/albedo)", "encode(tree/height)"] {
+    for stage in [
+        "mesh(tree)",
+        "planes(tree)",
+        "layout(tree)",
+        "atlas(tree)",
+        "lod(tree)",
+        "encode(tree/albedo)",
+        "encode(tree/height)",
+    ] {
         assert!(executed.iter().any(|e| e == stage), "{stage} re-ran after a mesh edit: {executed:?}");
     }
     assert_ne!(project.read("baked/tree/lod.obj"), lod, "a new LOD mesh");
@@ -189,8 +217,13 @@ fn preview_of_the_bundled_bush_writes_a_contact_sheet_and_metrics() {
         .output()
         .unwrap();
     assert_eq!(output.status.code(), Some(0), "{}", String::from_utf8_lossy(&output.stderr));
-    assert!(!String::from_utf8_lossy(&output.stderr).contains("XDG_RUNTIME_DIR"), "{}", String::from_utf8_lossy(&output.stderr));
-    let metrics: serde_json::Value = serde_json::from_slice(&project.read("baked/bush/preview/metrics.json")).expect("metrics.json");
+    assert!(
+        !String::from_utf8_lossy(&output.stderr).contains("XDG_RUNTIME_DIR"),
+        "{}",
+        String::from_utf8_lossy(&output.stderr)
+    );
+    let metrics: serde_json::Value =
+        serde_json::from_slice(&project.read("baked/bush/preview/metrics.json")).expect("metrics.json");
     let views = metrics["views"].as_array().expect("views");
     assert_eq!(views.len(), 26);
     let directions: BTreeSet<String> = views.iter().map(|view| view["direction"].to_string()).collect();
@@ -198,10 +231,14 @@ fn preview_of_the_bundled_bush_writes_a_contact_sheet_and_metrics() {
     // Per view, what the LOD misses and draws beyond the source (fractions of the source's
     // silhouette) are the two sides of its IoU: (1 − missed) / (1 + extra).
     for view in views {
-        let (iou, missed, extra) = (view["iou"].as_f64().unwrap(), view["missed"].as_f64().unwrap(), view["extra"].as_f64().unwrap());
+        let (iou, missed, extra) =
+            (view["iou"].as_f64().unwrap(), view["missed"].as_f64().unwrap(), view["extra"].as_f64().unwrap());
         assert!((iou - (1.0 - missed) / (1.0 + extra)).abs() < 1e-9 && missed > 0.0 && extra > 0.0, "{view}");
     }
-    assert!(metrics["mean_missed"].as_f64().unwrap() > 0.0 && metrics["mean_extra"].as_f64().unwrap() > 0.0, "{metrics}");
+    assert!(
+        metrics["mean_missed"].as_f64().unwrap() > 0.0 && metrics["mean_extra"].as_f64().unwrap() > 0.0,
+        "{metrics}"
+    );
     let mean = metrics["mean_iou"].as_f64().unwrap();
     println!("bundled bush, 1024² atlas: mean IoU {mean:.3}, {} samples per pixel", metrics["samples_per_pixel"]);
     assert_eq!(metrics["samples_per_pixel"], 16);
@@ -213,7 +250,11 @@ fn preview_of_the_bundled_bush_writes_a_contact_sheet_and_metrics() {
     let shift = metrics["source_shift_iou"].as_f64().unwrap();
     assert!((0.6..0.95).contains(&shift), "the source against itself moved 1 pixel: IoU {shift}");
     let sheet = image::load_from_memory(&project.read("baked/bush/preview/contact_sheet.png")).expect("PNG");
-    assert_eq!((sheet.width(), sheet.height()), (4 * 2 * 256 + 3 * 8, 7 * 256 + 6 * 8), "source | LOD pairs, four per row");
+    assert_eq!(
+        (sheet.width(), sheet.height()),
+        (4 * 2 * 256 + 3 * 8, 7 * 256 + 6 * 8),
+        "source | LOD pairs, four per row"
+    );
     assert_eq!(project.run_cli(&["preview", "--asset", "nope"]).status.code(), Some(2));
 }
 
@@ -226,7 +267,11 @@ fn a_stand_in_moves_each_face_onto_its_plane_as_asked() {
     let at = |stand_in, corner| stand_in_position(stand_in, corners, corner, plane);
     for corner in 0..3 {
         assert_eq!(at(StandIn::Baked, corner), corners[corner]);
-        assert_eq!(stand_in_position(StandIn::Projected, corners, corner, None), corners[corner], "a face without a plane stays");
+        assert_eq!(
+            stand_in_position(StandIn::Projected, corners, corner, None),
+            corners[corner],
+            "a face without a plane stays"
+        );
         // Projected: onto the plane, straight down.
         assert_eq!(at(StandIn::Projected, corner), [corners[corner][0], corners[corner][1], 1.0]);
         // Translated: the whole face down by its mean height (2), keeping its shape and tilt.
@@ -241,7 +286,8 @@ fn a_preview_with_a_stand_in_tells_what_the_planes_cost_from_what_the_atlas_cost
     // them: projecting them onto it is translating them, and a flat colour loses little in the
     // atlas, so the baked LOD scores about what its plane allows. Side by side, the plane that
     // fits them best is tilted: projected, they are also foreshortened.
-    let stacked = "v 0 0 0\nv 1 0 0\nv 1 1 0\nv 0 1 0\nv 0 0 0.4\nv 1 0 0.4\nv 1 1 0.4\nv 0 1 0.4\nf 1 2 3 4\nf 5 6 7 8\n";
+    let stacked =
+        "v 0 0 0\nv 1 0 0\nv 1 1 0\nv 0 1 0\nv 0 0 0.4\nv 1 0 0.4\nv 1 1 0.4\nv 0 1 0.4\nf 1 2 3 4\nf 5 6 7 8\n";
     let side_by_side = "v 0 0 0\nv 1 0 0\nv 1 1 0\nv 0 1 0\nv 1.2 0 0.4\nv 2.2 0 0.4\nv 2.2 1 0.4\nv 1.2 1 0.4\nf 1 2 3 4\nf 5 6 7 8\n";
     let mut figures = Vec::new();
     for obj in [stacked, side_by_side] {
@@ -256,7 +302,11 @@ fn a_preview_with_a_stand_in_tells_what_the_planes_cost_from_what_the_atlas_cost
             let output = project.run_cli(&["preview", "--asset", "squares", "--stand-in", stand_in, "--size", "64"]);
             assert_eq!(output.status.code(), Some(0), "{}", String::from_utf8_lossy(&output.stderr));
             let stdout = String::from_utf8_lossy(&output.stdout);
-            assert_eq!(stdout.contains(&format!("source faces {stand_in} onto the planes")), stand_in != "baked", "{stdout}");
+            assert_eq!(
+                stdout.contains(&format!("source faces {stand_in} onto the planes")),
+                stand_in != "baked",
+                "{stdout}"
+            );
             let folder = if stand_in == "baked" { "preview".to_string() } else { format!("preview_{stand_in}") };
             let metrics: serde_json::Value =
                 serde_json::from_slice(&project.read(&format!("baked/squares/{folder}/metrics.json"))).unwrap();
@@ -267,8 +317,13 @@ fn a_preview_with_a_stand_in_tells_what_the_planes_cost_from_what_the_atlas_cost
         assert_eq!(project.run_cli(&["preview", "--asset", "squares", "--stand-in", "nope"]).status.code(), Some(2));
         figures.push(ious);
     }
-    println!("two squares on one plane, mean IoU (baked, projected, translated): stacked {:?}, side by side {:?}", figures[0], figures[1]);
-    let (&[baked, projected, translated], &[_, tilted_projected, tilted_translated]) = (&figures[0][..], &figures[1][..]) else {
+    println!(
+        "two squares on one plane, mean IoU (baked, projected, translated): stacked {:?}, side by side {:?}",
+        figures[0], figures[1]
+    );
+    let (&[baked, projected, translated], &[_, tilted_projected, tilted_translated]) =
+        (&figures[0][..], &figures[1][..])
+    else {
         unreachable!()
     };
     assert!(projected < 0.95, "the squares are drawn displaced: {figures:?}");
@@ -298,7 +353,8 @@ fn trunk_obj(segments: usize, rings: usize) -> String {
     let vertex = |ring: usize, index: usize| ring * (segments + 1) + index + 1;
     for ring in 0..rings {
         for index in 0..segments {
-            let [a, b, c, d] = [vertex(ring, index), vertex(ring, index + 1), vertex(ring + 1, index + 1), vertex(ring + 1, index)];
+            let [a, b, c, d] =
+                [vertex(ring, index), vertex(ring, index + 1), vertex(ring + 1, index + 1), vertex(ring + 1, index)];
             obj.push_str(&format!("f {a}/{a} {d}/{d} {c}/{c} {b}/{b}\n"));
         }
     }
@@ -322,7 +378,8 @@ fn a_solid_trunk_split_between_planes_shows_no_cracks() {
         let output = project.run_cli(&["preview", "--asset", "trunk"]);
         assert_eq!(output.status.code(), Some(0), "{}", String::from_utf8_lossy(&output.stderr));
         let report: serde_json::Value = serde_json::from_slice(&project.read("baked/trunk/report.json")).unwrap();
-        let metrics: serde_json::Value = serde_json::from_slice(&project.read("baked/trunk/preview/metrics.json")).unwrap();
+        let metrics: serde_json::Value =
+            serde_json::from_slice(&project.read("baked/trunk/preview/metrics.json")).unwrap();
         figures.push((
             report["planes"].as_u64().unwrap(),
             report["faces_also_drawn"].as_u64().unwrap(),
@@ -330,8 +387,12 @@ fn a_solid_trunk_split_between_planes_shows_no_cracks() {
             metrics["min_iou"].as_f64().unwrap(),
         ));
     }
-    println!("trunk (planes, faces also drawn, mean IoU, min IoU): solid {:?}, declared cut-out {:?}", figures[0], figures[1]);
-    let [(planes, also_drawn, solid_mean, solid_min), (_, cut_out_also_drawn, cut_out_mean, cut_out_min)] = figures[..] else {
+    println!(
+        "trunk (planes, faces also drawn, mean IoU, min IoU): solid {:?}, declared cut-out {:?}",
+        figures[0], figures[1]
+    );
+    let [(planes, also_drawn, solid_mean, solid_min), (_, cut_out_also_drawn, cut_out_mean, cut_out_min)] = figures[..]
+    else {
         unreachable!()
     };
     assert!(planes >= 3 && also_drawn > 0 && cut_out_also_drawn == 0, "{figures:?}");
@@ -355,8 +416,9 @@ fn crack_filling_draws_a_face_only_on_planes_it_meets() {
         cirrus::kinds::billboard_cloud::planes::SEAM_WEIGHT,
     );
     let rectangles = cirrus::kinds::billboard_cloud::rectangles::plane_rectangles(positions, triangles, &planes);
-    let mut rectangles =
-        cirrus::kinds::billboard_cloud::rectangles::merge_rectangles_to_budget(positions, triangles, &planes, rectangles, 64);
+    let mut rectangles = cirrus::kinds::billboard_cloud::rectangles::merge_rectangles_to_budget(
+        positions, triangles, &planes, rectangles, 64,
+    );
     let solid_materials = vec![true; bush.materials.len().max(1)];
     let input = cirrus::kinds::billboard_cloud::rectangles::CrackFillingInput {
         positions,
@@ -408,9 +470,11 @@ fn after_a_restart_a_leaf_colour_edit_reuses_mesh_planes_layout_lod_and_the_unch
         ])"#,
     );
     let trees = Path::new(env!("CARGO_MANIFEST_DIR")).join("examples/assets/trees");
-    let textures = ["aspen_color.png", "oak_color_1k.jpg", "oak_normal_1k.jpg", "oak_roughness_1k.jpg", "oak_ao_1k.jpg"];
-    for file in
-        ["bush_2.obj".to_string(), "bush_2.mtl".to_string()].into_iter().chain(textures.map(|texture| format!("textures/{texture}")))
+    let textures =
+        ["aspen_color.png", "oak_color_1k.jpg", "oak_normal_1k.jpg", "oak_roughness_1k.jpg", "oak_ao_1k.jpg"];
+    for file in ["bush_2.obj".to_string(), "bush_2.mtl".to_string()]
+        .into_iter()
+        .chain(textures.map(|texture| format!("textures/{texture}")))
     {
         project.write(&format!("assets/trees/{file}"), std::fs::read(trees.join(&file)).unwrap());
     }
@@ -420,13 +484,16 @@ fn after_a_restart_a_leaf_colour_edit_reuses_mesh_planes_layout_lod_and_the_unch
     // Another process after a colour edit of the leaves (alpha kept, so coverage is the same).
     let leaves = image::load_from_memory(&project.read("assets/trees/textures/aspen_color.png")).unwrap().into_rgba8();
     let (width, height) = leaves.dimensions();
-    let recoloured: Vec<u8> = leaves.into_raw().chunks_exact(4).flat_map(|texel| [texel[1], texel[0], texel[2], texel[3]]).collect();
+    let recoloured: Vec<u8> =
+        leaves.into_raw().chunks_exact(4).flat_map(|texel| [texel[1], texel[0], texel[2], texel[3]]).collect();
     project.write("assets/trees/textures/aspen_color.png", crate::support::png_bytes(width, height, &recoloured));
     let second = stage_statuses(&project.run_cli(&["build", "--summary", "json"]), "bush");
     let status = |stage: &str, instance: Option<&str>| -> BTreeSet<String> {
         second
             .iter()
-            .filter(|(name, this_instance, _)| name == stage && instance.is_none_or(|instance| instance == this_instance))
+            .filter(|(name, this_instance, _)| {
+                name == stage && instance.is_none_or(|instance| instance == this_instance)
+            })
             .map(|(_, _, status)| status.clone())
             .collect()
     };
@@ -437,7 +504,10 @@ fn after_a_restart_a_leaf_colour_edit_reuses_mesh_planes_layout_lod_and_the_unch
     }
     // Plane images come from the render memo, except the render groups that show the leaves.
     for (_, instance, state) in second.iter().filter(|(stage, _, _)| stage == "render") {
-        let shows_leaves = instance.split(':').nth(1).is_some_and(|materials| materials.split('+').any(|material| material == "leaves"));
+        let shows_leaves = instance
+            .split(':')
+            .nth(1)
+            .is_some_and(|materials| materials.split('+').any(|material| material == "leaves"));
         assert_eq!(state, if shows_leaves { "ran" } else { "cached" }, "render({instance})");
     }
     assert_eq!(status("render", None).len(), 2, "the bush has render groups with and without leaves");
@@ -483,7 +553,8 @@ fn memo_entries_that_do_not_fit_are_misses_and_the_bake_equals_a_clean_one() {
                 let mut real = cache.load(stage, key).unwrap();
                 if stage == "render-memo" {
                     // Every group of the real memo, each with one 1×1 image.
-                    let groups: Vec<(String, Vec<(u32, u32)>)> = serde_json::from_value(real.metadata["groups"].clone()).unwrap();
+                    let groups: Vec<(String, Vec<(u32, u32)>)> =
+                        serde_json::from_value(real.metadata["groups"].clone()).unwrap();
                     real.metadata = serde_json::json!({ "groups": groups.iter().map(|(group, _)| (group, [(1, 1)])).collect::<Vec<_>>() });
                     real.blobs = vec![vec![7; groups.len() * 16]];
                 } else if stage == "atlas-fill" {

@@ -16,11 +16,21 @@ fn lod_quads(obj: &[u8]) -> usize {
 
 /// Every face of the mesh on exactly one of the budget's rectangles, and no more rectangles
 /// than the budget.
-fn assert_budget_covers_every_face(positions: &[[f32; 3]], triangles: &[[u32; 3]], materials: &[u32], quads: u32) -> f32 {
+fn assert_budget_covers_every_face(
+    positions: &[[f32; 3]],
+    triangles: &[[u32; 3]],
+    materials: &[u32],
+    quads: u32,
+) -> f32 {
     let planes = select_planes_within_budget(positions, triangles, materials, quads, None, SEAM_WEIGHT);
     assert!(planes.planes.len() <= quads as usize, "{} planes for {quads} quads", planes.planes.len());
-    let rectangles =
-        merge_rectangles_to_budget(positions, triangles, &planes, plane_rectangles(positions, triangles, &planes), quads as usize);
+    let rectangles = merge_rectangles_to_budget(
+        positions,
+        triangles,
+        &planes,
+        plane_rectangles(positions, triangles, &planes),
+        quads as usize,
+    );
     assert!(rectangles.len() <= quads as usize, "{} rectangles for {quads} quads", rectangles.len());
     let mut drawn = vec![0u32; triangles.len()];
     for rectangle in &rectangles {
@@ -45,7 +55,8 @@ fn scattered_boxes() -> (Vec<[f32; 3]>, Vec<[u32; 3]>) {
         let turn = glam::Quat::from_euler(glam::EulerRot::XYZ, random() * 6.3, random() * 6.3, random() * 6.3);
         let first = positions.len() as u32;
         for corner in 0..8 {
-            let local = glam::Vec3::new((corner & 1) as f32, ((corner >> 1) & 1) as f32, ((corner >> 2) & 1) as f32) - 0.5;
+            let local =
+                glam::Vec3::new((corner & 1) as f32, ((corner >> 1) & 1) as f32, ((corner >> 2) & 1) as f32) - 0.5;
             positions.push((centre + turn * (local * 0.2)).to_array());
         }
         for [a, b, c, d] in [[0, 1, 3, 2], [4, 6, 7, 5], [0, 4, 5, 1], [2, 3, 7, 6], [0, 2, 6, 4], [1, 5, 7, 3]] {
@@ -73,13 +84,19 @@ fn a_budget_bounds_the_quads_and_every_face_stays_drawn() {
 
 /// The area-weighted mean of |cos| between each face's normal and its plane's (1: every face
 /// drawn unforeshortened).
-fn mean_alignment(positions: &[[f32; 3]], triangles: &[[u32; 3]], planes: &cirrus::kinds::billboard_cloud::planes::PlaneSet) -> f64 {
+fn mean_alignment(
+    positions: &[[f32; 3]],
+    triangles: &[[u32; 3]],
+    planes: &cirrus::kinds::billboard_cloud::planes::PlaneSet,
+) -> f64 {
     let (mut sum, mut area) = (0.0f64, 0.0f64);
     for plane in &planes.planes {
         for &face in &plane.faces {
             let [a, b, c] = triangles[face as usize].map(|vertex| glam::Vec3::from(positions[vertex as usize]));
             let cross = (b - a).cross(c - a);
-            sum += cross.normalize_or_zero().dot(glam::Vec3::from(plane.normal)).abs() as f64 * 0.5 * cross.length() as f64;
+            sum += cross.normalize_or_zero().dot(glam::Vec3::from(plane.normal)).abs() as f64
+                * 0.5
+                * cross.length() as f64;
             area += 0.5 * cross.length() as f64;
         }
     }
@@ -104,7 +121,8 @@ fn a_budgets_planes_are_refined_past_the_greedy_selection() {
         budget.mean_error,
         at_epsilon.mean_error
     );
-    let (refined, greedy) = (mean_alignment(positions, triangles, &budget), mean_alignment(positions, triangles, &at_epsilon));
+    let (refined, greedy) =
+        (mean_alignment(positions, triangles, &budget), mean_alignment(positions, triangles, &at_epsilon));
     assert!(refined > greedy + 0.03, "mean |cos| {refined} refined against {greedy} at ε alone");
     assert!(budget.max_error > budget.epsilon, "the refinement is not held to ε");
     assert_budget_covers_every_face(positions, triangles, materials, 64);
@@ -124,8 +142,18 @@ fn a_budgets_planes_keep_adjacent_faces_together_where_splitting_them_opens_a_st
         "seam gap {} closed, {} open; mean error {} closed, {} open",
         closed.seam_gap, open.seam_gap, closed.mean_error, open.mean_error
     );
-    assert!(closed.seam_gap > 0.0 && closed.seam_gap < 0.8 * open.seam_gap, "seam gap {} closed, {} open", closed.seam_gap, open.seam_gap);
-    assert!(closed.mean_error < 1.1 * open.mean_error, "mean error {} closed, {} open", closed.mean_error, open.mean_error);
+    assert!(
+        closed.seam_gap > 0.0 && closed.seam_gap < 0.8 * open.seam_gap,
+        "seam gap {} closed, {} open",
+        closed.seam_gap,
+        open.seam_gap
+    );
+    assert!(
+        closed.mean_error < 1.1 * open.mean_error,
+        "mean error {} closed, {} open",
+        closed.mean_error,
+        open.mean_error
+    );
     assert_budget_covers_every_face(positions, triangles, materials, 64);
 }
 
@@ -143,13 +171,17 @@ fn a_budgeted_bake_writes_at_most_that_many_quads() {
     assert!(summary.all_ok(), "{}", summary.to_text());
     for (name, quads) in [("bush16", 16), ("bush48", 48)] {
         let lod = lod_quads(&project.read(&format!("baked/{name}/lod.obj")));
-        let report: serde_json::Value = serde_json::from_slice(&project.read(&format!("baked/{name}/report.json"))).unwrap();
+        let report: serde_json::Value =
+            serde_json::from_slice(&project.read(&format!("baked/{name}/report.json"))).unwrap();
         assert!(lod <= quads && lod > 0, "{name}: {lod} quads");
         assert_eq!(report["quads"], lod, "{name}");
         assert_eq!(report["budget_quads"], quads, "{name}");
         // The refinement lets a face leave its ε-slab; on average they lie well within it.
         assert!(report["mean_error_world"].as_f64().unwrap() < report["epsilon_world"].as_f64().unwrap(), "{report}");
-        assert!(report["max_error_world"].as_f64().unwrap() >= report["mean_error_world"].as_f64().unwrap(), "{report}");
+        assert!(
+            report["max_error_world"].as_f64().unwrap() >= report["mean_error_world"].as_f64().unwrap(),
+            "{report}"
+        );
     }
 }
 
@@ -169,14 +201,18 @@ fn the_atlas_follows_the_screen_size_the_lod_is_meant_for() {
     let diameter = 2.0 * cirrus::kinds::billboard_cloud::planes::bounding_sphere_radius(&bush.positions) as f64;
     let mut sides = Vec::new();
     for (name, pixels) in [("far", 64.0), ("near", 512.0)] {
-        let report: serde_json::Value = serde_json::from_slice(&project.read(&format!("baked/{name}/report.json"))).unwrap();
+        let report: serde_json::Value =
+            serde_json::from_slice(&project.read(&format!("baked/{name}/report.json"))).unwrap();
         let atlas = &report["atlas"];
         // One texel per pixel at that size (lowered only if the atlas would pass max_size).
         let density = atlas["texel_density"].as_f64().unwrap();
         let side = atlas["width"].as_u64().unwrap().max(atlas["height"].as_u64().unwrap());
         let wanted = pixels / diameter;
         let exact = (density - wanted).abs() < 1e-3 * density;
-        assert!(exact || (side == 2048 && density < wanted), "{name}: {density} texels per unit for {pixels} px over {diameter}");
+        assert!(
+            exact || (side == 2048 && density < wanted),
+            "{name}: {density} texels per unit for {pixels} px over {diameter}"
+        );
         sides.push(side);
     }
     assert!(sides[0] * 4 <= sides[1], "an LOD meant for 64 px gets a far smaller atlas than one for 512: {sides:?}");
@@ -184,7 +220,9 @@ fn the_atlas_follows_the_screen_size_the_lod_is_meant_for() {
 
 #[test]
 fn the_epsilon_search_finds_the_smallest_fitting_step_in_few_probes() {
-    use cirrus::kinds::billboard_cloud::planes::{ladder_epsilon, search_epsilon_ladder, LadderProbe, BUDGET_LADDER_STEPS};
+    use cirrus::kinds::billboard_cloud::planes::{
+        ladder_epsilon, search_epsilon_ladder, LadderProbe, BUDGET_LADDER_STEPS,
+    };
     // Plane counts that follow a power of ε, failing probes reporting less than the truth (as
     // the estimate from the faces the capped planes hold does).
     let mut probes_per_search = Vec::new();
@@ -204,7 +242,10 @@ fn the_epsilon_search_finds_the_smallest_fitting_step_in_few_probes() {
         }
     }
     let mean = probes_per_search.iter().sum::<u32>() as f32 / probes_per_search.len() as f32;
-    assert!(mean <= 6.0 && probes_per_search.iter().all(|&probes| probes <= 12), "bisection takes 9 or 10: {probes_per_search:?}");
+    assert!(
+        mean <= 6.0 && probes_per_search.iter().all(|&probes| probes <= 12),
+        "bisection takes 9 or 10: {probes_per_search:?}"
+    );
     // Any boundary, with counts that say nothing: never wrong, never more than twice bisection.
     for boundary in [0, 1, 2, 100, 255, 256, 257, 400, 511, 512, 513] {
         let mut probes = 0;
@@ -226,15 +267,23 @@ fn the_epsilon_search_finds_the_smallest_fitting_step_in_few_probes() {
                     LadderProbe { fits: count(step) <= cap as f32, planes: count(step) }
                 })
             };
-            let (smallest, found) = (search(f32::INFINITY, &mut exact_probes), search((0.9 * cap as f32).ceil(), &mut enough_probes));
+            let (smallest, found) =
+                (search(f32::INFINITY, &mut exact_probes), search((0.9 * cap as f32).ceil(), &mut enough_probes));
             let (Some(smallest), Some(found)) = (smallest, found) else {
                 assert_eq!((smallest, found), (None, None), "α {alpha}, cap {cap}");
                 continue;
             };
             assert!(count(found) <= cap as f32, "α {alpha}, cap {cap}: step {found} does not fit");
-            assert!(found == smallest || count(found) >= (0.9 * cap as f32).ceil(), "α {alpha}, cap {cap}: {} planes", count(found));
+            assert!(
+                found == smallest || count(found) >= (0.9 * cap as f32).ceil(),
+                "α {alpha}, cap {cap}: {} planes",
+                count(found)
+            );
         }
     }
     println!("{enough_probes} probes with enough planes, {exact_probes} for the smallest step");
-    assert!(enough_probes < exact_probes, "{enough_probes} probes with enough planes, {exact_probes} for the smallest step");
+    assert!(
+        enough_probes < exact_probes,
+        "{enough_probes} probes with enough planes, {exact_probes} for the smallest step"
+    );
 }

@@ -13,8 +13,10 @@ use crate::support::{build, pattern_png, TempProject};
 fn chain_project(lods: &str) -> TempProject {
     let project = crate::billboard_cloud::bake::tree_project();
     let pipeline = String::from_utf8(project.read("pipeline.ron")).unwrap();
-    let pipeline =
-        pipeline.replace("atlas: (max_size: 256, padding: 2)", &format!("atlas: (max_size: 256, padding: 2), billboard: (lods: {lods})"));
+    let pipeline = pipeline.replace(
+        "atlas: (max_size: 256, padding: 2)",
+        &format!("atlas: (max_size: 256, padding: 2), billboard: (lods: {lods})"),
+    );
     std::fs::write(project.path("pipeline.ron"), pipeline).unwrap();
     project
 }
@@ -47,11 +49,17 @@ fn a_chain_bakes_each_level_within_its_budget_into_its_own_folder() {
         let entry = &levels[level];
         let quads = lod_quads(&project.read(&format!("baked/tree/lod{level}/lod.obj")));
         assert!(quads <= budget && quads > 0, "lod{level}: {quads} quads for a budget of {budget}");
-        assert_eq!((entry["level"].as_u64(), entry["folder"].as_str()), (Some(level as u64), Some(format!("lod{level}").as_str())));
+        assert_eq!(
+            (entry["level"].as_u64(), entry["folder"].as_str()),
+            (Some(level as u64), Some(format!("lod{level}").as_str()))
+        );
         assert_eq!(entry["quads"], quads);
         assert_eq!(entry["triangles"], 2 * quads);
         assert_eq!(entry["budget_quads"], budget);
-        assert!(entry["max_error_world"].as_f64().unwrap() <= entry["epsilon_world"].as_f64().unwrap() * 1.0001, "{entry}");
+        assert!(
+            entry["max_error_world"].as_f64().unwrap() <= entry["epsilon_world"].as_f64().unwrap() * 1.0001,
+            "{entry}"
+        );
         // Level N without a screen size gets an atlas of at most max_size / 2^N a side.
         let (width, height) = (entry["atlas"]["width"].as_u64().unwrap(), entry["atlas"]["height"].as_u64().unwrap());
         assert!(width.max(height) <= max_side, "lod{level}: {width}×{height}");
@@ -66,7 +74,10 @@ fn a_chain_bakes_each_level_within_its_budget_into_its_own_folder() {
         let ktx2 = crate::support::read_ktx2(&project.read(&format!("baked/tree/lod{level}/albedo.ktx2")));
         assert_eq!((ktx2.width as u64, ktx2.height as u64), (width, height));
     }
-    assert!(levels[1]["epsilon"].as_f64().unwrap() >= levels[0]["epsilon"].as_f64().unwrap(), "a smaller budget needs a larger ε");
+    assert!(
+        levels[1]["epsilon"].as_f64().unwrap() >= levels[0]["epsilon"].as_f64().unwrap(),
+        "a smaller budget needs a larger ε"
+    );
     // What the hot-reload batch says of each file: its level.
     let changed: Vec<_> = summary.changed.iter().filter(|artifact| artifact.artifact.starts_with("lod1/")).collect();
     assert!(changed.len() >= 6, "{changed:?}");
@@ -78,7 +89,12 @@ fn a_chain_bakes_each_level_within_its_budget_into_its_own_folder() {
 fn renders_reading(cirrus: &mut cirrus::project::Project, texture: &str) -> BTreeSet<String> {
     let graph = cirrus.graph();
     let decode = format!("decode({texture})");
-    graph.edges.iter().filter(|edge| edge.from == decode && edge.to.starts_with("render(")).map(|edge| edge.to.clone()).collect()
+    graph
+        .edges
+        .iter()
+        .filter(|edge| edge.from == decode && edge.to.starts_with("render("))
+        .map(|edge| edge.to.clone())
+        .collect()
 }
 
 #[test]
@@ -92,7 +108,10 @@ fn a_bark_edit_rerenders_only_the_bark_of_each_level_and_a_budget_edit_only_its_
     for level in 0..2 {
         let prefix = format!("render(tree/lod{level}/");
         assert!(bark_renders.iter().any(|render| render.starts_with(&prefix)), "lod{level} has bark: {bark_renders:?}");
-        assert!(leaf_renders.difference(&bark_renders).any(|render| render.starts_with(&prefix)), "lod{level} has leaves alone");
+        assert!(
+            leaf_renders.difference(&bark_renders).any(|render| render.starts_with(&prefix)),
+            "lod{level} has leaves alone"
+        );
     }
     let lods = [0, 1].map(|level| project.read(&format!("baked/tree/lod{level}/lod.obj")));
 
@@ -103,15 +122,22 @@ fn a_bark_edit_rerenders_only_the_bark_of_each_level_and_a_budget_edit_only_its_
     let mut expected = bark_renders.clone();
     expected.insert("decode(assets/bark.png)".into());
     for level in 0..2 {
-        for stage in
-            ["atlas(tree/lod{level})", "mips(tree/lod{level}/albedo)", "encode(tree/lod{level}/albedo)", "write(tree/lod{level}/albedo)"]
-        {
+        for stage in [
+            "atlas(tree/lod{level})",
+            "mips(tree/lod{level}/albedo)",
+            "encode(tree/lod{level}/albedo)",
+            "write(tree/lod{level}/albedo)",
+        ] {
             expected.insert(stage.replace("{level}", &level.to_string()));
         }
     }
     assert_eq!(executed, expected, "each level's bark renders, atlas and albedo tail");
     for (level, lod) in lods.iter().enumerate() {
-        assert_eq!(&project.read(&format!("baked/tree/lod{level}/lod.obj")), lod, "texture edits leave lod{level}'s mesh alone");
+        assert_eq!(
+            &project.read(&format!("baked/tree/lod{level}/lod.obj")),
+            lod,
+            "texture edits leave lod{level}'s mesh alone"
+        );
     }
 
     // A new budget for level 1 re-runs level 1 only: level 0 keeps everything.
@@ -161,23 +187,38 @@ fn the_preview_compares_every_level_and_lays_the_chain_side_by_side() {
             serde_json::from_slice(&project.read(&format!("baked/tree/preview/lod{level}/metrics.json"))).unwrap();
         assert_eq!(metrics["views"].as_array().unwrap().len(), 26);
         iou.push(metrics["mean_iou"].as_f64().unwrap());
-        assert!(stdout.contains(&format!("lod{level}: 26 views, 4 samples per pixel: mean IoU {:.3}", iou[level])), "{stdout}");
-        let sheet = image::load_from_memory(&project.read(&format!("baked/tree/preview/lod{level}/contact_sheet.png"))).unwrap();
-        assert_eq!((sheet.width(), sheet.height()), (4 * 2 * 48 + 3 * 8, 7 * 48 + 6 * 8), "source | lod{level} pairs, four to a row");
+        assert!(
+            stdout.contains(&format!("lod{level}: 26 views, 4 samples per pixel: mean IoU {:.3}", iou[level])),
+            "{stdout}"
+        );
+        let sheet = image::load_from_memory(&project.read(&format!("baked/tree/preview/lod{level}/contact_sheet.png")))
+            .unwrap();
+        assert_eq!(
+            (sheet.width(), sheet.height()),
+            (4 * 2 * 48 + 3 * 8, 7 * 48 + 6 * 8),
+            "source | lod{level} pairs, four to a row"
+        );
     }
-    assert!(iou[0] >= iou[1] - 0.02 && iou[1] > 0.3, "twelve quads look at least as much like the tree as four: {iou:?}");
+    assert!(
+        iou[0] >= iou[1] - 0.02 && iou[1] > 0.3,
+        "twelve quads look at least as much like the tree as four: {iou:?}"
+    );
     // Each view: the source and both levels; two such groups per row.
     let sheet = image::load_from_memory(&project.read("baked/tree/preview/contact_sheet.png")).unwrap();
     assert_eq!((sheet.width(), sheet.height()), (2 * 3 * 48 + 8, 13 * 48 + 12 * 8));
 
-    let output = project.run_cli(&["preview", "--asset", "tree", "--lod", "1", "--views", "1", "--size", "32", "--out", "one"]);
+    let output =
+        project.run_cli(&["preview", "--asset", "tree", "--lod", "1", "--views", "1", "--size", "32", "--out", "one"]);
     assert_eq!(output.status.code(), Some(0), "{}", String::from_utf8_lossy(&output.stderr));
     assert!(project.path("one/lod1/metrics.json").is_file() && !project.path("one/lod0").exists());
     let sheet = image::load_from_memory(&project.read("one/lod1/contact_sheet.png")).unwrap();
     assert_eq!((sheet.width(), sheet.height()), (2 * 32, 32), "one view: one pair, no empty columns");
     let output = project.run_cli(&["preview", "--asset", "tree", "--lod", "2"]);
     assert_eq!(output.status.code(), Some(2));
-    assert!(String::from_utf8_lossy(&output.stderr).contains("asset `tree` has no LOD level 2: it has 2 (0 to 1)"), "{output:?}");
+    assert!(
+        String::from_utf8_lossy(&output.stderr).contains("asset `tree` has no LOD level 2: it has 2 (0 to 1)"),
+        "{output:?}"
+    );
 }
 
 #[test]
@@ -185,7 +226,11 @@ fn the_viewer_switches_levels_with_the_digit_keys() {
     let project = chain_project("[Quads(12), Quads(4)]");
     build(&mut project.open());
     let screenshot = project.path("shot.png");
-    let options = crate::support::headless_viewer_options(&["--size", "96", "--press", "1x70"], &screenshot, &project.path("baked/tree"));
+    let options = crate::support::headless_viewer_options(
+        &["--size", "96", "--press", "1x70"],
+        &screenshot,
+        &project.path("baked/tree"),
+    );
     let mut lines = Vec::new();
     crate::viewer::run(&options, &mut |line| lines.push(line)).expect("the viewer runs");
     assert_eq!(lines.len(), 5, "{lines:?}");

@@ -47,7 +47,9 @@ fn alpha_of(surface: &[u8]) -> Vec<u8> {
 /// at least one half and where `inside` holds, on a grid of 16² points per texel.
 fn magnified_iou(alpha: &[u8], size: usize, inside: impl Fn(f32, f32) -> bool) -> f32 {
     let steps = 16;
-    let fetch = |x: i64, y: i64| alpha[y.clamp(0, size as i64 - 1) as usize * size + x.clamp(0, size as i64 - 1) as usize] as f32 / 255.0;
+    let fetch = |x: i64, y: i64| {
+        alpha[y.clamp(0, size as i64 - 1) as usize * size + x.clamp(0, size as i64 - 1) as usize] as f32 / 255.0
+    };
     let (mut both, mut either) = (0usize, 0usize);
     for row in 0..size * steps {
         for column in 0..size * steps {

@@ -12,7 +12,14 @@ fn vertex(position: [f32; 3], uv: [f32; 2]) -> RenderVertex {
 
 /// The plane z = 0 over [0, 2] × [0, 1].
 fn plane_two_by_one() -> RectangleFrame {
-    RectangleFrame { origin: [0.0; 3], x_axis: [1.0, 0.0, 0.0], y_axis: [0.0, 1.0, 0.0], normal: [0.0, 0.0, 1.0], width: 2.0, height: 1.0 }
+    RectangleFrame {
+        origin: [0.0; 3],
+        x_axis: [1.0, 0.0, 0.0],
+        y_axis: [0.0, 1.0, 0.0],
+        normal: [0.0, 0.0, 1.0],
+        width: 2.0,
+        height: 1.0,
+    }
 }
 
 /// Two triangles over [0, `right`] × [0, 1] at height `z`, UVs over [0, 1]².
@@ -70,7 +77,10 @@ fn a_plane_render_covers_its_faces_cuts_alpha_and_encodes_normal_and_height() {
     assert_eq!(texel(images.surface(SurfaceKind::Albedo), 10, 28)[3], 0, "bottom half cut by the alpha test");
     assert_eq!(texel(images.surface(SurfaceKind::Albedo), 50, 5)[3], 0, "right half: no face");
     let normal = texel(images.surface(SurfaceKind::Normal), 10, 5);
-    assert!(normal[0].abs_diff(128) <= 1 && normal[1].abs_diff(128) <= 1 && normal[2] >= 254, "flat normal: {normal:?}");
+    assert!(
+        normal[0].abs_diff(128) <= 1 && normal[1].abs_diff(128) <= 1 && normal[2] >= 254,
+        "flat normal: {normal:?}"
+    );
     let mra = texel(images.surface(SurfaceKind::Mra), 10, 5);
     // 0.5 × 255 = 127.5 rounds either way (llvmpipe 128, NVIDIA 127).
     assert!(mra[0] == 0 && mra[1].abs_diff(128) <= 1 && mra[2] == 255, "metallic 0, roughness 0.5, AO 1: {mra:?}");
@@ -85,7 +95,10 @@ fn a_plane_render_covers_its_faces_cuts_alpha_and_encodes_normal_and_height() {
     assert_eq!(stacked.len(), 2);
     assert_eq!(stacked[1], images, "the first rectangle, second in the stack");
     assert_eq!(stacked[0], gpu.render_rectangles(&[second]).expect("renders").remove(0), "the wide rectangle");
-    assert!(stacked[0].surface(SurfaceKind::Albedo).chunks_exact(4).any(|texel| texel[3] == 255), "the wide rectangle sees the quad too");
+    assert!(
+        stacked[0].surface(SurfaceKind::Albedo).chunks_exact(4).any(|texel| texel[3] == 255),
+        "the wide rectangle sees the quad too"
+    );
 }
 
 #[test]
@@ -95,7 +108,12 @@ fn a_supersampled_plane_render_puts_a_cut_out_edge_between_texels() {
     // x ≤ 0.99, so its right edge lies at texel 31.68, not on a texel boundary.
     let rectangle = plane_two_by_one();
     let quad = quad_up_to(0.99, 0.0);
-    let materials = [RenderMaterial { albedo_factor: [0.0, 1.0, 0.0, 1.0], roughness_value: 0.5, ao_value: 1.0, ..Default::default() }];
+    let materials = [RenderMaterial {
+        albedo_factor: [0.0, 1.0, 0.0, 1.0],
+        roughness_value: 0.5,
+        ao_value: 1.0,
+        ..Default::default()
+    }];
     let input = |supersampling| PlaneRenderInput {
         frame: rectangle,
         epsilon: 0.1,
@@ -108,7 +126,8 @@ fn a_supersampled_plane_render_puts_a_cut_out_edge_between_texels() {
     };
     // Where a bilinear fetch along row 16 crosses alpha one half.
     let crossing = |images: &cirrus::gpu::PlaneImages| -> f32 {
-        let alpha: Vec<f32> = (0..64).map(|x| images.surface(SurfaceKind::Albedo)[(16 * 64 + x) * 4 + 3] as f32 / 255.0).collect();
+        let alpha: Vec<f32> =
+            (0..64).map(|x| images.surface(SurfaceKind::Albedo)[(16 * 64 + x) * 4 + 3] as f32 / 255.0).collect();
         let last = (0..63).find(|&x| alpha[x] >= 0.5 && alpha[x + 1] < 0.5).expect("an edge along the row");
         last as f32 + 0.5 + (alpha[last] - 0.5) / (alpha[last] - alpha[last + 1])
     };
@@ -121,7 +140,8 @@ fn a_supersampled_plane_render_puts_a_cut_out_edge_between_texels() {
     assert!((one_edge - 32.0).abs() < 0.01, "one sample per texel: edge at {one_edge}");
     assert!((four_edge - 31.68).abs() < 0.25, "2 × 2 samples: edge at {four_edge}, the quad's at 31.68");
     // Inside, the texels are the quad's; well outside, nothing is drawn.
-    let texel = |x: usize| -> [u8; 4] { four.surface(SurfaceKind::Albedo)[(16 * 64 + x) * 4..][..4].try_into().unwrap() };
+    let texel =
+        |x: usize| -> [u8; 4] { four.surface(SurfaceKind::Albedo)[(16 * 64 + x) * 4..][..4].try_into().unwrap() };
     assert_eq!(texel(20), [0, 255, 0, 255]);
     assert_eq!(texel(31)[..3], [0, 255, 0], "the edge texel keeps the quad's colour");
     assert_eq!(texel(40), [0, 0, 0, 0]);
@@ -189,8 +209,10 @@ fn speckled_quad(offset: f32) -> cirrus::gpu::ViewMesh {
         let alpha = if (state >> 8) % 10 < 7 { 255 } else { 0 };
         pixels.extend([60, 160, 60, alpha]);
     }
-    let levels =
-        mip_chain(&Texture::new(256, 256, pixels), MipSettings { kind: cirrus::texture::SurfaceKind::Albedo, alpha_cutoff: Some(0.5) });
+    let levels = mip_chain(
+        &Texture::new(256, 256, pixels),
+        MipSettings { kind: cirrus::texture::SurfaceKind::Albedo, alpha_cutoff: Some(0.5) },
+    );
     let corner = |y: f32, z: f32, uv: [f32; 2]| RenderVertex {
         position: [0.0, y + offset, z + offset],
         normal: [1.0, 0.0, 0.0],
@@ -206,8 +228,12 @@ fn speckled_quad(offset: f32) -> cirrus::gpu::ViewMesh {
         corner(high, high, [1.0, 1.0]),
         corner(low, high, [0.0, 1.0]),
     ];
-    let material =
-        cirrus::gpu::ViewMaterial { albedo: Some(Arc::new(levels)), albedo_factor: [1.0; 4], alpha_cutoff: 0.5, ..Default::default() };
+    let material = cirrus::gpu::ViewMaterial {
+        albedo: Some(Arc::new(levels)),
+        albedo_factor: [1.0; 4],
+        alpha_cutoff: 0.5,
+        ..Default::default()
+    };
     cirrus::gpu::ViewMesh { batches: vec![(0, vertices)], materials: vec![material] }
 }
 
@@ -252,7 +278,10 @@ fn a_render_the_device_refuses_is_an_error_and_the_device_still_renders() {
     let camera = cirrus::kinds::billboard_cloud::lod_preview::view_projection([0.0; 3], 1.0, [1.0, 0.0, 0.0]);
     // A 0-pixel target is invalid to wgpu, which panics on errors nothing catches.
     let refused = gpu.render_view(&quad, camera, [0.0, 0.0, 1.0], 0);
-    assert!(matches!(&refused, Err(cirrus::gpu::GpuError::Render(message)) if message.contains("imension")), "{refused:?}");
+    assert!(
+        matches!(&refused, Err(cirrus::gpu::GpuError::Render(message)) if message.contains("imension")),
+        "{refused:?}"
+    );
     let image = gpu.render_view(&quad, camera, [0.0, 0.0, 1.0], 16).expect("the next render");
     assert!(image.chunks_exact(4).any(|pixel| pixel[3] == 255), "the quad is drawn");
 }

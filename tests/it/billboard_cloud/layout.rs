@@ -11,8 +11,10 @@ use glam::{Vec2, Vec3};
 fn the_minimum_area_rectangle_of_a_rotated_square_is_the_square() {
     let angle = 0.5f32;
     let rotate = |p: Vec2| Vec2::new(p.x * angle.cos() - p.y * angle.sin(), p.x * angle.sin() + p.y * angle.cos());
-    let mut points: Vec<Vec2> =
-        [[0.0, 0.0], [2.0, 0.0], [2.0, 2.0], [0.0, 2.0], [1.0, 1.0], [0.5, 1.5]].iter().map(|&[x, y]| rotate(Vec2::new(x, y))).collect();
+    let mut points: Vec<Vec2> = [[0.0, 0.0], [2.0, 0.0], [2.0, 2.0], [0.0, 2.0], [1.0, 1.0], [0.5, 1.5]]
+        .iter()
+        .map(|&[x, y]| rotate(Vec2::new(x, y)))
+        .collect();
     points.push(rotate(Vec2::new(1.0, 0.0)));
     let hull = convex_hull(points);
     assert_eq!(hull.len(), 4, "interior and collinear points dropped");
@@ -23,10 +25,12 @@ fn the_minimum_area_rectangle_of_a_rotated_square_is_the_square() {
 
 #[test]
 fn plane_rectangles_frame_every_face_of_their_plane() {
-    let positions: Vec<[f32; 3]> = (0..8).map(|i| [(i & 1) as f32 * 2.0, ((i >> 1) & 1) as f32, ((i >> 2) & 1) as f32 * 3.0]).collect();
+    let positions: Vec<[f32; 3]> =
+        (0..8).map(|i| [(i & 1) as f32 * 2.0, ((i >> 1) & 1) as f32, ((i >> 2) & 1) as f32 * 3.0]).collect();
     let quads = [[0u32, 1, 3, 2], [4, 6, 7, 5], [0, 4, 5, 1], [2, 3, 7, 6], [0, 2, 6, 4], [1, 5, 7, 3]];
     let triangles: Vec<[u32; 3]> = quads.iter().flat_map(|q| [[q[0], q[1], q[2]], [q[0], q[2], q[3]]]).collect();
-    let planes = select_planes(&positions, &triangles, &[], PlaneSettings { epsilon: 0.02, max_planes: None, max_quads: None });
+    let planes =
+        select_planes(&positions, &triangles, &[], PlaneSettings { epsilon: 0.02, max_planes: None, max_quads: None });
     let rectangles = plane_rectangles(&positions, &triangles, &planes);
     let mut areas: Vec<f32> = rectangles.iter().map(|r| r.frame.width * r.frame.height).collect();
     areas.sort_by(f32::total_cmp);
@@ -34,12 +38,19 @@ fn plane_rectangles_frame_every_face_of_their_plane() {
         assert!((area - expected).abs() < 1e-3, "areas {areas:?}");
     }
     for (plane, rectangle) in planes.planes.iter().zip(&rectangles) {
-        let (x, y, n) = (Vec3::from(rectangle.frame.x_axis), Vec3::from(rectangle.frame.y_axis), Vec3::from(rectangle.frame.normal));
+        let (x, y, n) = (
+            Vec3::from(rectangle.frame.x_axis),
+            Vec3::from(rectangle.frame.y_axis),
+            Vec3::from(rectangle.frame.normal),
+        );
         assert!((x.cross(y) - n).length() < 1e-4, "right-handed frame");
         for vertex in plane.faces.iter().flat_map(|&face| triangles[face as usize]) {
             let local = Vec3::from(positions[vertex as usize]) - Vec3::from(rectangle.frame.origin);
             let (u, v) = (local.dot(x), local.dot(y));
-            assert!(u > -1e-3 && u < rectangle.frame.width + 1e-3 && v > -1e-3 && v < rectangle.frame.height + 1e-3, "inside: {u} {v}");
+            assert!(
+                u > -1e-3 && u < rectangle.frame.width + 1e-3 && v > -1e-3 && v < rectangle.frame.height + 1e-3,
+                "inside: {u} {v}"
+            );
         }
     }
 }
@@ -50,7 +61,10 @@ fn check_layout(layout: &Layout, settings: &AtlasSettings) {
         assert!(a.width % 4 == 0 && a.height % 4 == 0, "whole blocks: {a:?}");
         let (aw, ah) = if a.rotated { (a.height, a.width) } else { (a.width, a.height) };
         assert!(
-            a.x >= padding && a.y >= padding && a.x + aw + padding <= layout.width && a.y + ah + padding <= layout.height,
+            a.x >= padding
+                && a.y >= padding
+                && a.x + aw + padding <= layout.width
+                && a.y + ah + padding <= layout.height,
             "inside with padding: {a:?}"
         );
         for b in &layout.placements[index + 1..] {
@@ -65,7 +79,11 @@ fn check_layout(layout: &Layout, settings: &AtlasSettings) {
     }
     let used: u64 = layout.placements.iter().map(|p| p.width as u64 * p.height as u64).sum();
     let occupancy = used as f32 / (layout.width as f32 * layout.height as f32);
-    assert!((layout.occupancy - occupancy).abs() < 1e-6, "reported occupancy {} is the real one {occupancy}", layout.occupancy);
+    assert!(
+        (layout.occupancy - occupancy).abs() < 1e-6,
+        "reported occupancy {} is the real one {occupancy}",
+        layout.occupancy
+    );
     if settings.power_of_two {
         assert!(layout.width.is_power_of_two() && layout.height.is_power_of_two());
     }
@@ -74,7 +92,8 @@ fn check_layout(layout: &Layout, settings: &AtlasSettings) {
 
 #[test]
 fn layouts_have_no_overlaps_keep_padding_and_scale_density_at_max_size() {
-    let sizes: Vec<(f32, f32)> = (0..150).map(|i| (0.2 + (i * 37 % 11) as f32 * 0.3, 0.1 + (i * 53 % 7) as f32 * 0.5)).collect();
+    let sizes: Vec<(f32, f32)> =
+        (0..150).map(|i| (0.2 + (i * 37 % 11) as f32 * 0.3, 0.1 + (i * 53 % 7) as f32 * 0.5)).collect();
     let settings = AtlasSettings { max_size: 1024, padding: 4, power_of_two: true };
     let layout = layout_rectangles(&sizes, &settings, Some(20.0));
     check_layout(&layout, &settings);
@@ -90,30 +109,41 @@ fn layouts_have_no_overlaps_keep_padding_and_scale_density_at_max_size() {
     // As densely as the packer can: the density is searched to within 0.2 %, not in 5 % steps
     // from 80 % of the atlas (which capped occupancy at 80 %).
     assert!(derived.occupancy > 0.74, "occupancy {} (0.69 in 5 % steps)", derived.occupancy);
-    assert!(layout_rectangles(&sizes, &settings, Some(derived.texel_density * 1.01)).texel_density < derived.texel_density * 1.01);
+    assert!(
+        layout_rectangles(&sizes, &settings, Some(derived.texel_density * 1.01)).texel_density
+            < derived.texel_density * 1.01
+    );
 }
 
 #[test]
 fn lod_obj_loads_back_with_every_quad_inside_its_atlas_placement() {
     use cirrus::kinds::billboard_cloud::lod_mesh::lod_mesh;
-    let positions: Vec<[f32; 3]> = (0..8).map(|i| [(i & 1) as f32 * 2.0, ((i >> 1) & 1) as f32, ((i >> 2) & 1) as f32 * 3.0]).collect();
+    let positions: Vec<[f32; 3]> =
+        (0..8).map(|i| [(i & 1) as f32 * 2.0, ((i >> 1) & 1) as f32, ((i >> 2) & 1) as f32 * 3.0]).collect();
     let quads = [[0u32, 1, 3, 2], [4, 6, 7, 5], [0, 4, 5, 1], [2, 3, 7, 6], [0, 2, 6, 4], [1, 5, 7, 3]];
     let triangles: Vec<[u32; 3]> = quads.iter().flat_map(|q| [[q[0], q[1], q[2]], [q[0], q[2], q[3]]]).collect();
-    let planes = select_planes(&positions, &triangles, &[], PlaneSettings { epsilon: 0.02, max_planes: None, max_quads: None });
+    let planes =
+        select_planes(&positions, &triangles, &[], PlaneSettings { epsilon: 0.02, max_planes: None, max_quads: None });
     let rectangles = plane_rectangles(&positions, &triangles, &planes);
     let settings = AtlasSettings { max_size: 256, padding: 4, power_of_two: true };
-    let layout = layout_rectangles(&rectangles.iter().map(|r| (r.frame.width, r.frame.height)).collect::<Vec<_>>(), &settings, None);
+    let layout = layout_rectangles(
+        &rectangles.iter().map(|r| (r.frame.width, r.frame.height)).collect::<Vec<_>>(),
+        &settings,
+        None,
+    );
     let (obj, mtl) = lod_mesh(&rectangles, &layout, "box");
     assert!(mtl.contains("newmtl box") && mtl.contains("map_Kd albedo.png"));
-    let (models, _) =
-        tobj::load_obj_buf(&mut obj.as_bytes(), &tobj::LoadOptions { single_index: true, triangulate: true, ..Default::default() }, |_| {
-            Ok((Vec::new(), Default::default()))
-        })
-        .expect("lod.obj parses");
+    let (models, _) = tobj::load_obj_buf(
+        &mut obj.as_bytes(),
+        &tobj::LoadOptions { single_index: true, triangulate: true, ..Default::default() },
+        |_| Ok((Vec::new(), Default::default())),
+    )
+    .expect("lod.obj parses");
     let mesh = &models[0].mesh;
     assert_eq!(mesh.indices.len(), 6 * 6, "two triangles per plane");
     for (plane, placement) in layout.placements.iter().enumerate() {
-        let (w, h) = if placement.rotated { (placement.height, placement.width) } else { (placement.width, placement.height) };
+        let (w, h) =
+            if placement.rotated { (placement.height, placement.width) } else { (placement.width, placement.height) };
         for corner in 0..4 {
             let vertex = mesh.indices.iter().map(|&i| i as usize).find(|&i| {
                 let p = [mesh.positions[i * 3], mesh.positions[i * 3 + 1], mesh.positions[i * 3 + 2]];

@@ -82,7 +82,12 @@ fn every_face_is_assigned_within_epsilon_and_selection_is_deterministic() {
 #[test]
 fn max_planes_caps_the_count_and_reports_the_achieved_error() {
     let (positions, triangles) = soup(500);
-    let set = select_planes(&positions, &triangles, &[], PlaneSettings { epsilon: 0.02, max_planes: Some(8), max_quads: None });
+    let set = select_planes(
+        &positions,
+        &triangles,
+        &[],
+        PlaneSettings { epsilon: 0.02, max_planes: Some(8), max_quads: None },
+    );
     assert!(set.planes.len() <= 8);
     let worst = check_assignment(&positions, &triangles, &set);
     assert!(worst > set.epsilon, "capped: some faces move further than ε");
@@ -161,12 +166,18 @@ fn faces_move_only_to_planes_that_hold_their_material() {
         set.planes
             .iter()
             .filter(|plane| {
-                plane.faces.iter().any(|&f| materials[f as usize] == 0) && plane.faces.iter().any(|&f| materials[f as usize] == 1)
+                plane.faces.iter().any(|&f| materials[f as usize] == 0)
+                    && plane.faces.iter().any(|&f| materials[f as usize] == 1)
             })
             .count()
     };
     let aware = select_planes(&positions, &triangles, &materials, settings(0.05));
     let blind = select_planes(&positions, &triangles, &[], settings(0.05));
     check_assignment(&positions, &triangles, &aware);
-    assert!(mixed(&aware) < mixed(&blind), "planes mixing materials: {} aware of materials, {} blind", mixed(&aware), mixed(&blind));
+    assert!(
+        mixed(&aware) < mixed(&blind),
+        "planes mixing materials: {} aware of materials, {} blind",
+        mixed(&aware),
+        mixed(&blind)
+    );
 }

@@ -56,7 +56,8 @@ fn a_relief_seen_from_above_is_recovered_within_one_16_bit_step() {
     let mut worst = 0.0f64;
     for row in 0..size {
         for column in 0..size {
-            let (x, z) = (-1.0 + (column as f64 + 0.5) / size as f64 * 2.0, -1.0 + (row as f64 + 0.5) / size as f64 * 2.0);
+            let (x, z) =
+                (-1.0 + (column as f64 + 0.5) / size as f64 * 2.0, -1.0 + (row as f64 + 0.5) / size as f64 * 2.0);
             let expected = height_field_at(cells, relief, x, z);
             worst = worst.max((measured[(row * size + column) as usize] - expected).abs() / step);
         }
@@ -70,8 +71,10 @@ fn bundled_pair() -> TempProject {
     let pipeline = std::fs::read_to_string(root.join("pipeline.ron")).unwrap();
     let start = pipeline.find("Height(name: \"spot_height\"").unwrap();
     let end = start + pipeline[start..].find("displace: true))),").unwrap() + "displace: true))),".len();
-    let project =
-        TempProject::new(&format!(r#"Pipeline(source: "examples/assets", output: "baked", assets: [ {} ])"#, &pipeline[start..end]));
+    let project = TempProject::new(&format!(
+        r#"Pipeline(source: "examples/assets", output: "baked", assets: [ {} ])"#,
+        &pipeline[start..end]
+    ));
     std::os::unix::fs::symlink(root.join("examples"), project.path("examples")).unwrap();
     project
 }
@@ -126,7 +129,12 @@ fn bad_input_fails_with_a_message_naming_the_file() {
             .collect()
     };
     let cases = [
-        (height_field_obj(2, |_, _| 0.0, false, true), field(0.01), "", "relief: assets/low.obj: the low mesh has no texture coordinates"),
+        (
+            height_field_obj(2, |_, _| 0.0, false, true),
+            field(0.01),
+            "",
+            "relief: assets/low.obj: the low mesh has no texture coordinates",
+        ),
         (
             field(0.0),
             field(5.0),
@@ -154,7 +162,9 @@ fn bad_input_fails_with_a_message_naming_the_file() {
         let errors: Vec<String> = summary
             .assets
             .iter()
-            .flat_map(|asset| asset.errors.iter().map(|error| format!("{}: {}: {}", asset.name, error.file, error.message)))
+            .flat_map(|asset| {
+                asset.errors.iter().map(|error| format!("{}: {}: {}", asset.name, error.file, error.message))
+            })
             .collect();
         assert!(errors.iter().any(|error| error.starts_with(expected)), "{expected}\n{errors:#?}");
         assert!(!project.path("baked/relief/height.png").exists(), "no artifact written");
@@ -164,7 +174,10 @@ fn bad_input_fails_with_a_message_naming_the_file() {
     let project = height_project(&field(0.01), &height_field_obj(2, |_, _| 0.0, false, true), "");
     let output = project.run_cli(&["check"]);
     let stdout = String::from_utf8_lossy(&output.stdout);
-    assert!(!output.status.success() && stdout.contains("relief: assets/low.obj: the low mesh has no texture coordinates"), "{stdout}");
+    assert!(
+        !output.status.success() && stdout.contains("relief: assets/low.obj: the low mesh has no texture coordinates"),
+        "{stdout}"
+    );
 }
 
 #[test]
@@ -178,7 +191,10 @@ fn coinciding_meshes_give_a_flat_map_with_a_warning_instead_of_noise_stretched_o
     let report = report(&project);
     assert_eq!(report["map"]["flat"], true, "{report}");
     let warnings = report["warnings"].to_string();
-    assert!(warnings.contains("the height map is flat") && warnings.contains("the high mesh lies on the low one"), "{warnings}");
+    assert!(
+        warnings.contains("the height map is flat") && warnings.contains("the high mesh lies on the low one"),
+        "{warnings}"
+    );
     let (_, values) = png16_values(&project.read("baked/relief/height.png"));
     let (low_value, high_value) = (values.iter().min().copied().unwrap(), values.iter().max().copied().unwrap());
     assert!(high_value - low_value <= 2 && (32766..=32769).contains(&low_value), "values {low_value}..={high_value}");

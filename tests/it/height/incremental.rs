@@ -23,7 +23,8 @@ fn bumps(amplitude: f32, phase: f32) -> String {
 #[test]
 fn high_mesh_level_and_encoder_edits_rerun_only_their_stages() {
     let low = height_field_obj(4, |_, _| 0.0, true, true);
-    let project = height_project(&bumps(0.02, 0.0), &low, "height: (size: 64), tessellate: Some((level: 4, displace: true))");
+    let project =
+        height_project(&bumps(0.02, 0.0), &low, "height: (size: 64), tessellate: Some((level: 4, displace: true))");
     let mut cirrus = project.open();
     assert!(build(&mut cirrus).all_ok());
     cirrus.take_executed_stages();
@@ -72,7 +73,8 @@ fn high_mesh_level_and_encoder_edits_rerun_only_their_stages() {
     .assert_debug_eq(&cirrus.take_executed_stages());
 
     // The high-mesh edit's result equals a clean bake of the edited sources.
-    let clean = height_project(&bumps(0.03, 0.5), &low, "height: (size: 64), tessellate: Some((level: 4, displace: true))");
+    let clean =
+        height_project(&bumps(0.03, 0.5), &low, "height: (size: 64), tessellate: Some((level: 4, displace: true))");
     assert!(build(&mut clean.open()).all_ok());
     assert_eq!((clean.read("baked/relief/tessellated.obj"), clean.read("baked/relief/height_pn.png")), edited);
 }

@@ -48,7 +48,8 @@ pub fn height_field_obj(cells: u32, height: impl Fn(f32, f32) -> f32, uvs: bool,
 /// The height field's surface at `(x, z)`: linear over the triangle of the cell that holds it.
 pub fn height_field_at(cells: u32, height: impl Fn(f32, f32) -> f32, x: f64, z: f64) -> f64 {
     let step = 2.0 / cells as f64;
-    let (column, row) = (((x + 1.0) / step).floor().min(cells as f64 - 1.0), ((z + 1.0) / step).floor().min(cells as f64 - 1.0));
+    let (column, row) =
+        (((x + 1.0) / step).floor().min(cells as f64 - 1.0), ((z + 1.0) / step).floor().min(cells as f64 - 1.0));
     let (fx, fz) = ((x + 1.0) / step - column, (z + 1.0) / step - row);
     let at = |i: f64, j: f64| height((-1.0 + (column + i) * step) as f32, (-1.0 + (row + j) * step) as f32) as f64;
     let (a, b, c, d) = (at(0.0, 0.0), at(1.0, 0.0), at(1.0, 1.0), at(0.0, 1.0));

@@ -9,7 +9,11 @@ use glam::Vec3;
 #[test]
 fn a_patch_interpolates_its_corners_and_their_normals() {
     let p = [Vec3::new(0.0, 0.0, 0.0), Vec3::new(1.0, 0.2, 0.0), Vec3::new(0.1, -0.3, 1.0)];
-    let n = [Vec3::new(0.3, 1.0, 0.1).normalize(), Vec3::new(-0.2, 1.0, 0.4).normalize(), Vec3::new(0.0, 0.8, -0.6).normalize()];
+    let n = [
+        Vec3::new(0.3, 1.0, 0.1).normalize(),
+        Vec3::new(-0.2, 1.0, 0.4).normalize(),
+        Vec3::new(0.0, 0.8, -0.6).normalize(),
+    ];
     let patch = pn_patch(p, n);
     for corner in 0..3 {
         let mut weights = [0.0; 3];
@@ -130,6 +134,7 @@ fn closed_meshes_stay_closed_through_tessellation_and_displacement_split_normals
     }
     // The corners' averaged normal bulges the faces outward.
     let pn = tessellate(&input, 4);
-    let centre_of_top = pn.positions.iter().map(|&p| Vec3::from(p)).filter(|p| p.x.abs() < 1e-6 && p.z.abs() < 1e-6 && p.y > 0.0);
+    let centre_of_top =
+        pn.positions.iter().map(|&p| Vec3::from(p)).filter(|p| p.x.abs() < 1e-6 && p.z.abs() < 1e-6 && p.y > 0.0);
     assert!(centre_of_top.into_iter().all(|p| p.y > 1.01), "the face centre moved out");
 }

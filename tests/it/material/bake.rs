@@ -19,7 +19,10 @@ pub fn material_project(extra_encode: &str) -> TempProject {
     ));
     let bark = std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("examples/assets/textures/bark_oak");
     for map in ["albedo", "normal", "roughness", "ao"] {
-        project.write(&format!("assets/textures/oak/{map}.jpg"), std::fs::read(bark.join(format!("{map}.jpg"))).expect("bundled bark"));
+        project.write(
+            &format!("assets/textures/oak/{map}.jpg"),
+            std::fs::read(bark.join(format!("{map}.jpg"))).expect("bundled bark"),
+        );
     }
     project.write(
         "assets/materials/bark.mymaterial",
@@ -126,14 +129,18 @@ fn an_alpha_tested_albedo_reports_the_colour_where_the_test_passes_and_the_tests
         let (passes, decoded_passes) = (source[3] >= 128, decoded[3] >= 128);
         if passes {
             visible += 1;
-            squared += (0..3).map(|channel| (source[channel] as i64 - decoded[channel] as i64).pow(2) as u64).sum::<u64>();
+            squared +=
+                (0..3).map(|channel| (source[channel] as i64 - decoded[channel] as i64).pow(2) as u64).sum::<u64>();
         }
         either += u64::from(passes || decoded_passes);
         both += u64::from(passes && decoded_passes);
     }
     let visible_psnr = 10.0 * (255.0f64 * 255.0 / (squared as f64 / (visible * 3) as f64)).log10();
     let reported = albedo["visible_psnr_db"].as_f64().expect("an alpha-tested albedo reports its visible PSNR");
-    assert!((reported - visible_psnr).abs() <= 0.006, "visible PSNR {reported} against {visible_psnr:.3} measured here");
+    assert!(
+        (reported - visible_psnr).abs() <= 0.006,
+        "visible PSNR {reported} against {visible_psnr:.3} measured here"
+    );
     let iou = both as f64 / either as f64;
     let reported = albedo["alpha_test_iou"].as_f64().expect("and its alpha test's IoU");
     assert!((reported - iou).abs() <= 1e-5, "alpha-test IoU {reported} against {iou:.5}");
@@ -230,7 +237,10 @@ fn report_json_lists_every_surface_with_its_measured_psnr() {
     }
     let manifest: serde_json::Value = serde_json::from_slice(&project.read("baked/manifest.json")).expect("manifest");
     let entry = &manifest["artifacts"]["baked/bark/oak_bark/albedo.ktx2"];
-    assert_eq!(entry["hash"].as_str().unwrap(), blake3::hash(&project.read("baked/bark/oak_bark/albedo.ktx2")).to_hex().as_str());
+    assert_eq!(
+        entry["hash"].as_str().unwrap(),
+        blake3::hash(&project.read("baked/bark/oak_bark/albedo.ktx2")).to_hex().as_str()
+    );
     assert_eq!(entry["revision"], 1);
     #[cfg(unix)]
     {
@@ -310,7 +320,11 @@ fn block_fingerprints_see_a_one_texel_change_in_its_block_alone_edge_blocks_incl
             let changed: Vec<usize> = (0..6).filter(|&number| new.block_changed(&old, number)).collect();
             assert_eq!(changed, [block], "texel ({x}, {y}), channel {channel}");
             let alpha_changed: Vec<usize> = (0..6).filter(|&number| new.alpha_changed(&old, number)).collect();
-            assert_eq!(alpha_changed, if channel == 3 { vec![block] } else { vec![] }, "texel ({x}, {y}), channel {channel}");
+            assert_eq!(
+                alpha_changed,
+                if channel == 3 { vec![block] } else { vec![] },
+                "texel ({x}, {y}), channel {channel}"
+            );
         }
     }
 }
@@ -322,12 +336,16 @@ fn refiltering_only_changed_mip_tiles_equals_a_full_chain() {
     use cirrus::texture::SurfaceKind;
     use cirrus::texture::Texture;
     // The reusing chain of `texture` after `previous` (its levels and what it kept).
-    let chain_after = |texture: &Texture, settings, previous: Option<(&[Texture], &cirrus::texture::mips::MipReuse)>| {
-        let blocks = previous.map(|(levels, _)| BlockFingerprints::of(&levels[0]));
-        let previous =
-            previous.map(|(levels, reuse)| PreviousChain { level0_blocks: blocks.as_ref().unwrap(), lower_levels: &levels[1..], reuse });
-        mip_chain_reusing(texture, &BlockFingerprints::of(texture), settings, previous)
-    };
+    let chain_after =
+        |texture: &Texture, settings, previous: Option<(&[Texture], &cirrus::texture::mips::MipReuse)>| {
+            let blocks = previous.map(|(levels, _)| BlockFingerprints::of(&levels[0]));
+            let previous = previous.map(|(levels, reuse)| PreviousChain {
+                level0_blocks: blocks.as_ref().unwrap(),
+                lower_levels: &levels[1..],
+                reuse,
+            });
+            mip_chain_reusing(texture, &BlockFingerprints::of(texture), settings, previous)
+        };
     // 192 × 128: six 64² tiles. Cut-out albedo (coverage preserved), a normal map, plain data.
     let cutout = decode_png(&cutout_png(192, 128));
     let pattern = decode_png(&pattern_png(192, 128, 3));
@@ -472,7 +490,8 @@ fn transparent_albedo_texels_keep_their_colour_down_the_mip_chain() {
             pixels.extend_from_slice(if x < 4 { &[200, 30, 30, 255] } else { &[40, 180, 40, 0] });
         }
     }
-    let levels = mip_chain(&Texture::new(8, 8, pixels), MipSettings { kind: SurfaceKind::Albedo, alpha_cutoff: Some(0.5) });
+    let levels =
+        mip_chain(&Texture::new(8, 8, pixels), MipSettings { kind: SurfaceKind::Albedo, alpha_cutoff: Some(0.5) });
     let level1 = &levels[1];
     let texel = |x: usize, y: usize| -> [u8; 4] { level1.pixels[(y * 4 + x) * 4..][..4].try_into().unwrap() };
     assert_eq!(texel(0, 1)[..3], [200, 30, 30], "opaque texels keep their colour");
@@ -494,7 +513,12 @@ fn linear_to_srgb_bytes_round_like_the_formula() {
             mismatches.push(linear);
         }
     }
-    assert!(mismatches.is_empty(), "{} values differ, first {:?}", mismatches.len(), &mismatches[..mismatches.len().min(5)]);
+    assert!(
+        mismatches.is_empty(),
+        "{} values differ, first {:?}",
+        mismatches.len(),
+        &mismatches[..mismatches.len().min(5)]
+    );
     assert_eq!((linear_to_srgb_u8(-1.0), linear_to_srgb_u8(2.0), linear_to_srgb_u8(f32::NAN)), (0, 255, 0));
     for byte in 0..=255u8 {
         assert_eq!(linear_to_srgb_u8(srgb_u8_to_linear(byte)), byte, "round trip of {byte}");
@@ -526,7 +550,12 @@ fn the_report_gives_each_formats_cost_and_with_compare_formats_what_the_others_w
                 .iter()
                 .map(|other| format!("{} {} bpp", other["format"].as_str().unwrap(), other["bits_per_texel"]))
                 .collect();
-            format!("{} {} bpp; others: {}", surface["format"].as_str().unwrap(), surface["bits_per_texel"], others.join(", "))
+            format!(
+                "{} {} bpp; others: {}",
+                surface["format"].as_str().unwrap(),
+                surface["bits_per_texel"],
+                others.join(", ")
+            )
         })
         .collect();
     expect_test::expect![[r#"

@@ -11,7 +11,9 @@ fn channel_blocks(image: &image::RgbaImage, channel: usize) -> Vec<[u8; 16]> {
     let mut blocks = Vec::new();
     for by in (0..height).step_by(4) {
         for bx in (0..width).step_by(4) {
-            blocks.push(std::array::from_fn(|texel| image.get_pixel((bx + texel % 4) as u32, (by + texel / 4) as u32).0[channel]));
+            blocks.push(std::array::from_fn(|texel| {
+                image.get_pixel((bx + texel % 4) as u32, (by + texel / 4) as u32).0[channel]
+            }));
         }
     }
     blocks
@@ -33,7 +35,11 @@ fn ispc_error(blocks: &[[u8; 16]]) -> f64 {
     let mut output = vec![0u8; blocks.len() * 8];
     let surface = intel_tex_2::RSurface { data: &data, width: stride as u32, height: 4, stride: stride as u32 };
     intel_tex_2::bc4::compress_blocks_into(&surface, &mut output);
-    blocks.iter().zip(output.chunks_exact(8)).map(|(block, bytes)| bc4_block_error(block, bytes.try_into().unwrap()) as f64).sum()
+    blocks
+        .iter()
+        .zip(output.chunks_exact(8))
+        .map(|(block, bytes)| bc4_block_error(block, bytes.try_into().unwrap()) as f64)
+        .sum()
 }
 
 #[test]
@@ -47,7 +53,8 @@ fn bc4_blocks_decode_to_the_error_the_search_scored() {
     };
     for case in 0..2000 {
         let (low, span) = ((random() % 256) as i32, [2, 16, 80, 255][case % 4]);
-        let values: [u8; 16] = std::array::from_fn(|_| (low + (random() % (span + 1)) as i32 - span as i32 / 2).clamp(0, 255) as u8);
+        let values: [u8; 16] =
+            std::array::from_fn(|_| (low + (random() % (span + 1)) as i32 - span as i32 / 2).clamp(0, 255) as u8);
         let bytes = encode_bc4_block(&values, Bc4Search::for_quality(EncodeQuality::Basic));
         let mut decoded = [0u8; 16];
         bcdec_rs::bc4(&bytes, &mut decoded, 4, false);
@@ -69,12 +76,17 @@ fn bundled_normal_maps_come_within_half_a_db_of_the_optimum() {
             let optimum: f64 = sample.iter().map(|block| bc4_windowed_optimum(block, 16) as f64).sum();
             let ours: f64 = sample
                 .iter()
-                .map(|block| bc4_block_error(block, &encode_bc4_block(block, Bc4Search::for_quality(EncodeQuality::Basic))) as f64)
+                .map(|block| {
+                    bc4_block_error(block, &encode_bc4_block(block, Bc4Search::for_quality(EncodeQuality::Basic)))
+                        as f64
+                })
                 .sum();
             // Speed over every block of the channel, one thread.
             let clock = std::time::Instant::now();
-            let encoded: Vec<[u8; 8]> =
-                blocks.iter().map(|block| encode_bc4_block(block, Bc4Search::for_quality(EncodeQuality::Basic))).collect();
+            let encoded: Vec<[u8; 8]> = blocks
+                .iter()
+                .map(|block| encode_bc4_block(block, Bc4Search::for_quality(EncodeQuality::Basic)))
+                .collect();
             let elapsed = clock.elapsed().as_secs_f64() * sample.len() as f64 / encoded.len() as f64;
             let values = sample.len() * 16;
             let clock = std::time::Instant::now();
@@ -114,7 +126,10 @@ fn bc1_refinement_never_loses_to_the_ispc_block_and_gains_on_the_bundled_bark() 
             data[texel * 4 + 3] = 255;
         }
         let mut start = [0u8; 8];
-        intel_tex_2::bc1::compress_blocks_into(&intel_tex_2::RgbaSurface { data: &data, width: 4, height: 4, stride: 16 }, &mut start);
+        intel_tex_2::bc1::compress_blocks_into(
+            &intel_tex_2::RgbaSurface { data: &data, width: 4, height: 4, stride: 16 },
+            &mut start,
+        );
         let refined = cirrus::texture::bc1::refine_bc1_block(texels, start);
         let error = |bytes: &[u8; 8]| {
             let mut decoded = [0u8; 64];
@@ -122,7 +137,9 @@ fn bc1_refinement_never_loses_to_the_ispc_block_and_gains_on_the_bundled_bark() 
             texels
                 .iter()
                 .enumerate()
-                .map(|(texel, rgb)| (0..3).map(|c| (rgb[c] as i64 - decoded[texel * 4 + c] as i64).pow(2) as u64).sum::<u64>())
+                .map(|(texel, rgb)| {
+                    (0..3).map(|c| (rgb[c] as i64 - decoded[texel * 4 + c] as i64).pow(2) as u64).sum::<u64>()
+                })
                 .sum::<u64>()
         };
         let (ispc, ours) = (error(&start), error(&refined));

@@ -20,7 +20,11 @@ fn openddl_grammar_covers_names_properties_literals_comments_and_crlf() {
     assert_eq!(properties[0].value, Value::String("distance".into()));
     assert_eq!(properties[1].value, Value::Bool(true), "a property without a value is true");
     let StructureBody::Primitive { values, .. } = &children[0].body else { panic!("primitive") };
-    assert_eq!(values, &[Value::Float(1.5), Value::Float(-2000.0), Value::Float(1.0)], "hex float literal is a bit pattern");
+    assert_eq!(
+        values,
+        &[Value::Float(1.5), Value::Float(-2000.0), Value::Float(1.0)],
+        "hex float literal is a bit pattern"
+    );
     let node = &structures[1];
     assert_eq!(node.name.as_ref().map(|name| name.to_string()), Some("$root".to_string()));
     assert_eq!(node.position.line, 3, "CRLF line endings count once");
@@ -48,7 +52,8 @@ fn material_file_with_two_materials_resolves_paths_and_constants() {
         Material %birch { Color (attrib = "diffuse") {float[3] {{0.2, 0.4, 0.6}}} }
         Light $sun {}
     "#;
-    let parsed = parse_material_file(Path::new("assets/materials/trees.mymaterial"), text, Path::new("assets")).expect("valid");
+    let parsed =
+        parse_material_file(Path::new("assets/materials/trees.mymaterial"), text, Path::new("assets")).expect("valid");
     let names: Vec<&str> = parsed.materials.iter().map(|material| material.name.as_str()).collect();
     assert_eq!(names, ["oak", "birch"]);
     let oak = &parsed.materials[0];
@@ -73,7 +78,8 @@ fn material_file_with_two_materials_resolves_paths_and_constants() {
 #[test]
 fn malformed_material_files_report_file_line_and_column() {
     let folder = Path::new(env!("CARGO_MANIFEST_DIR")).join("tests/fixtures/material_errors");
-    let mut files: Vec<_> = std::fs::read_dir(&folder).expect("fixture folder").flatten().map(|entry| entry.path()).collect();
+    let mut files: Vec<_> =
+        std::fs::read_dir(&folder).expect("fixture folder").flatten().map(|entry| entry.path()).collect();
     files.retain(|path| path.extension().is_some_and(|extension| extension == "mymaterial"));
     files.sort();
     assert!(files.len() >= 8, "fixtures present");

@@ -75,7 +75,11 @@ fn editing_an_ao_map_reencodes_only_the_mra_surfaces_that_use_it() {
     "#]]
     .assert_debug_eq(&cirrus.take_executed_stages());
     let ran = ran_stages(&summary);
-    assert_eq!(ran.len(), 10, "the summary agrees with the event log (the shared decode is listed under both assets): {ran:?}");
+    assert_eq!(
+        ran.len(),
+        10,
+        "the summary agrees with the event log (the shared decode is listed under both assets): {ran:?}"
+    );
 }
 
 #[test]

@@ -301,7 +301,10 @@ fn configure_threads() {
         None | Some(Ok(0)) => cores,
         Some(Ok(threads)) if threads <= cores => threads,
         Some(Ok(threads)) => {
-            tracing::warn!("RAYON_NUM_THREADS={threads} is more than this machine's {cores} cores: cirrus works on {cores} threads");
+            tracing::warn!(
+                "RAYON_NUM_THREADS={threads} is more than this machine's {cores} cores: cirrus works on \
+                {cores} threads"
+            );
             cores
         }
         Some(Err(_)) => {

@@ -667,7 +667,8 @@ impl Validator<'_> {
                 self.error_at_key(
                     "lods",
                     anchor,
-                    "a LOD chain needs at least one level (`lods: [Quads(256), Quads(64)]`); leave `lods` out for a single LOD",
+                    "a LOD chain needs at least one level (`lods: [Quads(256), Quads(64)]`); leave `lods` out for a \
+                        single LOD",
                 );
             }
             if lods.windows(2).any(|pair| pair[1].quads() >= pair[0].quads()) {
@@ -675,7 +676,11 @@ impl Validator<'_> {
                 self.error_at_key(
                     "lods",
                     anchor,
-                    &format!("a LOD chain goes from the most detailed level to the least: each level must allow fewer quads than the one before ({})", quads.join(", ")),
+                    &format!(
+                        "a LOD chain goes from the most detailed level to the least: each level must allow \
+                        fewer quads than the one before ({})",
+                        quads.join(", ")
+                    ),
                 );
             }
             settings.billboard.lods = lods.clone();

@@ -45,7 +45,10 @@ pub enum WatchError {
     Watch { path: String, source: notify::Error },
     #[error("cannot resolve the project folder {path}: {source}")]
     Root { path: String, source: std::io::Error },
-    #[error("another `cirrus watch` ({holder}) bakes into {folder}: two daemons would issue the same revisions for different batches; stop that one first")]
+    #[error(
+        "another `cirrus watch` ({holder}) bakes into {folder}: two daemons would issue the same revisions for \
+        different batches; stop that one first"
+    )]
     Locked { folder: String, holder: String },
     #[error("cannot lock the output folder {folder}: {source}")]
     Lock { folder: String, source: std::io::Error },
@@ -558,7 +561,8 @@ fn log_batch(summary: &BuildSummary, changed_files: &[PathBuf], graph: &crate::g
         summary.assets.iter().filter(|asset| asset.stages.iter().any(|stage| stage.status == StageStatus::Ran)).count();
     let _ = writeln!(
         std::io::stderr(),
-        "cirrus watch: batch r{}: {} file(s) changed, {rebuilt} asset(s) rebuilt, {} stage(s) ran, {} artifact(s) changed, {} failed asset(s), {ms:.0} ms",
+        "cirrus watch: batch r{}: {} file(s) changed, {rebuilt} asset(s) rebuilt, {} stage(s) ran, {} artifact(s) \
+            changed, {} failed asset(s), {ms:.0} ms",
         summary.revision,
         changed_files.len(),
         ran.len(),

@@ -485,7 +485,8 @@ impl RemoteStore {
             }
             Ok(Ok(Err(size))) => {
                 tracing::warn!(
-                    "shared cache {}: the {stage} object {} is {size} bytes, more than an entry can be ({limit}); not downloaded, computing it",
+                    "shared cache {}: the {stage} object {} is {size} bytes, more than an entry can be ({limit}); \
+                        not downloaded, computing it",
                     shared.settings.url,
                     &key.0.to_hex()[..16]
                 );

@@ -356,7 +356,9 @@ pub fn uvs_outside_warnings(obj_file: &Path, mesh: &Mesh) -> Vec<Diagnostic> {
             Diagnostic::new(
                 obj_file,
                 format!(
-                    "material `{}`: {outside} of its {total} triangles have texture coordinates outside [0, 1] (u ∈ [{u_min}, {u_max}], v ∈ [{v_min}, {v_max}]): a map covers [0, 1] only, so the parts outside are not baked",
+                    "material `{}`: {outside} of its {total} triangles have texture coordinates outside [0, 1] (u ∈ \
+                        [{u_min}, {u_max}], v ∈ [{v_min}, {v_max}]): a map covers [0, 1] only, so the parts outside \
+                        are not baked",
                     mesh.materials[material].name
                 ),
             )

@@ -363,7 +363,8 @@ pub fn long_bake_warning(
         crate::diagnostic::Diagnostic::new(
             file,
             format!(
-                "about {:.1} G rays at `rays: {}`: the bake takes about {} on {cores} cores; fewer rays (256 is plenty for most maps) or a smaller `size` bake sooner",
+                "about {:.1} G rays at `rays: {}`: the bake takes about {} on {cores} cores; fewer rays (256 is \
+                    plenty for most maps) or a smaller `size` bake sooner",
                 rays as f64 / 1e9,
                 settings.rays,
                 crate::summary::rough_duration(seconds)

@@ -273,7 +273,8 @@ fn ao_outputs(db: &dyn Db, asset: Asset, output_folder: &Path, runs: &[StageRun]
             return Err(Diagnostic::new(
                 asset.main_file(db),
                 format!(
-                    "material `{}`: its UV layout covers no texel of the {}² map (every triangle's texture coordinates are degenerate or lie outside [0, 1]): there is nothing to bake",
+                    "material `{}`: its UV layout covers no texel of the {}² map (every triangle's texture \
+                        coordinates are degenerate or lie outside [0, 1]): there is nothing to bake",
                     material.name, settings.size
                 ),
             ));

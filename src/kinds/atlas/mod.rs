@@ -271,7 +271,8 @@ fn uvs_beyond_trim(
             warnings.push(Diagnostic::new(
                 mesh_file,
                 format!(
-                    "warning: its UVs (u ∈ [{}, {}], v ∈ [{}, {}]) reach the transparent border of `{}`: the atlas keeps {}×{} texels at ({}, {}) of it, not the {}×{} at ({}, {}) trimming alone would keep",
+                    "warning: its UVs (u ∈ [{}, {}], v ∈ [{}, {}]) reach the transparent border of `{}`: the atlas \
+                        keeps {}×{} texels at ({}, {}) of it, not the {}×{} at ({}, {}) trimming alone would keep",
                     reach.u[0],
                     reach.u[1],
                     reach.v[0],

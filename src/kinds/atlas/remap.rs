@@ -43,7 +43,10 @@ pub enum RemapError {
         "material `{material}` has UVs u ∈ [{u_min}, {u_max}], v ∈ [{v_min}, {v_max}] on the atlased texture `{entry}`: repeating UVs (outside [0, 1]) cannot be remapped onto an atlas rectangle"
     )]
     RepeatingUvs { material: String, entry: String, u_min: f32, u_max: f32, v_min: f32, v_max: f32 },
-    #[error("material `{material}` uses the atlased textures `{first}` and `{second}`, which lie in different rectangles or at different places in one: one UV set cannot address both")]
+    #[error(
+        "material `{material}` uses the atlased textures `{first}` and `{second}`, which lie in different \
+        rectangles or at different places in one: one UV set cannot address both"
+    )]
     TwoRectangles { material: String, first: String, second: String },
     #[error(
         "material `{material}` maps `{texture}`, which does not exist: the remapped mesh would point at a missing file"

@@ -56,7 +56,9 @@ pub fn mesh_libraries_of(db: &dyn Db, asset: Asset, obj: PathBuf) -> Arc<BTreeMa
     Arc::new(paths.iter().filter_map(|path| Some((path.clone(), asset_file(db, asset, path.clone())?))).collect())
 }
 
-fn library_bytes(db: &dyn Db, asset: Asset, obj: &Path) -> BTreeMap<PathBuf, Option<Vec<u8>>> {
+/// The bytes of the MTL files an OBJ of the asset names, as `mesh::load_mesh` takes them (a
+/// missing or unreadable one absent or `None`).
+pub fn library_bytes(db: &dyn Db, asset: Asset, obj: &Path) -> BTreeMap<PathBuf, Option<Vec<u8>>> {
     mesh_libraries_of(db, asset, obj.to_path_buf())
         .iter()
         .map(|(path, file)| (path.clone(), file.contents(db).as_ref().ok().map(|contents| contents.bytes.to_vec())))

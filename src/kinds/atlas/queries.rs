@@ -188,14 +188,7 @@ pub fn mesh_uv_reach(db: &dyn Db, asset: Asset) -> Arc<std::collections::BTreeMa
     for mesh in atlas_mesh_files(db, asset) {
         let Some(file) = asset_file(db, asset, mesh.clone()) else { continue };
         let Ok(contents) = file.contents(db) else { continue };
-        let libraries: std::collections::BTreeMap<PathBuf, Option<Vec<u8>>> = mesh_library_paths(db, asset, mesh)
-            .into_iter()
-            .map(|path| {
-                let bytes = asset_file(db, asset, path.clone())
-                    .and_then(|file| file.contents(db).as_ref().ok().map(|contents| contents.bytes.to_vec()));
-                (path, bytes)
-            })
-            .collect();
+        let libraries = crate::kinds::mesh_queries::library_bytes(db, asset, mesh);
         let label = format!("{}/meshes/{}", asset.name(db), display_path(&remapped_mesh_path(db, asset, mesh)));
         // Keyed by the mesh, its libraries and which textures are atlased (by path).
         let library_files =
@@ -625,22 +618,12 @@ pub fn atlas_mesh_files(db: &dyn Db, asset: Asset) -> &[PathBuf] {
 
 /// The MTL files a mesh of the asset names (as far as its OBJ has been read).
 pub fn mesh_library_paths(db: &dyn Db, asset: Asset, mesh: &std::path::Path) -> Vec<PathBuf> {
-    let Some(file) = asset_file(db, asset, mesh.to_path_buf()) else { return Vec::new() };
-    let Ok(contents) = file.contents(db) else { return Vec::new() };
-    crate::mesh::material_libraries(mesh, &contents.bytes, asset.source_root(db))
+    crate::kinds::mesh_queries::mesh_library_paths_of(db, asset, mesh.to_path_buf()).to_vec()
 }
 
 /// The texture files a mesh's materials name (as far as its MTL files have been read).
 pub fn mesh_map_paths(db: &dyn Db, asset: Asset, mesh: &std::path::Path) -> Vec<PathBuf> {
-    let libraries: std::collections::BTreeMap<PathBuf, Option<Vec<u8>>> = mesh_library_paths(db, asset, mesh)
-        .into_iter()
-        .map(|path| {
-            let bytes = asset_file(db, asset, path.clone())
-                .and_then(|file| file.contents(db).as_ref().ok().map(|contents| contents.bytes.to_vec()));
-            (path, bytes)
-        })
-        .collect();
-    crate::mesh::texture_paths(mesh, &libraries, asset.source_root(db))
+    crate::mesh::texture_paths(mesh, &crate::kinds::mesh_queries::library_bytes(db, asset, mesh), asset.source_root(db))
 }
 
 /// A mesh's path below the asset's `meshes/` output folder: its path in the source folder,
@@ -726,15 +709,7 @@ pub fn remapped_mesh(db: &dyn Db, asset: Asset, mesh: PathBuf) -> Result<Arc<sup
         key_with_files(db, key, std::iter::once(file).chain(libraries.iter().filter_map(|(_, file)| *file))).finish();
     cached_json(db, REMAP, &label, key, || {
         let contents = crate::db::read_contents(db, file)?;
-        let library_bytes = libraries
-            .iter()
-            .map(|(path, file)| {
-                (
-                    path.clone(),
-                    file.and_then(|file| file.contents(db).as_ref().ok()).map(|contents| contents.bytes.to_vec()),
-                )
-            })
-            .collect();
+        let library_bytes = crate::kinds::mesh_queries::library_bytes(db, asset, &mesh);
         timed(db, REMAP, &label, || {
             let (loaded, warnings) =
                 crate::mesh::load_mesh(&mesh, &contents.bytes, &library_bytes, asset.source_root(db))?;

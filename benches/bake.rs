@@ -374,8 +374,18 @@ fn build_process_in(
     global_arguments: &[&str],
     environment: &[(&str, String)],
 ) -> (f64, f64, serde_json::Value) {
+    build_process_of(Path::new(env!("CARGO_BIN_EXE_cirrus")), folder, global_arguments, environment)
+}
+
+/// `binary build --summary json` in `folder`: wall seconds, peak memory (MiB), the summary.
+fn build_process_of(
+    binary: &Path,
+    folder: &Path,
+    global_arguments: &[&str],
+    environment: &[(&str, String)],
+) -> (f64, f64, serde_json::Value) {
     let start = Instant::now();
-    let mut child = std::process::Command::new(env!("CARGO_BIN_EXE_cirrus"))
+    let mut child = std::process::Command::new(binary)
         .args(global_arguments)
         .envs(environment.iter().map(|(name, value)| (name, value)))
         .args(["build", "--summary", "json"])
@@ -1512,34 +1522,8 @@ fn children_cpu_seconds() -> f64 {
 fn cold_bake(binary: &Path, folder: &Path, global_arguments: &[&str]) -> ProcessFigures {
     let _ = std::fs::remove_dir_all(folder.join("baked"));
     let cpu_before = children_cpu_seconds();
-    let start = Instant::now();
-    let mut child = std::process::Command::new(binary)
-        .args(global_arguments)
-        .args(["build", "--summary", "json"])
-        .current_dir(folder)
-        .stdout(std::process::Stdio::piped())
-        .stderr(std::process::Stdio::null())
-        .spawn()
-        .expect("run cirrus");
-    let status_file = format!("/proc/{}/status", child.id());
-    let mut stdout = child.stdout.take().expect("stdout");
-    let reader = std::thread::spawn(move || {
-        let mut bytes = Vec::new();
-        std::io::Read::read_to_end(&mut stdout, &mut bytes).expect("summary");
-        bytes
-    });
-    let mut peak_kib = 0u64;
-    while child.try_wait().expect("child").is_none() {
-        if let Ok(status) = std::fs::read_to_string(&status_file) {
-            if let Some(line) = status.lines().find(|line| line.starts_with("VmHWM:")) {
-                peak_kib = peak_kib.max(line.split_whitespace().nth(1).and_then(|kib| kib.parse().ok()).unwrap_or(0));
-            }
-        }
-        std::thread::sleep(std::time::Duration::from_millis(5));
-    }
-    let wall = start.elapsed().as_secs_f64();
-    let summary = serde_json::from_slice(&reader.join().expect("reader")).expect("summary JSON");
-    ProcessFigures { wall, cpu: children_cpu_seconds() - cpu_before, peak_mib: peak_kib as f64 / 1024.0, summary }
+    let (wall, peak_mib, summary) = build_process_of(binary, folder, global_arguments, &[]);
+    ProcessFigures { wall, cpu: children_cpu_seconds() - cpu_before, peak_mib, summary }
 }
 
 /// The oak's full bake (default settings, cold, as a process, llvmpipe or whatever adapter the

@@ -488,7 +488,7 @@ impl Project {
             for (path, bytes) in &outputs.files {
                 all_written &= self.write_artifact(path, bytes, &mut errors, &mut produced);
             }
-            let warnings = outputs.report.as_deref().map(crate::summary::report_warnings).unwrap_or_default();
+            let warnings = outputs.warnings;
             // The report comes last and describes the files above: it is written only when they
             // all are (a failed write keeps the last good report with its files).
             if let (Some(mut report), true) = (outputs.report, all_written) {

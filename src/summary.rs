@@ -164,27 +164,6 @@ impl BuildSummary {
     }
 }
 
-/// The `warnings` of an asset's `report.json` (each kind lists its warnings there, in this
-/// shape); none when the report has no such list.
-pub fn report_warnings(report: &[u8]) -> Vec<ErrorSummary> {
-    let Ok(report) = serde_json::from_slice::<serde_json::Value>(report) else { return Vec::new() };
-    let Some(warnings) = report.get("warnings").and_then(|warnings| warnings.as_array()) else { return Vec::new() };
-    let number = |warning: &serde_json::Value, key: &str| {
-        warning.get(key).and_then(|value| value.as_u64()).map(|value| value as u32)
-    };
-    warnings
-        .iter()
-        .filter_map(|warning| {
-            Some(ErrorSummary {
-                file: warning.get("file")?.as_str()?.to_string(),
-                line: number(warning, "line"),
-                column: number(warning, "column"),
-                message: warning.get("message")?.as_str()?.to_string(),
-            })
-        })
-        .collect()
-}
-
 /// A duration for people: `45 s`, `17 min`, `2.3 h`.
 pub fn rough_duration(seconds: f64) -> String {
     match seconds {

@@ -409,7 +409,8 @@ pub fn watch(settings: &WatchSettings) -> Result<(), WatchError> {
         force_build = false;
         // The files this build is about to read count as sources already: a folder of new
         // rule-matched files deleted while they bake (one event for the folder) cancels it.
-        {
+        // (Without rules no asset is new to the watcher: no walk of the source folder.)
+        if !project.config().rules.is_empty() {
             let main_files: Vec<PathBuf> = project
                 .asset_list()
                 .iter()

@@ -448,6 +448,8 @@ pub struct AssetOutputs {
     /// What some files' values mean (a height map's `center` and `magnitude`), listed beside
     /// them in the manifest.
     pub meanings: std::collections::BTreeMap<PathBuf, serde_json::Value>,
+    /// What the report warns about, for the build summary too.
+    pub warnings: Vec<crate::summary::ErrorSummary>,
 }
 
 /// Reads a texture's header for `check`: readable, decodable, within the texture limits.

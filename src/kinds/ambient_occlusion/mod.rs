@@ -338,5 +338,6 @@ fn ao_outputs(db: &dyn Db, asset: Asset, output_folder: &Path, runs: &[StageRun]
             .collect(),
     };
     outputs.report = Some(serde_json::to_vec_pretty(&report).expect("reports serialise"));
+    outputs.warnings = report.warnings;
     Ok(outputs)
 }

@@ -348,6 +348,7 @@ fn atlas_outputs(
         "stage_ms": crate::kinds::asset_stage_ms(asset.name(db), runs),
     });
     outputs.report = Some(serde_json::to_vec_pretty(&report).expect("reports serialise"));
+    outputs.warnings = warnings.iter().map(crate::summary::ErrorSummary::from).collect();
     Ok(outputs)
 }
 

@@ -355,11 +355,8 @@ fn billboard_outputs(
         "stage_ms".into(),
         serde_json::to_value(crate::kinds::asset_stage_ms(name, runs)).expect("times serialise"),
     );
-    fields.insert(
-        "warnings".into(),
-        serde_json::to_value(loaded.warnings.iter().map(ErrorSummary::from).collect::<Vec<_>>())
-            .expect("warnings serialise"),
-    );
+    outputs.warnings = loaded.warnings.iter().map(ErrorSummary::from).collect();
+    fields.insert("warnings".into(), serde_json::to_value(&outputs.warnings).expect("warnings serialise"));
     outputs.report = Some(serde_json::to_vec_pretty(&report).expect("reports serialise"));
     Ok(outputs)
 }

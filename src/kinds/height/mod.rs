@@ -419,5 +419,6 @@ fn height_outputs(
         warnings,
     };
     outputs.report = Some(serde_json::to_vec_pretty(&report).expect("reports serialise"));
+    outputs.warnings = report.warnings;
     Ok(outputs)
 }

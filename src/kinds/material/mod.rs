@@ -160,6 +160,7 @@ impl Kind for Material {
             errors: errors.iter().map(ErrorSummary::from).collect(),
         };
         outputs.report = Some(serde_json::to_vec_pretty(&report).expect("reports serialise"));
+        outputs.warnings = report.warnings;
         outputs
     }
 

@@ -575,13 +575,9 @@ fn graph(
         Err(code) => return code,
     };
     let mut project = Project::open(config, options);
-    if let Some(name) = &asset {
-        let assets = project.asset_list();
-        if !assets.iter().any(|candidate| &candidate.name == name) {
-            let hint = crate::diagnostic::did_you_mean(name, assets.iter().map(|candidate| candidate.name.as_str()));
-            eprintln!("error: no asset named `{name}` in {}{hint}", crate::diagnostic::display_path(&pipeline));
-            return ExitCode::from(EXIT_USAGE);
-        }
+    if let Err(error) = crate::project::require_assets(asset.as_slice(), &project.asset_list(), &pipeline) {
+        eprintln!("error: {error}");
+        return ExitCode::from(EXIT_USAGE);
     }
     // A build first (cached work costs nothing), so that nodes carry their states and timings.
     let summary = match project.build(&BuildOptions::default(), &|_| {}) {

@@ -19,11 +19,13 @@ pub fn run(command: CacheCommand, options: ProjectOptions) -> ExitCode {
             ExitCode::SUCCESS
         }),
         CacheCommand::Explain { pipeline, asset } => with_cache_folder(&pipeline, |folder, config| {
-            if !config.assets.iter().any(|listed| listed.name == asset) && !last_build_names(folder).contains(&asset) {
-                let hint =
-                    crate::diagnostic::did_you_mean(&asset, config.assets.iter().map(|listed| listed.name.as_str()));
-                eprintln!("error: no asset named `{asset}` in {}{hint}", display_path(&pipeline));
-                return ExitCode::from(EXIT_USAGE);
+            if !last_build_names(folder).contains(&asset) {
+                if let Err(error) =
+                    crate::project::require_assets(std::slice::from_ref(&asset), &config.assets, &pipeline)
+                {
+                    eprintln!("error: {error}");
+                    return ExitCode::from(EXIT_USAGE);
+                }
             }
             match explain_text(folder, &asset) {
                 Some(text) => {

@@ -67,6 +67,14 @@ pub struct BuildOptions {
     pub always_new_revision: bool,
 }
 
+/// `Err(UnknownAsset)`, with the closest known name, for the first of `names` that names none
+/// of `assets`.
+pub fn require_assets(names: &[String], assets: &[AssetConfig], pipeline: &Path) -> Result<(), BuildError> {
+    let Some(name) = names.iter().find(|name| !assets.iter().any(|asset| &asset.name == *name)) else { return Ok(()) };
+    let hint = crate::diagnostic::did_you_mean(name, assets.iter().map(|asset| asset.name.as_str()));
+    Err(BuildError::UnknownAsset { name: name.clone(), pipeline: display_path(pipeline), hint })
+}
+
 #[derive(Debug, thiserror::Error)]
 pub enum BuildError {
     #[error("no asset named `{name}` in {pipeline}{hint}")]
@@ -393,16 +401,7 @@ impl Project {
         for conflict in &conflicts {
             tracing::warn!("{conflict}");
         }
-        for name in &options.only_assets {
-            if !all_assets.iter().any(|asset| &asset.name == name) {
-                let hint = crate::diagnostic::did_you_mean(name, all_assets.iter().map(|asset| asset.name.as_str()));
-                return Err(BuildError::UnknownAsset {
-                    name: name.clone(),
-                    pipeline: display_path(&self.config.file),
-                    hint,
-                });
-            }
-        }
+        require_assets(&options.only_assets, &all_assets, &self.config.file)?;
         let selected: Vec<AssetConfig> = all_assets
             .iter()
             .filter(|asset| options.only_assets.is_empty() || options.only_assets.contains(&asset.name))
@@ -622,16 +621,7 @@ impl Project {
     /// when it is empty); an unknown name is an error, with the closest known one.
     pub fn check_assets(&self, only: &[String]) -> Result<Vec<(String, Vec<Diagnostic>)>, BuildError> {
         let (assets, conflicts) = self.asset_list_and_conflicts();
-        for name in only {
-            if !assets.iter().any(|asset| &asset.name == name) {
-                let hint = crate::diagnostic::did_you_mean(name, assets.iter().map(|asset| asset.name.as_str()));
-                return Err(BuildError::UnknownAsset {
-                    name: name.clone(),
-                    pipeline: display_path(&self.config.file),
-                    hint,
-                });
-            }
-        }
+        require_assets(only, &assets, &self.config.file)?;
         // Rule-matched files that do not become assets are reported under `rules`.
         let conflicts =
             conflicts.into_iter().filter(|_| only.is_empty()).map(|conflict| ("rules".to_string(), vec![conflict]));

@@ -153,20 +153,24 @@ pub fn record_artifact(
     !unchanged
 }
 
-/// Deletes the artifacts `doomed` selects, file and manifest entry; returns the paths deleted.
-/// `manifest.json` is a file on disk that anyone may have edited: a listed path is deleted only
-/// when it lies inside the output folder and the file there is the one cirrus wrote (its blake3
-/// matches the entry). Any other entry is dropped from the manifest with a warning, its file
-/// left alone.
-pub fn remove_artifacts(
-    config: &PipelineConfig,
-    manifest: &mut Manifest,
-    doomed: impl Fn(&str, &ManifestEntry) -> bool,
-) -> Vec<String> {
-    let paths: Vec<String> =
-        manifest.artifacts.iter().filter(|(path, entry)| doomed(path, entry)).map(|(path, _)| path.clone()).collect();
+/// The manifest's artifact paths of each asset (one pass over the manifest, so that a build
+/// looks up an asset's artifacts without going through everyone's).
+pub fn artifacts_by_asset(manifest: &Manifest) -> std::collections::HashMap<String, Vec<String>> {
+    let mut by_asset: std::collections::HashMap<String, Vec<String>> = Default::default();
+    for (path, entry) in &manifest.artifacts {
+        by_asset.entry(entry.asset.clone()).or_default().push(path.clone());
+    }
+    by_asset
+}
+
+/// Deletes the artifacts at `doomed` (manifest paths), file and manifest entry; returns the
+/// paths deleted. `manifest.json` is a file on disk that anyone may have edited: a listed path
+/// is deleted only when it lies inside the output folder and the file there is the one cirrus
+/// wrote (its blake3 matches the entry). Any other entry is dropped from the manifest with a
+/// warning, its file left alone.
+pub fn remove_artifacts(config: &PipelineConfig, manifest: &mut Manifest, doomed: Vec<String>) -> Vec<String> {
     let mut removed = Vec::new();
-    for path in paths {
+    for path in doomed {
         let Some(entry) = manifest.artifacts.remove(&path) else { continue };
         match stale_artifact_file(config, &path, &entry.hash) {
             Ok(Some(file)) => match std::fs::remove_file(&file) {

@@ -51,6 +51,10 @@ pub enum Command {
         /// How to print the result on stdout.
         #[arg(long, value_enum, default_value_t = SummaryFormat::Text)]
         summary: SummaryFormat,
+        /// Hash every source file and artifact instead of trusting their metadata (size,
+        /// modification and change times, file id) as the build record holds it.
+        #[arg(long)]
+        verify: bool,
     },
     /// Render a billboard cloud and its source from many directions: contact sheet and metrics.
     Preview {
@@ -332,7 +336,9 @@ fn run_command(cli: Cli) -> ExitCode {
     };
     let options = ProjectOptions { remote_cache: remote_cache.clone(), ..Default::default() };
     match cli.command {
-        Command::Build { pipeline, assets, summary } => build(pipeline, assets, summary, options),
+        Command::Build { pipeline, assets, summary, verify } => {
+            build(pipeline, assets, summary, ProjectOptions { verify, ..options })
+        }
         Command::Check { pipeline, assets, json } => check(pipeline, &assets, json),
         Command::Cache { command } => crate::cli_cache::run(command, options),
         Command::Watch { pipeline, listen, debounce_ms } => {

@@ -6,7 +6,7 @@ use std::fmt::Write as _;
 use std::path::Path;
 use std::process::ExitCode;
 
-use crate::cache::upkeep::{collect_garbage, entry_files, read_last_build, recorded_key_parts, Miss};
+use crate::cache::upkeep::{collect_garbage, entry_files, read_last_build, recorded_key_parts, LastBuild, Miss};
 use crate::cli::{load_pipeline_or_report, CacheCommand, EXIT_USAGE};
 use crate::diagnostic::display_path;
 use crate::project::ProjectOptions;
@@ -69,7 +69,8 @@ fn with_cache_folder(
 }
 
 fn last_build_names(folder: &Path) -> Vec<String> {
-    read_last_build(folder).map(|last| last.assets.into_iter().map(|asset| asset.name).collect()).unwrap_or_default()
+    let names = |last: LastBuild| last.assets.into_iter().map(|asset| asset.name).chain(last.unchanged).collect();
+    read_last_build(folder).map(names).unwrap_or_default()
 }
 
 /// `cirrus cache stats`: entries and bytes per stage, then the last build's counts.
@@ -121,6 +122,9 @@ pub fn stats_text(folder: &Path, remote: Option<&str>) -> String {
             }
             let statuses: Vec<String> = statuses.iter().map(|(status, count)| format!("{count} {status}")).collect();
             let _ = writeln!(text, "  stages: {}", statuses.join(", "));
+            if !last.unchanged.is_empty() {
+                let _ = writeln!(text, "  assets passed over (nothing they read changed): {}", last.unchanged.len());
+            }
         }
     }
     text
@@ -130,6 +134,13 @@ pub fn stats_text(folder: &Path, remote: Option<&str>) -> String {
 /// where its result came from.
 pub fn explain_text(folder: &Path, asset: &str) -> Option<String> {
     let last = read_last_build(folder)?;
+    if last.unchanged.iter().any(|name| name == asset) {
+        return Some(format!(
+            "{asset} in the build of revision {}: passed over: the build record showed that nothing it reads had \
+             changed and its artifacts were as written, so no stage was asked for a result\n",
+            last.revision
+        ));
+    }
     let recorded = last.assets.iter().find(|recorded| recorded.name == asset)?;
     let mut text = String::new();
     let _ = writeln!(text, "{asset} in the build of revision {}:", last.revision);

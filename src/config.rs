@@ -1,7 +1,7 @@
 //! `pipeline.ron`: parsed in two levels, a serde mirror of the file (`raw`) and then validated,
 //! resolved per-asset settings (`PipelineConfig`). Every error names the file, line and column.
 
-use std::collections::BTreeSet;
+use std::collections::HashMap;
 use std::net::SocketAddr;
 use std::path::{Component, Path, PathBuf};
 
@@ -130,6 +130,12 @@ impl PipelineConfig {
         if self.assets.iter().any(|asset| asset.source.main_file() == relative) {
             return None;
         }
+        self.rule_asset(relative)
+    }
+
+    /// The asset that the first rule matching `relative` makes of it, whether or not an explicit
+    /// asset uses the file (the driver, which lists thousands, checks that once for all).
+    pub fn rule_asset(&self, relative: &Path) -> Option<AssetConfig> {
         let rule = self.rules.iter().find(|rule| rule.matcher.is_match(relative))?;
         let name = crate::diagnostic::display_path(&relative.with_extension(""));
         let source = match rule.kind {
@@ -391,7 +397,7 @@ impl Validator<'_> {
             });
 
         let mut assets = Vec::new();
-        let mut names = BTreeSet::new();
+        let mut names = AssetFolders::default();
         for asset in &raw.assets {
             // Each kind's own settings; the others keep the defaults.
             let mut overrides = raw::SettingsOverrides::default();
@@ -443,12 +449,12 @@ impl Validator<'_> {
             if let Some(reserved) = reserved_asset_name(name) {
                 self.error_at_value(name, 0, &reserved);
             }
-            if !names.insert(name.clone()) {
+            let collision = names.collision(name).map(str::to_string);
+            names.insert(name);
+            if collision.as_ref() == Some(name) {
                 let second = self.offset_of_value(name, anchor + name.len() + 2).unwrap_or(anchor);
                 self.error_at_value(name, second, &format!("asset name `{name}` is used twice"));
-            } else if let Some(other) = names.iter().find(|other| *other != name && asset_folders_collide(other, name))
-            {
-                let other = other.clone();
+            } else if let Some(other) = collision {
                 self.error_at_value(
                     name,
                     anchor,
@@ -956,11 +962,36 @@ pub fn reserved_asset_name(name: &str) -> Option<String> {
     }
 }
 
-/// Whether two asset names share artifacts: the same name, or one folder inside the other
-/// (`x` and `x/m`: the stale-artifact cleanup of one would delete the other's files).
-pub fn asset_folders_collide(a: &str, b: &str) -> bool {
-    let inside = |outer: &str, inner: &str| inner.strip_prefix(outer).is_some_and(|rest| rest.starts_with('/'));
-    a == b || inside(a, b) || inside(b, a)
+/// Asset names, indexed so that whether a new name's folder collides with one of theirs is a
+/// handful of lookups, not a pass over every name: two names share artifacts when they are the
+/// same or one folder lies inside the other (`x` and `x/m`: the stale-artifact cleanup of one
+/// would delete the other's files).
+#[derive(Default)]
+pub struct AssetFolders {
+    names: std::collections::HashSet<String>,
+    /// Each folder that holds a name's folder (`x` and `x/m` for `x/m/n`), with one such name.
+    outer: HashMap<String, String>,
+}
+
+impl AssetFolders {
+    /// A name already added that `name`'s folder collides with (itself included).
+    pub fn collision(&self, name: &str) -> Option<&str> {
+        if let Some(same) = self.names.get(name) {
+            return Some(same);
+        }
+        let outers = name.match_indices('/').map(|(at, _)| &name[..at]);
+        if let Some(outer) = outers.filter_map(|outer| self.names.get(outer)).next() {
+            return Some(outer);
+        }
+        self.outer.get(name).map(String::as_str)
+    }
+
+    pub fn insert(&mut self, name: &str) {
+        for (at, _) in name.match_indices('/') {
+            self.outer.entry(name[..at].to_string()).or_insert_with(|| name.to_string());
+        }
+        self.names.insert(name.to_string());
+    }
 }
 
 /// Resolves `.` and `..` lexically; `None` when the path is absolute or climbs out of its base.

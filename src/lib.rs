@@ -20,6 +20,7 @@ pub mod db;
 pub mod cache;
 pub mod sources;
 pub mod artifacts;
+pub mod record;
 pub mod schedule;
 pub mod summary;
 pub mod graph;

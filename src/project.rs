@@ -16,7 +16,8 @@ use crate::config::{AssetConfig, PipelineConfig};
 use crate::db::{Asset, Database, Db, SourceFile, StageRun};
 use crate::diagnostic::{display_path, Diagnostic};
 use crate::kinds::{stage_node_id, AssetKind, Read, StageInstance};
-use crate::sources::{read_source, rule_matches};
+use crate::record::{AssetRecord, BuildRecord, FileStamp, InstanceRecord, ReadRecord};
+use crate::sources::{read_source_stamped, rule_matches};
 use crate::summary::{
     ArtifactSummary, AssetStatus, AssetSummary, BuildSummary, ChangedArtifact, ErrorSummary, StageStatus, StageSummary,
 };
@@ -32,6 +33,9 @@ pub struct ProjectOptions {
     pub source_reading: SourceReading,
     /// The command line's word on the shared cache (`pipeline.ron`'s `cache` otherwise).
     pub remote_cache: crate::cache::remote::RemoteCacheOverride,
+    /// Hash every source file and every artifact instead of trusting the build record's
+    /// metadata (`cirrus build --verify`).
+    pub verify: bool,
 }
 
 impl Default for ProjectOptions {
@@ -40,6 +44,7 @@ impl Default for ProjectOptions {
             persistent_cache: true,
             source_reading: SourceReading::EveryBuild,
             remote_cache: Default::default(),
+            verify: false,
         }
     }
 }
@@ -65,6 +70,9 @@ pub struct BuildOptions {
     /// Give this build a revision of its own even when it changed no artifact (the daemon's
     /// batches are numbered by it).
     pub always_new_revision: bool,
+    /// Leave the assets that the record let the build pass over out of the summary (the daemon,
+    /// whose batches report what changed, so that a batch costs what its edit costs).
+    pub omit_unchanged: bool,
 }
 
 /// `Err(UnknownAsset)`, with the closest known name, for the first of `names` that names none
@@ -111,7 +119,32 @@ pub struct Project {
     /// A source input was created or set since the last finished build (also by `graph`).
     sources_changed_since_build: bool,
     options: ProjectOptions,
+    /// The build record: source files' metadata and hashes, baked assets' fingerprints.
+    record: BuildRecord,
+    /// The record differs from the one on disk.
+    record_changed: bool,
+    /// Content hashes (or why a file cannot be read) of files that have no salsa input, valid
+    /// while the file is in `fresh`.
+    known: HashMap<PathBuf, Result<blake3::Hash, String>>,
+    /// Assets whose artifacts this process wrote or checked against the record: the daemon,
+    /// which holds the output folder's lock, does not check them again.
+    trusted_artifacts: HashSet<String>,
+    /// What identifies this executable in fingerprints (a rebuilt cirrus trusts no record).
+    identity: blake3::Hash,
+    /// The hash of each distinct asset configuration seen (most assets share their rule's).
+    config_hashes: Vec<(AssetConfig, blake3::Hash)>,
+    /// The manifest as last read or written, with the stamp its file had then: read again only
+    /// when the file changed meanwhile.
+    manifest: Option<(Option<FileStamp>, Manifest)>,
+    /// The daemon's asset list, until an edit may change it.
+    asset_list_kept: std::cell::RefCell<Option<Arc<AssetList>>>,
 }
+
+/// The assets of the pipeline, and the rule-matched files that do not become assets.
+type AssetList = (Vec<AssetConfig>, Vec<Diagnostic>);
+
+/// Bump when what enters an asset's fingerprint changes.
+const FINGERPRINT_VERSION: u32 = 1;
 
 /// The local cache under `<output>/.cirrus/cache`, with the shared store behind it when the
 /// pipeline or the command line names one (one that cannot be opened is a warning).
@@ -136,10 +169,17 @@ fn open_disk_cache(config: &PipelineConfig, options: &ProjectOptions) -> Option<
 impl Project {
     pub fn open(config: PipelineConfig, options: ProjectOptions) -> Project {
         let cache = open_disk_cache(&config, &options);
-        let revision = load_manifest(&config.output_dir()).revision;
-        let swept = crate::artifacts::sweep_temporary_files(&config.output_dir());
-        if swept > 0 {
-            tracing::info!("deleted {swept} temporary file(s) left by an interrupted build");
+        let manifest = load_manifest(&config.output_dir());
+        let revision = manifest.revision;
+        let manifest_stamp = FileStamp::read(&crate::artifacts::manifest_path(&config.output_dir()));
+        let record = BuildRecord::load(&config.output_dir());
+        // Only a build that was interrupted leaves temporary files: the output folder is walked
+        // for them only then.
+        if crate::record::interrupted_build(&config.output_dir()) {
+            let swept = crate::artifacts::sweep_temporary_files(&config.output_dir());
+            if swept > 0 {
+                tracing::info!("deleted {swept} temporary file(s) left by an interrupted build");
+            }
         }
         let mut project = Project {
             config,
@@ -155,6 +195,14 @@ impl Project {
             revision,
             sources_changed_since_build: false,
             options,
+            record,
+            record_changed: false,
+            known: HashMap::new(),
+            trusted_artifacts: HashSet::new(),
+            identity: executable_identity(),
+            config_hashes: Vec::new(),
+            manifest: Some((manifest_stamp, manifest)),
+            asset_list_kept: Default::default(),
         };
         project.sync_limits();
         project
@@ -174,9 +222,17 @@ impl Project {
         &self.db
     }
 
-    /// The salsa input of an asset the project has read.
-    pub fn asset_input(&self, name: &str) -> Option<Asset> {
-        self.assets.get(name).copied()
+    /// The salsa input of an asset of the pipeline, read now if a build passed it over.
+    pub fn asset_input(&mut self, name: &str) -> Option<Asset> {
+        if let Some(&asset) = self.assets.get(name) {
+            return Some(asset);
+        }
+        let listed = self.asset_list_and_conflicts();
+        let config = listed.0.iter().find(|asset| asset.name == name)?;
+        let asset = self.sync_asset(config);
+        let all = listed.0.clone();
+        self.sync_registry(&all, &[(config.clone(), asset)]);
+        Some(asset)
     }
 
     /// Uses up a revision without a build (the daemon numbers a configuration error's batch).
@@ -184,14 +240,31 @@ impl Project {
         self.revision += 1;
     }
 
-    /// Every source file read so far (project-relative).
+    /// Every source file read so far (project-relative), and every file that the record says
+    /// a baked asset reads.
     pub fn source_paths(&self) -> BTreeSet<PathBuf> {
-        self.files.keys().cloned().collect()
+        let recorded = self.record.assets.values().flat_map(|asset| asset.files.iter());
+        self.files.keys().chain(recorded).cloned().collect()
+    }
+
+    /// The source files of the named assets: read by their inputs, or by the record.
+    pub fn source_paths_of(&self, names: &HashSet<String>) -> BTreeSet<PathBuf> {
+        let mut paths = BTreeSet::new();
+        for name in names {
+            if let Some(&asset) = self.assets.get(name) {
+                paths.extend(asset.files(&self.db).keys().cloned());
+            }
+            if let Some(record) = self.record.assets.get(name) {
+                paths.extend(record.files.iter().cloned());
+            }
+        }
+        paths
     }
 
     /// Marks source files as changed on disk: the next build reads them again.
     pub fn invalidate_sources<'a>(&mut self, paths: impl IntoIterator<Item = &'a Path>) {
         for path in paths {
+            self.forget_asset_list_for(path);
             self.fresh.remove(path);
         }
     }
@@ -202,21 +275,61 @@ impl Project {
     pub fn refresh_sources<'a>(&mut self, paths: impl IntoIterator<Item = &'a Path>) -> bool {
         let mut changed = self.sources_changed_since_build;
         for path in paths {
-            let Some(&file) = self.files.get(path) else {
-                changed = true;
-                continue;
-            };
-            let before = file.contents(&self.db).clone();
+            self.forget_asset_list_for(path);
+            let before = self.last_known_hash(path);
             self.fresh.remove(path);
-            self.source_file(path);
-            changed |= file.contents(&self.db) != &before;
+            let after = self.file_hash(path);
+            changed |= before != Some(after);
         }
         changed
+    }
+
+    /// The content hash last seen of a file (its input's, or the record's), if any.
+    fn last_known_hash(&self, path: &Path) -> Option<Result<blake3::Hash, String>> {
+        match self.files.get(path) {
+            Some(file) => Some(file.contents(&self.db).as_ref().map(|contents| contents.hash).map_err(Clone::clone)),
+            None => self.known.get(path).cloned().or_else(|| self.record.files.get(path).map(|file| Ok(file.hash))),
+        }
+    }
+
+    /// The content hash of a source file (or why it cannot be read): its input's when it has
+    /// one, else the record's when the file's metadata did not move since it was recorded (not
+    /// racy, no `--verify`), else read and hashed now (and recorded).
+    fn file_hash(&mut self, path: &Path) -> Result<blake3::Hash, String> {
+        if self.files.contains_key(path) {
+            let file = self.source_file(path);
+            return file.contents(&self.db).as_ref().map(|contents| contents.hash).map_err(Clone::clone);
+        }
+        if self.fresh.contains(path) {
+            if let Some(known) = self.known.get(path) {
+                return known.clone();
+            }
+        }
+        let seen_at = crate::record::now();
+        if !self.options.verify {
+            let trusted = FileStamp::read(&self.config.root.join(path))
+                .and_then(|stamp| self.record.trusted_hash(path, &stamp))
+                .filter(|_| self.config.source_dir().is_dir());
+            if let Some(hash) = trusted {
+                self.fresh.insert(path.to_path_buf());
+                self.known.insert(path.to_path_buf(), Ok(hash));
+                return Ok(hash);
+            }
+        }
+        let read = read_source_stamped(&self.config.root, &self.config.source, path);
+        let hash = read.map(|(contents, stamp)| {
+            self.record_changed |= self.record.remember_file(path, stamp, contents.hash, seen_at);
+            contents.hash
+        });
+        self.fresh.insert(path.to_path_buf());
+        self.known.insert(path.to_path_buf(), hash.clone());
+        hash
     }
 
     /// Marks every source file as possibly changed (after a watcher overflow or error).
     pub fn invalidate_all_sources(&mut self) {
         self.fresh.clear();
+        *self.asset_list_kept.get_mut() = None;
     }
 
     /// Whether `path` (project-relative) is a source file some asset read.
@@ -238,6 +351,7 @@ impl Project {
             self.db.replace_disk_cache(open_disk_cache(&config, &self.options));
         }
         self.config = config;
+        *self.asset_list_kept.get_mut() = None;
         self.sync_limits();
     }
 
@@ -268,22 +382,58 @@ impl Project {
 
     /// The assets of the pipeline: the listed ones, then files matching `rules`.
     pub fn asset_list(&self) -> Vec<AssetConfig> {
-        self.asset_list_and_conflicts().0
+        self.asset_list_and_conflicts().0.clone()
     }
 
     /// The assets of the pipeline, and a warning for each rule-matched file that does not
     /// become an asset because its name is reserved or collides with another asset's folder.
-    pub fn asset_list_and_conflicts(&self) -> (Vec<AssetConfig>, Vec<Diagnostic>) {
+    /// The daemon keeps them until an edit may change them (see `refresh_sources`); a build
+    /// lists them afresh.
+    pub fn asset_list_and_conflicts(&self) -> Arc<AssetList> {
+        let mut kept = self.asset_list_kept.borrow_mut();
+        if let Some(list) = kept.as_ref().filter(|_| self.source_reading == SourceReading::WhenInvalidated) {
+            return list.clone();
+        }
+        let list = Arc::new(self.list_assets());
+        *kept = Some(list.clone());
+        list
+    }
+
+    /// Forgets the kept asset list when `path` (project-relative) may change it: a file that
+    /// a rule matches, or one no asset reads (new, or a folder).
+    fn forget_asset_list_for(&mut self, path: &Path) {
+        if self.config.rules.is_empty() {
+            return;
+        }
+        let known = self.files.contains_key(path) || self.record.files.contains_key(path);
+        let matched = path.strip_prefix(&self.config.source).is_ok_and(|relative| {
+            let relative = PathBuf::from(display_path(relative));
+            self.config.rules.iter().any(|rule| rule.matcher.is_match(&relative))
+        });
+        if !known || matched {
+            *self.asset_list_kept.get_mut() = None;
+        }
+    }
+
+    fn list_assets(&self) -> AssetList {
         let mut assets = self.config.assets.clone();
         let mut conflicts = Vec::new();
+        let mut folders = crate::config::AssetFolders::default();
+        let mut by_name: HashMap<String, usize> = HashMap::new();
+        for (index, asset) in assets.iter().enumerate() {
+            folders.insert(&asset.name);
+            by_name.insert(asset.name.clone(), index);
+        }
+        let listed_files: HashSet<&Path> = self.config.assets.iter().map(|asset| asset.source.main_file()).collect();
         for relative in rule_matches(&self.config) {
-            let Some(asset) = self.config.asset_for_rule_match(&relative) else { continue };
+            if listed_files.contains(relative.as_path()) {
+                continue;
+            }
+            let Some(asset) = self.config.rule_asset(&relative) else { continue };
             let file = self.config.source.join(&relative);
             if let Some(reserved) = crate::config::reserved_asset_name(&asset.name) {
                 conflicts.push(Diagnostic::new(file, format!("warning: matches a rule but is not baked: {reserved}")));
-            } else if let Some(other) =
-                assets.iter().find(|other| crate::config::asset_folders_collide(&other.name, &asset.name))
-            {
+            } else if let Some(other) = folders.collision(&asset.name).map(|name| &assets[by_name[name]]) {
                 conflicts.push(Diagnostic::new(
                     file,
                     format!(
@@ -294,6 +444,8 @@ impl Project {
                     ),
                 ));
             } else {
+                folders.insert(&asset.name);
+                by_name.insert(asset.name.clone(), assets.len());
                 assets.push(asset);
             }
         }
@@ -364,6 +516,124 @@ impl Project {
         asset
     }
 
+    /// The files of the source folder that an asset's globs list (none for most kinds).
+    fn listed_sources(&self, config: &AssetConfig) -> Vec<Vec<PathBuf>> {
+        let lists = config.source.glob_lists();
+        lists.into_iter().map(|globs| crate::sources::glob_matches(&self.config, globs)).collect()
+    }
+
+    /// The hash of an asset's configuration with the pipeline-wide settings its outputs depend
+    /// on (most assets share their rule's settings: each distinct one is formatted once).
+    fn config_hash(&mut self, config: &AssetConfig) -> blake3::Hash {
+        if let Some((_, hash)) = self.config_hashes.iter().find(|(seen, _)| seen == config) {
+            return *hash;
+        }
+        let text = format!(
+            "{:?}|{:?}|{:?}|{:?}|{}",
+            config,
+            self.config.source,
+            self.config.output,
+            self.config.limits,
+            crate::isa::kernel_isa().name()
+        );
+        let hash = blake3::hash(text.as_bytes());
+        if self.config_hashes.len() >= 64 {
+            self.config_hashes.remove(0);
+        }
+        self.config_hashes.push((config.clone(), hash));
+        hash
+    }
+
+    /// The fingerprint of an asset that reads `files` and lists `listed`: everything its outputs
+    /// depend on (this executable, the CPU kernels' level, its configuration and the pipeline's
+    /// limits and folders, each file's content hash or why it cannot be read, and the
+    /// fingerprint of the asset whose output it reads). `None` when that asset has none.
+    fn fingerprint(
+        &mut self,
+        config: &AssetConfig,
+        files: &[PathBuf],
+        listed: &[Vec<PathBuf>],
+        all_assets: &[AssetConfig],
+        built: &HashMap<String, Asset>,
+        depth: usize,
+    ) -> Option<blake3::Hash> {
+        let mut hasher = blake3::Hasher::new();
+        hasher.update(&FINGERPRINT_VERSION.to_le_bytes());
+        hasher.update(self.identity.as_bytes());
+        hasher.update(self.config_hash(config).as_bytes());
+        for list in listed {
+            hasher.update(&(list.len() as u64).to_le_bytes());
+            for path in list {
+                hasher.update(display_path(path).as_bytes()).update(b"\0");
+            }
+        }
+        hasher.update(&(files.len() as u64).to_le_bytes());
+        for path in files {
+            hasher.update(display_path(path).as_bytes()).update(b"\0");
+            match self.file_hash(path) {
+                Ok(hash) => hasher.update(b"=").update(hash.as_bytes()),
+                Err(why) => hasher.update(b"!").update(why.as_bytes()).update(b"\0"),
+            };
+        }
+        if let Some(source) = &config.settings.ao_source {
+            let read = all_assets.iter().find(|asset| &asset.name == source)?;
+            hasher.update(self.current_fingerprint(read, all_assets, built, depth + 1)?.as_bytes());
+        }
+        Some(hasher.finalize())
+    }
+
+    /// An asset's fingerprint now: of the files its input reads when this build baked it, else
+    /// of the files the record says it reads (`None` when it has no record: never baked, or
+    /// failed).
+    fn current_fingerprint(
+        &mut self,
+        config: &AssetConfig,
+        all_assets: &[AssetConfig],
+        built: &HashMap<String, Asset>,
+        depth: usize,
+    ) -> Option<blake3::Hash> {
+        if depth > 4 {
+            return None;
+        }
+        let (files, listed) = match built.get(&config.name) {
+            Some(&asset) => (asset.files(&self.db).keys().cloned().collect(), (**asset.listed(&self.db)).clone()),
+            None => (self.record.assets.get(&config.name)?.files.clone(), self.listed_sources(config)),
+        };
+        self.fingerprint(config, &files, &listed, all_assets, built, depth)
+    }
+
+    /// Whether an asset can be passed over: the record holds it, its fingerprint is the same,
+    /// and every artifact it wrote is still there as written (by its metadata, or its bytes'
+    /// hash with `--verify`) and listed in the manifest as its.
+    fn unchanged_asset(&mut self, config: &AssetConfig, all_assets: &[AssetConfig], manifest: &Manifest) -> bool {
+        let Some(recorded) = self.record.assets.get(&config.name).map(|record| record.fingerprint) else {
+            return false;
+        };
+        if self.current_fingerprint(config, all_assets, &HashMap::new(), 0) != Some(recorded) {
+            return false;
+        }
+        if self.source_reading == SourceReading::WhenInvalidated && self.trusted_artifacts.contains(&config.name) {
+            return true;
+        }
+        let record = &self.record.assets[&config.name];
+        let intact = record.artifacts.iter().all(|(path, stamp)| {
+            let Some(entry) = manifest.artifacts.get(path).filter(|entry| entry.asset == config.name) else {
+                return false;
+            };
+            let file = self.config.root.join(path);
+            if self.options.verify {
+                crate::sources::read_regular_file(&file, crate::sources::MAX_SOURCE_BYTES)
+                    .is_ok_and(|bytes| blake3::hash(&bytes).to_hex().as_str() == entry.hash)
+            } else {
+                FileStamp::read(&file) == Some(*stamp)
+            }
+        });
+        if intact {
+            self.trusted_artifacts.insert(config.name.clone());
+        }
+        intact
+    }
+
     /// Names the built assets for those that read another's output (`ao_source`), syncing each
     /// asset read that this build does not bake itself (`--asset` leaving it out): its result
     /// is computed for the reader, its files are not written. Set only when it changed.
@@ -397,11 +667,12 @@ impl Project {
         options: &BuildOptions,
         progress: &(dyn Fn(Progress) + Sync),
     ) -> Result<BuildSummary, BuildError> {
-        let (all_assets, conflicts) = self.asset_list_and_conflicts();
-        for conflict in &conflicts {
+        let listed = self.asset_list_and_conflicts();
+        let (all_assets, conflicts) = (&listed.0, &listed.1);
+        for conflict in conflicts {
             tracing::warn!("{conflict}");
         }
-        require_assets(&options.only_assets, &all_assets, &self.config.file)?;
+        require_assets(&options.only_assets, all_assets, &self.config.file)?;
         let selected: Vec<AssetConfig> = all_assets
             .iter()
             .filter(|asset| options.only_assets.is_empty() || options.only_assets.contains(&asset.name))
@@ -412,16 +683,27 @@ impl Project {
         if self.source_reading == SourceReading::EveryBuild {
             self.fresh.clear();
         }
+        let output_dir = self.config.output_dir();
+        let mut manifest = self.take_manifest();
+        // Assets whose fingerprint and artifacts are as the record has them are passed over:
+        // no input, no stage, no file read.
+        let order: HashMap<String, usize> =
+            selected.iter().enumerate().map(|(index, config)| (config.name.clone(), index)).collect();
         let mut assets = Vec::new();
+        let mut unchanged = Vec::new();
         for config in selected {
             if cancel.is_raised() {
                 self.db.take_runs();
                 return Err(BuildError::Cancelled);
             }
+            if self.unchanged_asset(&config, all_assets, &manifest) {
+                unchanged.push(config);
+                continue;
+            }
             let asset = self.sync_asset(&config);
             assets.push((config, asset));
         }
-        self.sync_registry(&all_assets, &assets);
+        self.sync_registry(all_assets, &assets);
         if let Some(cache) = self.db.disk_cache() {
             // This build's hits and misses start here.
             cache.take_counts();
@@ -449,8 +731,8 @@ impl Project {
             }
         }
 
-        let output_dir = self.config.output_dir();
-        let mut manifest = load_manifest(&output_dir);
+        let mut listed_artifacts = crate::artifacts::artifacts_by_asset(&manifest);
+        let run_index = RunIndex::new(&runs);
         let next_revision = manifest.revision.max(self.revision) + 1;
         let mut changed = options.always_new_revision;
         let mut changed_artifacts = Vec::new();
@@ -460,19 +742,32 @@ impl Project {
         // Every asset's files are put together before any is written: an edit meanwhile (a
         // folder of sources deleted) still cancels the build, and nothing of it is published.
         let mut all_outputs = Vec::with_capacity(assets.len());
+        let mut asset_runs = runs_by_asset(&runs, assets.iter().map(|(config, _)| config.name.as_str()));
         for (config, asset) in &assets {
             if cancel.is_raised() {
                 return Err(BuildError::Cancelled);
             }
             let (mut errors, failed_jobs) = failures.remove(asset).unwrap_or_default();
             let folder = self.config.output.join(&config.name);
+            let runs = asset_runs.remove(config.name.as_str()).unwrap_or_default();
             let outputs = asset.kind(&self.db).outputs(&self.db, *asset, &folder, &mut errors, &runs);
             all_outputs.push((errors, failed_jobs, folder, outputs));
         }
         if cancel.is_raised() {
             return Err(BuildError::Cancelled);
         }
-        for ((config, asset), (mut errors, failed_jobs, folder, outputs)) in assets.iter().zip(all_outputs) {
+        // Each baked asset's fingerprint, of the files its input read.
+        let built: HashMap<String, Asset> =
+            assets.iter().map(|(config, asset)| (config.name.clone(), *asset)).collect();
+        let fingerprints: Vec<Option<blake3::Hash>> =
+            assets.iter().map(|(config, _)| self.current_fingerprint(config, all_assets, &built, 0)).collect();
+        let writing = !assets.is_empty();
+        if writing {
+            crate::record::begin_writing(&output_dir);
+        }
+        for (((config, asset), (mut errors, failed_jobs, folder, outputs)), fingerprint) in
+            assets.iter().zip(all_outputs).zip(fingerprints)
+        {
             // Writing is not interrupted (the manifest must list what was written), but an asset
             // baked from a source that went away meanwhile (a folder deleted while it baked, whose
             // event may not have arrived yet) is not published: the next build, which that
@@ -509,37 +804,75 @@ impl Project {
                     });
                 }
             }
+            let listed = listed_artifacts.remove(&config.name).unwrap_or_default();
             if errors.is_empty() {
                 // A fully baked asset owns exactly what it produced: drop stale artifacts.
-                let name = &config.name;
-                removed_artifacts.extend(remove_artifacts(&self.config, &mut manifest, |path, entry| {
-                    &entry.asset == name && !produced.contains_key(path)
-                }));
+                let stale = listed.iter().filter(|path| !produced.contains_key(*path)).cloned().collect();
+                removed_artifacts.extend(remove_artifacts(&self.config, &mut manifest, stale));
             }
             let instances = kind.stage_instances(&self.db, *asset, &folder, &errors);
-            let stages = stage_summaries(&instances, &runs, !errors.is_empty(), &failed_jobs);
+            let stages = stage_summaries(&instances, &run_index, !errors.is_empty(), &failed_jobs);
             for (instance, stage) in instances.iter().zip(&stages) {
                 let state = stage.status.name();
                 let ms = (stage.status == StageStatus::Ran).then_some((stage.ms * 10.0).round() / 10.0);
                 statuses.insert(instance.node_id(), (state, ms));
+            }
+            // The record lets the next build pass over this asset while nothing it reads moves.
+            self.record_changed = true;
+            self.trusted_artifacts.remove(&config.name);
+            match fingerprint.filter(|_| errors.is_empty()) {
+                Some(fingerprint) => {
+                    let artifacts = produced
+                        .keys()
+                        .filter_map(|path| Some((path.clone(), FileStamp::read(&self.config.root.join(path))?)))
+                        .collect();
+                    let files = asset.files(&self.db).keys().cloned().collect();
+                    let records: Vec<InstanceRecord> = instances.iter().map(instance_record).collect();
+                    let record = AssetRecord::new(fingerprint, files, artifacts, &records, warnings.clone());
+                    self.record.assets.insert(config.name.clone(), record);
+                    self.trusted_artifacts.insert(config.name.clone());
+                }
+                None => {
+                    self.record.assets.remove(&config.name);
+                }
             }
             summaries.push(AssetSummary {
                 name: config.name.clone(),
                 kind: kind.name(),
                 status: if errors.is_empty() { AssetStatus::Ok } else { AssetStatus::Failed },
                 stages,
-                artifacts: asset_artifacts(&manifest, &config.name),
+                artifacts: asset_artifacts(&manifest, &config.name, listed.iter().chain(produced.keys())),
                 errors: errors.iter().map(ErrorSummary::from).collect(),
                 warnings,
             });
         }
+        for config in unchanged.iter().filter(|_| !options.omit_unchanged) {
+            let record = &self.record.assets[&config.name];
+            let listed = listed_artifacts.remove(&config.name).unwrap_or_default();
+            let stages = record.stages().into_iter().map(|(stage, instance)| StageSummary {
+                stage,
+                instance,
+                status: StageStatus::Cached,
+                ms: 0.0,
+            });
+            summaries.push(AssetSummary {
+                name: config.name.clone(),
+                kind: AssetKind::of(&config.source).name(),
+                status: AssetStatus::Ok,
+                stages: stages.collect(),
+                artifacts: asset_artifacts(&manifest, &config.name, listed.iter()),
+                errors: Vec::new(),
+                warnings: record.warnings.clone(),
+            });
+        }
+        summaries.sort_by_key(|summary| order.get(&summary.name).copied());
         if options.only_assets.is_empty() && self.config.source_dir().is_dir() {
             // Artifacts of assets that left the pipeline (not of those that a vanished source
             // folder took along: they failed, and keep their last good artifacts).
-            let names: BTreeSet<&str> = all_assets.iter().map(|asset| asset.name.as_str()).collect();
-            removed_artifacts.extend(remove_artifacts(&self.config, &mut manifest, |_, entry| {
-                !names.contains(entry.asset.as_str())
-            }));
+            let names: HashSet<&str> = all_assets.iter().map(|asset| asset.name.as_str()).collect();
+            let gone = manifest.artifacts.iter().filter(|(_, entry)| !names.contains(entry.asset.as_str()));
+            let gone = gone.map(|(path, _)| path.clone()).collect();
+            removed_artifacts.extend(remove_artifacts(&self.config, &mut manifest, gone));
         }
         // A failure is news too: its batch gets a revision of its own, so that a client that
         // subscribes after it (with `since` = the revision before) still hears of it.
@@ -553,6 +886,7 @@ impl Project {
                 let file = display_path(&self.config.output.join("manifest.json"));
                 tracing::error!("cannot write {file}: {error}");
                 for summary in &mut summaries {
+                    self.record.assets.remove(&summary.name);
                     summary.status = AssetStatus::Failed;
                     summary.errors.push(ErrorSummary {
                         file: file.clone(),
@@ -565,15 +899,29 @@ impl Project {
         }
         self.revision = manifest.revision;
         self.sources_changed_since_build = false;
+        if options.only_assets.is_empty() {
+            self.prune_record(all_assets);
+        }
+        // The daemon saves the record when it is idle (`save_record`): a record older than the
+        // artifacts only costs the next start some checking.
+        if self.source_reading == SourceReading::EveryBuild {
+            self.save_record();
+        }
+        if writing {
+            crate::record::end_writing(&output_dir);
+        }
         if let Some(cache) = self.db.disk_cache() {
+            // The assets passed over are named, not listed stage by stage.
+            let passed_over: HashSet<&str> = unchanged.iter().map(|config| config.name.as_str()).collect();
             let assets = summaries
                 .iter()
+                .filter(|asset| !passed_over.contains(asset.name.as_str()))
                 .map(|asset| crate::cache::upkeep::LastBuildAsset {
                     name: asset.name.clone(),
                     stages: asset
                         .stages
                         .iter()
-                        .map(|stage| (stage_node_id(stage.stage, &stage.instance), stage.status.name().to_string()))
+                        .map(|stage| (stage_node_id(&stage.stage, &stage.instance), stage.status.name().to_string()))
                         .collect(),
                 })
                 .collect();
@@ -582,6 +930,7 @@ impl Project {
                 counts: cache.take_counts(),
                 remote: cache.remote().map(|remote| remote.settings().url.clone()),
                 assets,
+                unchanged: unchanged.iter().map(|config| config.name.clone()).collect(),
                 misses: cache.take_misses(),
             };
             crate::cache::upkeep::write_last_build(cache.folder(), &last);
@@ -590,12 +939,50 @@ impl Project {
         self.last_statuses = statuses;
         self.last_revision = Some(manifest.revision);
         changed_artifacts.sort_by(|a, b| a.path.cmp(&b.path));
-        Ok(BuildSummary {
-            revision: manifest.revision,
-            assets: summaries,
-            changed: changed_artifacts,
-            removed: removed_artifacts,
-        })
+        let revision = manifest.revision;
+        self.keep_manifest(manifest);
+        Ok(BuildSummary { revision, assets: summaries, changed: changed_artifacts, removed: removed_artifacts })
+    }
+
+    /// Writes the build record when it changed since it was last written.
+    pub fn save_record(&mut self) {
+        if !self.record_changed || !self.options.persistent_cache {
+            return;
+        }
+        match self.record.save(&self.config.output_dir()) {
+            Ok(()) => self.record_changed = false,
+            Err(error) => tracing::warn!(
+                "cannot write {}: {error} (the next build hashes its sources again)",
+                display_path(&crate::record::record_path(&self.config.output))
+            ),
+        }
+    }
+
+    /// The manifest on disk: the one kept when its file did not change since.
+    fn take_manifest(&mut self) -> Manifest {
+        let output_dir = self.config.output_dir();
+        let stamp = FileStamp::read(&crate::artifacts::manifest_path(&output_dir));
+        match self.manifest.take() {
+            Some((kept, manifest)) if kept == stamp && stamp.is_some() => manifest,
+            _ => load_manifest(&output_dir),
+        }
+    }
+
+    /// Keeps the manifest as it is on disk now, for the next [`Project::take_manifest`].
+    fn keep_manifest(&mut self, manifest: Manifest) {
+        let stamp = FileStamp::read(&crate::artifacts::manifest_path(&self.config.output_dir()));
+        self.manifest = Some((stamp, manifest));
+    }
+
+    /// Drops the record's assets that left the pipeline and the files no recorded asset reads.
+    fn prune_record(&mut self, all_assets: &[AssetConfig]) {
+        let names: HashSet<&str> = all_assets.iter().map(|asset| asset.name.as_str()).collect();
+        let before = (self.record.assets.len(), self.record.files.len());
+        self.record.assets.retain(|name, _| names.contains(name.as_str()));
+        let read: HashSet<&PathBuf> = self.record.assets.values().flat_map(|asset| asset.files.iter()).collect();
+        let files = std::mem::take(&mut self.record.files);
+        self.record.files = files.into_iter().filter(|(path, _)| read.contains(path)).collect();
+        self.record_changed |= before != (self.record.assets.len(), self.record.files.len());
     }
 
     /// Adds stage runs to the history (revision, milliseconds) and the executed log.
@@ -620,7 +1007,8 @@ impl Project {
     /// [`Project::check`] of the assets named in `only` (every asset, and the rules' conflicts,
     /// when it is empty); an unknown name is an error, with the closest known one.
     pub fn check_assets(&self, only: &[String]) -> Result<Vec<(String, Vec<Diagnostic>)>, BuildError> {
-        let (assets, conflicts) = self.asset_list_and_conflicts();
+        let listed = self.asset_list_and_conflicts();
+        let (assets, conflicts) = listed.as_ref().clone();
         require_assets(only, &assets, &self.config.file)?;
         // Rule-matched files that do not become assets are reported under `rules`.
         let conflicts =
@@ -650,7 +1038,11 @@ impl Project {
                 return file;
             }
         }
-        let contents = read_source(&self.config.root, &self.config.source, path);
+        let seen_at = crate::record::now();
+        let contents = read_source_stamped(&self.config.root, &self.config.source, path).map(|(contents, stamp)| {
+            self.record_changed |= self.record.remember_file(path, stamp, contents.hash, seen_at);
+            contents
+        });
         self.fresh.insert(path.to_path_buf());
         match self.files.get(path) {
             Some(&file) => {
@@ -704,24 +1096,40 @@ impl Project {
     /// Reads the sources and runs the stages that tell the instances (a billboard cloud's
     /// layout) where needed.
     pub fn graph(&mut self) -> crate::graph::Graph {
+        self.graph_of_assets(None)
+    }
+
+    /// [`Project::graph`] of the named assets only (all when `None`).
+    pub fn graph_of_assets(&mut self, only: Option<&HashSet<String>>) -> crate::graph::Graph {
         use crate::graph::{GraphBuilder, Node, NodeKind};
         let mut graph = GraphBuilder::default();
-        let manifest = load_manifest(&self.config.output_dir());
+        let manifest = self.take_manifest();
         let list = self.asset_list();
-        let assets: Vec<(AssetConfig, Asset)> =
-            list.iter().map(|config| (config.clone(), self.sync_asset(config))).collect();
-        self.sync_registry(&list, &assets);
-        let mut all_instances = Vec::new();
-        for (config, asset) in assets {
+        if self.source_reading == SourceReading::EveryBuild {
+            self.fresh.clear();
+        }
+        // An asset that the record holds as it is now: its instances from there; any other
+        // through its kind (which may read its sources and run the stages that tell them).
+        let mut all_instances: Vec<(String, Vec<InstanceRecord>)> = Vec::new();
+        let mut synced = Vec::new();
+        for config in list.iter().filter(|config| only.is_none_or(|only| only.contains(&config.name))) {
+            if self.unchanged_asset(config, &list, &manifest) {
+                all_instances.push((config.name.clone(), self.record.assets[&config.name].instances()));
+            } else {
+                synced.push((config.clone(), self.sync_asset(config)));
+            }
+        }
+        self.sync_registry(&list, &synced);
+        for (config, asset) in synced {
             let folder = self.config.output.join(&config.name);
             let instances = asset.kind(&self.db).stage_instances(&self.db, asset, &folder, &[]);
-            all_instances.push((config.name, instances));
+            all_instances.push((config.name, instances.iter().map(instance_record).collect()));
         }
         let runs = self.db.take_runs();
         self.record_runs(&runs, self.revision);
         for (asset, instances) in &all_instances {
             for instance in instances {
-                let id = instance.node_id();
+                let id = stage_node_id(&instance.stage, &instance.label);
                 let last = self.history.get(&id);
                 // Instances without a status in the last summary: from the history.
                 let (state, ms) = self.last_statuses.get(&id).cloned().unwrap_or(match (self.last_revision, last) {
@@ -740,13 +1148,13 @@ impl Project {
                 });
                 for read in &instance.reads {
                     let from = match read {
-                        Read::File(path) => self.file_node(&mut graph, path),
-                        Read::Stage(stage, label) => stage_node_id(stage.name, label),
+                        ReadRecord::File(path) => self.file_node(&mut graph, path),
+                        ReadRecord::Stage(id) => id.clone(),
                     };
                     graph.edge(&from, &id);
                 }
-                for path in &instance.writes {
-                    let artifact = display_path(path);
+                for artifact in &instance.writes {
+                    let artifact = artifact.clone();
                     let entry = manifest.artifacts.get(&artifact);
                     graph.node(Node {
                         id: artifact.clone(),
@@ -761,13 +1169,18 @@ impl Project {
                 }
             }
         }
+        self.keep_manifest(manifest);
         graph.finish()
     }
 
     /// Adds the node of a source file; returns its id.
-    fn file_node(&self, graph: &mut crate::graph::GraphBuilder, path: &Path) -> String {
-        let id = file_node_id(path);
-        let present = self.files.get(path).is_some_and(|file| file.contents(&self.db).is_ok());
+    fn file_node(&self, graph: &mut crate::graph::GraphBuilder, path: &str) -> String {
+        let id = path.to_string();
+        let path = Path::new(path);
+        let present = match self.files.get(path) {
+            Some(file) => file.contents(&self.db).is_ok(),
+            None => matches!(self.known.get(path), Some(Ok(_))) || self.record.files.contains_key(path),
+        };
         graph.node(crate::graph::Node {
             id: id.clone(),
             kind: crate::graph::NodeKind::File,
@@ -781,6 +1194,85 @@ impl Project {
     }
 }
 
+/// A stage instance as the record keeps it (owned names, reads as graph node ids).
+fn instance_record(instance: &StageInstance) -> InstanceRecord {
+    let reads = instance.reads.iter().map(|read| match read {
+        Read::File(path) => ReadRecord::File(display_path(path)),
+        Read::Stage(stage, label) => ReadRecord::Stage(stage_node_id(stage.name, label)),
+    });
+    InstanceRecord::new(
+        instance.stage.name.to_string(),
+        instance.label.clone(),
+        instance.instance.clone(),
+        reads.collect(),
+        instance.writes.iter().map(|path| display_path(path)).collect(),
+        instance.shared,
+    )
+}
+
+/// What identifies this executable in fingerprints: its version and its file's size and
+/// modification time, so that a rebuilt cirrus (whose stages may bake otherwise) trusts no
+/// fingerprint an older one recorded. Unknown: a value no record holds.
+fn executable_identity() -> blake3::Hash {
+    let file = std::env::current_exe().ok().and_then(|path| Some((FileStamp::read(&path)?, path)));
+    let text = match file {
+        Some((stamp, path)) => {
+            format!("{}|{}|{}|{}", env!("CARGO_PKG_VERSION"), path.display(), stamp.size, stamp.modified)
+        }
+        None => format!("unknown|{}", crate::record::now()),
+    };
+    blake3::hash(text.as_bytes())
+}
+
+/// The stage runs labelled by each asset's name or below it (`name/…`): what its kind's report
+/// may time. One pass over the runs, each label looked up at each of its `/`.
+fn runs_by_asset<'a>(runs: &[StageRun], names: impl Iterator<Item = &'a str>) -> HashMap<&'a str, Vec<StageRun>> {
+    let names: HashSet<&str> = names.collect();
+    let mut by_asset: HashMap<&str, Vec<StageRun>> = HashMap::new();
+    for run in runs {
+        let label = run.label.as_str();
+        let prefixes = label.match_indices('/').map(|(at, _)| &label[..at]).chain([label]);
+        if let Some(name) = prefixes.filter_map(|prefix| names.get(prefix)).next() {
+            by_asset.entry(name).or_default().push(run.clone());
+        }
+    }
+    by_asset
+}
+
+/// What a build's stage runs say of each stage instance (`(stage, label)`), gathered once per
+/// build so that each asset's summary looks up only its own instances.
+#[derive(Default)]
+struct RunIndex<'a> {
+    instances: HashMap<(&'a str, &'a str), InstanceRuns>,
+}
+
+#[derive(Clone, Copy, Default)]
+struct InstanceRuns {
+    /// Milliseconds of the bodies that ran (not from a cache).
+    ran_ms: Option<f64>,
+    local_hit: bool,
+    remote_hit: bool,
+}
+
+impl<'a> RunIndex<'a> {
+    fn new(runs: &'a [StageRun]) -> RunIndex<'a> {
+        let mut index = RunIndex::default();
+        for run in runs {
+            let entry = index.instances.entry((run.stage, run.label.as_str())).or_default();
+            match (run.from_cache, run.from_remote) {
+                (false, _) => *entry.ran_ms.get_or_insert(0.0) += run.ms,
+                (true, true) => entry.remote_hit = true,
+                (true, false) => entry.local_hit = true,
+            }
+        }
+        index
+    }
+
+    fn get(&self, instance: &StageInstance) -> InstanceRuns {
+        self.instances.get(&(instance.stage.name, instance.label.as_str())).copied().unwrap_or_default()
+    }
+}
+
 /// The summary of each stage instance: ran when this build ran it, failed when the asset
 /// failed before it had a result (its kind says, or its job failed), remote when its result
 /// came from the shared cache, cached otherwise. A stage that needed no result of its own
@@ -788,45 +1280,39 @@ impl Project {
 /// build came from the shared cache, and cached otherwise.
 fn stage_summaries(
     instances: &[StageInstance],
-    runs: &[StageRun],
+    runs: &RunIndex,
     asset_failed: bool,
     failed_jobs: &HashSet<String>,
 ) -> Vec<StageSummary> {
-    let mut ran: HashMap<(&str, &str), f64> = HashMap::new();
-    for run in runs.iter().filter(|run| !run.from_cache) {
-        *ran.entry((run.stage, run.label.as_str())).or_insert(0.0) += run.ms;
-    }
-    let ids: HashSet<(&str, &str)> =
-        instances.iter().map(|instance| (instance.stage.name, instance.label.as_str())).collect();
-    let hits: Vec<&StageRun> =
-        runs.iter().filter(|run| run.from_cache && ids.contains(&(run.stage, run.label.as_str()))).collect();
-    let remote_hits: HashSet<(&str, &str)> =
-        hits.iter().filter(|run| run.from_remote).map(|run| (run.stage, run.label.as_str())).collect();
-    let every_hit_remote = !hits.is_empty() && hits.iter().all(|run| run.from_remote);
-    let local_hits: HashSet<(&str, &str)> =
-        hits.iter().filter(|run| !run.from_remote).map(|run| (run.stage, run.label.as_str())).collect();
+    let facts: Vec<InstanceRuns> = instances.iter().map(|instance| runs.get(instance)).collect();
+    let any_hit = facts.iter().any(|facts| facts.local_hit || facts.remote_hit);
+    let every_hit_remote = any_hit && !facts.iter().any(|facts| facts.local_hit);
     instances
         .iter()
-        .map(|instance| {
-            let id = (instance.stage.name, instance.label.as_str());
-            let (status, ms) = match ran.get(&id) {
-                Some(&ms) => (StageStatus::Ran, ms),
+        .zip(facts)
+        .map(|(instance, facts)| {
+            let (status, ms) = match facts.ran_ms {
+                Some(ms) => (StageStatus::Ran, ms),
                 None if asset_failed && (instance.failed || failed_jobs.contains(&instance.label)) => {
                     (StageStatus::Failed, 0.0)
                 }
-                None if !local_hits.contains(&id) && (remote_hits.contains(&id) || every_hit_remote) => {
-                    (StageStatus::Remote, 0.0)
-                }
+                None if !facts.local_hit && (facts.remote_hit || every_hit_remote) => (StageStatus::Remote, 0.0),
                 None => (StageStatus::Cached, 0.0),
             };
-            StageSummary { stage: instance.stage.name, instance: instance.instance.clone(), status, ms }
+            StageSummary { stage: instance.stage.name.to_string(), instance: instance.instance.clone(), status, ms }
         })
         .collect()
 }
 
-/// The artifacts the manifest lists for an asset.
-fn asset_artifacts(manifest: &Manifest, asset: &str) -> Vec<ArtifactSummary> {
-    let entries = manifest.artifacts.iter().filter(|(_, entry)| entry.asset == asset);
+/// The artifacts the manifest lists for an asset, of the `paths` that may be its (sorted).
+fn asset_artifacts<'a>(
+    manifest: &Manifest,
+    asset: &str,
+    paths: impl Iterator<Item = &'a String>,
+) -> Vec<ArtifactSummary> {
+    let paths: BTreeSet<&String> = paths.collect();
+    let entries = paths.into_iter().filter_map(|path| Some((path, manifest.artifacts.get(path)?)));
+    let entries = entries.filter(|(_, entry)| entry.asset == asset);
     entries.map(|(path, entry)| ArtifactSummary { path: path.clone(), hash: entry.hash.clone() }).collect()
 }
 

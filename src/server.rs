@@ -130,9 +130,14 @@ struct State {
     /// Recent batches: (revision, the line sent).
     history: VecDeque<(u64, Arc<str>)>,
     clients: Vec<Client>,
-    graph: Arc<Graph>,
+    /// The graph of the revision it names, until a batch makes it stale.
+    graph: Option<(u64, Arc<Graph>)>,
     next_client: u64,
 }
+
+/// Asks the daemon for the current graph and its revision (the daemon's owner thread computes
+/// it between batches, only when a client asks).
+pub type GraphSource = Arc<dyn Fn() -> Option<(u64, Graph)> + Send + Sync>;
 
 /// A running server; dropping it does not stop the listener thread (it lives as long as the
 /// daemon process).
@@ -141,6 +146,7 @@ pub struct Server {
     state: Arc<Mutex<State>>,
     settings: ServerSettings,
     address: SocketAddr,
+    graph_source: Arc<Mutex<Option<GraphSource>>>,
 }
 
 #[derive(Debug, thiserror::Error)]
@@ -155,9 +161,9 @@ impl Server {
     pub fn start(address: SocketAddr, settings: ServerSettings, revision: u64) -> Result<Server, ServerError> {
         let listener = TcpListener::bind(address).map_err(|source| ServerError { address, source })?;
         let address = listener.local_addr().map_err(|source| ServerError { address, source })?;
-        let state =
-            State { revision, history: VecDeque::new(), clients: Vec::new(), graph: Arc::default(), next_client: 0 };
-        let server = Server { state: Arc::new(Mutex::new(state)), settings, address };
+        let state = State { revision, history: VecDeque::new(), clients: Vec::new(), graph: None, next_client: 0 };
+        let server =
+            Server { state: Arc::new(Mutex::new(state)), settings, address, graph_source: Arc::new(Mutex::new(None)) };
         let accepting = server.clone();
         std::thread::Builder::new()
             .name("cirrus-accept".into())
@@ -189,9 +195,30 @@ impl Server {
         state.clients.retain(|client| !client.subscribed || send(client, message.clone()));
     }
 
-    /// The graph answered to `graph` requests from now on.
-    pub fn set_graph(&self, graph: Graph) {
-        self.state.lock().expect("server state").graph = Arc::new(graph);
+    /// Where `graph` requests get the graph when the last one is stale.
+    pub fn set_graph_source(&self, source: GraphSource) {
+        *self.graph_source.lock().expect("graph source") = Some(source);
+    }
+
+    /// The graph of the last published revision: kept, or asked of the graph source (without
+    /// holding the state, which the daemon needs to publish meanwhile).
+    fn current_graph(&self) -> Arc<Graph> {
+        {
+            let state = self.state.lock().expect("server state");
+            if let Some((revision, graph)) = &state.graph {
+                if *revision == state.revision {
+                    return graph.clone();
+                }
+            }
+        }
+        let source = self.graph_source.lock().expect("graph source").clone();
+        let Some((revision, graph)) = source.and_then(|source| source()) else { return Arc::default() };
+        let graph = Arc::new(graph);
+        let mut state = self.state.lock().expect("server state");
+        if revision == state.revision {
+            state.graph = Some((revision, graph.clone()));
+        }
+        graph
     }
 
     /// Clients connected now.
@@ -342,7 +369,7 @@ impl Server {
                         Outgoing::Error { message: format!("unknown graph format `{name}`: json, dot or mermaid") },
                     );
                 };
-                let graph = self.state.lock().expect("server state").graph.clone();
+                let graph = self.current_graph();
                 let graph = match &asset {
                     Some(asset) if !graph.has_asset(asset) => {
                         return self

@@ -17,16 +17,28 @@ pub const MAX_SOURCE_BYTES: u64 = 512 << 20;
 /// folder are the user's own choice (a shared texture library linked in) and are followed,
 /// wherever they lead; what they lead to must still be a regular file within the size limit.
 pub fn read_source(root: &Path, source: &Path, relative: &Path) -> FileRead {
+    read_source_stamped(root, source, relative).map(|(contents, _)| contents)
+}
+
+/// [`read_source`], with the stamp of the file that was read (taken on the open file before
+/// reading it, so that a write meanwhile leaves the record a stamp that no longer matches).
+pub fn read_source_stamped(
+    root: &Path,
+    source: &Path,
+    relative: &Path,
+) -> Result<(FileContents, crate::record::FileStamp), String> {
     if !root.join(source).is_dir() {
         return Err(format!("the source folder {} does not exist", crate::diagnostic::display_path(source)));
     }
-    read_regular_file(&root.join(relative), MAX_SOURCE_BYTES).map(FileContents::new).map_err(|why| {
-        if why == FILE_NOT_FOUND {
-            format!("{FILE_NOT_FOUND}{}", similar_file_hint(root, source, relative))
-        } else {
-            why
-        }
-    })
+    read_regular_file_with_metadata(&root.join(relative), MAX_SOURCE_BYTES)
+        .map(|(bytes, metadata)| (FileContents::new(bytes), crate::record::FileStamp::of(&metadata)))
+        .map_err(|why| {
+            if why == FILE_NOT_FOUND {
+                format!("{FILE_NOT_FOUND}{}", similar_file_hint(root, source, relative))
+            } else {
+                why
+            }
+        })
 }
 
 /// ` (did you mean `trees/bush_2.obj`?)` when the missing file's folder holds a file whose name
@@ -51,6 +63,11 @@ fn similar_file_hint(root: &Path, source: &Path, relative: &Path) -> String {
 /// opened non-blocking and checked on the open handle, and at most `limit + 1` bytes are read,
 /// whatever the metadata says (`/proc` files and growing files report other sizes).
 pub fn read_regular_file(path: &Path, limit: u64) -> Result<Vec<u8>, String> {
+    read_regular_file_with_metadata(path, limit).map(|(bytes, _)| bytes)
+}
+
+/// [`read_regular_file`], with the metadata of the open file, taken before its bytes are read.
+pub fn read_regular_file_with_metadata(path: &Path, limit: u64) -> Result<(Vec<u8>, std::fs::Metadata), String> {
     use std::io::Read;
     let mut options = std::fs::OpenOptions::new();
     options.read(true);
@@ -72,11 +89,11 @@ pub fn read_regular_file(path: &Path, limit: u64) -> Result<Vec<u8>, String> {
         return Err(format!("is larger than {}", describe_bytes(limit)));
     }
     let mut bytes = Vec::with_capacity(metadata.len() as usize);
-    file.take(limit + 1).read_to_end(&mut bytes).map_err(describe_io_error)?;
+    (&file).take(limit + 1).read_to_end(&mut bytes).map_err(describe_io_error)?;
     if bytes.len() as u64 > limit {
         return Err(format!("is larger than {}", describe_bytes(limit)));
     }
-    Ok(bytes)
+    Ok((bytes, metadata))
 }
 
 fn describe_bytes(bytes: u64) -> String {

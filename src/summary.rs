@@ -66,7 +66,7 @@ impl StageStatus {
 
 #[derive(Clone, Debug, PartialEq, Serialize)]
 pub struct StageSummary {
-    pub stage: &'static str,
+    pub stage: String,
     pub instance: String,
     pub status: StageStatus,
     pub ms: f64,
@@ -80,7 +80,7 @@ pub struct ArtifactSummary {
     pub hash: String,
 }
 
-#[derive(Clone, Debug, PartialEq, Eq, Serialize)]
+#[derive(Clone, Debug, PartialEq, Eq, Serialize, serde::Deserialize)]
 pub struct ErrorSummary {
     pub file: String,
     pub line: Option<u32>,

@@ -4,7 +4,7 @@
 //! next build starts from the newest inputs. Each finished build is logged and published to the
 //! hot-reload server.
 
-use std::collections::BTreeSet;
+use std::collections::{BTreeSet, HashSet};
 use std::io::Write as _;
 use std::net::SocketAddr;
 use std::path::{Path, PathBuf};
@@ -228,7 +228,13 @@ enum WatchMessage {
     /// The source folder (or a parent) was created, deleted or moved: watch it again, then read
     /// everything again.
     Rearm,
+    /// A client asked for the graph: computed between batches, sent with its revision.
+    Graph(std::sync::mpsc::SyncSender<(u64, crate::graph::Graph)>),
 }
+
+/// How long the daemon waits after a batch for the next edit before it writes the build
+/// record (which only spares the next start some checking).
+const RECORD_SAVE_IDLE: Duration = Duration::from_secs(1);
 
 /// Runs the daemon until the process ends (or `max_builds` builds finished).
 pub fn watch(settings: &WatchSettings) -> Result<(), WatchError> {
@@ -247,6 +253,7 @@ pub fn watch(settings: &WatchSettings) -> Result<(), WatchError> {
             persistent_cache: true,
             source_reading: SourceReading::WhenInvalidated,
             remote_cache: settings.remote_cache.clone(),
+            verify: false,
         },
     );
 
@@ -279,6 +286,14 @@ pub fn watch(settings: &WatchSettings) -> Result<(), WatchError> {
     }));
     let cancel = CancelFlag::default();
     let (sender, messages) = channel::<WatchMessage>();
+    if let Some(server) = &server {
+        let sender = std::sync::Mutex::new(sender.clone());
+        server.set_graph_source(Arc::new(move || {
+            let (reply, answer) = std::sync::mpsc::sync_channel(1);
+            sender.lock().ok()?.send(WatchMessage::Graph(reply)).ok()?;
+            answer.recv().ok()
+        }));
+    }
     let watcher_filter = filter.clone();
     let watcher_cancel = cancel.clone();
     let mut debouncer = new_debouncer(settings.debounce, None, move |result: DebounceEventResult| {
@@ -308,16 +323,43 @@ pub fn watch(settings: &WatchSettings) -> Result<(), WatchError> {
     // A build is owed even without changed bytes: the first one, and one after a cancellation.
     let mut force_build = true;
     let mut rearm = false;
+    // Graph requests that arrived while a batch was being put together: answered after it.
+    let mut graph_requests: Vec<std::sync::mpsc::SyncSender<(u64, crate::graph::Graph)>> = Vec::new();
     loop {
+        for reply in graph_requests.drain(..) {
+            let _ = reply.send((project.revision(), project.graph()));
+        }
         if !first {
-            // Block for the next edit (the watcher gone ends the daemon).
-            let Ok(message) = messages.recv() else { return Ok(()) };
-            rearm |= apply_message(message, &mut pending, &mut project);
+            // Block for the next edit (the watcher gone ends the daemon); graph requests are
+            // answered meanwhile, and the record is written once the daemon is idle.
+            let mut record_saved = false;
+            let message = loop {
+                let received = if record_saved {
+                    messages.recv().map_err(|_| std::sync::mpsc::RecvTimeoutError::Disconnected)
+                } else {
+                    messages.recv_timeout(RECORD_SAVE_IDLE)
+                };
+                match received {
+                    Ok(WatchMessage::Graph(reply)) => {
+                        let _ = reply.send((project.revision(), project.graph()));
+                    }
+                    Ok(message) => break message,
+                    Err(std::sync::mpsc::RecvTimeoutError::Timeout) => {
+                        project.save_record();
+                        record_saved = true;
+                    }
+                    Err(std::sync::mpsc::RecvTimeoutError::Disconnected) => {
+                        project.save_record();
+                        return Ok(());
+                    }
+                }
+            };
+            rearm |= apply_message(message, &mut pending, &mut project, &mut graph_requests);
         }
         cancel.lower();
         // Messages that arrived in between belong to this build too.
         while let Ok(message) = messages.try_recv() {
-            rearm |= apply_message(message, &mut pending, &mut project);
+            rearm |= apply_message(message, &mut pending, &mut project, &mut graph_requests);
         }
         if std::mem::take(&mut rearm) {
             // The old recursive watch may follow a folder that was moved away, or nothing at all.
@@ -419,7 +461,12 @@ pub fn watch(settings: &WatchSettings) -> Result<(), WatchError> {
             filter.write().expect("event filter").sources.extend(main_files);
         }
         let start = Instant::now();
-        let options = BuildOptions { cancel: Some(cancel.clone()), always_new_revision: !first, ..Default::default() };
+        let options = BuildOptions {
+            cancel: Some(cancel.clone()),
+            always_new_revision: !first,
+            omit_unchanged: true,
+            ..Default::default()
+        };
         let summary = match project.build(&options, &|_| {}) {
             Ok(summary) => summary,
             Err(BuildError::Cancelled) => {
@@ -440,28 +487,38 @@ pub fn watch(settings: &WatchSettings) -> Result<(), WatchError> {
             }
         };
         let ms = start.elapsed().as_secs_f64() * 1e3;
+        // The summary lists the assets this batch looked into (the others were passed over):
+        // their files join the watched sources.
+        let rebuilt: HashSet<String> = summary.assets.iter().map(|asset| asset.name.clone()).collect();
+        let sources = if first { project.source_paths() } else { project.source_paths_of(&rebuilt) };
+        filter.write().expect("event filter").sources.extend(sources);
         first = false;
-        filter.write().expect("event filter").sources = project.source_paths();
-        // The engine hears first; the graph (which may compute a cached billboard's layout) after.
+        // The engine hears first; the log's graph (which may compute a cached billboard's
+        // layout) after, and only of the assets of this batch.
         if let Some(server) = &server {
             server.publish(&batch_event(&summary, ms));
         }
-        let graph = project.graph();
+        let graph = project.graph_of_assets(Some(&rebuilt));
         log_batch(&summary, &changed_files, &graph, ms);
-        if let Some(server) = &server {
-            server.set_graph(graph);
-        }
         builds += 1;
         if settings.max_builds.is_some_and(|max| builds >= max) {
+            project.save_record();
             return Ok(());
         }
     }
 }
 
-/// Applies a watcher message; true when the source folder must be watched again.
-fn apply_message(message: WatchMessage, pending: &mut BTreeSet<PathBuf>, project: &mut Project) -> bool {
+/// Applies a watcher message; true when the source folder must be watched again. A graph
+/// request waits in `graph_requests` for the batch to finish.
+fn apply_message(
+    message: WatchMessage,
+    pending: &mut BTreeSet<PathBuf>,
+    project: &mut Project,
+    graph_requests: &mut Vec<std::sync::mpsc::SyncSender<(u64, crate::graph::Graph)>>,
+) -> bool {
     let rearm = matches!(message, WatchMessage::Rearm);
     match message {
+        WatchMessage::Graph(reply) => graph_requests.push(reply),
         WatchMessage::Changed(paths) => pending.extend(paths),
         WatchMessage::Rescan(why) => {
             tracing::warn!("rescanning every source: {why}");
@@ -525,8 +582,11 @@ fn watch_folders(
 pub fn batch_event(summary: &BuildSummary, ms: f64) -> BatchEvent {
     let mut failed = Vec::new();
     for asset in summary.assets.iter().filter(|asset| asset.status == AssetStatus::Failed) {
-        let stage =
-            asset.stages.iter().find(|stage| stage.status == StageStatus::Failed).map_or("parse", |stage| stage.stage);
+        let stage = asset
+            .stages
+            .iter()
+            .find(|stage| stage.status == StageStatus::Failed)
+            .map_or("parse", |stage| stage.stage.as_str());
         for error in &asset.errors {
             failed.push(FailedEntry {
                 asset: Some(asset.name.clone()),

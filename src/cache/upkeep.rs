@@ -139,8 +139,12 @@ pub struct LastBuild {
     pub counts: CacheCounts,
     /// The shared store's URL, when there was one.
     pub remote: Option<String>,
-    /// Per asset, each stage instance (`stage(instance)`) and its status in that build.
+    /// Per asset the build looked into, each stage instance (`stage(instance)`) and its status
+    /// in that build.
     pub assets: Vec<LastBuildAsset>,
+    /// The assets the build passed over: nothing they read had changed (the build record).
+    #[serde(default)]
+    pub unchanged: Vec<String>,
     /// The lookups that found no entry, local or remote.
     #[serde(default)]
     pub misses: Vec<Miss>,
@@ -192,7 +196,7 @@ pub struct LastBuildAsset {
 /// Records the last build's counts (written whole and renamed, like every entry).
 pub fn write_last_build(folder: &Path, last: &LastBuild) {
     let path = folder.join(LAST_BUILD_FILE);
-    let json = serde_json::to_vec_pretty(last).expect("counts serialise");
+    let json = serde_json::to_vec(last).expect("counts serialise");
     if let Err(error) = super::write_atomically(&path, |file| std::io::Write::write_all(file, &json)) {
         tracing::warn!("cannot write {}: {error}", path.display());
     }

@@ -21,6 +21,7 @@ mod hostile;
 mod isa;
 mod occlusion;
 mod packing;
+mod scale;
 mod tidy;
 mod uv_raster;
 mod watch;
@@ -29,3 +30,8 @@ mod watch;
 /// runs (a nested `cargo build` would wait on the build-directory lock the test run holds).
 #[path = "../../examples/viewer.rs"]
 mod viewer;
+
+/// The synthetic level generator, as `cargo run --example make_level` and the `scale` bench use it.
+#[path = "../../examples/make_level.rs"]
+#[allow(dead_code)]
+mod make_level;

@@ -197,7 +197,7 @@ fn the_per_vertex_mode_interpolates_vertex_occlusion_across_each_triangle() {
     let project = ao_project(&parts, "size: 64, rays: 256, occluders: AllMeshes, mode: Vertices");
     let summary = build(&mut project.open());
     assert!(summary.all_ok(), "{}", summary.to_text());
-    let ran: Vec<&str> = summary.assets[0].stages.iter().map(|stage| stage.stage).collect();
+    let ran: Vec<&str> = summary.assets[0].stages.iter().map(|stage| stage.stage.as_str()).collect();
     assert!(ran.contains(&"vertices"), "{ran:?}");
     let report = report(&project);
     assert_eq!(report["mode"], "Vertices");

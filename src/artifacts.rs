@@ -153,14 +153,12 @@ pub fn record_artifact(
     !unchanged
 }
 
-/// The manifest's artifact paths of each asset (one pass over the manifest, so that a build
-/// looks up an asset's artifacts without going through everyone's).
-pub fn artifacts_by_asset(manifest: &Manifest) -> std::collections::HashMap<String, Vec<String>> {
-    let mut by_asset: std::collections::HashMap<String, Vec<String>> = Default::default();
-    for (path, entry) in &manifest.artifacts {
-        by_asset.entry(entry.asset.clone()).or_default().push(path.clone());
-    }
-    by_asset
+/// The manifest's artifact paths of an asset whose folder (project-relative) is `folder`: a
+/// range of the sorted manifest (asset folders never nest), not a pass over every entry.
+pub fn artifacts_of(manifest: &Manifest, asset: &str, folder: &Path) -> Vec<String> {
+    let prefix = format!("{}/", display_path(folder));
+    let below = manifest.artifacts.range(prefix.clone()..).take_while(|(path, _)| path.starts_with(&prefix));
+    below.filter(|(_, entry)| entry.asset == asset).map(|(path, _)| path.clone()).collect()
 }
 
 /// Deletes the artifacts at `doomed` (manifest paths), file and manifest entry; returns the

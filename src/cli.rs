@@ -586,19 +586,21 @@ fn graph(
         return ExitCode::from(EXIT_USAGE);
     }
     // A build first (cached work costs nothing), so that nodes carry their states and timings.
-    let summary = match project.build(&BuildOptions::default(), &|_| {}) {
+    let summary = match project.build(&BuildOptions { omit_unchanged: true, ..Default::default() }, &|_| {}) {
         Ok(summary) => summary,
         Err(error) => {
             eprintln!("error: {error}");
             return ExitCode::from(EXIT_USAGE);
         }
     };
-    let graph = project.graph();
     let graph = match &asset {
-        Some(name) => graph.for_asset(name),
-        None => graph,
+        Some(name) => project.graph_of_assets(Some(&[name.clone()].into())).for_asset(name),
+        None => project.graph(),
     };
     out!("{}", graph.render(format));
+    // As after `build`: the process ends, nothing to free one by one.
+    std::mem::forget(project);
+    std::mem::forget(graph);
     if summary.all_ok() {
         ExitCode::SUCCESS
     } else {

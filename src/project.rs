@@ -131,13 +131,25 @@ pub struct Project {
     trusted_artifacts: HashSet<String>,
     /// What identifies this executable in fingerprints (a rebuilt cirrus trusts no record).
     identity: blake3::Hash,
-    /// The hash of each distinct asset configuration seen (most assets share their rule's).
-    config_hashes: Vec<(AssetConfig, blake3::Hash)>,
+    /// The hash of each distinct asset settings seen (most assets share their rule's), with the
+    /// pipeline-wide values that enter fingerprints.
+    settings_hashes: Vec<(crate::config::Settings, blake3::Hash)>,
     /// The manifest as last read or written, with the stamp its file had then: read again only
     /// when the file changed meanwhile.
     manifest: Option<(Option<FileStamp>, Manifest)>,
     /// The daemon's asset list, until an edit may change it.
     asset_list_kept: std::cell::RefCell<Option<Arc<AssetList>>>,
+    /// The daemon's assets known to be as the record holds them, for the asset list in
+    /// `clean_list`: passed over without a fingerprint until a file they read changes.
+    clean: HashSet<String>,
+    clean_list: Option<Arc<AssetList>>,
+    /// The assets that read each source file (for `clean`; may name an asset that no longer
+    /// reads it, which only costs that asset a fingerprint).
+    readers: HashMap<PathBuf, Vec<String>>,
+    /// The asset list whose departed assets' artifacts were last removed.
+    departures_checked: Option<Arc<AssetList>>,
+    /// The manifest kept in memory differs from the file (the daemon writes it when idle).
+    manifest_unsaved: bool,
 }
 
 /// The assets of the pipeline, and the rule-matched files that do not become assets.
@@ -170,7 +182,8 @@ impl Project {
     pub fn open(config: PipelineConfig, options: ProjectOptions) -> Project {
         let cache = open_disk_cache(&config, &options);
         let manifest = load_manifest(&config.output_dir());
-        let revision = manifest.revision;
+        // (A daemon writes the manifest when idle, and the revision of every batch at once.)
+        let revision = manifest.revision.max(crate::record::saved_revision(&config.output_dir()));
         let manifest_stamp = FileStamp::read(&crate::artifacts::manifest_path(&config.output_dir()));
         let record = BuildRecord::load(&config.output_dir());
         // Only a build that was interrupted leaves temporary files: the output folder is walked
@@ -200,9 +213,14 @@ impl Project {
             known: HashMap::new(),
             trusted_artifacts: HashSet::new(),
             identity: executable_identity(),
-            config_hashes: Vec::new(),
+            settings_hashes: Vec::new(),
             manifest: Some((manifest_stamp, manifest)),
             asset_list_kept: Default::default(),
+            clean: HashSet::new(),
+            clean_list: None,
+            readers: HashMap::new(),
+            departures_checked: None,
+            manifest_unsaved: false,
         };
         project.sync_limits();
         project
@@ -265,6 +283,7 @@ impl Project {
     pub fn invalidate_sources<'a>(&mut self, paths: impl IntoIterator<Item = &'a Path>) {
         for path in paths {
             self.forget_asset_list_for(path);
+            self.unclean_readers_of(path);
             self.fresh.remove(path);
         }
     }
@@ -276,6 +295,7 @@ impl Project {
         let mut changed = self.sources_changed_since_build;
         for path in paths {
             self.forget_asset_list_for(path);
+            self.unclean_readers_of(path);
             let before = self.last_known_hash(path);
             self.fresh.remove(path);
             let after = self.file_hash(path);
@@ -329,7 +349,54 @@ impl Project {
     /// Marks every source file as possibly changed (after a watcher overflow or error).
     pub fn invalidate_all_sources(&mut self) {
         self.fresh.clear();
+        self.clean.clear();
         *self.asset_list_kept.get_mut() = None;
+    }
+
+    /// The assets that read `path` are no longer known to be clean.
+    fn unclean_readers_of(&mut self, path: &Path) {
+        for reader in self.readers.get(path).into_iter().flatten() {
+            self.clean.remove(reader);
+        }
+    }
+
+    /// Marks an asset clean: passed over without a fingerprint until a file it reads changes
+    /// (the daemon), or until the next build (which starts afresh).
+    fn mark_clean(&mut self, name: &str) {
+        if !self.clean.insert(name.to_string()) || self.source_reading != SourceReading::WhenInvalidated {
+            return;
+        }
+        let files: Vec<PathBuf> = match self.assets.get(name) {
+            Some(&asset) => asset.files(&self.db).keys().cloned().collect(),
+            None => self.record.assets.get(name).map(|record| record.files.clone()).unwrap_or_default(),
+        };
+        for file in files {
+            let readers = self.readers.entry(file).or_default();
+            if !readers.iter().any(|reader| reader == name) {
+                readers.push(name.to_string());
+            }
+        }
+    }
+
+    /// Keeps the clean assets whose configuration is the same in `list` as in the list they
+    /// were found clean for.
+    fn keep_clean_for(&mut self, list: &Arc<AssetList>) {
+        match &self.clean_list {
+            Some(old) if Arc::ptr_eq(old, list) => return,
+            Some(old) => {
+                let before: HashMap<&str, &AssetConfig> =
+                    old.0.iter().map(|asset| (asset.name.as_str(), asset)).collect();
+                let same: HashSet<&str> = list
+                    .0
+                    .iter()
+                    .filter(|asset| before.get(asset.name.as_str()).is_some_and(|old| *old == *asset))
+                    .map(|asset| asset.name.as_str())
+                    .collect();
+                self.clean.retain(|name| same.contains(name.as_str()));
+            }
+            None => self.clean.clear(),
+        }
+        self.clean_list = Some(list.clone());
     }
 
     /// Whether `path` (project-relative) is a source file some asset read.
@@ -352,6 +419,8 @@ impl Project {
         }
         self.config = config;
         *self.asset_list_kept.get_mut() = None;
+        self.settings_hashes.clear();
+        self.clean.clear();
         self.sync_limits();
     }
 
@@ -525,23 +594,29 @@ impl Project {
     /// The hash of an asset's configuration with the pipeline-wide settings its outputs depend
     /// on (most assets share their rule's settings: each distinct one is formatted once).
     fn config_hash(&mut self, config: &AssetConfig) -> blake3::Hash {
-        if let Some((_, hash)) = self.config_hashes.iter().find(|(seen, _)| seen == config) {
-            return *hash;
-        }
-        let text = format!(
-            "{:?}|{:?}|{:?}|{:?}|{}",
-            config,
-            self.config.source,
-            self.config.output,
-            self.config.limits,
-            crate::isa::kernel_isa().name()
-        );
-        let hash = blake3::hash(text.as_bytes());
-        if self.config_hashes.len() >= 64 {
-            self.config_hashes.remove(0);
-        }
-        self.config_hashes.push((config.clone(), hash));
-        hash
+        let settings = match self.settings_hashes.iter().find(|(seen, _)| *seen == config.settings) {
+            Some((_, hash)) => *hash,
+            None => {
+                let text = format!(
+                    "{:?}|{:?}|{:?}|{:?}|{}",
+                    config.settings,
+                    self.config.source,
+                    self.config.output,
+                    self.config.limits,
+                    crate::isa::kernel_isa().name()
+                );
+                let hash = blake3::hash(text.as_bytes());
+                if self.settings_hashes.len() >= 64 {
+                    self.settings_hashes.remove(0);
+                }
+                self.settings_hashes.push((config.settings.clone(), hash));
+                hash
+            }
+        };
+        let mut hasher = blake3::Hasher::new();
+        hasher.update(settings.as_bytes()).update(config.name.as_bytes()).update(b"\0");
+        hasher.update(format!("{:?}", config.source).as_bytes());
+        hasher.finalize()
     }
 
     /// The fingerprint of an asset that reads `files` and lists `listed`: everything its outputs
@@ -606,6 +681,12 @@ impl Project {
     /// and every artifact it wrote is still there as written (by its metadata, or its bytes'
     /// hash with `--verify`) and listed in the manifest as its.
     fn unchanged_asset(&mut self, config: &AssetConfig, all_assets: &[AssetConfig], manifest: &Manifest) -> bool {
+        // Nothing this asset reads changed since it was last found unchanged (an asset that
+        // reads another's output, or lists its sources by glob, is checked every time).
+        let checked_every_time = config.settings.ao_source.is_some() || !config.source.glob_lists().is_empty();
+        if !checked_every_time && self.clean.contains(&config.name) {
+            return true;
+        }
         let Some(recorded) = self.record.assets.get(&config.name).map(|record| record.fingerprint) else {
             return false;
         };
@@ -613,6 +694,7 @@ impl Project {
             return false;
         }
         if self.source_reading == SourceReading::WhenInvalidated && self.trusted_artifacts.contains(&config.name) {
+            self.mark_clean(&config.name);
             return true;
         }
         let record = &self.record.assets[&config.name];
@@ -630,6 +712,7 @@ impl Project {
         });
         if intact {
             self.trusted_artifacts.insert(config.name.clone());
+            self.mark_clean(&config.name);
         }
         intact
     }
@@ -673,35 +756,35 @@ impl Project {
             tracing::warn!("{conflict}");
         }
         require_assets(&options.only_assets, all_assets, &self.config.file)?;
-        let selected: Vec<AssetConfig> = all_assets
+        self.keep_clean_for(&listed);
+        let selected: Vec<&AssetConfig> = all_assets
             .iter()
             .filter(|asset| options.only_assets.is_empty() || options.only_assets.contains(&asset.name))
-            .cloned()
             .collect();
 
         let cancel = options.cancel.clone().unwrap_or_default();
         if self.source_reading == SourceReading::EveryBuild {
             self.fresh.clear();
+            self.clean.clear();
         }
         let output_dir = self.config.output_dir();
         let mut manifest = self.take_manifest();
         // Assets whose fingerprint and artifacts are as the record has them are passed over:
         // no input, no stage, no file read.
-        let order: HashMap<String, usize> =
-            selected.iter().enumerate().map(|(index, config)| (config.name.clone(), index)).collect();
         let mut assets = Vec::new();
         let mut unchanged = Vec::new();
         for config in selected {
             if cancel.is_raised() {
                 self.db.take_runs();
+                self.keep_manifest(manifest);
                 return Err(BuildError::Cancelled);
             }
-            if self.unchanged_asset(&config, all_assets, &manifest) {
+            if self.unchanged_asset(config, all_assets, &manifest) {
                 unchanged.push(config);
                 continue;
             }
-            let asset = self.sync_asset(&config);
-            assets.push((config, asset));
+            let asset = self.sync_asset(config);
+            assets.push((config.clone(), asset));
         }
         self.sync_registry(all_assets, &assets);
         if let Some(cache) = self.db.disk_cache() {
@@ -718,7 +801,10 @@ impl Project {
             // Entries written in the background are on disk before the build reports.
             cache.flush();
         }
-        let Some(finished) = finished.filter(|_| !cancel.is_raised()) else { return Err(BuildError::Cancelled) };
+        let Some(finished) = finished.filter(|_| !cancel.is_raised()) else {
+            self.keep_manifest(manifest);
+            return Err(BuildError::Cancelled);
+        };
         // Per asset: its errors, and the labels of its jobs that failed.
         let mut failures: HashMap<Asset, (Vec<Diagnostic>, HashSet<String>)> = HashMap::new();
         for (job, result) in finished {
@@ -731,7 +817,6 @@ impl Project {
             }
         }
 
-        let mut listed_artifacts = crate::artifacts::artifacts_by_asset(&manifest);
         let run_index = RunIndex::new(&runs);
         let next_revision = manifest.revision.max(self.revision) + 1;
         let mut changed = options.always_new_revision;
@@ -745,6 +830,7 @@ impl Project {
         let mut asset_runs = runs_by_asset(&runs, assets.iter().map(|(config, _)| config.name.as_str()));
         for (config, asset) in &assets {
             if cancel.is_raised() {
+                self.keep_manifest(manifest);
                 return Err(BuildError::Cancelled);
             }
             let (mut errors, failed_jobs) = failures.remove(asset).unwrap_or_default();
@@ -754,6 +840,7 @@ impl Project {
             all_outputs.push((errors, failed_jobs, folder, outputs));
         }
         if cancel.is_raised() {
+            self.keep_manifest(manifest);
             return Err(BuildError::Cancelled);
         }
         // Each baked asset's fingerprint, of the files its input read.
@@ -804,7 +891,7 @@ impl Project {
                     });
                 }
             }
-            let listed = listed_artifacts.remove(&config.name).unwrap_or_default();
+            let listed = crate::artifacts::artifacts_of(&manifest, &config.name, &folder);
             if errors.is_empty() {
                 // A fully baked asset owns exactly what it produced: drop stale artifacts.
                 let stale = listed.iter().filter(|path| !produced.contains_key(*path)).cloned().collect();
@@ -831,9 +918,12 @@ impl Project {
                     let record = AssetRecord::new(fingerprint, files, artifacts, &records, warnings.clone());
                     self.record.assets.insert(config.name.clone(), record);
                     self.trusted_artifacts.insert(config.name.clone());
+                    self.clean.remove(&config.name);
+                    self.mark_clean(&config.name);
                 }
                 None => {
                     self.record.assets.remove(&config.name);
+                    self.clean.remove(&config.name);
                 }
             }
             summaries.push(AssetSummary {
@@ -848,7 +938,8 @@ impl Project {
         }
         for config in unchanged.iter().filter(|_| !options.omit_unchanged) {
             let record = &self.record.assets[&config.name];
-            let listed = listed_artifacts.remove(&config.name).unwrap_or_default();
+            let listed =
+                crate::artifacts::artifacts_of(&manifest, &config.name, &self.config.output.join(&config.name));
             let stages = record.stages().into_iter().map(|(stage, instance)| StageSummary {
                 stage,
                 instance,
@@ -865,10 +956,19 @@ impl Project {
                 warnings: record.warnings.clone(),
             });
         }
-        summaries.sort_by_key(|summary| order.get(&summary.name).copied());
-        if options.only_assets.is_empty() && self.config.source_dir().is_dir() {
+        if !options.omit_unchanged {
+            // In the pipeline's order.
+            let order: HashMap<&str, usize> =
+                all_assets.iter().enumerate().map(|(index, config)| (config.name.as_str(), index)).collect();
+            summaries.sort_by_key(|summary| order.get(summary.name.as_str()).copied());
+        }
+        let departures_unchecked = self.source_reading == SourceReading::EveryBuild
+            || !self.departures_checked.as_ref().is_some_and(|checked| Arc::ptr_eq(checked, &listed));
+        if options.only_assets.is_empty() && departures_unchecked && self.config.source_dir().is_dir() {
             // Artifacts of assets that left the pipeline (not of those that a vanished source
-            // folder took along: they failed, and keep their last good artifacts).
+            // folder took along: they failed, and keep their last good artifacts). Only a new
+            // asset list can have lost assets.
+            self.departures_checked = Some(listed.clone());
             let names: HashSet<&str> = all_assets.iter().map(|asset| asset.name.as_str()).collect();
             let gone = manifest.artifacts.iter().filter(|(_, entry)| !names.contains(entry.asset.as_str()));
             let gone = gone.map(|(path, _)| path.clone()).collect();
@@ -878,7 +978,13 @@ impl Project {
         // subscribes after it (with `since` = the revision before) still hears of it.
         changed |=
             !removed_artifacts.is_empty() || summaries.iter().any(|summary| summary.status == AssetStatus::Failed);
-        if changed {
+        if changed && self.source_reading == SourceReading::WhenInvalidated {
+            // The daemon: the manifest waits for an idle moment (`save_deferred`); the revision,
+            // which must never be issued twice, is written now.
+            manifest.revision = next_revision;
+            self.manifest_unsaved = true;
+            crate::record::save_revision(&output_dir, next_revision);
+        } else if changed {
             manifest.revision = next_revision;
             if let Err(error) = save_manifest(&output_dir, &manifest) {
                 // Without the manifest, the next build cannot tell its artifacts from the user's
@@ -899,7 +1005,9 @@ impl Project {
         }
         self.revision = manifest.revision;
         self.sources_changed_since_build = false;
-        if options.only_assets.is_empty() {
+        // (The daemon leaves files that no asset reads any more in the record: pruning costs a
+        // pass over every file.)
+        if options.only_assets.is_empty() && self.source_reading == SourceReading::EveryBuild {
             self.prune_record(all_assets);
         }
         // The daemon saves the record when it is idle (`save_record`): a record older than the
@@ -944,8 +1052,26 @@ impl Project {
         Ok(BuildSummary { revision, assets: summaries, changed: changed_artifacts, removed: removed_artifacts })
     }
 
+    /// Writes what the daemon keeps in memory between idle moments: the manifest and the
+    /// build record, each when it changed since it was last written.
+    pub fn save_deferred(&mut self) {
+        if self.manifest_unsaved {
+            if let Some((_, manifest)) = self.manifest.take() {
+                if let Err(error) = save_manifest(&self.config.output_dir(), &manifest) {
+                    tracing::error!(
+                        "cannot write {}: {error}",
+                        display_path(&self.config.output.join("manifest.json"))
+                    );
+                }
+                self.keep_manifest(manifest);
+            }
+            self.manifest_unsaved = false;
+        }
+        self.save_record();
+    }
+
     /// Writes the build record when it changed since it was last written.
-    pub fn save_record(&mut self) {
+    fn save_record(&mut self) {
         if !self.record_changed || !self.options.persistent_cache {
             return;
         }
@@ -963,6 +1089,8 @@ impl Project {
         let output_dir = self.config.output_dir();
         let stamp = FileStamp::read(&crate::artifacts::manifest_path(&output_dir));
         match self.manifest.take() {
+            // Unsaved (the daemon's), or as the file still is.
+            Some((_, manifest)) if self.manifest_unsaved => manifest,
             Some((kept, manifest)) if kept == stamp && stamp.is_some() => manifest,
             _ => load_manifest(&output_dir),
         }
@@ -1104,22 +1232,21 @@ impl Project {
         use crate::graph::{GraphBuilder, Node, NodeKind};
         let mut graph = GraphBuilder::default();
         let manifest = self.take_manifest();
-        let list = self.asset_list();
-        if self.source_reading == SourceReading::EveryBuild {
-            self.fresh.clear();
-        }
+        let listed = self.asset_list_and_conflicts();
+        self.keep_clean_for(&listed);
+        let list = &listed.0;
         // An asset that the record holds as it is now: its instances from there; any other
         // through its kind (which may read its sources and run the stages that tell them).
         let mut all_instances: Vec<(String, Vec<InstanceRecord>)> = Vec::new();
         let mut synced = Vec::new();
         for config in list.iter().filter(|config| only.is_none_or(|only| only.contains(&config.name))) {
-            if self.unchanged_asset(config, &list, &manifest) {
+            if self.unchanged_asset(config, list, &manifest) {
                 all_instances.push((config.name.clone(), self.record.assets[&config.name].instances()));
             } else {
                 synced.push((config.clone(), self.sync_asset(config)));
             }
         }
-        self.sync_registry(&list, &synced);
+        self.sync_registry(list, &synced);
         for (config, asset) in synced {
             let folder = self.config.output.join(&config.name);
             let instances = asset.kind(&self.db).stage_instances(&self.db, asset, &folder, &[]);

@@ -232,6 +232,25 @@ pub fn record_path(output_dir: &Path) -> PathBuf {
     output_dir.join(".cirrus").join("record.json")
 }
 
+/// The last revision a daemon issued (`<output>/.cirrus/revision`), written with every batch:
+/// the daemon writes the manifest, which holds it too, only when idle.
+fn revision_path(output_dir: &Path) -> PathBuf {
+    output_dir.join(".cirrus").join("revision")
+}
+
+pub fn save_revision(output_dir: &Path, revision: u64) {
+    if let Err(error) = crate::artifacts::write_if_changed(&revision_path(output_dir), revision.to_string().as_bytes())
+    {
+        tracing::warn!("cannot write {}: {error}", revision_path(output_dir).display());
+    }
+}
+
+/// The revision of [`save_revision`] (0 when none or unreadable).
+pub fn saved_revision(output_dir: &Path) -> u64 {
+    let bytes = crate::sources::read_regular_file(&revision_path(output_dir), 64).unwrap_or_default();
+    String::from_utf8_lossy(&bytes).trim().parse().unwrap_or(0)
+}
+
 /// The marker a build leaves while it writes: found by the next process, it says that a build
 /// was interrupted (and may have left temporary files to sweep).
 fn marker_path(output_dir: &Path) -> PathBuf {

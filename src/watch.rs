@@ -232,9 +232,10 @@ enum WatchMessage {
     Graph(std::sync::mpsc::SyncSender<(u64, crate::graph::Graph)>),
 }
 
-/// How long the daemon waits after a batch for the next edit before it writes the build
-/// record (which only spares the next start some checking).
+/// How long the daemon waits after a batch for the next edit before it writes the manifest and
+/// the build record (`Project::save_deferred`), and how late they may be while edits keep coming.
 const RECORD_SAVE_IDLE: Duration = Duration::from_secs(1);
+const RECORD_SAVE_LATEST: Duration = Duration::from_secs(10);
 
 /// Runs the daemon until the process ends (or `max_builds` builds finished).
 pub fn watch(settings: &WatchSettings) -> Result<(), WatchError> {
@@ -324,6 +325,7 @@ pub fn watch(settings: &WatchSettings) -> Result<(), WatchError> {
     let mut force_build = true;
     let mut rearm = false;
     // Graph requests that arrived while a batch was being put together: answered after it.
+    let mut last_saved = Instant::now();
     let mut graph_requests: Vec<std::sync::mpsc::SyncSender<(u64, crate::graph::Graph)>> = Vec::new();
     loop {
         for reply in graph_requests.drain(..) {
@@ -345,11 +347,12 @@ pub fn watch(settings: &WatchSettings) -> Result<(), WatchError> {
                     }
                     Ok(message) => break message,
                     Err(std::sync::mpsc::RecvTimeoutError::Timeout) => {
-                        project.save_record();
+                        project.save_deferred();
+                        last_saved = Instant::now();
                         record_saved = true;
                     }
                     Err(std::sync::mpsc::RecvTimeoutError::Disconnected) => {
-                        project.save_record();
+                        project.save_deferred();
                         return Ok(());
                     }
                 }
@@ -500,9 +503,13 @@ pub fn watch(settings: &WatchSettings) -> Result<(), WatchError> {
         }
         let graph = project.graph_of_assets(Some(&rebuilt));
         log_batch(&summary, &changed_files, &graph, ms);
+        if last_saved.elapsed() > RECORD_SAVE_LATEST {
+            project.save_deferred();
+            last_saved = Instant::now();
+        }
         builds += 1;
         if settings.max_builds.is_some_and(|max| builds >= max) {
-            project.save_record();
+            project.save_deferred();
             return Ok(());
         }
     }

@@ -150,6 +150,11 @@ pub struct Project {
     departures_checked: Option<Arc<AssetList>>,
     /// The manifest kept in memory differs from the file (the daemon writes it when idle).
     manifest_unsaved: bool,
+    /// Source files read (and hashed) since the last build finished.
+    files_read: usize,
+    /// What `file_hash` read of files without an input, for `source_file` to take instead of
+    /// reading them again (emptied when a build ends).
+    unclaimed: HashMap<PathBuf, crate::db::FileRead>,
 }
 
 /// The assets of the pipeline, and the rule-matched files that do not become assets.
@@ -221,6 +226,8 @@ impl Project {
             readers: HashMap::new(),
             departures_checked: None,
             manifest_unsaved: false,
+            files_read: 0,
+            unclaimed: HashMap::new(),
         };
         project.sync_limits();
         project
@@ -336,13 +343,20 @@ impl Project {
                 return Ok(hash);
             }
         }
-        let read = read_source_stamped(&self.config.root, &self.config.source, path);
-        let hash = read.map(|(contents, stamp)| {
+        self.files_read += 1;
+        let recorded = self.record.files.get(path).map(|file| file.hash);
+        let read = read_source_stamped(&self.config.root, &self.config.source, path).map(|(contents, stamp)| {
             self.record_changed |= self.record.remember_file(path, stamp, contents.hash, seen_at);
-            contents.hash
+            contents
         });
+        let hash = read.as_ref().map(|contents| contents.hash).map_err(Clone::clone);
         self.fresh.insert(path.to_path_buf());
         self.known.insert(path.to_path_buf(), hash.clone());
+        // A file whose bytes changed is read again by the asset about to be baked: these bytes,
+        // until the build ends (not those of a file merely touched).
+        if hash.as_ref().ok() != recorded.as_ref() {
+            self.unclaimed.insert(path.to_path_buf(), read);
+        }
         hash
     }
 
@@ -1005,6 +1019,14 @@ impl Project {
         }
         self.revision = manifest.revision;
         self.sources_changed_since_build = false;
+        tracing::info!(
+            "{} asset(s) passed over, {} looked into; {} source file(s) read",
+            unchanged.len(),
+            assets.len(),
+            self.files_read
+        );
+        self.files_read = 0;
+        self.unclaimed.clear();
         // (The daemon leaves files that no asset reads any more in the record: pruning costs a
         // pass over every file.)
         if options.only_assets.is_empty() && self.source_reading == SourceReading::EveryBuild {
@@ -1166,11 +1188,17 @@ impl Project {
                 return file;
             }
         }
-        let seen_at = crate::record::now();
-        let contents = read_source_stamped(&self.config.root, &self.config.source, path).map(|(contents, stamp)| {
-            self.record_changed |= self.record.remember_file(path, stamp, contents.hash, seen_at);
-            contents
-        });
+        let contents = match self.unclaimed.remove(path).filter(|_| self.fresh.contains(path)) {
+            Some(read) => read,
+            None => {
+                let seen_at = crate::record::now();
+                self.files_read += 1;
+                read_source_stamped(&self.config.root, &self.config.source, path).map(|(contents, stamp)| {
+                    self.record_changed |= self.record.remember_file(path, stamp, contents.hash, seen_at);
+                    contents
+                })
+            }
+        };
         self.fresh.insert(path.to_path_buf());
         match self.files.get(path) {
             Some(&file) => {

@@ -226,3 +226,43 @@ fn the_record_survives_a_killed_build_and_is_rebuilt_when_damaged() {
     let stats = String::from_utf8_lossy(&stats.stdout);
     assert!(stats.contains("assets passed over (nothing they read changed): 60"), "{stats}");
 }
+
+#[test]
+fn the_daemon_starts_on_a_baked_level_without_reading_its_sources_and_an_edit_reads_only_its_assets_files() {
+    let dir = tempfile::tempdir().unwrap();
+    let level = write_level(dir.path(), &LevelSettings { assets: 60 }).unwrap();
+    build_process(dir.path(), &[]);
+    // Out of the racy window, so that the record trusts every file's metadata.
+    std::thread::sleep(Duration::from_millis(2100));
+    build_process(dir.path(), &[]);
+    let mut daemon = std::process::Command::new(env!("CARGO_BIN_EXE_cirrus"))
+        .args(["-v", "watch", "--debounce-ms", "50"])
+        .current_dir(dir.path())
+        .stdout(std::process::Stdio::null())
+        .stderr(std::process::Stdio::piped())
+        .spawn()
+        .unwrap();
+    let (lines, receive) = std::sync::mpsc::channel();
+    let stderr = daemon.stderr.take().unwrap();
+    std::thread::spawn(move || {
+        for line in std::io::BufRead::lines(std::io::BufReader::new(stderr)).map_while(Result::ok) {
+            let _ = lines.send(line);
+        }
+    });
+    let next_read_count = || loop {
+        let line = receive.recv_timeout(Duration::from_secs(120)).expect("the daemon logs each build");
+        if let Some(read) = line.split("source file(s) read").next().filter(|_| line.contains("source file(s) read")) {
+            break (line.clone(), read.rsplit(' ').nth(1).unwrap().parse::<usize>().unwrap());
+        }
+    };
+    let (ready, read) = next_read_count();
+    assert!(ready.contains("60 asset(s) passed over, 0 looked into"), "{ready}");
+    assert_eq!(read, 0, "{ready}");
+    std::fs::write(dir.path().join(&level.albedo_maps[3]), noise_png(64, 64, 3, 99)).unwrap();
+    let (edit, read) = next_read_count();
+    assert!(edit.contains("59 asset(s) passed over, 1 looked into"), "{edit}");
+    // The edited map, and the material file and normal map its asset reads.
+    assert_eq!(read, 3, "{edit}");
+    daemon.kill().unwrap();
+    daemon.wait().unwrap();
+}

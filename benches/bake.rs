@@ -164,8 +164,11 @@ fn bench_scale() {
         .unwrap_or_else(|| vec![100, 1_000, 10_000]);
     println!(
         "scale: synthetic levels (90 % materials with 64² maps, one in ten 256², 7 % AO rocks, 3 % billboard plants); \
-         CPU ISA {}, {} threads",
+         CPU ISA {}{}, {} threads",
         cirrus::isa::detected_isa().name(),
+        std::env::var("CIRRUS_ISA")
+            .map(|isa| format!(" (processes limited to {isa} by CIRRUS_ISA)"))
+            .unwrap_or_default(),
         rayon::current_num_threads()
     );
     let mut all = Vec::new();

@@ -190,7 +190,8 @@ impl Project {
         // (A daemon writes the manifest when idle, and the revision of every batch at once.)
         let revision = manifest.revision.max(crate::record::saved_revision(&config.output_dir()));
         let manifest_stamp = FileStamp::read(&crate::artifacts::manifest_path(&config.output_dir()));
-        let record = BuildRecord::load(&config.output_dir());
+        let mut record = BuildRecord::load(&config.output_dir());
+        record.keep_within(&config.source, &config.output);
         // Only a build that was interrupted leaves temporary files: the output folder is walked
         // for them only then.
         if crate::record::interrupted_build(&config.output_dir()) {

@@ -306,6 +306,21 @@ impl BuildRecord {
         crate::artifacts::write_if_changed(&record_path(output_dir), &bytes).map(|_| ())
     }
 
+    /// Drops what a record edited by hand (or by an attacker) could use to make a build look at
+    /// files elsewhere: an asset whose files are not plain paths inside `source`, or whose
+    /// artifacts are not plain paths inside `output`, and such files (project-relative folders).
+    pub fn keep_within(&mut self, source: &Path, output: &Path) {
+        let plain_inside = |path: &Path, folder: &Path| {
+            path.starts_with(folder)
+                && path.components().all(|component| matches!(component, std::path::Component::Normal(_)))
+        };
+        self.files.retain(|path, _| plain_inside(path, source));
+        self.assets.retain(|_, asset| {
+            asset.files.iter().all(|file| plain_inside(file, source))
+                && asset.artifacts.keys().all(|artifact| plain_inside(Path::new(artifact), output))
+        });
+    }
+
     /// The content hash the record holds for `path` when its metadata is `stamp` and was not
     /// racy when recorded.
     pub fn trusted_hash(&self, path: &Path, stamp: &FileStamp) -> Option<blake3::Hash> {

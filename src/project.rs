@@ -949,6 +949,7 @@ impl Project {
                 artifacts: asset_artifacts(&manifest, &config.name, listed.iter().chain(produced.keys())),
                 errors: errors.iter().map(ErrorSummary::from).collect(),
                 warnings,
+                passed_over: false,
             });
         }
         for config in unchanged.iter().filter(|_| !options.omit_unchanged) {
@@ -969,6 +970,7 @@ impl Project {
                 artifacts: asset_artifacts(&manifest, &config.name, listed.iter()),
                 errors: Vec::new(),
                 warnings: record.warnings.clone(),
+                passed_over: true,
             });
         }
         if !options.omit_unchanged {

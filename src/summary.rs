@@ -111,6 +111,10 @@ pub struct AssetSummary {
     /// bake); absent from the JSON when there is none.
     #[serde(skip_serializing_if = "Vec::is_empty")]
     pub warnings: Vec<ErrorSummary>,
+    /// The build record let the build pass it over: nothing it reads had moved (the text form
+    /// counts such assets instead of listing them; the JSON lists them like any other).
+    #[serde(skip)]
+    pub passed_over: bool,
 }
 
 impl BuildSummary {
@@ -122,10 +126,12 @@ impl BuildSummary {
         serde_json::to_string(self).expect("summaries serialise")
     }
 
-    /// A human-readable summary: one line per asset, its errors indented below.
+    /// A human-readable summary: one line per asset, its errors indented below; the assets the
+    /// build passed over without warnings are counted on one line (a level has thousands).
     pub fn to_text(&self) -> String {
         let mut text = String::new();
-        for asset in &self.assets {
+        let quiet = |asset: &&AssetSummary| asset.passed_over && asset.warnings.is_empty();
+        for asset in self.assets.iter().filter(|asset| !quiet(asset)) {
             let count = |status: StageStatus| asset.stages.iter().filter(|stage| stage.status == status).count();
             let ms = asset.stages.iter().fold(0.0, |total, stage| total + stage.ms);
             let status = match asset.status {
@@ -158,6 +164,11 @@ impl BuildSummary {
                 let position = warning.line.map(|line| format!(":{line}")).unwrap_or_default();
                 let _ = writeln!(text, "       warning: {}{position}: {}", warning.file, warning.message);
             }
+        }
+        let unchanged = self.assets.iter().filter(quiet).count();
+        if unchanged > 0 {
+            let _ =
+                writeln!(text, "ok     {unchanged} asset(s) unchanged: nothing they read moved since they were baked");
         }
         let _ = writeln!(text, "revision {}", self.revision);
         text

@@ -143,6 +143,10 @@ fn a_touched_file_runs_nothing_and_a_changed_one_is_caught_even_with_its_mtime_p
 
     // --verify hashes everything: the same result, nothing runs.
     assert!(ran(&build_process(project.root(), &["--verify"])).is_empty());
+    // The text summary counts the assets passed over instead of listing them.
+    let text = project.run_cli(&["build"]);
+    let text = String::from_utf8_lossy(&text.stdout);
+    assert!(text.starts_with("ok     1 asset(s) unchanged: nothing they read moved"), "{text}");
 }
 
 #[test]

@@ -574,12 +574,7 @@ impl Project {
         };
         // Sources named by globs: listed on every build, so that new files join and deleted
         // ones leave.
-        let listed: Vec<Vec<PathBuf>> = config
-            .source
-            .glob_lists()
-            .into_iter()
-            .map(|globs| crate::sources::glob_matches(&self.config, globs))
-            .collect();
+        let listed = self.listed_sources(config);
         if **asset.listed(&self.db) != listed {
             asset.set_listed(&mut self.db).to(Arc::new(listed));
         }

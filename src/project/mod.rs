@@ -24,6 +24,15 @@ use crate::summary::{
 
 pub use crate::schedule::{CancelFlag, Progress};
 
+mod graph;
+mod source_files;
+mod summaries;
+mod unchanged;
+
+use graph::instance_record;
+use summaries::{asset_artifacts, runs_by_asset, stage_summaries, RunIndex};
+use unchanged::executable_identity;
+
 /// How a project is opened.
 #[derive(Clone, Debug)]
 pub struct ProjectOptions {
@@ -296,122 +305,11 @@ impl Project {
         }
     }
 
-    /// Reads `paths` again now; true when any of them is new to the project or its bytes changed,
-    /// or another input changed since the last finished build (so that a touch with identical
-    /// bytes costs no build).
-    pub fn refresh_sources<'a>(&mut self, paths: impl IntoIterator<Item = &'a Path>) -> bool {
-        let mut changed = self.sources_changed_since_build;
-        for path in paths {
-            self.forget_asset_list_for(path);
-            self.unclean_readers_of(path);
-            let before = self.last_known_hash(path);
-            self.fresh.remove(path);
-            let after = self.file_hash(path);
-            changed |= before != Some(after);
-        }
-        changed
-    }
-
-    /// The content hash last seen of a file (its input's, or the record's), if any.
-    fn last_known_hash(&self, path: &Path) -> Option<Result<blake3::Hash, String>> {
-        match self.files.get(path) {
-            Some(file) => Some(file.contents(&self.db).as_ref().map(|contents| contents.hash).map_err(Clone::clone)),
-            None => self.known.get(path).cloned().or_else(|| self.record.files.get(path).map(|file| Ok(file.hash))),
-        }
-    }
-
-    /// The content hash of a source file (or why it cannot be read): its input's when it has
-    /// one, else the record's when the file's metadata did not move since it was recorded (not
-    /// racy, no `--verify`), else read and hashed now (and recorded).
-    fn file_hash(&mut self, path: &Path) -> Result<blake3::Hash, String> {
-        if self.files.contains_key(path) {
-            let file = self.source_file(path);
-            return file.contents(&self.db).as_ref().map(|contents| contents.hash).map_err(Clone::clone);
-        }
-        if self.fresh.contains(path) {
-            if let Some(known) = self.known.get(path) {
-                return known.clone();
-            }
-        }
-        let seen_at = crate::record::now();
-        if !self.options.verify {
-            let trusted = FileStamp::read(&self.config.root.join(path))
-                .and_then(|stamp| self.record.trusted_hash(path, &stamp))
-                .filter(|_| self.config.source_dir().is_dir());
-            if let Some(hash) = trusted {
-                self.fresh.insert(path.to_path_buf());
-                self.known.insert(path.to_path_buf(), Ok(hash));
-                return Ok(hash);
-            }
-        }
-        self.files_read += 1;
-        let recorded = self.record.files.get(path).map(|file| file.hash);
-        let read = read_source_stamped(&self.config.root, &self.config.source, path).map(|(contents, stamp)| {
-            self.record_changed |= self.record.remember_file(path, stamp, contents.hash, seen_at);
-            contents
-        });
-        let hash = read.as_ref().map(|contents| contents.hash).map_err(Clone::clone);
-        self.fresh.insert(path.to_path_buf());
-        self.known.insert(path.to_path_buf(), hash.clone());
-        // A file whose bytes changed is read again by the asset about to be baked: these bytes,
-        // until the build ends (not those of a file merely touched).
-        if hash.as_ref().ok() != recorded.as_ref() {
-            self.unclaimed.insert(path.to_path_buf(), read);
-        }
-        hash
-    }
-
     /// Marks every source file as possibly changed (after a watcher overflow or error).
     pub fn invalidate_all_sources(&mut self) {
         self.fresh.clear();
         self.clean.clear();
         *self.asset_list_kept.get_mut() = None;
-    }
-
-    /// The assets that read `path` are no longer known to be clean.
-    fn unclean_readers_of(&mut self, path: &Path) {
-        for reader in self.readers.get(path).into_iter().flatten() {
-            self.clean.remove(reader);
-        }
-    }
-
-    /// Marks an asset clean: passed over without a fingerprint until a file it reads changes
-    /// (the daemon), or until the next build (which starts afresh).
-    fn mark_clean(&mut self, name: &str) {
-        if !self.clean.insert(name.to_string()) || self.source_reading != SourceReading::WhenInvalidated {
-            return;
-        }
-        let files: Vec<PathBuf> = match self.assets.get(name) {
-            Some(&asset) => asset.files(&self.db).keys().cloned().collect(),
-            None => self.record.assets.get(name).map(|record| record.files.clone()).unwrap_or_default(),
-        };
-        for file in files {
-            let readers = self.readers.entry(file).or_default();
-            if !readers.iter().any(|reader| reader == name) {
-                readers.push(name.to_string());
-            }
-        }
-    }
-
-    /// Keeps the clean assets whose configuration is the same in `list` as in the list they
-    /// were found clean for.
-    fn keep_clean_for(&mut self, list: &Arc<AssetList>) {
-        match &self.clean_list {
-            Some(old) if Arc::ptr_eq(old, list) => return,
-            Some(old) => {
-                let before: HashMap<&str, &AssetConfig> =
-                    old.0.iter().map(|asset| (asset.name.as_str(), asset)).collect();
-                let same: HashSet<&str> = list
-                    .0
-                    .iter()
-                    .filter(|asset| before.get(asset.name.as_str()).is_some_and(|old| *old == *asset))
-                    .map(|asset| asset.name.as_str())
-                    .collect();
-                self.clean.retain(|name| same.contains(name.as_str()));
-            }
-            None => self.clean.clear(),
-        }
-        self.clean_list = Some(list.clone());
     }
 
     /// Whether `path` (project-relative) is a source file some asset read.
@@ -593,138 +491,6 @@ impl Project {
             asset.set_files(&mut self.db).to(Arc::new(files));
         }
         asset
-    }
-
-    /// The files of the source folder that an asset's globs list (none for most kinds).
-    fn listed_sources(&self, config: &AssetConfig) -> Vec<Vec<PathBuf>> {
-        let lists = config.source.glob_lists();
-        lists.into_iter().map(|globs| crate::sources::glob_matches(&self.config, globs)).collect()
-    }
-
-    /// The hash of an asset's configuration with the pipeline-wide settings its outputs depend
-    /// on (most assets share their rule's settings: each distinct one is formatted once).
-    fn config_hash(&mut self, config: &AssetConfig) -> blake3::Hash {
-        let settings = match self.settings_hashes.iter().find(|(seen, _)| *seen == config.settings) {
-            Some((_, hash)) => *hash,
-            None => {
-                let text = format!(
-                    "{:?}|{:?}|{:?}|{:?}|{}",
-                    config.settings,
-                    self.config.source,
-                    self.config.output,
-                    self.config.limits,
-                    crate::isa::kernel_isa().name()
-                );
-                let hash = blake3::hash(text.as_bytes());
-                if self.settings_hashes.len() >= 64 {
-                    self.settings_hashes.remove(0);
-                }
-                self.settings_hashes.push((config.settings.clone(), hash));
-                hash
-            }
-        };
-        let mut hasher = blake3::Hasher::new();
-        hasher.update(settings.as_bytes()).update(config.name.as_bytes()).update(b"\0");
-        hasher.update(format!("{:?}", config.source).as_bytes());
-        hasher.finalize()
-    }
-
-    /// The fingerprint of an asset that reads `files` and lists `listed`: everything its outputs
-    /// depend on (this executable, the CPU kernels' level, its configuration and the pipeline's
-    /// limits and folders, each file's content hash or why it cannot be read, and the
-    /// fingerprint of the asset whose output it reads). `None` when that asset has none.
-    fn fingerprint(
-        &mut self,
-        config: &AssetConfig,
-        files: &[PathBuf],
-        listed: &[Vec<PathBuf>],
-        all_assets: &[AssetConfig],
-        built: &HashMap<String, Asset>,
-        depth: usize,
-    ) -> Option<blake3::Hash> {
-        let mut hasher = blake3::Hasher::new();
-        hasher.update(&FINGERPRINT_VERSION.to_le_bytes());
-        hasher.update(self.identity.as_bytes());
-        hasher.update(self.config_hash(config).as_bytes());
-        for list in listed {
-            hasher.update(&(list.len() as u64).to_le_bytes());
-            for path in list {
-                hasher.update(display_path(path).as_bytes()).update(b"\0");
-            }
-        }
-        hasher.update(&(files.len() as u64).to_le_bytes());
-        for path in files {
-            hasher.update(display_path(path).as_bytes()).update(b"\0");
-            match self.file_hash(path) {
-                Ok(hash) => hasher.update(b"=").update(hash.as_bytes()),
-                Err(why) => hasher.update(b"!").update(why.as_bytes()).update(b"\0"),
-            };
-        }
-        if let Some(source) = &config.settings.ao_source {
-            let read = all_assets.iter().find(|asset| &asset.name == source)?;
-            hasher.update(self.current_fingerprint(read, all_assets, built, depth + 1)?.as_bytes());
-        }
-        Some(hasher.finalize())
-    }
-
-    /// An asset's fingerprint now: of the files its input reads when this build baked it, else
-    /// of the files the record says it reads (`None` when it has no record: never baked, or
-    /// failed).
-    fn current_fingerprint(
-        &mut self,
-        config: &AssetConfig,
-        all_assets: &[AssetConfig],
-        built: &HashMap<String, Asset>,
-        depth: usize,
-    ) -> Option<blake3::Hash> {
-        if depth > 4 {
-            return None;
-        }
-        let (files, listed) = match built.get(&config.name) {
-            Some(&asset) => (asset.files(&self.db).keys().cloned().collect(), (**asset.listed(&self.db)).clone()),
-            None => (self.record.assets.get(&config.name)?.files.clone(), self.listed_sources(config)),
-        };
-        self.fingerprint(config, &files, &listed, all_assets, built, depth)
-    }
-
-    /// Whether an asset can be passed over: the record holds it, its fingerprint is the same,
-    /// and every artifact it wrote is still there as written (by its metadata, or its bytes'
-    /// hash with `--verify`) and listed in the manifest as its.
-    fn unchanged_asset(&mut self, config: &AssetConfig, all_assets: &[AssetConfig], manifest: &Manifest) -> bool {
-        // Nothing this asset reads changed since it was last found unchanged (an asset that
-        // reads another's output, or lists its sources by glob, is checked every time).
-        let checked_every_time = config.settings.ao_source.is_some() || !config.source.glob_lists().is_empty();
-        if !checked_every_time && self.clean.contains(&config.name) {
-            return true;
-        }
-        let Some(recorded) = self.record.assets.get(&config.name).map(|record| record.fingerprint) else {
-            return false;
-        };
-        if self.current_fingerprint(config, all_assets, &HashMap::new(), 0) != Some(recorded) {
-            return false;
-        }
-        if self.source_reading == SourceReading::WhenInvalidated && self.trusted_artifacts.contains(&config.name) {
-            self.mark_clean(&config.name);
-            return true;
-        }
-        let record = &self.record.assets[&config.name];
-        let intact = record.artifacts.iter().all(|(path, stamp)| {
-            let Some(entry) = manifest.artifacts.get(path).filter(|entry| entry.asset == config.name) else {
-                return false;
-            };
-            let file = self.config.root.join(path);
-            if self.options.verify {
-                crate::sources::read_regular_file(&file, crate::sources::MAX_SOURCE_BYTES)
-                    .is_ok_and(|bytes| blake3::hash(&bytes).to_hex().as_str() == entry.hash)
-            } else {
-                FileStamp::read(&file) == Some(*stamp)
-            }
-        });
-        if intact {
-            self.trusted_artifacts.insert(config.name.clone());
-            self.mark_clean(&config.name);
-        }
-        intact
     }
 
     /// Names the built assets for those that read another's output (`ao_source`), syncing each
@@ -1072,38 +838,6 @@ impl Project {
         Ok(BuildSummary { revision, assets: summaries, changed: changed_artifacts, removed: removed_artifacts })
     }
 
-    /// Writes what the daemon keeps in memory between idle moments: the manifest and the
-    /// build record, each when it changed since it was last written.
-    pub fn save_deferred(&mut self) {
-        if self.manifest_unsaved {
-            if let Some((_, manifest)) = self.manifest.take() {
-                if let Err(error) = save_manifest(&self.config.output_dir(), &manifest) {
-                    tracing::error!(
-                        "cannot write {}: {error}",
-                        display_path(&self.config.output.join("manifest.json"))
-                    );
-                }
-                self.keep_manifest(manifest);
-            }
-            self.manifest_unsaved = false;
-        }
-        self.save_record();
-    }
-
-    /// Writes the build record when it changed since it was last written.
-    fn save_record(&mut self) {
-        if !self.record_changed || !self.options.persistent_cache {
-            return;
-        }
-        match self.record.save(&self.config.output_dir()) {
-            Ok(()) => self.record_changed = false,
-            Err(error) => tracing::warn!(
-                "cannot write {}: {error} (the next build hashes its sources again)",
-                display_path(&crate::record::record_path(&self.config.output))
-            ),
-        }
-    }
-
     /// The manifest on disk: the one kept when its file did not change since.
     fn take_manifest(&mut self) -> Manifest {
         let output_dir = self.config.output_dir();
@@ -1120,17 +854,6 @@ impl Project {
     fn keep_manifest(&mut self, manifest: Manifest) {
         let stamp = FileStamp::read(&crate::artifacts::manifest_path(&self.config.output_dir()));
         self.manifest = Some((stamp, manifest));
-    }
-
-    /// Drops the record's assets that left the pipeline and the files no recorded asset reads.
-    fn prune_record(&mut self, all_assets: &[AssetConfig]) {
-        let names: HashSet<&str> = all_assets.iter().map(|asset| asset.name.as_str()).collect();
-        let before = (self.record.assets.len(), self.record.files.len());
-        self.record.assets.retain(|name, _| names.contains(name.as_str()));
-        let read: HashSet<&PathBuf> = self.record.assets.values().flat_map(|asset| asset.files.iter()).collect();
-        let files = std::mem::take(&mut self.record.files);
-        self.record.files = files.into_iter().filter(|(path, _)| read.contains(path)).collect();
-        self.record_changed |= before != (self.record.assets.len(), self.record.files.len());
     }
 
     /// Adds stage runs to the history (revision, milliseconds) and the executed log.
@@ -1179,44 +902,6 @@ impl Project {
         std::mem::take(&mut self.executed).into_iter().collect()
     }
 
-    /// The salsa input of a file, read from disk now; set again only when its bytes changed.
-    fn source_file(&mut self, path: &Path) -> SourceFile {
-        if self.fresh.contains(path) {
-            if let Some(&file) = self.files.get(path) {
-                return file;
-            }
-        }
-        let contents = match self.unclaimed.remove(path).filter(|_| self.fresh.contains(path)) {
-            Some(read) => read,
-            None => {
-                let seen_at = crate::record::now();
-                self.files_read += 1;
-                read_source_stamped(&self.config.root, &self.config.source, path).map(|(contents, stamp)| {
-                    self.record_changed |= self.record.remember_file(path, stamp, contents.hash, seen_at);
-                    contents
-                })
-            }
-        };
-        self.fresh.insert(path.to_path_buf());
-        match self.files.get(path) {
-            Some(&file) => {
-                if file.contents(&self.db) != &contents {
-                    let _previous = file.set_contents(&mut self.db).to(contents);
-                    self.history.insert(file_node_id(path), (self.next_revision(), 0.0));
-                    self.sources_changed_since_build = true;
-                }
-                file
-            }
-            None => {
-                let file = SourceFile::new(&self.db, path.to_path_buf(), contents);
-                self.history.insert(file_node_id(path), (self.next_revision(), 0.0));
-                self.sources_changed_since_build = true;
-                self.files.insert(path.to_path_buf(), file);
-                file
-            }
-        }
-    }
-
     /// Writes one artifact (project-relative `path`) if its bytes changed and records its hash;
     /// false when it could not be written. A report that differs only in its timings is kept.
     fn write_artifact(
@@ -1244,229 +929,6 @@ impl Project {
             }
         }
     }
-
-    /// The dependency graph of every asset: source files, stage instances and artifacts, with
-    /// an edge for each read a stage function makes (the same stage instances the summary lists).
-    /// Reads the sources and runs the stages that tell the instances (a billboard cloud's
-    /// layout) where needed.
-    pub fn graph(&mut self) -> crate::graph::Graph {
-        self.graph_of_assets(None)
-    }
-
-    /// [`Project::graph`] of the named assets only (all when `None`).
-    pub fn graph_of_assets(&mut self, only: Option<&HashSet<String>>) -> crate::graph::Graph {
-        use crate::graph::{GraphBuilder, Node, NodeKind};
-        let mut graph = GraphBuilder::default();
-        let manifest = self.take_manifest();
-        let listed = self.asset_list_and_conflicts();
-        self.keep_clean_for(&listed);
-        let list = &listed.0;
-        // An asset that the record holds as it is now: its instances from there; any other
-        // through its kind (which may read its sources and run the stages that tell them).
-        let mut all_instances: Vec<(String, Vec<InstanceRecord>)> = Vec::new();
-        let mut synced = Vec::new();
-        for config in list.iter().filter(|config| only.is_none_or(|only| only.contains(&config.name))) {
-            if self.unchanged_asset(config, list, &manifest) {
-                all_instances.push((config.name.clone(), self.record.assets[&config.name].instances()));
-            } else {
-                synced.push((config.clone(), self.sync_asset(config)));
-            }
-        }
-        self.sync_registry(list, &synced);
-        for (config, asset) in synced {
-            let folder = self.config.output.join(&config.name);
-            let instances = asset.kind(&self.db).stage_instances(&self.db, asset, &folder, &[]);
-            all_instances.push((config.name, instances.iter().map(instance_record).collect()));
-        }
-        let runs = self.db.take_runs();
-        self.record_runs(&runs, self.revision);
-        for (asset, instances) in &all_instances {
-            for instance in instances {
-                let id = stage_node_id(&instance.stage, &instance.label);
-                let last = self.history.get(&id);
-                // Instances without a status in the last summary: from the history.
-                let (state, ms) = self.last_statuses.get(&id).cloned().unwrap_or(match (self.last_revision, last) {
-                    (None, _) => ("pending", None),
-                    (Some(revision), Some((ran, ms))) if *ran == revision => ("ran", Some((ms * 10.0).round() / 10.0)),
-                    (Some(_), _) => ("cached", None),
-                });
-                graph.node(Node {
-                    id: id.clone(),
-                    kind: NodeKind::Stage,
-                    label: id.clone(),
-                    asset: (!instance.shared).then(|| asset.clone()),
-                    revision: last.map(|(revision, _)| *revision),
-                    ms: ms.or(last.map(|(_, ms)| (ms * 10.0).round() / 10.0)),
-                    state: state.to_string(),
-                });
-                for read in &instance.reads {
-                    let from = match read {
-                        ReadRecord::File(path) => self.file_node(&mut graph, path),
-                        ReadRecord::Stage(id) => id.clone(),
-                    };
-                    graph.edge(&from, &id);
-                }
-                for artifact in &instance.writes {
-                    let artifact = artifact.clone();
-                    let entry = manifest.artifacts.get(&artifact);
-                    graph.node(Node {
-                        id: artifact.clone(),
-                        kind: NodeKind::Artifact,
-                        label: artifact.clone(),
-                        asset: Some(asset.clone()),
-                        revision: entry.map(|entry| entry.revision),
-                        ms: None,
-                        state: if entry.is_some() { "written" } else { "pending" }.to_string(),
-                    });
-                    graph.edge(&id, &artifact);
-                }
-            }
-        }
-        self.keep_manifest(manifest);
-        graph.finish()
-    }
-
-    /// Adds the node of a source file; returns its id.
-    fn file_node(&self, graph: &mut crate::graph::GraphBuilder, path: &str) -> String {
-        let id = path.to_string();
-        let path = Path::new(path);
-        let present = match self.files.get(path) {
-            Some(file) => file.contents(&self.db).is_ok(),
-            None => matches!(self.known.get(path), Some(Ok(_))) || self.record.files.contains_key(path),
-        };
-        graph.node(crate::graph::Node {
-            id: id.clone(),
-            kind: crate::graph::NodeKind::File,
-            label: id.clone(),
-            asset: None,
-            revision: self.history.get(&id).map(|(revision, _)| *revision),
-            ms: None,
-            state: if present { "present" } else { "missing" }.to_string(),
-        });
-        id
-    }
-}
-
-/// A stage instance as the record keeps it (owned names, reads as graph node ids).
-fn instance_record(instance: &StageInstance) -> InstanceRecord {
-    let reads = instance.reads.iter().map(|read| match read {
-        Read::File(path) => ReadRecord::File(display_path(path)),
-        Read::Stage(stage, label) => ReadRecord::Stage(stage_node_id(stage.name, label)),
-    });
-    InstanceRecord::new(
-        instance.stage.name.to_string(),
-        instance.label.clone(),
-        instance.instance.clone(),
-        reads.collect(),
-        instance.writes.iter().map(|path| display_path(path)).collect(),
-        instance.shared,
-    )
-}
-
-/// What identifies this executable in fingerprints: its version and its file's size and
-/// modification time, so that a rebuilt cirrus (whose stages may bake otherwise) trusts no
-/// fingerprint an older one recorded. Unknown: a value no record holds.
-fn executable_identity() -> blake3::Hash {
-    let file = std::env::current_exe().ok().and_then(|path| Some((FileStamp::read(&path)?, path)));
-    let text = match file {
-        Some((stamp, path)) => {
-            format!("{}|{}|{}|{}", env!("CARGO_PKG_VERSION"), path.display(), stamp.size, stamp.modified)
-        }
-        None => format!("unknown|{}", crate::record::now()),
-    };
-    blake3::hash(text.as_bytes())
-}
-
-/// The stage runs labelled by each asset's name or below it (`name/…`): what its kind's report
-/// may time. One pass over the runs, each label looked up at each of its `/`.
-fn runs_by_asset<'a>(runs: &[StageRun], names: impl Iterator<Item = &'a str>) -> HashMap<&'a str, Vec<StageRun>> {
-    let names: HashSet<&str> = names.collect();
-    let mut by_asset: HashMap<&str, Vec<StageRun>> = HashMap::new();
-    for run in runs {
-        let label = run.label.as_str();
-        let prefixes = label.match_indices('/').map(|(at, _)| &label[..at]).chain([label]);
-        if let Some(name) = prefixes.filter_map(|prefix| names.get(prefix)).next() {
-            by_asset.entry(name).or_default().push(run.clone());
-        }
-    }
-    by_asset
-}
-
-/// What a build's stage runs say of each stage instance (`(stage, label)`), gathered once per
-/// build so that each asset's summary looks up only its own instances.
-#[derive(Default)]
-struct RunIndex<'a> {
-    instances: HashMap<(&'a str, &'a str), InstanceRuns>,
-}
-
-#[derive(Clone, Copy, Default)]
-struct InstanceRuns {
-    /// Milliseconds of the bodies that ran (not from a cache).
-    ran_ms: Option<f64>,
-    local_hit: bool,
-    remote_hit: bool,
-}
-
-impl<'a> RunIndex<'a> {
-    fn new(runs: &'a [StageRun]) -> RunIndex<'a> {
-        let mut index = RunIndex::default();
-        for run in runs {
-            let entry = index.instances.entry((run.stage, run.label.as_str())).or_default();
-            match (run.from_cache, run.from_remote) {
-                (false, _) => *entry.ran_ms.get_or_insert(0.0) += run.ms,
-                (true, true) => entry.remote_hit = true,
-                (true, false) => entry.local_hit = true,
-            }
-        }
-        index
-    }
-
-    fn get(&self, instance: &StageInstance) -> InstanceRuns {
-        self.instances.get(&(instance.stage.name, instance.label.as_str())).copied().unwrap_or_default()
-    }
-}
-
-/// The summary of each stage instance: ran when this build ran it, failed when the asset
-/// failed before it had a result (its kind says, or its job failed), remote when its result
-/// came from the shared cache, cached otherwise. A stage that needed no result of its own
-/// (what it feeds was found in a cache) is remote when every cache hit of its asset in this
-/// build came from the shared cache, and cached otherwise.
-fn stage_summaries(
-    instances: &[StageInstance],
-    runs: &RunIndex,
-    asset_failed: bool,
-    failed_jobs: &HashSet<String>,
-) -> Vec<StageSummary> {
-    let facts: Vec<InstanceRuns> = instances.iter().map(|instance| runs.get(instance)).collect();
-    let any_hit = facts.iter().any(|facts| facts.local_hit || facts.remote_hit);
-    let every_hit_remote = any_hit && !facts.iter().any(|facts| facts.local_hit);
-    instances
-        .iter()
-        .zip(facts)
-        .map(|(instance, facts)| {
-            let (status, ms) = match facts.ran_ms {
-                Some(ms) => (StageStatus::Ran, ms),
-                None if asset_failed && (instance.failed || failed_jobs.contains(&instance.label)) => {
-                    (StageStatus::Failed, 0.0)
-                }
-                None if !facts.local_hit && (facts.remote_hit || every_hit_remote) => (StageStatus::Remote, 0.0),
-                None => (StageStatus::Cached, 0.0),
-            };
-            StageSummary { stage: instance.stage.name.to_string(), instance: instance.instance.clone(), status, ms }
-        })
-        .collect()
-}
-
-/// The artifacts the manifest lists for an asset, of the `paths` that may be its (sorted).
-fn asset_artifacts<'a>(
-    manifest: &Manifest,
-    asset: &str,
-    paths: impl Iterator<Item = &'a String>,
-) -> Vec<ArtifactSummary> {
-    let paths: BTreeSet<&String> = paths.collect();
-    let entries = paths.into_iter().filter_map(|path| Some((path, manifest.artifacts.get(path)?)));
-    let entries = entries.filter(|(_, entry)| entry.asset == asset);
-    entries.map(|(path, entry)| ArtifactSummary { path: path.clone(), hash: entry.hash.clone() }).collect()
 }
 
 /// The graph node id of a source file.

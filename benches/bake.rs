@@ -1098,7 +1098,11 @@ fn preview_one_level(
     project: &mut Project,
     options: &cirrus::kinds::billboard_cloud::PreviewOptions,
 ) -> cirrus::kinds::billboard_cloud::lod_preview::PreviewMetrics {
-    let mut levels = cirrus::kinds::billboard_cloud::preview(project, options).expect("preview");
+    let mut levels = {
+        let input = project.built_asset(&options.asset).expect("the asset builds");
+        cirrus::kinds::billboard_cloud::preview(project.database(), input, project.config(), options)
+    }
+    .expect("preview");
     assert_eq!(levels.len(), 1, "one level");
     levels.remove(0).1
 }
@@ -1216,7 +1220,11 @@ fn bench_billboard_chain(corpus: &Path) {
             report["stage_ms"]
         );
         let (_dir, mut project, options) = tree_preview(corpus, tree, CHAIN);
-        let levels = cirrus::kinds::billboard_cloud::preview(&mut project, &options).expect("preview");
+        let levels = {
+            let input = project.built_asset(&options.asset).expect("the asset builds");
+            cirrus::kinds::billboard_cloud::preview(project.database(), input, project.config(), &options)
+        }
+        .expect("preview");
         for ((level, metrics), entry) in levels.iter().zip(report["levels"].as_array().expect("levels")) {
             // Level N is meant for half the screen size of level N − 1: also seen at that size.
             let size = options.settings.size >> level;

@@ -261,8 +261,7 @@ fn write_screenshot(gpu: &Gpu, scene: &Scene, size: u32, path: &Path, what: &str
         texel[3] = 255;
     }
     let png = cirrus::texture::preview::preview_png(&cirrus::texture::Texture::new(size, size, pixels));
-    cirrus::artifacts::write_if_changed(path, &png)
-        .map_err(|error| format!("cannot write {}: {error}", path.display()))?;
+    cirrus::files::write_if_changed(path, &png).map_err(|error| format!("cannot write {}: {error}", path.display()))?;
     let quads = scene.mesh.batches.iter().map(|(_, vertices)| vertices.len() / 6).sum::<usize>();
     let coverage = 100.0 * covered as f64 / (size as f64 * size as f64);
     let level = if scene.levels > 0 { format!("lod{} of {}, ", scene.level, scene.levels) } else { String::new() };

@@ -3,43 +3,13 @@
 //! revision that produced it.
 
 use std::collections::BTreeMap;
-use std::io::Write;
 use std::path::{Path, PathBuf};
 
 use serde::{Deserialize, Serialize};
 
 use crate::config::PipelineConfig;
 use crate::diagnostic::display_path;
-
-/// The name prefix of temporary files (artifacts and cache entries before their rename); files
-/// with it that a killed build left behind are swept by `sweep_temporary_files`.
-pub const TEMPORARY_PREFIX: &str = ".cirrus-tmp-";
-
-/// Writes `bytes` to `path` atomically unless the file already holds exactly these bytes.
-/// Returns whether the file changed.
-pub fn write_if_changed(path: &Path, bytes: &[u8]) -> std::io::Result<bool> {
-    // Read back at most the new length (a longer file differs anyway); a FIFO or device put in
-    // place of an artifact is not read (it would block) but replaced.
-    if let Ok(existing) = crate::sources::read_regular_file(path, bytes.len() as u64) {
-        if existing == bytes {
-            return Ok(false);
-        }
-    }
-    let folder = path.parent().unwrap_or(Path::new("."));
-    std::fs::create_dir_all(folder)?;
-    let mut temporary = tempfile::Builder::new().prefix(TEMPORARY_PREFIX).tempfile_in(folder)?;
-    #[cfg(unix)]
-    {
-        // Artifacts are read by engines and tools running as other users: rw-r--r--, not the
-        // temporary file's private default.
-        use std::os::unix::fs::PermissionsExt;
-        temporary.as_file().set_permissions(std::fs::Permissions::from_mode(0o644))?;
-    }
-    temporary.write_all(bytes)?;
-    temporary.as_file().sync_data()?;
-    temporary.persist(path).map_err(|error| error.error)?;
-    Ok(true)
-}
+use crate::files::{write_if_changed, TEMPORARY_PREFIX};
 
 /// Deletes the temporary files that killed builds left under `output_dir`: regular files named
 /// with `TEMPORARY_PREFIX`, untouched for a minute (another process may be writing a fresh one);
@@ -72,7 +42,7 @@ pub fn sweep_temporary_files(output_dir: &Path) -> usize {
 /// every run: such a report is not rewritten, so a batch that changed nothing else lists no
 /// artifact.
 pub fn same_report_on_disk(path: &Path, report: &[u8]) -> Option<Vec<u8>> {
-    let existing = crate::sources::read_regular_file(path, 64 << 20).ok()?;
+    let existing = crate::files::read_regular_file(path, 64 << 20).ok()?;
     let without_timings = |bytes: &[u8]| -> Option<serde_json::Value> {
         let mut value: serde_json::Value = serde_json::from_slice(bytes).ok()?;
         let object = value.as_object_mut()?;
@@ -113,7 +83,7 @@ pub fn manifest_path(output_dir: &Path) -> PathBuf {
 
 /// The manifest of the last build, or an empty one.
 pub fn load_manifest(output_dir: &Path) -> Manifest {
-    crate::sources::read_regular_file(&manifest_path(output_dir), MAX_MANIFEST_BYTES)
+    crate::files::read_regular_file(&manifest_path(output_dir), MAX_MANIFEST_BYTES)
         .ok()
         .and_then(|bytes| serde_json::from_slice(&bytes).ok())
         .unwrap_or_default()
@@ -185,7 +155,7 @@ pub fn remove_artifacts(config: &PipelineConfig, manifest: &mut Manifest, doomed
 /// The file of a stale artifact that may be deleted (`None` when it is gone already), or why it
 /// must not be: outside the output folder, not a regular file, or not the bytes cirrus wrote.
 fn stale_artifact_file(config: &PipelineConfig, path: &str, hash: &str) -> Result<Option<PathBuf>, String> {
-    let normalized = crate::config::normalize_relative_path(Path::new(path));
+    let normalized = crate::files::normalize_relative_path(Path::new(path));
     let inside_output = normalized.as_ref().is_some_and(|normalized| {
         display_path(normalized) == path && normalized.starts_with(&config.output) && normalized != &config.output
     });
@@ -207,7 +177,7 @@ fn stale_artifact_file(config: &PipelineConfig, path: &str, hash: &str) -> Resul
     if !folder.is_some_and(|folder| folder.starts_with(&output)) {
         return Err("its folder resolves outside the output folder".to_string());
     }
-    let bytes = crate::sources::read_regular_file(&file, crate::sources::MAX_SOURCE_BYTES)?;
+    let bytes = crate::files::read_regular_file(&file, crate::files::MAX_SOURCE_BYTES)?;
     if blake3::hash(&bytes).to_hex().as_str() != hash {
         return Err("its bytes are not the ones cirrus wrote there (edited or replaced since)".to_string());
     }

@@ -2,17 +2,18 @@
 //! resolved per-asset settings (`PipelineConfig`). Every error names the file, line and column.
 
 use std::net::SocketAddr;
-use std::path::{Component, Path, PathBuf};
+use std::path::{Path, PathBuf};
 
 use serde::{Deserialize, Serialize};
 
 use crate::diagnostic::{Diagnostic, TextPosition};
+use crate::files::normalize_relative_path;
 
 mod settings;
 pub use settings::*;
 
 #[derive(Clone, Copy, Debug, PartialEq, Eq, Hash, Serialize, Deserialize)]
-pub enum AssetKindName {
+pub enum AssetKind {
     Material,
     BillboardCloud,
     Atlas,
@@ -37,13 +38,13 @@ pub enum AssetSource {
 }
 
 impl AssetSource {
-    pub fn kind(&self) -> AssetKindName {
+    pub fn kind(&self) -> AssetKind {
         match self {
-            AssetSource::Material { .. } => AssetKindName::Material,
-            AssetSource::BillboardCloud { .. } => AssetKindName::BillboardCloud,
-            AssetSource::Atlas { .. } => AssetKindName::Atlas,
-            AssetSource::AmbientOcclusion { .. } => AssetKindName::AmbientOcclusion,
-            AssetSource::Height { .. } => AssetKindName::Height,
+            AssetSource::Material { .. } => AssetKind::Material,
+            AssetSource::BillboardCloud { .. } => AssetKind::BillboardCloud,
+            AssetSource::Atlas { .. } => AssetKind::Atlas,
+            AssetSource::AmbientOcclusion { .. } => AssetKind::AmbientOcclusion,
+            AssetSource::Height { .. } => AssetKind::Height,
         }
     }
 
@@ -79,7 +80,7 @@ pub struct AssetConfig {
 pub struct Rule {
     pub glob: String,
     pub matcher: globset::GlobMatcher,
-    pub kind: AssetKindName,
+    pub kind: AssetKind,
 }
 
 /// The validated pipeline.
@@ -138,11 +139,11 @@ impl PipelineConfig {
         let rule = self.rules.iter().find(|rule| rule.matcher.is_match(relative))?;
         let name = crate::diagnostic::display_path(&relative.with_extension(""));
         let source = match rule.kind {
-            AssetKindName::Material => AssetSource::Material { material: relative.to_path_buf() },
-            AssetKindName::BillboardCloud => AssetSource::BillboardCloud { mesh: relative.to_path_buf() },
-            AssetKindName::AmbientOcclusion => AssetSource::AmbientOcclusion { mesh: relative.to_path_buf() },
+            AssetKind::Material => AssetSource::Material { material: relative.to_path_buf() },
+            AssetKind::BillboardCloud => AssetSource::BillboardCloud { mesh: relative.to_path_buf() },
+            AssetKind::AmbientOcclusion => AssetSource::AmbientOcclusion { mesh: relative.to_path_buf() },
             // Refused when the pipeline is read: a rule makes one asset per file.
-            AssetKindName::Atlas | AssetKindName::Height => return None,
+            AssetKind::Atlas | AssetKind::Height => return None,
         };
         Some(AssetConfig { name, source, settings: self.defaults.clone() })
     }
@@ -179,9 +180,9 @@ const MAX_PIPELINE_BYTES: u64 = 16 << 20;
 /// with symbolic links resolved, neither holds nor lies inside the source folder.
 pub fn load_pipeline(file: &Path) -> Result<PipelineConfig, ConfigError> {
     let fail = |message: String| ConfigError { diagnostics: vec![Diagnostic::new(file, message)] };
-    let bytes = crate::sources::read_regular_file(file, MAX_PIPELINE_BYTES).map_err(|why| {
+    let bytes = crate::files::read_regular_file(file, MAX_PIPELINE_BYTES).map_err(|why| {
         // "is not a regular file", "is larger than …" read as a sentence; the rest are reasons.
-        fail(if why.starts_with("is ") {
+        fail(if why.is_predicate() {
             format!("the pipeline file {why}")
         } else {
             format!("cannot read the pipeline file: {why}")
@@ -409,23 +410,23 @@ impl Validator<'_> {
                 raw::Asset::Material { name, material, billboard, atlas, encode, report, .. } => {
                     (overrides.billboard, overrides.atlas) = (billboard.clone(), atlas.clone());
                     overrides.report = report.clone();
-                    (name, Some(material), encode, AssetKindName::Material)
+                    (name, Some(material), encode, AssetKind::Material)
                 }
                 raw::Asset::BillboardCloud { name, mesh, billboard, atlas, encode } => {
                     (overrides.billboard, overrides.atlas) = (billboard.clone(), atlas.clone());
-                    (name, Some(mesh), encode, AssetKindName::BillboardCloud)
+                    (name, Some(mesh), encode, AssetKind::BillboardCloud)
                 }
                 raw::Asset::Atlas { name, pack, encode, .. } => {
                     overrides.pack = pack.clone();
-                    (name, None, encode, AssetKindName::Atlas)
+                    (name, None, encode, AssetKind::Atlas)
                 }
                 raw::Asset::AmbientOcclusion { name, mesh, ao, encode } => {
                     overrides.ao = ao.clone();
-                    (name, Some(mesh), encode, AssetKindName::AmbientOcclusion)
+                    (name, Some(mesh), encode, AssetKind::AmbientOcclusion)
                 }
                 raw::Asset::Height { name, low, height, encode, .. } => {
                     overrides.height = height.clone();
-                    (name, Some(low), encode, AssetKindName::Height)
+                    (name, Some(low), encode, AssetKind::Height)
                 }
             };
             overrides.encode = encode.clone();
@@ -486,9 +487,9 @@ impl Validator<'_> {
             // Each atlas surface (each material's AO map) goes through the texture tail: the
             // same budget holds.
             let surface_side = match kind {
-                AssetKindName::BillboardCloud => Some(("atlas", settings.atlas.max_size, "max_size")),
-                AssetKindName::AmbientOcclusion => Some(("AO map", settings.ao.size, "size")),
-                AssetKindName::Height => Some(("height map", settings.height.size, "size")),
+                AssetKind::BillboardCloud => Some(("atlas", settings.atlas.max_size, "max_size")),
+                AssetKind::AmbientOcclusion => Some(("AO map", settings.ao.size, "size")),
+                AssetKind::Height => Some(("height map", settings.height.size, "size")),
                 _ => None,
             };
             if let Some((what, side, setting)) = surface_side {
@@ -537,12 +538,12 @@ impl Validator<'_> {
         let mut rules = Vec::new();
         for rule in &raw.rules {
             match rule.kind {
-                AssetKindName::Atlas => self.error_at_value(
+                AssetKind::Atlas => self.error_at_value(
                     &rule.glob,
                     0,
                     "a rule makes one asset per file: an Atlas is listed under `assets` with its globs",
                 ),
-                AssetKindName::Height => self.error_at_value(
+                AssetKind::Height => self.error_at_value(
                     &rule.glob,
                     0,
                     "a rule makes one asset per file: a Height reads a high and a low mesh, listed under `assets`",
@@ -577,12 +578,12 @@ impl Validator<'_> {
     /// AmbientOcclusion assets, whose names are known only once files are listed) any name
     /// that is not a listed asset of another kind; the build reports a name no asset has.
     fn check_ao_sources(&mut self, assets: &[AssetConfig], rules: &[raw::Rule]) {
-        let rules_make_ao = rules.iter().any(|rule| rule.kind == AssetKindName::AmbientOcclusion);
+        let rules_make_ao = rules.iter().any(|rule| rule.kind == AssetKind::AmbientOcclusion);
         for asset in assets {
             let Some(source) = &asset.settings.ao_source else { continue };
             let name = &asset.name;
             let message = match assets.iter().find(|other| &other.name == source).map(|other| other.source.kind()) {
-                Some(AssetKindName::AmbientOcclusion) => continue,
+                Some(AssetKind::AmbientOcclusion) => continue,
                 Some(kind) => format!(
                     "asset `{name}`: ao_source `{source}` is a {kind:?} asset; it must name an AmbientOcclusion asset"
                 ),
@@ -942,21 +943,4 @@ fn find_key(text: &str, key: &str) -> Option<usize> {
         start = index + key.len();
     }
     None
-}
-
-/// Resolves `.` and `..` lexically; `None` when the path is absolute or climbs out of its base.
-pub fn normalize_relative_path(path: &Path) -> Option<PathBuf> {
-    let text = path.to_string_lossy().replace('\\', "/");
-    let mut parts: Vec<String> = Vec::new();
-    for component in Path::new(&text).components() {
-        match component {
-            Component::CurDir => {}
-            Component::ParentDir => {
-                parts.pop()?;
-            }
-            Component::Normal(part) => parts.push(part.to_string_lossy().into_owned()),
-            Component::RootDir | Component::Prefix(_) => return None,
-        }
-    }
-    Some(parts.iter().collect())
 }

@@ -11,9 +11,9 @@ use std::sync::{Arc, Mutex};
 use std::time::Instant;
 
 use crate::cache::{CacheEntry, CacheKey, CacheKeyBuilder, DiskCache};
+use crate::config::AssetKind;
 use crate::config::Settings;
 use crate::diagnostic::{display_path, Diagnostic};
-use crate::kinds::AssetKind;
 use crate::texture::{decode_texture, Texture};
 
 /// The bytes of a source file and their blake3 hash. Equality is by hash.
@@ -45,7 +45,7 @@ impl fmt::Debug for FileContents {
 }
 
 /// A file's contents, or why it could not be read.
-pub type FileRead = Result<FileContents, String>;
+pub type FileRead = Result<FileContents, crate::files::ReadError>;
 
 /// Pipeline-wide limits, one per database (set by the driver from `pipeline.ron`).
 #[salsa::input(singleton, debug)]
@@ -436,16 +436,12 @@ pub fn cached_json<T: serde::Serialize + serde::de::DeserializeOwned>(
     key: CacheKey,
     compute: impl FnOnce() -> Result<T, Diagnostic>,
 ) -> Result<T, Diagnostic> {
-    if let Some(value) = load_cached(db, stage.name, key, |entry| serde_json::from_value::<T>(entry.metadata).ok()) {
+    if let Some(value) = load_cached(db, stage.name, key, |entry| entry.parts::<T, 0>().map(|(value, [])| value)) {
         record_cache_hit(db, stage, label);
         return Ok(value);
     }
     let value = compute()?;
-    store_cached(db, stage.name, key, || CacheEntry {
-        metadata: serde_json::to_value(&value).expect("stage results serialise"),
-        blobs: Vec::new(),
-        compress: true,
-    });
+    store_cached(db, stage.name, key, || CacheEntry::new(&value, Vec::new(), true));
     Ok(value)
 }
 
@@ -465,7 +461,7 @@ pub fn key_with_files(
         let key = key.part(&source_relative(db, file.path(db)));
         match file.contents(db) {
             Ok(contents) => key.part(&contents.hash),
-            Err(error) => key.part(error),
+            Err(error) => key.part(&error.to_string()),
         }
     })
 }

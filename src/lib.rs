@@ -1,28 +1,34 @@
 //! cirrus: an incremental asset-pipeline daemon that bakes meshes into billboard-cloud LODs and
-//! texture sets into block-compressed GPU materials. The modules are listed in reading order:
-//! what a newcomer reads first comes first, each group builds on the ones above it.
+//! texture sets into block-compressed GPU materials. The modules are listed bottom-up, as they
+//! stack: each group imports only the groups above it (the tidy test checks it), and the one
+//! loop left is inside `kinds/` (a kind's `mod.rs` and its queries).
 
-// The inputs: the pipeline file, and how every problem with an input is reported.
-pub mod config;
+// Leaves: how every problem with an input is reported, safe file reading and writing and path
+// normalisation, the CPU kernels' level, the OpenDDL parser.
 pub mod diagnostic;
-
-// Shared libraries: pure functions over plain data (no salsa, no IO), named by role.
+pub mod files;
 pub mod isa;
 pub mod openddl;
+
+// Shared libraries: pure functions over plain data (no salsa, no IO), named by role.
 pub mod texture;
 pub mod mesh;
 pub mod packing;
 pub mod gpu;
 
-// The machinery, which names no kind: the database, the persistent cache, reading sources,
-// writing artifacts, running jobs on workers, what a build reports, the dependency graph.
-pub mod db;
+// The inputs: the pipeline file, validated into per-asset settings.
+pub mod config;
+
+// The machinery, which names no kind: the persistent cache, the database, reading sources,
+// writing artifacts, the build record, running jobs on workers, what a build reports, the
+// dependency graph.
 pub mod cache;
+pub mod db;
 pub mod sources;
 pub mod artifacts;
+pub mod summary;
 pub mod record;
 pub mod schedule;
-pub mod summary;
 pub mod graph;
 
 // The asset kinds: the one list of kinds and the questions the driver asks them, then one
@@ -36,4 +42,3 @@ pub mod project;
 pub mod watch;
 pub mod server;
 pub mod cli;
-pub mod cli_cache;

@@ -239,15 +239,14 @@ fn revision_path(output_dir: &Path) -> PathBuf {
 }
 
 pub fn save_revision(output_dir: &Path, revision: u64) {
-    if let Err(error) = crate::artifacts::write_if_changed(&revision_path(output_dir), revision.to_string().as_bytes())
-    {
+    if let Err(error) = crate::files::write_if_changed(&revision_path(output_dir), revision.to_string().as_bytes()) {
         tracing::warn!("cannot write {}: {error}", revision_path(output_dir).display());
     }
 }
 
 /// The revision of [`save_revision`] (0 when none or unreadable).
 pub fn saved_revision(output_dir: &Path) -> u64 {
-    let bytes = crate::sources::read_regular_file(&revision_path(output_dir), 64).unwrap_or_default();
+    let bytes = crate::files::read_regular_file(&revision_path(output_dir), 64).unwrap_or_default();
     String::from_utf8_lossy(&bytes).trim().parse().unwrap_or(0)
 }
 
@@ -282,7 +281,7 @@ impl BuildRecord {
     /// every source hashed once, every asset checked through its stages).
     pub fn load(output_dir: &Path) -> BuildRecord {
         let path = record_path(output_dir);
-        let bytes = match crate::sources::read_regular_file(&path, MAX_RECORD_BYTES) {
+        let bytes = match crate::files::read_regular_file(&path, MAX_RECORD_BYTES) {
             Ok(bytes) => bytes,
             Err(_) => return BuildRecord::default(),
         };
@@ -303,7 +302,7 @@ impl BuildRecord {
     pub fn save(&mut self, output_dir: &Path) -> std::io::Result<()> {
         self.version = RECORD_VERSION;
         let bytes = serde_json::to_vec(self).expect("the record serialises");
-        crate::artifacts::write_if_changed(&record_path(output_dir), &bytes).map(|_| ())
+        crate::files::write_if_changed(&record_path(output_dir), &bytes).map(|_| ())
     }
 
     /// Drops what a record edited by hand (or by an attacker) could use to make a build look at

@@ -10,9 +10,32 @@ use std::path::PathBuf;
 use std::sync::atomic::{AtomicUsize, Ordering};
 use std::sync::{Arc, Mutex};
 
-use crate::db::Database;
+use crate::db::{Asset, Database, Db};
 use crate::diagnostic::Diagnostic;
-use crate::kinds::Job;
+
+/// Work for a worker thread: one task of an asset (what a task is, the kinds say).
+#[derive(Clone, Debug, PartialEq)]
+pub struct Job<T> {
+    pub asset: Asset,
+    pub task: T,
+    /// Waves to wait after the wave that scheduled it (jobs of one wave run in parallel).
+    pub after: u32,
+    /// For progress and for naming the job in an internal error.
+    pub label: String,
+}
+
+/// What the scheduler asks of a job's task.
+pub trait JobTask: Clone + Send + Sync {
+    /// The sort of work it is, for estimating how long the waiting ones take (jobs of one sort
+    /// take about as long as each other).
+    fn sort(&self) -> &'static str;
+}
+
+/// Each finished job with its result (its follow-ups are scheduled, not returned).
+pub type FinishedJobs<T> = Vec<(Job<T>, Result<(), Diagnostic>)>;
+
+/// Runs one job, returning the jobs it schedules.
+pub type RunJob<'a, T> = &'a (dyn Fn(&dyn Db, &Job<T>) -> Result<Vec<Job<T>>, Diagnostic> + Sync);
 
 /// A flag that cancels a running build when raised.
 #[derive(Clone, Debug, Default)]
@@ -90,13 +113,14 @@ pub fn remaining_seconds(
 
 /// Runs every job and the jobs they schedule, wave by wave; each finished job with its result.
 /// `None` when the build was cancelled.
-pub fn run_jobs(
+pub fn run_jobs<T: JobTask>(
     db: &Database,
-    first: Vec<Job>,
+    first: Vec<Job<T>>,
+    run: RunJob<'_, T>,
     progress: &(dyn Fn(Progress) + Sync),
     cancel: &CancelFlag,
-) -> Option<Vec<(Job, Result<(), Diagnostic>)>> {
-    let mut waves: BTreeMap<u32, Vec<Job>> = BTreeMap::from([(0, first)]);
+) -> Option<FinishedJobs<T>> {
+    let mut waves: BTreeMap<u32, Vec<Job<T>>> = BTreeMap::from([(0, first)]);
     let mut finished = Vec::new();
     let mut total = waves[&0].len();
     // Seconds and count of the finished jobs per sort, and the jobs known but not finished.
@@ -133,8 +157,8 @@ pub fn run_jobs(
         let results = run_parallel(
             db,
             &jobs,
-            &|db, job: &Job| (job.asset.main_file(db).clone(), job.label.clone()),
-            &|db, job: &Job| crate::cache::with_asset(job.asset.name(db), || job.asset.kind(db).run_job(db, job)),
+            &|db, job: &Job<T>| (job.asset.main_file(db).clone(), job.label.clone()),
+            &|db, job: &Job<T>| crate::cache::with_asset(job.asset.name(db), || run(db, job)),
             &report,
             cancel,
         );

@@ -5,9 +5,7 @@ use std::path::{Path, PathBuf};
 
 use crate::config::PipelineConfig;
 use crate::db::{FileContents, FileRead};
-
-/// Largest source file read (textures, meshes, materials).
-pub const MAX_SOURCE_BYTES: u64 = 512 << 20;
+use crate::files::{read_regular_file_with_metadata, ReadError, MAX_SOURCE_BYTES};
 
 /// Reads `relative` (to the project folder `root`), a file inside the source folder `source`
 /// (project-relative too), or says why it cannot be read.
@@ -26,18 +24,15 @@ pub fn read_source_stamped(
     root: &Path,
     source: &Path,
     relative: &Path,
-) -> Result<(FileContents, crate::record::FileStamp), String> {
+) -> Result<(FileContents, crate::record::FileStamp), ReadError> {
     if !root.join(source).is_dir() {
-        return Err(format!("the source folder {} does not exist", crate::diagnostic::display_path(source)));
+        return Err(ReadError::NoSourceFolder(source.to_path_buf()));
     }
     read_regular_file_with_metadata(&root.join(relative), MAX_SOURCE_BYTES)
         .map(|(bytes, metadata)| (FileContents::new(bytes), crate::record::FileStamp::of(&metadata)))
-        .map_err(|why| {
-            if why == FILE_NOT_FOUND {
-                format!("{FILE_NOT_FOUND}{}", similar_file_hint(root, source, relative))
-            } else {
-                why
-            }
+        .map_err(|why| match why {
+            ReadError::NotFound { .. } => ReadError::NotFound { hint: similar_file_hint(root, source, relative) },
+            why => why,
         })
 }
 
@@ -56,64 +51,6 @@ fn similar_file_hint(root: &Path, source: &Path, relative: &Path) -> String {
     let suggestion = parent.join(closest);
     let suggestion = suggestion.strip_prefix(source).unwrap_or(&suggestion);
     format!(" (did you mean `{}`?)", crate::diagnostic::display_path(suggestion))
-}
-
-/// Reads the file at `path` when it is a regular file (symbolic links followed) of at most
-/// `limit` bytes. FIFOs, devices, sockets and folders are refused without blocking: the file is
-/// opened non-blocking and checked on the open handle, and at most `limit + 1` bytes are read,
-/// whatever the metadata says (`/proc` files and growing files report other sizes).
-pub fn read_regular_file(path: &Path, limit: u64) -> Result<Vec<u8>, String> {
-    read_regular_file_with_metadata(path, limit).map(|(bytes, _)| bytes)
-}
-
-/// [`read_regular_file`], with the metadata of the open file, taken before its bytes are read.
-pub fn read_regular_file_with_metadata(path: &Path, limit: u64) -> Result<(Vec<u8>, std::fs::Metadata), String> {
-    use std::io::Read;
-    let mut options = std::fs::OpenOptions::new();
-    options.read(true);
-    #[cfg(unix)]
-    {
-        use std::os::unix::fs::OpenOptionsExt;
-        // Opening a FIFO for reading blocks until a writer appears; non-blocking, it does not.
-        options.custom_flags(libc::O_NONBLOCK);
-    }
-    let file = options.open(path).map_err(describe_io_error)?;
-    let metadata = file.metadata().map_err(describe_io_error)?;
-    if metadata.is_dir() {
-        return Err("is a folder, not a file".to_string());
-    }
-    if !metadata.is_file() {
-        return Err("is not a regular file (a FIFO, socket or device)".to_string());
-    }
-    if metadata.len() > limit {
-        return Err(format!("is larger than {}", describe_bytes(limit)));
-    }
-    let mut bytes = Vec::with_capacity(metadata.len() as usize);
-    (&file).take(limit + 1).read_to_end(&mut bytes).map_err(describe_io_error)?;
-    if bytes.len() as u64 > limit {
-        return Err(format!("is larger than {}", describe_bytes(limit)));
-    }
-    Ok((bytes, metadata))
-}
-
-fn describe_bytes(bytes: u64) -> String {
-    if bytes >= 1 << 20 {
-        format!("{} MiB", bytes >> 20)
-    } else {
-        format!("{bytes} bytes")
-    }
-}
-
-/// What `read_source` says of a file that does not exist.
-pub const FILE_NOT_FOUND: &str = "file not found";
-
-fn describe_io_error(error: std::io::Error) -> String {
-    match error.kind() {
-        std::io::ErrorKind::NotFound => FILE_NOT_FOUND.to_string(),
-        std::io::ErrorKind::PermissionDenied => "permission denied".to_string(),
-        std::io::ErrorKind::IsADirectory => "is a folder, not a file".to_string(),
-        _ => format!("cannot read: {error}"),
-    }
 }
 
 /// Files below the source folder that match a rule, relative to the source folder, sorted.
@@ -136,7 +73,7 @@ pub fn glob_matches(config: &PipelineConfig, globs: &[String]) -> Vec<PathBuf> {
     let found = source_files_where(config, |relative| matchers.iter().any(|matcher| matcher.is_match(relative)));
     let mut files: Vec<PathBuf> = found.into_iter().map(|relative| config.source.join(relative)).collect();
     for plain in globs.iter().filter(|glob| !glob.contains(['*', '?', '[', ']', '{', '}'])) {
-        let Some(path) = crate::config::normalize_relative_path(&config.source.join(plain)) else { continue };
+        let Some(path) = crate::files::normalize_relative_path(&config.source.join(plain)) else { continue };
         if path.starts_with(&config.source) && !files.contains(&path) {
             files.push(path);
         }

@@ -301,9 +301,9 @@ macro_rules! key_part_by_name {
     };
 }
 
-key_part_by_name!(crate::config::BlockFormat { Bc1, Bc3, Bc4, Bc5, Bc7 });
-key_part_by_name!(crate::config::Container { Ktx2, Dds, Pvr });
-key_part_by_name!(crate::config::EncodeQuality { UltraFast, VeryFast, Fast, Basic, Slow });
+key_part_by_name!(crate::texture::format::BlockFormat { Bc1, Bc3, Bc4, Bc5, Bc7 });
+key_part_by_name!(crate::texture::format::Container { Ktx2, Dds, Pvr });
+key_part_by_name!(crate::texture::format::EncodeQuality { UltraFast, VeryFast, Fast, Basic, Slow });
 
 impl KeyPart for crate::texture::SurfaceKind {
     fn add_to(&self, key: CacheKeyBuilder) -> CacheKeyBuilder {
@@ -370,11 +370,45 @@ const BACKGROUND_STORE_BYTES: usize = 1 << 20;
 /// One cache entry: small metadata plus large binary parts.
 #[derive(Clone, Debug, PartialEq)]
 pub struct CacheEntry {
+    /// A stage's own serde struct as JSON: stages make and read it through [`CacheEntry::new`]
+    /// and [`CacheEntry::parts`]; it is public for tools and tests that forge damaged entries.
     pub metadata: serde_json::Value,
     pub blobs: Vec<Vec<u8>>,
     /// Compress the body (images with uniform areas); false for blobs that are compressed
     /// already (KTX2 with zstd, PNG), where it would cost time and save nothing.
     pub compress: bool,
+}
+
+/// The one codec of cache entries: a stage's metadata is its own serde struct (read back by
+/// type, not by field name), its large data are blobs.
+impl CacheEntry {
+    /// An entry of `metadata` (serialised as JSON) beside `blobs`; `compress` for bodies that
+    /// compress (images with uniform areas), not for blobs compressed already.
+    pub fn new(metadata: &impl serde::Serialize, blobs: Vec<Vec<u8>>, compress: bool) -> CacheEntry {
+        CacheEntry { metadata: serde_json::to_value(metadata).expect("cache metadata serialises"), blobs, compress }
+    }
+
+    /// An entry of blobs alone.
+    pub fn of_blobs(blobs: Vec<Vec<u8>>, compress: bool) -> CacheEntry {
+        CacheEntry { metadata: serde_json::Value::Null, blobs, compress }
+    }
+
+    /// The metadata as `T` and exactly `N` blobs; none when the entry has another shape (a hand-
+    /// made or older entry is a miss, never a panic).
+    pub fn parts<T: serde::de::DeserializeOwned, const N: usize>(self) -> Option<(T, [Vec<u8>; N])> {
+        let metadata = T::deserialize(&self.metadata).ok()?;
+        Some((metadata, self.blobs.try_into().ok()?))
+    }
+
+    /// Exactly `N` blobs (of an entry made by [`CacheEntry::of_blobs`]).
+    pub fn into_blobs<const N: usize>(self) -> Option<[Vec<u8>; N]> {
+        self.blobs.try_into().ok()
+    }
+
+    /// The metadata as `T` and every blob (for entries whose blob count the metadata tells).
+    pub fn metadata_and_blobs<T: serde::de::DeserializeOwned>(self) -> Option<(T, Vec<Vec<u8>>)> {
+        Some((T::deserialize(&self.metadata).ok()?, self.blobs))
+    }
 }
 
 impl DiskCache {
@@ -431,7 +465,7 @@ impl DiskCache {
     /// kept here); `None` when neither has a good one.
     pub fn load(&self, stage: &str, key: CacheKey) -> Option<CacheEntry> {
         let path = self.entry_path(stage, key);
-        let local = crate::sources::read_regular_file(&path, MAX_ENTRY_BYTES)
+        let local = crate::files::read_regular_file(&path, MAX_ENTRY_BYTES)
             .ok()
             .and_then(|bytes| decode_entry(&bytes, stage, key));
         if local.is_some() {
@@ -500,7 +534,7 @@ impl DiskCache {
         }
         if let Some(remote) = self.remote.as_ref().filter(|remote| remote.uploads(stage)) {
             // The file as written (the page cache has it): the object is the entry, byte for byte.
-            match crate::sources::read_regular_file(&path, MAX_ENTRY_BYTES) {
+            match crate::files::read_regular_file(&path, MAX_ENTRY_BYTES) {
                 Ok(bytes) => remote.upload(stage, key, bytes),
                 Err(error) => tracing::warn!("cannot read back cache entry {}: {error}", path.display()),
             }
@@ -524,7 +558,7 @@ impl DiskCache {
 fn write_atomically(path: &Path, write: impl FnOnce(&mut std::fs::File) -> std::io::Result<()>) -> std::io::Result<()> {
     let folder = path.parent().expect("entry paths have a folder");
     std::fs::create_dir_all(folder)?;
-    let mut temporary = tempfile::Builder::new().prefix(crate::artifacts::TEMPORARY_PREFIX).tempfile_in(folder)?;
+    let mut temporary = tempfile::Builder::new().prefix(crate::files::TEMPORARY_PREFIX).tempfile_in(folder)?;
     write(temporary.as_file_mut())?;
     temporary.persist(path).map_err(|error| error.error)?;
     Ok(())

@@ -430,9 +430,9 @@ const DEFAULT_MAX_OBJECT_BYTES: u64 = 4 << 30;
 
 /// The largest entry a project with `texture_working_set` bytes per texture can make: an image
 /// entry holds at most about 8 bytes per texel of the largest texture (whose bake may take 64),
-/// and a mesh entry about twice its source file (at most `sources::MAX_SOURCE_BYTES`).
+/// and a mesh entry about twice its source file (at most `files::MAX_SOURCE_BYTES`).
 pub fn largest_entry_bytes(texture_working_set: u64) -> u64 {
-    (texture_working_set / 8).max(2 * crate::sources::MAX_SOURCE_BYTES)
+    (texture_working_set / 8).max(2 * crate::files::MAX_SOURCE_BYTES)
 }
 
 /// Whether entries of `stage` are shared at all (memos are not).

@@ -183,7 +183,7 @@ pub fn record_key_parts(folder: &Path, stage: &str, key: super::CacheKey, parts:
 /// The recorded key parts of a stage's stored entries (unreadable lines skipped).
 pub fn recorded_key_parts(folder: &Path, stage: &str) -> Vec<(String, Vec<String>)> {
     let path = folder.join(KEY_PARTS_FOLDER).join(format!("{stage}.jsonl"));
-    let Ok(bytes) = crate::sources::read_regular_file(&path, 256 << 20) else { return Vec::new() };
+    let Ok(bytes) = crate::files::read_regular_file(&path, 256 << 20) else { return Vec::new() };
     String::from_utf8_lossy(&bytes).lines().filter_map(|line| serde_json::from_str(line).ok()).collect()
 }
 
@@ -204,6 +204,6 @@ pub fn write_last_build(folder: &Path, last: &LastBuild) {
 
 /// The last build's counts, if a build recorded them.
 pub fn read_last_build(folder: &Path) -> Option<LastBuild> {
-    let bytes = crate::sources::read_regular_file(&folder.join(LAST_BUILD_FILE), 16 << 20).ok()?;
+    let bytes = crate::files::read_regular_file(&folder.join(LAST_BUILD_FILE), 16 << 20).ok()?;
     serde_json::from_slice(&bytes).ok()
 }

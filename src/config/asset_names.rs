@@ -4,7 +4,7 @@
 use std::collections::{HashMap, HashSet};
 use std::path::Path;
 
-use super::normalize_relative_path;
+use crate::files::normalize_relative_path;
 
 pub(super) fn valid_asset_name(name: &str) -> bool {
     // Compared as text: `a//b` and `a/./b` are the same folder as `a/b` and would pass a path
@@ -21,7 +21,7 @@ pub const RESERVED_ASSET_NAMES: [&str; 2] = ["manifest.json", ".cirrus"];
 /// the cache, or its name starts with the temporary-file prefix.
 pub fn reserved_asset_name(name: &str) -> Option<String> {
     let first = name.split('/').next().unwrap_or(name);
-    if RESERVED_ASSET_NAMES.contains(&first) || first.starts_with(crate::artifacts::TEMPORARY_PREFIX) {
+    if RESERVED_ASSET_NAMES.contains(&first) || first.starts_with(crate::files::TEMPORARY_PREFIX) {
         Some(format!("asset name `{name}` is reserved: `<output>/{first}` belongs to cirrus"))
     } else {
         None

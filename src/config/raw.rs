@@ -3,7 +3,7 @@
 
 use serde::{Deserialize, Deserializer};
 
-use super::{AoMode, AoOccluders, AssetKindName, BlockFormat, Container, EncodeQuality, HeightProjection, LodBudget};
+use super::{AoMode, AoOccluders, AssetKind, BlockFormat, Container, EncodeQuality, HeightProjection, LodBudget};
 use crate::mesh::occlusion::RayDistribution;
 
 #[derive(Deserialize)]
@@ -219,5 +219,5 @@ pub enum Asset {
 #[serde(deny_unknown_fields)]
 pub struct Rule {
     pub glob: String,
-    pub kind: AssetKindName,
+    pub kind: AssetKind,
 }

@@ -5,43 +5,8 @@ use std::path::PathBuf;
 
 use serde::{Deserialize, Serialize};
 
-/// A block-compression format.
-#[derive(Clone, Copy, Debug, PartialEq, Eq, Hash, Serialize, Deserialize)]
-pub enum BlockFormat {
-    Bc1,
-    Bc3,
-    Bc4,
-    Bc5,
-    Bc7,
-}
-
-/// The file format textures are written in.
-#[derive(Clone, Copy, Debug, PartialEq, Eq, Hash, Serialize, Deserialize)]
-pub enum Container {
-    Ktx2,
-    Dds,
-    Pvr,
-}
-
-impl Container {
-    pub fn extension(self) -> &'static str {
-        match self {
-            Container::Ktx2 => "ktx2",
-            Container::Dds => "dds",
-            Container::Pvr => "pvr",
-        }
-    }
-}
-
-/// Speed/quality trade-off of the block encoder, ordered fastest first.
-#[derive(Clone, Copy, Debug, PartialEq, Eq, PartialOrd, Ord, Hash, Serialize, Deserialize)]
-pub enum EncodeQuality {
-    UltraFast,
-    VeryFast,
-    Fast,
-    Basic,
-    Slow,
-}
+pub use crate::packing::PageSettings;
+pub use crate::texture::format::{BlockFormat, Container, EncodeQuality};
 
 #[derive(Clone, Debug, PartialEq, Serialize)]
 pub struct BillboardSettings {
@@ -81,13 +46,6 @@ impl LodBudget {
             LodBudget::Triangles(triangles) => triangles / 2,
         }
     }
-}
-
-#[derive(Clone, Debug, PartialEq, Eq, Hash, Serialize)]
-pub struct AtlasSettings {
-    pub max_size: u32,
-    pub padding: u32,
-    pub power_of_two: bool,
 }
 
 /// How an `Atlas` asset packs its textures onto pages.
@@ -216,7 +174,7 @@ impl EncodeSettings {
 #[derive(Clone, Debug, PartialEq, Serialize)]
 pub struct Settings {
     pub billboard: BillboardSettings,
-    pub atlas: AtlasSettings,
+    pub atlas: PageSettings,
     pub pack: PackSettings,
     pub ao: AoSettings,
     pub encode: EncodeSettings,
@@ -243,7 +201,7 @@ impl Default for Settings {
                 lods: Vec::new(),
                 alpha_cutoff: 0.5,
             },
-            atlas: AtlasSettings { max_size: 2048, padding: 4, power_of_two: true },
+            atlas: PageSettings { max_size: 2048, padding: 4, power_of_two: true },
             pack: PackSettings { max_size: 4096, padding: 4, rotate: true, trim: true, power_of_two: false, pages: 4 },
             ao: AoSettings {
                 size: 1024,

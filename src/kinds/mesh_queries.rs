@@ -101,16 +101,26 @@ pub fn mesh_label(db: &dyn Db, asset: Asset, obj: &Path) -> String {
     }
 }
 
+/// What a mesh entry holds beside its arrays.
+#[derive(serde::Serialize, serde::Deserialize)]
+struct MeshEntry {
+    materials: Vec<crate::mesh::MeshMaterial>,
+    objects: Vec<String>,
+    warnings: Vec<Diagnostic>,
+    uvs: bool,
+}
+
 fn loaded_mesh_entry(loaded: &LoadedMesh) -> CacheEntry {
     let mesh = &loaded.mesh;
-    CacheEntry {
-        metadata: serde_json::json!({
-            "materials": mesh.materials,
-            "objects": mesh.objects,
-            "warnings": loaded.warnings,
-            "uvs": mesh.uvs.is_some(),
-        }),
-        blobs: vec![
+    let metadata = MeshEntry {
+        materials: mesh.materials.clone(),
+        objects: mesh.objects.clone(),
+        warnings: loaded.warnings.clone(),
+        uvs: mesh.uvs.is_some(),
+    };
+    CacheEntry::new(
+        &metadata,
+        vec![
             pod_blob(&mesh.positions),
             pod_blob(&mesh.normals),
             mesh.uvs.as_deref().map(pod_blob).unwrap_or_default(),
@@ -119,25 +129,24 @@ fn loaded_mesh_entry(loaded: &LoadedMesh) -> CacheEntry {
             pod_blob(&loaded.tangents),
             pod_blob(&mesh.triangle_objects),
         ],
-        compress: false,
-    }
+        false,
+    )
 }
 
 fn loaded_mesh_from_entry(entry: CacheEntry) -> Option<LoadedMesh> {
-    let [positions, normals, uvs, triangles, triangle_materials, tangents, triangle_objects]: [Vec<u8>; 7] =
-        entry.blobs.try_into().ok()?;
+    let (metadata, [positions, normals, uvs, triangles, triangle_materials, tangents, triangle_objects]) =
+        entry.parts::<MeshEntry, 7>()?;
     let mesh = crate::mesh::Mesh {
         positions: from_pod_blob(&positions)?,
         normals: from_pod_blob(&normals)?,
-        uvs: if entry.metadata.get("uvs")?.as_bool()? { Some(from_pod_blob(&uvs)?) } else { None },
+        uvs: if metadata.uvs { Some(from_pod_blob(&uvs)?) } else { None },
         triangles: from_pod_blob(&triangles)?,
         triangle_materials: from_pod_blob(&triangle_materials)?,
-        materials: serde_json::from_value(entry.metadata.get("materials")?.clone()).ok()?,
+        materials: metadata.materials,
         triangle_objects: from_pod_blob(&triangle_objects)?,
-        objects: serde_json::from_value(entry.metadata.get("objects")?.clone()).ok()?,
+        objects: metadata.objects,
     };
-    let warnings = serde_json::from_value(entry.metadata.get("warnings")?.clone()).ok()?;
-    Some(LoadedMesh { mesh, tangents: from_pod_blob(&tangents)?, warnings })
+    Some(LoadedMesh { mesh, tangents: from_pod_blob(&tangents)?, warnings: metadata.warnings })
 }
 
 /// The asset's main mesh (stage `mesh`).
@@ -154,7 +163,7 @@ pub fn loaded_mesh_of(db: &dyn Db, asset: Asset, obj: PathBuf) -> Result<Arc<Loa
     // cannot be read (not a regular file, no permission) fails the mesh, naming why.
     for (path, library) in mesh_libraries_of(db, asset, obj.clone()).iter() {
         if let Err(why) = library.contents(db) {
-            if !why.starts_with(crate::sources::FILE_NOT_FOUND) {
+            if !why.is_not_found() {
                 return Err(Diagnostic::new(path, why.clone()));
             }
         }

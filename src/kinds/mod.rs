@@ -7,7 +7,8 @@ use std::path::{Path, PathBuf};
 use std::sync::Arc;
 
 use crate::cache::CacheKey;
-use crate::config::{AssetConfig, AssetSource, PipelineConfig};
+pub use crate::config::AssetKind;
+use crate::config::{AssetConfig, PipelineConfig};
 use crate::db::{Asset, Db, Stage, StageRun};
 use crate::diagnostic::Diagnostic;
 use crate::texture::tail::TailSettings;
@@ -40,8 +41,11 @@ pub trait Kind {
     /// The first jobs of a build; each job may schedule more.
     fn first_jobs(db: &dyn Db, asset: Asset) -> Vec<Job>;
 
+    /// The kind's own steps: what its jobs do besides running surfaces through the tail.
+    type Step: KindStep;
+
     /// Runs one of the kind's own steps (surfaces are run by the shared tail).
-    fn run_step(db: &dyn Db, asset: Asset, step: &'static str, index: u32) -> Result<Vec<Job>, Diagnostic>;
+    fn run_step(db: &dyn Db, asset: Asset, step: &Self::Step) -> Result<Vec<Job>, Diagnostic>;
 
     /// Every stage instance of the asset, as far as known, marked failed where `errors` left it
     /// without a result.
@@ -86,186 +90,133 @@ pub trait Kind {
     }
 }
 
-/// The kinds of asset cirrus bakes: one `match` per question of `Kind`.
-#[derive(Clone, Copy, Debug, PartialEq, Eq, Hash)]
-pub enum AssetKind {
-    Material,
-    BillboardCloud,
-    Atlas,
-    AmbientOcclusion,
-    Height,
+/// What the scheduler asks of a kind's step.
+pub trait KindStep: Clone + std::fmt::Debug + PartialEq + Send + Sync {
+    /// The sort of work it is, for estimating how long the waiting jobs take (the steps of one
+    /// sort take about as long as each other).
+    fn sort(&self) -> &'static str;
 }
 
-impl AssetKind {
-    pub fn of(source: &AssetSource) -> AssetKind {
-        match source {
-            AssetSource::Material { .. } => AssetKind::Material,
-            AssetSource::BillboardCloud { .. } => AssetKind::BillboardCloud,
-            AssetSource::Atlas { .. } => AssetKind::Atlas,
-            AssetSource::AmbientOcclusion { .. } => AssetKind::AmbientOcclusion,
-            AssetSource::Height { .. } => AssetKind::Height,
+/// The one list of kinds: each name of `config::AssetKind` and the type that answers for it.
+/// It generates one dispatching method per question of `Kind` and the `Step` that carries any
+/// kind's step (a kind left out of the list is a compile error: the `match`es are exhaustive).
+macro_rules! kinds {
+    ($($name:ident => $kind:ty),* $(,)?) => {
+        /// A step of one kind's own (its `Kind::Step`), as a job carries it.
+        #[derive(Clone, Debug, PartialEq)]
+        pub enum Step {
+            $($name(<$kind as Kind>::Step)),*
         }
-    }
 
-    pub fn name(self) -> &'static str {
-        match self {
-            AssetKind::Material => Material::NAME,
-            AssetKind::BillboardCloud => BillboardCloud::NAME,
-            AssetKind::Atlas => Atlas::NAME,
-            AssetKind::AmbientOcclusion => AmbientOcclusion::NAME,
-            AssetKind::Height => Height::NAME,
-        }
-    }
-
-    pub fn files_to_read(self, db: &dyn Db, asset: Asset) -> Vec<PathBuf> {
-        match self {
-            AssetKind::Material => Material::files_to_read(db, asset),
-            AssetKind::BillboardCloud => BillboardCloud::files_to_read(db, asset),
-            AssetKind::Atlas => Atlas::files_to_read(db, asset),
-            AssetKind::AmbientOcclusion => AmbientOcclusion::files_to_read(db, asset),
-            AssetKind::Height => Height::files_to_read(db, asset),
-        }
-    }
-
-    pub fn first_jobs(self, db: &dyn Db, asset: Asset) -> Vec<Job> {
-        match self {
-            AssetKind::Material => Material::first_jobs(db, asset),
-            AssetKind::BillboardCloud => BillboardCloud::first_jobs(db, asset),
-            AssetKind::Atlas => Atlas::first_jobs(db, asset),
-            AssetKind::AmbientOcclusion => AmbientOcclusion::first_jobs(db, asset),
-            AssetKind::Height => Height::first_jobs(db, asset),
-        }
-    }
-
-    /// Runs a job on a worker: a surface through the shared tail, a step by its kind.
-    pub fn run_job(self, db: &dyn Db, job: &Job) -> Result<Vec<Job>, Diagnostic> {
-        match (&job.task, self) {
-            (Task::Surface(surface), _) => {
-                tail_queries::surface_artifacts(db, job.asset, surface.clone()).map(|_| Vec::new())
+        impl Step {
+            fn sort(&self) -> &'static str {
+                match self { $(Step::$name(step) => step.sort()),* }
             }
-            (Task::LoadPreviousEncoding(surface), _) => {
-                tail_queries::load_previous_encoding(db, job.asset, surface);
-                Ok(Vec::new())
+        }
+
+        $(impl From<<$kind as Kind>::Step> for Step {
+            fn from(step: <$kind as Kind>::Step) -> Step {
+                Step::$name(step)
             }
-            (Task::Step(step, index), AssetKind::Material) => Material::run_step(db, job.asset, step, *index),
-            (Task::Step(step, index), AssetKind::BillboardCloud) => {
-                BillboardCloud::run_step(db, job.asset, step, *index)
+        })*
+
+        /// Runs a job on a worker: a surface through the shared tail, a step by its kind.
+        pub fn run_job(db: &dyn Db, job: &Job) -> Result<Vec<Job>, Diagnostic> {
+            match &job.task {
+                Task::Surface(surface) => {
+                    tail_queries::surface_artifacts(db, job.asset, surface.clone()).map(|_| Vec::new())
+                }
+                Task::LoadPreviousEncoding(surface) => {
+                    tail_queries::load_previous_encoding(db, job.asset, surface);
+                    Ok(Vec::new())
+                }
+                $(Task::Step(Step::$name(step)) => <$kind>::run_step(db, job.asset, step),)*
             }
-            (Task::Step(step, index), AssetKind::Atlas) => Atlas::run_step(db, job.asset, step, *index),
-            (Task::Step(step, index), AssetKind::AmbientOcclusion) => {
-                AmbientOcclusion::run_step(db, job.asset, step, *index)
+        }
+
+        impl AssetKind {
+            /// The kind's name in `pipeline.ron`, summaries and reports.
+            pub fn name(self) -> &'static str {
+                match self { $(AssetKind::$name => <$kind>::NAME),* }
             }
-            (Task::Step(step, index), AssetKind::Height) => Height::run_step(db, job.asset, step, *index),
-        }
-    }
 
-    pub fn stage_instances(
-        self,
-        db: &dyn Db,
-        asset: Asset,
-        output_folder: &Path,
-        errors: &[Diagnostic],
-    ) -> Vec<StageInstance> {
-        match self {
-            AssetKind::Material => Material::stage_instances(db, asset, output_folder, errors),
-            AssetKind::BillboardCloud => BillboardCloud::stage_instances(db, asset, output_folder, errors),
-            AssetKind::Atlas => Atlas::stage_instances(db, asset, output_folder, errors),
-            AssetKind::AmbientOcclusion => AmbientOcclusion::stage_instances(db, asset, output_folder, errors),
-            AssetKind::Height => Height::stage_instances(db, asset, output_folder, errors),
-        }
-    }
+            pub fn files_to_read(self, db: &dyn Db, asset: Asset) -> Vec<PathBuf> {
+                match self { $(AssetKind::$name => <$kind>::files_to_read(db, asset)),* }
+            }
 
-    pub fn outputs(
-        self,
-        db: &dyn Db,
-        asset: Asset,
-        output_folder: &Path,
-        errors: &mut Vec<Diagnostic>,
-        runs: &[StageRun],
-    ) -> AssetOutputs {
-        match self {
-            AssetKind::Material => Material::outputs(db, asset, output_folder, errors, runs),
-            AssetKind::BillboardCloud => BillboardCloud::outputs(db, asset, output_folder, errors, runs),
-            AssetKind::Atlas => Atlas::outputs(db, asset, output_folder, errors, runs),
-            AssetKind::AmbientOcclusion => AmbientOcclusion::outputs(db, asset, output_folder, errors, runs),
-            AssetKind::Height => Height::outputs(db, asset, output_folder, errors, runs),
-        }
-    }
+            pub fn first_jobs(self, db: &dyn Db, asset: Asset) -> Vec<Job> {
+                match self { $(AssetKind::$name => <$kind>::first_jobs(db, asset)),* }
+            }
 
-    pub fn check(self, config: &PipelineConfig, asset: &AssetConfig) -> Vec<Diagnostic> {
-        match self {
-            AssetKind::Material => Material::check(config, asset),
-            AssetKind::BillboardCloud => BillboardCloud::check(config, asset),
-            AssetKind::Atlas => Atlas::check(config, asset),
-            AssetKind::AmbientOcclusion => AmbientOcclusion::check(config, asset),
-            AssetKind::Height => Height::check(config, asset),
-        }
-    }
+            pub fn stage_instances(
+                self,
+                db: &dyn Db,
+                asset: Asset,
+                output_folder: &Path,
+                errors: &[Diagnostic],
+            ) -> Vec<StageInstance> {
+                match self { $(AssetKind::$name => <$kind>::stage_instances(db, asset, output_folder, errors)),* }
+            }
 
-    pub fn surface_image(self, db: &dyn Db, asset: Asset, surface: &SurfaceId) -> Result<Arc<Texture>, Diagnostic> {
-        match self {
-            AssetKind::Material => Material::surface_image(db, asset, surface),
-            AssetKind::BillboardCloud => BillboardCloud::surface_image(db, asset, surface),
-            AssetKind::Atlas => Atlas::surface_image(db, asset, surface),
-            AssetKind::AmbientOcclusion => AmbientOcclusion::surface_image(db, asset, surface),
-            AssetKind::Height => Height::surface_image(db, asset, surface),
-        }
-    }
+            pub fn outputs(
+                self,
+                db: &dyn Db,
+                asset: Asset,
+                output_folder: &Path,
+                errors: &mut Vec<Diagnostic>,
+                runs: &[StageRun],
+            ) -> AssetOutputs {
+                match self { $(AssetKind::$name => <$kind>::outputs(db, asset, output_folder, errors, runs)),* }
+            }
 
-    pub fn tail_settings(self, db: &dyn Db, asset: Asset, surface: &SurfaceId) -> Result<TailSettings, Diagnostic> {
-        match self {
-            AssetKind::Material => Material::tail_settings(db, asset, surface),
-            AssetKind::BillboardCloud => BillboardCloud::tail_settings(db, asset, surface),
-            AssetKind::Atlas => Atlas::tail_settings(db, asset, surface),
-            AssetKind::AmbientOcclusion => AmbientOcclusion::tail_settings(db, asset, surface),
-            AssetKind::Height => Height::tail_settings(db, asset, surface),
-        }
-    }
+            pub fn check(self, config: &PipelineConfig, asset: &AssetConfig) -> Vec<Diagnostic> {
+                match self { $(AssetKind::$name => <$kind>::check(config, asset)),* }
+            }
 
-    pub fn surface_parts_key(
-        self,
-        db: &dyn Db,
-        asset: Asset,
-        surface: &SurfaceId,
-    ) -> Result<Option<CacheKey>, Diagnostic> {
-        match self {
-            AssetKind::Material => Material::surface_parts_key(db, asset, surface),
-            AssetKind::BillboardCloud => BillboardCloud::surface_parts_key(db, asset, surface),
-            AssetKind::Atlas => Atlas::surface_parts_key(db, asset, surface),
-            AssetKind::AmbientOcclusion => AmbientOcclusion::surface_parts_key(db, asset, surface),
-            AssetKind::Height => Height::surface_parts_key(db, asset, surface),
-        }
-    }
+            pub fn surface_image(self, db: &dyn Db, asset: Asset, surface: &SurfaceId) -> Result<Arc<Texture>, Diagnostic> {
+                match self { $(AssetKind::$name => <$kind>::surface_image(db, asset, surface)),* }
+            }
 
-    pub fn provided_surface_stage(
-        self,
-        db: &dyn Db,
-        asset: Asset,
-        surface: &SurfaceId,
-    ) -> Result<Option<Read>, Diagnostic> {
-        match self {
-            AssetKind::Material => Material::provided_surface_stage(db, asset, surface),
-            AssetKind::BillboardCloud => BillboardCloud::provided_surface_stage(db, asset, surface),
-            AssetKind::Atlas => Atlas::provided_surface_stage(db, asset, surface),
-            AssetKind::AmbientOcclusion => AmbientOcclusion::provided_surface_stage(db, asset, surface),
-            AssetKind::Height => Height::provided_surface_stage(db, asset, surface),
-        }
-    }
+            pub fn tail_settings(self, db: &dyn Db, asset: Asset, surface: &SurfaceId) -> Result<TailSettings, Diagnostic> {
+                match self { $(AssetKind::$name => <$kind>::tail_settings(db, asset, surface)),* }
+            }
 
-    pub fn surface_recipe_key(
-        self,
-        db: &dyn Db,
-        asset: Asset,
-        surface: &SurfaceId,
-    ) -> Result<Option<CacheKey>, Diagnostic> {
-        match self {
-            AssetKind::Material => Material::surface_recipe_key(db, asset, surface),
-            AssetKind::BillboardCloud => BillboardCloud::surface_recipe_key(db, asset, surface),
-            AssetKind::Atlas => Atlas::surface_recipe_key(db, asset, surface),
-            AssetKind::AmbientOcclusion => AmbientOcclusion::surface_recipe_key(db, asset, surface),
-            AssetKind::Height => Height::surface_recipe_key(db, asset, surface),
+            pub fn surface_recipe_key(
+                self,
+                db: &dyn Db,
+                asset: Asset,
+                surface: &SurfaceId,
+            ) -> Result<Option<CacheKey>, Diagnostic> {
+                match self { $(AssetKind::$name => <$kind>::surface_recipe_key(db, asset, surface)),* }
+            }
+
+            pub fn surface_parts_key(
+                self,
+                db: &dyn Db,
+                asset: Asset,
+                surface: &SurfaceId,
+            ) -> Result<Option<CacheKey>, Diagnostic> {
+                match self { $(AssetKind::$name => <$kind>::surface_parts_key(db, asset, surface)),* }
+            }
+
+            pub fn provided_surface_stage(
+                self,
+                db: &dyn Db,
+                asset: Asset,
+                surface: &SurfaceId,
+            ) -> Result<Option<Read>, Diagnostic> {
+                match self { $(AssetKind::$name => <$kind>::provided_surface_stage(db, asset, surface)),* }
+            }
         }
-    }
+    };
+}
+
+kinds! {
+    Material => Material,
+    BillboardCloud => BillboardCloud,
+    Atlas => Atlas,
+    AmbientOcclusion => AmbientOcclusion,
+    Height => Height,
 }
 
 /// One surface that ends in the texture tail: `group` names what it belongs to inside the asset
@@ -302,22 +253,13 @@ impl SurfaceId {
 }
 
 /// Work for a worker thread: one step of an asset, or one surface through the tail.
-#[derive(Clone, Debug, PartialEq)]
-pub struct Job {
-    pub asset: Asset,
-    pub task: Task,
-    /// Waves to wait after the wave that scheduled it (jobs of one wave run in parallel).
-    pub after: u32,
-    /// For progress and for naming the job in an internal error.
-    pub label: String,
-}
+pub type Job = crate::schedule::Job<Task>;
 
-impl Task {
-    /// The sort of work a task is, for estimating how long the waiting ones take: a step's name,
-    /// or `surface`.
-    pub fn sort(&self) -> &'static str {
+impl crate::schedule::JobTask for Task {
+    /// A step's name, or `surface`.
+    fn sort(&self) -> &'static str {
         match self {
-            Task::Step(name, _) => name,
+            Task::Step(step) => step.sort(),
             Task::Surface(_) => "surface",
             Task::LoadPreviousEncoding(_) => "previous-encoding",
         }
@@ -326,13 +268,20 @@ impl Task {
 
 #[derive(Clone, Debug, PartialEq)]
 pub enum Task {
-    /// A step of the kind's own, with an index (a render group, a tile).
-    Step(&'static str, u32),
+    /// A step of the kind's own.
+    Step(Step),
     /// A surface through the shared texture tail.
     Surface(SurfaceId),
     /// Loads a surface's last encoding from the persistent cache ahead of its tail (a kind
     /// schedules it beside slower work, so that the load is off the surface's path).
     LoadPreviousEncoding(SurfaceId),
+}
+
+impl Task {
+    /// A job's task of one of the kind's own steps.
+    pub fn step(step: impl Into<Step>) -> Task {
+        Task::Step(step.into())
+    }
 }
 
 /// One instance of a stage, as the summary, the graph dump and the event log name it.
@@ -454,6 +403,7 @@ pub struct AssetOutputs {
 
 /// Reads a texture's header for `check`: readable, decodable, within the texture limits.
 pub fn check_texture_file(config: &PipelineConfig, path: &Path) -> Result<(), String> {
+    // (A `String`: check reports the reason under the file's name.)
     let contents = crate::sources::read_source(&config.root, &config.source, path)?;
     crate::texture::probe_texture(path, &contents.bytes, config.limits.texture)
         .map(|_| ())
@@ -492,7 +442,7 @@ pub fn check_mesh_file(
     for library in crate::mesh::material_libraries(mesh_file, &contents.bytes, &config.source) {
         let bytes = match read(&library) {
             Ok(contents) => Some(contents.bytes.to_vec()),
-            Err(error) if error.starts_with(crate::sources::FILE_NOT_FOUND) => None,
+            Err(error) if error.is_not_found() => None,
             Err(error) => return Err(Diagnostic::new(&library, error)),
         };
         libraries.insert(library, bytes);

@@ -184,10 +184,8 @@ pub fn surface_artifacts(db: &dyn Db, asset: Asset, surface: SurfaceId) -> Resul
         },
     };
     for key in [recipe_key, parts_key].into_iter().flatten() {
-        store_cached(db, SURFACE_RECIPE_ENTRY, key, || CacheEntry {
-            metadata: content.0.to_hex().to_string().into(),
-            blobs: Vec::new(),
-            compress: false,
+        store_cached(db, SURFACE_RECIPE_ENTRY, key, || {
+            CacheEntry::new(&content.0.to_hex().to_string(), Vec::new(), false)
         });
     }
     Ok(artifacts)
@@ -196,7 +194,8 @@ pub fn surface_artifacts(db: &dyn Db, asset: Asset, surface: SurfaceId) -> Resul
 /// The content key a recipe (or parts) entry names.
 fn recipe_target(db: &dyn Db, key: CacheKey) -> Option<CacheKey> {
     load_cached(db, SURFACE_RECIPE_ENTRY, key, |entry| {
-        Some(CacheKey(blake3::Hash::from_hex(entry.metadata.as_str()?).ok()?))
+        let (content, []) = entry.parts::<String, 0>()?;
+        Some(CacheKey(blake3::Hash::from_hex(content).ok()?))
     })
 }
 
@@ -237,16 +236,11 @@ fn surface_key(settings: &TailSettings) -> CacheKeyBuilder {
 }
 
 fn artifacts_entry(artifacts: &SurfaceArtifacts) -> CacheEntry {
-    CacheEntry {
-        metadata: serde_json::to_value(&artifacts.info).expect("surface info serialises"),
-        blobs: vec![artifacts.texture_file.to_vec(), artifacts.preview_png.to_vec()],
-        compress: false,
-    }
+    CacheEntry::new(&artifacts.info, vec![artifacts.texture_file.to_vec(), artifacts.preview_png.to_vec()], false)
 }
 
 fn artifacts_from_entry(entry: CacheEntry) -> Option<SurfaceArtifacts> {
-    let info = serde_json::from_value(entry.metadata).ok()?;
-    let [texture_file, preview_png]: [Vec<u8>; 2] = entry.blobs.try_into().ok()?;
+    let (info, [texture_file, preview_png]) = entry.parts()?;
     Some(SurfaceArtifacts { info, texture_file: texture_file.into(), preview_png: preview_png.into() })
 }
 
@@ -297,19 +291,32 @@ fn encoding_memo_name(label: &str) -> String {
     format!("{ENCODING_MEMO}:{label}")
 }
 
+/// What an encoding memo holds beside its blocks, levels and errors.
+#[derive(serde::Serialize, serde::Deserialize)]
+struct EncodingEntry {
+    /// The lower mip levels' sizes (level 0's is `width` × `height`).
+    levels: Vec<(u32, u32)>,
+    reuse: Option<crate::texture::mips::MipReuse>,
+    settings: crate::texture::encode::BlockEncodeSettings,
+    width: u32,
+    height: u32,
+    psnr_db: f64,
+    channels: usize,
+    alpha_threshold: Option<u8>,
+}
+
 fn encoding_entry(previous: &PreviousEncoding) -> CacheEntry {
     let (blocks, encoded) = (&previous.level0_blocks, &previous.encoded);
-    let levels: Vec<(u32, u32)> = previous.lower_levels.iter().map(|level| (level.width, level.height)).collect();
-    let metadata = serde_json::json!({
-        "levels": levels,
-        "reuse": previous.mip_reuse.as_deref(),
-        "settings": encoded.settings,
-        "width": encoded.texture.width,
-        "height": encoded.texture.height,
-        "psnr_db": encoded.psnr_db,
-        "channels": encoded.block_errors.channels,
-        "alpha_threshold": encoded.block_errors.cut_out.as_ref().map(|(threshold, _)| threshold),
-    });
+    let metadata = EncodingEntry {
+        levels: previous.lower_levels.iter().map(|level| (level.width, level.height)).collect(),
+        reuse: previous.mip_reuse.as_deref().cloned(),
+        settings: encoded.settings,
+        width: encoded.texture.width,
+        height: encoded.texture.height,
+        psnr_db: encoded.psnr_db,
+        channels: encoded.block_errors.channels,
+        alpha_threshold: encoded.block_errors.cut_out.as_ref().map(|(threshold, _)| *threshold),
+    };
     let mut blobs = vec![crate::db::pod_blob(&blocks.texels), crate::db::pod_blob(&blocks.alphas)];
     blobs.extend(previous.lower_levels.iter().map(|level| level.pixels.to_vec()));
     blobs.extend(encoded.texture.levels.iter().map(|level| level.to_vec()));
@@ -317,22 +324,17 @@ fn encoding_entry(previous: &PreviousEncoding) -> CacheEntry {
     blobs.push(crate::db::pod_blob(encoded.block_errors.cut_out.as_ref().map_or(&[][..], |(_, blocks)| blocks)));
     // Uncompressed: fingerprints and blocks hardly compress, and writing 16 MB costs less than
     // compressing it (measured on the oak's albedo).
-    CacheEntry { metadata, blobs, compress: false }
+    CacheEntry::new(&metadata, blobs, false)
 }
 
 fn encoding_from_entry(entry: CacheEntry) -> Option<PreviousEncoding> {
-    let metadata = &entry.metadata;
-    let sizes: Vec<(u32, u32)> = serde_json::from_value(metadata.get("levels")?.clone()).ok()?;
-    let settings: crate::texture::encode::BlockEncodeSettings =
-        serde_json::from_value(metadata.get("settings")?.clone()).ok()?;
-    let reuse: Option<crate::texture::mips::MipReuse> = serde_json::from_value(metadata.get("reuse")?.clone()).ok()?;
-    let width = metadata.get("width")?.as_u64()? as u32;
-    let height = metadata.get("height")?.as_u64()? as u32;
+    let (metadata, blobs) = entry.metadata_and_blobs::<EncodingEntry>()?;
+    let EncodingEntry { levels: sizes, reuse, settings, width, height, .. } = metadata;
     let level_count = sizes.len() + 1;
-    if entry.blobs.len() != 2 + sizes.len() + level_count + 2 {
+    if blobs.len() != 2 + sizes.len() + level_count + 2 {
         return None;
     }
-    let mut blobs = entry.blobs.into_iter();
+    let mut blobs = blobs.into_iter();
     let texels = crate::db::from_pod_blob::<u64>(&blobs.next()?)?;
     let alphas = crate::db::from_pod_blob::<u64>(&blobs.next()?)?;
     let level0_blocks = BlockFingerprints { width, height, texels, alphas };
@@ -347,8 +349,7 @@ fn encoding_from_entry(entry: CacheEntry) -> Option<PreviousEncoding> {
     let encoded_levels: Vec<Arc<[u8]>> = blobs.by_ref().take(level_count).map(Arc::from).collect();
     let errors = crate::db::from_pod_blob::<u32>(&blobs.next()?)?;
     let cut_out_blocks = crate::db::from_pod_blob::<crate::texture::quality::CutOutBlock>(&blobs.next()?)?;
-    let alpha_threshold: Option<u8> = serde_json::from_value(metadata.get("alpha_threshold")?.clone()).ok()?;
-    let cut_out = match alpha_threshold {
+    let cut_out = match metadata.alpha_threshold {
         Some(threshold) if cut_out_blocks.len() == errors.len() => Some((threshold, cut_out_blocks)),
         None if cut_out_blocks.is_empty() => None,
         _ => return None,
@@ -372,21 +373,12 @@ fn encoding_from_entry(entry: CacheEntry) -> Option<PreviousEncoding> {
         height,
         encoded_levels,
     );
-    let block_errors = crate::texture::quality::BlockErrors {
-        format: settings.format,
-        channels: metadata.get("channels")?.as_u64()? as usize,
-        errors,
-        cut_out,
-    };
+    let block_errors =
+        crate::texture::quality::BlockErrors { format: settings.format, channels: metadata.channels, errors, cut_out };
     Some(PreviousEncoding {
         level0_blocks: Arc::new(level0_blocks),
         lower_levels,
         mip_reuse: reuse.map(Arc::new),
-        encoded: EncodedSurface {
-            settings,
-            texture,
-            block_errors: Arc::new(block_errors),
-            psnr_db: metadata.get("psnr_db")?.as_f64()?,
-        },
+        encoded: EncodedSurface { settings, texture, block_errors: Arc::new(block_errors), psnr_db: metadata.psnr_db },
     })
 }

@@ -16,8 +16,8 @@ use std::path::{Path, PathBuf};
 
 use serde::{Deserialize, Serialize};
 
-use crate::config::normalize_relative_path;
 use crate::diagnostic::Diagnostic;
+use crate::files::normalize_relative_path;
 use crate::texture::TextureSlot;
 
 /// Asked between units of long work (points, batches of rays): `true` stops the work with

@@ -6,7 +6,14 @@
 
 pub mod max_rects;
 
-use crate::config::AtlasSettings;
+/// The page a billboard atlas is packed onto: its largest side, the padding around each
+/// rectangle, and whether its sides are powers of two.
+#[derive(Clone, Debug, PartialEq, Eq, Hash, serde::Serialize)]
+pub struct PageSettings {
+    pub max_size: u32,
+    pub padding: u32,
+    pub power_of_two: bool,
+}
 
 /// Where one rectangle landed, in texels (the content, without its padding).
 #[derive(Clone, Copy, Debug, PartialEq, Eq, serde::Serialize, serde::Deserialize)]
@@ -20,7 +27,7 @@ pub struct Placement {
 }
 
 /// The smallest atlas (by area, then squarest) that holds `cells`, if any within `max_size`.
-pub fn pack_smallest(cells: &[(u32, u32)], settings: &AtlasSettings) -> Option<(u32, u32, Vec<Placement>)> {
+pub fn pack_smallest(cells: &[(u32, u32)], settings: &PageSettings) -> Option<(u32, u32, Vec<Placement>)> {
     let padding = settings.padding;
     let padded_area: u64 = cells.iter().map(|&(w, h)| (w + 2 * padding) as u64 * (h + 2 * padding) as u64).sum();
     let largest = cells.iter().map(|&(w, h)| w.min(h) + 2 * padding).max().unwrap_or(4);

@@ -22,10 +22,14 @@ impl Project {
         let list = &listed.0;
         // An asset that the record holds as it is now: its instances from there; any other
         // through its kind (which may read its sources and run the stages that tell them).
+        // The last build's instances hold while no input changed since it finished.
+        let last_build_holds = !self.sources_changed_since_build;
         let mut all_instances: Vec<(String, Vec<InstanceRecord>)> = Vec::new();
         let mut synced = Vec::new();
         for config in list.iter().filter(|config| only.is_none_or(|only| only.contains(&config.name))) {
-            if self.unchanged_asset(config, list, &manifest) {
+            if let Some(instances) = self.built_instances.get(&config.name).filter(|_| last_build_holds) {
+                all_instances.push((config.name.clone(), instances.clone()));
+            } else if self.unchanged_asset(config, list, &manifest) {
                 all_instances.push((config.name.clone(), self.record.assets[&config.name].instances()));
             } else {
                 synced.push((config.clone(), self.sync_asset(config)));

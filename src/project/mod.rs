@@ -10,12 +10,13 @@ use std::sync::Arc;
 
 use salsa::Setter;
 
-use crate::artifacts::{load_manifest, record_artifact, remove_artifacts, save_manifest, write_if_changed, Manifest};
+use crate::artifacts::{load_manifest, record_artifact, remove_artifacts, save_manifest, Manifest};
 use crate::cache::DiskCache;
 use crate::config::{AssetConfig, PipelineConfig};
 use crate::db::{Asset, Database, Db, SourceFile, StageRun};
 use crate::diagnostic::{display_path, Diagnostic};
-use crate::kinds::{stage_node_id, AssetKind, Read, StageInstance};
+use crate::files::write_if_changed;
+use crate::kinds::{stage_node_id, Read, StageInstance};
 use crate::record::{AssetRecord, BuildRecord, FileStamp, InstanceRecord, ReadRecord};
 use crate::sources::{read_source_stamped, rule_matches};
 use crate::summary::{
@@ -98,6 +99,8 @@ pub enum BuildError {
     UnknownAsset { name: String, pipeline: String, hint: String },
     #[error("the build was cancelled by a newer edit")]
     Cancelled,
+    #[error("asset `{name}` failed to bake:\n{errors}")]
+    Failed { name: String, errors: String },
 }
 
 /// How many times the driver asks a kind for the files it reads before giving up on a stable
@@ -127,6 +130,9 @@ pub struct Project {
     revision: u64,
     /// A source input was created or set since the last finished build (also by `graph`).
     sources_changed_since_build: bool,
+    /// The stage instances of the assets the last build looked into, for the graph while no
+    /// input changed since (the daemon's log after each batch asks for it without a second sync).
+    built_instances: HashMap<String, Vec<InstanceRecord>>,
     options: ProjectOptions,
     /// The build record: source files' metadata and hashes, baked assets' fingerprints.
     record: BuildRecord,
@@ -134,7 +140,7 @@ pub struct Project {
     record_changed: bool,
     /// Content hashes (or why a file cannot be read) of files that have no salsa input, valid
     /// while the file is in `fresh`.
-    known: HashMap<PathBuf, Result<blake3::Hash, String>>,
+    known: HashMap<PathBuf, Result<blake3::Hash, crate::files::ReadError>>,
     /// Assets whose artifacts this process wrote or checked against the record: the daemon,
     /// which holds the output folder's lock, does not check them again.
     trusted_artifacts: HashSet<String>,
@@ -222,6 +228,7 @@ impl Project {
             executed: BTreeSet::new(),
             revision,
             sources_changed_since_build: false,
+            built_instances: HashMap::new(),
             options,
             record,
             record_changed: false,
@@ -258,6 +265,25 @@ impl Project {
     }
 
     /// The salsa input of an asset of the pipeline, read now if a build passed it over.
+    /// Builds the asset `name` alone (when it is not baked already) and returns its input, for a
+    /// command that reads what the asset's stages made (`cirrus preview`); an asset that failed
+    /// to bake is an error listing its problems.
+    pub fn built_asset(&mut self, name: &str) -> Result<Asset, BuildError> {
+        let build = BuildOptions { only_assets: vec![name.to_string()], ..Default::default() };
+        let summary = self.build(&build, &|_| {})?;
+        let asset = &summary.assets[0];
+        if asset.status != crate::summary::AssetStatus::Ok {
+            let errors = asset
+                .errors
+                .iter()
+                .map(|error| format!("  {}: {}", error.file, error.message))
+                .collect::<Vec<_>>()
+                .join("\n");
+            return Err(BuildError::Failed { name: name.to_string(), errors });
+        }
+        Ok(self.asset_input(name).expect("a built asset has an input"))
+    }
+
     pub fn asset_input(&mut self, name: &str) -> Option<Asset> {
         if let Some(&asset) = self.assets.get(name) {
             return Some(asset);
@@ -308,6 +334,7 @@ impl Project {
     /// Marks every source file as possibly changed (after a watcher overflow or error).
     pub fn invalidate_all_sources(&mut self) {
         self.fresh.clear();
+        self.built_instances.clear();
         self.clean.clear();
         *self.asset_list_kept.get_mut() = None;
     }
@@ -332,6 +359,7 @@ impl Project {
         }
         self.config = config;
         *self.asset_list_kept.get_mut() = None;
+        self.built_instances.clear();
         self.settings_hashes.clear();
         self.clean.clear();
         self.sync_limits();
@@ -436,7 +464,7 @@ impl Project {
 
     /// The asset's input, its settings and every file its kind reads, set only where changed.
     fn sync_asset(&mut self, config: &AssetConfig) -> Asset {
-        let kind = AssetKind::of(&config.source);
+        let kind = config.source.kind();
         let main_file = self.config.source.join(config.source.main_file());
         let source_root = self.config.source.clone();
         let asset = match self.assets.get(&config.name) {
@@ -533,6 +561,7 @@ impl Project {
         }
         require_assets(&options.only_assets, all_assets, &self.config.file)?;
         self.keep_clean_for(&listed);
+        self.built_instances.clear();
         let selected: Vec<&AssetConfig> = all_assets
             .iter()
             .filter(|asset| options.only_assets.is_empty() || options.only_assets.contains(&asset.name))
@@ -570,7 +599,7 @@ impl Project {
         }
         let first_jobs =
             assets.iter().flat_map(|(_, asset)| asset.kind(&self.db).first_jobs(&self.db, *asset)).collect();
-        let finished = crate::schedule::run_jobs(&self.db, first_jobs, progress, &cancel);
+        let finished = crate::schedule::run_jobs(&self.db, first_jobs, &crate::kinds::run_job, progress, &cancel);
         let runs = self.db.take_runs();
         crate::gpu::wait_for_gpu_start();
         if let Some(cache) = self.db.disk_cache() {
@@ -680,6 +709,7 @@ impl Project {
                 let ms = (stage.status == StageStatus::Ran).then_some((stage.ms * 10.0).round() / 10.0);
                 statuses.insert(instance.node_id(), (state, ms));
             }
+            let records: Vec<InstanceRecord> = instances.iter().map(instance_record).collect();
             // The record lets the next build pass over this asset while nothing it reads moves.
             self.record_changed = true;
             self.trusted_artifacts.remove(&config.name);
@@ -690,7 +720,6 @@ impl Project {
                         .filter_map(|path| Some((path.clone(), FileStamp::read(&self.config.root.join(path))?)))
                         .collect();
                     let files = asset.files(&self.db).keys().cloned().collect();
-                    let records: Vec<InstanceRecord> = instances.iter().map(instance_record).collect();
                     let record = AssetRecord::new(fingerprint, files, artifacts, &records, warnings.clone());
                     self.record.assets.insert(config.name.clone(), record);
                     self.trusted_artifacts.insert(config.name.clone());
@@ -702,6 +731,7 @@ impl Project {
                     self.clean.remove(&config.name);
                 }
             }
+            self.built_instances.insert(config.name.clone(), records);
             summaries.push(AssetSummary {
                 name: config.name.clone(),
                 kind: kind.name(),
@@ -725,7 +755,7 @@ impl Project {
             });
             summaries.push(AssetSummary {
                 name: config.name.clone(),
-                kind: AssetKind::of(&config.source).name(),
+                kind: config.source.kind().name(),
                 status: AssetStatus::Ok,
                 stages: stages.collect(),
                 artifacts: asset_artifacts(&manifest, &config.name, listed.iter()),
@@ -888,7 +918,7 @@ impl Project {
             .into_iter()
             .filter(|asset| only.is_empty() || only.contains(&asset.name))
             .map(|asset| {
-                let problems = AssetKind::of(&asset.source).check(&self.config, &asset);
+                let problems = asset.source.kind().check(&self.config, &asset);
                 (asset.name, problems)
             })
             .chain(conflicts)

@@ -21,7 +21,7 @@ impl Project {
     }
 
     /// The content hash last seen of a file (its input's, or the record's), if any.
-    pub(super) fn last_known_hash(&self, path: &Path) -> Option<Result<blake3::Hash, String>> {
+    pub(super) fn last_known_hash(&self, path: &Path) -> Option<Result<blake3::Hash, crate::files::ReadError>> {
         match self.files.get(path) {
             Some(file) => Some(file.contents(&self.db).as_ref().map(|contents| contents.hash).map_err(Clone::clone)),
             None => self.known.get(path).cloned().or_else(|| self.record.files.get(path).map(|file| Ok(file.hash))),
@@ -31,7 +31,7 @@ impl Project {
     /// The content hash of a source file (or why it cannot be read): its input's when it has
     /// one, else the record's when the file's metadata did not move since it was recorded (not
     /// racy, no `--verify`), else read and hashed now (and recorded).
-    pub(super) fn file_hash(&mut self, path: &Path) -> Result<blake3::Hash, String> {
+    pub(super) fn file_hash(&mut self, path: &Path) -> Result<blake3::Hash, crate::files::ReadError> {
         if self.files.contains_key(path) {
             let file = self.source_file(path);
             return file.contents(&self.db).as_ref().map(|contents| contents.hash).map_err(Clone::clone);

@@ -112,7 +112,7 @@ impl Project {
             hasher.update(display_path(path).as_bytes()).update(b"\0");
             match self.file_hash(path) {
                 Ok(hash) => hasher.update(b"=").update(hash.as_bytes()),
-                Err(why) => hasher.update(b"!").update(why.as_bytes()).update(b"\0"),
+                Err(why) => hasher.update(b"!").update(why.to_string().as_bytes()).update(b"\0"),
             };
         }
         if let Some(source) = &config.settings.ao_source {
@@ -174,7 +174,7 @@ impl Project {
             };
             let file = self.config.root.join(path);
             if self.options.verify {
-                crate::sources::read_regular_file(&file, crate::sources::MAX_SOURCE_BYTES)
+                crate::files::read_regular_file(&file, crate::files::MAX_SOURCE_BYTES)
                     .is_ok_and(|bytes| blake3::hash(&bytes).to_hex().as_str() == entry.hash)
             } else {
                 FileStamp::read(&file) == Some(*stamp)

@@ -18,8 +18,8 @@ pub struct Bc4Search {
 
 impl Bc4Search {
     /// The search for an encoder quality setting.
-    pub fn for_quality(quality: crate::config::EncodeQuality) -> Bc4Search {
-        use crate::config::EncodeQuality;
+    pub fn for_quality(quality: crate::texture::format::EncodeQuality) -> Bc4Search {
+        use crate::texture::format::EncodeQuality;
         match quality {
             EncodeQuality::UltraFast | EncodeQuality::VeryFast => Bc4Search { window: 0, refine: false },
             EncodeQuality::Fast => Bc4Search { window: 1, refine: false },

@@ -1,8 +1,8 @@
 //! Texture files: block-compressed levels wrapped in KTX2 (with its data format descriptor and
 //! optional zstd supercompression), DDS (DX10 header) or PVR v3.
 
-use crate::config::{BlockFormat, Container};
 use crate::texture::encode::{block_bytes, EncodedTexture};
+use crate::texture::format::{BlockFormat, Container};
 
 /// Writes `texture` in `container`; `zstd_level` applies to KTX2 only.
 pub fn write_container(texture: &EncodedTexture, container: Container, zstd_level: Option<i32>) -> Vec<u8> {

@@ -7,8 +7,8 @@ use std::sync::Arc;
 
 use rayon::prelude::*;
 
-use crate::config::{BlockFormat, EncodeQuality};
 use crate::texture::fingerprint::BlockFingerprints;
+use crate::texture::format::{BlockFormat, EncodeQuality};
 use crate::texture::Texture;
 
 /// One texture, block-compressed, all levels. Equality is by content hash.

@@ -3,6 +3,7 @@
 //! GIF bytes to RGBA8 pixels, with size and memory limits checked from the header, so that a
 //! decompression bomb is an error, not an out-of-memory crash.
 
+pub mod format;
 pub mod color;
 pub mod mips;
 pub mod fingerprint;

@@ -3,9 +3,9 @@
 
 use rayon::prelude::*;
 
-use crate::config::BlockFormat;
 use crate::texture::encode::block_bytes;
 use crate::texture::fingerprint::BlockFingerprints;
+use crate::texture::format::BlockFormat;
 use crate::texture::Texture;
 
 /// PSNR reported for a lossless result (the true value is infinite).

@@ -6,11 +6,11 @@
 
 use std::sync::Arc;
 
-use crate::config::{BlockFormat, Container, EncodeQuality};
 use crate::texture::color::has_transparency;
 use crate::texture::container::write_container;
 use crate::texture::encode::{encode_levels_reusing, BlockEncodeSettings, EncodedTexture, PreviousBlocks};
 use crate::texture::fingerprint::BlockFingerprints;
+use crate::texture::format::{BlockFormat, Container, EncodeQuality};
 use crate::texture::mips::{mip_chain_reusing, MipReuse, MipSettings, PreviousChain};
 use crate::texture::preview::preview_png;
 use crate::texture::quality::{alpha_test_threshold, block_errors_reusing, BlockErrors, Measure};

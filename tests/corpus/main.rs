@@ -200,9 +200,11 @@ fn corpus_billboard_clouds_bake_and_keep_their_silhouettes() {
             lod: None,
             stand_in: Default::default(),
         };
-        let [(0, metrics)] =
-            &cirrus::kinds::billboard_cloud::preview(&mut project, &options).expect("preview renders")[..]
-        else {
+        let [(0, metrics)] = &{
+            let input = project.built_asset(&options.asset).expect("the asset builds");
+            cirrus::kinds::billboard_cloud::preview(project.database(), input, project.config(), &options)
+        }
+        .expect("preview renders")[..] else {
             panic!("{name}: one level previewed")
         };
         assert_eq!(metrics.views.len(), 26);

@@ -88,6 +88,7 @@ fn salsa_wgpu_notify_sockets_and_file_io_stay_in_their_modules() {
         "cache/remote.rs",
         "cache/upkeep.rs",
         "config.rs",
+        "files.rs",
         "record.rs",
         "sources.rs",
         "watch.rs",
@@ -118,13 +119,207 @@ fn the_driver_and_the_machinery_name_no_kind() {
         "graph.rs",
         "artifacts.rs",
         "sources.rs",
-        "cli_cache.rs",
+        "cli/cache.rs",
     ];
     for module in machinery {
         let path = Path::new(env!("CARGO_MANIFEST_DIR")).join("src").join(module);
-        let code = code(&path).to_lowercase();
-        for kind in ["material", "billboard", "planes", "atlas"] {
+        let code = code(&path);
+        let lower = code.to_lowercase();
+        for kind in ["material", "billboard", "planes", "atlas", "ambient", "occlusion"] {
+            assert!(!lower.contains(kind), "{module} names `{kind}`");
+        }
+        // `height` is also a texture's; the kind is named by its type or its module.
+        for kind in ["Height", "kinds::height", "AmbientOcclusion", "BillboardCloud"] {
             assert!(!code.contains(kind), "{module} names `{kind}`");
+        }
+    }
+}
+
+/// The modules (files under `src/`, `a/mod.rs` as `a`) each module's code names: every
+/// `crate::a::b` path (and each path inside `crate::{…}` or `crate::a::{…}`) resolved to the
+/// longest module it reaches, every `super::` path likewise, and each child module a parent
+/// names (`mod x;` and `x::`).
+fn module_imports() -> std::collections::BTreeMap<String, std::collections::BTreeSet<String>> {
+    use std::collections::{BTreeMap, BTreeSet};
+    let root = Path::new(env!("CARGO_MANIFEST_DIR")).join("src");
+    let name_of = |path: &Path| -> String {
+        let relative = path.strip_prefix(&root).unwrap().with_extension("");
+        let text = relative.to_string_lossy().replace('\\', "/");
+        text.strip_suffix("/mod").unwrap_or(&text).to_string()
+    };
+    let files = rust_files("src");
+    let modules: BTreeSet<String> = files.iter().map(|path| name_of(path)).collect();
+    let resolve = |segments: &[&str]| -> Option<String> {
+        (1..=segments.len()).rev().map(|n| segments[..n].join("/")).find(|candidate| modules.contains(candidate))
+    };
+    let is_segment = |text: &str| {
+        !text.is_empty() && text.bytes().all(|b| b.is_ascii_lowercase() || b.is_ascii_digit() || b == b'_')
+    };
+    // The paths a `use` tree starting at `text` names, each as its leading lowercase segments.
+    fn paths(text: &str, is_segment: &dyn Fn(&str) -> bool) -> Vec<Vec<String>> {
+        let mut prefix = Vec::new();
+        let mut rest = text;
+        loop {
+            let end = rest.find(|c: char| !(c.is_ascii_alphanumeric() || c == '_')).unwrap_or(rest.len());
+            let (word, after) = rest.split_at(end);
+            if let Some(after) = after.strip_prefix("::") {
+                if is_segment(word) {
+                    prefix.push(word.to_string());
+                    rest = after;
+                    continue;
+                }
+            }
+            if word.is_empty() && rest.starts_with('{') {
+                let mut depth = 0;
+                let mut items = Vec::new();
+                let mut start = 1;
+                for (index, c) in rest.char_indices() {
+                    match c {
+                        '{' => depth += 1,
+                        '}' => {
+                            depth -= 1;
+                            if depth == 0 {
+                                items.push(&rest[start..index]);
+                                break;
+                            }
+                        }
+                        ',' if depth == 1 => {
+                            items.push(&rest[start..index]);
+                            start = index + 1;
+                        }
+                        _ => {}
+                    }
+                }
+                return items
+                    .iter()
+                    .flat_map(|item| paths(item.trim(), is_segment))
+                    .map(|tail| prefix.iter().cloned().chain(tail).collect())
+                    .collect();
+            }
+            if is_segment(word) {
+                prefix.push(word.to_string());
+            }
+            return vec![prefix];
+        }
+    }
+    let mut imports: BTreeMap<String, BTreeSet<String>> = BTreeMap::new();
+    for path in &files {
+        let module = name_of(path);
+        let code = code(path);
+        let is_folder_module =
+            path.file_name().is_some_and(|name| name == "mod.rs" || name == "lib.rs" || name == "main.rs");
+        let parent: Vec<&str> = if is_folder_module {
+            module.split('/').collect()
+        } else {
+            module.split('/').rev().skip(1).collect::<Vec<_>>().into_iter().rev().collect()
+        };
+        let mut named = BTreeSet::new();
+        for (at, _) in code.match_indices("crate::") {
+            for segments in paths(&code[at + "crate::".len()..], &is_segment) {
+                let segments: Vec<&str> = segments.iter().map(String::as_str).collect();
+                named.extend(resolve(&segments));
+            }
+        }
+        for (at, _) in code.match_indices("super::") {
+            let up = &parent[..parent.len().saturating_sub(1)];
+            for segments in paths(&code[at + "super::".len()..], &is_segment) {
+                let full: Vec<&str> = up.iter().copied().chain(segments.iter().map(String::as_str)).collect();
+                named.extend(resolve(&full).or_else(|| (!up.is_empty()).then(|| up.join("/"))));
+            }
+        }
+        for line in code.lines() {
+            let line = line.trim_start().trim_start_matches("pub ").trim_start_matches("pub(crate) ");
+            let Some(child) = line.strip_prefix("mod ").and_then(|rest| rest.strip_suffix(';')) else { continue };
+            let child_module =
+                if module == "lib" { child.to_string() } else { format!("{}/{child}", parent.join("/")) };
+            if modules.contains(&child_module) && code.contains(&format!("{child}::")) {
+                named.insert(child_module);
+            }
+        }
+        named.remove(&module);
+        named.remove("lib");
+        imports.insert(module, named);
+    }
+    imports
+}
+
+/// The strongly connected components of the import graph with more than one module (Tarjan).
+fn import_cycles(imports: &std::collections::BTreeMap<String, std::collections::BTreeSet<String>>) -> Vec<Vec<String>> {
+    use std::collections::BTreeMap;
+    struct Search<'a> {
+        imports: &'a BTreeMap<String, std::collections::BTreeSet<String>>,
+        index: BTreeMap<&'a str, usize>,
+        low: BTreeMap<&'a str, usize>,
+        stack: Vec<&'a str>,
+        cycles: Vec<Vec<String>>,
+    }
+    impl<'a> Search<'a> {
+        fn visit(&mut self, module: &'a str) {
+            let index = self.index.len();
+            self.index.insert(module, index);
+            self.low.insert(module, index);
+            self.stack.push(module);
+            for next in self.imports.get(module).into_iter().flatten() {
+                if !self.index.contains_key(next.as_str()) {
+                    self.visit(next);
+                    let low = self.low[module].min(self.low[next.as_str()]);
+                    self.low.insert(module, low);
+                } else if self.stack.contains(&next.as_str()) {
+                    let low = self.low[module].min(self.index[next.as_str()]);
+                    self.low.insert(module, low);
+                }
+            }
+            if self.low[module] == self.index[module] {
+                let at = self.stack.iter().rposition(|&m| m == module).unwrap();
+                let component: Vec<String> = self.stack.drain(at..).map(str::to_string).collect();
+                if component.len() > 1 {
+                    self.cycles.push(component);
+                }
+            }
+        }
+    }
+    let mut search =
+        Search { imports, index: BTreeMap::new(), low: BTreeMap::new(), stack: Vec::new(), cycles: Vec::new() };
+    for module in imports.keys() {
+        if !search.index.contains_key(module.as_str()) {
+            search.visit(module);
+        }
+    }
+    search.cycles
+}
+
+#[test]
+fn the_modules_form_a_straight_stack_with_one_loop_inside_kinds() {
+    let imports = module_imports();
+    assert!(imports.len() > 60, "the import graph sees the modules: {}", imports.len());
+    // The check can fail: the kinds import each other (a kind's queries and its mod.rs).
+    let cycles = import_cycles(&imports);
+    let inside_kinds = |module: &String| module == "kinds" || module.starts_with("kinds/");
+    assert!(cycles.iter().any(|cycle| cycle.iter().all(inside_kinds)), "the kinds' own loop is seen: {cycles:?}");
+    let outside: Vec<&Vec<String>> = cycles.iter().filter(|cycle| !cycle.iter().all(inside_kinds)).collect();
+    assert!(outside.is_empty(), "import loops outside kinds/: {outside:?}");
+    // The libraries name none of the machinery above them.
+    let above = ["config", "db", "project", "kinds", "cache", "sources", "artifacts", "record", "schedule", "summary"];
+    for (module, named) in &imports {
+        let library = ["texture", "mesh", "packing", "gpu"]
+            .iter()
+            .any(|library| module == library || module.starts_with(&format!("{library}/")))
+            || ["files", "isa", "openddl", "diagnostic"].contains(&module.as_str());
+        if library {
+            let bad: Vec<&String> =
+                named.iter().filter(|n| above.iter().any(|a| *n == a || n.starts_with(&format!("{a}/")))).collect();
+            assert!(bad.is_empty(), "the library {module} imports {bad:?}");
+        }
+    }
+    // The database and the scheduler name no kind and no driver; nothing below the shell runs the driver.
+    for module in ["db", "schedule", "cache", "config", "sources", "artifacts", "record"] {
+        let bad: Vec<&String> =
+            imports[module].iter().filter(|n| n.starts_with("kinds") || n.starts_with("project")).collect();
+        assert!(bad.is_empty(), "{module} imports {bad:?}");
+    }
+    for (module, named) in &imports {
+        if module.starts_with("kinds") {
+            assert!(!named.iter().any(|n| n.starts_with("project")), "{module} runs the driver");
         }
     }
 }

@@ -53,6 +53,18 @@ fn surface_material(db: &dyn Db, asset: Asset, surface: &SurfaceId) -> Result<(A
     Ok((geometry, index))
 }
 
+/// The AO kind's one step: load the mesh, then schedule each material's map.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub enum Step {
+    Plan,
+}
+
+impl crate::kinds::KindStep for Step {
+    fn sort(&self) -> &'static str {
+        "plan"
+    }
+}
+
 impl Kind for AmbientOcclusion {
     const NAME: &'static str = "AmbientOcclusion";
 
@@ -61,10 +73,12 @@ impl Kind for AmbientOcclusion {
     }
 
     fn first_jobs(db: &dyn Db, asset: Asset) -> Vec<Job> {
-        vec![Job { asset, task: Task::Step("plan", 0), after: 0, label: asset.name(db).clone() }]
+        vec![Job { asset, task: Task::step(Step::Plan), after: 0, label: asset.name(db).clone() }]
     }
 
-    fn run_step(db: &dyn Db, asset: Asset, _step: &'static str, _index: u32) -> Result<Vec<Job>, Diagnostic> {
+    type Step = Step;
+
+    fn run_step(db: &dyn Db, asset: Asset, _step: &Step) -> Result<Vec<Job>, Diagnostic> {
         let geometry = bake_geometry(db, asset)?;
         let name = asset.name(db);
         Ok(geometry

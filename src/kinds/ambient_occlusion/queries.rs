@@ -213,7 +213,9 @@ pub fn vertex_visibility(db: &dyn Db, asset: Asset) -> Result<Arc<VertexVisibili
         .part(&geometry.vertex_offset)
         .finish();
     let name = asset.name(db);
-    if let Some(values) = load_cached(db, VERTICES.name, key, |entry| from_pod_blob::<f32>(entry.blobs.first()?)) {
+    if let Some(values) =
+        load_cached(db, VERTICES.name, key, |entry| from_pod_blob::<f32>(&entry.into_blobs::<1>()?[0]))
+    {
         record_cache_hit(db, VERTICES, name);
         return Ok(Arc::new(VertexVisibility(values)));
     }
@@ -234,11 +236,7 @@ pub fn vertex_visibility(db: &dyn Db, asset: Asset) -> Result<Arc<VertexVisibili
         .map(|occlusion| occlusion.map_or(1.0, |occlusion| occlusion.visibility))
         .collect()
     });
-    store_cached(db, VERTICES.name, key, || CacheEntry {
-        metadata: serde_json::Value::Null,
-        blobs: vec![pod_blob(&values)],
-        compress: true,
-    });
+    store_cached(db, VERTICES.name, key, || CacheEntry::of_blobs(vec![pod_blob(&values)], true));
     Ok(Arc::new(VertexVisibility(values)))
 }
 
@@ -325,23 +323,30 @@ pub fn tile_key(db: &dyn Db, asset: Asset, tile: TileId) -> Result<CacheKey, Dia
 
 const TILE_ENTRY: &str = "ao-tile";
 
+/// What a tile entry holds beside its values and states.
+#[derive(serde::Serialize, serde::Deserialize)]
+struct TileEntry {
+    /// x, y, width, height.
+    region: [u32; 4],
+    overlapping: u32,
+    rays: u64,
+    bake_ms: f64,
+}
+
 fn tile_entry(tile: &TileBake) -> CacheEntry {
     let region = tile.region;
-    CacheEntry {
-        metadata: serde_json::json!({
-            "region": [region.x, region.y, region.width, region.height],
-            "overlapping": tile.overlapping,
-            "rays": tile.rays,
-            "bake_ms": tile.bake_ms,
-        }),
-        blobs: vec![pod_blob(&tile.values), tile.states.clone()],
-        compress: true,
-    }
+    let metadata = TileEntry {
+        region: [region.x, region.y, region.width, region.height],
+        overlapping: tile.overlapping,
+        rays: tile.rays,
+        bake_ms: tile.bake_ms,
+    };
+    CacheEntry::new(&metadata, vec![pod_blob(&tile.values), tile.states.clone()], true)
 }
 
 fn tile_from_entry(entry: CacheEntry) -> Option<TileBake> {
-    let [values, states]: [Vec<u8>; 2] = entry.blobs.try_into().ok()?;
-    let region: [u32; 4] = serde_json::from_value(entry.metadata.get("region")?.clone()).ok()?;
+    let (metadata, [values, states]) = entry.parts::<TileEntry, 2>()?;
+    let region = metadata.region;
     let region = TexelRegion { x: region[0], y: region[1], width: region[2], height: region[3] };
     let values: Vec<u16> = from_pod_blob(&values)?;
     let texels = region.width as usize * region.height as usize;
@@ -350,9 +355,9 @@ fn tile_from_entry(entry: CacheEntry) -> Option<TileBake> {
         region,
         values,
         states,
-        overlapping: entry.metadata.get("overlapping")?.as_u64()? as u32,
-        rays: entry.metadata.get("rays")?.as_u64()?,
-        bake_ms: entry.metadata.get("bake_ms")?.as_f64()?,
+        overlapping: metadata.overlapping,
+        rays: metadata.rays,
+        bake_ms: metadata.bake_ms,
     })
 }
 
@@ -454,36 +459,43 @@ pub fn ao_map(db: &dyn Db, asset: Asset, material: u32) -> Result<Arc<AoMapFiles
     Ok(Arc::new(files))
 }
 
+/// What a map entry holds beside its values and 16-bit PNG.
+#[derive(serde::Serialize, serde::Deserialize)]
+struct MapEntry {
+    size: u32,
+    baked_texels: u64,
+    invalid_texels: u64,
+    overlapping_texels: u64,
+    rays: u64,
+    bake_ms: f64,
+}
+
 fn map_entry(files: &AoMapFiles) -> CacheEntry {
     let map = &files.map;
-    CacheEntry {
-        metadata: serde_json::json!({
-            "size": map.size,
-            "baked_texels": map.baked_texels,
-            "invalid_texels": map.invalid_texels,
-            "overlapping_texels": map.overlapping_texels,
-            "rays": map.rays,
-            "bake_ms": map.bake_ms,
-        }),
-        blobs: vec![pod_blob(&map.values), files.png16.to_vec()],
-        compress: true,
-    }
+    let metadata = MapEntry {
+        size: map.size,
+        baked_texels: map.baked_texels,
+        invalid_texels: map.invalid_texels,
+        overlapping_texels: map.overlapping_texels,
+        rays: map.rays,
+        bake_ms: map.bake_ms,
+    };
+    CacheEntry::new(&metadata, vec![pod_blob(&map.values), files.png16.to_vec()], true)
 }
 
 fn map_from_entry(entry: CacheEntry) -> Option<AoMapFiles> {
-    let [values, png16]: [Vec<u8>; 2] = entry.blobs.try_into().ok()?;
-    let metadata = &entry.metadata;
-    let size = metadata.get("size")?.as_u64()? as u32;
+    let (metadata, [values, png16]) = entry.parts::<MapEntry, 2>()?;
+    let size = metadata.size;
     let values: Vec<u16> = from_pod_blob(&values)?;
     (values.len() == size as usize * size as usize).then_some(())?;
     let map = AoMap {
         size,
         values,
-        baked_texels: metadata.get("baked_texels")?.as_u64()?,
-        invalid_texels: metadata.get("invalid_texels")?.as_u64()?,
-        overlapping_texels: metadata.get("overlapping_texels")?.as_u64()?,
-        rays: metadata.get("rays")?.as_u64()?,
-        bake_ms: metadata.get("bake_ms")?.as_f64()?,
+        baked_texels: metadata.baked_texels,
+        invalid_texels: metadata.invalid_texels,
+        overlapping_texels: metadata.overlapping_texels,
+        rays: metadata.rays,
+        bake_ms: metadata.bake_ms,
     };
     Some(AoMapFiles { map, png16: png16.into() })
 }

@@ -45,6 +45,25 @@ fn page_files(output_folder: &Path, page: u32, container: crate::config::Contain
     [output_folder.join(format!("{stem}.{}", container.extension())), output_folder.join(format!("{stem}.png"))]
 }
 
+/// The atlas kind's steps: the layout (then its pages and meshes), and one mesh's remap.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub enum Step {
+    Layout,
+    /// The `mesh`-th of the asset's meshes.
+    Remap {
+        mesh: u32,
+    },
+}
+
+impl crate::kinds::KindStep for Step {
+    fn sort(&self) -> &'static str {
+        match self {
+            Step::Layout => "layout",
+            Step::Remap { .. } => "remap",
+        }
+    }
+}
+
 impl Kind for Atlas {
     const NAME: &'static str = "Atlas";
 
@@ -61,12 +80,14 @@ impl Kind for Atlas {
     }
 
     fn first_jobs(db: &dyn Db, asset: Asset) -> Vec<Job> {
-        vec![Job { asset, task: Task::Step("layout", 0), after: 0, label: asset.name(db).clone() }]
+        vec![Job { asset, task: Task::step(Step::Layout), after: 0, label: asset.name(db).clone() }]
     }
 
-    fn run_step(db: &dyn Db, asset: Asset, step: &'static str, index: u32) -> Result<Vec<Job>, Diagnostic> {
-        match step {
-            "layout" => {
+    type Step = Step;
+
+    fn run_step(db: &dyn Db, asset: Asset, step: &Step) -> Result<Vec<Job>, Diagnostic> {
+        match *step {
+            Step::Layout => {
                 let layout = atlas_layout(db, asset)?;
                 let name = asset.name(db);
                 let pages = (0..layout.packing.pages.len() as u32).map(|page| Job {
@@ -77,18 +98,17 @@ impl Kind for Atlas {
                 });
                 let meshes = atlas_mesh_files(db, asset).iter().enumerate().map(|(index, mesh)| Job {
                     asset,
-                    task: Task::Step("remap", index as u32),
+                    task: Task::step(Step::Remap { mesh: index as u32 }),
                     after: 1,
                     label: format!("{name}/meshes/{}", display_path(&remapped_mesh_path(db, asset, mesh))),
                 });
                 Ok(pages.chain(meshes).collect())
             }
             // The mesh's own failure is reported by `outputs` (the other meshes are written).
-            "remap" => {
-                let _ = remapped_mesh(db, asset, atlas_mesh_files(db, asset)[index as usize].clone());
+            Step::Remap { mesh } => {
+                let _ = remapped_mesh(db, asset, atlas_mesh_files(db, asset)[mesh as usize].clone());
                 Ok(Vec::new())
             }
-            other => unreachable!("the atlas kind schedules no step `{other}`"),
         }
     }
 

@@ -383,7 +383,7 @@ fn previous_layout(db: &dyn Db, asset: Asset) -> Option<Arc<AtlasLayout>> {
     if let Some(previous) = recall(db, &layout_memo_name(db, asset)) {
         return Some(previous);
     }
-    load_cached(db, LAYOUT_MEMO, layout_memo_key(db, asset), |entry| serde_json::from_value(entry.metadata).ok())
+    load_cached(db, LAYOUT_MEMO, layout_memo_key(db, asset), |entry| entry.parts::<_, 0>().map(|(layout, [])| layout))
         .map(Arc::new)
 }
 
@@ -393,11 +393,7 @@ fn remember_layout(db: &dyn Db, asset: Asset, layout: &AtlasLayout) {
         return;
     }
     remember(db, &name, Arc::new(layout.clone()));
-    store_cached(db, LAYOUT_MEMO, layout_memo_key(db, asset), || CacheEntry {
-        metadata: serde_json::to_value(layout).expect("layouts serialise"),
-        blobs: Vec::new(),
-        compress: true,
-    });
+    store_cached(db, LAYOUT_MEMO, layout_memo_key(db, asset), || CacheEntry::new(layout, Vec::new(), true));
 }
 
 /// The entries of one page: their layout entry, place, and trimmed texture facts.
@@ -500,29 +496,29 @@ fn page_memo_entry(memo: &PageMemo) -> CacheEntry {
         .iter()
         .map(|entry| (entry.placement, blake3::Hash::from(entry.kept_hash).to_hex().to_string(), entry.translucent))
         .collect();
-    CacheEntry {
-        metadata: serde_json::json!({
-            "entries": entries,
-            "padding": memo.padding,
-            "width": memo.texture.width,
-            "height": memo.texture.height,
-        }),
-        blobs: vec![memo.texture.pixels.to_vec(), crate::db::pod_blob(&memo.sources.to_offsets())],
-        compress: true,
-    }
+    let metadata =
+        PageMemoEntry { entries, padding: memo.padding, width: memo.texture.width, height: memo.texture.height };
+    let blobs = vec![memo.texture.pixels.to_vec(), crate::db::pod_blob(&memo.sources.to_offsets())];
+    CacheEntry::new(&metadata, blobs, true)
+}
+
+/// What a page memo entry holds beside its pixels and fill offsets.
+#[derive(serde::Serialize, serde::Deserialize)]
+struct PageMemoEntry {
+    /// Each entry's placement, kept texels' hash (hex) and whether it is translucent.
+    entries: Vec<(Placement, String, bool)>,
+    padding: u32,
+    width: u32,
+    height: u32,
 }
 
 fn page_memo_from_entry(entry: CacheEntry) -> Option<PageMemo> {
-    let metadata = &entry.metadata;
-    let listed: Vec<(Placement, String, bool)> = serde_json::from_value(metadata.get("entries")?.clone()).ok()?;
+    let (metadata, [pixels, offsets]) = entry.parts::<PageMemoEntry, 2>()?;
+    let PageMemoEntry { entries: listed, padding, width, height } = metadata;
     let mut entries = Vec::new();
     for (placement, hash, translucent) in listed {
         entries.push(PageEntry { placement, kept_hash: *blake3::Hash::from_hex(hash).ok()?.as_bytes(), translucent });
     }
-    let padding = metadata.get("padding")?.as_u64()? as u32;
-    let width = metadata.get("width")?.as_u64()? as u32;
-    let height = metadata.get("height")?.as_u64()? as u32;
-    let [pixels, offsets]: [Vec<u8>; 2] = entry.blobs.try_into().ok()?;
     let texels = width as usize * height as usize;
     if pixels.len() != texels * 4 {
         return None;

@@ -3,7 +3,7 @@
 //! the smallest (power-of-two when asked) atlas that fits; the density scales down uniformly
 //! when `max_size` is reached.
 
-use crate::config::AtlasSettings;
+use crate::packing::PageSettings;
 use crate::packing::{pack_smallest, Placement};
 
 #[derive(Clone, Debug, PartialEq, serde::Serialize, serde::Deserialize)]
@@ -18,7 +18,7 @@ pub struct Layout {
 }
 
 /// Packs rectangles of `sizes` (world units, width × height) into one atlas.
-pub fn layout_rectangles(sizes: &[(f32, f32)], settings: &AtlasSettings, texel_density: Option<f32>) -> Layout {
+pub fn layout_rectangles(sizes: &[(f32, f32)], settings: &PageSettings, texel_density: Option<f32>) -> Layout {
     let area: f32 = sizes.iter().map(|(w, h)| w.max(1e-6) * h.max(1e-6)).sum::<f32>().max(1e-12);
     let max_side = settings.max_size as f32;
     let pack_at = |density: f32| {
@@ -56,7 +56,7 @@ pub fn layout_rectangles(sizes: &[(f32, f32)], settings: &AtlasSettings, texel_d
     // Even one block per rectangle does not fit: the caller's max_size is far too small.
     let cells: Vec<(u32, u32)> = sizes.iter().map(|_| (4, 4)).collect();
     let (width, height, placements) =
-        pack_smallest(&cells, &AtlasSettings { max_size: u32::MAX / 4, ..settings.clone() }).expect("unbounded atlas");
+        pack_smallest(&cells, &PageSettings { max_size: u32::MAX / 4, ..settings.clone() }).expect("unbounded atlas");
     Layout { width, height, texel_density: 0.0, placements, occupancy: 0.0 }
 }
 

@@ -2,7 +2,8 @@
 //! folder and its label. One level without `lods` (the asset's folder); one per budget of a
 //! chain (`lod0/`, `lod1/`, …), each meant for half the screen size of the one before.
 
-use crate::config::{AtlasSettings, Settings};
+use crate::config::Settings;
+use crate::packing::PageSettings;
 
 /// What one level of a billboard cloud is asked for.
 #[derive(Clone, Copy, Debug, PartialEq)]
@@ -51,8 +52,8 @@ pub fn level_settings(settings: &Settings, level: u32) -> LevelSettings {
 }
 
 /// The atlas settings of a level: the asset's, with the level's largest side.
-pub fn level_atlas_settings(atlas: &AtlasSettings, level: &LevelSettings) -> AtlasSettings {
-    AtlasSettings { max_size: level.max_atlas_size, ..atlas.clone() }
+pub fn level_atlas_settings(atlas: &PageSettings, level: &LevelSettings) -> PageSettings {
+    PageSettings { max_size: level.max_atlas_size, ..atlas.clone() }
 }
 
 /// The folder a level's files go to, inside the asset's: `lod<N>` in a chain, else none.

@@ -54,9 +54,6 @@ fn level_of_surface(db: &dyn Db, asset: Asset, surface: &SurfaceId) -> Result<u3
         .ok_or_else(|| Diagnostic::new(asset.main_file(db), format!("no LOD level `{}`", surface.group)))
 }
 
-/// Render steps carry their level and group in one index: the level in the top byte.
-const GROUPS_PER_LEVEL: u32 = 1 << 24;
-
 /// Whether some of a level's atlas surfaces are not in the persistent cache (so it renders).
 fn level_renders(db: &dyn Db, asset: Asset, level: u32) -> bool {
     !atlas_surfaces(db, asset, level)
@@ -71,6 +68,29 @@ fn material_texture_slots(loaded: &LoadedMesh) -> Vec<(usize, TextureSlot)> {
     }
     let materials = loaded.mesh.materials.iter().enumerate();
     materials.flat_map(|(index, material)| material.maps.keys().map(move |&slot| (index, slot))).collect()
+}
+
+/// The billboard kind's steps, each of one LOD level: its planes and layout (then the rest), a
+/// source texture's upload to the GPU, the render memo's load, one render batch, the LOD mesh.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub enum Step {
+    Layout { level: u32 },
+    Upload { texture: u32 },
+    RenderMemo { level: u32 },
+    Render { level: u32, batch: u32 },
+    Lod { level: u32 },
+}
+
+impl crate::kinds::KindStep for Step {
+    fn sort(&self) -> &'static str {
+        match self {
+            Step::Layout { .. } => "layout",
+            Step::Upload { .. } => "upload",
+            Step::RenderMemo { .. } => "render-memo",
+            Step::Render { .. } => "render",
+            Step::Lod { .. } => "lod",
+        }
+    }
 }
 
 impl Kind for BillboardCloud {
@@ -88,7 +108,7 @@ impl Kind for BillboardCloud {
             .clone()
             .map(|level| Job {
                 asset,
-                task: Task::Step("layout", level),
+                task: Task::step(Step::Layout { level }),
                 after: 0,
                 label: level_label(db, asset, level).clone(),
             })
@@ -101,7 +121,7 @@ impl Kind for BillboardCloud {
             let name = asset.name(db);
             jobs.extend((0..uploads).map(|texture| Job {
                 asset,
-                task: Task::Step("upload", texture),
+                task: Task::step(Step::Upload { texture }),
                 after: 0,
                 label: format!("{name}/upload{texture}"),
             }));
@@ -109,14 +129,15 @@ impl Kind for BillboardCloud {
         jobs
     }
 
-    fn run_step(db: &dyn Db, asset: Asset, step: &'static str, index: u32) -> Result<Vec<Job>, Diagnostic> {
+    type Step = Step;
+
+    fn run_step(db: &dyn Db, asset: Asset, step: &Step) -> Result<Vec<Job>, Diagnostic> {
         let name = asset.name(db);
-        match step {
-            "layout" => {
-                let level = index;
+        match *step {
+            Step::Layout { level } => {
                 let label = level_label(db, asset, level);
                 billboard_layout(db, asset, level)?;
-                let lod = Job { asset, task: Task::Step("lod", level), after: 1, label: format!("{label}/lod") };
+                let lod = Job { asset, task: Task::step(Step::Lod { level }), after: 1, label: format!("{label}/lod") };
                 let surfaces = atlas_surfaces(db, asset, level);
                 let surface_jobs = surfaces.clone().map(|surface| Job {
                     asset,
@@ -134,7 +155,7 @@ impl Kind for BillboardCloud {
                 // of one after the other inside the first render.
                 let mut jobs = vec![Job {
                     asset,
-                    task: Task::Step("render-memo", level),
+                    task: Task::step(Step::RenderMemo { level }),
                     after: 1,
                     label: format!("{label}/render-memo"),
                 }];
@@ -145,24 +166,24 @@ impl Kind for BillboardCloud {
                     label: surface.label(name),
                 }));
                 jobs.push(lod);
-                let batches = 0..(queries::level_render_batches(db, asset, level).len() as u32).min(GROUPS_PER_LEVEL);
+                let batches = 0..queries::level_render_batches(db, asset, level).len() as u32;
                 jobs.extend(batches.map(|batch| Job {
                     asset,
-                    task: Task::Step("render", level * GROUPS_PER_LEVEL + batch),
+                    task: Task::step(Step::Render { level, batch }),
                     after: 1,
                     label: format!("{label}/render{batch}"),
                 }));
                 jobs.extend(surface_jobs);
                 Ok(jobs)
             }
-            "render-memo" => {
-                queries::stored_renders(db, asset, index);
+            Step::RenderMemo { level } => {
+                queries::stored_renders(db, asset, level);
                 Ok(Vec::new())
             }
-            "upload" => {
+            Step::Upload { texture } => {
                 // Errors are the renders' to report.
                 let loaded = loaded_mesh(db, asset)?;
-                if let Some(&(material, slot)) = material_texture_slots(&loaded).get(index as usize) {
+                if let Some(&(material, slot)) = material_texture_slots(&loaded).get(texture as usize) {
                     if let (Ok(Some(levels)), Ok(gpu)) =
                         (queries::material_texture_mips(db, asset, material as u32, slot), crate::gpu::gpu())
                     {
@@ -171,8 +192,7 @@ impl Kind for BillboardCloud {
                 }
                 Ok(Vec::new())
             }
-            "render" => {
-                let (level, batch) = (index / GROUPS_PER_LEVEL, index % GROUPS_PER_LEVEL);
+            Step::Render { level, batch } => {
                 let groups =
                     queries::level_render_batches(db, asset, level).get(batch as usize).cloned().unwrap_or_default();
                 for group in groups {
@@ -180,8 +200,7 @@ impl Kind for BillboardCloud {
                 }
                 Ok(Vec::new())
             }
-            "lod" => lod_files(db, asset, index).map(|_| Vec::new()),
-            other => unreachable!("the billboard kind schedules no step `{other}`"),
+            Step::Lod { level } => lod_files(db, asset, level).map(|_| Vec::new()),
         }
     }
 
@@ -444,14 +463,10 @@ pub struct PreviewOptions {
 
 #[derive(Debug, thiserror::Error)]
 pub enum PreviewError {
-    #[error(transparent)]
-    Build(#[from] crate::project::BuildError),
     #[error("asset `{0}` is not a BillboardCloud: only billboard clouds have a LOD to preview")]
     NotBillboard(String),
     #[error("asset `{name}` has no LOD level {level}: it has {levels} (0 to {})", levels - 1)]
     NoSuchLevel { name: String, level: u32, levels: u32 },
-    #[error("asset `{name}` failed to bake:\n{errors}")]
-    Failed { name: String, errors: String },
     #[error("{0}")]
     Artifact(Diagnostic),
     #[error(transparent)]
@@ -460,30 +475,18 @@ pub enum PreviewError {
     Write(std::io::Error),
 }
 
-/// `cirrus preview`: bakes the asset if needed, then renders it and its source from the view
-/// directions and writes the contact sheet and the metrics of each level asked for (with
-/// several, also the chain sheet); returns each level's metrics.
+/// `cirrus preview` of a baked asset (`input`, built by the caller): renders it and its source
+/// from the view directions and writes the contact sheet and the metrics of each level asked
+/// for (with several, also the chain sheet); returns each level's metrics.
 pub fn preview(
-    project: &mut crate::project::Project,
+    db: &dyn Db,
+    input: Asset,
+    config: &PipelineConfig,
     options: &PreviewOptions,
 ) -> Result<Vec<(u32, lod_preview::PreviewMetrics)>, PreviewError> {
-    let build = crate::project::BuildOptions { only_assets: vec![options.asset.clone()], ..Default::default() };
-    let summary = project.build(&build, &|_| {})?;
-    let asset = &summary.assets[0];
-    if asset.kind != BillboardCloud::NAME {
+    if input.kind(db) != crate::config::AssetKind::BillboardCloud {
         return Err(PreviewError::NotBillboard(options.asset.clone()));
     }
-    if asset.status != crate::summary::AssetStatus::Ok {
-        let errors = asset
-            .errors
-            .iter()
-            .map(|error| format!("  {}: {}", error.file, error.message))
-            .collect::<Vec<_>>()
-            .join("\n");
-        return Err(PreviewError::Failed { name: options.asset.clone(), errors });
-    }
-    let input = project.asset_input(&options.asset).expect("a built asset has an input");
-    let db = project.database();
     let settings = input.settings(db);
     let level_count = levels::level_count(settings);
     let chosen: Vec<u32> = match options.lod {
@@ -496,7 +499,6 @@ pub fn preview(
     let loaded = loaded_mesh(db, input).map_err(PreviewError::Artifact)?;
     let source = source_view_mesh(db, input, &loaded).map_err(PreviewError::Artifact)?;
     let cutoff = settings.billboard.alpha_cutoff;
-    let config = project.config();
     let folder = config.output.join(&options.asset);
     let lods = chosen
         .iter()
@@ -526,8 +528,7 @@ pub fn preview(
     let lod_refs: Vec<&crate::gpu::ViewMesh> = lods.iter().collect();
     let preview = lod_preview::preview_chain(gpu, &source, &lod_refs, center.to_array(), radius, options.settings)?;
     let out = config.root.join(&options.out);
-    let write =
-        |path: PathBuf, bytes: &[u8]| crate::artifacts::write_if_changed(&path, bytes).map_err(PreviewError::Write);
+    let write = |path: PathBuf, bytes: &[u8]| crate::files::write_if_changed(&path, bytes).map_err(PreviewError::Write);
     let mut results = Vec::new();
     for (&level, level_preview) in chosen.iter().zip(preview.levels) {
         let level_out = out.join(levels::level_folder(settings, level));

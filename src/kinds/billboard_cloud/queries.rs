@@ -42,9 +42,9 @@ pub const RENDER: Stage = Stage { name: "render", version: 7 };
 pub const ATLAS: Stage = Stage { name: "atlas", version: 1 };
 pub const LOD: Stage = Stage { name: "lod", version: 1 };
 
-impl KeyPart for crate::config::AtlasSettings {
+impl KeyPart for crate::packing::PageSettings {
     fn add_to(&self, key: CacheKeyBuilder) -> CacheKeyBuilder {
-        let crate::config::AtlasSettings { max_size, padding, power_of_two } = self;
+        let crate::packing::PageSettings { max_size, padding, power_of_two } = self;
         key.part(max_size).part(padding).part(power_of_two)
     }
 }
@@ -114,7 +114,7 @@ pub fn atlas_layout_settings(
     db: &dyn Db,
     asset: Asset,
     level: u32,
-) -> (crate::config::AtlasSettings, Option<f32>, Option<u32>) {
+) -> (crate::packing::PageSettings, Option<f32>, Option<u32>) {
     let settings = level_settings(db, asset, level);
     (
         super::levels::level_atlas_settings(&asset.settings(db).atlas, &settings),
@@ -257,11 +257,9 @@ pub fn material_texture_mips(
     let levels = Arc::new(crate::texture::mips::mip_chain(&texture, settings));
     if let Some(key) = key {
         let stored = levels.clone();
-        store_cached_in_background(db, SOURCE_MIPS.name, key, move || CacheEntry {
-            metadata: serde_json::to_value(stored.iter().map(|level| (level.width, level.height)).collect::<Vec<_>>())
-                .expect("sizes serialise"),
-            blobs: stored.iter().map(|level| level.pixels.to_vec()).collect(),
-            compress: true,
+        store_cached_in_background(db, SOURCE_MIPS.name, key, move || {
+            let sizes: Vec<(u32, u32)> = stored.iter().map(|level| (level.width, level.height)).collect();
+            CacheEntry::new(&sizes, stored.iter().map(|level| level.pixels.to_vec()).collect(), true)
         });
     }
     Ok(Some(levels))
@@ -273,23 +271,17 @@ const SOURCE_MIPS: Stage = Stage { name: "source-mips", version: 1 };
 /// A chain back from its entry; `None` unless every level has its size's bytes and each level
 /// halves the one before (a damaged or hand-made entry is a miss).
 fn mip_levels_from_entry(entry: CacheEntry) -> Option<Vec<Texture>> {
-    let sizes: Vec<(u32, u32)> = serde_json::from_value(entry.metadata).ok()?;
+    let (sizes, blobs) = entry.metadata_and_blobs::<Vec<(u32, u32)>>()?;
     if sizes.is_empty()
-        || sizes.len() != entry.blobs.len()
+        || sizes.len() != blobs.len()
         || sizes.windows(2).any(|pair| pair[1] != ((pair[0].0 / 2).max(1), (pair[0].1 / 2).max(1)))
     {
         return None;
     }
-    let fits = sizes
-        .iter()
-        .zip(&entry.blobs)
-        .all(|(&(width, height), pixels)| pixels.len() == width as usize * height as usize * 4);
+    let fits =
+        sizes.iter().zip(&blobs).all(|(&(width, height), pixels)| pixels.len() == width as usize * height as usize * 4);
     fits.then(|| {
-        sizes
-            .into_iter()
-            .zip(entry.blobs)
-            .map(|((width, height), pixels)| Texture::new(width, height, pixels))
-            .collect()
+        sizes.into_iter().zip(blobs).map(|((width, height), pixels)| Texture::new(width, height, pixels)).collect()
     })
 }
 
@@ -498,7 +490,7 @@ pub fn atlas_texel_sources(
     let key = stage_key(ATLAS_FILL).part(&coverage.content_hash()).finish();
     let texels = coverage.width as usize * coverage.height as usize;
     let stored = load_cached(db, ATLAS_FILL.name, key, |entry| {
-        let [offsets]: [Vec<u8>; 1] = entry.blobs.try_into().ok()?;
+        let [offsets] = entry.into_blobs::<1>()?;
         crate::texture::fill::TexelSources::from_offsets(&from_pod_blob::<u32>(&offsets)?, texels)
     });
     if let Some(sources) = stored {
@@ -507,10 +499,8 @@ pub fn atlas_texel_sources(
     let sources = timed(db, ATLAS, level_label(db, asset, level), || super::atlas::texel_sources(&coverage));
     if !sources.0.is_empty() {
         let offsets = sources.to_offsets();
-        store_cached_in_background(db, ATLAS_FILL.name, key, move || CacheEntry {
-            metadata: serde_json::Value::Null,
-            blobs: vec![pod_blob(&offsets)],
-            compress: true,
+        store_cached_in_background(db, ATLAS_FILL.name, key, move || {
+            CacheEntry::of_blobs(vec![pod_blob(&offsets)], true)
         });
     }
     Ok(Arc::new(sources))
@@ -676,15 +666,20 @@ fn store_renders(db: &dyn Db, asset: Asset, level: u32, images: &[Arc<Vec<PlaneI
                     bytes.extend_from_slice(image.bytes());
                 }
             }
-            CacheEntry { metadata: serde_json::json!({ "groups": groups }), blobs: vec![bytes], compress: true }
+            CacheEntry::new(&RenderMemoEntry { groups }, vec![bytes], true)
         });
     }
 }
 
+/// What a render memo entry holds beside its images: each group's key (hex) and image sizes.
+#[derive(serde::Serialize, serde::Deserialize)]
+struct RenderMemoEntry {
+    groups: Vec<(String, Vec<(u32, u32)>)>,
+}
+
 /// A render memo entry's groups; their images share the entry's blob (nothing is copied).
 fn renders_from_entry(entry: CacheEntry) -> Option<HashMap<CacheKey, Arc<Vec<PlaneImages>>>> {
-    let groups: Vec<(String, Vec<(u32, u32)>)> = serde_json::from_value(entry.metadata.get("groups")?.clone()).ok()?;
-    let [bytes]: [Vec<u8>; 1] = entry.blobs.try_into().ok()?;
+    let (RenderMemoEntry { groups }, [bytes]) = entry.parts::<RenderMemoEntry, 1>()?;
     let buffer = Arc::new(bytes);
     let mut offset = 0;
     let mut renders = HashMap::new();

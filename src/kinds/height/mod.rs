@@ -51,6 +51,28 @@ fn measured_meshes(db: &dyn Db, asset: Asset) -> Vec<Measured> {
     }
 }
 
+/// The height kind's steps: both meshes (then the map and the rest), the tessellation, and one
+/// measured mesh's distance to the high one.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub enum Step {
+    Plan,
+    Tessellate,
+    /// The `mesh`-th measured mesh.
+    Distance {
+        mesh: u32,
+    },
+}
+
+impl crate::kinds::KindStep for Step {
+    fn sort(&self) -> &'static str {
+        match self {
+            Step::Plan => "plan",
+            Step::Tessellate => "tessellate",
+            Step::Distance { .. } => "distance",
+        }
+    }
+}
+
 impl Kind for Height {
     const NAME: &'static str = "Height";
 
@@ -61,13 +83,15 @@ impl Kind for Height {
     }
 
     fn first_jobs(db: &dyn Db, asset: Asset) -> Vec<Job> {
-        vec![Job { asset, task: Task::Step("plan", 0), after: 0, label: asset.name(db).clone() }]
+        vec![Job { asset, task: Task::step(Step::Plan), after: 0, label: asset.name(db).clone() }]
     }
 
-    fn run_step(db: &dyn Db, asset: Asset, step: &'static str, index: u32) -> Result<Vec<Job>, Diagnostic> {
+    type Step = Step;
+
+    fn run_step(db: &dyn Db, asset: Asset, step: &Step) -> Result<Vec<Job>, Diagnostic> {
         let name = asset.name(db);
-        match step {
-            "plan" => {
+        match *step {
+            Step::Plan => {
                 low_geometry(db, asset)?;
                 high_geometry(db, asset)?;
                 let surface = height_surface();
@@ -76,7 +100,7 @@ impl Kind for Height {
                     jobs.push(Job {
                         asset,
                         label: distance_label(name, measured),
-                        task: Task::Step("distance", index as u32),
+                        task: Task::step(Step::Distance { mesh: index as u32 }),
                         after: 1,
                     });
                 }
@@ -84,18 +108,17 @@ impl Kind for Height {
                     jobs.push(Job {
                         asset,
                         label: format!("{name}/tessellated"),
-                        task: Task::Step("tessellate", 0),
+                        task: Task::step(Step::Tessellate),
                         after: 1,
                     });
                 }
                 Ok(jobs)
             }
-            "tessellate" => tessellated_files(db, asset).map(|_| Vec::new()),
-            "distance" => match measured_meshes(db, asset).get(index as usize) {
+            Step::Tessellate => tessellated_files(db, asset).map(|_| Vec::new()),
+            Step::Distance { mesh } => match measured_meshes(db, asset).get(mesh as usize) {
                 Some(&measured) => distance_to_high(db, asset, measured).map(|_| Vec::new()),
                 None => Ok(Vec::new()),
             },
-            other => unreachable!("the Height kind schedules no step `{other}`"),
         }
     }
 

@@ -321,26 +321,33 @@ fn top_down_footprint(low: &MeshGeometry, high: &MeshGeometry) -> crate::gpu::to
     }
 }
 
+/// What a height map entry holds beside its distances, states and 16-bit PNG.
+#[derive(serde::Serialize, serde::Deserialize)]
+struct MapEntry {
+    size: u32,
+    range: [f32; 2],
+    measured_texels: u64,
+    missed_texels: u64,
+    search_span: f32,
+    bake_ms: f64,
+}
+
 fn map_entry(files: &HeightMapFiles) -> CacheEntry {
     let map = &files.map;
-    CacheEntry {
-        metadata: serde_json::json!({
-            "size": map.size,
-            "range": map.range,
-            "measured_texels": map.measured_texels,
-            "missed_texels": map.missed_texels,
-            "search_span": map.search_span,
-            "bake_ms": map.bake_ms,
-        }),
-        blobs: vec![pod_blob(&map.distances), map.states.clone(), files.png16.to_vec()],
-        compress: true,
-    }
+    let metadata = MapEntry {
+        size: map.size,
+        range: map.range,
+        measured_texels: map.measured_texels,
+        missed_texels: map.missed_texels,
+        search_span: map.search_span,
+        bake_ms: map.bake_ms,
+    };
+    CacheEntry::new(&metadata, vec![pod_blob(&map.distances), map.states.clone(), files.png16.to_vec()], true)
 }
 
 fn map_from_entry(entry: CacheEntry) -> Option<HeightMapFiles> {
-    let [distances, states, png16]: [Vec<u8>; 3] = entry.blobs.try_into().ok()?;
-    let metadata = &entry.metadata;
-    let size = metadata.get("size")?.as_u64()? as u32;
+    let (metadata, [distances, states, png16]) = entry.parts::<MapEntry, 3>()?;
+    let size = metadata.size;
     let distances: Vec<f32> = from_pod_blob(&distances)?;
     let texels = size as usize * size as usize;
     (distances.len() == texels && states.len() == texels).then_some(())?;
@@ -348,11 +355,11 @@ fn map_from_entry(entry: CacheEntry) -> Option<HeightMapFiles> {
         size,
         distances,
         states,
-        range: serde_json::from_value(metadata.get("range")?.clone()).ok()?,
-        measured_texels: metadata.get("measured_texels")?.as_u64()?,
-        missed_texels: metadata.get("missed_texels")?.as_u64()?,
-        search_span: metadata.get("search_span")?.as_f64()? as f32,
-        bake_ms: metadata.get("bake_ms")?.as_f64()?,
+        range: metadata.range,
+        measured_texels: metadata.measured_texels,
+        missed_texels: metadata.missed_texels,
+        search_span: metadata.search_span,
+        bake_ms: metadata.bake_ms,
     };
     Some(HeightMapFiles { map, png16: png16.into() })
 }
@@ -438,16 +445,20 @@ pub struct TessellatedFiles {
 
 const MESH_ENTRY: &str = "height-tessellated";
 
+/// What a tessellated mesh entry holds beside its OBJ.
+#[derive(serde::Serialize, serde::Deserialize)]
+struct MeshEntry {
+    vertices: u64,
+    triangles: u64,
+}
+
 /// The final mesh's OBJ (from the persistent cache, else `output_mesh`).
 #[salsa::tracked(returns(clone))]
 pub fn tessellated_files(db: &dyn Db, asset: Asset) -> Result<Arc<TessellatedFiles>, Diagnostic> {
     let key = output_mesh_key(db, asset)?;
     let from_entry = |entry: CacheEntry| {
-        Some(TessellatedFiles {
-            obj: entry.blobs.first()?.clone().into(),
-            vertices: entry.metadata.get("vertices")?.as_u64()?,
-            triangles: entry.metadata.get("triangles")?.as_u64()?,
-        })
+        let (MeshEntry { vertices, triangles }, [obj]) = entry.parts::<MeshEntry, 1>()?;
+        Some(TessellatedFiles { obj: obj.into(), vertices, triangles })
     };
     if let Some(files) = load_cached(db, MESH_ENTRY, key, from_entry) {
         record_cache_hit(db, DISPLACE, asset.name(db));
@@ -476,10 +487,12 @@ pub fn tessellated_files(db: &dyn Db, asset: Asset) -> Result<Arc<TessellatedFil
         vertices: mesh.positions.len() as u64,
         triangles: mesh.triangles.len() as u64,
     };
-    store_cached(db, MESH_ENTRY, key, || CacheEntry {
-        metadata: serde_json::json!({ "vertices": files.vertices, "triangles": files.triangles }),
-        blobs: vec![files.obj.to_vec()],
-        compress: true,
+    store_cached(db, MESH_ENTRY, key, || {
+        CacheEntry::new(
+            &MeshEntry { vertices: files.vertices, triangles: files.triangles },
+            vec![files.obj.to_vec()],
+            true,
+        )
     });
     Ok(Arc::new(files))
 }
@@ -508,7 +521,7 @@ pub fn distance_to_high(db: &dyn Db, asset: Asset, measured: Measured) -> Result
         .part(&high_geometry(db, asset)?.hash)
         .finish();
     let label = distance_label(asset.name(db), measured);
-    let from_entry = |entry: CacheEntry| serde_json::from_value::<Option<[f64; 2]>>(entry.metadata).ok();
+    let from_entry = |entry: CacheEntry| entry.parts::<Option<[f64; 2]>, 0>().map(|(figures, [])| figures);
     if let Some(figures) = load_cached(db, DISTANCE_ENTRY, key, from_entry) {
         record_cache_hit(db, DISTANCE, &label);
         return Ok(figures.map(|[rms, hausdorff]| SurfaceDistance { rms, hausdorff }));
@@ -534,10 +547,8 @@ pub fn distance_to_high(db: &dyn Db, asset: Asset, measured: Measured) -> Result
         let high_samples = area_weighted_samples(&high_mesh.positions, &high_mesh.triangles, DISTANCE_SAMPLES);
         surface_distance(&mesh_samples, &mesh_bvh, &high_samples, &bvh.value, high.diagonal)
     });
-    store_cached(db, DISTANCE_ENTRY, key, || CacheEntry {
-        metadata: serde_json::json!(distance.map(|distance| [distance.rms, distance.hausdorff])),
-        blobs: Vec::new(),
-        compress: false,
+    store_cached(db, DISTANCE_ENTRY, key, || {
+        CacheEntry::new(&distance.map(|distance| [distance.rms, distance.hausdorff]), Vec::new(), false)
     });
     Ok(distance)
 }

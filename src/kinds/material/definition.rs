@@ -6,8 +6,8 @@ use std::path::{Path, PathBuf};
 
 use serde::{Deserialize, Serialize};
 
-use crate::config::normalize_relative_path;
 use crate::diagnostic::{Diagnostic, TextPosition};
+use crate::files::normalize_relative_path;
 use crate::openddl::{self, Structure, StructureBody, Value};
 use crate::texture::TextureSlot;
 

@@ -35,6 +35,18 @@ fn surfaces(parsed: &definition::MaterialFile) -> Vec<SurfaceId> {
         .collect()
 }
 
+/// The material kind's one step: parse the material file, then schedule its surfaces.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub enum Step {
+    Parse,
+}
+
+impl crate::kinds::KindStep for Step {
+    fn sort(&self) -> &'static str {
+        "parse"
+    }
+}
+
 impl Kind for Material {
     const NAME: &'static str = "Material";
 
@@ -47,10 +59,12 @@ impl Kind for Material {
     }
 
     fn first_jobs(db: &dyn Db, asset: Asset) -> Vec<Job> {
-        vec![Job { asset, task: Task::Step("parse", 0), after: 0, label: display_path(asset.main_file(db)) }]
+        vec![Job { asset, task: Task::step(Step::Parse), after: 0, label: display_path(asset.main_file(db)) }]
     }
 
-    fn run_step(db: &dyn Db, asset: Asset, _step: &'static str, _index: u32) -> Result<Vec<Job>, Diagnostic> {
+    type Step = Step;
+
+    fn run_step(db: &dyn Db, asset: Asset, _step: &Step) -> Result<Vec<Job>, Diagnostic> {
         let parsed = material_file(db, asset)?;
         for warning in &parsed.warnings {
             tracing::warn!("{warning}");

@@ -1,10 +1,10 @@
 //! Rectangles and layout: minimum-area frames around each plane's faces, and atlas packing
 //! without overlaps, with padding, block alignment and the size rules.
 
-use cirrus::config::AtlasSettings;
 use cirrus::kinds::billboard_cloud::layout::{layout_rectangles, Layout};
 use cirrus::kinds::billboard_cloud::planes::{select_planes, PlaneSettings};
 use cirrus::kinds::billboard_cloud::rectangles::{convex_hull, minimum_area_rectangle, plane_rectangles};
+use cirrus::packing::PageSettings;
 use glam::{Vec2, Vec3};
 
 #[test]
@@ -55,7 +55,7 @@ fn plane_rectangles_frame_every_face_of_their_plane() {
     }
 }
 
-fn check_layout(layout: &Layout, settings: &AtlasSettings) {
+fn check_layout(layout: &Layout, settings: &PageSettings) {
     let padding = settings.padding;
     for (index, a) in layout.placements.iter().enumerate() {
         assert!(a.width % 4 == 0 && a.height % 4 == 0, "whole blocks: {a:?}");
@@ -94,12 +94,12 @@ fn check_layout(layout: &Layout, settings: &AtlasSettings) {
 fn layouts_have_no_overlaps_keep_padding_and_scale_density_at_max_size() {
     let sizes: Vec<(f32, f32)> =
         (0..150).map(|i| (0.2 + (i * 37 % 11) as f32 * 0.3, 0.1 + (i * 53 % 7) as f32 * 0.5)).collect();
-    let settings = AtlasSettings { max_size: 1024, padding: 4, power_of_two: true };
+    let settings = PageSettings { max_size: 1024, padding: 4, power_of_two: true };
     let layout = layout_rectangles(&sizes, &settings, Some(20.0));
     check_layout(&layout, &settings);
     assert_eq!(layout.texel_density, 20.0, "fits at the asked density");
     assert!(layout.placements.iter().any(|p| p.rotated), "rotation is used");
-    let small = AtlasSettings { max_size: 256, padding: 2, power_of_two: false };
+    let small = PageSettings { max_size: 256, padding: 2, power_of_two: false };
     let scaled = layout_rectangles(&sizes, &small, Some(20.0));
     check_layout(&scaled, &small);
     assert!(scaled.texel_density < 20.0, "density scaled down at max_size");
@@ -125,7 +125,7 @@ fn lod_obj_loads_back_with_every_quad_inside_its_atlas_placement() {
     let planes =
         select_planes(&positions, &triangles, &[], PlaneSettings { epsilon: 0.02, max_planes: None, max_quads: None });
     let rectangles = plane_rectangles(&positions, &triangles, &planes);
-    let settings = AtlasSettings { max_size: 256, padding: 4, power_of_two: true };
+    let settings = PageSettings { max_size: 256, padding: 4, power_of_two: true };
     let layout = layout_rectangles(
         &rectangles.iter().map(|r| (r.frame.width, r.frame.height)).collect::<Vec<_>>(),
         &settings,

@@ -6,8 +6,8 @@ use std::fmt::Write as _;
 use std::path::Path;
 use std::process::ExitCode;
 
+use super::{load_pipeline_or_report, CacheCommand, EXIT_USAGE};
 use crate::cache::upkeep::{collect_garbage, entry_files, read_last_build, recorded_key_parts, LastBuild, Miss};
-use crate::cli::{load_pipeline_or_report, CacheCommand, EXIT_USAGE};
 use crate::diagnostic::display_path;
 use crate::project::ProjectOptions;
 
@@ -15,7 +15,7 @@ pub fn run(command: CacheCommand, options: ProjectOptions) -> ExitCode {
     match command {
         CacheCommand::Stats { pipeline } => with_cache_folder(&pipeline, |folder, config| {
             let remote = options.remote_cache.apply(config.remote_cache.as_ref());
-            crate::cli::out!("{}", stats_text(folder, remote.as_ref().map(|remote| remote.url.as_str())));
+            super::out!("{}", stats_text(folder, remote.as_ref().map(|remote| remote.url.as_str())));
             ExitCode::SUCCESS
         }),
         CacheCommand::Explain { pipeline, asset } => with_cache_folder(&pipeline, |folder, config| {
@@ -29,7 +29,7 @@ pub fn run(command: CacheCommand, options: ProjectOptions) -> ExitCode {
             }
             match explain_text(folder, &asset) {
                 Some(text) => {
-                    crate::cli::out!("{text}");
+                    super::out!("{text}");
                     ExitCode::SUCCESS
                 }
                 None => {
@@ -43,7 +43,7 @@ pub fn run(command: CacheCommand, options: ProjectOptions) -> ExitCode {
         }),
         CacheCommand::Gc { pipeline, max_size } => with_cache_folder(&pipeline, |folder, _| {
             let collected = collect_garbage(folder, max_size);
-            crate::cli::outln!(
+            super::outln!(
                 "deleted {} entries ({}), kept {} entries ({}) in {}",
                 collected.deleted_entries,
                 human_bytes(collected.deleted_bytes),

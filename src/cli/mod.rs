@@ -1,6 +1,8 @@
 //! The command line: `build`, `watch`, `graph`, `preview`, `check` and `cache`, their options, output and exit codes
 //! (0: every asset baked, 1: some asset failed, 2: usage or configuration error).
 
+mod cache;
+
 use std::io::IsTerminal;
 use std::path::PathBuf;
 use std::process::ExitCode;
@@ -340,7 +342,7 @@ fn run_command(cli: Cli) -> ExitCode {
             build(pipeline, assets, summary, ProjectOptions { verify, ..options })
         }
         Command::Check { pipeline, assets, json } => check(pipeline, &assets, json),
-        Command::Cache { command } => crate::cli_cache::run(command, options),
+        Command::Cache { command } => cache::run(command, options),
         Command::Watch { pipeline, listen, debounce_ms } => {
             let debounce = std::time::Duration::from_millis(debounce_ms);
             let settings = crate::watch::WatchSettings { pipeline, listen, debounce, max_builds: None, remote_cache };
@@ -523,7 +525,11 @@ fn preview(
     let out = out.unwrap_or_else(|| config.output.join(&asset).join(folder));
     let mut project = Project::open(config, options);
     let options = crate::kinds::billboard_cloud::PreviewOptions { asset, settings, out: out.clone(), lod, stand_in };
-    match crate::kinds::billboard_cloud::preview(&mut project, &options) {
+    let previewed = project.built_asset(&options.asset).map_err(PreviewFailure::Build).and_then(|input| {
+        crate::kinds::billboard_cloud::preview(project.database(), input, project.config(), &options)
+            .map_err(PreviewFailure::Preview)
+    });
+    match previewed {
         Ok(levels) => {
             let chain = levels.len() > 1 || levels.first().is_some_and(|&(level, _)| level > 0) || lod.is_some();
             let stand_in = match stand_in {
@@ -556,9 +562,11 @@ fn preview(
             ExitCode::SUCCESS
         }
         Err(
-            error @ (crate::kinds::billboard_cloud::PreviewError::Build(_)
-            | crate::kinds::billboard_cloud::PreviewError::NotBillboard(_)
-            | crate::kinds::billboard_cloud::PreviewError::NoSuchLevel { .. }),
+            error @ (PreviewFailure::Build(crate::project::BuildError::UnknownAsset { .. })
+            | PreviewFailure::Preview(
+                crate::kinds::billboard_cloud::PreviewError::NotBillboard(_)
+                | crate::kinds::billboard_cloud::PreviewError::NoSuchLevel { .. },
+            )),
         ) => {
             eprintln!("error: {error}");
             ExitCode::from(EXIT_USAGE)
@@ -568,6 +576,15 @@ fn preview(
             ExitCode::from(EXIT_ASSET_FAILED)
         }
     }
+}
+
+/// Why `cirrus preview` could not render: the asset did not build, or its preview failed.
+#[derive(Debug, thiserror::Error)]
+enum PreviewFailure {
+    #[error(transparent)]
+    Build(crate::project::BuildError),
+    #[error(transparent)]
+    Preview(crate::kinds::billboard_cloud::PreviewError),
 }
 
 fn graph(

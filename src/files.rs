@@ -1,0 +1,149 @@
+//! Reading and writing files safely, and normalising relative paths: the leaf every IO edge
+//! (sources, artifacts, the cache, the record) and the libraries build on.
+
+use std::io::Write;
+use std::path::{Component, Path, PathBuf};
+
+/// Largest source file read (textures, meshes, materials).
+pub const MAX_SOURCE_BYTES: u64 = 512 << 20;
+
+/// The name prefix of temporary files (artifacts and cache entries before their rename); files
+/// with it that a killed build left behind are swept by `sweep_temporary_files`.
+pub const TEMPORARY_PREFIX: &str = ".cirrus-tmp-";
+
+/// Writes `bytes` to `path` atomically unless the file already holds exactly these bytes.
+/// Returns whether the file changed.
+pub fn write_if_changed(path: &Path, bytes: &[u8]) -> std::io::Result<bool> {
+    // Read back at most the new length (a longer file differs anyway); a FIFO or device put in
+    // place of an artifact is not read (it would block) but replaced.
+    if let Ok(existing) = read_regular_file(path, bytes.len() as u64) {
+        if existing == bytes {
+            return Ok(false);
+        }
+    }
+    let folder = path.parent().unwrap_or(Path::new("."));
+    std::fs::create_dir_all(folder)?;
+    let mut temporary = tempfile::Builder::new().prefix(TEMPORARY_PREFIX).tempfile_in(folder)?;
+    #[cfg(unix)]
+    {
+        // Artifacts are read by engines and tools running as other users: rw-r--r--, not the
+        // temporary file's private default.
+        use std::os::unix::fs::PermissionsExt;
+        temporary.as_file().set_permissions(std::fs::Permissions::from_mode(0o644))?;
+    }
+    temporary.write_all(bytes)?;
+    temporary.as_file().sync_data()?;
+    temporary.persist(path).map_err(|error| error.error)?;
+    Ok(true)
+}
+
+/// Reads the file at `path` when it is a regular file (symbolic links followed) of at most
+/// `limit` bytes. FIFOs, devices, sockets and folders are refused without blocking: the file is
+/// opened non-blocking and checked on the open handle, and at most `limit + 1` bytes are read,
+/// whatever the metadata says (`/proc` files and growing files report other sizes).
+pub fn read_regular_file(path: &Path, limit: u64) -> Result<Vec<u8>, ReadError> {
+    read_regular_file_with_metadata(path, limit).map(|(bytes, _)| bytes)
+}
+
+/// [`read_regular_file`], with the metadata of the open file, taken before its bytes are read.
+pub fn read_regular_file_with_metadata(path: &Path, limit: u64) -> Result<(Vec<u8>, std::fs::Metadata), ReadError> {
+    use std::io::Read;
+    let mut options = std::fs::OpenOptions::new();
+    options.read(true);
+    #[cfg(unix)]
+    {
+        use std::os::unix::fs::OpenOptionsExt;
+        // Opening a FIFO for reading blocks until a writer appears; non-blocking, it does not.
+        options.custom_flags(libc::O_NONBLOCK);
+    }
+    let file = options.open(path).map_err(ReadError::of)?;
+    let metadata = file.metadata().map_err(ReadError::of)?;
+    if metadata.is_dir() {
+        return Err(ReadError::Folder);
+    }
+    if !metadata.is_file() {
+        return Err(ReadError::NotRegular);
+    }
+    if metadata.len() > limit {
+        return Err(ReadError::TooLarge { limit });
+    }
+    let mut bytes = Vec::with_capacity(metadata.len() as usize);
+    (&file).take(limit + 1).read_to_end(&mut bytes).map_err(ReadError::of)?;
+    if bytes.len() as u64 > limit {
+        return Err(ReadError::TooLarge { limit });
+    }
+    Ok((bytes, metadata))
+}
+
+fn describe_bytes(bytes: u64) -> String {
+    if bytes >= 1 << 20 {
+        format!("{} MiB", bytes >> 20)
+    } else {
+        format!("{bytes} bytes")
+    }
+}
+
+/// Why a file could not be read (its text is what messages and fingerprints carry).
+#[derive(Clone, Debug, PartialEq, Eq, Hash, thiserror::Error)]
+pub enum ReadError {
+    /// `hint` names a file with a similar name, when a source read found one.
+    #[error("file not found{hint}")]
+    NotFound { hint: String },
+    #[error("permission denied")]
+    PermissionDenied,
+    #[error("is a folder, not a file")]
+    Folder,
+    #[error("is not a regular file (a FIFO, socket or device)")]
+    NotRegular,
+    #[error("is larger than {}", describe_bytes(*limit))]
+    TooLarge { limit: u64 },
+    /// The source folder a source read looked in (project-relative).
+    #[error("the source folder {} does not exist", crate::diagnostic::display_path(.0))]
+    NoSourceFolder(PathBuf),
+    #[error("cannot read: {0}")]
+    Other(String),
+}
+
+impl ReadError {
+    fn of(error: std::io::Error) -> ReadError {
+        match error.kind() {
+            std::io::ErrorKind::NotFound => ReadError::NotFound { hint: String::new() },
+            std::io::ErrorKind::PermissionDenied => ReadError::PermissionDenied,
+            std::io::ErrorKind::IsADirectory => ReadError::Folder,
+            _ => ReadError::Other(error.to_string()),
+        }
+    }
+
+    pub fn is_not_found(&self) -> bool {
+        matches!(self, ReadError::NotFound { .. })
+    }
+
+    /// Whether the message reads as the end of a sentence about the file (`the pipeline file
+    /// is larger than 16 MiB`) rather than a reason (`permission denied`).
+    pub fn is_predicate(&self) -> bool {
+        matches!(self, ReadError::Folder | ReadError::NotRegular | ReadError::TooLarge { .. })
+    }
+}
+
+impl From<ReadError> for String {
+    fn from(error: ReadError) -> String {
+        error.to_string()
+    }
+}
+
+/// Resolves `.` and `..` lexically; `None` when the path is absolute or climbs out of its base.
+pub fn normalize_relative_path(path: &Path) -> Option<PathBuf> {
+    let text = path.to_string_lossy().replace('\\', "/");
+    let mut parts: Vec<String> = Vec::new();
+    for component in Path::new(&text).components() {
+        match component {
+            Component::CurDir => {}
+            Component::ParentDir => {
+                parts.pop()?;
+            }
+            Component::Normal(part) => parts.push(part.to_string_lossy().into_owned()),
+            Component::RootDir | Component::Prefix(_) => return None,
+        }
+    }
+    Some(parts.iter().collect())
+}

@@ -1,0 +1,42 @@
+//! What a surface is written as: the block-compression format, the container file and the
+//! encoder's speed/quality trade-off (the pipeline's `encode` section names them).
+
+use serde::{Deserialize, Serialize};
+
+/// A block-compression format.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Hash, Serialize, Deserialize)]
+pub enum BlockFormat {
+    Bc1,
+    Bc3,
+    Bc4,
+    Bc5,
+    Bc7,
+}
+
+/// The file format textures are written in.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Hash, Serialize, Deserialize)]
+pub enum Container {
+    Ktx2,
+    Dds,
+    Pvr,
+}
+
+impl Container {
+    pub fn extension(self) -> &'static str {
+        match self {
+            Container::Ktx2 => "ktx2",
+            Container::Dds => "dds",
+            Container::Pvr => "pvr",
+        }
+    }
+}
+
+/// Speed/quality trade-off of the block encoder, ordered fastest first.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, PartialOrd, Ord, Hash, Serialize, Deserialize)]
+pub enum EncodeQuality {
+    UltraFast,
+    VeryFast,
+    Fast,
+    Basic,
+    Slow,
+}

@@ -12,14 +12,30 @@ use crate::files::normalize_relative_path;
 mod settings;
 pub use settings::*;
 
-#[derive(Clone, Copy, Debug, PartialEq, Eq, Hash, Serialize, Deserialize)]
-pub enum AssetKind {
-    Material,
-    BillboardCloud,
-    Atlas,
-    AmbientOcclusion,
-    Height,
+/// The `AssetKind` enum of the one list of kinds (`kind_list.rs`): a pipeline's `kind:` names.
+macro_rules! asset_kind_enum {
+    ($($name:ident => $folder:ident),* $(,)?) => {
+        /// A kind of asset, as `pipeline.ron` names it (`rules: [(glob: …, kind: Material)]`).
+        #[derive(Clone, Copy, Debug, PartialEq, Eq, Hash, Serialize, Deserialize)]
+        pub enum AssetKind {
+            $($name),*
+        }
+
+        impl AssetKind {
+            /// Every kind, in the list's order.
+            pub const ALL: &[AssetKind] = &[$(AssetKind::$name),*];
+
+            /// The kind's name in `pipeline.ron`, summaries and reports.
+            pub fn name(self) -> &'static str {
+                match self {
+                    $(AssetKind::$name => stringify!($name)),*
+                }
+            }
+        }
+    };
 }
+
+with_kinds!(asset_kind_enum);
 
 /// What an asset is made from.
 #[derive(Clone, Debug, PartialEq, Eq, Hash)]
@@ -496,7 +512,8 @@ impl Validator<'_> {
                 let needed = crate::texture::TextureLimits::working_set_of(side, side);
                 if needed > limits.texture.working_set {
                     let message = format!(
-                        "asset `{name}`: a {side}² {what} needs about {} MiB per surface, more than the texture memory budget of {} MiB \
+                        "asset `{name}`: a {side}² {what} needs about {} MiB per surface, more than the texture \
+                            memory budget of {} MiB \
                          (lower {setting} or raise `limits: (texture_memory_mib: …)`)",
                         needed >> 20,
                         limits.texture.working_set >> 20

@@ -3,8 +3,11 @@
 //! stack: each group imports only the groups above it (the tidy test checks it), and the one
 //! loop left is inside `kinds/` (a kind's `mod.rs` and its queries).
 
-// Leaves: how every problem with an input is reported, safe file reading and writing and path
+// Leaves: the one list of asset kinds (a macro, first so that every module below may use it),
+// how every problem with an input is reported, safe file reading and writing and path
 // normalisation, the CPU kernels' level, the OpenDDL parser.
+#[macro_use]
+mod kind_list;
 pub mod diagnostic;
 pub mod files;
 pub mod isa;

@@ -337,7 +337,8 @@ impl Server {
                         replay.push(line(&Outgoing::Resync {
                             revision,
                             message: format!(
-                                "revision {since} is newer than the daemon's revision {revision} (the output was baked by another \
+                                "revision {since} is newer than the daemon's revision {revision} (the output was \
+                                    baked by another \
                                  daemon or cleaned): reload every artifact"
                             ),
                         }));

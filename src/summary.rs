@@ -144,7 +144,8 @@ impl BuildSummary {
             };
             let _ = writeln!(
                 text,
-                "{status:<6} {} ({}): {} stages ran, {} cached{remote}, {} failed; {} artifacts; {ms:.0} ms of stage work",
+                "{status:<6} {} ({}): {} stages ran, {} cached{remote}, {} failed; {} artifacts; {ms:.0} ms of stage \
+                    work",
                 asset.name,
                 asset.kind,
                 count(StageStatus::Ran),

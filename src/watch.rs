@@ -237,8 +237,9 @@ enum WatchMessage {
 const RECORD_SAVE_IDLE: Duration = Duration::from_secs(1);
 const RECORD_SAVE_LATEST: Duration = Duration::from_secs(10);
 
-/// Runs the daemon until the process ends (or `max_builds` builds finished).
-pub fn watch(settings: &WatchSettings) -> Result<(), WatchError> {
+/// Starts the daemon: the project opened on its output folder (locked), the hot-reload server,
+/// the watcher and its filter. Returns the daemon and the watcher's messages.
+fn start(settings: &WatchSettings) -> Result<(Daemon<'_>, std::sync::mpsc::Receiver<WatchMessage>), WatchError> {
     let config = load_pipeline(&settings.pipeline)?;
     let absolute = |path: &Path| {
         std::path::absolute(path)
@@ -248,7 +249,7 @@ pub fn watch(settings: &WatchSettings) -> Result<(), WatchError> {
     let root = absolute(&config.root)?;
     let pipeline = root.join(config.file.file_name().unwrap_or_default());
     let mut output_lock = OutputLock::take(&root.join(&config.output))?;
-    let mut project = Project::open(
+    let project = Project::open(
         config.clone(),
         ProjectOptions {
             persistent_cache: true,
@@ -269,8 +270,9 @@ pub fn watch(settings: &WatchSettings) -> Result<(), WatchError> {
         eprintln!("cirrus watch: hot-reload server on {}", server.address());
         if !server.address().ip().is_loopback() {
             tracing::warn!(
-                "the hot-reload server listens on {}, beyond this machine: the protocol has no authentication, so any host that \
-                 reaches this port can read artifact paths and the dependency graph; use 127.0.0.1 unless that is intended",
+                "the hot-reload server listens on {}, beyond this machine: the protocol has no authentication, so any \
+                 host that reaches this port can read artifact paths and the dependency graph; use 127.0.0.1 unless \
+                 that is intended",
                 server.address()
             );
         }
@@ -316,8 +318,14 @@ pub fn watch(settings: &WatchSettings) -> Result<(), WatchError> {
     debouncer
         .watch(&root, RecursiveMode::NonRecursive)
         .map_err(|source| WatchError::Watch { path: display_path(&root), source })?;
-    let mut watched = watch_folders(&mut debouncer, &root, &config, &[]);
+    let watched = watch_folders(&mut debouncer, &root, &config, &[]);
+    let daemon = Daemon { settings, root, pipeline, output_lock, project, server, filter, debouncer, watched, cancel };
+    Ok((daemon, messages))
+}
 
+/// Runs the daemon until the process ends (or `max_builds` builds finished).
+pub fn watch(settings: &WatchSettings) -> Result<(), WatchError> {
+    let (mut daemon, messages) = start(settings)?;
     let mut builds = 0u64;
     let mut pending: BTreeSet<PathBuf> = BTreeSet::new();
     let mut first = true;
@@ -329,190 +337,247 @@ pub fn watch(settings: &WatchSettings) -> Result<(), WatchError> {
     let mut graph_requests: Vec<std::sync::mpsc::SyncSender<(u64, crate::graph::Graph)>> = Vec::new();
     loop {
         for reply in graph_requests.drain(..) {
-            let _ = reply.send((project.revision(), project.graph()));
+            let _ = reply.send((daemon.project.revision(), daemon.project.graph()));
         }
         if !first {
             // Block for the next edit (the watcher gone ends the daemon); graph requests are
             // answered meanwhile, and the record is written once the daemon is idle.
-            let mut record_saved = false;
-            let message = loop {
-                let received = if record_saved {
-                    messages.recv().map_err(|_| std::sync::mpsc::RecvTimeoutError::Disconnected)
-                } else {
-                    messages.recv_timeout(RECORD_SAVE_IDLE)
-                };
-                match received {
-                    Ok(WatchMessage::Graph(reply)) => {
-                        let _ = reply.send((project.revision(), project.graph()));
-                    }
-                    Ok(message) => break message,
-                    Err(std::sync::mpsc::RecvTimeoutError::Timeout) => {
-                        project.save_deferred();
-                        last_saved = Instant::now();
-                        record_saved = true;
-                    }
-                    Err(std::sync::mpsc::RecvTimeoutError::Disconnected) => {
-                        project.save_deferred();
-                        return Ok(());
-                    }
-                }
+            let Some(message) = wait_for_edit(&mut daemon.project, &messages, &mut last_saved) else {
+                return Ok(());
             };
-            rearm |= apply_message(message, &mut pending, &mut project, &mut graph_requests);
+            rearm |= apply_message(message, &mut pending, &mut daemon.project, &mut graph_requests);
         }
-        cancel.lower();
+        daemon.cancel.lower();
         // Messages that arrived in between belong to this build too.
         while let Ok(message) = messages.try_recv() {
-            rearm |= apply_message(message, &mut pending, &mut project, &mut graph_requests);
+            rearm |= apply_message(message, &mut pending, &mut daemon.project, &mut graph_requests);
         }
         if std::mem::take(&mut rearm) {
             // The old recursive watch may follow a folder that was moved away, or nothing at all.
-            watched = watch_folders(&mut debouncer, &root, project.config(), &watched);
+            daemon.watched =
+                watch_folders(&mut daemon.debouncer, &daemon.root, daemon.project.config(), &daemon.watched);
             force_build = true;
         }
         let mut reconfigured = false;
-        if pending.remove(Path::new(pipeline.file_name().unwrap_or_default())) {
-            // A new output folder is locked before the configuration is taken; one that another
-            // daemon holds is refused like a configuration error, keeping the old one.
-            let loaded = load_pipeline(&project.config().file).and_then(|new_config| {
-                if new_config.output == project.config().output {
-                    return Ok(new_config);
-                }
-                match OutputLock::take(&root.join(&new_config.output)) {
-                    Ok(mut lock) => {
-                        lock.describe(server.as_ref().map(Server::address));
-                        output_lock = lock;
-                        Ok(new_config)
-                    }
-                    Err(error) => Err(crate::config::ConfigError {
-                        diagnostics: vec![crate::diagnostic::Diagnostic::new(
-                            &new_config.file,
-                            format!("`output`: {error}"),
-                        )],
-                    }),
-                }
-            });
-            match loaded {
-                Ok(new_config) => {
-                    tracing::info!("{} changed: reconfigured", display_path(&new_config.file));
-                    if new_config.server != project.config().server && settings.listen.is_none() {
-                        tracing::warn!(
-                            "`server` changed in {}: the hot-reload server keeps its address until `cirrus watch` restarts",
-                            display_path(&new_config.file)
-                        );
-                    }
-                    watched = watch_folders(&mut debouncer, &root, &new_config, &watched);
-                    {
-                        let mut filter = filter.write().expect("event filter");
-                        filter.output = root.join(&new_config.output);
-                        filter.source = root.join(&new_config.source);
-                        filter.config = new_config.clone();
-                        filter.asset_globs = asset_globs(&new_config);
-                    }
-                    project.reconfigure(new_config);
-                    project.invalidate_all_sources();
-                    reconfigured = true;
-                }
-                Err(error) => {
-                    tracing::error!("{error}");
-                    eprintln!("{error}");
-                    let failed = error
-                        .diagnostics
-                        .iter()
-                        .map(|diagnostic| FailedEntry {
-                            asset: None,
-                            stage: "config".into(),
-                            message: diagnostic.message.clone(),
-                            file: display_path(&diagnostic.file),
-                            line: diagnostic.line(),
-                            column: diagnostic.column(),
-                        })
-                        .collect();
-                    // Keep running on the last good configuration; report the broken file.
-                    if let Some(server) = &server {
-                        let batch = BatchEvent {
-                            revision: project.revision() + 1,
-                            changed: Vec::new(),
-                            removed: Vec::new(),
-                            failed,
-                            ms: 0.0,
-                        };
-                        project.skip_revision();
-                        server.publish(&batch);
-                    }
-                    if pending.is_empty() {
-                        continue;
-                    }
-                }
+        if pending.remove(Path::new(daemon.pipeline.file_name().unwrap_or_default())) {
+            reconfigured = reload_pipeline(&mut daemon);
+            if !reconfigured && pending.is_empty() {
+                continue;
             }
         }
         let changed_files: Vec<PathBuf> = std::mem::take(&mut pending).into_iter().collect();
-        let changed = project.refresh_sources(changed_files.iter().map(PathBuf::as_path));
+        let changed = daemon.project.refresh_sources(changed_files.iter().map(PathBuf::as_path));
         if !force_build && !reconfigured && !changed {
             tracing::debug!("{} file(s) touched with identical bytes: nothing to do", changed_files.len());
             continue;
         }
         force_build = false;
-        // The files this build is about to read count as sources already: a folder of new
-        // rule-matched files deleted while they bake (one event for the folder) cancels it.
-        // (Without rules no asset is new to the watcher: no walk of the source folder.)
-        if !project.config().rules.is_empty() {
-            let main_files: Vec<PathBuf> = project
-                .asset_list()
-                .iter()
-                .map(|asset| project.config().source.join(asset.source.main_file()))
-                .collect();
-            filter.write().expect("event filter").sources.extend(main_files);
-        }
-        let start = Instant::now();
-        let options = BuildOptions {
-            cancel: Some(cancel.clone()),
-            always_new_revision: !first,
-            omit_unchanged: true,
-            ..Default::default()
-        };
-        let summary = match project.build(&options, &|_| {}) {
-            Ok(summary) => summary,
-            Err(BuildError::Cancelled) => {
-                tracing::info!(
-                    "build cancelled by a newer edit after {:.0} ms; restarting",
-                    start.elapsed().as_secs_f64() * 1e3
-                );
+        let batch = bake_batch(&mut daemon, &changed_files, first);
+        first = false;
+        match batch {
+            Batch::Published => {}
+            Batch::Cancelled => {
                 // The next build covers this batch's edits too (their inputs are set already).
                 pending.extend(changed_files);
                 force_build = true;
-                first = false;
                 continue;
             }
-            Err(error) => {
-                tracing::error!("{error}");
-                first = false;
-                continue;
-            }
-        };
-        let ms = start.elapsed().as_secs_f64() * 1e3;
-        // The summary lists the assets this batch looked into (the others were passed over):
-        // their files join the watched sources.
-        let rebuilt: HashSet<String> = summary.assets.iter().map(|asset| asset.name.clone()).collect();
-        let sources = if first { project.source_paths() } else { project.source_paths_of(&rebuilt) };
-        filter.write().expect("event filter").sources.extend(sources);
-        first = false;
-        // The engine hears first; the log's graph (which may compute a cached billboard's
-        // layout) after, and only of the assets of this batch.
-        if let Some(server) = &server {
-            server.publish(&batch_event(&summary, ms));
+            Batch::Failed => continue,
         }
-        let graph = project.graph_of_assets(Some(&rebuilt));
-        log_batch(&summary, &changed_files, &graph, ms);
         if last_saved.elapsed() > RECORD_SAVE_LATEST {
-            project.save_deferred();
+            daemon.project.save_deferred();
             last_saved = Instant::now();
         }
         builds += 1;
-        if settings.max_builds.is_some_and(|max| builds >= max) {
-            project.save_deferred();
+        if daemon.settings.max_builds.is_some_and(|max| builds >= max) {
+            daemon.project.save_deferred();
             return Ok(());
         }
     }
+}
+
+type Debouncer = notify_debouncer_full::Debouncer<notify::RecommendedWatcher, notify_debouncer_full::RecommendedCache>;
+
+/// What the daemon's owner thread holds between batches.
+struct Daemon<'a> {
+    settings: &'a WatchSettings,
+    /// The project folder, absolute, and the pipeline file in it.
+    root: PathBuf,
+    pipeline: PathBuf,
+    output_lock: OutputLock,
+    project: Project,
+    server: Option<Server>,
+    filter: Arc<RwLock<EventFilter>>,
+    debouncer: Debouncer,
+    /// The folders watched now (see [`watch_folders`]).
+    watched: Vec<(PathBuf, RecursiveMode)>,
+    cancel: CancelFlag,
+}
+
+/// How a batch ended.
+enum Batch {
+    Published,
+    /// A newer edit cancelled it.
+    Cancelled,
+    Failed,
+}
+
+/// Blocks for the next edit; graph requests are answered meanwhile, and the manifest and the
+/// record are written once the daemon is idle. `None` when the watcher is gone (the daemon ends).
+fn wait_for_edit(
+    project: &mut Project,
+    messages: &std::sync::mpsc::Receiver<WatchMessage>,
+    last_saved: &mut Instant,
+) -> Option<WatchMessage> {
+    let mut record_saved = false;
+    loop {
+        let received = if record_saved {
+            messages.recv().map_err(|_| std::sync::mpsc::RecvTimeoutError::Disconnected)
+        } else {
+            messages.recv_timeout(RECORD_SAVE_IDLE)
+        };
+        match received {
+            Ok(WatchMessage::Graph(reply)) => {
+                let _ = reply.send((project.revision(), project.graph()));
+            }
+            Ok(message) => return Some(message),
+            Err(std::sync::mpsc::RecvTimeoutError::Timeout) => {
+                project.save_deferred();
+                *last_saved = Instant::now();
+                record_saved = true;
+            }
+            Err(std::sync::mpsc::RecvTimeoutError::Disconnected) => {
+                project.save_deferred();
+                return None;
+            }
+        }
+    }
+}
+
+/// Loads the edited pipeline file; true when the daemon took it. A broken file (or a new output
+/// folder that another daemon holds) keeps the last good configuration and is reported to the
+/// subscribed clients as a failed batch.
+fn reload_pipeline(daemon: &mut Daemon) -> bool {
+    // A new output folder is locked before the configuration is taken; one that another
+    // daemon holds is refused like a configuration error, keeping the old one.
+    let loaded = load_pipeline(&daemon.project.config().file).and_then(|new_config| {
+        if new_config.output == daemon.project.config().output {
+            return Ok(new_config);
+        }
+        match OutputLock::take(&daemon.root.join(&new_config.output)) {
+            Ok(mut lock) => {
+                lock.describe(daemon.server.as_ref().map(Server::address));
+                daemon.output_lock = lock;
+                Ok(new_config)
+            }
+            Err(error) => Err(crate::config::ConfigError {
+                diagnostics: vec![crate::diagnostic::Diagnostic::new(&new_config.file, format!("`output`: {error}"))],
+            }),
+        }
+    });
+    match loaded {
+        Ok(new_config) => {
+            tracing::info!("{} changed: reconfigured", display_path(&new_config.file));
+            if new_config.server != daemon.project.config().server && daemon.settings.listen.is_none() {
+                tracing::warn!(
+                    "`server` changed in {}: the hot-reload server keeps its address until `cirrus watch` restarts",
+                    display_path(&new_config.file)
+                );
+            }
+            daemon.watched = watch_folders(&mut daemon.debouncer, &daemon.root, &new_config, &daemon.watched);
+            {
+                let mut filter = daemon.filter.write().expect("event filter");
+                filter.output = daemon.root.join(&new_config.output);
+                filter.source = daemon.root.join(&new_config.source);
+                filter.config = new_config.clone();
+                filter.asset_globs = asset_globs(&new_config);
+            }
+            daemon.project.reconfigure(new_config);
+            daemon.project.invalidate_all_sources();
+            true
+        }
+        Err(error) => {
+            tracing::error!("{error}");
+            eprintln!("{error}");
+            let failed = error
+                .diagnostics
+                .iter()
+                .map(|diagnostic| FailedEntry {
+                    asset: None,
+                    stage: "config".into(),
+                    message: diagnostic.message.clone(),
+                    file: display_path(&diagnostic.file),
+                    line: diagnostic.line(),
+                    column: diagnostic.column(),
+                })
+                .collect();
+            // Keep running on the last good configuration; report the broken file.
+            if let Some(server) = &daemon.server {
+                let batch = BatchEvent {
+                    revision: daemon.project.revision() + 1,
+                    changed: Vec::new(),
+                    removed: Vec::new(),
+                    failed,
+                    ms: 0.0,
+                };
+                daemon.project.skip_revision();
+                server.publish(&batch);
+            }
+            false
+        }
+    }
+}
+
+/// Builds the batch of `changed_files` and publishes it: the engine hears first, then the log
+/// (with the graph of the assets the batch looked into).
+fn bake_batch(daemon: &mut Daemon, changed_files: &[PathBuf], first: bool) -> Batch {
+    // The files this build is about to read count as sources already: a folder of new
+    // rule-matched files deleted while they bake (one event for the folder) cancels it.
+    // (Without rules no asset is new to the watcher: no walk of the source folder.)
+    if !daemon.project.config().rules.is_empty() {
+        let main_files: Vec<PathBuf> = daemon
+            .project
+            .asset_list()
+            .iter()
+            .map(|asset| daemon.project.config().source.join(asset.source.main_file()))
+            .collect();
+        daemon.filter.write().expect("event filter").sources.extend(main_files);
+    }
+    let start = Instant::now();
+    let options = BuildOptions {
+        cancel: Some(daemon.cancel.clone()),
+        always_new_revision: !first,
+        omit_unchanged: true,
+        ..Default::default()
+    };
+    let summary = match daemon.project.build(&options, &|_| {}) {
+        Ok(summary) => summary,
+        Err(BuildError::Cancelled) => {
+            tracing::info!(
+                "build cancelled by a newer edit after {:.0} ms; restarting",
+                start.elapsed().as_secs_f64() * 1e3
+            );
+            return Batch::Cancelled;
+        }
+        Err(error) => {
+            tracing::error!("{error}");
+            return Batch::Failed;
+        }
+    };
+    let ms = start.elapsed().as_secs_f64() * 1e3;
+    // The summary lists the assets this batch looked into (the others were passed over):
+    // their files join the watched sources.
+    let rebuilt: HashSet<String> = summary.assets.iter().map(|asset| asset.name.clone()).collect();
+    let sources = if first { daemon.project.source_paths() } else { daemon.project.source_paths_of(&rebuilt) };
+    daemon.filter.write().expect("event filter").sources.extend(sources);
+    // The engine hears first; the log's graph (which may compute a cached billboard's
+    // layout) after, and only of the assets of this batch.
+    if let Some(server) = &daemon.server {
+        server.publish(&batch_event(&summary, ms));
+    }
+    let graph = daemon.project.graph_of_assets(Some(&rebuilt));
+    log_batch(&summary, changed_files, &graph, ms);
+    Batch::Published
 }
 
 /// Applies a watcher message; true when the source folder must be watched again. A graph

@@ -20,34 +20,71 @@
 //!   `Option` as a tag byte (0 none, 1 some) then the value; arrays, tuples and settings structs
 //!   as their fields in declaration order, each a part of its own; content as its blake3 hash.
 //!
-//! | entry folder (key name, version) | parts, in order | holds |
-//! |---|---|---|
-//! | `parse` (`parse`, `PARSE`) | the `.mymaterial` content hash; its path | the parsed material file |
-//! | `surface-recipe` (`surface`, 5) | the tail's parts (below); the kind's recipe key | the content key of the surface's files |
-//! | `surface` (`surface`, 5) | the tail's parts; the image's width, height and content hash | the container file and PNG preview |
-//! | `encoding-memo` (`encoding-memo`, 5) | mips and encode versions; the surface's label (`asset/material/surface`, `asset/surface`) | a BC7 surface's last encoding: level 0's block fingerprints, the other levels, the blocks, the errors and, alpha-tested, each block's alpha-test figures (a memo: overwritten) |
-//! | `mesh` (`mesh`, `MESH`) | per file the mesh stage reads (the OBJ, then its MTL files), its path and its content hash or read error | the loaded mesh (with each triangle's OBJ object) and tangents |
-//! | `planes` (`planes`, `PLANES`) | the `mesh` key; ε; max planes option | the plane set |
-//! | `layout` (`layout`, `LAYOUT`) | the `planes` key; atlas settings (max size, padding, power of two); texel density option | rectangles, layout, render groups |
-//! | `lod` (`lod`, `LOD`) | the `layout` key | `lod.obj`, `lod.mtl` |
-//! | `render-memo` (`render-memo`, `RENDER`) | the `layout` key; a material set | the images of every render group that shows that set, each under its group key (a memo: overwritten) |
-//! | `atlas` (`atlas-coverage`, 1) | the billboard atlas recipe key | the atlas's coverage fraction (for the report) |
-//! | `atlas-fill` (`atlas-fill`, 1) | the coverage's content hash (atlas size, then every drawn texel's atlas texel, plane and plane texel as `u32`) | the fill search's source of every atlas texel (as offsets) |
-//! | `surface-recipe` (`surface`, 5) | the tail's parts; the atlas surface's parts key (below) | the content key of the surface's files |
-//! | `trim` (`trim`, `TRIM`) | the trim setting; the texture memory budget (`u64`); the texture file's path and content hash or read error | an atlas texture's size, kept rectangle, kept texels' hash, translucency |
-//! | `trim` (`trim`, `TRIM`), kept | `kept`; the kept rectangle (x, y, width, height); the texture file's path and content hash or read error; the texture memory budget | a texture kept to a rectangle its meshes' UVs reach: size, rectangle, kept texels' hash, translucency |
-//! | `reach` (`reach`, `REACH`) | the atlas's texture paths; the OBJ's and its MTL files' paths and content hashes | per texture the mesh's materials map, the range of their UVs |
-//! | `layout` (`layout`, `atlas::LAYOUT`) | `atlas`; the pack settings key (`atlas-settings`, 1: max size, padding, pages; rotate, power of two, trim); the file count; per texture file its path and content hash or read error; the blake3 of the meshes' UV reach as JSON (paths `$source/…`) | an atlas layout (entries with their aliases, pages, placements) and how it came from the last one |
-//! | `atlas-layout-memo` (`atlas-layout-memo`, `atlas::LAYOUT`) | the asset's name; the pack settings key | the asset's last layout, the packer's hint (a memo: overwritten) |
-//! | `atlas-page-memo` (`atlas-page-memo`, `COMPOSITE`) | the page's name (`atlas-page:asset/pageN`) | a page's last composite: its entries (placement, kept hash, translucency), the page, the fill sources as offsets (a memo: overwritten) |
-//! | `remap` (`remap`, `REMAP`) | the blake3 of the layout's JSON (paths `$source/…`); the textures its materials name that are missing; the OBJ's and its MTL files' paths and content hashes | a remapped mesh's OBJ text and materials |
-//! | `vertices` (`vertices`, `VERTICES`) | the mesh's content hash (positions, normals, UVs, triangles, groups); rays; distribution; max distance in mesh units; back faces pass through; ground plane option; the vertex offset | an AO asset's visibility per vertex (`f32`) |
-//! | `ao-tile` (`bake`, `BAKE`) | the map size; the tile's region (x, y, width, height); the mode (`Texels`, `Vertices`); per texel the occlusion settings as for `vertices`, the hash of its own triangles' corners (UV, position and normal bits), then `within reach` and the hash of the occluders within reach (group, corner positions) or `whole mesh` and the mesh's content hash; per vertex the hash of its own triangles' corners and of their visibility | a baked tile: 16-bit values, texel states, overlap count, rays, bake time |
-//! | `ao-map` (`fill`, `FILL`) | the map size; every tile key of the material, in row order | a material's filled map (16-bit), its 16-bit PNG and its figures |
-//! | `height-map` (`bake`, `height::BAKE`) | the projection (`Normals`, `TopDown`); for `TopDown` (a GPU render) the GPU's driver family as an option (`gpu::adapter_family`), else none; `low` or `pn`; the map size; frontal; rear (fractions of the diagonal); the low and the high mesh's geometry hash (positions, normals, UVs, triangles) | a filled height map (`f32` distances), texel states, its 16-bit PNG, range and counts |
-//! | `height-tessellated` (`displace`, `DISPLACE`) | the tessellate version; level; displace; the low geometry hash; when displaced, the `pn` map's key | `tessellated.obj` and its counts |
-//! | `height-distance` (`distance`, `DISTANCE`) | `low`, `pn` or `displaced`; samples per surface (`u64`); the measured mesh's key (low: `distance` and the low geometry hash; pn: `tessellate`, level, the low geometry hash; displaced: the `height-tessellated` key); the high geometry hash | RMS and Hausdorff distance over the high mesh's diagonal, or none |
-//! | `source-mips` (`source-mips`, 1) | decode and mips versions; the texture file's content hash; the material slot; the filter kind; the alpha cutoff bits (or `u32::MAX`) | the mip chain the renders sample |
+//! Each entry folder (key name, version): its parts, in order, and what it holds.
+//!
+//! - `parse` (`parse`, `PARSE`): the `.mymaterial` content hash; its path. Holds the parsed material file.
+//! - `surface-recipe` (`surface`, 5): the tail's parts (below); the kind's recipe key. Holds the content key of the
+//!   surface's files.
+//! - `surface` (`surface`, 5): the tail's parts; the image's width, height and content hash. Holds the container file
+//!   and PNG preview.
+//! - `encoding-memo` (`encoding-memo`, 5): mips and encode versions; the surface's label (`asset/material/surface`,
+//!   `asset/surface`). Holds a BC7 surface's last encoding: level 0's block fingerprints, the other levels, the blocks,
+//!   the errors and, alpha-tested, each block's alpha-test figures (a memo: overwritten).
+//! - `mesh` (`mesh`, `MESH`): per file the mesh stage reads (the OBJ, then its MTL files), its path and its content
+//!   hash or read error. Holds the loaded mesh (with each triangle's OBJ object) and tangents.
+//! - `planes` (`planes`, `PLANES`): the `mesh` key; ε; max planes option. Holds the plane set.
+//! - `layout` (`layout`, `LAYOUT`): the `planes` key; atlas settings (max size, padding, power of two); texel density
+//!   option. Holds rectangles, layout, render groups.
+//! - `lod` (`lod`, `LOD`): the `layout` key. Holds `lod.obj`, `lod.mtl`.
+//! - `render-memo` (`render-memo`, `RENDER`): the `layout` key; a material set. Holds the images of every render group
+//!   that shows that set, each under its group key (a memo: overwritten).
+//! - `atlas` (`atlas-coverage`, 1): the billboard atlas recipe key. Holds the atlas's coverage fraction (for the
+//!   report).
+//! - `atlas-fill` (`atlas-fill`, 1): the coverage's content hash (atlas size, then every drawn texel's atlas texel,
+//!   plane and plane texel as `u32`). Holds the fill search's source of every atlas texel (as offsets).
+//! - `surface-recipe` (`surface`, 5): the tail's parts; the atlas surface's parts key (below). Holds the content key of
+//!   the surface's files.
+//! - `trim` (`trim`, `TRIM`): the trim setting; the texture memory budget (`u64`); the texture file's path and content
+//!   hash or read error. Holds an atlas texture's size, kept rectangle, kept texels' hash, translucency.
+//! - `trim` (`trim`, `TRIM`), kept: `kept`; the kept rectangle (x, y, width, height); the texture file's path and
+//!   content hash or read error; the texture memory budget. Holds a texture kept to a rectangle its meshes' UVs reach:
+//!   size, rectangle, kept texels' hash, translucency.
+//! - `reach` (`reach`, `REACH`): the atlas's texture paths; the OBJ's and its MTL files' paths and content hashes.
+//!   Holds per texture the mesh's materials map, the range of their UVs.
+//! - `layout` (`layout`, `atlas::LAYOUT`): `atlas`; the pack settings key (`atlas-settings`, 1: max size, padding,
+//!   pages; rotate, power of two, trim); the file count; per texture file its path and content hash or read error; the
+//!   blake3 of the meshes' UV reach as JSON (paths `$source/…`). Holds an atlas layout (entries with their aliases,
+//!   pages, placements) and how it came from the last one.
+//! - `atlas-layout-memo` (`atlas-layout-memo`, `atlas::LAYOUT`): the asset's name; the pack settings key. Holds the
+//!   asset's last layout, the packer's hint (a memo: overwritten).
+//! - `atlas-page-memo` (`atlas-page-memo`, `COMPOSITE`): the page's name (`atlas-page:asset/pageN`). Holds a page's
+//!   last composite: its entries (placement, kept hash, translucency), the page, the fill sources as offsets (a memo:
+//!   overwritten).
+//! - `remap` (`remap`, `REMAP`): the blake3 of the layout's JSON (paths `$source/…`); the textures its materials name
+//!   that are missing; the OBJ's and its MTL files' paths and content hashes. Holds a remapped mesh's OBJ text and
+//!   materials.
+//! - `vertices` (`vertices`, `VERTICES`): the mesh's content hash (positions, normals, UVs, triangles, groups); rays;
+//!   distribution; max distance in mesh units; back faces pass through; ground plane option; the vertex offset. Holds
+//!   an AO asset's visibility per vertex (`f32`).
+//! - `ao-tile` (`bake`, `BAKE`): the map size; the tile's region (x, y, width, height); the mode (`Texels`,
+//!   `Vertices`); per texel the occlusion settings as for `vertices`, the hash of its own triangles' corners (UV,
+//!   position and normal bits), then `within reach` and the hash of the occluders within reach (group, corner
+//!   positions) or `whole mesh` and the mesh's content hash; per vertex the hash of its own triangles' corners and of
+//!   their visibility. Holds a baked tile: 16-bit values, texel states, overlap count, rays, bake time.
+//! - `ao-map` (`fill`, `FILL`): the map size; every tile key of the material, in row order. Holds a material's filled
+//!   map (16-bit), its 16-bit PNG and its figures.
+//! - `height-map` (`bake`, `height::BAKE`): the projection (`Normals`, `TopDown`); for `TopDown` (a GPU render) the
+//!   GPU's driver family as an option (`gpu::adapter_family`), else none; `low` or `pn`; the map size; frontal; rear
+//!   (fractions of the diagonal); the low and the high mesh's geometry hash (positions, normals, UVs, triangles). Holds
+//!   a filled height map (`f32` distances), texel states, its 16-bit PNG, range and counts.
+//! - `height-tessellated` (`displace`, `DISPLACE`): the tessellate version; level; displace; the low geometry hash;
+//!   when displaced, the `pn` map's key. Holds `tessellated.obj` and its counts.
+//! - `height-distance` (`distance`, `DISTANCE`): `low`, `pn` or `displaced`; samples per surface (`u64`); the measured
+//!   mesh's key (low: `distance` and the low geometry hash; pn: `tessellate`, level, the low geometry hash; displaced:
+//!   the `height-tessellated` key); the high geometry hash. Holds RMS and Hausdorff distance over the high mesh's
+//!   diagonal, or none.
+//! - `source-mips` (`source-mips`, 1): decode and mips versions; the texture file's content hash; the material slot;
+//!   the filter kind; the alpha cutoff bits (or `u32::MAX`). Holds the mip chain the renders sample.
 //!
 //! The tail's parts: the mips, encode and write versions; the surface name; block format;
 //! encoder quality; mips; alpha cutoff option; container; zstd level option.
@@ -59,7 +96,8 @@
 //! (`atlas`, `ATLAS`), the render version, the GPU's driver family (`gpu::adapter_family`:
 //! backend, vendor id, driver, e.g. `Vulkan/0x10005/llvmpipe`), the `layout` key, the alpha cutoff, per texture the
 //! materials name its path and content hash or read error. A render group's key: (`render`,
-//! `RENDER`), the GPU's driver family, the `layout` key, the group's index, the alpha cutoff, per texture of the group's
+//! `RENDER`), the GPU's driver family, the `layout` key, the group's index, the alpha cutoff, per texture of the
+//! group's
 //! materials its path and content hash or read error. An atlas surface's parts key, asked when
 //! its recipe misses (after the renders, before compositing): (`atlas-parts`, 1), the atlas
 //! version, the `layout` key, the alpha cutoff, the surface, the coverage's content hash, and

@@ -84,7 +84,8 @@ pub fn parse_remote_url(url: &str) -> Result<RemoteLocation, String> {
             let (bucket, prefix) = rest.split_once('/').unwrap_or((rest, ""));
             if bucket.contains('@') || bucket.contains(':') {
                 return Err(format!(
-                    "`{url}` names credentials or a port; they come from AWS_ACCESS_KEY_ID, AWS_SECRET_ACCESS_KEY and AWS_ENDPOINT_URL"
+                    "`{url}` names credentials or a port; they come from AWS_ACCESS_KEY_ID, AWS_SECRET_ACCESS_KEY and \
+                        AWS_ENDPOINT_URL"
                 ));
             }
             let bucket_ok = (3..=63).contains(&bucket.len())
@@ -255,6 +256,12 @@ fn memory_store(name: &str) -> Arc<dyn ObjectStore> {
     store
 }
 
+/// Installs the TLS provider of every HTTPS client in the process (rustls on `ring`, see
+/// Cargo.toml): an object-store client built without one panics. Installing twice is harmless.
+pub fn install_tls_provider() {
+    let _ = rustls::crypto::ring::default_provider().install_default();
+}
+
 impl RemoteStore {
     /// Opens the store without contacting it (the first request does).
     pub fn open(settings: RemoteCacheSettings) -> Result<RemoteStore, RemoteCacheError> {
@@ -262,6 +269,7 @@ impl RemoteStore {
         let (store, prefix): (Arc<dyn ObjectStore>, String) = match &settings.location {
             RemoteLocation::S3 { bucket, prefix } => {
                 check_endpoint_environment().map_err(error)?;
+                install_tls_provider();
                 let client = object_store::ClientOptions::new()
                     .with_connect_timeout(PROBE_TIMEOUT)
                     .with_timeout(TRANSFER_TIMEOUT)

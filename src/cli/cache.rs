@@ -101,7 +101,8 @@ pub fn stats_text(folder: &Path, remote: Option<&str>) -> String {
                 (Some(remote), Some(url)) => {
                     let _ = writeln!(
                         text,
-                        "  remote {url}: {} hits, {} misses ({} corrupt), {} downloaded; {} uploads ({}), {} already there; {} errors",
+                        "  remote {url}: {} hits, {} misses ({} corrupt), {} downloaded; {} uploads ({}), {} already \
+                            there; {} errors",
                         remote.hits,
                         remote.misses,
                         remote.corrupt,

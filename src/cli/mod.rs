@@ -538,10 +538,15 @@ fn preview(
             };
             for (level, metrics) in &levels {
                 outln!(
-                    "{}{stand_in}{} views, {} per pixel: mean IoU {:.3}, min IoU {:.3} (missed {:.1} %, extra {:.1} % of the source's silhouette), mean PSNR {:.2} dB; the source against itself moved 1 pixel: IoU {:.3}",
+                    "{}{stand_in}{} views, {} per pixel: mean IoU {:.3}, min IoU {:.3} (missed {:.1} %, extra {:.1} % \
+                        of the source's silhouette), mean PSNR {:.2} dB; the source against itself moved 1 pixel: \
+                        IoU {:.3}",
                     if chain { format!("lod{level}: ") } else { String::new() },
                     metrics.views.len(),
-                    if metrics.samples_per_pixel == 1 { "1 sample".to_string() } else { format!("{} samples", metrics.samples_per_pixel) },
+                    match metrics.samples_per_pixel {
+                        1 => "1 sample".to_string(),
+                        samples => format!("{samples} samples"),
+                    },
                     metrics.mean_iou,
                     metrics.min_iou,
                     100.0 * metrics.mean_missed,
@@ -552,7 +557,8 @@ fn preview(
             }
             if levels.len() > 1 {
                 outln!(
-                    "wrote {0}/contact_sheet.png (each view: source, then lod0 to lod{1}) and lod<N>/contact_sheet.png, lod<N>/metrics.json",
+                    "wrote {0}/contact_sheet.png (each view: source, then lod0 to lod{1}) and \
+                        lod<N>/contact_sheet.png, lod<N>/metrics.json",
                     crate::diagnostic::display_path(&out),
                     levels.len() - 1
                 );

@@ -24,9 +24,16 @@ use crate::texture::Texture;
 
 #[derive(Clone, Debug, PartialEq, Eq, thiserror::Error)]
 pub enum GpuError {
-    #[error("no GPU adapter: wgpu found no Vulkan, Metal, DX12 or GL device ({0}). Billboard clouds render their textures on the GPU; on Linux without a GPU install a software Vulkan driver, e.g. `apt-get install mesa-vulkan-drivers` (llvmpipe)")]
+    #[error(
+        "no GPU adapter: wgpu found no Vulkan, Metal, DX12 or GL device ({0}). Billboard clouds render their \
+        textures on the GPU; on Linux without a GPU install a software Vulkan driver, e.g. \
+        `apt-get install mesa-vulkan-drivers` (llvmpipe)"
+    )]
     NoAdapter(String),
-    #[error("no GPU adapter can render cirrus's textures: {0}. On Linux without a GPU install a software Vulkan driver, e.g. `apt-get install mesa-vulkan-drivers` (llvmpipe), or name another backend with WGPU_BACKEND")]
+    #[error(
+        "no GPU adapter can render cirrus's textures: {0}. On Linux without a GPU install a software Vulkan \
+        driver, e.g. `apt-get install mesa-vulkan-drivers` (llvmpipe), or name another backend with WGPU_BACKEND"
+    )]
     Unsupported(String),
     #[error("the GPU device could not be created: {0}")]
     Device(String),

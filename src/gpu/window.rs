@@ -107,7 +107,8 @@ impl Gpu {
     }
 
     /// Shows a `size`² image from [`Gpu::render_view`] centred in the window (cropped where the
-    /// window is smaller, on the images' background grey where it is larger). A frame the surface cannot give right now is skipped.
+    /// window is smaller, on the images' background grey where it is larger). A frame the surface cannot give right
+    /// now is skipped.
     pub fn present_image(&self, surface: &mut WindowSurface, rgba: &[u8], size: u32) -> Result<(), GpuError> {
         let frame = match surface.surface.get_current_texture() {
             wgpu::CurrentSurfaceTexture::Success(frame) | wgpu::CurrentSurfaceTexture::Suboptimal(frame) => frame,

@@ -1,7 +1,8 @@
-//! The asset kinds: the one list of kinds (`AssetKind`), the questions the driver asks each of
-//! them (`Kind`), and what the answers are made of: jobs to run on workers, stage instances (the
-//! build summary, the graph dump and the event-log labels all come from them) and outputs.
-//! Adding a kind: a folder with a `Kind` implementation, one variant here, one in `config`.
+//! The asset kinds: the questions the driver asks each of them (`Kind`), their dispatch over the
+//! one list of kinds (`kind_list.rs`), and what the answers are made of: jobs to run on workers,
+//! stage instances (the build summary, the graph dump and the event-log labels all come from
+//! them) and outputs. Adding a kind: a folder with a `Kind` implementation, one line in the list,
+//! its variant in `config/raw.rs` (the file's mirror) and its settings (see ARCHITECTURE.md).
 
 use std::path::{Path, PathBuf};
 use std::sync::Arc;
@@ -22,18 +23,9 @@ pub mod atlas;
 pub mod ambient_occlusion;
 pub mod height;
 
-use ambient_occlusion::AmbientOcclusion;
-use atlas::Atlas;
-use billboard_cloud::BillboardCloud;
-use height::Height;
-use material::Material;
-
 /// The questions the driver asks an asset kind. Every answer is computed from the database
 /// (through the kind's tracked functions); none does IO.
 pub trait Kind {
-    /// The kind's name in `pipeline.ron`, summaries and reports.
-    const NAME: &'static str;
-
     /// The files the asset reads, as far as the files read so far tell (the driver reads them
     /// and asks again until nothing new turns up).
     fn files_to_read(db: &dyn Db, asset: Asset) -> Vec<PathBuf>;
@@ -97,25 +89,27 @@ pub trait KindStep: Clone + std::fmt::Debug + PartialEq + Send + Sync {
     fn sort(&self) -> &'static str;
 }
 
-/// The one list of kinds: each name of `config::AssetKind` and the type that answers for it.
-/// It generates one dispatching method per question of `Kind` and the `Step` that carries any
-/// kind's step (a kind left out of the list is a compile error: the `match`es are exhaustive).
+/// The dispatch of the one list of kinds (`kind_list.rs`): each kind's type is `folder::Name`.
+/// It generates one method per question of `Kind` and the `Step` that carries any kind's step
+/// (a kind left out is a compile error: the `match`es are exhaustive).
 macro_rules! kinds {
-    ($($name:ident => $kind:ty),* $(,)?) => {
+    ($($name:ident => $folder:ident),* $(,)?) => {
         /// A step of one kind's own (its `Kind::Step`), as a job carries it.
         #[derive(Clone, Debug, PartialEq)]
         pub enum Step {
-            $($name(<$kind as Kind>::Step)),*
+            $($name(<$folder::$name as Kind>::Step)),*
         }
 
         impl Step {
             fn sort(&self) -> &'static str {
-                match self { $(Step::$name(step) => step.sort()),* }
+                match self {
+                    $(Step::$name(step) => step.sort()),*
+                }
             }
         }
 
-        $(impl From<<$kind as Kind>::Step> for Step {
-            fn from(step: <$kind as Kind>::Step) -> Step {
+        $(impl From<<$folder::$name as Kind>::Step> for Step {
+            fn from(step: <$folder::$name as Kind>::Step) -> Step {
                 Step::$name(step)
             }
         })*
@@ -130,22 +124,21 @@ macro_rules! kinds {
                     tail_queries::load_previous_encoding(db, job.asset, surface);
                     Ok(Vec::new())
                 }
-                $(Task::Step(Step::$name(step)) => <$kind>::run_step(db, job.asset, step),)*
+                $(Task::Step(Step::$name(step)) => <$folder::$name>::run_step(db, job.asset, step),)*
             }
         }
 
         impl AssetKind {
-            /// The kind's name in `pipeline.ron`, summaries and reports.
-            pub fn name(self) -> &'static str {
-                match self { $(AssetKind::$name => <$kind>::NAME),* }
-            }
-
             pub fn files_to_read(self, db: &dyn Db, asset: Asset) -> Vec<PathBuf> {
-                match self { $(AssetKind::$name => <$kind>::files_to_read(db, asset)),* }
+                match self {
+                    $(AssetKind::$name => <$folder::$name>::files_to_read(db, asset)),*
+                }
             }
 
             pub fn first_jobs(self, db: &dyn Db, asset: Asset) -> Vec<Job> {
-                match self { $(AssetKind::$name => <$kind>::first_jobs(db, asset)),* }
+                match self {
+                    $(AssetKind::$name => <$folder::$name>::first_jobs(db, asset)),*
+                }
             }
 
             pub fn stage_instances(
@@ -155,7 +148,9 @@ macro_rules! kinds {
                 output_folder: &Path,
                 errors: &[Diagnostic],
             ) -> Vec<StageInstance> {
-                match self { $(AssetKind::$name => <$kind>::stage_instances(db, asset, output_folder, errors)),* }
+                match self {
+                    $(AssetKind::$name => <$folder::$name>::stage_instances(db, asset, output_folder, errors)),*
+                }
             }
 
             pub fn outputs(
@@ -166,19 +161,37 @@ macro_rules! kinds {
                 errors: &mut Vec<Diagnostic>,
                 runs: &[StageRun],
             ) -> AssetOutputs {
-                match self { $(AssetKind::$name => <$kind>::outputs(db, asset, output_folder, errors, runs)),* }
+                match self {
+                    $(AssetKind::$name => <$folder::$name>::outputs(db, asset, output_folder, errors, runs)),*
+                }
             }
 
             pub fn check(self, config: &PipelineConfig, asset: &AssetConfig) -> Vec<Diagnostic> {
-                match self { $(AssetKind::$name => <$kind>::check(config, asset)),* }
+                match self {
+                    $(AssetKind::$name => <$folder::$name>::check(config, asset)),*
+                }
             }
 
-            pub fn surface_image(self, db: &dyn Db, asset: Asset, surface: &SurfaceId) -> Result<Arc<Texture>, Diagnostic> {
-                match self { $(AssetKind::$name => <$kind>::surface_image(db, asset, surface)),* }
+            pub fn surface_image(
+                self,
+                db: &dyn Db,
+                asset: Asset,
+                surface: &SurfaceId,
+            ) -> Result<Arc<Texture>, Diagnostic> {
+                match self {
+                    $(AssetKind::$name => <$folder::$name>::surface_image(db, asset, surface)),*
+                }
             }
 
-            pub fn tail_settings(self, db: &dyn Db, asset: Asset, surface: &SurfaceId) -> Result<TailSettings, Diagnostic> {
-                match self { $(AssetKind::$name => <$kind>::tail_settings(db, asset, surface)),* }
+            pub fn tail_settings(
+                self,
+                db: &dyn Db,
+                asset: Asset,
+                surface: &SurfaceId,
+            ) -> Result<TailSettings, Diagnostic> {
+                match self {
+                    $(AssetKind::$name => <$folder::$name>::tail_settings(db, asset, surface)),*
+                }
             }
 
             pub fn surface_recipe_key(
@@ -187,7 +200,9 @@ macro_rules! kinds {
                 asset: Asset,
                 surface: &SurfaceId,
             ) -> Result<Option<CacheKey>, Diagnostic> {
-                match self { $(AssetKind::$name => <$kind>::surface_recipe_key(db, asset, surface)),* }
+                match self {
+                    $(AssetKind::$name => <$folder::$name>::surface_recipe_key(db, asset, surface)),*
+                }
             }
 
             pub fn surface_parts_key(
@@ -196,7 +211,9 @@ macro_rules! kinds {
                 asset: Asset,
                 surface: &SurfaceId,
             ) -> Result<Option<CacheKey>, Diagnostic> {
-                match self { $(AssetKind::$name => <$kind>::surface_parts_key(db, asset, surface)),* }
+                match self {
+                    $(AssetKind::$name => <$folder::$name>::surface_parts_key(db, asset, surface)),*
+                }
             }
 
             pub fn provided_surface_stage(
@@ -205,19 +222,15 @@ macro_rules! kinds {
                 asset: Asset,
                 surface: &SurfaceId,
             ) -> Result<Option<Read>, Diagnostic> {
-                match self { $(AssetKind::$name => <$kind>::provided_surface_stage(db, asset, surface)),* }
+                match self {
+                    $(AssetKind::$name => <$folder::$name>::provided_surface_stage(db, asset, surface)),*
+                }
             }
         }
     };
 }
 
-kinds! {
-    Material => Material,
-    BillboardCloud => BillboardCloud,
-    Atlas => Atlas,
-    AmbientOcclusion => AmbientOcclusion,
-    Height => Height,
-}
+with_kinds!(kinds);
 
 /// One surface that ends in the texture tail: `group` names what it belongs to inside the asset
 /// (a material's name; empty for an asset's own surfaces, like a billboard cloud's atlas).

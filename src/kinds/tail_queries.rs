@@ -1,8 +1,10 @@
 //! The tracked functions of the shared texture tail (thin glue over `texture::tail`): every
 //! kind's surfaces run through them, keyed by asset and `SurfaceId` (salsa interns the pair).
-//! The persistent cache is asked twice: by the surface's recipe (its kind's cheap key of what
-//! the image is made of, so a restart needs no image), then by the image's content (so an edit
-//! that leaves a surface's texels alone encodes nothing).
+//! The persistent cache is asked up to three times: by the surface's recipe (its kind's cheap key
+//! of what the image is made of, so a restart needs no image), then by its parts when the kind
+//! has them (what the image is put together from, so an edit that leaves them alone composites
+//! nothing), then by the image's content (so an edit that leaves a surface's texels alone
+//! encodes nothing).
 
 use std::sync::Arc;
 

@@ -273,7 +273,10 @@ pub fn load_mesh(
         for name in &objects_without_uvs {
             warnings.push(Diagnostic::new(
                 obj_file,
-                format!("object `{name}` has no texture coordinates: its faces take their materials' constants, not their maps (and are not baked in UV space)"),
+                format!(
+                    "object `{name}` has no texture coordinates: its faces take their materials' constants, not \
+                    their maps (and are not baked in UV space)"
+                ),
             ));
         }
         // Each material those faces use, once more without maps.
@@ -426,7 +429,10 @@ fn check_scale(obj_file: &Path, mesh: &Mesh) -> Result<(), Diagnostic> {
     if extent > MAX_MESH_EXTENT {
         return Err(Diagnostic::new(
             obj_file,
-            format!("the mesh spans {extent:.3e} units, more than the {MAX_MESH_EXTENT:.0e} that single precision can bake: scale it down"),
+            format!(
+                "the mesh spans {extent:.3e} units, more than the {MAX_MESH_EXTENT:.0e} that single precision can \
+                bake: scale it down"
+            ),
         ));
     }
     let area: f64 = mesh
@@ -443,7 +449,10 @@ fn check_scale(obj_file: &Path, mesh: &Mesh) -> Result<(), Diagnostic> {
     if extent < MIN_MESH_EXTENT {
         return Err(Diagnostic::new(
             obj_file,
-            format!("the mesh spans {extent:.3e} units, less than the {MIN_MESH_EXTENT:.0e} that single precision can bake: scale it up"),
+            format!(
+                "the mesh spans {extent:.3e} units, less than the {MIN_MESH_EXTENT:.0e} that single precision can \
+                bake: scale it up"
+            ),
         ));
     }
     Ok(())

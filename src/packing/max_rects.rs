@@ -97,10 +97,14 @@ impl PagePacking {
 /// Why rectangles could not be packed.
 #[derive(Clone, Debug, PartialEq, Eq, thiserror::Error)]
 pub enum PackError {
-    #[error("rectangle {index} is {width}×{height} texels with its padding, larger than a page of at most {max_size}×{max_size}")]
+    #[error(
+        "rectangle {index} is {width}×{height} texels with its padding, larger than a page of at most \
+        {max_size}×{max_size}"
+    )]
     TooLarge { index: usize, width: u32, height: u32, max_size: u32 },
     #[error(
-        "{left} of {count} rectangles ({left_texels} texels with padding) do not fit on {pages} page(s) of at most {max_size}×{max_size}"
+        "{left} of {count} rectangles ({left_texels} texels with padding) do not fit on {pages} page(s) of at most \
+            {max_size}×{max_size}"
     )]
     DoesNotFit { count: usize, left: usize, left_texels: u64, pages: u32, max_size: u32 },
 }

@@ -26,11 +26,13 @@ use crate::summary::{
 pub use crate::schedule::{CancelFlag, Progress};
 
 mod graph;
+mod publish;
 mod source_files;
 mod summaries;
 mod unchanged;
 
 use graph::instance_record;
+use publish::{BakedAsset, BuildNews};
 use summaries::{asset_artifacts, runs_by_asset, stage_summaries, RunIndex};
 use unchanged::executable_identity;
 
@@ -133,6 +135,9 @@ pub struct Project {
     /// The stage instances of the assets the last build looked into, for the graph while no
     /// input changed since (the daemon's log after each batch asks for it without a second sync).
     built_instances: HashMap<String, Vec<InstanceRecord>>,
+    /// How many times an asset's input was synced (its files listed and set): see
+    /// [`Project::assets_synced`].
+    syncs: u64,
     options: ProjectOptions,
     /// The build record: source files' metadata and hashes, baked assets' fingerprints.
     record: BuildRecord,
@@ -229,6 +234,7 @@ impl Project {
             revision,
             sources_changed_since_build: false,
             built_instances: HashMap::new(),
+            syncs: 0,
             options,
             record,
             record_changed: false,
@@ -282,6 +288,12 @@ impl Project {
             return Err(BuildError::Failed { name: name.to_string(), errors });
         }
         Ok(self.asset_input(name).expect("a built asset has an input"))
+    }
+
+    /// How many times an asset's input was synced since the project opened: each costs the
+    /// kind's file lists and a look at every file the asset reads (the daemon's tests count them).
+    pub fn assets_synced(&self) -> u64 {
+        self.syncs
     }
 
     pub fn asset_input(&mut self, name: &str) -> Option<Asset> {
@@ -447,7 +459,8 @@ impl Project {
                 conflicts.push(Diagnostic::new(
                     file,
                     format!(
-                        "warning: matches a rule but is not baked: its asset name `{}` collides with the asset `{}` ({})",
+                        "warning: matches a rule but is not baked: its asset name `{}` collides with the asset `{}` \
+                            ({})",
                         asset.name,
                         other.name,
                         display_path(&self.config.source.join(other.source.main_file()))
@@ -464,6 +477,7 @@ impl Project {
 
     /// The asset's input, its settings and every file its kind reads, set only where changed.
     fn sync_asset(&mut self, config: &AssetConfig) -> Asset {
+        self.syncs += 1;
         let kind = config.source.kind();
         let main_file = self.config.source.join(config.source.main_file());
         let source_root = self.config.source.clone();
@@ -592,43 +606,13 @@ impl Project {
             assets.push((config.clone(), asset));
         }
         self.sync_registry(all_assets, &assets);
-        if let Some(cache) = self.db.disk_cache() {
-            // This build's hits and misses start here.
-            cache.take_counts();
-            cache.take_misses();
-        }
-        let first_jobs =
-            assets.iter().flat_map(|(_, asset)| asset.kind(&self.db).first_jobs(&self.db, *asset)).collect();
-        let finished = crate::schedule::run_jobs(&self.db, first_jobs, &crate::kinds::run_job, progress, &cancel);
-        let runs = self.db.take_runs();
-        crate::gpu::wait_for_gpu_start();
-        if let Some(cache) = self.db.disk_cache() {
-            // Entries written in the background are on disk before the build reports.
-            cache.flush();
-        }
-        let Some(finished) = finished.filter(|_| !cancel.is_raised()) else {
+        let Some((runs, mut failures)) = self.run_asset_jobs(&assets, progress, &cancel) else {
             self.keep_manifest(manifest);
             return Err(BuildError::Cancelled);
         };
-        // Per asset: its errors, and the labels of its jobs that failed.
-        let mut failures: HashMap<Asset, (Vec<Diagnostic>, HashSet<String>)> = HashMap::new();
-        for (job, result) in finished {
-            if let Err(diagnostic) = result {
-                let (errors, labels) = failures.entry(job.asset).or_default();
-                if !errors.contains(&diagnostic) {
-                    errors.push(diagnostic);
-                }
-                labels.insert(job.label);
-            }
-        }
 
         let run_index = RunIndex::new(&runs);
         let next_revision = manifest.revision.max(self.revision) + 1;
-        let mut changed = options.always_new_revision;
-        let mut changed_artifacts = Vec::new();
-        let mut removed_artifacts = Vec::new();
-        let mut summaries = Vec::new();
-        let mut statuses = HashMap::new();
         // Every asset's files are put together before any is written: an edit meanwhile (a
         // folder of sources deleted) still cancels the build, and nothing of it is published.
         let mut all_outputs = Vec::with_capacity(assets.len());
@@ -642,7 +626,7 @@ impl Project {
             let folder = self.config.output.join(&config.name);
             let runs = asset_runs.remove(config.name.as_str()).unwrap_or_default();
             let outputs = asset.kind(&self.db).outputs(&self.db, *asset, &folder, &mut errors, &runs);
-            all_outputs.push((errors, failed_jobs, folder, outputs));
+            all_outputs.push(BakedAsset { errors, failed_jobs, folder, outputs });
         }
         if cancel.is_raised() {
             self.keep_manifest(manifest);
@@ -657,112 +641,13 @@ impl Project {
         if writing {
             crate::record::begin_writing(&output_dir);
         }
-        for (((config, asset), (mut errors, failed_jobs, folder, outputs)), fingerprint) in
-            assets.iter().zip(all_outputs).zip(fingerprints)
-        {
-            // Writing is not interrupted (the manifest must list what was written), but an asset
-            // baked from a source that went away meanwhile (a folder deleted while it baked, whose
-            // event may not have arrived yet) is not published: the next build, which that
-            // deletion asks for, removes what it had. (A failure is still reported.)
-            if errors.is_empty() && !self.config.source_dir().join(config.source.main_file()).exists() {
-                continue;
-            }
-            let kind = asset.kind(&self.db);
-            // Project-relative artifact path → blake3 hex of what this build wrote there.
-            let mut produced = BTreeMap::new();
-            let mut all_written = true;
-            for (path, bytes) in &outputs.files {
-                all_written &= self.write_artifact(path, bytes, &mut errors, &mut produced);
-            }
-            let warnings = outputs.warnings;
-            // The report comes last and describes the files above: it is written only when they
-            // all are (a failed write keeps the last good report with its files).
-            if let (Some(mut report), true) = (outputs.report, all_written) {
-                report.push(b'\n');
-                self.write_artifact(&folder.join("report.json"), &report, &mut errors, &mut produced);
-            }
-            let asset_folder = format!("{}/", display_path(&folder));
-            for (path, hash) in &produced {
-                let meaning =
-                    outputs.meanings.iter().find(|(file, _)| display_path(file) == *path).map(|(_, meaning)| meaning);
-                if record_artifact(&mut manifest, next_revision, &config.name, path, hash, meaning) {
-                    changed = true;
-                    changed_artifacts.push(ChangedArtifact {
-                        asset: config.name.clone(),
-                        artifact: path.strip_prefix(&asset_folder).unwrap_or(path).to_string(),
-                        path: path.clone(),
-                        hash: hash.clone(),
-                        meaning: meaning.cloned(),
-                    });
-                }
-            }
-            let listed = crate::artifacts::artifacts_of(&manifest, &config.name, &folder);
-            if errors.is_empty() {
-                // A fully baked asset owns exactly what it produced: drop stale artifacts.
-                let stale = listed.iter().filter(|path| !produced.contains_key(*path)).cloned().collect();
-                removed_artifacts.extend(remove_artifacts(&self.config, &mut manifest, stale));
-            }
-            let instances = kind.stage_instances(&self.db, *asset, &folder, &errors);
-            let stages = stage_summaries(&instances, &run_index, !errors.is_empty(), &failed_jobs);
-            for (instance, stage) in instances.iter().zip(&stages) {
-                let state = stage.status.name();
-                let ms = (stage.status == StageStatus::Ran).then_some((stage.ms * 10.0).round() / 10.0);
-                statuses.insert(instance.node_id(), (state, ms));
-            }
-            let records: Vec<InstanceRecord> = instances.iter().map(instance_record).collect();
-            // The record lets the next build pass over this asset while nothing it reads moves.
-            self.record_changed = true;
-            self.trusted_artifacts.remove(&config.name);
-            match fingerprint.filter(|_| errors.is_empty()) {
-                Some(fingerprint) => {
-                    let artifacts = produced
-                        .keys()
-                        .filter_map(|path| Some((path.clone(), FileStamp::read(&self.config.root.join(path))?)))
-                        .collect();
-                    let files = asset.files(&self.db).keys().cloned().collect();
-                    let record = AssetRecord::new(fingerprint, files, artifacts, &records, warnings.clone());
-                    self.record.assets.insert(config.name.clone(), record);
-                    self.trusted_artifacts.insert(config.name.clone());
-                    self.clean.remove(&config.name);
-                    self.mark_clean(&config.name);
-                }
-                None => {
-                    self.record.assets.remove(&config.name);
-                    self.clean.remove(&config.name);
-                }
-            }
-            self.built_instances.insert(config.name.clone(), records);
-            summaries.push(AssetSummary {
-                name: config.name.clone(),
-                kind: kind.name(),
-                status: if errors.is_empty() { AssetStatus::Ok } else { AssetStatus::Failed },
-                stages,
-                artifacts: asset_artifacts(&manifest, &config.name, listed.iter().chain(produced.keys())),
-                errors: errors.iter().map(ErrorSummary::from).collect(),
-                warnings,
-                passed_over: false,
-            });
+        let mut news = BuildNews { changed: options.always_new_revision, ..Default::default() };
+        for ((config, asset), (baked, fingerprint)) in assets.iter().zip(all_outputs.into_iter().zip(fingerprints)) {
+            self.publish_asset(config, *asset, baked, fingerprint, &run_index, &mut manifest, next_revision, &mut news);
         }
+        let BuildNews { mut changed, mut changed_artifacts, mut removed_artifacts, mut summaries, statuses } = news;
         for config in unchanged.iter().filter(|_| !options.omit_unchanged) {
-            let record = &self.record.assets[&config.name];
-            let listed =
-                crate::artifacts::artifacts_of(&manifest, &config.name, &self.config.output.join(&config.name));
-            let stages = record.stages().into_iter().map(|(stage, instance)| StageSummary {
-                stage,
-                instance,
-                status: StageStatus::Cached,
-                ms: 0.0,
-            });
-            summaries.push(AssetSummary {
-                name: config.name.clone(),
-                kind: config.source.kind().name(),
-                status: AssetStatus::Ok,
-                stages: stages.collect(),
-                artifacts: asset_artifacts(&manifest, &config.name, listed.iter()),
-                errors: Vec::new(),
-                warnings: record.warnings.clone(),
-                passed_over: true,
-            });
+            summaries.push(self.passed_over_summary(config, &manifest));
         }
         if !options.omit_unchanged {
             // In the pipeline's order.
@@ -770,46 +655,15 @@ impl Project {
                 all_assets.iter().enumerate().map(|(index, config)| (config.name.as_str(), index)).collect();
             summaries.sort_by_key(|summary| order.get(summary.name.as_str()).copied());
         }
-        let departures_unchecked = self.source_reading == SourceReading::EveryBuild
-            || !self.departures_checked.as_ref().is_some_and(|checked| Arc::ptr_eq(checked, &listed));
-        if options.only_assets.is_empty() && departures_unchecked && self.config.source_dir().is_dir() {
-            // Artifacts of assets that left the pipeline (not of those that a vanished source
-            // folder took along: they failed, and keep their last good artifacts). Only a new
-            // asset list can have lost assets.
-            self.departures_checked = Some(listed.clone());
-            let names: HashSet<&str> = all_assets.iter().map(|asset| asset.name.as_str()).collect();
-            let gone = manifest.artifacts.iter().filter(|(_, entry)| !names.contains(entry.asset.as_str()));
-            let gone = gone.map(|(path, _)| path.clone()).collect();
-            removed_artifacts.extend(remove_artifacts(&self.config, &mut manifest, gone));
+        if options.only_assets.is_empty() {
+            removed_artifacts.extend(self.remove_departed(&listed, &mut manifest));
         }
         // A failure is news too: its batch gets a revision of its own, so that a client that
         // subscribes after it (with `since` = the revision before) still hears of it.
         changed |=
             !removed_artifacts.is_empty() || summaries.iter().any(|summary| summary.status == AssetStatus::Failed);
-        if changed && self.source_reading == SourceReading::WhenInvalidated {
-            // The daemon: the manifest waits for an idle moment (`save_deferred`); the revision,
-            // which must never be issued twice, is written now.
-            manifest.revision = next_revision;
-            self.manifest_unsaved = true;
-            crate::record::save_revision(&output_dir, next_revision);
-        } else if changed {
-            manifest.revision = next_revision;
-            if let Err(error) = save_manifest(&output_dir, &manifest) {
-                // Without the manifest, the next build cannot tell its artifacts from the user's
-                // files: every asset of this build fails, so scripts and CI notice.
-                let file = display_path(&self.config.output.join("manifest.json"));
-                tracing::error!("cannot write {file}: {error}");
-                for summary in &mut summaries {
-                    self.record.assets.remove(&summary.name);
-                    summary.status = AssetStatus::Failed;
-                    summary.errors.push(ErrorSummary {
-                        file: file.clone(),
-                        line: None,
-                        column: None,
-                        message: format!("cannot write the manifest: {error}"),
-                    });
-                }
-            }
+        if changed {
+            self.save_build_manifest(&mut manifest, next_revision, &mut summaries);
         }
         self.revision = manifest.revision;
         self.sources_changed_since_build = false;
@@ -834,31 +688,7 @@ impl Project {
         if writing {
             crate::record::end_writing(&output_dir);
         }
-        if let Some(cache) = self.db.disk_cache() {
-            // The assets passed over are named, not listed stage by stage.
-            let passed_over: HashSet<&str> = unchanged.iter().map(|config| config.name.as_str()).collect();
-            let assets = summaries
-                .iter()
-                .filter(|asset| !passed_over.contains(asset.name.as_str()))
-                .map(|asset| crate::cache::upkeep::LastBuildAsset {
-                    name: asset.name.clone(),
-                    stages: asset
-                        .stages
-                        .iter()
-                        .map(|stage| (stage_node_id(&stage.stage, &stage.instance), stage.status.name().to_string()))
-                        .collect(),
-                })
-                .collect();
-            let last = crate::cache::upkeep::LastBuild {
-                revision: manifest.revision,
-                counts: cache.take_counts(),
-                remote: cache.remote().map(|remote| remote.settings().url.clone()),
-                assets,
-                unchanged: unchanged.iter().map(|config| config.name.clone()).collect(),
-                misses: cache.take_misses(),
-            };
-            crate::cache::upkeep::write_last_build(cache.folder(), &last);
-        }
+        self.write_last_build(&summaries, &unchanged, manifest.revision);
         self.record_runs(&runs, manifest.revision);
         self.last_statuses = statuses;
         self.last_revision = Some(manifest.revision);
@@ -866,6 +696,59 @@ impl Project {
         let revision = manifest.revision;
         self.keep_manifest(manifest);
         Ok(BuildSummary { revision, assets: summaries, changed: changed_artifacts, removed: removed_artifacts })
+    }
+
+    /// Runs the first jobs of `assets` and those they schedule; this build's stage runs and, per
+    /// asset, its errors and the labels of its jobs that failed. `None` when cancelled.
+    #[allow(clippy::type_complexity)]
+    fn run_asset_jobs(
+        &mut self,
+        assets: &[(AssetConfig, Asset)],
+        progress: &(dyn Fn(Progress) + Sync),
+        cancel: &CancelFlag,
+    ) -> Option<(Vec<StageRun>, HashMap<Asset, (Vec<Diagnostic>, HashSet<String>)>)> {
+        if let Some(cache) = self.db.disk_cache() {
+            // This build's hits and misses start here.
+            cache.take_counts();
+            cache.take_misses();
+        }
+        let first_jobs =
+            assets.iter().flat_map(|(_, asset)| asset.kind(&self.db).first_jobs(&self.db, *asset)).collect();
+        let finished = crate::schedule::run_jobs(&self.db, first_jobs, &crate::kinds::run_job, progress, cancel);
+        let runs = self.db.take_runs();
+        crate::gpu::wait_for_gpu_start();
+        if let Some(cache) = self.db.disk_cache() {
+            // Entries written in the background are on disk before the build reports.
+            cache.flush();
+        }
+        let finished = finished.filter(|_| !cancel.is_raised())?;
+        let mut failures: HashMap<Asset, (Vec<Diagnostic>, HashSet<String>)> = HashMap::new();
+        for (job, result) in finished {
+            if let Err(diagnostic) = result {
+                let (errors, labels) = failures.entry(job.asset).or_default();
+                if !errors.contains(&diagnostic) {
+                    errors.push(diagnostic);
+                }
+                labels.insert(job.label);
+            }
+        }
+        Some((runs, failures))
+    }
+
+    /// Removes the artifacts of assets that left the pipeline (not of those that a vanished
+    /// source folder took along: they failed, and keep their last good artifacts); only a new
+    /// asset list can have lost assets, so the daemon looks once per list. Returns what it removed.
+    fn remove_departed(&mut self, listed: &Arc<AssetList>, manifest: &mut Manifest) -> Vec<String> {
+        let unchecked = self.source_reading == SourceReading::EveryBuild
+            || !self.departures_checked.as_ref().is_some_and(|checked| Arc::ptr_eq(checked, listed));
+        if !unchecked || !self.config.source_dir().is_dir() {
+            return Vec::new();
+        }
+        self.departures_checked = Some(listed.clone());
+        let names: HashSet<&str> = listed.0.iter().map(|asset| asset.name.as_str()).collect();
+        let gone = manifest.artifacts.iter().filter(|(_, entry)| !names.contains(entry.asset.as_str()));
+        let gone = gone.map(|(path, _)| path.clone()).collect();
+        remove_artifacts(&self.config, manifest, gone)
     }
 
     /// The manifest on disk: the one kept when its file did not change since.

@@ -72,7 +72,8 @@ impl TextureLimits {
         Err(Diagnostic::new(
             file,
             format!(
-                "the image is {width}×{height}: baking it needs about {} MiB, more than the texture memory budget of {} MiB \
+                "the image is {width}×{height}: baking it needs about {} MiB, more than the texture memory budget of \
+                    {} MiB \
                  (raise it with `limits: (texture_memory_mib: {})` in the pipeline file, or use a smaller image)",
                 mib(needed),
                 mib(self.working_set),

@@ -248,3 +248,36 @@ fn graph_renders_as_dot_json_and_mermaid() {
     let mermaid = String::from_utf8(project.run_cli(&["graph", "--format", "mermaid"]).stdout).unwrap();
     assert!(mermaid.starts_with("flowchart LR\n") && mermaid.contains(" --> "), "{mermaid}");
 }
+
+#[test]
+fn the_graph_after_a_build_reads_that_builds_instances_without_syncing_the_assets_again() {
+    // A material that fails (the record does not hold it) and an atlas named by glob (checked
+    // on every build): both were synced again by the graph before it kept the build's instances.
+    let project = TempProject::new(
+        r#"Pipeline(source: "src", output: "out", assets: [
+            Material(name: "broken", material: "broken.mymaterial"),
+            Atlas(name: "leaves", textures: ["leaves/*.png"]),
+        ])"#,
+    );
+    project.write("src/broken.mymaterial", "Material $m { Texture (attrib = \"diffuse\") {string {\"missing.png\"}} }");
+    project.write("src/leaves/a.png", crate::support::pattern_png(32, 32, 1));
+    project.write("src/leaves/b.png", crate::support::pattern_png(16, 16, 2));
+    let config = load_pipeline(&project.path("pipeline.ron")).unwrap();
+    let mut cirrus = Project::open(config, ProjectOptions { persistent_cache: false, ..Default::default() });
+    let summary = build(&mut cirrus);
+    assert!(!summary.all_ok(), "the material fails");
+    let names = ["broken", "leaves"].iter().map(|name| name.to_string()).collect();
+    let synced = cirrus.assets_synced();
+    let graph = cirrus.graph_of_assets(Some(&names));
+    assert_eq!(cirrus.assets_synced(), synced, "the graph synced no asset again");
+    for stage in ["parse(src/broken.mymaterial)", "layout(leaves)"] {
+        assert!(graph.nodes.iter().any(|node| node.id == stage), "{stage} in the graph");
+    }
+    assert!(graph.nodes.iter().any(|node| node.id == "src/leaves/b.png"), "the atlas's files in the graph");
+    // Once an input changed, the build's instances may be stale: the graph looks again.
+    project.write("src/leaves/a.png", crate::support::pattern_png(32, 32, 3));
+    cirrus.refresh_sources([Path::new("src/leaves/a.png")]);
+    let graph = cirrus.graph_of_assets(Some(&names));
+    assert!(cirrus.assets_synced() > synced, "an input changed: the graph syncs");
+    assert!(graph.nodes.iter().any(|node| node.id == "layout(leaves)"), "the atlas still in the graph");
+}

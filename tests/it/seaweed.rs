@@ -201,6 +201,7 @@ impl SeaweedServer {
 
     /// The bucket, for the test to look at and tamper with.
     pub fn bucket(&self) -> Bucket {
+        cirrus::cache::remote::install_tls_provider();
         let store = object_store::aws::AmazonS3Builder::new()
             .with_bucket_name(BUCKET)
             .with_endpoint(self.endpoint())

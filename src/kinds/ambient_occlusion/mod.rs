@@ -66,8 +66,6 @@ impl crate::kinds::KindStep for Step {
 }
 
 impl Kind for AmbientOcclusion {
-    const NAME: &'static str = "AmbientOcclusion";
-
     fn files_to_read(db: &dyn Db, asset: Asset) -> Vec<PathBuf> {
         crate::kinds::mesh_queries::mesh_files(db, asset)
     }
@@ -326,7 +324,7 @@ fn ao_outputs(db: &dyn Db, asset: Asset, output_folder: &Path, runs: &[StageRun]
     let name = asset.name(db);
     let report = AoReport {
         asset: name.clone(),
-        kind: AmbientOcclusion::NAME,
+        kind: crate::config::AssetKind::AmbientOcclusion.name(),
         mesh: display_path(asset.main_file(db)),
         mode: settings.mode,
         rays_per_texel: settings.rays,

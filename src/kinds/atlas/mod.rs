@@ -65,8 +65,6 @@ impl crate::kinds::KindStep for Step {
 }
 
 impl Kind for Atlas {
-    const NAME: &'static str = "Atlas";
-
     fn files_to_read(db: &dyn Db, asset: Asset) -> Vec<PathBuf> {
         let mut files: Vec<PathBuf> = asset.listed(db).iter().flatten().cloned().collect();
         for mesh in atlas_mesh_files(db, asset) {
@@ -182,11 +180,12 @@ impl Kind for Atlas {
         let mesh_error = |error: &Diagnostic| meshes.contains(&error.file);
         let others_failed = errors.iter().any(|error| !mesh_error(error));
         for instance in &mut instances {
+            let fails_mesh = |error: &Diagnostic, path: &PathBuf| &error.file == path && mesh_error(error);
             let own_mesh_failed = instance.stage == REMAP
                 && instance
                     .reads
                     .iter()
-                    .any(|read| matches!(read, Read::File(path) if errors.iter().any(|error| &error.file == path && mesh_error(error))));
+                    .any(|read| matches!(read, Read::File(path) if errors.iter().any(|error| fails_mesh(error, path))));
             instance.failed = others_failed || own_mesh_failed;
         }
         instances
@@ -347,7 +346,7 @@ fn atlas_outputs(
     let meshes = mesh_outputs(db, asset, output_folder, &mut outputs, errors, &mut warnings);
     let report = serde_json::json!({
         "asset": asset.name(db),
-        "kind": Atlas::NAME,
+        "kind": crate::config::AssetKind::Atlas.name(),
         "entries": layout.entries.len(),
         "textures": atlas_texture_files(db, asset).len(),
         "pages": layout.packing.pages,
@@ -407,7 +406,8 @@ fn mesh_outputs(
             errors.push(Diagnostic::new(
                 mesh,
                 format!(
-                    "mesh `{}`: material `{name}` differs from the material of that name in `{}`; atlas.mtl holds one material per name (rename one)",
+                    "mesh `{}`: material `{name}` differs from the material of that name in `{}`; atlas.mtl holds one \
+                        material per name (rename one)",
                     display_path(mesh),
                     display_path(&other_mesh)
                 ),

@@ -40,7 +40,8 @@ pub struct RemappedMesh {
 #[derive(Clone, Debug, PartialEq, thiserror::Error)]
 pub enum RemapError {
     #[error(
-        "material `{material}` has UVs u ∈ [{u_min}, {u_max}], v ∈ [{v_min}, {v_max}] on the atlased texture `{entry}`: repeating UVs (outside [0, 1]) cannot be remapped onto an atlas rectangle"
+        "material `{material}` has UVs u ∈ [{u_min}, {u_max}], v ∈ [{v_min}, {v_max}] on the atlased texture \
+            `{entry}`: repeating UVs (outside [0, 1]) cannot be remapped onto an atlas rectangle"
     )]
     RepeatingUvs { material: String, entry: String, u_min: f32, u_max: f32, v_min: f32, v_max: f32 },
     #[error(

@@ -29,7 +29,7 @@ pub fn is_chain(settings: &Settings) -> bool {
 /// density; with neither, its atlas's largest side is `max_size / 2^N` (at least 64 texels,
 /// a multiple of 4). Level 0, and the one level of an asset without a chain, take the settings
 /// as they are.
-pub fn level_settings(settings: &Settings, level: u32) -> LevelSettings {
+pub fn settings_for(settings: &Settings, level: u32) -> LevelSettings {
     let billboard = &settings.billboard;
     let budget = billboard.lods.get(level as usize).copied().or(billboard.budget);
     let halvings = level.min(31);
@@ -74,7 +74,7 @@ pub fn level_of_folder(folder: &str) -> Option<u32> {
 }
 
 /// A level's stage label: the asset's name, or `asset/lod<N>` in a chain.
-pub fn level_label(asset_name: &str, folder: &str) -> String {
+pub fn label(asset_name: &str, folder: &str) -> String {
     if folder.is_empty() {
         asset_name.to_string()
     } else {

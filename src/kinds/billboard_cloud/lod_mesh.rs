@@ -39,7 +39,8 @@ pub fn lod_mesh(rectangles: &[PlaneRectangle], layout: &Layout, material: &str) 
         let _ = writeln!(obj, "f {}/{}/{n} {}/{}/{n} {}/{}/{n}", v, v, v + 2, v + 2, v + 3, v + 3);
     }
     let mtl = format!(
-        "# cirrus billboard cloud material (alpha-tested, double-sided)\nnewmtl {material}\nKd 1 1 1\nmap_Kd albedo.png\nmap_d albedo.png\nnorm normal.png\nmap_Pr mra.png\nmap_ao mra.png\n"
+        "# cirrus billboard cloud material (alpha-tested, double-sided)\nnewmtl {material}\nKd 1 1 1\nmap_Kd \
+            albedo.png\nmap_d albedo.png\nnorm normal.png\nmap_Pr mra.png\nmap_ao mra.png\n"
     );
     (obj, mtl)
 }

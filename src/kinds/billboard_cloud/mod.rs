@@ -94,8 +94,6 @@ impl crate::kinds::KindStep for Step {
 }
 
 impl Kind for BillboardCloud {
-    const NAME: &'static str = "BillboardCloud";
-
     fn files_to_read(db: &dyn Db, asset: Asset) -> Vec<PathBuf> {
         let mut files = crate::kinds::mesh_queries::mesh_files(db, asset);
         files.extend(mesh_textures(db, asset).iter().cloned());
@@ -358,7 +356,7 @@ fn billboard_outputs(
     }
     let mut report = serde_json::json!({
         "asset": name,
-        "kind": BillboardCloud::NAME,
+        "kind": crate::config::AssetKind::BillboardCloud.name(),
         "mesh": display_path(asset.main_file(db)),
         "faces": loaded.mesh.triangles.len(),
         "alpha_cutoff": settings.billboard.alpha_cutoff,

@@ -52,13 +52,13 @@ impl KeyPart for crate::packing::PageSettings {
 /// What a level is asked for (one level without a chain).
 #[salsa::tracked(returns(copy))]
 pub fn level_settings(db: &dyn Db, asset: Asset, level: u32) -> super::levels::LevelSettings {
-    super::levels::level_settings(asset.settings(db), level)
+    super::levels::settings_for(asset.settings(db), level)
 }
 
 /// A level's stage label: the asset's name, or `asset/lod<N>` in a chain.
 #[salsa::tracked(returns(ref))]
 pub fn level_label(db: &dyn Db, asset: Asset, level: u32) -> String {
-    super::levels::level_label(asset.name(db), &super::levels::level_folder(asset.settings(db), level))
+    super::levels::label(asset.name(db), &super::levels::level_folder(asset.settings(db), level))
 }
 
 #[salsa::tracked(returns(copy))]

@@ -74,8 +74,6 @@ impl crate::kinds::KindStep for Step {
 }
 
 impl Kind for Height {
-    const NAME: &'static str = "Height";
-
     fn files_to_read(db: &dyn Db, asset: Asset) -> Vec<PathBuf> {
         let mut files = mesh_files_of(db, asset, asset.main_file(db));
         files.extend(mesh_files_of(db, asset, &high_path(db, asset)));
@@ -201,7 +199,8 @@ impl Kind for Height {
                 } else if needs_uvs && mesh.uvs.is_none() {
                     problems.push(Diagnostic::new(
                         low_file,
-                        "the low mesh has no texture coordinates (`vt` in the OBJ): a Normals height bake and a displaced tessellation need its UV layout",
+                        "the low mesh has no texture coordinates (`vt` in the OBJ): a Normals height bake and a \
+                            displaced tessellation need its UV layout",
                     ));
                 } else if settings.height.projection == HeightProjection::Normals {
                     problems.extend(
@@ -425,7 +424,7 @@ fn height_outputs(
     warnings.extend(flat_map_warning(&*height_map(db, asset, MapReference::Low)?, &high_path(db, asset), "height"));
     let report = HeightReport {
         asset: name.clone(),
-        kind: Height::NAME,
+        kind: crate::config::AssetKind::Height.name(),
         high: display_path(&high_path(db, asset)),
         low: display_path(asset.main_file(db)),
         projection: settings.projection,

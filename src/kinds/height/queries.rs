@@ -285,7 +285,8 @@ pub fn height_map(db: &dyn Db, asset: Asset, reference: MapReference) -> Result<
     if map.measured_texels == 0 {
         let message = match map_projection(&settings, reference) {
             HeightProjection::Normals => format!(
-                "no ray from the low mesh met the high mesh within frontal {} and rear {} of the diagonal: do the two meshes overlap?",
+                "no ray from the low mesh met the high mesh within frontal {} and rear {} of the diagonal: do the two \
+                    meshes overlap?",
                 settings.frontal, settings.rear
             ),
             HeightProjection::TopDown => {
@@ -393,7 +394,8 @@ pub fn pn_mesh(db: &dyn Db, asset: Asset) -> Result<Arc<HashedMesh>, Diagnostic>
     let triangles = mesh.triangles.len() as u64 * settings.level as u64 * settings.level as u64;
     if triangles > MAX_TESSELLATED_TRIANGLES {
         let message = format!(
-            "level {} would tessellate the low mesh's {} triangles into {triangles}, more than the {MAX_TESSELLATED_TRIANGLES} a tessellated mesh may have: lower `level`",
+            "level {} would tessellate the low mesh's {} triangles into {triangles}, more than the \
+                {MAX_TESSELLATED_TRIANGLES} a tessellated mesh may have: lower `level`",
             settings.level,
             mesh.triangles.len()
         );

@@ -48,8 +48,6 @@ impl crate::kinds::KindStep for Step {
 }
 
 impl Kind for Material {
-    const NAME: &'static str = "Material";
-
     fn files_to_read(db: &dyn Db, asset: Asset) -> Vec<PathBuf> {
         let mut files = vec![asset.main_file(db).clone()];
         if let Ok(parsed) = material_file(db, asset) {
@@ -167,7 +165,7 @@ impl Kind for Material {
         }
         let report = MaterialReport {
             asset: asset.name(db).clone(),
-            kind: Material::NAME,
+            kind: crate::config::AssetKind::Material.name(),
             file: display_path(asset.main_file(db)),
             materials,
             warnings: parsed.warnings.iter().map(ErrorSummary::from).collect(),

@@ -14,7 +14,7 @@ use crate::files::{write_if_changed, TEMPORARY_PREFIX};
 /// Deletes the temporary files that killed builds left under `output_dir`: regular files named
 /// with `TEMPORARY_PREFIX`, untouched for a minute (another process may be writing a fresh one);
 /// symbolic links are not followed. Returns how many were deleted.
-pub fn sweep_temporary_files(output_dir: &Path) -> usize {
+pub(crate) fn sweep_temporary_files(output_dir: &Path) -> usize {
     let mut swept = 0;
     let mut folders = vec![output_dir.to_path_buf()];
     while let Some(folder) = folders.pop() {
@@ -41,7 +41,7 @@ pub fn sweep_temporary_files(output_dir: &Path) -> usize {
 /// timings (`stage_ms`, and `timings`: any other figure measured in the run), which differ on
 /// every run: such a report is not rewritten, so a batch that changed nothing else lists no
 /// artifact.
-pub fn same_report_on_disk(path: &Path, report: &[u8]) -> Option<Vec<u8>> {
+pub(crate) fn same_report_on_disk(path: &Path, report: &[u8]) -> Option<Vec<u8>> {
     let existing = crate::files::read_regular_file(path, 64 << 20).ok()?;
     let without_timings = |bytes: &[u8]| -> Option<serde_json::Value> {
         let mut value: serde_json::Value = serde_json::from_slice(bytes).ok()?;
@@ -55,7 +55,7 @@ pub fn same_report_on_disk(path: &Path, report: &[u8]) -> Option<Vec<u8>> {
 
 /// One artifact in the manifest.
 #[derive(Clone, Debug, PartialEq, Eq, Serialize, Deserialize)]
-pub struct ManifestEntry {
+pub(crate) struct ManifestEntry {
     pub asset: String,
     /// blake3 hex digest of the file.
     pub hash: String,
@@ -69,7 +69,7 @@ pub struct ManifestEntry {
 
 /// `<output>/manifest.json`: paths are relative to the project folder, with `/` separators.
 #[derive(Clone, Debug, Default, PartialEq, Eq, Serialize, Deserialize)]
-pub struct Manifest {
+pub(crate) struct Manifest {
     pub revision: u64,
     pub artifacts: BTreeMap<String, ManifestEntry>,
 }
@@ -77,19 +77,19 @@ pub struct Manifest {
 /// Largest `manifest.json` read back (a million artifacts take about 200 MB).
 const MAX_MANIFEST_BYTES: u64 = 256 << 20;
 
-pub fn manifest_path(output_dir: &Path) -> PathBuf {
+pub(crate) fn manifest_path(output_dir: &Path) -> PathBuf {
     output_dir.join("manifest.json")
 }
 
 /// The manifest of the last build, or an empty one.
-pub fn load_manifest(output_dir: &Path) -> Manifest {
+pub(crate) fn load_manifest(output_dir: &Path) -> Manifest {
     crate::files::read_regular_file(&manifest_path(output_dir), MAX_MANIFEST_BYTES)
         .ok()
         .and_then(|bytes| serde_json::from_slice(&bytes).ok())
         .unwrap_or_default()
 }
 
-pub fn save_manifest(output_dir: &Path, manifest: &Manifest) -> std::io::Result<bool> {
+pub(crate) fn save_manifest(output_dir: &Path, manifest: &Manifest) -> std::io::Result<bool> {
     let mut bytes = serde_json::to_vec_pretty(manifest).expect("manifest serialises");
     bytes.push(b'\n');
     write_if_changed(&manifest_path(output_dir), &bytes)
@@ -97,13 +97,13 @@ pub fn save_manifest(output_dir: &Path, manifest: &Manifest) -> std::io::Result<
 
 /// The bytes of a baked artifact (`path` relative to `root`), for commands that read what a
 /// build wrote (the preview, the viewer).
-pub fn read_artifact(root: &Path, path: &Path) -> Result<Vec<u8>, crate::diagnostic::Diagnostic> {
+pub(crate) fn read_artifact(root: &Path, path: &Path) -> Result<Vec<u8>, crate::diagnostic::Diagnostic> {
     std::fs::read(root.join(path))
         .map_err(|error| crate::diagnostic::Diagnostic::new(path, format!("cannot read the baked artifact: {error}")))
 }
 
 /// Records an artifact in the manifest; true when the entry is new or its bytes changed.
-pub fn record_artifact(
+pub(crate) fn record_artifact(
     manifest: &mut Manifest,
     revision: u64,
     asset: &str,
@@ -125,7 +125,7 @@ pub fn record_artifact(
 
 /// The manifest's artifact paths of an asset whose folder (project-relative) is `folder`: a
 /// range of the sorted manifest (asset folders never nest), not a pass over every entry.
-pub fn artifacts_of(manifest: &Manifest, asset: &str, folder: &Path) -> Vec<String> {
+pub(crate) fn artifacts_of(manifest: &Manifest, asset: &str, folder: &Path) -> Vec<String> {
     let prefix = format!("{}/", display_path(folder));
     let below = manifest.artifacts.range(prefix.clone()..).take_while(|(path, _)| path.starts_with(&prefix));
     below.filter(|(_, entry)| entry.asset == asset).map(|(path, _)| path.clone()).collect()
@@ -136,7 +136,7 @@ pub fn artifacts_of(manifest: &Manifest, asset: &str, folder: &Path) -> Vec<Stri
 /// is deleted only when it lies inside the output folder and the file there is the one cirrus
 /// wrote (its blake3 matches the entry). Any other entry is dropped from the manifest with a
 /// warning, its file left alone.
-pub fn remove_artifacts(config: &PipelineConfig, manifest: &mut Manifest, doomed: Vec<String>) -> Vec<String> {
+pub(crate) fn remove_artifacts(config: &PipelineConfig, manifest: &mut Manifest, doomed: Vec<String>) -> Vec<String> {
     let mut removed = Vec::new();
     for path in doomed {
         let Some(entry) = manifest.artifacts.remove(&path) else { continue };

@@ -64,7 +64,7 @@ impl AssetSource {
         }
     }
 
-    pub fn main_file(&self) -> &Path {
+    pub(crate) fn main_file(&self) -> &Path {
         match self {
             AssetSource::Material { material } => material,
             AssetSource::BillboardCloud { mesh } | AssetSource::AmbientOcclusion { mesh } => mesh,
@@ -76,7 +76,7 @@ impl AssetSource {
 
     /// The lists of globs (over the source folder) whose matches the asset reads, in the order
     /// its kind takes them (an atlas: textures, then meshes); none for kinds that name files.
-    pub fn glob_lists(&self) -> Vec<&[String]> {
+    pub(crate) fn glob_lists(&self) -> Vec<&[String]> {
         match self {
             AssetSource::Atlas { textures, meshes } => vec![textures, meshes],
             _ => Vec::new(),
@@ -131,12 +131,12 @@ impl PipelineConfig {
         self.root.join(&self.source)
     }
 
-    pub fn output_dir(&self) -> PathBuf {
+    pub(crate) fn output_dir(&self) -> PathBuf {
         self.root.join(&self.output)
     }
 
     /// The local stage cache: `<output>/.cirrus/cache`.
-    pub fn cache_dir(&self) -> PathBuf {
+    pub(crate) fn cache_dir(&self) -> PathBuf {
         self.output_dir().join(".cirrus").join("cache")
     }
 
@@ -178,10 +178,10 @@ mod raw;
 /// What an asset may be called, and which names share a folder.
 mod asset_names;
 use asset_names::valid_asset_name;
-pub use asset_names::{reserved_asset_name, AssetFolders, RESERVED_ASSET_NAMES};
+pub(crate) use asset_names::{reserved_asset_name, AssetFolders};
 
 /// A glob over paths relative to the source folder (`*` stops at `/`, `**` crosses folders).
-pub fn source_glob(glob: &str) -> Result<globset::GlobMatcher, String> {
+pub(crate) fn source_glob(glob: &str) -> Result<globset::GlobMatcher, String> {
     globset::GlobBuilder::new(glob)
         .literal_separator(true)
         .build()
@@ -300,6 +300,23 @@ fn ron_message(error: &ron::error::SpannedError, text: &str) -> String {
                 list(expected)
             )
         }
+        ron::Error::NoSuchStructField { expected, found, outer }
+            if AssetKind::ALL.iter().any(|kind| Some(kind.name()) == outer.as_deref()) =>
+        {
+            // A settings section of another kind: said with the kinds that read it.
+            let kind = outer.as_deref().unwrap_or_default();
+            match SECTION_READERS.iter().find(|(section, _)| section == found) {
+                Some((section, readers)) => format!(
+                    "a {kind} asset does not read `{section}` settings (only {readers} do); its fields are {}",
+                    list(expected)
+                ),
+                None => format!(
+                    "unknown field `{found}` in a {kind} asset{}; expected one of {}",
+                    did_you_mean(found, expected.iter().copied()),
+                    list(expected)
+                ),
+            }
+        }
         ron::Error::NoSuchStructField { expected, found, outer } => {
             let outer = outer.as_deref().map_or("this structure".to_string(), |outer| {
                 format!("`{}`", outer.trim_end_matches("Overrides").trim_start_matches("Raw").to_lowercase())
@@ -347,6 +364,19 @@ fn ron_message(error: &ron::error::SpannedError, text: &str) -> String {
     }
 }
 
+/// Each settings section of an asset and the kinds that read it (for the error of a section
+/// written on a kind that does not).
+const SECTION_READERS: &[(&str, &str)] = &[
+    ("billboard", "BillboardCloud assets (and Material ones, for `alpha_cutoff`)"),
+    ("atlas", "BillboardCloud assets"),
+    ("pack", "Atlas assets"),
+    ("ao", "AmbientOcclusion assets"),
+    ("height", "Height assets"),
+    ("tessellate", "Height assets"),
+    ("report", "Material assets"),
+    ("ao_source", "Material assets"),
+];
+
 /// The byte offset of a 1-based line and (character) column.
 fn byte_offset(text: &str, line: usize, column: usize) -> usize {
     let line_start: usize = text.split_inclusive('\n').take(line.saturating_sub(1)).map(str::len).sum();
@@ -380,6 +410,8 @@ struct Validator<'a> {
 }
 
 impl Validator<'_> {
+    // Long: one pass over the pipeline in file order, so that each error is anchored at its text;
+    // it shrinks when each kind validates its own settings in its folder (issue 38, item 2).
     fn validate(mut self, raw: raw::Pipeline, root: PathBuf) -> Result<PipelineConfig, ConfigError> {
         let source = self.project_path(&raw.source, "source", 0);
         let output = self.project_path(&raw.output, "output", 0);
@@ -423,8 +455,8 @@ impl Validator<'_> {
             // Each kind's own settings; the others keep the defaults.
             let mut overrides = raw::SettingsOverrides::default();
             let (name, path, encode, kind) = match asset {
-                raw::Asset::Material { name, material, billboard, atlas, encode, report, .. } => {
-                    (overrides.billboard, overrides.atlas) = (billboard.clone(), atlas.clone());
+                raw::Asset::Material { name, material, billboard, encode, report, .. } => {
+                    overrides.billboard = billboard.clone();
                     overrides.report = report.clone();
                     (name, Some(material), encode, AssetKind::Material)
                 }
@@ -635,6 +667,8 @@ impl Validator<'_> {
         }
     }
 
+    // Long: every section's checks, each a few lines; they move to the kinds' own settings files
+    // with issue 38's item 2.
     fn merge_settings(&mut self, base: &Settings, overrides: &raw::SettingsOverrides, anchor: usize) -> Settings {
         let mut settings = base.clone();
         let billboard = &overrides.billboard;
@@ -933,7 +967,7 @@ impl Validator<'_> {
 
 /// A listening address: `127.0.0.1:7878`, `[::1]:7878` or a host name with a port
 /// (`localhost:7878`, resolved now; IPv4 preferred).
-pub fn resolve_socket_address(text: &str) -> Result<SocketAddr, String> {
+pub(crate) fn resolve_socket_address(text: &str) -> Result<SocketAddr, String> {
     use std::net::ToSocketAddrs;
     if let Ok(address) = text.parse::<SocketAddr>() {
         return Ok(address);

@@ -45,17 +45,17 @@ impl fmt::Debug for FileContents {
 }
 
 /// A file's contents, or why it could not be read.
-pub type FileRead = Result<FileContents, crate::files::ReadError>;
+pub(crate) type FileRead = Result<FileContents, crate::files::ReadError>;
 
 /// Pipeline-wide limits, one per database (set by the driver from `pipeline.ron`).
 #[salsa::input(singleton, debug)]
-pub struct PipelineLimits {
+pub(crate) struct PipelineLimits {
     #[returns(copy)]
     pub texture: crate::texture::TextureLimits,
 }
 
 /// The texture limits in force (the defaults before the driver set any).
-pub fn texture_limits(db: &dyn Db) -> crate::texture::TextureLimits {
+pub(crate) fn texture_limits(db: &dyn Db) -> crate::texture::TextureLimits {
     PipelineLimits::try_get(db).map_or_else(Default::default, |limits| limits.texture(db))
 }
 
@@ -63,18 +63,18 @@ pub fn texture_limits(db: &dyn Db) -> crate::texture::TextureLimits {
 /// database): cache keys and cached values hold paths relative to it, so that the same project
 /// with its source folder named otherwise shares every entry.
 #[salsa::input(singleton, debug)]
-pub struct SourceFolder {
+pub(crate) struct SourceFolder {
     #[returns(ref)]
     pub path: PathBuf,
 }
 
 /// The source folder in force (empty before the driver set one).
-pub fn source_folder(db: &dyn Db) -> PathBuf {
+pub(crate) fn source_folder(db: &dyn Db) -> PathBuf {
     SourceFolder::try_get(db).map_or_else(PathBuf::new, |folder| folder.path(db).clone())
 }
 
 /// `path` (project-relative) relative to the source folder, as cache keys name files.
-pub fn source_relative(db: &dyn Db, path: &std::path::Path) -> PathBuf {
+pub(crate) fn source_relative(db: &dyn Db, path: &std::path::Path) -> PathBuf {
     let folder = source_folder(db);
     path.strip_prefix(&folder).map_or_else(|_| path.to_path_buf(), std::path::Path::to_path_buf)
 }
@@ -116,7 +116,7 @@ fn relocate(value: &mut serde_json::Value, from: &str, to: &str) {
 
 /// A hash of `value` as JSON with paths relative to the source folder (for a key part made of
 /// a stage result that names files).
-pub fn relocatable_hash(db: &dyn Db, value: &impl serde::Serialize) -> blake3::Hash {
+pub(crate) fn relocatable_hash(db: &dyn Db, value: &impl serde::Serialize) -> blake3::Hash {
     let mut json = serde_json::to_value(value).expect("stage results serialise");
     let folder = display_path(&source_folder(db));
     if !folder.is_empty() {
@@ -177,30 +177,30 @@ pub struct Asset {
 /// The assets of the build by name, for an asset that reads another's output (a `Material`'s
 /// `ao_source`): set by the driver, one per database.
 #[salsa::input(singleton, debug)]
-pub struct AssetRegistry {
+pub(crate) struct AssetRegistry {
     #[returns(ref)]
     pub assets: Arc<BTreeMap<String, Asset>>,
 }
 
 /// The asset of the build named `name`, if any.
-pub fn asset_named(db: &dyn Db, name: &str) -> Option<Asset> {
+pub(crate) fn asset_named(db: &dyn Db, name: &str) -> Option<Asset> {
     AssetRegistry::try_get(db).and_then(|registry| registry.assets(db).get(name).copied())
 }
 
 /// The input of one file the asset read (cuts off when other files join or leave the asset).
 #[salsa::tracked(returns(copy))]
-pub fn asset_file(db: &dyn Db, asset: Asset, path: PathBuf) -> Option<SourceFile> {
+pub(crate) fn asset_file(db: &dyn Db, asset: Asset, path: PathBuf) -> Option<SourceFile> {
     asset.files(db).get(&path).copied()
 }
 
 /// Whether a file could be read: a stage that needs only that (not the bytes) is left alone by
 /// edits of the file.
 #[salsa::tracked(returns(copy))]
-pub fn file_readable(db: &dyn Db, file: SourceFile) -> bool {
+pub(crate) fn file_readable(db: &dyn Db, file: SourceFile) -> bool {
     file.contents(db).is_ok()
 }
 
-pub fn read_contents(db: &dyn Db, file: SourceFile) -> Result<&FileContents, Diagnostic> {
+pub(crate) fn read_contents(db: &dyn Db, file: SourceFile) -> Result<&FileContents, Diagnostic> {
     file.contents(db).as_ref().map_err(|error| Diagnostic::new(file.path(db), error.clone()))
 }
 
@@ -213,7 +213,7 @@ pub struct Stage {
 }
 
 /// Decoding a source image (shared by every asset that reads the file).
-pub const DECODE: Stage = Stage { name: "decode", version: 1 };
+pub(crate) const DECODE: Stage = Stage { name: "decode", version: 1 };
 
 /// One execution of a stage body in this process.
 #[derive(Clone, Debug, PartialEq)]
@@ -259,12 +259,12 @@ impl Database {
     }
 
     /// Uses another persistent cache from now on (the pipeline's output or shared cache changed).
-    pub fn replace_disk_cache(&mut self, cache: Option<DiskCache>) {
+    pub(crate) fn replace_disk_cache(&mut self, cache: Option<DiskCache>) {
         self.cache = cache;
     }
 
     /// The stage bodies that ran since the last call, with their durations.
-    pub fn take_runs(&self) -> Vec<StageRun> {
+    pub(crate) fn take_runs(&self) -> Vec<StageRun> {
         std::mem::take(&mut *self.logs.runs.lock().expect("log lock"))
     }
 }
@@ -294,17 +294,17 @@ impl Db for Database {
 /// What a stage kept of its last run in this process (its last encoding, layout or page),
 /// by a name of its choosing. Salsa does not track these memos: a stage reads one to do less
 /// work for the same result, or (the atlas layout) as the hint its design asks for.
-pub fn recall<T: Any + Send + Sync>(db: &dyn Db, name: &str) -> Option<Arc<T>> {
+pub(crate) fn recall<T: Any + Send + Sync>(db: &dyn Db, name: &str) -> Option<Arc<T>> {
     db.recalled(name)?.downcast::<T>().ok()
 }
 
 /// Keeps `value` for the next run of the stage that names it `name` (see [`recall`]).
-pub fn remember<T: Any + Send + Sync>(db: &dyn Db, name: &str, value: Arc<T>) {
+pub(crate) fn remember<T: Any + Send + Sync>(db: &dyn Db, name: &str, value: Arc<T>) {
     db.remember(name, value);
 }
 
 /// Runs a stage body, timing it and recording the run under `label`.
-pub fn timed<T>(db: &dyn Db, stage: Stage, label: &str, body: impl FnOnce() -> T) -> T {
+pub(crate) fn timed<T>(db: &dyn Db, stage: Stage, label: &str, body: impl FnOnce() -> T) -> T {
     // A remote hit on the way to running is not this stage's result.
     crate::cache::take_remote_hit();
     let start = Instant::now();
@@ -322,7 +322,7 @@ pub fn timed<T>(db: &dyn Db, stage: Stage, label: &str, body: impl FnOnce() -> T
 
 /// Runs one body that does the work of several instances of a stage (`labels`, each with its
 /// share of the work), recording a run for each with its share of the time.
-pub fn timed_together<T>(db: &dyn Db, stage: Stage, labels: &[(String, f64)], body: impl FnOnce() -> T) -> T {
+pub(crate) fn timed_together<T>(db: &dyn Db, stage: Stage, labels: &[(String, f64)], body: impl FnOnce() -> T) -> T {
     crate::cache::take_remote_hit();
     let start = Instant::now();
     let result = body();
@@ -345,7 +345,10 @@ pub fn timed_together<T>(db: &dyn Db, stage: Stage, labels: &[(String, f64)], bo
 /// Runs long `work` that asks its [`ShouldStop`](crate::mesh::ShouldStop) between units (points,
 /// batches of rays): a cancellation of this database (a newer edit under `watch`) stops it within
 /// a unit, and the query unwinds as salsa's cancellation does, leaving no result behind.
-pub fn stoppable<T>(db: &dyn Db, work: impl FnOnce(crate::mesh::ShouldStop) -> Result<T, crate::mesh::Stopped>) -> T {
+pub(crate) fn stoppable<T>(
+    db: &dyn Db,
+    work: impl FnOnce(crate::mesh::ShouldStop) -> Result<T, crate::mesh::Stopped>,
+) -> T {
     let token = db.cancellation_token();
     let should_stop = move || token.is_cancelled();
     match work(&should_stop) {
@@ -358,7 +361,7 @@ pub fn stoppable<T>(db: &dyn Db, work: impl FnOnce(crate::mesh::ShouldStop) -> R
 }
 
 /// served it (a load on this thread since the last record, see `cache::take_remote_hit`).
-pub fn record_cache_hit(db: &dyn Db, stage: Stage, label: &str) {
+pub(crate) fn record_cache_hit(db: &dyn Db, stage: Stage, label: &str) {
     let from_remote = crate::cache::take_remote_hit();
     db.record_run(StageRun {
         stage: stage.name,
@@ -372,7 +375,7 @@ pub fn record_cache_hit(db: &dyn Db, stage: Stage, label: &str) {
 
 /// A source texture decoded to RGBA8 (the decode stage, labelled by the file's path).
 #[salsa::tracked(returns(clone))]
-pub fn decoded_texture(db: &dyn Db, file: SourceFile) -> Result<Arc<Texture>, Diagnostic> {
+pub(crate) fn decoded_texture(db: &dyn Db, file: SourceFile) -> Result<Arc<Texture>, Diagnostic> {
     let contents = read_contents(db, file)?;
     let limits = texture_limits(db);
     let path = file.path(db);
@@ -381,7 +384,7 @@ pub fn decoded_texture(db: &dyn Db, file: SourceFile) -> Result<Arc<Texture>, Di
 
 /// A source texture as an opacity map (alpha if it has transparency, else red), decoded once.
 #[salsa::tracked(returns(clone))]
-pub fn opacity_texture(db: &dyn Db, file: SourceFile) -> Result<Arc<Texture>, Diagnostic> {
+pub(crate) fn opacity_texture(db: &dyn Db, file: SourceFile) -> Result<Arc<Texture>, Diagnostic> {
     let texture = decoded_texture(db, file)?;
     Ok(Arc::new(crate::texture::opacity_channel(&texture)))
 }
@@ -389,7 +392,7 @@ pub fn opacity_texture(db: &dyn Db, file: SourceFile) -> Result<Arc<Texture>, Di
 // ---------------------------------------------------------------------------------------------
 // the persistent cache boundary
 
-pub fn load_cached<T>(
+pub(crate) fn load_cached<T>(
     db: &dyn Db,
     entry: &str,
     key: CacheKey,
@@ -400,7 +403,7 @@ pub fn load_cached<T>(
     decode(loaded)
 }
 
-pub fn store_cached(db: &dyn Db, entry: &str, key: CacheKey, make: impl FnOnce() -> CacheEntry) {
+pub(crate) fn store_cached(db: &dyn Db, entry: &str, key: CacheKey, make: impl FnOnce() -> CacheEntry) {
     if let Some(cache) = db.disk_cache() {
         let mut made = make();
         to_placeholder(&source_folder(db), &mut made);
@@ -410,7 +413,7 @@ pub fn store_cached(db: &dyn Db, entry: &str, key: CacheKey, make: impl FnOnce()
 
 /// Like `store_cached`, but the entry is also made on the cache's background thread (`make`
 /// owns what it needs: `Arc`s of the images it gathers).
-pub fn store_cached_in_background(
+pub(crate) fn store_cached_in_background(
     db: &dyn Db,
     entry: &str,
     key: CacheKey,
@@ -429,7 +432,7 @@ pub fn store_cached_in_background(
 /// A stage result stored as JSON metadata under the stage's name (parsed materials, plane sets,
 /// layouts: small, exact with `float_roundtrip`): loaded (a cache hit of `stage` for `label`), or
 /// computed and stored.
-pub fn cached_json<T: serde::Serialize + serde::de::DeserializeOwned>(
+pub(crate) fn cached_json<T: serde::Serialize + serde::de::DeserializeOwned>(
     db: &dyn Db,
     stage: Stage,
     label: &str,
@@ -446,13 +449,13 @@ pub fn cached_json<T: serde::Serialize + serde::de::DeserializeOwned>(
 }
 
 /// A key builder for `stage` (its name and version).
-pub fn stage_key(stage: Stage) -> CacheKeyBuilder {
+pub(crate) fn stage_key(stage: Stage) -> CacheKeyBuilder {
     CacheKeyBuilder::new(stage.name, stage.version)
 }
 
 /// Adds each file's path (relative to the source folder) and its content hash (or why it could
 /// not be read) to a key.
-pub fn key_with_files(
+pub(crate) fn key_with_files(
     db: &dyn Db,
     key: CacheKeyBuilder,
     files: impl IntoIterator<Item = SourceFile>,
@@ -469,7 +472,7 @@ pub fn key_with_files(
 /// Plain values as raw bytes, for cache blobs (little-endian on every machine cirrus runs on).
 /// A stage result compared by the hash of what it was made from (a BVH, a tessellated mesh):
 /// exact, cheap equality for salsa's early cutoff on a value that has none of its own.
-pub struct ByHash<T> {
+pub(crate) struct ByHash<T> {
     pub hash: blake3::Hash,
     pub value: T,
 }
@@ -488,7 +491,7 @@ impl<T> fmt::Debug for ByHash<T> {
 
 /// The blake3 of a list of byte strings, each prefixed by its length, so that no two lists
 /// hash alike by moving bytes from one part to the next.
-pub fn hash_of_parts(parts: &[&[u8]]) -> blake3::Hash {
+pub(crate) fn hash_of_parts(parts: &[&[u8]]) -> blake3::Hash {
     let mut hasher = blake3::Hasher::new();
     for part in parts {
         hasher.update(&(part.len() as u64).to_le_bytes());
@@ -497,10 +500,10 @@ pub fn hash_of_parts(parts: &[&[u8]]) -> blake3::Hash {
     hasher.finalize()
 }
 
-pub fn pod_blob<T: bytemuck::Pod>(values: &[T]) -> Vec<u8> {
+pub(crate) fn pod_blob<T: bytemuck::Pod>(values: &[T]) -> Vec<u8> {
     bytemuck::cast_slice(values).to_vec()
 }
 
-pub fn from_pod_blob<T: bytemuck::Pod>(bytes: &[u8]) -> Option<Vec<T>> {
+pub(crate) fn from_pod_blob<T: bytemuck::Pod>(bytes: &[u8]) -> Option<Vec<T>> {
     bytes.len().is_multiple_of(std::mem::size_of::<T>()).then(|| bytemuck::pod_collect_to_vec(bytes))
 }

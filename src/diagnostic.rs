@@ -15,7 +15,7 @@ pub struct TextPosition {
 
 impl TextPosition {
     /// The position of byte `offset` in `text` (1-based line and column, column in characters).
-    pub fn of_byte_offset(text: &str, offset: usize) -> TextPosition {
+    pub(crate) fn of_byte_offset(text: &str, offset: usize) -> TextPosition {
         let offset = offset.min(text.len());
         let before = &text[..floor_char_boundary(text, offset)];
         let line = before.matches('\n').count() as u32 + 1;
@@ -78,14 +78,14 @@ impl fmt::Display for Diagnostic {
 impl std::error::Error for Diagnostic {}
 
 /// A path as users read it: forward slashes on every platform.
-pub fn display_path(path: &Path) -> String {
+pub(crate) fn display_path(path: &Path) -> String {
     path.to_string_lossy().replace('\\', "/")
 }
 
 /// The candidate closest to `word` by edit distance (case-insensitive), when close enough to be
 /// a slip (at most a third of the word's letters, and at least one): `BilboardCloud` →
 /// `BillboardCloud`, `bush2.obj` → `bush_2.obj`.
-pub fn closest<'a>(word: &str, candidates: impl IntoIterator<Item = &'a str>) -> Option<&'a str> {
+pub(crate) fn closest<'a>(word: &str, candidates: impl IntoIterator<Item = &'a str>) -> Option<&'a str> {
     let word_lower = word.to_lowercase();
     let limit = (word.chars().count() / 3).max(1);
     candidates
@@ -98,7 +98,7 @@ pub fn closest<'a>(word: &str, candidates: impl IntoIterator<Item = &'a str>) ->
 }
 
 /// ` (did you mean `X`?)` for the closest candidate, else nothing.
-pub fn did_you_mean<'a>(word: &str, candidates: impl IntoIterator<Item = &'a str>) -> String {
+pub(crate) fn did_you_mean<'a>(word: &str, candidates: impl IntoIterator<Item = &'a str>) -> String {
     closest(word, candidates).map(|candidate| format!(" (did you mean `{candidate}`?)")).unwrap_or_default()
 }
 

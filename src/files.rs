@@ -5,11 +5,11 @@ use std::io::Write;
 use std::path::{Component, Path, PathBuf};
 
 /// Largest source file read (textures, meshes, materials).
-pub const MAX_SOURCE_BYTES: u64 = 512 << 20;
+pub(crate) const MAX_SOURCE_BYTES: u64 = 512 << 20;
 
 /// The name prefix of temporary files (artifacts and cache entries before their rename); files
 /// with it that a killed build left behind are swept by `sweep_temporary_files`.
-pub const TEMPORARY_PREFIX: &str = ".cirrus-tmp-";
+pub(crate) const TEMPORARY_PREFIX: &str = ".cirrus-tmp-";
 
 /// Writes `bytes` to `path` atomically unless the file already holds exactly these bytes.
 /// Returns whether the file changed.
@@ -41,12 +41,15 @@ pub fn write_if_changed(path: &Path, bytes: &[u8]) -> std::io::Result<bool> {
 /// `limit` bytes. FIFOs, devices, sockets and folders are refused without blocking: the file is
 /// opened non-blocking and checked on the open handle, and at most `limit + 1` bytes are read,
 /// whatever the metadata says (`/proc` files and growing files report other sizes).
-pub fn read_regular_file(path: &Path, limit: u64) -> Result<Vec<u8>, ReadError> {
+pub(crate) fn read_regular_file(path: &Path, limit: u64) -> Result<Vec<u8>, ReadError> {
     read_regular_file_with_metadata(path, limit).map(|(bytes, _)| bytes)
 }
 
 /// [`read_regular_file`], with the metadata of the open file, taken before its bytes are read.
-pub fn read_regular_file_with_metadata(path: &Path, limit: u64) -> Result<(Vec<u8>, std::fs::Metadata), ReadError> {
+pub(crate) fn read_regular_file_with_metadata(
+    path: &Path,
+    limit: u64,
+) -> Result<(Vec<u8>, std::fs::Metadata), ReadError> {
     use std::io::Read;
     let mut options = std::fs::OpenOptions::new();
     options.read(true);
@@ -114,13 +117,13 @@ impl ReadError {
         }
     }
 
-    pub fn is_not_found(&self) -> bool {
+    pub(crate) fn is_not_found(&self) -> bool {
         matches!(self, ReadError::NotFound { .. })
     }
 
     /// Whether the message reads as the end of a sentence about the file (`the pipeline file
     /// is larger than 16 MiB`) rather than a reason (`permission denied`).
-    pub fn is_predicate(&self) -> bool {
+    pub(crate) fn is_predicate(&self) -> bool {
         matches!(self, ReadError::Folder | ReadError::NotRegular | ReadError::TooLarge { .. })
     }
 }
@@ -132,7 +135,7 @@ impl From<ReadError> for String {
 }
 
 /// Resolves `.` and `..` lexically; `None` when the path is absolute or climbs out of its base.
-pub fn normalize_relative_path(path: &Path) -> Option<PathBuf> {
+pub(crate) fn normalize_relative_path(path: &Path) -> Option<PathBuf> {
     let text = path.to_string_lossy().replace('\\', "/");
     let mut parts: Vec<String> = Vec::new();
     for component in Path::new(&text).components() {

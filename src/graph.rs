@@ -46,7 +46,7 @@ pub struct Graph {
 
 /// Collects nodes and edges without duplicates.
 #[derive(Default)]
-pub struct GraphBuilder {
+pub(crate) struct GraphBuilder {
     nodes: BTreeMap<String, Node>,
     edges: BTreeSet<Edge>,
 }
@@ -112,7 +112,7 @@ impl Graph {
 
     /// The part of the graph that belongs to `asset` or feeds it, however far upstream (a
     /// shared decode and the texture file it reads).
-    pub fn for_asset(&self, asset: &str) -> Graph {
+    pub(crate) fn for_asset(&self, asset: &str) -> Graph {
         let mut keep: BTreeSet<&str> = self
             .nodes
             .iter()

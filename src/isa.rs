@@ -94,11 +94,11 @@ pub fn limit_isa(level: IsaLevel) {
 }
 
 /// The level the kernels run at: the CPU's, or the limit when that is lower.
-pub fn kernel_isa() -> IsaLevel {
+pub(crate) fn kernel_isa() -> IsaLevel {
     detected_isa().min(IsaLevel::from_index(LIMIT.load(Ordering::Relaxed)))
 }
 
 /// Whether the kernels may use AVX2 and FMA.
-pub fn avx2_allowed() -> bool {
+pub(crate) fn avx2_allowed() -> bool {
     kernel_isa() >= IsaLevel::Avx2
 }

@@ -39,7 +39,7 @@ pub enum DataType {
 }
 
 impl DataType {
-    pub fn from_identifier(identifier: &str) -> Option<DataType> {
+    pub(crate) fn from_identifier(identifier: &str) -> Option<DataType> {
         Some(match identifier {
             "bool" | "b" => DataType::Bool,
             "int8" | "i8" => DataType::Int8,
@@ -124,7 +124,7 @@ pub enum Value {
 }
 
 impl Value {
-    pub fn describe(&self) -> &'static str {
+    pub(crate) fn describe(&self) -> &'static str {
         match self {
             Value::Bool(_) => "a bool",
             Value::Integer(_) => "an integer",
@@ -439,7 +439,7 @@ impl<'a> Lexer<'a> {
 /// How deeply structures may nest. Real files nest a few levels; the parser, and the tree's
 /// drop, comparison and walkers, recurse once per level, so a bound keeps a hostile file from
 /// overflowing the stack.
-pub const MAX_NESTING: usize = 100;
+pub(crate) const MAX_NESTING: usize = 100;
 
 struct Parser<'a> {
     lexer: Lexer<'a>,

@@ -19,7 +19,7 @@ use serde::{Deserialize, Serialize};
 
 /// A file whose metadata changed within this many seconds of the moment it was recorded is
 /// hashed again on the next build (two seconds: FAT's modification-time granularity).
-pub const RACY_SECONDS: i64 = 2;
+pub(crate) const RACY_SECONDS: i64 = 2;
 
 /// What a file's metadata says of it: equal stamps mean an unchanged file (outside the racy
 /// window). Stored as an array of its five numbers.
@@ -228,7 +228,7 @@ const RECORD_VERSION: u32 = 1;
 /// Largest `record.json` read back (about 2 KB per asset).
 const MAX_RECORD_BYTES: u64 = 1 << 30;
 
-pub fn record_path(output_dir: &Path) -> PathBuf {
+pub(crate) fn record_path(output_dir: &Path) -> PathBuf {
     output_dir.join(".cirrus").join("record.json")
 }
 
@@ -238,14 +238,14 @@ fn revision_path(output_dir: &Path) -> PathBuf {
     output_dir.join(".cirrus").join("revision")
 }
 
-pub fn save_revision(output_dir: &Path, revision: u64) {
+pub(crate) fn save_revision(output_dir: &Path, revision: u64) {
     if let Err(error) = crate::files::write_if_changed(&revision_path(output_dir), revision.to_string().as_bytes()) {
         tracing::warn!("cannot write {}: {error}", revision_path(output_dir).display());
     }
 }
 
 /// The revision of [`save_revision`] (0 when none or unreadable).
-pub fn saved_revision(output_dir: &Path) -> u64 {
+pub(crate) fn saved_revision(output_dir: &Path) -> u64 {
     let bytes = crate::files::read_regular_file(&revision_path(output_dir), 64).unwrap_or_default();
     String::from_utf8_lossy(&bytes).trim().parse().unwrap_or(0)
 }
@@ -257,7 +257,7 @@ fn marker_path(output_dir: &Path) -> PathBuf {
 }
 
 /// Marks the output folder as being written (see [`interrupted_build`]).
-pub fn begin_writing(output_dir: &Path) {
+pub(crate) fn begin_writing(output_dir: &Path) {
     let marker = marker_path(output_dir);
     if let Some(folder) = marker.parent() {
         let _ = std::fs::create_dir_all(folder);
@@ -266,13 +266,13 @@ pub fn begin_writing(output_dir: &Path) {
 }
 
 /// Clears the mark of [`begin_writing`].
-pub fn end_writing(output_dir: &Path) {
+pub(crate) fn end_writing(output_dir: &Path) {
     let _ = std::fs::remove_file(marker_path(output_dir));
 }
 
 /// Whether a build may have been interrupted while writing into `output_dir`: its marker is
 /// there, or there is no record (a first build, or one from before the record).
-pub fn interrupted_build(output_dir: &Path) -> bool {
+pub(crate) fn interrupted_build(output_dir: &Path) -> bool {
     marker_path(output_dir).exists() || !record_path(output_dir).exists()
 }
 
@@ -308,7 +308,7 @@ impl BuildRecord {
     /// Drops what a record edited by hand (or by an attacker) could use to make a build look at
     /// files elsewhere: an asset whose files are not plain paths inside `source`, or whose
     /// artifacts are not plain paths inside `output`, and such files (project-relative folders).
-    pub fn keep_within(&mut self, source: &Path, output: &Path) {
+    pub(crate) fn keep_within(&mut self, source: &Path, output: &Path) {
         let plain_inside = |path: &Path, folder: &Path| {
             path.starts_with(folder)
                 && path.components().all(|component| matches!(component, std::path::Component::Normal(_)))
@@ -344,11 +344,11 @@ impl BuildRecord {
 mod hex_hash {
     use serde::{Deserialize, Deserializer, Serializer};
 
-    pub fn serialize<S: Serializer>(hash: &blake3::Hash, serializer: S) -> Result<S::Ok, S::Error> {
+    pub(crate) fn serialize<S: Serializer>(hash: &blake3::Hash, serializer: S) -> Result<S::Ok, S::Error> {
         serializer.serialize_str(hash.to_hex().as_str())
     }
 
-    pub fn deserialize<'de, D: Deserializer<'de>>(deserializer: D) -> Result<blake3::Hash, D::Error> {
+    pub(crate) fn deserialize<'de, D: Deserializer<'de>>(deserializer: D) -> Result<blake3::Hash, D::Error> {
         let text = <std::borrow::Cow<'de, str>>::deserialize(deserializer)?;
         blake3::Hash::from_hex(text.as_bytes()).map_err(serde::de::Error::custom)
     }

@@ -15,7 +15,7 @@ use crate::diagnostic::Diagnostic;
 
 /// Work for a worker thread: one task of an asset (what a task is, the kinds say).
 #[derive(Clone, Debug, PartialEq)]
-pub struct Job<T> {
+pub(crate) struct Job<T> {
     pub asset: Asset,
     pub task: T,
     /// Waves to wait after the wave that scheduled it (jobs of one wave run in parallel).
@@ -25,24 +25,24 @@ pub struct Job<T> {
 }
 
 /// What the scheduler asks of a job's task.
-pub trait JobTask: Clone + Send + Sync {
+pub(crate) trait JobTask: Clone + Send + Sync {
     /// The sort of work it is, for estimating how long the waiting ones take (jobs of one sort
     /// take about as long as each other).
     fn sort(&self) -> &'static str;
 }
 
 /// Each finished job with its result (its follow-ups are scheduled, not returned).
-pub type FinishedJobs<T> = Vec<(Job<T>, Result<(), Diagnostic>)>;
+pub(crate) type FinishedJobs<T> = Vec<(Job<T>, Result<(), Diagnostic>)>;
 
 /// Runs one job, returning the jobs it schedules.
-pub type RunJob<'a, T> = &'a (dyn Fn(&dyn Db, &Job<T>) -> Result<Vec<Job<T>>, Diagnostic> + Sync);
+pub(crate) type RunJob<'a, T> = &'a (dyn Fn(&dyn Db, &Job<T>) -> Result<Vec<Job<T>>, Diagnostic> + Sync);
 
 /// A flag that cancels a running build when raised.
 #[derive(Clone, Debug, Default)]
 pub struct CancelFlag(Arc<std::sync::atomic::AtomicBool>);
 
 impl CancelFlag {
-    pub fn raise(&self) {
+    pub(crate) fn raise(&self) {
         self.0.store(true, Ordering::SeqCst);
     }
 
@@ -50,7 +50,7 @@ impl CancelFlag {
         self.0.store(false, Ordering::SeqCst);
     }
 
-    pub fn is_raised(&self) -> bool {
+    pub(crate) fn is_raised(&self) -> bool {
         self.0.load(Ordering::SeqCst)
     }
 }
@@ -113,7 +113,7 @@ pub fn remaining_seconds(
 
 /// Runs every job and the jobs they schedule, wave by wave; each finished job with its result.
 /// `None` when the build was cancelled.
-pub fn run_jobs<T: JobTask>(
+pub(crate) fn run_jobs<T: JobTask>(
     db: &Database,
     first: Vec<Job<T>>,
     run: RunJob<'_, T>,
@@ -184,7 +184,7 @@ pub fn run_jobs<T: JobTask>(
 /// fails only its item. `describe` names an item's file (for that failure) and progress label.
 /// Raising `cancel` stops the workers: those inside a query unwind with `salsa::Cancelled`
 /// (their clones' cancellation tokens), the rest take no new item; unfinished items are `None`.
-pub fn run_parallel<T: Sync, R: Send>(
+pub(crate) fn run_parallel<T: Sync, R: Send>(
     db: &Database,
     items: &[T],
     describe: &(dyn Fn(&Database, &T) -> (PathBuf, String) + Sync),
@@ -265,7 +265,7 @@ pub struct MemoryBudget {
 /// The process's texture memory budget: every texture's mips and encode reserve from it, so
 /// that the budget bounds the whole process, not each texture (more cores run more jobs, not
 /// more of them at once than the memory allows).
-pub static TEXTURE_MEMORY: MemoryBudget = MemoryBudget::new();
+pub(crate) static TEXTURE_MEMORY: MemoryBudget = MemoryBudget::new();
 
 /// Memory reserved from a [`MemoryBudget`], given back when dropped.
 pub struct MemoryReservation<'a> {

@@ -16,11 +16,11 @@ use serde::{Deserialize, Serialize};
 use crate::graph::{Graph, GraphFormat};
 use crate::summary::ChangedArtifact;
 
-pub const PROTOCOL_VERSION: u32 = 1;
+pub(crate) const PROTOCOL_VERSION: u32 = 1;
 
 /// Limits of the server.
 #[derive(Clone, Debug)]
-pub struct ServerSettings {
+pub(crate) struct ServerSettings {
     /// Longest client line accepted, in bytes; longer lines are answered with an error.
     pub max_line_bytes: usize,
     /// How many batches are kept for `since` replay.
@@ -50,7 +50,7 @@ impl Default for ServerSettings {
 
 /// One finished build, as the engine sees it.
 #[derive(Clone, Debug, PartialEq, Serialize)]
-pub struct BatchEvent {
+pub(crate) struct BatchEvent {
     pub revision: u64,
     /// Artifacts renamed into place by this build, with their blake3 hashes.
     pub changed: Vec<ChangedArtifact>,
@@ -64,7 +64,7 @@ pub struct BatchEvent {
 
 /// One problem of a failed asset (or of `pipeline.ron`, with `asset` null and stage `config`).
 #[derive(Clone, Debug, PartialEq, Serialize)]
-pub struct FailedEntry {
+pub(crate) struct FailedEntry {
     pub asset: Option<String>,
     pub stage: String,
     pub message: String,
@@ -137,12 +137,12 @@ struct State {
 
 /// Asks the daemon for the current graph and its revision (the daemon's owner thread computes
 /// it between batches, only when a client asks).
-pub type GraphSource = Arc<dyn Fn() -> Option<(u64, Graph)> + Send + Sync>;
+pub(crate) type GraphSource = Arc<dyn Fn() -> Option<(u64, Graph)> + Send + Sync>;
 
 /// A running server; dropping it does not stop the listener thread (it lives as long as the
 /// daemon process).
 #[derive(Clone)]
-pub struct Server {
+pub(crate) struct Server {
     state: Arc<Mutex<State>>,
     settings: ServerSettings,
     address: SocketAddr,
@@ -184,7 +184,7 @@ impl Server {
     }
 
     /// Sends a finished batch to every subscribed client and keeps it for replay.
-    pub fn publish(&self, batch: &BatchEvent) {
+    pub(crate) fn publish(&self, batch: &BatchEvent) {
         let message = line(&Outgoing::Batch(batch));
         let mut state = self.state.lock().expect("server state");
         state.revision = batch.revision;
@@ -196,7 +196,7 @@ impl Server {
     }
 
     /// Where `graph` requests get the graph when the last one is stale.
-    pub fn set_graph_source(&self, source: GraphSource) {
+    pub(crate) fn set_graph_source(&self, source: GraphSource) {
         *self.graph_source.lock().expect("graph source") = Some(source);
     }
 
@@ -219,11 +219,6 @@ impl Server {
             state.graph = Some((revision, graph.clone()));
         }
         graph
-    }
-
-    /// Clients connected now.
-    pub fn client_count(&self) -> usize {
-        self.state.lock().expect("server state").clients.len()
     }
 
     fn accept(&self, stream: TcpStream) {

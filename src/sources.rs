@@ -14,13 +14,13 @@ use crate::files::{read_regular_file_with_metadata, ReadError, MAX_SOURCE_BYTES}
 /// to stay inside the source folder before they get here. Symbolic links placed in the source
 /// folder are the user's own choice (a shared texture library linked in) and are followed,
 /// wherever they lead; what they lead to must still be a regular file within the size limit.
-pub fn read_source(root: &Path, source: &Path, relative: &Path) -> FileRead {
+pub(crate) fn read_source(root: &Path, source: &Path, relative: &Path) -> FileRead {
     read_source_stamped(root, source, relative).map(|(contents, _)| contents)
 }
 
 /// [`read_source`], with the stamp of the file that was read (taken on the open file before
 /// reading it, so that a write meanwhile leaves the record a stamp that no longer matches).
-pub fn read_source_stamped(
+pub(crate) fn read_source_stamped(
     root: &Path,
     source: &Path,
     relative: &Path,
@@ -54,7 +54,7 @@ fn similar_file_hint(root: &Path, source: &Path, relative: &Path) -> String {
 }
 
 /// Files below the source folder that match a rule, relative to the source folder, sorted.
-pub fn rule_matches(config: &PipelineConfig) -> Vec<PathBuf> {
+pub(crate) fn rule_matches(config: &PipelineConfig) -> Vec<PathBuf> {
     if config.rules.is_empty() {
         return Vec::new();
     }
@@ -64,7 +64,7 @@ pub fn rule_matches(config: &PipelineConfig) -> Vec<PathBuf> {
 /// Files below the source folder that match one of `globs` (over paths relative to it),
 /// project-relative, sorted: the files an asset named by globs reads. A plain path (no glob
 /// characters) is listed even when it is missing, so that reading it names it.
-pub fn glob_matches(config: &PipelineConfig, globs: &[String]) -> Vec<PathBuf> {
+pub(crate) fn glob_matches(config: &PipelineConfig, globs: &[String]) -> Vec<PathBuf> {
     let matchers: Vec<globset::GlobMatcher> =
         globs.iter().filter_map(|glob| crate::config::source_glob(glob).ok()).collect();
     if matchers.is_empty() {

@@ -177,7 +177,7 @@ impl BuildSummary {
 }
 
 /// A duration for people: `45 s`, `17 min`, `2.3 h`.
-pub fn rough_duration(seconds: f64) -> String {
+pub(crate) fn rough_duration(seconds: f64) -> String {
     match seconds {
         seconds if seconds < 90.0 => format!("{:.0} s", seconds.max(0.0)),
         seconds if seconds < 5400.0 => format!("{:.0} min", seconds / 60.0),

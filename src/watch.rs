@@ -651,7 +651,7 @@ fn watch_folders(
 }
 
 /// The batch message of a finished build.
-pub fn batch_event(summary: &BuildSummary, ms: f64) -> BatchEvent {
+pub(crate) fn batch_event(summary: &BuildSummary, ms: f64) -> BatchEvent {
     let mut failed = Vec::new();
     for asset in summary.assets.iter().filter(|asset| asset.status == AssetStatus::Failed) {
         let stage = asset

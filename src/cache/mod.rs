@@ -220,7 +220,7 @@ pub mod key_parts {
 
     static PARTS: Mutex<Option<HashMap<CacheKey, Arc<[String]>>>> = Mutex::new(None);
 
-    pub fn remember(key: CacheKey, parts: Vec<String>) {
+    pub(crate) fn remember(key: CacheKey, parts: Vec<String>) {
         let mut known = PARTS.lock().expect("key parts lock");
         let known = known.get_or_insert_with(HashMap::new);
         if known.len() >= MAX_KEYS {
@@ -374,7 +374,7 @@ struct LocalCounters {
 /// What the caches did in one build: local hits and misses (a local miss may still be a remote
 /// hit), and the shared store's counts when there is one.
 #[derive(Clone, Copy, Debug, Default, PartialEq, Eq, serde::Serialize, serde::Deserialize)]
-pub struct CacheCounts {
+pub(crate) struct CacheCounts {
     pub local_hits: u64,
     pub local_misses: u64,
     pub remote: Option<RemoteCounts>,
@@ -389,7 +389,7 @@ thread_local! {
 }
 
 /// Runs `body` with lookups on this thread attributed to `asset` (a job of that asset).
-pub fn with_asset<T>(asset: &str, body: impl FnOnce() -> T) -> T {
+pub(crate) fn with_asset<T>(asset: &str, body: impl FnOnce() -> T) -> T {
     let previous = CURRENT_ASSET.with(|current| current.replace(Some(asset.to_string())));
     let result = body();
     CURRENT_ASSET.with(|current| *current.borrow_mut() = previous);
@@ -397,7 +397,7 @@ pub fn with_asset<T>(asset: &str, body: impl FnOnce() -> T) -> T {
 }
 
 /// Whether a load on this thread was served by the shared store since the last call.
-pub fn take_remote_hit() -> bool {
+pub(crate) fn take_remote_hit() -> bool {
     REMOTE_HIT.with(|hit| hit.replace(false))
 }
 
@@ -427,7 +427,7 @@ impl CacheEntry {
     }
 
     /// An entry of blobs alone.
-    pub fn of_blobs(blobs: Vec<Vec<u8>>, compress: bool) -> CacheEntry {
+    pub(crate) fn of_blobs(blobs: Vec<Vec<u8>>, compress: bool) -> CacheEntry {
         CacheEntry { metadata: serde_json::Value::Null, blobs, compress }
     }
 
@@ -439,12 +439,12 @@ impl CacheEntry {
     }
 
     /// Exactly `N` blobs (of an entry made by [`CacheEntry::of_blobs`]).
-    pub fn into_blobs<const N: usize>(self) -> Option<[Vec<u8>; N]> {
+    pub(crate) fn into_blobs<const N: usize>(self) -> Option<[Vec<u8>; N]> {
         self.blobs.try_into().ok()
     }
 
     /// The metadata as `T` and every blob (for entries whose blob count the metadata tells).
-    pub fn metadata_and_blobs<T: serde::de::DeserializeOwned>(self) -> Option<(T, Vec<Vec<u8>>)> {
+    pub(crate) fn metadata_and_blobs<T: serde::de::DeserializeOwned>(self) -> Option<(T, Vec<Vec<u8>>)> {
         Some((T::deserialize(&self.metadata).ok()?, self.blobs))
     }
 }
@@ -461,7 +461,7 @@ impl DiskCache {
     }
 
     /// The same folder with a shared store behind it.
-    pub fn with_remote(self, remote: RemoteStore) -> DiskCache {
+    pub(crate) fn with_remote(self, remote: RemoteStore) -> DiskCache {
         DiskCache { remote: Some(Arc::new(remote)), ..self }
     }
 
@@ -471,12 +471,12 @@ impl DiskCache {
 
     /// The lookups that found nothing, local or remote, since the last call (at most
     /// `upkeep::MAX_RECORDED_MISSES`), with their keys' parts.
-    pub fn take_misses(&self) -> Vec<upkeep::Miss> {
+    pub(crate) fn take_misses(&self) -> Vec<upkeep::Miss> {
         std::mem::take(&mut *self.misses.lock().expect("misses lock"))
     }
 
     /// What the caches did since the last call (a build's figures).
-    pub fn take_counts(&self) -> CacheCounts {
+    pub(crate) fn take_counts(&self) -> CacheCounts {
         CacheCounts {
             local_hits: self.counters.hits.swap(0, Ordering::Relaxed),
             local_misses: self.counters.misses.swap(0, Ordering::Relaxed),
@@ -554,7 +554,12 @@ impl DiskCache {
 
     /// Makes an entry and stores it on a thread of its own (for large entries whose making,
     /// such as gathering images into one blob, would hold up the stage); see `flush`.
-    pub fn store_in_background(&self, stage: &str, key: CacheKey, make: impl FnOnce() -> CacheEntry + Send + 'static) {
+    pub(crate) fn store_in_background(
+        &self,
+        stage: &str,
+        key: CacheKey,
+        make: impl FnOnce() -> CacheEntry + Send + 'static,
+    ) {
         let (cache, stage) = (self.clone(), stage.to_string());
         let write = std::thread::spawn(move || cache.write_entry(&stage, key, &make()));
         self.pending.lock().expect("pending writes lock").push(write);

@@ -72,7 +72,7 @@ pub struct RemoteCacheSettings {
 
 /// Parses a shared cache URL; the error says what is wrong with it. Credentials never come
 /// from the URL (nor from `pipeline.ron`): a URL with a user, password or query is refused.
-pub fn parse_remote_url(url: &str) -> Result<RemoteLocation, String> {
+pub(crate) fn parse_remote_url(url: &str) -> Result<RemoteLocation, String> {
     let Some((scheme, rest)) = url.split_once("://") else {
         return Err(format!("`{url}` is not a URL: write s3://bucket/prefix, file:///folder or memory://name"));
     };
@@ -149,7 +149,7 @@ impl RemoteCacheOverride {
 
     /// The shared cache a build uses: the override's, else the pipeline's, in the override's
     /// mode if it names one.
-    pub fn apply(&self, pipeline: Option<&RemoteCacheSettings>) -> Option<RemoteCacheSettings> {
+    pub(crate) fn apply(&self, pipeline: Option<&RemoteCacheSettings>) -> Option<RemoteCacheSettings> {
         let mut settings = match &self.location {
             Some(None) => return None,
             Some(Some((url, location))) => RemoteCacheSettings {
@@ -183,7 +183,7 @@ pub const RETRY_AFTER: Duration = Duration::from_secs(10);
 
 /// What the store did in one build (see `RemoteStore::take_counts`).
 #[derive(Clone, Copy, Debug, Default, PartialEq, Eq, serde::Serialize, serde::Deserialize)]
-pub struct RemoteCounts {
+pub(crate) struct RemoteCounts {
     pub hits: u64,
     pub misses: u64,
     /// Objects that were there but failed verification (then a miss).
@@ -323,7 +323,7 @@ impl RemoteStore {
     }
 
     /// The same store, refusing objects larger than `bytes` without downloading them.
-    pub fn with_object_limit(self, bytes: u64) -> RemoteStore {
+    pub(crate) fn with_object_limit(self, bytes: u64) -> RemoteStore {
         RemoteStore { max_object_bytes: bytes, ..self }
     }
 
@@ -411,7 +411,7 @@ const ENDPOINT_VARIABLES: [&str; 3] = ["AWS_ENDPOINT_URL", "AWS_ENDPOINT", "AWS_
 /// Whether the S3 endpoint the environment names (if any) is a URL a client can use:
 /// `http://` or `https://` with a host. `object_store` accepts any text there and panics on the
 /// first request.
-pub fn check_endpoint_environment() -> Result<(), String> {
+pub(crate) fn check_endpoint_environment() -> Result<(), String> {
     for variable in ENDPOINT_VARIABLES {
         let Some(value) = std::env::var_os(variable) else { continue };
         let value = value.to_string_lossy();
@@ -439,7 +439,7 @@ const DEFAULT_MAX_OBJECT_BYTES: u64 = 4 << 30;
 /// The largest entry a project with `texture_working_set` bytes per texture can make: an image
 /// entry holds at most about 8 bytes per texel of the largest texture (whose bake may take 64),
 /// and a mesh entry about twice its source file (at most `files::MAX_SOURCE_BYTES`).
-pub fn largest_entry_bytes(texture_working_set: u64) -> u64 {
+pub(crate) fn largest_entry_bytes(texture_working_set: u64) -> u64 {
     (texture_working_set / 8).max(2 * crate::files::MAX_SOURCE_BYTES)
 }
 
@@ -518,7 +518,7 @@ impl RemoteStore {
 
     /// Counts a fetched object that verified (a hit) or did not (corrupt: a miss, and the key
     /// is overwritten by its next upload).
-    pub fn verified(&self, stage: &str, key: CacheKey, good: bool) {
+    pub(crate) fn verified(&self, stage: &str, key: CacheKey, good: bool) {
         let shared = &self.shared;
         if good {
             shared.counters.hits.fetch_add(1, Ordering::Relaxed);
@@ -569,7 +569,7 @@ impl RemoteStore {
     }
 
     /// Waits for the uploads still running (each has its own deadline).
-    pub fn wait_for_uploads(&self) {
+    pub(crate) fn wait_for_uploads(&self) {
         let uploads = std::mem::take(&mut *self.uploads.lock().expect("uploads lock"));
         self.runtime.block_on(async {
             for upload in uploads {
@@ -579,7 +579,7 @@ impl RemoteStore {
     }
 
     /// What the store did since the last call.
-    pub fn take_counts(&self) -> RemoteCounts {
+    pub(crate) fn take_counts(&self) -> RemoteCounts {
         let take = |counter: &AtomicU64| counter.swap(0, Ordering::Relaxed);
         let counters = &self.shared.counters;
         RemoteCounts {

@@ -12,7 +12,7 @@ use std::time::SystemTime;
 use super::CacheCounts;
 
 /// Records that the entry at `path` was used now (for `gc`); a read-only cache keeps its times.
-pub fn mark_used(path: &Path) {
+pub(crate) fn mark_used(path: &Path) {
     if let Ok(file) = std::fs::File::options().append(true).open(path) {
         let _ = file.set_modified(SystemTime::now());
     }
@@ -69,7 +69,7 @@ pub fn entry_files(folder: &Path) -> Vec<EntryFile> {
 
 /// What `gc` did.
 #[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
-pub struct Collected {
+pub(crate) struct Collected {
     pub deleted_entries: u64,
     pub deleted_bytes: u64,
     pub kept_entries: u64,
@@ -77,7 +77,7 @@ pub struct Collected {
 }
 
 /// Deletes the least recently used entries until the folder's entries take at most `max_bytes`.
-pub fn collect_garbage(folder: &Path, max_bytes: u64) -> Collected {
+pub(crate) fn collect_garbage(folder: &Path, max_bytes: u64) -> Collected {
     let mut entries = entry_files(folder);
     // Most recently used first; the path breaks ties, so the order is the same on every run.
     entries.sort_by(|a, b| b.last_used.cmp(&a.last_used).then_with(|| a.path.cmp(&b.path)));
@@ -134,7 +134,7 @@ const LAST_BUILD_FILE: &str = "last-build.json";
 
 /// What the last build that used a cache folder recorded there.
 #[derive(Clone, Debug, Default, PartialEq, serde::Serialize, serde::Deserialize)]
-pub struct LastBuild {
+pub(crate) struct LastBuild {
     pub revision: u64,
     pub counts: CacheCounts,
     /// The shared store's URL, when there was one.
@@ -151,12 +151,12 @@ pub struct LastBuild {
 }
 
 /// Misses a build records at most.
-pub const MAX_RECORDED_MISSES: usize = 4096;
+pub(crate) const MAX_RECORDED_MISSES: usize = 4096;
 
 /// A lookup that found no entry: the asset whose job made it, the entry's stage, its key and the
 /// key's parts (described).
 #[derive(Clone, Debug, Default, PartialEq, serde::Serialize, serde::Deserialize)]
-pub struct Miss {
+pub(crate) struct Miss {
     pub asset: Option<String>,
     pub stage: String,
     pub key: String,
@@ -168,7 +168,7 @@ const KEY_PARTS_FOLDER: &str = "key-parts";
 
 /// Records the parts of a stored entry's key (a line appended to `key-parts/<stage>.jsonl`; a
 /// line under 4 KiB is appended whole even with another process appending).
-pub fn record_key_parts(folder: &Path, stage: &str, key: super::CacheKey, parts: &[String]) {
+pub(crate) fn record_key_parts(folder: &Path, stage: &str, key: super::CacheKey, parts: &[String]) {
     let mut line = serde_json::to_string(&(key.0.to_hex().as_str(), parts)).expect("parts serialise");
     line.push('\n');
     let path = folder.join(KEY_PARTS_FOLDER).join(format!("{stage}.jsonl"));
@@ -181,20 +181,20 @@ pub fn record_key_parts(folder: &Path, stage: &str, key: super::CacheKey, parts:
 }
 
 /// The recorded key parts of a stage's stored entries (unreadable lines skipped).
-pub fn recorded_key_parts(folder: &Path, stage: &str) -> Vec<(String, Vec<String>)> {
+pub(crate) fn recorded_key_parts(folder: &Path, stage: &str) -> Vec<(String, Vec<String>)> {
     let path = folder.join(KEY_PARTS_FOLDER).join(format!("{stage}.jsonl"));
     let Ok(bytes) = crate::files::read_regular_file(&path, 256 << 20) else { return Vec::new() };
     String::from_utf8_lossy(&bytes).lines().filter_map(|line| serde_json::from_str(line).ok()).collect()
 }
 
 #[derive(Clone, Debug, Default, PartialEq, serde::Serialize, serde::Deserialize)]
-pub struct LastBuildAsset {
+pub(crate) struct LastBuildAsset {
     pub name: String,
     pub stages: Vec<(String, String)>,
 }
 
 /// Records the last build's counts (written whole and renamed, like every entry).
-pub fn write_last_build(folder: &Path, last: &LastBuild) {
+pub(crate) fn write_last_build(folder: &Path, last: &LastBuild) {
     let path = folder.join(LAST_BUILD_FILE);
     let json = serde_json::to_vec(last).expect("counts serialise");
     if let Err(error) = super::write_atomically(&path, |file| std::io::Write::write_all(file, &json)) {
@@ -203,7 +203,7 @@ pub fn write_last_build(folder: &Path, last: &LastBuild) {
 }
 
 /// The last build's counts, if a build recorded them.
-pub fn read_last_build(folder: &Path) -> Option<LastBuild> {
+pub(crate) fn read_last_build(folder: &Path) -> Option<LastBuild> {
     let bytes = crate::files::read_regular_file(&folder.join(LAST_BUILD_FILE), 16 << 20).ok()?;
     serde_json::from_slice(&bytes).ok()
 }

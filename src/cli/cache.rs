@@ -74,7 +74,7 @@ fn last_build_names(folder: &Path) -> Vec<String> {
 }
 
 /// `cirrus cache stats`: entries and bytes per stage, then the last build's counts.
-pub fn stats_text(folder: &Path, remote: Option<&str>) -> String {
+pub(crate) fn stats_text(folder: &Path, remote: Option<&str>) -> String {
     let mut text = String::new();
     let entries = entry_files(folder);
     let mut per_stage: BTreeMap<&str, (u64, u64)> = BTreeMap::new();
@@ -133,7 +133,7 @@ pub fn stats_text(folder: &Path, remote: Option<&str>) -> String {
 
 /// `cirrus cache explain --asset NAME`: every stage instance of the asset in the last build,
 /// where its result came from.
-pub fn explain_text(folder: &Path, asset: &str) -> Option<String> {
+pub(crate) fn explain_text(folder: &Path, asset: &str) -> Option<String> {
     let last = read_last_build(folder)?;
     if last.unchanged.iter().any(|name| name == asset) {
         return Some(format!(
@@ -209,7 +209,7 @@ fn nearest_difference(miss: &Miss, candidates: &[&(String, Vec<String>)]) -> Str
 }
 
 /// Bytes in the largest unit that keeps the figure at or above 1 (1024-based).
-pub fn human_bytes(bytes: u64) -> String {
+pub(crate) fn human_bytes(bytes: u64) -> String {
     const UNITS: [&str; 5] = ["B", "KiB", "MiB", "GiB", "TiB"];
     let mut value = bytes as f64;
     let mut unit = 0;

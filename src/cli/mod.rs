@@ -206,10 +206,10 @@ pub enum SummaryFormat {
     Json,
 }
 
-pub const EXIT_ASSET_FAILED: u8 = 1;
-pub const EXIT_USAGE: u8 = 2;
+pub(crate) const EXIT_ASSET_FAILED: u8 = 1;
+pub(crate) const EXIT_USAGE: u8 = 2;
 
-pub fn init_logging(verbose: u8) {
+pub(crate) fn init_logging(verbose: u8) {
     let default = match verbose {
         0 => "warn",
         1 => "info",

@@ -15,11 +15,11 @@ pub(super) fn valid_asset_name(name: &str) -> bool {
 }
 
 /// Names of the output folder's own files: an asset named so would overwrite them.
-pub const RESERVED_ASSET_NAMES: [&str; 2] = ["manifest.json", ".cirrus"];
+pub(crate) const RESERVED_ASSET_NAMES: [&str; 2] = ["manifest.json", ".cirrus"];
 
 /// Why an asset may not be called `name`, if it may not: its folder would be the manifest or
 /// the cache, or its name starts with the temporary-file prefix.
-pub fn reserved_asset_name(name: &str) -> Option<String> {
+pub(crate) fn reserved_asset_name(name: &str) -> Option<String> {
     let first = name.split('/').next().unwrap_or(name);
     if RESERVED_ASSET_NAMES.contains(&first) || first.starts_with(crate::files::TEMPORARY_PREFIX) {
         Some(format!("asset name `{name}` is reserved: `<output>/{first}` belongs to cirrus"))
@@ -33,7 +33,7 @@ pub fn reserved_asset_name(name: &str) -> Option<String> {
 /// same or one folder lies inside the other (`x` and `x/m`: the stale-artifact cleanup of one
 /// would delete the other's files).
 #[derive(Default)]
-pub struct AssetFolders {
+pub(crate) struct AssetFolders {
     names: HashSet<String>,
     /// Each folder that holds a name's folder (`x` and `x/m` for `x/m/n`), with one such name.
     outer: HashMap<String, String>,
@@ -41,7 +41,7 @@ pub struct AssetFolders {
 
 impl AssetFolders {
     /// A name already added that `name`'s folder collides with (itself included).
-    pub fn collision(&self, name: &str) -> Option<&str> {
+    pub(crate) fn collision(&self, name: &str) -> Option<&str> {
         if let Some(same) = self.names.get(name) {
             return Some(same);
         }

@@ -27,7 +27,7 @@ pub struct Pipeline {
 
 #[derive(Deserialize, Default)]
 #[serde(deny_unknown_fields)]
-pub struct Cache {
+pub(crate) struct Cache {
     /// The shared cache's URL (`s3://bucket/prefix`).
     #[serde(default)]
     pub remote: Option<String>,
@@ -43,7 +43,7 @@ pub struct Limits {
 
 #[derive(Deserialize, Default)]
 #[serde(deny_unknown_fields)]
-pub struct SettingsOverrides {
+pub(crate) struct SettingsOverrides {
     #[serde(default)]
     pub billboard: BillboardOverrides,
     #[serde(default)]
@@ -62,13 +62,13 @@ pub struct SettingsOverrides {
 
 #[derive(Deserialize, Default, Clone)]
 #[serde(deny_unknown_fields)]
-pub struct ReportOverrides {
+pub(crate) struct ReportOverrides {
     pub compare_formats: Option<bool>,
 }
 
 #[derive(Deserialize, Default, Clone)]
 #[serde(deny_unknown_fields)]
-pub struct HeightOverrides {
+pub(crate) struct HeightOverrides {
     pub projection: Option<HeightProjection>,
     pub size: Option<u32>,
     pub frontal: Option<f32>,
@@ -77,14 +77,14 @@ pub struct HeightOverrides {
 
 #[derive(Deserialize, Default, Clone)]
 #[serde(deny_unknown_fields)]
-pub struct TessellateOverrides {
+pub(crate) struct TessellateOverrides {
     pub level: Option<u32>,
     pub displace: Option<bool>,
 }
 
 #[derive(Deserialize, Default, Clone)]
 #[serde(deny_unknown_fields)]
-pub struct AoOverrides {
+pub(crate) struct AoOverrides {
     pub size: Option<u32>,
     pub rays: Option<u32>,
     pub mode: Option<AoMode>,
@@ -99,7 +99,7 @@ pub struct AoOverrides {
 
 #[derive(Deserialize, Default, Clone)]
 #[serde(deny_unknown_fields)]
-pub struct PackOverrides {
+pub(crate) struct PackOverrides {
     pub max_size: Option<u32>,
     pub padding: Option<u32>,
     pub rotate: Option<bool>,
@@ -119,7 +119,7 @@ where
 
 #[derive(Deserialize, Default, Clone)]
 #[serde(deny_unknown_fields)]
-pub struct BillboardOverrides {
+pub(crate) struct BillboardOverrides {
     pub epsilon: Option<f32>,
     #[serde(default, deserialize_with = "explicit")]
     pub max_planes: Option<Option<u32>>,
@@ -135,7 +135,7 @@ pub struct BillboardOverrides {
 
 #[derive(Deserialize, Default, Clone)]
 #[serde(deny_unknown_fields)]
-pub struct AtlasOverrides {
+pub(crate) struct AtlasOverrides {
     pub max_size: Option<u32>,
     pub padding: Option<u32>,
     pub power_of_two: Option<bool>,
@@ -143,7 +143,7 @@ pub struct AtlasOverrides {
 
 #[derive(Deserialize, Default, Clone)]
 #[serde(deny_unknown_fields)]
-pub struct EncodeOverrides {
+pub(crate) struct EncodeOverrides {
     pub albedo: Option<BlockFormat>,
     pub mra: Option<BlockFormat>,
     pub normal: Option<BlockFormat>,
@@ -167,10 +167,9 @@ pub enum Asset {
         ao_source: Option<String>,
         #[serde(default)]
         report: ReportOverrides,
+        /// Only its `alpha_cutoff` (an alpha-tested albedo's).
         #[serde(default)]
         billboard: BillboardOverrides,
-        #[serde(default)]
-        atlas: AtlasOverrides,
         #[serde(default)]
         encode: EncodeOverrides,
     },

@@ -29,7 +29,7 @@ pub struct BillboardSettings {
 }
 
 /// The most levels a LOD chain may have (the viewer switches them with keys 0–9).
-pub const MAX_LOD_LEVELS: usize = 10;
+pub(crate) const MAX_LOD_LEVELS: usize = 10;
 
 /// What a billboard-cloud LOD may cost: quads (two triangles each) or triangles.
 #[derive(Clone, Copy, Debug, PartialEq, Eq, Hash, Serialize, Deserialize)]
@@ -125,7 +125,7 @@ pub struct TessellateSettings {
 }
 
 /// The block formats a kind of surface may be encoded to (the first is the default).
-pub fn allowed_formats(surface: crate::texture::SurfaceKind) -> &'static [BlockFormat] {
+pub(crate) fn allowed_formats(surface: crate::texture::SurfaceKind) -> &'static [BlockFormat] {
     use crate::texture::SurfaceKind;
     match surface {
         SurfaceKind::Albedo => &[BlockFormat::Bc7, BlockFormat::Bc3, BlockFormat::Bc1],
@@ -159,7 +159,7 @@ pub struct EncodeSettings {
 
 impl EncodeSettings {
     /// The block format of one kind of surface.
-    pub fn format_of(&self, surface: crate::texture::SurfaceKind) -> BlockFormat {
+    pub(crate) fn format_of(&self, surface: crate::texture::SurfaceKind) -> BlockFormat {
         match surface {
             crate::texture::SurfaceKind::Albedo => self.albedo,
             crate::texture::SurfaceKind::Mra => self.mra,

@@ -210,7 +210,7 @@ static GPU_STARTER: Mutex<Option<std::thread::JoinHandle<()>>> = Mutex::new(None
 /// Starts creating the shared GPU on a thread of its own (about 50–80 ms on llvmpipe), for a
 /// caller that knows it will render soon and has other work to do meanwhile; `gpu()` then waits
 /// for it. Call `wait_for_gpu_start` before the process ends.
-pub fn start_gpu_in_background() {
+pub(crate) fn start_gpu_in_background() {
     let mut starter = GPU_STARTER.lock().expect("GPU starter lock");
     if GPU.get().is_none() && starter.is_none() {
         *starter = Some(std::thread::spawn(|| {
@@ -221,7 +221,7 @@ pub fn start_gpu_in_background() {
 
 /// Waits for a GPU start begun by `start_gpu_in_background` (so that the process never exits
 /// while the driver is being set up).
-pub fn wait_for_gpu_start() {
+pub(crate) fn wait_for_gpu_start() {
     let starter = GPU_STARTER.lock().expect("GPU starter lock").take();
     if let Some(starter) = starter {
         let _ = starter.join();
@@ -252,6 +252,9 @@ pub struct RenderVertex {
 }
 
 impl Gpu {
+    /// The device on the first adapter able to draw every target, with every pipeline.
+    // Long: the device's creation and each pipeline's, written out once; a helper per pipeline
+    // would take most of the same lines as arguments.
     async fn new() -> Result<Gpu, GpuError> {
         let instance = new_instance();
         let adapter = choose_adapter(&instance).await?;

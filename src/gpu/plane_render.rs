@@ -91,11 +91,11 @@ pub struct PlaneImages {
 
 impl PlaneImages {
     /// The surfaces in buffer order.
-    pub const SURFACES: [SurfaceKind; 4] =
+    pub(crate) const SURFACES: [SurfaceKind; 4] =
         [SurfaceKind::Albedo, SurfaceKind::Normal, SurfaceKind::Mra, SurfaceKind::Height];
 
     /// The bytes of one `width` × `height` plane's four images.
-    pub fn byte_len(width: u32, height: u32) -> usize {
+    pub(crate) fn byte_len(width: u32, height: u32) -> usize {
         Self::SURFACES.len() * Self::surface_len(width, height)
     }
 
@@ -105,7 +105,7 @@ impl PlaneImages {
 
     /// The images that start at `offset` in `buffer` (the four surfaces in [`Self::SURFACES`]
     /// order); `None` when the buffer ends before them.
-    pub fn in_buffer(width: u32, height: u32, buffer: Arc<Vec<u8>>, offset: usize) -> Option<PlaneImages> {
+    pub(crate) fn in_buffer(width: u32, height: u32, buffer: Arc<Vec<u8>>, offset: usize) -> Option<PlaneImages> {
         let end = offset.checked_add(Self::byte_len(width, height))?;
         (end <= buffer.len()).then_some(PlaneImages { width, height, buffer, offset })
     }
@@ -162,7 +162,7 @@ impl Gpu {
     /// Uploads the mip chain of a material's texture for `slot` (made with
     /// [`material_mip_settings`], level 0 first) ahead of the renders that use it, once per
     /// content: a kind can upload on every worker while other work runs.
-    pub fn upload_material_mips(&self, levels: &[Texture], slot: TextureSlot, alpha_cutoff: f32) {
+    pub(crate) fn upload_material_mips(&self, levels: &[Texture], slot: TextureSlot, alpha_cutoff: f32) {
         self.material_texture_view(levels, slot, alpha_cutoff);
     }
 
@@ -242,6 +242,8 @@ impl Gpu {
     /// One submission: each input rendered at its place (x, y) in targets of `texels` (width,
     /// height), and, with a supersampling `factor` above 1, its coverage at `factor` times the
     /// place in a coverage target `factor` times the size.
+    // Long: one command encoder from the targets' creation to the read-back, whose buffers and
+    // bind groups must outlive the submission; split, each part would pass them all along.
     fn render_stack(
         &self,
         inputs: &[(&PlaneRenderInput, u32, u32)],

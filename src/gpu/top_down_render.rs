@@ -12,7 +12,7 @@ const ABSENT: f64 = -3.0e38;
 /// What a top-down render covers: X from `min[0]` to `max[0]` across, Z from `min[1]` to
 /// `max[1]` down, and the Y range the heights lie in.
 #[derive(Clone, Copy, Debug, PartialEq)]
-pub struct Footprint {
+pub(crate) struct Footprint {
     pub min: [f32; 2],
     pub max: [f32; 2],
     pub low_y: f32,
@@ -76,7 +76,7 @@ impl Gpu {
     /// The highest surface's Y above `footprint.low_y` at every texel centre of a `size`² grid
     /// over `footprint` (row by row, row 0 at the lowest Z), none where no triangle covers the
     /// centre. Relative, so that two renders over one footprint subtract without losing bits.
-    pub fn render_top_down(
+    pub(crate) fn render_top_down(
         &self,
         positions: &[[f32; 3]],
         triangles: &[[u32; 3]],

@@ -17,7 +17,7 @@ use crate::diagnostic::Diagnostic;
 
 // Mesh 2: `map_d` naming the albedo texture is not applied a second time. 3: each triangle's
 // OBJ object.
-pub const MESH: Stage = Stage { name: "mesh", version: 3 };
+pub(crate) const MESH: Stage = Stage { name: "mesh", version: 3 };
 
 /// An OBJ's input.
 fn mesh_source(db: &dyn Db, asset: Asset, obj: &Path) -> Result<SourceFile, Diagnostic> {
@@ -26,39 +26,34 @@ fn mesh_source(db: &dyn Db, asset: Asset, obj: &Path) -> Result<SourceFile, Diag
 
 /// The MTL files an OBJ of the asset names (project-relative), read or not.
 #[salsa::tracked(returns(clone))]
-pub fn mesh_library_paths_of(db: &dyn Db, asset: Asset, obj: PathBuf) -> Arc<Vec<PathBuf>> {
+pub(crate) fn mesh_library_paths_of(db: &dyn Db, asset: Asset, obj: PathBuf) -> Arc<Vec<PathBuf>> {
     let Ok(file) = mesh_source(db, asset, &obj) else { return Arc::default() };
     let Ok(contents) = file.contents(db) else { return Arc::default() };
     Arc::new(crate::mesh::material_libraries(&obj, &contents.bytes, asset.source_root(db)))
 }
 
-/// The MTL files the asset's main OBJ names.
-pub fn mesh_library_paths(db: &dyn Db, asset: Asset) -> Arc<Vec<PathBuf>> {
-    mesh_library_paths_of(db, asset, asset.main_file(db).clone())
-}
-
 /// An OBJ and the MTL files it names: what its mesh stage reads.
-pub fn mesh_files_of(db: &dyn Db, asset: Asset, obj: &Path) -> Vec<PathBuf> {
+pub(crate) fn mesh_files_of(db: &dyn Db, asset: Asset, obj: &Path) -> Vec<PathBuf> {
     let mut files = vec![obj.to_path_buf()];
     files.extend(mesh_library_paths_of(db, asset, obj.to_path_buf()).iter().cloned());
     files
 }
 
 /// The main OBJ and the MTL files it names.
-pub fn mesh_files(db: &dyn Db, asset: Asset) -> Vec<PathBuf> {
+pub(crate) fn mesh_files(db: &dyn Db, asset: Asset) -> Vec<PathBuf> {
     mesh_files_of(db, asset, asset.main_file(db))
 }
 
 /// The MTL files an OBJ names, as far as read, by project-relative path.
 #[salsa::tracked(returns(clone))]
-pub fn mesh_libraries_of(db: &dyn Db, asset: Asset, obj: PathBuf) -> Arc<BTreeMap<PathBuf, SourceFile>> {
+pub(crate) fn mesh_libraries_of(db: &dyn Db, asset: Asset, obj: PathBuf) -> Arc<BTreeMap<PathBuf, SourceFile>> {
     let paths = mesh_library_paths_of(db, asset, obj);
     Arc::new(paths.iter().filter_map(|path| Some((path.clone(), asset_file(db, asset, path.clone())?))).collect())
 }
 
 /// The bytes of the MTL files an OBJ of the asset names, as `mesh::load_mesh` takes them (a
 /// missing or unreadable one absent or `None`).
-pub fn library_bytes(db: &dyn Db, asset: Asset, obj: &Path) -> BTreeMap<PathBuf, Option<Vec<u8>>> {
+pub(crate) fn library_bytes(db: &dyn Db, asset: Asset, obj: &Path) -> BTreeMap<PathBuf, Option<Vec<u8>>> {
     mesh_libraries_of(db, asset, obj.to_path_buf())
         .iter()
         .map(|(path, file)| (path.clone(), file.contents(db).as_ref().ok().map(|contents| contents.bytes.to_vec())))
@@ -67,14 +62,14 @@ pub fn library_bytes(db: &dyn Db, asset: Asset, obj: &Path) -> BTreeMap<PathBuf,
 
 /// The texture files the main mesh's materials name (cheap: the MTL files only).
 #[salsa::tracked(returns(clone))]
-pub fn mesh_textures(db: &dyn Db, asset: Asset) -> Arc<Vec<PathBuf>> {
+pub(crate) fn mesh_textures(db: &dyn Db, asset: Asset) -> Arc<Vec<PathBuf>> {
     let obj = asset.main_file(db);
     Arc::new(crate::mesh::texture_paths(obj, &library_bytes(db, asset, obj), asset.source_root(db)))
 }
 
 /// A loaded mesh with its vertex tangents and load warnings.
 #[derive(Debug, PartialEq)]
-pub struct LoadedMesh {
+pub(crate) struct LoadedMesh {
     pub mesh: crate::mesh::Mesh,
     pub tangents: Vec<[f32; 4]>,
     pub warnings: Vec<Diagnostic>,
@@ -84,7 +79,7 @@ pub struct LoadedMesh {
 /// to the source folder, and bytes); the mesh names its textures relative to that folder too
 /// in the cache (see `db::load_cached`).
 #[salsa::tracked(returns(copy))]
-pub fn mesh_cache_key(db: &dyn Db, asset: Asset, obj: PathBuf) -> CacheKey {
+pub(crate) fn mesh_cache_key(db: &dyn Db, asset: Asset, obj: PathBuf) -> CacheKey {
     let key = stage_key(MESH);
     let libraries = mesh_libraries_of(db, asset, obj.clone());
     let files = mesh_source(db, asset, &obj).ok().into_iter().chain(libraries.values().copied());
@@ -92,7 +87,7 @@ pub fn mesh_cache_key(db: &dyn Db, asset: Asset, obj: PathBuf) -> CacheKey {
 }
 
 /// A mesh stage's label: the asset's name for its main OBJ, `asset/<path>` for another.
-pub fn mesh_label(db: &dyn Db, asset: Asset, obj: &Path) -> String {
+pub(crate) fn mesh_label(db: &dyn Db, asset: Asset, obj: &Path) -> String {
     let name = asset.name(db);
     if obj == asset.main_file(db) {
         name.clone()
@@ -150,13 +145,13 @@ fn loaded_mesh_from_entry(entry: CacheEntry) -> Option<LoadedMesh> {
 }
 
 /// The asset's main mesh (stage `mesh`).
-pub fn loaded_mesh(db: &dyn Db, asset: Asset) -> Result<Arc<LoadedMesh>, Diagnostic> {
+pub(crate) fn loaded_mesh(db: &dyn Db, asset: Asset) -> Result<Arc<LoadedMesh>, Diagnostic> {
     loaded_mesh_of(db, asset, asset.main_file(db).clone())
 }
 
 /// A mesh of the asset (stage `mesh`): OBJ + MTL loaded, tangents computed.
 #[salsa::tracked(returns(clone))]
-pub fn loaded_mesh_of(db: &dyn Db, asset: Asset, obj: PathBuf) -> Result<Arc<LoadedMesh>, Diagnostic> {
+pub(crate) fn loaded_mesh_of(db: &dyn Db, asset: Asset, obj: PathBuf) -> Result<Arc<LoadedMesh>, Diagnostic> {
     let file = mesh_source(db, asset, &obj)?;
     let contents = read_contents(db, file)?;
     // A missing MTL is a warning (its materials fall back to defaults); one that is there but
@@ -189,12 +184,12 @@ pub fn loaded_mesh_of(db: &dyn Db, asset: Asset, obj: PathBuf) -> Result<Arc<Loa
 }
 
 /// The main mesh stage's instance: labelled by the asset, reading the OBJ and its MTL files.
-pub fn mesh_instance(db: &dyn Db, asset: Asset) -> crate::kinds::StageInstance {
+pub(crate) fn mesh_instance(db: &dyn Db, asset: Asset) -> crate::kinds::StageInstance {
     mesh_instance_of(db, asset, asset.main_file(db))
 }
 
 /// The instance of the mesh stage of one OBJ of the asset (see `mesh_label`).
-pub fn mesh_instance_of(db: &dyn Db, asset: Asset, obj: &Path) -> crate::kinds::StageInstance {
+pub(crate) fn mesh_instance_of(db: &dyn Db, asset: Asset, obj: &Path) -> crate::kinds::StageInstance {
     let mut mesh =
         crate::kinds::StageInstance::new(MESH, mesh_label(db, asset, obj), crate::diagnostic::display_path(obj));
     mesh.reads.push(crate::kinds::Read::File(obj.to_path_buf()));

@@ -25,7 +25,7 @@ pub mod height;
 
 /// The questions the driver asks an asset kind. Every answer is computed from the database
 /// (through the kind's tracked functions); none does IO.
-pub trait Kind {
+pub(crate) trait Kind {
     /// The files the asset reads, as far as the files read so far tell (the driver reads them
     /// and asks again until nothing new turns up).
     fn files_to_read(db: &dyn Db, asset: Asset) -> Vec<PathBuf>;
@@ -83,7 +83,7 @@ pub trait Kind {
 }
 
 /// What the scheduler asks of a kind's step.
-pub trait KindStep: Clone + std::fmt::Debug + PartialEq + Send + Sync {
+pub(crate) trait KindStep: Clone + std::fmt::Debug + PartialEq + Send + Sync {
     /// The sort of work it is, for estimating how long the waiting jobs take (the steps of one
     /// sort take about as long as each other).
     fn sort(&self) -> &'static str;
@@ -96,7 +96,7 @@ macro_rules! kinds {
     ($($name:ident => $folder:ident),* $(,)?) => {
         /// A step of one kind's own (its `Kind::Step`), as a job carries it.
         #[derive(Clone, Debug, PartialEq)]
-        pub enum Step {
+        pub(crate) enum Step {
             $($name(<$folder::$name as Kind>::Step)),*
         }
 
@@ -115,7 +115,7 @@ macro_rules! kinds {
         })*
 
         /// Runs a job on a worker: a surface through the shared tail, a step by its kind.
-        pub fn run_job(db: &dyn Db, job: &Job) -> Result<Vec<Job>, Diagnostic> {
+        pub(crate) fn run_job(db: &dyn Db, job: &Job) -> Result<Vec<Job>, Diagnostic> {
             match &job.task {
                 Task::Surface(surface) => {
                     tail_queries::surface_artifacts(db, job.asset, surface.clone()).map(|_| Vec::new())
@@ -129,19 +129,19 @@ macro_rules! kinds {
         }
 
         impl AssetKind {
-            pub fn files_to_read(self, db: &dyn Db, asset: Asset) -> Vec<PathBuf> {
+            pub(crate) fn files_to_read(self, db: &dyn Db, asset: Asset) -> Vec<PathBuf> {
                 match self {
                     $(AssetKind::$name => <$folder::$name>::files_to_read(db, asset)),*
                 }
             }
 
-            pub fn first_jobs(self, db: &dyn Db, asset: Asset) -> Vec<Job> {
+            pub(crate) fn first_jobs(self, db: &dyn Db, asset: Asset) -> Vec<Job> {
                 match self {
                     $(AssetKind::$name => <$folder::$name>::first_jobs(db, asset)),*
                 }
             }
 
-            pub fn stage_instances(
+            pub(crate) fn stage_instances(
                 self,
                 db: &dyn Db,
                 asset: Asset,
@@ -153,7 +153,7 @@ macro_rules! kinds {
                 }
             }
 
-            pub fn outputs(
+            pub(crate) fn outputs(
                 self,
                 db: &dyn Db,
                 asset: Asset,
@@ -172,7 +172,7 @@ macro_rules! kinds {
                 }
             }
 
-            pub fn surface_image(
+            pub(crate) fn surface_image(
                 self,
                 db: &dyn Db,
                 asset: Asset,
@@ -183,7 +183,7 @@ macro_rules! kinds {
                 }
             }
 
-            pub fn tail_settings(
+            pub(crate) fn tail_settings(
                 self,
                 db: &dyn Db,
                 asset: Asset,
@@ -194,7 +194,7 @@ macro_rules! kinds {
                 }
             }
 
-            pub fn surface_recipe_key(
+            pub(crate) fn surface_recipe_key(
                 self,
                 db: &dyn Db,
                 asset: Asset,
@@ -205,7 +205,7 @@ macro_rules! kinds {
                 }
             }
 
-            pub fn surface_parts_key(
+            pub(crate) fn surface_parts_key(
                 self,
                 db: &dyn Db,
                 asset: Asset,
@@ -216,7 +216,7 @@ macro_rules! kinds {
                 }
             }
 
-            pub fn provided_surface_stage(
+            pub(crate) fn provided_surface_stage(
                 self,
                 db: &dyn Db,
                 asset: Asset,
@@ -235,7 +235,7 @@ with_kinds!(kinds);
 /// One surface that ends in the texture tail: `group` names what it belongs to inside the asset
 /// (a material's name; empty for an asset's own surfaces, like a billboard cloud's atlas).
 #[derive(Clone, Debug, PartialEq, Eq, Hash, PartialOrd, Ord)]
-pub struct SurfaceId {
+pub(crate) struct SurfaceId {
     pub group: String,
     pub surface: SurfaceKind,
 }
@@ -256,7 +256,7 @@ impl SurfaceId {
     }
 
     /// Its texture and preview files inside the asset folder.
-    pub fn artifact_paths(&self, output_folder: &Path, container: crate::config::Container) -> [PathBuf; 2] {
+    pub(crate) fn artifact_paths(&self, output_folder: &Path, container: crate::config::Container) -> [PathBuf; 2] {
         let folder = if self.group.is_empty() { output_folder.to_path_buf() } else { output_folder.join(&self.group) };
         [
             folder.join(format!("{}.{}", self.surface.name(), container.extension())),
@@ -266,7 +266,7 @@ impl SurfaceId {
 }
 
 /// Work for a worker thread: one step of an asset, or one surface through the tail.
-pub type Job = crate::schedule::Job<Task>;
+pub(crate) type Job = crate::schedule::Job<Task>;
 
 impl crate::schedule::JobTask for Task {
     /// A step's name, or `surface`.
@@ -280,7 +280,7 @@ impl crate::schedule::JobTask for Task {
 }
 
 #[derive(Clone, Debug, PartialEq)]
-pub enum Task {
+pub(crate) enum Task {
     /// A step of the kind's own.
     Step(Step),
     /// A surface through the shared texture tail.
@@ -299,7 +299,7 @@ impl Task {
 
 /// One instance of a stage, as the summary, the graph dump and the event log name it.
 #[derive(Clone, Debug, PartialEq)]
-pub struct StageInstance {
+pub(crate) struct StageInstance {
     pub stage: Stage,
     /// Its label in the event log and the graph: the node is `stage(label)`.
     pub label: String,
@@ -335,25 +335,25 @@ impl StageInstance {
         }
     }
 
-    pub fn reads_stage(mut self, other: &StageInstance) -> Self {
+    pub(crate) fn reads_stage(mut self, other: &StageInstance) -> Self {
         self.reads.push(Read::Stage(other.stage, other.label.clone()));
         self
     }
 
     /// The node id in the graph and the event log: `stage(label)`.
-    pub fn node_id(&self) -> String {
+    pub(crate) fn node_id(&self) -> String {
         stage_node_id(self.stage.name, &self.label)
     }
 }
 
 /// The graph id of a stage instance, as the event log names it: `stage(label)`.
-pub fn stage_node_id(stage: &str, label: &str) -> String {
+pub(crate) fn stage_node_id(stage: &str, label: &str) -> String {
     format!("{stage}({label})")
 }
 
 /// The shared tail stages of one surface (mips → encode → write), reading `image` (the stage
 /// that made the surface's image) and writing its two files.
-pub fn tail_instances(
+pub(crate) fn tail_instances(
     asset_name: &str,
     surface: &SurfaceId,
     image: &StageInstance,
@@ -370,7 +370,7 @@ pub fn tail_instances(
 
 /// The tail settings of a surface of kind `surface` in `format`, the rest from the asset's
 /// `encode` settings.
-pub fn tail_settings_from(
+pub(crate) fn tail_settings_from(
     encode: &crate::config::EncodeSettings,
     surface: SurfaceKind,
     format: crate::config::BlockFormat,
@@ -389,7 +389,7 @@ pub fn tail_settings_from(
 
 /// An asset's outputs made by `make` when its stages left no error; the error of making them
 /// joins `errors` (and nothing is written).
-pub fn outputs_unless_failed(
+pub(crate) fn outputs_unless_failed(
     errors: &mut Vec<Diagnostic>,
     make: impl FnOnce() -> Result<AssetOutputs, Diagnostic>,
 ) -> AssetOutputs {
@@ -404,7 +404,7 @@ pub fn outputs_unless_failed(
 
 /// What an asset writes: files (project-relative) and its `report.json`, written last.
 #[derive(Clone, Debug, Default)]
-pub struct AssetOutputs {
+pub(crate) struct AssetOutputs {
     pub files: Vec<(PathBuf, Arc<[u8]>)>,
     pub report: Option<Vec<u8>>,
     /// What some files' values mean (a height map's `center` and `magnitude`), listed beside
@@ -415,7 +415,7 @@ pub struct AssetOutputs {
 }
 
 /// Reads a texture's header for `check`: readable, decodable, within the texture limits.
-pub fn check_texture_file(config: &PipelineConfig, path: &Path) -> Result<(), String> {
+pub(crate) fn check_texture_file(config: &PipelineConfig, path: &Path) -> Result<(), String> {
     // (A `String`: check reports the reason under the file's name.)
     let contents = crate::sources::read_source(&config.root, &config.source, path)?;
     crate::texture::probe_texture(path, &contents.bytes, config.limits.texture)
@@ -424,13 +424,13 @@ pub fn check_texture_file(config: &PipelineConfig, path: &Path) -> Result<(), St
 }
 
 /// A warning reported by `check`: the diagnostic with its message marked.
-pub fn as_warning(diagnostic: &Diagnostic) -> Diagnostic {
+pub(crate) fn as_warning(diagnostic: &Diagnostic) -> Diagnostic {
     Diagnostic { message: format!("warning: {}", diagnostic.message), ..diagnostic.clone() }
 }
 
 /// Milliseconds each stage of an asset spent in this build (runs labelled by the asset's name
 /// or below it, cache hits left out), for its report.
-pub fn asset_stage_ms<'a>(asset_name: &str, runs: &'a [StageRun]) -> std::collections::BTreeMap<&'a str, f64> {
+pub(crate) fn asset_stage_ms<'a>(asset_name: &str, runs: &'a [StageRun]) -> std::collections::BTreeMap<&'a str, f64> {
     let mut stage_ms = std::collections::BTreeMap::new();
     let below = format!("{asset_name}/");
     for run in runs.iter().filter(|run| !run.from_cache && (run.label == asset_name || run.label.starts_with(&below))) {
@@ -445,7 +445,7 @@ pub fn asset_stage_ms<'a>(asset_name: &str, runs: &'a [StageRun]) -> std::collec
 
 /// An OBJ of the source folder loaded for `cirrus check`, with the MTL files it names (a
 /// missing MTL is a load warning, as in a build); the load warnings come back as warnings.
-pub fn check_mesh_file(
+pub(crate) fn check_mesh_file(
     config: &PipelineConfig,
     mesh_file: &Path,
 ) -> Result<(crate::mesh::Mesh, Vec<Diagnostic>), Diagnostic> {

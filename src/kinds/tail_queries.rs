@@ -26,9 +26,9 @@ use crate::texture::Texture;
 // of level 0 passes the cutoff. Encode 3: fully transparent BC7 blocks use the fastest profile;
 // 4, 5: as mips 3, 4; 6: BC4 and BC5 by cirrus's own search (`texture::bc4`); 7: BC1 blocks
 // refined (`texture::bc1`); 8: the cut-out edges of alpha-tested BC7 at the very fast profile.
-pub const MIPS: Stage = Stage { name: "mips", version: 4 };
-pub const ENCODE: Stage = Stage { name: "encode", version: 9 };
-pub const WRITE: Stage = Stage { name: "write", version: 1 };
+pub(crate) const MIPS: Stage = Stage { name: "mips", version: 4 };
+pub(crate) const ENCODE: Stage = Stage { name: "encode", version: 9 };
+pub(crate) const WRITE: Stage = Stage { name: "write", version: 1 };
 
 /// The cache entry of a finished surface (under its recipe key and under its content key).
 const SURFACE_ENTRY: &str = "surface";
@@ -39,7 +39,7 @@ const SURFACE_ENTRY_VERSION: u32 = 5;
 const SURFACE_RECIPE_ENTRY: &str = "surface-recipe";
 
 #[salsa::tracked(returns(clone))]
-pub fn tail_settings(db: &dyn Db, asset: Asset, surface: SurfaceId) -> Result<TailSettings, Diagnostic> {
+pub(crate) fn tail_settings(db: &dyn Db, asset: Asset, surface: SurfaceId) -> Result<TailSettings, Diagnostic> {
     asset.kind(db).tail_settings(db, asset, &surface)
 }
 
@@ -68,7 +68,7 @@ fn write_step_settings(
 
 /// The surface's image, made by its kind.
 #[salsa::tracked(returns(clone))]
-pub fn surface_image(db: &dyn Db, asset: Asset, surface: SurfaceId) -> Result<Arc<Texture>, Diagnostic> {
+pub(crate) fn surface_image(db: &dyn Db, asset: Asset, surface: SurfaceId) -> Result<Arc<Texture>, Diagnostic> {
     asset.kind(db).surface_image(db, asset, &surface)
 }
 
@@ -81,7 +81,7 @@ fn texture_memory(db: &dyn Db, width: u32, height: u32) -> crate::schedule::Memo
 
 /// The mip chain (stage `mips`), re-filtering only the tiles that changed since the last run.
 #[salsa::tracked(returns(clone))]
-pub fn surface_mips(db: &dyn Db, asset: Asset, surface: SurfaceId) -> Result<Arc<MipLevels>, Diagnostic> {
+pub(crate) fn surface_mips(db: &dyn Db, asset: Asset, surface: SurfaceId) -> Result<Arc<MipLevels>, Diagnostic> {
     let image = surface_image(db, asset, surface.clone())?;
     let settings = mip_step_settings(db, asset, surface.clone())?;
     let label = surface.label(asset.name(db));
@@ -92,7 +92,7 @@ pub fn surface_mips(db: &dyn Db, asset: Asset, surface: SurfaceId) -> Result<Arc
 
 /// The blocks and their PSNR (stage `encode`), re-encoding only the blocks that changed.
 #[salsa::tracked(returns(clone))]
-pub fn surface_blocks(db: &dyn Db, asset: Asset, surface: SurfaceId) -> Result<Arc<EncodedSurface>, Diagnostic> {
+pub(crate) fn surface_blocks(db: &dyn Db, asset: Asset, surface: SurfaceId) -> Result<Arc<EncodedSurface>, Diagnostic> {
     let mips = surface_mips(db, asset, surface.clone())?;
     let (format, quality, alpha_cutoff) = encode_step_settings(db, asset, surface.clone())?;
     let label = surface.label(asset.name(db));
@@ -115,7 +115,7 @@ pub fn surface_blocks(db: &dyn Db, asset: Asset, surface: SurfaceId) -> Result<A
 /// (`report: (compare_formats: true)`): level 0 encoded and measured again in each (not a
 /// stage of the build: only the report reads it).
 #[salsa::tracked(returns(clone))]
-pub fn surface_format_comparison(
+pub(crate) fn surface_format_comparison(
     db: &dyn Db,
     asset: Asset,
     surface: SurfaceId,
@@ -133,7 +133,11 @@ pub fn surface_format_comparison(
 /// The container and preview (stage `write`); from the persistent cache when a surface with
 /// the same texels and settings was baked before.
 #[salsa::tracked(returns(clone))]
-pub fn surface_files(db: &dyn Db, asset: Asset, surface: SurfaceId) -> Result<Arc<SurfaceArtifacts>, Diagnostic> {
+pub(crate) fn surface_files(
+    db: &dyn Db,
+    asset: Asset,
+    surface: SurfaceId,
+) -> Result<Arc<SurfaceArtifacts>, Diagnostic> {
     let image = surface_image(db, asset, surface.clone())?;
     let settings = tail_settings(db, asset, surface.clone())?;
     let label = surface.label(asset.name(db));
@@ -153,7 +157,11 @@ pub fn surface_files(db: &dyn Db, asset: Asset, surface: SurfaceId) -> Result<Ar
 /// one (then no image is made), else by its parts (then the image is not put together), else
 /// through the tail.
 #[salsa::tracked(returns(clone))]
-pub fn surface_artifacts(db: &dyn Db, asset: Asset, surface: SurfaceId) -> Result<Arc<SurfaceArtifacts>, Diagnostic> {
+pub(crate) fn surface_artifacts(
+    db: &dyn Db,
+    asset: Asset,
+    surface: SurfaceId,
+) -> Result<Arc<SurfaceArtifacts>, Diagnostic> {
     let settings = tail_settings(db, asset, surface.clone())?;
     let kind = asset.kind(db);
     let recipe_key =
@@ -208,7 +216,7 @@ fn artifacts_by_recipe(db: &dyn Db, key: CacheKey) -> Option<SurfaceArtifacts> {
 
 /// Whether the persistent cache holds the surface's files under its recipe (a kind can then
 /// skip making the image).
-pub fn surface_in_cache(db: &dyn Db, asset: Asset, surface: &SurfaceId) -> bool {
+pub(crate) fn surface_in_cache(db: &dyn Db, asset: Asset, surface: &SurfaceId) -> bool {
     let (Some(cache), Ok(settings)) = (db.disk_cache(), tail_settings(db, asset, surface.clone())) else {
         return false;
     };
@@ -274,7 +282,7 @@ fn encoding_memo_key(label: &str) -> CacheKey {
 
 /// Loads the surface's last encoding into this process ahead of its tail (no-op when it is
 /// here already or the memo holds none).
-pub fn load_previous_encoding(db: &dyn Db, asset: Asset, surface: &SurfaceId) {
+pub(crate) fn load_previous_encoding(db: &dyn Db, asset: Asset, surface: &SurfaceId) {
     previous_encoding(db, &surface.label(asset.name(db)));
 }
 

@@ -22,7 +22,7 @@ use crate::texture::TextureSlot;
 
 /// Asked between units of long work (points, batches of rays): `true` stops the work with
 /// [`Stopped`]. The driver passes its cancellation check; tests and benches pass [`never`].
-pub type ShouldStop<'a> = &'a (dyn Fn() -> bool + Sync);
+pub(crate) type ShouldStop<'a> = &'a (dyn Fn() -> bool + Sync);
 
 /// Long work stopped because [`ShouldStop`] said so; what it made is thrown away.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
@@ -35,7 +35,7 @@ pub fn never() -> bool {
 
 /// Appended to the name of the copy of a material that faces without texture coordinates use
 /// (they take its constants, not its maps).
-pub const WITHOUT_UVS_SUFFIX: &str = " (no UVs)";
+pub(crate) const WITHOUT_UVS_SUFFIX: &str = " (no UVs)";
 
 /// One material of a mesh.
 #[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
@@ -92,7 +92,7 @@ pub struct Mesh {
 /// Per vertex, the id of its position among the distinct positions (by exact coordinates: a
 /// seam in the normals or texture coordinates splits vertices, not the surface), and how many
 /// distinct positions there are.
-pub fn position_ids(positions: &[[f32; 3]]) -> (Vec<u32>, usize) {
+pub(crate) fn position_ids(positions: &[[f32; 3]]) -> (Vec<u32>, usize) {
     let mut ids: std::collections::HashMap<[u32; 3], u32> = std::collections::HashMap::new();
     let per_vertex = positions
         .iter()
@@ -128,6 +128,8 @@ pub fn material_libraries(obj_file: &Path, obj_bytes: &[u8], source_root: &Path)
 /// Loads the OBJ `obj_bytes` read from `obj_file`; `libraries` serves the bytes of the MTL files
 /// that `material_libraries` named (a missing one is `None`: its materials fall back to
 /// defaults with a warning). Texture paths must stay inside `source_root`.
+// Long: one pass over tobj's models, whose per-model checks (index bounds, UVs, normals,
+// objects without UVs) share the running offsets of the merged arrays.
 pub fn load_mesh(
     obj_file: &Path,
     obj_bytes: &[u8],
@@ -326,7 +328,7 @@ fn first_non_finite_statement(text: &str, keyword: &str) -> Option<crate::diagno
 /// Per material of `mesh` whose triangles use texture coordinates outside [0, 1] (beyond
 /// `1e-4`): the material, how many of its triangles do, of how many, and the UV range
 /// `[u_min, u_max, v_min, v_max]`. A bake in UV space covers [0, 1]: those texels are not in it.
-pub fn uvs_outside_unit_square(mesh: &Mesh) -> Vec<(usize, usize, usize, [f32; 4])> {
+pub(crate) fn uvs_outside_unit_square(mesh: &Mesh) -> Vec<(usize, usize, usize, [f32; 4])> {
     let Some(uvs) = mesh.uvs.as_deref() else { return Vec::new() };
     let mut per_material: BTreeMap<usize, (usize, usize, [f32; 4])> = BTreeMap::new();
     for (triangle, &material) in mesh.triangles.iter().zip(&mesh.triangle_materials) {
@@ -352,7 +354,7 @@ pub fn uvs_outside_unit_square(mesh: &Mesh) -> Vec<(usize, usize, usize, [f32; 4
 }
 
 /// The warnings of [`uvs_outside_unit_square`] for a mesh baked in UV space.
-pub fn uvs_outside_warnings(obj_file: &Path, mesh: &Mesh) -> Vec<Diagnostic> {
+pub(crate) fn uvs_outside_warnings(obj_file: &Path, mesh: &Mesh) -> Vec<Diagnostic> {
     uvs_outside_unit_square(mesh)
         .into_iter()
         .map(|(material, outside, total, [u_min, u_max, v_min, v_max])| {
@@ -409,10 +411,10 @@ fn load_mtl(bytes: &[u8]) -> tobj::MTLLoadResult {
 
 /// Largest bounding-box diagonal accepted, in world units: the stages compute in single
 /// precision, and squared distances of larger meshes overflow it.
-pub const MAX_MESH_EXTENT: f64 = 1e9;
+pub(crate) const MAX_MESH_EXTENT: f64 = 1e9;
 /// Smallest bounding-box diagonal accepted: areas and squared distances of smaller meshes fall
 /// below single precision's normal range.
-pub const MIN_MESH_EXTENT: f64 = 1e-6;
+pub(crate) const MIN_MESH_EXTENT: f64 = 1e-6;
 
 /// Refuses meshes that single precision cannot bake: coordinates so large or so small that the
 /// stages' squared distances overflow or vanish, and meshes whose every face has zero area.
@@ -613,14 +615,9 @@ fn mesh_material(
     result
 }
 
-/// The file name of an MTL texture statement, after its options (`-bm 0.5`, `-s 1 1 1`, …).
-pub fn texture_file_from_statement(statement: &str) -> Option<String> {
-    texture_statement_parts(statement).map(|(_, file)| file)
-}
-
 /// An MTL texture statement's options (their words joined by spaces, empty without any) and
 /// file name.
-pub fn texture_statement_parts(statement: &str) -> Option<(String, String)> {
+pub(crate) fn texture_statement_parts(statement: &str) -> Option<(String, String)> {
     let arguments = |option: &str| -> usize {
         match option {
             "-blendu" | "-blendv" | "-cc" | "-clamp" | "-imfchan" | "-texres" | "-bm" | "-boost" | "-type" => 1,
@@ -711,7 +708,7 @@ pub fn texture_paths(
 }
 
 /// Per-vertex tangents (xyz, handedness in w) from UV derivatives, for normal mapping.
-pub fn vertex_tangents(
+pub(crate) fn vertex_tangents(
     positions: &[[f32; 3]],
     normals: &[[f32; 3]],
     uvs: &[[f32; 2]],

@@ -22,7 +22,7 @@ fn slot_keyword(slot: TextureSlot) -> &'static str {
 }
 
 /// One material's MTL statements, each map's file named by `map_file`.
-pub fn mtl_material_text(source: &MeshMaterial, map_file: impl Fn(TextureSlot, &Path) -> String) -> String {
+pub(crate) fn mtl_material_text(source: &MeshMaterial, map_file: impl Fn(TextureSlot, &Path) -> String) -> String {
     let mut text = String::new();
     let [r, g, b] = source.albedo_factor;
     let _ = writeln!(text, "newmtl {}\nKd {r} {g} {b}", source.name);
@@ -45,7 +45,7 @@ pub fn mtl_material_text(source: &MeshMaterial, map_file: impl Fn(TextureSlot, &
 
 /// `to` as seen from the folder `from` (both relative to the same folder, or both absolute);
 /// `to` itself when one is absolute and the other not.
-pub fn relative_path(from: &Path, to: &Path) -> PathBuf {
+pub(crate) fn relative_path(from: &Path, to: &Path) -> PathBuf {
     if from.is_absolute() != to.is_absolute() {
         return to.to_path_buf();
     }
@@ -63,7 +63,7 @@ pub fn relative_path(from: &Path, to: &Path) -> PathBuf {
 }
 
 /// A triangle mesh as an OBJ writes it.
-pub struct ObjMesh<'a> {
+pub(crate) struct ObjMesh<'a> {
     pub positions: &'a [[f32; 3]],
     pub normals: &'a [[f32; 3]],
     /// Per vertex, or empty.
@@ -76,7 +76,7 @@ pub struct ObjMesh<'a> {
 
 /// The OBJ text of `mesh`: a header comment, `mtllib`, one `v`/`vn`(/`vt`) per vertex, faces
 /// grouped by material in the materials' order.
-pub fn obj_text(mesh: &ObjMesh, header: &str, material_library: &str) -> String {
+pub(crate) fn obj_text(mesh: &ObjMesh, header: &str, material_library: &str) -> String {
     let mut obj = String::with_capacity(mesh.positions.len() * 90 + mesh.triangles.len() * 40);
     let _ = writeln!(obj, "# {header}\nmtllib {material_library}");
     for [x, y, z] in mesh.positions {

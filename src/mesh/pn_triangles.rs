@@ -101,7 +101,7 @@ impl PnPatch {
 /// The point and unit normal at `t` along the PN edge from `(p_a, n_a)` to `(p_b, n_b)`: the
 /// patch restricted to an edge depends on that edge alone, so two triangles sharing it get the
 /// same curve (computed here once, in one order, so to the bit).
-pub fn pn_edge_point(p_a: Vec3, n_a: Vec3, p_b: Vec3, n_b: Vec3, t: f32) -> (Vec3, Vec3) {
+pub(crate) fn pn_edge_point(p_a: Vec3, n_a: Vec3, p_b: Vec3, n_b: Vec3, t: f32) -> (Vec3, Vec3) {
     let s = 1.0 - t;
     let (b_a, b_b) = (edge_control(p_a, p_b, n_a), edge_control(p_b, p_a, n_b));
     let position = p_a * (s * s * s) + b_a * (3.0 * s * s * t) + b_b * (3.0 * s * t * t) + p_b * (t * t * t);
@@ -123,7 +123,7 @@ pub struct PnInput<'a> {
 /// One id per distinct position (by exact coordinates), and per id the average of the distinct
 /// normals its vertices carry (the geometry's normal there; a face-area average where those
 /// cancel out).
-pub fn averaged_normals(input: &PnInput) -> (Vec<u32>, Vec<Vec3>) {
+pub(crate) fn averaged_normals(input: &PnInput) -> (Vec<u32>, Vec<Vec3>) {
     let (position_ids, distinct_positions) = super::position_ids(input.positions);
     let mut seen: HashMap<(u32, [u32; 3]), ()> = HashMap::new();
     let mut sums = vec![Vec3::ZERO; distinct_positions];
@@ -345,7 +345,7 @@ pub fn displaced(mesh: &PnMesh, height: impl Fn([f32; 2]) -> f32 + Sync) -> PnMe
 
 /// Area-weighted face normals summed per (position, input normal) and normalised; a vertex
 /// whose faces cancel keeps its input normal.
-pub fn smooth_normals(positions: &[[f32; 3]], normals: &[[f32; 3]], triangles: &[[u32; 3]]) -> Vec<[f32; 3]> {
+pub(crate) fn smooth_normals(positions: &[[f32; 3]], normals: &[[f32; 3]], triangles: &[[u32; 3]]) -> Vec<[f32; 3]> {
     let mut groups: HashMap<([u32; 3], [u32; 3]), u32> = HashMap::new();
     let group_of: Vec<u32> = positions
         .iter()

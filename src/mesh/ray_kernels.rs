@@ -7,7 +7,7 @@
 use glam::{Vec3, Vec4};
 
 /// Lanes of a node and of a triangle packet.
-pub const WIDTH: usize = 8;
+pub(crate) const WIDTH: usize = 8;
 
 /// Eight child boxes as planes `[min x, max x, min y, max y, min z, max z]`, each eight lanes
 /// (an empty lane has min +∞ and max −∞, which no ray enters), and what each child is.
@@ -22,7 +22,7 @@ pub struct Node {
 /// ray hits), and their mesh indices (`u32::MAX` in empty lanes).
 #[derive(Clone, Copy)]
 #[repr(C, align(32))]
-pub struct Packet {
+pub(crate) struct Packet {
     pub corner: [[f32; WIDTH]; 3],
     pub edge1: [[f32; WIDTH]; 3],
     pub edge2: [[f32; WIDTH]; 3],
@@ -30,7 +30,7 @@ pub struct Packet {
 }
 
 /// A ray as the kernels read it.
-pub struct PreparedRay {
+pub(crate) struct PreparedRay {
     pub origin: Vec3,
     pub direction: Vec3,
     /// 1 / direction, with zero components replaced by tiny ones of the same sign.
@@ -59,7 +59,7 @@ impl PreparedRay {
 /// What a ray met in a packet: per lane, the distance (meaningful where hit), and as bit masks
 /// the lanes hit within (0, `max_distance`) and the lanes whose triangle faces away from the
 /// ray (the geometric normal, by winding, along the ray).
-pub struct PacketHits {
+pub(crate) struct PacketHits {
     pub distances: [f32; WIDTH],
     pub hits: u32,
     pub back_faces: u32,
@@ -71,7 +71,7 @@ pub struct PacketHits {
 ///
 /// The AVX2 version may only run on a CPU that has AVX2 and FMA (see [`Avx2::available`]);
 /// the portable version runs anywhere.
-pub trait Kernels {
+pub(crate) trait Kernels {
     /// The distance at which the ray enters each child box, and the mask of the children it
     /// enters before `max_distance`.
     unsafe fn node(node: &Node, ray: &PreparedRay, max_distance: f32) -> ([f32; WIDTH], u32);
@@ -79,7 +79,7 @@ pub trait Kernels {
 }
 
 /// The kernels in plain four-lane vectors: any CPU.
-pub struct Portable;
+pub(crate) struct Portable;
 
 impl Kernels for Portable {
     #[inline(always)]
@@ -145,7 +145,7 @@ pub struct Avx2;
 #[cfg(target_arch = "x86_64")]
 impl Avx2 {
     /// Whether this CPU can run them.
-    pub fn available() -> bool {
+    pub(crate) fn available() -> bool {
         crate::isa::avx2_allowed()
     }
 }

@@ -402,10 +402,6 @@ unsafe fn cast_avx2(
 }
 
 impl TriangleBvh {
-    pub fn triangle_count(&self) -> usize {
-        self.normals.len()
-    }
-
     /// A triangle's geometric normal (unit, by its winding; zero when degenerate).
     pub fn geometric_normal(&self, triangle: u32) -> [f32; 3] {
         self.normals[triangle as usize].into()
@@ -443,7 +439,7 @@ impl TriangleBvh {
 
     /// The mesh's point nearest `point` within `max_distance`: its triangle and distance
     /// (degenerate triangles are skipped). Children are visited nearest box first.
-    pub fn nearest_point(&self, point: Vec3, max_distance: f32) -> Option<(u32, f32)> {
+    pub(crate) fn nearest_point(&self, point: Vec3, max_distance: f32) -> Option<(u32, f32)> {
         if self.nodes.is_empty() {
             return None;
         }
@@ -520,7 +516,7 @@ impl TriangleBvh {
 }
 
 /// The point of triangle `a b c` nearest `p` (Ericson, "Real-Time Collision Detection", 5.1.5).
-pub fn closest_point_on_triangle(p: Vec3, a: Vec3, b: Vec3, c: Vec3) -> Vec3 {
+pub(crate) fn closest_point_on_triangle(p: Vec3, a: Vec3, b: Vec3, c: Vec3) -> Vec3 {
     let (ab, ac, ap) = (b - a, c - a, p - a);
     let (d1, d2) = (ab.dot(ap), ac.dot(ap));
     if d1 <= 0.0 && d2 <= 0.0 {

@@ -10,7 +10,7 @@ use super::rays::TriangleBvh;
 /// `count` points on the triangles, each triangle getting points in proportion to its area:
 /// stratified along the cumulative area, and placed inside the triangle by the R2 sequence, so
 /// the same mesh always gives the same points.
-pub fn area_weighted_samples(positions: &[[f32; 3]], triangles: &[[u32; 3]], count: usize) -> Vec<Vec3> {
+pub(crate) fn area_weighted_samples(positions: &[[f32; 3]], triangles: &[[u32; 3]], count: usize) -> Vec<Vec3> {
     let corners = |triangle: &[u32; 3]| triangle.map(|vertex| Vec3::from(positions[vertex as usize]));
     let mut cumulative = Vec::with_capacity(triangles.len());
     let mut total = 0.0f64;
@@ -40,7 +40,7 @@ pub fn area_weighted_samples(positions: &[[f32; 3]], triangles: &[[u32; 3]], cou
 
 /// Distances between two surfaces, as fractions of a length (the bounding-box diagonal).
 #[derive(Clone, Copy, Debug, PartialEq, serde::Serialize)]
-pub struct SurfaceDistance {
+pub(crate) struct SurfaceDistance {
     /// Root mean square of every sample's distance, both ways.
     pub rms: f64,
     /// The largest sample distance either way.
@@ -48,12 +48,12 @@ pub struct SurfaceDistance {
 }
 
 /// Each sample's distance to the nearest point of `target` (none when it has no triangles).
-pub fn distances_to(samples: &[Vec3], target: &TriangleBvh) -> Option<Vec<f32>> {
+pub(crate) fn distances_to(samples: &[Vec3], target: &TriangleBvh) -> Option<Vec<f32>> {
     samples.par_iter().map(|&point| target.nearest_point(point, f32::INFINITY).map(|(_, distance)| distance)).collect()
 }
 
 /// The distance between surfaces `a` and `b` (their samples and BVHs), over `length`.
-pub fn surface_distance(
+pub(crate) fn surface_distance(
     a_samples: &[Vec3],
     a: &TriangleBvh,
     b_samples: &[Vec3],

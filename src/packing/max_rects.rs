@@ -27,7 +27,7 @@ pub struct PageSettings {
 
 /// Where MaxRects puts the next rectangle among the free ones.
 #[derive(Clone, Copy, Debug, PartialEq, Eq, serde::Serialize, serde::Deserialize)]
-pub enum PlacementRule {
+pub(crate) enum PlacementRule {
     /// The free rectangle whose shorter leftover side is smallest.
     BestShortSideFit,
     /// The free rectangle whose longer leftover side is smallest.
@@ -42,7 +42,7 @@ pub enum PlacementRule {
 
 /// In which order the rectangles are placed (largest first by each measure).
 #[derive(Clone, Copy, Debug, PartialEq, Eq, serde::Serialize, serde::Deserialize)]
-pub enum SortOrder {
+pub(crate) enum SortOrder {
     Area,
     MaxSide,
     MinSide,
@@ -60,13 +60,13 @@ const ORDERS: [SortOrder; 4] = [SortOrder::Area, SortOrder::MaxSide, SortOrder::
 
 /// One way of packing: a rule and an order.
 #[derive(Clone, Copy, Debug, PartialEq, Eq, serde::Serialize, serde::Deserialize)]
-pub struct PackVariant {
+pub(crate) struct PackVariant {
     pub rule: PlacementRule,
     pub order: SortOrder,
 }
 
 /// Every variant, in the order that breaks ties.
-pub fn pack_variants() -> Vec<PackVariant> {
+pub(crate) fn pack_variants() -> Vec<PackVariant> {
     ORDERS.iter().flat_map(|&order| RULES.iter().map(move |&rule| PackVariant { rule, order })).collect()
 }
 

@@ -27,7 +27,7 @@ pub struct Placement {
 }
 
 /// The smallest atlas (by area, then squarest) that holds `cells`, if any within `max_size`.
-pub fn pack_smallest(cells: &[(u32, u32)], settings: &PageSettings) -> Option<(u32, u32, Vec<Placement>)> {
+pub(crate) fn pack_smallest(cells: &[(u32, u32)], settings: &PageSettings) -> Option<(u32, u32, Vec<Placement>)> {
     let padding = settings.padding;
     let padded_area: u64 = cells.iter().map(|&(w, h)| (w + 2 * padding) as u64 * (h + 2 * padding) as u64).sum();
     let largest = cells.iter().map(|&(w, h)| w.min(h) + 2 * padding).max().unwrap_or(4);
@@ -149,7 +149,7 @@ fn pack_skyline(cells: &[(u32, u32)], width: u32, padding: u32) -> Option<(u32, 
 impl Placement {
     /// The atlas texel position (continuous, origin top-left, rows down) of the point at
     /// `(s, t)` ∈ [0, 1]² of the rectangle (s along its X axis, t along its Y axis, Y up).
-    pub fn atlas_position(&self, s: f32, t: f32) -> (f32, f32) {
+    pub(crate) fn atlas_position(&self, s: f32, t: f32) -> (f32, f32) {
         if self.rotated {
             (self.x as f32 + t * self.height as f32, self.y as f32 + s * self.width as f32)
         } else {

@@ -89,7 +89,7 @@ pub struct BuildOptions {
 
 /// `Err(UnknownAsset)`, with the closest known name, for the first of `names` that names none
 /// of `assets`.
-pub fn require_assets(names: &[String], assets: &[AssetConfig], pipeline: &Path) -> Result<(), BuildError> {
+pub(crate) fn require_assets(names: &[String], assets: &[AssetConfig], pipeline: &Path) -> Result<(), BuildError> {
     let Some(name) = names.iter().find(|name| !assets.iter().any(|asset| &asset.name == *name)) else { return Ok(()) };
     let hint = crate::diagnostic::did_you_mean(name, assets.iter().map(|asset| asset.name.as_str()));
     Err(BuildError::UnknownAsset { name: name.clone(), pipeline: display_path(pipeline), hint })
@@ -296,7 +296,7 @@ impl Project {
         self.syncs
     }
 
-    pub fn asset_input(&mut self, name: &str) -> Option<Asset> {
+    pub(crate) fn asset_input(&mut self, name: &str) -> Option<Asset> {
         if let Some(&asset) = self.assets.get(name) {
             return Some(asset);
         }
@@ -309,19 +309,19 @@ impl Project {
     }
 
     /// Uses up a revision without a build (the daemon numbers a configuration error's batch).
-    pub fn skip_revision(&mut self) {
+    pub(crate) fn skip_revision(&mut self) {
         self.revision += 1;
     }
 
     /// Every source file read so far (project-relative), and every file that the record says
     /// a baked asset reads.
-    pub fn source_paths(&self) -> BTreeSet<PathBuf> {
+    pub(crate) fn source_paths(&self) -> BTreeSet<PathBuf> {
         let recorded = self.record.assets.values().flat_map(|asset| asset.files.iter());
         self.files.keys().chain(recorded).cloned().collect()
     }
 
     /// The source files of the named assets: read by their inputs, or by the record.
-    pub fn source_paths_of(&self, names: &HashSet<String>) -> BTreeSet<PathBuf> {
+    pub(crate) fn source_paths_of(&self, names: &HashSet<String>) -> BTreeSet<PathBuf> {
         let mut paths = BTreeSet::new();
         for name in names {
             if let Some(&asset) = self.assets.get(name) {
@@ -334,26 +334,12 @@ impl Project {
         paths
     }
 
-    /// Marks source files as changed on disk: the next build reads them again.
-    pub fn invalidate_sources<'a>(&mut self, paths: impl IntoIterator<Item = &'a Path>) {
-        for path in paths {
-            self.forget_asset_list_for(path);
-            self.unclean_readers_of(path);
-            self.fresh.remove(path);
-        }
-    }
-
     /// Marks every source file as possibly changed (after a watcher overflow or error).
     pub fn invalidate_all_sources(&mut self) {
         self.fresh.clear();
         self.built_instances.clear();
         self.clean.clear();
         *self.asset_list_kept.get_mut() = None;
-    }
-
-    /// Whether `path` (project-relative) is a source file some asset read.
-    pub fn is_source(&self, path: &Path) -> bool {
-        self.files.contains_key(path)
     }
 
     pub fn config(&self) -> &PipelineConfig {
@@ -403,7 +389,7 @@ impl Project {
     }
 
     /// The assets of the pipeline: the listed ones, then files matching `rules`.
-    pub fn asset_list(&self) -> Vec<AssetConfig> {
+    pub(crate) fn asset_list(&self) -> Vec<AssetConfig> {
         self.asset_list_and_conflicts().0.clone()
     }
 
@@ -411,7 +397,7 @@ impl Project {
     /// become an asset because its name is reserved or collides with another asset's folder.
     /// The daemon keeps them until an edit may change them (see `refresh_sources`); a build
     /// lists them afresh.
-    pub fn asset_list_and_conflicts(&self) -> Arc<AssetList> {
+    pub(crate) fn asset_list_and_conflicts(&self) -> Arc<AssetList> {
         let mut kept = self.asset_list_kept.borrow_mut();
         if let Some(list) = kept.as_ref().filter(|_| self.source_reading == SourceReading::WhenInvalidated) {
             return list.clone();
@@ -606,7 +592,7 @@ impl Project {
             assets.push((config.clone(), asset));
         }
         self.sync_registry(all_assets, &assets);
-        let Some((runs, mut failures)) = self.run_asset_jobs(&assets, progress, &cancel) else {
+        let Some((runs, failures)) = self.run_asset_jobs(&assets, progress, &cancel) else {
             self.keep_manifest(manifest);
             return Err(BuildError::Cancelled);
         };
@@ -615,23 +601,10 @@ impl Project {
         let next_revision = manifest.revision.max(self.revision) + 1;
         // Every asset's files are put together before any is written: an edit meanwhile (a
         // folder of sources deleted) still cancels the build, and nothing of it is published.
-        let mut all_outputs = Vec::with_capacity(assets.len());
-        let mut asset_runs = runs_by_asset(&runs, assets.iter().map(|(config, _)| config.name.as_str()));
-        for (config, asset) in &assets {
-            if cancel.is_raised() {
-                self.keep_manifest(manifest);
-                return Err(BuildError::Cancelled);
-            }
-            let (mut errors, failed_jobs) = failures.remove(asset).unwrap_or_default();
-            let folder = self.config.output.join(&config.name);
-            let runs = asset_runs.remove(config.name.as_str()).unwrap_or_default();
-            let outputs = asset.kind(&self.db).outputs(&self.db, *asset, &folder, &mut errors, &runs);
-            all_outputs.push(BakedAsset { errors, failed_jobs, folder, outputs });
-        }
-        if cancel.is_raised() {
+        let Some(all_outputs) = self.asset_outputs(&assets, &runs, failures, &cancel) else {
             self.keep_manifest(manifest);
             return Err(BuildError::Cancelled);
-        }
+        };
         // Each baked asset's fingerprint, of the files its input read.
         let built: HashMap<String, Asset> =
             assets.iter().map(|(config, asset)| (config.name.clone(), *asset)).collect();
@@ -667,22 +640,16 @@ impl Project {
         }
         self.revision = manifest.revision;
         self.sources_changed_since_build = false;
-        tracing::info!(
-            "{} asset(s) passed over, {} looked into; {} source file(s) read",
-            unchanged.len(),
-            assets.len(),
-            self.files_read
-        );
-        self.files_read = 0;
+        let (passed, looked, read) = (unchanged.len(), assets.len(), std::mem::take(&mut self.files_read));
+        tracing::info!("{passed} asset(s) passed over, {looked} looked into; {read} source file(s) read");
         self.unclaimed.clear();
-        // (The daemon leaves files that no asset reads any more in the record: pruning costs a
-        // pass over every file.)
-        if options.only_assets.is_empty() && self.source_reading == SourceReading::EveryBuild {
-            self.prune_record(all_assets);
-        }
         // The daemon saves the record when it is idle (`save_record`): a record older than the
-        // artifacts only costs the next start some checking.
+        // artifacts only costs the next start some checking. (It leaves files that no asset reads
+        // any more in the record: pruning costs a pass over every file.)
         if self.source_reading == SourceReading::EveryBuild {
+            if options.only_assets.is_empty() {
+                self.prune_record(all_assets);
+            }
             self.save_record();
         }
         if writing {
@@ -733,6 +700,31 @@ impl Project {
             }
         }
         Some((runs, failures))
+    }
+
+    /// Each asset's outputs as its kind makes them from the finished stages, with its errors;
+    /// `None` when the build was cancelled meanwhile.
+    #[allow(clippy::type_complexity)]
+    fn asset_outputs(
+        &self,
+        assets: &[(AssetConfig, Asset)],
+        runs: &[StageRun],
+        mut failures: HashMap<Asset, (Vec<Diagnostic>, HashSet<String>)>,
+        cancel: &CancelFlag,
+    ) -> Option<Vec<BakedAsset>> {
+        let mut all_outputs = Vec::with_capacity(assets.len());
+        let mut asset_runs = runs_by_asset(runs, assets.iter().map(|(config, _)| config.name.as_str()));
+        for (config, asset) in assets {
+            if cancel.is_raised() {
+                return None;
+            }
+            let (mut errors, failed_jobs) = failures.remove(asset).unwrap_or_default();
+            let folder = self.config.output.join(&config.name);
+            let runs = asset_runs.remove(config.name.as_str()).unwrap_or_default();
+            let outputs = asset.kind(&self.db).outputs(&self.db, *asset, &folder, &mut errors, &runs);
+            all_outputs.push(BakedAsset { errors, failed_jobs, folder, outputs });
+        }
+        (!cancel.is_raised()).then_some(all_outputs)
     }
 
     /// Removes the artifacts of assets that left the pipeline (not of those that a vanished
@@ -790,7 +782,7 @@ impl Project {
 
     /// [`Project::check`] of the assets named in `only` (every asset, and the rules' conflicts,
     /// when it is empty); an unknown name is an error, with the closest known one.
-    pub fn check_assets(&self, only: &[String]) -> Result<Vec<(String, Vec<Diagnostic>)>, BuildError> {
+    pub(crate) fn check_assets(&self, only: &[String]) -> Result<Vec<(String, Vec<Diagnostic>)>, BuildError> {
         let listed = self.asset_list_and_conflicts();
         let (assets, conflicts) = listed.as_ref().clone();
         require_assets(only, &assets, &self.config.file)?;
@@ -845,6 +837,6 @@ impl Project {
 }
 
 /// The graph node id of a source file.
-pub fn file_node_id(path: &Path) -> String {
+pub(crate) fn file_node_id(path: &Path) -> String {
     display_path(path)
 }

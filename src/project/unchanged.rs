@@ -189,7 +189,7 @@ impl Project {
 
     /// Writes what the daemon keeps in memory between idle moments: the manifest and the
     /// build record, each when it changed since it was last written.
-    pub fn save_deferred(&mut self) {
+    pub(crate) fn save_deferred(&mut self) {
         if self.manifest_unsaved {
             if let Some((_, manifest)) = self.manifest.take() {
                 if let Err(error) = save_manifest(&self.config.output_dir(), &manifest) {

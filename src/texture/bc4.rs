@@ -31,7 +31,7 @@ impl Bc4Search {
 
 /// The eight values a block with endpoints `e0`, `e1` decodes to, as `bcdec` computes them
 /// (16-bit fixed-point weights, rounded).
-pub fn bc4_palette(e0: u8, e1: u8) -> [u8; 8] {
+pub(crate) fn bc4_palette(e0: u8, e1: u8) -> [u8; 8] {
     let (a, b) = (e0 as u32, e1 as u32);
     let mix = |wa: u32, wb: u32| ((wa * a + wb * b + 32768) >> 16) as u8;
     if a > b {

@@ -4,11 +4,11 @@
 use super::Texture;
 
 /// True when some texel of an albedo surface is not fully opaque.
-pub fn has_transparency(albedo: &Texture) -> bool {
+pub(crate) fn has_transparency(albedo: &Texture) -> bool {
     albedo.pixels.chunks_exact(4).any(|texel| texel[3] < 255)
 }
 
-pub fn unorm_u8(value: f32) -> u8 {
+pub(crate) fn unorm_u8(value: f32) -> u8 {
     (value.clamp(0.0, 1.0) * 255.0 + 0.5) as u8
 }
 
@@ -78,17 +78,17 @@ static SRGB_TO_LINEAR: std::sync::LazyLock<[f32; 256]> = std::sync::LazyLock::ne
     })
 });
 
-pub fn decode_normal(rgb: [u8; 3]) -> [f32; 3] {
+pub(crate) fn decode_normal(rgb: [u8; 3]) -> [f32; 3] {
     rgb.map(|c| c as f32 / 255.0 * 2.0 - 1.0)
 }
 
-pub fn encode_normal(normal: [f32; 3]) -> [u8; 4] {
+pub(crate) fn encode_normal(normal: [f32; 3]) -> [u8; 4] {
     let [x, y, z] = normal.map(|c| unorm_u8(c * 0.5 + 0.5));
     [x, y, z, 255]
 }
 
 /// Unit length, facing out of the surface (z ≥ 0); a degenerate normal becomes flat.
-pub fn normalize_tangent_normal([x, y, z]: [f32; 3]) -> [f32; 3] {
+pub(crate) fn normalize_tangent_normal([x, y, z]: [f32; 3]) -> [f32; 3] {
     let z = z.max(0.0);
     let length = (x * x + y * y + z * z).sqrt();
     if length < 1e-6 {

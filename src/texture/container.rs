@@ -5,7 +5,7 @@ use crate::texture::encode::{block_bytes, EncodedTexture};
 use crate::texture::format::{BlockFormat, Container};
 
 /// Writes `texture` in `container`; `zstd_level` applies to KTX2 only.
-pub fn write_container(texture: &EncodedTexture, container: Container, zstd_level: Option<i32>) -> Vec<u8> {
+pub(crate) fn write_container(texture: &EncodedTexture, container: Container, zstd_level: Option<i32>) -> Vec<u8> {
     match container {
         Container::Ktx2 => write_ktx2(texture, zstd_level),
         Container::Dds => write_dds(texture),
@@ -136,7 +136,7 @@ fn push_key_value(kvd: &mut Vec<u8>, key: &str, value: &str) {
 }
 
 /// DXGI_FORMAT value of a block format.
-pub fn dxgi_format(format: BlockFormat, srgb: bool) -> u32 {
+pub(crate) fn dxgi_format(format: BlockFormat, srgb: bool) -> u32 {
     match (format, srgb) {
         (BlockFormat::Bc1, false) => 71,
         (BlockFormat::Bc1, true) => 72,
@@ -190,7 +190,7 @@ fn write_dds(texture: &EncodedTexture) -> Vec<u8> {
 }
 
 /// PVR v3 pixel format ids of the compressed formats.
-pub fn pvr_format(format: BlockFormat) -> u64 {
+pub(crate) fn pvr_format(format: BlockFormat) -> u64 {
     match format {
         BlockFormat::Bc1 => 7,
         BlockFormat::Bc3 => 11,
@@ -200,7 +200,7 @@ pub fn pvr_format(format: BlockFormat) -> u64 {
     }
 }
 
-pub const PVR3_VERSION: u32 = 0x03525650;
+pub(crate) const PVR3_VERSION: u32 = 0x03525650;
 
 fn write_pvr(texture: &EncodedTexture) -> Vec<u8> {
     let mut file = Vec::new();

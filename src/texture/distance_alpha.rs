@@ -9,7 +9,7 @@ use rayon::prelude::*;
 
 /// The signed distance (in texels) that maps to alpha 0 and 1: the ramp spans one texel either
 /// side of the edge, which is all that bilinear filtering between two neighbours reads.
-pub const DISTANCE_SPREAD_TEXELS: f32 = 1.0;
+pub(crate) const DISTANCE_SPREAD_TEXELS: f32 = 1.0;
 
 /// Images of fewer samples are brought down on the calling thread: a billboard's render groups
 /// are mostly a few thousand texels, and handing each pass to the thread pool and waiting for

@@ -60,7 +60,7 @@ pub fn block_bytes(format: BlockFormat) -> usize {
 /// What a format's blocks depend on beyond the texels and settings, for cache keys that a
 /// shared cache hands between machines: the ISPC kernels' output differs between instruction-set
 /// levels (`ispc::output_family`); cirrus's BC4 search gives the same bytes on every CPU.
-pub fn encoder_family(format: BlockFormat) -> &'static str {
+pub(crate) fn encoder_family(format: BlockFormat) -> &'static str {
     match format {
         BlockFormat::Bc4 | BlockFormat::Bc5 => "cirrus-bc4",
         BlockFormat::Bc1 | BlockFormat::Bc3 | BlockFormat::Bc7 => super::ispc::output_family(),
@@ -90,7 +90,7 @@ fn encoded_texture(levels: &[Texture], settings: BlockEncodeSettings, encoded: V
 
 impl EncodedTexture {
     /// An encoded texture from its block data per level (level 0 first).
-    pub fn from_levels(
+    pub(crate) fn from_levels(
         format: BlockFormat,
         srgb: bool,
         width: u32,

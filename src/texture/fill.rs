@@ -13,13 +13,13 @@ pub struct TexelSources(pub Vec<u32>);
 impl TexelSources {
     /// Each texel's source as an offset from the texel itself (wrapping): zero where covered and
     /// small nearby, so the list compresses to a few percent of its size.
-    pub fn to_offsets(&self) -> Vec<u32> {
+    pub(crate) fn to_offsets(&self) -> Vec<u32> {
         self.0.par_iter().enumerate().map(|(texel, &source)| source.wrapping_sub(texel as u32)).collect()
     }
 
     /// The sources back from `to_offsets`, for an image of `texels` texels; `None` when the
     /// count is wrong or a source lies outside the image (a damaged or hand-made cache entry).
-    pub fn from_offsets(offsets: &[u32], texels: usize) -> Option<TexelSources> {
+    pub(crate) fn from_offsets(offsets: &[u32], texels: usize) -> Option<TexelSources> {
         if offsets.len() != texels {
             return None;
         }
@@ -32,7 +32,7 @@ impl TexelSources {
 /// Where every texel of a `width` × `height` image takes its values from (see [`TexelSources`]):
 /// the nearest of the `covered` texels (indices, ascending), breadth-first from all of them at
 /// once; empty when none is covered.
-pub fn texel_sources(width: u32, height: u32, covered: impl IntoIterator<Item = u32>) -> TexelSources {
+pub(crate) fn texel_sources(width: u32, height: u32, covered: impl IntoIterator<Item = u32>) -> TexelSources {
     const UNREACHED: u32 = u32::MAX;
     const BORDER: u32 = u32::MAX - 1;
     let (width, height) = (width as usize, height as usize);
@@ -80,7 +80,7 @@ pub fn texel_sources(width: u32, height: u32, covered: impl IntoIterator<Item = 
 /// The fill itself: every texel of a `width`-wide RGBA8 image takes the values of the texel
 /// `sources` names in `drawn` (rows in parallel); with `clear_filled_alpha`, texels that are not
 /// their own source get alpha 0 (nothing is drawn there).
-pub fn fill_from_sources(drawn: &[u8], width: u32, sources: &TexelSources, clear_filled_alpha: bool) -> Vec<u8> {
+pub(crate) fn fill_from_sources(drawn: &[u8], width: u32, sources: &TexelSources, clear_filled_alpha: bool) -> Vec<u8> {
     let mut pixels = vec![0u8; drawn.len()];
     let row = width as usize * 4;
     pixels.par_chunks_mut(row.max(4)).enumerate().for_each(|(y, row_pixels)| {
@@ -98,6 +98,6 @@ pub fn fill_from_sources(drawn: &[u8], width: u32, sources: &TexelSources, clear
 
 /// The fill of a one-value-per-texel image (a bake's 16-bit values): every texel takes the
 /// value of the texel `sources` names.
-pub fn fill_values<T: Copy + Send + Sync>(drawn: &[T], sources: &TexelSources) -> Vec<T> {
+pub(crate) fn fill_values<T: Copy + Send + Sync>(drawn: &[T], sources: &TexelSources) -> Vec<T> {
     sources.0.par_iter().map(|&source| drawn[source as usize]).collect()
 }

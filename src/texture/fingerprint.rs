@@ -48,7 +48,7 @@ impl BlockFingerprints {
     }
 
     /// Whether `self` and `other` are of textures of one size (so that blocks correspond).
-    pub fn same_size(&self, other: &BlockFingerprints) -> bool {
+    pub(crate) fn same_size(&self, other: &BlockFingerprints) -> bool {
         (self.width, self.height) == (other.width, other.height)
     }
 

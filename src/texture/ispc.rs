@@ -82,12 +82,12 @@ fn at_kernel_level<K: Copy>(kernels: &[K; 4]) -> K {
 }
 
 /// BC1 blocks of `surface` into `blocks` (8 bytes each, row-major).
-pub fn compress_bc1(surface: &RgbaSurface, blocks: &mut [u8]) {
+pub(crate) fn compress_bc1(surface: &RgbaSurface, blocks: &mut [u8]) {
     compress_with(at_kernel_level(&kernels::BC1), surface, blocks, 8);
 }
 
 /// BC3 blocks of `surface` into `blocks` (16 bytes each, row-major).
-pub fn compress_bc3(surface: &RgbaSurface, blocks: &mut [u8]) {
+pub(crate) fn compress_bc3(surface: &RgbaSurface, blocks: &mut [u8]) {
     compress_with(at_kernel_level(&kernels::BC3), surface, blocks, 16);
 }
 
@@ -100,7 +100,7 @@ fn compress_with(compress: SurfaceKernel, surface: &RgbaSurface, blocks: &mut [u
 }
 
 /// BC7 blocks of `surface` into `blocks` (16 bytes each, row-major).
-pub fn compress_bc7(settings: &intel_tex_2::bc7::EncodeSettings, surface: &RgbaSurface, blocks: &mut [u8]) {
+pub(crate) fn compress_bc7(settings: &intel_tex_2::bc7::EncodeSettings, surface: &RgbaSurface, blocks: &mut [u8]) {
     check_sizes(surface, blocks, 16);
     let mut c = c_surface(surface);
     let mut settings = kernel::bc7_enc_settings {
@@ -121,7 +121,7 @@ pub fn compress_bc7(settings: &intel_tex_2::bc7::EncodeSettings, surface: &RgbaS
 /// Which of the kernels' outputs this process makes, for cache keys: measured on the corpus
 /// (`cargo bench -- isa`), the AVX2 and AVX-512 kernels give the same bytes, and the SSE4 and
 /// SSE2 ones others (no fused multiply-add, four lanes).
-pub fn output_family() -> &'static str {
+pub(crate) fn output_family() -> &'static str {
     if !cfg!(all(target_arch = "x86_64", unix)) {
         return "ispc-native";
     }
@@ -140,14 +140,26 @@ mod per_level {
     use intel_tex_2::bindings::kernel::{bc7_enc_settings, rgba_surface};
 
     extern "C" {
-        pub fn CompressBlocksBC1_ispc_sse2(src: *mut rgba_surface, dst: *mut u8);
-        pub fn CompressBlocksBC1_ispc_sse4(src: *mut rgba_surface, dst: *mut u8);
-        pub fn CompressBlocksBC1_ispc_avx2(src: *mut rgba_surface, dst: *mut u8);
-        pub fn CompressBlocksBC3_ispc_sse2(src: *mut rgba_surface, dst: *mut u8);
-        pub fn CompressBlocksBC3_ispc_sse4(src: *mut rgba_surface, dst: *mut u8);
-        pub fn CompressBlocksBC3_ispc_avx2(src: *mut rgba_surface, dst: *mut u8);
-        pub fn CompressBlocksBC7_ispc_sse2(src: *mut rgba_surface, dst: *mut u8, settings: *mut bc7_enc_settings);
-        pub fn CompressBlocksBC7_ispc_sse4(src: *mut rgba_surface, dst: *mut u8, settings: *mut bc7_enc_settings);
-        pub fn CompressBlocksBC7_ispc_avx2(src: *mut rgba_surface, dst: *mut u8, settings: *mut bc7_enc_settings);
+        pub(crate) fn CompressBlocksBC1_ispc_sse2(src: *mut rgba_surface, dst: *mut u8);
+        pub(crate) fn CompressBlocksBC1_ispc_sse4(src: *mut rgba_surface, dst: *mut u8);
+        pub(crate) fn CompressBlocksBC1_ispc_avx2(src: *mut rgba_surface, dst: *mut u8);
+        pub(crate) fn CompressBlocksBC3_ispc_sse2(src: *mut rgba_surface, dst: *mut u8);
+        pub(crate) fn CompressBlocksBC3_ispc_sse4(src: *mut rgba_surface, dst: *mut u8);
+        pub(crate) fn CompressBlocksBC3_ispc_avx2(src: *mut rgba_surface, dst: *mut u8);
+        pub(crate) fn CompressBlocksBC7_ispc_sse2(
+            src: *mut rgba_surface,
+            dst: *mut u8,
+            settings: *mut bc7_enc_settings,
+        );
+        pub(crate) fn CompressBlocksBC7_ispc_sse4(
+            src: *mut rgba_surface,
+            dst: *mut u8,
+            settings: *mut bc7_enc_settings,
+        );
+        pub(crate) fn CompressBlocksBC7_ispc_avx2(
+            src: *mut rgba_surface,
+            dst: *mut u8,
+            settings: *mut bc7_enc_settings,
+        );
     }
 }

@@ -28,19 +28,19 @@ use serde::{Deserialize, Serialize};
 use crate::diagnostic::Diagnostic;
 
 /// Largest accepted width or height.
-pub const MAX_TEXTURE_SIDE: u32 = 16384;
+pub(crate) const MAX_TEXTURE_SIDE: u32 = 16384;
 /// Largest accepted decoder allocation.
-pub const MAX_DECODE_BYTES: u64 = 1 << 30;
+pub(crate) const MAX_DECODE_BYTES: u64 = 1 << 30;
 
 /// Memory the stages after decoding need per texel of a texture, at their peak: the decoded
 /// and packed RGBA8 levels, the mip filter's linear-light float texels (two sets of four `f32`
 /// for colour with alpha) and the levels it makes, the blocks and their decoded check, the
 /// preview. A whole `cirrus build` of one 8192² albedo peaks at 29 bytes per texel opaque and 44
 /// alpha-tested (1.8 and 2.8 GiB); the estimate leaves room for a second map decoded meanwhile.
-pub const WORKING_SET_BYTES_PER_TEXEL: u64 = 64;
+pub(crate) const WORKING_SET_BYTES_PER_TEXEL: u64 = 64;
 
 /// Default budget of one texture's working set: textures up to about 8192² pass.
-pub const DEFAULT_TEXTURE_MEMORY: u64 = 4 << 30;
+pub(crate) const DEFAULT_TEXTURE_MEMORY: u64 = 4 << 30;
 
 /// How much memory one texture may cost.
 #[derive(Clone, Copy, Debug, PartialEq, Eq, Hash)]
@@ -57,7 +57,7 @@ impl Default for TextureLimits {
 
 impl TextureLimits {
     /// The bytes a `width` × `height` texture's bake needs at its peak.
-    pub fn working_set_of(width: u32, height: u32) -> u64 {
+    pub(crate) fn working_set_of(width: u32, height: u32) -> u64 {
         u64::from(width) * u64::from(height) * WORKING_SET_BYTES_PER_TEXEL
     }
 
@@ -126,9 +126,9 @@ pub enum SurfaceKind {
 
 impl SurfaceKind {
     /// The surfaces of a baked material.
-    pub const MATERIAL: [SurfaceKind; 3] = [SurfaceKind::Albedo, SurfaceKind::Mra, SurfaceKind::Normal];
+    pub(crate) const MATERIAL: [SurfaceKind; 3] = [SurfaceKind::Albedo, SurfaceKind::Mra, SurfaceKind::Normal];
     /// The surfaces of a billboard-cloud atlas.
-    pub const BILLBOARD: [SurfaceKind; 4] =
+    pub(crate) const BILLBOARD: [SurfaceKind; 4] =
         [SurfaceKind::Albedo, SurfaceKind::Mra, SurfaceKind::Normal, SurfaceKind::Height];
 
     pub fn name(self) -> &'static str {
@@ -142,7 +142,7 @@ impl SurfaceKind {
     }
 
     /// The source maps this surface is packed from.
-    pub fn slots(self) -> &'static [TextureSlot] {
+    pub(crate) fn slots(self) -> &'static [TextureSlot] {
         match self {
             SurfaceKind::Albedo => &[TextureSlot::Albedo, TextureSlot::Opacity],
             SurfaceKind::Mra => &[TextureSlot::Metallic, TextureSlot::Roughness, TextureSlot::Ao],
@@ -326,7 +326,7 @@ fn image_reader<'a>(file: &Path, bytes: &'a [u8]) -> Result<image::ImageReader<C
 /// An opacity map as one grey value in every channel (alpha included, so alpha-aware mips keep
 /// its coverage): the alpha channel when the image has transparency (an
 /// RGBA texture used as `map_d`, as foliage exporters write), else its red channel.
-pub fn opacity_channel(texture: &Texture) -> Texture {
+pub(crate) fn opacity_channel(texture: &Texture) -> Texture {
     let use_alpha = texture.pixels.chunks_exact(4).any(|texel| texel[3] < 255);
     let pixels = texture
         .pixels
@@ -341,7 +341,7 @@ pub fn opacity_channel(texture: &Texture) -> Texture {
 
 /// One 16-bit value per texel (a bake's map) as an RGBA8 grey texture, rounded to 8 bits (for
 /// the texture tail: BC4 reads red).
-pub fn grey16_texture(width: u32, height: u32, values: &[u16]) -> Texture {
+pub(crate) fn grey16_texture(width: u32, height: u32, values: &[u16]) -> Texture {
     let pixels = values
         .iter()
         .flat_map(|&value| {

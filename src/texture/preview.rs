@@ -23,7 +23,7 @@ pub fn png_bytes(samples: &[u8], width: u32, height: u32, color: image::Extended
 }
 
 /// A 16-bit greyscale PNG of one value per texel (a bake's map).
-pub fn png16_grey(values: &[u16], width: u32, height: u32) -> Vec<u8> {
+pub(crate) fn png16_grey(values: &[u16], width: u32, height: u32) -> Vec<u8> {
     let samples: Vec<u8> = values.iter().flat_map(|value| value.to_ne_bytes()).collect();
     png_bytes(&samples, width, height, image::ExtendedColorType::L16)
 }

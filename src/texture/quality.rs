@@ -9,7 +9,7 @@ use crate::texture::format::BlockFormat;
 use crate::texture::Texture;
 
 /// PSNR reported for a lossless result (the true value is infinite).
-pub const LOSSLESS_PSNR_DB: f64 = 100.0;
+pub(crate) const LOSSLESS_PSNR_DB: f64 = 100.0;
 
 /// Decodes BC block data of a `width` × `height` level to RGBA8 (channels a format lacks are 0,
 /// alpha 255).
@@ -102,7 +102,7 @@ pub struct CutOutBlock {
 /// The alpha-test figures of a surface: colour PSNR over the texels the test shows, and the
 /// intersection over union of where the test passes on the uncompressed and decoded surfaces.
 #[derive(Clone, Copy, Debug, PartialEq)]
-pub struct CutOutQuality {
+pub(crate) struct CutOutQuality {
     pub visible_psnr_db: f64,
     pub alpha_test_iou: f64,
 }
@@ -115,7 +115,7 @@ impl BlockErrors {
     }
 
     /// The alpha-test figures, for an alpha-tested surface.
-    pub fn cut_out_quality(&self) -> Option<CutOutQuality> {
+    pub(crate) fn cut_out_quality(&self) -> Option<CutOutQuality> {
         let (_, blocks) = self.cut_out.as_ref()?;
         let sum = |field: fn(&CutOutBlock) -> u64| blocks.iter().map(field).sum::<u64>();
         let (error, visible) = (sum(|block| block.visible_error as u64), sum(|block| block.visible as u64));
@@ -129,7 +129,7 @@ impl BlockErrors {
 
 /// The smallest alpha byte that passes an alpha test at `cutoff` (as a shader tests the
 /// unorm value: passing when alpha / 255 ≥ cutoff).
-pub fn alpha_test_threshold(cutoff: f32) -> u8 {
+pub(crate) fn alpha_test_threshold(cutoff: f32) -> u8 {
     (0..=255u8).find(|&alpha| alpha as f32 / 255.0 >= cutoff).unwrap_or(255)
 }
 

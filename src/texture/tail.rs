@@ -18,7 +18,7 @@ use crate::texture::{SurfaceKind, Texture};
 
 /// Everything the tail of one surface reads besides its image.
 #[derive(Clone, Copy, Debug, PartialEq)]
-pub struct TailSettings {
+pub(crate) struct TailSettings {
     pub surface: SurfaceKind,
     pub format: BlockFormat,
     pub quality: EncodeQuality,
@@ -31,21 +31,21 @@ pub struct TailSettings {
 
 /// The settings of the mip step alone (so that an encoder setting does not re-filter).
 #[derive(Clone, Copy, Debug, PartialEq)]
-pub struct MipStepSettings {
+pub(crate) struct MipStepSettings {
     pub surface: SurfaceKind,
     pub mips: bool,
     pub alpha_cutoff: Option<f32>,
 }
 
 impl TailSettings {
-    pub fn mip_step(&self) -> MipStepSettings {
+    pub(crate) fn mip_step(&self) -> MipStepSettings {
         MipStepSettings { surface: self.surface, mips: self.mips, alpha_cutoff: self.alpha_cutoff }
     }
 }
 
 /// A surface's mip chain (level 0 first) and whether its alpha is tested.
 #[derive(Clone, Debug)]
-pub struct MipLevels {
+pub(crate) struct MipLevels {
     pub levels: Arc<Vec<Texture>>,
     pub alpha_tested: bool,
     /// The fingerprints of level 0's blocks (what the next bake compares instead of texels).
@@ -62,7 +62,7 @@ impl PartialEq for MipLevels {
 
 /// A block-compressed surface with its per-block errors and PSNR (level 0 against the image).
 #[derive(Clone, Debug)]
-pub struct EncodedSurface {
+pub(crate) struct EncodedSurface {
     pub settings: BlockEncodeSettings,
     pub texture: EncodedTexture,
     pub block_errors: Arc<BlockErrors>,
@@ -78,7 +78,7 @@ impl PartialEq for EncodedSurface {
 
 /// What one surface is written as, with the figures its report needs.
 #[derive(Clone, Debug, PartialEq, serde::Serialize, serde::Deserialize)]
-pub struct SurfaceInfo {
+pub(crate) struct SurfaceInfo {
     pub surface: SurfaceKind,
     pub format: BlockFormat,
     pub srgb: bool,
@@ -103,7 +103,7 @@ pub struct SurfaceInfo {
 
 /// The files of one surface: the texture container and a PNG preview of the image.
 #[derive(Clone, Debug, PartialEq)]
-pub struct SurfaceArtifacts {
+pub(crate) struct SurfaceArtifacts {
     pub info: SurfaceInfo,
     pub texture_file: Arc<[u8]>,
     pub preview_png: Arc<[u8]>,
@@ -113,7 +113,7 @@ pub struct SurfaceArtifacts {
 /// encodes again only the blocks that changed. Level 0 is kept as block fingerprints only: it
 /// is the largest level (16 of 28 MB on the oak's atlas), and a new process loads this.
 #[derive(Clone, Debug)]
-pub struct PreviousEncoding {
+pub(crate) struct PreviousEncoding {
     pub level0_blocks: Arc<BlockFingerprints>,
     /// Levels 1 and below.
     pub lower_levels: Vec<Texture>,
@@ -134,7 +134,7 @@ impl PreviousEncoding {
 }
 
 /// The mip chain of `image`, reusing the previous chain's unchanged tiles.
-pub fn tail_mips(image: &Texture, settings: MipStepSettings, previous: Option<&PreviousEncoding>) -> MipLevels {
+pub(crate) fn tail_mips(image: &Texture, settings: MipStepSettings, previous: Option<&PreviousEncoding>) -> MipLevels {
     let alpha_tested = settings.surface == SurfaceKind::Albedo && has_transparency(image);
     let level0_blocks = Arc::new(BlockFingerprints::of(image));
     if !settings.mips {
@@ -156,7 +156,7 @@ pub fn tail_mips(image: &Texture, settings: MipStepSettings, previous: Option<&P
 /// Block-compresses a mip chain, reusing the previous encoding's blocks where the texels are
 /// unchanged, and measures level 0's error per block (again only where something changed); an
 /// alpha-tested surface also what its alpha test at `alpha_cutoff` shows.
-pub fn tail_encode(
+pub(crate) fn tail_encode(
     mips: &MipLevels,
     surface: SurfaceKind,
     (format, quality): (BlockFormat, EncodeQuality),
@@ -195,7 +195,7 @@ pub fn tail_encode(
 
 /// What a surface would measure in another format: its cost and level 0's PSNR.
 #[derive(Clone, Debug, PartialEq, serde::Serialize)]
-pub struct FormatFigure {
+pub(crate) struct FormatFigure {
     pub format: BlockFormat,
     pub bits_per_texel: u32,
     pub psnr_db: f64,
@@ -203,7 +203,7 @@ pub struct FormatFigure {
 
 /// Level 0 of a surface (`mips`) encoded in each of `formats` and decoded again: what each
 /// would cost and give (`cirrus report: (compare_formats: true)`).
-pub fn format_comparison(
+pub(crate) fn format_comparison(
     mips: &MipLevels,
     surface: SurfaceKind,
     formats: &[BlockFormat],
@@ -227,7 +227,7 @@ pub fn format_comparison(
 }
 
 /// The container file and PNG preview of an encoded surface.
-pub fn tail_write(
+pub(crate) fn tail_write(
     image: &Texture,
     surface: SurfaceKind,
     encoded: &EncodedSurface,

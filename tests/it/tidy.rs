@@ -323,3 +323,84 @@ fn the_modules_form_a_straight_stack_with_one_loop_inside_kinds() {
         }
     }
 }
+
+#[test]
+fn no_line_of_src_is_wider_than_120_columns() {
+    let mut wide = Vec::new();
+    for path in rust_files("src") {
+        for (index, line) in std::fs::read_to_string(&path).unwrap().lines().enumerate() {
+            if line.chars().count() > 120 {
+                wide.push(format!("{}:{}", module(&path), index + 1));
+            }
+        }
+    }
+    assert!(wide.is_empty(), "lines over 120 columns: {wide:?}");
+}
+
+/// Each function of `code` (by its `fn` line) with its length in lines, to its closing brace.
+fn function_lengths(code: &str) -> Vec<(usize, usize)> {
+    let lines: Vec<&str> = code.lines().collect();
+    let mut found = Vec::new();
+    for (start, line) in lines.iter().enumerate() {
+        let trimmed = line.trim_start();
+        let declaration = ["fn ", "pub fn ", "pub(crate) fn ", "pub(super) fn ", "async fn ", "pub async fn "];
+        if !declaration.iter().any(|prefix| trimmed.starts_with(prefix)) {
+            continue;
+        }
+        let mut depth = 0i32;
+        let mut opened = false;
+        for (end, line) in lines.iter().enumerate().skip(start) {
+            // Braces inside strings and character literals do not count.
+            let mut in_string = false;
+            let mut previous = ' ';
+            for c in line.split("//").next().unwrap_or("").chars() {
+                match c {
+                    '"' if previous != '\\' && previous != '\'' => in_string = !in_string,
+                    '{' if !in_string && previous != '\'' => {
+                        depth += 1;
+                        opened = true;
+                    }
+                    '}' if !in_string && previous != '\'' => depth -= 1,
+                    _ => {}
+                }
+                previous = c;
+            }
+            if opened && depth == 0 {
+                found.push((start, end - start + 1));
+                break;
+            }
+            if !opened && line.trim_end().ends_with(';') {
+                break;
+            }
+        }
+    }
+    found
+}
+
+#[test]
+fn no_function_is_over_120_lines_without_a_reason_written_above_it() {
+    let mut unexplained = Vec::new();
+    let mut explained = 0;
+    for path in rust_files("src") {
+        let text = std::fs::read_to_string(&path).unwrap();
+        let lines: Vec<&str> = text.lines().collect();
+        for (start, length) in function_lengths(&text) {
+            if length <= 120 {
+                continue;
+            }
+            // A `// Long:` comment among the comments and attributes right above the `fn`.
+            let above = lines[..start].iter().rev().take_while(|line| {
+                let line = line.trim_start();
+                line.starts_with("//") || line.starts_with("#[")
+            });
+            if above.clone().any(|line| line.trim_start().starts_with("// Long:")) {
+                explained += 1;
+            } else {
+                unexplained.push(format!("{}:{} ({length} lines)", module(&path), start + 1));
+            }
+        }
+    }
+    // The check sees long functions (some are explained).
+    assert!(explained > 0, "no long function found: the scan is broken");
+    assert!(unexplained.is_empty(), "functions over 120 lines without a `// Long:` reason: {unexplained:?}");
+}

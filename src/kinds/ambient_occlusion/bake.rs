@@ -11,11 +11,11 @@ use crate::mesh::uv_raster::{rasterize_uv, TexelRegion};
 use crate::mesh::{ShouldStop, Stopped};
 
 /// Tiles are squares of this many texels (fewer at the map's right and bottom edges).
-pub const TILE_SIZE: u32 = 128;
+pub(crate) const TILE_SIZE: u32 = 128;
 
 /// One tile of one material's map: the material's index in the mesh, the tile's column and row.
 #[derive(Clone, Copy, Debug, PartialEq, Eq, Hash, PartialOrd, Ord)]
-pub struct TileId {
+pub(crate) struct TileId {
     pub material: u32,
     pub column: u32,
     pub row: u32,
@@ -35,7 +35,7 @@ impl TileId {
 }
 
 /// The tiles of material `material`'s `size`² map, row by row.
-pub fn material_tiles(material: u32, size: u32) -> Vec<TileId> {
+pub(crate) fn material_tiles(material: u32, size: u32) -> Vec<TileId> {
     let count = size.div_ceil(TILE_SIZE);
     (0..count).flat_map(|row| (0..count).map(move |column| TileId { material, column, row })).collect()
 }
@@ -72,12 +72,12 @@ fn uv_box_meets(mesh: &BakeMesh, triangle: u32, size: u32, region: TexelRegion) 
 
 /// The triangles of `material_triangles` (ascending) whose UVs reach into the tile: the only
 /// ones the tile's rasterisation keeps, in the same order.
-pub fn tile_triangles(mesh: &BakeMesh, material_triangles: &[u32], size: u32, region: TexelRegion) -> Vec<u32> {
+pub(crate) fn tile_triangles(mesh: &BakeMesh, material_triangles: &[u32], size: u32, region: TexelRegion) -> Vec<u32> {
     material_triangles.iter().copied().filter(|&triangle| uv_box_meets(mesh, triangle, size, region)).collect()
 }
 
 /// Each triangle's axis-aligned bounding box.
-pub fn triangle_boxes(positions: &[[f32; 3]], triangles: &[[u32; 3]]) -> Vec<[Vec3; 2]> {
+pub(crate) fn triangle_boxes(positions: &[[f32; 3]], triangles: &[[u32; 3]]) -> Vec<[Vec3; 2]> {
     triangles
         .iter()
         .map(|triangle| {
@@ -90,7 +90,7 @@ pub fn triangle_boxes(positions: &[[f32; 3]], triangles: &[[u32; 3]]) -> Vec<[Ve
 /// The occluders a tile's rays can reach: every triangle (of the own triangles' groups, when
 /// triangles occlude only their group) whose box meets the own triangles' box grown by `reach`
 /// (with a margin for the rays' origin offsets), in ascending order.
-pub fn occluders_within_reach(mesh: &BakeMesh, boxes: &[[Vec3; 2]], own: &[u32], reach: f32) -> Vec<u32> {
+pub(crate) fn occluders_within_reach(mesh: &BakeMesh, boxes: &[[Vec3; 2]], own: &[u32], reach: f32) -> Vec<u32> {
     let Some(&first) = own.first() else { return Vec::new() };
     let [mut low, mut high] = boxes[first as usize];
     for &triangle in own {
@@ -160,7 +160,7 @@ impl TileBake {
 }
 
 /// A visibility in [0, 1] as 16 bits.
-pub fn unorm16(visibility: f32) -> u16 {
+pub(crate) fn unorm16(visibility: f32) -> u16 {
     (visibility.clamp(0.0, 1.0) * 65535.0).round() as u16
 }
 
@@ -244,7 +244,7 @@ pub fn bake_tile_from_vertices(
 
 /// A material's finished map: 16-bit visibility with every texel filled, and its figures.
 #[derive(Clone, Debug)]
-pub struct AoMap {
+pub(crate) struct AoMap {
     pub size: u32,
     pub values: Vec<u16>,
     /// Texels rays were cast from (those found inside geometry included).
@@ -273,7 +273,7 @@ impl PartialEq for AoMap {
 /// The map put together from its tiles, every texel that is not baked (empty, or inside
 /// geometry) taking its nearest baked texel's value (`texture::fill`), so that no mip and no
 /// bilinear tap reaches background; all open (65535) when nothing is baked.
-pub fn assemble_map(size: u32, tiles: &[&TileBake]) -> AoMap {
+pub(crate) fn assemble_map(size: u32, tiles: &[&TileBake]) -> AoMap {
     let mut values = vec![0u16; size as usize * size as usize];
     let mut fill_sources = Vec::new();
     let mut map = AoMap {
@@ -314,25 +314,25 @@ pub fn assemble_map(size: u32, tiles: &[&TileBake]) -> AoMap {
 }
 
 /// The map as an RGBA8 grey texture (for the texture tail: BC4 reads red).
-pub fn map_texture(map: &AoMap) -> crate::texture::Texture {
+pub(crate) fn map_texture(map: &AoMap) -> crate::texture::Texture {
     crate::texture::grey16_texture(map.size, map.size, &map.values)
 }
 
 /// The map as a 16-bit greyscale PNG.
-pub fn map_png16(map: &AoMap) -> Vec<u8> {
+pub(crate) fn map_png16(map: &AoMap) -> Vec<u8> {
     crate::texture::preview::png16_grey(&map.values, map.size, map.size)
 }
 
 /// Rays one core casts per second on a typical mesh, for the estimate of a bake's time (the
 /// flight helmet: 5.4–7.7 M on AVX-512; a little less on AVX2 and on denser meshes).
-pub const ESTIMATED_RAYS_PER_SECOND_PER_CORE: f64 = 4.0e6;
+pub(crate) const ESTIMATED_RAYS_PER_SECOND_PER_CORE: f64 = 4.0e6;
 
 /// A bake estimated to take longer than this gets a warning with the estimate.
-pub const LONG_BAKE_SECONDS: f64 = 300.0;
+pub(crate) const LONG_BAKE_SECONDS: f64 = 300.0;
 
 /// The rays a bake casts, estimated from the mesh: per material, the texels its UV triangles
 /// cover (their area, at most the whole map) times `rays`; per vertex in `Vertices` mode.
-pub fn estimated_rays(mesh: &crate::mesh::Mesh, settings: &crate::config::AoSettings) -> u64 {
+pub(crate) fn estimated_rays(mesh: &crate::mesh::Mesh, settings: &crate::config::AoSettings) -> u64 {
     let Some(uvs) = &mesh.uvs else { return 0 };
     if settings.mode == crate::config::AoMode::Vertices {
         return mesh.positions.len() as u64 * u64::from(settings.rays);
@@ -351,7 +351,7 @@ pub fn estimated_rays(mesh: &crate::mesh::Mesh, settings: &crate::config::AoSett
 
 /// A warning when the bake is estimated to take longer than [`LONG_BAKE_SECONDS`] on `cores`
 /// cores, with the estimate and what makes it shorter.
-pub fn long_bake_warning(
+pub(crate) fn long_bake_warning(
     file: &std::path::Path,
     mesh: &crate::mesh::Mesh,
     settings: &crate::config::AoSettings,

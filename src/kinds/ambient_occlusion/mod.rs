@@ -55,7 +55,7 @@ fn surface_material(db: &dyn Db, asset: Asset, surface: &SurfaceId) -> Result<(A
 
 /// The AO kind's one step: load the mesh, then schedule each material's map.
 #[derive(Clone, Copy, Debug, PartialEq)]
-pub enum Step {
+pub(crate) enum Step {
     Plan,
 }
 
@@ -186,7 +186,7 @@ impl Kind for AmbientOcclusion {
 
 /// `report.json` of an AO bake.
 #[derive(Clone, Debug, PartialEq, Serialize)]
-pub struct AoReport {
+pub(crate) struct AoReport {
     pub asset: String,
     pub kind: &'static str,
     pub mesh: String,
@@ -202,7 +202,7 @@ pub struct AoReport {
 }
 
 #[derive(Clone, Debug, PartialEq, Serialize)]
-pub struct AoMaterialReport {
+pub(crate) struct AoMaterialReport {
     pub name: String,
     pub folder: String,
     /// The 16-bit map.
@@ -223,14 +223,14 @@ pub struct AoMaterialReport {
 
 /// What this build's tile bakes took.
 #[derive(Clone, Debug, PartialEq, Serialize)]
-pub struct AoTimings {
+pub(crate) struct AoTimings {
     /// Rays per second of this build's tile bakes, all materials together, over the wall time
     /// from the first tile's start to the last tile's end (none when no tile baked).
     pub rays_per_second: Option<f64>,
 }
 
 #[derive(Clone, Debug, PartialEq, Serialize)]
-pub struct AoSurfaceReport {
+pub(crate) struct AoSurfaceReport {
     pub path: String,
     #[serde(flatten)]
     pub info: SurfaceInfo,

@@ -26,14 +26,14 @@ use crate::mesh::rays::BackFaces;
 use crate::mesh::uv_raster::TexelRegion;
 
 pub const BVH: Stage = Stage { name: "bvh", version: 1 };
-pub const VERTICES: Stage = Stage { name: "vertices", version: 1 };
-pub const BAKE: Stage = Stage { name: "bake", version: 1 };
-pub const FILL: Stage = Stage { name: "fill", version: 1 };
+pub(crate) const VERTICES: Stage = Stage { name: "vertices", version: 1 };
+pub(crate) const BAKE: Stage = Stage { name: "bake", version: 1 };
+pub(crate) const FILL: Stage = Stage { name: "fill", version: 1 };
 
 /// One material of the mesh that is baked: its index, the folder its map is written to, and
 /// its triangles (ascending).
 #[derive(Clone, Debug, PartialEq)]
-pub struct BakedMaterial {
+pub(crate) struct BakedMaterial {
     pub index: u32,
     pub name: String,
     /// `name` made safe as one folder name, unique in the asset.
@@ -43,7 +43,7 @@ pub struct BakedMaterial {
 
 /// The mesh as the bake reads it, with the settings resolved against its size.
 #[derive(Debug, PartialEq)]
-pub struct BakeGeometry {
+pub(crate) struct BakeGeometry {
     pub loaded: Arc<LoadedMesh>,
     pub materials: Vec<BakedMaterial>,
     pub boxes: Vec<[Vec3; 2]>,
@@ -100,7 +100,7 @@ pub fn ao_settings(db: &dyn Db, asset: Asset) -> AoSettings {
 /// Each triangle's occluder group (its OBJ object) when objects occlude only themselves and
 /// there are several; none when every triangle occludes every point.
 #[salsa::tracked(returns(clone))]
-pub fn occluder_groups(db: &dyn Db, asset: Asset) -> Result<Option<Arc<Vec<u32>>>, Diagnostic> {
+pub(crate) fn occluder_groups(db: &dyn Db, asset: Asset) -> Result<Option<Arc<Vec<u32>>>, Diagnostic> {
     let loaded = loaded_mesh(db, asset)?;
     let mesh = &loaded.mesh;
     let self_only = ao_settings(db, asset).occluders == AoOccluders::SelfOnly;
@@ -109,7 +109,7 @@ pub fn occluder_groups(db: &dyn Db, asset: Asset) -> Result<Option<Arc<Vec<u32>>
 
 /// The mesh and settings of the bake: a mesh without texture coordinates is an error naming it.
 #[salsa::tracked(returns(clone))]
-pub fn bake_geometry(db: &dyn Db, asset: Asset) -> Result<Arc<BakeGeometry>, Diagnostic> {
+pub(crate) fn bake_geometry(db: &dyn Db, asset: Asset) -> Result<Arc<BakeGeometry>, Diagnostic> {
     let loaded = loaded_mesh(db, asset)?;
     let settings = ao_settings(db, asset);
     let mesh = &loaded.mesh;
@@ -169,12 +169,12 @@ pub fn bake_geometry(db: &dyn Db, asset: Asset) -> Result<Arc<BakeGeometry>, Dia
 }
 
 /// The occluders' BVHs, compared by the geometry they were built from.
-pub type OccluderSet = ByHash<Occluders>;
+pub(crate) type OccluderSet = ByHash<Occluders>;
 
 /// The BVHs the rays are cast against (stage `bvh`): built only when some tile must bake, from
 /// the positions and the groups alone (a settings change builds nothing).
 #[salsa::tracked(returns(clone))]
-pub fn occluder_set(db: &dyn Db, asset: Asset) -> Result<Arc<OccluderSet>, Diagnostic> {
+pub(crate) fn occluder_set(db: &dyn Db, asset: Asset) -> Result<Arc<OccluderSet>, Diagnostic> {
     let loaded = loaded_mesh(db, asset)?;
     let groups = occluder_groups(db, asset)?;
     let mesh = &loaded.mesh;
@@ -204,10 +204,10 @@ fn occlusion_key(key: crate::cache::CacheKeyBuilder, settings: &OcclusionSetting
 /// Per-vertex visibility (stage `vertices`, per-vertex mode): rays from every vertex, cached
 /// by the whole mesh and the settings.
 #[derive(Debug, PartialEq)]
-pub struct VertexVisibility(pub Vec<f32>);
+pub(crate) struct VertexVisibility(pub Vec<f32>);
 
 #[salsa::tracked(returns(clone))]
-pub fn vertex_visibility(db: &dyn Db, asset: Asset) -> Result<Arc<VertexVisibility>, Diagnostic> {
+pub(crate) fn vertex_visibility(db: &dyn Db, asset: Asset) -> Result<Arc<VertexVisibility>, Diagnostic> {
     let geometry = bake_geometry(db, asset)?;
     let key = occlusion_key(stage_key(VERTICES).part(&geometry.whole_hash), &geometry.occlusion)
         .part(&geometry.vertex_offset)
@@ -242,19 +242,19 @@ pub fn vertex_visibility(db: &dyn Db, asset: Asset) -> Result<Arc<VertexVisibili
 
 /// The materials' tiles, in material then row order.
 #[salsa::tracked(returns(clone))]
-pub fn all_tiles(db: &dyn Db, asset: Asset) -> Result<Arc<Vec<TileId>>, Diagnostic> {
+pub(crate) fn all_tiles(db: &dyn Db, asset: Asset) -> Result<Arc<Vec<TileId>>, Diagnostic> {
     let geometry = bake_geometry(db, asset)?;
     let size = ao_settings(db, asset).size;
     Ok(Arc::new(geometry.materials.iter().flat_map(|material| material_tiles(material.index, size)).collect()))
 }
 
 /// A tile's stage label: `asset/material/tile_c_r`.
-pub fn tile_label(asset_name: &str, folder: &str, tile: TileId) -> String {
+pub(crate) fn tile_label(asset_name: &str, folder: &str, tile: TileId) -> String {
     format!("{asset_name}/{folder}/{}", tile.name())
 }
 
 /// A material's stage label: `asset/material`.
-pub fn material_label(asset_name: &str, folder: &str) -> String {
+pub(crate) fn material_label(asset_name: &str, folder: &str) -> String {
     format!("{asset_name}/{folder}")
 }
 
@@ -270,7 +270,7 @@ fn material_of<'a>(
 /// its own triangles' UVs, positions and normals, and the occluders it can reach (all of them,
 /// as one hash, when the reach is unbounded) or, per vertex, its corners' visibility.
 #[salsa::tracked(returns(clone))]
-pub fn tile_key(db: &dyn Db, asset: Asset, tile: TileId) -> Result<CacheKey, Diagnostic> {
+pub(crate) fn tile_key(db: &dyn Db, asset: Asset, tile: TileId) -> Result<CacheKey, Diagnostic> {
     let geometry = bake_geometry(db, asset)?;
     let settings = ao_settings(db, asset);
     let material = material_of(&geometry, asset.main_file(db), tile.material)?;
@@ -364,7 +364,7 @@ fn tile_from_entry(entry: CacheEntry) -> Option<TileBake> {
 /// One tile baked (stage `bake`): the last bake of the tile when its key is unchanged (an edit
 /// out of its reach), else from the persistent cache, else rays (or per-vertex values).
 #[salsa::tracked(returns(clone))]
-pub fn ao_tile(db: &dyn Db, asset: Asset, tile: TileId) -> Result<Arc<TileBake>, Diagnostic> {
+pub(crate) fn ao_tile(db: &dyn Db, asset: Asset, tile: TileId) -> Result<Arc<TileBake>, Diagnostic> {
     let key = tile_key(db, asset, tile)?;
     let geometry = bake_geometry(db, asset)?;
     let material = material_of(&geometry, asset.main_file(db), tile.material)?;
@@ -417,7 +417,7 @@ pub fn ao_tile(db: &dyn Db, asset: Asset, tile: TileId) -> Result<Arc<TileBake>,
 
 /// What a material's map is made of: the fill's version, the map size and every tile's key.
 #[salsa::tracked(returns(clone))]
-pub fn ao_map_key(db: &dyn Db, asset: Asset, material: u32) -> Result<CacheKey, Diagnostic> {
+pub(crate) fn ao_map_key(db: &dyn Db, asset: Asset, material: u32) -> Result<CacheKey, Diagnostic> {
     let size = ao_settings(db, asset).size;
     let mut key = stage_key(FILL).part(&size);
     for tile in material_tiles(material, size) {
@@ -428,7 +428,7 @@ pub fn ao_map_key(db: &dyn Db, asset: Asset, material: u32) -> Result<CacheKey, 
 
 /// A material's finished map and its 16-bit PNG.
 #[derive(Debug, PartialEq)]
-pub struct AoMapFiles {
+pub(crate) struct AoMapFiles {
     pub map: AoMap,
     pub png16: Arc<[u8]>,
 }

@@ -47,7 +47,7 @@ fn page_files(output_folder: &Path, page: u32, container: crate::config::Contain
 
 /// The atlas kind's steps: the layout (then its pages and meshes), and one mesh's remap.
 #[derive(Clone, Copy, Debug, PartialEq)]
-pub enum Step {
+pub(crate) enum Step {
     Layout,
     /// The `mesh`-th of the asset's meshes.
     Remap {

@@ -35,7 +35,7 @@ impl TrimRect {
 
 /// The texels a mesh's texture coordinates in `u` × `v` (OBJ convention: origin bottom-left,
 /// v up; clamped to [0, 1]) fall on, in a `size` texture: what a remapped mesh samples.
-pub fn uv_texel_rect(u: [f32; 2], v: [f32; 2], size: [u32; 2]) -> TrimRect {
+pub(crate) fn uv_texel_rect(u: [f32; 2], v: [f32; 2], size: [u32; 2]) -> TrimRect {
     let (width, height) = (size[0] as f32, size[1] as f32);
     let column = |u: f32| (u.clamp(0.0, 1.0) * width).floor().clamp(0.0, width - 1.0) as u32;
     let row = |v: f32| ((1.0 - v.clamp(0.0, 1.0)) * height).floor().clamp(0.0, height - 1.0) as u32;
@@ -175,7 +175,7 @@ fn paste_entry(pixels: &mut [u8], width: u32, height: u32, texture: &Texture, pl
 
 /// Where each texel of a page of these placements takes its colour from: itself inside an
 /// entry or its padding ring, else the nearest such texel.
-pub fn page_texel_sources(width: u32, height: u32, placements: &[Placement], padding: u32) -> TexelSources {
+pub(crate) fn page_texel_sources(width: u32, height: u32, placements: &[Placement], padding: u32) -> TexelSources {
     let mut covered = vec![false; width as usize * height as usize];
     for placement in placements {
         let (span_x, span_y) =

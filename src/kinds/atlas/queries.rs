@@ -21,18 +21,18 @@ use super::page::{
     composite_page_keeping_sources, crop, opaque_bounds, recomposite_page, uv_texel_rect, PageEntry, TrimRect,
 };
 
-pub const TRIM: Stage = Stage { name: "trim", version: 1 };
+pub(crate) const TRIM: Stage = Stage { name: "trim", version: 1 };
 /// 3: kept as a hint for the next layout; entries come from the trim stage. 4: an entry keeps
 /// what the remapped meshes' UVs reach; aliases with their own canvases.
-pub const LAYOUT: Stage = Stage { name: "layout", version: 4 };
+pub(crate) const LAYOUT: Stage = Stage { name: "layout", version: 4 };
 /// Where the remapped meshes' UVs reach on each atlased texture.
 pub const REACH: Stage = Stage { name: "reach", version: 1 };
-pub const COMPOSITE: Stage = Stage { name: "composite", version: 2 };
+pub(crate) const COMPOSITE: Stage = Stage { name: "composite", version: 2 };
 
 /// What the layout needs of one texture file: its size, the rectangle trim keeps, and what
 /// the kept texels are (equal ones make aliases).
 #[derive(Clone, Copy, Debug, PartialEq, Eq, serde::Serialize, serde::Deserialize)]
-pub struct TrimmedTexture {
+pub(crate) struct TrimmedTexture {
     pub source_size: [u32; 2],
     pub trim: TrimRect,
     /// blake3 of the kept texels.
@@ -44,7 +44,7 @@ pub struct TrimmedTexture {
 /// One rectangle of the atlas: the texture it shows (its file, trimmed to `trim`), and the other
 /// textures whose kept texels are the same pixels.
 #[derive(Clone, Debug, PartialEq, serde::Serialize, serde::Deserialize)]
-pub struct LayoutEntry {
+pub(crate) struct LayoutEntry {
     /// The source path relative to the source folder (the first in name order of its aliases).
     pub name: String,
     pub aliases: Vec<LayoutAlias>,
@@ -61,7 +61,7 @@ pub struct LayoutEntry {
 /// A texture that shares an entry's rectangle: its own name, canvas and where the shared texels
 /// lie in it (two textures with the same pixels and different transparent borders).
 #[derive(Clone, Debug, PartialEq, serde::Serialize, serde::Deserialize)]
-pub struct LayoutAlias {
+pub(crate) struct LayoutAlias {
     pub name: String,
     pub source_size: [u32; 2],
     pub trim: TrimRect,
@@ -69,14 +69,14 @@ pub struct LayoutAlias {
 
 /// The entries and where each went (`packing.placements` in entry order): all the table needs.
 #[derive(Clone, Debug, PartialEq, serde::Serialize, serde::Deserialize)]
-pub struct AtlasLayout {
+pub(crate) struct AtlasLayout {
     pub entries: Vec<LayoutEntry>,
     pub packing: PagePacking,
 }
 
 /// How a layout came from the last one (for the report).
 #[derive(Clone, Debug, Default, PartialEq, Eq, serde::Serialize, serde::Deserialize)]
-pub struct LayoutChange {
+pub(crate) struct LayoutChange {
     /// `fresh` (no earlier layout with these settings), `kept` (the earlier layout, new or
     /// resized entries put into free space) or `repacked` (kept would have been below 90 % of a
     /// fresh pack's occupancy, or could not take the new entries).
@@ -88,13 +88,13 @@ pub struct LayoutChange {
 }
 
 /// The asset's texture files (matches of its `textures` globs), project-relative, sorted.
-pub fn atlas_texture_files(db: &dyn Db, asset: Asset) -> &[PathBuf] {
+pub(crate) fn atlas_texture_files(db: &dyn Db, asset: Asset) -> &[PathBuf] {
     asset.listed(db).first().map_or(&[], Vec::as_slice)
 }
 
 /// The packer's settings of the asset.
 #[salsa::tracked(returns(copy))]
-pub fn page_settings(db: &dyn Db, asset: Asset) -> PageSettings {
+pub(crate) fn page_settings(db: &dyn Db, asset: Asset) -> PageSettings {
     let pack = &asset.settings(db).pack;
     PageSettings {
         max_size: pack.max_size,
@@ -114,7 +114,7 @@ pub fn trims(db: &dyn Db, asset: Asset) -> bool {
 /// A texture decoded, its kept rectangle found (stage `trim`, per file); from the persistent
 /// cache when the file was trimmed before, so that a layout after a restart decodes nothing.
 #[salsa::tracked(returns(clone))]
-pub fn trimmed_texture(db: &dyn Db, file: SourceFile, trim: bool) -> Result<TrimmedTexture, Diagnostic> {
+pub(crate) fn trimmed_texture(db: &dyn Db, file: SourceFile, trim: bool) -> Result<TrimmedTexture, Diagnostic> {
     let label = display_path(file.path(db));
     let key = key_with_files(db, stage_key(TRIM).part(&trim).part(&texture_limits(db).working_set), [file]).finish();
     cached_json(db, TRIM, &label, key, || {
@@ -146,7 +146,7 @@ fn kept_part(texture: &Texture, rect: TrimRect) -> TrimmedTexture {
 /// A texture kept to `rect` rather than to its trim (part of the stage `trim`, per file): where
 /// a remapped mesh's UVs reach beyond the opaque texels.
 #[salsa::tracked(returns(clone))]
-pub fn kept_texture(db: &dyn Db, file: SourceFile, rect: TrimRect) -> Result<TrimmedTexture, Diagnostic> {
+pub(crate) fn kept_texture(db: &dyn Db, file: SourceFile, rect: TrimRect) -> Result<TrimmedTexture, Diagnostic> {
     let label = display_path(file.path(db));
     let key = key_with_files(db, stage_key(TRIM).part("kept").part(&[rect.x, rect.y, rect.width, rect.height]), [file]);
     cached_json(db, TRIM, &label, key.part(&texture_limits(db).working_set).finish(), || {
@@ -163,7 +163,7 @@ pub fn kept_texture(db: &dyn Db, file: SourceFile, rect: TrimRect) -> Result<Tri
 
 /// The texture coordinates a material of a mesh uses on an atlased texture: their range.
 #[derive(Clone, Copy, Debug, PartialEq, serde::Serialize, serde::Deserialize)]
-pub struct UvReach {
+pub(crate) struct UvReach {
     pub u: [f32; 2],
     pub v: [f32; 2],
 }
@@ -182,7 +182,7 @@ impl UvReach {
 /// coordinates (finite ones), over every mesh and material. A mesh that does not load is the
 /// remap's to report.
 #[salsa::tracked(returns(clone))]
-pub fn mesh_uv_reach(db: &dyn Db, asset: Asset) -> Arc<std::collections::BTreeMap<PathBuf, UvReach>> {
+pub(crate) fn mesh_uv_reach(db: &dyn Db, asset: Asset) -> Arc<std::collections::BTreeMap<PathBuf, UvReach>> {
     let mut reach = std::collections::BTreeMap::new();
     let textures: std::collections::BTreeSet<&PathBuf> = atlas_texture_files(db, asset).iter().collect();
     for mesh in atlas_mesh_files(db, asset) {
@@ -218,7 +218,7 @@ pub fn mesh_uv_reach(db: &dyn Db, asset: Asset) -> Arc<std::collections::BTreeMa
 /// are relative to it) and the pack settings. The layout cached under it is the one made last
 /// from these inputs (which earlier layout was its hint is not part of it).
 #[salsa::tracked(returns(copy))]
-pub fn layout_key(db: &dyn Db, asset: Asset) -> CacheKey {
+pub(crate) fn layout_key(db: &dyn Db, asset: Asset) -> CacheKey {
     let key = stage_key(LAYOUT).part("atlas").part(&settings_key(db, asset).0);
     let files = atlas_texture_files(db, asset)
         .iter()
@@ -240,7 +240,10 @@ fn settings_key(db: &dyn Db, asset: Asset) -> CacheKey {
 /// The layout and how it came from the last one (stage `layout`); from the persistent cache
 /// when the same textures and settings were laid out before.
 #[salsa::tracked(returns(clone))]
-pub fn atlas_layout_and_change(db: &dyn Db, asset: Asset) -> Result<Arc<(AtlasLayout, LayoutChange)>, Diagnostic> {
+pub(crate) fn atlas_layout_and_change(
+    db: &dyn Db,
+    asset: Asset,
+) -> Result<Arc<(AtlasLayout, LayoutChange)>, Diagnostic> {
     let laid_out = cached_json(db, LAYOUT, asset.name(db), layout_key(db, asset), || compute_atlas_layout(db, asset))?;
     remember_layout(db, asset, &laid_out.0);
     Ok(Arc::new(laid_out))
@@ -248,7 +251,7 @@ pub fn atlas_layout_and_change(db: &dyn Db, asset: Asset) -> Result<Arc<(AtlasLa
 
 /// The layout alone: unchanged (and so not re-run downstream) when an edit moved nothing.
 #[salsa::tracked(returns(clone))]
-pub fn atlas_layout(db: &dyn Db, asset: Asset) -> Result<Arc<AtlasLayout>, Diagnostic> {
+pub(crate) fn atlas_layout(db: &dyn Db, asset: Asset) -> Result<Arc<AtlasLayout>, Diagnostic> {
     atlas_layout_and_change(db, asset).map(|laid_out| Arc::new(laid_out.0.clone()))
 }
 
@@ -425,7 +428,7 @@ fn page_entries(
 /// composite when only some entries' texels changed (then only those are decoded and put
 /// back), else from every entry.
 #[salsa::tracked(returns(clone))]
-pub fn atlas_page(db: &dyn Db, asset: Asset, page: u32) -> Result<Arc<Texture>, Diagnostic> {
+pub(crate) fn atlas_page(db: &dyn Db, asset: Asset, page: u32) -> Result<Arc<Texture>, Diagnostic> {
     let layout = atlas_layout(db, asset)?;
     let Some(&(width, height)) = layout.packing.pages.get(page as usize) else {
         return Err(Diagnostic::new(asset.source_root(db), format!("atlas page {page} no longer exists")));
@@ -563,7 +566,7 @@ fn entry_texture(db: &dyn Db, asset: Asset, path: &PathBuf) -> Result<Arc<Textur
 /// What a page is made of, cheap to compute once the layout is known: the page's size, each
 /// of its entries' place and file content, and the padding; so that a page already in the
 /// persistent cache needs no composite, and an edit elsewhere leaves this page's key alone.
-pub fn page_recipe_key(db: &dyn Db, asset: Asset, page: u32) -> Result<CacheKey, Diagnostic> {
+pub(crate) fn page_recipe_key(db: &dyn Db, asset: Asset, page: u32) -> Result<CacheKey, Diagnostic> {
     let layout = atlas_layout(db, asset)?;
     let Some(&(width, height)) = layout.packing.pages.get(page as usize) else {
         return Err(Diagnostic::new(asset.source_root(db), format!("atlas page {page} no longer exists")));
@@ -589,17 +592,17 @@ pub fn page_recipe_key(db: &dyn Db, asset: Asset, page: u32) -> Result<CacheKey,
 }
 
 /// A page's name inside the asset: `page0`, `page1`, ….
-pub fn page_group(page: u32) -> String {
+pub(crate) fn page_group(page: u32) -> String {
     format!("page{page}")
 }
 
 /// The label of a page's composite: `asset/page0`.
-pub fn page_label(asset_name: &str, page: u32) -> String {
+pub(crate) fn page_label(asset_name: &str, page: u32) -> String {
     format!("{asset_name}/{}", page_group(page))
 }
 
 /// A page's texture file name: `atlas` for the first page, `atlas_N` for the others.
-pub fn page_stem(page: u32) -> String {
+pub(crate) fn page_stem(page: u32) -> String {
     if page == 0 {
         "atlas".to_string()
     } else {
@@ -608,28 +611,28 @@ pub fn page_stem(page: u32) -> String {
 }
 
 /// The asset's mesh files (matches of its `meshes` globs), project-relative, sorted.
-pub fn atlas_mesh_files(db: &dyn Db, asset: Asset) -> &[PathBuf] {
+pub(crate) fn atlas_mesh_files(db: &dyn Db, asset: Asset) -> &[PathBuf] {
     asset.listed(db).get(1).map_or(&[], Vec::as_slice)
 }
 
 /// The MTL files a mesh of the asset names (as far as its OBJ has been read).
-pub fn mesh_library_paths(db: &dyn Db, asset: Asset, mesh: &std::path::Path) -> Vec<PathBuf> {
+pub(crate) fn mesh_library_paths(db: &dyn Db, asset: Asset, mesh: &std::path::Path) -> Vec<PathBuf> {
     crate::kinds::mesh_queries::mesh_library_paths_of(db, asset, mesh.to_path_buf()).to_vec()
 }
 
 /// The texture files a mesh's materials name (as far as its MTL files have been read).
-pub fn mesh_map_paths(db: &dyn Db, asset: Asset, mesh: &std::path::Path) -> Vec<PathBuf> {
+pub(crate) fn mesh_map_paths(db: &dyn Db, asset: Asset, mesh: &std::path::Path) -> Vec<PathBuf> {
     crate::mesh::texture_paths(mesh, &crate::kinds::mesh_queries::library_bytes(db, asset, mesh), asset.source_root(db))
 }
 
 /// A mesh's path below the asset's `meshes/` output folder: its path in the source folder,
 /// with the extension `.obj`.
-pub fn remapped_mesh_path(db: &dyn Db, asset: Asset, mesh: &std::path::Path) -> PathBuf {
+pub(crate) fn remapped_mesh_path(db: &dyn Db, asset: Asset, mesh: &std::path::Path) -> PathBuf {
     mesh.strip_prefix(asset.source_root(db)).unwrap_or(mesh).with_extension("obj")
 }
 
 /// The table the layout gives (entries in name order), as `atlas.json` has it.
-pub fn atlas_table_entries(layout: &AtlasLayout) -> Vec<super::table::AtlasEntry> {
+pub(crate) fn atlas_table_entries(layout: &AtlasLayout) -> Vec<super::table::AtlasEntry> {
     use super::table::{AtlasAlias, AtlasEntry, UvTransform};
     let mut entries: Vec<AtlasEntry> = layout
         .entries
@@ -677,7 +680,11 @@ pub fn atlas_table_entries(layout: &AtlasLayout) -> Vec<super::table::AtlasEntry
 /// the layout, so that texel edits that move nothing leave it alone; from the persistent cache
 /// when the same files were remapped onto the same layout before.
 #[salsa::tracked(returns(clone))]
-pub fn remapped_mesh(db: &dyn Db, asset: Asset, mesh: PathBuf) -> Result<Arc<super::remap::RemappedMesh>, Diagnostic> {
+pub(crate) fn remapped_mesh(
+    db: &dyn Db,
+    asset: Asset,
+    mesh: PathBuf,
+) -> Result<Arc<super::remap::RemappedMesh>, Diagnostic> {
     let layout = atlas_layout(db, asset)?;
     let label = format!("{}/meshes/{}", asset.name(db), display_path(&remapped_mesh_path(db, asset, &mesh)));
     let file = asset_file(db, asset, mesh.clone()).ok_or_else(|| Diagnostic::new(&mesh, "file not found"))?;
@@ -749,4 +756,4 @@ pub fn remapped_mesh(db: &dyn Db, asset: Asset, mesh: PathBuf) -> Result<Arc<sup
 
 /// 2: with the mesh's load warnings.
 /// 3: UVs onto each texture's own place (aliases), maps' -s and -o kept, unused materials ignored.
-pub const REMAP: Stage = Stage { name: "remap", version: 3 };
+pub(crate) const REMAP: Stage = Stage { name: "remap", version: 3 };

@@ -18,7 +18,7 @@ const UV_TOLERANCE: f32 = 1e-4;
 
 /// A material of a remapped mesh, as `atlas.mtl` writes it.
 #[derive(Clone, Debug, PartialEq, serde::Serialize, serde::Deserialize)]
-pub struct RemappedMaterial {
+pub(crate) struct RemappedMaterial {
     pub material: MeshMaterial,
     /// The atlas page its atlased maps now point at, and which maps those are.
     pub page: Option<u32>,
@@ -27,7 +27,7 @@ pub struct RemappedMaterial {
 
 /// A mesh remapped onto the atlas: the new OBJ's text and its materials.
 #[derive(Clone, Debug, PartialEq, serde::Serialize, serde::Deserialize)]
-pub struct RemappedMesh {
+pub(crate) struct RemappedMesh {
     pub obj: String,
     pub materials: Vec<RemappedMaterial>,
     /// What loading or remapping the mesh warned of (a missing MTL, a map leaving the source
@@ -38,7 +38,7 @@ pub struct RemappedMesh {
 
 /// Why a mesh cannot be remapped.
 #[derive(Clone, Debug, PartialEq, thiserror::Error)]
-pub enum RemapError {
+pub(crate) enum RemapError {
     #[error(
         "material `{material}` has UVs u ∈ [{u_min}, {u_max}], v ∈ [{v_min}, {v_max}] on the atlased texture \
             `{entry}`: repeating UVs (outside [0, 1]) cannot be remapped onto an atlas rectangle"
@@ -58,7 +58,7 @@ pub enum RemapError {
 /// A texture a remapped material may name: an atlas entry's own texture or one of its aliases,
 /// with where its coordinates land on the page.
 #[derive(Clone, Debug, PartialEq)]
-pub struct RemapTarget {
+pub(crate) struct RemapTarget {
     /// The texture's path relative to the source folder.
     pub name: String,
     pub page: u32,
@@ -66,7 +66,7 @@ pub struct RemapTarget {
 }
 
 /// Every texture the table can address: each entry's own, then its aliases.
-pub fn remap_targets(entries: &[AtlasEntry]) -> Vec<RemapTarget> {
+pub(crate) fn remap_targets(entries: &[AtlasEntry]) -> Vec<RemapTarget> {
     let mut targets = Vec::new();
     for entry in entries {
         targets.push(RemapTarget { name: entry.name.clone(), page: entry.page, transform: entry.transform() });
@@ -82,13 +82,13 @@ pub fn remap_targets(entries: &[AtlasEntry]) -> Vec<RemapTarget> {
 }
 
 /// The target (index into the targets) a material's maps are in, and which of its maps those are.
-pub type MaterialEntry = Option<(usize, Vec<TextureSlot>)>;
+pub(crate) type MaterialEntry = Option<(usize, Vec<TextureSlot>)>;
 
 /// For each material of `mesh` that some triangle uses, the target its atlased maps are in
 /// (`target_of` finds the target of a project-relative texture path), with the slots that are;
 /// `None` for materials without atlased maps and for materials no triangle uses (a shared MTL's
 /// other materials are none of this mesh's business).
-pub fn material_entries(
+pub(crate) fn material_entries(
     mesh: &Mesh,
     targets: &[RemapTarget],
     target_of: impl Fn(&Path) -> Option<usize>,
@@ -170,7 +170,7 @@ fn material_uv_transform(
 /// The mesh with the UVs of atlased materials moved onto their textures' places, written as
 /// OBJ text naming `material_library`; fails on the first atlased material with UVs outside
 /// [0, 1] (after its map's `-s` and `-o`). Gives warnings for map options it drops.
-pub fn remap_mesh(
+pub(crate) fn remap_mesh(
     mesh: &Mesh,
     targets: &[RemapTarget],
     material_entries: &[MaterialEntry],
@@ -272,7 +272,7 @@ pub fn remap_mesh(
 /// Fails when the triangles of material `material` (index into the mesh's materials) use UVs
 /// outside [0, 1]: they repeat the texture, which an atlas rectangle cannot (`entry` names the
 /// atlased texture in the message).
-pub fn repeating_uvs(mesh: &Mesh, material: usize, entry: &str) -> Result<(), RemapError> {
+pub(crate) fn repeating_uvs(mesh: &Mesh, material: usize, entry: &str) -> Result<(), RemapError> {
     repeating_uvs_through(mesh, material, entry, &|uv| uv)
 }
 
@@ -319,7 +319,7 @@ fn material_uv_range(mesh: &Mesh, material: usize, transform: &dyn Fn([f32; 2]) 
 /// Where the materials of `mesh` that some triangle uses sample each texture `atlased` accepts
 /// (any slot): the range of their texture coordinates (after the map's `-s` and `-o`), per
 /// texture, over the materials that map it.
-pub fn material_uv_reach(
+pub(crate) fn material_uv_reach(
     mesh: &Mesh,
     atlased: impl Fn(&Path) -> bool,
 ) -> Vec<(std::path::PathBuf, super::queries::UvReach)> {
@@ -343,7 +343,7 @@ pub fn material_uv_reach(
 
 /// One material of `atlas.mtl`: atlased maps name the page's image (`page_file`), the others
 /// their source texture as seen from the MTL's folder (`path_from_mtl`).
-pub fn mtl_material(
+pub(crate) fn mtl_material(
     material: &RemappedMaterial,
     page_file: impl Fn(u32) -> String,
     path_from_mtl: impl Fn(&Path) -> String,

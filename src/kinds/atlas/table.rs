@@ -11,7 +11,7 @@ use super::page::TrimRect;
 
 /// One page of the atlas: its texture file (in the asset's folder) and size.
 #[derive(Clone, Debug, PartialEq, serde::Serialize, serde::Deserialize)]
-pub struct AtlasPage {
+pub(crate) struct AtlasPage {
     pub file: String,
     pub width: u32,
     pub height: u32,
@@ -49,7 +49,7 @@ pub struct AtlasAlias {
 
 /// The table: pages, then entries in name order.
 #[derive(Clone, Debug, PartialEq, serde::Serialize, serde::Deserialize)]
-pub struct AtlasTable {
+pub(crate) struct AtlasTable {
     pub pages: Vec<AtlasPage>,
     pub entries: Vec<AtlasEntry>,
 }
@@ -101,18 +101,6 @@ impl AtlasEntry {
     /// A source texture coordinate of the entry's own texture on the page.
     pub fn page_uv(&self, uv: [f64; 2]) -> [f64; 2] {
         self.transform().page_uv(uv)
-    }
-
-    /// The page's UV rectangle of the entry's texels, `[u_min, v_min, u_max, v_max]` (UVs as OBJ
-    /// has them), of a `page_size` page.
-    pub fn page_uv_bounds(&self, page_size: (u32, u32)) -> [f64; 4] {
-        let (page_width, page_height) = (page_size.0 as f64, page_size.1 as f64);
-        [
-            self.x as f64 / page_width,
-            1.0 - (self.y + self.height) as f64 / page_height,
-            (self.x + self.width) as f64 / page_width,
-            1.0 - self.y as f64 / page_height,
-        ]
     }
 }
 

@@ -12,7 +12,7 @@ use crate::texture::{SurfaceKind, Texture};
 /// Which atlas texels a face covers, and what is drawn there: the shape of the atlas without its
 /// colours, so that a colour-only edit finds it unchanged and skips the fill search.
 #[derive(Clone, Debug, PartialEq)]
-pub struct AtlasCoverage {
+pub(crate) struct AtlasCoverage {
     pub width: u32,
     pub height: u32,
     /// Every covered texel in index order with the plane image and texel drawn on it (the last
@@ -22,7 +22,7 @@ pub struct AtlasCoverage {
 
 impl AtlasCoverage {
     /// A content hash of the coverage (size and every drawn texel), hashed on every core.
-    pub fn content_hash(&self) -> blake3::Hash {
+    pub(crate) fn content_hash(&self) -> blake3::Hash {
         let mut hasher = blake3::Hasher::new();
         hasher.update(&self.width.to_le_bytes()).update(&self.height.to_le_bytes());
         hasher.update_rayon(bytemuck::cast_slice(&self.drawn));
@@ -33,7 +33,7 @@ impl AtlasCoverage {
 /// One covered atlas texel and the texel of a plane image (in layout order) drawn on it.
 #[repr(C)]
 #[derive(Clone, Copy, Debug, PartialEq, bytemuck::Pod, bytemuck::Zeroable)]
-pub struct DrawnTexel {
+pub(crate) struct DrawnTexel {
     pub atlas_texel: u32,
     pub plane: u32,
     pub plane_texel: u32,
@@ -65,7 +65,7 @@ fn drawn_texels(layout: &Layout, placement: &crate::packing::Placement, images: 
 
 /// The atlas texels that `planes` (in layout order) cover, and what each shows: the planes are
 /// traced in parallel, then laid down in layout order (a later plane wins a shared texel).
-pub fn atlas_coverage(layout: &Layout, planes: &[&PlaneImages]) -> AtlasCoverage {
+pub(crate) fn atlas_coverage(layout: &Layout, planes: &[&PlaneImages]) -> AtlasCoverage {
     let texels = layout.width as usize * layout.height as usize;
     let per_plane: Vec<Vec<(u32, u32)>> = layout
         .placements
@@ -93,7 +93,7 @@ pub fn atlas_coverage(layout: &Layout, planes: &[&PlaneImages]) -> AtlasCoverage
 /// [`texel_sources`] of the same coverage), rows in parallel. Albedo alpha stays 0 on
 /// uncovered texels. Surfaces are composited one by one, so that a surface whose parts did not
 /// change is never composited (see the kind's `surface_parts_key`).
-pub fn composite_atlas_surface(
+pub(crate) fn composite_atlas_surface(
     layout: &Layout,
     planes: &[&PlaneImages],
     coverage: &AtlasCoverage,
@@ -122,7 +122,7 @@ pub fn composite_atlas_surface(
 
 /// Where every atlas texel takes its values from: the nearest covered texel (see
 /// [`crate::texture::fill`]).
-pub fn texel_sources(coverage: &AtlasCoverage) -> TexelSources {
+pub(crate) fn texel_sources(coverage: &AtlasCoverage) -> TexelSources {
     crate::texture::fill::texel_sources(
         coverage.width,
         coverage.height,

@@ -21,7 +21,7 @@ pub fn level_count(settings: &Settings) -> u32 {
 }
 
 /// Whether the asset bakes a LOD chain (each level in a folder of its own).
-pub fn is_chain(settings: &Settings) -> bool {
+pub(crate) fn is_chain(settings: &Settings) -> bool {
     !settings.billboard.lods.is_empty()
 }
 
@@ -29,7 +29,7 @@ pub fn is_chain(settings: &Settings) -> bool {
 /// density; with neither, its atlas's largest side is `max_size / 2^N` (at least 64 texels,
 /// a multiple of 4). Level 0, and the one level of an asset without a chain, take the settings
 /// as they are.
-pub fn settings_for(settings: &Settings, level: u32) -> LevelSettings {
+pub(crate) fn settings_for(settings: &Settings, level: u32) -> LevelSettings {
     let billboard = &settings.billboard;
     let budget = billboard.lods.get(level as usize).copied().or(billboard.budget);
     let halvings = level.min(31);
@@ -52,7 +52,7 @@ pub fn settings_for(settings: &Settings, level: u32) -> LevelSettings {
 }
 
 /// The atlas settings of a level: the asset's, with the level's largest side.
-pub fn level_atlas_settings(atlas: &PageSettings, level: &LevelSettings) -> PageSettings {
+pub(crate) fn level_atlas_settings(atlas: &PageSettings, level: &LevelSettings) -> PageSettings {
     PageSettings { max_size: level.max_atlas_size, ..atlas.clone() }
 }
 

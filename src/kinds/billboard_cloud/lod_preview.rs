@@ -24,7 +24,7 @@ use crate::gpu::{Gpu, GpuError, RenderVertex, ViewMaterial, ViewMesh};
 use crate::texture::Texture;
 
 /// The 26 view directions, unit length: 6 face centres, 12 edge midpoints, 8 corners.
-pub fn view_directions() -> Vec<[f32; 3]> {
+pub(crate) fn view_directions() -> Vec<[f32; 3]> {
     let mut directions = Vec::new();
     for nonzero in 1..=3 {
         for x in -1i32..=1 {
@@ -77,7 +77,7 @@ pub struct Preview {
 
 /// The result of previewing several LODs of one source: each one's preview, and the chain sheet
 /// (each view's source, then every LOD, side by side; PNG bytes).
-pub struct ChainPreview {
+pub(crate) struct ChainPreview {
     pub levels: Vec<Preview>,
     pub chain_sheet: Vec<u8>,
 }
@@ -113,7 +113,7 @@ pub fn preview(
 
 /// Renders `source` and each of `lods` from the first `settings.views` directions (the source
 /// once per view), framing the sphere at `center` with `radius`.
-pub fn preview_chain(
+pub(crate) fn preview_chain(
     gpu: &Gpu,
     source: &ViewMesh,
     lods: &[&ViewMesh],
@@ -313,7 +313,7 @@ pub fn stand_in_position(
 }
 
 /// The files of a baked LOD, each with its path (for messages) and bytes.
-pub struct LodFiles {
+pub(crate) struct LodFiles {
     pub obj: (PathBuf, Vec<u8>),
     pub albedo_ktx2: (PathBuf, Vec<u8>),
     pub normal_ktx2: (PathBuf, Vec<u8>),
@@ -322,7 +322,7 @@ pub struct LodFiles {
 
 /// The baked LOD as an engine sees it: `lod.obj` with the decoded KTX2 atlas levels (BC-decoded,
 /// so renders show the compression), alpha-tested and double-sided.
-pub fn lod_view_mesh(files: &LodFiles) -> Result<ViewMesh, Diagnostic> {
+pub(crate) fn lod_view_mesh(files: &LodFiles) -> Result<ViewMesh, Diagnostic> {
     let (obj_path, obj_bytes) = &files.obj;
     let folder = obj_path.parent().map(PathBuf::from).unwrap_or_default();
     let (mesh, _) = crate::mesh::load_mesh(obj_path, obj_bytes, &BTreeMap::new(), &folder)?;
@@ -426,7 +426,7 @@ pub fn one_pixel_shift_iou(view: &ResolvedView, size: u32) -> f64 {
 }
 
 /// PSNR of the colour (background included), capped at 100 dB.
-pub fn rgb_psnr(a: &[u8], b: &[u8]) -> f64 {
+pub(crate) fn rgb_psnr(a: &[u8], b: &[u8]) -> f64 {
     let mut squared = 0u64;
     for (x, y) in a.chunks_exact(4).zip(b.chunks_exact(4)) {
         for channel in 0..3 {

@@ -73,7 +73,7 @@ fn material_texture_slots(loaded: &LoadedMesh) -> Vec<(usize, TextureSlot)> {
 /// The billboard kind's steps, each of one LOD level: its planes and layout (then the rest), a
 /// source texture's upload to the GPU, the render memo's load, one render batch, the LOD mesh.
 #[derive(Clone, Copy, Debug, PartialEq)]
-pub enum Step {
+pub(crate) enum Step {
     Layout { level: u32 },
     Upload { texture: u32 },
     RenderMemo { level: u32 },

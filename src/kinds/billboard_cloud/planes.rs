@@ -720,7 +720,7 @@ fn plane_of_each_face(face_count: usize, planes: &[(Vec3, f32, Vec<u32>)]) -> Ve
 }
 
 /// The materials `faces` use (`face_materials` per face; empty: one material), ascending.
-pub fn materials_of_faces(faces: &[u32], face_materials: &[u32]) -> Vec<u32> {
+pub(crate) fn materials_of_faces(faces: &[u32], face_materials: &[u32]) -> Vec<u32> {
     let mut materials: Vec<u32> =
         faces.iter().map(|&face| face_materials.get(face as usize).copied().unwrap_or(0)).collect();
     materials.sort_unstable();

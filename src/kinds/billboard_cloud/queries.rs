@@ -28,18 +28,18 @@ use crate::texture::{SurfaceKind, Texture, TextureSlot};
 // Planes 2: each plane is fitted to its faces (least squares within ε). 3: faces then move to
 // their nearest plane holding their material (rounds of reassignment and refitting). 5: a
 // budget's planes are refined as k-planes and filled up to the budget; the mean error.
-pub const PLANES: Stage = Stage { name: "planes", version: 6 };
+pub(crate) const PLANES: Stage = Stage { name: "planes", version: 6 };
 // Layout 2: faces of solid materials are also drawn on other planes' rectangles they lie within
 // ε of (crack filling).
 // 4: the density fills the atlas as far as the packer can (bisection after the 5 % steps).
 // 5: crack filling only next to the other plane's faces.
-pub const LAYOUT: Stage = Stage { name: "layout", version: 5 };
+pub(crate) const LAYOUT: Stage = Stage { name: "layout", version: 5 };
 // Render 2–5: coverage-preserving mips of alpha sources; transparent texels keep their
 // footprint's colour; sRGB bytes from tables; no coverage scaling when all or none pass.
 // 6: distance-field alpha from 2 × 2 samples; 7: colours shaded once per texel, coverage alone
 // at 2 × 2 samples.
-pub const RENDER: Stage = Stage { name: "render", version: 7 };
-pub const ATLAS: Stage = Stage { name: "atlas", version: 1 };
+pub(crate) const RENDER: Stage = Stage { name: "render", version: 7 };
+pub(crate) const ATLAS: Stage = Stage { name: "atlas", version: 1 };
 pub const LOD: Stage = Stage { name: "lod", version: 1 };
 
 impl KeyPart for crate::packing::PageSettings {
@@ -51,18 +51,18 @@ impl KeyPart for crate::packing::PageSettings {
 
 /// What a level is asked for (one level without a chain).
 #[salsa::tracked(returns(copy))]
-pub fn level_settings(db: &dyn Db, asset: Asset, level: u32) -> super::levels::LevelSettings {
+pub(crate) fn level_settings(db: &dyn Db, asset: Asset, level: u32) -> super::levels::LevelSettings {
     super::levels::settings_for(asset.settings(db), level)
 }
 
 /// A level's stage label: the asset's name, or `asset/lod<N>` in a chain.
 #[salsa::tracked(returns(ref))]
-pub fn level_label(db: &dyn Db, asset: Asset, level: u32) -> String {
+pub(crate) fn level_label(db: &dyn Db, asset: Asset, level: u32) -> String {
     super::levels::label(asset.name(db), &super::levels::level_folder(asset.settings(db), level))
 }
 
 #[salsa::tracked(returns(copy))]
-pub fn planes_cache_key(db: &dyn Db, asset: Asset, level: u32) -> CacheKey {
+pub(crate) fn planes_cache_key(db: &dyn Db, asset: Asset, level: u32) -> CacheKey {
     let settings = level_settings(db, asset, level).planes;
     let key = stage_key(PLANES).part(&mesh_cache_key(db, asset, asset.main_file(db).clone()).0);
     match settings.max_quads {
@@ -74,7 +74,11 @@ pub fn planes_cache_key(db: &dyn Db, asset: Asset, level: u32) -> CacheKey {
 
 /// A level's planes (stage `planes`).
 #[salsa::tracked(returns(clone))]
-pub fn billboard_planes(db: &dyn Db, asset: Asset, level: u32) -> Result<Arc<super::planes::PlaneSet>, Diagnostic> {
+pub(crate) fn billboard_planes(
+    db: &dyn Db,
+    asset: Asset,
+    level: u32,
+) -> Result<Arc<super::planes::PlaneSet>, Diagnostic> {
     let name = level_label(db, asset, level);
     cached_json(db, PLANES, name, planes_cache_key(db, asset, level), || {
         let loaded = loaded_mesh(db, asset)?;
@@ -101,7 +105,7 @@ pub fn billboard_planes(db: &dyn Db, asset: Asset, level: u32) -> Result<Arc<sup
 
 /// The planes' rectangles and their atlas layout.
 #[derive(Debug, PartialEq, serde::Serialize, serde::Deserialize)]
-pub struct BillboardLayout {
+pub(crate) struct BillboardLayout {
     pub rectangles: Vec<PlaneRectangle>,
     pub layout: Layout,
     /// The render stages: each plane's rectangles grouped by the materials they show.
@@ -110,7 +114,7 @@ pub struct BillboardLayout {
 
 /// A level's atlas settings, the texel density asked for, and the screen size it is meant for.
 #[salsa::tracked(returns(clone))]
-pub fn atlas_layout_settings(
+pub(crate) fn atlas_layout_settings(
     db: &dyn Db,
     asset: Asset,
     level: u32,
@@ -124,7 +128,7 @@ pub fn atlas_layout_settings(
 }
 
 #[salsa::tracked(returns(copy))]
-pub fn layout_cache_key(db: &dyn Db, asset: Asset, level: u32) -> CacheKey {
+pub(crate) fn layout_cache_key(db: &dyn Db, asset: Asset, level: u32) -> CacheKey {
     let (atlas, density, screen_size) = atlas_layout_settings(db, asset, level);
     let key = stage_key(LAYOUT).part(&planes_cache_key(db, asset, level).0).part(&atlas).part(&density);
     // Only when given, so that the keys of layouts without it stay as they were.
@@ -136,7 +140,7 @@ pub fn layout_cache_key(db: &dyn Db, asset: Asset, level: u32) -> CacheKey {
 
 /// A level's rectangles, layout and render groups (stage `layout`).
 #[salsa::tracked(returns(clone))]
-pub fn billboard_layout(db: &dyn Db, asset: Asset, level: u32) -> Result<Arc<BillboardLayout>, Diagnostic> {
+pub(crate) fn billboard_layout(db: &dyn Db, asset: Asset, level: u32) -> Result<Arc<BillboardLayout>, Diagnostic> {
     let label = level_label(db, asset, level);
     cached_json(db, LAYOUT, label, layout_cache_key(db, asset, level), || compute_billboard_layout(db, asset, level))
         .map(Arc::new)
@@ -182,7 +186,7 @@ fn compute_billboard_layout(db: &dyn Db, asset: Asset, level: u32) -> Result<Bil
 /// A level's `lod.obj` and `lod.mtl` (stage `lod`): planes and layout only, so texture edits
 /// leave them alone.
 #[salsa::tracked(returns(clone))]
-pub fn lod_files(db: &dyn Db, asset: Asset, level: u32) -> Result<Arc<(String, String)>, Diagnostic> {
+pub(crate) fn lod_files(db: &dyn Db, asset: Asset, level: u32) -> Result<Arc<(String, String)>, Diagnostic> {
     let name = level_label(db, asset, level);
     let key = stage_key(LOD).part(&layout_cache_key(db, asset, level).0).finish();
     cached_json(db, LOD, name, key, || {
@@ -193,13 +197,13 @@ pub fn lod_files(db: &dyn Db, asset: Asset, level: u32) -> Result<Arc<(String, S
 }
 
 #[salsa::tracked(returns(copy))]
-pub fn billboard_alpha_cutoff(db: &dyn Db, asset: Asset) -> f32 {
+pub(crate) fn billboard_alpha_cutoff(db: &dyn Db, asset: Asset) -> f32 {
     asset.settings(db).billboard.alpha_cutoff
 }
 
 /// The label of a render group's stage instance: `asset/plane12:bark+leaves`, or
 /// `asset/lod1/plane12:bark+leaves` in a chain (`level_label` is the level's).
-pub fn render_label(level_label: &str, mesh: &crate::mesh::Mesh, group: &RenderGroup) -> String {
+pub(crate) fn render_label(level_label: &str, mesh: &crate::mesh::Mesh, group: &RenderGroup) -> String {
     format!("{level_label}/{}", super::render_groups::render_group_label(mesh, group))
 }
 
@@ -228,7 +232,7 @@ fn material_map(
 /// texture), kept in the persistent cache under the file's content: after a restart, textures
 /// that did not change are neither decoded nor filtered again (on the oak, about 50 ms each).
 #[salsa::tracked(returns(clone))]
-pub fn material_texture_mips(
+pub(crate) fn material_texture_mips(
     db: &dyn Db,
     asset: Asset,
     material: u32,
@@ -289,7 +293,12 @@ fn mip_levels_from_entry(entry: CacheEntry) -> Option<Vec<Texture>> {
 /// plane's rectangles that show the same materials (stage `render`), from the render memo when
 /// it holds them, else from its batch's render; reads only the textures of those materials.
 #[salsa::tracked(returns(clone))]
-pub fn plane_images(db: &dyn Db, asset: Asset, level: u32, group: u32) -> Result<Arc<Vec<PlaneImages>>, Diagnostic> {
+pub(crate) fn plane_images(
+    db: &dyn Db,
+    asset: Asset,
+    level: u32,
+    group: u32,
+) -> Result<Arc<Vec<PlaneImages>>, Diagnostic> {
     let loaded = loaded_mesh(db, asset)?;
     let layout = billboard_layout(db, asset, level)?;
     let Some(render_group) = layout.render_groups.get(group as usize) else {
@@ -326,7 +335,7 @@ fn remembered_render(db: &dyn Db, asset: Asset, level: u32, group: u32) -> Optio
 
 /// The level's render groups in the batches that render together (`render_groups::render_batches`).
 #[salsa::tracked(returns(clone))]
-pub fn level_render_batches(db: &dyn Db, asset: Asset, level: u32) -> Arc<Vec<Vec<u32>>> {
+pub(crate) fn level_render_batches(db: &dyn Db, asset: Asset, level: u32) -> Arc<Vec<Vec<u32>>> {
     let Ok(layout) = billboard_layout(db, asset, level) else { return Arc::default() };
     Arc::new(super::render_groups::render_batches(&layout.render_groups, |group| {
         group
@@ -339,14 +348,19 @@ pub fn level_render_batches(db: &dyn Db, asset: Asset, level: u32) -> Arc<Vec<Ve
 }
 
 /// A render batch's images: each render group's index and its planes' images.
-pub type BatchImages = Vec<(u32, Arc<Vec<PlaneImages>>)>;
+pub(crate) type BatchImages = Vec<(u32, Arc<Vec<PlaneImages>>)>;
 
 /// The images of a batch's render groups that the render memo does not hold, rendered in one
 /// go (few GPU submissions for many small groups); each group's run is recorded under its own
 /// label with its share of the time, by texels. Every group of a batch shows the same
 /// materials, so the batch reads what each of its groups reads.
 #[salsa::tracked(returns(clone))]
-pub fn rendered_batch(db: &dyn Db, asset: Asset, level: u32, batch: u32) -> Result<Arc<BatchImages>, Diagnostic> {
+pub(crate) fn rendered_batch(
+    db: &dyn Db,
+    asset: Asset,
+    level: u32,
+    batch: u32,
+) -> Result<Arc<BatchImages>, Diagnostic> {
     let loaded = loaded_mesh(db, asset)?;
     let layout = billboard_layout(db, asset, level)?;
     let alpha_cutoff = billboard_alpha_cutoff(db, asset);
@@ -468,7 +482,11 @@ fn images_by_rectangle<'a>(layout: &BillboardLayout, images: &'a [Arc<Vec<PlaneI
 /// The atlas texels that faces cover (part of the atlas stage): unchanged by colour-only
 /// edits, which therefore skip the fill search below.
 #[salsa::tracked(returns(clone))]
-pub fn atlas_coverage(db: &dyn Db, asset: Asset, level: u32) -> Result<Arc<super::atlas::AtlasCoverage>, Diagnostic> {
+pub(crate) fn atlas_coverage(
+    db: &dyn Db,
+    asset: Asset,
+    level: u32,
+) -> Result<Arc<super::atlas::AtlasCoverage>, Diagnostic> {
     let layout = billboard_layout(db, asset, level)?;
     let images = render_group_images(db, asset, level, &layout)?;
     store_renders(db, asset, level, &images);
@@ -481,7 +499,7 @@ pub fn atlas_coverage(db: &dyn Db, asset: Asset, level: u32) -> Result<Arc<super
 /// atlas stage). Kept in the persistent cache under the coverage's content hash: a colour-only
 /// edit in a new process loads it (about 15 ms on the oak) instead of searching (about 90 ms).
 #[salsa::tracked(returns(clone))]
-pub fn atlas_texel_sources(
+pub(crate) fn atlas_texel_sources(
     db: &dyn Db,
     asset: Asset,
     level: u32,
@@ -512,7 +530,12 @@ const ATLAS_FILL: Stage = Stage { name: "atlas-fill", version: 1 };
 /// One composited, filled atlas surface of a level (stage `atlas`), shared with the tail, not
 /// copied.
 #[salsa::tracked(returns(clone))]
-pub fn atlas_surface(db: &dyn Db, asset: Asset, level: u32, surface: SurfaceKind) -> Result<Arc<Texture>, Diagnostic> {
+pub(crate) fn atlas_surface(
+    db: &dyn Db,
+    asset: Asset,
+    level: u32,
+    surface: SurfaceKind,
+) -> Result<Arc<Texture>, Diagnostic> {
     let layout = billboard_layout(db, asset, level)?;
     let images = render_group_images(db, asset, level, &layout)?;
     let coverage = atlas_coverage(db, asset, level)?;
@@ -528,7 +551,7 @@ pub fn atlas_surface(db: &dyn Db, asset: Asset, level: u32, surface: SurfaceKind
 /// texture edit that leaves a surface's renders alone (a colour-only edit leaves the normals)
 /// finds it in the cache by this key without compositing it.
 #[salsa::tracked(returns(clone))]
-pub fn atlas_surface_parts_key(
+pub(crate) fn atlas_surface_parts_key(
     db: &dyn Db,
     asset: Asset,
     level: u32,
@@ -557,7 +580,7 @@ pub fn atlas_surface_parts_key(
 /// What the atlas is made of, cheap to compute: the layout's key (mesh, MTL, settings), every
 /// texture the materials name, the alpha cutoff, the render and atlas versions.
 #[salsa::tracked(returns(copy))]
-pub fn atlas_recipe_key(db: &dyn Db, asset: Asset, level: u32) -> CacheKey {
+pub(crate) fn atlas_recipe_key(db: &dyn Db, asset: Asset, level: u32) -> CacheKey {
     let key = stage_key(ATLAS)
         .part(&RENDER.version)
         .part(crate::gpu::adapter_family())
@@ -571,7 +594,7 @@ pub fn atlas_recipe_key(db: &dyn Db, asset: Asset, level: u32) -> CacheKey {
 /// The fraction of atlas texels that faces cover, rounded to 1e-4, for the report: kept in the
 /// persistent cache under the atlas's recipe, so that a bake served from the cache needs no atlas.
 #[salsa::tracked(returns(clone))]
-pub fn atlas_coverage_fraction(db: &dyn Db, asset: Asset, level: u32) -> Result<f64, Diagnostic> {
+pub(crate) fn atlas_coverage_fraction(db: &dyn Db, asset: Asset, level: u32) -> Result<f64, Diagnostic> {
     let key =
         stage_key(Stage { name: "atlas-coverage", version: 1 }).part(&atlas_recipe_key(db, asset, level).0).finish();
     cached_json(db, ATLAS, level_label(db, asset, level), key, || {
@@ -584,7 +607,7 @@ pub fn atlas_coverage_fraction(db: &dyn Db, asset: Asset, level: u32) -> Result<
 /// What one render group's images are made of: the layout (mesh, MTL, planes, settings), the
 /// group, the alpha cutoff, and the textures of the group's materials.
 #[salsa::tracked(returns(copy))]
-pub fn render_group_key(db: &dyn Db, asset: Asset, level: u32, group: u32) -> CacheKey {
+pub(crate) fn render_group_key(db: &dyn Db, asset: Asset, level: u32, group: u32) -> CacheKey {
     let key = stage_key(RENDER)
         .part(crate::gpu::adapter_family())
         .part(&layout_cache_key(db, asset, level).0)
@@ -631,7 +654,7 @@ fn groups_by_material_set(layout: &BillboardLayout) -> BTreeMap<&[u32], Vec<u32>
 
 /// The render groups' images the memo on disk holds, by group key (read once per layout).
 #[salsa::tracked(returns(clone))]
-pub fn stored_renders(db: &dyn Db, asset: Asset, level: u32) -> Arc<HashMap<CacheKey, Arc<Vec<PlaneImages>>>> {
+pub(crate) fn stored_renders(db: &dyn Db, asset: Asset, level: u32) -> Arc<HashMap<CacheKey, Arc<Vec<PlaneImages>>>> {
     let Ok(layout) = billboard_layout(db, asset, level) else { return Arc::default() };
     let mut renders = HashMap::new();
     for materials in groups_by_material_set(&layout).keys() {

@@ -4,7 +4,6 @@
 //! itself is `gpu::Gpu::render_rectangles`.
 
 use std::collections::BTreeMap;
-use std::path::PathBuf;
 
 use crate::gpu::RenderVertex;
 use crate::kinds::billboard_cloud::rectangles::PlaneRectangle;
@@ -13,14 +12,14 @@ use crate::mesh::Mesh;
 /// Samples per texel along each axis of the plane renders: two, brought down with a
 /// distance-field alpha, put cut-out edges between texels where the samples put them (at 256
 /// quads, mean IoU: oak 0.896 → 0.904, ash 0.808 → 0.829, bush 0.852 → 0.857).
-pub const PLANE_SUPERSAMPLING: u32 = 2;
+pub(crate) const PLANE_SUPERSAMPLING: u32 = 2;
 
 /// The largest side a supersampled render may have: WebGPU's guaranteed texture size, so that
 /// every adapter renders the same; a larger rectangle renders one sample per texel.
-pub const MAX_SUPERSAMPLED_SIDE: u32 = 8192;
+pub(crate) const MAX_SUPERSAMPLED_SIDE: u32 = 8192;
 
 /// The supersampling of a rectangle of `width` × `height` texels.
-pub fn plane_supersampling(width: u32, height: u32) -> u32 {
+pub(crate) fn plane_supersampling(width: u32, height: u32) -> u32 {
     if width.max(height).max(1).saturating_mul(PLANE_SUPERSAMPLING) <= MAX_SUPERSAMPLED_SIDE {
         PLANE_SUPERSAMPLING
     } else {
@@ -29,7 +28,7 @@ pub fn plane_supersampling(width: u32, height: u32) -> u32 {
 }
 
 /// The materials a rectangle's faces use, in index order.
-pub fn plane_materials(mesh: &Mesh, plane: &PlaneRectangle) -> Vec<u32> {
+pub(crate) fn plane_materials(mesh: &Mesh, plane: &PlaneRectangle) -> Vec<u32> {
     crate::kinds::billboard_cloud::planes::materials_of_faces(&plane.faces, &mesh.triangle_materials)
 }
 
@@ -65,13 +64,13 @@ pub fn render_groups(mesh: &Mesh, rectangles: &[PlaneRectangle]) -> Vec<RenderGr
 /// The most texels of one render batch: a few submissions per level instead of one per render
 /// group (on llvmpipe each submission costs about a millisecond whatever its size, and the oak
 /// has 1,245 groups), small enough that two workers share a level's renders evenly.
-pub const RENDER_BATCH_TEXELS: u64 = 1 << 19;
+pub(crate) const RENDER_BATCH_TEXELS: u64 = 1 << 19;
 
 /// The render groups in batches rendered together: groups of one material set (so that an edit
 /// of a material's texture re-renders only batches of groups that show it), in layout order,
 /// each batch up to [`RENDER_BATCH_TEXELS`] (a larger group is a batch alone). `texels(group)`
 /// is the group's size in texels.
-pub fn render_batches(groups: &[RenderGroup], texels: impl Fn(&RenderGroup) -> u64) -> Vec<Vec<u32>> {
+pub(crate) fn render_batches(groups: &[RenderGroup], texels: impl Fn(&RenderGroup) -> u64) -> Vec<Vec<u32>> {
     let mut open: BTreeMap<&[u32], (Vec<u32>, u64)> = BTreeMap::new();
     let mut batches: Vec<Vec<u32>> = Vec::new();
     for (index, group) in groups.iter().enumerate() {
@@ -96,23 +95,9 @@ pub fn render_group_label(mesh: &Mesh, group: &RenderGroup) -> String {
     format!("plane{}:{}", group.plane, names.join("+"))
 }
 
-/// The texture files a plane's render reads: the maps of the materials its faces use.
-pub fn plane_texture_paths(mesh: &Mesh, plane: &PlaneRectangle) -> Vec<PathBuf> {
-    if mesh.uvs.is_none() {
-        return Vec::new();
-    }
-    let mut paths: Vec<PathBuf> = plane_materials(mesh, plane)
-        .iter()
-        .flat_map(|&material| mesh.materials[material as usize].maps.values().cloned())
-        .collect();
-    paths.sort();
-    paths.dedup();
-    paths
-}
-
 /// `faces` as vertex batches per material (three vertices per triangle, in the order given): a
 /// rectangle's own faces then those it also draws, or every face for a view of the mesh.
-pub fn face_batches(
+pub(crate) fn face_batches(
     mesh: &Mesh,
     tangents: &[[f32; 4]],
     faces: impl IntoIterator<Item = u32>,
@@ -124,7 +109,7 @@ pub fn face_batches(
 
 /// [`face_batches`] with each corner drawn at `position(face, corner)` (corner 0 to 2) instead of
 /// its vertex's position (normals, texture coordinates and tangents stay the vertex's).
-pub fn face_batches_placed(
+pub(crate) fn face_batches_placed(
     mesh: &Mesh,
     tangents: &[[f32; 4]],
     faces: impl IntoIterator<Item = u32>,

@@ -14,7 +14,7 @@ use crate::mesh::uv_raster::{rasterize_uv, TexelRegion};
 
 /// The low mesh as the rays leave it.
 #[derive(Clone, Copy)]
-pub struct LowSurface<'a> {
+pub(crate) struct LowSurface<'a> {
     pub positions: &'a [[f32; 3]],
     pub normals: &'a [[f32; 3]],
     pub uvs: &'a [[f32; 2]],
@@ -25,7 +25,7 @@ pub struct LowSurface<'a> {
 
 /// Where the rays of a `Normals` bake leave from.
 #[derive(Clone, Copy)]
-pub enum RayStart<'a> {
+pub(crate) enum RayStart<'a> {
     /// The low surface, along its interpolated normals (`height.png`).
     Flat,
     /// Each low triangle's PN patch, along its PN normal (the map a PN-tessellated mesh is
@@ -36,7 +36,7 @@ pub enum RayStart<'a> {
 /// How far along the normal the high surface is looked for: `frontal` outward, `rear` inward
 /// (mesh units).
 #[derive(Clone, Copy, Debug, PartialEq)]
-pub struct RayReach {
+pub(crate) struct RayReach {
     pub frontal: f32,
     pub rear: f32,
 }
@@ -44,7 +44,7 @@ pub struct RayReach {
 /// What one texel holds.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
 #[repr(u8)]
-pub enum HeightTexel {
+pub(crate) enum HeightTexel {
     /// Not on the surface: filled.
     Empty = 0,
     Measured = 1,
@@ -55,7 +55,7 @@ pub enum HeightTexel {
 /// A finished height map: a signed distance per texel (mesh units, every texel filled), each
 /// texel's state, and figures.
 #[derive(Clone, Debug)]
-pub struct HeightMap {
+pub(crate) struct HeightMap {
     pub size: u32,
     pub distances: Vec<f32>,
     pub states: Vec<u8>,
@@ -72,7 +72,7 @@ pub struct HeightMap {
 
 /// Heights that span less than this fraction of the search span are a flat map: the high mesh
 /// lies on the low one (float noise of the rays, about 1e-7 of the mesh's size, is far below).
-pub const FLAT_FRACTION: f32 = 1e-4;
+pub(crate) const FLAT_FRACTION: f32 = 1e-4;
 
 impl PartialEq for HeightMap {
     fn eq(&self, other: &Self) -> bool {
@@ -85,7 +85,7 @@ impl HeightMap {
     /// Assembles a map from per-texel measures (`None` on the surface with no hit; texels off
     /// the surface are `covered = false`), filling every unmeasured texel from its nearest
     /// measured one.
-    pub fn from_measures(
+    pub(crate) fn from_measures(
         size: u32,
         measures: &[Option<f32>],
         covered: &[bool],
@@ -122,14 +122,14 @@ impl HeightMap {
 
     /// Whether the measured heights are flat: they span less than [`FLAT_FRACTION`] of the
     /// search span.
-    pub fn is_flat(&self) -> bool {
+    pub(crate) fn is_flat(&self) -> bool {
         self.range[1] - self.range[0] < FLAT_FRACTION * self.search_span
     }
 
     /// The mapping of its 16-bit values: the measured range spread over 0..=65535; a flat map's
     /// middle at the middle value and the whole search span over the range, so that its noise
     /// is not stretched into relief.
-    pub fn quantization(&self) -> Quantization {
+    pub(crate) fn quantization(&self) -> Quantization {
         let [low, high] = self.range.map(f64::from);
         if self.is_flat() {
             let magnitude = f64::from(self.search_span).max(1e-30);
@@ -140,7 +140,7 @@ impl HeightMap {
     }
 
     /// The 16-bit values under `quantization`.
-    pub fn values16(&self) -> Vec<u16> {
+    pub(crate) fn values16(&self) -> Vec<u16> {
         let quantization = self.quantization();
         self.distances.iter().map(|&distance| quantization.value(distance)).collect()
     }
@@ -168,7 +168,7 @@ impl HeightMap {
 
 /// `distance = (value − center) × magnitude`, `value` in [0, 1] (the 16-bit value / 65535).
 #[derive(Clone, Copy, Debug, PartialEq, serde::Serialize)]
-pub struct Quantization {
+pub(crate) struct Quantization {
     pub center: f64,
     pub magnitude: f64,
 }
@@ -178,16 +178,18 @@ impl Quantization {
         let value = distance as f64 / self.magnitude + self.center;
         (value.clamp(0.0, 1.0) * 65535.0).round() as u16
     }
-
-    pub fn distance(&self, value: u16) -> f64 {
-        (value as f64 / 65535.0 - self.center) * self.magnitude
-    }
 }
 
 /// The signed distance along `direction` from `point` to the high surface nearest it within
 /// `reach` (positive outward), both faces counting. Each way's ray starts a hair behind the
 /// point, so that a high surface lying exactly on the low one is found.
-pub fn distance_along(high: &TriangleBvh, point: Vec3, direction: Vec3, reach: RayReach, hair: f32) -> Option<f32> {
+pub(crate) fn distance_along(
+    high: &TriangleBvh,
+    point: Vec3,
+    direction: Vec3,
+    reach: RayReach,
+    hair: f32,
+) -> Option<f32> {
     let outward = (reach.frontal > 0.0)
         .then(|| high.cast(point - direction * hair, direction, reach.frontal + hair, u32::MAX, BackFaces::Block).hit)
         .flatten()
@@ -204,7 +206,7 @@ pub fn distance_along(high: &TriangleBvh, point: Vec3, direction: Vec3, reach: R
 
 /// A `Normals` bake: per texel of the low mesh's `size`² UV space, the distance to the high
 /// surface along the surface's normal (the low surface's, or its PN surface's).
-pub fn bake_along_normals(
+pub(crate) fn bake_along_normals(
     high: &TriangleBvh,
     low: &LowSurface,
     start: RayStart,
@@ -258,7 +260,7 @@ pub fn bake_along_normals(
 
 /// A `TopDown` bake: the high render minus the low one per texel (both relative to one
 /// footprint), measured where both surfaces are.
-pub fn bake_top_down(
+pub(crate) fn bake_top_down(
     size: u32,
     high: &[Option<f32>],
     low: &[Option<f32>],

@@ -54,7 +54,7 @@ fn measured_meshes(db: &dyn Db, asset: Asset) -> Vec<Measured> {
 /// The height kind's steps: both meshes (then the map and the rest), the tessellation, and one
 /// measured mesh's distance to the high one.
 #[derive(Clone, Copy, Debug, PartialEq)]
-pub enum Step {
+pub(crate) enum Step {
     Plan,
     Tessellate,
     /// The `mesh`-th measured mesh.
@@ -243,7 +243,7 @@ impl Kind for Height {
 
 /// `report.json` of a height bake.
 #[derive(Clone, Debug, PartialEq, Serialize)]
-pub struct HeightReport {
+pub(crate) struct HeightReport {
     pub asset: String,
     pub kind: &'static str,
     pub high: String,
@@ -263,7 +263,7 @@ pub struct HeightReport {
 }
 
 #[derive(Clone, Debug, PartialEq, Serialize)]
-pub struct HeightMapReport {
+pub(crate) struct HeightMapReport {
     /// The 16-bit map.
     pub png: String,
     pub size: u32,
@@ -282,14 +282,14 @@ pub struct HeightMapReport {
 }
 
 #[derive(Clone, Debug, PartialEq, Serialize)]
-pub struct HeightTextureReport {
+pub(crate) struct HeightTextureReport {
     pub path: String,
     #[serde(flatten)]
     pub info: SurfaceInfo,
 }
 
 #[derive(Clone, Debug, PartialEq, Serialize)]
-pub struct TessellatedReport {
+pub(crate) struct TessellatedReport {
     pub obj: String,
     pub level: u32,
     pub displace: bool,
@@ -298,7 +298,7 @@ pub struct TessellatedReport {
 }
 
 #[derive(Clone, Debug, PartialEq, Serialize)]
-pub struct DistanceReport {
+pub(crate) struct DistanceReport {
     pub samples_per_surface: usize,
     pub low: Option<SurfaceDistance>,
     pub pn: Option<SurfaceDistance>,

@@ -25,17 +25,17 @@ use crate::mesh::surface_distance::{area_weighted_samples, surface_distance, Sur
 
 pub const BVH: Stage = Stage { name: "bvh", version: 1 };
 /// 2: a flat map (heights within 1e-4 of the search) centred, its noise not stretched.
-pub const BAKE: Stage = Stage { name: "bake", version: 2 };
-pub const TESSELLATE: Stage = Stage { name: "tessellate", version: 1 };
-pub const DISPLACE: Stage = Stage { name: "displace", version: 1 };
-pub const DISTANCE: Stage = Stage { name: "distance", version: 1 };
+pub(crate) const BAKE: Stage = Stage { name: "bake", version: 2 };
+pub(crate) const TESSELLATE: Stage = Stage { name: "tessellate", version: 1 };
+pub(crate) const DISPLACE: Stage = Stage { name: "displace", version: 1 };
+pub(crate) const DISTANCE: Stage = Stage { name: "distance", version: 1 };
 
 /// Points sampled on each surface for the distances, each way.
-pub const DISTANCE_SAMPLES: usize = 100_000;
+pub(crate) const DISTANCE_SAMPLES: usize = 100_000;
 
 /// Which surface a map's rays leave from.
 #[derive(Clone, Copy, Debug, PartialEq, Eq, Hash, PartialOrd, Ord)]
-pub enum MapReference {
+pub(crate) enum MapReference {
     /// The low mesh (`height.png`).
     Low,
     /// The low mesh's PN surface (`height_pn.png`, what the tessellation is displaced by).
@@ -61,7 +61,7 @@ impl Measured {
 }
 
 /// A map's stage label: the asset's name for the low map, `asset/pn` for the PN one.
-pub fn map_label(asset_name: &str, reference: MapReference) -> String {
+pub(crate) fn map_label(asset_name: &str, reference: MapReference) -> String {
     match reference {
         MapReference::Low => asset_name.to_string(),
         MapReference::Pn => format!("{asset_name}/pn"),
@@ -69,23 +69,23 @@ pub fn map_label(asset_name: &str, reference: MapReference) -> String {
 }
 
 #[salsa::tracked(returns(clone))]
-pub fn height_settings(db: &dyn Db, asset: Asset) -> HeightSettings {
+pub(crate) fn height_settings(db: &dyn Db, asset: Asset) -> HeightSettings {
     asset.settings(db).height.clone()
 }
 
 #[salsa::tracked(returns(clone))]
-pub fn tessellate_settings(db: &dyn Db, asset: Asset) -> Option<TessellateSettings> {
+pub(crate) fn tessellate_settings(db: &dyn Db, asset: Asset) -> Option<TessellateSettings> {
     asset.settings(db).tessellate
 }
 
 /// The high mesh's project-relative path (the settings hold it relative to the source folder).
-pub fn high_path(db: &dyn Db, asset: Asset) -> PathBuf {
+pub(crate) fn high_path(db: &dyn Db, asset: Asset) -> PathBuf {
     asset.source_root(db).join(asset.settings(db).high_mesh.as_deref().unwrap_or(std::path::Path::new("")))
 }
 
 /// A mesh with the hash of its geometry and its bounding-box diagonal.
 #[derive(Debug, PartialEq)]
-pub struct MeshGeometry {
+pub(crate) struct MeshGeometry {
     pub loaded: Arc<LoadedMesh>,
     /// blake3 of positions, normals, UVs and triangles.
     pub hash: blake3::Hash,
@@ -132,22 +132,22 @@ fn mesh_geometry(
 }
 
 #[salsa::tracked(returns(clone))]
-pub fn low_geometry(db: &dyn Db, asset: Asset) -> Result<Arc<MeshGeometry>, Diagnostic> {
+pub(crate) fn low_geometry(db: &dyn Db, asset: Asset) -> Result<Arc<MeshGeometry>, Diagnostic> {
     mesh_geometry(loaded_mesh(db, asset)?, asset.main_file(db), "low")
 }
 
 #[salsa::tracked(returns(clone))]
-pub fn high_geometry(db: &dyn Db, asset: Asset) -> Result<Arc<MeshGeometry>, Diagnostic> {
+pub(crate) fn high_geometry(db: &dyn Db, asset: Asset) -> Result<Arc<MeshGeometry>, Diagnostic> {
     let path = high_path(db, asset);
     mesh_geometry(loaded_mesh_of(db, asset, path.clone())?, &path, "high")
 }
 
 /// A BVH compared by the geometry it was built from.
-pub type HashedBvh = ByHash<TriangleBvh>;
+pub(crate) type HashedBvh = ByHash<TriangleBvh>;
 
 /// The high mesh's BVH (stage `bvh`): built only when a map or a distance must be computed.
 #[salsa::tracked(returns(clone))]
-pub fn high_bvh(db: &dyn Db, asset: Asset) -> Result<Arc<HashedBvh>, Diagnostic> {
+pub(crate) fn high_bvh(db: &dyn Db, asset: Asset) -> Result<Arc<HashedBvh>, Diagnostic> {
     let high = high_geometry(db, asset)?;
     let mesh = &high.loaded.mesh;
     let bvh = timed(db, BVH, asset.name(db), || build_triangle_bvh(&mesh.positions, &mesh.triangles));
@@ -155,7 +155,7 @@ pub fn high_bvh(db: &dyn Db, asset: Asset) -> Result<Arc<HashedBvh>, Diagnostic>
 }
 
 /// The low mesh's PN patches, each from its corners' averaged normals (the geometry's).
-pub fn pn_patches(low: &MeshGeometry) -> Vec<PnPatch> {
+pub(crate) fn pn_patches(low: &MeshGeometry) -> Vec<PnPatch> {
     let mesh = &low.loaded.mesh;
     let input = PnInput { positions: &mesh.positions, normals: &mesh.normals, uvs: None, triangles: &mesh.triangles };
     let (position_ids, averaged) = averaged_normals(&input);
@@ -187,7 +187,7 @@ fn map_projection(settings: &HeightSettings, reference: MapReference) -> HeightP
 
 /// What a map reads, as a key: its settings and both meshes' geometry (not their materials).
 #[salsa::tracked(returns(clone))]
-pub fn map_key(db: &dyn Db, asset: Asset, reference: MapReference) -> Result<CacheKey, Diagnostic> {
+pub(crate) fn map_key(db: &dyn Db, asset: Asset, reference: MapReference) -> Result<CacheKey, Diagnostic> {
     let settings = height_settings(db, asset);
     let reference_name = match reference {
         MapReference::Low => "low",
@@ -210,7 +210,7 @@ pub fn map_key(db: &dyn Db, asset: Asset, reference: MapReference) -> Result<Cac
 
 /// A finished map and its 16-bit PNG.
 #[derive(Debug, PartialEq)]
-pub struct HeightMapFiles {
+pub(crate) struct HeightMapFiles {
     pub map: HeightMap,
     pub png16: Arc<[u8]>,
 }
@@ -220,7 +220,11 @@ const MAP_ENTRY: &str = "height-map";
 /// A map (stage `bake`): from the persistent cache, else rays along the normals or two
 /// top-down renders; filled, with its 16-bit PNG.
 #[salsa::tracked(returns(clone))]
-pub fn height_map(db: &dyn Db, asset: Asset, reference: MapReference) -> Result<Arc<HeightMapFiles>, Diagnostic> {
+pub(crate) fn height_map(
+    db: &dyn Db,
+    asset: Asset,
+    reference: MapReference,
+) -> Result<Arc<HeightMapFiles>, Diagnostic> {
     let key = map_key(db, asset, reference)?;
     let label = map_label(asset.name(db), reference);
     if let Some(files) = load_cached(db, MAP_ENTRY, key, map_from_entry) {
@@ -366,7 +370,7 @@ fn map_from_entry(entry: CacheEntry) -> Option<HeightMapFiles> {
 }
 
 /// A tessellated mesh compared by the hash of its vertices and triangles.
-pub type HashedMesh = ByHash<PnMesh>;
+pub(crate) type HashedMesh = ByHash<PnMesh>;
 
 fn hashed(mesh: PnMesh) -> Arc<HashedMesh> {
     let hash = hash_of_parts(&[
@@ -383,11 +387,11 @@ fn level_of(db: &dyn Db, asset: Asset) -> Result<TessellateSettings, Diagnostic>
 }
 
 /// The most triangles a tessellated mesh may have (its OBJ text is about 90 bytes a triangle).
-pub const MAX_TESSELLATED_TRIANGLES: u64 = 4_000_000;
+pub(crate) const MAX_TESSELLATED_TRIANGLES: u64 = 4_000_000;
 
 /// The low mesh on its PN surface, `level` segments per edge (stage `tessellate`).
 #[salsa::tracked(returns(clone))]
-pub fn pn_mesh(db: &dyn Db, asset: Asset) -> Result<Arc<HashedMesh>, Diagnostic> {
+pub(crate) fn pn_mesh(db: &dyn Db, asset: Asset) -> Result<Arc<HashedMesh>, Diagnostic> {
     let settings = level_of(db, asset)?;
     let low = low_geometry(db, asset)?;
     let mesh = &low.loaded.mesh;
@@ -413,7 +417,7 @@ pub fn pn_mesh(db: &dyn Db, asset: Asset) -> Result<Arc<HashedMesh>, Diagnostic>
 /// What the final tessellated mesh reads: the tessellation's settings, the low mesh, and when
 /// displaced the PN map's key.
 #[salsa::tracked(returns(clone))]
-pub fn output_mesh_key(db: &dyn Db, asset: Asset) -> Result<CacheKey, Diagnostic> {
+pub(crate) fn output_mesh_key(db: &dyn Db, asset: Asset) -> Result<CacheKey, Diagnostic> {
     let settings = level_of(db, asset)?;
     let key = stage_key(DISPLACE)
         .part(&TESSELLATE.version)
@@ -425,7 +429,7 @@ pub fn output_mesh_key(db: &dyn Db, asset: Asset) -> Result<CacheKey, Diagnostic
 
 /// The PN mesh displaced by the PN map (stage `displace`; the PN mesh itself without `displace`).
 #[salsa::tracked(returns(clone))]
-pub fn output_mesh(db: &dyn Db, asset: Asset) -> Result<Arc<HashedMesh>, Diagnostic> {
+pub(crate) fn output_mesh(db: &dyn Db, asset: Asset) -> Result<Arc<HashedMesh>, Diagnostic> {
     let settings = level_of(db, asset)?;
     let pn = pn_mesh(db, asset)?;
     if !settings.displace {
@@ -439,7 +443,7 @@ pub fn output_mesh(db: &dyn Db, asset: Asset) -> Result<Arc<HashedMesh>, Diagnos
 
 /// The final tessellated mesh as OBJ text (`mtllib tessellated.mtl`), with its counts.
 #[derive(Debug, PartialEq)]
-pub struct TessellatedFiles {
+pub(crate) struct TessellatedFiles {
     pub obj: Arc<[u8]>,
     pub vertices: u64,
     pub triangles: u64,
@@ -456,7 +460,7 @@ struct MeshEntry {
 
 /// The final mesh's OBJ (from the persistent cache, else `output_mesh`).
 #[salsa::tracked(returns(clone))]
-pub fn tessellated_files(db: &dyn Db, asset: Asset) -> Result<Arc<TessellatedFiles>, Diagnostic> {
+pub(crate) fn tessellated_files(db: &dyn Db, asset: Asset) -> Result<Arc<TessellatedFiles>, Diagnostic> {
     let key = output_mesh_key(db, asset)?;
     let from_entry = |entry: CacheEntry| {
         let (MeshEntry { vertices, triangles }, [obj]) = entry.parts::<MeshEntry, 1>()?;
@@ -500,7 +504,7 @@ pub fn tessellated_files(db: &dyn Db, asset: Asset) -> Result<Arc<TessellatedFil
 }
 
 /// A distance stage's label: `asset/low`, `asset/pn`, `asset/displaced`.
-pub fn distance_label(asset_name: &str, measured: Measured) -> String {
+pub(crate) fn distance_label(asset_name: &str, measured: Measured) -> String {
     format!("{asset_name}/{}", measured.name())
 }
 
@@ -509,7 +513,11 @@ const DISTANCE_ENTRY: &str = "height-distance";
 /// The distance between a mesh and the high one (stage `distance`), over the high mesh's
 /// bounding-box diagonal; cached by what both meshes are made from.
 #[salsa::tracked(returns(clone))]
-pub fn distance_to_high(db: &dyn Db, asset: Asset, measured: Measured) -> Result<Option<SurfaceDistance>, Diagnostic> {
+pub(crate) fn distance_to_high(
+    db: &dyn Db,
+    asset: Asset,
+    measured: Measured,
+) -> Result<Option<SurfaceDistance>, Diagnostic> {
     let low_hash = low_geometry(db, asset)?.hash;
     let mesh_key = match measured {
         Measured::Low => stage_key(DISTANCE).part(&low_hash).finish().0,

@@ -13,7 +13,7 @@ const CONSTANT_SURFACE_SIDE: u32 = 4;
 
 /// Packs `kind` from its source maps (`None` where the material has no such map).
 /// `sources` must hold one entry per slot of `kind.slots()`, in that order.
-pub fn pack_surface(kind: SurfaceKind, sources: &[Option<&Texture>], constants: &MaterialConstants) -> Texture {
+pub(crate) fn pack_surface(kind: SurfaceKind, sources: &[Option<&Texture>], constants: &MaterialConstants) -> Texture {
     assert_eq!(sources.len(), kind.slots().len(), "one source per slot");
     let width = sources.iter().flatten().map(|texture| texture.width).max().unwrap_or(CONSTANT_SURFACE_SIDE);
     let height = sources.iter().flatten().map(|texture| texture.height).max().unwrap_or(CONSTANT_SURFACE_SIDE);

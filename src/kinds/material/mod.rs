@@ -37,7 +37,7 @@ fn surfaces(parsed: &definition::MaterialFile) -> Vec<SurfaceId> {
 
 /// The material kind's one step: parse the material file, then schedule its surfaces.
 #[derive(Clone, Copy, Debug, PartialEq)]
-pub enum Step {
+pub(crate) enum Step {
     Parse,
 }
 
@@ -223,7 +223,7 @@ impl Kind for Material {
 
 /// `report.json` of a material asset.
 #[derive(Clone, Debug, PartialEq, Serialize)]
-pub struct MaterialReport {
+pub(crate) struct MaterialReport {
     pub asset: String,
     pub kind: &'static str,
     pub file: String,
@@ -233,14 +233,14 @@ pub struct MaterialReport {
 }
 
 #[derive(Clone, Debug, PartialEq, Serialize)]
-pub struct MaterialReportEntry {
+pub(crate) struct MaterialReportEntry {
     pub name: String,
     pub display_name: Option<String>,
     pub surfaces: Vec<SurfaceReport>,
 }
 
 #[derive(Clone, Debug, PartialEq, Serialize)]
-pub struct SurfaceReport {
+pub(crate) struct SurfaceReport {
     pub path: String,
     pub preview: String,
     #[serde(flatten)]

@@ -12,10 +12,10 @@ use crate::diagnostic::{display_path, Diagnostic};
 use crate::kinds::{Read, SurfaceId};
 use crate::texture::{SurfaceKind, Texture, TextureSlot};
 
-pub const PARSE: Stage = Stage { name: "parse", version: 1 };
+pub(crate) const PARSE: Stage = Stage { name: "parse", version: 1 };
 // 2: opacity maps read alpha when the image has transparency. 3: linear → sRGB bytes from
 // tables, rounded like the f64 formula (was f32 powf).
-pub const PACK: Stage = Stage { name: "pack", version: 3 };
+pub(crate) const PACK: Stage = Stage { name: "pack", version: 3 };
 
 impl KeyPart for MaterialConstants {
     fn add_to(&self, key: CacheKeyBuilder) -> CacheKeyBuilder {
@@ -32,7 +32,7 @@ fn material_source(db: &dyn Db, asset: Asset) -> Result<SourceFile, Diagnostic> 
 
 /// The `.mymaterial` file of an asset, parsed (cached on disk by content).
 #[salsa::tracked(returns(clone))]
-pub fn material_file(db: &dyn Db, asset: Asset) -> Result<Arc<MaterialFile>, Diagnostic> {
+pub(crate) fn material_file(db: &dyn Db, asset: Asset) -> Result<Arc<MaterialFile>, Diagnostic> {
     let file = material_source(db, asset)?;
     let contents = read_contents(db, file)?;
     let path = file.path(db);
@@ -47,7 +47,7 @@ pub fn material_file(db: &dyn Db, asset: Asset) -> Result<Arc<MaterialFile>, Dia
 
 /// What one surface is made of: its sources (one per slot) and constants.
 #[derive(Clone, Debug, PartialEq)]
-pub struct SurfaceRecipe {
+pub(crate) struct SurfaceRecipe {
     /// One entry per slot of the surface; `None` where the material has no such map.
     pub sources: Vec<Option<MapSource>>,
     pub constants: MaterialConstants,
@@ -55,7 +55,7 @@ pub struct SurfaceRecipe {
 
 /// Where one slot's map comes from.
 #[derive(Clone, Debug, PartialEq)]
-pub enum MapSource {
+pub(crate) enum MapSource {
     /// A texture file the material names.
     File(SourceFile),
     /// Another asset's surface: the `ao_source` asset's AO map of the material's name, made
@@ -87,7 +87,7 @@ fn ao_source_map(db: &dyn Db, asset: Asset, material: &str) -> Result<Option<Map
 }
 
 #[salsa::tracked(returns(clone))]
-pub fn surface_recipe(db: &dyn Db, asset: Asset, surface: SurfaceId) -> Result<Arc<SurfaceRecipe>, Diagnostic> {
+pub(crate) fn surface_recipe(db: &dyn Db, asset: Asset, surface: SurfaceId) -> Result<Arc<SurfaceRecipe>, Diagnostic> {
     let parsed = material_file(db, asset)?;
     let material_path = asset.main_file(db);
     let Some(material) = parsed.materials.iter().find(|material| material.name == surface.group) else {
@@ -131,7 +131,7 @@ pub fn surface_recipe(db: &dyn Db, asset: Asset, surface: SurfaceId) -> Result<A
 
 /// The surface packed from its source maps (stage `pack`).
 #[salsa::tracked(returns(clone))]
-pub fn packed_surface(db: &dyn Db, asset: Asset, surface: SurfaceId) -> Result<Arc<Texture>, Diagnostic> {
+pub(crate) fn packed_surface(db: &dyn Db, asset: Asset, surface: SurfaceId) -> Result<Arc<Texture>, Diagnostic> {
     let recipe = surface_recipe(db, asset, surface.clone())?;
     let mut decoded = Vec::new();
     for source in &recipe.sources {
@@ -153,7 +153,7 @@ pub fn packed_surface(db: &dyn Db, asset: Asset, surface: SurfaceId) -> Result<A
 /// What a surface's image is made of: the pack stage's version, the constants and each slot's
 /// source content.
 #[salsa::tracked(returns(clone))]
-pub fn surface_recipe_key(db: &dyn Db, asset: Asset, surface: SurfaceId) -> Result<CacheKey, Diagnostic> {
+pub(crate) fn surface_recipe_key(db: &dyn Db, asset: Asset, surface: SurfaceId) -> Result<CacheKey, Diagnostic> {
     let recipe = surface_recipe(db, asset, surface.clone())?;
     let mut key = stage_key(PACK).part(&surface.surface).part(&recipe.constants);
     for source in &recipe.sources {
@@ -173,7 +173,7 @@ pub fn surface_recipe_key(db: &dyn Db, asset: Asset, surface: SurfaceId) -> Resu
 }
 
 /// Every texture the material file references (project-relative), once each.
-pub fn referenced_textures(parsed: &MaterialFile) -> Vec<PathBuf> {
+pub(crate) fn referenced_textures(parsed: &MaterialFile) -> Vec<PathBuf> {
     let mut paths: Vec<PathBuf> = parsed
         .materials
         .iter()

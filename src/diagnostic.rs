@@ -32,6 +32,21 @@ fn floor_char_boundary(text: &str, mut offset: usize) -> usize {
     offset
 }
 
+/// Whether a problem stops the bake (an error) or is only said (a warning: `cirrus check`'s
+/// report of what the bake goes ahead past).
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq, Hash, Serialize, Deserialize)]
+pub enum Severity {
+    #[default]
+    Error,
+    Warning,
+}
+
+impl Severity {
+    fn is_error(&self) -> bool {
+        *self == Severity::Error
+    }
+}
+
 /// One problem with one input file.
 #[derive(Clone, Debug, PartialEq, Eq, Hash, Serialize, Deserialize)]
 pub struct Diagnostic {
@@ -39,21 +54,27 @@ pub struct Diagnostic {
     pub file: PathBuf,
     pub position: Option<TextPosition>,
     pub message: String,
+    /// (Absent in stored diagnostics: an error.)
+    #[serde(default, skip_serializing_if = "Severity::is_error")]
+    pub severity: Severity,
 }
 
 impl Diagnostic {
-    /// Whether this is a warning (a message marked `warning: `, as `cirrus check` reports what
-    /// does not stop a bake), not an error.
     pub fn is_warning(&self) -> bool {
-        self.message.starts_with("warning: ")
+        self.severity == Severity::Warning
     }
 
     pub fn new(file: impl Into<PathBuf>, message: impl Into<String>) -> Diagnostic {
-        Diagnostic { file: file.into(), position: None, message: message.into() }
+        Diagnostic { file: file.into(), position: None, message: message.into(), severity: Severity::Error }
     }
 
     pub fn at(file: impl Into<PathBuf>, position: TextPosition, message: impl Into<String>) -> Diagnostic {
-        Diagnostic { file: file.into(), position: Some(position), message: message.into() }
+        Diagnostic { file: file.into(), position: Some(position), message: message.into(), severity: Severity::Error }
+    }
+
+    /// The same problem, said as a warning.
+    pub fn as_warning(&self) -> Diagnostic {
+        Diagnostic { severity: Severity::Warning, ..self.clone() }
     }
 
     pub fn line(&self) -> Option<u32> {
@@ -71,7 +92,10 @@ impl fmt::Display for Diagnostic {
         if let Some(position) = self.position {
             write!(f, ":{}:{}", position.line, position.column)?;
         }
-        write!(f, ": {}", self.message)
+        match self.severity {
+            Severity::Error => write!(f, ": {}", self.message),
+            Severity::Warning => write!(f, ": warning: {}", self.message),
+        }
     }
 }
 

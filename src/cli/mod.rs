@@ -471,13 +471,12 @@ fn check(pipeline: PathBuf, only: &[String], json: bool) -> ExitCode {
                 let problems: Vec<serde_json::Value> = diagnostics
                     .iter()
                     .map(|diagnostic| {
-                        let message = diagnostic.message.strip_prefix("warning: ").unwrap_or(&diagnostic.message);
                         serde_json::json!({
                             "file": crate::diagnostic::display_path(&diagnostic.file),
                             "line": diagnostic.line(),
                             "column": diagnostic.column(),
                             "severity": if diagnostic.is_warning() { "warning" } else { "error" },
-                            "message": message,
+                            "message": diagnostic.message,
                         })
                     })
                     .collect();

@@ -423,11 +423,6 @@ pub(crate) fn check_texture_file(config: &PipelineConfig, path: &Path) -> Result
         .map_err(|diagnostic| diagnostic.message)
 }
 
-/// A warning reported by `check`: the diagnostic with its message marked.
-pub(crate) fn as_warning(diagnostic: &Diagnostic) -> Diagnostic {
-    Diagnostic { message: format!("warning: {}", diagnostic.message), ..diagnostic.clone() }
-}
-
 /// Milliseconds each stage of an asset spent in this build (runs labelled by the asset's name
 /// or below it, cache hits left out), for its report.
 pub(crate) fn asset_stage_ms<'a>(asset_name: &str, runs: &'a [StageRun]) -> std::collections::BTreeMap<&'a str, f64> {
@@ -461,5 +456,5 @@ pub(crate) fn check_mesh_file(
         libraries.insert(library, bytes);
     }
     let (mesh, warnings) = crate::mesh::load_mesh(mesh_file, &contents.bytes, &libraries, &config.source)?;
-    Ok((mesh, warnings.iter().map(as_warning).collect()))
+    Ok((mesh, warnings.iter().map(Diagnostic::as_warning).collect()))
 }

@@ -440,18 +440,22 @@ impl Project {
             let Some(asset) = self.config.rule_asset(&relative) else { continue };
             let file = self.config.source.join(&relative);
             if let Some(reserved) = crate::config::reserved_asset_name(&asset.name) {
-                conflicts.push(Diagnostic::new(file, format!("warning: matches a rule but is not baked: {reserved}")));
+                conflicts
+                    .push(Diagnostic::new(file, format!("matches a rule but is not baked: {reserved}")).as_warning());
             } else if let Some(other) = folders.collision(&asset.name).map(|name| &assets[by_name[name]]) {
-                conflicts.push(Diagnostic::new(
-                    file,
-                    format!(
-                        "warning: matches a rule but is not baked: its asset name `{}` collides with the asset `{}` \
+                conflicts.push(
+                    Diagnostic::new(
+                        file,
+                        format!(
+                            "matches a rule but is not baked: its asset name `{}` collides with the asset `{}` \
                             ({})",
-                        asset.name,
-                        other.name,
-                        display_path(&self.config.source.join(other.source.main_file()))
-                    ),
-                ));
+                            asset.name,
+                            other.name,
+                            display_path(&self.config.source.join(other.source.main_file()))
+                        ),
+                    )
+                    .as_warning(),
+                );
             } else {
                 folders.insert(&asset.name);
                 by_name.insert(asset.name.clone(), assets.len());

@@ -153,9 +153,11 @@ impl Kind for AmbientOcclusion {
                 "the mesh has no texture coordinates: an AO bake needs a UV layout (`vt` in the OBJ)",
             ));
         }
-        problems.extend(crate::mesh::uvs_outside_warnings(main_file, &mesh).iter().map(crate::kinds::as_warning));
+        problems.extend(
+            crate::mesh::uvs_outside_warnings(main_file, &mesh).iter().map(crate::diagnostic::Diagnostic::as_warning),
+        );
         let long_bake = bake::long_bake_warning(main_file, &mesh, &asset.settings.ao, crate::schedule::cores());
-        problems.extend(long_bake.as_ref().map(crate::kinds::as_warning));
+        problems.extend(long_bake.as_ref().map(crate::diagnostic::Diagnostic::as_warning));
         problems
     }
 

@@ -287,26 +287,29 @@ fn uvs_beyond_trim(
         let wanted = page::uv_texel_rect(reach.u, reach.v, [decoded.width, decoded.height]);
         if !trimmed.contains(wanted) {
             let kept = trimmed.union(wanted);
-            warnings.push(Diagnostic::new(
-                mesh_file,
-                format!(
-                    "warning: its UVs (u ∈ [{}, {}], v ∈ [{}, {}]) reach the transparent border of `{}`: the atlas \
+            warnings.push(
+                Diagnostic::new(
+                    mesh_file,
+                    format!(
+                        "its UVs (u ∈ [{}, {}], v ∈ [{}, {}]) reach the transparent border of `{}`: the atlas \
                         keeps {}×{} texels at ({}, {}) of it, not the {}×{} at ({}, {}) trimming alone would keep",
-                    reach.u[0],
-                    reach.u[1],
-                    reach.v[0],
-                    reach.v[1],
-                    display_path(texture.strip_prefix(&config.source).unwrap_or(&texture)),
-                    kept.width,
-                    kept.height,
-                    kept.x,
-                    kept.y,
-                    trimmed.width,
-                    trimmed.height,
-                    trimmed.x,
-                    trimmed.y
-                ),
-            ));
+                        reach.u[0],
+                        reach.u[1],
+                        reach.v[0],
+                        reach.v[1],
+                        display_path(texture.strip_prefix(&config.source).unwrap_or(&texture)),
+                        kept.width,
+                        kept.height,
+                        kept.x,
+                        kept.y,
+                        trimmed.width,
+                        trimmed.height,
+                        trimmed.x,
+                        trimmed.y
+                    ),
+                )
+                .as_warning(),
+            );
         }
     }
     warnings

@@ -204,7 +204,9 @@ impl Kind for Height {
                     ));
                 } else if settings.height.projection == HeightProjection::Normals {
                     problems.extend(
-                        crate::mesh::uvs_outside_warnings(low_file, &mesh).iter().map(crate::kinds::as_warning),
+                        crate::mesh::uvs_outside_warnings(low_file, &mesh)
+                            .iter()
+                            .map(crate::diagnostic::Diagnostic::as_warning),
                     );
                 }
             }

@@ -17,9 +17,7 @@ use crate::cache::CacheKey;
 use crate::config::{AssetConfig, PipelineConfig};
 use crate::db::{Asset, Db, StageRun, DECODE};
 use crate::diagnostic::{display_path, Diagnostic};
-use crate::kinds::{
-    as_warning, check_texture_file, tail_instances, AssetOutputs, Job, Kind, Read, StageInstance, SurfaceId, Task,
-};
+use crate::kinds::{check_texture_file, tail_instances, AssetOutputs, Job, Kind, Read, StageInstance, SurfaceId, Task};
 use crate::summary::ErrorSummary;
 use crate::texture::tail::{SurfaceInfo, TailSettings};
 use crate::texture::{SurfaceKind, Texture};
@@ -188,7 +186,7 @@ impl Kind for Material {
             Ok(parsed) => parsed,
             Err(diagnostic) => return vec![diagnostic],
         };
-        let mut problems: Vec<Diagnostic> = parsed.warnings.iter().map(as_warning).collect();
+        let mut problems: Vec<Diagnostic> = parsed.warnings.iter().map(Diagnostic::as_warning).collect();
         for reference in parsed.materials.iter().flat_map(|material| material.textures.values()) {
             if let Err(message) = check_texture_file(config, &reference.path) {
                 let message =

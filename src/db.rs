@@ -291,16 +291,34 @@ impl Db for Database {
     }
 }
 
-/// What a stage kept of its last run in this process (its last encoding, layout or page),
-/// by a name of its choosing. Salsa does not track these memos: a stage reads one to do less
-/// work for the same result, or (the atlas layout) as the hint its design asks for.
-pub(crate) fn recall<T: Any + Send + Sync>(db: &dyn Db, name: &str) -> Option<Arc<T>> {
-    db.recalled(name)?.downcast::<T>().ok()
+/// A memo's key: its kind (`encoding-memo`) and identity (a surface's label), and the type of
+/// what it holds, so that a memo is read back as what was kept under it.
+pub(crate) struct Memo<T> {
+    name: String,
+    holds: std::marker::PhantomData<fn() -> T>,
 }
 
-/// Keeps `value` for the next run of the stage that names it `name` (see [`recall`]).
-pub(crate) fn remember<T: Any + Send + Sync>(db: &dyn Db, name: &str, value: Arc<T>) {
-    db.remember(name, value);
+impl<T: Any + Send + Sync> Memo<T> {
+    pub(crate) fn new(kind: &str, identity: impl std::fmt::Display) -> Memo<T> {
+        Memo { name: format!("{kind}:{identity}"), holds: std::marker::PhantomData }
+    }
+
+    /// `kind:identity`, as the memo's disk entries name it too.
+    pub(crate) fn name(&self) -> &str {
+        &self.name
+    }
+}
+
+/// What a stage kept of its last run in this process (its last encoding, layout or page).
+/// Salsa does not track these memos: a stage reads one to do less work for the same result,
+/// or (the atlas layout) as the hint its design asks for.
+pub(crate) fn recall<T: Any + Send + Sync>(db: &dyn Db, memo: &Memo<T>) -> Option<Arc<T>> {
+    db.recalled(&memo.name)?.downcast::<T>().ok()
+}
+
+/// Keeps `value` for the next run of the stage (see [`recall`]).
+pub(crate) fn remember<T: Any + Send + Sync>(db: &dyn Db, memo: &Memo<T>, value: Arc<T>) {
+    db.remember(&memo.name, value);
 }
 
 /// Runs a stage body, timing it and recording the run under `label`.

@@ -297,8 +297,8 @@ fn previous_encoding(db: &dyn Db, label: &str) -> Option<Arc<PreviousEncoding>> 
 }
 
 /// The in-process memo's name for a surface's last encoding.
-fn encoding_memo_name(label: &str) -> String {
-    format!("{ENCODING_MEMO}:{label}")
+fn encoding_memo_name(label: &str) -> crate::db::Memo<PreviousEncoding> {
+    crate::db::Memo::new(ENCODING_MEMO, label)
 }
 
 /// What an encoding memo holds beside its blocks, levels and errors.

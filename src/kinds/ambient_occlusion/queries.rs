@@ -369,8 +369,8 @@ pub(crate) fn ao_tile(db: &dyn Db, asset: Asset, tile: TileId) -> Result<Arc<Til
     let geometry = bake_geometry(db, asset)?;
     let material = material_of(&geometry, asset.main_file(db), tile.material)?;
     let label = tile_label(asset.name(db), &material.folder, tile);
-    let memo_name = format!("ao-tile:{label}");
-    if let Some(memo) = recall::<(CacheKey, Arc<TileBake>)>(db, &memo_name).filter(|memo| memo.0 == key) {
+    let memo_name = crate::db::Memo::<(CacheKey, Arc<TileBake>)>::new("ao-tile", &label);
+    if let Some(memo) = recall(db, &memo_name).filter(|memo| memo.0 == key) {
         return Ok(memo.1.clone());
     }
     let bake = match load_cached(db, TILE_ENTRY, key, tile_from_entry) {

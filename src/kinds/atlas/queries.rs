@@ -377,8 +377,8 @@ fn layout_memo_key(db: &dyn Db, asset: Asset) -> CacheKey {
     CacheKeyBuilder::new(LAYOUT_MEMO, LAYOUT.version).part(asset.name(db)).part(&settings_key(db, asset).0).finish()
 }
 
-fn layout_memo_name(db: &dyn Db, asset: Asset) -> String {
-    format!("{LAYOUT_MEMO}:{}:{}", asset.name(db), settings_key(db, asset).0.to_hex())
+fn layout_memo_name(db: &dyn Db, asset: Asset) -> crate::db::Memo<AtlasLayout> {
+    crate::db::Memo::new(LAYOUT_MEMO, format_args!("{}:{}", asset.name(db), settings_key(db, asset).0.to_hex()))
 }
 
 /// The asset's last layout with its settings: from this process, else from the memo on disk.
@@ -392,7 +392,7 @@ fn previous_layout(db: &dyn Db, asset: Asset) -> Option<Arc<AtlasLayout>> {
 
 fn remember_layout(db: &dyn Db, asset: Asset, layout: &AtlasLayout) {
     let name = layout_memo_name(db, asset);
-    if recall::<AtlasLayout>(db, &name).is_some_and(|previous| *previous == *layout) {
+    if recall(db, &name).is_some_and(|previous| *previous == *layout) {
         return;
     }
     remember(db, &name, Arc::new(layout.clone()));
@@ -472,7 +472,7 @@ pub(crate) fn atlas_page(db: &dyn Db, asset: Asset, page: u32) -> Result<Arc<Tex
     };
     let memo = Arc::new(PageMemo { entries: recipe, padding, texture: texture.clone(), sources });
     remember(db, &memo_name, memo.clone());
-    store_cached_in_background(db, PAGE_MEMO, page_memo_key(&memo_name), move || page_memo_entry(&memo));
+    store_cached_in_background(db, PAGE_MEMO, page_memo_key(memo_name.name()), move || page_memo_entry(&memo));
     Ok(Arc::new(texture))
 }
 
@@ -486,11 +486,11 @@ fn page_memo_key(memo_name: &str) -> CacheKey {
 }
 
 /// The page's last composite: from this process, else from the memo on disk.
-fn previous_page(db: &dyn Db, memo_name: &str) -> Option<Arc<PageMemo>> {
+fn previous_page(db: &dyn Db, memo_name: &crate::db::Memo<PageMemo>) -> Option<Arc<PageMemo>> {
     if let Some(previous) = recall(db, memo_name) {
         return Some(previous);
     }
-    load_cached(db, PAGE_MEMO, page_memo_key(memo_name), page_memo_from_entry).map(Arc::new)
+    load_cached(db, PAGE_MEMO, page_memo_key(memo_name.name()), page_memo_from_entry).map(Arc::new)
 }
 
 fn page_memo_entry(memo: &PageMemo) -> CacheEntry {
@@ -553,8 +553,8 @@ impl PageMemo {
     }
 }
 
-fn page_memo_name(asset_name: &str, page: u32) -> String {
-    format!("atlas-page:{}", page_label(asset_name, page))
+fn page_memo_name(asset_name: &str, page: u32) -> crate::db::Memo<PageMemo> {
+    crate::db::Memo::new("atlas-page", page_label(asset_name, page))
 }
 
 /// A texture of the atlas, decoded.

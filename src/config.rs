@@ -410,8 +410,6 @@ struct Validator<'a> {
 }
 
 impl Validator<'_> {
-    // Long: one pass over the pipeline in file order, so that each error is anchored at its text;
-    // it shrinks when each kind validates its own settings in its folder (issue 38, item 2).
     fn validate(mut self, raw: raw::Pipeline, root: PathBuf) -> Result<PipelineConfig, ConfigError> {
         let source = self.project_path(&raw.source, "source", 0);
         let output = self.project_path(&raw.output, "output", 0);
@@ -452,134 +450,9 @@ impl Validator<'_> {
         let mut assets = Vec::new();
         let mut names = AssetFolders::default();
         for asset in &raw.assets {
-            // Each kind's own settings; the others keep the defaults.
-            let mut overrides = raw::SettingsOverrides::default();
-            let (name, path, encode, kind) = match asset {
-                raw::Asset::Material { name, material, billboard, encode, report, .. } => {
-                    overrides.billboard = billboard.clone();
-                    overrides.report = report.clone();
-                    (name, Some(material), encode, AssetKind::Material)
-                }
-                raw::Asset::BillboardCloud { name, mesh, billboard, atlas, encode } => {
-                    (overrides.billboard, overrides.atlas) = (billboard.clone(), atlas.clone());
-                    (name, Some(mesh), encode, AssetKind::BillboardCloud)
-                }
-                raw::Asset::Atlas { name, pack, encode, .. } => {
-                    overrides.pack = pack.clone();
-                    (name, None, encode, AssetKind::Atlas)
-                }
-                raw::Asset::AmbientOcclusion { name, mesh, ao, encode } => {
-                    overrides.ao = ao.clone();
-                    (name, Some(mesh), encode, AssetKind::AmbientOcclusion)
-                }
-                raw::Asset::Height { name, low, height, encode, .. } => {
-                    overrides.height = height.clone();
-                    (name, Some(low), encode, AssetKind::Height)
-                }
-            };
-            overrides.encode = encode.clone();
-            let anchor = self.offset_of_value(name, 0).unwrap_or(0);
-            let normal_form =
-                normalize_relative_path(Path::new(name)).map(|path| crate::diagnostic::display_path(&path));
-            if valid_asset_name(&name.replace("//", "/").replace("/./", "/"))
-                && normal_form.as_deref() != Some(name.as_str())
-            {
-                let normal_form = normal_form.unwrap_or_default();
-                self.error_at_value(
-                    name,
-                    0,
-                    &format!("asset name `{name}` names the folder `{normal_form}`: write `{normal_form}`"),
-                );
-            } else if !valid_asset_name(name) {
-                self.error_at_value(
-                    name,
-                    0,
-                    &format!(
-                        "asset name `{name}` must be non-empty and use only letters, digits, `_`, `-`, `.` and `/`"
-                    ),
-                );
+            if let Some(config) = self.validate_asset(asset, &defaults, &limits, &mut names) {
+                assets.push(config);
             }
-            if let Some(reserved) = reserved_asset_name(name) {
-                self.error_at_value(name, 0, &reserved);
-            }
-            let collision = names.collision(name).map(str::to_string);
-            names.insert(name);
-            if collision.as_ref() == Some(name) {
-                let second = self.offset_of_value(name, anchor + name.len() + 2).unwrap_or(anchor);
-                self.error_at_value(name, second, &format!("asset name `{name}` is used twice"));
-            } else if let Some(other) = collision {
-                self.error_at_value(
-                    name,
-                    anchor,
-                    &format!("asset names `{other}` and `{name}` would share a folder: one lies inside the other"),
-                );
-            }
-            let relative = match path {
-                Some(path) => match self.source_path(path, anchor) {
-                    Some(relative) => Some(relative),
-                    None => continue,
-                },
-                None => None,
-            };
-            let mut settings = self.merge_settings(&defaults, &overrides, anchor);
-            match asset {
-                raw::Asset::Material { ao_source, .. } => settings.ao_source = ao_source.clone(),
-                raw::Asset::Height { high, tessellate, .. } => {
-                    let Some(high) = self.source_path(high, anchor) else { continue };
-                    settings.high_mesh = Some(high);
-                    settings.tessellate =
-                        tessellate.as_ref().map(|tessellate| self.tessellate_settings(tessellate, anchor));
-                }
-                _ => {}
-            }
-            // Each atlas surface (each material's AO map) goes through the texture tail: the
-            // same budget holds.
-            let surface_side = match kind {
-                AssetKind::BillboardCloud => Some(("atlas", settings.atlas.max_size, "max_size")),
-                AssetKind::AmbientOcclusion => Some(("AO map", settings.ao.size, "size")),
-                AssetKind::Height => Some(("height map", settings.height.size, "size")),
-                _ => None,
-            };
-            if let Some((what, side, setting)) = surface_side {
-                let needed = crate::texture::TextureLimits::working_set_of(side, side);
-                if needed > limits.texture.working_set {
-                    let message = format!(
-                        "asset `{name}`: a {side}² {what} needs about {} MiB per surface, more than the texture \
-                            memory budget of {} MiB \
-                         (lower {setting} or raise `limits: (texture_memory_mib: …)`)",
-                        needed >> 20,
-                        limits.texture.working_set >> 20
-                    );
-                    self.error_at_value(name, anchor, &message);
-                }
-            }
-            let source = match (asset, relative) {
-                (raw::Asset::Atlas { textures, meshes, .. }, _) => {
-                    if textures.is_empty() {
-                        self.error_at_value(
-                            name,
-                            anchor,
-                            &format!("asset `{name}`: an atlas needs at least one texture glob"),
-                        );
-                    }
-                    for glob in textures.iter().chain(meshes) {
-                        if let Err(error) = source_glob(glob) {
-                            self.error_at_value(glob, anchor, &format!("bad glob: {error}"));
-                        }
-                    }
-                    AssetSource::Atlas { textures: textures.clone(), meshes: meshes.clone() }
-                }
-                (raw::Asset::Material { .. }, Some(relative)) => AssetSource::Material { material: relative },
-                (raw::Asset::BillboardCloud { .. }, Some(relative)) => AssetSource::BillboardCloud { mesh: relative },
-                (raw::Asset::AmbientOcclusion { .. }, Some(relative)) => {
-                    AssetSource::AmbientOcclusion { mesh: relative }
-                }
-                (raw::Asset::Height { .. }, Some(low)) => {
-                    AssetSource::Height { high: settings.high_mesh.clone().unwrap_or_default(), low }
-                }
-                _ => unreachable!("materials, billboard clouds, AO and height bakes name their files"),
-            };
-            assets.push(AssetConfig { name: name.clone(), source, settings });
         }
 
         self.check_ao_sources(&assets, &raw.rules);
@@ -620,6 +493,142 @@ impl Validator<'_> {
             })
         } else {
             Err(ConfigError { diagnostics: self.diagnostics })
+        }
+    }
+
+    /// One listed asset: its name (valid, not reserved, not colliding with `names`), its files,
+    /// its settings (the defaults with its own sections merged) within the texture budget.
+    fn validate_asset(
+        &mut self,
+        asset: &raw::Asset,
+        defaults: &Settings,
+        limits: &Limits,
+        names: &mut AssetFolders,
+    ) -> Option<AssetConfig> {
+        // Each kind's own settings; the others keep the defaults.
+        let mut overrides = raw::SettingsOverrides::default();
+        let (name, path, encode, kind) = match asset {
+            raw::Asset::Material { name, material, billboard, encode, report, .. } => {
+                overrides.billboard = billboard.clone();
+                overrides.report = report.clone();
+                (name, Some(material), encode, AssetKind::Material)
+            }
+            raw::Asset::BillboardCloud { name, mesh, billboard, atlas, encode } => {
+                (overrides.billboard, overrides.atlas) = (billboard.clone(), atlas.clone());
+                (name, Some(mesh), encode, AssetKind::BillboardCloud)
+            }
+            raw::Asset::Atlas { name, pack, encode, .. } => {
+                overrides.pack = pack.clone();
+                (name, None, encode, AssetKind::Atlas)
+            }
+            raw::Asset::AmbientOcclusion { name, mesh, ao, encode } => {
+                overrides.ao = ao.clone();
+                (name, Some(mesh), encode, AssetKind::AmbientOcclusion)
+            }
+            raw::Asset::Height { name, low, height, encode, .. } => {
+                overrides.height = height.clone();
+                (name, Some(low), encode, AssetKind::Height)
+            }
+        };
+        overrides.encode = encode.clone();
+        let anchor = self.offset_of_value(name, 0).unwrap_or(0);
+        self.check_asset_name(name, anchor, names);
+        let relative = match path {
+            Some(path) => Some(self.source_path(path, anchor)?),
+            None => None,
+        };
+        let mut settings = self.merge_settings(defaults, &overrides, anchor);
+        match asset {
+            raw::Asset::Material { ao_source, .. } => settings.ao_source = ao_source.clone(),
+            raw::Asset::Height { high, tessellate, .. } => {
+                settings.high_mesh = Some(self.source_path(high, anchor)?);
+                settings.tessellate =
+                    tessellate.as_ref().map(|tessellate| self.tessellate_settings(tessellate, anchor));
+            }
+            _ => {}
+        }
+        // Each atlas surface (each material's AO map) goes through the texture tail: the
+        // same budget holds.
+        let surface_side = match kind {
+            AssetKind::BillboardCloud => Some(("atlas", settings.atlas.max_size, "max_size")),
+            AssetKind::AmbientOcclusion => Some(("AO map", settings.ao.size, "size")),
+            AssetKind::Height => Some(("height map", settings.height.size, "size")),
+            _ => None,
+        };
+        if let Some((what, side, setting)) = surface_side {
+            let needed = crate::texture::TextureLimits::working_set_of(side, side);
+            if needed > limits.texture.working_set {
+                let message = format!(
+                    "asset `{name}`: a {side}² {what} needs about {} MiB per surface, more than the texture \
+                        memory budget of {} MiB \
+                     (lower {setting} or raise `limits: (texture_memory_mib: …)`)",
+                    needed >> 20,
+                    limits.texture.working_set >> 20
+                );
+                self.error_at_value(name, anchor, &message);
+            }
+        }
+        let source = match (asset, relative) {
+            (raw::Asset::Atlas { textures, meshes, .. }, _) => {
+                if textures.is_empty() {
+                    self.error_at_value(
+                        name,
+                        anchor,
+                        &format!("asset `{name}`: an atlas needs at least one texture glob"),
+                    );
+                }
+                for glob in textures.iter().chain(meshes) {
+                    if let Err(error) = source_glob(glob) {
+                        self.error_at_value(glob, anchor, &format!("bad glob: {error}"));
+                    }
+                }
+                AssetSource::Atlas { textures: textures.clone(), meshes: meshes.clone() }
+            }
+            (raw::Asset::Material { .. }, Some(relative)) => AssetSource::Material { material: relative },
+            (raw::Asset::BillboardCloud { .. }, Some(relative)) => AssetSource::BillboardCloud { mesh: relative },
+            (raw::Asset::AmbientOcclusion { .. }, Some(relative)) => AssetSource::AmbientOcclusion { mesh: relative },
+            (raw::Asset::Height { .. }, Some(low)) => {
+                AssetSource::Height { high: settings.high_mesh.clone().unwrap_or_default(), low }
+            }
+            _ => unreachable!("materials, billboard clouds, AO and height bakes name their files"),
+        };
+        Some(AssetConfig { name: name.clone(), source, settings })
+    }
+
+    /// An asset's name: valid, in its normal form, not reserved, and sharing no folder with an
+    /// asset listed before it (`names`, which it joins).
+    fn check_asset_name(&mut self, name: &String, anchor: usize, names: &mut AssetFolders) {
+        let normal_form = normalize_relative_path(Path::new(name)).map(|path| crate::diagnostic::display_path(&path));
+        if valid_asset_name(&name.replace("//", "/").replace("/./", "/"))
+            && normal_form.as_deref() != Some(name.as_str())
+        {
+            let normal_form = normal_form.unwrap_or_default();
+            self.error_at_value(
+                name,
+                0,
+                &format!("asset name `{name}` names the folder `{normal_form}`: write `{normal_form}`"),
+            );
+        } else if !valid_asset_name(name) {
+            self.error_at_value(
+                name,
+                0,
+                &format!("asset name `{name}` must be non-empty and use only letters, digits, `_`, `-`, `.` and `/`"),
+            );
+        }
+        if let Some(reserved) = reserved_asset_name(name) {
+            self.error_at_value(name, 0, &reserved);
+        }
+        let collision = names.collision(name).map(str::to_string);
+        names.insert(name);
+        if collision.as_ref() == Some(name) {
+            let second = self.offset_of_value(name, anchor + name.len() + 2).unwrap_or(anchor);
+            self.error_at_value(name, second, &format!("asset name `{name}` is used twice"));
+        } else if let Some(other) = collision {
+            self.error_at_value(
+                name,
+                anchor,
+                &format!("asset names `{other}` and `{name}` would share a folder: one lies inside the other"),
+            );
         }
     }
 
@@ -667,11 +676,24 @@ impl Validator<'_> {
         }
     }
 
-    // Long: every section's checks, each a few lines; they move to the kinds' own settings files
-    // with issue 38's item 2.
     fn merge_settings(&mut self, base: &Settings, overrides: &raw::SettingsOverrides, anchor: usize) -> Settings {
         let mut settings = base.clone();
-        let billboard = &overrides.billboard;
+        self.merge_billboard(&mut settings.billboard, &overrides.billboard, anchor);
+        self.merge_atlas(&mut settings.atlas, &overrides.atlas, anchor);
+        self.merge_pack(&mut settings.pack, &overrides.pack, anchor);
+        self.merge_ao(&mut settings.ao, &overrides.ao, anchor);
+        self.merge_height(&mut settings.height, &overrides.height, anchor);
+        self.merge_encode(&mut settings.encode, &overrides.encode, anchor);
+        settings.report.compare_formats = overrides.report.compare_formats.unwrap_or(settings.report.compare_formats);
+        settings
+    }
+
+    fn merge_billboard(
+        &mut self,
+        settings: &mut BillboardSettings,
+        billboard: &raw::BillboardOverrides,
+        anchor: usize,
+    ) {
         if let Some(epsilon) = billboard.epsilon {
             if !(epsilon > 0.0 && epsilon < 1.0) {
                 self.error_at_key(
@@ -680,13 +702,13 @@ impl Validator<'_> {
                     "epsilon must be in (0, 1): it is a fraction of the bounding-sphere radius",
                 );
             }
-            settings.billboard.epsilon = epsilon;
+            settings.epsilon = epsilon;
         }
         if let Some(max_planes) = billboard.max_planes {
             if max_planes == Some(0) {
                 self.error_at_key("max_planes", anchor, "max_planes must be at least 1");
             }
-            settings.billboard.max_planes = max_planes;
+            settings.max_planes = max_planes;
         }
         if let Some(budget) = billboard.budget {
             if budget.is_some_and(|budget| !(1..=1_000_000).contains(&budget.quads())) {
@@ -696,7 +718,7 @@ impl Validator<'_> {
                     "budget must allow between 1 and 1000000 quads (Triangles: at least 2)",
                 );
             }
-            settings.billboard.budget = budget;
+            settings.budget = budget;
         }
         if let Some(density) = billboard.texel_density {
             if density.is_some_and(|d| !(d > 0.0 && d.is_finite())) {
@@ -706,13 +728,13 @@ impl Validator<'_> {
                     "texel_density must be a positive number of texels per world unit",
                 );
             }
-            settings.billboard.texel_density = density;
+            settings.texel_density = density;
         }
         if let Some(screen_size) = billboard.screen_size {
             if screen_size.is_some_and(|pixels| !(4..=16384).contains(&pixels)) {
                 self.error_at_key("screen_size", anchor, "screen_size must be between 4 and 16384 pixels");
             }
-            settings.billboard.screen_size = screen_size;
+            settings.screen_size = screen_size;
         }
         if let Some(lods) = &billboard.lods {
             if lods.len() > MAX_LOD_LEVELS {
@@ -745,16 +767,16 @@ impl Validator<'_> {
                     ),
                 );
             }
-            settings.billboard.lods = lods.clone();
+            settings.lods = lods.clone();
         }
-        if !settings.billboard.lods.is_empty() && settings.billboard.budget.is_some() {
+        if !settings.lods.is_empty() && settings.budget.is_some() {
             self.error_at_key(
                 "lods",
                 anchor,
                 "give budget or lods, not both: a chain's levels carry their own budgets",
             );
         }
-        if settings.billboard.screen_size.is_some() && settings.billboard.texel_density.is_some() {
+        if settings.screen_size.is_some() && settings.texel_density.is_some() {
             self.error_at_key(
                 "screen_size",
                 anchor,
@@ -765,46 +787,38 @@ impl Validator<'_> {
             if !(0.0..=1.0).contains(&cutoff) {
                 self.error_at_key("alpha_cutoff", anchor, "alpha_cutoff must be in [0, 1]");
             }
-            settings.billboard.alpha_cutoff = cutoff;
+            settings.alpha_cutoff = cutoff;
         }
-        let atlas = &overrides.atlas;
-        self.page_size_overrides(
-            atlas.max_size,
-            atlas.padding,
-            anchor,
-            &mut settings.atlas.max_size,
-            &mut settings.atlas.padding,
-        );
+    }
+
+    fn merge_atlas(&mut self, settings: &mut PageSettings, atlas: &raw::AtlasOverrides, anchor: usize) {
+        self.page_size_overrides(atlas.max_size, atlas.padding, anchor, &mut settings.max_size, &mut settings.padding);
         if let Some(power_of_two) = atlas.power_of_two {
-            settings.atlas.power_of_two = power_of_two;
+            settings.power_of_two = power_of_two;
         }
-        let pack = &overrides.pack;
-        self.page_size_overrides(
-            pack.max_size,
-            pack.padding,
-            anchor,
-            &mut settings.pack.max_size,
-            &mut settings.pack.padding,
-        );
+    }
+
+    fn merge_pack(&mut self, settings: &mut PackSettings, pack: &raw::PackOverrides, anchor: usize) {
+        self.page_size_overrides(pack.max_size, pack.padding, anchor, &mut settings.max_size, &mut settings.padding);
         if let Some(pages) = pack.pages {
             if !(1..=64).contains(&pages) {
                 self.error_at_key("pages", anchor, "pages must be between 1 and 64");
             }
-            settings.pack.pages = pages;
+            settings.pages = pages;
         }
-        settings.pack.rotate = pack.rotate.unwrap_or(settings.pack.rotate);
-        settings.pack.trim = pack.trim.unwrap_or(settings.pack.trim);
-        settings.pack.power_of_two = pack.power_of_two.unwrap_or(settings.pack.power_of_two);
-        self.merge_ao(&mut settings.ao, &overrides.ao, anchor);
-        self.merge_height(&mut settings.height, &overrides.height, anchor);
-        let encode = &overrides.encode;
+        settings.rotate = pack.rotate.unwrap_or(settings.rotate);
+        settings.trim = pack.trim.unwrap_or(settings.trim);
+        settings.power_of_two = pack.power_of_two.unwrap_or(settings.power_of_two);
+    }
+
+    fn merge_encode(&mut self, settings: &mut EncodeSettings, encode: &raw::EncodeOverrides, anchor: usize) {
         use crate::texture::SurfaceKind;
         let surfaces: [(&str, Option<BlockFormat>, &[BlockFormat], &mut BlockFormat); 5] = [
-            ("albedo", encode.albedo, allowed_formats(SurfaceKind::Albedo), &mut settings.encode.albedo),
-            ("mra", encode.mra, allowed_formats(SurfaceKind::Mra), &mut settings.encode.mra),
-            ("normal", encode.normal, allowed_formats(SurfaceKind::Normal), &mut settings.encode.normal),
-            ("height", encode.height, allowed_formats(SurfaceKind::Height), &mut settings.encode.height),
-            ("ao", encode.ao, allowed_formats(SurfaceKind::Ao), &mut settings.encode.ao),
+            ("albedo", encode.albedo, allowed_formats(SurfaceKind::Albedo), &mut settings.albedo),
+            ("mra", encode.mra, allowed_formats(SurfaceKind::Mra), &mut settings.mra),
+            ("normal", encode.normal, allowed_formats(SurfaceKind::Normal), &mut settings.normal),
+            ("height", encode.height, allowed_formats(SurfaceKind::Height), &mut settings.height),
+            ("ao", encode.ao, allowed_formats(SurfaceKind::Ao), &mut settings.ao),
         ];
         let mut format_errors = Vec::new();
         for (key, value, allowed, target) in surfaces {
@@ -820,22 +834,20 @@ impl Validator<'_> {
             self.error_at_key(key, anchor, &message);
         }
         if let Some(mips) = encode.mips {
-            settings.encode.mips = mips;
+            settings.mips = mips;
         }
         if let Some(container) = encode.container {
-            settings.encode.container = container;
+            settings.container = container;
         }
         if let Some(zstd) = encode.zstd {
             if zstd.is_some_and(|level| !(1..=22).contains(&level)) {
                 self.error_at_key("zstd", anchor, "zstd level must be between 1 and 22");
             }
-            settings.encode.zstd = zstd;
+            settings.zstd = zstd;
         }
         if let Some(quality) = encode.quality {
-            settings.encode.quality = quality;
+            settings.quality = quality;
         }
-        settings.report.compare_formats = overrides.report.compare_formats.unwrap_or(settings.report.compare_formats);
-        settings
     }
 
     fn merge_ao(&mut self, settings: &mut AoSettings, ao: &raw::AoOverrides, anchor: usize) {

@@ -8,7 +8,12 @@ use serde::{Deserialize, Serialize};
 
 use crate::diagnostic::{Diagnostic, TextPosition};
 use crate::files::normalize_relative_path;
+use crate::kinds::ambient_occlusion::settings::merge_ao;
+use crate::kinds::atlas::settings::merge_pack;
+use crate::kinds::billboard_cloud::settings::{merge_atlas, merge_billboard};
+use crate::kinds::height::settings::{merge_height, tessellate_settings};
 
+pub(crate) mod sections;
 mod settings;
 pub use settings::*;
 
@@ -409,6 +414,12 @@ struct Validator<'a> {
     diagnostics: Vec<Diagnostic>,
 }
 
+impl sections::Check for Validator<'_> {
+    fn error_at_key(&mut self, key: &str, anchor: usize, message: &str) {
+        Validator::error_at_key(self, key, anchor, message);
+    }
+}
+
 impl Validator<'_> {
     fn validate(mut self, raw: raw::Pipeline, root: PathBuf) -> Result<PipelineConfig, ConfigError> {
         let source = self.project_path(&raw.source, "source", 0);
@@ -543,7 +554,7 @@ impl Validator<'_> {
             raw::Asset::Height { high, tessellate, .. } => {
                 settings.high_mesh = Some(self.source_path(high, anchor)?);
                 settings.tessellate =
-                    tessellate.as_ref().map(|tessellate| self.tessellate_settings(tessellate, anchor));
+                    tessellate.as_ref().map(|tessellate| tessellate_settings(self, tessellate, anchor));
             }
             _ => {}
         }
@@ -653,162 +664,16 @@ impl Validator<'_> {
         }
     }
 
-    /// A page's `max_size` and `padding` (a billboard atlas, a texture atlas), checked.
-    fn page_size_overrides(
-        &mut self,
-        max_size: Option<u32>,
-        padding: Option<u32>,
-        anchor: usize,
-        size: &mut u32,
-        pad: &mut u32,
-    ) {
-        if let Some(max_size) = max_size {
-            if !(16..=16384).contains(&max_size) || max_size % 4 != 0 {
-                self.error_at_key("max_size", anchor, "max_size must be a multiple of 4 between 16 and 16384");
-            }
-            *size = max_size;
-        }
-        if let Some(padding) = padding {
-            if padding > 64 {
-                self.error_at_key("padding", anchor, "padding must be at most 64 texels");
-            }
-            *pad = padding;
-        }
-    }
-
     fn merge_settings(&mut self, base: &Settings, overrides: &raw::SettingsOverrides, anchor: usize) -> Settings {
         let mut settings = base.clone();
-        self.merge_billboard(&mut settings.billboard, &overrides.billboard, anchor);
-        self.merge_atlas(&mut settings.atlas, &overrides.atlas, anchor);
-        self.merge_pack(&mut settings.pack, &overrides.pack, anchor);
-        self.merge_ao(&mut settings.ao, &overrides.ao, anchor);
-        self.merge_height(&mut settings.height, &overrides.height, anchor);
+        merge_billboard(self, &mut settings.billboard, &overrides.billboard, anchor);
+        merge_atlas(self, &mut settings.atlas, &overrides.atlas, anchor);
+        merge_pack(self, &mut settings.pack, &overrides.pack, anchor);
+        merge_ao(self, &mut settings.ao, &overrides.ao, anchor);
+        merge_height(self, &mut settings.height, &overrides.height, anchor);
         self.merge_encode(&mut settings.encode, &overrides.encode, anchor);
         settings.report.compare_formats = overrides.report.compare_formats.unwrap_or(settings.report.compare_formats);
         settings
-    }
-
-    fn merge_billboard(
-        &mut self,
-        settings: &mut BillboardSettings,
-        billboard: &raw::BillboardOverrides,
-        anchor: usize,
-    ) {
-        if let Some(epsilon) = billboard.epsilon {
-            if !(epsilon > 0.0 && epsilon < 1.0) {
-                self.error_at_key(
-                    "epsilon",
-                    anchor,
-                    "epsilon must be in (0, 1): it is a fraction of the bounding-sphere radius",
-                );
-            }
-            settings.epsilon = epsilon;
-        }
-        if let Some(max_planes) = billboard.max_planes {
-            if max_planes == Some(0) {
-                self.error_at_key("max_planes", anchor, "max_planes must be at least 1");
-            }
-            settings.max_planes = max_planes;
-        }
-        if let Some(budget) = billboard.budget {
-            if budget.is_some_and(|budget| !(1..=1_000_000).contains(&budget.quads())) {
-                self.error_at_key(
-                    "budget",
-                    anchor,
-                    "budget must allow between 1 and 1000000 quads (Triangles: at least 2)",
-                );
-            }
-            settings.budget = budget;
-        }
-        if let Some(density) = billboard.texel_density {
-            if density.is_some_and(|d| !(d > 0.0 && d.is_finite())) {
-                self.error_at_key(
-                    "texel_density",
-                    anchor,
-                    "texel_density must be a positive number of texels per world unit",
-                );
-            }
-            settings.texel_density = density;
-        }
-        if let Some(screen_size) = billboard.screen_size {
-            if screen_size.is_some_and(|pixels| !(4..=16384).contains(&pixels)) {
-                self.error_at_key("screen_size", anchor, "screen_size must be between 4 and 16384 pixels");
-            }
-            settings.screen_size = screen_size;
-        }
-        if let Some(lods) = &billboard.lods {
-            if lods.len() > MAX_LOD_LEVELS {
-                self.error_at_key("lods", anchor, &format!("a LOD chain has at most {MAX_LOD_LEVELS} levels"));
-            }
-            if lods.iter().any(|budget| !(1..=1_000_000).contains(&budget.quads())) {
-                self.error_at_key(
-                    "lods",
-                    anchor,
-                    "each level must allow between 1 and 1000000 quads (Triangles: at least 2)",
-                );
-            }
-            if lods.is_empty() {
-                self.error_at_key(
-                    "lods",
-                    anchor,
-                    "a LOD chain needs at least one level (`lods: [Quads(256), Quads(64)]`); leave `lods` out for a \
-                        single LOD",
-                );
-            }
-            if lods.windows(2).any(|pair| pair[1].quads() >= pair[0].quads()) {
-                let quads: Vec<String> = lods.iter().map(|budget| budget.quads().to_string()).collect();
-                self.error_at_key(
-                    "lods",
-                    anchor,
-                    &format!(
-                        "a LOD chain goes from the most detailed level to the least: each level must allow \
-                        fewer quads than the one before ({})",
-                        quads.join(", ")
-                    ),
-                );
-            }
-            settings.lods = lods.clone();
-        }
-        if !settings.lods.is_empty() && settings.budget.is_some() {
-            self.error_at_key(
-                "lods",
-                anchor,
-                "give budget or lods, not both: a chain's levels carry their own budgets",
-            );
-        }
-        if settings.screen_size.is_some() && settings.texel_density.is_some() {
-            self.error_at_key(
-                "screen_size",
-                anchor,
-                "give texel_density or screen_size, not both: each sets the atlas's texels per unit",
-            );
-        }
-        if let Some(cutoff) = billboard.alpha_cutoff {
-            if !(0.0..=1.0).contains(&cutoff) {
-                self.error_at_key("alpha_cutoff", anchor, "alpha_cutoff must be in [0, 1]");
-            }
-            settings.alpha_cutoff = cutoff;
-        }
-    }
-
-    fn merge_atlas(&mut self, settings: &mut PageSettings, atlas: &raw::AtlasOverrides, anchor: usize) {
-        self.page_size_overrides(atlas.max_size, atlas.padding, anchor, &mut settings.max_size, &mut settings.padding);
-        if let Some(power_of_two) = atlas.power_of_two {
-            settings.power_of_two = power_of_two;
-        }
-    }
-
-    fn merge_pack(&mut self, settings: &mut PackSettings, pack: &raw::PackOverrides, anchor: usize) {
-        self.page_size_overrides(pack.max_size, pack.padding, anchor, &mut settings.max_size, &mut settings.padding);
-        if let Some(pages) = pack.pages {
-            if !(1..=64).contains(&pages) {
-                self.error_at_key("pages", anchor, "pages must be between 1 and 64");
-            }
-            settings.pages = pages;
-        }
-        settings.rotate = pack.rotate.unwrap_or(settings.rotate);
-        settings.trim = pack.trim.unwrap_or(settings.trim);
-        settings.power_of_two = pack.power_of_two.unwrap_or(settings.power_of_two);
     }
 
     fn merge_encode(&mut self, settings: &mut EncodeSettings, encode: &raw::EncodeOverrides, anchor: usize) {
@@ -848,77 +713,6 @@ impl Validator<'_> {
         if let Some(quality) = encode.quality {
             settings.quality = quality;
         }
-    }
-
-    fn merge_ao(&mut self, settings: &mut AoSettings, ao: &raw::AoOverrides, anchor: usize) {
-        if let Some(size) = ao.size {
-            if !(16..=16384).contains(&size) || size % 4 != 0 {
-                self.error_at_key("size", anchor, "size must be a multiple of 4 between 16 and 16384");
-            }
-            settings.size = size;
-        }
-        if let Some(rays) = ao.rays {
-            if !(1..=1 << 20).contains(&rays) {
-                self.error_at_key("rays", anchor, "rays must be between 1 and 1048576");
-            }
-            settings.rays = rays;
-        }
-        if let Some(max_distance) = ao.max_distance {
-            if max_distance.is_some_and(|distance| !(distance > 0.0 && distance.is_finite())) {
-                self.error_at_key(
-                    "max_distance",
-                    anchor,
-                    "max_distance must be a positive fraction of the bounding-box diagonal",
-                );
-            }
-            settings.max_distance = max_distance;
-        }
-        if let Some(padding) = ao.padding {
-            if padding > 256 {
-                self.error_at_key("padding", anchor, "padding must be at most 256 texels");
-            }
-            settings.padding = padding;
-        }
-        settings.mode = ao.mode.unwrap_or(settings.mode);
-        settings.distribution = ao.distribution.unwrap_or(settings.distribution);
-        settings.occluders = ao.occluders.unwrap_or(settings.occluders);
-        settings.ignore_backfaces = ao.ignore_backfaces.unwrap_or(settings.ignore_backfaces);
-        settings.ground_plane = ao.ground_plane.unwrap_or(settings.ground_plane);
-    }
-
-    fn merge_height(&mut self, settings: &mut HeightSettings, height: &raw::HeightOverrides, anchor: usize) {
-        if let Some(size) = height.size {
-            if !(16..=16384).contains(&size) || size % 4 != 0 {
-                self.error_at_key("size", anchor, "size must be a multiple of 4 between 16 and 16384");
-            }
-            settings.size = size;
-        }
-        for (key, value, target) in
-            [("frontal", height.frontal, &mut settings.frontal), ("rear", height.rear, &mut settings.rear)]
-        {
-            if let Some(value) = value {
-                if !(0.0..=1.0).contains(&value) {
-                    self.error_at_key(
-                        key,
-                        anchor,
-                        &format!("{key} must be a fraction of the bounding-box diagonal in [0, 1]"),
-                    );
-                }
-                *target = value;
-            }
-        }
-        if settings.frontal + settings.rear <= 0.0 {
-            self.error_at_key("frontal", anchor, "frontal and rear cannot both be 0: the rays would have no length");
-        }
-        settings.projection = height.projection.unwrap_or(settings.projection);
-    }
-
-    fn tessellate_settings(&mut self, tessellate: &raw::TessellateOverrides, anchor: usize) -> TessellateSettings {
-        let level = tessellate.level.unwrap_or(8);
-        if !(1..=64).contains(&level) {
-            self.error_at_key("level", anchor, "level must be between 1 and 64 segments per edge");
-        }
-        TessellateSettings { level, displace: tessellate.displace.unwrap_or(true) }
     }
 
     /// A path relative to the project folder that must stay inside it.

@@ -1,10 +1,13 @@
 //! The serde mirror of `pipeline.ron`: what the file may say, before validation (every field
 //! optional where a default applies; `deny_unknown_fields` throughout, so a typo is an error).
 
-use serde::{Deserialize, Deserializer};
+use serde::Deserialize;
 
-use super::{AoMode, AoOccluders, AssetKind, BlockFormat, Container, EncodeQuality, HeightProjection, LodBudget};
-use crate::mesh::occlusion::RayDistribution;
+use super::sections::explicit;
+use super::{
+    AoOverrides, AssetKind, AtlasOverrides, BillboardOverrides, BlockFormat, Container, EncodeQuality, HeightOverrides,
+    PackOverrides, ReportOverrides, TessellateOverrides,
+};
 
 #[derive(Deserialize)]
 #[serde(deny_unknown_fields)]
@@ -58,87 +61,6 @@ pub(crate) struct SettingsOverrides {
     pub encode: EncodeOverrides,
     #[serde(default)]
     pub report: ReportOverrides,
-}
-
-#[derive(Deserialize, Default, Clone)]
-#[serde(deny_unknown_fields)]
-pub(crate) struct ReportOverrides {
-    pub compare_formats: Option<bool>,
-}
-
-#[derive(Deserialize, Default, Clone)]
-#[serde(deny_unknown_fields)]
-pub(crate) struct HeightOverrides {
-    pub projection: Option<HeightProjection>,
-    pub size: Option<u32>,
-    pub frontal: Option<f32>,
-    pub rear: Option<f32>,
-}
-
-#[derive(Deserialize, Default, Clone)]
-#[serde(deny_unknown_fields)]
-pub(crate) struct TessellateOverrides {
-    pub level: Option<u32>,
-    pub displace: Option<bool>,
-}
-
-#[derive(Deserialize, Default, Clone)]
-#[serde(deny_unknown_fields)]
-pub(crate) struct AoOverrides {
-    pub size: Option<u32>,
-    pub rays: Option<u32>,
-    pub mode: Option<AoMode>,
-    pub distribution: Option<RayDistribution>,
-    #[serde(default, deserialize_with = "explicit")]
-    pub max_distance: Option<Option<f32>>,
-    pub occluders: Option<AoOccluders>,
-    pub ignore_backfaces: Option<bool>,
-    pub ground_plane: Option<bool>,
-    pub padding: Option<u32>,
-}
-
-#[derive(Deserialize, Default, Clone)]
-#[serde(deny_unknown_fields)]
-pub(crate) struct PackOverrides {
-    pub max_size: Option<u32>,
-    pub padding: Option<u32>,
-    pub rotate: Option<bool>,
-    pub trim: Option<bool>,
-    pub power_of_two: Option<bool>,
-    pub pages: Option<u32>,
-}
-
-/// `Some(None)` is an explicit `None` in the file; `None` is "not given".
-fn explicit<'de, D, T>(deserializer: D) -> Result<Option<Option<T>>, D::Error>
-where
-    D: Deserializer<'de>,
-    T: Deserialize<'de>,
-{
-    Option::<T>::deserialize(deserializer).map(Some)
-}
-
-#[derive(Deserialize, Default, Clone)]
-#[serde(deny_unknown_fields)]
-pub(crate) struct BillboardOverrides {
-    pub epsilon: Option<f32>,
-    #[serde(default, deserialize_with = "explicit")]
-    pub max_planes: Option<Option<u32>>,
-    #[serde(default, deserialize_with = "explicit")]
-    pub budget: Option<Option<LodBudget>>,
-    #[serde(default, deserialize_with = "explicit")]
-    pub texel_density: Option<Option<f32>>,
-    #[serde(default, deserialize_with = "explicit")]
-    pub screen_size: Option<Option<u32>>,
-    pub lods: Option<Vec<LodBudget>>,
-    pub alpha_cutoff: Option<f32>,
-}
-
-#[derive(Deserialize, Default, Clone)]
-#[serde(deny_unknown_fields)]
-pub(crate) struct AtlasOverrides {
-    pub max_size: Option<u32>,
-    pub padding: Option<u32>,
-    pub power_of_two: Option<bool>,
 }
 
 #[derive(Deserialize, Default, Clone)]

@@ -311,10 +311,30 @@ fn the_modules_form_a_straight_stack_with_one_loop_inside_kinds() {
             assert!(bad.is_empty(), "the library {module} imports {bad:?}");
         }
     }
-    // The database and the scheduler name no kind and no driver; nothing below the shell runs the driver.
-    for module in ["db", "schedule", "cache", "config", "sources", "artifacts", "record"] {
-        let bad: Vec<&String> =
-            imports[module].iter().filter(|n| n.starts_with("kinds") || n.starts_with("project")).collect();
+    // Each kind's settings file is a leaf under its folder: config assembles the pipeline's
+    // settings from them, and they import only the libraries, `config/sections` and each other.
+    let settings_leaf = |module: &str| module.starts_with("kinds/") && module.ends_with("/settings");
+    let settings_files: Vec<&String> = imports.keys().filter(|module| settings_leaf(module)).collect();
+    assert!(settings_files.len() >= 5, "every kind has its settings file: {settings_files:?}");
+    let libraries = ["texture", "mesh", "packing", "files", "diagnostic"];
+    for module in settings_files {
+        let allowed = |n: &&String| {
+            settings_leaf(n)
+                || n.as_str() == "config/sections"
+                || libraries.iter().any(|library| n.as_str() == *library || n.starts_with(&format!("{library}/")))
+        };
+        let bad: Vec<&String> = imports[module].iter().filter(|n| !allowed(n)).collect();
+        assert!(bad.is_empty(), "the settings leaf {module} imports {bad:?}");
+    }
+    // The database and the scheduler name no kind and no driver; nothing below the shell runs the
+    // driver; the configuration names no kind but through their settings leaves.
+    for module in
+        ["db", "schedule", "cache", "config", "config/raw", "config/settings", "sources", "artifacts", "record"]
+    {
+        let bad: Vec<&String> = imports[module]
+            .iter()
+            .filter(|n| (n.starts_with("kinds") && !settings_leaf(n)) || n.starts_with("project"))
+            .collect();
         assert!(bad.is_empty(), "{module} imports {bad:?}");
     }
     for (module, named) in &imports {

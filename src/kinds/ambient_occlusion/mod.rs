@@ -8,6 +8,7 @@
 //! map, which asks for its tiles. Stage instances: `mesh` → `bvh` (→ `vertices`) → a `bake` per
 //! tile → a `fill` per material → `mips → encode → write`.
 
+pub mod settings;
 pub mod bake;
 pub mod queries;
 

@@ -4,6 +4,7 @@
 //! is the packer's hint (`pack_pages_keeping`), so an edit moves nothing; the last page is the
 //! composite's start, so an edit re-composites its own rectangle.
 
+pub mod settings;
 pub mod page;
 pub mod queries;
 pub mod remap;

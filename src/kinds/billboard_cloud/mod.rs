@@ -13,6 +13,7 @@
 //! first level that renders) followed by one `render` per render group (wave 1), then the four
 //! atlas surfaces through the tail (wave 2).
 
+pub mod settings;
 pub mod planes;
 pub mod rectangles;
 pub mod layout;

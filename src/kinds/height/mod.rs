@@ -10,6 +10,7 @@
 //! Stage instances: `mesh` ×2 → `bvh` → `bake` (→ `mips → encode → write`); `tessellate` →
 //! `bake(pn)` → `displace`; `distance` per measured mesh.
 
+pub mod settings;
 pub mod bake;
 pub mod queries;
 

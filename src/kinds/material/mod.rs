@@ -4,6 +4,7 @@
 //! Jobs: `parse` (wave 0), then one tail job per material × surface. Stage instances: `parse`,
 //! a `decode` per texture, then per surface `pack → mips → encode → write`.
 
+pub mod settings;
 pub mod definition;
 pub mod channel_packing;
 pub mod queries;

@@ -1,0 +1,102 @@
+//! The `Height` kind's settings: its `height` and `tessellate` sections as `pipeline.ron` writes
+//! them (overrides), as they resolve (settings), and their checks. A leaf: it imports only
+//! `config/sections`.
+
+use serde::{Deserialize, Serialize};
+
+use crate::config::sections::Check;
+
+/// How a `Height` asset measures its high mesh from its low one (DESIGN §3.4).
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Hash, Serialize, Deserialize)]
+pub enum HeightProjection {
+    /// Per texel of the low mesh's UV space, along the low surface's interpolated normal.
+    Normals,
+    /// Orthographic depth along −Y over the low mesh's XZ footprint (terrain, relief).
+    TopDown,
+}
+
+/// How a `Height` asset's map is baked.
+#[derive(Clone, Debug, PartialEq, Serialize)]
+pub struct HeightSettings {
+    pub projection: HeightProjection,
+    /// Width and height of the map, in texels.
+    pub size: u32,
+    /// How far above the low surface (along its normal) the high one is looked for, as a
+    /// fraction of the low mesh's bounding-box diagonal.
+    pub frontal: f32,
+    /// How far below the low surface, likewise.
+    pub rear: f32,
+}
+
+/// A `Height` asset's tessellated mesh: `level` segments per edge, displaced or not.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Hash, Serialize)]
+pub struct TessellateSettings {
+    pub level: u32,
+    pub displace: bool,
+}
+
+#[derive(Deserialize, Default, Clone)]
+#[serde(deny_unknown_fields)]
+pub(crate) struct HeightOverrides {
+    pub projection: Option<HeightProjection>,
+    pub size: Option<u32>,
+    pub frontal: Option<f32>,
+    pub rear: Option<f32>,
+}
+
+#[derive(Deserialize, Default, Clone)]
+#[serde(deny_unknown_fields)]
+pub(crate) struct TessellateOverrides {
+    pub level: Option<u32>,
+    pub displace: Option<bool>,
+}
+
+pub(crate) fn merge_height(
+    check: &mut dyn Check,
+    settings: &mut HeightSettings,
+    height: &HeightOverrides,
+    anchor: usize,
+) {
+    if let Some(size) = height.size {
+        if !(16..=16384).contains(&size) || size % 4 != 0 {
+            check.error_at_key("size", anchor, "size must be a multiple of 4 between 16 and 16384");
+        }
+        settings.size = size;
+    }
+    for (key, value, target) in
+        [("frontal", height.frontal, &mut settings.frontal), ("rear", height.rear, &mut settings.rear)]
+    {
+        if let Some(value) = value {
+            if !(0.0..=1.0).contains(&value) {
+                check.error_at_key(
+                    key,
+                    anchor,
+                    &format!("{key} must be a fraction of the bounding-box diagonal in [0, 1]"),
+                );
+            }
+            *target = value;
+        }
+    }
+    if settings.frontal + settings.rear <= 0.0 {
+        check.error_at_key("frontal", anchor, "frontal and rear cannot both be 0: the rays would have no length");
+    }
+    settings.projection = height.projection.unwrap_or(settings.projection);
+}
+
+pub(crate) fn tessellate_settings(
+    check: &mut dyn Check,
+    tessellate: &TessellateOverrides,
+    anchor: usize,
+) -> TessellateSettings {
+    let level = tessellate.level.unwrap_or(8);
+    if !(1..=64).contains(&level) {
+        check.error_at_key("level", anchor, "level must be between 1 and 64 segments per edge");
+    }
+    TessellateSettings { level, displace: tessellate.displace.unwrap_or(true) }
+}
+
+impl Default for HeightSettings {
+    fn default() -> HeightSettings {
+        HeightSettings { projection: HeightProjection::Normals, size: 1024, frontal: 0.02, rear: 0.02 }
+    }
+}

@@ -116,7 +116,7 @@ pub struct PipelineConfig {
     /// The artifact folder, relative to `root`.
     pub output: PathBuf,
     pub server: Option<SocketAddr>,
-    pub defaults: Settings,
+    pub defaults: Defaults,
     pub assets: Vec<AssetConfig>,
     pub rules: Vec<Rule>,
     pub limits: Limits,
@@ -166,7 +166,7 @@ impl PipelineConfig {
             // Refused when the pipeline is read: a rule makes one asset per file.
             AssetKind::Atlas | AssetKind::Height => return None,
         };
-        Some(AssetConfig { name, source, settings: self.defaults.clone() })
+        Some(AssetConfig { name, source, settings: Settings::of_kind(rule.kind, &self.defaults) })
     }
 }
 
@@ -182,6 +182,7 @@ mod raw;
 
 /// What an asset may be called, and which names share a folder.
 mod asset_names;
+use crate::kinds::height::settings::Settings as Own;
 use asset_names::valid_asset_name;
 pub(crate) use asset_names::{reserved_asset_name, AssetFolders};
 
@@ -437,7 +438,7 @@ impl Validator<'_> {
                 None
             }
         });
-        let defaults = self.merge_settings(&Settings::default(), &raw.defaults, 0);
+        let defaults = self.merge_settings(&Defaults::default(), &raw.defaults, 0);
         let mut limits = Limits::default();
         if let Some(mib) = raw.limits.texture_memory_mib {
             if !(16..=1 << 24).contains(&mib) {
@@ -512,7 +513,7 @@ impl Validator<'_> {
     fn validate_asset(
         &mut self,
         asset: &raw::Asset,
-        defaults: &Settings,
+        defaults: &Defaults,
         limits: &Limits,
         names: &mut AssetFolders,
     ) -> Option<AssetConfig> {
@@ -548,22 +549,22 @@ impl Validator<'_> {
             Some(path) => Some(self.source_path(path, anchor)?),
             None => None,
         };
-        let mut settings = self.merge_settings(defaults, &overrides, anchor);
-        match asset {
-            raw::Asset::Material { ao_source, .. } => settings.ao_source = ao_source.clone(),
-            raw::Asset::Height { high, tessellate, .. } => {
-                settings.high_mesh = Some(self.source_path(high, anchor)?);
-                settings.tessellate =
-                    tessellate.as_ref().map(|tessellate| tessellate_settings(self, tessellate, anchor));
+        let merged = self.merge_settings(defaults, &overrides, anchor);
+        let mut settings = Settings::of_kind(kind, &merged);
+        match (asset, &mut settings.kind) {
+            (raw::Asset::Material { ao_source, .. }, KindSettings::Material(own)) => own.ao_source = ao_source.clone(),
+            (raw::Asset::Height { high, tessellate, .. }, KindSettings::Height(own)) => {
+                own.high_mesh = self.source_path(high, anchor)?;
+                own.tessellate = tessellate.as_ref().map(|tessellate| tessellate_settings(self, tessellate, anchor));
             }
             _ => {}
         }
         // Each atlas surface (each material's AO map) goes through the texture tail: the
         // same budget holds.
         let surface_side = match kind {
-            AssetKind::BillboardCloud => Some(("atlas", settings.atlas.max_size, "max_size")),
-            AssetKind::AmbientOcclusion => Some(("AO map", settings.ao.size, "size")),
-            AssetKind::Height => Some(("height map", settings.height.size, "size")),
+            AssetKind::BillboardCloud => Some(("atlas", merged.atlas.max_size, "max_size")),
+            AssetKind::AmbientOcclusion => Some(("AO map", merged.ao.size, "size")),
+            AssetKind::Height => Some(("height map", merged.height.size, "size")),
             _ => None,
         };
         if let Some((what, side, setting)) = surface_side {
@@ -599,7 +600,8 @@ impl Validator<'_> {
             (raw::Asset::BillboardCloud { .. }, Some(relative)) => AssetSource::BillboardCloud { mesh: relative },
             (raw::Asset::AmbientOcclusion { .. }, Some(relative)) => AssetSource::AmbientOcclusion { mesh: relative },
             (raw::Asset::Height { .. }, Some(low)) => {
-                AssetSource::Height { high: settings.high_mesh.clone().unwrap_or_default(), low }
+                let high = settings.own::<Own>().high_mesh.clone();
+                AssetSource::Height { high, low }
             }
             _ => unreachable!("materials, billboard clouds, AO and height bakes name their files"),
         };
@@ -649,9 +651,9 @@ impl Validator<'_> {
     fn check_ao_sources(&mut self, assets: &[AssetConfig], rules: &[raw::Rule]) {
         let rules_make_ao = rules.iter().any(|rule| rule.kind == AssetKind::AmbientOcclusion);
         for asset in assets {
-            let Some(source) = &asset.settings.ao_source else { continue };
+            let Some(source) = asset.settings.reads_asset() else { continue };
             let name = &asset.name;
-            let message = match assets.iter().find(|other| &other.name == source).map(|other| other.source.kind()) {
+            let message = match assets.iter().find(|other| other.name == source).map(|other| other.source.kind()) {
                 Some(AssetKind::AmbientOcclusion) => continue,
                 Some(kind) => format!(
                     "asset `{name}`: ao_source `{source}` is a {kind:?} asset; it must name an AmbientOcclusion asset"
@@ -664,7 +666,7 @@ impl Validator<'_> {
         }
     }
 
-    fn merge_settings(&mut self, base: &Settings, overrides: &raw::SettingsOverrides, anchor: usize) -> Settings {
+    fn merge_settings(&mut self, base: &Defaults, overrides: &raw::SettingsOverrides, anchor: usize) -> Defaults {
         let mut settings = base.clone();
         merge_billboard(self, &mut settings.billboard, &overrides.billboard, anchor);
         merge_atlas(self, &mut settings.atlas, &overrides.atlas, anchor);

@@ -51,28 +51,105 @@ impl EncodeSettings {
     }
 }
 
-/// Every setting of one asset, defaults and overrides merged.
+/// The sections `defaults:` may set, for assets of every kind (and the sections one asset's
+/// entry merges before its kind takes its own of them).
 #[derive(Clone, Debug, PartialEq, Serialize)]
-pub struct Settings {
+pub struct Defaults {
     pub billboard: BillboardSettings,
     pub atlas: PageSettings,
     pub pack: PackSettings,
     pub ao: AoSettings,
     pub encode: EncodeSettings,
-    /// The `AmbientOcclusion` asset a `Material` takes its AO maps from (`ao_source`), by
-    /// asset name: per asset, never a default.
-    pub ao_source: Option<String>,
     pub height: HeightSettings,
-    /// A `Height` asset's tessellated mesh (per asset, never a default; none: no tessellation).
-    pub tessellate: Option<TessellateSettings>,
-    /// The high mesh a `Height` asset measures (source-relative; per asset, never a default).
-    pub high_mesh: Option<PathBuf>,
     pub report: ReportSettings,
 }
 
-impl Default for Settings {
-    fn default() -> Settings {
-        Settings {
+/// `KindSettings` and `OwnSettings` of the one list of kinds (`kind_list.rs`).
+macro_rules! kind_settings {
+    ($($name:ident => $folder:ident),* $(,)?) => {
+        /// One asset's kind's own settings (`kinds/<kind>/settings.rs`).
+        #[derive(Clone, Debug, PartialEq, Serialize)]
+        pub enum KindSettings {
+            $($name(crate::kinds::$folder::settings::Settings)),*
+        }
+
+        $(impl OwnSettings for crate::kinds::$folder::settings::Settings {
+            fn of(settings: &KindSettings) -> Option<&Self> {
+                match settings {
+                    KindSettings::$name(own) => Some(own),
+                    #[allow(unreachable_patterns)]
+                    _ => None,
+                }
+            }
+        })*
+    };
+}
+
+/// A kind's own settings type: found in an asset's settings.
+pub trait OwnSettings: Sized {
+    fn of(settings: &KindSettings) -> Option<&Self>;
+}
+
+with_kinds!(kind_settings);
+
+/// Every setting of one asset, defaults and overrides merged: the shared `encode` section and
+/// its kind's own.
+#[derive(Clone, Debug, PartialEq, Serialize)]
+pub struct Settings {
+    pub encode: EncodeSettings,
+    pub kind: KindSettings,
+}
+
+impl Settings {
+    /// The asset's kind's own settings (`settings.own::<billboard_cloud::settings::Settings>()`).
+    pub fn own<T: OwnSettings>(&self) -> &T {
+        T::of(&self.kind).expect("an asset's settings are of its kind")
+    }
+
+    /// The other asset whose output this one reads (a Material's `ao_source`), if any.
+    pub fn reads_asset(&self) -> Option<&str> {
+        match &self.kind {
+            KindSettings::Material(material) => material.ao_source.as_deref(),
+            _ => None,
+        }
+    }
+
+    /// The settings of an asset of `kind` that the sections in `merged` make (its per-asset
+    /// fields empty: an asset a rule makes has none).
+    pub fn of_kind(kind: crate::config::AssetKind, merged: &Defaults) -> Settings {
+        use crate::config::AssetKind;
+        use crate::kinds::ambient_occlusion::settings as ambient_occlusion;
+        use crate::kinds::atlas::settings as atlas;
+        use crate::kinds::billboard_cloud::settings as billboard_cloud;
+        use crate::kinds::height::settings as height;
+        use crate::kinds::material::settings as material;
+        let kind = match kind {
+            AssetKind::Material => KindSettings::Material(material::Settings {
+                report: merged.report.clone(),
+                alpha_cutoff: merged.billboard.alpha_cutoff,
+                ao_source: None,
+            }),
+            AssetKind::BillboardCloud => KindSettings::BillboardCloud(billboard_cloud::Settings {
+                billboard: merged.billboard.clone(),
+                atlas: merged.atlas.clone(),
+            }),
+            AssetKind::Atlas => KindSettings::Atlas(atlas::Settings { pack: merged.pack.clone() }),
+            AssetKind::AmbientOcclusion => {
+                KindSettings::AmbientOcclusion(ambient_occlusion::Settings { ao: merged.ao.clone() })
+            }
+            AssetKind::Height => KindSettings::Height(height::Settings {
+                height: merged.height.clone(),
+                tessellate: None,
+                high_mesh: PathBuf::new(),
+            }),
+        };
+        Settings { encode: merged.encode.clone(), kind }
+    }
+}
+
+impl Default for Defaults {
+    fn default() -> Defaults {
+        Defaults {
             billboard: BillboardSettings::default(),
             atlas: default_billboard_atlas(),
             pack: PackSettings::default(),
@@ -88,10 +165,7 @@ impl Default for Settings {
                 zstd: None,
                 quality: EncodeQuality::Basic,
             },
-            ao_source: None,
             height: HeightSettings::default(),
-            tessellate: None,
-            high_mesh: None,
             report: ReportSettings::default(),
         }
     }

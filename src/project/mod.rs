@@ -532,11 +532,11 @@ impl Project {
         let mut registry: BTreeMap<String, Asset> =
             built.iter().map(|(config, asset)| (config.name.clone(), *asset)).collect();
         for (config, _) in built {
-            let Some(source) = &config.settings.ao_source else { continue };
+            let Some(source) = config.settings.reads_asset() else { continue };
             if registry.contains_key(source) {
                 continue;
             }
-            if let Some(read) = all_assets.iter().find(|asset| &asset.name == source) {
+            if let Some(read) = all_assets.iter().find(|asset| asset.name == source) {
                 let asset = self.sync_asset(read);
                 registry.insert(read.name.clone(), asset);
             }

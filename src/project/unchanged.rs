@@ -115,8 +115,8 @@ impl Project {
                 Err(why) => hasher.update(b"!").update(why.to_string().as_bytes()).update(b"\0"),
             };
         }
-        if let Some(source) = &config.settings.ao_source {
-            let read = all_assets.iter().find(|asset| &asset.name == source)?;
+        if let Some(source) = config.settings.reads_asset() {
+            let read = all_assets.iter().find(|asset| asset.name == source)?;
             hasher.update(self.current_fingerprint(read, all_assets, built, depth + 1)?.as_bytes());
         }
         Some(hasher.finalize())
@@ -153,7 +153,7 @@ impl Project {
     ) -> bool {
         // Nothing this asset reads changed since it was last found unchanged (an asset that
         // reads another's output, or lists its sources by glob, is checked every time).
-        let checked_every_time = config.settings.ao_source.is_some() || !config.source.glob_lists().is_empty();
+        let checked_every_time = config.settings.reads_asset().is_some() || !config.source.glob_lists().is_empty();
         if !checked_every_time && self.clean.contains(&config.name) {
             return true;
         }

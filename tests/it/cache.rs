@@ -5,7 +5,7 @@ use std::collections::BTreeSet;
 use std::path::{Path, PathBuf};
 
 use cirrus::cache::CacheKeyBuilder;
-use cirrus::config::{BlockFormat, Container, EncodeQuality, Settings};
+use cirrus::config::{BlockFormat, Container, Defaults, EncodeQuality};
 use expect_test::expect;
 
 use crate::support::build;
@@ -29,7 +29,7 @@ fn cache_entries(output: &Path) -> BTreeSet<PathBuf> {
 
 #[test]
 fn keys_have_a_pinned_encoding() {
-    let settings = Settings::default();
+    let settings = Defaults::default();
     let key = CacheKeyBuilder::new("example", 3)
         .part(&settings.billboard.epsilon)
         .part(&settings.billboard.max_planes)

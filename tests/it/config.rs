@@ -26,8 +26,9 @@ fn defaults_apply_and_assets_override_them() {
     assert_eq!(bark.settings.encode.zstd, None, "an explicit None overrides a default");
     assert_eq!(bark.settings.encode.albedo, BlockFormat::Bc7, "built-in default");
     let oak = &config.assets[1];
-    assert_eq!(oak.settings.billboard.epsilon, 0.03);
-    assert_eq!(oak.settings.billboard.max_planes, Some(12));
+    let billboard = &oak.settings.own::<cirrus::kinds::billboard_cloud::settings::Settings>().billboard;
+    assert_eq!(billboard.epsilon, 0.03);
+    assert_eq!(billboard.max_planes, Some(12));
     assert_eq!(oak.settings.encode.zstd, Some(5));
     let rule_asset = config.asset_for_rule_match(Path::new("materials/metal/steel.mymaterial")).expect("rule matches");
     assert_eq!(rule_asset.name, "materials/metal/steel");

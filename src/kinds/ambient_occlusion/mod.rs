@@ -21,6 +21,7 @@ use crate::cache::CacheKey;
 use crate::config::{AoMode, AssetConfig, PipelineConfig};
 use crate::db::{Asset, Db, StageRun};
 use crate::diagnostic::{display_path, Diagnostic};
+use crate::kinds::ambient_occlusion::settings::Settings as Own;
 use crate::kinds::mesh_queries::mesh_instance;
 use crate::kinds::Read;
 use crate::kinds::{tail_instances, AssetOutputs, Job, Kind, StageInstance, SurfaceId, Task};
@@ -157,7 +158,8 @@ impl Kind for AmbientOcclusion {
         problems.extend(
             crate::mesh::uvs_outside_warnings(main_file, &mesh).iter().map(crate::diagnostic::Diagnostic::as_warning),
         );
-        let long_bake = bake::long_bake_warning(main_file, &mesh, &asset.settings.ao, crate::schedule::cores());
+        let long_bake =
+            bake::long_bake_warning(main_file, &mesh, &asset.settings.own::<Own>().ao, crate::schedule::cores());
         problems.extend(long_bake.as_ref().map(crate::diagnostic::Diagnostic::as_warning));
         problems
     }

@@ -20,6 +20,7 @@ use crate::db::{
     store_cached, timed, Asset, ByHash, Db, Stage,
 };
 use crate::diagnostic::Diagnostic;
+use crate::kinds::ambient_occlusion::settings::Settings as Own;
 use crate::kinds::mesh_queries::{loaded_mesh, LoadedMesh};
 use crate::mesh::occlusion::{build_occluders, occlusion_of_vertices, Occluders, OcclusionSettings};
 use crate::mesh::rays::BackFaces;
@@ -94,7 +95,7 @@ fn material_folder(name: &str, taken: &[String]) -> String {
 
 #[salsa::tracked(returns(clone))]
 pub fn ao_settings(db: &dyn Db, asset: Asset) -> AoSettings {
-    asset.settings(db).ao.clone()
+    asset.settings(db).own::<Own>().ao.clone()
 }
 
 /// Each triangle's occluder group (its OBJ object) when objects occlude only themselves and

@@ -109,3 +109,9 @@ impl Default for AoSettings {
         }
     }
 }
+
+/// An `AmbientOcclusion` asset's own settings.
+#[derive(Clone, Debug, PartialEq, Serialize)]
+pub struct Settings {
+    pub ao: AoSettings,
+}

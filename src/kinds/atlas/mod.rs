@@ -21,6 +21,7 @@ use crate::kinds::{check_texture_file, tail_instances, AssetOutputs, Job, Kind, 
 use crate::texture::tail::TailSettings;
 use crate::texture::{SurfaceKind, Texture};
 
+use crate::kinds::atlas::settings::Settings as Own;
 use queries::{
     atlas_layout, atlas_layout_and_change, atlas_mesh_files, atlas_page, atlas_texture_files, mesh_library_paths,
     mesh_map_paths, page_group, page_label, page_recipe_key, page_stem, remapped_mesh, remapped_mesh_path, COMPOSITE,
@@ -247,7 +248,7 @@ impl Kind for Atlas {
                     problems.push(Diagnostic::new(&mesh_file, error.to_string()));
                 }
             }
-            if asset.settings.pack.trim {
+            if asset.settings.own::<Own>().pack.trim {
                 problems.extend(uvs_beyond_trim(config, &mesh_file, &mesh, &files));
             }
         }

@@ -20,6 +20,7 @@ use crate::texture::Texture;
 use super::page::{
     composite_page_keeping_sources, crop, opaque_bounds, recomposite_page, uv_texel_rect, PageEntry, TrimRect,
 };
+use crate::kinds::atlas::settings::Settings as Own;
 
 pub(crate) const TRIM: Stage = Stage { name: "trim", version: 1 };
 /// 3: kept as a hint for the next layout; entries come from the trim stage. 4: an entry keeps
@@ -95,7 +96,7 @@ pub(crate) fn atlas_texture_files(db: &dyn Db, asset: Asset) -> &[PathBuf] {
 /// The packer's settings of the asset.
 #[salsa::tracked(returns(copy))]
 pub(crate) fn page_settings(db: &dyn Db, asset: Asset) -> PageSettings {
-    let pack = &asset.settings(db).pack;
+    let pack = &asset.settings(db).own::<Own>().pack;
     PageSettings {
         max_size: pack.max_size,
         padding: pack.padding,
@@ -108,7 +109,7 @@ pub(crate) fn page_settings(db: &dyn Db, asset: Asset) -> PageSettings {
 /// Whether the asset trims transparent borders.
 #[salsa::tracked(returns(copy))]
 pub fn trims(db: &dyn Db, asset: Asset) -> bool {
-    asset.settings(db).pack.trim
+    asset.settings(db).own::<Own>().pack.trim
 }
 
 /// A texture decoded, its kept rectangle found (stage `trim`, per file); from the persistent

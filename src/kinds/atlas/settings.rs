@@ -45,3 +45,9 @@ impl Default for PackSettings {
         PackSettings { max_size: 4096, padding: 4, rotate: true, trim: true, power_of_two: false, pages: 4 }
     }
 }
+
+/// An `Atlas` asset's own settings.
+#[derive(Clone, Debug, PartialEq, Serialize)]
+pub struct Settings {
+    pub pack: PackSettings,
+}

@@ -3,6 +3,7 @@
 //! chain (`lod0/`, `lod1/`, …), each meant for half the screen size of the one before.
 
 use crate::config::Settings;
+use crate::kinds::billboard_cloud::settings::Settings as Own;
 use crate::packing::PageSettings;
 
 /// What one level of a billboard cloud is asked for.
@@ -17,12 +18,12 @@ pub struct LevelSettings {
 
 /// The levels an asset bakes: one per budget of its chain, else one.
 pub fn level_count(settings: &Settings) -> u32 {
-    settings.billboard.lods.len().max(1) as u32
+    settings.own::<Own>().billboard.lods.len().max(1) as u32
 }
 
 /// Whether the asset bakes a LOD chain (each level in a folder of its own).
 pub(crate) fn is_chain(settings: &Settings) -> bool {
-    !settings.billboard.lods.is_empty()
+    !settings.own::<Own>().billboard.lods.is_empty()
 }
 
 /// What level `level` is asked for. A chain's level N halves level N − 1's screen size or texel
@@ -30,10 +31,10 @@ pub(crate) fn is_chain(settings: &Settings) -> bool {
 /// a multiple of 4). Level 0, and the one level of an asset without a chain, take the settings
 /// as they are.
 pub(crate) fn settings_for(settings: &Settings, level: u32) -> LevelSettings {
-    let billboard = &settings.billboard;
+    let billboard = &settings.own::<Own>().billboard;
     let budget = billboard.lods.get(level as usize).copied().or(billboard.budget);
     let halvings = level.min(31);
-    let max_size = settings.atlas.max_size;
+    let max_size = settings.own::<Own>().atlas.max_size;
     let max_atlas_size = if billboard.screen_size.is_none() && billboard.texel_density.is_none() {
         ((max_size >> halvings).max(64.min(max_size))) & !3
     } else {

@@ -32,6 +32,7 @@ use crate::cache::CacheKey;
 use crate::config::{AssetConfig, PipelineConfig};
 use crate::db::{Asset, Db, StageRun, DECODE};
 use crate::diagnostic::{display_path, Diagnostic};
+use crate::kinds::billboard_cloud::settings::Settings as Own;
 use crate::kinds::mesh_queries::{loaded_mesh, mesh_textures, LoadedMesh};
 use crate::kinds::{check_texture_file, tail_instances, AssetOutputs, Job, Kind, Read, StageInstance, SurfaceId, Task};
 use crate::summary::ErrorSummary;
@@ -288,7 +289,7 @@ impl Kind for BillboardCloud {
             encode,
             surface.surface,
             encode.format_of(surface.surface),
-            (surface.surface == SurfaceKind::Albedo).then_some(settings.billboard.alpha_cutoff),
+            (surface.surface == SurfaceKind::Albedo).then_some(settings.own::<Own>().billboard.alpha_cutoff),
         ))
     }
 
@@ -360,7 +361,7 @@ fn billboard_outputs(
         "kind": crate::config::AssetKind::BillboardCloud.name(),
         "mesh": display_path(asset.main_file(db)),
         "faces": loaded.mesh.triangles.len(),
-        "alpha_cutoff": settings.billboard.alpha_cutoff,
+        "alpha_cutoff": settings.own::<Own>().billboard.alpha_cutoff,
     });
     let fields = report.as_object_mut().expect("an object");
     if levels::is_chain(settings) {
@@ -497,7 +498,7 @@ pub fn preview(
     };
     let loaded = loaded_mesh(db, input).map_err(PreviewError::Artifact)?;
     let source = source_view_mesh(db, input, &loaded).map_err(PreviewError::Artifact)?;
-    let cutoff = settings.billboard.alpha_cutoff;
+    let cutoff = settings.own::<Own>().billboard.alpha_cutoff;
     let folder = config.output.join(&options.asset);
     let lods = chosen
         .iter()
@@ -588,7 +589,7 @@ fn faces_on_planes(
 /// The source mesh with its decoded maps (mipmapped as for rendering).
 fn source_view_mesh(db: &dyn Db, input: Asset, loaded: &LoadedMesh) -> Result<crate::gpu::ViewMesh, Diagnostic> {
     use crate::texture::TextureSlot;
-    let cutoff = input.settings(db).billboard.alpha_cutoff;
+    let cutoff = input.settings(db).own::<Own>().billboard.alpha_cutoff;
     let mut materials = Vec::new();
     for material in &loaded.mesh.materials {
         let levels = |slot: TextureSlot,

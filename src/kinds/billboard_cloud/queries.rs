@@ -22,6 +22,7 @@ use crate::db::{
 };
 use crate::diagnostic::{display_path, Diagnostic};
 use crate::gpu::PlaneImages;
+use crate::kinds::billboard_cloud::settings::Settings as Own;
 use crate::kinds::mesh_queries::{loaded_mesh, mesh_cache_key, mesh_textures};
 use crate::texture::{SurfaceKind, Texture, TextureSlot};
 
@@ -121,7 +122,7 @@ pub(crate) fn atlas_layout_settings(
 ) -> (crate::packing::PageSettings, Option<f32>, Option<u32>) {
     let settings = level_settings(db, asset, level);
     (
-        super::levels::level_atlas_settings(&asset.settings(db).atlas, &settings),
+        super::levels::level_atlas_settings(&asset.settings(db).own::<Own>().atlas, &settings),
         settings.texel_density,
         settings.screen_size,
     )
@@ -198,7 +199,7 @@ pub(crate) fn lod_files(db: &dyn Db, asset: Asset, level: u32) -> Result<Arc<(St
 
 #[salsa::tracked(returns(copy))]
 pub(crate) fn billboard_alpha_cutoff(db: &dyn Db, asset: Asset) -> f32 {
-    asset.settings(db).billboard.alpha_cutoff
+    asset.settings(db).own::<Own>().billboard.alpha_cutoff
 }
 
 /// The label of a render group's stage instance: `asset/plane12:bark+leaves`, or

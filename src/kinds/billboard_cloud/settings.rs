@@ -195,3 +195,10 @@ impl Default for BillboardSettings {
 pub fn default_billboard_atlas() -> PageSettings {
     PageSettings { max_size: 2048, padding: 4, power_of_two: true }
 }
+
+/// A `BillboardCloud` asset's own settings.
+#[derive(Clone, Debug, PartialEq, Serialize)]
+pub struct Settings {
+    pub billboard: BillboardSettings,
+    pub atlas: PageSettings,
+}

@@ -23,6 +23,7 @@ use crate::cache::CacheKey;
 use crate::config::{AssetConfig, HeightProjection, PipelineConfig};
 use crate::db::{Asset, Db, StageRun};
 use crate::diagnostic::{display_path, Diagnostic};
+use crate::kinds::height::settings::Settings as Own;
 use crate::kinds::mesh_queries::{mesh_files_of, mesh_instance_of};
 use crate::kinds::{tail_instances, AssetOutputs, Job, Kind, StageInstance, SurfaceId, Task};
 use crate::mesh::surface_distance::SurfaceDistance;
@@ -193,8 +194,8 @@ impl Kind for Height {
             Ok((mesh, warnings)) => {
                 problems.extend(warnings);
                 let settings = &asset.settings;
-                let needs_uvs = settings.height.projection == HeightProjection::Normals
-                    || settings.tessellate.is_some_and(|tessellate| tessellate.displace);
+                let needs_uvs = settings.own::<Own>().height.projection == HeightProjection::Normals
+                    || settings.own::<Own>().tessellate.is_some_and(|tessellate| tessellate.displace);
                 if mesh.triangles.is_empty() {
                     problems.push(Diagnostic::new(low_file, "the low mesh has no triangles"));
                 } else if needs_uvs && mesh.uvs.is_none() {
@@ -203,7 +204,7 @@ impl Kind for Height {
                         "the low mesh has no texture coordinates (`vt` in the OBJ): a Normals height bake and a \
                             displaced tessellation need its UV layout",
                     ));
-                } else if settings.height.projection == HeightProjection::Normals {
+                } else if settings.own::<Own>().height.projection == HeightProjection::Normals {
                     problems.extend(
                         crate::mesh::uvs_outside_warnings(low_file, &mesh)
                             .iter()
@@ -213,7 +214,8 @@ impl Kind for Height {
             }
             Err(diagnostic) => problems.push(diagnostic),
         }
-        if let Some(high) = &asset.settings.high_mesh {
+        {
+            let high = &asset.settings.own::<Own>().high_mesh;
             let high_file = &config.source.join(high);
             match crate::kinds::check_mesh_file(config, high_file) {
                 Ok((mesh, warnings)) => {

@@ -18,6 +18,7 @@ use crate::db::{
     ByHash, Db, Stage,
 };
 use crate::diagnostic::Diagnostic;
+use crate::kinds::height::settings::Settings as Own;
 use crate::kinds::mesh_queries::{loaded_mesh, loaded_mesh_of, LoadedMesh};
 use crate::mesh::pn_triangles::{averaged_normals, pn_patch, tessellate, PnInput, PnMesh, PnPatch};
 use crate::mesh::rays::{build_triangle_bvh, TriangleBvh};
@@ -70,17 +71,17 @@ pub(crate) fn map_label(asset_name: &str, reference: MapReference) -> String {
 
 #[salsa::tracked(returns(clone))]
 pub(crate) fn height_settings(db: &dyn Db, asset: Asset) -> HeightSettings {
-    asset.settings(db).height.clone()
+    asset.settings(db).own::<Own>().height.clone()
 }
 
 #[salsa::tracked(returns(clone))]
 pub(crate) fn tessellate_settings(db: &dyn Db, asset: Asset) -> Option<TessellateSettings> {
-    asset.settings(db).tessellate
+    asset.settings(db).own::<Own>().tessellate
 }
 
 /// The high mesh's project-relative path (the settings hold it relative to the source folder).
 pub(crate) fn high_path(db: &dyn Db, asset: Asset) -> PathBuf {
-    asset.source_root(db).join(asset.settings(db).high_mesh.as_deref().unwrap_or(std::path::Path::new("")))
+    asset.source_root(db).join(&asset.settings(db).own::<Own>().high_mesh)
 }
 
 /// A mesh with the hash of its geometry and its bounding-box diagonal.

@@ -100,3 +100,13 @@ impl Default for HeightSettings {
         HeightSettings { projection: HeightProjection::Normals, size: 1024, frontal: 0.02, rear: 0.02 }
     }
 }
+
+/// A `Height` asset's own settings.
+#[derive(Clone, Debug, PartialEq, Serialize)]
+pub struct Settings {
+    pub height: HeightSettings,
+    /// Its tessellated mesh (per asset, never a default; none: no tessellation).
+    pub tessellate: Option<TessellateSettings>,
+    /// The high mesh it measures (source-relative; per asset, never a default).
+    pub high_mesh: std::path::PathBuf,
+}

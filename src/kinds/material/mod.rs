@@ -18,6 +18,7 @@ use crate::cache::CacheKey;
 use crate::config::{AssetConfig, PipelineConfig};
 use crate::db::{Asset, Db, StageRun, DECODE};
 use crate::diagnostic::{display_path, Diagnostic};
+use crate::kinds::material::settings::Settings as Own;
 use crate::kinds::{check_texture_file, tail_instances, AssetOutputs, Job, Kind, Read, StageInstance, SurfaceId, Task};
 use crate::summary::ErrorSummary;
 use crate::texture::tail::{SurfaceInfo, TailSettings};
@@ -140,7 +141,7 @@ impl Kind for Material {
                     continue;
                 };
                 let [texture_path, preview_path] = id.artifact_paths(output_folder, container);
-                let other_formats = if asset.settings(db).report.compare_formats {
+                let other_formats = if asset.settings(db).own::<Own>().report.compare_formats {
                     crate::kinds::tail_queries::surface_format_comparison(db, asset, id.clone())
                         .ok()
                         .map(|figures| figures.to_vec())
@@ -208,7 +209,7 @@ impl Kind for Material {
         let alpha_cutoff = match surface.surface {
             SurfaceKind::Albedo => {
                 let recipe = surface_recipe(db, asset, surface.clone())?;
-                Some(recipe.constants.alpha_cutoff.unwrap_or(settings.billboard.alpha_cutoff))
+                Some(recipe.constants.alpha_cutoff.unwrap_or(settings.own::<Own>().alpha_cutoff))
             }
             _ => None,
         };

@@ -9,6 +9,7 @@ use super::definition::{parse_material_file, MaterialConstants, MaterialFile};
 use crate::cache::{CacheKey, CacheKeyBuilder, KeyPart};
 use crate::db::{cached_json, decoded_texture, read_contents, stage_key, timed, Asset, Db, SourceFile, Stage};
 use crate::diagnostic::{display_path, Diagnostic};
+use crate::kinds::material::settings::Settings as Own;
 use crate::kinds::{Read, SurfaceId};
 use crate::texture::{SurfaceKind, Texture, TextureSlot};
 
@@ -70,7 +71,7 @@ fn from_ao_source(db: &dyn Db, asset: Asset, name: &str, error: Diagnostic) -> D
 
 /// The AO map of `material` from the asset's `ao_source`, if it names one.
 fn ao_source_map(db: &dyn Db, asset: Asset, material: &str) -> Result<Option<MapSource>, Diagnostic> {
-    let Some(name) = &asset.settings(db).ao_source else { return Ok(None) };
+    let Some(name) = &asset.settings(db).own::<Own>().ao_source else { return Ok(None) };
     let reader = asset.main_file(db);
     let Some(source) = crate::db::asset_named(db, name) else {
         return Err(Diagnostic::new(reader, format!("ao_source `{name}` names no asset of the pipeline")));

@@ -17,3 +17,14 @@ pub struct ReportSettings {
 pub(crate) struct ReportOverrides {
     pub compare_formats: Option<bool>,
 }
+
+/// A `Material` asset's own settings.
+#[derive(Clone, Debug, PartialEq, Serialize)]
+pub struct Settings {
+    pub report: ReportSettings,
+    /// The alpha test of an alpha-tested albedo (the `billboard` section's `alpha_cutoff`).
+    pub alpha_cutoff: f32,
+    /// The `AmbientOcclusion` asset the material takes its AO maps from, by asset name: per
+    /// asset, never a default.
+    pub ao_source: Option<String>,
+}

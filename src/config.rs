@@ -42,50 +42,36 @@ macro_rules! asset_kind_enum {
 
 with_kinds!(asset_kind_enum);
 
-/// What an asset is made from.
+/// What an asset is made from: its kind, the file it is named after, and the globs whose
+/// matches it reads, whatever its kind (a kind's other files are its settings').
 #[derive(Clone, Debug, PartialEq, Eq, Hash)]
-pub enum AssetSource {
-    /// A `.mymaterial` file, relative to the source folder.
-    Material { material: PathBuf },
-    /// An OBJ mesh, relative to the source folder.
-    BillboardCloud { mesh: PathBuf },
-    /// Textures (and meshes to remap) by globs over the source folder.
-    Atlas { textures: Vec<String>, meshes: Vec<String> },
-    /// An OBJ mesh with UVs, relative to the source folder.
-    AmbientOcclusion { mesh: PathBuf },
-    /// A high and a low OBJ mesh, relative to the source folder (the low one is the main file:
-    /// the map lies in its UV space).
-    Height { high: PathBuf, low: PathBuf },
+pub struct AssetSource {
+    pub kind: AssetKind,
+    /// Relative to the source folder: a `.mymaterial`, a billboard's or AO's OBJ, a Height's low
+    /// mesh; empty for an asset named by globs alone (what concerns the whole asset is then
+    /// said of the source folder).
+    pub main_file: PathBuf,
+    /// The lists of globs (over the source folder) whose matches the asset reads, in the order
+    /// its kind takes them (an atlas: textures, then meshes); none for kinds that name files.
+    pub glob_lists: Vec<Vec<String>>,
 }
 
 impl AssetSource {
+    /// An asset named after one file.
+    pub fn of_file(kind: AssetKind, main_file: impl Into<PathBuf>) -> AssetSource {
+        AssetSource { kind, main_file: main_file.into(), glob_lists: Vec::new() }
+    }
+
     pub fn kind(&self) -> AssetKind {
-        match self {
-            AssetSource::Material { .. } => AssetKind::Material,
-            AssetSource::BillboardCloud { .. } => AssetKind::BillboardCloud,
-            AssetSource::Atlas { .. } => AssetKind::Atlas,
-            AssetSource::AmbientOcclusion { .. } => AssetKind::AmbientOcclusion,
-            AssetSource::Height { .. } => AssetKind::Height,
-        }
+        self.kind
     }
 
     pub(crate) fn main_file(&self) -> &Path {
-        match self {
-            AssetSource::Material { material } => material,
-            AssetSource::BillboardCloud { mesh } | AssetSource::AmbientOcclusion { mesh } => mesh,
-            AssetSource::Height { low, .. } => low,
-            // No one file: what concerns the whole asset is said of the source folder.
-            AssetSource::Atlas { .. } => Path::new(""),
-        }
+        &self.main_file
     }
 
-    /// The lists of globs (over the source folder) whose matches the asset reads, in the order
-    /// its kind takes them (an atlas: textures, then meshes); none for kinds that name files.
     pub(crate) fn glob_lists(&self) -> Vec<&[String]> {
-        match self {
-            AssetSource::Atlas { textures, meshes } => vec![textures, meshes],
-            _ => Vec::new(),
-        }
+        self.glob_lists.iter().map(Vec::as_slice).collect()
     }
 }
 
@@ -159,13 +145,11 @@ impl PipelineConfig {
     pub fn rule_asset(&self, relative: &Path) -> Option<AssetConfig> {
         let rule = self.rules.iter().find(|rule| rule.matcher.is_match(relative))?;
         let name = crate::diagnostic::display_path(&relative.with_extension(""));
-        let source = match rule.kind {
-            AssetKind::Material => AssetSource::Material { material: relative.to_path_buf() },
-            AssetKind::BillboardCloud => AssetSource::BillboardCloud { mesh: relative.to_path_buf() },
-            AssetKind::AmbientOcclusion => AssetSource::AmbientOcclusion { mesh: relative.to_path_buf() },
-            // Refused when the pipeline is read: a rule makes one asset per file.
-            AssetKind::Atlas | AssetKind::Height => return None,
-        };
+        // An Atlas or a Height is refused when the pipeline is read: a rule makes one asset per file.
+        if matches!(rule.kind, AssetKind::Atlas | AssetKind::Height) {
+            return None;
+        }
+        let source = AssetSource::of_file(rule.kind, relative);
         Some(AssetConfig { name, source, settings: Settings::of_kind(rule.kind, &self.defaults) })
     }
 }
@@ -182,7 +166,6 @@ mod raw;
 
 /// What an asset may be called, and which names share a folder.
 mod asset_names;
-use crate::kinds::height::settings::Settings as Own;
 use asset_names::valid_asset_name;
 pub(crate) use asset_names::{reserved_asset_name, AssetFolders};
 
@@ -594,16 +577,10 @@ impl Validator<'_> {
                         self.error_at_value(glob, anchor, &format!("bad glob: {error}"));
                     }
                 }
-                AssetSource::Atlas { textures: textures.clone(), meshes: meshes.clone() }
+                AssetSource { kind, main_file: PathBuf::new(), glob_lists: vec![textures.clone(), meshes.clone()] }
             }
-            (raw::Asset::Material { .. }, Some(relative)) => AssetSource::Material { material: relative },
-            (raw::Asset::BillboardCloud { .. }, Some(relative)) => AssetSource::BillboardCloud { mesh: relative },
-            (raw::Asset::AmbientOcclusion { .. }, Some(relative)) => AssetSource::AmbientOcclusion { mesh: relative },
-            (raw::Asset::Height { .. }, Some(low)) => {
-                let high = settings.own::<Own>().high_mesh.clone();
-                AssetSource::Height { high, low }
-            }
-            _ => unreachable!("materials, billboard clouds, AO and height bakes name their files"),
+            (_, Some(relative)) => AssetSource::of_file(kind, relative),
+            (_, None) => unreachable!("materials, billboard clouds, AO and height bakes name their files"),
         };
         Some(AssetConfig { name: name.clone(), source, settings })
     }

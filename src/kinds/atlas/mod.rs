@@ -14,7 +14,7 @@ use std::path::{Path, PathBuf};
 use std::sync::Arc;
 
 use crate::cache::CacheKey;
-use crate::config::{AssetConfig, AssetSource, PipelineConfig};
+use crate::config::{AssetConfig, PipelineConfig};
 use crate::db::{Asset, Db, StageRun, DECODE};
 use crate::diagnostic::{display_path, Diagnostic};
 use crate::kinds::{check_texture_file, tail_instances, AssetOutputs, Job, Kind, Read, StageInstance, SurfaceId, Task};
@@ -216,7 +216,7 @@ impl Kind for Atlas {
     /// nothing are an error); every mesh loads, and its materials that use atlased maps keep
     /// their UVs inside [0, 1].
     fn check(config: &PipelineConfig, asset: &AssetConfig) -> Vec<Diagnostic> {
-        let AssetSource::Atlas { textures, meshes } = &asset.source else { return Vec::new() };
+        let [textures, meshes] = &asset.source.glob_lists[..] else { return Vec::new() };
         let files = crate::sources::glob_matches(config, textures);
         if files.is_empty() {
             return vec![Diagnostic::new(

@@ -337,7 +337,7 @@ fn flat_map_warning(files: &queries::HeightMapFiles, high: &Path, which: &str) -
         ErrorSummary::from(&Diagnostic::new(
             high,
             format!(
-                "warning: the {which} map is flat: every measured height lies within {:e} of the others (under {} of \
+                "the {which} map is flat: every measured height lies within {:e} of the others (under {} of \
                     the {:e} searched): {what}, and the map holds no relief (its values sit at the middle of the \
                     16-bit range, not stretched over noise)",
                 map.range[1] - map.range[0],

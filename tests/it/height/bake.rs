@@ -195,6 +195,9 @@ fn coinciding_meshes_give_a_flat_map_with_a_warning_instead_of_noise_stretched_o
         warnings.contains("the height map is flat") && warnings.contains("the high mesh lies on the low one"),
         "{warnings}"
     );
+    // Said once as a warning in the text summary, not "warning: …: warning: …".
+    let text = summary.to_text();
+    assert!(text.contains("warning: ") && !text.contains(": warning: "), "{text}");
     let (_, values) = png16_values(&project.read("baked/relief/height.png"));
     let (low_value, high_value) = (values.iter().min().copied().unwrap(), values.iter().max().copied().unwrap());
     assert!(high_value - low_value <= 2 && (32766..=32769).contains(&low_value), "values {low_value}..={high_value}");

@@ -416,7 +416,6 @@ pub(crate) struct AssetOutputs {
 
 /// Reads a texture's header for `check`: readable, decodable, within the texture limits.
 pub(crate) fn check_texture_file(config: &PipelineConfig, path: &Path) -> Result<(), String> {
-    // (A `String`: check reports the reason under the file's name.)
     let contents = crate::sources::read_source(&config.root, &config.source, path)?;
     crate::texture::probe_texture(path, &contents.bytes, config.limits.texture)
         .map(|_| ())

@@ -1049,14 +1049,9 @@ fn bench_billboard_quality(corpus: &Path) {
         for epsilon in [0.01, 0.02, 0.04] {
             let (dir, mut project, options) = tree_preview(corpus, tree, &format!("epsilon: {epsilon}"));
             let metrics = preview_one_level(&mut project, &options);
-            let one_sample = cirrus::kinds::billboard_cloud::lod_preview::PreviewSettings {
-                samples_per_axis: 1,
-                ..Default::default()
-            };
-            let aliased = preview_one_level(
-                &mut project,
-                &cirrus::kinds::billboard_cloud::PreviewOptions { settings: one_sample, ..options },
-            );
+            let one_sample = cirrus::preview::PreviewSettings { samples_per_axis: 1, ..Default::default() };
+            let aliased =
+                preview_one_level(&mut project, &cirrus::kinds::PreviewOptions { settings: one_sample, ..options });
             let report: serde_json::Value =
                 serde_json::from_slice(&std::fs::read(dir.path().join("baked/tree/report.json")).unwrap()).unwrap();
             figures.push(format!(
@@ -1074,7 +1069,7 @@ fn tree_preview(
     corpus: &Path,
     tree: &str,
     billboard: &str,
-) -> (tempfile::TempDir, Project, cirrus::kinds::billboard_cloud::PreviewOptions) {
+) -> (tempfile::TempDir, Project, cirrus::kinds::PreviewOptions) {
     let dir = tree_project(
         corpus,
         &format!(r#"BillboardCloud(name: "tree", mesh: "trees/{tree}.obj", billboard: ({billboard}))"#),
@@ -1083,7 +1078,7 @@ fn tree_preview(
         load_pipeline(&dir.path().join("pipeline.ron")).unwrap(),
         ProjectOptions { persistent_cache: false, ..Default::default() },
     );
-    let options = cirrus::kinds::billboard_cloud::PreviewOptions {
+    let options = cirrus::kinds::PreviewOptions {
         asset: "tree".into(),
         settings: Default::default(),
         out: "preview".into(),
@@ -1096,11 +1091,11 @@ fn tree_preview(
 /// The preview metrics of an asset with one LOD.
 fn preview_one_level(
     project: &mut Project,
-    options: &cirrus::kinds::billboard_cloud::PreviewOptions,
-) -> cirrus::kinds::billboard_cloud::lod_preview::PreviewMetrics {
+    options: &cirrus::kinds::PreviewOptions,
+) -> cirrus::preview::PreviewMetrics {
     let mut levels = {
         let input = project.built_asset(&options.asset).expect("the asset builds");
-        cirrus::kinds::billboard_cloud::preview(project.database(), input, project.config(), options)
+        cirrus::kinds::billboard_cloud::preview_levels(project.database(), input, project.config(), options)
     }
     .expect("preview");
     assert_eq!(levels.len(), 1, "one level");
@@ -1118,7 +1113,7 @@ fn bench_billboard_budget(corpus: &Path) {
     use cirrus::kinds::billboard_cloud::lod_preview::StandIn;
     use cirrus::kinds::billboard_cloud::planes::{select_planes, PlaneSettings};
     use cirrus::kinds::billboard_cloud::rectangles::plane_rectangles;
-    use cirrus::kinds::billboard_cloud::PreviewOptions;
+    use cirrus::kinds::PreviewOptions;
     for tree in ["oak_medium", "ash_small", "bush_2"] {
         let obj = std::fs::read(corpus.join(format!("trees/{tree}.obj"))).unwrap();
         let (mesh, _) =
@@ -1222,16 +1217,16 @@ fn bench_billboard_chain(corpus: &Path) {
         let (_dir, mut project, options) = tree_preview(corpus, tree, CHAIN);
         let levels = {
             let input = project.built_asset(&options.asset).expect("the asset builds");
-            cirrus::kinds::billboard_cloud::preview(project.database(), input, project.config(), &options)
+            cirrus::kinds::billboard_cloud::preview_levels(project.database(), input, project.config(), &options)
         }
         .expect("preview");
         for ((level, metrics), entry) in levels.iter().zip(report["levels"].as_array().expect("levels")) {
             // Level N is meant for half the screen size of level N − 1: also seen at that size.
             let size = options.settings.size >> level;
-            let settings = cirrus::kinds::billboard_cloud::lod_preview::PreviewSettings { size, ..options.settings };
+            let settings = cirrus::preview::PreviewSettings { size, ..options.settings };
             let at_its_size = preview_one_level(
                 &mut project,
-                &cirrus::kinds::billboard_cloud::PreviewOptions { settings, lod: Some(*level), ..options.clone() },
+                &cirrus::kinds::PreviewOptions { settings, lod: Some(*level), ..options.clone() },
             );
             println!(
                 "billboard-chain: {tree}: lod{level}: {} quads (budget {}), ε {:.4}, atlas {}×{}, {:.2} MB, mean IoU {:.3} at {} px, {:.3} at {size} px",

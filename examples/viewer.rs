@@ -111,7 +111,7 @@ impl Scene {
         let level_folder = level_folder(&folder, levels, options.lod);
         let mesh = cirrus::kinds::billboard_cloud::read_lod_view_mesh(Path::new("."), &level_folder, alpha_cutoff)
             .map_err(|error| error.to_string())?;
-        let (center, radius) = cirrus::kinds::billboard_cloud::lod_preview::bounding_sphere(&mesh);
+        let (center, radius) = cirrus::preview::bounding_sphere(&mesh);
         let camera = Camera { yaw: 0.6, pitch: 0.25, zoom: 1.0 };
         Ok(Scene { folder, levels, level: options.lod, alpha_cutoff, mesh, center, radius, camera })
     }
@@ -160,8 +160,7 @@ impl Scene {
     /// A `size`² RGBA8 image of the LOD (mid-grey background, alpha 0 there).
     fn render(&self, gpu: &Gpu, size: u32) -> Result<Vec<u8>, String> {
         let matrix = self.camera.view_projection(self.center, self.radius);
-        gpu.render_view(&self.mesh, matrix, cirrus::kinds::billboard_cloud::lod_preview::preview_light(), size)
-            .map_err(|error| error.to_string())
+        gpu.render_view(&self.mesh, matrix, cirrus::preview::preview_light(), size).map_err(|error| error.to_string())
     }
 }
 

@@ -13,11 +13,13 @@ pub mod files;
 pub mod isa;
 pub mod openddl;
 
-// Shared libraries: pure functions over plain data (no salsa, no IO), named by role.
+// Shared libraries: pure functions over plain data (no salsa, no IO), named by role; the
+// previews render through the GPU device.
 pub mod texture;
 pub mod mesh;
 pub mod packing;
 pub mod gpu;
+pub mod preview;
 
 // The inputs: the pipeline file, validated into per-asset settings.
 pub mod config;

@@ -58,12 +58,13 @@ pub enum Command {
         #[arg(long)]
         verify: bool,
     },
-    /// Render a billboard cloud and its source from many directions: contact sheet and metrics.
+    /// Render a baked mesh beside its source from many directions (a billboard cloud's LODs, an
+    /// atlas's remapped meshes): contact sheets and metrics.
     Preview {
         /// The pipeline file.
         #[arg(long, default_value = "pipeline.ron")]
         pipeline: PathBuf,
-        /// The BillboardCloud asset.
+        /// The BillboardCloud asset, or Atlas asset with `meshes`.
         #[arg(long)]
         asset: String,
         /// How many of the 26 cube directions to render.
@@ -356,11 +357,7 @@ fn run_command(cli: Cli) -> ExitCode {
         }
         Command::Graph { pipeline, asset, format } => graph(pipeline, asset, format, options),
         Command::Preview { pipeline, asset, views, size, samples, out, lod, stand_in } => {
-            let settings = crate::kinds::billboard_cloud::lod_preview::PreviewSettings {
-                views: views as usize,
-                size,
-                samples_per_axis: samples,
-            };
+            let settings = crate::preview::PreviewSettings { views: views as usize, size, samples_per_axis: samples };
             preview(pipeline, asset, settings, out, lod, stand_in, options)
         }
     }
@@ -506,7 +503,7 @@ fn check(pipeline: PathBuf, only: &[String], json: bool) -> ExitCode {
 fn preview(
     pipeline: PathBuf,
     asset: String,
-    settings: crate::kinds::billboard_cloud::lod_preview::PreviewSettings,
+    settings: crate::preview::PreviewSettings,
     out: Option<PathBuf>,
     lod: Option<u32>,
     stand_in: crate::kinds::billboard_cloud::lod_preview::StandIn,
@@ -523,64 +520,58 @@ fn preview(
     };
     let out = out.unwrap_or_else(|| config.output.join(&asset).join(folder));
     let mut project = Project::open(config, options);
-    let options = crate::kinds::billboard_cloud::PreviewOptions { asset, settings, out: out.clone(), lod, stand_in };
+    let options = crate::kinds::PreviewOptions { asset, settings, out, lod, stand_in };
     let previewed = project.built_asset(&options.asset).map_err(PreviewFailure::Build).and_then(|input| {
-        crate::kinds::billboard_cloud::preview(project.database(), input, project.config(), &options)
-            .map_err(PreviewFailure::Preview)
+        let db = project.database();
+        input.kind(db).preview(db, input, project.config(), &options).map_err(PreviewFailure::Preview)
     });
-    match previewed {
-        Ok(levels) => {
-            let chain = levels.len() > 1 || levels.first().is_some_and(|&(level, _)| level > 0) || lod.is_some();
-            let stand_in = match stand_in {
-                crate::kinds::billboard_cloud::lod_preview::StandIn::Baked => String::new(),
-                other => format!("source faces {} onto the planes: ", other.name()),
-            };
-            for (level, metrics) in &levels {
-                outln!(
-                    "{}{stand_in}{} views, {} per pixel: mean IoU {:.3}, min IoU {:.3} (missed {:.1} %, extra {:.1} % \
-                        of the source's silhouette), mean PSNR {:.2} dB; the source against itself moved 1 pixel: \
-                        IoU {:.3}",
-                    if chain { format!("lod{level}: ") } else { String::new() },
-                    metrics.views.len(),
-                    match metrics.samples_per_pixel {
-                        1 => "1 sample".to_string(),
-                        samples => format!("{samples} samples"),
-                    },
-                    metrics.mean_iou,
-                    metrics.min_iou,
-                    100.0 * metrics.mean_missed,
-                    100.0 * metrics.mean_extra,
-                    metrics.mean_psnr,
-                    metrics.source_shift_iou
-                );
-            }
-            if levels.len() > 1 {
-                outln!(
-                    "wrote {0}/contact_sheet.png (each view: source, then lod0 to lod{1}) and \
-                        lod<N>/contact_sheet.png, lod<N>/metrics.json",
-                    crate::diagnostic::display_path(&out),
-                    levels.len() - 1
-                );
-            } else {
-                outln!("wrote contact_sheet.png and metrics.json under {}", crate::diagnostic::display_path(&out));
-            }
-            ExitCode::SUCCESS
-        }
-        Err(
-            error @ (PreviewFailure::Build(crate::project::BuildError::UnknownAsset { .. })
-            | PreviewFailure::Preview(
-                crate::kinds::billboard_cloud::PreviewError::NotBillboard(_)
-                | crate::kinds::billboard_cloud::PreviewError::NoSuchLevel { .. },
-            )),
-        ) => {
-            eprintln!("error: {error}");
-            ExitCode::from(EXIT_USAGE)
-        }
+    let report = match previewed {
+        Ok(report) => report,
         Err(error) => {
             eprintln!("error: {error}");
-            ExitCode::from(EXIT_ASSET_FAILED)
+            let usage = match &error {
+                PreviewFailure::Build(crate::project::BuildError::UnknownAsset { .. }) => true,
+                PreviewFailure::Build(_) => false,
+                PreviewFailure::Preview(error) => error.is_usage(),
+            };
+            return ExitCode::from(if usage { EXIT_USAGE } else { EXIT_ASSET_FAILED });
         }
+    };
+    let stand_in = match stand_in {
+        crate::kinds::billboard_cloud::lod_preview::StandIn::Baked => String::new(),
+        other => format!("source faces {} onto the planes: ", other.name()),
+    };
+    for row in &report.rows {
+        let metrics = &row.metrics;
+        outln!(
+            "{}{stand_in}{} views, {} per pixel: mean IoU {:.3}, min IoU {:.3} (missed {:.1} %, extra {:.1} % of the \
+                source's silhouette), mean PSNR {:.2} dB; the source against itself moved 1 pixel: IoU {:.3}",
+            row.label.as_ref().map(|label| format!("{label}: ")).unwrap_or_default(),
+            metrics.views.len(),
+            match metrics.samples_per_pixel {
+                1 => "1 sample".to_string(),
+                samples => format!("{samples} samples"),
+            },
+            metrics.mean_iou,
+            metrics.min_iou,
+            100.0 * metrics.mean_missed,
+            100.0 * metrics.mean_extra,
+            metrics.mean_psnr,
+            metrics.source_shift_iou
+        );
     }
+    let folders: Vec<String> =
+        report.rows.iter().map(|row| crate::diagnostic::display_path(&row.folder).to_string()).collect();
+    match &report.chain_sheet {
+        Some(sheet) => outln!(
+            "wrote {} (each view: the source, then {}) and contact_sheet.png, metrics.json under {}",
+            crate::diagnostic::display_path(sheet),
+            report.rows.iter().filter_map(|row| row.label.clone()).collect::<Vec<_>>().join(", "),
+            folders.join(", ")
+        ),
+        None => outln!("wrote contact_sheet.png and metrics.json under {}", folders.join(", ")),
+    }
+    ExitCode::SUCCESS
 }
 
 /// Why `cirrus preview` could not render: the asset did not build, or its preview failed.
@@ -589,7 +580,7 @@ enum PreviewFailure {
     #[error(transparent)]
     Build(crate::project::BuildError),
     #[error(transparent)]
-    Preview(crate::kinds::billboard_cloud::PreviewError),
+    Preview(crate::kinds::PreviewError),
 }
 
 fn graph(

@@ -251,6 +251,43 @@ pub struct RenderVertex {
     pub tangent: [f32; 4],
 }
 
+/// `faces` as vertex batches per material (three vertices per triangle, in the order given): a
+/// rectangle's own faces then those it also draws, or every face for a view of the mesh.
+pub fn face_batches(
+    mesh: &crate::mesh::Mesh,
+    tangents: &[[f32; 4]],
+    faces: impl IntoIterator<Item = u32>,
+) -> Vec<(usize, Vec<RenderVertex>)> {
+    face_batches_placed(mesh, tangents, faces, |face, corner| {
+        mesh.positions[mesh.triangles[face as usize][corner] as usize]
+    })
+}
+
+/// [`face_batches`] with each corner drawn at `position(face, corner)` (corner 0 to 2) instead of
+/// its vertex's position (normals, texture coordinates and tangents stay the vertex's).
+pub fn face_batches_placed(
+    mesh: &crate::mesh::Mesh,
+    tangents: &[[f32; 4]],
+    faces: impl IntoIterator<Item = u32>,
+    position: impl Fn(u32, usize) -> [f32; 3],
+) -> Vec<(usize, Vec<RenderVertex>)> {
+    let mut batches: std::collections::BTreeMap<usize, Vec<RenderVertex>> = std::collections::BTreeMap::new();
+    for face in faces {
+        let material = mesh.triangle_materials[face as usize] as usize;
+        let batch = batches.entry(material).or_default();
+        for (corner, vertex) in mesh.triangles[face as usize].into_iter().enumerate() {
+            let index = vertex as usize;
+            batch.push(RenderVertex {
+                position: position(face, corner),
+                normal: mesh.normals[index],
+                uv: mesh.uvs.as_ref().map_or([0.0, 0.0], |uvs| uvs[index]),
+                tangent: tangents.get(index).copied().unwrap_or([1.0, 0.0, 0.0, 1.0]),
+            });
+        }
+    }
+    batches.into_iter().collect()
+}
+
 impl Gpu {
     /// The device on the first adapter able to draw every target, with every pipeline.
     // Long: the device's creation and each pipeline's, written out once; a helper per pipeline

@@ -16,8 +16,8 @@ use crate::db::{
 use crate::diagnostic::Diagnostic;
 
 // Mesh 2: `map_d` naming the albedo texture is not applied a second time. 3: each triangle's
-// OBJ object.
-pub(crate) const MESH: Stage = Stage { name: "mesh", version: 3 };
+// OBJ object. 4: a map's path relative to the MTL file that names it, not to the OBJ.
+pub(crate) const MESH: Stage = Stage { name: "mesh", version: 4 };
 
 /// An OBJ's input.
 fn mesh_source(db: &dyn Db, asset: Asset, obj: &Path) -> Result<SourceFile, Diagnostic> {
@@ -64,7 +64,7 @@ pub(crate) fn library_bytes(db: &dyn Db, asset: Asset, obj: &Path) -> BTreeMap<P
 #[salsa::tracked(returns(clone))]
 pub(crate) fn mesh_textures(db: &dyn Db, asset: Asset) -> Arc<Vec<PathBuf>> {
     let obj = asset.main_file(db);
-    Arc::new(crate::mesh::texture_paths(obj, &library_bytes(db, asset, obj), asset.source_root(db)))
+    Arc::new(crate::mesh::texture_paths(&library_bytes(db, asset, obj), asset.source_root(db)))
 }
 
 /// A loaded mesh with its vertex tangents and load warnings.

@@ -24,7 +24,8 @@ pub mod ambient_occlusion;
 pub mod height;
 
 /// The questions the driver asks an asset kind. Every answer is computed from the database
-/// (through the kind's tracked functions); none does IO.
+/// (through the kind's tracked functions); none does IO but `preview`, which `cirrus preview`
+/// asks after a build (it reads the baked files and writes its sheets).
 pub(crate) trait Kind {
     /// The files the asset reads, as far as the files read so far tell (the driver reads them
     /// and asks again until nothing new turns up).
@@ -79,6 +80,87 @@ pub(crate) trait Kind {
     /// `surface.group` may be the group's name or its folder.
     fn provided_surface_stage(_db: &dyn Db, _asset: Asset, _surface: &SurfaceId) -> Result<Option<Read>, Diagnostic> {
         Ok(None)
+    }
+
+    /// `cirrus preview` of the built asset: renders what it baked beside its source, writes the
+    /// contact sheets and metrics under `options.out` and says what it compared. A kind that
+    /// bakes no mesh has nothing to preview.
+    fn preview(
+        db: &dyn Db,
+        asset: Asset,
+        _config: &PipelineConfig,
+        _options: &PreviewOptions,
+    ) -> Result<PreviewReport, PreviewError> {
+        Err(PreviewError::NotPreviewable { name: asset.name(db).clone(), kind: asset.kind(db).name() })
+    }
+}
+
+/// What `cirrus preview` renders, and where.
+#[derive(Clone, Debug)]
+pub struct PreviewOptions {
+    pub asset: String,
+    pub settings: crate::preview::PreviewSettings,
+    /// Where the sheets and metrics go (project-relative or absolute).
+    pub out: PathBuf,
+    /// A billboard cloud's chain: only this level (none: every level).
+    pub lod: Option<u32>,
+    /// A billboard cloud: what stands for each level beside the source, the baked LOD or the
+    /// source's faces moved onto the level's planes.
+    pub stand_in: billboard_cloud::lod_preview::StandIn,
+}
+
+/// One comparison of a preview: what stood beside the source (a LOD level, a remapped mesh;
+/// none for an asset's only LOD), its figures, and the folder of its `contact_sheet.png` and
+/// `metrics.json`.
+#[derive(Clone, Debug)]
+pub struct PreviewRow {
+    pub label: Option<String>,
+    pub metrics: crate::preview::PreviewMetrics,
+    pub folder: PathBuf,
+}
+
+/// What `cirrus preview` compared, and the sheet of every comparison side by side when it made
+/// several of one source (a LOD chain).
+#[derive(Clone, Debug)]
+pub struct PreviewReport {
+    pub rows: Vec<PreviewRow>,
+    pub chain_sheet: Option<PathBuf>,
+}
+
+#[derive(Debug, thiserror::Error)]
+pub enum PreviewError {
+    #[error(
+        "asset `{name}` is a {kind}: it bakes no mesh to preview (BillboardCloud and Atlas assets with `meshes` do)"
+    )]
+    NotPreviewable { name: String, kind: &'static str },
+    #[error("asset `{name}` has no LOD level {level}: it has {levels} (0 to {})", levels - 1)]
+    NoSuchLevel { name: String, level: u32, levels: u32 },
+    /// An option the asset's kind does not take.
+    #[error("{0}")]
+    Option(String),
+    #[error("{0}")]
+    Artifact(Diagnostic),
+    #[error(transparent)]
+    Gpu(#[from] crate::gpu::GpuError),
+    #[error("cannot write the preview: {0}")]
+    Write(std::io::Error),
+}
+
+/// Writes one comparison's `contact_sheet.png` and `metrics.json` into `folder`.
+pub(crate) fn write_preview(folder: &Path, preview: &crate::preview::Preview) -> Result<(), PreviewError> {
+    let mut metrics = serde_json::to_vec_pretty(&preview.metrics).expect("metrics serialise");
+    metrics.push(b'\n');
+    let write = |name: &str, bytes: &[u8]| crate::files::write_if_changed(&folder.join(name), bytes);
+    write("contact_sheet.png", &preview.contact_sheet)
+        .and_then(|_| write("metrics.json", &metrics))
+        .map_err(PreviewError::Write)?;
+    Ok(())
+}
+
+impl PreviewError {
+    /// Whether the command was asked wrongly (rather than the asset failing to preview).
+    pub fn is_usage(&self) -> bool {
+        matches!(self, PreviewError::NotPreviewable { .. } | PreviewError::NoSuchLevel { .. } | PreviewError::Option(_))
     }
 }
 
@@ -213,6 +295,18 @@ macro_rules! kinds {
             ) -> Result<Option<CacheKey>, Diagnostic> {
                 match self {
                     $(AssetKind::$name => <$folder::$name>::surface_parts_key(db, asset, surface)),*
+                }
+            }
+
+            pub fn preview(
+                self,
+                db: &dyn Db,
+                asset: Asset,
+                config: &PipelineConfig,
+                options: &PreviewOptions,
+            ) -> Result<PreviewReport, PreviewError> {
+                match self {
+                    $(AssetKind::$name => <$folder::$name>::preview(db, asset, config, options)),*
                 }
             }
 

@@ -199,7 +199,7 @@ pub fn load_mesh(
     let mut materials: Vec<MeshMaterial> = Vec::new();
     for material in &tobj_materials {
         let library = material_files.get(&material.name).cloned().unwrap_or_else(|| obj_file.to_path_buf());
-        materials.push(mesh_material(material, &folder, &library, source_root, &mut warnings));
+        materials.push(mesh_material(material, &library, source_root, &mut warnings));
     }
     let default_material = materials.len() as u32;
     materials.push(MeshMaterial::default());
@@ -557,7 +557,6 @@ fn undefined_material_uses(obj_file: &Path, text: &str, materials: &[tobj::Mater
 
 fn mesh_material(
     material: &tobj::Material,
-    folder: &Path,
     library: &Path,
     source_root: &Path,
     warnings: &mut Vec<Diagnostic>,
@@ -585,6 +584,9 @@ fn mesh_material(
         (TextureSlot::Roughness, unknown("map_Pr")),
         (TextureSlot::Ao, unknown("map_ao").or_else(|| unknown("map_AO"))),
     ];
+    // A map's path is relative to the MTL file that names it (as Blender, three.js's MTLLoader and
+    // Assimp read it; the same folder as the OBJ's unless `mtllib` names another).
+    let folder = library.parent().unwrap_or(Path::new(""));
     for (slot, statement) in statements {
         let Some(statement) = statement else { continue };
         let Some((options, file)) = texture_statement_parts(&statement) else {
@@ -686,20 +688,15 @@ fn compute_normals(mesh: &mut Mesh) {
 
 /// The texture files the materials of an OBJ's MTL libraries name (project-relative, sorted),
 /// without parsing the OBJ itself: what a billboard cloud reads besides its mesh.
-pub fn texture_paths(
-    obj_file: &Path,
-    libraries: &BTreeMap<PathBuf, Option<Vec<u8>>>,
-    source_root: &Path,
-) -> Vec<PathBuf> {
-    let folder = obj_file.parent().unwrap_or(Path::new(""));
+pub fn texture_paths(libraries: &BTreeMap<PathBuf, Option<Vec<u8>>>, source_root: &Path) -> Vec<PathBuf> {
     let mut paths = Vec::new();
     let mut ignored = Vec::new();
-    for bytes in libraries.values().flatten() {
-        let Ok((materials, _)) = load_mtl(bytes) else {
+    for (library, bytes) in libraries {
+        let Some(Ok((materials, _))) = bytes.as_deref().map(load_mtl) else {
             continue;
         };
         for material in &materials {
-            paths.extend(mesh_material(material, folder, obj_file, source_root, &mut ignored).maps.into_values());
+            paths.extend(mesh_material(material, library, source_root, &mut ignored).maps.into_values());
         }
     }
     paths.sort();

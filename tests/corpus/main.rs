@@ -193,7 +193,7 @@ fn corpus_billboard_clouds_bake_and_keep_their_silhouettes() {
     assert!(summary.all_ok(), "{}", summary.to_text());
     let mut figures = Vec::new();
     for name in ["oak", "ash", "bush"] {
-        let options = cirrus::kinds::billboard_cloud::PreviewOptions {
+        let options = cirrus::kinds::PreviewOptions {
             asset: name.into(),
             settings: Default::default(),
             out: format!("baked/{name}/preview").into(),
@@ -202,7 +202,7 @@ fn corpus_billboard_clouds_bake_and_keep_their_silhouettes() {
         };
         let [(0, metrics)] = &{
             let input = project.built_asset(&options.asset).expect("the asset builds");
-            cirrus::kinds::billboard_cloud::preview(project.database(), input, project.config(), &options)
+            cirrus::kinds::billboard_cloud::preview_levels(project.database(), input, project.config(), &options)
         }
         .expect("preview renders")[..] else {
             panic!("{name}: one level previewed")

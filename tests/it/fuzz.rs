@@ -258,7 +258,7 @@ newmtl leaf\nd 0.5\nmap_d leaf.png\nmap_Kd leaf.png\n"
                 .into_iter()
                 .map(|library| (library, mtl.clone()))
                 .collect();
-        let _ = cirrus::mesh::texture_paths(path, &libraries, Path::new("assets"));
+        let _ = cirrus::mesh::texture_paths(&libraries, Path::new("assets"));
         let Ok((mesh, _)) = cirrus::mesh::load_mesh(path, obj, &libraries, Path::new("assets")) else { return false };
         // What later stages rely on: indices in range, one material per face.
         assert_eq!(mesh.triangles.len(), mesh.triangle_materials.len());

@@ -453,6 +453,32 @@ fn load_obj(
 }
 
 #[test]
+fn a_map_path_is_relative_to_the_mtl_file_that_names_it() {
+    // As Blender, three.js's MTLLoader and Assimp (its issue #2355, the conformance suite's
+    // `mtl_different_folder.obj`) read it; the OBJ's folder was used, so an MTL in another
+    // folder, like the atlas.mtl that cirrus writes above its remapped meshes, named textures
+    // that are not there.
+    let obj_path = Path::new("assets/meshes/m.obj");
+    let obj =
+        b"mtllib ../materials/m.mtl\nv 0 0 0\nv 1 0 0\nv 0 1 0\nvt 0 0\nvt 1 0\nvt 0 1\nusemtl bark\nf 1/1 2/2 3/3\n";
+    let mtl = b"newmtl bark\nmap_Kd textures/bark.png\nnorm ../bark_normal.png\n".to_vec();
+    let libraries: std::collections::BTreeMap<_, _> =
+        cirrus::mesh::material_libraries(obj_path, obj, Path::new("assets"))
+            .into_iter()
+            .map(|library| (library, Some(mtl.clone())))
+            .collect();
+    assert_eq!(libraries.keys().collect::<Vec<_>>(), [Path::new("assets/materials/m.mtl")]);
+    let (mesh, warnings) = cirrus::mesh::load_mesh(obj_path, obj, &libraries, Path::new("assets")).expect("loads");
+    assert!(warnings.is_empty(), "{warnings:?}");
+    let maps: Vec<&Path> = mesh.materials[0].maps.values().map(|path| path.as_path()).collect();
+    assert_eq!(maps, [Path::new("assets/materials/textures/bark.png"), Path::new("assets/bark_normal.png")]);
+    assert_eq!(
+        cirrus::mesh::texture_paths(&libraries, Path::new("assets")),
+        [Path::new("assets/bark_normal.png"), Path::new("assets/materials/textures/bark.png")]
+    );
+}
+
+#[test]
 fn an_object_without_uvs_keeps_the_other_objects_textured() {
     let mtl = "newmtl bark\nmap_Kd bark.png\n";
     let obj = "mtllib m.mtl\nv 0 0 0\nv 1 0 0\nv 0 1 0\nvt 0 0\nvt 1 0\nvt 0 1\n\

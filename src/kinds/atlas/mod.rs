@@ -6,6 +6,7 @@
 
 pub mod settings;
 pub mod page;
+pub mod preview;
 pub mod queries;
 pub mod remap;
 pub mod table;
@@ -268,6 +269,15 @@ impl Kind for Atlas {
 
     fn surface_recipe_key(db: &dyn Db, asset: Asset, surface: &SurfaceId) -> Result<Option<CacheKey>, Diagnostic> {
         surface_page(surface).map(|page| page_recipe_key(db, asset, page)).transpose()
+    }
+
+    fn preview(
+        db: &dyn Db,
+        asset: Asset,
+        config: &PipelineConfig,
+        options: &crate::kinds::PreviewOptions,
+    ) -> Result<crate::kinds::PreviewReport, crate::kinds::PreviewError> {
+        preview::preview(db, asset, config, options)
     }
 }
 

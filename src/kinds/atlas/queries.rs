@@ -623,7 +623,7 @@ pub(crate) fn mesh_library_paths(db: &dyn Db, asset: Asset, mesh: &std::path::Pa
 
 /// The texture files a mesh's materials name (as far as its MTL files have been read).
 pub(crate) fn mesh_map_paths(db: &dyn Db, asset: Asset, mesh: &std::path::Path) -> Vec<PathBuf> {
-    crate::mesh::texture_paths(mesh, &crate::kinds::mesh_queries::library_bytes(db, asset, mesh), asset.source_root(db))
+    crate::mesh::texture_paths(&crate::kinds::mesh_queries::library_bytes(db, asset, mesh), asset.source_root(db))
 }
 
 /// A mesh's path below the asset's `meshes/` output folder: its path in the source folder,
@@ -757,4 +757,5 @@ pub(crate) fn remapped_mesh(
 
 /// 2: with the mesh's load warnings.
 /// 3: UVs onto each texture's own place (aliases), maps' -s and -o kept, unused materials ignored.
-pub(crate) const REMAP: Stage = Stage { name: "remap", version: 3 };
+/// 4: a map's path relative to the MTL file that names it.
+pub(crate) const REMAP: Stage = Stage { name: "remap", version: 4 };

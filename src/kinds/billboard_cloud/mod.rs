@@ -34,7 +34,10 @@ use crate::db::{Asset, Db, StageRun, DECODE};
 use crate::diagnostic::{display_path, Diagnostic};
 use crate::kinds::billboard_cloud::settings::Settings as Own;
 use crate::kinds::mesh_queries::{loaded_mesh, mesh_textures, LoadedMesh};
-use crate::kinds::{check_texture_file, tail_instances, AssetOutputs, Job, Kind, Read, StageInstance, SurfaceId, Task};
+use crate::kinds::{
+    check_texture_file, tail_instances, AssetOutputs, Job, Kind, PreviewError, PreviewOptions, PreviewReport,
+    PreviewRow, Read, StageInstance, SurfaceId, Task,
+};
 use crate::summary::ErrorSummary;
 use crate::texture::tail::TailSettings;
 use crate::texture::{SurfaceKind, Texture, TextureSlot};
@@ -300,6 +303,27 @@ impl Kind for BillboardCloud {
     fn surface_parts_key(db: &dyn Db, asset: Asset, surface: &SurfaceId) -> Result<Option<CacheKey>, Diagnostic> {
         queries::atlas_surface_parts_key(db, asset, level_of_surface(db, asset, surface)?, surface.surface).map(Some)
     }
+
+    fn preview(
+        db: &dyn Db,
+        asset: Asset,
+        config: &PipelineConfig,
+        options: &PreviewOptions,
+    ) -> Result<PreviewReport, PreviewError> {
+        let previewed = preview_levels(db, asset, config, options)?;
+        let settings = asset.settings(db);
+        let chain = previewed.len() > 1 || previewed.iter().any(|&(level, _)| level > 0) || options.lod.is_some();
+        let several = previewed.len() > 1;
+        let rows = previewed
+            .into_iter()
+            .map(|(level, metrics)| PreviewRow {
+                label: chain.then(|| format!("lod{level}")),
+                metrics,
+                folder: options.out.join(levels::level_folder(settings, level)),
+            })
+            .collect();
+        Ok(PreviewReport { rows, chain_sheet: several.then(|| options.out.join("contact_sheet.png")) })
+    }
 }
 
 /// A level's render stage instances, one per render group, each reading the decodes of its
@@ -446,46 +470,17 @@ fn level_outputs(
     }))
 }
 
-/// What `cirrus preview` renders.
-#[derive(Clone, Debug)]
-pub struct PreviewOptions {
-    pub asset: String,
-    pub settings: lod_preview::PreviewSettings,
-    /// Where `contact_sheet.png` and `metrics.json` go (project-relative or absolute); a chain's
-    /// levels each get theirs in `lod<N>/`, and the chain sheet is `contact_sheet.png`.
-    pub out: PathBuf,
-    /// Only this level of a chain (none: every level).
-    pub lod: Option<u32>,
-    /// What stands for each level beside the source: the baked LOD, or the source's faces moved
-    /// onto the level's planes (see [`lod_preview::StandIn`]).
-    pub stand_in: lod_preview::StandIn,
-}
-
-#[derive(Debug, thiserror::Error)]
-pub enum PreviewError {
-    #[error("asset `{0}` is not a BillboardCloud: only billboard clouds have a LOD to preview")]
-    NotBillboard(String),
-    #[error("asset `{name}` has no LOD level {level}: it has {levels} (0 to {})", levels - 1)]
-    NoSuchLevel { name: String, level: u32, levels: u32 },
-    #[error("{0}")]
-    Artifact(Diagnostic),
-    #[error(transparent)]
-    Gpu(#[from] crate::gpu::GpuError),
-    #[error("cannot write the preview: {0}")]
-    Write(std::io::Error),
-}
-
 /// `cirrus preview` of a baked asset (`input`, built by the caller): renders it and its source
 /// from the view directions and writes the contact sheet and the metrics of each level asked
 /// for (with several, also the chain sheet); returns each level's metrics.
-pub fn preview(
+pub fn preview_levels(
     db: &dyn Db,
     input: Asset,
     config: &PipelineConfig,
     options: &PreviewOptions,
-) -> Result<Vec<(u32, lod_preview::PreviewMetrics)>, PreviewError> {
+) -> Result<Vec<(u32, crate::preview::PreviewMetrics)>, PreviewError> {
     if input.kind(db) != crate::config::AssetKind::BillboardCloud {
-        return Err(PreviewError::NotBillboard(options.asset.clone()));
+        return Err(PreviewError::NotPreviewable { name: options.asset.clone(), kind: input.kind(db).name() });
     }
     let settings = input.settings(db);
     let level_count = levels::level_count(settings);
@@ -526,20 +521,16 @@ pub fn preview(
     let radius = positions.iter().map(|&p| glam::Vec3::from(p).distance(center)).fold(0.0, f32::max);
     let gpu = crate::gpu::gpu()?;
     let lod_refs: Vec<&crate::gpu::ViewMesh> = lods.iter().collect();
-    let preview = lod_preview::preview_chain(gpu, &source, &lod_refs, center.to_array(), radius, options.settings)?;
+    let preview = crate::preview::preview_chain(gpu, &source, &lod_refs, center.to_array(), radius, options.settings)?;
     let out = config.root.join(&options.out);
-    let write = |path: PathBuf, bytes: &[u8]| crate::files::write_if_changed(&path, bytes).map_err(PreviewError::Write);
     let mut results = Vec::new();
     for (&level, level_preview) in chosen.iter().zip(preview.levels) {
-        let level_out = out.join(levels::level_folder(settings, level));
-        let mut metrics = serde_json::to_vec_pretty(&level_preview.metrics).expect("metrics serialise");
-        metrics.push(b'\n');
-        write(level_out.join("contact_sheet.png"), &level_preview.contact_sheet)?;
-        write(level_out.join("metrics.json"), &metrics)?;
+        crate::kinds::write_preview(&out.join(levels::level_folder(settings, level)), &level_preview)?;
         results.push((level, level_preview.metrics));
     }
     if chosen.len() > 1 {
-        write(out.join("contact_sheet.png"), &preview.chain_sheet)?;
+        crate::files::write_if_changed(&out.join("contact_sheet.png"), &preview.chain_sheet)
+            .map_err(PreviewError::Write)?;
     }
     Ok(results)
 }
@@ -575,7 +566,7 @@ fn faces_on_planes(
             }
         }
     }
-    render_groups::face_batches_placed(mesh, &loaded.tangents, 0..mesh.triangles.len() as u32, |face, corner| {
+    crate::gpu::face_batches_placed(mesh, &loaded.tangents, 0..mesh.triangles.len() as u32, |face, corner| {
         let triangle = mesh.triangles[face as usize];
         lod_preview::stand_in_position(
             stand_in,
@@ -588,43 +579,13 @@ fn faces_on_planes(
 
 /// The source mesh with its decoded maps (mipmapped as for rendering).
 fn source_view_mesh(db: &dyn Db, input: Asset, loaded: &LoadedMesh) -> Result<crate::gpu::ViewMesh, Diagnostic> {
-    use crate::texture::TextureSlot;
     let cutoff = input.settings(db).own::<Own>().billboard.alpha_cutoff;
-    let mut materials = Vec::new();
-    for material in &loaded.mesh.materials {
-        let levels = |slot: TextureSlot,
-                      kind: SurfaceKind|
-         -> Result<Option<Arc<Vec<crate::texture::Texture>>>, Diagnostic> {
-            let Some(path) = material.maps.get(&slot).filter(|_| loaded.mesh.uvs.is_some()) else { return Ok(None) };
-            let Some(file) = crate::db::asset_file(db, input, path.clone()) else { return Ok(None) };
-            let texture = if slot == TextureSlot::Opacity {
-                crate::db::opacity_texture(db, file)?
-            } else {
-                crate::db::decoded_texture(db, file)?
-            };
-            // The reference keeps alpha-tested coverage at every distance, as the bake does.
-            let alpha_cutoff = matches!(slot, TextureSlot::Albedo | TextureSlot::Opacity).then_some(cutoff);
-            Ok(Some(Arc::new(crate::texture::mips::mip_chain(
-                &texture,
-                crate::texture::mips::MipSettings { kind, alpha_cutoff },
-            ))))
-        };
-        materials.push(crate::gpu::ViewMaterial {
-            albedo: levels(TextureSlot::Albedo, SurfaceKind::Albedo)?,
-            opacity: levels(TextureSlot::Opacity, SurfaceKind::Albedo)?,
-            normal: levels(TextureSlot::Normal, SurfaceKind::Normal)?,
-            normal_has_z: true,
-            albedo_factor: [
-                material.albedo_factor[0],
-                material.albedo_factor[1],
-                material.albedo_factor[2],
-                material.opacity,
-            ],
-            alpha_cutoff: cutoff,
-        });
-    }
-    Ok(crate::gpu::ViewMesh {
-        batches: render_groups::face_batches(&loaded.mesh, &loaded.tangents, 0..loaded.mesh.triangles.len() as u32),
-        materials,
+    crate::preview::mesh_view(&loaded.mesh, &loaded.tangents, cutoff, |material, slot| {
+        let Some(path) = material.maps.get(&slot).filter(|_| loaded.mesh.uvs.is_some()) else { return Ok(None) };
+        let Some(file) = crate::db::asset_file(db, input, path.clone()) else { return Ok(None) };
+        match slot {
+            TextureSlot::Opacity => crate::db::opacity_texture(db, file).map(Some),
+            _ => crate::db::decoded_texture(db, file).map(Some),
+        }
     })
 }

@@ -437,7 +437,7 @@ pub(crate) fn rendered_batch(
                     width: placement.width,
                     height: placement.height,
                     supersampling: super::render_groups::plane_supersampling(placement.width, placement.height),
-                    batches: super::render_groups::face_batches(
+                    batches: crate::gpu::face_batches(
                         &loaded.mesh,
                         &loaded.tangents,
                         rectangle.faces.iter().chain(&rectangle.also_drawn).copied(),

@@ -5,7 +5,6 @@
 
 use std::collections::BTreeMap;
 
-use crate::gpu::RenderVertex;
 use crate::kinds::billboard_cloud::rectangles::PlaneRectangle;
 use crate::mesh::Mesh;
 
@@ -93,41 +92,4 @@ pub fn render_group_label(mesh: &Mesh, group: &RenderGroup) -> String {
     let names: Vec<&str> =
         group.materials.iter().map(|&material| mesh.materials[material as usize].name.as_str()).collect();
     format!("plane{}:{}", group.plane, names.join("+"))
-}
-
-/// `faces` as vertex batches per material (three vertices per triangle, in the order given): a
-/// rectangle's own faces then those it also draws, or every face for a view of the mesh.
-pub(crate) fn face_batches(
-    mesh: &Mesh,
-    tangents: &[[f32; 4]],
-    faces: impl IntoIterator<Item = u32>,
-) -> Vec<(usize, Vec<RenderVertex>)> {
-    face_batches_placed(mesh, tangents, faces, |face, corner| {
-        mesh.positions[mesh.triangles[face as usize][corner] as usize]
-    })
-}
-
-/// [`face_batches`] with each corner drawn at `position(face, corner)` (corner 0 to 2) instead of
-/// its vertex's position (normals, texture coordinates and tangents stay the vertex's).
-pub(crate) fn face_batches_placed(
-    mesh: &Mesh,
-    tangents: &[[f32; 4]],
-    faces: impl IntoIterator<Item = u32>,
-    position: impl Fn(u32, usize) -> [f32; 3],
-) -> Vec<(usize, Vec<RenderVertex>)> {
-    let mut batches: BTreeMap<usize, Vec<RenderVertex>> = BTreeMap::new();
-    for face in faces {
-        let material = mesh.triangle_materials[face as usize] as usize;
-        let batch = batches.entry(material).or_default();
-        for (corner, vertex) in mesh.triangles[face as usize].into_iter().enumerate() {
-            let index = vertex as usize;
-            batch.push(RenderVertex {
-                position: position(face, corner),
-                normal: mesh.normals[index],
-                uv: mesh.uvs.as_ref().map_or([0.0, 0.0], |uvs| uvs[index]),
-                tangent: tangents.get(index).copied().unwrap_or([1.0, 0.0, 0.0, 1.0]),
-            });
-        }
-    }
-    batches.into_iter().collect()
 }

@@ -268,6 +268,51 @@ fn the_bundled_bush_remapped_onto_foliage_samples_only_its_own_texels_with_its_o
     assert!(text.contains("reach the transparent border of `trees/textures/aspen_color.png`"), "{text}");
 }
 
+#[test]
+fn the_preview_draws_the_remapped_bush_as_its_source_from_every_side() {
+    // `cirrus preview` of an Atlas renders each remapped mesh as an engine loads it (the OBJ,
+    // atlas.mtl, the page PNG, the bark maps it still names) beside its source from the 26
+    // directions. With the remapped UVs of the trimmed aspen (v down to −0.21, before the entry
+    // kept what the UVs reach), the leaf cards drew the oak leaves and empty page.
+    let project = bundled_foliage();
+    let output = project.run_cli(&["preview", "--asset", "foliage"]);
+    let stdout = String::from_utf8_lossy(&output.stdout);
+    assert_eq!(output.status.code(), Some(0), "{stdout}{}", String::from_utf8_lossy(&output.stderr));
+    assert!(stdout.contains("trees/bush_2.obj remapped: 26 views, 16 samples per pixel: mean IoU"), "{stdout}");
+    let metrics: serde_json::Value =
+        serde_json::from_slice(&project.read("baked/foliage/preview/trees/bush_2/metrics.json")).unwrap();
+    let (mean_iou, min_iou, psnr) = (
+        metrics["mean_iou"].as_f64().unwrap(),
+        metrics["min_iou"].as_f64().unwrap(),
+        metrics["mean_psnr"].as_f64().unwrap(),
+    );
+    println!("bundled bush remapped onto foliage: mean IoU {mean_iou:.3}, min {min_iou:.3}, PSNR {psnr:.2} dB");
+    // The same faces with the same texels: what differs is the page's mip levels (its
+    // neighbours and padding filtered in) against the source's own.
+    assert!(mean_iou >= 0.97 && min_iou >= 0.96 && psnr >= 40.0, "{metrics}");
+    // From above, the side the leaf cards face.
+    let above = metrics["views"]
+        .as_array()
+        .unwrap()
+        .iter()
+        .find(|view| view["direction"] == serde_json::json!([0.0, 1.0, 0.0]));
+    assert!(above.unwrap()["iou"].as_f64().unwrap() >= 0.97, "{above:?}");
+    let sheet = image::load_from_memory(&project.read("baked/foliage/preview/trees/bush_2/contact_sheet.png")).unwrap();
+    assert_eq!((sheet.width(), sheet.height()), (4 * 2 * 256 + 3 * 8, 7 * 256 + 6 * 8));
+
+    // Options that are a billboard cloud's, and an asset without a mesh to draw.
+    let output = project.run_cli(&["preview", "--asset", "foliage", "--lod", "1"]);
+    assert_eq!(output.status.code(), Some(2));
+    assert!(String::from_utf8_lossy(&output.stderr).contains("`--lod` and `--stand-in` are for BillboardCloud"));
+    project.write(
+        "pipeline.ron",
+        r#"Pipeline(source: "assets", output: "baked", assets: [Atlas(name: "leaves", textures: ["textures/leaves/*.png"])])"#,
+    );
+    let output = project.run_cli(&["preview", "--asset", "leaves"]);
+    assert_eq!(output.status.code(), Some(2));
+    assert!(String::from_utf8_lossy(&output.stderr).contains("remaps no mesh"), "{output:?}");
+}
+
 /// A `size`² texture whose middle `core`² texels are a pattern and the rest transparent.
 fn bordered_png(size: u32, core: u32, seed: u32) -> Vec<u8> {
     let pattern = decode_png(&pattern_png(core, core, seed));

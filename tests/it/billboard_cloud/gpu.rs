@@ -149,7 +149,7 @@ fn a_supersampled_plane_render_puts_a_cut_out_edge_between_texels() {
 
 #[test]
 fn a_resolved_pixel_is_in_the_silhouette_when_half_its_samples_are_covered() {
-    use cirrus::kinds::billboard_cloud::lod_preview::{resolve_samples, silhouette_overlap, ResolvedView};
+    use cirrus::preview::{resolve_samples, silhouette_overlap, ResolvedView};
     // Two by two pixels of 4 × 4 samples: white where covered, black background. Covered samples
     // per pixel: 16, 8, 7, 0.
     let covered_per_pixel = [16, 8, 7, 0];
@@ -179,7 +179,7 @@ fn a_resolved_pixel_is_in_the_silhouette_when_half_its_samples_are_covered() {
 
 #[test]
 fn a_one_pixel_shift_costs_a_thin_silhouette_more_iou_than_a_solid_one() {
-    use cirrus::kinds::billboard_cloud::lod_preview::{one_pixel_shift_iou, ResolvedView};
+    use cirrus::preview::{one_pixel_shift_iou, ResolvedView};
     // A 16-pixel view holding `inside` pixels, every sample of them covered.
     let view = |inside: &dyn Fn(usize, usize) -> bool| ResolvedView {
         rgba: vec![0; 16 * 16 * 4],
@@ -239,7 +239,7 @@ fn speckled_quad(offset: f32) -> cirrus::gpu::ViewMesh {
 
 #[test]
 fn sixteen_samples_per_pixel_keep_the_silhouette_iou_from_measuring_aliasing() {
-    use cirrus::kinds::billboard_cloud::lod_preview::{preview, PreviewSettings};
+    use cirrus::preview::{preview, PreviewSettings};
     let gpu = gpu().expect("a GPU adapter (install mesa-vulkan-drivers for the software one)");
     // The same cut-out moved by a quarter pixel: a LOD could hardly be closer.
     let quarter_pixel = 0.25 * 2.0 / 64.0;
@@ -275,7 +275,7 @@ fn an_adapter_that_cannot_draw_every_target_is_refused_with_what_it_lacks() {
 fn a_render_the_device_refuses_is_an_error_and_the_device_still_renders() {
     let gpu = gpu().expect("a GPU adapter (install mesa-vulkan-drivers for the software one)");
     let quad = speckled_quad(0.0);
-    let camera = cirrus::kinds::billboard_cloud::lod_preview::view_projection([0.0; 3], 1.0, [1.0, 0.0, 0.0]);
+    let camera = cirrus::preview::view_projection([0.0; 3], 1.0, [1.0, 0.0, 0.0]);
     // A 0-pixel target is invalid to wgpu, which panics on errors nothing catches.
     let refused = gpu.render_view(&quad, camera, [0.0, 0.0, 1.0], 0);
     assert!(

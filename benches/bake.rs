@@ -1601,6 +1601,18 @@ fn bench_isa(corpus: &Path) {
             figures.push(format!("{name} {:?} {:.1} Mpix/s ({same})", settings.format, texels / best / 1e6));
         }
         println!("isa: {level}: {}", figures.join(", "));
+        // cirrus's BC4 search at each quality on the normal surface (BC5: two channels).
+        if let Some((_, chain, settings)) = surfaces.iter().find(|(name, _, _)| name == "Normal") {
+            let texels: f64 = chain.iter().map(|level| 2.0 * (level.width * level.height) as f64).sum();
+            let qualities = [EncodeQuality::Fast, EncodeQuality::Basic, EncodeQuality::Slow].map(|quality| {
+                let settings = BlockEncodeSettings { format: BlockFormat::Bc5, quality, ..*settings };
+                let start = Instant::now();
+                std::hint::black_box(cirrus::texture::encode::encode_levels(chain, settings));
+                let cores = rayon::current_num_threads() as f64;
+                format!("{quality:?} {:.1}", texels / start.elapsed().as_secs_f64() / 1e6 / cores)
+            });
+            println!("isa: {level}: BC4 search, M channel texels/s per core: {}", qualities.join(", "));
+        }
     }
     limit_isa(IsaLevel::Avx512);
     for &level in &levels {

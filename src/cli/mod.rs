@@ -217,8 +217,11 @@ pub(crate) fn init_logging(verbose: u8) {
         2 => "debug",
         _ => "trace",
     };
+    // notify warns "Unable to remove the path from the watches" when the source folder it
+    // watched is deleted (its watch went with it); the daemon watches the folder again and says
+    // so itself.
     let filter = tracing_subscriber::EnvFilter::try_from_default_env()
-        .unwrap_or_else(|_| tracing_subscriber::EnvFilter::new(format!("{default},salsa=warn")));
+        .unwrap_or_else(|_| tracing_subscriber::EnvFilter::new(format!("{default},salsa=warn,notify=error")));
     // Colour only for a person at a terminal: logs redirected to a file or a pipe stay plain
     // text (and `NO_COLOR` turns colour off anywhere).
     let ansi = std::io::stderr().is_terminal() && std::env::var_os("NO_COLOR").is_none();

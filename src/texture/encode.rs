@@ -62,7 +62,8 @@ pub fn block_bytes(format: BlockFormat) -> usize {
 /// levels (`ispc::output_family`); cirrus's BC4 search gives the same bytes on every CPU.
 pub(crate) fn encoder_family(format: BlockFormat) -> &'static str {
     match format {
-        BlockFormat::Bc4 | BlockFormat::Bc5 => "cirrus-bc4",
+        // 2: scored with the float palette, seeded and searched wider.
+        BlockFormat::Bc4 | BlockFormat::Bc5 => "cirrus-bc4-2",
         BlockFormat::Bc1 | BlockFormat::Bc3 | BlockFormat::Bc7 => super::ispc::output_family(),
     }
 }
@@ -325,12 +326,12 @@ fn bc7_settings(quality: EncodeQuality, alpha: bool) -> intel_tex_2::bc7::Encode
         (EncodeQuality::VeryFast, false) => bc7::opaque_very_fast_settings(),
         (EncodeQuality::Fast, false) => bc7::opaque_fast_settings(),
         (EncodeQuality::Basic, false) => bc7::opaque_basic_settings(),
-        (EncodeQuality::Slow, false) => bc7::opaque_slow_settings(),
+        (EncodeQuality::Slow | EncodeQuality::Exhaustive, false) => bc7::opaque_slow_settings(),
         (EncodeQuality::UltraFast, true) => bc7::alpha_ultra_fast_settings(),
         (EncodeQuality::VeryFast, true) => bc7::alpha_very_fast_settings(),
         (EncodeQuality::Fast, true) => bc7::alpha_fast_settings(),
         (EncodeQuality::Basic, true) => bc7::alpha_basic_settings(),
-        (EncodeQuality::Slow, true) => bc7::alpha_slow_settings(),
+        (EncodeQuality::Slow | EncodeQuality::Exhaustive, true) => bc7::alpha_slow_settings(),
     }
 }
 

@@ -39,4 +39,7 @@ pub enum EncodeQuality {
     Fast,
     Basic,
     Slow,
+    /// BC4/BC5: every endpoint pair (the true optimum, about a millisecond a block: for
+    /// references); BC1/BC3/BC7 as `Slow`.
+    Exhaustive,
 }

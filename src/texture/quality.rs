@@ -1,5 +1,6 @@
-//! Compression quality: block data decoded back with `bcdec_rs` and compared with the
-//! uncompressed surface (PSNR over the channels that carry data).
+//! Compression quality: block data decoded back and compared with the uncompressed surface (PSNR
+//! over the channels that carry data): BC4/BC5 with the D3D specification's float palette, as a
+//! GPU decodes them (block errors in whole 35ths), the others with `bcdec_rs`.
 
 use rayon::prelude::*;
 
@@ -111,7 +112,14 @@ impl BlockErrors {
     /// PSNR in dB over `width` × `height` texels.
     pub fn psnr(&self, width: u32, height: u32) -> f64 {
         let squared_error: u64 = self.errors.iter().map(|&error| error as u64).sum();
-        psnr_of_squared_error(squared_error, width as u64 * height as u64 * self.channels as u64)
+        let samples = width as u64 * height as u64 * self.channels as u64;
+        match self.format {
+            // Errors in 35ths (see `block_errors_reusing`).
+            BlockFormat::Bc4 | BlockFormat::Bc5 => {
+                psnr_of_squared_error(squared_error, samples * super::bc4::BC4_ERROR_SCALE as u64)
+            }
+            _ => psnr_of_squared_error(squared_error, samples),
+        }
     }
 
     /// The alpha-test figures, for an alpha-tested surface.
@@ -173,6 +181,25 @@ pub fn block_errors_reusing(
                     *error = (old.errors[number], cut_out);
                     continue;
                 }
+            }
+            if matches!(format, BlockFormat::Bc4 | BlockFormat::Bc5) {
+                // As a GPU decodes them: the float palette, in whole 35ths.
+                let mut sum = 0u32;
+                for channel in 0..channels {
+                    // A channel the format does not hold decodes to 0.
+                    let decoded = block
+                        .chunks_exact(8)
+                        .nth(channel)
+                        .map_or([0; 16], |half| super::bc4::bc4_decode_scaled(half.try_into().expect("eight bytes")));
+                    for (row_in_block, row) in rows.clone().enumerate() {
+                        for (column, texel) in reference.pixels[texels(row)].chunks_exact(4).enumerate() {
+                            let difference = texel[channel] as i32 * 35 - decoded[row_in_block * 4 + column];
+                            sum += (difference * difference) as u32;
+                        }
+                    }
+                }
+                *error = (sum, CutOutBlock::default());
+                continue;
             }
             let decoded = decode_block(format, block);
             let (mut sum, mut cut_out) = (0u32, CutOutBlock::default());

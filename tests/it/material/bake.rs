@@ -294,7 +294,13 @@ fn re_encoding_only_changed_blocks_equals_a_full_encode() {
         let reused_errors = measure_again(&old_errors);
         assert_eq!(reused_errors, fresh, "{format:?}");
         let decoded = decode_blocks(format, &reused.levels[0], 96, 64);
-        assert_eq!(fresh.psnr(96, 64), psnr(&new_levels[0], &decoded, channels), "{format:?}");
+        if matches!(format, BlockFormat::Bc4 | BlockFormat::Bc5) {
+            // Measured with the float palette, as a GPU decodes; `bcdec` rounds the entries.
+            let (float, rounded) = (fresh.psnr(96, 64), psnr(&new_levels[0], &decoded, channels));
+            assert!((float - rounded).abs() < 0.5, "{format:?}: {float} against bcdec's {rounded}");
+        } else {
+            assert_eq!(fresh.psnr(96, 64), psnr(&new_levels[0], &decoded, channels), "{format:?}");
+        }
         // Errors planted in the previous measurement stay where nothing changed.
         let mut planted = old_errors.clone();
         planted.errors[0] += 1;

@@ -64,7 +64,15 @@ pub(crate) fn encoder_family(format: BlockFormat) -> &'static str {
     match format {
         // 2: scored with the float palette, seeded and searched wider.
         BlockFormat::Bc4 | BlockFormat::Bc5 => "cirrus-bc4-2",
-        BlockFormat::Bc1 | BlockFormat::Bc3 | BlockFormat::Bc7 => super::ispc::output_family(),
+        // BC1's blocks are refined by `bc1` after the kernels; 2: scored with the float palette,
+        // single-colour blocks and one-channel lines searched.
+        BlockFormat::Bc1 => match super::ispc::output_family() {
+            "ispc-avx2" => "ispc-avx2/bc1-2",
+            "ispc-sse4" => "ispc-sse4/bc1-2",
+            "ispc-sse2" => "ispc-sse2/bc1-2",
+            _ => "ispc-native/bc1-2",
+        },
+        BlockFormat::Bc3 | BlockFormat::Bc7 => super::ispc::output_family(),
     }
 }
 

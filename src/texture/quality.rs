@@ -1,6 +1,7 @@
 //! Compression quality: block data decoded back and compared with the uncompressed surface (PSNR
-//! over the channels that carry data): BC4/BC5 with the D3D specification's float palette, as a
-//! GPU decodes them (block errors in whole 35ths), the others with `bcdec_rs`.
+//! over the channels that carry data): BC4/BC5 and opaque BC1 with the D3D specification's float
+//! palette, as a GPU decodes them (block errors in whole 35ths, and 64ths rounded), the others
+//! with `bcdec_rs` (BC7's palette is integer by specification; BC3 and cut-out BC1 not yet).
 
 use rayon::prelude::*;
 
@@ -8,6 +9,9 @@ use crate::texture::encode::block_bytes;
 use crate::texture::fingerprint::BlockFingerprints;
 use crate::texture::format::BlockFormat;
 use crate::texture::Texture;
+
+/// What an opaque BC1 surface's block errors are scaled by (float palette, rounded per block).
+const BC1_ERROR_SCALE: u32 = 64;
 
 /// PSNR reported for a lossless result (the true value is infinite).
 pub(crate) const LOSSLESS_PSNR_DB: f64 = 100.0;
@@ -118,6 +122,9 @@ impl BlockErrors {
             BlockFormat::Bc4 | BlockFormat::Bc5 => {
                 psnr_of_squared_error(squared_error, samples * super::bc4::BC4_ERROR_SCALE as u64)
             }
+            BlockFormat::Bc1 if self.cut_out.is_none() => {
+                psnr_of_squared_error(squared_error, samples * BC1_ERROR_SCALE as u64)
+            }
             _ => psnr_of_squared_error(squared_error, samples),
         }
     }
@@ -199,6 +206,22 @@ pub fn block_errors_reusing(
                     }
                 }
                 *error = (sum, CutOutBlock::default());
+                continue;
+            }
+            if format == BlockFormat::Bc1 && alpha_threshold.is_none() {
+                // As a GPU decodes it: the float palette, errors in 64ths (rounded per block).
+                let palette = super::bc1::bc1_block_float_palette(block.try_into().expect("eight bytes"));
+                let indices = u32::from_le_bytes([block[4], block[5], block[6], block[7]]);
+                let mut sum = 0f64;
+                for (row_in_block, row) in rows.clone().enumerate() {
+                    for (column, texel) in reference.pixels[texels(row)].chunks_exact(4).enumerate() {
+                        let entry = palette[(indices >> (2 * (row_in_block * 4 + column)) & 3) as usize];
+                        for channel in 0..channels.min(3) {
+                            sum += (texel[channel] as f64 - entry[channel] as f64).powi(2);
+                        }
+                    }
+                }
+                *error = ((sum * BC1_ERROR_SCALE as f64).round() as u32, CutOutBlock::default());
                 continue;
             }
             let decoded = decode_block(format, block);

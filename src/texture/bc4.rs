@@ -135,7 +135,8 @@ struct Candidate {
     error: u32,
 }
 
-const MAX_CANDIDATES: usize = 192;
+/// Room for every seed of `Slow` (its coarse grid is at most 2 × 9² pairs).
+const MAX_CANDIDATES: usize = 256;
 
 /// Candidate endpoint pairs of one block (on the stack).
 struct Candidates {

@@ -36,7 +36,11 @@ fn follow(mut stream: TcpStream, since: &mut Option<u64>) -> std::io::Result<()>
             continue;
         };
         match event["type"].as_str() {
-            Some("hello") => println!("connected: protocol {}, revision {}", event["protocol"], event["revision"]),
+            Some("hello") => println!(
+                "connected: protocol {}, revision {}, output folder {}",
+                event["protocol"], event["revision"], event["output"]
+            ),
+            Some("building") => println!("building: {} edited file(s)", event["files"].as_array().map_or(0, Vec::len)),
             Some("batch") => {
                 *since = event["revision"].as_u64();
                 println!("batch r{} ({} ms)", event["revision"], event["ms"]);

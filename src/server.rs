@@ -16,7 +16,8 @@ use serde::{Deserialize, Serialize};
 use crate::graph::{Graph, GraphFormat};
 use crate::summary::ChangedArtifact;
 
-pub(crate) const PROTOCOL_VERSION: u32 = 1;
+/// 2: `hello` names the output folder; `building` when a batch starts; `ping` / `pong`.
+pub(crate) const PROTOCOL_VERSION: u32 = 2;
 
 /// Limits of the server.
 #[derive(Clone, Debug)]
@@ -76,8 +77,10 @@ pub(crate) struct FailedEntry {
 #[derive(Serialize)]
 #[serde(tag = "type", rename_all = "lowercase")]
 enum Outgoing<'a> {
-    Hello { protocol: u32, revision: u64 },
+    Hello { protocol: u32, revision: u64, output: String },
+    Building { revision: u64, files: &'a [String] },
     Batch(&'a BatchEvent),
+    Pong { revision: u64 },
     Resync { revision: u64, message: String },
     Graph { format: &'static str, graph: Option<&'a Graph>, text: Option<String> },
     Error { message: String },
@@ -87,6 +90,7 @@ enum Outgoing<'a> {
 #[derive(Debug, Deserialize)]
 #[serde(tag = "type", rename_all = "lowercase", deny_unknown_fields)]
 pub enum Request {
+    Ping,
     Subscribe {
         #[serde(default)]
         since: Option<u64>,
@@ -127,6 +131,8 @@ struct Client {
 
 struct State {
     revision: u64,
+    /// The project's output folder (project-relative, `/`-separated), as `hello` names it.
+    output: String,
     /// Recent batches: (revision, the line sent).
     history: VecDeque<(u64, Arc<str>)>,
     clients: Vec<Client>,
@@ -158,10 +164,17 @@ pub struct ServerError {
 
 impl Server {
     /// Binds `address` and starts accepting clients on a thread of its own.
-    pub fn start(address: SocketAddr, settings: ServerSettings, revision: u64) -> Result<Server, ServerError> {
+    pub fn start(
+        address: SocketAddr,
+        settings: ServerSettings,
+        revision: u64,
+        output: &std::path::Path,
+    ) -> Result<Server, ServerError> {
         let listener = TcpListener::bind(address).map_err(|source| ServerError { address, source })?;
         let address = listener.local_addr().map_err(|source| ServerError { address, source })?;
-        let state = State { revision, history: VecDeque::new(), clients: Vec::new(), graph: None, next_client: 0 };
+        let output = crate::diagnostic::display_path(output);
+        let state =
+            State { revision, output, history: VecDeque::new(), clients: Vec::new(), graph: None, next_client: 0 };
         let server =
             Server { state: Arc::new(Mutex::new(state)), settings, address, graph_source: Arc::new(Mutex::new(None)) };
         let accepting = server.clone();
@@ -193,6 +206,19 @@ impl Server {
             state.history.pop_front();
         }
         state.clients.retain(|client| !client.subscribed || send(client, message.clone()));
+    }
+
+    /// Tells every subscribed client that a build of the edits to `files` (project-relative)
+    /// started; not kept for replay.
+    pub(crate) fn building(&self, files: &[String]) {
+        let mut state = self.state.lock().expect("server state");
+        let message = line(&Outgoing::Building { revision: state.revision, files });
+        state.clients.retain(|client| !client.subscribed || send(client, message.clone()));
+    }
+
+    /// The output folder that `hello` names from now on (the pipeline file named another).
+    pub(crate) fn set_output(&self, output: &std::path::Path) {
+        self.state.lock().expect("server state").output = crate::diagnostic::display_path(output);
     }
 
     /// Where `graph` requests get the graph when the last one is stale.
@@ -264,7 +290,11 @@ impl Server {
             }
             let id = state.next_client;
             state.next_client += 1;
-            let hello = line(&Outgoing::Hello { protocol: PROTOCOL_VERSION, revision: state.revision });
+            let hello = line(&Outgoing::Hello {
+                protocol: PROTOCOL_VERSION,
+                revision: state.revision,
+                output: state.output.clone(),
+            });
             let client = Client { id, queue, stream, subscribed: false, last_request: std::time::Instant::now() };
             if !send(&client, hello) {
                 return;
@@ -322,6 +352,10 @@ impl Server {
 
     fn handle(&self, id: u64, request: Request) {
         match request {
+            Request::Ping => {
+                let revision = self.state.lock().expect("server state").revision;
+                self.reply(id, Outgoing::Pong { revision });
+            }
             Request::Subscribe { since } => {
                 let mut state = self.state.lock().expect("server state");
                 let revision = state.revision;

@@ -261,7 +261,7 @@ fn start(settings: &WatchSettings) -> Result<(Daemon<'_>, std::sync::mpsc::Recei
 
     let listen = settings.listen.or(config.server);
     let server = match listen {
-        Some(address) => Some(Server::start(address, ServerSettings::default(), project.revision())?),
+        Some(address) => Some(Server::start(address, ServerSettings::default(), project.revision(), &config.output)?),
         None => None,
     };
     if let Some(server) = &server {
@@ -468,6 +468,9 @@ fn reload_pipeline(daemon: &mut Daemon) -> bool {
             Ok(mut lock) => {
                 lock.describe(daemon.server.as_ref().map(Server::address));
                 daemon.output_lock = lock;
+                if let Some(server) = &daemon.server {
+                    server.set_output(&new_config.output);
+                }
                 Ok(new_config)
             }
             Err(error) => Err(crate::config::ConfigError {
@@ -531,6 +534,9 @@ fn reload_pipeline(daemon: &mut Daemon) -> bool {
 /// Builds the batch of `changed_files` and publishes it: the engine hears first, then the log
 /// (with the graph of the assets the batch looked into).
 fn bake_batch(daemon: &mut Daemon, changed_files: &[PathBuf], first: bool) -> Batch {
+    if let Some(server) = &daemon.server {
+        server.building(&changed_files.iter().map(|file| display_path(file)).collect::<Vec<_>>());
+    }
     // The files this build is about to read count as sources already: a folder of new
     // rule-matched files deleted while they bake (one event for the folder) cancels it.
     // (Without rules no asset is new to the watcher: no walk of the source folder.)

@@ -66,7 +66,7 @@ impl Daemon {
         stream.set_read_timeout(Some(Duration::from_secs(120))).unwrap();
         let mut client = Client { reader: BufReader::new(stream.try_clone().unwrap()), stream };
         let hello = client.receive();
-        assert_eq!((hello["type"].as_str(), hello["protocol"].as_u64()), (Some("hello"), Some(1)), "{hello}");
+        assert_eq!((hello["type"].as_str(), hello["protocol"].as_u64()), (Some("hello"), Some(2)), "{hello}");
         client
     }
 
@@ -241,6 +241,38 @@ fn edits_become_one_batch_each_naming_exactly_the_changed_artifacts() {
     // A touch with identical bytes does nothing at all.
     project.write("assets/normal.png", pattern_png(32, 32, 77));
     assert!(client.quiet_for(Duration::from_millis(800)), "identical bytes make no batch");
+}
+
+#[test]
+fn hello_names_the_output_ping_is_answered_and_each_build_is_announced_before_its_batch() {
+    let project = watched_project();
+    let daemon = Daemon::start(&project);
+    let stream = std::net::TcpStream::connect(&daemon.address).unwrap();
+    stream.set_read_timeout(Some(Duration::from_secs(120))).unwrap();
+    let mut reader = BufReader::new(stream.try_clone().unwrap());
+    let mut hello = String::new();
+    reader.read_line(&mut hello).unwrap();
+    let hello: Value = serde_json::from_str(&hello).unwrap();
+    assert_eq!((hello["protocol"].as_u64(), hello["output"].as_str()), (Some(2), Some("baked")), "{hello}");
+    drop((reader, stream));
+
+    let mut client = daemon.connect();
+    client.subscribe(Some(0));
+    let first = client.batch()["revision"].as_u64().unwrap();
+    client.send(r#"{"type":"ping"}"#);
+    let pong = client.receive();
+    assert_eq!((pong["type"].as_str(), pong["revision"].as_u64()), (Some("pong"), Some(first)), "{pong}");
+    // An edit: first `building` (the edited files, the revision before), then its batch.
+    project.write("assets/ao.png", ao_variant(5));
+    let building = client.receive();
+    assert_eq!(building["type"], "building", "{building}");
+    assert_eq!(
+        (building["revision"].as_u64(), &building["files"]),
+        (Some(first), &serde_json::json!(["assets/ao.png"]))
+    );
+    let batch = client.receive();
+    assert_eq!(batch["type"], "batch", "{batch}");
+    assert!(batch["revision"].as_u64().unwrap() > first, "{batch}");
 }
 
 #[test]

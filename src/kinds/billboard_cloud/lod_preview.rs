@@ -11,6 +11,7 @@ use std::sync::Arc;
 use crate::diagnostic::Diagnostic;
 use crate::gpu::{RenderVertex, ViewMaterial, ViewMesh};
 use crate::texture::Texture;
+
 /// What a preview compares with the source: the baked LOD, or a stand-in that keeps some of the
 /// cloud's losses and not others. A stand-in is the source's own faces, drawn with the source's
 /// textures at full resolution (no atlas, no mips, no block compression), each moved onto the

@@ -16,7 +16,7 @@ use serde::{Deserialize, Serialize};
 use crate::graph::{Graph, GraphFormat};
 use crate::summary::ChangedArtifact;
 
-/// 2: `hello` names the output folder; `building` when a batch starts; `ping` / `pong`.
+/// 2: `hello` names the output folder; `building` when a batch starts; `ping` / `pong`; `state`.
 pub(crate) const PROTOCOL_VERSION: u32 = 2;
 
 /// Limits of the server.
@@ -81,6 +81,7 @@ enum Outgoing<'a> {
     Building { revision: u64, files: &'a [String] },
     Batch(&'a BatchEvent),
     Pong { revision: u64 },
+    State { revision: u64, artifacts: Vec<&'a ChangedArtifact> },
     Resync { revision: u64, message: String },
     Graph { format: &'static str, graph: Option<&'a Graph>, text: Option<String> },
     Error { message: String },
@@ -91,6 +92,7 @@ enum Outgoing<'a> {
 #[serde(tag = "type", rename_all = "lowercase", deny_unknown_fields)]
 pub enum Request {
     Ping,
+    State,
     Subscribe {
         #[serde(default)]
         since: Option<u64>,
@@ -133,6 +135,9 @@ struct State {
     revision: u64,
     /// The project's output folder (project-relative, `/`-separated), as `hello` names it.
     output: String,
+    /// Every artifact in the output folder by path, as `state` answers: the manifest when the
+    /// daemon started, then every published batch's changes.
+    artifacts: std::collections::BTreeMap<String, ChangedArtifact>,
     /// Recent batches: (revision, the line sent).
     history: VecDeque<(u64, Arc<str>)>,
     clients: Vec<Client>,
@@ -169,12 +174,21 @@ impl Server {
         settings: ServerSettings,
         revision: u64,
         output: &std::path::Path,
+        manifest: &crate::artifacts::Manifest,
     ) -> Result<Server, ServerError> {
         let listener = TcpListener::bind(address).map_err(|source| ServerError { address, source })?;
         let address = listener.local_addr().map_err(|source| ServerError { address, source })?;
+        let artifacts = manifest_artifacts(output, manifest);
         let output = crate::diagnostic::display_path(output);
-        let state =
-            State { revision, output, history: VecDeque::new(), clients: Vec::new(), graph: None, next_client: 0 };
+        let state = State {
+            revision,
+            output,
+            artifacts,
+            history: VecDeque::new(),
+            clients: Vec::new(),
+            graph: None,
+            next_client: 0,
+        };
         let server =
             Server { state: Arc::new(Mutex::new(state)), settings, address, graph_source: Arc::new(Mutex::new(None)) };
         let accepting = server.clone();
@@ -201,6 +215,12 @@ impl Server {
         let message = line(&Outgoing::Batch(batch));
         let mut state = self.state.lock().expect("server state");
         state.revision = batch.revision;
+        for removed in &batch.removed {
+            state.artifacts.remove(removed);
+        }
+        for changed in &batch.changed {
+            state.artifacts.insert(changed.path.clone(), changed.clone());
+        }
         state.history.push_back((batch.revision, message.clone()));
         while state.history.len() > self.settings.history {
             state.history.pop_front();
@@ -216,9 +236,12 @@ impl Server {
         state.clients.retain(|client| !client.subscribed || send(client, message.clone()));
     }
 
-    /// The output folder that `hello` names from now on (the pipeline file named another).
-    pub(crate) fn set_output(&self, output: &std::path::Path) {
-        self.state.lock().expect("server state").output = crate::diagnostic::display_path(output);
+    /// The output folder that `hello` names from now on (the pipeline file named another), and
+    /// the artifacts its manifest lists.
+    pub(crate) fn set_output(&self, output: &std::path::Path, manifest: &crate::artifacts::Manifest) {
+        let mut state = self.state.lock().expect("server state");
+        state.output = crate::diagnostic::display_path(output);
+        state.artifacts = manifest_artifacts(output, manifest);
     }
 
     /// Where `graph` requests get the graph when the last one is stale.
@@ -356,6 +379,14 @@ impl Server {
                 let revision = self.state.lock().expect("server state").revision;
                 self.reply(id, Outgoing::Pong { revision });
             }
+            Request::State => {
+                let message = {
+                    let state = self.state.lock().expect("server state");
+                    line(&Outgoing::State { revision: state.revision, artifacts: state.artifacts.values().collect() })
+                };
+                let mut state = self.state.lock().expect("server state");
+                state.clients.retain(|client| client.id != id || send(client, message.clone()));
+            }
             Request::Subscribe { since } => {
                 let mut state = self.state.lock().expect("server state");
                 let revision = state.revision;
@@ -427,6 +458,29 @@ impl Server {
         let mut state = self.state.lock().expect("server state");
         state.clients.retain(|client| client.id != id || send(client, message.clone()));
     }
+}
+
+/// The artifacts `manifest` lists, by path, as `state` and `batch` name them (`output`: the
+/// project-relative output folder).
+fn manifest_artifacts(
+    output: &std::path::Path,
+    manifest: &crate::artifacts::Manifest,
+) -> std::collections::BTreeMap<String, ChangedArtifact> {
+    manifest
+        .artifacts
+        .iter()
+        .map(|(path, entry)| {
+            let folder = format!("{}/", crate::diagnostic::display_path(&output.join(&entry.asset)));
+            let artifact = ChangedArtifact {
+                asset: entry.asset.clone(),
+                artifact: path.strip_prefix(&folder).unwrap_or(path).to_string(),
+                path: path.clone(),
+                hash: entry.hash.clone(),
+                meaning: entry.meaning.clone(),
+            };
+            (path.clone(), artifact)
+        })
+        .collect()
 }
 
 /// Queues `message` for `client`; false (and the connection closed) when its queue is full.

@@ -261,7 +261,10 @@ fn start(settings: &WatchSettings) -> Result<(Daemon<'_>, std::sync::mpsc::Recei
 
     let listen = settings.listen.or(config.server);
     let server = match listen {
-        Some(address) => Some(Server::start(address, ServerSettings::default(), project.revision(), &config.output)?),
+        Some(address) => {
+            let manifest = crate::artifacts::load_manifest(&config.output_dir());
+            Some(Server::start(address, ServerSettings::default(), project.revision(), &config.output, &manifest)?)
+        }
         None => None,
     };
     if let Some(server) = &server {
@@ -469,7 +472,8 @@ fn reload_pipeline(daemon: &mut Daemon) -> bool {
                 lock.describe(daemon.server.as_ref().map(Server::address));
                 daemon.output_lock = lock;
                 if let Some(server) = &daemon.server {
-                    server.set_output(&new_config.output);
+                    let manifest = crate::artifacts::load_manifest(&new_config.output_dir());
+                    server.set_output(&new_config.output, &manifest);
                 }
                 Ok(new_config)
             }

@@ -244,7 +244,7 @@ fn edits_become_one_batch_each_naming_exactly_the_changed_artifacts() {
 }
 
 #[test]
-fn hello_names_the_output_ping_is_answered_and_each_build_is_announced_before_its_batch() {
+fn hello_names_the_output_ping_and_state_are_answered_and_each_build_is_announced_before_its_batch() {
     let project = watched_project();
     let daemon = Daemon::start(&project);
     let stream = std::net::TcpStream::connect(&daemon.address).unwrap();
@@ -273,6 +273,37 @@ fn hello_names_the_output_ping_is_answered_and_each_build_is_announced_before_it
     let batch = client.receive();
     assert_eq!(batch["type"], "batch", "{batch}");
     assert!(batch["revision"].as_u64().unwrap() > first, "{batch}");
+
+    // `state`: every artifact on disk with its hash, as `batch` names them.
+    client.send(r#"{"type":"state"}"#);
+    let state = client.receive();
+    assert_eq!((state["type"].as_str(), state["revision"].as_u64()), (Some("state"), batch["revision"].as_u64()));
+    let listed: BTreeMap<String, String> = state["artifacts"]
+        .as_array()
+        .unwrap()
+        .iter()
+        .map(|entry| (entry["path"].as_str().unwrap().to_string(), entry["hash"].as_str().unwrap().to_string()))
+        .collect();
+    assert_eq!(listed, output_hashes(&project));
+    let mra = state["artifacts"].as_array().unwrap().iter().find(|entry| entry["path"] == "baked/rock/rock/mra.ktx2");
+    assert_eq!(mra.map(|entry| (&entry["asset"], &entry["artifact"])), Some((&"rock".into(), &"rock/mra.ktx2".into())));
+
+    // A daemon started on that output lists the same before its first batch is published (from
+    // the manifest, which the first wrote once idle).
+    wait_for_revision_after(&project, batch["revision"].as_u64().unwrap() - 1);
+    drop(client);
+    drop(daemon);
+    let daemon = Daemon::start(&project);
+    let mut client = daemon.connect();
+    client.send(r#"{"type":"state"}"#);
+    let state = client.receive();
+    let relisted: BTreeMap<String, String> = state["artifacts"]
+        .as_array()
+        .unwrap()
+        .iter()
+        .map(|entry| (entry["path"].as_str().unwrap().to_string(), entry["hash"].as_str().unwrap().to_string()))
+        .collect();
+    assert_eq!(relisted, listed, "{state}");
 }
 
 #[test]

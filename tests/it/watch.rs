@@ -243,6 +243,15 @@ fn edits_become_one_batch_each_naming_exactly_the_changed_artifacts() {
     assert!(client.quiet_for(Duration::from_millis(800)), "identical bytes make no batch");
 }
 
+/// A `state` answer's artifacts: path → hash.
+fn state_hashes(state: &Value) -> BTreeMap<String, String> {
+    let artifacts = state["artifacts"].as_array().unwrap_or_else(|| panic!("{state}"));
+    artifacts
+        .iter()
+        .map(|entry| (entry["path"].as_str().unwrap().to_string(), entry["hash"].as_str().unwrap().to_string()))
+        .collect()
+}
+
 #[test]
 fn hello_names_the_output_ping_and_state_are_answered_and_each_build_is_announced_before_its_batch() {
     let project = watched_project();
@@ -278,12 +287,7 @@ fn hello_names_the_output_ping_and_state_are_answered_and_each_build_is_announce
     client.send(r#"{"type":"state"}"#);
     let state = client.receive();
     assert_eq!((state["type"].as_str(), state["revision"].as_u64()), (Some("state"), batch["revision"].as_u64()));
-    let listed: BTreeMap<String, String> = state["artifacts"]
-        .as_array()
-        .unwrap()
-        .iter()
-        .map(|entry| (entry["path"].as_str().unwrap().to_string(), entry["hash"].as_str().unwrap().to_string()))
-        .collect();
+    let listed = state_hashes(&state);
     assert_eq!(listed, output_hashes(&project));
     let mra = state["artifacts"].as_array().unwrap().iter().find(|entry| entry["path"] == "baked/rock/rock/mra.ktx2");
     assert_eq!(mra.map(|entry| (&entry["asset"], &entry["artifact"])), Some((&"rock".into(), &"rock/mra.ktx2".into())));
@@ -297,12 +301,7 @@ fn hello_names_the_output_ping_and_state_are_answered_and_each_build_is_announce
     let mut client = daemon.connect();
     client.send(r#"{"type":"state"}"#);
     let state = client.receive();
-    let relisted: BTreeMap<String, String> = state["artifacts"]
-        .as_array()
-        .unwrap()
-        .iter()
-        .map(|entry| (entry["path"].as_str().unwrap().to_string(), entry["hash"].as_str().unwrap().to_string()))
-        .collect();
+    let relisted = state_hashes(&state);
     assert_eq!(relisted, listed, "{state}");
 }
 

@@ -4,7 +4,11 @@
 use std::path::{Path, PathBuf};
 
 use cirrus::config::load_pipeline;
+
+#[path = "../shared/ispc_reference.rs"]
+mod ispc_reference;
 use cirrus::project::{BuildOptions, Project, ProjectOptions};
+use ispc_reference::ispc_bc4_error;
 
 fn corpus() -> PathBuf {
     let path = Path::new(env!("CARGO_MANIFEST_DIR")).join("../shared/assets");
@@ -292,25 +296,6 @@ fn every_corpus_normal_and_ao_channel_comes_within_half_a_db_of_the_bc4_optimum(
     }
     assert!(figures.len() >= 12, "{figures:?}");
     println!("{}", figures.join("\n"));
-}
-
-/// The ISPC encoder's BC4 error on `blocks` (× `BC4_ERROR_SCALE`, float palette).
-fn ispc_bc4_error(blocks: &[[u8; 16]]) -> f64 {
-    let stride = blocks.len() * 4;
-    let mut data = vec![0u8; blocks.len() * 16];
-    for (index, block) in blocks.iter().enumerate() {
-        for row in 0..4 {
-            data[row * stride + index * 4..][..4].copy_from_slice(&block[row * 4..][..4]);
-        }
-    }
-    let mut output = vec![0u8; blocks.len() * 8];
-    let surface = intel_tex_2::RSurface { data: &data, width: stride as u32, height: 4, stride: stride as u32 };
-    intel_tex_2::bc4::compress_blocks_into(&surface, &mut output);
-    blocks
-        .iter()
-        .zip(output.chunks_exact(8))
-        .map(|(block, bytes)| cirrus::texture::bc4::bc4_block_error(block, bytes.try_into().unwrap()) as f64)
-        .sum()
 }
 
 /// The GPU starts in this process, where Mesa's Wayland probe prints "error: XDG_RUNTIME_DIR is

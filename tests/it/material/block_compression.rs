@@ -4,9 +4,13 @@
 //! beats the ISPC encoder it replaced.
 
 use cirrus::config::EncodeQuality;
+
+#[path = "../../shared/ispc_reference.rs"]
+mod ispc_reference;
 use cirrus::texture::bc4::{
     bc4_block_error, bc4_float_palette, bc4_optimum, encode_bc4_block, Bc4Search, BC4_ERROR_SCALE,
 };
+use ispc_reference::{ispc_bc1_block, ispc_bc4_error};
 
 /// The 4×4 blocks of one channel of an image.
 fn channel_blocks(image: &image::RgbaImage, channel: usize) -> Vec<[u8; 16]> {
@@ -82,25 +86,6 @@ fn d3d_bc1_error(texels: &[[u8; 3]; 16], bytes: &[u8; 8]) -> f64 {
             let entry = palette[(indices >> (2 * texel) & 3) as usize];
             (0..3).map(|channel| (rgb[channel] as f64 - entry[channel]).powi(2)).sum::<f64>()
         })
-        .sum()
-}
-
-/// The ISPC encoder's BC4 error over `blocks` (the encoder cirrus used before).
-fn ispc_error(blocks: &[[u8; 16]]) -> f64 {
-    let mut data = vec![0u8; blocks.len() * 16];
-    let stride = blocks.len() * 4;
-    for (index, block) in blocks.iter().enumerate() {
-        for row in 0..4 {
-            data[row * stride + index * 4..][..4].copy_from_slice(&block[row * 4..][..4]);
-        }
-    }
-    let mut output = vec![0u8; blocks.len() * 8];
-    let surface = intel_tex_2::RSurface { data: &data, width: stride as u32, height: 4, stride: stride as u32 };
-    intel_tex_2::bc4::compress_blocks_into(&surface, &mut output);
-    blocks
-        .iter()
-        .zip(output.chunks_exact(8))
-        .map(|(block, bytes)| bc4_block_error(block, bytes.try_into().unwrap()) as f64)
         .sum()
 }
 
@@ -182,7 +167,7 @@ fn bundled_normal_maps_come_within_half_a_db_of_the_optimum() {
                 .collect();
             let rate = (encoded.len() * 16) as f64 / clock.elapsed().as_secs_f64() / 1e6;
             let values = sample.len() * 16;
-            let ispc = ispc_error(&sample);
+            let ispc = ispc_bc4_error(&sample);
             let (basic, slow, optimum, ispc) =
                 (psnr(basic, values), psnr(slow, values), psnr(optimum, values), psnr(ispc, values));
             eprintln!(
@@ -215,16 +200,7 @@ fn bc1_refinement_never_loses_to_the_ispc_block_and_gains_on_the_bundled_bark() 
         .collect();
     let (mut ispc_total, mut refined_total) = (0f64, 0f64);
     for texels in &blocks {
-        let mut data = [0u8; 64];
-        for (texel, rgb) in texels.iter().enumerate() {
-            data[texel * 4..texel * 4 + 3].copy_from_slice(rgb);
-            data[texel * 4 + 3] = 255;
-        }
-        let mut start = [0u8; 8];
-        intel_tex_2::bc1::compress_blocks_into(
-            &intel_tex_2::RgbaSurface { data: &data, width: 4, height: 4, stride: 16 },
-            &mut start,
-        );
+        let start = ispc_bc1_block(texels);
         let refined = cirrus::texture::bc1::refine_bc1_block(texels, start);
         let (ispc, ours) = (d3d_bc1_error(texels, &start), d3d_bc1_error(texels, &refined));
         assert!(ours <= ispc + 1e-3, "a refined block decodes worse: {ours} against {ispc}");
@@ -251,16 +227,7 @@ fn bc1_reaches_the_best_line_on_a_packed_map_with_two_constant_channels() {
         let (bx, by) = (block % (width / 4) * 4, block / (width / 4) * 4);
         let texels: [[u8; 3]; 16] =
             std::array::from_fn(|texel| [0, 230, ao.get_pixel(bx + texel as u32 % 4, by + texel as u32 / 4).0[0]]);
-        let mut data = [0u8; 64];
-        for (texel, rgb) in texels.iter().enumerate() {
-            data[texel * 4..texel * 4 + 3].copy_from_slice(rgb);
-            data[texel * 4 + 3] = 255;
-        }
-        let mut start = [0u8; 8];
-        intel_tex_2::bc1::compress_blocks_into(
-            &intel_tex_2::RgbaSurface { data: &data, width: 4, height: 4, stride: 16 },
-            &mut start,
-        );
+        let start = ispc_bc1_block(&texels);
         ours += d3d_bc1_error(&texels, &cirrus::texture::bc1::refine_bc1_block(&texels, start));
         ispc_total += d3d_bc1_error(&texels, &start);
         // Every pair of blue ends, red and green at their nearest values (57 of 63 is 230.7).

@@ -9,7 +9,7 @@ use std::path::PathBuf;
 use std::sync::Arc;
 
 use crate::diagnostic::Diagnostic;
-use crate::gpu::{RenderVertex, ViewMaterial, ViewMesh};
+use crate::gpu::{ViewMaterial, ViewMesh};
 use crate::texture::Texture;
 
 /// What a preview compares with the source: the baked LOD, or a stand-in that keeps some of the
@@ -109,19 +109,7 @@ pub(crate) fn lod_view_mesh(files: &LodFiles) -> Result<ViewMesh, Diagnostic> {
     };
     let uvs = mesh.uvs.as_deref().unwrap_or(&[]);
     let tangents = crate::mesh::vertex_tangents(&mesh.positions, &mesh.normals, uvs, &mesh.triangles);
-    let vertices = mesh
-        .triangles
-        .iter()
-        .flatten()
-        .map(|&index| {
-            let index = index as usize;
-            RenderVertex {
-                position: mesh.positions[index],
-                normal: mesh.normals[index],
-                uv: uvs.get(index).copied().unwrap_or([0.0; 2]),
-                tangent: tangents.get(index).copied().unwrap_or([1.0, 0.0, 0.0, 1.0]),
-            }
-        })
-        .collect();
-    Ok(ViewMesh { batches: vec![(0, vertices)], materials: vec![material] })
+    // Loaded without its MTL, every face has the default material, 0: the one view material.
+    let batches = crate::gpu::face_batches(&mesh, &tangents, 0..mesh.triangles.len() as u32);
+    Ok(ViewMesh { batches, materials: vec![material] })
 }

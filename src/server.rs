@@ -380,11 +380,9 @@ impl Server {
                 self.reply(id, Outgoing::Pong { revision });
             }
             Request::State => {
-                let message = {
-                    let state = self.state.lock().expect("server state");
-                    line(&Outgoing::State { revision: state.revision, artifacts: state.artifacts.values().collect() })
-                };
                 let mut state = self.state.lock().expect("server state");
+                let message =
+                    line(&Outgoing::State { revision: state.revision, artifacts: state.artifacts.values().collect() });
                 state.clients.retain(|client| client.id != id || send(client, message.clone()));
             }
             Request::Subscribe { since } => {

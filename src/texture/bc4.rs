@@ -327,15 +327,16 @@ fn encode_block<const AVX2: bool>(values: &[u8; 16], search: Bc4Search) -> [u8; 
     // rarely wins). On the corpus the second start takes the worst channel from 0.66 dB under
     // the optimum to 0.17.
     let mut starts = [Some(best), None];
+    // One buffer for the other mode's seeds, then each step's moves.
+    let mut near = Candidates::new();
     {
         let eight = best.e0 > best.e1;
         let mut other = Candidate { e0: 0, e1: 0, error: u32::MAX };
-        let mut others = Candidates::new();
-        for &(e0, e1) in seeds.as_slice().iter().filter(|&&(e0, e1)| (e0 > e1) != eight) {
-            others.pairs[others.count] = (e0, e1);
-            others.count += 1;
+        for &pair in seeds.as_slice().iter().filter(|&&(e0, e1)| (e0 > e1) != eight) {
+            near.pairs[near.count] = pair;
+            near.count += 1;
         }
-        score::<AVX2>(&lanes, others.as_slice(), &mut other);
+        score::<AVX2>(&lanes, near.as_slice(), &mut other);
         let close = slow || (other.error as u64) < 2 * best.error as u64;
         starts[1] = (other.error < u32::MAX && close).then_some(other);
     }
@@ -349,7 +350,7 @@ fn encode_block<const AVX2: bool>(values: &[u8; 16], search: Bc4Search) -> [u8; 
                     break;
                 }
                 let (high, low) = if eight { (at.e0 as i32, at.e1 as i32) } else { (at.e1 as i32, at.e0 as i32) };
-                let mut near = Candidates::new();
+                near.count = 0;
                 for (high_move, low_move) in [(1, 0), (-1, 0), (0, 1), (0, -1), (1, 1), (-1, -1), (1, -1), (-1, 1)] {
                     near.add(high + high_move * step, low + low_move * step, eight);
                 }

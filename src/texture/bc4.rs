@@ -68,11 +68,17 @@ pub fn bc4_float_palette(e0: u8, e1: u8) -> [f32; 8] {
 /// The block's bytes: endpoints, then each value's nearest palette index (3 bits each).
 fn block_bytes(values: &[u8; 16], e0: u8, e1: u8) -> [u8; 8] {
     let palette = palette35(e0, e1);
-    let mut indices = 0u64;
-    for (texel, &value) in values.iter().enumerate() {
-        let nearest = (0..8).min_by_key(|&index| (value as i32 * 35 - palette[index]).abs()).expect("eight entries");
-        indices |= (nearest as u64) << (3 * texel);
+    // Each value's first nearest entry, entry by entry over all 16 lanes (one vector pass).
+    let (mut nearest, mut distance) = ([0u8; 16], [i32::MAX; 16]);
+    for (index, &entry) in palette.iter().enumerate() {
+        for lane in 0..16 {
+            let difference = (values[lane] as i32 * 35 - entry).abs();
+            if difference < distance[lane] {
+                (distance[lane], nearest[lane]) = (difference, index as u8);
+            }
+        }
     }
+    let indices = nearest.iter().enumerate().fold(0u64, |bits, (texel, &index)| bits | (index as u64) << (3 * texel));
     let mut bytes = [0u8; 8];
     bytes[0] = e0;
     bytes[1] = e1;
@@ -82,36 +88,35 @@ fn block_bytes(values: &[u8; 16], e0: u8, e1: u8) -> [u8; 8] {
 
 /// The ends (high, low), rounded, that fit `values` best in the least-squares sense for the
 /// entries they take under `e0`, `e1` (the six-value mode's constants 0 and 255 left out); none
-/// when the values all take one entry.
+/// when the values all take one entry. The sums are whole numbers (entry numbers `k` and values),
+/// so they are exact, and the loop is one vector pass where the CPU has them.
 #[inline(always)]
 fn least_squares_ends(values: &[u8; 16], e0: u8, e1: u8) -> Option<(i32, i32)> {
     let eight = e0 > e1;
-    let (low, high) = (e0.min(e1) as f32, e0.max(e1) as f32);
+    let (low, high) = (e0.min(e1) as i32, e0.max(e1) as i32);
     if high <= low {
         return None;
     }
-    let steps = if eight { 7.0f32 } else { 5.0 };
-    let scale = steps / (high - low);
-    // Sums over the values on interpolated entries, at t = k / steps of the way: v ≈ low + t d.
-    let (mut s_t, mut s_tt, mut s_v, mut s_vt, mut count) = (0f32, 0f32, 0f32, 0f32, 0f32);
-    let (mut k_min, mut k_max) = (steps, 0.0f32);
+    let steps = if eight { 7 } else { 5 };
+    let (range, scale) = (high - low, steps as f32 / (high - low) as f32);
+    // Sums over the values on interpolated entries, entry k at low + k range / steps.
+    let (mut count, mut sum_k, mut sum_kk, mut sum_v, mut sum_vk) = (0i32, 0i32, 0i32, 0i32, 0i32);
     for &value in values {
-        let value = value as f32;
-        let k = ((value - low) * scale).round().clamp(0.0, steps);
-        if !eight && value.min(255.0 - value) < (value - low - k / scale).abs() {
-            continue;
-        }
-        let t = k / steps;
-        (s_t, s_tt, s_v, s_vt, count) = (s_t + t, s_tt + t * t, s_v + value, s_vt + value * t, count + 1.0);
-        (k_min, k_max) = (k_min.min(k), k_max.max(k));
+        let value = value as i32;
+        let k = (((value - low) as f32 * scale).round() as i32).clamp(0, steps);
+        // In the six-value mode a value nearer 0 or 255 than its entry takes the constant
+        // (compared in steps-ths, exactly).
+        let kept = i32::from(eight || steps * value.min(255 - value) >= (steps * (value - low) - k * range).abs());
+        (count, sum_k, sum_kk) = (count + kept, sum_k + kept * k, sum_kk + kept * k * k);
+        (sum_v, sum_vk) = (sum_v + kept * value, sum_vk + kept * value * k);
     }
-    let determinant = count * s_tt - s_t * s_t;
-    if k_min >= k_max || determinant.abs() < 1e-6 {
+    let spread = count * sum_kk - sum_k * sum_k;
+    if spread == 0 {
         return None;
     }
-    let d = (count * s_vt - s_t * s_v) / determinant;
-    let low = (s_v - d * s_t) / count;
-    Some(((low + d).round() as i32, low.round() as i32))
+    let slope = (steps * (count * sum_vk - sum_k * sum_v)) as f32 / spread as f32;
+    let low = (sum_v as f32 - slope * sum_k as f32 / steps as f32) / count as f32;
+    Some(((low + slope).round() as i32, low.round() as i32))
 }
 
 /// The bytes `e0`, `e1` of ends `high` and `low` in the eight-value (`e0 > e1`) or six-value
@@ -161,6 +166,20 @@ impl Candidates {
         self.count += 1;
     }
 
+    /// Drops the pairs `seen` holds (adding the others to it), keeping their order.
+    #[inline(always)]
+    fn retain_unseen(&mut self, seen: &mut SeenPairs) {
+        let mut kept = 0;
+        for index in 0..self.count {
+            let pair = self.pairs[index];
+            if seen.insert(pair) {
+                self.pairs[kept] = pair;
+                kept += 1;
+            }
+        }
+        self.count = kept;
+    }
+
     /// Every pair within `window` of the ends `high`, `low`.
     fn add_window(&mut self, high: i32, low: i32, window: i32, eight: bool) {
         for high in high - window..=high + window {
@@ -168,6 +187,37 @@ impl Candidates {
                 self.add(high, low, eight);
             }
         }
+    }
+}
+
+/// The pairs one pattern search has scored: an open-addressed set of `e0 << 8 | e1` (a search
+/// scores well under a hundred).
+struct SeenPairs {
+    slots: [u16; 256],
+    filled: [bool; 256],
+}
+
+impl SeenPairs {
+    fn new() -> SeenPairs {
+        SeenPairs { slots: [0; 256], filled: [false; 256] }
+    }
+
+    /// Adds the pair; false when it was there already (or the set is full: then it is scored).
+    #[inline(always)]
+    fn insert(&mut self, (e0, e1): (u8, u8)) -> bool {
+        let key = (e0 as u16) << 8 | e1 as u16;
+        let mut slot = (key.wrapping_mul(0x9E37) >> 8) as usize;
+        for _ in 0..256 {
+            if !self.filled[slot] {
+                (self.slots[slot], self.filled[slot]) = (key, true);
+                return true;
+            }
+            if self.slots[slot] == key {
+                return false;
+            }
+            slot = (slot + 1) & 255;
+        }
+        true
     }
 }
 
@@ -211,6 +261,22 @@ unsafe fn score_avx2(values: &[i16; 16], pairs: &[(u8, u8)], best: &mut Candidat
     }
 }
 
+/// Keeps in `best[0]` the best eight-value pair of `pairs` and in `best[1]` the best six-value
+/// one (the first of equals); returns where in `pairs` each was found.
+#[inline(always)]
+fn score_by_mode<const AVX2: bool>(values: &[i16; 16], pairs: &[(u8, u8)], best: &mut [Candidate; 2]) -> [usize; 2] {
+    let mut found_at = [usize::MAX; 2];
+    for (index, &(e0, e1)) in pairs.iter().enumerate() {
+        let mode = usize::from(e0 <= e1);
+        let before = best[mode].error;
+        score::<AVX2>(values, &[(e0, e1)], &mut best[mode]);
+        if best[mode].error < before {
+            found_at[mode] = index;
+        }
+    }
+    found_at
+}
+
 /// Keeps in `best` the best of `pairs` (the first of equals, on every path).
 #[inline(always)]
 fn score<const AVX2: bool>(values: &[i16; 16], pairs: &[(u8, u8)], best: &mut Candidate) {
@@ -250,9 +316,7 @@ const EXTREME: u8 = 24;
 // text gives them; split, each part would take most of the same block state as arguments.
 #[inline(always)]
 fn encode_block<const AVX2: bool>(values: &[u8; 16], search: Bc4Search) -> [u8; 8] {
-    let mut sorted = *values;
-    sorted.sort_unstable();
-    let (min, max) = (sorted[0], sorted[15]);
+    let (min, max) = values.iter().fold((255u8, 0u8), |(low, high), &value| (low.min(value), high.max(value)));
     if min == max {
         return block_bytes(values, min, min);
     }
@@ -278,7 +342,7 @@ fn encode_block<const AVX2: bool>(values: &[u8; 16], search: Bc4Search) -> [u8; 
             seeds.add_window(high, low, 1, true);
         }
         if slow || min <= EXTREME || max >= 255 - EXTREME {
-            let inner = sorted
+            let inner = values
                 .iter()
                 .filter(|&&value| value != 0 && value != 255)
                 .fold((255u8, 0u8), |(low, high), &value| (low.min(value), high.max(value)));
@@ -317,8 +381,12 @@ fn encode_block<const AVX2: bool>(values: &[u8; 16], search: Bc4Search) -> [u8; 
             }
         }
     }
-    let mut best = Candidate { e0: max, e1: min, error: u32::MAX };
-    score::<AVX2>(&lanes, seeds.as_slice(), &mut best);
+    // The best seed of each mode (eight-value first).
+    let mut modes = [Candidate { e0: max, e1: min, error: u32::MAX }, Candidate { e0: 0, e1: 0, error: u32::MAX }];
+    let found_at = score_by_mode::<AVX2>(&lanes, seeds.as_slice(), &mut modes);
+    // The first of equals in seed order, as one scoring of every seed would keep.
+    let six_first = (modes[1].error, found_at[1]) < (modes[0].error, found_at[0]);
+    let mut best = modes[usize::from(six_first)];
     if quick {
         return block_bytes(values, best.e0, best.e1);
     }
@@ -326,23 +394,16 @@ fn encode_block<const AVX2: bool>(values: &[u8; 16], search: Bc4Search) -> [u8; 
     // `Basic`, only when it is within twice the best's error: a local search from a far one
     // rarely wins). On the corpus the second start takes the worst channel from 0.66 dB under
     // the optimum to 0.17.
-    let mut starts = [Some(best), None];
-    // One buffer for the other mode's seeds, then each step's moves.
+    let other = modes[usize::from(best.e0 > best.e1)];
+    let close = slow || (other.error as u64) < 2 * best.error as u64;
+    let starts = [Some(best), (other.error < u32::MAX && close).then_some(other)];
     let mut near = Candidates::new();
-    {
-        let eight = best.e0 > best.e1;
-        let mut other = Candidate { e0: 0, e1: 0, error: u32::MAX };
-        for &pair in seeds.as_slice().iter().filter(|&&(e0, e1)| (e0 > e1) != eight) {
-            near.pairs[near.count] = pair;
-            near.count += 1;
-        }
-        score::<AVX2>(&lanes, near.as_slice(), &mut other);
-        let close = slow || (other.error as u64) < 2 * best.error as u64;
-        starts[1] = (other.error < u32::MAX && close).then_some(other);
-    }
     let steps: &[i32] = if slow { &[16, 8, 4, 2, 1] } else { &[4, 2, 1] };
     for mut at in starts.into_iter().flatten() {
         let eight = at.e0 > at.e1;
+        // A pair scored before in this start's search is no better than `at`: not scored again.
+        let mut seen = SeenPairs::new();
+        seen.insert((at.e0, at.e1));
         for &step in steps {
             for _ in 0..8 {
                 let before = at.error;
@@ -357,6 +418,7 @@ fn encode_block<const AVX2: bool>(values: &[u8; 16], search: Bc4Search) -> [u8; 
                 if let Some((high, low)) = least_squares_ends(values, at.e0, at.e1) {
                     near.add(high, low, eight);
                 }
+                near.retain_unseen(&mut seen);
                 score::<AVX2>(&lanes, near.as_slice(), &mut at);
                 if at.error >= before {
                     break;

@@ -63,7 +63,7 @@ pub fn block_bytes(format: BlockFormat) -> usize {
 pub(crate) fn encoder_family(format: BlockFormat) -> &'static str {
     match format {
         // 2: scored with the float palette, seeded and searched wider.
-        BlockFormat::Bc4 | BlockFormat::Bc5 => "cirrus-bc4-2",
+        BlockFormat::Bc4 | BlockFormat::Bc5 => "cirrus-bc4-3",
         // BC1's blocks are refined by `bc1` after the kernels; 2: scored with the float palette,
         // single-colour blocks and one-channel lines searched.
         BlockFormat::Bc1 => match super::ispc::output_family() {

@@ -1735,12 +1735,15 @@ fn cold_bake(binary: &Path, folder: &Path, global_arguments: &[&str]) -> Process
 /// IoU (26 views) and the albedo's PSNR, visible-texel PSNR and alpha-test IoU.
 fn bench_oak_bake(corpus: &Path) {
     let current = Path::new(env!("CARGO_BIN_EXE_cirrus")).to_path_buf();
-    let baseline = std::env::var_os("CIRRUS_BENCH_BASELINE").map(std::path::PathBuf::from);
-    if baseline.is_none() {
-        println!("oak-bake: no baseline (set CIRRUS_BENCH_BASELINE to another build's cirrus, e.g. from tools/build_baseline.sh REV)");
+    // Baselines: other builds' binaries, separated as PATH is (`:` on Unix).
+    let baselines: Vec<std::path::PathBuf> = std::env::var_os("CIRRUS_BENCH_BASELINE")
+        .map(|paths| std::env::split_paths(&paths).collect())
+        .unwrap_or_default();
+    if baselines.is_empty() {
+        println!("oak-bake: no baseline (set CIRRUS_BENCH_BASELINE to other builds' cirrus, `:`-separated, e.g. from tools/build_baseline.sh REV)");
     }
     let binaries: Vec<(String, std::path::PathBuf)> = std::iter::once(("this build".to_string(), current))
-        .chain(baseline.map(|path| (format!("baseline {}", path.display()), path)))
+        .chain(baselines.into_iter().map(|path| (format!("baseline {}", path.display()), path)))
         .collect();
     let knows_isa = |binary: &Path| {
         std::process::Command::new(binary)

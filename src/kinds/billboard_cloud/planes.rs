@@ -59,6 +59,25 @@ const PENALTY: f32 = 10.0;
 const REFINEMENT_STEPS: usize = 6;
 /// Faces a refinement evaluates candidate directions on (the final offset uses them all).
 const REFINEMENT_SAMPLE: usize = 768;
+/// Below this many faces a per-plane filter runs on the calling thread: the greedy loop runs it
+/// a few times per plane (the oak: 1,012 planes), and waking the pool for a few microseconds of
+/// work cost more than the work (a fifth of the planes stage was the scheduler's).
+const PARALLEL_FACES: usize = 16_384;
+/// Below this many faces in a refinement's sample, its nine candidate directions are scored on
+/// the calling thread.
+const PARALLEL_SAMPLE: usize = 256;
+/// Below this many removed faces (× the θ rows), a density update runs on the calling thread.
+const PARALLEL_REMOVALS: usize = 64;
+
+/// The indices of `indices` that `keep` holds, in order: on the thread pool for large sets.
+fn filter_faces(indices: &[u32], keep: impl Fn(u32) -> bool + Sync + Send) -> Vec<u32> {
+    if indices.len() < PARALLEL_FACES {
+        indices.iter().copied().filter(|&index| keep(index)).collect()
+    } else {
+        indices.par_iter().copied().filter(|&index| keep(index)).collect()
+    }
+}
+
 /// Rounds of moving faces to their nearest plane and refitting after the greedy selection.
 const REASSIGNMENT_ROUNDS: usize = 6;
 
@@ -330,21 +349,17 @@ impl Density {
     fn remove_faces(&mut self, grid: &Grid, faces: &[Face], ranges: &[BinRanges], removed: &[u32]) {
         let row = PHI_BINS * grid.rho_bins;
         let per_row = faces.len() * PHI_BINS;
-        self.valid.par_chunks_mut(row).zip(self.front.par_chunks_mut(row)).enumerate().for_each(
-            |(t, (valid, front))| {
-                for &index in removed {
-                    let start = t * per_row + index as usize * PHI_BINS;
-                    grid.contribute_to_row(
-                        &faces[index as usize],
-                        &ranges[start..start + PHI_BINS],
-                        -1.0,
-                        t,
-                        valid,
-                        front,
-                    );
-                }
-            },
-        );
+        let remove_from_row = |(t, (valid, front)): (usize, (&mut [f32], &mut [f32]))| {
+            for &index in removed {
+                let start = t * per_row + index as usize * PHI_BINS;
+                grid.contribute_to_row(&faces[index as usize], &ranges[start..start + PHI_BINS], -1.0, t, valid, front);
+            }
+        };
+        if removed.len() < PARALLEL_REMOVALS {
+            self.valid.chunks_mut(row).zip(self.front.chunks_mut(row)).enumerate().for_each(remove_from_row);
+        } else {
+            self.valid.par_chunks_mut(row).zip(self.front.par_chunks_mut(row)).enumerate().for_each(remove_from_row);
+        }
     }
 
     /// The densest bin: valid area minus the near-tangent penalty; where every bin is
@@ -500,11 +515,7 @@ fn greedy_planes(grid: &Grid, faces: &[Face], cap: usize) -> GreedyPlanes {
             .and_then(|region| refine(grid, faces, &remaining, region))
             .unwrap_or_else(|| largest_face_plane(faces, &remaining));
         let holds = |(normal, rho): (Vec3, f32)| -> Vec<u32> {
-            remaining
-                .par_iter()
-                .copied()
-                .filter(|&index| faces[index as usize].distance_to(normal, rho) <= grid.epsilon)
-                .collect()
+            filter_faces(&remaining, |index| faces[index as usize].distance_to(normal, rho) <= grid.epsilon)
         };
         let (mut normal, mut rho) = (normal, rho);
         let mut members = holds((normal, rho));
@@ -746,15 +757,11 @@ fn refine(grid: &Grid, faces: &[Face], remaining: &[u32], region: Region) -> Opt
         rho: (region.rho.0 - grid.epsilon, region.rho.1 + grid.epsilon),
     };
     let corners = grown.corners();
-    let set: Vec<u32> = remaining
-        .par_iter()
-        .copied()
-        .filter(|&index| {
-            faces[index as usize]
-                .valid_rho(&corners, grid.epsilon)
-                .is_some_and(|(low, high)| low <= grown.rho.1 && high >= grown.rho.0)
-        })
-        .collect();
+    let set: Vec<u32> = filter_faces(remaining, |index| {
+        faces[index as usize]
+            .valid_rho(&corners, grid.epsilon)
+            .is_some_and(|(low, high)| low <= grown.rho.1 && high >= grown.rho.0)
+    });
     if set.is_empty() {
         return None;
     }
@@ -776,14 +783,16 @@ fn refine(grid: &Grid, faces: &[Face], remaining: &[u32], region: Region) -> Opt
                 )
             })
             .collect();
-        let scored: Vec<Option<(f32, f32, f32)>> = candidates
-            .par_iter()
-            .map_init(Vec::new, |events, &(candidate_theta, candidate_phi)| {
-                let normal = direction(candidate_theta, candidate_phi);
-                best_offset(faces, &sample, normal, grid.epsilon, events)
-                    .map(|(score, _)| (score, candidate_theta, candidate_phi))
-            })
-            .collect();
+        let score = |events: &mut Vec<u64>, &(candidate_theta, candidate_phi): &(f32, f32)| {
+            let normal = direction(candidate_theta, candidate_phi);
+            best_offset(faces, &sample, normal, grid.epsilon, events)
+                .map(|(score, _)| (score, candidate_theta, candidate_phi))
+        };
+        let scored: Vec<Option<(f32, f32, f32)>> = if sample.len() < PARALLEL_SAMPLE {
+            candidates.iter().map(|candidate| score(&mut events, candidate)).collect()
+        } else {
+            candidates.par_iter().map_init(Vec::new, score).collect()
+        };
         // In candidate order, so ties resolve the same way on every run.
         for (score, candidate_theta, candidate_phi) in scored.into_iter().flatten() {
             if best.is_none_or(|(best_score, _, _)| score > best_score) {

@@ -34,7 +34,7 @@ pub(crate) const WRITE: Stage = Stage { name: "write", version: 1 };
 const SURFACE_ENTRY: &str = "surface";
 // 4: the surface's figures include bits per texel; 5: and an alpha-tested one's visible PSNR
 // and alpha-test IoU.
-const SURFACE_ENTRY_VERSION: u32 = 5;
+const SURFACE_ENTRY_VERSION: u32 = 6;
 /// The entry under a surface's recipe key: the content key of its files.
 const SURFACE_RECIPE_ENTRY: &str = "surface-recipe";
 
@@ -245,13 +245,20 @@ fn surface_key(settings: &TailSettings) -> CacheKeyBuilder {
         .part(&settings.zstd)
 }
 
+/// Parts: the container, the preview, and the glTF image (empty when the surface has none).
 fn artifacts_entry(artifacts: &SurfaceArtifacts) -> CacheEntry {
-    CacheEntry::new(&artifacts.info, vec![artifacts.texture_file.to_vec(), artifacts.preview_png.to_vec()], false)
+    let orm_png = artifacts.orm_png.as_deref().map_or_else(Vec::new, <[u8]>::to_vec);
+    CacheEntry::new(
+        &artifacts.info,
+        vec![artifacts.texture_file.to_vec(), artifacts.preview_png.to_vec(), orm_png],
+        false,
+    )
 }
 
 fn artifacts_from_entry(entry: CacheEntry) -> Option<SurfaceArtifacts> {
-    let (info, [texture_file, preview_png]) = entry.parts()?;
-    Some(SurfaceArtifacts { info, texture_file: texture_file.into(), preview_png: preview_png.into() })
+    let (info, [texture_file, preview_png, orm_png]): (crate::texture::tail::SurfaceInfo, _) = entry.parts()?;
+    let orm_png = (info.surface == crate::texture::SurfaceKind::Mra).then(|| orm_png.into());
+    Some(SurfaceArtifacts { info, texture_file: texture_file.into(), preview_png: preview_png.into(), orm_png })
 }
 
 /// The memo of a surface's last encoding on disk: not a content address but the surface's

@@ -2,6 +2,7 @@
 //! (computed where missing), optional UVs and a material per triangle, each material with the
 //! maps of DESIGN §2.2 and constant fallbacks. Pure: the driver serves the MTL bytes.
 
+pub mod gltf;
 pub mod obj_text;
 pub mod occlusion;
 pub mod pn_triangles;

@@ -101,12 +101,21 @@ pub(crate) struct SurfaceInfo {
     pub alpha_test_iou: Option<f64>,
 }
 
-/// The files of one surface: the texture container and a PNG preview of the image.
+/// The files of one surface: the texture container and a PNG preview of the image; for a
+/// packed metallic / roughness / AO surface also the PNG glTF reads (see [`orm_texture`]).
 #[derive(Clone, Debug, PartialEq)]
 pub(crate) struct SurfaceArtifacts {
     pub info: SurfaceInfo,
     pub texture_file: Arc<[u8]>,
     pub preview_png: Arc<[u8]>,
+    pub orm_png: Option<Arc<[u8]>>,
+}
+
+/// A packed `mra` image (R metallic, G roughness, B occlusion) in the order glTF's materials
+/// read (R occlusion, G roughness, B metallic), opaque.
+pub fn orm_texture(mra: &Texture) -> Texture {
+    let pixels = mra.pixels.chunks_exact(4).flat_map(|texel| [texel[2], texel[1], texel[0], 255]).collect();
+    Texture::new(mra.width, mra.height, pixels)
 }
 
 /// The last encoding of a surface, so that the next one filters again only the mip tiles and
@@ -251,5 +260,6 @@ pub(crate) fn tail_write(
         visible_psnr_db: cut_out.map(|quality| (quality.visible_psnr_db * 100.0).round() / 100.0),
         alpha_test_iou: cut_out.map(|quality| (quality.alpha_test_iou * 1e5).round() / 1e5),
     };
-    SurfaceArtifacts { info, texture_file, preview_png: preview_png(image).into() }
+    let orm_png = (surface == SurfaceKind::Mra).then(|| preview_png(&orm_texture(image)).into());
+    SurfaceArtifacts { info, texture_file, preview_png: preview_png(image).into(), orm_png }
 }

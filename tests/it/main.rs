@@ -14,6 +14,7 @@ mod cli;
 mod config;
 mod conformance;
 mod fuzz;
+mod gltf;
 mod graph;
 mod seaweed;
 mod shared_cache;

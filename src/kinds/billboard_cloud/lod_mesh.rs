@@ -1,11 +1,13 @@
-//! The LOD mesh: `lod.obj` + `lod.mtl` text, two triangles per rectangle (a cluster of a plane's
-//! faces) with UVs into the atlas and
-//! the plane's normal. Depends on planes and layout only: a texture edit does not rewrite it.
+//! The LOD mesh: `lod.obj` + `lod.mtl` text and `lod.gltf` + `lod.bin`, two triangles per
+//! rectangle (a cluster of a plane's faces) with UVs into the atlas, the plane's normal and (glTF)
+//! its x axis as the tangent of the atlas's normal map. Depends on planes and layout only: a
+//! texture edit does not rewrite it.
 
 use std::fmt::Write;
 
 use crate::kinds::billboard_cloud::layout::Layout;
 use crate::kinds::billboard_cloud::rectangles::PlaneRectangle;
+use crate::mesh::gltf::{gltf_files, GltfAlpha, GltfFiles, GltfMaterial, GltfMesh};
 
 /// The OBJ and MTL text of the billboard cloud; `material` names the atlas material.
 pub fn lod_mesh(rectangles: &[PlaneRectangle], layout: &Layout, material: &str) -> (String, String) {
@@ -43,4 +45,49 @@ pub fn lod_mesh(rectangles: &[PlaneRectangle], layout: &Layout, material: &str) 
             albedo.png\nmap_d albedo.png\nnorm normal.png\nmap_Pr mra.png\nmap_ao mra.png\n"
     );
     (obj, mtl)
+}
+
+/// The billboard cloud as a glTF document (`lod.gltf` naming `lod.bin`): the same quads as the
+/// OBJ, one alpha-tested, double-sided material over `albedo.png`, `normal.png` (in each quad's
+/// frame: tangent = the plane's x axis, bitangent its y axis) and `orm.png`.
+pub fn lod_gltf(rectangles: &[PlaneRectangle], layout: &Layout, alpha_cutoff: f32) -> GltfFiles {
+    let corner_st = [(0.0, 0.0), (1.0, 0.0), (1.0, 1.0), (0.0, 1.0)];
+    let vertices = rectangles.len() * 4;
+    let (mut positions, mut normals) = (Vec::with_capacity(vertices), Vec::with_capacity(vertices));
+    let (mut tangents, mut uvs) = (Vec::with_capacity(vertices), Vec::with_capacity(vertices));
+    let mut triangles = Vec::with_capacity(rectangles.len() * 2);
+    for (rectangle, placement) in rectangles.iter().zip(&layout.placements) {
+        let first = positions.len() as u32;
+        for (corner, (s, t)) in rectangle.corners().into_iter().zip(corner_st) {
+            positions.push(corner.to_array());
+            normals.push(rectangle.frame.normal);
+            let [x, y, z] = rectangle.frame.x_axis;
+            tangents.push([x, y, z, 1.0]);
+            uvs.push(placement.uv(s, t, layout.width, layout.height));
+        }
+        triangles.push([first, first + 1, first + 2]);
+        triangles.push([first, first + 2, first + 3]);
+    }
+    let material = GltfMaterial {
+        name: "billboard_cloud".into(),
+        base_colour_factor: [1.0; 4],
+        metallic_factor: 1.0,
+        roughness_factor: 1.0,
+        base_colour: Some("albedo.png".into()),
+        normal: Some("normal.png".into()),
+        occlusion_roughness_metallic: Some("orm.png".into()),
+        alpha: GltfAlpha::Mask(alpha_cutoff),
+        double_sided: true,
+    };
+    let mesh = GltfMesh {
+        name: "billboard_cloud",
+        positions: &positions,
+        normals: &normals,
+        tangents: &tangents,
+        uvs: &uvs,
+        triangles: &triangles,
+        triangle_materials: &[],
+        materials: std::slice::from_ref(&material),
+    };
+    gltf_files(&mesh, "lod.bin", concat!("cirrus ", env!("CARGO_PKG_VERSION")))
 }

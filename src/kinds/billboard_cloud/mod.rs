@@ -425,6 +425,9 @@ fn level_outputs(
     let mut bytes = obj.len() + mtl.len();
     outputs.files.push((level_folder.join("lod.obj"), obj.into_bytes().into()));
     outputs.files.push((level_folder.join("lod.mtl"), mtl.into_bytes().into()));
+    let gltf = queries::lod_gltf(db, asset, level)?;
+    outputs.files.push((level_folder.join("lod.gltf"), gltf.gltf.clone().into()));
+    outputs.files.push((level_folder.join("lod.bin"), gltf.bin.clone().into()));
     let container = settings.encode.container;
     let mut surfaces = Vec::new();
     for surface in atlas_surfaces(db, asset, level) {
@@ -433,6 +436,9 @@ fn level_outputs(
         bytes += artifacts.texture_file.len();
         outputs.files.push((texture_path, artifacts.texture_file.clone()));
         outputs.files.push((preview_path, artifacts.preview_png.clone()));
+        if let Some(orm_png) = &artifacts.orm_png {
+            outputs.files.push((level_folder.join("orm.png"), orm_png.clone()));
+        }
         surfaces.push(artifacts.info.clone());
     }
     if levels::is_chain(settings) {

@@ -12,6 +12,8 @@ use std::collections::{BTreeMap, HashMap};
 use std::path::PathBuf;
 use std::sync::Arc;
 
+use crate::mesh::gltf::GltfFiles;
+
 use super::layout::Layout;
 use super::rectangles::PlaneRectangle;
 use super::render_groups::RenderGroup;
@@ -195,6 +197,15 @@ pub(crate) fn lod_files(db: &dyn Db, asset: Asset, level: u32) -> Result<Arc<(St
         timed(db, LOD, name, || Ok(super::lod_mesh::lod_mesh(&layout.rectangles, &layout.layout, "billboard_cloud")))
     })
     .map(Arc::new)
+}
+
+/// A level's `lod.gltf` and `lod.bin`: planes and layout only (made again after a restart: a
+/// few milliseconds, not worth a cache entry).
+#[salsa::tracked(returns(clone))]
+pub(crate) fn lod_gltf(db: &dyn Db, asset: Asset, level: u32) -> Result<Arc<GltfFiles>, Diagnostic> {
+    let layout = billboard_layout(db, asset, level)?;
+    let cutoff = billboard_alpha_cutoff(db, asset);
+    Ok(Arc::new(super::lod_mesh::lod_gltf(&layout.rectangles, &layout.layout, cutoff)))
 }
 
 #[salsa::tracked(returns(copy))]

@@ -1,0 +1,288 @@
+//! glTF 2.0 documents of triangle meshes: a `.gltf` JSON (made with `gltf-json`) and the `.bin`
+//! it names, with positions, normals, optional tangents and UVs, one primitive per material,
+//! and metallic-roughness materials whose maps are image files beside the document.
+//!
+//! Conventions (stated once, here and in the README): UVs as glTF has them, origin at the
+//! image's top left (the OBJ's `v` is flipped, `1 − v`); normal maps +Y up (OpenGL, glTF), in
+//! the tangent frame of each vertex's `TANGENT` (w = +1: bitangent = normal × tangent); one
+//! packed image for occlusion (R), roughness (G) and metallic (B), as glTF reads it. Pure: the
+//! kinds hand the bytes to the artifacts edge.
+
+use std::collections::BTreeMap;
+
+use gltf_json as json;
+use json::validation::Checked::Valid;
+use json::validation::USize64;
+
+/// How a material's alpha is used.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub enum GltfAlpha {
+    Opaque,
+    /// Alpha-tested at this cutoff (glTF's `MASK`).
+    Mask(f32),
+}
+
+/// A metallic-roughness material; maps are URIs relative to the `.gltf` file.
+#[derive(Clone, Debug, PartialEq)]
+pub struct GltfMaterial {
+    pub name: String,
+    /// Linear RGBA factor (multiplies the base colour map).
+    pub base_colour_factor: [f32; 4],
+    pub metallic_factor: f32,
+    pub roughness_factor: f32,
+    pub base_colour: Option<String>,
+    pub normal: Option<String>,
+    /// One image: R occlusion, G roughness, B metallic.
+    pub occlusion_roughness_metallic: Option<String>,
+    pub alpha: GltfAlpha,
+    pub double_sided: bool,
+}
+
+/// A triangle mesh as the document stores it.
+#[derive(Clone, Copy, Debug)]
+pub struct GltfMesh<'a> {
+    pub name: &'a str,
+    pub positions: &'a [[f32; 3]],
+    /// Per vertex, unit length.
+    pub normals: &'a [[f32; 3]],
+    /// Per vertex (xyz unit length, w ±1), or empty.
+    pub tangents: &'a [[f32; 4]],
+    /// Per vertex in the OBJ's convention (origin bottom left), or empty.
+    pub uvs: &'a [[f32; 2]],
+    pub triangles: &'a [[u32; 3]],
+    /// Each triangle's index into `materials`.
+    pub triangle_materials: &'a [u32],
+    pub materials: &'a [GltfMaterial],
+}
+
+/// The two files of a document.
+#[derive(Clone, Debug, PartialEq, Eq)]
+pub struct GltfFiles {
+    pub gltf: Vec<u8>,
+    pub bin: Vec<u8>,
+}
+
+/// The document of `mesh`, its buffer named `bin_uri` (relative to the `.gltf`).
+pub fn gltf_files(mesh: &GltfMesh, bin_uri: &str, generator: &str) -> GltfFiles {
+    let mut root = json::Root {
+        asset: json::Asset { generator: Some(generator.to_string()), ..Default::default() },
+        ..Default::default()
+    };
+    let mut bin = Vec::new();
+    let buffer = json::Index::new(0);
+    let mut attributes = BTreeMap::new();
+    let position = vertex_accessor(&mut root, &mut bin, buffer, mesh.positions, json::accessor::Type::Vec3, true);
+    attributes.insert(Valid(json::mesh::Semantic::Positions), position);
+    let normal = vertex_accessor(&mut root, &mut bin, buffer, mesh.normals, json::accessor::Type::Vec3, false);
+    attributes.insert(Valid(json::mesh::Semantic::Normals), normal);
+    if !mesh.tangents.is_empty() {
+        let tangent = vertex_accessor(&mut root, &mut bin, buffer, mesh.tangents, json::accessor::Type::Vec4, false);
+        attributes.insert(Valid(json::mesh::Semantic::Tangents), tangent);
+    }
+    if !mesh.uvs.is_empty() {
+        let flipped: Vec<[f32; 2]> = mesh.uvs.iter().map(|&[u, v]| [u, 1.0 - v]).collect();
+        let uv = vertex_accessor(&mut root, &mut bin, buffer, &flipped, json::accessor::Type::Vec2, false);
+        attributes.insert(Valid(json::mesh::Semantic::TexCoords(0)), uv);
+    }
+    let materials: Vec<json::Index<json::Material>> =
+        mesh.materials.iter().map(|material| push_material(&mut root, material)).collect();
+    // One primitive per material that has triangles, in the materials' order.
+    let mut by_material: Vec<Vec<u32>> = vec![Vec::new(); mesh.materials.len().max(1)];
+    let last = by_material.len() - 1;
+    for (triangle, corners) in mesh.triangles.iter().enumerate() {
+        let material = mesh.triangle_materials.get(triangle).map_or(0, |&material| (material as usize).min(last));
+        by_material[material].extend_from_slice(corners);
+    }
+    let mut primitives = Vec::new();
+    for (material, indices) in by_material.iter().enumerate().filter(|(_, indices)| !indices.is_empty()) {
+        let view = push_view(&mut root, &mut bin, buffer, bytemuck::cast_slice(indices), None);
+        root.buffer_views[view.value()].target = Some(Valid(json::buffer::Target::ElementArrayBuffer));
+        let accessor = root.push(json::Accessor {
+            buffer_view: Some(view),
+            byte_offset: None,
+            count: USize64::from(indices.len()),
+            component_type: Valid(json::accessor::GenericComponentType(json::accessor::ComponentType::U32)),
+            extensions: None,
+            extras: Default::default(),
+            type_: Valid(json::accessor::Type::Scalar),
+            min: None,
+            max: None,
+            name: None,
+            normalized: false,
+            sparse: None,
+        });
+        primitives.push(json::mesh::Primitive {
+            attributes: attributes.clone(),
+            extensions: None,
+            extras: Default::default(),
+            indices: Some(accessor),
+            material: materials.get(material).copied(),
+            mode: Valid(json::mesh::Mode::Triangles),
+            targets: None,
+        });
+    }
+    let gltf_mesh = root.push(json::Mesh {
+        extensions: None,
+        extras: Default::default(),
+        name: Some(mesh.name.to_string()),
+        primitives,
+        weights: None,
+    });
+    let node = root.push(json::Node { mesh: Some(gltf_mesh), name: Some(mesh.name.to_string()), ..Default::default() });
+    let scene = root.push(json::Scene { extensions: None, extras: Default::default(), name: None, nodes: vec![node] });
+    root.scene = Some(scene);
+    root.buffers.push(json::Buffer {
+        byte_length: USize64::from(bin.len()),
+        name: None,
+        uri: Some(bin_uri.to_string()),
+        extensions: None,
+        extras: Default::default(),
+    });
+    let gltf = json::serialize::to_vec_pretty(&root).expect("a glTF document serialises");
+    GltfFiles { gltf, bin }
+}
+
+/// Appends `bytes` (padded to 4) to the buffer as a view of its own.
+fn push_view(
+    root: &mut json::Root,
+    bin: &mut Vec<u8>,
+    buffer: json::Index<json::Buffer>,
+    bytes: &[u8],
+    target: Option<json::buffer::Target>,
+) -> json::Index<json::buffer::View> {
+    let offset = bin.len();
+    bin.extend_from_slice(bytes);
+    bin.resize(bin.len().next_multiple_of(4), 0);
+    root.push(json::buffer::View {
+        buffer,
+        byte_length: USize64::from(bytes.len()),
+        byte_offset: Some(USize64::from(offset)),
+        byte_stride: None,
+        name: None,
+        target: target.map(Valid),
+        extensions: None,
+        extras: Default::default(),
+    })
+}
+
+/// A float vertex attribute (`N` components) in a view of its own; positions carry their
+/// bounds, as glTF requires.
+fn vertex_accessor<const N: usize>(
+    root: &mut json::Root,
+    bin: &mut Vec<u8>,
+    buffer: json::Index<json::Buffer>,
+    values: &[[f32; N]],
+    type_: json::accessor::Type,
+    bounds: bool,
+) -> json::Index<json::Accessor> {
+    let view = push_view(root, bin, buffer, bytemuck::cast_slice(values), Some(json::buffer::Target::ArrayBuffer));
+    let (min, max) = if bounds && !values.is_empty() {
+        let mut min = [f32::INFINITY; N];
+        let mut max = [f32::NEG_INFINITY; N];
+        for value in values {
+            for component in 0..N {
+                min[component] = min[component].min(value[component]);
+                max[component] = max[component].max(value[component]);
+            }
+        }
+        (Some(json::Value::from(min.to_vec())), Some(json::Value::from(max.to_vec())))
+    } else {
+        (None, None)
+    };
+    root.push(json::Accessor {
+        buffer_view: Some(view),
+        byte_offset: None,
+        count: USize64::from(values.len()),
+        component_type: Valid(json::accessor::GenericComponentType(json::accessor::ComponentType::F32)),
+        extensions: None,
+        extras: Default::default(),
+        type_: Valid(type_),
+        min,
+        max,
+        name: None,
+        normalized: false,
+        sparse: None,
+    })
+}
+
+/// A texture of the image at `uri` (one image and texture per URI; the sampler is shared).
+fn push_texture(root: &mut json::Root, uri: &str) -> json::Index<json::Texture> {
+    if let Some(index) =
+        root.textures.iter().position(|texture| root.images[texture.source.value()].uri.as_deref() == Some(uri))
+    {
+        return json::Index::new(index as u32);
+    }
+    if root.samplers.is_empty() {
+        root.push(json::texture::Sampler {
+            mag_filter: Some(Valid(json::texture::MagFilter::Linear)),
+            min_filter: Some(Valid(json::texture::MinFilter::LinearMipmapLinear)),
+            wrap_s: Valid(json::texture::WrappingMode::ClampToEdge),
+            wrap_t: Valid(json::texture::WrappingMode::ClampToEdge),
+            ..Default::default()
+        });
+    }
+    let image = root.push(json::Image {
+        buffer_view: None,
+        mime_type: None,
+        name: None,
+        uri: Some(uri.to_string()),
+        extensions: None,
+        extras: Default::default(),
+    });
+    root.push(json::Texture {
+        name: None,
+        sampler: Some(json::Index::new(0)),
+        source: image,
+        extensions: None,
+        extras: Default::default(),
+    })
+}
+
+fn push_material(root: &mut json::Root, material: &GltfMaterial) -> json::Index<json::Material> {
+    let info = |root: &mut json::Root, uri: &Option<String>| {
+        uri.as_deref().map(|uri| json::texture::Info {
+            index: push_texture(root, uri),
+            tex_coord: 0,
+            extensions: None,
+            extras: Default::default(),
+        })
+    };
+    let base_color_texture = info(root, &material.base_colour);
+    let orm = info(root, &material.occlusion_roughness_metallic);
+    let normal_texture = info(root, &material.normal).map(|info| json::material::NormalTexture {
+        index: info.index,
+        scale: 1.0,
+        tex_coord: 0,
+        extensions: None,
+        extras: Default::default(),
+    });
+    let occlusion_texture = orm.as_ref().map(|info| json::material::OcclusionTexture {
+        index: info.index,
+        strength: json::material::StrengthFactor(1.0),
+        tex_coord: 0,
+        extensions: None,
+        extras: Default::default(),
+    });
+    let (alpha_mode, alpha_cutoff) = match material.alpha {
+        GltfAlpha::Opaque => (json::material::AlphaMode::Opaque, None),
+        GltfAlpha::Mask(cutoff) => (json::material::AlphaMode::Mask, Some(json::material::AlphaCutoff(cutoff))),
+    };
+    root.push(json::Material {
+        alpha_cutoff,
+        alpha_mode: Valid(alpha_mode),
+        double_sided: material.double_sided,
+        name: Some(material.name.clone()),
+        pbr_metallic_roughness: json::material::PbrMetallicRoughness {
+            base_color_factor: json::material::PbrBaseColorFactor(material.base_colour_factor),
+            base_color_texture,
+            metallic_factor: json::material::StrengthFactor(material.metallic_factor),
+            roughness_factor: json::material::StrengthFactor(material.roughness_factor),
+            metallic_roughness_texture: orm,
+            extensions: None,
+            extras: Default::default(),
+        },
+        normal_texture,
+        occlusion_texture,
+        ..Default::default()
+    })
+}

@@ -1,0 +1,205 @@
+//! The glTF files cirrus writes, read by what reads them in real life: the Khronos
+//! glTF-Validator (npm `gltf-validator`, run by Node; installed into the target folder when
+//! `.ci/run` has not), and the documents' own numbers against the OBJ they stand beside.
+
+use std::path::{Path, PathBuf};
+use std::process::Command;
+use std::sync::OnceLock;
+
+use crate::support::{decode_png, TempProject};
+
+/// The validator's npm version (pinned: its reports are what the tests read).
+const VALIDATOR_VERSION: &str = "2.0.0-dev.3.10";
+
+/// Validates each file given on the command line, resolving its images and buffers beside it;
+/// prints one JSON array of `{ file, issues }`.
+const VALIDATE_SCRIPT: &str = r#"
+const validator = require('gltf-validator');
+const fs = require('fs');
+const path = require('path');
+(async () => {
+  const results = [];
+  for (const file of process.argv.slice(2)) {
+    const report = await validator.validateBytes(new Uint8Array(fs.readFileSync(file)), {
+      uri: path.basename(file),
+      maxIssues: 100,
+      externalResourceFunction: (uri) => new Promise((resolve, reject) => {
+        fs.readFile(path.resolve(path.dirname(file), decodeURIComponent(uri)),
+          (error, data) => error ? reject(error.toString()) : resolve(new Uint8Array(data)));
+      }),
+    });
+    results.push({ file, issues: report.issues });
+  }
+  console.log(JSON.stringify(results));
+})().catch((error) => { console.error(error); process.exit(1); });
+"#;
+
+/// The folder holding `node_modules/gltf-validator` and the script: `CIRRUS_GLTF_VALIDATOR`,
+/// else one under the target folder, installed with npm once per test run.
+fn validator_folder() -> PathBuf {
+    static FOLDER: OnceLock<Result<PathBuf, String>> = OnceLock::new();
+    let found = FOLDER.get_or_init(|| {
+        let folder = std::env::var_os("CIRRUS_GLTF_VALIDATOR")
+            .map(PathBuf::from)
+            .unwrap_or_else(|| Path::new(env!("CARGO_TARGET_TMPDIR")).join("gltf-validator"));
+        if !folder.join("node_modules/gltf-validator/package.json").is_file() {
+            std::fs::create_dir_all(&folder).map_err(|error| error.to_string())?;
+            let output = Command::new("npm")
+                .args(["install", "--silent", "--no-audit", "--no-fund", "--prefix"])
+                .arg(&folder)
+                .arg(format!("gltf-validator@{VALIDATOR_VERSION}"))
+                .output()
+                .map_err(|error| format!("npm: {error}"))?;
+            if !output.status.success() {
+                return Err(format!("npm install failed: {}", String::from_utf8_lossy(&output.stderr)));
+            }
+        }
+        std::fs::write(folder.join("validate.js"), VALIDATE_SCRIPT).map_err(|error| error.to_string())?;
+        Ok(folder)
+    });
+    match found {
+        Ok(folder) => folder.clone(),
+        Err(why) => panic!(
+            "the glTF tests need Node and npm's gltf-validator@{VALIDATOR_VERSION} (`.ci/run` installs them): {why}"
+        ),
+    }
+}
+
+/// The validator's issues of each file: (file, errors, warnings, messages).
+fn validate(files: &[PathBuf]) -> Vec<(PathBuf, u64, u64, String)> {
+    let folder = validator_folder();
+    let output = Command::new("node").arg(folder.join("validate.js")).args(files).output().expect("node runs");
+    assert!(output.status.success(), "the validator failed: {}", String::from_utf8_lossy(&output.stderr));
+    let results: serde_json::Value = serde_json::from_slice(&output.stdout).expect("the validator's JSON");
+    results
+        .as_array()
+        .expect("one result per file")
+        .iter()
+        .map(|result| {
+            let issues = &result["issues"];
+            (
+                PathBuf::from(result["file"].as_str().expect("file")),
+                issues["numErrors"].as_u64().expect("numErrors"),
+                issues["numWarnings"].as_u64().expect("numWarnings"),
+                issues["messages"].to_string(),
+            )
+        })
+        .collect()
+}
+
+fn files_named(folder: &Path, extension: &str) -> Vec<PathBuf> {
+    let mut found = Vec::new();
+    let mut folders = vec![folder.to_path_buf()];
+    while let Some(current) = folders.pop() {
+        for entry in std::fs::read_dir(&current).unwrap().flatten() {
+            let path = entry.path();
+            if path.is_dir() {
+                folders.push(path);
+            } else if path.extension().is_some_and(|found| found == extension) {
+                found.push(path);
+            }
+        }
+    }
+    found.sort();
+    found
+}
+
+#[test]
+fn every_gltf_of_the_bundled_project_passes_the_khronos_validator_without_an_error_or_warning() {
+    let root = Path::new(env!("CARGO_MANIFEST_DIR"));
+    let project = TempProject::new(&std::fs::read_to_string(root.join("pipeline.ron")).unwrap());
+    std::os::unix::fs::symlink(root.join("examples"), project.path("examples")).unwrap();
+    let output = project.run_cli(&["build"]);
+    assert!(output.status.success(), "{}", String::from_utf8_lossy(&output.stderr));
+    let documents = files_named(&project.path("baked"), "gltf");
+    // The bush and the three levels of its chain.
+    let billboard_levels = documents.iter().filter(|path| path.ends_with("lod.gltf")).count();
+    assert_eq!(billboard_levels, 4, "a lod.gltf beside every lod.obj: {documents:?}");
+    for (file, errors, warnings, messages) in validate(&documents) {
+        assert_eq!((errors, warnings), (0, 0), "{}: {messages}", file.display());
+    }
+    // The validator reads the images: one it cannot find is an error.
+    let orm = project.path("baked/bush/orm.png");
+    std::fs::rename(&orm, orm.with_extension("moved")).unwrap();
+    let (_, errors, _, messages) = validate(&[project.path("baked/bush/lod.gltf")]).remove(0);
+    assert_eq!(errors, 1, "{messages}");
+    assert!(messages.contains("orm.png"), "{messages}");
+}
+
+/// The numbers of an accessor of `document` (floats, `components` each).
+fn float_accessor(document: &serde_json::Value, bin: &[u8], accessor: u64, components: usize) -> Vec<Vec<f32>> {
+    let accessor = &document["accessors"][accessor as usize];
+    let view = &document["bufferViews"][accessor["bufferView"].as_u64().unwrap() as usize];
+    let offset = view["byteOffset"].as_u64().unwrap_or(0) as usize;
+    let count = accessor["count"].as_u64().unwrap() as usize;
+    let floats: &[f32] = bytemuck::cast_slice(&bin[offset..offset + count * components * 4]);
+    floats.chunks_exact(components).map(<[f32]>::to_vec).collect()
+}
+
+#[test]
+fn a_billboard_lod_s_gltf_draws_the_obj_s_quads_with_gltf_s_uv_origin_an_alpha_test_and_an_orm_image() {
+    let project = TempProject::new(
+        r#"Pipeline(source: "assets", output: "baked", assets: [
+            BillboardCloud(name: "bush", mesh: "trees/bush_2.obj", atlas: (max_size: 256)),
+        ])"#,
+    );
+    let trees = Path::new(env!("CARGO_MANIFEST_DIR")).join("examples/assets/trees");
+    for entry in std::fs::read_dir(&trees).unwrap().flatten().filter(|entry| entry.path().is_file()) {
+        project.write(
+            &format!("assets/trees/{}", entry.file_name().to_string_lossy()),
+            std::fs::read(entry.path()).unwrap(),
+        );
+    }
+    for entry in std::fs::read_dir(trees.join("textures")).unwrap().flatten() {
+        let name = entry.file_name().to_string_lossy().to_string();
+        project.write(&format!("assets/trees/textures/{name}"), std::fs::read(entry.path()).unwrap());
+    }
+    let output = project.run_cli(&["build"]);
+    assert!(output.status.success(), "{}", String::from_utf8_lossy(&output.stderr));
+    let document: serde_json::Value = serde_json::from_slice(&project.read("baked/bush/lod.gltf")).unwrap();
+    let bin = project.read("baked/bush/lod.bin");
+    assert_eq!(document["buffers"][0]["uri"], "lod.bin");
+    assert_eq!(document["buffers"][0]["byteLength"].as_u64().unwrap() as usize, bin.len());
+    let material = &document["materials"][0];
+    assert_eq!(
+        (&material["alphaMode"], &material["alphaCutoff"], &material["doubleSided"]),
+        (&"MASK".into(), &0.5.into(), &true.into())
+    );
+    let image_of = |texture: &serde_json::Value| {
+        let source = document["textures"][texture["index"].as_u64().unwrap() as usize]["source"].as_u64().unwrap();
+        document["images"][source as usize]["uri"].as_str().unwrap().to_string()
+    };
+    let pbr = &material["pbrMetallicRoughness"];
+    assert_eq!(image_of(&pbr["baseColorTexture"]), "albedo.png");
+    assert_eq!(image_of(&pbr["metallicRoughnessTexture"]), "orm.png");
+    assert_eq!(image_of(&material["occlusionTexture"]), "orm.png");
+    assert_eq!(image_of(&material["normalTexture"]), "normal.png");
+
+    // The same corners as the OBJ's, and its UVs with v flipped (glTF's origin is the top left).
+    let obj = String::from_utf8(project.read("baked/bush/lod.obj")).unwrap();
+    let numbers = |prefix: &str| -> Vec<Vec<f32>> {
+        obj.lines()
+            .filter_map(|line| line.strip_prefix(prefix))
+            .map(|rest| rest.split_whitespace().map(|number| number.parse().unwrap()).collect())
+            .collect()
+    };
+    let attributes = &document["meshes"][0]["primitives"][0]["attributes"];
+    let positions = float_accessor(&document, &bin, attributes["POSITION"].as_u64().unwrap(), 3);
+    let uvs = float_accessor(&document, &bin, attributes["TEXCOORD_0"].as_u64().unwrap(), 2);
+    let tangents = float_accessor(&document, &bin, attributes["TANGENT"].as_u64().unwrap(), 4);
+    assert_eq!(positions, numbers("v "));
+    let obj_uvs = numbers("vt ");
+    assert_eq!(uvs.len(), obj_uvs.len());
+    for (gltf, obj) in uvs.iter().zip(&obj_uvs) {
+        assert_eq!(gltf[0], obj[0]);
+        assert!((gltf[1] - (1.0 - obj[1])).abs() < 1e-6, "{gltf:?} against the OBJ's {obj:?}");
+    }
+    assert!(tangents.iter().all(|tangent| tangent[3] == 1.0), "bitangent = normal × tangent");
+
+    // orm.png is mra.png with metallic and occlusion swapped, opaque.
+    let (mra, orm) = (decode_png(&project.read("baked/bush/mra.png")), decode_png(&project.read("baked/bush/orm.png")));
+    assert_eq!((orm.width, orm.height), (mra.width, mra.height));
+    for (orm, mra) in orm.pixels.chunks_exact(4).zip(mra.pixels.chunks_exact(4)) {
+        assert_eq!(orm, [mra[2], mra[1], mra[0], 255]);
+    }
+}

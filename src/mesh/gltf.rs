@@ -64,28 +64,93 @@ pub struct GltfFiles {
 
 /// The document of `mesh`, its buffer named `bin_uri` (relative to the `.gltf`).
 pub fn gltf_files(mesh: &GltfMesh, bin_uri: &str, generator: &str) -> GltfFiles {
-    let mut root = json::Root {
+    let mut root = new_root(generator);
+    let (node, bin) = push_mesh(&mut root, mesh, bin_uri, "");
+    let scene = root.push(json::Scene { extensions: None, extras: Default::default(), name: None, nodes: vec![node] });
+    root.scene = Some(scene);
+    GltfFiles { gltf: document_bytes(&root), bin }
+}
+
+/// One level of a chain: its mesh, and the folder (relative to the chain's document) that holds
+/// its `.bin` and images.
+#[derive(Clone, Copy, Debug)]
+pub struct GltfLevel<'a> {
+    pub mesh: GltfMesh<'a>,
+    pub folder: &'a str,
+}
+
+/// A LOD chain as one document (`MSFT_lod`): the first level's node in the scene, naming the
+/// others' nodes in order, with `screen_coverage` (one value per level: the least screen
+/// coverage at which each is shown) in its extras as `MSFT_screencoverage`. Each level's
+/// buffer is `<folder>/<bin_name>`, the very bytes [`gltf_files`] writes for it there.
+pub fn gltf_chain(levels: &[GltfLevel], bin_name: &str, screen_coverage: &[f32], generator: &str) -> Vec<u8> {
+    let mut root = new_root(generator);
+    let nodes: Vec<json::Index<json::Node>> = levels
+        .iter()
+        .map(|level| push_mesh(&mut root, &level.mesh, &format!("{}/{bin_name}", level.folder), level.folder).0)
+        .collect();
+    if let Some((&first, others)) = nodes.split_first() {
+        let ids: Vec<u32> = others.iter().map(|node| node.value() as u32).collect();
+        let node = &mut root.nodes[first.value()];
+        let mut extensions = json::extensions::scene::Node::default();
+        extensions.others.insert("MSFT_lod".into(), serde_json::json!({ "ids": ids }));
+        node.extensions = Some(extensions);
+        node.extras = Some(
+            serde_json::value::to_raw_value(&serde_json::json!({ "MSFT_screencoverage": screen_coverage }))
+                .expect("extras serialise"),
+        );
+        root.extensions_used.push("MSFT_lod".into());
+        let scene =
+            root.push(json::Scene { extensions: None, extras: Default::default(), name: None, nodes: vec![first] });
+        root.scene = Some(scene);
+    }
+    document_bytes(&root)
+}
+
+fn new_root(generator: &str) -> json::Root {
+    json::Root {
         asset: json::Asset { generator: Some(generator.to_string()), ..Default::default() },
         ..Default::default()
-    };
+    }
+}
+
+fn document_bytes(root: &json::Root) -> Vec<u8> {
+    json::serialize::to_vec_pretty(root).expect("a glTF document serialises")
+}
+
+/// Adds `mesh` (a node, its mesh, materials and images under `folder`) with a buffer of its own
+/// named `bin_uri`; returns the node and the buffer's bytes.
+fn push_mesh(
+    root: &mut json::Root,
+    mesh: &GltfMesh,
+    bin_uri: &str,
+    folder: &str,
+) -> (json::Index<json::Node>, Vec<u8>) {
     let mut bin = Vec::new();
-    let buffer = json::Index::new(0);
+    let buffer = json::Index::new(root.buffers.len() as u32);
+    root.buffers.push(json::Buffer {
+        byte_length: USize64(0),
+        name: None,
+        uri: Some(bin_uri.to_string()),
+        extensions: None,
+        extras: Default::default(),
+    });
     let mut attributes = BTreeMap::new();
-    let position = vertex_accessor(&mut root, &mut bin, buffer, mesh.positions, json::accessor::Type::Vec3, true);
+    let position = vertex_accessor(root, &mut bin, buffer, mesh.positions, json::accessor::Type::Vec3, true);
     attributes.insert(Valid(json::mesh::Semantic::Positions), position);
-    let normal = vertex_accessor(&mut root, &mut bin, buffer, mesh.normals, json::accessor::Type::Vec3, false);
+    let normal = vertex_accessor(root, &mut bin, buffer, mesh.normals, json::accessor::Type::Vec3, false);
     attributes.insert(Valid(json::mesh::Semantic::Normals), normal);
     if !mesh.tangents.is_empty() {
-        let tangent = vertex_accessor(&mut root, &mut bin, buffer, mesh.tangents, json::accessor::Type::Vec4, false);
+        let tangent = vertex_accessor(root, &mut bin, buffer, mesh.tangents, json::accessor::Type::Vec4, false);
         attributes.insert(Valid(json::mesh::Semantic::Tangents), tangent);
     }
     if !mesh.uvs.is_empty() {
         let flipped: Vec<[f32; 2]> = mesh.uvs.iter().map(|&[u, v]| [u, 1.0 - v]).collect();
-        let uv = vertex_accessor(&mut root, &mut bin, buffer, &flipped, json::accessor::Type::Vec2, false);
+        let uv = vertex_accessor(root, &mut bin, buffer, &flipped, json::accessor::Type::Vec2, false);
         attributes.insert(Valid(json::mesh::Semantic::TexCoords(0)), uv);
     }
     let materials: Vec<json::Index<json::Material>> =
-        mesh.materials.iter().map(|material| push_material(&mut root, material)).collect();
+        mesh.materials.iter().map(|material| push_material(root, material, folder)).collect();
     // One primitive per material that has triangles, in the materials' order.
     let mut by_material: Vec<Vec<u32>> = vec![Vec::new(); mesh.materials.len().max(1)];
     let last = by_material.len() - 1;
@@ -95,7 +160,7 @@ pub fn gltf_files(mesh: &GltfMesh, bin_uri: &str, generator: &str) -> GltfFiles 
     }
     let mut primitives = Vec::new();
     for (material, indices) in by_material.iter().enumerate().filter(|(_, indices)| !indices.is_empty()) {
-        let view = push_view(&mut root, &mut bin, buffer, bytemuck::cast_slice(indices), None);
+        let view = push_view(root, &mut bin, buffer, bytemuck::cast_slice(indices), None);
         root.buffer_views[view.value()].target = Some(Valid(json::buffer::Target::ElementArrayBuffer));
         let accessor = root.push(json::Accessor {
             buffer_view: Some(view),
@@ -128,18 +193,9 @@ pub fn gltf_files(mesh: &GltfMesh, bin_uri: &str, generator: &str) -> GltfFiles 
         primitives,
         weights: None,
     });
+    root.buffers[buffer.value()].byte_length = USize64::from(bin.len());
     let node = root.push(json::Node { mesh: Some(gltf_mesh), name: Some(mesh.name.to_string()), ..Default::default() });
-    let scene = root.push(json::Scene { extensions: None, extras: Default::default(), name: None, nodes: vec![node] });
-    root.scene = Some(scene);
-    root.buffers.push(json::Buffer {
-        byte_length: USize64::from(bin.len()),
-        name: None,
-        uri: Some(bin_uri.to_string()),
-        extensions: None,
-        extras: Default::default(),
-    });
-    let gltf = json::serialize::to_vec_pretty(&root).expect("a glTF document serialises");
-    GltfFiles { gltf, bin }
+    (node, bin)
 }
 
 /// Appends `bytes` (padded to 4) to the buffer as a view of its own.
@@ -238,10 +294,11 @@ fn push_texture(root: &mut json::Root, uri: &str) -> json::Index<json::Texture> 
     })
 }
 
-fn push_material(root: &mut json::Root, material: &GltfMaterial) -> json::Index<json::Material> {
+/// `material`, its images named as seen from the document (`folder` + their URI).
+fn push_material(root: &mut json::Root, material: &GltfMaterial, folder: &str) -> json::Index<json::Material> {
     let info = |root: &mut json::Root, uri: &Option<String>| {
         uri.as_deref().map(|uri| json::texture::Info {
-            index: push_texture(root, uri),
+            index: push_texture(root, &if folder.is_empty() { uri.to_string() } else { format!("{folder}/{uri}") }),
             tex_coord: 0,
             extensions: None,
             extras: Default::default(),

@@ -115,9 +115,28 @@ fn every_gltf_of_the_bundled_project_passes_the_khronos_validator_without_an_err
     // The bush and the three levels of its chain.
     let billboard_levels = documents.iter().filter(|path| path.ends_with("lod.gltf")).count();
     assert_eq!(billboard_levels, 4, "a lod.gltf beside every lod.obj: {documents:?}");
+    assert!(documents.contains(&project.path("baked/bush_lods/lods.gltf")), "the chain as one document");
     for (file, errors, warnings, messages) in validate(&documents) {
         assert_eq!((errors, warnings), (0, 0), "{}: {messages}", file.display());
     }
+
+    // The chain: its first level's node names the others (MSFT_lod), each level's buffer is the
+    // lod.bin beside that level's lod.gltf, and the switch coverages are the report's.
+    let chain: serde_json::Value = serde_json::from_slice(&project.read("baked/bush_lods/lods.gltf")).unwrap();
+    assert_eq!(chain["scenes"][0]["nodes"], serde_json::json!([0]));
+    assert_eq!(chain["nodes"][0]["extensions"]["MSFT_lod"]["ids"], serde_json::json!([1, 2]));
+    assert_eq!(chain["extensionsUsed"], serde_json::json!(["MSFT_lod"]));
+    for (level, buffer) in chain["buffers"].as_array().unwrap().iter().enumerate() {
+        let bin = project.read(&format!("baked/bush_lods/lod{level}/lod.bin"));
+        assert_eq!(buffer["uri"], format!("lod{level}/lod.bin"));
+        assert_eq!(buffer["byteLength"].as_u64().unwrap() as usize, bin.len());
+    }
+    let report: serde_json::Value = serde_json::from_slice(&project.read("baked/bush_lods/report.json")).unwrap();
+    let coverage = &chain["nodes"][0]["extras"]["MSFT_screencoverage"];
+    assert_eq!(coverage, &report["screen_coverage"]);
+    let coverage: Vec<f64> = coverage.as_array().unwrap().iter().map(|value| value.as_f64().unwrap()).collect();
+    assert_eq!(coverage.len(), 3);
+    assert!(coverage[0] > coverage[1] && coverage[1] > coverage[2] && coverage[2] == 0.0, "{coverage:?}");
     // The validator reads the images: one it cannot find is an error.
     let orm = project.path("baked/bush/orm.png");
     std::fs::rename(&orm, orm.with_extension("moved")).unwrap();
@@ -202,4 +221,25 @@ fn a_billboard_lod_s_gltf_draws_the_obj_s_quads_with_gltf_s_uv_origin_an_alpha_t
     for (orm, mra) in orm.pixels.chunks_exact(4).zip(mra.pixels.chunks_exact(4)) {
         assert_eq!(orm, [mra[2], mra[1], mra[0], 255]);
     }
+}
+
+#[test]
+fn a_chain_gives_way_to_its_next_level_where_that_level_s_error_is_one_pixel() {
+    use cirrus::kinds::billboard_cloud::lod_mesh::{screen_coverage, COVERAGE_VIEWPORT};
+    let (width, height) = COVERAGE_VIEWPORT;
+    let (diameter, errors) = (40.0f32, [0.1f32, 0.5, 1.0]);
+    let coverage = screen_coverage(&errors, diameter);
+    assert_eq!(coverage.len(), 3);
+    assert_eq!(coverage[2], 0.0, "the last level is shown down to nothing");
+    for level in 0..2 {
+        // The object's height in pixels at that coverage (its disc's area share), and the next
+        // level's error there.
+        let share = (coverage[level] * width / height / std::f32::consts::FRAC_PI_4).sqrt();
+        let pixels_per_unit = share * height / diameter;
+        assert!((errors[level + 1] * pixels_per_unit - 1.0).abs() < 1e-4, "level {level}: {coverage:?}");
+    }
+    // A next level without error takes over at once (coverage 1, the most there is); a coarser
+    // level never asks for more coverage than the one before it.
+    assert_eq!(screen_coverage(&[0.5, 0.0], diameter), [1.0, 0.0]);
+    assert_eq!(screen_coverage(&[0.1, 1.0, 0.5], diameter)[1], screen_coverage(&[0.1, 1.0, 0.5], diameter)[0]);
 }

@@ -47,10 +47,43 @@ pub fn lod_mesh(rectangles: &[PlaneRectangle], layout: &Layout, material: &str) 
     (obj, mtl)
 }
 
-/// The billboard cloud as a glTF document (`lod.gltf` naming `lod.bin`): the same quads as the
-/// OBJ, one alpha-tested, double-sided material over `albedo.png`, `normal.png` (in each quad's
-/// frame: tangent = the plane's x axis, bitangent its y axis) and `orm.png`.
+/// The glTF of a level: [`lod_gltf_mesh`] in `lod.gltf` naming `lod.bin`.
 pub fn lod_gltf(rectangles: &[PlaneRectangle], layout: &Layout, alpha_cutoff: f32) -> GltfFiles {
+    gltf_files(&lod_gltf_mesh(rectangles, layout, alpha_cutoff).mesh(), "lod.bin", GLTF_GENERATOR)
+}
+
+/// What the glTF documents name as their generator.
+pub const GLTF_GENERATOR: &str = concat!("cirrus ", env!("CARGO_PKG_VERSION"));
+
+/// A level's quads as glTF draws them (owned; [`LodGltfMesh::mesh`] lends them).
+pub struct LodGltfMesh {
+    positions: Vec<[f32; 3]>,
+    normals: Vec<[f32; 3]>,
+    tangents: Vec<[f32; 4]>,
+    uvs: Vec<[f32; 2]>,
+    triangles: Vec<[u32; 3]>,
+    material: GltfMaterial,
+}
+
+impl LodGltfMesh {
+    pub fn mesh(&self) -> GltfMesh<'_> {
+        GltfMesh {
+            name: "billboard_cloud",
+            positions: &self.positions,
+            normals: &self.normals,
+            tangents: &self.tangents,
+            uvs: &self.uvs,
+            triangles: &self.triangles,
+            triangle_materials: &[],
+            materials: std::slice::from_ref(&self.material),
+        }
+    }
+}
+
+/// The billboard cloud for glTF: the same quads as the OBJ, one alpha-tested, double-sided
+/// material over `albedo.png`, `normal.png` (in each quad's frame: tangent = the plane's x
+/// axis, bitangent its y axis) and `orm.png`.
+pub fn lod_gltf_mesh(rectangles: &[PlaneRectangle], layout: &Layout, alpha_cutoff: f32) -> LodGltfMesh {
     let corner_st = [(0.0, 0.0), (1.0, 0.0), (1.0, 1.0), (0.0, 1.0)];
     let vertices = rectangles.len() * 4;
     let (mut positions, mut normals) = (Vec::with_capacity(vertices), Vec::with_capacity(vertices));
@@ -79,15 +112,32 @@ pub fn lod_gltf(rectangles: &[PlaneRectangle], layout: &Layout, alpha_cutoff: f3
         alpha: GltfAlpha::Mask(alpha_cutoff),
         double_sided: true,
     };
-    let mesh = GltfMesh {
-        name: "billboard_cloud",
-        positions: &positions,
-        normals: &normals,
-        tangents: &tangents,
-        uvs: &uvs,
-        triangles: &triangles,
-        triangle_materials: &[],
-        materials: std::slice::from_ref(&material),
-    };
-    gltf_files(&mesh, "lod.bin", concat!("cirrus ", env!("CARGO_PKG_VERSION")))
+    LodGltfMesh { positions, normals, tangents, uvs, triangles, material }
+}
+
+/// The viewport a chain's switch coverages are stated for: 1920 × 1080 pixels.
+pub const COVERAGE_VIEWPORT: (f32, f32) = (1920.0, 1080.0);
+
+/// A chain's `MSFT_screencoverage`: for each level, the least screen coverage at which it is
+/// shown, as Babylon.js reads it (the share of the viewport's area the object covers, here its
+/// bounding sphere's disc on a [`COVERAGE_VIEWPORT`]). Level `i` gives way where level `i + 1`'s
+/// measured error (`errors_world`, world units: the mean distance of its faces from their
+/// planes) projects to one pixel; the last level is shown down to nothing (0). Non-increasing,
+/// at most 1.
+pub fn screen_coverage(errors_world: &[f32], diameter_world: f32) -> Vec<f32> {
+    let (width, height) = COVERAGE_VIEWPORT;
+    let mut coverage: Vec<f32> = errors_world
+        .iter()
+        .skip(1)
+        .map(|&error| {
+            // The share of the viewport's height at which `error` is one pixel.
+            let share = if error > 0.0 { diameter_world / (error * height) } else { f32::INFINITY };
+            (std::f32::consts::FRAC_PI_4 * share * share * height / width).min(1.0)
+        })
+        .collect();
+    coverage.push(0.0);
+    for index in 1..coverage.len() {
+        coverage[index] = coverage[index].min(coverage[index - 1]);
+    }
+    coverage
 }

@@ -388,6 +388,13 @@ fn billboard_outputs(
         "alpha_cutoff": settings.own::<Own>().billboard.alpha_cutoff,
     });
     let fields = report.as_object_mut().expect("an object");
+    if let Some(chain) = queries::lod_chain_gltf(db, asset)? {
+        let (document, coverage) = &*chain;
+        outputs.files.push((output_folder.join("lods.gltf"), document.clone().into()));
+        // The least share of a 1920 × 1080 viewport's area at which each level is shown (see
+        // `lod_mesh::screen_coverage`), as `lods.gltf` states it.
+        fields.insert("screen_coverage".into(), serde_json::json!(coverage));
+    }
     if levels::is_chain(settings) {
         fields.insert("levels".into(), serde_json::Value::Array(level_reports));
     } else if let Some(serde_json::Value::Object(level)) = level_reports.pop() {

@@ -12,7 +12,7 @@ use std::collections::{BTreeMap, HashMap};
 use std::path::PathBuf;
 use std::sync::Arc;
 
-use crate::mesh::gltf::GltfFiles;
+use crate::mesh::gltf::{gltf_chain, GltfFiles, GltfLevel};
 
 use super::layout::Layout;
 use super::rectangles::PlaneRectangle;
@@ -206,6 +206,34 @@ pub(crate) fn lod_gltf(db: &dyn Db, asset: Asset, level: u32) -> Result<Arc<Gltf
     let layout = billboard_layout(db, asset, level)?;
     let cutoff = billboard_alpha_cutoff(db, asset);
     Ok(Arc::new(super::lod_mesh::lod_gltf(&layout.rectangles, &layout.layout, cutoff)))
+}
+
+/// A chain's `lods.gltf` (`MSFT_lod`, every level's `lod.bin` and images under its folder, the
+/// switch coverages from each level's mean plane error) and those coverages; `None` for a
+/// single LOD.
+#[salsa::tracked(returns(clone))]
+pub(crate) fn lod_chain_gltf(db: &dyn Db, asset: Asset) -> Result<Option<Arc<(Vec<u8>, Vec<f32>)>>, Diagnostic> {
+    let settings = asset.settings(db);
+    if !super::levels::is_chain(settings) {
+        return Ok(None);
+    }
+    let cutoff = billboard_alpha_cutoff(db, asset);
+    let (mut meshes, mut folders, mut errors, mut diameter) = (Vec::new(), Vec::new(), Vec::new(), 0.0f32);
+    for level in 0..super::levels::level_count(settings) {
+        let layout = billboard_layout(db, asset, level)?;
+        let planes = billboard_planes(db, asset, level)?;
+        meshes.push(super::lod_mesh::lod_gltf_mesh(&layout.rectangles, &layout.layout, cutoff));
+        folders.push(super::levels::level_folder(settings, level));
+        errors.push(planes.mean_error);
+        if planes.epsilon_fraction > 0.0 {
+            diameter = 2.0 * planes.epsilon / planes.epsilon_fraction;
+        }
+    }
+    let levels: Vec<GltfLevel> =
+        meshes.iter().zip(&folders).map(|(mesh, folder)| GltfLevel { mesh: mesh.mesh(), folder }).collect();
+    let coverage = super::lod_mesh::screen_coverage(&errors, diameter);
+    let document = gltf_chain(&levels, "lod.bin", &coverage, super::lod_mesh::GLTF_GENERATOR);
+    Ok(Some(Arc::new((document, coverage))))
 }
 
 #[salsa::tracked(returns(copy))]

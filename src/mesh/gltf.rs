@@ -22,6 +22,9 @@ pub enum GltfAlpha {
     Mask(f32),
 }
 
+/// What the documents cirrus writes name as their generator.
+pub const GENERATOR: &str = concat!("cirrus ", env!("CARGO_PKG_VERSION"));
+
 /// A metallic-roughness material; maps are URIs relative to the `.gltf` file.
 #[derive(Clone, Debug, PartialEq)]
 pub struct GltfMaterial {
@@ -342,4 +345,21 @@ fn push_material(root: &mut json::Root, material: &GltfMaterial, folder: &str) -
         occlusion_texture,
         ..Default::default()
     })
+}
+
+/// A material on its own: a 1 × 1 square in the XY plane facing +Z (tangent +X), its UVs over
+/// the whole image, drawn with `material`; the document's buffer is `bin_uri`.
+pub fn swatch_files(material: GltfMaterial, bin_uri: &str, generator: &str) -> GltfFiles {
+    let name = material.name.clone();
+    let mesh = GltfMesh {
+        name: &name,
+        positions: &[[-0.5, -0.5, 0.0], [0.5, -0.5, 0.0], [0.5, 0.5, 0.0], [-0.5, 0.5, 0.0]],
+        normals: &[[0.0, 0.0, 1.0]; 4],
+        tangents: &[[1.0, 0.0, 0.0, 1.0]; 4],
+        uvs: &[[0.0, 0.0], [1.0, 0.0], [1.0, 1.0], [0.0, 1.0]],
+        triangles: &[[0, 1, 2], [0, 2, 3]],
+        triangle_materials: &[],
+        materials: std::slice::from_ref(&material),
+    };
+    gltf_files(&mesh, bin_uri, generator)
 }

@@ -116,6 +116,15 @@ fn every_gltf_of_the_bundled_project_passes_the_khronos_validator_without_an_err
     let billboard_levels = documents.iter().filter(|path| path.ends_with("lod.gltf")).count();
     assert_eq!(billboard_levels, 4, "a lod.gltf beside every lod.obj: {documents:?}");
     assert!(documents.contains(&project.path("baked/bush_lods/lods.gltf")), "the chain as one document");
+    // Every material of the Material assets as a swatch, alpha-tested where its albedo is.
+    let swatches = documents.iter().filter(|path| path.ends_with("material.gltf")).count();
+    assert_eq!(swatches, 5, "{documents:?}");
+    let alpha_mode = |relative: &str| {
+        let document: serde_json::Value = serde_json::from_slice(&project.read(relative)).unwrap();
+        document["materials"][0]["alphaMode"].as_str().unwrap_or("OPAQUE").to_string()
+    };
+    assert_eq!(alpha_mode("baked/materials/oak_leaves/oak_leaves/material.gltf"), "MASK");
+    assert_eq!(alpha_mode("baked/steel/painted_steel/material.gltf"), "OPAQUE");
     for (file, errors, warnings, messages) in validate(&documents) {
         assert_eq!((errors, warnings), (0, 0), "{}: {messages}", file.display());
     }

@@ -211,10 +211,13 @@ fn graph_renders_as_dot_json_and_mermaid() {
         [
             "artifact baked/m/m/albedo.ktx2 written",
             "artifact baked/m/m/albedo.png written",
+            "artifact baked/m/m/material.bin written",
+            "artifact baked/m/m/material.gltf written",
             "artifact baked/m/m/mra.ktx2 written",
             "artifact baked/m/m/mra.png written",
             "artifact baked/m/m/normal.ktx2 written",
             "artifact baked/m/m/normal.png written",
+            "artifact baked/m/m/orm.png written",
             "artifact baked/m/report.json written",
             "file assets/ao.png present",
             "file assets/m.mymaterial present",

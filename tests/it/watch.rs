@@ -210,7 +210,7 @@ fn edits_become_one_batch_each_naming_exactly_the_changed_artifacts() {
     assert_eq!(changed_paths(&project, &batch), differing(&before, &after));
     assert_eq!(
         changed_paths(&project, &batch),
-        ["baked/rock/report.json", "baked/rock/rock/mra.ktx2", "baked/rock/rock/mra.png"]
+        ["baked/rock/report.json", "baked/rock/rock/mra.ktx2", "baked/rock/rock/mra.png", "baked/rock/rock/orm.png"]
     );
     assert!(client.quiet_for(Duration::from_millis(600)), "one edit is one batch");
 

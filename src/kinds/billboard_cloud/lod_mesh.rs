@@ -7,7 +7,7 @@ use std::fmt::Write;
 
 use crate::kinds::billboard_cloud::layout::Layout;
 use crate::kinds::billboard_cloud::rectangles::PlaneRectangle;
-use crate::mesh::gltf::{gltf_files, GltfAlpha, GltfFiles, GltfMaterial, GltfMesh};
+use crate::mesh::gltf::{gltf_files, GltfAlpha, GltfFiles, GltfMaterial, GltfMesh, GENERATOR};
 
 /// The OBJ and MTL text of the billboard cloud; `material` names the atlas material.
 pub fn lod_mesh(rectangles: &[PlaneRectangle], layout: &Layout, material: &str) -> (String, String) {
@@ -49,11 +49,8 @@ pub fn lod_mesh(rectangles: &[PlaneRectangle], layout: &Layout, material: &str) 
 
 /// The glTF of a level: [`lod_gltf_mesh`] in `lod.gltf` naming `lod.bin`.
 pub fn lod_gltf(rectangles: &[PlaneRectangle], layout: &Layout, alpha_cutoff: f32) -> GltfFiles {
-    gltf_files(&lod_gltf_mesh(rectangles, layout, alpha_cutoff).mesh(), "lod.bin", GLTF_GENERATOR)
+    gltf_files(&lod_gltf_mesh(rectangles, layout, alpha_cutoff).mesh(), "lod.bin", GENERATOR)
 }
-
-/// What the glTF documents name as their generator.
-pub const GLTF_GENERATOR: &str = concat!("cirrus ", env!("CARGO_PKG_VERSION"));
 
 /// A level's quads as glTF draws them (owned; [`LodGltfMesh::mesh`] lends them).
 pub struct LodGltfMesh {

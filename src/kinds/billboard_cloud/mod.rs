@@ -226,7 +226,11 @@ impl Kind for BillboardCloud {
             let mut atlas = StageInstance::new(ATLAS, label, &instance).reads_stage(&layout);
             let mut lod = StageInstance::new(LOD, label, &instance).reads_stage(&layout);
             let level_folder = output_folder.join(&folder);
-            lod.writes = vec![level_folder.join("lod.obj"), level_folder.join("lod.mtl")];
+            lod.writes = ["lod.obj", "lod.mtl", "lod.gltf", "lod.bin"].map(|file| level_folder.join(file)).to_vec();
+            if levels::is_chain(asset.settings(db)) && level + 1 == levels::level_count(asset.settings(db)) {
+                // The chain's document, made once every level's layout is.
+                lod.writes.push(output_folder.join("lods.gltf"));
+            }
             instances.extend([planes.clone(), layout.clone()]);
             let renders = level_render_instances(db, asset, level, [&mesh, &planes, &layout], &mut decodes);
             for render in &renders {
@@ -239,6 +243,9 @@ impl Kind for BillboardCloud {
                 let [mips, encode, mut write] =
                     tail_instances(name, &surface, &atlas, surface.artifact_paths(output_folder, container));
                 write.writes.push(report.clone());
+                if surface.surface == SurfaceKind::Mra {
+                    write.writes.push(level_folder.join("orm.png"));
+                }
                 tails.extend([mips, encode, write]);
             }
             atlas.writes.push(report.clone());

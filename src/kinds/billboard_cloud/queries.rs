@@ -232,7 +232,7 @@ pub(crate) fn lod_chain_gltf(db: &dyn Db, asset: Asset) -> Result<Option<Arc<(Ve
     let levels: Vec<GltfLevel> =
         meshes.iter().zip(&folders).map(|(mesh, folder)| GltfLevel { mesh: mesh.mesh(), folder }).collect();
     let coverage = super::lod_mesh::screen_coverage(&errors, diameter);
-    let document = gltf_chain(&levels, "lod.bin", &coverage, super::lod_mesh::GLTF_GENERATOR);
+    let document = gltf_chain(&levels, "lod.bin", &coverage, crate::mesh::gltf::GENERATOR);
     Ok(Some(Arc::new((document, coverage))))
 }
 

@@ -9,6 +9,7 @@ pub mod definition;
 pub mod channel_packing;
 pub mod queries;
 
+use crate::mesh::gltf::{swatch_files, GltfAlpha, GltfMaterial};
 use std::path::{Path, PathBuf};
 use std::sync::Arc;
 
@@ -112,11 +113,18 @@ impl Kind for Material {
                     }
                 }
             }
-            let [mut mips, encode, mut write] =
-                tail_instances(name, &surface, &pack, surface.artifact_paths(output_folder, container));
+            let files = surface.artifact_paths(output_folder, container);
+            let folder = files[1].with_file_name("");
+            let [mut mips, encode, mut write] = tail_instances(name, &surface, &pack, files);
             // The alpha cutoff of an albedo's mips comes from the material's constants.
             mips = mips.reads_stage(&parse);
             write.writes.push(report.clone());
+            match surface.surface {
+                SurfaceKind::Mra => write.writes.push(folder.join("orm.png")),
+                // The material's glTF swatch, written with its albedo.
+                SurfaceKind::Albedo => write.writes.extend([folder.join("material.gltf"), folder.join("material.bin")]),
+                _ => {}
+            }
             instances.extend([pack, mips, encode, write]);
         }
         instances
@@ -135,6 +143,17 @@ impl Kind for Material {
         let mut materials = Vec::new();
         for material in &parsed.materials {
             let mut reports = Vec::new();
+            let mut swatch = GltfMaterial {
+                name: material.name.clone(),
+                base_colour_factor: [1.0; 4],
+                metallic_factor: 1.0,
+                roughness_factor: 1.0,
+                base_colour: None,
+                normal: None,
+                occlusion_roughness_metallic: None,
+                alpha: GltfAlpha::Opaque,
+                double_sided: false,
+            };
             for surface in SurfaceKind::MATERIAL {
                 let id = SurfaceId { group: material.name.clone(), surface };
                 let Ok(artifacts) = crate::kinds::tail_queries::surface_artifacts(db, asset, id.clone()) else {
@@ -155,8 +174,32 @@ impl Kind for Material {
                     other_formats,
                 });
                 outputs.files.push((texture_path, artifacts.texture_file.clone()));
-                outputs.files.push((preview_path, artifacts.preview_png.clone()));
+                outputs.files.push((preview_path.clone(), artifacts.preview_png.clone()));
+                let preview_name = || preview_path.file_name().map(|name| name.to_string_lossy().to_string());
+                match surface {
+                    SurfaceKind::Albedo => {
+                        swatch.base_colour = preview_name();
+                        if artifacts.info.alpha_tested {
+                            let cutoff = Self::tail_settings(db, asset, &id).ok().and_then(|tail| tail.alpha_cutoff);
+                            (swatch.alpha, swatch.double_sided) = (GltfAlpha::Mask(cutoff.unwrap_or(0.5)), true);
+                        }
+                    }
+                    SurfaceKind::Normal => swatch.normal = preview_name(),
+                    _ => {}
+                }
+                if let Some(orm_png) = &artifacts.orm_png {
+                    let orm_path = preview_path.with_file_name("orm.png");
+                    swatch.occlusion_roughness_metallic = Some("orm.png".into());
+                    outputs.files.push((orm_path, orm_png.clone()));
+                }
             }
+            // The material as glTF: a swatch square an engine or viewer can load as it is.
+            let folder = SurfaceId { group: material.name.clone(), surface: SurfaceKind::Albedo }
+                .artifact_paths(output_folder, container)[1]
+                .with_file_name("");
+            let files = swatch_files(swatch, "material.bin", crate::mesh::gltf::GENERATOR);
+            outputs.files.push((folder.join("material.gltf"), files.gltf.into()));
+            outputs.files.push((folder.join("material.bin"), files.bin.into()));
             materials.push(MaterialReportEntry {
                 name: material.name.clone(),
                 display_name: material.display_name.clone(),

@@ -208,11 +208,14 @@ pub(crate) fn lod_gltf(db: &dyn Db, asset: Asset, level: u32) -> Result<Arc<Gltf
     Ok(Arc::new(super::lod_mesh::lod_gltf(&layout.rectangles, &layout.layout, cutoff)))
 }
 
+/// A chain's glTF document and the switch coverages it states.
+pub(crate) type ChainGltf = (Vec<u8>, Vec<f32>);
+
 /// A chain's `lods.gltf` (`MSFT_lod`, every level's `lod.bin` and images under its folder, the
 /// switch coverages from each level's mean plane error) and those coverages; `None` for a
 /// single LOD.
 #[salsa::tracked(returns(clone))]
-pub(crate) fn lod_chain_gltf(db: &dyn Db, asset: Asset) -> Result<Option<Arc<(Vec<u8>, Vec<f32>)>>, Diagnostic> {
+pub(crate) fn lod_chain_gltf(db: &dyn Db, asset: Asset) -> Result<Option<Arc<ChainGltf>>, Diagnostic> {
     let settings = asset.settings(db);
     if !super::levels::is_chain(settings) {
         return Ok(None);

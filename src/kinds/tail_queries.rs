@@ -28,7 +28,7 @@ use crate::texture::Texture;
 // refined (`texture::bc1`); 8: the cut-out edges of alpha-tested BC7 at the very fast profile.
 pub(crate) const MIPS: Stage = Stage { name: "mips", version: 4 };
 pub(crate) const ENCODE: Stage = Stage { name: "encode", version: 9 };
-pub(crate) const WRITE: Stage = Stage { name: "write", version: 1 };
+pub(crate) const WRITE: Stage = Stage { name: "write", version: 2 };
 
 /// The cache entry of a finished surface (under its recipe key and under its content key).
 const SURFACE_ENTRY: &str = "surface";

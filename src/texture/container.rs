@@ -65,6 +65,9 @@ fn write_ktx2(texture: &EncodedTexture, zstd_level: Option<i32>) -> Vec<u8> {
     let level_index_size = level_count * 24;
     let dfd = data_format_descriptor(texture.format, texture.srgb);
     let mut kvd = Vec::new();
+    // Keys in byte order, as the specification requires. Rows are stored top to bottom, columns
+    // left to right: "rd", the orientation glTF and the PNG previews share.
+    push_key_value(&mut kvd, "KTXorientation", "rd");
     push_key_value(&mut kvd, "KTXwriter", &format!("cirrus {}", env!("CARGO_PKG_VERSION")));
     let dfd_offset = header_size + level_index_size;
     let kvd_offset = dfd_offset + dfd.len();

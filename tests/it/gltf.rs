@@ -224,6 +224,12 @@ fn a_billboard_lod_s_gltf_draws_the_obj_s_quads_with_gltf_s_uv_origin_an_alpha_t
     }
     assert!(tangents.iter().all(|tangent| tangent[3] == 1.0), "bitangent = normal × tangent");
 
+    // The KTX2 atlas states the orientation the glTF's UVs assume: rows from the top.
+    let ktx2 = crate::support::read_ktx2(&project.read("baked/bush/albedo.ktx2"));
+    let keys: Vec<&str> = ktx2.key_values.iter().map(|(key, _)| key.as_str()).collect();
+    assert_eq!(keys, ["KTXorientation", "KTXwriter"], "sorted, as KTX2 requires");
+    assert_eq!(ktx2.key_values[0].1, "rd");
+
     // orm.png is mra.png with metallic and occlusion swapped, opaque.
     let (mra, orm) = (decode_png(&project.read("baked/bush/mra.png")), decode_png(&project.read("baked/bush/orm.png")));
     assert_eq!((orm.width, orm.height), (mra.width, mra.height));

@@ -120,6 +120,8 @@ pub struct Ktx2 {
     /// (offset, length, uncompressed length) per level, level 0 first.
     pub levels: Vec<(u64, u64, u64)>,
     pub dfd: Vec<u8>,
+    /// The key/value data, in file order.
+    pub key_values: Vec<(String, String)>,
 }
 
 pub fn read_ktx2(bytes: &[u8]) -> Ktx2 {
@@ -132,7 +134,20 @@ pub fn read_ktx2(bytes: &[u8]) -> Ktx2 {
         (u64_at(at), u64_at(at + 8), u64_at(at + 16))
     });
     let (dfd_offset, dfd_length) = (u32_at(48) as usize, u32_at(52) as usize);
+    let (kvd_offset, kvd_length) = (u32_at(56) as usize, u32_at(60) as usize);
+    let mut key_values = Vec::new();
+    let mut at = kvd_offset;
+    while at + 4 <= kvd_offset + kvd_length {
+        let length = u32_at(at) as usize;
+        let pair = &bytes[at + 4..at + 4 + length];
+        let split = pair.iter().position(|&byte| byte == 0).expect("a key ends with NUL");
+        let value = pair[split + 1..].strip_suffix(&[0]).unwrap_or(&pair[split + 1..]);
+        key_values
+            .push((String::from_utf8(pair[..split].to_vec()).unwrap(), String::from_utf8(value.to_vec()).unwrap()));
+        at += (4 + length).next_multiple_of(4);
+    }
     Ktx2 {
+        key_values,
         vk_format: u32_at(12),
         width: u32_at(20),
         height: u32_at(24),

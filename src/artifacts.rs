@@ -65,6 +65,9 @@ pub(crate) struct ManifestEntry {
     /// `center` and `magnitude`).
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub meaning: Option<serde_json::Value>,
+    /// What the file is (absent in manifests written before roles).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub role: Option<crate::summary::ArtifactRole>,
 }
 
 /// `<output>/manifest.json`: paths are relative to the project folder, with `/` separators.
@@ -110,14 +113,14 @@ pub(crate) fn record_artifact(
     path: &str,
     hash: &str,
     meaning: Option<&serde_json::Value>,
+    role: Option<crate::summary::ArtifactRole>,
 ) -> bool {
-    let unchanged = manifest
-        .artifacts
-        .get(path)
-        .is_some_and(|entry| entry.hash == hash && entry.asset == asset && entry.meaning.as_ref() == meaning);
+    let unchanged = manifest.artifacts.get(path).is_some_and(|entry| {
+        entry.hash == hash && entry.asset == asset && entry.meaning.as_ref() == meaning && entry.role == role
+    });
     if !unchanged {
-        let entry =
-            ManifestEntry { asset: asset.to_string(), hash: hash.to_string(), revision, meaning: meaning.cloned() };
+        let meaning = meaning.cloned();
+        let entry = ManifestEntry { asset: asset.to_string(), hash: hash.to_string(), revision, meaning, role };
         manifest.artifacts.insert(path.to_string(), entry);
     }
     !unchanged

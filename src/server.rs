@@ -470,6 +470,7 @@ fn manifest_artifacts(
         .map(|(path, entry)| {
             let folder = format!("{}/", crate::diagnostic::display_path(&output.join(&entry.asset)));
             let artifact = ChangedArtifact {
+                role: entry.role,
                 asset: entry.asset.clone(),
                 artifact: path.strip_prefix(&folder).unwrap_or(path).to_string(),
                 path: path.clone(),

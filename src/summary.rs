@@ -22,6 +22,9 @@ pub struct BuildSummary {
 /// An artifact a build wrote: what a running engine must reload.
 #[derive(Clone, Debug, PartialEq, Eq, Serialize)]
 pub struct ChangedArtifact {
+    /// What the file is for an engine (absent in manifests written before roles).
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub role: Option<ArtifactRole>,
     pub asset: String,
     /// The file inside the asset's folder, e.g. `oak_bark/albedo.ktx2`.
     pub artifact: String,
@@ -183,4 +186,27 @@ pub(crate) fn rough_duration(seconds: f64) -> String {
         seconds if seconds < 5400.0 => format!("{:.0} min", seconds / 60.0),
         seconds => format!("{:.1} h", seconds / 3600.0),
     }
+}
+
+/// What an artifact is, for an engine or a client choosing what to load (`role` in the manifest,
+/// the protocol's `changed` entries and its `state` answer).
+#[derive(Clone, Copy, Debug, PartialEq, Eq, serde::Serialize, serde::Deserialize)]
+#[serde(rename_all = "snake_case")]
+pub enum ArtifactRole {
+    /// A block-compressed texture in its container (KTX2, DDS or PVR).
+    Texture,
+    /// A PNG of a surface: the preview of a texture, and what glTF and MTL files name.
+    Image,
+    /// An OBJ mesh.
+    Mesh,
+    /// An MTL file.
+    Mtl,
+    /// A glTF document (`.gltf`).
+    Gltf,
+    /// The binary buffer a glTF document names (`.bin`).
+    GltfBuffer,
+    /// A table of entries in JSON (an atlas's `atlas.json`).
+    Table,
+    /// The asset's `report.json`.
+    Report,
 }

@@ -499,13 +499,20 @@ pub(crate) fn outputs_unless_failed(
 /// What an asset writes: files (project-relative) and its `report.json`, written last.
 #[derive(Clone, Debug, Default)]
 pub(crate) struct AssetOutputs {
-    pub files: Vec<(PathBuf, Arc<[u8]>)>,
+    pub files: Vec<(PathBuf, crate::summary::ArtifactRole, Arc<[u8]>)>,
     pub report: Option<Vec<u8>>,
     /// What some files' values mean (a height map's `center` and `magnitude`), listed beside
     /// them in the manifest.
     pub meanings: std::collections::BTreeMap<PathBuf, serde_json::Value>,
     /// What the report warns about, for the build summary too.
     pub warnings: Vec<crate::summary::ErrorSummary>,
+}
+
+impl AssetOutputs {
+    /// Adds a file the asset writes, and what it is.
+    pub(crate) fn add(&mut self, path: PathBuf, role: crate::summary::ArtifactRole, bytes: Arc<[u8]>) {
+        self.files.push((path, role, bytes));
+    }
 }
 
 /// Reads a texture's header for `check`: readable, decodable, within the texture limits.

@@ -3,6 +3,7 @@
 //! what the cache's `explain` reads of the build.
 
 use super::*;
+use crate::summary::ArtifactRole;
 
 /// An asset's outputs as its kind made them, with its errors and the labels of its failed jobs.
 pub(super) struct BakedAsset {
@@ -52,9 +53,12 @@ impl Project {
         // Project-relative artifact path → blake3 hex of what this build wrote there.
         let mut produced = BTreeMap::new();
         let mut all_written = true;
-        for (path, bytes) in &outputs.files {
+        let mut roles: BTreeMap<String, ArtifactRole> = BTreeMap::new();
+        for (path, role, bytes) in &outputs.files {
             all_written &= self.write_artifact(path, bytes, &mut errors, &mut produced);
+            roles.insert(display_path(path), *role);
         }
+        roles.insert(display_path(&folder.join("report.json")), ArtifactRole::Report);
         let warnings = outputs.warnings;
         // The report comes last and describes the files above: it is written only when they
         // all are (a failed write keeps the last good report with its files).
@@ -66,9 +70,11 @@ impl Project {
         for (path, hash) in &produced {
             let meaning =
                 outputs.meanings.iter().find(|(file, _)| display_path(file) == *path).map(|(_, meaning)| meaning);
-            if record_artifact(manifest, next_revision, &config.name, path, hash, meaning) {
+            let role = roles.get(path).copied();
+            if record_artifact(manifest, next_revision, &config.name, path, hash, meaning, role) {
                 news.changed = true;
                 news.changed_artifacts.push(ChangedArtifact {
+                    role,
                     asset: config.name.clone(),
                     artifact: path.strip_prefix(&asset_folder).unwrap_or(path).to_string(),
                     path: path.clone(),

@@ -62,6 +62,24 @@ fn every_bundled_kind_builds_rebuilds_for_free_checks_and_shows_in_the_graph() {
         }
     }
 
+    // Every artifact in the manifest says what it is, the same as its file's name says.
+    let manifest: serde_json::Value = serde_json::from_slice(&project.read("baked/manifest.json")).unwrap();
+    for (path, entry) in manifest["artifacts"].as_object().unwrap() {
+        let extension = Path::new(path).extension().unwrap().to_string_lossy().to_string();
+        let expected = match extension.as_str() {
+            "ktx2" | "dds" | "pvr" => "texture",
+            "png" => "image",
+            "obj" => "mesh",
+            "mtl" => "mtl",
+            "gltf" => "gltf",
+            "bin" => "gltf_buffer",
+            _ if path.ends_with("/report.json") => "report",
+            _ if path.ends_with("/atlas.json") => "table",
+            _ => panic!("an artifact cirrus should not write: {path}"),
+        };
+        assert_eq!(entry["role"], expected, "{path}");
+    }
+
     // A no-op rebuild in the same process, then a restart: no stage runs, nothing is written.
     for (label, project_handle) in [("no-op rebuild", &mut first), ("restart", &mut open(&project))] {
         let again = build(project_handle);

@@ -173,6 +173,7 @@ pub fn changed_paths(project: &TempProject, batch: &Value) -> Vec<String> {
         let bytes = std::fs::read(project.path(path)).unwrap_or_else(|error| panic!("{path}: {error}"));
         assert_eq!(blake3::hash(&bytes).to_hex().as_str(), entry["hash"].as_str().unwrap(), "{path} matches its hash");
         assert!(path.ends_with(entry["artifact"].as_str().unwrap()), "{entry}");
+        assert!(entry["role"].is_string(), "every changed file says what it is: {entry}");
         paths.push(path.to_string());
     }
     paths
@@ -291,6 +292,7 @@ fn hello_names_the_output_ping_and_state_are_answered_and_each_build_is_announce
     assert_eq!(listed, output_hashes(&project));
     let mra = state["artifacts"].as_array().unwrap().iter().find(|entry| entry["path"] == "baked/rock/rock/mra.ktx2");
     assert_eq!(mra.map(|entry| (&entry["asset"], &entry["artifact"])), Some((&"rock".into(), &"rock/mra.ktx2".into())));
+    assert_eq!(mra.map(|entry| &entry["role"]), Some(&"texture".into()));
 
     // A daemon started on that output lists the same before its first batch is published (from
     // the manifest, which the first wrote once idle).

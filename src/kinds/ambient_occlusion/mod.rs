@@ -12,6 +12,7 @@ pub mod settings;
 pub mod bake;
 pub mod queries;
 
+use crate::summary::ArtifactRole;
 use std::path::{Path, PathBuf};
 use std::sync::Arc;
 
@@ -283,8 +284,8 @@ fn ao_outputs(db: &dyn Db, asset: Asset, output_folder: &Path, runs: &[StageRun]
         let artifacts = crate::kinds::tail_queries::surface_artifacts(db, asset, surface.clone())?;
         let files = ao_map(db, asset, material.index)?;
         let [texture_path, png_path] = surface.artifact_paths(output_folder, container);
-        outputs.files.push((texture_path.clone(), artifacts.texture_file.clone()));
-        outputs.files.push((png_path.clone(), files.png16.clone()));
+        outputs.add(texture_path.clone(), ArtifactRole::Texture, artifacts.texture_file.clone());
+        outputs.add(png_path.clone(), ArtifactRole::Image, files.png16.clone());
         let map = &files.map;
         if map.baked_texels == 0 {
             return Err(Diagnostic::new(

@@ -11,6 +11,7 @@ pub mod queries;
 pub mod remap;
 pub mod table;
 
+use crate::summary::ArtifactRole;
 use std::path::{Path, PathBuf};
 use std::sync::Arc;
 
@@ -28,7 +29,7 @@ use queries::{
     mesh_map_paths, page_group, page_label, page_recipe_key, page_stem, remapped_mesh, remapped_mesh_path, COMPOSITE,
     LAYOUT, REACH, REMAP, TRIM,
 };
-use table::{AtlasPage, AtlasTable};
+use table::{AtlasPage, Table};
 
 pub struct Atlas;
 
@@ -350,13 +351,13 @@ fn atlas_outputs(
             width,
             height,
         });
-        outputs.files.push((texture_path, artifacts.texture_file.clone()));
-        outputs.files.push((preview_path, artifacts.preview_png.clone()));
+        outputs.add(texture_path, ArtifactRole::Texture, artifacts.texture_file.clone());
+        outputs.add(preview_path, ArtifactRole::Image, artifacts.preview_png.clone());
         surfaces.push(artifacts.info.clone());
     }
     let entries = queries::atlas_table_entries(layout);
-    let table = AtlasTable { pages, entries };
-    outputs.files.push((output_folder.join("atlas.json"), table.to_json().into_bytes().into()));
+    let table = Table { pages, entries };
+    outputs.add(output_folder.join("atlas.json"), ArtifactRole::Table, table.to_json().into_bytes().into());
     let mut warnings = Vec::new();
     let meshes = mesh_outputs(db, asset, output_folder, &mut outputs, errors, &mut warnings);
     let report = serde_json::json!({
@@ -434,7 +435,11 @@ fn mesh_outputs(
         }
         warnings.extend(remapped.warnings.iter().cloned());
         let relative = remapped_mesh_path(db, asset, mesh);
-        outputs.files.push((output_folder.join("meshes").join(&relative), remapped.obj.clone().into_bytes().into()));
+        outputs.add(
+            output_folder.join("meshes").join(&relative),
+            ArtifactRole::Mesh,
+            remapped.obj.clone().into_bytes().into(),
+        );
         written.push(display_path(&relative));
     }
     let mut mtl = format!("# cirrus: materials of the meshes remapped onto atlas `{}`\n", asset.name(db));
@@ -446,6 +451,6 @@ fn mesh_outputs(
             |path| display_path(&crate::mesh::obj_text::relative_path(output_folder, path)),
         ));
     }
-    outputs.files.push((output_folder.join("atlas.mtl"), mtl.into_bytes().into()));
+    outputs.add(output_folder.join("atlas.mtl"), ArtifactRole::Mtl, mtl.into_bytes().into());
     written
 }

@@ -168,7 +168,7 @@ fn material_uv_transform(
 }
 
 /// The mesh with the UVs of atlased materials moved onto their textures' places, written as
-/// OBJ text naming `material_library`; fails on the first atlased material with UVs outside
+/// OBJ text naming `mtl`; fails on the first atlased material with UVs outside
 /// [0, 1] (after its map's `-s` and `-o`). Gives warnings for map options it drops.
 pub(crate) fn remap_mesh(
     mesh: &Mesh,

@@ -49,7 +49,7 @@ pub struct AtlasAlias {
 
 /// The table: pages, then entries in name order.
 #[derive(Clone, Debug, PartialEq, serde::Serialize, serde::Deserialize)]
-pub(crate) struct AtlasTable {
+pub(crate) struct Table {
     pub pages: Vec<AtlasPage>,
     pub entries: Vec<AtlasEntry>,
 }
@@ -110,7 +110,7 @@ impl AtlasAlias {
     }
 }
 
-impl AtlasTable {
+impl Table {
     /// `atlas.json`: pretty JSON with a final newline.
     pub fn to_json(&self) -> String {
         let mut json = serde_json::to_string_pretty(self).expect("the table serialises");

@@ -24,6 +24,7 @@ pub mod lod_preview;
 pub mod levels;
 pub mod queries;
 
+use crate::summary::ArtifactRole;
 use std::collections::BTreeMap;
 use std::path::{Path, PathBuf};
 use std::sync::Arc;
@@ -397,7 +398,7 @@ fn billboard_outputs(
     let fields = report.as_object_mut().expect("an object");
     if let Some(chain) = queries::lod_chain_gltf(db, asset)? {
         let (document, coverage) = &*chain;
-        outputs.files.push((output_folder.join("lods.gltf"), document.clone().into()));
+        outputs.add(output_folder.join("lods.gltf"), ArtifactRole::Gltf, document.clone().into());
         // The least share of a 1920 × 1080 viewport's area at which each level is shown (see
         // `lod_mesh::screen_coverage`), as `lods.gltf` states it.
         fields.insert("screen_coverage".into(), serde_json::json!(coverage));
@@ -437,27 +438,27 @@ fn level_outputs(
     let level_folder = output_folder.join(&folder);
     let first_file = outputs.files.len();
     let mut bytes = obj.len() + mtl.len();
-    outputs.files.push((level_folder.join("lod.obj"), obj.into_bytes().into()));
-    outputs.files.push((level_folder.join("lod.mtl"), mtl.into_bytes().into()));
+    outputs.add(level_folder.join("lod.obj"), ArtifactRole::Mesh, obj.into_bytes().into());
+    outputs.add(level_folder.join("lod.mtl"), ArtifactRole::Mtl, mtl.into_bytes().into());
     let gltf = queries::lod_gltf(db, asset, level)?;
-    outputs.files.push((level_folder.join("lod.gltf"), gltf.gltf.clone().into()));
-    outputs.files.push((level_folder.join("lod.bin"), gltf.bin.clone().into()));
+    outputs.add(level_folder.join("lod.gltf"), ArtifactRole::Gltf, gltf.gltf.clone().into());
+    outputs.add(level_folder.join("lod.bin"), ArtifactRole::GltfBuffer, gltf.bin.clone().into());
     let container = settings.encode.container;
     let mut surfaces = Vec::new();
     for surface in atlas_surfaces(db, asset, level) {
         let artifacts = crate::kinds::tail_queries::surface_artifacts(db, asset, surface.clone())?;
         let [texture_path, preview_path] = surface.artifact_paths(output_folder, container);
         bytes += artifacts.texture_file.len();
-        outputs.files.push((texture_path, artifacts.texture_file.clone()));
-        outputs.files.push((preview_path, artifacts.preview_png.clone()));
+        outputs.add(texture_path, ArtifactRole::Texture, artifacts.texture_file.clone());
+        outputs.add(preview_path, ArtifactRole::Image, artifacts.preview_png.clone());
         if let Some(orm_png) = &artifacts.orm_png {
-            outputs.files.push((level_folder.join("orm.png"), orm_png.clone()));
+            outputs.add(level_folder.join("orm.png"), ArtifactRole::Image, orm_png.clone());
         }
         surfaces.push(artifacts.info.clone());
     }
     if levels::is_chain(settings) {
         // The manifest and the hot-reload batches name each file's level.
-        for (path, _) in &outputs.files[first_file..] {
+        for (path, _, _) in &outputs.files[first_file..] {
             outputs.meanings.insert(path.clone(), serde_json::json!({ "lod": level }));
         }
     }

@@ -14,6 +14,7 @@ pub mod settings;
 pub mod bake;
 pub mod queries;
 
+use crate::summary::ArtifactRole;
 use std::path::{Path, PathBuf};
 use std::sync::Arc;
 
@@ -362,8 +363,8 @@ fn height_outputs(
     let artifacts = crate::kinds::tail_queries::surface_artifacts(db, asset, surface.clone())?;
     let map = height_map(db, asset, MapReference::Low)?;
     let [texture_path, png_path] = surface.artifact_paths(output_folder, container);
-    outputs.files.push((texture_path.clone(), artifacts.texture_file.clone()));
-    outputs.files.push((png_path.clone(), map.png16.clone()));
+    outputs.add(texture_path.clone(), ArtifactRole::Texture, artifacts.texture_file.clone());
+    outputs.add(png_path.clone(), ArtifactRole::Image, map.png16.clone());
     let meaning = |files: &queries::HeightMapFiles| serde_json::json!({ "distance": files.map.quantization() });
     outputs.meanings.insert(png_path.clone(), meaning(&map));
     outputs.meanings.insert(texture_path.clone(), meaning(&map));
@@ -375,13 +376,13 @@ fn height_outputs(
         if tessellate.displace {
             let pn_map = height_map(db, asset, MapReference::Pn)?;
             let pn_png = output_folder.join("height_pn.png");
-            outputs.files.push((pn_png.clone(), pn_map.png16.clone()));
+            outputs.add(pn_png.clone(), ArtifactRole::Image, pn_map.png16.clone());
             outputs.meanings.insert(pn_png.clone(), meaning(&pn_map));
             pn_map_report = Some(map_report(&pn_map, &pn_png, None));
         }
         let files = tessellated_files(db, asset)?;
         let obj_path = output_folder.join("tessellated.obj");
-        outputs.files.push((obj_path.clone(), files.obj.clone()));
+        outputs.add(obj_path.clone(), ArtifactRole::Mesh, files.obj.clone());
         let mesh = &low.loaded.mesh;
         let mtl: String = mesh
             .materials
@@ -394,7 +395,7 @@ fn height_outputs(
                 })
             })
             .collect();
-        outputs.files.push((output_folder.join("tessellated.mtl"), mtl.into_bytes().into()));
+        outputs.add(output_folder.join("tessellated.mtl"), ArtifactRole::Mtl, mtl.into_bytes().into());
         tessellated = Some(TessellatedReport {
             obj: display_path(&obj_path),
             level: tessellate.level,

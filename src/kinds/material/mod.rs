@@ -10,6 +10,7 @@ pub mod channel_packing;
 pub mod queries;
 
 use crate::mesh::gltf::{swatch_files, GltfAlpha, GltfMaterial};
+use crate::summary::ArtifactRole;
 use std::path::{Path, PathBuf};
 use std::sync::Arc;
 
@@ -173,8 +174,8 @@ impl Kind for Material {
                     info: artifacts.info.clone(),
                     other_formats,
                 });
-                outputs.files.push((texture_path, artifacts.texture_file.clone()));
-                outputs.files.push((preview_path.clone(), artifacts.preview_png.clone()));
+                outputs.add(texture_path, ArtifactRole::Texture, artifacts.texture_file.clone());
+                outputs.add(preview_path.clone(), ArtifactRole::Image, artifacts.preview_png.clone());
                 let preview_name = || preview_path.file_name().map(|name| name.to_string_lossy().to_string());
                 match surface {
                     SurfaceKind::Albedo => {
@@ -190,7 +191,7 @@ impl Kind for Material {
                 if let Some(orm_png) = &artifacts.orm_png {
                     let orm_path = preview_path.with_file_name("orm.png");
                     swatch.occlusion_roughness_metallic = Some("orm.png".into());
-                    outputs.files.push((orm_path, orm_png.clone()));
+                    outputs.add(orm_path, ArtifactRole::Image, orm_png.clone());
                 }
             }
             // The material as glTF: a swatch square an engine or viewer can load as it is.
@@ -198,8 +199,8 @@ impl Kind for Material {
                 .artifact_paths(output_folder, container)[1]
                 .with_file_name("");
             let files = swatch_files(swatch, "material.bin", crate::mesh::gltf::GENERATOR);
-            outputs.files.push((folder.join("material.gltf"), files.gltf.into()));
-            outputs.files.push((folder.join("material.bin"), files.bin.into()));
+            outputs.add(folder.join("material.gltf"), ArtifactRole::Gltf, files.gltf.into());
+            outputs.add(folder.join("material.bin"), ArtifactRole::GltfBuffer, files.bin.into());
             materials.push(MaterialReportEntry {
                 name: material.name.clone(),
                 display_name: material.display_name.clone(),

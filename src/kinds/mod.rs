@@ -349,9 +349,18 @@ impl SurfaceId {
         }
     }
 
+    /// The folder of its files: the asset folder, or its group's inside it.
+    pub(crate) fn folder(&self, output_folder: &Path) -> PathBuf {
+        if self.group.is_empty() {
+            output_folder.to_path_buf()
+        } else {
+            output_folder.join(&self.group)
+        }
+    }
+
     /// Its texture and preview files inside the asset folder.
     pub(crate) fn artifact_paths(&self, output_folder: &Path, container: crate::config::Container) -> [PathBuf; 2] {
-        let folder = if self.group.is_empty() { output_folder.to_path_buf() } else { output_folder.join(&self.group) };
+        let folder = self.folder(output_folder);
         [
             folder.join(format!("{}.{}", self.surface.name(), container.extension())),
             folder.join(format!("{}.png", self.surface.name())),

@@ -69,8 +69,7 @@ pub struct GltfFiles {
 pub fn gltf_files(mesh: &GltfMesh, bin_uri: &str, generator: &str) -> GltfFiles {
     let mut root = new_root(generator);
     let (node, bin) = push_mesh(&mut root, mesh, bin_uri, "");
-    let scene = root.push(json::Scene { extensions: None, extras: Default::default(), name: None, nodes: vec![node] });
-    root.scene = Some(scene);
+    set_scene(&mut root, node);
     GltfFiles { gltf: document_bytes(&root), bin }
 }
 
@@ -103,9 +102,7 @@ pub fn gltf_chain(levels: &[GltfLevel], bin_name: &str, screen_coverage: &[f32],
                 .expect("extras serialise"),
         );
         root.extensions_used.push("MSFT_lod".into());
-        let scene =
-            root.push(json::Scene { extensions: None, extras: Default::default(), name: None, nodes: vec![first] });
-        root.scene = Some(scene);
+        set_scene(&mut root, first);
     }
     document_bytes(&root)
 }
@@ -115,6 +112,12 @@ fn new_root(generator: &str) -> json::Root {
         asset: json::Asset { generator: Some(generator.to_string()), ..Default::default() },
         ..Default::default()
     }
+}
+
+/// The document's one scene, holding `node`.
+fn set_scene(root: &mut json::Root, node: json::Index<json::Node>) {
+    let scene = root.push(json::Scene { extensions: None, extras: Default::default(), name: None, nodes: vec![node] });
+    root.scene = Some(scene);
 }
 
 fn document_bytes(root: &json::Root) -> Vec<u8> {
@@ -155,30 +158,14 @@ fn push_mesh(
     let materials: Vec<json::Index<json::Material>> =
         mesh.materials.iter().map(|material| push_material(root, material, folder)).collect();
     // One primitive per material that has triangles, in the materials' order.
-    let mut by_material: Vec<Vec<u32>> = vec![Vec::new(); mesh.materials.len().max(1)];
-    let last = by_material.len() - 1;
-    for (triangle, corners) in mesh.triangles.iter().enumerate() {
-        let material = mesh.triangle_materials.get(triangle).map_or(0, |&material| (material as usize).min(last));
-        by_material[material].extend_from_slice(corners);
-    }
+    let by_material = super::triangles_by_material(mesh.triangle_materials, mesh.triangles.len(), mesh.materials.len());
     let mut primitives = Vec::new();
-    for (material, indices) in by_material.iter().enumerate().filter(|(_, indices)| !indices.is_empty()) {
-        let view = push_view(root, &mut bin, buffer, bytemuck::cast_slice(indices), None);
-        root.buffer_views[view.value()].target = Some(Valid(json::buffer::Target::ElementArrayBuffer));
-        let accessor = root.push(json::Accessor {
-            buffer_view: Some(view),
-            byte_offset: None,
-            count: USize64::from(indices.len()),
-            component_type: Valid(json::accessor::GenericComponentType(json::accessor::ComponentType::U32)),
-            extensions: None,
-            extras: Default::default(),
-            type_: Valid(json::accessor::Type::Scalar),
-            min: None,
-            max: None,
-            name: None,
-            normalized: false,
-            sparse: None,
-        });
+    for (material, triangles) in by_material.iter().enumerate().filter(|(_, triangles)| !triangles.is_empty()) {
+        let indices: Vec<u32> = triangles.iter().flat_map(|&triangle| mesh.triangles[triangle]).collect();
+        let target = Some(json::buffer::Target::ElementArrayBuffer);
+        let view = push_view(root, &mut bin, buffer, bytemuck::cast_slice(&indices), target);
+        let accessor =
+            root.push(accessor(view, indices.len(), json::accessor::ComponentType::U32, json::accessor::Type::Scalar));
         primitives.push(json::mesh::Primitive {
             attributes: attributes.clone(),
             extensions: None,
@@ -248,20 +235,30 @@ fn vertex_accessor<const N: usize>(
     } else {
         (None, None)
     };
-    root.push(json::Accessor {
+    root.push(json::Accessor { min, max, ..accessor(view, values.len(), json::accessor::ComponentType::F32, type_) })
+}
+
+/// An accessor of `count` elements over all of `view`, without bounds.
+fn accessor(
+    view: json::Index<json::buffer::View>,
+    count: usize,
+    component: json::accessor::ComponentType,
+    type_: json::accessor::Type,
+) -> json::Accessor {
+    json::Accessor {
         buffer_view: Some(view),
         byte_offset: None,
-        count: USize64::from(values.len()),
-        component_type: Valid(json::accessor::GenericComponentType(json::accessor::ComponentType::F32)),
+        count: USize64::from(count),
+        component_type: Valid(json::accessor::GenericComponentType(component)),
         extensions: None,
         extras: Default::default(),
         type_: Valid(type_),
-        min,
-        max,
+        min: None,
+        max: None,
         name: None,
         normalized: false,
         sparse: None,
-    })
+    }
 }
 
 /// A texture of the image at `uri` (one image and texture per URI; the sampler is shared).

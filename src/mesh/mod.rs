@@ -105,6 +105,23 @@ pub(crate) fn position_ids(positions: &[[f32; 3]]) -> (Vec<u32>, usize) {
     (per_vertex, ids.len())
 }
 
+/// Each material's triangles (indices, in order) of a mesh with `triangle_count` triangles:
+/// one list per material (at least one); a triangle past the end of `triangle_materials` is the
+/// first material's, one naming a material past the last is the last's.
+pub(crate) fn triangles_by_material(
+    triangle_materials: &[u32],
+    triangle_count: usize,
+    material_count: usize,
+) -> Vec<Vec<usize>> {
+    let mut by_material: Vec<Vec<usize>> = vec![Vec::new(); material_count.max(1)];
+    let last = by_material.len() - 1;
+    for triangle in 0..triangle_count {
+        let material = triangle_materials.get(triangle).map_or(0, |&material| (material as usize).min(last));
+        by_material[material].push(triangle);
+    }
+    by_material
+}
+
 /// The `mtllib` files an OBJ names, resolved (project-relative) next to it; those outside the
 /// source folder `source_root` are left out (`load_mesh` then warns that they are not found).
 pub fn material_libraries(obj_file: &Path, obj_bytes: &[u8], source_root: &Path) -> Vec<PathBuf> {

@@ -88,11 +88,8 @@ pub(crate) fn obj_text(mesh: &ObjMesh, header: &str, material_library: &str) -> 
     for [u, v] in mesh.uvs {
         let _ = writeln!(obj, "vt {u} {v}");
     }
-    let mut by_material: Vec<Vec<usize>> = vec![Vec::new(); mesh.material_names.len().max(1)];
-    let last = by_material.len() - 1;
-    for (triangle, &material) in mesh.triangle_materials.iter().enumerate() {
-        by_material[(material as usize).min(last)].push(triangle);
-    }
+    let by_material =
+        super::triangles_by_material(mesh.triangle_materials, mesh.triangles.len(), mesh.material_names.len());
     for (material, triangles) in by_material.iter().enumerate() {
         if triangles.is_empty() {
             continue;

@@ -114,9 +114,9 @@ impl Kind for Material {
                     }
                 }
             }
-            let files = surface.artifact_paths(output_folder, container);
-            let folder = files[1].with_file_name("");
-            let [mut mips, encode, mut write] = tail_instances(name, &surface, &pack, files);
+            let folder = surface.folder(output_folder);
+            let [mut mips, encode, mut write] =
+                tail_instances(name, &surface, &pack, surface.artifact_paths(output_folder, container));
             // The alpha cutoff of an albedo's mips comes from the material's constants.
             mips = mips.reads_stage(&parse);
             write.writes.push(report.clone());
@@ -189,15 +189,12 @@ impl Kind for Material {
                     _ => {}
                 }
                 if let Some(orm_png) = &artifacts.orm_png {
-                    let orm_path = preview_path.with_file_name("orm.png");
                     swatch.occlusion_roughness_metallic = Some("orm.png".into());
-                    outputs.add(orm_path, ArtifactRole::Image, orm_png.clone());
+                    outputs.add(id.folder(output_folder).join("orm.png"), ArtifactRole::Image, orm_png.clone());
                 }
             }
             // The material as glTF: a swatch square an engine or viewer can load as it is.
-            let folder = SurfaceId { group: material.name.clone(), surface: SurfaceKind::Albedo }
-                .artifact_paths(output_folder, container)[1]
-                .with_file_name("");
+            let folder = SurfaceId { group: material.name.clone(), surface: SurfaceKind::Albedo }.folder(output_folder);
             let files = swatch_files(swatch, "material.bin", crate::mesh::gltf::GENERATOR);
             outputs.add(folder.join("material.gltf"), ArtifactRole::Gltf, files.gltf.into());
             outputs.add(folder.join("material.bin"), ArtifactRole::GltfBuffer, files.bin.into());

@@ -13,18 +13,7 @@ use crate::support::build;
 /// The entry files under `<output>/.cirrus/cache`, relative to it: `stage/xx/rest-of-the-key`.
 fn cache_entries(output: &Path) -> BTreeSet<PathBuf> {
     let root = output.join(".cirrus/cache");
-    let mut entries = BTreeSet::new();
-    let mut folders = vec![root.clone()];
-    while let Some(folder) = folders.pop() {
-        for entry in std::fs::read_dir(&folder).unwrap().flatten() {
-            if entry.file_type().unwrap().is_dir() {
-                folders.push(entry.path());
-            } else {
-                entries.insert(entry.path().strip_prefix(&root).unwrap().to_path_buf());
-            }
-        }
-    }
-    entries
+    crate::support::files_under(&root).iter().map(|path| path.strip_prefix(&root).unwrap().to_path_buf()).collect()
 }
 
 #[test]

@@ -6,7 +6,7 @@ use std::path::{Path, PathBuf};
 use std::process::Command;
 use std::sync::OnceLock;
 
-use crate::support::{decode_png, TempProject};
+use crate::support::{decode_png, files_under, TempProject};
 
 /// The validator's npm version (pinned: its reports are what the tests read).
 const VALIDATOR_VERSION: &str = "2.0.0-dev.3.10";
@@ -88,19 +88,8 @@ fn validate(files: &[PathBuf]) -> Vec<(PathBuf, u64, u64, String)> {
 }
 
 fn files_named(folder: &Path, extension: &str) -> Vec<PathBuf> {
-    let mut found = Vec::new();
-    let mut folders = vec![folder.to_path_buf()];
-    while let Some(current) = folders.pop() {
-        for entry in std::fs::read_dir(&current).unwrap().flatten() {
-            let path = entry.path();
-            if path.is_dir() {
-                folders.push(path);
-            } else if path.extension().is_some_and(|found| found == extension) {
-                found.push(path);
-            }
-        }
-    }
-    found.sort();
+    let mut found = files_under(folder);
+    found.retain(|path| path.extension().is_some_and(|found| found == extension));
     found
 }
 
@@ -172,16 +161,8 @@ fn a_billboard_lod_s_gltf_draws_the_obj_s_quads_with_gltf_s_uv_origin_an_alpha_t
         ])"#,
     );
     let trees = Path::new(env!("CARGO_MANIFEST_DIR")).join("examples/assets/trees");
-    for entry in std::fs::read_dir(&trees).unwrap().flatten().filter(|entry| entry.path().is_file()) {
-        project.write(
-            &format!("assets/trees/{}", entry.file_name().to_string_lossy()),
-            std::fs::read(entry.path()).unwrap(),
-        );
-    }
-    for entry in std::fs::read_dir(trees.join("textures")).unwrap().flatten() {
-        let name = entry.file_name().to_string_lossy().to_string();
-        project.write(&format!("assets/trees/textures/{name}"), std::fs::read(entry.path()).unwrap());
-    }
+    std::fs::create_dir_all(project.path("assets")).unwrap();
+    std::os::unix::fs::symlink(trees, project.path("assets/trees")).unwrap();
     let output = project.run_cli(&["build"]);
     assert!(output.status.success(), "{}", String::from_utf8_lossy(&output.stderr));
     let document: serde_json::Value = serde_json::from_slice(&project.read("baked/bush/lod.gltf")).unwrap();

@@ -592,18 +592,7 @@ fn a_cache_entry_moved_under_another_key_is_a_miss_not_another_result() {
     assert!(build(&mut project.open()).all_ok());
     let good = output_hashes(&project);
     // Swap every pair of entries of the final stage: each now sits under another surface's key.
-    let mut entries = Vec::new();
-    let mut folders = vec![project.path("baked/.cirrus/cache")];
-    while let Some(folder) = folders.pop() {
-        for entry in std::fs::read_dir(&folder).unwrap().flatten() {
-            if entry.file_type().unwrap().is_dir() {
-                folders.push(entry.path());
-            } else {
-                entries.push(entry.path());
-            }
-        }
-    }
-    entries.sort();
+    let entries = crate::support::files_under(&project.path("baked/.cirrus/cache"));
     assert!(entries.len() >= 2, "{entries:?}");
     let contents: Vec<Vec<u8>> = entries.iter().map(|path| std::fs::read(path).unwrap()).collect();
     for (index, path) in entries.iter().enumerate() {
@@ -762,17 +751,8 @@ fn a_shared_store_object_larger_than_any_entry_is_refused_without_being_read() {
     project.write("pipeline.ron", with_store);
     let (output, _) = run_measuring_memory(&project, &["build"], &[], Duration::from_secs(120));
     assert!(output.status.success(), "{}", text(&output));
-    let mut objects = Vec::new();
-    let mut folders = vec![store.path().to_path_buf()];
-    while let Some(folder) = folders.pop() {
-        for entry in std::fs::read_dir(folder).unwrap().flatten() {
-            if entry.path().is_dir() {
-                folders.push(entry.path());
-            } else if !entry.path().to_string_lossy().contains("cirrus-probe") {
-                objects.push(entry.path());
-            }
-        }
-    }
+    let mut objects = crate::support::files_under(store.path());
+    objects.retain(|path| !path.to_string_lossy().contains("cirrus-probe"));
     assert!(objects.len() >= 3, "the build uploaded its entries: {objects:?}");
     for object in &objects {
         let file = std::fs::OpenOptions::new().write(true).open(object).unwrap();

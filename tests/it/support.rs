@@ -8,6 +8,24 @@ use cirrus::project::{BuildOptions, Project, ProjectOptions};
 use cirrus::summary::BuildSummary;
 use cirrus::texture::Texture;
 
+/// Every file under `folder`, at any depth, sorted.
+pub fn files_under(folder: &Path) -> Vec<PathBuf> {
+    let mut files = Vec::new();
+    let mut folders = vec![folder.to_path_buf()];
+    while let Some(current) = folders.pop() {
+        for entry in std::fs::read_dir(&current).unwrap().flatten() {
+            let path = entry.path();
+            if path.is_dir() {
+                folders.push(path);
+            } else {
+                files.push(path);
+            }
+        }
+    }
+    files.sort();
+    files
+}
+
 /// A project in a temporary folder: `pipeline.ron` at its root, sources under `assets/`.
 pub struct TempProject {
     pub dir: tempfile::TempDir,

@@ -4,19 +4,8 @@
 use std::path::{Path, PathBuf};
 
 fn rust_files(folder: &str) -> Vec<PathBuf> {
-    let mut files = Vec::new();
-    let mut folders = vec![Path::new(env!("CARGO_MANIFEST_DIR")).join(folder)];
-    while let Some(folder) = folders.pop() {
-        for entry in std::fs::read_dir(&folder).unwrap().flatten() {
-            let path = entry.path();
-            if path.is_dir() {
-                folders.push(path);
-            } else if path.extension().is_some_and(|extension| extension == "rs") {
-                files.push(path);
-            }
-        }
-    }
-    files.sort();
+    let mut files = crate::support::files_under(&Path::new(env!("CARGO_MANIFEST_DIR")).join(folder));
+    files.retain(|path| path.extension().is_some_and(|extension| extension == "rs"));
     files
 }
 

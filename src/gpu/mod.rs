@@ -296,6 +296,7 @@ impl Gpu {
         let instance = new_instance();
         let adapter = choose_adapter(&instance).await?;
         let adapter_name = format!("{} ({:?})", adapter.get_info().name, adapter.get_info().backend);
+        tracing::info!(adapter = %adapter_name, "GPU");
         let (device, queue) = adapter
             .request_device(&wgpu::DeviceDescriptor {
                 label: Some("cirrus"),

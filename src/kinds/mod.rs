@@ -17,6 +17,7 @@ use crate::texture::{SurfaceKind, Texture};
 
 pub mod tail_queries;
 pub mod mesh_queries;
+pub mod source_copies;
 pub mod material;
 pub mod billboard_cloud;
 pub mod atlas;

@@ -9,10 +9,14 @@
 //! kinds hand the bytes to the artifacts edge.
 
 use std::collections::BTreeMap;
+use std::path::Path;
 
 use gltf_json as json;
 use json::validation::Checked::Valid;
 use json::validation::USize64;
+
+use crate::mesh::MeshMaterial;
+use crate::texture::TextureSlot;
 
 /// How a material's alpha is used.
 #[derive(Clone, Copy, Debug, PartialEq)]
@@ -20,6 +24,8 @@ pub enum GltfAlpha {
     Opaque,
     /// Alpha-tested at this cutoff (glTF's `MASK`).
     Mask(f32),
+    /// Blended by the base colour's alpha (glTF's `BLEND`): an MTL's `d` below 1.
+    Blend,
 }
 
 /// What the documents cirrus writes name as their generator.
@@ -35,10 +41,72 @@ pub struct GltfMaterial {
     pub roughness_factor: f32,
     pub base_colour: Option<String>,
     pub normal: Option<String>,
-    /// One image: R occlusion, G roughness, B metallic.
-    pub occlusion_roughness_metallic: Option<String>,
+    /// Occlusion from the image's R channel.
+    pub occlusion: Option<String>,
+    /// Roughness from the image's G channel, metallic from its B (times the factors).
+    pub metallic_roughness: Option<String>,
     pub alpha: GltfAlpha,
     pub double_sided: bool,
+}
+
+/// The glTF material of an OBJ material (`MeshMaterial`), each map's URI given by `uri` (`None`:
+/// leave it out), and what glTF cannot say of it. The albedo map is the base colour, its alpha
+/// the cut-out's (`MASK` at 0.5, double-sided) or `d` below 1 blended; `norm` the normal map;
+/// `map_ao` the occlusion (R of a grey map); `map_Pr` the roughness (G of a grey map) when the
+/// metallic is a constant 0, since glTF reads metallic from the same image's B. A separate
+/// opacity map, or a roughness map beside a metallic map or a non-zero metallic, would need
+/// the maps packed into one image: the material keeps their factors, and a note says so.
+pub fn material_from_mtl(
+    material: &MeshMaterial,
+    mut uri: impl FnMut(TextureSlot, &Path) -> Option<String>,
+) -> (GltfMaterial, Vec<String>) {
+    let mut map = |slot: TextureSlot| material.maps.get(&slot).and_then(|path| uri(slot, path));
+    let mut notes = Vec::new();
+    let [r, g, b] = material.albedo_factor;
+    let base_colour = map(TextureSlot::Albedo);
+    let alpha = if material.cut_out && material.opacity >= 1.0 && base_colour.is_some() {
+        GltfAlpha::Mask(0.5)
+    } else if material.opacity < 1.0 {
+        GltfAlpha::Blend
+    } else {
+        GltfAlpha::Opaque
+    };
+    if let Some(opacity) = material.maps.get(&TextureSlot::Opacity) {
+        notes.push(format!(
+            "material `{}`: its opacity map `{}` is not its albedo's alpha, and glTF reads alpha from the base \
+                colour only: the glTF material is {}",
+            material.name,
+            crate::diagnostic::display_path(opacity),
+            if alpha == GltfAlpha::Opaque { "opaque" } else { "alpha-tested by the albedo's alpha" }
+        ));
+    }
+    let roughness = map(TextureSlot::Roughness);
+    let metallic = map(TextureSlot::Metallic);
+    let metallic_roughness = match (&roughness, &metallic) {
+        (Some(roughness), None) if material.metallic == 0.0 => Some(roughness.clone()),
+        (None, None) => None,
+        _ => {
+            notes.push(format!(
+                "material `{}`: its roughness and metallic maps would need packing into one image for glTF; the \
+                    glTF material has their factors (roughness {}, metallic {}) instead",
+                material.name, material.roughness, material.metallic
+            ));
+            None
+        }
+    };
+    let gltf = GltfMaterial {
+        name: material.name.clone(),
+        base_colour_factor: [r, g, b, material.opacity],
+        metallic_factor: material.metallic,
+        roughness_factor: if metallic_roughness.is_some() { 1.0 } else { material.roughness },
+        base_colour,
+        normal: map(TextureSlot::Normal),
+        occlusion: map(TextureSlot::Ao),
+        metallic_roughness,
+        alpha,
+        double_sided: matches!(alpha, GltfAlpha::Mask(_)),
+    };
+    (gltf, notes)
 }
 
 /// A triangle mesh as the document stores it.
@@ -56,6 +124,49 @@ pub struct GltfMesh<'a> {
     /// Each triangle's index into `materials`.
     pub triangle_materials: &'a [u32],
     pub materials: &'a [GltfMaterial],
+}
+
+/// The geometry of a [`GltfMesh`], owned: what a stage keeps (in its cache entry) so that the
+/// document can be written again with other image names without the stage.
+#[derive(Clone, Debug, Default, PartialEq, serde::Serialize, serde::Deserialize)]
+pub struct GltfGeometry {
+    pub positions: Vec<[f32; 3]>,
+    pub normals: Vec<[f32; 3]>,
+    /// Per vertex in the OBJ's convention, or empty.
+    pub uvs: Vec<[f32; 2]>,
+    pub triangles: Vec<[u32; 3]>,
+    pub triangle_materials: Vec<u32>,
+    /// Per vertex when there are UVs (see [`GltfGeometry::with_tangents`]), else empty.
+    #[serde(default)]
+    pub tangents: Vec<[f32; 4]>,
+}
+
+impl GltfGeometry {
+    /// The geometry with its tangents when it has UVs: from the UVs' derivatives in the OBJ's
+    /// convention (v up), the frame cirrus bakes normal maps in and glTF's +Y-up normal maps
+    /// expect, so that no loader has to make its own.
+    pub fn with_tangents(mut self) -> GltfGeometry {
+        if !self.uvs.is_empty() {
+            self.tangents = super::vertex_tangents(&self.positions, &self.normals, &self.uvs, &self.triangles);
+        }
+        self
+    }
+
+    /// The mesh over this geometry drawn with `materials`: with its tangents when one of them
+    /// has a normal map.
+    pub fn mesh<'a>(&'a self, name: &'a str, materials: &'a [GltfMaterial]) -> GltfMesh<'a> {
+        let normal_mapped = materials.iter().any(|material| material.normal.is_some());
+        GltfMesh {
+            name,
+            positions: &self.positions,
+            normals: &self.normals,
+            tangents: if normal_mapped { &self.tangents } else { &[] },
+            uvs: &self.uvs,
+            triangles: &self.triangles,
+            triangle_materials: &self.triangle_materials,
+            materials,
+        }
+    }
 }
 
 /// The two files of a document.
@@ -107,6 +218,20 @@ pub fn gltf_chain(levels: &[GltfLevel], bin_name: &str, screen_coverage: &[f32],
     document_bytes(&root)
 }
 
+/// A relative path as a URI reference: bytes other than unreserved ones and `/` percent-encoded
+/// (a space in a file name is `%20` to a glTF loader).
+fn uri_of(path: &str) -> String {
+    let mut uri = String::with_capacity(path.len());
+    for byte in path.bytes() {
+        if byte.is_ascii_alphanumeric() || b"-._~/".contains(&byte) {
+            uri.push(byte as char);
+        } else {
+            uri.push_str(&format!("%{byte:02X}"));
+        }
+    }
+    uri
+}
+
 fn new_root(generator: &str) -> json::Root {
     json::Root {
         asset: json::Asset { generator: Some(generator.to_string()), ..Default::default() },
@@ -137,7 +262,7 @@ fn push_mesh(
     root.buffers.push(json::Buffer {
         byte_length: USize64(0),
         name: None,
-        uri: Some(bin_uri.to_string()),
+        uri: Some(uri_of(bin_uri)),
         extensions: None,
         extras: Default::default(),
     });
@@ -262,9 +387,10 @@ fn accessor(
 }
 
 /// A texture of the image at `uri` (one image and texture per URI; the sampler is shared).
-fn push_texture(root: &mut json::Root, uri: &str) -> json::Index<json::Texture> {
+fn push_texture(root: &mut json::Root, path: &str) -> json::Index<json::Texture> {
+    let uri = uri_of(path);
     if let Some(index) =
-        root.textures.iter().position(|texture| root.images[texture.source.value()].uri.as_deref() == Some(uri))
+        root.textures.iter().position(|texture| root.images[texture.source.value()].uri.as_deref() == Some(&*uri))
     {
         return json::Index::new(index as u32);
     }
@@ -281,7 +407,7 @@ fn push_texture(root: &mut json::Root, uri: &str) -> json::Index<json::Texture> 
         buffer_view: None,
         mime_type: None,
         name: None,
-        uri: Some(uri.to_string()),
+        uri: Some(uri),
         extensions: None,
         extras: Default::default(),
     });
@@ -305,7 +431,8 @@ fn push_material(root: &mut json::Root, material: &GltfMaterial, folder: &str) -
         })
     };
     let base_color_texture = info(root, &material.base_colour);
-    let orm = info(root, &material.occlusion_roughness_metallic);
+    let metallic_roughness_texture = info(root, &material.metallic_roughness);
+    let occlusion = info(root, &material.occlusion);
     let normal_texture = info(root, &material.normal).map(|info| json::material::NormalTexture {
         index: info.index,
         scale: 1.0,
@@ -313,7 +440,7 @@ fn push_material(root: &mut json::Root, material: &GltfMaterial, folder: &str) -
         extensions: None,
         extras: Default::default(),
     });
-    let occlusion_texture = orm.as_ref().map(|info| json::material::OcclusionTexture {
+    let occlusion_texture = occlusion.map(|info| json::material::OcclusionTexture {
         index: info.index,
         strength: json::material::StrengthFactor(1.0),
         tex_coord: 0,
@@ -323,6 +450,7 @@ fn push_material(root: &mut json::Root, material: &GltfMaterial, folder: &str) -
     let (alpha_mode, alpha_cutoff) = match material.alpha {
         GltfAlpha::Opaque => (json::material::AlphaMode::Opaque, None),
         GltfAlpha::Mask(cutoff) => (json::material::AlphaMode::Mask, Some(json::material::AlphaCutoff(cutoff))),
+        GltfAlpha::Blend => (json::material::AlphaMode::Blend, None),
     };
     root.push(json::Material {
         alpha_cutoff,
@@ -334,7 +462,7 @@ fn push_material(root: &mut json::Root, material: &GltfMaterial, folder: &str) -
             base_color_texture,
             metallic_factor: json::material::StrengthFactor(material.metallic_factor),
             roughness_factor: json::material::StrengthFactor(material.roughness_factor),
-            metallic_roughness_texture: orm,
+            metallic_roughness_texture,
             extensions: None,
             extras: Default::default(),
         },

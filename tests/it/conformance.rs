@@ -68,7 +68,8 @@ fn every_bundled_kind_builds_rebuilds_for_free_checks_and_shows_in_the_graph() {
         let extension = Path::new(path).extension().unwrap().to_string_lossy().to_string();
         let expected = match extension.as_str() {
             "ktx2" | "dds" | "pvr" => "texture",
-            "png" => "image",
+            // PNG the kinds make, and the copies of source maps an MTL or glTF names (`maps/`).
+            "png" | "jpg" => "image",
             "obj" => "mesh",
             "mtl" => "mtl",
             "gltf" => "gltf",

@@ -1,6 +1,7 @@
 //! The glTF files cirrus writes, read by what reads them in real life: the Khronos
-//! glTF-Validator (npm `gltf-validator`, run by Node; installed into the target folder when
-//! `.ci/run` has not), and the documents' own numbers against the OBJ they stand beside.
+//! glTF-Validator (npm `gltf-validator`, run by Node) and trimesh (pip, in a virtual
+//! environment; both installed into the target folder when `.ci/run` has not), and the
+//! documents' own numbers against the OBJ they stand beside.
 
 use std::path::{Path, PathBuf};
 use std::process::Command;
@@ -87,6 +88,120 @@ fn validate(files: &[PathBuf]) -> Vec<(PathBuf, u64, u64, String)> {
         .collect()
 }
 
+/// trimesh's and its image reader's pip versions (pinned: what the test reads is theirs).
+const TRIMESH_PACKAGES: [&str; 3] = ["trimesh==5.2.0", "numpy==2.4.6", "pillow==13.0.0"];
+
+/// Loads each OBJ or glTF given on the command line as a user would (`trimesh.load`, its own
+/// resolver beside the file); prints one JSON array of `{ file, error }` or `{ file,
+/// geometries: [{ name, faces, material, image: [w, h] or null }] }`.
+const TRIMESH_SCRIPT: &str = r#"
+import json, sys, trimesh
+results = []
+for path in sys.argv[1:]:
+    try:
+        scene = trimesh.load(path, force="scene")
+    except Exception as error:
+        results.append({"file": path, "error": repr(error)})
+        continue
+    geometries = []
+    for name, geometry in scene.geometry.items():
+        material = getattr(geometry.visual, "material", None)
+        image = getattr(material, "image", None) or getattr(material, "baseColorTexture", None)
+        geometries.append({"name": name, "faces": len(geometry.faces), "material": getattr(material, "name", None),
+                           "image": list(image.size) if image is not None else None})
+    results.append({"file": path, "geometries": geometries})
+print(json.dumps(results))
+"#;
+
+/// The Python with trimesh: `CIRRUS_TRIMESH` (a virtual environment), else one under the target
+/// folder, made with pip once per test run.
+fn trimesh_python() -> PathBuf {
+    static PYTHON: OnceLock<Result<PathBuf, String>> = OnceLock::new();
+    let found = PYTHON.get_or_init(|| {
+        let venv = std::env::var_os("CIRRUS_TRIMESH")
+            .map(PathBuf::from)
+            .unwrap_or_else(|| Path::new(env!("CARGO_TARGET_TMPDIR")).join("trimesh"));
+        let python = venv.join("bin/python");
+        let installed = Command::new(&python).args(["-c", "import trimesh, PIL"]).output();
+        if !installed.is_ok_and(|output| output.status.success()) {
+            let run = |command: &mut Command| -> Result<(), String> {
+                let output = command.output().map_err(|error| error.to_string())?;
+                output
+                    .status
+                    .success()
+                    .then_some(())
+                    .ok_or_else(|| String::from_utf8_lossy(&output.stderr).into_owned())
+            };
+            run(Command::new("python3").args(["-m", "venv"]).arg(&venv))?;
+            run(Command::new(venv.join("bin/pip")).args(["install", "--quiet"]).args(TRIMESH_PACKAGES))?;
+        }
+        Ok(python)
+    });
+    match found {
+        Ok(python) => python.clone(),
+        Err(why) => panic!(
+            "the glTF tests need Python's venv and pip for {TRIMESH_PACKAGES:?} (`.ci/run` installs them): {why}"
+        ),
+    }
+}
+
+/// Moves the output folder `baked` somewhere else (the sources out of reach), then checks that
+/// every file an OBJ, MTL or glTF names lies inside it (no `..`, nothing absolute) and that
+/// trimesh loads every OBJ and glTF with an image on every geometry's material.
+fn output_moved_elsewhere_loads_in_trimesh(baked: &Path) {
+    let elsewhere = tempfile::tempdir().unwrap();
+    let moved = elsewhere.path().join("shipped");
+    std::fs::create_dir(&moved).unwrap();
+    for file in files_under(baked) {
+        let relative = file.strip_prefix(baked).unwrap();
+        if relative.starts_with(".cirrus") {
+            continue;
+        }
+        std::fs::create_dir_all(moved.join(relative).parent().unwrap()).unwrap();
+        std::fs::copy(&file, moved.join(relative)).unwrap();
+    }
+    let mut named = 0;
+    for file in files_under(&moved) {
+        let extension = file.extension().map(|extension| extension.to_string_lossy().into_owned());
+        let names: Vec<String> = match extension.as_deref() {
+            Some("obj" | "mtl") => std::fs::read_to_string(&file)
+                .unwrap()
+                .lines()
+                .filter(|line| ["mtllib ", "map_", "norm ", "bump "].iter().any(|start| line.starts_with(start)))
+                .filter_map(|line| line.split_whitespace().last().map(str::to_string))
+                .collect(),
+            Some("gltf") => {
+                let document: serde_json::Value = serde_json::from_slice(&std::fs::read(&file).unwrap()).unwrap();
+                ["images", "buffers"]
+                    .iter()
+                    .flat_map(|list| document[list].as_array().cloned().unwrap_or_default())
+                    .filter_map(|item| item["uri"].as_str().map(str::to_string))
+                    .collect()
+            }
+            _ => continue,
+        };
+        for name in names {
+            assert!(!name.contains("..") && !name.starts_with('/'), "{}: names `{name}`", file.display());
+            assert!(file.parent().unwrap().join(&name).is_file(), "{}: `{name}` is missing", file.display());
+            named += 1;
+        }
+    }
+    assert!(named > 50, "{named} references checked");
+    let mut meshes = files_named(&moved, "obj");
+    meshes.extend(files_named(&moved, "gltf"));
+    let output = Command::new(trimesh_python()).arg("-c").arg(TRIMESH_SCRIPT).args(&meshes).output().unwrap();
+    assert!(output.status.success(), "trimesh: {}", String::from_utf8_lossy(&output.stderr));
+    let results: serde_json::Value = serde_json::from_slice(&output.stdout).expect("trimesh's JSON");
+    assert_eq!(results.as_array().unwrap().len(), meshes.len());
+    for result in results.as_array().unwrap() {
+        let geometries = result["geometries"].as_array().unwrap_or_else(|| panic!("{result}"));
+        assert!(!geometries.is_empty(), "{result}");
+        for geometry in geometries {
+            assert!(geometry["image"].is_array(), "{}: a material without its image: {geometry}", result["file"]);
+        }
+    }
+}
+
 fn files_named(folder: &Path, extension: &str) -> Vec<PathBuf> {
     let mut found = files_under(folder);
     found.retain(|path| path.extension().is_some_and(|found| found == extension));
@@ -94,7 +209,7 @@ fn files_named(folder: &Path, extension: &str) -> Vec<PathBuf> {
 }
 
 #[test]
-fn every_gltf_of_the_bundled_project_passes_the_khronos_validator_without_an_error_or_warning() {
+fn every_gltf_of_the_bundled_project_passes_the_khronos_validator_and_the_output_loads_in_trimesh_once_moved() {
     let root = Path::new(env!("CARGO_MANIFEST_DIR"));
     let project = TempProject::new(&std::fs::read_to_string(root.join("pipeline.ron")).unwrap());
     std::os::unix::fs::symlink(root.join("examples"), project.path("examples")).unwrap();
@@ -135,6 +250,11 @@ fn every_gltf_of_the_bundled_project_passes_the_khronos_validator_without_an_err
     let coverage: Vec<f64> = coverage.as_array().unwrap().iter().map(|value| value.as_f64().unwrap()).collect();
     assert_eq!(coverage.len(), 3);
     assert!(coverage[0] > coverage[1] && coverage[1] > coverage[2] && coverage[2] == 0.0, "{coverage:?}");
+    // The atlas-remapped bush and the tessellated cow, beside their OBJs.
+    for document in ["baked/foliage/trees-bush_2.gltf", "baked/spot_height/tessellated.gltf"] {
+        assert!(documents.contains(&project.path(document)), "{document}: {documents:?}");
+    }
+    output_moved_elsewhere_loads_in_trimesh(&project.path("baked"));
     // The validator reads the images: one it cannot find is an error.
     let orm = project.path("baked/bush/orm.png");
     std::fs::rename(&orm, orm.with_extension("moved")).unwrap();

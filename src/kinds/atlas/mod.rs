@@ -19,6 +19,7 @@ use crate::cache::CacheKey;
 use crate::config::{AssetConfig, PipelineConfig};
 use crate::db::{Asset, Db, StageRun, DECODE};
 use crate::diagnostic::{display_path, Diagnostic};
+use crate::kinds::source_copies::{material_copy_paths, output_materials, MaterialPlaces, OutputMaterial};
 use crate::kinds::{check_texture_file, tail_instances, AssetOutputs, Job, Kind, Read, StageInstance, SurfaceId, Task};
 use crate::texture::tail::TailSettings;
 use crate::texture::{SurfaceKind, Texture};
@@ -26,8 +27,8 @@ use crate::texture::{SurfaceKind, Texture};
 use crate::kinds::atlas::settings::Settings as Own;
 use queries::{
     atlas_layout, atlas_layout_and_change, atlas_mesh_files, atlas_page, atlas_texture_files, mesh_library_paths,
-    mesh_map_paths, page_group, page_label, page_recipe_key, page_stem, remapped_mesh, remapped_mesh_path, COMPOSITE,
-    LAYOUT, REACH, REMAP, TRIM,
+    mesh_map_paths, page_group, page_label, page_recipe_key, page_stem, remapped_mesh, remapped_mesh_file,
+    remapped_mesh_path, COMPOSITE, LAYOUT, REACH, REMAP, TRIM,
 };
 use table::{AtlasPage, Table};
 
@@ -174,8 +175,20 @@ impl Kind for Atlas {
                 StageInstance::new(REMAP, &label, format!("meshes/{}", display_path(&relative))).reads_stage(&pack);
             remap.reads.push(Read::File(mesh.clone()));
             remap.reads.extend(mesh_library_paths(db, asset, mesh).into_iter().map(Read::File));
-            remap.writes =
-                vec![output_folder.join("meshes").join(&relative), output_folder.join("atlas.mtl"), report.clone()];
+            let file = output_folder.join(remapped_mesh_file(db, asset, mesh));
+            remap.writes = vec![
+                file.clone(),
+                file.with_extension("gltf"),
+                file.with_extension("bin"),
+                output_folder.join("atlas.mtl"),
+                report.clone(),
+            ];
+            // The copies of the maps its materials keep (the bark's, beside the atlased leaves).
+            if let Ok(remapped) = remapped_mesh(db, asset, mesh.clone()) {
+                let chosen: Vec<OutputMaterial> =
+                    remapped.materials.iter().map(|material| output_material(output_folder, material)).collect();
+                remap.writes.extend(material_copy_paths(db, asset, output_folder, &chosen));
+            }
             tails.push(remap);
         }
         instances.insert(0, pack);
@@ -433,24 +446,59 @@ fn mesh_outputs(
         for material in &remapped.materials {
             materials.entry(material.material.name.clone()).or_insert_with(|| (material.clone(), mesh.clone()));
         }
+        let file = remapped_mesh_file(db, asset, mesh);
+        let obj_path = output_folder.join(&file);
+        if outputs.files.iter().any(|(written, _, _)| *written == obj_path) {
+            errors.push(Diagnostic::new(
+                mesh,
+                format!(
+                    "mesh `{}` would be written as `{}`, the name another mesh of the asset takes (folders \
+                        join the name with `-`): rename one",
+                    display_path(mesh),
+                    display_path(&file)
+                ),
+            ));
+            continue;
+        }
         warnings.extend(remapped.warnings.iter().cloned());
-        let relative = remapped_mesh_path(db, asset, mesh);
-        outputs.add(
-            output_folder.join("meshes").join(&relative),
-            ArtifactRole::Mesh,
-            remapped.obj.clone().into_bytes().into(),
+        let places = MaterialPlaces { source: mesh, mtl_folder: output_folder, gltf_folder: output_folder };
+        let chosen: Vec<OutputMaterial> =
+            remapped.materials.iter().map(|material| output_material(output_folder, material)).collect();
+        let named = output_materials(db, asset, output_folder, outputs, &chosen, &places);
+        warnings.extend(named.warnings);
+        let stem = obj_path.file_stem().map_or_else(|| "mesh".into(), |stem| stem.to_string_lossy().into_owned());
+        let gltf = crate::mesh::gltf::gltf_files(
+            &remapped.geometry.mesh(&stem, &named.gltf),
+            &format!("{stem}.bin"),
+            crate::mesh::gltf::GENERATOR,
         );
-        written.push(display_path(&relative));
+        outputs.add(obj_path.clone(), ArtifactRole::Mesh, remapped.obj.clone().into_bytes().into());
+        outputs.add(obj_path.with_extension("gltf"), ArtifactRole::Gltf, gltf.gltf.into());
+        outputs.add(obj_path.with_extension("bin"), ArtifactRole::GltfBuffer, gltf.bin.into());
+        written.push(display_path(&file));
     }
-    let mut mtl = format!("# cirrus: materials of the meshes remapped onto atlas `{}`\n", asset.name(db));
-    for (material, _) in materials.values() {
-        mtl.push('\n');
-        mtl.push_str(&remap::mtl_material(
-            material,
-            |page| format!("{}.png", page_stem(page)),
-            |path| display_path(&crate::mesh::obj_text::relative_path(output_folder, path)),
-        ));
-    }
+    let chosen: Vec<OutputMaterial> =
+        materials.values().map(|(material, _)| output_material(output_folder, material)).collect();
+    let places = MaterialPlaces { source: asset.main_file(db), mtl_folder: output_folder, gltf_folder: output_folder };
+    let named = output_materials(db, asset, output_folder, outputs, &chosen, &places);
+    let mut mtl = format!("# cirrus: materials of the meshes remapped onto atlas `{}`\n\n", asset.name(db));
+    mtl.push_str(&named.mtl);
     outputs.add(output_folder.join("atlas.mtl"), ArtifactRole::Mtl, mtl.into_bytes().into());
+    // Each mesh's glTF and the shared MTL name the same maps: one warning per problem.
+    let mut seen = std::collections::HashSet::new();
+    warnings.retain(|warning| seen.insert((warning.file.clone(), warning.message.clone())));
     written
+}
+
+/// A remapped material as the output names it: its atlased maps are the page's image.
+fn output_material<'a>(output_folder: &Path, material: &'a remap::RemappedMaterial) -> OutputMaterial<'a> {
+    let baked = match material.page {
+        Some(page) => material
+            .atlased
+            .iter()
+            .map(|&slot| (slot, output_folder.join(format!("{}.png", page_stem(page)))))
+            .collect(),
+        None => Default::default(),
+    };
+    OutputMaterial { material: &material.material, baked }
 }

@@ -16,7 +16,7 @@ use crate::gpu::ViewMesh;
 use crate::kinds::{PreviewError, PreviewOptions, PreviewReport, PreviewRow};
 use crate::texture::{Texture, TextureLimits, TextureSlot};
 
-use super::queries::{atlas_mesh_files, remapped_mesh_path};
+use super::queries::{atlas_mesh_files, remapped_mesh_file, remapped_mesh_path};
 
 /// The alpha test of both renders: the usual cutoff of an OBJ's cut-out maps (an MTL has none
 /// of its own; three.js's and glTF's `alphaCutoff` default is 0.5 too).
@@ -48,7 +48,7 @@ pub(super) fn preview(
     let mut rows = Vec::new();
     for mesh in meshes {
         let relative = remapped_mesh_path(db, asset, mesh);
-        let remapped_obj = config.output.join(&options.asset).join("meshes").join(&relative);
+        let remapped_obj = config.output.join(&options.asset).join(remapped_mesh_file(db, asset, mesh));
         let source =
             mesh_view_from_files(&config.root, mesh, &config.source, limits).map_err(PreviewError::Artifact)?;
         // The remapped mesh may name anything inside the project, as an engine would read it.

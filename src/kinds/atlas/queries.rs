@@ -626,10 +626,21 @@ pub(crate) fn mesh_map_paths(db: &dyn Db, asset: Asset, mesh: &std::path::Path) 
     crate::mesh::texture_paths(&crate::kinds::mesh_queries::library_bytes(db, asset, mesh), asset.source_root(db))
 }
 
-/// A mesh's path below the asset's `meshes/` output folder: its path in the source folder,
-/// with the extension `.obj`.
+/// A mesh's path in the source folder with the extension `.obj`: what its stages are named by
+/// (`foliage/meshes/trees/bush_2.obj`).
 pub(crate) fn remapped_mesh_path(db: &dyn Db, asset: Asset, mesh: &std::path::Path) -> PathBuf {
     mesh.strip_prefix(asset.source_root(db)).unwrap_or(mesh).with_extension("obj")
+}
+
+/// A remapped mesh's file in the asset's output folder: [`remapped_mesh_path`] with its folders
+/// joined to its name by `-` (`trees/bush_2.obj` → `trees-bush_2.obj`), beside `atlas.mtl`, the
+/// pages and `maps/`, so that nothing it names lies above it (loaders such as trimesh refuse
+/// a `..` in a material or image path). Its `.gltf` and `.bin` take the same stem.
+pub(crate) fn remapped_mesh_file(db: &dyn Db, asset: Asset, mesh: &std::path::Path) -> PathBuf {
+    let relative = remapped_mesh_path(db, asset, mesh);
+    let parts: Vec<String> =
+        relative.components().map(|component| component.as_os_str().to_string_lossy().into_owned()).collect();
+    PathBuf::from(parts.join("-"))
 }
 
 /// The table the layout gives (entries in name order), as `atlas.json` has it.
@@ -739,11 +750,10 @@ pub(crate) fn remapped_mesh(
             }
             let chosen = super::remap::material_entries(&loaded, &targets, |path| by_path.get(path).copied())
                 .map_err(remap_error)?;
-            let depth = remapped_mesh_path(db, asset, &mesh).components().count();
-            let library = format!("{}atlas.mtl", "../".repeat(depth));
+            let library = "atlas.mtl";
             let header = format!("cirrus: {} remapped onto atlas `{}`", display_path(&mesh), asset.name(db));
             let remapped =
-                super::remap::remap_mesh(&loaded, &targets, &chosen, &library, &header).map_err(remap_error)?;
+                super::remap::remap_mesh(&loaded, &targets, &chosen, library, &header).map_err(remap_error)?;
             let remap_warnings =
                 remapped.warnings.iter().map(|warning| Diagnostic::new(&mesh, warning.message.clone()));
             Ok(super::remap::RemappedMesh {
@@ -758,4 +768,5 @@ pub(crate) fn remapped_mesh(
 /// 2: with the mesh's load warnings.
 /// 3: UVs onto each texture's own place (aliases), maps' -s and -o kept, unused materials ignored.
 /// 4: a map's path relative to the MTL file that names it.
-pub(crate) const REMAP: Stage = Stage { name: "remap", version: 4 };
+/// 5: with the mesh's glTF geometry; beside `atlas.mtl` (`mtllib atlas.mtl`).
+pub(crate) const REMAP: Stage = Stage { name: "remap", version: 5 };

@@ -30,6 +30,9 @@ pub(crate) struct RemappedMaterial {
 pub(crate) struct RemappedMesh {
     pub obj: String,
     pub materials: Vec<RemappedMaterial>,
+    /// The same mesh for glTF: a vertex per (OBJ vertex, UV) pair, triangles numbering
+    /// `materials`.
+    pub geometry: crate::mesh::gltf::GltfGeometry,
     /// What loading or remapping the mesh warned of (a missing MTL, a map leaving the source
     /// folder, map options the atlas cannot keep).
     #[serde(default)]
@@ -212,6 +215,8 @@ pub(crate) fn remap_mesh(
     let mut uv_index: HashMap<(u32, Option<u32>), u32> = HashMap::new();
     let mut faces_by_material: BTreeMap<u32, Vec<[(u32, u32); 3]>> = BTreeMap::new();
     let has_uvs = mesh.uvs.is_some();
+    let mut geometry = crate::mesh::gltf::GltfGeometry::default();
+    let mut gltf_materials = Vec::with_capacity(mesh.triangles.len());
     for (triangle, &material) in mesh.triangles.iter().zip(&mesh.triangle_materials) {
         let chosen =
             material_entries.get(material as usize).and_then(|chosen| chosen.as_ref().map(|(target, _)| *target));
@@ -231,13 +236,23 @@ pub(crate) fn remap_mesh(
                 };
                 if has_uvs {
                     let _ = writeln!(obj, "vt {u} {v}");
+                    geometry.uvs.push([u, v]);
                 }
+                geometry.positions.push(mesh.positions[vertex as usize]);
+                geometry.normals.push(mesh.normals.get(vertex as usize).copied().unwrap_or([0.0, 0.0, 1.0]));
                 next
             });
             (vertex, uv)
         });
+        geometry.triangles.push(corners.map(|(_, uv)| uv));
+        gltf_materials.push(material);
         faces_by_material.entry(material).or_default().push(corners);
     }
+    // Triangles number the used materials, as `materials` below lists them.
+    let used: Vec<u32> = faces_by_material.keys().copied().collect();
+    geometry.triangle_materials =
+        gltf_materials.iter().map(|material| used.binary_search(material).unwrap_or(0) as u32).collect();
+    let geometry = geometry.with_tangents();
     for (material, faces) in &faces_by_material {
         let _ = writeln!(obj, "usemtl {}", mesh.materials[*material as usize].name);
         for face in faces {
@@ -266,7 +281,7 @@ pub(crate) fn remap_mesh(
         .collect();
     let warnings =
         warnings.into_iter().map(|message| crate::diagnostic::Diagnostic::new(Path::new(header), message)).collect();
-    Ok(RemappedMesh { obj, materials, warnings })
+    Ok(RemappedMesh { obj, materials, geometry, warnings })
 }
 
 /// Fails when the triangles of material `material` (index into the mesh's materials) use UVs
@@ -339,17 +354,4 @@ pub(crate) fn material_uv_reach(
         }
     }
     reach.into_iter().collect()
-}
-
-/// One material of `atlas.mtl`: atlased maps name the page's image (`page_file`), the others
-/// their source texture as seen from the MTL's folder (`path_from_mtl`).
-pub(crate) fn mtl_material(
-    material: &RemappedMaterial,
-    page_file: impl Fn(u32) -> String,
-    path_from_mtl: impl Fn(&Path) -> String,
-) -> String {
-    crate::mesh::obj_text::mtl_material_text(&material.material, |slot, path| match material.page {
-        Some(page) if material.atlased.contains(&slot) => page_file(page),
-        _ => path_from_mtl(path),
-    })
 }

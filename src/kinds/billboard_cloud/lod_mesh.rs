@@ -105,7 +105,8 @@ pub fn lod_gltf_mesh(rectangles: &[PlaneRectangle], layout: &Layout, alpha_cutof
         roughness_factor: 1.0,
         base_colour: Some("albedo.png".into()),
         normal: Some("normal.png".into()),
-        occlusion_roughness_metallic: Some("orm.png".into()),
+        occlusion: Some("orm.png".into()),
+        metallic_roughness: Some("orm.png".into()),
         alpha: GltfAlpha::Mask(alpha_cutoff),
         double_sided: true,
     };

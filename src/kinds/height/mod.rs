@@ -14,6 +14,7 @@ pub mod settings;
 pub mod bake;
 pub mod queries;
 
+use crate::kinds::source_copies::material_copy_paths;
 use crate::summary::ArtifactRole;
 use std::path::{Path, PathBuf};
 use std::sync::Arc;
@@ -80,6 +81,12 @@ impl Kind for Height {
     fn files_to_read(db: &dyn Db, asset: Asset) -> Vec<PathBuf> {
         let mut files = mesh_files_of(db, asset, asset.main_file(db));
         files.extend(mesh_files_of(db, asset, &high_path(db, asset)));
+        // The low mesh's maps: the tessellated mesh's MTL and glTF name copies of them.
+        if tessellate_settings(db, asset).is_some() {
+            files.extend(crate::kinds::mesh_queries::mesh_textures(db, asset).iter().cloned());
+        }
+        files.sort();
+        files.dedup();
         files
     }
 
@@ -154,7 +161,14 @@ impl Kind for Height {
         if let Some(tessellate) = tessellate_settings(db, asset) {
             let pn = StageInstance::new(TESSELLATE, name, "tessellate").reads_stage(&low);
             let mut displace = StageInstance::new(DISPLACE, name, "displace").reads_stage(&pn);
-            displace.writes = vec![output_folder.join("tessellated.obj"), output_folder.join("tessellated.mtl")];
+            displace.writes = ["tessellated.obj", "tessellated.mtl", "tessellated.gltf", "tessellated.bin"]
+                .map(|file| output_folder.join(file))
+                .to_vec();
+            // The copies of the maps its materials name.
+            if let Ok(low) = low_geometry(db, asset) {
+                let chosen = used_materials(&low.loaded.mesh).1;
+                displace.writes.extend(material_copy_paths(db, asset, output_folder, &chosen));
+            }
             more.push(distance(Measured::Pn, &pn));
             if tessellate.displace {
                 let pn_map = StageInstance::new(BAKE, map_label(name, MapReference::Pn), "height_pn")
@@ -297,6 +311,7 @@ pub(crate) struct HeightTextureReport {
 #[derive(Clone, Debug, PartialEq, Serialize)]
 pub(crate) struct TessellatedReport {
     pub obj: String,
+    pub gltf: String,
     pub level: u32,
     pub displace: bool,
     pub vertices: u64,
@@ -372,6 +387,7 @@ fn height_outputs(
     let low_map_report = map_report(&map, &png_path, Some(texture));
     let mut pn_map_report = None;
     let mut tessellated = None;
+    let mut material_warnings = Vec::new();
     if let Some(tessellate) = tessellate_settings(db, asset) {
         if tessellate.displace {
             let pn_map = height_map(db, asset, MapReference::Pn)?;
@@ -383,21 +399,11 @@ fn height_outputs(
         let files = tessellated_files(db, asset)?;
         let obj_path = output_folder.join("tessellated.obj");
         outputs.add(obj_path.clone(), ArtifactRole::Mesh, files.obj.clone());
-        let mesh = &low.loaded.mesh;
-        let mtl: String = mesh
-            .materials
-            .iter()
-            .enumerate()
-            .filter(|(index, _)| mesh.triangle_materials.contains(&(*index as u32)))
-            .map(|(_, material)| {
-                crate::mesh::obj_text::mtl_material_text(material, |_, path| {
-                    display_path(&crate::mesh::obj_text::relative_path(output_folder, path))
-                })
-            })
-            .collect();
-        outputs.add(output_folder.join("tessellated.mtl"), ArtifactRole::Mtl, mtl.into_bytes().into());
+        let gltf_path =
+            tessellated_gltf(db, asset, output_folder, &files, &low.loaded.mesh, &mut outputs, &mut material_warnings);
         tessellated = Some(TessellatedReport {
             obj: display_path(&obj_path),
+            gltf: display_path(&gltf_path),
             level: tessellate.level,
             displace: tessellate.displace,
             vertices: files.vertices,
@@ -428,6 +434,7 @@ fn height_outputs(
         );
     }
     warnings.extend(flat_map_warning(&*height_map(db, asset, MapReference::Low)?, &high_path(db, asset), "height"));
+    warnings.extend(material_warnings.iter().map(ErrorSummary::from));
     let report = HeightReport {
         asset: name.clone(),
         kind: crate::config::AssetKind::Height.name(),
@@ -449,4 +456,56 @@ fn height_outputs(
     outputs.report = Some(serde_json::to_vec_pretty(&report).expect("reports serialise"));
     outputs.warnings = report.warnings;
     Ok(outputs)
+}
+
+/// `tessellated.mtl`, `tessellated.gltf` and its `tessellated.bin`: the tessellated mesh's used
+/// materials over copies of their maps in the output (`source_copies`). Gives the glTF's path.
+fn tessellated_gltf(
+    db: &dyn Db,
+    asset: Asset,
+    output_folder: &Path,
+    files: &queries::TessellatedFiles,
+    low: &crate::mesh::Mesh,
+    outputs: &mut AssetOutputs,
+    warnings: &mut Vec<Diagnostic>,
+) -> PathBuf {
+    use crate::kinds::source_copies::{output_materials, MaterialPlaces};
+    let geometry = &files.geometry;
+    let (used, chosen) = used_materials(low);
+    let places = MaterialPlaces { source: asset.main_file(db), mtl_folder: output_folder, gltf_folder: output_folder };
+    let named = output_materials(db, asset, output_folder, outputs, &chosen, &places);
+    warnings.extend(named.warnings);
+    outputs.add(output_folder.join("tessellated.mtl"), ArtifactRole::Mtl, named.mtl.into_bytes().into());
+    let geometry = crate::mesh::gltf::GltfGeometry {
+        triangle_materials: geometry
+            .triangle_materials
+            .iter()
+            .map(|material| used.binary_search(material).unwrap_or(0) as u32)
+            .collect(),
+        ..geometry.clone()
+    };
+    let name = asset.name(db);
+    let gltf = crate::mesh::gltf::gltf_files(
+        &geometry.mesh(name, &named.gltf),
+        "tessellated.bin",
+        crate::mesh::gltf::GENERATOR,
+    );
+    let gltf_path = output_folder.join("tessellated.gltf");
+    outputs.add(gltf_path.clone(), ArtifactRole::Gltf, gltf.gltf.into());
+    outputs.add(output_folder.join("tessellated.bin"), ArtifactRole::GltfBuffer, gltf.bin.into());
+    gltf_path
+}
+
+/// The materials the tessellated mesh's triangles use (those of the low mesh's triangles: each
+/// is tessellated), their numbers in the low mesh in order, and as the output names them.
+fn used_materials(low: &crate::mesh::Mesh) -> (Vec<u32>, Vec<crate::kinds::source_copies::OutputMaterial<'_>>) {
+    let mut used: Vec<u32> = low.triangle_materials.clone();
+    used.sort_unstable();
+    used.dedup();
+    let chosen = used
+        .iter()
+        .filter_map(|&index| low.materials.get(index as usize))
+        .map(|material| crate::kinds::source_copies::OutputMaterial { material, baked: Default::default() })
+        .collect();
+    (used, chosen)
 }

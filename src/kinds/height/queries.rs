@@ -442,12 +442,14 @@ pub(crate) fn output_mesh(db: &dyn Db, asset: Asset) -> Result<Arc<HashedMesh>, 
     }))
 }
 
-/// The final tessellated mesh as OBJ text (`mtllib tessellated.mtl`), with its counts.
+/// The final tessellated mesh as OBJ text (`mtllib tessellated.mtl`), with its counts, and its
+/// geometry for the glTF (whose image names the outputs give: they follow the maps' contents).
 #[derive(Debug, PartialEq)]
 pub(crate) struct TessellatedFiles {
     pub obj: Arc<[u8]>,
     pub vertices: u64,
     pub triangles: u64,
+    pub geometry: crate::mesh::gltf::GltfGeometry,
 }
 
 const MESH_ENTRY: &str = "height-tessellated";
@@ -464,8 +466,17 @@ struct MeshEntry {
 pub(crate) fn tessellated_files(db: &dyn Db, asset: Asset) -> Result<Arc<TessellatedFiles>, Diagnostic> {
     let key = output_mesh_key(db, asset)?;
     let from_entry = |entry: CacheEntry| {
-        let (MeshEntry { vertices, triangles }, [obj]) = entry.parts::<MeshEntry, 1>()?;
-        Some(TessellatedFiles { obj: obj.into(), vertices, triangles })
+        let (MeshEntry { vertices, triangles }, [obj, positions, normals, uvs, corners, materials, tangents]) =
+            entry.parts::<MeshEntry, 7>()?;
+        let geometry = crate::mesh::gltf::GltfGeometry {
+            positions: from_pod_blob(&positions)?,
+            normals: from_pod_blob(&normals)?,
+            uvs: from_pod_blob(&uvs)?,
+            triangles: from_pod_blob(&corners)?,
+            triangle_materials: from_pod_blob(&materials)?,
+            tangents: from_pod_blob(&tangents)?,
+        };
+        Some(TessellatedFiles { obj: obj.into(), vertices, triangles, geometry })
     };
     if let Some(files) = load_cached(db, MESH_ENTRY, key, from_entry) {
         record_cache_hit(db, DISPLACE, asset.name(db));
@@ -493,11 +504,29 @@ pub(crate) fn tessellated_files(db: &dyn Db, asset: Asset) -> Result<Arc<Tessell
         obj: obj.into_bytes().into(),
         vertices: mesh.positions.len() as u64,
         triangles: mesh.triangles.len() as u64,
+        geometry: crate::mesh::gltf::GltfGeometry {
+            positions: mesh.positions.clone(),
+            normals: mesh.normals.clone(),
+            uvs: mesh.uvs.clone(),
+            triangles: mesh.triangles.clone(),
+            triangle_materials: materials,
+            tangents: Vec::new(),
+        }
+        .with_tangents(),
     };
     store_cached(db, MESH_ENTRY, key, || {
+        let geometry = &files.geometry;
         CacheEntry::new(
             &MeshEntry { vertices: files.vertices, triangles: files.triangles },
-            vec![files.obj.to_vec()],
+            vec![
+                files.obj.to_vec(),
+                pod_blob(&geometry.positions),
+                pod_blob(&geometry.normals),
+                pod_blob(&geometry.uvs),
+                pod_blob(&geometry.triangles),
+                pod_blob(&geometry.triangle_materials),
+                pod_blob(&geometry.tangents),
+            ],
             true,
         )
     });

@@ -151,7 +151,8 @@ impl Kind for Material {
                 roughness_factor: 1.0,
                 base_colour: None,
                 normal: None,
-                occlusion_roughness_metallic: None,
+                occlusion: None,
+                metallic_roughness: None,
                 alpha: GltfAlpha::Opaque,
                 double_sided: false,
             };
@@ -189,7 +190,8 @@ impl Kind for Material {
                     _ => {}
                 }
                 if let Some(orm_png) = &artifacts.orm_png {
-                    swatch.occlusion_roughness_metallic = Some("orm.png".into());
+                    swatch.occlusion = Some("orm.png".into());
+                    swatch.metallic_roughness = Some("orm.png".into());
                     outputs.add(id.folder(output_folder).join("orm.png"), ArtifactRole::Image, orm_png.clone());
                 }
             }

@@ -61,8 +61,8 @@ fn a_remapped_mesh_sampled_through_the_atlas_shows_what_it_showed_through_its_ow
         )
         .unwrap()
         .0;
-        let remapped_text = project.read(&format!("baked/props/meshes/props/{mesh}.obj"));
-        assert!(String::from_utf8_lossy(&remapped_text).contains("mtllib ../../atlas.mtl"));
+        let remapped_text = project.read(&format!("baked/props/props-{mesh}.obj"));
+        assert!(String::from_utf8_lossy(&remapped_text).contains("mtllib atlas.mtl\n"));
         let remapped = tobj::load_obj_buf(
             &mut remapped_text.as_slice(),
             &tobj::LoadOptions { single_index: true, triangulate: true, ..Default::default() },
@@ -109,14 +109,14 @@ fn a_mesh_with_repeating_uvs_fails_alone_naming_mesh_material_and_range_and_the_
     for part in ["assets/props/crate.obj", "material `crate`", "u ∈ [-0.5, 2]", "v ∈ [0, 1]", "repeating UVs"] {
         assert!(message.contains(part), "{part} not in {message}");
     }
-    assert!(project.path("baked/props/meshes/props/plank.obj").is_file());
-    assert!(project.path("baked/props/meshes/props/rope.obj").is_file());
-    assert!(!project.path("baked/props/meshes/props/crate.obj").exists());
+    assert!(project.path("baked/props/props-plank.obj").is_file());
+    assert!(project.path("baked/props/props-rope.obj").is_file());
+    assert!(!project.path("baked/props/props-crate.obj").exists());
     assert!(project.path("baked/props/atlas.ktx2").is_file());
     // Fixed, it is written.
     project.write("assets/props/crate.obj", quad_obj("crate", [0.0, 0.0, 1.0, 1.0]));
     assert!(build(&mut project.open()).all_ok());
-    assert!(project.path("baked/props/meshes/props/crate.obj").is_file());
+    assert!(project.path("baked/props/props-crate.obj").is_file());
 }
 
 #[test]
@@ -125,13 +125,45 @@ fn a_texel_edit_rewrites_neither_the_table_nor_the_meshes() {
     let mut cirrus = project.open();
     assert!(build(&mut cirrus).all_ok());
     cirrus.take_executed_stages();
-    let mesh = project.read("baked/props/meshes/props/plank.obj");
+    let mesh = project.read("baked/props/props-plank.obj");
     project.write("assets/props/plank.png", pattern_png(120, 16, 9));
     assert!(build(&mut cirrus).all_ok());
     let ran = cirrus.take_executed_stages();
     assert!(ran.iter().all(|stage| !stage.starts_with("remap")), "{ran:?}");
     assert!(ran.contains(&"composite(props/page0)".to_string()), "{ran:?}");
-    assert_eq!(project.read("baked/props/meshes/props/plank.obj"), mesh);
+    assert_eq!(project.read("baked/props/props-plank.obj"), mesh);
+}
+
+#[test]
+fn a_map_the_output_names_is_copied_in_by_content_and_an_edit_renames_the_copy_without_a_remap() {
+    // The bush's bark keeps its own maps: atlas.mtl and the glTF name copies under maps/, named
+    // by their contents' hash; the source edited, the next build names (and writes) a new copy,
+    // removes the old one and remaps nothing.
+    let project = bundled_foliage();
+    let mut cirrus = project.open();
+    assert!(build(&mut cirrus).all_ok());
+    cirrus.take_executed_stages();
+    let copy_named = |mtl: &str| -> String {
+        let line = mtl.lines().find(|line| line.starts_with("map_Kd maps/oak_color_1k.")).expect("the bark's copy");
+        line.trim_start_matches("map_Kd ").to_string()
+    };
+    let first = copy_named(&String::from_utf8(project.read("baked/foliage/atlas.mtl")).unwrap());
+    let source = project.read("assets/trees/textures/oak_color_1k.jpg");
+    assert_eq!(first, format!("maps/oak_color_1k.{}.jpg", &blake3::hash(&source).to_hex()[..16]));
+    assert_eq!(project.read(&format!("baked/foliage/{first}")), source, "a JPEG is copied byte for byte");
+    let gltf = String::from_utf8(project.read("baked/foliage/trees-bush_2.gltf")).unwrap();
+    assert!(gltf.contains(&format!("\"uri\": \"{first}\"")), "{gltf}");
+
+    project.write("assets/trees/textures/oak_color_1k.jpg", project.read("assets/trees/textures/oak_ao_1k.jpg"));
+    assert!(build(&mut cirrus).all_ok());
+    let ran = cirrus.take_executed_stages();
+    assert!(ran.iter().all(|stage| !stage.starts_with("remap")), "{ran:?}");
+    let second = copy_named(&String::from_utf8(project.read("baked/foliage/atlas.mtl")).unwrap());
+    assert_ne!(second, first);
+    assert_eq!(project.read(&format!("baked/foliage/{second}")), project.read("assets/trees/textures/oak_ao_1k.jpg"));
+    assert!(!project.path(&format!("baked/foliage/{first}")).exists(), "the old copy is gone");
+    let gltf = String::from_utf8(project.read("baked/foliage/trees-bush_2.gltf")).unwrap();
+    assert!(gltf.contains(&second) && !gltf.contains(&first), "{gltf}");
 }
 
 #[test]
@@ -140,7 +172,7 @@ fn a_mesh_whose_material_library_is_missing_is_written_with_its_warning_in_the_r
     project.write("assets/props/lost.obj", quad_obj("plank", [0.0, 0.0, 1.0, 1.0]).replace("props.mtl", "lost.mtl"));
     let summary = build(&mut project.open());
     assert!(summary.all_ok(), "{}", summary.to_text());
-    assert!(project.path("baked/props/meshes/props/lost.obj").is_file());
+    assert!(project.path("baked/props/props-lost.obj").is_file());
     let report: serde_json::Value = serde_json::from_slice(&project.read("baked/props/report.json")).unwrap();
     let warnings = report["warnings"].to_string();
     assert!(warnings.contains("lost.mtl") && warnings.contains("not found"), "{report}");
@@ -238,8 +270,7 @@ fn the_bundled_bush_remapped_onto_foliage_samples_only_its_own_texels_with_its_o
     let mtl = project.read("assets/trees/bush_2.mtl");
     let original = material_uv_triangles(&project.read("assets/trees/bush_2.obj"), Some(&mtl), "leaves");
     let atlas_mtl = project.read("baked/foliage/atlas.mtl");
-    let remapped =
-        material_uv_triangles(&project.read("baked/foliage/meshes/trees/bush_2.obj"), Some(&atlas_mtl), "leaves");
+    let remapped = material_uv_triangles(&project.read("baked/foliage/trees-bush_2.obj"), Some(&atlas_mtl), "leaves");
     assert_eq!(original.len(), remapped.len());
     let (mut points, mut outside, mut disagreeing) = (0usize, 0usize, 0usize);
     for (before, after) in original.iter().zip(&remapped) {
@@ -367,8 +398,7 @@ fn aliases_with_other_canvases_get_their_own_transform_and_their_meshes_sample_t
             Some(&project.read("assets/props/props.mtl")),
             mesh,
         );
-        let after =
-            material_uv_triangles(&project.read(&format!("baked/props/meshes/props/{mesh}.obj")), Some(&mtl), mesh);
+        let after = material_uv_triangles(&project.read(&format!("baked/props/props-{mesh}.obj")), Some(&mtl), mesh);
         let mut sum = PsnrSum::default();
         for (before, after) in before.iter().zip(&after) {
             for (source_uv, page_uv) in triangle_points(before, 12).into_iter().zip(triangle_points(after, 12)) {
@@ -391,7 +421,7 @@ fn a_remapped_mesh_whose_texture_is_deleted_fails_naming_it_and_the_others_are_w
     for part in ["assets/props/crate.obj", "material `crate`", "props/crate.png", "does not exist"] {
         assert!(messages[0].contains(part), "{part} not in {}", messages[0]);
     }
-    assert!(project.path("baked/props/meshes/props/plank.obj").is_file());
+    assert!(project.path("baked/props/props-plank.obj").is_file());
 }
 
 #[test]
@@ -428,7 +458,7 @@ fn scale_and_offset_options_of_an_atlased_map_are_kept_in_the_remapped_uvs_and_o
         "crate",
     );
     let after = material_uv_triangles(
-        &project.read("baked/props/meshes/props/crate.obj"),
+        &project.read("baked/props/props-crate.obj"),
         Some(&project.read("baked/props/atlas.mtl")),
         "crate",
     );

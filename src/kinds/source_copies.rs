@@ -1,0 +1,178 @@
+//! The source files an asset's artifacts name without baking them (the maps of an OBJ material
+//! that an MTL or glTF passes on as they are), copied into the asset's output folder, so that
+//! nothing under the output names a path outside it and `baked/` can move on its own; and the
+//! MTL and glTF materials of a mesh over those copies.
+
+use std::collections::BTreeMap;
+use std::path::{Path, PathBuf};
+
+use crate::db::{Asset, Db};
+use crate::diagnostic::{display_path, Diagnostic};
+use crate::kinds::AssetOutputs;
+use crate::mesh::gltf::GltfMaterial;
+use crate::mesh::obj_text::{mtl_material_text, relative_path};
+use crate::mesh::MeshMaterial;
+use crate::summary::ArtifactRole;
+use crate::texture::TextureSlot;
+
+/// The folder of an asset's output that holds the copies.
+pub(crate) const SOURCE_COPIES: &str = "maps";
+
+/// Where [`copy_source`] puts the source file `path` (project-relative): `<output_folder>/maps/`
+/// `<stem>.<hash>.<extension>`, the hash the first 16 hex digits of its contents' BLAKE3, so one
+/// file is copied once however many materials name it, and an edit gives a new name (no engine
+/// keeps a stale copy). The stem keeps letters, digits, `-` and `_` (others become `_`), so the
+/// name is a plain glTF URI. `None` when the file cannot be read.
+pub(crate) fn source_copy_path(db: &dyn Db, asset: Asset, output_folder: &Path, path: &Path) -> Option<PathBuf> {
+    let file = crate::db::asset_file(db, asset, path.to_path_buf())?;
+    let contents = crate::db::read_contents(db, file).ok()?;
+    let plain = |text: &str| -> String {
+        text.chars().map(|c| if c.is_ascii_alphanumeric() || c == '-' || c == '_' { c } else { '_' }).collect()
+    };
+    let stem = plain(&path.file_stem().map_or_else(|| "map".into(), |stem| stem.to_string_lossy()));
+    let hash = contents.hash.to_hex();
+    let name = match path.extension() {
+        Some(extension) => format!("{stem}.{}.{}", &hash[..16], plain(&extension.to_string_lossy())),
+        None => format!("{stem}.{}", &hash[..16]),
+    };
+    Some(output_folder.join(SOURCE_COPIES).join(name))
+}
+
+/// Copies the source file `path` into the asset's output ([`source_copy_path`]), once; a PNG
+/// loses its colour-space chunks on the way (`png_without_colour_chunks`: the same pixels).
+/// Gives the copy's path, or `None` when the file cannot be read.
+pub(crate) fn copy_source(
+    db: &dyn Db,
+    asset: Asset,
+    output_folder: &Path,
+    outputs: &mut AssetOutputs,
+    path: &Path,
+) -> Option<PathBuf> {
+    let copy = source_copy_path(db, asset, output_folder, path)?;
+    if !outputs.files.iter().any(|(written, _, _)| *written == copy) {
+        let file = crate::db::asset_file(db, asset, path.to_path_buf())?;
+        let bytes = &crate::db::read_contents(db, file).ok()?.bytes;
+        let plain_png = crate::texture::preview::png_without_colour_chunks(bytes);
+        outputs.add(copy.clone(), ArtifactRole::Image, plain_png.map_or_else(|| bytes.clone(), Into::into));
+    }
+    Some(copy)
+}
+
+/// The copies [`output_materials`] makes of `materials`' maps (those `baked` does not stand in
+/// for), for the graph's stage instances.
+pub(crate) fn material_copy_paths(
+    db: &dyn Db,
+    asset: Asset,
+    output_folder: &Path,
+    materials: &[OutputMaterial],
+) -> Vec<PathBuf> {
+    let mut paths: Vec<PathBuf> = materials
+        .iter()
+        .flat_map(|OutputMaterial { material, baked }| {
+            material.maps.iter().filter(|(slot, _)| !baked.contains_key(slot)).map(|(_, path)| path)
+        })
+        .filter_map(|path| source_copy_path(db, asset, output_folder, path))
+        .collect();
+    paths.sort();
+    paths.dedup();
+    paths
+}
+
+/// One material of a mesh the asset writes, and the maps an artifact of the asset stands in for
+/// (an atlas page: project-relative paths in the output) instead of the material's own.
+pub(crate) struct OutputMaterial<'a> {
+    pub material: &'a MeshMaterial,
+    pub baked: BTreeMap<TextureSlot, PathBuf>,
+}
+
+/// The materials of a mesh as the output names them: each map either what `baked` gives or a
+/// copy of the source (`copy_source`); a map that cannot be read is left out with a warning.
+pub(crate) struct OutputMaterials {
+    /// Each material's statements, maps relative to `mtl_folder`.
+    pub mtl: String,
+    /// The glTF materials, maps relative to `gltf_folder`: PNG and JPEG images only (what glTF
+    /// core reads); a map of another format is left out with a warning.
+    pub gltf: Vec<GltfMaterial>,
+    pub warnings: Vec<Diagnostic>,
+}
+
+/// Where a mesh's materials are named from: the source file the warnings name, and the folders
+/// (project-relative) of the MTL and of the glTF that name the maps.
+pub(crate) struct MaterialPlaces<'a> {
+    pub source: &'a Path,
+    pub mtl_folder: &'a Path,
+    pub gltf_folder: &'a Path,
+}
+
+/// [`OutputMaterials`] of `materials`, named from `places`.
+pub(crate) fn output_materials(
+    db: &dyn Db,
+    asset: Asset,
+    output_folder: &Path,
+    outputs: &mut AssetOutputs,
+    materials: &[OutputMaterial],
+    places: &MaterialPlaces,
+) -> OutputMaterials {
+    let MaterialPlaces { source, mtl_folder, gltf_folder } = *places;
+    let mut result = OutputMaterials { mtl: String::new(), gltf: Vec::new(), warnings: Vec::new() };
+    for OutputMaterial { material, baked } in materials {
+        let mut resolved: BTreeMap<TextureSlot, PathBuf> = BTreeMap::new();
+        for (&slot, path) in &material.maps {
+            if let Some(artifact) = baked.get(&slot) {
+                resolved.insert(slot, artifact.clone());
+            } else if let Some(copy) = copy_source(db, asset, output_folder, outputs, path) {
+                resolved.insert(slot, copy);
+            } else {
+                result.warnings.push(Diagnostic::new(
+                    source,
+                    format!(
+                        "material `{}`: its {} map `{}` cannot be read and is left out of the output's materials",
+                        material.name,
+                        slot.name(),
+                        display_path(&crate::db::source_relative(db, path))
+                    ),
+                ));
+            }
+        }
+        let kept = MeshMaterial {
+            maps: material
+                .maps
+                .iter()
+                .filter(|(slot, _)| resolved.contains_key(slot))
+                .map(|(slot, path)| (*slot, path.clone()))
+                .collect(),
+            ..(*material).clone()
+        };
+        if !result.mtl.is_empty() {
+            result.mtl.push('\n');
+        }
+        let map_file = |slot, _: &Path| display_path(&relative_path(mtl_folder, &resolved[&slot]));
+        result.mtl.push_str(&mtl_material_text(&kept, map_file));
+        let mut not_gltf = Vec::new();
+        let (gltf, notes) = crate::mesh::gltf::material_from_mtl(&kept, |slot, _| {
+            let path = &resolved[&slot];
+            let readable = path
+                .extension()
+                .map(|extension| extension.to_ascii_lowercase())
+                .is_some_and(|extension| extension == "png" || extension == "jpg" || extension == "jpeg");
+            if !readable {
+                not_gltf.push(format!("`{}`", display_path(path)));
+                return None;
+            }
+            Some(display_path(&relative_path(gltf_folder, path)))
+        });
+        if !not_gltf.is_empty() {
+            result.warnings.push(Diagnostic::new(
+                source,
+                format!(
+                    "material `{}`: glTF reads PNG and JPEG images only; its glTF material leaves out {}",
+                    material.name,
+                    not_gltf.join(", ")
+                ),
+            ));
+        }
+        result.warnings.extend(notes.into_iter().map(|note| Diagnostic::new(source, note)));
+        result.gltf.push(gltf);
+    }
+    result
+}

@@ -692,6 +692,9 @@ impl Validator<'_> {
         if let Some(quality) = encode.quality {
             settings.quality = quality;
         }
+        if let Some(packing) = encode.packing {
+            settings.packing = packing;
+        }
     }
 
     /// A path relative to the project folder that must stay inside it.

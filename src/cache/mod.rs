@@ -341,6 +341,7 @@ macro_rules! key_part_by_name {
 
 key_part_by_name!(crate::texture::format::BlockFormat { Bc1, Bc3, Bc4, Bc5, Bc7 });
 key_part_by_name!(crate::texture::format::Container { Ktx2, Dds, Pvr });
+key_part_by_name!(crate::texture::format::Packing { Mra, Orm });
 key_part_by_name!(crate::texture::format::EncodeQuality { UltraFast, VeryFast, Fast, Basic, Slow, Exhaustive });
 
 impl KeyPart for crate::texture::SurfaceKind {

@@ -76,6 +76,7 @@ pub(crate) struct EncodeOverrides {
     #[serde(default, deserialize_with = "explicit")]
     pub zstd: Option<Option<i32>>,
     pub quality: Option<EncodeQuality>,
+    pub packing: Option<crate::texture::format::Packing>,
 }
 
 #[derive(Deserialize)]

@@ -36,6 +36,8 @@ pub struct EncodeSettings {
     /// zstd supercompression level for KTX2 (`None`: no supercompression).
     pub zstd: Option<i32>,
     pub quality: EncodeQuality,
+    /// The packed surface's channel order (`mra.*` or `orm.*`); glTF gets ORM either way.
+    pub packing: crate::texture::format::Packing,
 }
 
 impl EncodeSettings {
@@ -164,6 +166,7 @@ impl Default for Defaults {
                 container: Container::Ktx2,
                 zstd: None,
                 quality: EncodeQuality::Basic,
+                packing: crate::texture::format::Packing::Mra,
             },
             height: HeightSettings::default(),
             report: ReportSettings::default(),

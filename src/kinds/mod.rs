@@ -359,13 +359,25 @@ impl SurfaceId {
         }
     }
 
-    /// Its texture and preview files inside the asset folder.
-    pub(crate) fn artifact_paths(&self, output_folder: &Path, container: crate::config::Container) -> [PathBuf; 2] {
+    /// Its texture and preview files inside the asset folder, named by the surface (a packed
+    /// surface by its channel order: `mra` or `orm`) in `encode`'s container.
+    pub(crate) fn artifact_paths(&self, output_folder: &Path, encode: &crate::config::EncodeSettings) -> [PathBuf; 2] {
         let folder = self.folder(output_folder);
-        [
-            folder.join(format!("{}.{}", self.surface.name(), container.extension())),
-            folder.join(format!("{}.png", self.surface.name())),
-        ]
+        let stem = match self.surface {
+            SurfaceKind::Mra => encode.packing.stem(),
+            surface => surface.name(),
+        };
+        [folder.join(format!("{stem}.{}", encode.container.extension())), folder.join(format!("{stem}.png"))]
+    }
+
+    /// The files of its write stage: its [`SurfaceId::artifact_paths`], and for a packed surface
+    /// in `Mra` order the `orm.png` glTF reads.
+    pub(crate) fn written_files(&self, output_folder: &Path, encode: &crate::config::EncodeSettings) -> Vec<PathBuf> {
+        let mut files = self.artifact_paths(output_folder, encode).to_vec();
+        if self.surface == SurfaceKind::Mra && encode.packing == crate::texture::format::Packing::Mra {
+            files.push(self.folder(output_folder).join("orm.png"));
+        }
+        files
     }
 }
 
@@ -461,7 +473,7 @@ pub(crate) fn tail_instances(
     asset_name: &str,
     surface: &SurfaceId,
     image: &StageInstance,
-    files: [PathBuf; 2],
+    files: &[PathBuf],
 ) -> [StageInstance; 3] {
     let label = surface.label(asset_name);
     let instance = surface.instance();
@@ -488,6 +500,7 @@ pub(crate) fn tail_settings_from(
         alpha_cutoff,
         container: encode.container,
         zstd: encode.zstd,
+        packing: encode.packing,
     }
 }
 

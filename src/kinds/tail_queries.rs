@@ -15,11 +15,12 @@ use crate::db::{
 use crate::diagnostic::Diagnostic;
 use crate::kinds::SurfaceId;
 use crate::texture::fingerprint::BlockFingerprints;
+use crate::texture::format::Packing;
 use crate::texture::tail::{
     tail_encode, tail_mips, tail_write, EncodedSurface, MipLevels, MipStepSettings, PreviousEncoding, SurfaceArtifacts,
     TailSettings,
 };
-use crate::texture::Texture;
+use crate::texture::{SurfaceKind, Texture};
 
 // Versions: mips 2: coverage-preserving mips for albedo and opacity sources; 3: transparent
 // texels of albedo mips keep their footprint's colour; 4: no coverage scaling when all or none
@@ -72,6 +73,18 @@ pub(crate) fn surface_image(db: &dyn Db, asset: Asset, surface: SurfaceId) -> Re
     asset.kind(db).surface_image(db, asset, &surface)
 }
 
+/// The image the tail filters and encodes: the kind's, in the channel order of the asset's
+/// `packing` (kinds make packed surfaces in `Mra`).
+#[salsa::tracked(returns(clone))]
+fn tail_image(db: &dyn Db, asset: Asset, surface: SurfaceId) -> Result<Arc<Texture>, Diagnostic> {
+    let image = surface_image(db, asset, surface.clone())?;
+    let packing = tail_settings(db, asset, surface.clone())?.packing;
+    Ok(match (surface.surface, packing) {
+        (SurfaceKind::Mra, Packing::Orm) => Arc::new(crate::texture::tail::swap_red_and_blue(&image)),
+        _ => image,
+    })
+}
+
 /// A `width` × `height` texture's working set reserved from the process's texture memory budget
 /// (held over pure work only: no query may run while it is held).
 fn texture_memory(db: &dyn Db, width: u32, height: u32) -> crate::schedule::MemoryReservation<'static> {
@@ -82,7 +95,7 @@ fn texture_memory(db: &dyn Db, width: u32, height: u32) -> crate::schedule::Memo
 /// The mip chain (stage `mips`), re-filtering only the tiles that changed since the last run.
 #[salsa::tracked(returns(clone))]
 pub(crate) fn surface_mips(db: &dyn Db, asset: Asset, surface: SurfaceId) -> Result<Arc<MipLevels>, Diagnostic> {
-    let image = surface_image(db, asset, surface.clone())?;
+    let image = tail_image(db, asset, surface.clone())?;
     let settings = mip_step_settings(db, asset, surface.clone())?;
     let label = surface.label(asset.name(db));
     let previous = previous_encoding(db, &label);
@@ -138,7 +151,7 @@ pub(crate) fn surface_files(
     asset: Asset,
     surface: SurfaceId,
 ) -> Result<Arc<SurfaceArtifacts>, Diagnostic> {
-    let image = surface_image(db, asset, surface.clone())?;
+    let image = tail_image(db, asset, surface.clone())?;
     let settings = tail_settings(db, asset, surface.clone())?;
     let label = surface.label(asset.name(db));
     let content_key = content_key(&settings, &image);
@@ -148,7 +161,9 @@ pub(crate) fn surface_files(
     }
     let encoded = surface_blocks(db, asset, surface.clone())?;
     let (container, zstd) = write_step_settings(db, asset, surface.clone())?;
-    let artifacts = timed(db, WRITE, &label, || tail_write(&image, surface.surface, &encoded, container, zstd));
+    let packing = settings.packing;
+    let artifacts =
+        timed(db, WRITE, &label, || tail_write(&image, (surface.surface, packing), &encoded, container, zstd));
     store_cached(db, SURFACE_ENTRY, content_key, || artifacts_entry(&artifacts));
     Ok(Arc::new(artifacts))
 }
@@ -181,7 +196,7 @@ pub(crate) fn surface_artifacts(
         }
         None => {
             let artifacts = surface_files(db, asset, surface.clone())?;
-            (artifacts, Some(content_key(&settings, &*surface_image(db, asset, surface.clone())?)))
+            (artifacts, Some(content_key(&settings, &*tail_image(db, asset, surface.clone())?)))
         }
     };
     // Both keys name the content entry from now on (found by parts: the content key is the
@@ -233,7 +248,7 @@ fn content_key(settings: &TailSettings, image: &Texture) -> CacheKey {
 
 /// The start of both keys of a surface entry: the tail's versions and every tail setting.
 fn surface_key(settings: &TailSettings) -> CacheKeyBuilder {
-    CacheKeyBuilder::new(SURFACE_ENTRY, SURFACE_ENTRY_VERSION)
+    let key = CacheKeyBuilder::new(SURFACE_ENTRY, SURFACE_ENTRY_VERSION)
         .part(&[MIPS.version, ENCODE.version, WRITE.version])
         .part(&settings.surface)
         .part(&settings.format)
@@ -242,7 +257,12 @@ fn surface_key(settings: &TailSettings) -> CacheKeyBuilder {
         .part(&settings.mips)
         .part(&settings.alpha_cutoff)
         .part(&settings.container)
-        .part(&settings.zstd)
+        .part(&settings.zstd);
+    // Keys of packed surfaces in the first order stay what they were before the setting.
+    match (settings.surface, settings.packing) {
+        (SurfaceKind::Mra, Packing::Orm) => key.part(&settings.packing),
+        _ => key,
+    }
 }
 
 /// Parts: the container, the preview, and the glTF image (empty when the surface has none).
@@ -257,7 +277,8 @@ fn artifacts_entry(artifacts: &SurfaceArtifacts) -> CacheEntry {
 
 fn artifacts_from_entry(entry: CacheEntry) -> Option<SurfaceArtifacts> {
     let (info, [texture_file, preview_png, orm_png]): (crate::texture::tail::SurfaceInfo, _) = entry.parts()?;
-    let orm_png = (info.surface == crate::texture::SurfaceKind::Mra).then(|| orm_png.into());
+    // Empty for a surface written in ORM order already (its preview is the glTF's image).
+    let orm_png = (info.surface == SurfaceKind::Mra && !orm_png.is_empty()).then(|| orm_png.into());
     Some(SurfaceArtifacts { info, texture_file: texture_file.into(), preview_png: preview_png.into(), orm_png })
 }
 

@@ -31,6 +31,26 @@ impl Container {
     }
 }
 
+/// The channel order of the packed metallic / roughness / occlusion surface.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq, Hash, Serialize, Deserialize)]
+pub enum Packing {
+    /// R metallic, G roughness, B occlusion: `mra.*` (cirrus's first order).
+    #[default]
+    Mra,
+    /// R occlusion, G roughness, B metallic: `orm.*`, glTF's and Unreal's order.
+    Orm,
+}
+
+impl Packing {
+    /// The packed surface's file stem.
+    pub fn stem(self) -> &'static str {
+        match self {
+            Packing::Mra => "mra",
+            Packing::Orm => "orm",
+        }
+    }
+}
+
 /// Speed/quality trade-off of the block encoder, ordered fastest first.
 #[derive(Clone, Copy, Debug, PartialEq, Eq, PartialOrd, Ord, Hash, Serialize, Deserialize)]
 pub enum EncodeQuality {

@@ -10,7 +10,7 @@ use crate::texture::color::has_transparency;
 use crate::texture::container::write_container;
 use crate::texture::encode::{encode_levels_reusing, BlockEncodeSettings, EncodedTexture, PreviousBlocks};
 use crate::texture::fingerprint::BlockFingerprints;
-use crate::texture::format::{BlockFormat, Container, EncodeQuality};
+use crate::texture::format::{BlockFormat, Container, EncodeQuality, Packing};
 use crate::texture::mips::{mip_chain_reusing, MipReuse, MipSettings, PreviousChain};
 use crate::texture::preview::preview_png;
 use crate::texture::quality::{alpha_test_threshold, block_errors_reusing, BlockErrors, Measure};
@@ -27,6 +27,8 @@ pub(crate) struct TailSettings {
     pub alpha_cutoff: Option<f32>,
     pub container: Container,
     pub zstd: Option<i32>,
+    /// The channel order a packed surface is encoded in (its image is made in `Mra`).
+    pub packing: Packing,
 }
 
 /// The settings of the mip step alone (so that an encoder setting does not re-filter).
@@ -116,6 +118,12 @@ pub(crate) struct SurfaceArtifacts {
 pub fn orm_texture(mra: &Texture) -> Texture {
     let pixels = mra.pixels.chunks_exact(4).flat_map(|texel| [texel[2], texel[1], texel[0], 255]).collect();
     Texture::new(mra.width, mra.height, pixels)
+}
+
+/// An image with its red and blue channels swapped (`mra` ↔ `orm`), alpha kept.
+pub fn swap_red_and_blue(image: &Texture) -> Texture {
+    let pixels = image.pixels.chunks_exact(4).flat_map(|texel| [texel[2], texel[1], texel[0], texel[3]]).collect();
+    Texture::new(image.width, image.height, pixels)
 }
 
 /// The last encoding of a surface, so that the next one filters again only the mip tiles and
@@ -235,10 +243,11 @@ pub(crate) fn format_comparison(
         .collect()
 }
 
-/// The container file and PNG preview of an encoded surface.
+/// The container file and PNG preview of an encoded surface (and for a packed surface in `Mra`
+/// order, glTF's `orm.png`).
 pub(crate) fn tail_write(
     image: &Texture,
-    surface: SurfaceKind,
+    (surface, packing): (SurfaceKind, Packing),
     encoded: &EncodedSurface,
     container: Container,
     zstd: Option<i32>,
@@ -260,6 +269,8 @@ pub(crate) fn tail_write(
         visible_psnr_db: cut_out.map(|quality| (quality.visible_psnr_db * 100.0).round() / 100.0),
         alpha_test_iou: cut_out.map(|quality| (quality.alpha_test_iou * 1e5).round() / 1e5),
     };
-    let orm_png = (surface == SurfaceKind::Mra).then(|| preview_png(&orm_texture(image)).into());
+    // A surface packed in ORM order is glTF's image itself (its preview, `orm.png`).
+    let orm_png =
+        (surface == SurfaceKind::Mra && packing == Packing::Mra).then(|| preview_png(&orm_texture(image)).into());
     SurfaceArtifacts { info, texture_file, preview_png: preview_png(image).into(), orm_png }
 }

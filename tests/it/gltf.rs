@@ -359,3 +359,43 @@ fn a_chain_gives_way_to_its_next_level_where_that_level_s_error_is_one_pixel() {
     assert_eq!(screen_coverage(&[0.5, 0.0], diameter), [1.0, 0.0]);
     assert_eq!(screen_coverage(&[0.1, 1.0, 0.5], diameter)[1], screen_coverage(&[0.1, 1.0, 0.5], diameter)[0]);
 }
+
+#[test]
+fn packing_orm_writes_the_packed_surface_in_gltf_s_order_under_its_own_name() {
+    // The same bush and steel material baked with `packing: Mra` (the default) and `Orm`: the
+    // ORM bake writes orm.ktx2 + orm.png and no mra.*, its orm.png is the MRA bake's orm.png
+    // texel for texel, the BC1 keeps its PSNR, and lod.mtl and the glTFs name orm.png.
+    let root = Path::new(env!("CARGO_MANIFEST_DIR"));
+    let pipeline = std::fs::read_to_string(root.join("pipeline.ron")).unwrap();
+    let bake = |pipeline: &str| {
+        let project = TempProject::new(pipeline);
+        std::os::unix::fs::symlink(root.join("examples"), project.path("examples")).unwrap();
+        let output = project.run_cli(&["build", "--asset", "bush", "--asset", "steel"]);
+        assert!(output.status.success(), "{}", String::from_utf8_lossy(&output.stderr));
+        project
+    };
+    let mra = bake(&pipeline);
+    let orm_pipeline = pipeline.replace("container: Ktx2),", "container: Ktx2, packing: Orm),");
+    assert_ne!(orm_pipeline, pipeline);
+    let orm = bake(&orm_pipeline);
+    for (folder, container) in [("baked/bush", "ktx2"), ("baked/steel/painted_steel", "dds")] {
+        assert!(orm.path(&format!("{folder}/orm.{container}")).is_file(), "{folder}");
+        assert!(!orm.path(&format!("{folder}/mra.{container}")).exists());
+        assert!(!orm.path(&format!("{folder}/mra.png")).exists(), "{folder}");
+        let (ours, theirs) = (orm.read(&format!("{folder}/orm.png")), mra.read(&format!("{folder}/orm.png")));
+        assert_eq!(decode_png(&ours).pixels, decode_png(&theirs).pixels, "{folder}");
+    }
+    let surface_psnr = |project: &TempProject| -> f64 {
+        let report: serde_json::Value = serde_json::from_slice(&project.read("baked/bush/report.json")).unwrap();
+        let surfaces = report["surfaces"].as_array().unwrap().clone();
+        surfaces.iter().find(|surface| surface["surface"] == "Mra").unwrap()["psnr_db"].as_f64().unwrap()
+    };
+    assert!((surface_psnr(&orm) - surface_psnr(&mra)).abs() < 0.5, "{} {}", surface_psnr(&orm), surface_psnr(&mra));
+    let mtl = String::from_utf8(orm.read("baked/bush/lod.mtl")).unwrap();
+    assert!(mtl.contains("map_Pr orm.png\nmap_ao orm.png\n"), "{mtl}");
+    let documents = [orm.path("baked/bush/lod.gltf"), orm.path("baked/steel/painted_steel/material.gltf")];
+    for (file, errors, warnings, messages) in validate(&documents) {
+        assert_eq!((errors, warnings), (0, 0), "{}: {messages}", file.display());
+        assert!(std::fs::read_to_string(&file).unwrap().contains("\"uri\": \"orm.png\""), "{}", file.display());
+    }
+}

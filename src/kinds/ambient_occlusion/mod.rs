@@ -109,7 +109,7 @@ impl Kind for AmbientOcclusion {
             if settings.mode == AoMode::Vertices {
                 instances.push(rays.clone());
             }
-            let container = asset.settings(db).encode.container;
+            let encode = &asset.settings(db).encode;
             for material in &geometry.materials {
                 let mut fill = StageInstance::new(FILL, material_label(name, &material.folder), &material.folder);
                 for tile in material_tiles(material.index, settings.size) {
@@ -121,7 +121,7 @@ impl Kind for AmbientOcclusion {
                 }
                 let surface = material_surface(&material.folder);
                 let [mips, encode, mut write] =
-                    tail_instances(name, &surface, &fill, surface.artifact_paths(output_folder, container));
+                    tail_instances(name, &surface, &fill, &surface.artifact_paths(output_folder, encode));
                 write.writes.push(report.clone());
                 instances.extend([fill, mips, encode, write]);
             }
@@ -276,14 +276,14 @@ fn bake_rays_per_second(
 fn ao_outputs(db: &dyn Db, asset: Asset, output_folder: &Path, runs: &[StageRun]) -> Result<AssetOutputs, Diagnostic> {
     let geometry = bake_geometry(db, asset)?;
     let settings = ao_settings(db, asset);
-    let container = asset.settings(db).encode.container;
+    let encode = &asset.settings(db).encode;
     let mut outputs = AssetOutputs::default();
     let mut materials = Vec::new();
     for material in &geometry.materials {
         let surface = material_surface(&material.folder);
         let artifacts = crate::kinds::tail_queries::surface_artifacts(db, asset, surface.clone())?;
         let files = ao_map(db, asset, material.index)?;
-        let [texture_path, png_path] = surface.artifact_paths(output_folder, container);
+        let [texture_path, png_path] = surface.artifact_paths(output_folder, encode);
         outputs.add(texture_path.clone(), ArtifactRole::Texture, artifacts.texture_file.clone());
         outputs.add(png_path.clone(), ArtifactRole::Image, files.png16.clone());
         let map = &files.map;

@@ -164,7 +164,7 @@ impl Kind for Atlas {
                 composite.reads.push(Read::Stage(DECODE, display_path(&entry.file)));
             }
             let [mips, encode, mut write] =
-                tail_instances(name, &page_surface(page), &composite, page_files(output_folder, page, container));
+                tail_instances(name, &page_surface(page), &composite, &page_files(output_folder, page, container));
             write.writes.push(report.clone());
             tails.extend([composite, mips, encode, write]);
         }

@@ -9,8 +9,8 @@ use crate::kinds::billboard_cloud::layout::Layout;
 use crate::kinds::billboard_cloud::rectangles::PlaneRectangle;
 use crate::mesh::gltf::{gltf_files, GltfAlpha, GltfFiles, GltfMaterial, GltfMesh, GENERATOR};
 
-/// The OBJ and MTL text of the billboard cloud; `material` names the atlas material.
-pub fn lod_mesh(rectangles: &[PlaneRectangle], layout: &Layout, material: &str) -> (String, String) {
+/// The OBJ text of the billboard cloud (`mtllib lod.mtl`); `material` names the atlas material.
+pub fn lod_mesh(rectangles: &[PlaneRectangle], layout: &Layout, material: &str) -> String {
     let mut obj = String::new();
     let planes = rectangles.iter().map(|rectangle| rectangle.plane).collect::<std::collections::BTreeSet<_>>().len();
     let _ = writeln!(
@@ -40,11 +40,16 @@ pub fn lod_mesh(rectangles: &[PlaneRectangle], layout: &Layout, material: &str) 
         let _ = writeln!(obj, "f {}/{}/{n} {}/{}/{n} {}/{}/{n}", v, v, v + 1, v + 1, v + 2, v + 2);
         let _ = writeln!(obj, "f {}/{}/{n} {}/{}/{n} {}/{}/{n}", v, v, v + 2, v + 2, v + 3, v + 3);
     }
-    let mtl = format!(
+    obj
+}
+
+/// The `lod.mtl` of the atlas material `material`, its packed map `<packed>.png` (`mra` or
+/// `orm`, as the asset's `encode: (packing: …)` names it).
+pub fn lod_mtl(material: &str, packed: &str) -> String {
+    format!(
         "# cirrus billboard cloud material (alpha-tested, double-sided)\nnewmtl {material}\nKd 1 1 1\nmap_Kd \
-            albedo.png\nmap_d albedo.png\nnorm normal.png\nmap_Pr mra.png\nmap_ao mra.png\n"
-    );
-    (obj, mtl)
+            albedo.png\nmap_d albedo.png\nnorm normal.png\nmap_Pr {packed}.png\nmap_ao {packed}.png\n"
+    )
 }
 
 /// The glTF of a level: [`lod_gltf_mesh`] in `lod.gltf` naming `lod.bin`.

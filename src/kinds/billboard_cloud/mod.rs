@@ -238,15 +238,12 @@ impl Kind for BillboardCloud {
                 atlas = atlas.reads_stage(render);
             }
             instances.extend(renders);
-            let container = asset.settings(db).encode.container;
+            let encode_settings = &asset.settings(db).encode;
             let mut tails = Vec::new();
             for surface in atlas_surfaces(db, asset, level) {
                 let [mips, encode, mut write] =
-                    tail_instances(name, &surface, &atlas, surface.artifact_paths(output_folder, container));
+                    tail_instances(name, &surface, &atlas, &surface.written_files(output_folder, encode_settings));
                 write.writes.push(report.clone());
-                if surface.surface == SurfaceKind::Mra {
-                    write.writes.push(level_folder.join("orm.png"));
-                }
                 tails.extend([mips, encode, write]);
             }
             atlas.writes.push(report.clone());
@@ -432,7 +429,8 @@ fn level_outputs(
     let settings = asset.settings(db);
     let folder = levels::level_folder(settings, level);
     let level_settings = queries::level_settings(db, asset, level);
-    let (obj, mtl) = (*lod_files(db, asset, level)?).clone();
+    let obj = (*lod_files(db, asset, level)?).clone();
+    let mtl = lod_mesh::lod_mtl("billboard_cloud", settings.encode.packing.stem());
     let planes = billboard_planes(db, asset, level)?;
     let layout = billboard_layout(db, asset, level)?;
     let level_folder = output_folder.join(&folder);
@@ -443,11 +441,10 @@ fn level_outputs(
     let gltf = queries::lod_gltf(db, asset, level)?;
     outputs.add(level_folder.join("lod.gltf"), ArtifactRole::Gltf, gltf.gltf.clone().into());
     outputs.add(level_folder.join("lod.bin"), ArtifactRole::GltfBuffer, gltf.bin.clone().into());
-    let container = settings.encode.container;
     let mut surfaces = Vec::new();
     for surface in atlas_surfaces(db, asset, level) {
         let artifacts = crate::kinds::tail_queries::surface_artifacts(db, asset, surface.clone())?;
-        let [texture_path, preview_path] = surface.artifact_paths(output_folder, container);
+        let [texture_path, preview_path] = surface.artifact_paths(output_folder, &settings.encode);
         bytes += artifacts.texture_file.len();
         outputs.add(texture_path, ArtifactRole::Texture, artifacts.texture_file.clone());
         outputs.add(preview_path, ArtifactRole::Image, artifacts.preview_png.clone());

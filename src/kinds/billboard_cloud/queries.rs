@@ -43,7 +43,8 @@ pub(crate) const LAYOUT: Stage = Stage { name: "layout", version: 5 };
 // at 2 × 2 samples.
 pub(crate) const RENDER: Stage = Stage { name: "render", version: 7 };
 pub(crate) const ATLAS: Stage = Stage { name: "atlas", version: 1 };
-pub const LOD: Stage = Stage { name: "lod", version: 1 };
+/// 2: the OBJ alone (the MTL is written with the asset's packing).
+pub const LOD: Stage = Stage { name: "lod", version: 2 };
 
 impl KeyPart for crate::packing::PageSettings {
     fn add_to(&self, key: CacheKeyBuilder) -> CacheKeyBuilder {
@@ -186,10 +187,9 @@ fn compute_billboard_layout(db: &dyn Db, asset: Asset, level: u32) -> Result<Bil
     })
 }
 
-/// A level's `lod.obj` and `lod.mtl` (stage `lod`): planes and layout only, so texture edits
-/// leave them alone.
+/// A level's `lod.obj` (stage `lod`): planes and layout only, so texture edits leave it alone.
 #[salsa::tracked(returns(clone))]
-pub(crate) fn lod_files(db: &dyn Db, asset: Asset, level: u32) -> Result<Arc<(String, String)>, Diagnostic> {
+pub(crate) fn lod_files(db: &dyn Db, asset: Asset, level: u32) -> Result<Arc<String>, Diagnostic> {
     let name = level_label(db, asset, level);
     let key = stage_key(LOD).part(&layout_cache_key(db, asset, level).0).finish();
     cached_json(db, LOD, name, key, || {

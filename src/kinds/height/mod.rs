@@ -143,9 +143,9 @@ impl Kind for Height {
             HeightProjection::TopDown => map.reads_stage(&high),
         };
         let surface = height_surface();
-        let container = asset.settings(db).encode.container;
+        let encode = &asset.settings(db).encode;
         let [mips, encode, mut write] =
-            tail_instances(name, &surface, &map, surface.artifact_paths(output_folder, container));
+            tail_instances(name, &surface, &map, &surface.artifact_paths(output_folder, encode));
         write.writes.push(report.clone());
         let mut instances = vec![low.clone(), high.clone(), bvh.clone(), map, mips, encode, write];
         let distance = |measured: Measured, mesh: &StageInstance| {
@@ -371,13 +371,13 @@ fn height_outputs(
     runs: &[StageRun],
 ) -> Result<AssetOutputs, Diagnostic> {
     let settings = height_settings(db, asset);
-    let container = asset.settings(db).encode.container;
+    let encode = &asset.settings(db).encode;
     let low = low_geometry(db, asset)?;
     let mut outputs = AssetOutputs::default();
     let surface = height_surface();
     let artifacts = crate::kinds::tail_queries::surface_artifacts(db, asset, surface.clone())?;
     let map = height_map(db, asset, MapReference::Low)?;
-    let [texture_path, png_path] = surface.artifact_paths(output_folder, container);
+    let [texture_path, png_path] = surface.artifact_paths(output_folder, encode);
     outputs.add(texture_path.clone(), ArtifactRole::Texture, artifacts.texture_file.clone());
     outputs.add(png_path.clone(), ArtifactRole::Image, map.png16.clone());
     let meaning = |files: &queries::HeightMapFiles| serde_json::json!({ "distance": files.map.quantization() });

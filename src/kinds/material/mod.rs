@@ -95,7 +95,7 @@ impl Kind for Material {
             decode.failed = errors.iter().any(|error| error.file == path);
             instances.push(decode);
         }
-        let container = asset.settings(db).encode.container;
+        let encode = &asset.settings(db).encode;
         let name = asset.name(db);
         for surface in surfaces(&parsed) {
             let mut pack = StageInstance::new(PACK, surface.label(name), surface.instance()).reads_stage(&parse);
@@ -116,15 +116,13 @@ impl Kind for Material {
             }
             let folder = surface.folder(output_folder);
             let [mut mips, encode, mut write] =
-                tail_instances(name, &surface, &pack, surface.artifact_paths(output_folder, container));
+                tail_instances(name, &surface, &pack, &surface.written_files(output_folder, encode));
             // The alpha cutoff of an albedo's mips comes from the material's constants.
             mips = mips.reads_stage(&parse);
             write.writes.push(report.clone());
-            match surface.surface {
-                SurfaceKind::Mra => write.writes.push(folder.join("orm.png")),
-                // The material's glTF swatch, written with its albedo.
-                SurfaceKind::Albedo => write.writes.extend([folder.join("material.gltf"), folder.join("material.bin")]),
-                _ => {}
+            // The material's glTF swatch, written with its albedo.
+            if surface.surface == SurfaceKind::Albedo {
+                write.writes.extend([folder.join("material.gltf"), folder.join("material.bin")]);
             }
             instances.extend([pack, mips, encode, write]);
         }
@@ -139,7 +137,7 @@ impl Kind for Material {
         _runs: &[StageRun],
     ) -> AssetOutputs {
         let Ok(parsed) = material_file(db, asset) else { return AssetOutputs::default() };
-        let container = asset.settings(db).encode.container;
+        let encode = &asset.settings(db).encode;
         let mut outputs = AssetOutputs::default();
         let mut materials = Vec::new();
         for material in &parsed.materials {
@@ -161,7 +159,7 @@ impl Kind for Material {
                 let Ok(artifacts) = crate::kinds::tail_queries::surface_artifacts(db, asset, id.clone()) else {
                     continue;
                 };
-                let [texture_path, preview_path] = id.artifact_paths(output_folder, container);
+                let [texture_path, preview_path] = id.artifact_paths(output_folder, encode);
                 let other_formats = if asset.settings(db).own::<Own>().report.compare_formats {
                     crate::kinds::tail_queries::surface_format_comparison(db, asset, id.clone())
                         .ok()
@@ -187,11 +185,14 @@ impl Kind for Material {
                         }
                     }
                     SurfaceKind::Normal => swatch.normal = preview_name(),
+                    // `orm.png`: the preview itself when packed in ORM order, else written beside.
+                    SurfaceKind::Mra => {
+                        swatch.occlusion = Some("orm.png".into());
+                        swatch.metallic_roughness = Some("orm.png".into());
+                    }
                     _ => {}
                 }
                 if let Some(orm_png) = &artifacts.orm_png {
-                    swatch.occlusion = Some("orm.png".into());
-                    swatch.metallic_roughness = Some("orm.png".into());
                     outputs.add(id.folder(output_folder).join("orm.png"), ArtifactRole::Image, orm_png.clone());
                 }
             }

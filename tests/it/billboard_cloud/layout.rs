@@ -117,7 +117,7 @@ fn layouts_have_no_overlaps_keep_padding_and_scale_density_at_max_size() {
 
 #[test]
 fn lod_obj_loads_back_with_every_quad_inside_its_atlas_placement() {
-    use cirrus::kinds::billboard_cloud::lod_mesh::lod_mesh;
+    use cirrus::kinds::billboard_cloud::lod_mesh::{lod_mesh, lod_mtl};
     let positions: Vec<[f32; 3]> =
         (0..8).map(|i| [(i & 1) as f32 * 2.0, ((i >> 1) & 1) as f32, ((i >> 2) & 1) as f32 * 3.0]).collect();
     let quads = [[0u32, 1, 3, 2], [4, 6, 7, 5], [0, 4, 5, 1], [2, 3, 7, 6], [0, 2, 6, 4], [1, 5, 7, 3]];
@@ -131,7 +131,7 @@ fn lod_obj_loads_back_with_every_quad_inside_its_atlas_placement() {
         &settings,
         None,
     );
-    let (obj, mtl) = lod_mesh(&rectangles, &layout, "box");
+    let (obj, mtl) = (lod_mesh(&rectangles, &layout, "box"), lod_mtl("box", "mra"));
     assert!(mtl.contains("newmtl box") && mtl.contains("map_Kd albedo.png"));
     let (models, _) = tobj::load_obj_buf(
         &mut obj.as_bytes(),

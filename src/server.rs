@@ -1,5 +1,7 @@
-//! The hot-reload server (an IO edge): newline-delimited JSON over TCP, many clients at once,
-//! `since` replay, and the graph request. The protocol is documented in `PROTOCOL.md`.
+//! The hot-reload server (an IO edge): newline-delimited JSON over TCP, and the same messages
+//! over a WebSocket on the same port (a connection that opens with an HTTP request), many
+//! clients at once, `since` replay, and the graph request. The protocol is documented in
+//! `PROTOCOL.md`.
 //!
 //! Every client has a reader thread (bounded lines; malformed input is answered with an `error`
 //! message and never reaches the daemon) and a writer thread fed by a bounded queue, so a slow
@@ -270,72 +272,164 @@ impl Server {
         graph
     }
 
+    /// Serves a new connection on a thread of its own (the accept loop never waits on a client).
     fn accept(&self, stream: TcpStream) {
+        let server = self.clone();
+        let spawned = std::thread::Builder::new().name("cirrus-client".into()).spawn(move || server.serve(stream));
+        if let Err(error) = spawned {
+            tracing::warn!("hot-reload server: cannot start a client thread: {error}");
+        }
+    }
+
+    /// One connection: a WebSocket when it opens with an HTTP request (a browser's upgrade),
+    /// else JSON lines.
+    fn serve(&self, stream: TcpStream) {
         let _ = stream.set_nodelay(true);
+        if opens_with_http(&stream) {
+            self.serve_websocket(stream);
+        } else {
+            self.serve_lines(stream);
+        }
+    }
+
+    fn serve_lines(&self, stream: TcpStream) {
         let (Ok(reader_stream), Ok(writer_stream)) = (stream.try_clone(), stream.try_clone()) else { return };
-        let (queue, outgoing) = sync_channel::<Arc<str>>(self.settings.client_queue);
-        let id = {
-            let mut state = self.state.lock().expect("server state");
-            if state.clients.len() >= self.settings.max_clients {
-                // The longest idle client (never subscribed, silent past the grace) makes room.
-                let idle = state
-                    .clients
-                    .iter()
-                    .enumerate()
-                    .filter(|(_, client)| {
-                        !client.subscribed && client.last_request.elapsed() >= self.settings.idle_grace
-                    })
-                    .min_by_key(|(_, client)| client.last_request)
-                    .map(|(position, _)| position);
-                if let Some(position) = idle {
-                    let client = state.clients.remove(position);
-                    let notice = line(&Outgoing::Error {
-                        message: format!(
-                            "idle for {:.0} s while every slot was taken: disconnected",
-                            client.last_request.elapsed().as_secs_f64()
-                        ),
-                    });
-                    let _ = client.queue.try_send(notice);
-                    let _ = client.stream.shutdown(Shutdown::Read);
-                    tracing::info!("hot-reload client {} was idle: its slot went to a new client", client.id);
-                }
-            }
-            if state.clients.len() >= self.settings.max_clients {
-                let refusal = line(&Outgoing::Error {
-                    message: format!("too many clients ({} connected): try again later", state.clients.len()),
-                });
+        let (id, outgoing) = match self.register(&stream) {
+            Ok(registered) => registered,
+            Err(refusal) => {
                 let mut stream = stream;
                 let _ = stream.set_write_timeout(Some(std::time::Duration::from_millis(200)));
                 let _ = stream.write_all(refusal.as_bytes());
                 let _ = stream.shutdown(Shutdown::Both);
-                tracing::warn!("hot-reload server: refused a client, {} connected already", state.clients.len());
                 return;
             }
-            let id = state.next_client;
-            state.next_client += 1;
-            let hello = line(&Outgoing::Hello {
-                protocol: PROTOCOL_VERSION,
-                revision: state.revision,
-                output: state.output.clone(),
-            });
-            let client = Client { id, queue, stream, subscribed: false, last_request: std::time::Instant::now() };
-            if !send(&client, hello) {
-                return;
-            }
-            state.clients.push(client);
-            id
         };
-        let peer = writer_stream.peer_addr().map(|address| address.to_string()).unwrap_or_default();
-        tracing::info!("hot-reload client {id} connected from {peer}");
         let _ = std::thread::Builder::new()
             .name(format!("cirrus-client-{id}-write"))
             .spawn(move || write_loop(writer_stream, outgoing));
-        let server = self.clone();
-        let _ = std::thread::Builder::new().name(format!("cirrus-client-{id}-read")).spawn(move || {
-            server.read_loop(id, reader_stream);
-            server.disconnect(id);
-            tracing::info!("hot-reload client {id} disconnected");
+        self.read_loop(id, reader_stream);
+        self.disconnect(id);
+        tracing::info!("hot-reload client {id} disconnected");
+    }
+
+    /// The same messages over a WebSocket (RFC 6455, `tungstenite`): one JSON message per text
+    /// frame each way. One thread reads (polling every `WEBSOCKET_POLL`) and sends what the
+    /// client's queue holds.
+    fn serve_websocket(&self, stream: TcpStream) {
+        let limit = Some(self.settings.max_line_bytes);
+        let config = tungstenite::protocol::WebSocketConfig::default().max_message_size(limit).max_frame_size(limit);
+        let _ = stream.set_read_timeout(Some(WEBSOCKET_HANDSHAKE));
+        let Ok(raw) = stream.try_clone() else { return };
+        let mut socket = match tungstenite::accept_with_config(raw, Some(config)) {
+            Ok(socket) => socket,
+            Err(error) => {
+                tracing::info!("hot-reload server: a WebSocket handshake failed: {error}");
+                return;
+            }
+        };
+        let (id, outgoing) = match self.register(&stream) {
+            Ok(registered) => registered,
+            Err(refusal) => {
+                let _ = socket.send(tungstenite::Message::text(refusal.trim_end()));
+                let _ = socket.close(None);
+                let _ = socket.flush();
+                return;
+            }
+        };
+        let _ = stream.set_read_timeout(Some(WEBSOCKET_POLL));
+        self.websocket_loop(id, &mut socket, &outgoing);
+        self.disconnect(id);
+        tracing::info!("hot-reload client {id} (WebSocket) disconnected");
+    }
+
+    fn websocket_loop(&self, id: u64, socket: &mut tungstenite::WebSocket<TcpStream>, outgoing: &Receiver<Arc<str>>) {
+        use std::sync::mpsc::TryRecvError;
+        use tungstenite::{Error, Message};
+        loop {
+            loop {
+                match outgoing.try_recv() {
+                    Ok(message) if socket.send(Message::text(message.trim_end())).is_err() => return,
+                    Ok(_) => {}
+                    Err(TryRecvError::Empty) => break,
+                    Err(TryRecvError::Disconnected) => return,
+                }
+            }
+            match socket.read() {
+                Ok(Message::Text(text)) if !self.handle_line(id, text.as_bytes()) => return,
+                Ok(Message::Binary(_)) => self.reply(
+                    id,
+                    Outgoing::Error {
+                        message: "binary messages are not part of the protocol: send JSON as text".into(),
+                    },
+                ),
+                Ok(Message::Close(_)) => {
+                    let _ = socket.flush();
+                    return;
+                }
+                Ok(_) => {}
+                Err(Error::Io(error))
+                    if matches!(error.kind(), std::io::ErrorKind::WouldBlock | std::io::ErrorKind::TimedOut) => {}
+                Err(Error::Capacity(_)) => {
+                    let message = format!("message longer than {} bytes", self.settings.max_line_bytes);
+                    self.reply(id, Outgoing::Error { message });
+                }
+                Err(_) => return,
+            }
+        }
+    }
+
+    /// Takes a client slot for a new connection (the longest idle client gives up its own when
+    /// every slot is taken) and queues `hello`: the client's id and queue, or the refusal to send
+    /// it when no slot is free.
+    fn register(&self, stream: &TcpStream) -> Result<(u64, Receiver<Arc<str>>), Arc<str>> {
+        let Ok(stream) = stream.try_clone() else {
+            return Err(line(&Outgoing::Error { message: "the connection failed".into() }));
+        };
+        let (queue, outgoing) = sync_channel::<Arc<str>>(self.settings.client_queue);
+        let mut state = self.state.lock().expect("server state");
+        if state.clients.len() >= self.settings.max_clients {
+            // The longest idle client (never subscribed, silent past the grace) makes room.
+            let idle = state
+                .clients
+                .iter()
+                .enumerate()
+                .filter(|(_, client)| !client.subscribed && client.last_request.elapsed() >= self.settings.idle_grace)
+                .min_by_key(|(_, client)| client.last_request)
+                .map(|(position, _)| position);
+            if let Some(position) = idle {
+                let client = state.clients.remove(position);
+                let notice = line(&Outgoing::Error {
+                    message: format!(
+                        "idle for {:.0} s while every slot was taken: disconnected",
+                        client.last_request.elapsed().as_secs_f64()
+                    ),
+                });
+                let _ = client.queue.try_send(notice);
+                let _ = client.stream.shutdown(Shutdown::Read);
+                tracing::info!("hot-reload client {} was idle: its slot went to a new client", client.id);
+            }
+        }
+        if state.clients.len() >= self.settings.max_clients {
+            tracing::warn!("hot-reload server: refused a client, {} connected already", state.clients.len());
+            return Err(line(&Outgoing::Error {
+                message: format!("too many clients ({} connected): try again later", state.clients.len()),
+            }));
+        }
+        let id = state.next_client;
+        state.next_client += 1;
+        let hello = line(&Outgoing::Hello {
+            protocol: PROTOCOL_VERSION,
+            revision: state.revision,
+            output: state.output.clone(),
         });
+        let peer = stream.peer_addr().map(|address| address.to_string()).unwrap_or_default();
+        let client = Client { id, queue, stream, subscribed: false, last_request: std::time::Instant::now() };
+        if !send(&client, hello) {
+            return Err(line(&Outgoing::Error { message: "could not queue the greeting".into() }));
+        }
+        state.clients.push(client);
+        tracing::info!("hot-reload client {id} connected from {peer}");
+        Ok((id, outgoing))
     }
 
     /// Notes a request from client `id`; false when it is no longer connected.
@@ -362,15 +456,24 @@ impl Server {
                     id,
                     Outgoing::Error { message: format!("line longer than {} bytes", self.settings.max_line_bytes) },
                 ),
-                // A client whose slot went to another (idle) reads no more.
-                ClientLine::Line(_) if !self.touch(id) => return,
-                ClientLine::Line(bytes) => match parse_request(&bytes) {
-                    Ok(Some(request)) => self.handle(id, request),
-                    Ok(None) => {}
-                    Err(message) => self.reply(id, Outgoing::Error { message }),
-                },
+                ClientLine::Line(bytes) if !self.handle_line(id, &bytes) => return,
+                ClientLine::Line(_) => {}
             }
         }
+    }
+
+    /// One message from client `id`: a request handled, or an error answered; false when the
+    /// client no longer holds a slot (it went to another while this one was idle).
+    fn handle_line(&self, id: u64, bytes: &[u8]) -> bool {
+        if !self.touch(id) {
+            return false;
+        }
+        match parse_request(bytes) {
+            Ok(Some(request)) => self.handle(id, request),
+            Ok(None) => {}
+            Err(message) => self.reply(id, Outgoing::Error { message }),
+        }
+        true
     }
 
     fn handle(&self, id: u64, request: Request) {
@@ -492,6 +595,25 @@ fn send(client: &Client, message: Arc<str>) -> bool {
             false
         }
     }
+}
+
+/// How long a new connection may stay silent before it is taken for a JSON-lines client (a
+/// WebSocket client opens with its HTTP request at once; a JSON-lines client that waits for
+/// `hello` gets it this much later).
+const SNIFF_WINDOW: std::time::Duration = std::time::Duration::from_millis(150);
+/// How long a WebSocket handshake may take.
+const WEBSOCKET_HANDSHAKE: std::time::Duration = std::time::Duration::from_secs(5);
+/// How often a WebSocket client's thread looks at its queue between reads.
+const WEBSOCKET_POLL: std::time::Duration = std::time::Duration::from_millis(10);
+
+/// Whether a connection's first bytes, within `SNIFF_WINDOW`, are an HTTP request (`G` of
+/// `GET`: no JSON message starts with it).
+fn opens_with_http(stream: &TcpStream) -> bool {
+    let _ = stream.set_read_timeout(Some(SNIFF_WINDOW));
+    let mut first = [0u8; 1];
+    let http = matches!(stream.peek(&mut first), Ok(1) if first[0] == b'G');
+    let _ = stream.set_read_timeout(None);
+    http
 }
 
 fn write_loop(mut stream: TcpStream, outgoing: Receiver<Arc<str>>) {

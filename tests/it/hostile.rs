@@ -691,8 +691,12 @@ fn protocol_edges_since_from_the_future_unknown_graph_assets_and_too_many_client
     assert!(message["message"].as_str().unwrap().contains("no asset named `nope`"), "{message}");
 
     let mut crowd = Vec::new();
+    // Each sends a request at once, as a JSON-lines client may: served without the 150 ms the
+    // daemon waits for a silent client's first byte (a WebSocket's upgrade), so the crowd
+    // arrives before any of it has been idle for the 5 s that would free its slot.
     let refused = (0..80).any(|_| {
-        let stream = std::net::TcpStream::connect(&daemon.address).unwrap();
+        let mut stream = std::net::TcpStream::connect(&daemon.address).unwrap();
+        std::io::Write::write_all(&mut stream, b"{\"type\":\"ping\"}\n").unwrap();
         stream.set_read_timeout(Some(Duration::from_secs(10))).unwrap();
         let mut reader = std::io::BufReader::new(stream.try_clone().unwrap());
         let mut line = String::new();

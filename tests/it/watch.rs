@@ -308,6 +308,68 @@ fn hello_names_the_output_ping_and_state_are_answered_and_each_build_is_announce
 }
 
 #[test]
+fn a_websocket_client_on_the_same_port_gets_the_same_messages_and_a_json_lines_client_its_hello_as_before() {
+    // A browser's way in: an HTTP upgrade on the daemon's one port, then one JSON message per
+    // text frame each way (hello, ping / pong, subscribe, building, batch, state, errors).
+    let project = watched_project();
+    let daemon = Daemon::start(&project);
+    let stream = TcpStream::connect(&daemon.address).unwrap();
+    stream.set_read_timeout(Some(Duration::from_secs(120))).unwrap();
+    let (mut socket, response) =
+        tungstenite::client(format!("ws://{}/", daemon.address), stream).expect("the WebSocket handshake");
+    assert_eq!(response.status(), 101);
+    let receive = |socket: &mut tungstenite::WebSocket<TcpStream>| -> Value {
+        loop {
+            match socket.read().expect("a message") {
+                tungstenite::Message::Text(text) => return serde_json::from_str(text.as_str()).unwrap(),
+                tungstenite::Message::Close(frame) => panic!("closed: {frame:?}"),
+                _ => {}
+            }
+        }
+    };
+    let hello = receive(&mut socket);
+    assert_eq!((hello["type"].as_str(), hello["protocol"].as_u64()), (Some("hello"), Some(2)), "{hello}");
+    let send = |socket: &mut tungstenite::WebSocket<TcpStream>, text: &str| {
+        socket.send(tungstenite::Message::text(text)).expect("send");
+    };
+    send(&mut socket, r#"{"type":"subscribe","since":0}"#);
+    let first = loop {
+        let message = receive(&mut socket);
+        if message["type"] == "batch" {
+            break message["revision"].as_u64().unwrap();
+        }
+    };
+    send(&mut socket, r#"{"type":"ping"}"#);
+    assert_eq!(receive(&mut socket), serde_json::json!({"type": "pong", "revision": first}));
+    send(&mut socket, "not json");
+    assert_eq!(receive(&mut socket)["type"], "error");
+    // An edit reaches the WebSocket as it reaches a JSON-lines client: building, then the batch.
+    let mut lines = daemon.connect();
+    lines.subscribe(Some(first));
+    project.write("assets/ao.png", ao_variant(7));
+    assert_eq!(receive(&mut socket)["type"], "building");
+    let batch = receive(&mut socket);
+    assert_eq!(batch["type"], "batch", "{batch}");
+    assert_eq!(lines.batch(), batch, "the same batch over both");
+    send(&mut socket, r#"{"type":"state"}"#);
+    let state = receive(&mut socket);
+    assert_eq!(state_hashes(&state), output_hashes(&project));
+    socket.close(None).unwrap();
+    // A JSON-lines client that sends first is served at once (no wait for a WebSocket's
+    // request), and the daemon lives on.
+    let mut stream = TcpStream::connect(&daemon.address).unwrap();
+    stream.set_read_timeout(Some(Duration::from_secs(120))).unwrap();
+    let started = Instant::now();
+    stream.write_all(b"{\"type\":\"ping\"}\n").unwrap();
+    let mut reader = BufReader::new(stream);
+    let (mut hello, mut pong) = (String::new(), String::new());
+    reader.read_line(&mut hello).unwrap();
+    reader.read_line(&mut pong).unwrap();
+    assert!(hello.contains("\"hello\"") && pong.contains("\"pong\""), "{hello}{pong}");
+    assert!(started.elapsed() < Duration::from_millis(100), "{:?}", started.elapsed());
+}
+
+#[test]
 fn broken_materials_fail_with_their_line_keep_their_artifacts_and_recover() {
     let project = watched_project();
     let daemon = Daemon::start(&project);

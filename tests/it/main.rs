@@ -26,6 +26,7 @@ mod scale;
 mod tidy;
 mod uv_raster;
 mod watch;
+mod web;
 
 /// The viewer example, compiled in so the tests drive the very code `cargo run --example viewer`
 /// runs (a nested `cargo build` would wait on the build-directory lock the test run holds).

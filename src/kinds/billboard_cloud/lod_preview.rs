@@ -66,7 +66,7 @@ pub fn stand_in_position(
 }
 
 /// The files of a baked LOD, each with its path (for messages) and bytes.
-pub(crate) struct LodFiles {
+pub struct LodFiles {
     pub obj: (PathBuf, Vec<u8>),
     pub albedo_ktx2: (PathBuf, Vec<u8>),
     pub normal_ktx2: (PathBuf, Vec<u8>),
@@ -75,7 +75,7 @@ pub(crate) struct LodFiles {
 
 /// The baked LOD as an engine sees it: `lod.obj` with the decoded KTX2 atlas levels (BC-decoded,
 /// so renders show the compression), alpha-tested and double-sided.
-pub(crate) fn lod_view_mesh(files: &LodFiles) -> Result<ViewMesh, Diagnostic> {
+pub fn lod_view_mesh(files: &LodFiles) -> Result<ViewMesh, Diagnostic> {
     let (obj_path, obj_bytes) = &files.obj;
     let folder = obj_path.parent().map(PathBuf::from).unwrap_or_default();
     let (mesh, _) = crate::mesh::load_mesh(obj_path, obj_bytes, &BTreeMap::new(), &folder)?;

@@ -82,10 +82,15 @@ function documentsOf(artifacts) {
 async function load(asset, paths, revision) {
   const group = new THREE.Group();
   group.name = asset;
-  for (const path of paths.sort()) {
+  for (const [index, path] of paths.sort().entries()) {
     try {
       // `v` defeats caches between revisions (the server sends no-store as well).
       const gltf = await loader.loadAsync(`/${path}?v=${revision}`);
+      // An asset's documents side by side (a Material's swatches), in the fixed view as baked.
+      if (!fixedView) {
+        const size = new THREE.Box3().setFromObject(gltf.scene).getSize(new THREE.Vector3());
+        gltf.scene.position.x = index * 1.5 * Math.max(size.x, size.y, size.z, 1e-6);
+      }
       group.add(gltf.scene);
     } catch (error) {
       window.cirrus.errors.push(`${path}: ${error}`);

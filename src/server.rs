@@ -160,6 +160,8 @@ pub(crate) struct Server {
     settings: ServerSettings,
     address: SocketAddr,
     graph_source: Arc<Mutex<Option<GraphSource>>>,
+    /// Connections not yet given a slot (being told apart, or in a WebSocket handshake).
+    pending: Arc<std::sync::atomic::AtomicUsize>,
 }
 
 #[derive(Debug, thiserror::Error)]
@@ -191,8 +193,13 @@ impl Server {
             graph: None,
             next_client: 0,
         };
-        let server =
-            Server { state: Arc::new(Mutex::new(state)), settings, address, graph_source: Arc::new(Mutex::new(None)) };
+        let server = Server {
+            state: Arc::new(Mutex::new(state)),
+            settings,
+            address,
+            graph_source: Arc::new(Mutex::new(None)),
+            pending: Arc::default(),
+        };
         let accepting = server.clone();
         std::thread::Builder::new()
             .name("cirrus-accept".into())
@@ -272,11 +279,24 @@ impl Server {
         graph
     }
 
-    /// Serves a new connection on a thread of its own (the accept loop never waits on a client).
+    /// Serves a new connection on a thread of its own (the accept loop never waits on a client);
+    /// closes it at once when `max_clients` others are still being told apart or shaking hands
+    /// (each for at most `WEBSOCKET_HANDSHAKE`), so half-open connections cannot pile up threads.
     fn accept(&self, stream: TcpStream) {
+        use std::sync::atomic::Ordering;
+        if self.pending.fetch_add(1, Ordering::SeqCst) >= self.settings.max_clients {
+            self.pending.fetch_sub(1, Ordering::SeqCst);
+            let _ = stream.shutdown(Shutdown::Both);
+            tracing::warn!(
+                "hot-reload server: {} connections still opening: closed a new one",
+                self.settings.max_clients
+            );
+            return;
+        }
         let server = self.clone();
         let spawned = std::thread::Builder::new().name("cirrus-client".into()).spawn(move || server.serve(stream));
         if let Err(error) = spawned {
+            self.pending.fetch_sub(1, Ordering::SeqCst);
             tracing::warn!("hot-reload server: cannot start a client thread: {error}");
         }
     }
@@ -285,16 +305,19 @@ impl Server {
     /// else JSON lines.
     fn serve(&self, stream: TcpStream) {
         let _ = stream.set_nodelay(true);
+        let opening = Opening { pending: &self.pending, open: std::cell::Cell::new(true) };
         if opens_with_http(&stream) {
-            self.serve_websocket(stream);
+            self.serve_websocket(stream, &opening);
         } else {
-            self.serve_lines(stream);
+            self.serve_lines(stream, &opening);
         }
     }
 
-    fn serve_lines(&self, stream: TcpStream) {
+    fn serve_lines(&self, stream: TcpStream, opening: &Opening) {
         let (Ok(reader_stream), Ok(writer_stream)) = (stream.try_clone(), stream.try_clone()) else { return };
-        let (id, outgoing) = match self.register(&stream) {
+        let registered = self.register(&stream);
+        opening.finish();
+        let (id, outgoing) = match registered {
             Ok(registered) => registered,
             Err(refusal) => {
                 let mut stream = stream;
@@ -315,7 +338,7 @@ impl Server {
     /// The same messages over a WebSocket (RFC 6455, `tungstenite`): one JSON message per text
     /// frame each way. One thread reads (polling every `WEBSOCKET_POLL`) and sends what the
     /// client's queue holds.
-    fn serve_websocket(&self, stream: TcpStream) {
+    fn serve_websocket(&self, stream: TcpStream, opening: &Opening) {
         let limit = Some(self.settings.max_line_bytes);
         let config = tungstenite::protocol::WebSocketConfig::default().max_message_size(limit).max_frame_size(limit);
         let _ = stream.set_read_timeout(Some(WEBSOCKET_HANDSHAKE));
@@ -327,7 +350,9 @@ impl Server {
                 return;
             }
         };
-        let (id, outgoing) = match self.register(&stream) {
+        let registered = self.register(&stream);
+        opening.finish();
+        let (id, outgoing) = match registered {
             Ok(registered) => registered,
             Err(refusal) => {
                 let _ = socket.send(tungstenite::Message::text(refusal.trim_end()));
@@ -594,6 +619,26 @@ fn send(client: &Client, message: Arc<str>) -> bool {
             let _ = client.stream.shutdown(Shutdown::Both);
             false
         }
+    }
+}
+
+/// A connection still opening, counted in `Server::pending` until it is given a slot or closed.
+struct Opening<'a> {
+    pending: &'a std::sync::atomic::AtomicUsize,
+    open: std::cell::Cell<bool>,
+}
+
+impl Opening<'_> {
+    fn finish(&self) {
+        if self.open.replace(false) {
+            self.pending.fetch_sub(1, std::sync::atomic::Ordering::SeqCst);
+        }
+    }
+}
+
+impl Drop for Opening<'_> {
+    fn drop(&mut self) {
+        self.finish();
     }
 }
 

@@ -708,6 +708,60 @@ fn protocol_edges_since_from_the_future_unknown_graph_assets_and_too_many_client
     drop(crowd);
 }
 
+#[test]
+fn half_open_websocket_handshakes_cannot_pile_up_threads_and_the_daemon_serves_again_after_them() {
+    // 100 connections that send the `G` of an upgrade and stall: each used to hold a thread of
+    // its own for the 5 s handshake timeout. At most `max_clients` (64) may be opening at once;
+    // the others are closed at once, and when the stalled ones time out a client is served.
+    let project = watched_project();
+    let mut daemon = Daemon::start(&project);
+    let mut client = daemon.connect();
+    client.subscribe(Some(0));
+    client.batch();
+    let threads = |daemon: &Daemon| -> usize {
+        let status = std::fs::read_to_string(format!("/proc/{}/status", daemon.child.id())).unwrap();
+        let line = status.lines().find(|line| line.starts_with("Threads:")).unwrap().to_string();
+        line.split_whitespace().nth(1).unwrap().parse().unwrap()
+    };
+    let before = threads(&daemon);
+    let stalled: Vec<std::net::TcpStream> = (0..100)
+        .map(|_| {
+            let mut stream = std::net::TcpStream::connect(&daemon.address).unwrap();
+            std::io::Write::write_all(&mut stream, b"G").unwrap();
+            stream
+        })
+        .collect();
+    std::thread::sleep(Duration::from_millis(500));
+    let during = threads(&daemon);
+    assert!(during <= before + 64, "{before} threads before, {during} with 100 stalled handshakes");
+    let closed = stalled
+        .iter()
+        .filter(|stream| {
+            stream.set_read_timeout(Some(Duration::from_millis(20))).unwrap();
+            matches!(std::io::Read::read(&mut &**stream, &mut [0u8; 1]), Ok(0))
+        })
+        .count();
+    assert!(closed >= 30, "{closed} of 100 stalled connections closed at once");
+    let started = Instant::now();
+    let served = loop {
+        let mut stream = std::net::TcpStream::connect(&daemon.address).unwrap();
+        std::io::Write::write_all(&mut stream, b"{\"type\":\"ping\"}\n").unwrap();
+        stream.set_read_timeout(Some(Duration::from_secs(10))).unwrap();
+        let mut line = String::new();
+        let _ = std::io::BufRead::read_line(&mut std::io::BufReader::new(stream), &mut line);
+        if line.contains("\"hello\"") {
+            break started.elapsed();
+        }
+        assert!(started.elapsed() < Duration::from_secs(30), "no client served 30 s after the stalled handshakes");
+        std::thread::sleep(Duration::from_millis(200));
+    };
+    println!(
+        "half-open handshakes: {before} → {during} threads, {closed} closed at once, served again after {served:?}"
+    );
+    drop(stalled);
+    assert!(daemon.alive());
+}
+
 /// Runs `cirrus ARGS` with `environment`, polling its peak resident memory (MiB): the output and
 /// the peak.
 fn run_measuring_memory(

@@ -145,7 +145,10 @@ pub(crate) fn remove_artifacts(config: &PipelineConfig, manifest: &mut Manifest,
         let Some(entry) = manifest.artifacts.remove(&path) else { continue };
         match stale_artifact_file(config, &path, &entry.hash) {
             Ok(Some(file)) => match std::fs::remove_file(&file) {
-                Ok(()) => removed.push(path),
+                Ok(()) => {
+                    remove_empty_folders(&config.root.join(&config.output), &file);
+                    removed.push(path);
+                }
                 Err(error) => tracing::warn!("cannot delete the stale artifact {path}: {error}"),
             },
             Ok(None) => removed.push(path),
@@ -153,6 +156,19 @@ pub(crate) fn remove_artifacts(config: &PipelineConfig, manifest: &mut Manifest,
         }
     }
     removed
+}
+
+/// Removes the folders that held `file` (below `output`) once they are empty: a removed
+/// asset, material or level leaves no empty folder behind. `remove_dir` refuses a folder that
+/// still holds anything, so nothing else is touched.
+fn remove_empty_folders(output: &Path, file: &Path) {
+    let mut folder = file.parent();
+    while let Some(current) = folder.filter(|current| current.starts_with(output) && *current != output) {
+        if std::fs::remove_dir(current).is_err() {
+            return;
+        }
+        folder = current.parent();
+    }
 }
 
 /// The file of a stale artifact that may be deleted (`None` when it is gone already), or why it

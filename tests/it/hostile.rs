@@ -709,6 +709,22 @@ fn protocol_edges_since_from_the_future_unknown_graph_assets_and_too_many_client
 }
 
 #[test]
+fn an_asset_taken_out_of_the_pipeline_leaves_no_empty_folder_behind() {
+    // Its artifacts are deleted as stale; the folders that held them went with them only when
+    // they were empty: the other asset's folder and anything else in the output stay.
+    let project = material_project();
+    assert!(build(&mut project.open()).all_ok());
+    assert!(project.path("baked/moss/moss").is_dir());
+    project.write("baked/notes.txt", "someone's file");
+    let pipeline = std::fs::read_to_string(project.path("pipeline.ron")).unwrap();
+    project.write("pipeline.ron", pipeline.replace(r#"Material(name: "moss", material: "moss.mymaterial"),"#, ""));
+    assert!(build(&mut project.open()).all_ok());
+    assert!(!project.path("baked/moss").exists(), "the removed asset's folder is gone");
+    assert!(project.path("baked/rock/rock/albedo.ktx2").is_file());
+    assert!(project.path("baked/notes.txt").is_file());
+}
+
+#[test]
 fn half_open_websocket_handshakes_cannot_pile_up_threads_and_the_daemon_serves_again_after_them() {
     // 100 connections that send the `G` of an upgrade and stall: each used to hold a thread of
     // its own for the 5 s handshake timeout. At most `max_clients` (64) may be opening at once;

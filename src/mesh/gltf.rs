@@ -142,12 +142,12 @@ pub struct GltfGeometry {
 }
 
 impl GltfGeometry {
-    /// The geometry with its tangents when it has UVs: from the UVs' derivatives in the OBJ's
-    /// convention (v up), the frame cirrus bakes normal maps in and glTF's +Y-up normal maps
-    /// expect, so that no loader has to make its own.
+    /// The geometry with its tangents when it has UVs: MikkTSpace's (`mesh::mikktspace_tangents`),
+    /// the frame glTF loaders would make and the source normal maps were baked in, so that no
+    /// loader has to make its own.
     pub fn with_tangents(mut self) -> GltfGeometry {
         if !self.uvs.is_empty() {
-            self.tangents = super::vertex_tangents(&self.positions, &self.normals, &self.uvs, &self.triangles);
+            self.tangents = super::mikktspace_tangents(&self.positions, &self.normals, &self.uvs, &self.triangles);
         }
         self
     }

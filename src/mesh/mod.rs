@@ -722,6 +722,54 @@ pub fn texture_paths(libraries: &BTreeMap<PathBuf, Option<Vec<u8>>>, source_root
     paths
 }
 
+/// Per-vertex MikkTSpace tangents (xyz, handedness in w: bitangent = w · normal × tangent),
+/// the frame normal-map bakers and glTF loaders use, from UVs in the OBJ's convention (v up:
+/// what glTF's `TANGENT` means with its flipped v). MikkTSpace frames face corners; a vertex
+/// whose corners it frames differently keeps its first corner's, and a vertex of no triangle
+/// (or a mesh MikkTSpace refuses) the UV-derivative frame of [`vertex_tangents`].
+pub fn mikktspace_tangents(
+    positions: &[[f32; 3]],
+    normals: &[[f32; 3]],
+    uvs: &[[f32; 2]],
+    triangles: &[[u32; 3]],
+) -> Vec<[f32; 4]> {
+    struct Corners<'a> {
+        positions: &'a [[f32; 3]],
+        normals: &'a [[f32; 3]],
+        uvs: &'a [[f32; 2]],
+        triangles: &'a [[u32; 3]],
+        tangents: Vec<Option<[f32; 4]>>,
+    }
+    impl bevy_mikktspace::Geometry for Corners<'_> {
+        fn num_faces(&self) -> usize {
+            self.triangles.len()
+        }
+        fn num_vertices_of_face(&self, _face: usize) -> usize {
+            3
+        }
+        fn position(&self, face: usize, corner: usize) -> [f32; 3] {
+            self.positions[self.triangles[face][corner] as usize]
+        }
+        fn normal(&self, face: usize, corner: usize) -> [f32; 3] {
+            self.normals[self.triangles[face][corner] as usize]
+        }
+        fn tex_coord(&self, face: usize, corner: usize) -> [f32; 2] {
+            self.uvs[self.triangles[face][corner] as usize]
+        }
+        fn set_tangent(&mut self, frame: Option<bevy_mikktspace::TangentSpace>, face: usize, corner: usize) {
+            if let Some(frame) = frame {
+                self.tangents[self.triangles[face][corner] as usize].get_or_insert(frame.tangent_encoded());
+            }
+        }
+    }
+    let fallback = vertex_tangents(positions, normals, uvs, triangles);
+    let mut corners = Corners { positions, normals, uvs, triangles, tangents: vec![None; positions.len()] };
+    if bevy_mikktspace::generate_tangents(&mut corners).is_err() {
+        return fallback;
+    }
+    corners.tangents.into_iter().zip(fallback).map(|(tangent, fallback)| tangent.unwrap_or(fallback)).collect()
+}
+
 /// Per-vertex tangents (xyz, handedness in w) from UV derivatives, for normal mapping.
 pub(crate) fn vertex_tangents(
     positions: &[[f32; 3]],

@@ -399,3 +399,20 @@ fn packing_orm_writes_the_packed_surface_in_gltf_s_order_under_its_own_name() {
         assert!(std::fs::read_to_string(&file).unwrap().contains("\"uri\": \"orm.png\""), "{}", file.display());
     }
 }
+
+#[test]
+fn mikktspace_tangents_follow_u_and_their_sign_follows_a_mirrored_uv() {
+    // A square facing +Z, UVs in the OBJ's convention (v up): the tangent points along +u and the
+    // bitangent (w · normal × tangent) along +v, so a mirrored u flips both the tangent and w.
+    let positions = [[0.0, 0.0, 0.0], [1.0, 0.0, 0.0], [1.0, 1.0, 0.0], [0.0, 1.0, 0.0]];
+    let normals = [[0.0, 0.0, 1.0]; 4];
+    let triangles = [[0, 1, 2], [0, 2, 3]];
+    let tangents = |uvs: &[[f32; 2]]| cirrus::mesh::mikktspace_tangents(&positions, &normals, uvs, &triangles);
+    let close = |a: [f32; 4], b: [f32; 4]| a.iter().zip(b).all(|(a, b)| (a - b).abs() < 1e-5);
+    for tangent in tangents(&[[0.0, 0.0], [1.0, 0.0], [1.0, 1.0], [0.0, 1.0]]) {
+        assert!(close(tangent, [1.0, 0.0, 0.0, 1.0]), "{tangent:?}");
+    }
+    for tangent in tangents(&[[1.0, 0.0], [0.0, 0.0], [0.0, 1.0], [1.0, 1.0]]) {
+        assert!(close(tangent, [-1.0, 0.0, 0.0, -1.0]), "{tangent:?}");
+    }
+}

@@ -769,4 +769,5 @@ pub(crate) fn remapped_mesh(
 /// 3: UVs onto each texture's own place (aliases), maps' -s and -o kept, unused materials ignored.
 /// 4: a map's path relative to the MTL file that names it.
 /// 5: with the mesh's glTF geometry; beside `atlas.mtl` (`mtllib atlas.mtl`).
-pub(crate) const REMAP: Stage = Stage { name: "remap", version: 5 };
+/// 6: the glTF geometry's tangents MikkTSpace's.
+pub(crate) const REMAP: Stage = Stage { name: "remap", version: 6 };

@@ -28,7 +28,8 @@ pub const BVH: Stage = Stage { name: "bvh", version: 1 };
 /// 2: a flat map (heights within 1e-4 of the search) centred, its noise not stretched.
 pub(crate) const BAKE: Stage = Stage { name: "bake", version: 2 };
 pub(crate) const TESSELLATE: Stage = Stage { name: "tessellate", version: 1 };
-pub(crate) const DISPLACE: Stage = Stage { name: "displace", version: 1 };
+/// 2: its cache entry holds the glTF geometry, MikkTSpace tangents included.
+pub(crate) const DISPLACE: Stage = Stage { name: "displace", version: 2 };
 pub(crate) const DISTANCE: Stage = Stage { name: "distance", version: 1 };
 
 /// Points sampled on each surface for the distances, each way.

@@ -24,6 +24,16 @@ pub(crate) const SOURCE_COPIES: &str = "maps";
 /// keeps a stale copy). The stem keeps letters, digits, `-` and `_` (others become `_`), so the
 /// name is a plain glTF URI. `None` when the file cannot be read.
 pub(crate) fn source_copy_path(db: &dyn Db, asset: Asset, output_folder: &Path, path: &Path) -> Option<PathBuf> {
+    source_copy(db, asset, output_folder, path).map(|(copy, _)| copy)
+}
+
+/// [`source_copy_path`] and the source's contents.
+fn source_copy<'db>(
+    db: &'db dyn Db,
+    asset: Asset,
+    output_folder: &Path,
+    path: &Path,
+) -> Option<(PathBuf, &'db crate::db::FileContents)> {
     let file = crate::db::asset_file(db, asset, path.to_path_buf())?;
     let contents = crate::db::read_contents(db, file).ok()?;
     let plain = |text: &str| -> String {
@@ -35,7 +45,7 @@ pub(crate) fn source_copy_path(db: &dyn Db, asset: Asset, output_folder: &Path, 
         Some(extension) => format!("{stem}.{}.{}", &hash[..16], plain(&extension.to_string_lossy())),
         None => format!("{stem}.{}", &hash[..16]),
     };
-    Some(output_folder.join(SOURCE_COPIES).join(name))
+    Some((output_folder.join(SOURCE_COPIES).join(name), contents))
 }
 
 /// Copies the source file `path` into the asset's output ([`source_copy_path`]), once; a PNG
@@ -48,12 +58,10 @@ pub(crate) fn copy_source(
     outputs: &mut AssetOutputs,
     path: &Path,
 ) -> Option<PathBuf> {
-    let copy = source_copy_path(db, asset, output_folder, path)?;
+    let (copy, contents) = source_copy(db, asset, output_folder, path)?;
     if !outputs.files.iter().any(|(written, _, _)| *written == copy) {
-        let file = crate::db::asset_file(db, asset, path.to_path_buf())?;
-        let bytes = &crate::db::read_contents(db, file).ok()?.bytes;
-        let plain_png = crate::texture::preview::png_without_colour_chunks(bytes);
-        outputs.add(copy.clone(), ArtifactRole::Image, plain_png.map_or_else(|| bytes.clone(), Into::into));
+        let plain_png = crate::texture::preview::png_without_colour_chunks(&contents.bytes);
+        outputs.add(copy.clone(), ArtifactRole::Image, plain_png.map_or_else(|| contents.bytes.clone(), Into::into));
     }
     Some(copy)
 }

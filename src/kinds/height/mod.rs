@@ -476,20 +476,14 @@ fn tessellated_gltf(
     let named = output_materials(db, asset, output_folder, outputs, &chosen, &places);
     warnings.extend(named.warnings);
     outputs.add(output_folder.join("tessellated.mtl"), ArtifactRole::Mtl, named.mtl.into_bytes().into());
-    let geometry = crate::mesh::gltf::GltfGeometry {
-        triangle_materials: geometry
-            .triangle_materials
-            .iter()
-            .map(|material| used.binary_search(material).unwrap_or(0) as u32)
-            .collect(),
-        ..geometry.clone()
+    // Triangles number the used materials (the geometry's own arrays are borrowed, not copied).
+    let triangle_materials: Vec<u32> =
+        geometry.triangle_materials.iter().map(|material| used.binary_search(material).unwrap_or(0) as u32).collect();
+    let mesh = crate::mesh::gltf::GltfMesh {
+        triangle_materials: &triangle_materials,
+        ..geometry.mesh(asset.name(db), &named.gltf)
     };
-    let name = asset.name(db);
-    let gltf = crate::mesh::gltf::gltf_files(
-        &geometry.mesh(name, &named.gltf),
-        "tessellated.bin",
-        crate::mesh::gltf::GENERATOR,
-    );
+    let gltf = crate::mesh::gltf::gltf_files(&mesh, "tessellated.bin", crate::mesh::gltf::GENERATOR);
     let gltf_path = output_folder.join("tessellated.gltf");
     outputs.add(gltf_path.clone(), ArtifactRole::Gltf, gltf.gltf.into());
     outputs.add(output_folder.join("tessellated.bin"), ArtifactRole::GltfBuffer, gltf.bin.into());

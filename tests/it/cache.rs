@@ -172,19 +172,7 @@ fn bundled_project_in(folder: &str) -> crate::support::TempProject {
         .replace("source: \"examples/assets\"", &format!("source: \"{folder}\""))
         .replace("atlas: (max_size: 1024)", "atlas: (max_size: 256)");
     let project = crate::support::TempProject::new(&pipeline);
-    let source = Path::new(env!("CARGO_MANIFEST_DIR")).join("examples/assets");
-    let mut folders = vec![source.clone()];
-    while let Some(current) = folders.pop() {
-        for entry in std::fs::read_dir(&current).unwrap().flatten() {
-            let path = entry.path();
-            if path.is_dir() {
-                folders.push(path);
-            } else {
-                let relative = path.strip_prefix(&source).unwrap().to_string_lossy().to_string();
-                project.write(&format!("{folder}/{relative}"), std::fs::read(&path).unwrap());
-            }
-        }
-    }
+    project.copy_folder(&Path::new(env!("CARGO_MANIFEST_DIR")).join("examples/assets"), folder);
     project
 }
 

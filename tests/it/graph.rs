@@ -16,19 +16,7 @@ use crate::support::{build, TempProject};
 fn bundled_project() -> TempProject {
     let project =
         TempProject::new(&std::fs::read_to_string(Path::new(env!("CARGO_MANIFEST_DIR")).join("pipeline.ron")).unwrap());
-    let source = Path::new(env!("CARGO_MANIFEST_DIR")).join("examples/assets");
-    let mut folders = vec![source.clone()];
-    while let Some(folder) = folders.pop() {
-        for entry in std::fs::read_dir(&folder).unwrap().flatten() {
-            let path = entry.path();
-            if path.is_dir() {
-                folders.push(path);
-            } else {
-                let relative = path.strip_prefix(&source).unwrap().to_string_lossy().to_string();
-                project.write(&format!("examples/assets/{relative}"), std::fs::read(&path).unwrap());
-            }
-        }
-    }
+    project.copy_folder(&Path::new(env!("CARGO_MANIFEST_DIR")).join("examples/assets"), "examples/assets");
     project
 }
 

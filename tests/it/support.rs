@@ -52,6 +52,14 @@ impl TempProject {
         std::fs::write(path, bytes).expect("write file");
     }
 
+    /// Copies every file under `from` (at any depth) to the folder `to` of the project.
+    pub fn copy_folder(&self, from: &Path, to: &str) {
+        for file in files_under(from) {
+            let relative = file.strip_prefix(from).unwrap().to_string_lossy().to_string();
+            self.write(&format!("{to}/{relative}"), std::fs::read(&file).unwrap());
+        }
+    }
+
     pub fn read(&self, relative: &str) -> Vec<u8> {
         std::fs::read(self.path(relative)).unwrap_or_else(|error| panic!("read {relative}: {error}"))
     }

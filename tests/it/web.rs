@@ -190,26 +190,16 @@ fn iou(a: &[bool], b: &[bool]) -> f64 {
     both as f64 / either.max(1) as f64
 }
 
-/// The bush's source mesh's bounding sphere as the preview frames it (the box's centre, the
-/// farthest vertex).
+/// The bush's source mesh's bounding sphere as the preview frames it
+/// (`cirrus::preview::bounding_sphere` of the mesh as the preview draws it).
 fn source_sphere(project: &TempProject) -> ([f32; 3], f32) {
     let bytes = project.read("assets/trees/bush_2.obj");
     let (mesh, _) =
         cirrus::mesh::load_mesh(Path::new("bush_2.obj"), &bytes, &Default::default(), Path::new("")).unwrap();
-    let (mut min, mut max) = ([f32::MAX; 3], [f32::MIN; 3]);
-    for position in &mesh.positions {
-        for axis in 0..3 {
-            min[axis] = min[axis].min(position[axis]);
-            max[axis] = max[axis].max(position[axis]);
-        }
-    }
-    let center = [0, 1, 2].map(|axis| 0.5 * (min[axis] + max[axis]));
-    let radius = mesh
-        .positions
-        .iter()
-        .map(|p| ((p[0] - center[0]).powi(2) + (p[1] - center[1]).powi(2) + (p[2] - center[2]).powi(2)).sqrt())
-        .fold(0.0, f32::max);
-    (center, radius)
+    let uvs = mesh.uvs.clone().unwrap_or_default();
+    let tangents = cirrus::mesh::mikktspace_tangents(&mesh.positions, &mesh.normals, &uvs, &mesh.triangles);
+    let view = cirrus::preview::mesh_view(&mesh, &tangents, 0.5, |_, _| Ok::<_, ()>(None)).unwrap();
+    cirrus::preview::bounding_sphere(&view)
 }
 
 /// cirrus's preview render of the baked LOD (`lod.obj` with its decoded KTX2 atlas) from
@@ -246,11 +236,7 @@ fn the_web_example_draws_the_bush_lod_as_the_preview_does_and_reloads_it_after_a
             BillboardCloud(name: "bush", mesh: "trees/bush_2.obj", atlas: (max_size: 1024)),
         ])"#,
     );
-    let trees = Path::new(env!("CARGO_MANIFEST_DIR")).join("examples/assets/trees");
-    for file in crate::support::files_under(&trees) {
-        let relative = file.strip_prefix(&trees).unwrap().display().to_string();
-        project.write(&format!("assets/trees/{relative}"), std::fs::read(&file).unwrap());
-    }
+    project.copy_folder(&Path::new(env!("CARGO_MANIFEST_DIR")).join("examples/assets/trees"), "assets/trees");
     let daemon = Daemon::start(&project);
     let mut client = daemon.connect();
     client.subscribe(Some(0));

@@ -262,19 +262,53 @@ unsafe fn score_avx2(values: &[i16; 16], pairs: &[(u8, u8)], best: &mut Candidat
 }
 
 /// Keeps in `best[0]` the best eight-value pair of `pairs` and in `best[1]` the best six-value
-/// one (the first of equals); returns where in `pairs` each was found.
+/// one (the first of equals), and in `found_at` where in the seed list each was found (`pairs`
+/// starts at seed `offset`).
 #[inline(always)]
-fn score_by_mode<const AVX2: bool>(values: &[i16; 16], pairs: &[(u8, u8)], best: &mut [Candidate; 2]) -> [usize; 2] {
-    let mut found_at = [usize::MAX; 2];
+fn score_by_mode<const AVX2: bool>(
+    values: &[i16; 16],
+    (pairs, offset): (&[(u8, u8)], usize),
+    best: &mut [Candidate; 2],
+    found_at: &mut [usize; 2],
+) {
     for (index, &(e0, e1)) in pairs.iter().enumerate() {
         let mode = usize::from(e0 <= e1);
         let before = best[mode].error;
         score::<AVX2>(values, &[(e0, e1)], &mut best[mode]);
         if best[mode].error < before {
-            found_at[mode] = index;
+            found_at[mode] = offset + index;
         }
     }
-    found_at
+}
+
+/// The best seed of each mode so far (eight-value first) and where in the seed list each was
+/// found, the seeds scored as they come.
+struct SeedScores {
+    modes: [Candidate; 2],
+    found_at: [usize; 2],
+    scored: usize,
+}
+
+impl SeedScores {
+    fn new(max: u8, min: u8) -> SeedScores {
+        let modes = [Candidate { e0: max, e1: min, error: u32::MAX }, Candidate { e0: 0, e1: 0, error: u32::MAX }];
+        SeedScores { modes, found_at: [usize::MAX; 2], scored: 0 }
+    }
+
+    /// Scores the seeds added since the last call; the best so far when it is exact.
+    #[inline(always)]
+    fn score_new<const AVX2: bool>(&mut self, values: &[i16; 16], seeds: &Candidates) -> Option<Candidate> {
+        let new = (&seeds.as_slice()[self.scored..], self.scored);
+        score_by_mode::<AVX2>(values, new, &mut self.modes, &mut self.found_at);
+        self.scored = seeds.count;
+        Some(self.best()).filter(|best| best.error == 0)
+    }
+
+    /// The first of equals in seed order, as one scoring of every seed would keep.
+    fn best(&self) -> Candidate {
+        let six_first = (self.modes[1].error, self.found_at[1]) < (self.modes[0].error, self.found_at[0]);
+        self.modes[usize::from(six_first)]
+    }
 }
 
 /// Keeps in `best` the best of `pairs` (the first of equals, on every path).
@@ -337,6 +371,13 @@ fn encode_block<const AVX2: bool>(values: &[u8; 16], search: Bc4Search) -> [u8; 
             seeds.add(max as i32, max as i32 - steps * step, eight);
         }
     }
+    let mut scoring = SeedScores::new(max, min);
+    // A block the first seeds fit exactly (two values, or a few on a whole-number grid: most of
+    // an atlas's fill) keeps the first exact one: no later seed or step is strictly better, so
+    // the result is the one the whole search gives.
+    if let Some(exact) = scoring.score_new::<AVX2>(&lanes, &seeds).filter(|_| !quick) {
+        return block_bytes(values, exact.e0, exact.e1);
+    }
     if !quick {
         if let Some((high, low)) = least_squares_ends(values, max, min) {
             seeds.add_window(high, low, 1, true);
@@ -352,6 +393,9 @@ fn encode_block<const AVX2: bool>(values: &[u8; 16], search: Bc4Search) -> [u8; 
                     seeds.add_window(high, low, 1, false);
                 }
             }
+        }
+        if let Some(exact) = scoring.score_new::<AVX2>(&lanes, &seeds) {
+            return block_bytes(values, exact.e0, exact.e1);
         }
         // The range spanning entries `first` to `first + span` only (a block of a few clusters
         // fits every other entry better than all of them), each refined by least squares.
@@ -381,12 +425,8 @@ fn encode_block<const AVX2: bool>(values: &[u8; 16], search: Bc4Search) -> [u8; 
             }
         }
     }
-    // The best seed of each mode (eight-value first).
-    let mut modes = [Candidate { e0: max, e1: min, error: u32::MAX }, Candidate { e0: 0, e1: 0, error: u32::MAX }];
-    let found_at = score_by_mode::<AVX2>(&lanes, seeds.as_slice(), &mut modes);
-    // The first of equals in seed order, as one scoring of every seed would keep.
-    let six_first = (modes[1].error, found_at[1]) < (modes[0].error, found_at[0]);
-    let mut best = modes[usize::from(six_first)];
+    scoring.score_new::<AVX2>(&lanes, &seeds);
+    let (modes, mut best) = (scoring.modes, scoring.best());
     if quick {
         return block_bytes(values, best.e0, best.e1);
     }

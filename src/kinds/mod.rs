@@ -75,6 +75,16 @@ pub(crate) trait Kind {
         Ok(None)
     }
 
+    /// The surface whose alpha test cuts `surface` out (an atlas's albedo, for the atlas's
+    /// other surfaces): the tail encodes the blocks it hides entirely at the fastest setting
+    /// (see `texture::encode::HiddenBlocks`). None: every block is shown. The kind's recipe and
+    /// parts keys of `surface` must then also name what that surface's alpha is made of (the
+    /// billboard's parts key holds the atlas coverage, which is where its albedo's alpha is
+    /// not 0).
+    fn cutting_surface(_surface: &SurfaceId) -> Option<SurfaceId> {
+        None
+    }
+
     /// The stage whose result is the image of `surface`, for another asset that reads the
     /// surface as a source (a `Material`'s `ao_source`): none when this kind makes no such
     /// surface, an error when it would but cannot (no such group, a broken source).
@@ -285,6 +295,12 @@ macro_rules! kinds {
             ) -> Result<Option<CacheKey>, Diagnostic> {
                 match self {
                     $(AssetKind::$name => <$folder::$name>::surface_recipe_key(db, asset, surface)),*
+                }
+            }
+
+            pub(crate) fn cutting_surface(self, surface: &SurfaceId) -> Option<SurfaceId> {
+                match self {
+                    $(AssetKind::$name => <$folder::$name>::cutting_surface(surface)),*
                 }
             }
 

@@ -14,6 +14,7 @@ use crate::db::{
 };
 use crate::diagnostic::Diagnostic;
 use crate::kinds::SurfaceId;
+use crate::texture::encode::HiddenBlocks;
 use crate::texture::fingerprint::BlockFingerprints;
 use crate::texture::format::Packing;
 use crate::texture::tail::{
@@ -85,6 +86,28 @@ fn tail_image(db: &dyn Db, asset: Asset, surface: SurfaceId) -> Result<Arc<Textu
     })
 }
 
+/// The blocks of the surface that its asset's alpha test hides (see [`HiddenBlocks`]): from the
+/// alpha of the albedo that cuts it out, when that albedo is alpha-tested. Equal masks compare
+/// equal, so an edit of the albedo's colours alone re-encodes nothing here.
+#[salsa::tracked(returns(clone))]
+fn hidden_blocks(db: &dyn Db, asset: Asset, surface: SurfaceId) -> Result<Option<Arc<HiddenBlocks>>, Diagnostic> {
+    let Some(albedo) = asset.kind(db).cutting_surface(&surface) else { return Ok(None) };
+    if tail_settings(db, asset, albedo.clone())?.alpha_cutoff.is_none() {
+        return Ok(None);
+    }
+    let image = tail_image(db, asset, surface.clone())?;
+    let sizes = match mip_step_settings(db, asset, surface)?.mips {
+        true => crate::texture::mips::chain_sizes(image.width, image.height),
+        false => vec![(image.width, image.height)],
+    };
+    Ok(HiddenBlocks::of_alpha(&*tail_image(db, asset, albedo)?, &sizes).map(Arc::new))
+}
+
+/// The cache key part that names a surface's hidden blocks (empty when it has none).
+fn hidden_key(db: &dyn Db, asset: Asset, surface: &SurfaceId) -> Result<String, Diagnostic> {
+    Ok(hidden_blocks(db, asset, surface.clone())?.map_or_else(String::new, |hidden| hidden.hash.to_hex().to_string()))
+}
+
 /// A `width` × `height` texture's working set reserved from the process's texture memory budget
 /// (held over pure work only: no query may run while it is held).
 fn texture_memory(db: &dyn Db, width: u32, height: u32) -> crate::schedule::MemoryReservation<'static> {
@@ -111,8 +134,9 @@ pub(crate) fn surface_blocks(db: &dyn Db, asset: Asset, surface: SurfaceId) -> R
     let label = surface.label(asset.name(db));
     let previous = previous_encoding(db, &label);
     let memory = texture_memory(db, mips.levels[0].width, mips.levels[0].height);
+    let hidden = hidden_blocks(db, asset, surface.clone())?;
     let encoded = timed(db, ENCODE, &label, || {
-        tail_encode(&mips, surface.surface, (format, quality), alpha_cutoff, previous.as_deref())
+        tail_encode(&mips, surface.surface, (format, quality), (alpha_cutoff, hidden.as_deref()), previous.as_deref())
     });
     drop(memory);
     let remembered = Arc::new(PreviousEncoding::of(&mips, &encoded));
@@ -154,7 +178,7 @@ pub(crate) fn surface_files(
     let image = tail_image(db, asset, surface.clone())?;
     let settings = tail_settings(db, asset, surface.clone())?;
     let label = surface.label(asset.name(db));
-    let content_key = content_key(&settings, &image);
+    let content_key = content_key(&settings, &image, &hidden_key(db, asset, &surface)?);
     if let Some(artifacts) = load_cached(db, SURFACE_ENTRY, content_key, artifacts_from_entry) {
         record_cache_hit(db, WRITE, &label);
         return Ok(Arc::new(artifacts));
@@ -179,8 +203,7 @@ pub(crate) fn surface_artifacts(
 ) -> Result<Arc<SurfaceArtifacts>, Diagnostic> {
     let settings = tail_settings(db, asset, surface.clone())?;
     let kind = asset.kind(db);
-    let recipe_key =
-        kind.surface_recipe_key(db, asset, &surface)?.map(|recipe| surface_key(&settings).part(&recipe.0).finish());
+    let recipe_key = recipe_key(db, asset, &surface, &settings)?;
     if let Some(artifacts) = recipe_key.and_then(|key| artifacts_by_recipe(db, key)) {
         record_cache_hit(db, WRITE, &surface.label(asset.name(db)));
         return Ok(Arc::new(artifacts));
@@ -196,7 +219,8 @@ pub(crate) fn surface_artifacts(
         }
         None => {
             let artifacts = surface_files(db, asset, surface.clone())?;
-            (artifacts, Some(content_key(&settings, &*tail_image(db, asset, surface.clone())?)))
+            let image = tail_image(db, asset, surface.clone())?;
+            (artifacts, Some(content_key(&settings, &image, &hidden_key(db, asset, &surface)?)))
         }
     };
     // Both keys name the content entry from now on (found by parts: the content key is the
@@ -235,15 +259,32 @@ pub(crate) fn surface_in_cache(db: &dyn Db, asset: Asset, surface: &SurfaceId) -
     let (Some(cache), Ok(settings)) = (db.disk_cache(), tail_settings(db, asset, surface.clone())) else {
         return false;
     };
-    match asset.kind(db).surface_recipe_key(db, asset, surface) {
-        Ok(Some(recipe)) => cache.contains(SURFACE_RECIPE_ENTRY, surface_key(&settings).part(&recipe.0).finish()),
+    match recipe_key(db, asset, surface, &settings) {
+        Ok(Some(key)) => cache.contains(SURFACE_RECIPE_ENTRY, key),
         _ => false,
     }
 }
 
-/// The key of a surface's files by the texels of its image.
-fn content_key(settings: &TailSettings, image: &Texture) -> CacheKey {
-    surface_key(settings).part(&image.width).part(&image.height).part(&image.hash).finish()
+/// The key of a surface's entry by its kind's recipe (none when the kind names none).
+fn recipe_key(
+    db: &dyn Db,
+    asset: Asset,
+    surface: &SurfaceId,
+    settings: &TailSettings,
+) -> Result<Option<CacheKey>, Diagnostic> {
+    let recipe = asset.kind(db).surface_recipe_key(db, asset, surface)?;
+    Ok(recipe.map(|recipe| surface_key(settings).part(&recipe.0).finish()))
+}
+
+/// The key of a surface's files by the texels of its image (and the blocks its asset's alpha
+/// test hides, `hidden`: see [`hidden_key`]).
+fn content_key(settings: &TailSettings, image: &Texture, hidden: &str) -> CacheKey {
+    let key = surface_key(settings).part(&image.width).part(&image.height).part(&image.hash);
+    match hidden {
+        // Surfaces without hidden blocks keep the keys they had before hiding.
+        "" => key.finish(),
+        hidden => key.part(hidden).finish(),
+    }
 }
 
 /// The start of both keys of a surface entry: the tail's versions and every tail setting.
@@ -286,8 +327,9 @@ fn artifacts_from_entry(entry: CacheEntry) -> Option<SurfaceArtifacts> {
 /// identity (asset, surface, tail settings), overwritten by every encode, so that a new process
 /// re-encodes only the blocks an edit changed. Results equal a full encode either way.
 const ENCODING_MEMO: &str = "encoding-memo";
-/// 4: level 0 as block fingerprints; 5: with the alpha test's figures per block.
-const ENCODING_MEMO_VERSION: u32 = 5;
+/// 4: level 0 as block fingerprints; 5: with the alpha test's figures per block; 6: with the
+/// hidden blocks' hash.
+const ENCODING_MEMO_VERSION: u32 = 6;
 
 /// Whether a surface's last encoding is kept on disk: for BC7 only, whose encoder is the slow
 /// one (on the oak's 2048² albedo, re-encoding from scratch after a restart costs about 0.9 s;
@@ -341,6 +383,8 @@ struct EncodingEntry {
     psnr_db: f64,
     channels: usize,
     alpha_threshold: Option<u8>,
+    /// The hidden blocks' hash (hex), when it was encoded with some.
+    hidden: Option<String>,
 }
 
 fn encoding_entry(previous: &PreviousEncoding) -> CacheEntry {
@@ -354,6 +398,7 @@ fn encoding_entry(previous: &PreviousEncoding) -> CacheEntry {
         psnr_db: encoded.psnr_db,
         channels: encoded.block_errors.channels,
         alpha_threshold: encoded.block_errors.cut_out.as_ref().map(|(threshold, _)| *threshold),
+        hidden: encoded.hidden.map(|hash| hash.to_hex().to_string()),
     };
     let mut blobs = vec![crate::db::pod_blob(&blocks.texels), crate::db::pod_blob(&blocks.alphas)];
     blobs.extend(previous.lower_levels.iter().map(|level| level.pixels.to_vec()));
@@ -417,6 +462,12 @@ fn encoding_from_entry(entry: CacheEntry) -> Option<PreviousEncoding> {
         level0_blocks: Arc::new(level0_blocks),
         lower_levels,
         mip_reuse: reuse.map(Arc::new),
-        encoded: EncodedSurface { settings, texture, block_errors: Arc::new(block_errors), psnr_db: metadata.psnr_db },
+        encoded: EncodedSurface {
+            settings,
+            hidden: metadata.hidden.as_deref().and_then(|hash| blake3::Hash::from_hex(hash).ok()),
+            texture,
+            block_errors: Arc::new(block_errors),
+            psnr_db: metadata.psnr_db,
+        },
     })
 }

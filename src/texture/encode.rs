@@ -122,10 +122,94 @@ const BLOCKS_PER_TASK: usize = 1024;
 /// blocks repeat, and a block's encoding depends on its texels only, so the result is the same
 /// as encoding every block.
 pub fn encode_level(level: &Texture, settings: BlockEncodeSettings) -> Vec<u8> {
+    encode_level_hiding(level, settings, None)
+}
+
+/// [`encode_level`], the blocks `hidden` marks (one flag per block, rows of blocks from the top)
+/// at the fastest setting.
+fn encode_level_hiding(level: &Texture, settings: BlockEncodeSettings, hidden: Option<&[bool]>) -> Vec<u8> {
     let channels = format_channels(settings.format);
     let texels = block_texels(level, channels);
     let blocks: Vec<&[u8]> = texels.chunks_exact(16 * channels).collect();
-    encode_block_list(&blocks, settings)
+    encode_block_list(&blocks, settings, hidden)
+}
+
+/// The blocks of each level of a surface that no alpha test shows: where the albedo that
+/// cuts the surface out (an atlas's, for its normal, height and packed surfaces) has alpha 0
+/// over the block's whole footprint. They are seen only through filtering next to shown
+/// texels, like the fully transparent blocks of an alpha-tested BC7 albedo, and are encoded at
+/// the fastest setting: BC4/BC5 at the range's ends and grid palettes, BC1 without the
+/// refinement, BC7 at the fastest profile.
+#[derive(Clone, Debug, PartialEq, Eq)]
+pub struct HiddenBlocks {
+    /// Per level (level 0 first), one flag per block, rows of blocks from the top.
+    pub levels: Vec<Vec<bool>>,
+    pub hash: blake3::Hash,
+}
+
+impl HiddenBlocks {
+    /// The hidden blocks of a mip chain of `sizes` (level 0 first) under `albedo` (the size of
+    /// level 0). A texel of a lower level is hidden when every texel its box filter reads on the
+    /// level above is (a footprint of `scale` texels, widened to whole texels). None when no
+    /// block is hidden or the sizes do not match.
+    pub fn of_alpha(albedo: &Texture, sizes: &[(u32, u32)]) -> Option<HiddenBlocks> {
+        if sizes.first() != Some(&(albedo.width, albedo.height)) {
+            return None;
+        }
+        let mut zero: Vec<bool> = albedo.pixels.chunks_exact(4).map(|texel| texel[3] == 0).collect();
+        let (mut width, mut height) = (albedo.width as usize, albedo.height as usize);
+        let mut levels = Vec::with_capacity(sizes.len());
+        for (index, &(new_width, new_height)) in sizes.iter().enumerate() {
+            let (new_width, new_height) = (new_width as usize, new_height as usize);
+            if index > 0 {
+                zero = reduced_zeros(&zero, (width, height), (new_width, new_height));
+                (width, height) = (new_width, new_height);
+            }
+            levels.push(hidden_of_zeros(&zero, width, height));
+        }
+        if !levels.iter().flatten().any(|&hidden| hidden) {
+            return None;
+        }
+        let mut hasher = blake3::Hasher::new();
+        for level in &levels {
+            hasher.update(&(level.len() as u64).to_le_bytes());
+            hasher.update(bytemuck::cast_slice(&level.iter().map(|&hidden| hidden as u8).collect::<Vec<u8>>()));
+        }
+        Some(HiddenBlocks { levels, hash: hasher.finalize() })
+    }
+}
+
+/// Which texels of a `to` level are zero when the `from` level's `zero` texels are, by the
+/// footprints of the area-weighted box reduction between them.
+fn reduced_zeros(zero: &[bool], from: (usize, usize), to: (usize, usize)) -> Vec<bool> {
+    let span = |index: usize, old: usize, new: usize| {
+        let start = index * old / new;
+        let end = ((index + 1) * old).div_ceil(new).min(old);
+        start..end.max(start + 1)
+    };
+    let mut reduced = vec![false; to.0 * to.1];
+    for y in 0..to.1 {
+        let rows = span(y, from.1, to.1);
+        for x in 0..to.0 {
+            let columns = span(x, from.0, to.0);
+            reduced[y * to.0 + x] = rows
+                .clone()
+                .all(|row| zero[row * from.0 + columns.start..row * from.0 + columns.end].iter().all(|&z| z));
+        }
+    }
+    reduced
+}
+
+/// One flag per 4×4 block: every texel of it is zero (edge blocks: the texels they have).
+fn hidden_of_zeros(zero: &[bool], width: usize, height: usize) -> Vec<bool> {
+    let (blocks_x, blocks_y) = (width.div_ceil(4), height.div_ceil(4));
+    let mut hidden = vec![true; blocks_x * blocks_y];
+    for (texel, &is_zero) in zero.iter().enumerate() {
+        if !is_zero {
+            hidden[(texel / width / 4) * blocks_x + texel % width / 4] = false;
+        }
+    }
+    hidden
 }
 
 /// The bytes per texel a format's encoder reads.
@@ -137,8 +221,9 @@ fn format_channels(format: BlockFormat) -> usize {
     }
 }
 
-/// Encodes a list of blocks (16 texels each, rows top to bottom), in order.
-fn encode_block_list(blocks: &[&[u8]], settings: BlockEncodeSettings) -> Vec<u8> {
+/// Encodes a list of blocks (16 texels each, rows top to bottom), in order; those `hidden`
+/// marks at the fastest setting.
+fn encode_block_list(blocks: &[&[u8]], settings: BlockEncodeSettings, hidden: Option<&[bool]>) -> Vec<u8> {
     let channels = format_channels(settings.format);
     let block_count = blocks.len();
     // Each block's number among the distinct blocks, and the first block of each. Blocks are
@@ -147,11 +232,14 @@ fn encode_block_list(blocks: &[&[u8]], settings: BlockEncodeSettings) -> Vec<u8>
     let mut numbers: std::collections::HashMap<u64, u32> = std::collections::HashMap::with_capacity(block_count / 2);
     let mut distinct_of_block = Vec::with_capacity(block_count);
     let mut distinct: Vec<&[u8]> = Vec::new();
-    for (&block, hash) in blocks.iter().zip(hashes) {
+    // Whether some block of each distinct content is shown (not hidden).
+    let mut shown: Vec<bool> = Vec::new();
+    for (index, (&block, hash)) in blocks.iter().zip(hashes).enumerate() {
         let number = match numbers.get(&hash) {
             Some(&number) if distinct[number as usize] == block => number,
             seen => {
                 distinct.push(block);
+                shown.push(false);
                 let number = distinct.len() as u32 - 1;
                 if seen.is_none() {
                     numbers.insert(hash, number);
@@ -159,6 +247,7 @@ fn encode_block_list(blocks: &[&[u8]], settings: BlockEncodeSettings) -> Vec<u8>
                 number
             }
         };
+        shown[number as usize] |= !hidden.is_some_and(|hidden| hidden[index]);
         distinct_of_block.push(number);
     }
     // The blocks of an alpha-tested BC7 surface by what they show. Fully transparent ones are
@@ -178,6 +267,7 @@ fn encode_block_list(blocks: &[&[u8]], settings: BlockEncodeSettings) -> Vec<u8>
     ];
     for (number, block) in distinct.iter().enumerate() {
         let group = match alpha_profiles.then(|| alpha_coverage(block)) {
+            _ if !shown[number] => 1,
             Some(AlphaCoverage::Transparent) => 1,
             Some(AlphaCoverage::CutOut) => 2,
             _ => 0,
@@ -359,16 +449,25 @@ pub struct PreviousBlocks<'a> {
 pub fn encode_levels_reusing(
     levels: &[Texture],
     level0_blocks: &BlockFingerprints,
-    settings: BlockEncodeSettings,
+    (settings, hidden): (BlockEncodeSettings, Option<&HiddenBlocks>),
     previous: Option<PreviousBlocks>,
 ) -> EncodedTexture {
+    let hidden = hidden.filter(|hidden| {
+        hidden.levels.len() == levels.len()
+            && hidden.levels.iter().zip(levels).all(|(flags, level)| {
+                flags.len() == level.width.div_ceil(4) as usize * level.height.div_ceil(4) as usize
+            })
+    });
+    let hidden_of = |index: usize| hidden.map(|hidden| &hidden.levels[index][..]);
+    let encode_level = |index: usize, level: &Texture| encode_level_hiding(level, settings, hidden_of(index));
     let Some(previous) = previous.filter(|previous| {
         previous.encoded.format == settings.format
             && previous.encoded.srgb == settings.srgb
             && previous.lower_levels.len() + 1 == levels.len()
             && previous.encoded.levels.len() == levels.len()
     }) else {
-        return encode_levels(levels, settings);
+        let encoded = levels.iter().enumerate().map(|(index, level)| Arc::from(encode_level(index, level))).collect();
+        return encoded_texture(levels, settings, encoded);
     };
     let size = block_bytes(settings.format);
     let encoded: Vec<Arc<[u8]>> = levels
@@ -380,7 +479,7 @@ pub fn encode_levels_reusing(
                 if !level0_blocks.same_size(previous.level0_blocks)
                     || (level.width, level.height) != (level0_blocks.width, level0_blocks.height)
                 {
-                    return Arc::from(encode_level(level, settings));
+                    return Arc::from(encode_level(index, level));
                 }
                 let blocks_x = level0_blocks.blocks_x() as u32;
                 (0..level0_blocks.texels.len())
@@ -390,7 +489,7 @@ pub fn encode_levels_reusing(
             } else {
                 let old_level = &previous.lower_levels[index - 1];
                 if (level.width, level.height) != (old_level.width, old_level.height) {
-                    return Arc::from(encode_level(level, settings));
+                    return Arc::from(encode_level(index, level));
                 }
                 if level.hash == old_level.hash {
                     return old_blocks.clone();
@@ -401,7 +500,7 @@ pub fn encode_levels_reusing(
                 return old_blocks.clone();
             }
             if changed.len() * 2 > level.width.div_ceil(4) as usize * level.height.div_ceil(4) as usize {
-                return Arc::from(encode_level(level, settings));
+                return Arc::from(encode_level(index, level));
             }
             // Only the changed blocks are gathered and encoded, then scattered.
             let channels = format_channels(settings.format);
@@ -409,8 +508,14 @@ pub fn encode_levels_reusing(
             for (block, &(bx, by)) in texels.chunks_exact_mut(16 * channels).zip(&changed) {
                 copy_block(level, bx as usize, by as usize, channels, block);
             }
-            let fresh = encode_block_list(&texels.chunks_exact(16 * channels).collect::<Vec<_>>(), settings);
             let blocks_x = level.width.div_ceil(4) as usize;
+            let changed_hidden: Option<Vec<bool>> = hidden_of(index)
+                .map(|hidden| changed.iter().map(|&(bx, by)| hidden[by as usize * blocks_x + bx as usize]).collect());
+            let fresh = encode_block_list(
+                &texels.chunks_exact(16 * channels).collect::<Vec<_>>(),
+                settings,
+                changed_hidden.as_deref(),
+            );
             let mut blocks = old_blocks.to_vec();
             for (index, &(bx, by)) in changed.iter().enumerate() {
                 let number = by as usize * blocks_x + bx as usize;

@@ -110,6 +110,18 @@ struct Chain {
     tile_level: Option<TileLevel>,
 }
 
+/// The sizes of a full mip chain of a `width` × `height` level 0, level 0 first: each level
+/// halves (rounding down, at least 1) down to 1 × 1, as [`extend_chain`] makes them.
+pub fn chain_sizes(width: u32, height: u32) -> Vec<(u32, u32)> {
+    let mut sizes = vec![(width, height)];
+    let (mut width, mut height) = (width, height);
+    while width > 1 || height > 1 {
+        (width, height) = ((width / 2).max(1), (height / 2).max(1));
+        sizes.push((width, height));
+    }
+    sizes
+}
+
 /// Reduces `current` (the filter-space texels of the chain's last level) level by level down to
 /// 1×1, appending each level and its alpha scale.
 fn extend_chain(

@@ -8,7 +8,9 @@ use std::sync::Arc;
 
 use crate::texture::color::has_transparency;
 use crate::texture::container::write_container;
-use crate::texture::encode::{encode_levels_reusing, BlockEncodeSettings, EncodedTexture, PreviousBlocks};
+use crate::texture::encode::{
+    encode_levels_reusing, BlockEncodeSettings, EncodedTexture, HiddenBlocks, PreviousBlocks,
+};
 use crate::texture::fingerprint::BlockFingerprints;
 use crate::texture::format::{BlockFormat, Container, EncodeQuality, Packing};
 use crate::texture::mips::{mip_chain_reusing, MipReuse, MipSettings, PreviousChain};
@@ -66,6 +68,8 @@ impl PartialEq for MipLevels {
 #[derive(Clone, Debug)]
 pub(crate) struct EncodedSurface {
     pub settings: BlockEncodeSettings,
+    /// The hash of the hidden blocks it was encoded with (see [`HiddenBlocks`]).
+    pub hidden: Option<blake3::Hash>,
     pub texture: EncodedTexture,
     pub block_errors: Arc<BlockErrors>,
     /// Rounded to 0.01 dB.
@@ -74,7 +78,10 @@ pub(crate) struct EncodedSurface {
 
 impl PartialEq for EncodedSurface {
     fn eq(&self, other: &Self) -> bool {
-        self.settings == other.settings && self.texture == other.texture && self.psnr_db == other.psnr_db
+        self.settings == other.settings
+            && self.hidden == other.hidden
+            && self.texture == other.texture
+            && self.psnr_db == other.psnr_db
     }
 }
 
@@ -177,15 +184,17 @@ pub(crate) fn tail_encode(
     mips: &MipLevels,
     surface: SurfaceKind,
     (format, quality): (BlockFormat, EncodeQuality),
-    alpha_cutoff: Option<f32>,
+    (alpha_cutoff, hidden): (Option<f32>, Option<&HiddenBlocks>),
     previous: Option<&PreviousEncoding>,
 ) -> EncodedSurface {
     let settings = BlockEncodeSettings { format, quality, alpha: mips.alpha_tested, srgb: surface.is_srgb() };
-    let previous = previous.filter(|previous| previous.encoded.settings == settings);
+    let hidden_hash = hidden.map(|hidden| hidden.hash);
+    let previous =
+        previous.filter(|previous| previous.encoded.settings == settings && previous.encoded.hidden == hidden_hash);
     let texture = encode_levels_reusing(
         &mips.levels,
         &mips.level0_blocks,
-        settings,
+        (settings, hidden),
         previous.map(|previous| PreviousBlocks {
             level0_blocks: &previous.level0_blocks,
             lower_levels: &previous.lower_levels,
@@ -207,7 +216,7 @@ pub(crate) fn tail_encode(
         }),
     );
     let psnr_db = (block_errors.psnr(image.width, image.height) * 100.0).round() / 100.0;
-    EncodedSurface { settings, texture, block_errors: Arc::new(block_errors), psnr_db }
+    EncodedSurface { settings, hidden: hidden_hash, texture, block_errors: Arc::new(block_errors), psnr_db }
 }
 
 /// What a surface would measure in another format: its cost and level 0's PSNR.

@@ -305,6 +305,11 @@ impl Kind for BillboardCloud {
         Ok(Some(queries::atlas_recipe_key(db, asset, level_of_surface(db, asset, surface)?)))
     }
 
+    fn cutting_surface(surface: &SurfaceId) -> Option<SurfaceId> {
+        (surface.surface != SurfaceKind::Albedo)
+            .then(|| SurfaceId { group: surface.group.clone(), surface: SurfaceKind::Albedo })
+    }
+
     fn surface_parts_key(db: &dyn Db, asset: Asset, surface: &SurfaceId) -> Result<Option<CacheKey>, Diagnostic> {
         queries::atlas_surface_parts_key(db, asset, level_of_surface(db, asset, surface)?, surface.surface).map(Some)
     }

@@ -272,7 +272,7 @@ fn re_encoding_only_changed_blocks_equals_a_full_encode() {
         let old = encode_levels(&old_levels, settings);
         let (old_blocks, new_blocks) = (BlockFingerprints::of(&old_levels[0]), BlockFingerprints::of(&new_levels[0]));
         let previous = PreviousBlocks { level0_blocks: &old_blocks, lower_levels: &old_levels[1..], encoded: &old };
-        let reused = encode_levels_reusing(&new_levels, &new_blocks, settings, Some(previous));
+        let reused = encode_levels_reusing(&new_levels, &new_blocks, (settings, None), Some(previous));
         assert_eq!(reused, encode_levels(&new_levels, settings), "{format:?}: reuse is exact");
         assert_ne!(reused, old, "{format:?}: the edit shows");
         // The PSNR from per-block errors, measured again only where blocks or texels changed.
@@ -579,4 +579,60 @@ fn the_report_gives_each_formats_cost_and_with_compare_formats_what_the_others_w
     // Without the setting, no comparison is made.
     let plain: serde_json::Value = serde_json::from_slice(&project.read("baked/mixed/report.json")).expect("report");
     assert!(plain["materials"][0]["surfaces"][0].get("other_formats").is_none());
+}
+
+#[test]
+fn blocks_the_albedo_hides_are_encoded_fast_and_the_shown_ones_exactly_as_before() {
+    use cirrus::config::EncodeQuality;
+    use cirrus::texture::encode::{
+        encode_level, encode_levels, encode_levels_reusing, BlockEncodeSettings, HiddenBlocks,
+    };
+    use cirrus::texture::fingerprint::BlockFingerprints;
+    use cirrus::texture::mips::{chain_sizes, mip_chain, MipSettings};
+    use cirrus::texture::SurfaceKind;
+    // An albedo cut out on its left 26 columns (alpha 0) over a 70 × 40 surface of noise.
+    let (width, height) = (70u32, 40u32);
+    let albedo_pixels: Vec<u8> =
+        (0..width * height).flat_map(|texel| [90, 120, 60, if texel % width < 26 { 0 } else { 255 }]).collect();
+    let albedo = cirrus::texture::Texture::new(width, height, albedo_pixels);
+    let surface = decode_png(&pattern_png(width, height, 7));
+    let levels = mip_chain(&surface, MipSettings { kind: SurfaceKind::Height, alpha_cutoff: None });
+    let sizes = chain_sizes(width, height);
+    assert_eq!(sizes, levels.iter().map(|level| (level.width, level.height)).collect::<Vec<_>>());
+    let hidden = HiddenBlocks::of_alpha(&albedo, &sizes).expect("some blocks are hidden");
+    // Level 0: block columns 0..6 lie wholly in the cut-out columns (0..24), column 6 straddles.
+    let blocks_x = 18;
+    for (number, &is_hidden) in hidden.levels[0].iter().enumerate() {
+        assert_eq!(is_hidden, number % blocks_x < 6, "level 0 block {number}");
+    }
+    // Level 1 (35 × 20): texel x reads level-0 columns 2x and 2x + 1; blocks 0..3 read 0..24.
+    for (number, &is_hidden) in hidden.levels[1].iter().enumerate() {
+        assert_eq!(is_hidden, number % 9 < 3, "level 1 block {number}");
+    }
+    // A level whose blocks all reach the shown columns hides nothing.
+    assert!(hidden.levels[3].iter().all(|&is_hidden| !is_hidden), "level 3 (8 × 5) reads shown texels");
+    let opaque = cirrus::texture::Texture::new(width, height, vec![255; (width * height * 4) as usize]);
+    assert!(HiddenBlocks::of_alpha(&opaque, &sizes).is_none(), "an opaque albedo hides nothing");
+    assert!(HiddenBlocks::of_alpha(&albedo, &sizes[1..]).is_none(), "another size hides nothing");
+
+    let fingerprints = BlockFingerprints::of(&levels[0]);
+    for format in [BlockFormat::Bc1, BlockFormat::Bc4, BlockFormat::Bc5, BlockFormat::Bc7] {
+        let settings = BlockEncodeSettings { format, quality: EncodeQuality::Basic, alpha: false, srgb: false };
+        let fastest = BlockEncodeSettings { quality: EncodeQuality::UltraFast, ..settings };
+        let plain = encode_levels(&levels, settings);
+        let hiding = encode_levels_reusing(&levels, &fingerprints, (settings, Some(&hidden)), None);
+        let size = cirrus::texture::encode::block_bytes(format);
+        let mut differing = 0;
+        for (index, level) in levels.iter().enumerate() {
+            let quick = encode_level(level, fastest);
+            for (number, &is_hidden) in hidden.levels[index].iter().enumerate() {
+                let block = |bytes: &[u8]| bytes[number * size..][..size].to_vec();
+                let expected = if is_hidden { block(&quick) } else { block(&plain.levels[index]) };
+                assert_eq!(block(&hiding.levels[index]), expected, "{format:?} level {index} block {number}");
+                differing += usize::from(block(&hiding.levels[index]) != block(&plain.levels[index]));
+            }
+        }
+        // The fast setting is a different encoding of noise (the test can tell them apart).
+        assert!(differing > 0, "{format:?}: hidden blocks encoded as before");
+    }
 }

@@ -88,7 +88,20 @@ pub struct BlockEncodeSettings {
 
 /// Encodes every level of a mip chain (level 0 first).
 pub fn encode_levels(levels: &[Texture], settings: BlockEncodeSettings) -> EncodedTexture {
-    let encoded: Vec<Arc<[u8]>> = levels.iter().map(|level| Arc::from(encode_level(level, settings))).collect();
+    encode_levels_hiding(levels, settings, |_| None)
+}
+
+/// [`encode_levels`], the blocks `hidden_of(level)` marks at the fastest setting.
+fn encode_levels_hiding<'a>(
+    levels: &[Texture],
+    settings: BlockEncodeSettings,
+    hidden_of: impl Fn(usize) -> Option<&'a [bool]>,
+) -> EncodedTexture {
+    let encoded = levels
+        .iter()
+        .enumerate()
+        .map(|(index, level)| Arc::from(encode_level_hiding(level, settings, hidden_of(index))))
+        .collect();
     encoded_texture(levels, settings, encoded)
 }
 
@@ -466,8 +479,7 @@ pub fn encode_levels_reusing(
             && previous.lower_levels.len() + 1 == levels.len()
             && previous.encoded.levels.len() == levels.len()
     }) else {
-        let encoded = levels.iter().enumerate().map(|(index, level)| Arc::from(encode_level(index, level))).collect();
-        return encoded_texture(levels, settings, encoded);
+        return encode_levels_hiding(levels, settings, hidden_of);
     };
     let size = block_bytes(settings.format);
     let encoded: Vec<Arc<[u8]>> = levels

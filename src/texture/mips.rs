@@ -116,10 +116,15 @@ pub fn chain_sizes(width: u32, height: u32) -> Vec<(u32, u32)> {
     let mut sizes = vec![(width, height)];
     let (mut width, mut height) = (width, height);
     while width > 1 || height > 1 {
-        (width, height) = ((width / 2).max(1), (height / 2).max(1));
+        (width, height) = next_level_size(width, height);
         sizes.push((width, height));
     }
     sizes
+}
+
+/// The size of the level below a `width` × `height` one: halved, rounding down, at least 1.
+fn next_level_size(width: u32, height: u32) -> (u32, u32) {
+    ((width / 2).max(1), (height / 2).max(1))
 }
 
 /// Reduces `current` (the filter-space texels of the chain's last level) level by level down to
@@ -135,7 +140,7 @@ fn extend_chain(
     let last = chain.levels.last().expect("level 0");
     let (mut width, mut height) = (last.width, last.height);
     while width > 1 || height > 1 {
-        let (next_width, next_height) = ((width / 2).max(1), (height / 2).max(1));
+        let (next_width, next_height) = next_level_size(width, height);
         current = reduce(&current, width, height, next_width, next_height);
         straight = straight.map(|colour| reduce(&colour, width, height, next_width, next_height));
         (width, height) = (next_width, next_height);

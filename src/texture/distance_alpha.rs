@@ -166,6 +166,14 @@ fn area_keeping_offset(
     let at = |column: i64, row: i64| {
         texel_distances[row.clamp(0, height as i64 - 1) as usize * width + column.clamp(0, width as i64 - 1) as usize]
     };
+    // Each sample column's texel column to its left and its weight toward the right one; the
+    // samples of one texel column read the same four texels, tested once for all of them.
+    let sample_columns: Vec<(i64, f32)> = (0..width * factor)
+        .map(|sample_column| {
+            let x = (sample_column as f32 + 0.5) / factor as f32 - 0.5;
+            (x.floor() as i64, x - x.floor())
+        })
+        .collect();
     // Per row of samples: the filtered distances of the samples near an edge (some texel
     // around them neither far outside nor far inside), and the count of those far inside.
     let rows = map_rows(0..height * factor, width * height * factor * factor >= PARALLEL_SAMPLES, |sample_row| {
@@ -173,23 +181,22 @@ fn area_keeping_offset(
         let (row, fy) = (y.floor() as i64, y - y.floor());
         let mut near_edge = Vec::new();
         let mut deep = 0usize;
-        for sample_column in 0..width * factor {
-            let x = (sample_column as f32 + 0.5) / factor as f32 - 0.5;
-            let (column, fx) = (x.floor() as i64, x - x.floor());
+        for same_column in sample_columns.chunk_by(|a, b| a.0 == b.0) {
+            let column = same_column[0].0;
             let corners = [at(column, row), at(column + 1, row), at(column, row + 1), at(column + 1, row + 1)];
             if corners.iter().all(|&corner| corner <= -far) {
                 continue;
             }
             if corners.iter().all(|&corner| corner == far) {
-                deep += 1;
+                deep += same_column.len();
                 continue;
             }
-            near_edge.push(
+            near_edge.extend(same_column.iter().map(|&(_, fx)| {
                 corners[0] * (1.0 - fx) * (1.0 - fy)
                     + corners[1] * fx * (1.0 - fy)
                     + corners[2] * (1.0 - fx) * fy
-                    + corners[3] * fx * fy,
-            );
+                    + corners[3] * fx * fy
+            }));
         }
         (near_edge, deep)
     });

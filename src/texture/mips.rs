@@ -78,13 +78,20 @@ fn reusable_size(width: u32, height: u32) -> bool {
 }
 
 fn full_chain(level0: &Texture, settings: MipSettings) -> (Vec<Texture>, Option<MipReuse>) {
-    // Reduce from unscaled float levels so that coverage scaling does not compound.
-    let current = to_filter_space(&level0.pixels, settings.kind);
+    // Reduce from unscaled float levels so that coverage scaling does not compound. Level 0's
+    // bytes are converted to filter space as the first reduction reads them (four 2048² surfaces
+    // would otherwise each allocate, fault in and fill 64 MiB of floats for one pass).
+    let to_filter = filter_space_of(settings.kind);
+    let current = Texels::Level0(&level0.pixels, to_filter);
     // Straight (not alpha-weighted) linear colour, for albedo texels whose whole footprint is
     // transparent: alpha weighting would leave them black, and bilinear filtering at an
     // alpha-tested edge would then pull the visible colour toward black.
-    let straight = keeps_straight_colour(level0, settings).then(|| straight_linear_colour(&level0.pixels));
-    let coverage = settings.alpha_cutoff.map(|cutoff| alpha_coverage(&current, cutoff, 1.0));
+    let straight = keeps_straight_colour(level0, settings)
+        .then_some(Texels::Level0(&level0.pixels, straight_linear_texel as FilterTexel));
+    let coverage = settings.alpha_cutoff.map(|cutoff| {
+        let passing = level0.pixels.par_chunks_exact(4).filter(|texel| to_filter(texel)[3] > cutoff).count();
+        passing as f32 / (level0.pixels.len() / 4).max(1) as f32
+    });
     let mut chain = Chain { levels: vec![level0.clone()], alpha_scales: vec![1.0], tile_level: None };
     let keep_tile_level = reusable_size(level0.width, level0.height);
     extend_chain(&mut chain, current, straight, settings, coverage, keep_tile_level);
@@ -131,8 +138,8 @@ fn next_level_size(width: u32, height: u32) -> (u32, u32) {
 /// 1×1, appending each level and its alpha scale.
 fn extend_chain(
     chain: &mut Chain,
-    mut current: Vec<[f32; 4]>,
-    mut straight: Option<Vec<[f32; 4]>>,
+    mut current: Texels,
+    mut straight: Option<Texels>,
     settings: MipSettings,
     coverage: Option<f32>,
     keep_tile_level: bool,
@@ -141,19 +148,50 @@ fn extend_chain(
     let (mut width, mut height) = (last.width, last.height);
     while width > 1 || height > 1 {
         let (next_width, next_height) = next_level_size(width, height);
-        current = reduce(&current, width, height, next_width, next_height);
-        straight = straight.map(|colour| reduce(&colour, width, height, next_width, next_height));
+        let reduced = current.reduce(width, height, next_width, next_height);
+        let reduced_straight = straight.map(|colour| colour.reduce(width, height, next_width, next_height));
         (width, height) = (next_width, next_height);
         let alpha_scale = match (settings.alpha_cutoff, coverage) {
             // All or nothing passes on level 0, so on every level: no scale keeps it better.
             (Some(_), Some(coverage)) if coverage == 0.0 || coverage == 1.0 => 1.0,
-            (Some(cutoff), Some(coverage)) => coverage_alpha_scale(&current, cutoff, coverage),
+            (Some(cutoff), Some(coverage)) => coverage_alpha_scale(&reduced, cutoff, coverage),
             _ => 1.0,
         };
-        chain.levels.push(from_filter_space(&current, straight.as_deref(), width, height, settings.kind, alpha_scale));
+        let level = from_filter_space(&reduced, reduced_straight.as_deref(), width, height, settings.kind, alpha_scale);
+        chain.levels.push(level);
         chain.alpha_scales.push(alpha_scale);
         if keep_tile_level && chain.levels.len() == REUSE_TILE_LEVELS + 1 {
-            chain.tile_level = Some(TileLevel { texels: current.clone(), straight: straight.clone() });
+            chain.tile_level = Some(TileLevel { texels: reduced.clone(), straight: reduced_straight.clone() });
+        }
+        current = Texels::Stored(reduced);
+        straight = reduced_straight.map(Texels::Stored);
+    }
+}
+
+/// A level's texels in filter space: stored, or level 0's RGBA8 bytes converted as they are read.
+enum Texels<'a> {
+    Stored(Vec<[f32; 4]>),
+    Level0(&'a [u8], FilterTexel),
+}
+
+/// One RGBA8 texel in filter space.
+type FilterTexel = fn(&[u8]) -> [f32; 4];
+
+impl Texels<'_> {
+    /// [`reduce`] of these `width` × `height` texels.
+    fn reduce(&self, width: u32, height: u32, new_width: u32, new_height: u32) -> Vec<[f32; 4]> {
+        match self {
+            Texels::Stored(texels) => reduce(texels, width, height, new_width, new_height),
+            Texels::Level0(pixels, convert) if width == 2 * new_width && height == 2 * new_height => halve(
+                |index| convert(&pixels[index * 4..][..4]),
+                width as usize,
+                new_width as usize,
+                new_height as usize,
+            ),
+            Texels::Level0(pixels, convert) => {
+                let texels: Vec<[f32; 4]> = pixels.par_chunks_exact(4).map(convert).collect();
+                reduce(&texels, width, height, new_width, new_height)
+            }
         }
     }
 }
@@ -262,8 +300,8 @@ fn refilter_changed_tiles(
         Chain { levels, alpha_scales: previous.reuse.alpha_scales[..=REUSE_TILE_LEVELS].to_vec(), tile_level: None };
     extend_chain(
         &mut chain,
-        tile_level.texels.clone(),
-        tile_level.straight.clone(),
+        Texels::Stored(tile_level.texels.clone()),
+        tile_level.straight.clone().map(Texels::Stored),
         settings,
         previous.reuse.coverage,
         false,
@@ -275,35 +313,34 @@ fn refilter_changed_tiles(
 /// Texels as floats in the space where averaging is right: linear premultiplied colour for
 /// albedo, unit vectors for normals, plain values for data.
 fn to_filter_space(pixels: &[u8], kind: SurfaceKind) -> Vec<[f32; 4]> {
-    pixels
-        .par_chunks_exact(4)
-        .map(|t| match kind {
-            SurfaceKind::Albedo => {
-                let alpha = t[3] as f32 / 255.0;
-                [
-                    srgb_u8_to_linear(t[0]) * alpha,
-                    srgb_u8_to_linear(t[1]) * alpha,
-                    srgb_u8_to_linear(t[2]) * alpha,
-                    alpha,
-                ]
-            }
-            SurfaceKind::Normal => {
-                let [x, y, z] = decode_normal([t[0], t[1], t[2]]);
-                [x, y, z, 1.0]
-            }
-            SurfaceKind::Mra | SurfaceKind::Height | SurfaceKind::Ao => {
-                [t[0], t[1], t[2], t[3]].map(|c| c as f32 / 255.0)
-            }
-        })
-        .collect()
+    pixels.par_chunks_exact(4).map(filter_space_of(kind)).collect()
+}
+
+/// The conversion of one RGBA8 texel of a `kind` surface to filter space (see [`to_filter_space`]).
+fn filter_space_of(kind: SurfaceKind) -> FilterTexel {
+    match kind {
+        SurfaceKind::Albedo => |t| {
+            let alpha = t[3] as f32 / 255.0;
+            [srgb_u8_to_linear(t[0]) * alpha, srgb_u8_to_linear(t[1]) * alpha, srgb_u8_to_linear(t[2]) * alpha, alpha]
+        },
+        SurfaceKind::Normal => |t| {
+            let [x, y, z] = decode_normal([t[0], t[1], t[2]]);
+            [x, y, z, 1.0]
+        },
+        SurfaceKind::Mra | SurfaceKind::Height | SurfaceKind::Ao => {
+            |t| [t[0], t[1], t[2], t[3]].map(|c| c as f32 / 255.0)
+        }
+    }
 }
 
 /// Linear colour of every texel, not weighted by alpha.
 fn straight_linear_colour(pixels: &[u8]) -> Vec<[f32; 4]> {
-    pixels
-        .par_chunks_exact(4)
-        .map(|t| [srgb_u8_to_linear(t[0]), srgb_u8_to_linear(t[1]), srgb_u8_to_linear(t[2]), 1.0])
-        .collect()
+    pixels.par_chunks_exact(4).map(straight_linear_texel).collect()
+}
+
+/// Linear colour of one RGBA8 texel, not weighted by alpha.
+fn straight_linear_texel(t: &[u8]) -> [f32; 4] {
+    [srgb_u8_to_linear(t[0]), srgb_u8_to_linear(t[1]), srgb_u8_to_linear(t[2]), 1.0]
 }
 
 fn from_filter_space(
@@ -314,19 +351,45 @@ fn from_filter_space(
     kind: SurfaceKind,
     alpha_scale: f32,
 ) -> Texture {
+    // One loop per kind, so that the kind is no per-texel branch and the data kinds' loop is
+    // plain arithmetic the compiler vectorises.
+    let pixels = match kind {
+        SurfaceKind::Albedo => {
+            texels_to_bytes(texels, straight, |texel, straight| texel_bytes(texel, straight, kind, alpha_scale))
+        }
+        SurfaceKind::Normal => texels_to_bytes(texels, None, |texel, _| texel_bytes(texel, None, kind, alpha_scale)),
+        SurfaceKind::Mra | SurfaceKind::Height | SurfaceKind::Ao => {
+            texels_to_bytes(texels, None, |texel, _| texel_bytes(texel, None, SurfaceKind::Mra, alpha_scale))
+        }
+    };
+    Texture::new(width, height, pixels)
+}
+
+/// `convert` of every texel (with its straight colour when there is one) into RGBA8 bytes.
+fn texels_to_bytes(
+    texels: &[[f32; 4]],
+    straight: Option<&[[f32; 4]]>,
+    convert: impl Fn([f32; 4], Option<[f32; 4]>) -> [u8; 4] + Sync,
+) -> Vec<u8> {
+    const CHUNK: usize = 4096;
     let mut pixels = vec![0u8; texels.len() * 4];
-    pixels.par_chunks_mut(4096 * 4).enumerate().for_each(|(chunk, bytes)| {
-        for (offset, texel) in bytes.chunks_exact_mut(4).enumerate() {
-            let index = chunk * 4096 + offset;
-            texel.copy_from_slice(&texel_bytes(
-                texels[index],
-                straight.map(|straight| straight[index]),
-                kind,
-                alpha_scale,
-            ));
+    pixels.par_chunks_mut(CHUNK * 4).enumerate().for_each(|(chunk, bytes)| {
+        let texels = &texels[chunk * CHUNK..][..bytes.len() / 4];
+        match straight {
+            Some(straight) => {
+                let straight = &straight[chunk * CHUNK..][..bytes.len() / 4];
+                for ((bytes, &texel), &straight) in bytes.chunks_exact_mut(4).zip(texels).zip(straight) {
+                    bytes.copy_from_slice(&convert(texel, Some(straight)));
+                }
+            }
+            None => {
+                for (bytes, &texel) in bytes.chunks_exact_mut(4).zip(texels) {
+                    bytes.copy_from_slice(&convert(texel, None));
+                }
+            }
         }
     });
-    Texture::new(width, height, pixels)
+    pixels
 }
 
 /// [`from_filter_space`] of a few texels, on this thread.
@@ -343,6 +406,7 @@ fn filter_space_bytes(
         .collect()
 }
 
+#[inline(always)]
 fn texel_bytes([r, g, b, a]: [f32; 4], straight: Option<[f32; 4]>, kind: SurfaceKind, alpha_scale: f32) -> [u8; 4] {
     match kind {
         SurfaceKind::Albedo => {
@@ -366,7 +430,7 @@ fn texel_bytes([r, g, b, a]: [f32; 4], straight: Option<[f32; 4]>, kind: Surface
 /// footprint of the source).
 fn reduce(source: &[[f32; 4]], width: u32, height: u32, new_width: u32, new_height: u32) -> Vec<[f32; 4]> {
     if width == 2 * new_width && height == 2 * new_height {
-        return halve(source, width as usize, new_width as usize, new_height as usize);
+        return halve(|index| source[index], width as usize, new_width as usize, new_height as usize);
     }
     let scale_x = width as f32 / new_width as f32;
     let scale_y = height as f32 / new_height as f32;
@@ -413,13 +477,18 @@ fn reduce(source: &[[f32; 4]], width: u32, height: u32, new_width: u32, new_heig
 /// [`reduce`] of a level with even sides to half its size: each texel is the sum of its four
 /// source texels weighted by a quarter, added in the order the general reduction adds them (so
 /// the sums are the same to the bit), without its per-texel weight lists.
-fn halve(source: &[[f32; 4]], width: usize, new_width: usize, new_height: usize) -> Vec<[f32; 4]> {
+fn halve(
+    source: impl Fn(usize) -> [f32; 4] + Sync,
+    width: usize,
+    new_width: usize,
+    new_height: usize,
+) -> Vec<[f32; 4]> {
     let mut reduced = vec![[0.0f32; 4]; new_width * new_height];
     reduced.par_chunks_mut(new_width).enumerate().for_each(|(y, row)| {
-        let (top, bottom) = (&source[2 * y * width..][..width], &source[(2 * y + 1) * width..][..width]);
+        let (top, bottom) = (2 * y * width, (2 * y + 1) * width);
         for (x, texel) in row.iter_mut().enumerate() {
             let mut sum = [0.0f32; 4];
-            for corner in [top[2 * x], top[2 * x + 1], bottom[2 * x], bottom[2 * x + 1]] {
+            for corner in [top + 2 * x, top + 2 * x + 1, bottom + 2 * x, bottom + 2 * x + 1].map(&source) {
                 for channel in 0..4 {
                     sum[channel] += corner[channel] * 0.25;
                 }

@@ -327,10 +327,13 @@ pub(crate) fn timed<T>(db: &dyn Db, stage: Stage, label: &str, body: impl FnOnce
     crate::cache::take_remote_hit();
     let start = Instant::now();
     let result = body();
+    let ms = start.elapsed().as_secs_f64() * 1000.0;
+    // With its end time from the log's clock: where each stage ran, for the schedule's profile.
+    tracing::debug!("stage {} {label} ran {ms:.1} ms", stage.name);
     db.record_run(StageRun {
         stage: stage.name,
         label: label.to_string(),
-        ms: start.elapsed().as_secs_f64() * 1000.0,
+        ms,
         started: start,
         from_cache: false,
         from_remote: false,
@@ -345,6 +348,7 @@ pub(crate) fn timed_together<T>(db: &dyn Db, stage: Stage, labels: &[(String, f6
     let start = Instant::now();
     let result = body();
     let ms = start.elapsed().as_secs_f64() * 1000.0;
+    tracing::debug!("stage {} ({} instances together) ran {ms:.1} ms", stage.name, labels.len());
     let total: f64 = labels.iter().map(|(_, share)| share).sum();
     for (label, share) in labels {
         db.record_run(StageRun {

@@ -1732,7 +1732,8 @@ fn cold_bake(binary: &Path, folder: &Path, global_arguments: &[&str]) -> Process
 /// commit before a change, built with `tools/build_baseline.sh REV`), runs alternating, three
 /// each, at `--isa avx2` (where both binaries know the flag and the CPU has AVX2) and native:
 /// wall median (min–max), CPU, peak memory, stage sums over threads, then each build's mean
-/// IoU (26 views) and the albedo's PSNR, visible-texel PSNR and alpha-test IoU.
+/// IoU (26 views) and the albedo's PSNR, visible-texel PSNR and alpha-test IoU, and this build's
+/// albedo beside bc7enc's on the same surface.
 fn bench_oak_bake(corpus: &Path) {
     let current = Path::new(env!("CARGO_BIN_EXE_cirrus")).to_path_buf();
     // Baselines: other builds' binaries, separated as PATH is (`:` on Unix).
@@ -1833,5 +1834,23 @@ fn bench_oak_bake(corpus: &Path) {
             albedo.get("visible_psnr_db").map_or("—".to_string(), |value| value.to_string()),
             albedo.get("alpha_test_iou").map_or("—".to_string(), |value| value.to_string()),
         );
+        if name == "this build" {
+            println!("oak-bake: {}", bc7_beside_bc7enc(&dir.path().join("baked/oak/albedo.png")));
+        }
+    }
+}
+
+/// `benches/bc_reference.py bc7-visible` on a baked alpha-tested surface: cirrus's BC7 and
+/// bc7enc's at its top level on the same surface, where the alpha test passes, through the
+/// `python3` on the PATH or `CIRRUS_BENCH_PYTHON` (with `etcpak` and `texture2ddecoder`).
+fn bc7_beside_bc7enc(png: &Path) -> String {
+    let python = std::env::var("CIRRUS_BENCH_PYTHON").unwrap_or_else(|_| "python3".to_string());
+    let script = Path::new(env!("CARGO_MANIFEST_DIR")).join("benches/bc_reference.py");
+    match std::process::Command::new(&python).arg(&script).arg("bc7-visible").arg(png).output() {
+        Ok(output) if output.status.success() => String::from_utf8_lossy(&output.stdout).trim().to_string(),
+        _ => format!(
+            "bc7enc not measured: `{python}` cannot run {} bc7-visible (pip install etcpak texture2ddecoder pillow numpy)",
+            script.display()
+        ),
     }
 }

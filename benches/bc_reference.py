@@ -8,8 +8,18 @@ float, as a GPU decodes them):
                                          every 37th block as the corpus test samples them: PSNR
                                          of rgbcx's BC4 (the corpus test prints cirrus's, the
                                          optimum's and ISPC's on the same blocks)
+  python bc_reference.py bc7-visible PNG [CUTOFF]
+                                         PNG a baked alpha-tested surface (a billboard cloud's
+                                         albedo.png, an atlas's atlas.png) with cirrus's BC7
+                                         beside it (the .ktx2 of the same name): the PSNR of the colour where
+                                         the alpha test passes (at CUTOFF, 0.5 by default) on the
+                                         uncompressed surface, and the alpha test's IoU, of
+                                         cirrus's level 0 and of bc7enc's at its top uber level on
+                                         the same surface (BC7's decoding is exact integer
+                                         arithmetic: one decoder judges both)
 
-Needs `pip install quicktex pillow numpy` (a venv)."""
+Needs `pip install quicktex pillow numpy` (a venv); `bc7-visible` needs `etcpak` (bc7enc) and
+`texture2ddecoder` instead of quicktex."""
 
 import math
 import os
@@ -18,9 +28,6 @@ import sys
 
 import numpy as np
 from PIL import Image
-import quicktex
-from quicktex.s3tc.bc1 import BC1Encoder
-from quicktex.s3tc.bc4 import BC4Encoder
 
 
 def psnr(squared_error, samples):
@@ -57,6 +64,8 @@ def ktx2_level0(path):
 
 
 def bc1(folders):
+    import quicktex
+    from quicktex.s3tc.bc1 import BC1Encoder
     for folder in folders:
         reference = np.array(Image.open(os.path.join(folder, "mra.png")).convert("RGBA"))
         height, width = reference.shape[:2]
@@ -78,6 +87,8 @@ def bc4_palette(e0, e1):
 
 
 def bc4(root):
+    import quicktex
+    from quicktex.s3tc.bc4 import BC4Encoder
     for name in sorted(os.listdir(root)):
         for file, channels in (("normal", 2), ("ao", 1)):
             path = next((os.path.join(root, name, f"{file}.{extension}") for extension in ("png", "jpg")
@@ -103,10 +114,41 @@ def bc4(root):
                 print(f"{name}/{file} channel {channel}: rgbcx BC4 {psnr(total, samples):.2f} dB")
 
 
+def bc7_visible(png, cutoff):
+    import etcpak
+    import texture2ddecoder
+    reference = np.array(Image.open(png).convert("RGBA"))
+    height, width = reference.shape[:2]
+    blocks, ktx_width, ktx_height = ktx2_level0(os.path.splitext(png)[0] + ".ktx2")
+    assert (ktx_width, ktx_height) == (width, height) and width % 4 == 0 and height % 4 == 0
+    params = etcpak.BC7CompressBlockParams()
+    params.init_linear_weights()
+    params.m_uber_level = 4
+    params.m_max_partitions = 64
+    params.m_try_least_squares = True
+    theirs = etcpak.compress_bc7(reference.tobytes(), width, height, params)
+    # The alpha test passes where alpha / 255 >= cutoff, as a shader tests the unorm value.
+    visible = reference[:, :, 3] / 255.0 >= cutoff
+
+    def figures(data):
+        # texture2ddecoder gives BGRA.
+        decoded = np.frombuffer(texture2ddecoder.decode_bc7(data, width, height), np.uint8)
+        decoded = decoded.reshape(height, width, 4)[:, :, [2, 1, 0, 3]].astype(float)
+        error = ((decoded[:, :, :3] - reference[:, :, :3]) ** 2)[visible].sum()
+        passes = decoded[:, :, 3] / 255.0 >= cutoff
+        return psnr(error, visible.sum() * 3), (passes & visible).sum() / max((passes | visible).sum(), 1)
+
+    (ours_db, ours_iou), (theirs_db, theirs_iou) = figures(blocks), figures(theirs)
+    print(f"{png}: BC7 where the alpha test passes: cirrus {ours_db:.2f} dB (alpha-test IoU "
+          f"{ours_iou:.4f}), bc7enc uber 4 {theirs_db:.2f} dB ({theirs_iou:.4f}), {ours_db - theirs_db:+.2f} dB")
+
+
 if __name__ == "__main__":
     if len(sys.argv) >= 3 and sys.argv[1] == "bc1":
         bc1(sys.argv[2:])
     elif len(sys.argv) == 3 and sys.argv[1] == "bc4":
         bc4(sys.argv[2])
+    elif len(sys.argv) in (3, 4) and sys.argv[1] == "bc7-visible":
+        bc7_visible(sys.argv[2], float(sys.argv[3]) if len(sys.argv) == 4 else 0.5)
     else:
         sys.exit(__doc__)

@@ -354,10 +354,12 @@ fn from_filter_space(
     // One loop per kind, so that the kind is no per-texel branch and the data kinds' loop is
     // plain arithmetic the compiler vectorises.
     let pixels = match kind {
-        SurfaceKind::Albedo => {
-            texels_to_bytes(texels, straight, |texel, straight| texel_bytes(texel, straight, kind, alpha_scale))
+        SurfaceKind::Albedo => texels_to_bytes(texels, straight, |texel, straight| {
+            texel_bytes(texel, straight, SurfaceKind::Albedo, alpha_scale)
+        }),
+        SurfaceKind::Normal => {
+            texels_to_bytes(texels, None, |texel, _| texel_bytes(texel, None, SurfaceKind::Normal, alpha_scale))
         }
-        SurfaceKind::Normal => texels_to_bytes(texels, None, |texel, _| texel_bytes(texel, None, kind, alpha_scale)),
         SurfaceKind::Mra | SurfaceKind::Height | SurfaceKind::Ao => {
             texels_to_bytes(texels, None, |texel, _| texel_bytes(texel, None, SurfaceKind::Mra, alpha_scale))
         }

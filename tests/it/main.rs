@@ -22,6 +22,7 @@ mod hostile;
 mod isa;
 mod occlusion;
 mod packing;
+mod reduce;
 mod scale;
 mod tidy;
 mod uv_raster;

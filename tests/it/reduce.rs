@@ -1,5 +1,6 @@
 //! Triangle LODs (`mesh::reduce`): budgets held, material borders kept in place, leaf cards
-//! thinned evenly with their drawn area kept, the same result every run.
+//! thinned a few at a time with their drawn area bounded, the loss in px-shift units, the same
+//! result every run.
 
 use std::path::Path;
 
@@ -117,7 +118,7 @@ fn material_borders_stay_where_they_were() {
 }
 
 #[test]
-fn leaf_cards_thin_evenly_and_keep_the_leaf_area_drawn() {
+fn leaf_cards_thin_a_few_at_a_time_and_the_leaf_area_drawn_is_bounded() {
     let bush = bush_with_materials();
     let mut last_kept = usize::MAX;
     for ratio in [0.5f32, 0.25, 0.1] {
@@ -137,12 +138,12 @@ fn leaf_cards_thin_evenly_and_keep_the_leaf_area_drawn() {
         assert!((kept as f64 - expected).abs() <= 0.1 * expected + 2.0, "{kept} of {cards} cards kept at {ratio}");
         assert!(kept < last_kept);
         last_kept = kept;
-        // The kept cards grow to draw the leaf area of all of them, up to twice a side.
-        let bound = (1.0 / ratio as f64).min(4.0) * ratio as f64;
+        // The largest cards are kept and grow (by the fourth root of the area ratio): the leaf
+        // area drawn is at least the square root of the ratio, never more than the source's.
+        let drawn = area / source_area;
         assert!(
-            (area / source_area - bound).abs() < 0.1 * bound,
-            "leaf area {:.3} of the source's at {ratio}",
-            area / source_area
+            drawn >= (ratio as f64).sqrt() && drawn <= 1.0 + 1e-9,
+            "leaf area {drawn:.3} of the source's at {ratio}"
         );
     }
 }
@@ -151,4 +152,57 @@ fn leaf_cards_thin_evenly_and_keep_the_leaf_area_drawn() {
 fn the_same_mesh_reduces_to_the_same_mesh() {
     let bush = bush_with_materials();
     assert_eq!(reduce(&bush, TriangleBudget::Ratio(0.2)), reduce(&bush, TriangleBudget::Ratio(0.2)));
+}
+
+/// `mesh` as the preview draws it, with the bundled textures its materials name.
+fn bush_view(mesh: &Mesh) -> cirrus::gpu::ViewMesh {
+    let root = Path::new(env!("CARGO_MANIFEST_DIR")).join("examples/assets");
+    let uvs = mesh.uvs.clone().unwrap_or_default();
+    let tangents = cirrus::mesh::mikktspace_tangents(&mesh.positions, &mesh.normals, &uvs, &mesh.triangles);
+    cirrus::preview::mesh_view(mesh, &tangents, 0.5, |material, slot| {
+        let Some(path) = material.maps.get(&slot) else { return Ok(None) };
+        let bytes = std::fs::read(root.join(path)).map_err(|error| error.to_string())?;
+        let texture =
+            cirrus::texture::decode_texture(path, &bytes, Default::default()).map_err(|error| error.to_string())?;
+        Ok::<_, String>(Some(std::sync::Arc::new(texture)))
+    })
+    .expect("the bush's textures")
+}
+
+#[test]
+fn a_triangle_lod_of_the_bush_is_measured_in_pixel_shift_units() {
+    // The loss of a level, 1 - IoU over the 26 views at 16 samples per pixel, in units of what
+    // moving the source one pixel costs it (issue 40): the cards thinned and grown keep the
+    // bush's silhouette, where collapsing each card on its own would empty it.
+    let bush = bush_with_materials();
+    let source = bush_view(&bush);
+    let (center, radius) = cirrus::preview::bounding_sphere(&source);
+    let gpu = cirrus::gpu::gpu().expect("a GPU adapter (llvmpipe in CI)");
+    let settings = cirrus::preview::PreviewSettings { views: 26, size: 128, samples_per_axis: 4 };
+    let mut last_loss = 0.0;
+    for ratio in [0.5f32, 0.25, 0.1] {
+        let reduced = reduce(&bush, TriangleBudget::Ratio(ratio));
+        let preview = cirrus::preview::preview(gpu, &source, &bush_view(&reduced.mesh), center, radius, settings)
+            .expect("renders");
+        let metrics = &preview.metrics;
+        let loss = (1.0 - metrics.mean_iou) / (1.0 - metrics.source_shift_iou);
+        println!(
+            "bush at {ratio} ({} triangles) at 128 px: mean IoU {:.4}, {loss:.2} px-shift units (one pixel costs the source {:.4}), missed {:.3}, extra {:.3}",
+            reduced.mesh.triangles.len(),
+            metrics.mean_iou,
+            1.0 - metrics.source_shift_iou,
+            metrics.mean_missed,
+            metrics.mean_extra
+        );
+        assert!(loss >= last_loss, "fewer triangles lose more");
+        // Bounds a little above what it measures (0.47, 1.11, 1.80): the cards kept evenly over
+        // space instead of the largest measured 0.95, 1.34, 1.91.
+        let bound = match ratio {
+            0.5 => 0.55,
+            0.25 => 1.25,
+            _ => 1.9,
+        };
+        assert!(loss <= bound, "{loss:.2} px-shift units at {ratio}");
+        last_loss = loss;
+    }
 }

@@ -91,6 +91,16 @@ pub struct Mesh {
     pub objects: Vec<String>,
 }
 
+/// The root of `index`'s set in a union-find forest (`parent[i] == i` at a root), halving the
+/// path on the way up.
+pub(crate) fn union_find_root(parent: &mut [usize], mut index: usize) -> usize {
+    while parent[index] != index {
+        parent[index] = parent[parent[index]];
+        index = parent[index];
+    }
+    index
+}
+
 /// Per vertex, the id of its position among the distinct positions (by exact coordinates: a
 /// seam in the normals or texture coordinates splits vertices, not the surface), and how many
 /// distinct positions there are.

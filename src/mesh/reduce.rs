@@ -8,7 +8,7 @@ use std::collections::BTreeMap;
 use glam::Vec3;
 use meshopt::{SimplifyOptions, SimplifyVertex, VertexDataAdapter};
 
-use super::{position_ids, Mesh};
+use super::{position_ids, union_find_root, Mesh};
 
 /// How many triangles a reduced mesh may have.
 #[derive(Clone, Copy, Debug, PartialEq, serde::Serialize, serde::Deserialize)]
@@ -75,7 +75,8 @@ pub fn budget_triangles(budget: TriangleBudget, triangles: usize) -> usize {
 pub fn reduce_mesh(mesh: &Mesh, settings: &ReduceSettings) -> ReducedMesh {
     let triangle_count = mesh.triangles.len();
     let target = budget_triangles(settings.budget, triangle_count);
-    let cards = find_cards(mesh);
+    let (ids, count) = position_ids(&mesh.positions);
+    let cards = find_cards(mesh, (&ids, count));
     let card_triangles: usize = cards.iter().map(|card| card.triangles.len()).sum();
     let source_cut_out = cut_out_area(mesh, &mesh.positions, 0..triangle_count);
     if target >= triangle_count {
@@ -93,7 +94,7 @@ pub fn reduce_mesh(mesh: &Mesh, settings: &ReduceSettings) -> ReducedMesh {
     let mut cards = cards;
     let card_list: Vec<usize> = cards.iter().flat_map(|card| card.triangles.iter().copied()).collect();
     let (simplified_cards, card_error) =
-        simplify_groups(mesh, &card_list, card_budget, (settings.max_error, Reach::WithinError));
+        simplify_groups(mesh, (&ids, count), &card_list, card_budget, (settings.max_error, Reach::WithinError));
     let mut card_of_vertex: Vec<Option<usize>> = vec![None; mesh.positions.len()];
     for (index, card) in cards.iter().enumerate() {
         for &triangle in &card.triangles {
@@ -117,7 +118,7 @@ pub fn reduce_mesh(mesh: &Mesh, settings: &ReduceSettings) -> ReducedMesh {
         kept_cards.iter().flat_map(|&card| cards[card].simplified.iter().copied()).collect();
     let solid_budget = target.saturating_sub(kept_card_triangles.len());
     let (solid_triangles, solid_error) =
-        simplify_groups(mesh, &solid, solid_budget, (settings.max_error, Reach::Budget));
+        simplify_groups(mesh, (&ids, count), &solid, solid_budget, (settings.max_error, Reach::Budget));
     let error = solid_error.max(if kept_cards.is_empty() { 0.0 } else { card_error });
     let mut kept: Vec<([u32; 3], usize)> = solid_triangles;
     kept.extend(kept_card_triangles);
@@ -143,34 +144,25 @@ struct Card {
 
 /// The cards of `mesh`: its connected parts (by shared positions) of at most
 /// [`CARD_TRIANGLES`] triangles, all of cut-out materials.
-fn find_cards(mesh: &Mesh) -> Vec<Card> {
-    let (ids, count) = position_ids(&mesh.positions);
-    let mut parent: Vec<u32> = (0..count as u32).collect();
-    fn root(parent: &mut [u32], mut node: u32) -> u32 {
-        while parent[node as usize] != node {
-            parent[node as usize] = parent[parent[node as usize] as usize];
-            node = parent[node as usize];
-        }
-        node
-    }
+fn find_cards(mesh: &Mesh, (ids, count): (&[u32], usize)) -> Vec<Card> {
+    let mut parent: Vec<usize> = (0..count).collect();
+    let position = |corner: u32| ids[corner as usize] as usize;
     for triangle in &mesh.triangles {
-        let first = root(&mut parent, ids[triangle[0] as usize]);
+        let first = union_find_root(&mut parent, position(triangle[0]));
         for &corner in &triangle[1..] {
-            let other = root(&mut parent, ids[corner as usize]);
-            parent[other as usize] = first;
+            let other = union_find_root(&mut parent, position(corner));
+            parent[other] = first;
         }
     }
-    let mut parts: BTreeMap<u32, Vec<usize>> = BTreeMap::new();
+    let mut parts: BTreeMap<usize, Vec<usize>> = BTreeMap::new();
     for (index, triangle) in mesh.triangles.iter().enumerate() {
-        parts.entry(root(&mut parent, ids[triangle[0] as usize])).or_default().push(index);
+        parts.entry(union_find_root(&mut parent, position(triangle[0]))).or_default().push(index);
     }
-    let cut_out = |triangle: usize| {
-        let material = mesh.triangle_materials.get(triangle).copied().unwrap_or(0) as usize;
-        mesh.materials.get(material).is_some_and(|material| material.cut_out)
-    };
     parts
         .into_values()
-        .filter(|triangles| triangles.len() <= CARD_TRIANGLES && triangles.iter().all(|&triangle| cut_out(triangle)))
+        .filter(|triangles| {
+            triangles.len() <= CARD_TRIANGLES && triangles.iter().all(|&triangle| is_cut_out(mesh, triangle))
+        })
         .map(|triangles| {
             let corners: Vec<Vec3> = triangles
                 .iter()
@@ -244,6 +236,7 @@ enum Reach {
 /// object), and the largest deviation as a fraction of the mesh's extent.
 fn simplify_groups(
     mesh: &Mesh,
+    (ids, count): (&[u32], usize),
     solid: &[usize],
     budget: usize,
     (max_error, reach): (f32, Reach),
@@ -258,7 +251,6 @@ fn simplify_groups(
         groups.entry((material, object)).or_default().push(triangle);
     }
     // A vertex (by position) used by two groups lies on their border: locked.
-    let (ids, count) = position_ids(&mesh.positions);
     let mut group_of_position: Vec<Option<usize>> = vec![None; count];
     let mut shared = vec![false; count];
     for (group, triangles) in groups.values().enumerate() {
@@ -388,12 +380,15 @@ fn compact_mesh(mesh: &Mesh, positions: &[[f32; 3]], kept: &[([u32; 3], usize)])
 /// The summed area of the cut-out materials' triangles among `triangles`.
 fn cut_out_area(mesh: &Mesh, positions: &[[f32; 3]], triangles: std::ops::Range<usize>) -> f64 {
     triangles
-        .filter(|&triangle| {
-            let material = mesh.triangle_materials.get(triangle).copied().unwrap_or(0) as usize;
-            mesh.materials.get(material).is_some_and(|material| material.cut_out)
-        })
+        .filter(|&triangle| is_cut_out(mesh, triangle))
         .map(|triangle| triangle_area(positions, mesh.triangles[triangle]))
         .sum()
+}
+
+/// Whether triangle `triangle` of `mesh` is of a cut-out material.
+fn is_cut_out(mesh: &Mesh, triangle: usize) -> bool {
+    let material = mesh.triangle_materials.get(triangle).copied().unwrap_or(0) as usize;
+    mesh.materials.get(material).is_some_and(|material| material.cut_out)
 }
 
 fn triangle_area(positions: &[[f32; 3]], [a, b, c]: [u32; 3]) -> f64 {

@@ -269,13 +269,7 @@ fn clusters(faces: &[u32], triangles: &[[u32; 3]], project: &dyn Fn(u32) -> Vec2
         })
         .collect();
     let mut parent: Vec<usize> = (0..faces.len()).collect();
-    fn root(parent: &mut [usize], mut index: usize) -> usize {
-        while parent[index] != index {
-            parent[index] = parent[parent[index]];
-            index = parent[index];
-        }
-        index
-    }
+    let root = crate::mesh::union_find_root;
     let cell = |value: f32| (value / gap).floor() as i64;
     let mut owners: std::collections::HashMap<(i64, i64), usize> = std::collections::HashMap::new();
     for (index, (min, max)) in boxes.iter().enumerate() {

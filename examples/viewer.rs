@@ -261,10 +261,13 @@ fn write_screenshot(gpu: &Gpu, scene: &Scene, size: u32, path: &Path, what: &str
     }
     let png = cirrus::texture::preview::preview_png(&cirrus::texture::Texture::new(size, size, pixels));
     cirrus::files::write_if_changed(path, &png).map_err(|error| format!("cannot write {}: {error}", path.display()))?;
-    let quads = scene.mesh.batches.iter().map(|(_, vertices)| vertices.len() / 6).sum::<usize>();
+    let triangles = scene.mesh.batches.iter().map(|(_, vertices)| vertices.len() / 3).sum::<usize>();
     let coverage = 100.0 * covered as f64 / (size as f64 * size as f64);
     let level = if scene.levels > 0 { format!("lod{} of {}, ", scene.level, scene.levels) } else { String::new() };
-    Ok(format!("{what}: {level}{quads} quads, {coverage:.1}% of the view covered; screenshot {}", path.display()))
+    Ok(format!(
+        "{what}: {level}{triangles} triangles, {coverage:.1}% of the view covered; screenshot {}",
+        path.display()
+    ))
 }
 
 /// Subscribes to the daemon and turns its batches into viewer events, reconnecting with `since`
@@ -298,11 +301,12 @@ fn follow_connection(
         return true;
     }
     // Artifact paths in batches are relative to the pipeline's folder; the shown folder ends with
-    // the same components. A chain's files are one folder deeper (`lod1/albedo.ktx2`).
+    // the same components. A chain's files are one folder deeper (`lod1/albedo.ktx2`). A reduced
+    // level's map edit rewrites its `lod.mtl` (the copies are named by content).
     let relative = |path: &str| -> Option<String> {
         let path = Path::new(path);
         let (parent, name) = (path.parent()?, path.file_name()?.to_string_lossy().into_owned());
-        if !["lod.obj", "albedo.ktx2", "normal.ktx2"].contains(&name.as_str()) {
+        if !["lod.obj", "lod.mtl", "albedo.ktx2", "normal.ktx2"].contains(&name.as_str()) {
             return None;
         }
         if folder.ends_with(parent) {

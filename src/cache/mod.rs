@@ -36,6 +36,8 @@
 //! - `layout` (`layout`, `LAYOUT`): the `planes` key; atlas settings (max size, padding, power of two); texel density
 //!   option. Holds rectangles, layout, render groups.
 //! - `lod` (`lod`, `LOD`): the `layout` key. Holds `lod.obj`, `lod.mtl`.
+//! - `reduce` (`reduce`, `REDUCE`): the `mesh` key; `triangles` and a count or `ratio` and a fraction; the error bound.
+//!   Holds a reduced level's figures, `lod.obj` and its glTF geometry (with tangents).
 //! - `render-memo` (`render-memo`, `RENDER`): the `layout` key; a material set. Holds the images of every render group
 //!   that shows that set, each under its group key (a memo: overwritten).
 //! - `atlas` (`atlas-coverage`, 1): the billboard atlas recipe key. Holds the atlas's coverage fraction (for the

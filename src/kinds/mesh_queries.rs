@@ -198,3 +198,41 @@ pub(crate) fn mesh_instance_of(db: &dyn Db, asset: Asset, obj: &Path) -> crate::
     );
     mesh
 }
+
+/// A triangle mesh a kind writes (a tessellated mesh, a reduced level) as one cache entry:
+/// `metadata` (the kind's figures), the OBJ text and the glTF geometry's arrays.
+pub(crate) fn written_mesh_entry<T: serde::Serialize>(
+    metadata: &T,
+    obj: &[u8],
+    geometry: &crate::mesh::gltf::GltfGeometry,
+) -> CacheEntry {
+    CacheEntry::new(
+        metadata,
+        vec![
+            obj.to_vec(),
+            pod_blob(&geometry.positions),
+            pod_blob(&geometry.normals),
+            pod_blob(&geometry.uvs),
+            pod_blob(&geometry.triangles),
+            pod_blob(&geometry.triangle_materials),
+            pod_blob(&geometry.tangents),
+        ],
+        true,
+    )
+}
+
+/// What [`written_mesh_entry`] stored: the metadata, the OBJ text and the geometry.
+pub(crate) fn written_mesh_from_entry<T: serde::de::DeserializeOwned>(
+    entry: CacheEntry,
+) -> Option<(T, Arc<[u8]>, crate::mesh::gltf::GltfGeometry)> {
+    let (metadata, [obj, positions, normals, uvs, corners, materials, tangents]) = entry.parts::<T, 7>()?;
+    let geometry = crate::mesh::gltf::GltfGeometry {
+        positions: from_pod_blob(&positions)?,
+        normals: from_pod_blob(&normals)?,
+        uvs: from_pod_blob(&uvs)?,
+        triangles: from_pod_blob(&corners)?,
+        triangle_materials: from_pod_blob(&materials)?,
+        tangents: from_pod_blob(&tangents)?,
+    };
+    Some((metadata, obj.into(), geometry))
+}

@@ -184,3 +184,47 @@ pub(crate) fn output_materials(
     }
     result
 }
+
+/// The materials a mesh's triangles use (`triangle_materials`, indices into `materials`), their
+/// numbers in order, and as the output names them (each over copies of its maps).
+pub(crate) fn used_materials<'a>(
+    materials: &'a [MeshMaterial],
+    triangle_materials: &[u32],
+) -> (Vec<u32>, Vec<OutputMaterial<'a>>) {
+    let mut used: Vec<u32> = triangle_materials.to_vec();
+    used.sort_unstable();
+    used.dedup();
+    let chosen = used
+        .iter()
+        .filter_map(|&index| materials.get(index as usize))
+        .map(|material| OutputMaterial { material, baked: Default::default() })
+        .collect();
+    (used, chosen)
+}
+
+/// The used materials of a mesh the asset writes as an OBJ beside an MTL and a glTF, over copies
+/// of their maps: the MTL's text, the glTF materials, and each triangle's number among them.
+pub(crate) struct WrittenMaterials {
+    pub mtl: String,
+    pub gltf: Vec<GltfMaterial>,
+    pub triangle_materials: Vec<u32>,
+}
+
+/// [`WrittenMaterials`] of a mesh whose triangles draw `triangle_materials` (indices into
+/// `materials`), named from `places`; the copies go to `outputs`, the warnings to `warnings`.
+pub(crate) fn written_materials(
+    db: &dyn Db,
+    asset: Asset,
+    output_folder: &Path,
+    outputs: &mut AssetOutputs,
+    (materials, triangle_materials): (&[MeshMaterial], &[u32]),
+    places: &MaterialPlaces,
+    warnings: &mut Vec<Diagnostic>,
+) -> WrittenMaterials {
+    let (used, chosen) = used_materials(materials, triangle_materials);
+    let named = output_materials(db, asset, output_folder, outputs, &chosen, places);
+    warnings.extend(named.warnings);
+    let triangle_materials =
+        triangle_materials.iter().map(|material| used.binary_search(material).unwrap_or(0) as u32).collect();
+    WrittenMaterials { mtl: named.mtl, gltf: named.gltf, triangle_materials }
+}

@@ -28,6 +28,15 @@ pub enum GltfAlpha {
     Blend,
 }
 
+/// How a material's maps are sampled past their edges.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum GltfWrap {
+    /// Clamped to the edge texel: an atlas, whose UVs stay inside it.
+    Clamp,
+    /// Repeated: an OBJ material's maps (tiling bark, UVs past 1), unless its MTL says `-clamp on`.
+    Repeat,
+}
+
 /// What the documents cirrus writes name as their generator.
 pub const GENERATOR: &str = concat!("cirrus ", env!("CARGO_PKG_VERSION"));
 
@@ -47,6 +56,7 @@ pub struct GltfMaterial {
     pub metallic_roughness: Option<String>,
     pub alpha: GltfAlpha,
     pub double_sided: bool,
+    pub wrap: GltfWrap,
 }
 
 /// The glTF material of an OBJ material (`MeshMaterial`), each map's URI given by `uri` (`None`:
@@ -105,8 +115,19 @@ pub fn material_from_mtl(
         metallic_roughness,
         alpha,
         double_sided: matches!(alpha, GltfAlpha::Mask(_)),
+        wrap: if material.map_options.values().any(|options| clamps(options)) {
+            GltfWrap::Clamp
+        } else {
+            GltfWrap::Repeat
+        },
     };
     (gltf, notes)
+}
+
+/// Whether an MTL map's options (`-clamp on -s 2 2 1`) clamp its UVs.
+fn clamps(options: &str) -> bool {
+    let words: Vec<&str> = options.split_whitespace().collect();
+    words.windows(2).any(|pair| pair[0] == "-clamp" && pair[1].eq_ignore_ascii_case("on"))
 }
 
 /// A triangle mesh as the document stores it.
@@ -291,8 +312,14 @@ fn push_mesh(
         let view = push_view(root, &mut bin, buffer, bytemuck::cast_slice(&indices), target);
         let accessor =
             root.push(accessor(view, indices.len(), json::accessor::ComponentType::U32, json::accessor::Type::Scalar));
+        // A primitive whose material has no normal map leaves the tangents out (the validator's
+        // UNUSED_MESH_TANGENT).
+        let mut attributes = attributes.clone();
+        if mesh.materials.get(material).is_some_and(|material| material.normal.is_none()) {
+            attributes.remove(&Valid(json::mesh::Semantic::Tangents));
+        }
         primitives.push(json::mesh::Primitive {
-            attributes: attributes.clone(),
+            attributes,
             extensions: None,
             extras: Default::default(),
             indices: Some(accessor),
@@ -386,34 +413,47 @@ fn accessor(
     }
 }
 
-/// A texture of the image at `uri` (one image and texture per URI; the sampler is shared).
-fn push_texture(root: &mut json::Root, path: &str) -> json::Index<json::Texture> {
+/// A texture of the image at `path` sampled with `wrap` (one image per URI, one texture per image
+/// and wrap, one sampler per wrap).
+fn push_texture(root: &mut json::Root, path: &str, wrap: GltfWrap) -> json::Index<json::Texture> {
     let uri = uri_of(path);
-    if let Some(index) =
-        root.textures.iter().position(|texture| root.images[texture.source.value()].uri.as_deref() == Some(&*uri))
-    {
-        return json::Index::new(index as u32);
-    }
-    if root.samplers.is_empty() {
-        root.push(json::texture::Sampler {
+    let mode = match wrap {
+        GltfWrap::Clamp => json::texture::WrappingMode::ClampToEdge,
+        GltfWrap::Repeat => json::texture::WrappingMode::Repeat,
+    };
+    let sampler = match root.samplers.iter().position(|sampler| sampler.wrap_s == Valid(mode)) {
+        Some(index) => json::Index::new(index as u32),
+        None => root.push(json::texture::Sampler {
             mag_filter: Some(Valid(json::texture::MagFilter::Linear)),
             min_filter: Some(Valid(json::texture::MinFilter::LinearMipmapLinear)),
-            wrap_s: Valid(json::texture::WrappingMode::ClampToEdge),
-            wrap_t: Valid(json::texture::WrappingMode::ClampToEdge),
+            wrap_s: Valid(mode),
+            wrap_t: Valid(mode),
             ..Default::default()
+        }),
+    };
+    let image = root.images.iter().position(|image| image.uri.as_deref() == Some(&*uri));
+    if let Some(image) = image {
+        let same = root.textures.iter().position(|texture| {
+            texture.source.value() == image && texture.sampler.map(|found| found.value()) == Some(sampler.value())
         });
+        if let Some(index) = same {
+            return json::Index::new(index as u32);
+        }
     }
-    let image = root.push(json::Image {
-        buffer_view: None,
-        mime_type: None,
-        name: None,
-        uri: Some(uri),
-        extensions: None,
-        extras: Default::default(),
-    });
+    let image = match image {
+        Some(index) => json::Index::new(index as u32),
+        None => root.push(json::Image {
+            buffer_view: None,
+            mime_type: None,
+            name: None,
+            uri: Some(uri),
+            extensions: None,
+            extras: Default::default(),
+        }),
+    };
     root.push(json::Texture {
         name: None,
-        sampler: Some(json::Index::new(0)),
+        sampler: Some(sampler),
         source: image,
         extensions: None,
         extras: Default::default(),
@@ -424,7 +464,11 @@ fn push_texture(root: &mut json::Root, path: &str) -> json::Index<json::Texture>
 fn push_material(root: &mut json::Root, material: &GltfMaterial, folder: &str) -> json::Index<json::Material> {
     let info = |root: &mut json::Root, uri: &Option<String>| {
         uri.as_deref().map(|uri| json::texture::Info {
-            index: push_texture(root, &if folder.is_empty() { uri.to_string() } else { format!("{folder}/{uri}") }),
+            index: push_texture(
+                root,
+                &if folder.is_empty() { uri.to_string() } else { format!("{folder}/{uri}") },
+                material.wrap,
+            ),
             tex_coord: 0,
             extensions: None,
             extras: Default::default(),

@@ -737,7 +737,8 @@ pub fn texture_paths(libraries: &BTreeMap<PathBuf, Option<Vec<u8>>>, source_root
 /// the frame normal-map bakers and glTF loaders use, from UVs in the OBJ's convention (v up:
 /// what glTF's `TANGENT` means with its flipped v). MikkTSpace frames face corners; a vertex
 /// whose corners it frames differently keeps its first corner's, and a vertex of no triangle
-/// (or a mesh MikkTSpace refuses) the UV-derivative frame of [`vertex_tangents`].
+/// (or a mesh MikkTSpace refuses, or whose corners' UVs are all degenerate) the UV-derivative
+/// frame of [`vertex_tangents`].
 pub fn mikktspace_tangents(
     positions: &[[f32; 3]],
     normals: &[[f32; 3]],
@@ -768,8 +769,14 @@ pub fn mikktspace_tangents(
             self.uvs[self.triangles[face][corner] as usize]
         }
         fn set_tangent(&mut self, frame: Option<bevy_mikktspace::TangentSpace>, face: usize, corner: usize) {
-            if let Some(frame) = frame {
-                self.tangents[self.triangles[face][corner] as usize].get_or_insert(frame.tangent_encoded());
+            // A corner whose UVs are degenerate gets a zero tangent: not a frame (glTF's tangents
+            // are unit vectors), so another corner's or the fallback frames the vertex.
+            let framed = frame.map(|frame| frame.tangent_encoded()).filter(|&[x, y, z, _]| {
+                let length = glam::Vec3::new(x, y, z).length();
+                length.is_finite() && length > 0.5
+            });
+            if let Some(tangent) = framed {
+                self.tangents[self.triangles[face][corner] as usize].get_or_insert(tangent);
             }
         }
     }

@@ -314,8 +314,13 @@ fn simplify_groups(
         }
         if result.len() > share * 3 {
             let mut sloppy_error = 0.0f32;
-            result = meshopt::simplify_sloppy(&result, &vertices, share * 3, f32::MAX, Some(&mut sloppy_error));
-            reached = reached.max(sloppy_error * extent);
+            let sloppy = meshopt::simplify_sloppy(&result, &vertices, share * 3, f32::MAX, Some(&mut sloppy_error));
+            // The sloppy pass can take a small group (a box's sides, all corners and borders) to
+            // nothing: it is kept only when it leaves at least half the share.
+            if sloppy.len() >= share / 2 * 3 {
+                result = sloppy;
+                reached = reached.max(sloppy_error * extent);
+            }
         }
         let mut group_kept: Vec<[u32; 3]> =
             result.chunks_exact(3).map(|corners| [corners[0], corners[1], corners[2]]).collect();
@@ -328,6 +333,12 @@ fn simplify_groups(
             let mut keep = vec![false; group_kept.len()];
             for &index in &by_area[..share] {
                 keep[index] = true;
+            }
+            // A dropped triangle leaves a hole about half its longest side deep.
+            for &index in &by_area[share..] {
+                let corners = group_kept[index].map(|corner| Vec3::from(mesh.positions[corner as usize]));
+                let longest = (0..3).map(|side| corners[side].distance(corners[(side + 1) % 3])).fold(0.0f32, f32::max);
+                reached = reached.max(0.5 * longest);
             }
             let mut index = 0;
             group_kept.retain(|_| {
@@ -397,7 +408,7 @@ fn triangle_area(positions: &[[f32; 3]], [a, b, c]: [u32; 3]) -> f64 {
 }
 
 /// The largest side of the mesh's bounding box.
-fn mesh_extent(positions: &[[f32; 3]]) -> f32 {
+pub fn mesh_extent(positions: &[[f32; 3]]) -> f32 {
     let (low, high) = positions.iter().fold((Vec3::splat(f32::MAX), Vec3::splat(f32::MIN)), |(low, high), &p| {
         (low.min(Vec3::from(p)), high.max(Vec3::from(p)))
     });

@@ -644,17 +644,17 @@ fn the_viewer_keeps_the_last_good_lod_on_failure_and_reloads_on_a_texture_edit()
     let revision = batch["revision"].as_u64().unwrap();
     assert_eq!(lines.len(), 4, "{lines:?}");
     let numbers = |line: &str| -> (usize, f64) {
-        let (quads, rest) = line.split_once(": ").unwrap().1.split_once(" quads, ").unwrap();
-        (quads.parse().unwrap(), rest.split('%').next().unwrap().parse().unwrap())
+        let (triangles, rest) = line.split_once(": ").unwrap().1.split_once(" triangles, ").unwrap();
+        (triangles.parse().unwrap(), rest.split('%').next().unwrap().parse().unwrap())
     };
     assert!(lines[0].starts_with("loaded: "), "{lines:?}");
     assert!(lines[1].contains(": the asset failed, keeping the last LOD:\n  assets/tree.obj"), "{lines:?}");
     assert!(lines[2].ends_with(": nothing shown here changed"), "{lines:?}");
     assert!(lines[3].starts_with(&format!("reloaded r{revision} (albedo.ktx2")), "{lines:?}");
-    let ((quads, coverage), (reloaded_quads, reloaded_coverage)) = (numbers(&lines[0]), numbers(&lines[3]));
+    let ((triangles, coverage), (reloaded_triangles, reloaded_coverage)) = (numbers(&lines[0]), numbers(&lines[3]));
     let obj = String::from_utf8(project.read("baked/tree/lod.obj")).unwrap();
-    assert_eq!(quads, obj.lines().filter(|line| line.starts_with("f ")).count() / 2, "every quad of lod.obj is shown");
-    assert_eq!(reloaded_quads, quads, "{lines:?}");
+    assert_eq!(triangles, obj.lines().filter(|line| line.starts_with("f ")).count(), "every face of lod.obj is shown");
+    assert_eq!(reloaded_triangles, triangles, "{lines:?}");
     // Only the colour changed; BC7 may move a few alpha-tested edge texels.
     assert!(
         coverage > 5.0 && (reloaded_coverage - coverage).abs() < 0.5,

@@ -1,9 +1,11 @@
-//! A billboard cloud's LOD levels: what each level is asked for (its budget, ε and atlas), its
-//! folder and its label. One level without `lods` (the asset's folder); one per budget of a
-//! chain (`lod0/`, `lod1/`, …), each meant for half the screen size of the one before.
+//! A billboard cloud's LOD levels: what each level is asked for (a cloud's budget, ε and atlas,
+//! or a reduced mesh's triangles), its folder and its label. One level without `lods` (the
+//! asset's folder); one per entry of a chain (`lod0/`, `lod1/`, …), each meant for half the
+//! screen size of the one before.
 
 use crate::config::Settings;
-use crate::kinds::billboard_cloud::settings::Settings as Own;
+use crate::kinds::billboard_cloud::settings::{LodLevel, Settings as Own};
+use crate::mesh::reduce::TriangleBudget;
 use crate::packing::PageSettings;
 
 /// What one level of a billboard cloud is asked for.
@@ -14,6 +16,8 @@ pub struct LevelSettings {
     pub screen_size: Option<u32>,
     /// The largest side its atlas may take.
     pub max_atlas_size: u32,
+    /// A reduced level's triangles (none: a billboard cloud, which the fields above describe).
+    pub reduced: Option<TriangleBudget>,
 }
 
 /// The levels an asset bakes: one per budget of its chain, else one.
@@ -32,7 +36,11 @@ pub(crate) fn is_chain(settings: &Settings) -> bool {
 /// as they are.
 pub(crate) fn settings_for(settings: &Settings, level: u32) -> LevelSettings {
     let billboard = &settings.own::<Own>().billboard;
-    let budget = billboard.lods.get(level as usize).copied().or(billboard.budget);
+    let entry = billboard.lods.get(level as usize).copied();
+    let budget = match entry {
+        Some(entry) => entry.cloud_budget(),
+        None => billboard.budget,
+    };
     let halvings = level.min(31);
     let max_size = settings.own::<Own>().atlas.max_size;
     let max_atlas_size = if billboard.screen_size.is_none() && billboard.texel_density.is_none() {
@@ -49,7 +57,16 @@ pub(crate) fn settings_for(settings: &Settings, level: u32) -> LevelSettings {
         texel_density: billboard.texel_density.map(|density| density / (1u64 << halvings) as f32),
         screen_size: billboard.screen_size.map(|pixels| (pixels >> halvings).max(4)),
         max_atlas_size,
+        reduced: match entry {
+            Some(LodLevel::Reduced(triangles)) => Some(triangles),
+            _ => None,
+        },
     }
+}
+
+/// Whether level `level` is a reduced mesh (no planes, atlas or renders).
+pub(crate) fn is_reduced(settings: &Settings, level: u32) -> bool {
+    matches!(settings.own::<Own>().billboard.lods.get(level as usize), Some(LodLevel::Reduced(_)))
 }
 
 /// The atlas settings of a level: the asset's, with the level's largest side.

@@ -7,7 +7,10 @@ use std::fmt::Write;
 
 use crate::kinds::billboard_cloud::layout::Layout;
 use crate::kinds::billboard_cloud::rectangles::PlaneRectangle;
-use crate::mesh::gltf::{gltf_files, GltfAlpha, GltfFiles, GltfMaterial, GltfMesh, GENERATOR};
+use crate::mesh::gltf::{gltf_files, GltfAlpha, GltfFiles, GltfMaterial, GltfMesh, GltfWrap, GENERATOR};
+
+/// How a billboard cloud's `lod.obj` begins (a reduced level's does not).
+pub const CLOUD_HEADER: &str = "# cirrus billboard cloud";
 
 /// The OBJ text of the billboard cloud (`mtllib lod.mtl`); `material` names the atlas material.
 pub fn lod_mesh(rectangles: &[PlaneRectangle], layout: &Layout, material: &str) -> String {
@@ -15,7 +18,7 @@ pub fn lod_mesh(rectangles: &[PlaneRectangle], layout: &Layout, material: &str) 
     let planes = rectangles.iter().map(|rectangle| rectangle.plane).collect::<std::collections::BTreeSet<_>>().len();
     let _ = writeln!(
         obj,
-        "# cirrus billboard cloud: {} quads on {planes} planes, atlas {}x{}",
+        "{CLOUD_HEADER}: {} quads on {planes} planes, atlas {}x{}",
         rectangles.len(),
         layout.width,
         layout.height
@@ -114,6 +117,7 @@ pub fn lod_gltf_mesh(rectangles: &[PlaneRectangle], layout: &Layout, alpha_cutof
         metallic_roughness: Some("orm.png".into()),
         alpha: GltfAlpha::Mask(alpha_cutoff),
         double_sided: true,
+        wrap: GltfWrap::Clamp,
     };
     LodGltfMesh { positions, normals, tangents, uvs, triangles, material }
 }

@@ -22,6 +22,7 @@ pub mod atlas;
 pub mod lod_mesh;
 pub mod lod_preview;
 pub mod levels;
+pub mod reduced;
 pub mod queries;
 
 use crate::summary::ArtifactRole;
@@ -39,6 +40,7 @@ use crate::kinds::{
     check_texture_file, tail_instances, AssetOutputs, Job, Kind, PreviewError, PreviewOptions, PreviewReport,
     PreviewRow, Read, StageInstance, SurfaceId, Task,
 };
+use crate::mesh::gltf::{gltf_chain, GltfLevel};
 use crate::summary::ErrorSummary;
 use crate::texture::tail::TailSettings;
 use crate::texture::{SurfaceKind, Texture, TextureSlot};
@@ -47,10 +49,13 @@ use queries::{ATLAS, LAYOUT, LOD, PLANES, RENDER};
 
 pub struct BillboardCloud;
 
-/// A level's four atlas surfaces (their group is the level's folder).
-fn atlas_surfaces(db: &dyn Db, asset: Asset, level: u32) -> [SurfaceId; 4] {
+/// A level's four atlas surfaces (their group is the level's folder); none for a reduced level.
+fn atlas_surfaces(db: &dyn Db, asset: Asset, level: u32) -> Vec<SurfaceId> {
+    if levels::is_reduced(asset.settings(db), level) {
+        return Vec::new();
+    }
     let folder = levels::level_folder(asset.settings(db), level);
-    SurfaceKind::BILLBOARD.map(|surface| SurfaceId { group: folder.clone(), surface })
+    SurfaceKind::BILLBOARD.map(|surface| SurfaceId { group: folder.clone(), surface }).to_vec()
 }
 
 /// The level a surface belongs to (its group is the level's folder).
@@ -138,15 +143,18 @@ impl Kind for BillboardCloud {
     fn run_step(db: &dyn Db, asset: Asset, step: &Step) -> Result<Vec<Job>, Diagnostic> {
         let name = asset.name(db);
         match *step {
+            Step::Layout { level } if levels::is_reduced(asset.settings(db), level) => {
+                queries::reduced_level(db, asset, level).map(|_| Vec::new())
+            }
             Step::Layout { level } => {
                 let label = level_label(db, asset, level);
                 billboard_layout(db, asset, level)?;
                 let lod = Job { asset, task: Task::step(Step::Lod { level }), after: 1, label: format!("{label}/lod") };
                 let surfaces = atlas_surfaces(db, asset, level);
-                let surface_jobs = surfaces.clone().map(|surface| Job {
+                let surface_jobs = surfaces.iter().map(|surface| Job {
                     asset,
                     label: surface.label(name),
-                    task: Task::Surface(surface),
+                    task: Task::Surface(surface.clone()),
                     after: 2,
                 });
                 // Renders are needed only for surfaces the persistent cache does not hold.
@@ -222,13 +230,24 @@ impl Kind for BillboardCloud {
             let folder = levels::level_folder(asset.settings(db), level);
             let label = level_label(db, asset, level);
             let instance = if folder.is_empty() { mesh_label.clone() } else { folder.clone() };
+            let chain_end =
+                levels::is_chain(asset.settings(db)) && level + 1 == levels::level_count(asset.settings(db));
+            if levels::is_reduced(asset.settings(db), level) {
+                let mut reduce = reduced::reduce_instance(db, asset, level, output_folder, &mesh);
+                reduce.writes.push(report.clone());
+                if chain_end {
+                    reduce.writes.push(output_folder.join("lods.gltf"));
+                }
+                instances.push(reduce);
+                continue;
+            }
             let planes = StageInstance::new(PLANES, label, &instance).reads_stage(&mesh);
             let layout = StageInstance::new(LAYOUT, label, &instance).reads_stage(&mesh).reads_stage(&planes);
             let mut atlas = StageInstance::new(ATLAS, label, &instance).reads_stage(&layout);
             let mut lod = StageInstance::new(LOD, label, &instance).reads_stage(&layout);
             let level_folder = output_folder.join(&folder);
             lod.writes = ["lod.obj", "lod.mtl", "lod.gltf", "lod.bin"].map(|file| level_folder.join(file)).to_vec();
-            if levels::is_chain(asset.settings(db)) && level + 1 == levels::level_count(asset.settings(db)) {
+            if chain_end {
                 // The chain's document, made once every level's layout is.
                 lod.writes.push(output_folder.join("lods.gltf"));
             }
@@ -387,8 +406,22 @@ fn billboard_outputs(
     let name = asset.name(db);
     let mut outputs = AssetOutputs::default();
     let mut level_reports = Vec::new();
+    let mut chain = Vec::new();
+    let mut warnings = Vec::new();
     for level in 0..levels::level_count(settings) {
-        level_reports.push(level_outputs(db, asset, level, output_folder, &mut outputs)?);
+        let (report, mesh) = if levels::is_reduced(settings, level) {
+            let (report, mesh) =
+                reduced::reduced_level_outputs(db, asset, level, output_folder, (&mut outputs, &mut warnings))?;
+            (report, ChainMesh::Reduced(mesh))
+        } else {
+            level_outputs(db, asset, level, output_folder, &mut outputs)?
+        };
+        let error_world = match &mesh {
+            ChainMesh::Cloud(_) => billboard_planes(db, asset, level)?.mean_error,
+            ChainMesh::Reduced(reduced) => reduced.level.figures.error_world,
+        };
+        chain.push(ChainLevel { folder: levels::level_folder(settings, level), mesh, error_world });
+        level_reports.push(report);
     }
     let mut report = serde_json::json!({
         "asset": name,
@@ -398,9 +431,10 @@ fn billboard_outputs(
         "alpha_cutoff": settings.own::<Own>().billboard.alpha_cutoff,
     });
     let fields = report.as_object_mut().expect("an object");
-    if let Some(chain) = queries::lod_chain_gltf(db, asset)? {
-        let (document, coverage) = &*chain;
-        outputs.add(output_folder.join("lods.gltf"), ArtifactRole::Gltf, document.clone().into());
+    if levels::is_chain(settings) {
+        let diameter = 2.0 * planes::bounding_sphere_radius(&loaded.mesh.positions);
+        let (document, coverage) = chain_document(&chain, diameter);
+        outputs.add(output_folder.join("lods.gltf"), ArtifactRole::Gltf, document.into());
         // The least share of a 1920 × 1080 viewport's area at which each level is shown (see
         // `lod_mesh::screen_coverage`), as `lods.gltf` states it.
         fields.insert("screen_coverage".into(), serde_json::json!(coverage));
@@ -415,22 +449,54 @@ fn billboard_outputs(
         "stage_ms".into(),
         serde_json::to_value(crate::kinds::asset_stage_ms(name, runs)).expect("times serialise"),
     );
-    outputs.warnings = loaded.warnings.iter().map(ErrorSummary::from).collect();
+    outputs.warnings = loaded.warnings.iter().chain(&warnings).map(ErrorSummary::from).collect();
     fields.insert("warnings".into(), serde_json::to_value(&outputs.warnings).expect("warnings serialise"));
     outputs.report = Some(serde_json::to_vec_pretty(&report).expect("reports serialise"));
     Ok(outputs)
 }
 
-/// One level's files (added to `outputs`) and its part of the report: what it draws, the error
-/// it was made with, its atlas, its surfaces, and the bytes an engine loads (`lod.obj`,
-/// `lod.mtl` and the four textures; previews aside).
+/// One level as the chain's document draws it, and the error its switch coverage follows (world
+/// units: a cloud's mean plane error, a reduced mesh's largest deviation).
+struct ChainLevel {
+    folder: String,
+    mesh: ChainMesh,
+    error_world: f32,
+}
+
+enum ChainMesh {
+    Cloud(Box<lod_mesh::LodGltfMesh>),
+    Reduced(reduced::ReducedGltf),
+}
+
+/// A chain's `lods.gltf` (`MSFT_lod`, every level's `lod.bin` and images under its folder, the
+/// switch coverages from each level's error, `diameter` the bounding sphere's) and those
+/// coverages.
+fn chain_document(levels: &[ChainLevel], diameter: f32) -> (Vec<u8>, Vec<f32>) {
+    let gltf_levels: Vec<GltfLevel> = levels
+        .iter()
+        .map(|level| GltfLevel {
+            mesh: match &level.mesh {
+                ChainMesh::Cloud(mesh) => mesh.mesh(),
+                ChainMesh::Reduced(mesh) => mesh.mesh(),
+            },
+            folder: &level.folder,
+        })
+        .collect();
+    let errors: Vec<f32> = levels.iter().map(|level| level.error_world).collect();
+    let coverage = lod_mesh::screen_coverage(&errors, diameter);
+    (gltf_chain(&gltf_levels, "lod.bin", &coverage, crate::mesh::gltf::GENERATOR), coverage)
+}
+
+/// One billboard-cloud level's files (added to `outputs`), its part of the report (what it
+/// draws, the error it was made with, its atlas, its surfaces, and the bytes an engine loads:
+/// `lod.obj`, `lod.mtl` and the four textures; previews aside) and its mesh for the chain.
 fn level_outputs(
     db: &dyn Db,
     asset: Asset,
     level: u32,
     output_folder: &Path,
     outputs: &mut AssetOutputs,
-) -> Result<serde_json::Value, Diagnostic> {
+) -> Result<(serde_json::Value, ChainMesh), Diagnostic> {
     let settings = asset.settings(db);
     let folder = levels::level_folder(settings, level);
     let level_settings = queries::level_settings(db, asset, level);
@@ -465,9 +531,11 @@ fn level_outputs(
         }
     }
     let atlas_coverage = queries::atlas_coverage_fraction(db, asset, level)?;
-    Ok(serde_json::json!({
+    let chain = lod_mesh::lod_gltf_mesh(&layout.rectangles, &layout.layout, queries::billboard_alpha_cutoff(db, asset));
+    let report = serde_json::json!({
         "level": level,
         "folder": folder,
+        "representation": "billboard_cloud",
         "planes": planes.planes.len(),
         "quads": layout.layout.placements.len(),
         "triangles": 2 * layout.layout.placements.len(),
@@ -490,7 +558,8 @@ fn level_outputs(
         },
         "surfaces": surfaces,
         "bytes": bytes,
-    }))
+    });
+    Ok((report, ChainMesh::Cloud(Box::new(chain))))
 }
 
 /// `cirrus preview` of a baked asset (`input`, built by the caller): renders it and its source
@@ -521,6 +590,10 @@ pub fn preview_levels(
     let lods = chosen
         .iter()
         .map(|&level| match options.stand_in {
+            // A reduced level has no planes to stand in on: it is shown as baked.
+            _ if levels::is_reduced(settings, level) => {
+                reduced::reduced_view_mesh(&config.root, &folder.join(levels::level_folder(settings, level)), cutoff)
+            }
             lod_preview::StandIn::Baked => {
                 read_lod_view_mesh(&config.root, &folder.join(levels::level_folder(settings, level)), cutoff)
             }
@@ -558,16 +631,21 @@ pub fn preview_levels(
     Ok(results)
 }
 
-/// The baked LOD in `folder` (relative to `root`) as an engine loads it: `lod.obj` with the
-/// decoded levels of `albedo.ktx2` and `normal.ktx2`, alpha-tested at `alpha_cutoff`.
+/// The baked LOD in `folder` (relative to `root`) as an engine loads it: a billboard cloud's
+/// `lod.obj` with the decoded levels of `albedo.ktx2` and `normal.ktx2`, alpha-tested at
+/// `alpha_cutoff`; a reduced level's `lod.obj` with its own materials (`reduced_view_mesh`).
 pub fn read_lod_view_mesh(root: &Path, folder: &Path, alpha_cutoff: f32) -> Result<crate::gpu::ViewMesh, Diagnostic> {
     let read = |file: &str| -> Result<(PathBuf, Vec<u8>), Diagnostic> {
         let path = folder.join(file);
         let bytes = crate::artifacts::read_artifact(root, &path)?;
         Ok((path, bytes))
     };
+    let obj = read("lod.obj")?;
+    if !obj.1.starts_with(lod_mesh::CLOUD_HEADER.as_bytes()) {
+        return reduced::reduced_view_mesh(root, folder, alpha_cutoff);
+    }
     lod_preview::lod_view_mesh(&lod_preview::LodFiles {
-        obj: read("lod.obj")?,
+        obj,
         albedo_ktx2: read("albedo.ktx2")?,
         normal_ktx2: read("normal.ktx2")?,
         alpha_cutoff,

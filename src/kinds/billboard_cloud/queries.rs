@@ -12,7 +12,7 @@ use std::collections::{BTreeMap, HashMap};
 use std::path::PathBuf;
 use std::sync::Arc;
 
-use crate::mesh::gltf::{gltf_chain, GltfFiles, GltfLevel};
+use crate::mesh::gltf::GltfFiles;
 
 use super::layout::Layout;
 use super::rectangles::PlaneRectangle;
@@ -45,6 +45,12 @@ pub(crate) const RENDER: Stage = Stage { name: "render", version: 7 };
 pub(crate) const ATLAS: Stage = Stage { name: "atlas", version: 1 };
 /// 2: the OBJ alone (the MTL is written with the asset's packing).
 pub const LOD: Stage = Stage { name: "lod", version: 2 };
+/// A reduced level (`mesh::reduce`: meshoptimizer, cards thinned whole).
+pub(crate) const REDUCE: Stage = Stage { name: "reduce", version: 1 };
+
+/// The deviation (a fraction of the mesh's largest extent) up to which a reduced level's
+/// simplifier prefers stopping to reaching its budget.
+pub(crate) const REDUCE_MAX_ERROR: f32 = 0.01;
 
 impl KeyPart for crate::packing::PageSettings {
     fn add_to(&self, key: CacheKeyBuilder) -> CacheKeyBuilder {
@@ -206,37 +212,6 @@ pub(crate) fn lod_gltf(db: &dyn Db, asset: Asset, level: u32) -> Result<Arc<Gltf
     let layout = billboard_layout(db, asset, level)?;
     let cutoff = billboard_alpha_cutoff(db, asset);
     Ok(Arc::new(super::lod_mesh::lod_gltf(&layout.rectangles, &layout.layout, cutoff)))
-}
-
-/// A chain's glTF document and the switch coverages it states.
-pub(crate) type ChainGltf = (Vec<u8>, Vec<f32>);
-
-/// A chain's `lods.gltf` (`MSFT_lod`, every level's `lod.bin` and images under its folder, the
-/// switch coverages from each level's mean plane error) and those coverages; `None` for a
-/// single LOD.
-#[salsa::tracked(returns(clone))]
-pub(crate) fn lod_chain_gltf(db: &dyn Db, asset: Asset) -> Result<Option<Arc<ChainGltf>>, Diagnostic> {
-    let settings = asset.settings(db);
-    if !super::levels::is_chain(settings) {
-        return Ok(None);
-    }
-    let cutoff = billboard_alpha_cutoff(db, asset);
-    let (mut meshes, mut folders, mut errors, mut diameter) = (Vec::new(), Vec::new(), Vec::new(), 0.0f32);
-    for level in 0..super::levels::level_count(settings) {
-        let layout = billboard_layout(db, asset, level)?;
-        let planes = billboard_planes(db, asset, level)?;
-        meshes.push(super::lod_mesh::lod_gltf_mesh(&layout.rectangles, &layout.layout, cutoff));
-        folders.push(super::levels::level_folder(settings, level));
-        errors.push(planes.mean_error);
-        if planes.epsilon_fraction > 0.0 {
-            diameter = 2.0 * planes.epsilon / planes.epsilon_fraction;
-        }
-    }
-    let levels: Vec<GltfLevel> =
-        meshes.iter().zip(&folders).map(|(mesh, folder)| GltfLevel { mesh: mesh.mesh(), folder }).collect();
-    let coverage = super::lod_mesh::screen_coverage(&errors, diameter);
-    let document = gltf_chain(&levels, "lod.bin", &coverage, crate::mesh::gltf::GENERATOR);
-    Ok(Some(Arc::new((document, coverage))))
 }
 
 #[salsa::tracked(returns(copy))]
@@ -759,4 +734,101 @@ fn renders_from_entry(entry: CacheEntry) -> Option<HashMap<CacheKey, Arc<Vec<Pla
         renders.insert(key, Arc::new(images));
     }
     (offset == buffer.len()).then_some(renders)
+}
+
+/// What a reduced level drew, against its source.
+#[derive(Clone, Debug, PartialEq, serde::Serialize, serde::Deserialize)]
+pub(crate) struct ReducedFigures {
+    pub triangles: u64,
+    pub vertices: u64,
+    /// The simplifier's largest deviation, a fraction of the mesh's largest extent, and in
+    /// world units.
+    pub error: f32,
+    pub error_world: f32,
+    /// The source's leaf cards and those kept.
+    pub cards: (u64, u64),
+    /// The leaf area drawn (cut-out materials' triangles) in the source and the level.
+    pub cut_out_area: (f64, f64),
+}
+
+/// A reduced level's `lod.obj` (`mtllib lod.mtl`), the geometry of its glTF (whose image names
+/// the outputs give: copies of the maps, named by content) and its figures.
+#[derive(Debug, PartialEq)]
+pub(crate) struct ReducedLevel {
+    pub obj: Arc<[u8]>,
+    pub geometry: crate::mesh::gltf::GltfGeometry,
+    pub figures: ReducedFigures,
+}
+
+/// A reduced level (stage `reduce`): the mesh under the level's triangle budget.
+#[salsa::tracked(returns(clone))]
+pub(crate) fn reduced_level(db: &dyn Db, asset: Asset, level: u32) -> Result<Arc<ReducedLevel>, Diagnostic> {
+    let name = level_label(db, asset, level);
+    let Some(budget) = level_settings(db, asset, level).reduced else {
+        return Err(Diagnostic::new(asset.main_file(db), format!("{name} is not a reduced level")));
+    };
+    let key = stage_key(REDUCE).part(&mesh_cache_key(db, asset, asset.main_file(db).clone()).0);
+    let key = match budget {
+        crate::mesh::reduce::TriangleBudget::Triangles(count) => key.part("triangles").part(&count),
+        crate::mesh::reduce::TriangleBudget::Ratio(ratio) => key.part("ratio").part(&ratio),
+    };
+    let key = key.part(&REDUCE_MAX_ERROR).finish();
+    let from_entry = |entry: CacheEntry| {
+        let (figures, obj, geometry) = crate::kinds::mesh_queries::written_mesh_from_entry(entry)?;
+        Some(ReducedLevel { obj, geometry, figures })
+    };
+    if let Some(reduced) = load_cached(db, REDUCE.name, key, from_entry) {
+        record_cache_hit(db, REDUCE, name);
+        return Ok(Arc::new(reduced));
+    }
+    let loaded = loaded_mesh(db, asset)?;
+    let reduced = timed(db, REDUCE, name, || Ok(reduce_level(&loaded.mesh, budget, name)))?;
+    crate::db::store_cached(db, REDUCE.name, key, || {
+        crate::kinds::mesh_queries::written_mesh_entry(&reduced.figures, &reduced.obj, &reduced.geometry)
+    });
+    Ok(Arc::new(reduced))
+}
+
+/// `mesh` reduced to `budget` as a level's files (`header` names it in the OBJ).
+fn reduce_level(mesh: &crate::mesh::Mesh, budget: crate::mesh::reduce::TriangleBudget, header: &str) -> ReducedLevel {
+    let settings = crate::mesh::reduce::ReduceSettings { budget, max_error: REDUCE_MAX_ERROR };
+    let reduced = crate::mesh::reduce::reduce_mesh(mesh, &settings);
+    let extent = crate::mesh::reduce::mesh_extent(&mesh.positions);
+    let out = &reduced.mesh;
+    let names: Vec<String> = out.materials.iter().map(|material| material.name.clone()).collect();
+    let uvs = out.uvs.as_deref().unwrap_or(&[]);
+    let obj = crate::mesh::obj_text::obj_text(
+        &crate::mesh::obj_text::ObjMesh {
+            positions: &out.positions,
+            normals: &out.normals,
+            uvs,
+            triangles: &out.triangles,
+            triangle_materials: &out.triangle_materials,
+            material_names: &names,
+        },
+        &format!(
+            "{header}: {} of {} triangles, reduced by cirrus (meshoptimizer)",
+            out.triangles.len(),
+            mesh.triangles.len()
+        ),
+        "lod.mtl",
+    );
+    let geometry = crate::mesh::gltf::GltfGeometry {
+        positions: out.positions.clone(),
+        normals: out.normals.clone(),
+        uvs: uvs.to_vec(),
+        triangles: out.triangles.clone(),
+        triangle_materials: out.triangle_materials.clone(),
+        tangents: Vec::new(),
+    }
+    .with_tangents();
+    let figures = ReducedFigures {
+        triangles: out.triangles.len() as u64,
+        vertices: out.positions.len() as u64,
+        error: reduced.error,
+        error_world: reduced.error * extent,
+        cards: (reduced.cards.0 as u64, reduced.cards.1 as u64),
+        cut_out_area: reduced.cut_out_area,
+    };
+    ReducedLevel { obj: obj.into_bytes().into(), geometry, figures }
 }

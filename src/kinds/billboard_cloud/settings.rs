@@ -5,6 +5,7 @@
 use serde::{Deserialize, Serialize};
 
 use crate::config::sections::{explicit, page_size_overrides, Check};
+use crate::mesh::reduce::TriangleBudget;
 use crate::packing::PageSettings;
 
 #[derive(Clone, Debug, PartialEq, Serialize)]
@@ -19,11 +20,12 @@ pub struct BillboardSettings {
     /// diameter on screen): the atlas gets one texel per pixel there, `texel_density` =
     /// `screen_size / diameter` (none: `texel_density`, else the largest atlas).
     pub screen_size: Option<u32>,
-    /// A LOD chain: one level per budget, most detailed first, each baked into `lod<N>/`. Level
-    /// N is meant for half the screen size of level N − 1: its `screen_size` or `texel_density`
-    /// is halved, and without either its atlas's largest side is `max_size / 2^N` (at least 64).
-    /// Empty: one LOD (`budget`, or ε) in the asset's folder.
-    pub lods: Vec<LodBudget>,
+    /// A LOD chain: one level per entry, most detailed first, each baked into `lod<N>/`: a
+    /// billboard cloud at a budget, or the mesh reduced. Level N is meant for half the screen
+    /// size of level N − 1: its `screen_size` or `texel_density` is halved, and without either
+    /// its atlas's largest side is `max_size / 2^N` (at least 64). Empty: one LOD (`budget`, or
+    /// ε) in the asset's folder.
+    pub lods: Vec<LodLevel>,
     pub alpha_cutoff: f32,
 }
 
@@ -47,6 +49,67 @@ impl LodBudget {
     }
 }
 
+/// One level of a LOD chain: a billboard cloud within a budget, or the source's triangles
+/// reduced (`mesh::reduce`: meshoptimizer, leaf cards thinned whole).
+#[derive(Clone, Copy, Debug, PartialEq, Serialize, Deserialize)]
+pub enum LodLevel {
+    /// A billboard cloud of at most this many quads.
+    Quads(u32),
+    /// A billboard cloud of at most this many triangles (two per quad).
+    Triangles(u32),
+    /// The source mesh with at most `Triangles(n)` or `Ratio(r)` of its triangles.
+    Reduced(TriangleBudget),
+}
+
+impl LodLevel {
+    /// The budget of a billboard-cloud level (none: a reduced one).
+    pub fn cloud_budget(self) -> Option<LodBudget> {
+        match self {
+            LodLevel::Quads(quads) => Some(LodBudget::Quads(quads)),
+            LodLevel::Triangles(triangles) => Some(LodBudget::Triangles(triangles)),
+            LodLevel::Reduced(_) => None,
+        }
+    }
+
+    /// The triangles the level may draw, where the settings alone say (not a ratio).
+    fn triangles(self) -> Option<u64> {
+        match self {
+            LodLevel::Quads(quads) => Some(2 * quads as u64),
+            LodLevel::Triangles(triangles) => Some(triangles as u64 / 2 * 2),
+            LodLevel::Reduced(TriangleBudget::Triangles(triangles)) => Some(triangles as u64),
+            LodLevel::Reduced(TriangleBudget::Ratio(_)) => None,
+        }
+    }
+
+    /// The level as `pipeline.ron` writes it.
+    fn written(self) -> String {
+        match self {
+            LodLevel::Quads(quads) => format!("Quads({quads})"),
+            LodLevel::Triangles(triangles) => format!("Triangles({triangles})"),
+            LodLevel::Reduced(TriangleBudget::Triangles(triangles)) => format!("Reduced(Triangles({triangles}))"),
+            LodLevel::Reduced(TriangleBudget::Ratio(ratio)) => format!("Reduced(Ratio({ratio}))"),
+        }
+    }
+}
+
+/// Whether `next` asks for less than `previous`: fewer triangles where both counts are known,
+/// a smaller ratio between two ratios; a ratio beside a count cannot be compared before the
+/// mesh is read and passes.
+fn asks_for_less(previous: LodLevel, next: LodLevel) -> bool {
+    match (previous.triangles(), next.triangles()) {
+        (Some(previous), Some(next)) => next < previous,
+        _ => match (previous, next) {
+            (LodLevel::Reduced(TriangleBudget::Ratio(previous)), LodLevel::Reduced(TriangleBudget::Ratio(next))) => {
+                next < previous
+            }
+            _ => true,
+        },
+    }
+}
+
+/// The largest triangle count a reduced level may ask for.
+const MAX_REDUCED_TRIANGLES: u32 = 100_000_000;
+
 #[derive(Deserialize, Default, Clone)]
 #[serde(deny_unknown_fields)]
 pub(crate) struct BillboardOverrides {
@@ -59,7 +122,7 @@ pub(crate) struct BillboardOverrides {
     pub texel_density: Option<Option<f32>>,
     #[serde(default, deserialize_with = "explicit")]
     pub screen_size: Option<Option<u32>>,
-    pub lods: Option<Vec<LodBudget>>,
+    pub lods: Option<Vec<LodLevel>>,
     pub alpha_cutoff: Option<f32>,
 }
 
@@ -123,12 +186,33 @@ pub(crate) fn merge_billboard(
         if lods.len() > MAX_LOD_LEVELS {
             check.error_at_key("lods", anchor, &format!("a LOD chain has at most {MAX_LOD_LEVELS} levels"));
         }
-        if lods.iter().any(|budget| !(1..=1_000_000).contains(&budget.quads())) {
+        let clouds = lods.iter().filter_map(|level| level.cloud_budget());
+        if clouds.clone().any(|budget| !(1..=1_000_000).contains(&budget.quads())) {
             check.error_at_key(
                 "lods",
                 anchor,
                 "each level must allow between 1 and 1000000 quads (Triangles: at least 2)",
             );
+        }
+        for level in lods {
+            let problem = match *level {
+                LodLevel::Reduced(TriangleBudget::Triangles(triangles))
+                    if !(1..=MAX_REDUCED_TRIANGLES).contains(&triangles) =>
+                {
+                    Some(format!(
+                        "{}: a reduced level keeps between 1 and {MAX_REDUCED_TRIANGLES} triangles",
+                        level.written()
+                    ))
+                }
+                LodLevel::Reduced(TriangleBudget::Ratio(ratio)) if !(ratio > 0.0 && ratio < 1.0) => Some(format!(
+                    "{}: a reduced level keeps a ratio in (0, 1) of the source's triangles",
+                    level.written()
+                )),
+                _ => None,
+            };
+            if let Some(problem) = problem {
+                check.error_at_key("lods", anchor, &problem);
+            }
         }
         if lods.is_empty() {
             check.error_at_key(
@@ -138,15 +222,15 @@ pub(crate) fn merge_billboard(
                     single LOD",
             );
         }
-        if lods.windows(2).any(|pair| pair[1].quads() >= pair[0].quads()) {
-            let quads: Vec<String> = lods.iter().map(|budget| budget.quads().to_string()).collect();
+        if lods.windows(2).any(|pair| !asks_for_less(pair[0], pair[1])) {
+            let written: Vec<String> = lods.iter().map(|level| level.written()).collect();
             check.error_at_key(
                 "lods",
                 anchor,
                 &format!(
-                    "a LOD chain goes from the most detailed level to the least: each level must allow \
-                    fewer quads than the one before ({})",
-                    quads.join(", ")
+                    "a LOD chain goes from the most detailed level to the least: each level must draw fewer \
+                    triangles than the one before ({})",
+                    written.join(", ")
                 ),
             );
         }

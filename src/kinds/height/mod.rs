@@ -14,7 +14,7 @@ pub mod settings;
 pub mod bake;
 pub mod queries;
 
-use crate::kinds::source_copies::material_copy_paths;
+use crate::kinds::source_copies::{material_copy_paths, used_materials};
 use crate::summary::ArtifactRole;
 use std::path::{Path, PathBuf};
 use std::sync::Arc;
@@ -166,7 +166,8 @@ impl Kind for Height {
                 .to_vec();
             // The copies of the maps its materials name.
             if let Ok(low) = low_geometry(db, asset) {
-                let chosen = used_materials(&low.loaded.mesh).1;
+                let mesh = &low.loaded.mesh;
+                let chosen = used_materials(&mesh.materials, &mesh.triangle_materials).1;
                 displace.writes.extend(material_copy_paths(db, asset, output_folder, &chosen));
             }
             more.push(distance(Measured::Pn, &pn));
@@ -469,37 +470,26 @@ fn tessellated_gltf(
     outputs: &mut AssetOutputs,
     warnings: &mut Vec<Diagnostic>,
 ) -> PathBuf {
-    use crate::kinds::source_copies::{output_materials, MaterialPlaces};
+    use crate::kinds::source_copies::{written_materials, MaterialPlaces};
     let geometry = &files.geometry;
-    let (used, chosen) = used_materials(low);
     let places = MaterialPlaces { source: asset.main_file(db), mtl_folder: output_folder, gltf_folder: output_folder };
-    let named = output_materials(db, asset, output_folder, outputs, &chosen, &places);
-    warnings.extend(named.warnings);
-    outputs.add(output_folder.join("tessellated.mtl"), ArtifactRole::Mtl, named.mtl.into_bytes().into());
-    // Triangles number the used materials (the geometry's own arrays are borrowed, not copied).
-    let triangle_materials: Vec<u32> =
-        geometry.triangle_materials.iter().map(|material| used.binary_search(material).unwrap_or(0) as u32).collect();
+    let written = written_materials(
+        db,
+        asset,
+        output_folder,
+        outputs,
+        (&low.materials, &geometry.triangle_materials),
+        &places,
+        warnings,
+    );
+    outputs.add(output_folder.join("tessellated.mtl"), ArtifactRole::Mtl, written.mtl.into_bytes().into());
     let mesh = crate::mesh::gltf::GltfMesh {
-        triangle_materials: &triangle_materials,
-        ..geometry.mesh(asset.name(db), &named.gltf)
+        triangle_materials: &written.triangle_materials,
+        ..geometry.mesh(asset.name(db), &written.gltf)
     };
     let gltf = crate::mesh::gltf::gltf_files(&mesh, "tessellated.bin", crate::mesh::gltf::GENERATOR);
     let gltf_path = output_folder.join("tessellated.gltf");
     outputs.add(gltf_path.clone(), ArtifactRole::Gltf, gltf.gltf.into());
     outputs.add(output_folder.join("tessellated.bin"), ArtifactRole::GltfBuffer, gltf.bin.into());
     gltf_path
-}
-
-/// The materials the tessellated mesh's triangles use (those of the low mesh's triangles: each
-/// is tessellated), their numbers in the low mesh in order, and as the output names them.
-fn used_materials(low: &crate::mesh::Mesh) -> (Vec<u32>, Vec<crate::kinds::source_copies::OutputMaterial<'_>>) {
-    let mut used: Vec<u32> = low.triangle_materials.clone();
-    used.sort_unstable();
-    used.dedup();
-    let chosen = used
-        .iter()
-        .filter_map(|&index| low.materials.get(index as usize))
-        .map(|material| crate::kinds::source_copies::OutputMaterial { material, baked: Default::default() })
-        .collect();
-    (used, chosen)
 }

@@ -20,6 +20,7 @@ use crate::db::{
 use crate::diagnostic::Diagnostic;
 use crate::kinds::height::settings::Settings as Own;
 use crate::kinds::mesh_queries::{loaded_mesh, loaded_mesh_of, LoadedMesh};
+use crate::kinds::mesh_queries::{written_mesh_entry, written_mesh_from_entry};
 use crate::mesh::pn_triangles::{averaged_normals, pn_patch, tessellate, PnInput, PnMesh, PnPatch};
 use crate::mesh::rays::{build_triangle_bvh, TriangleBvh};
 use crate::mesh::surface_distance::{area_weighted_samples, surface_distance, SurfaceDistance};
@@ -467,17 +468,8 @@ struct MeshEntry {
 pub(crate) fn tessellated_files(db: &dyn Db, asset: Asset) -> Result<Arc<TessellatedFiles>, Diagnostic> {
     let key = output_mesh_key(db, asset)?;
     let from_entry = |entry: CacheEntry| {
-        let (MeshEntry { vertices, triangles }, [obj, positions, normals, uvs, corners, materials, tangents]) =
-            entry.parts::<MeshEntry, 7>()?;
-        let geometry = crate::mesh::gltf::GltfGeometry {
-            positions: from_pod_blob(&positions)?,
-            normals: from_pod_blob(&normals)?,
-            uvs: from_pod_blob(&uvs)?,
-            triangles: from_pod_blob(&corners)?,
-            triangle_materials: from_pod_blob(&materials)?,
-            tangents: from_pod_blob(&tangents)?,
-        };
-        Some(TessellatedFiles { obj: obj.into(), vertices, triangles, geometry })
+        let (MeshEntry { vertices, triangles }, obj, geometry) = written_mesh_from_entry(entry)?;
+        Some(TessellatedFiles { obj, vertices, triangles, geometry })
     };
     if let Some(files) = load_cached(db, MESH_ENTRY, key, from_entry) {
         record_cache_hit(db, DISPLACE, asset.name(db));
@@ -516,20 +508,8 @@ pub(crate) fn tessellated_files(db: &dyn Db, asset: Asset) -> Result<Arc<Tessell
         .with_tangents(),
     };
     store_cached(db, MESH_ENTRY, key, || {
-        let geometry = &files.geometry;
-        CacheEntry::new(
-            &MeshEntry { vertices: files.vertices, triangles: files.triangles },
-            vec![
-                files.obj.to_vec(),
-                pod_blob(&geometry.positions),
-                pod_blob(&geometry.normals),
-                pod_blob(&geometry.uvs),
-                pod_blob(&geometry.triangles),
-                pod_blob(&geometry.triangle_materials),
-                pod_blob(&geometry.tangents),
-            ],
-            true,
-        )
+        let metadata = MeshEntry { vertices: files.vertices, triangles: files.triangles };
+        written_mesh_entry(&metadata, &files.obj, &files.geometry)
     });
     Ok(Arc::new(files))
 }

@@ -9,7 +9,7 @@ pub mod definition;
 pub mod channel_packing;
 pub mod queries;
 
-use crate::mesh::gltf::{swatch_files, GltfAlpha, GltfMaterial};
+use crate::mesh::gltf::{swatch_files, GltfAlpha, GltfMaterial, GltfWrap};
 use crate::summary::ArtifactRole;
 use std::path::{Path, PathBuf};
 use std::sync::Arc;
@@ -153,6 +153,7 @@ impl Kind for Material {
                 metallic_roughness: None,
                 alpha: GltfAlpha::Opaque,
                 double_sided: false,
+                wrap: GltfWrap::Clamp,
             };
             for surface in SurfaceKind::MATERIAL {
                 let id = SurfaceId { group: material.name.clone(), surface };

@@ -10,7 +10,7 @@ use std::path::Path;
 use crate::support::{build, pattern_png, TempProject};
 
 /// The small tree of the bake tests as a two-level chain.
-fn chain_project(lods: &str) -> TempProject {
+pub(crate) fn chain_project(lods: &str) -> TempProject {
     let project = crate::billboard_cloud::bake::tree_project();
     let pipeline = String::from_utf8(project.read("pipeline.ron")).unwrap();
     let pipeline = pipeline.replace(
@@ -234,11 +234,11 @@ fn the_viewer_switches_levels_with_the_digit_keys() {
     let mut lines = Vec::new();
     crate::viewer::run(&options, &mut |line| lines.push(line)).expect("the viewer runs");
     assert_eq!(lines.len(), 5, "{lines:?}");
-    let quads = |level: usize| lod_quads(&project.read(&format!("baked/tree/lod{level}/lod.obj")));
-    assert!(lines[0].starts_with(&format!("loaded: lod0 of 2, {} quads", quads(0))), "{lines:?}");
-    assert!(lines[1].starts_with(&format!("showing lod1: lod1 of 2, {} quads", quads(1))), "{lines:?}");
+    let triangles = |level: usize| 2 * lod_quads(&project.read(&format!("baked/tree/lod{level}/lod.obj")));
+    assert!(lines[0].starts_with(&format!("loaded: lod0 of 2, {} triangles", triangles(0))), "{lines:?}");
+    assert!(lines[1].starts_with(&format!("showing lod1: lod1 of 2, {} triangles", triangles(1))), "{lines:?}");
     assert_eq!(lines[2], "key x does nothing");
     assert_eq!(lines[3], "key 7: no level 7, the chain has lod0 to lod1");
-    assert!(lines[4].starts_with(&format!("showing lod0: lod0 of 2, {} quads", quads(0))), "{lines:?}");
+    assert!(lines[4].starts_with(&format!("showing lod0: lod0 of 2, {} triangles", triangles(0))), "{lines:?}");
     assert!(Path::new(&screenshot).is_file());
 }

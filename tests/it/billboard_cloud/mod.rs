@@ -5,7 +5,8 @@
 pub mod bake;
 mod gpu;
 mod budget;
-mod chain;
+pub mod chain;
+mod reduced_level;
 mod distance_alpha;
 mod layout;
 mod planes;

@@ -1,0 +1,171 @@
+//! A LOD chain's reduced levels (`lods: [Reduced(Ratio(0.5)), …]`): the source's triangles
+//! brought under a budget (`mesh::reduce`), written as `lod.obj` + `lod.mtl` and `lod.gltf` +
+//! `lod.bin` over the source's materials, whose maps are copied into the level's `maps/` (named
+//! by content; in the level's folder, since loaders refuse paths out of a file's folder); their
+//! stage instance, report, and the level as an engine loads it (for the preview and the viewer).
+
+use std::collections::BTreeMap;
+use std::path::{Path, PathBuf};
+use std::sync::Arc;
+
+use super::levels;
+use super::queries::{level_label, reduced_level, ReducedLevel, REDUCE};
+use crate::db::{Asset, Db};
+use crate::diagnostic::Diagnostic;
+use crate::kinds::mesh_queries::loaded_mesh;
+use crate::kinds::source_copies::{material_copy_paths, used_materials, written_materials, MaterialPlaces};
+use crate::kinds::{AssetOutputs, StageInstance};
+use crate::mesh::gltf::{GltfMaterial, GltfMesh};
+use crate::summary::ArtifactRole;
+use crate::texture::TextureSlot;
+
+/// The files a reduced level writes into its folder (beside the copies of the maps).
+const LEVEL_FILES: [&str; 4] = ["lod.obj", "lod.mtl", "lod.gltf", "lod.bin"];
+
+/// A reduced level's `reduce` stage instance: it reads the mesh stage and writes the level's
+/// files and the copies of the maps its materials name.
+pub(crate) fn reduce_instance(
+    db: &dyn Db,
+    asset: Asset,
+    level: u32,
+    output_folder: &Path,
+    mesh: &StageInstance,
+) -> StageInstance {
+    let folder = levels::level_folder(asset.settings(db), level);
+    let level_folder = output_folder.join(&folder);
+    let mut reduce = StageInstance::new(REDUCE, level_label(db, asset, level), &folder).reads_stage(mesh);
+    reduce.writes = LEVEL_FILES.map(|file| level_folder.join(file)).to_vec();
+    if let (Ok(loaded), Ok(reduced)) = (loaded_mesh(db, asset), reduced_level(db, asset, level)) {
+        let chosen = used_materials(&loaded.mesh.materials, &reduced.geometry.triangle_materials).1;
+        reduce.writes.extend(material_copy_paths(db, asset, &level_folder, &chosen));
+    }
+    reduce
+}
+
+/// A reduced level as the chain's document draws it: its geometry and its used materials (maps
+/// relative to the level's folder).
+pub(crate) struct ReducedGltf {
+    pub level: Arc<ReducedLevel>,
+    pub materials: Vec<GltfMaterial>,
+    pub triangle_materials: Vec<u32>,
+}
+
+impl ReducedGltf {
+    pub fn mesh(&self) -> GltfMesh<'_> {
+        GltfMesh {
+            triangle_materials: &self.triangle_materials,
+            ..self.level.geometry.mesh("reduced", &self.materials)
+        }
+    }
+}
+
+/// A reduced level's files (added to `outputs`, its material warnings to `warnings`), its part
+/// of the report and its mesh for the chain's document.
+pub(crate) fn reduced_level_outputs(
+    db: &dyn Db,
+    asset: Asset,
+    level: u32,
+    output_folder: &Path,
+    (outputs, warnings): (&mut AssetOutputs, &mut Vec<Diagnostic>),
+) -> Result<(serde_json::Value, ReducedGltf), Diagnostic> {
+    let settings = asset.settings(db);
+    let folder = levels::level_folder(settings, level);
+    let level_folder = output_folder.join(&folder);
+    let loaded = loaded_mesh(db, asset)?;
+    let reduced = reduced_level(db, asset, level)?;
+    let first_file = outputs.files.len();
+    let places = MaterialPlaces { source: asset.main_file(db), mtl_folder: &level_folder, gltf_folder: &level_folder };
+    let written = written_materials(
+        db,
+        asset,
+        &level_folder,
+        outputs,
+        (&loaded.mesh.materials, &reduced.geometry.triangle_materials),
+        &places,
+        warnings,
+    );
+    let chain =
+        ReducedGltf { level: reduced.clone(), materials: written.gltf, triangle_materials: written.triangle_materials };
+    let gltf = crate::mesh::gltf::gltf_files(&chain.mesh(), "lod.bin", crate::mesh::gltf::GENERATOR);
+    let mtl = written.mtl.into_bytes();
+    // The bytes an engine loads: the mesh, its material library and the maps it names.
+    let copies = material_copy_paths(
+        db,
+        asset,
+        &level_folder,
+        &used_materials(&loaded.mesh.materials, &reduced.geometry.triangle_materials).1,
+    );
+    let map_bytes: usize =
+        outputs.files.iter().filter(|(path, _, _)| copies.contains(path)).map(|(_, _, bytes)| bytes.len()).sum();
+    let bytes = reduced.obj.len() + mtl.len() + map_bytes;
+    outputs.add(level_folder.join("lod.obj"), ArtifactRole::Mesh, reduced.obj.clone());
+    outputs.add(level_folder.join("lod.mtl"), ArtifactRole::Mtl, mtl.into());
+    outputs.add(level_folder.join("lod.gltf"), ArtifactRole::Gltf, gltf.gltf.into());
+    outputs.add(level_folder.join("lod.bin"), ArtifactRole::GltfBuffer, gltf.bin.into());
+    // The manifest and the hot-reload batches name each file's level.
+    for (path, _, _) in &outputs.files[first_file..] {
+        outputs.meanings.insert(path.clone(), serde_json::json!({ "lod": level }));
+    }
+    let figures = &reduced.figures;
+    let budget = match levels::settings_for(settings, level).reduced {
+        Some(crate::mesh::reduce::TriangleBudget::Triangles(count)) => serde_json::json!({ "triangles": count }),
+        Some(crate::mesh::reduce::TriangleBudget::Ratio(ratio)) => serde_json::json!({ "ratio": ratio }),
+        None => serde_json::Value::Null,
+    };
+    let (source_area, kept_area) = figures.cut_out_area;
+    let report = serde_json::json!({
+        "level": level,
+        "folder": folder,
+        "representation": "reduced",
+        "budget": budget,
+        "triangles": figures.triangles,
+        "vertices": figures.vertices,
+        // The simplifier's largest deviation: a fraction of the mesh's largest extent, and in
+        // world units.
+        "error": figures.error,
+        "error_world": figures.error_world,
+        "cards": { "source": figures.cards.0, "kept": figures.cards.1 },
+        // The leaf area drawn (cut-out materials), against the source's.
+        "leaf_area": if source_area > 0.0 { Some(((kept_area / source_area) * 1e4).round() / 1e4) } else { None },
+        "maps": copies.iter().map(|path| crate::diagnostic::display_path(path)).collect::<Vec<_>>(),
+        "bytes": bytes,
+    });
+    Ok((report, chain))
+}
+
+/// A reduced level in `folder` (relative to `root`) as an engine loads it: `lod.obj` with its
+/// `lod.mtl` and the maps that names (in its `maps/`), each cut-out material alpha-tested at
+/// `alpha_cutoff`.
+pub fn reduced_view_mesh(root: &Path, folder: &Path, alpha_cutoff: f32) -> Result<crate::gpu::ViewMesh, Diagnostic> {
+    let obj_path = folder.join("lod.obj");
+    let obj = crate::artifacts::read_artifact(root, &obj_path)?;
+    let mtl_path = folder.join("lod.mtl");
+    let libraries = BTreeMap::from([(mtl_path.clone(), crate::artifacts::read_artifact(root, &mtl_path).ok())]);
+    let (mesh, _) = crate::mesh::load_mesh(&obj_path, &obj, &libraries, folder)?;
+    let uvs = mesh.uvs.as_deref().unwrap_or(&[]);
+    let tangents = crate::mesh::vertex_tangents(&mesh.positions, &mesh.normals, uvs, &mesh.triangles);
+    let mut decoded: BTreeMap<PathBuf, Arc<crate::texture::Texture>> = BTreeMap::new();
+    let mut decode = |path: &Path| -> Result<Arc<crate::texture::Texture>, Diagnostic> {
+        if let Some(texture) = decoded.get(path) {
+            return Ok(texture.clone());
+        }
+        let bytes = crate::artifacts::read_artifact(root, path)?;
+        let texture = Arc::new(crate::texture::decode_texture(path, &bytes, Default::default())?);
+        decoded.insert(path.to_path_buf(), texture.clone());
+        Ok(texture)
+    };
+    let mut maps: BTreeMap<(String, TextureSlot), Arc<crate::texture::Texture>> = BTreeMap::new();
+    for material in &mesh.materials {
+        for (&slot, path) in material.maps.iter().filter(|_| mesh.uvs.is_some()) {
+            let texture = decode(path)?;
+            let texture = match slot {
+                TextureSlot::Opacity => Arc::new(crate::texture::opacity_channel(&texture)),
+                _ => texture,
+            };
+            maps.insert((material.name.clone(), slot), texture);
+        }
+    }
+    crate::preview::mesh_view(&mesh, &tangents, alpha_cutoff, |material, slot| {
+        Ok::<_, Diagnostic>(maps.get(&(material.name.clone(), slot)).cloned())
+    })
+}

@@ -66,6 +66,11 @@ pub struct PreviewMetrics {
     /// foliage loses more than a dense crown (corpus: oak 0.879, ash 0.785, bush 0.747), so LODs
     /// of different meshes drawn as displaced score different IoUs.
     pub source_shift_iou: f64,
+    /// The LOD's loss in px-shift units: `1 − mean_iou` over the source's own loss when moved one
+    /// pixel (`1 − source_shift_iou`); at most 1 means the LOD is as close to the source as the
+    /// source is to itself a pixel away, at this view size (DESIGN §3.2). `None` when a pixel
+    /// costs the source nothing (an empty view).
+    pub loss_px_shift: Option<f64>,
 }
 
 /// The result of previewing one LOD: metrics and the contact sheet (PNG bytes).
@@ -167,7 +172,18 @@ fn summarise_views(views: Vec<ViewMetrics>, samples_per_pixel: u32, source_shift
         (mean(|view| view.iou), mean(|view| view.missed), mean(|view| view.extra), mean(|view| view.psnr));
     let min_iou = views.iter().map(|view| view.iou).fold(1.0, f64::min);
     let source_shift_iou = source_shift_ious.iter().sum::<f64>() / source_shift_ious.len().max(1) as f64;
-    PreviewMetrics { samples_per_pixel, views, mean_iou, min_iou, mean_missed, mean_extra, mean_psnr, source_shift_iou }
+    let loss_px_shift = (source_shift_iou < 1.0).then(|| (1.0 - mean_iou) / (1.0 - source_shift_iou));
+    PreviewMetrics {
+        samples_per_pixel,
+        views,
+        mean_iou,
+        min_iou,
+        mean_missed,
+        mean_extra,
+        mean_psnr,
+        source_shift_iou,
+        loss_px_shift,
+    }
 }
 
 /// A view resolved to its pixels: the sRGB colour (the mean of the pixel's samples, taken in

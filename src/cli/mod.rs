@@ -547,7 +547,7 @@ fn preview(
     for row in &report.rows {
         let metrics = &row.metrics;
         outln!(
-            "{}{stand_in}{} views, {} per pixel: mean IoU {:.3}, min IoU {:.3} (missed {:.1} %, extra {:.1} % of the \
+            "{}{stand_in}{} views, {} per pixel: mean IoU {:.3}{}, min IoU {:.3} (missed {:.1} %, extra {:.1} % of the \
                 source's silhouette), mean PSNR {:.2} dB; the source against itself moved 1 pixel: IoU {:.3}",
             row.label.as_ref().map(|label| format!("{label}: ")).unwrap_or_default(),
             metrics.views.len(),
@@ -556,6 +556,7 @@ fn preview(
                 samples => format!("{samples} samples"),
             },
             metrics.mean_iou,
+            metrics.loss_px_shift.map(|loss| format!(" ({loss:.2} px-shift units)")).unwrap_or_default(),
             metrics.min_iou,
             100.0 * metrics.mean_missed,
             100.0 * metrics.mean_extra,

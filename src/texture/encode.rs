@@ -50,6 +50,25 @@ pub fn bits_per_texel(format: BlockFormat) -> u32 {
     block_bytes(format) as u32 * 8 / 16
 }
 
+/// The bytes a `width` × `height` texture takes on the GPU with its full mip chain (down to 1 × 1):
+/// block-compressed in `format` (whole 4 × 4 blocks per level), or RGBA8 without one (a PNG or
+/// JPEG an engine uploads as it is).
+pub fn gpu_bytes(width: u32, height: u32, format: Option<BlockFormat>) -> u64 {
+    let (mut width, mut height) = (width.max(1) as u64, height.max(1) as u64);
+    let mut bytes = 0;
+    loop {
+        bytes += match format {
+            Some(format) => width.div_ceil(4) * height.div_ceil(4) * block_bytes(format) as u64,
+            None => width * height * 4,
+        };
+        if width == 1 && height == 1 {
+            return bytes;
+        }
+        (width, height) = ((width / 2).max(1), (height / 2).max(1));
+    }
+}
+
+/// The bytes of one block of `format`.
 pub fn block_bytes(format: BlockFormat) -> usize {
     match format {
         BlockFormat::Bc1 | BlockFormat::Bc4 => 8,

@@ -510,6 +510,8 @@ fn level_outputs(
     outputs.add(level_folder.join("lod.obj"), ArtifactRole::Mesh, obj.into_bytes().into());
     outputs.add(level_folder.join("lod.mtl"), ArtifactRole::Mtl, mtl.into_bytes().into());
     let gltf = queries::lod_gltf(db, asset, level)?;
+    // What the GPU holds: the glTF's vertex and index buffer and the textures with their mips.
+    let mut gpu_bytes = gltf.bin.len() as u64;
     outputs.add(level_folder.join("lod.gltf"), ArtifactRole::Gltf, gltf.gltf.clone().into());
     outputs.add(level_folder.join("lod.bin"), ArtifactRole::GltfBuffer, gltf.bin.clone().into());
     let mut surfaces = Vec::new();
@@ -517,6 +519,8 @@ fn level_outputs(
         let artifacts = crate::kinds::tail_queries::surface_artifacts(db, asset, surface.clone())?;
         let [texture_path, preview_path] = surface.artifact_paths(output_folder, &settings.encode);
         bytes += artifacts.texture_file.len();
+        let format = settings.encode.format_of(surface.surface);
+        gpu_bytes += crate::texture::encode::gpu_bytes(layout.layout.width, layout.layout.height, Some(format));
         outputs.add(texture_path, ArtifactRole::Texture, artifacts.texture_file.clone());
         outputs.add(preview_path, ArtifactRole::Image, artifacts.preview_png.clone());
         if let Some(orm_png) = &artifacts.orm_png {
@@ -558,6 +562,7 @@ fn level_outputs(
         },
         "surfaces": surfaces,
         "bytes": bytes,
+        "gpu_bytes": gpu_bytes,
     });
     Ok((report, ChainMesh::Cloud(Box::new(chain))))
 }

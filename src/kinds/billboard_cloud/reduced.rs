@@ -95,8 +95,14 @@ pub(crate) fn reduced_level_outputs(
         &level_folder,
         &used_materials(&loaded.mesh.materials, &reduced.geometry.triangle_materials).1,
     );
-    let map_bytes: usize =
-        outputs.files.iter().filter(|(path, _, _)| copies.contains(path)).map(|(_, _, bytes)| bytes.len()).sum();
+    let (mut map_bytes, mut gpu_bytes) = (0, gltf.bin.len() as u64);
+    for (path, _, contents) in outputs.files.iter().filter(|(path, _, _)| copies.contains(path)) {
+        map_bytes += contents.len();
+        // The copies are uploaded as they are: RGBA8, mips made on load.
+        if let Ok((width, height)) = crate::texture::probe_texture(path, contents, Default::default()) {
+            gpu_bytes += crate::texture::encode::gpu_bytes(width, height, None);
+        }
+    }
     let bytes = reduced.obj.len() + mtl.len() + map_bytes;
     outputs.add(level_folder.join("lod.obj"), ArtifactRole::Mesh, reduced.obj.clone());
     outputs.add(level_folder.join("lod.mtl"), ArtifactRole::Mtl, mtl.into());
@@ -129,6 +135,8 @@ pub(crate) fn reduced_level_outputs(
         "leaf_area": if source_area > 0.0 { Some(((kept_area / source_area) * 1e4).round() / 1e4) } else { None },
         "maps": copies.iter().map(|path| crate::diagnostic::display_path(path)).collect::<Vec<_>>(),
         "bytes": bytes,
+        // What the GPU holds: the glTF's vertex and index buffer and the maps with their mips.
+        "gpu_bytes": gpu_bytes,
     });
     Ok((report, chain))
 }

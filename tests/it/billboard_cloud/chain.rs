@@ -71,6 +71,18 @@ fn a_chain_bakes_each_level_within_its_budget_into_its_own_folder() {
             assert_eq!(manifest["artifacts"][&path]["meaning"], serde_json::json!({ "lod": level }), "{path}");
         }
         assert_eq!(entry["bytes"], bytes, "lod{level}");
+        // What the GPU holds: the glTF's buffer and every level of the four textures' blocks.
+        let mut gpu_bytes = project.read(&format!("baked/tree/lod{level}/lod.bin")).len() as u64;
+        for surface in ["albedo", "mra", "normal", "height"] {
+            let ktx2 = crate::support::read_ktx2(&project.read(&format!("baked/tree/lod{level}/{surface}.ktx2")));
+            assert_eq!(
+                ktx2.levels.last().map(|_| (ktx2.width >> (ktx2.levels.len() - 1)).max(1)),
+                Some(1),
+                "a full chain"
+            );
+            gpu_bytes += ktx2.levels.iter().map(|&(_, _, uncompressed)| uncompressed).sum::<u64>();
+        }
+        assert_eq!(entry["gpu_bytes"], gpu_bytes, "lod{level}");
         let ktx2 = crate::support::read_ktx2(&project.read(&format!("baked/tree/lod{level}/albedo.ktx2")));
         assert_eq!((ktx2.width as u64, ktx2.height as u64), (width, height));
     }
@@ -187,8 +199,13 @@ fn the_preview_compares_every_level_and_lays_the_chain_side_by_side() {
             serde_json::from_slice(&project.read(&format!("baked/tree/preview/lod{level}/metrics.json"))).unwrap();
         assert_eq!(metrics["views"].as_array().unwrap().len(), 26);
         iou.push(metrics["mean_iou"].as_f64().unwrap());
+        let loss = (1.0 - iou[level]) / (1.0 - metrics["source_shift_iou"].as_f64().unwrap());
+        assert!((metrics["loss_px_shift"].as_f64().unwrap() - loss).abs() < 1e-9, "{metrics}");
         assert!(
-            stdout.contains(&format!("lod{level}: 26 views, 4 samples per pixel: mean IoU {:.3}", iou[level])),
+            stdout.contains(&format!(
+                "lod{level}: 26 views, 4 samples per pixel: mean IoU {:.3} ({loss:.2} px-shift units)",
+                iou[level]
+            )),
             "{stdout}"
         );
         let sheet = image::load_from_memory(&project.read(&format!("baked/tree/preview/lod{level}/contact_sheet.png")))

@@ -59,6 +59,11 @@ fn a_reduced_level_keeps_its_budget_over_copies_of_its_maps_and_a_map_edit_reduc
         assert_eq!(manifest["artifacts"][&path]["meaning"], serde_json::json!({ "lod": 0 }), "{path}");
     }
     assert_eq!(level["bytes"], bytes, "the mesh, its MTL and its maps");
+    // What the GPU holds: the glTF's buffer and the maps as RGBA8 with full mip chains (bark
+    // 32², its normal map 4², the leaf 64²).
+    let rgba8 = |side: u64| (0..=side.ilog2()).map(|level| (side >> level).pow(2) * 4).sum::<u64>();
+    let buffer = project.read("baked/tree/lod0/lod.bin").len() as u64;
+    assert_eq!(level["gpu_bytes"], buffer + rgba8(32) + rgba8(4) + rgba8(64));
     let bark_copy = maps.iter().find(|map| map.starts_with("maps/bark.")).unwrap().clone();
     assert_eq!(project.read(&format!("baked/tree/lod0/{bark_copy}")), project.read("assets/bark.png"));
 

@@ -4,6 +4,7 @@
 //! (preview views), `top_down_render` (a mesh's highest Y per texel, for height maps), `window`
 //! (the viewer's window surfaces).
 
+mod impostor;
 mod plane_render;
 pub mod top_down_render;
 mod view_render;

@@ -6,6 +6,7 @@ pub mod gltf;
 pub mod obj_text;
 pub mod occlusion;
 pub mod pn_triangles;
+pub mod octahedral;
 pub mod reduce;
 pub mod surface_distance;
 mod ray_kernels;

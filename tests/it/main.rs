@@ -20,6 +20,7 @@ mod seaweed;
 mod shared_cache;
 mod hostile;
 mod isa;
+mod impostor;
 mod occlusion;
 mod packing;
 mod reduce;

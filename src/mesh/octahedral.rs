@@ -1,0 +1,119 @@
+//! Octahedral impostor frames: the view directions of a `frames × frames` grid laid on an
+//! octahedron (the full sphere) or a hemi-octahedron (the upper half, for things seen from
+//! above the ground), and for any view direction the three frames an impostor blends with their
+//! weights. The reference that `shaders/impostor.wgsl` mirrors line for line (a GPU test runs
+//! both on the same directions).
+//!
+//! Conventions: +Y is up; a direction is where the camera looks *from* (object to eye). The grid
+//! holds frames at its points, `u = i / (frames − 1)`, `v = j / (frames − 1)` (frame number
+//! `j · frames + i`), so the poles and the horizon are frames of their own, as in Ryan Brucks'
+//! impostor baker and Amplify Impostors. A direction's grid cell is split along its anti-diagonal into two
+//! triangles; the frames at the corners of the triangle that holds the direction blend with its
+//! barycentric weights, so the weights are continuous across cells and a frame's weight is 1 at
+//! its own direction.
+
+use glam::{Vec2, Vec3};
+
+/// Which part of the sphere the frames cover.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Hash, serde::Serialize, serde::Deserialize)]
+pub enum Sphere {
+    /// The upper hemisphere (y ≥ 0): the grid's square is the hemi-octahedron (its diagonals
+    /// are the x and z axes); views from below use the horizon's frames.
+    Hemi,
+    /// The whole sphere: the grid's square is the octahedron unfolded (lower half folded out to
+    /// the corners).
+    Full,
+}
+
+/// A grid of impostor frames.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Hash, serde::Serialize, serde::Deserialize)]
+pub struct FrameGrid {
+    /// Frames along each side (at least 2).
+    pub frames: u32,
+    pub sphere: Sphere,
+}
+
+/// The point in the unit square, `[0, 1]²`, of the direction `direction` (need not be unit
+/// length; zero maps to straight up).
+pub fn encode(direction: Vec3, sphere: Sphere) -> Vec2 {
+    let direction = match sphere {
+        Sphere::Hemi => Vec3::new(direction.x, direction.y.max(0.0), direction.z),
+        Sphere::Full => direction,
+    };
+    let sum = direction.x.abs() + direction.y.abs() + direction.z.abs();
+    if sum <= 0.0 {
+        return Vec2::splat(0.5);
+    }
+    let d = direction / sum;
+    let square = match sphere {
+        Sphere::Hemi => Vec2::new(d.x + d.z, d.x - d.z),
+        Sphere::Full if d.y >= 0.0 => Vec2::new(d.x, d.z),
+        Sphere::Full => Vec2::new((1.0 - d.z.abs()) * sign(d.x), (1.0 - d.x.abs()) * sign(d.z)),
+    };
+    (square * 0.5 + 0.5).clamp(Vec2::ZERO, Vec2::ONE)
+}
+
+/// The unit direction of the point `uv` of the unit square ([`encode`]'s inverse).
+pub fn decode(uv: Vec2, sphere: Sphere) -> Vec3 {
+    let square = uv.clamp(Vec2::ZERO, Vec2::ONE) * 2.0 - 1.0;
+    let direction = match sphere {
+        Sphere::Hemi => {
+            let (x, z) = (0.5 * (square.x + square.y), 0.5 * (square.x - square.y));
+            Vec3::new(x, 1.0 - x.abs() - z.abs(), z)
+        }
+        Sphere::Full => {
+            let y = 1.0 - square.x.abs() - square.y.abs();
+            if y >= 0.0 {
+                Vec3::new(square.x, y, square.y)
+            } else {
+                let (x, z) = (square.x, square.y);
+                Vec3::new((1.0 - z.abs()) * sign(x), y, (1.0 - x.abs()) * sign(z))
+            }
+        }
+    };
+    direction.normalize()
+}
+
+/// `1` for 0 and above, `-1` below (WGSL's `select(-1.0, 1.0, x >= 0.0)`, not `sign`, which is 0
+/// at 0).
+fn sign(value: f32) -> f32 {
+    if value >= 0.0 {
+        1.0
+    } else {
+        -1.0
+    }
+}
+
+impl FrameGrid {
+    /// The number of frames.
+    pub fn frame_count(self) -> u32 {
+        self.frames * self.frames
+    }
+
+    /// The direction frame `frame` is rendered from.
+    pub fn frame_direction(self, frame: u32) -> Vec3 {
+        let last = (self.frames - 1) as f32;
+        let (i, j) = (frame % self.frames, frame / self.frames);
+        decode(Vec2::new(i as f32 / last, j as f32 / last), self.sphere)
+    }
+
+    /// The three frames an impostor seen from `direction` blends, each with its weight (the
+    /// weights sum to 1; a frame seen from its own direction has weight 1).
+    pub fn blend(self, direction: Vec3) -> [(u32, f32); 3] {
+        let last = (self.frames - 1) as f32;
+        let grid = encode(direction, self.sphere) * last;
+        let cell = grid.floor().min(Vec2::splat(last - 1.0));
+        let fraction = grid - cell;
+        let (i, j) = (cell.x as u32, cell.y as u32);
+        let frame = |di: u32, dj: u32| (j + dj) * self.frames + i + di;
+        if fraction.x + fraction.y <= 1.0 {
+            [(frame(0, 0), 1.0 - fraction.x - fraction.y), (frame(1, 0), fraction.x), (frame(0, 1), fraction.y)]
+        } else {
+            [
+                (frame(1, 1), fraction.x + fraction.y - 1.0),
+                (frame(1, 0), 1.0 - fraction.y),
+                (frame(0, 1), 1.0 - fraction.x),
+            ]
+        }
+    }
+}

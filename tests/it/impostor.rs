@@ -1,0 +1,168 @@
+//! Octahedral impostor frames (`mesh::octahedral`, `shaders/impostor.wgsl`): the frames' view
+//! directions and the three frames blended from a direction, against hand-computed ones; the
+//! weights continuous and 1 at a frame's own direction; and the shader, run on the GPU, picking
+//! the same frames with the same weights as the reference.
+
+use std::collections::BTreeMap;
+
+use cirrus::mesh::octahedral::{decode, encode, FrameGrid, Sphere};
+use glam::Vec3;
+
+fn close(a: Vec3, b: Vec3) -> bool {
+    a.distance(b) < 1e-5
+}
+
+#[test]
+fn frames_are_seen_from_the_grid_s_points_on_the_hemi_and_the_full_octahedron() {
+    let hemi = FrameGrid { frames: 3, sphere: Sphere::Hemi };
+    let diagonal = std::f32::consts::FRAC_1_SQRT_2;
+    let expected_hemi = [
+        (0, Vec3::new(-1.0, 0.0, 0.0)),
+        (1, Vec3::new(-diagonal, 0.0, diagonal)),
+        (2, Vec3::new(0.0, 0.0, 1.0)),
+        (4, Vec3::Y),
+        (6, Vec3::new(0.0, 0.0, -1.0)),
+        (8, Vec3::X),
+    ];
+    for (frame, direction) in expected_hemi {
+        assert!(close(hemi.frame_direction(frame), direction), "hemi frame {frame}: {}", hemi.frame_direction(frame));
+    }
+    let full = FrameGrid { frames: 3, sphere: Sphere::Full };
+    let expected_full = [
+        (0, Vec3::NEG_Y),
+        (1, Vec3::NEG_Z),
+        (2, Vec3::NEG_Y),
+        (3, Vec3::NEG_X),
+        (4, Vec3::Y),
+        (5, Vec3::X),
+        (7, Vec3::Z),
+        (8, Vec3::NEG_Y),
+    ];
+    for (frame, direction) in expected_full {
+        assert!(close(full.frame_direction(frame), direction), "full frame {frame}: {}", full.frame_direction(frame));
+    }
+    // Views from below on a hemi-octahedron use the horizon's frames.
+    assert!(close(decode(encode(Vec3::new(1.0, -5.0, 0.0), Sphere::Hemi), Sphere::Hemi), Vec3::X));
+}
+
+#[test]
+fn a_direction_blends_the_three_frames_of_its_half_cell_by_barycentric_weights() {
+    let hemi = FrameGrid { frames: 3, sphere: Sphere::Hemi };
+    // (1, 3, 0) / 4 → square (0.25, 0.25) → grid (1.25, 1.25): the lower half of cell (1, 1).
+    let blend = hemi.blend(Vec3::new(1.0, 3.0, 0.0));
+    assert_eq!(blend, [(4, 0.5), (5, 0.25), (7, 0.25)]);
+    // (1, 1, 0) / 2 → grid (1.5, 1.5): on the cell's anti-diagonal, between frames 5 and 7.
+    assert_eq!(hemi.blend(Vec3::new(1.0, 1.0, 0.0)), [(4, 0.0), (5, 0.5), (7, 0.5)]);
+    // (3, 1, 0) / 4 → square (0.75, 0.75) → grid (1.75, 1.75): the upper half, toward frame 8.
+    assert_eq!(hemi.blend(Vec3::new(3.0, 1.0, 0.0)), [(8, 0.5), (5, 0.25), (7, 0.25)]);
+    let full = FrameGrid { frames: 5, sphere: Sphere::Full };
+    // Straight down on the full octahedron: the grid's corner frame alone.
+    let down = full.blend(Vec3::NEG_Y);
+    let weight_of = |blend: [(u32, f32); 3], frame: u32| -> f32 {
+        blend.iter().filter(|(found, _)| *found == frame).map(|(_, weight)| weight).sum()
+    };
+    assert_eq!(weight_of(down, 24), 1.0, "{down:?}");
+}
+
+/// Each frame's weight in a blend (frames of weight 0 left out).
+fn weights(blend: [(u32, f32); 3]) -> BTreeMap<u32, f32> {
+    let mut weights = BTreeMap::new();
+    for (frame, weight) in blend {
+        *weights.entry(frame).or_insert(0.0) += weight;
+    }
+    weights.retain(|_, weight| weight.abs() > 1e-6);
+    weights
+}
+
+/// Each seen direction's weight in a blend (a frame's direction rounded to 1e-4), so that
+/// frames seen from the same direction count as one.
+fn by_direction(grid: FrameGrid, blend: [(u32, f32); 3]) -> BTreeMap<[i32; 3], f32> {
+    let mut weights = BTreeMap::new();
+    for (frame, weight) in blend {
+        let key = grid.frame_direction(frame).to_array().map(|value| (value * 1e4).round() as i32);
+        *weights.entry(key).or_insert(0.0) += weight;
+    }
+    weights.retain(|_, weight| weight.abs() > 1e-6);
+    weights
+}
+
+/// Directions all over the sphere (a golden-angle spiral), the axes, and every frame's own.
+fn directions(grid: FrameGrid, count: usize) -> Vec<Vec3> {
+    let golden = std::f32::consts::PI * (3.0 - 5f32.sqrt());
+    let mut directions: Vec<Vec3> = (0..count)
+        .map(|index| {
+            let y = 1.0 - 2.0 * (index as f32 + 0.5) / count as f32;
+            let radius = (1.0 - y * y).sqrt();
+            let angle = golden * index as f32;
+            Vec3::new(radius * angle.cos(), y, radius * angle.sin())
+        })
+        .collect();
+    directions.extend([Vec3::X, Vec3::NEG_X, Vec3::Y, Vec3::NEG_Y, Vec3::Z, Vec3::NEG_Z]);
+    directions.extend((0..grid.frame_count()).map(|frame| grid.frame_direction(frame)));
+    directions
+}
+
+#[test]
+fn weights_sum_to_one_are_one_at_a_frame_s_own_direction_and_move_smoothly() {
+    for sphere in [Sphere::Hemi, Sphere::Full] {
+        let grid = FrameGrid { frames: 8, sphere };
+        // (The full octahedron's border frames come in pairs, and its corners in fours, seen
+        // from the same direction: one of them takes it.)
+        for frame in 0..grid.frame_count() {
+            let direction = grid.frame_direction(frame);
+            let blend = weights(grid.blend(direction));
+            let whole = blend.iter().find(|(_, weight)| (*weight - 1.0).abs() < 1e-4);
+            assert!(
+                whole.is_some_and(|(&found, _)| close(grid.frame_direction(found), direction)),
+                "{sphere:?} frame {frame}: {blend:?}"
+            );
+        }
+        for direction in directions(grid, 2000) {
+            let blend = grid.blend(direction);
+            let sum: f32 = blend.iter().map(|(_, weight)| weight).sum();
+            assert!((sum - 1.0).abs() < 1e-5 && blend.iter().all(|&(_, weight)| weight >= -1e-6), "{blend:?}");
+            assert!(blend.iter().all(|&(frame, _)| frame < grid.frame_count()), "{blend:?}");
+            // A small turn of the view moves each frame's weight a little (no frame pops in);
+            // but for a view from well below a hemi-octahedron, whose horizon frame follows
+            // the view's bearing, which a small turn under the pole swings far.
+            if sphere == Sphere::Hemi && direction.y < -0.5 {
+                continue;
+            }
+            // (Frames are told apart by direction: across the full octahedron's folded border the
+            // same views are its mirrored frames.)
+            let turned = by_direction(grid, grid.blend(direction + Vec3::new(1e-3, 0.0, 1e-3)));
+            let here = by_direction(grid, blend);
+            for frame in here.keys().chain(turned.keys()) {
+                let change = (here.get(frame).unwrap_or(&0.0) - turned.get(frame).unwrap_or(&0.0)).abs();
+                assert!(change < 0.05, "{sphere:?} {direction}: {here:?} → {turned:?}");
+            }
+            if sphere == Sphere::Full || direction.y >= 0.0 {
+                let back = decode(encode(direction, sphere), sphere);
+                assert!(back.distance(direction.normalize()) < 1e-4, "{direction} → {back}");
+            }
+        }
+    }
+}
+
+#[test]
+fn the_shader_picks_the_same_frames_with_the_same_weights_as_the_reference() {
+    let gpu = cirrus::gpu::gpu().expect("a GPU adapter (llvmpipe in CI)");
+    for (frames, sphere) in [(8, Sphere::Hemi), (12, Sphere::Full), (2, Sphere::Full)] {
+        let grid = FrameGrid { frames, sphere };
+        let directions = directions(grid, 4000);
+        let arrays: Vec<[f32; 3]> = directions.iter().map(|direction| direction.to_array()).collect();
+        let shader = gpu.impostor_blends(grid, &arrays).expect("the shader runs");
+        assert_eq!(shader.len(), directions.len());
+        for (direction, blend) in directions.iter().zip(shader) {
+            let (gpu_weights, reference) = (weights(blend), weights(grid.blend(*direction)));
+            let seen: std::collections::BTreeSet<&u32> = gpu_weights.keys().chain(reference.keys()).collect();
+            for frame in seen {
+                let difference = (gpu_weights.get(frame).unwrap_or(&0.0) - reference.get(frame).unwrap_or(&0.0)).abs();
+                assert!(
+                    difference < 1e-4,
+                    "{frames}×{frames} {sphere:?} {direction}: GPU {gpu_weights:?}, reference {reference:?}"
+                );
+            }
+        }
+    }
+}

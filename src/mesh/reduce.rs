@@ -15,7 +15,7 @@ use super::{position_ids, union_find_root, Mesh};
 pub enum TriangleBudget {
     /// At most this many.
     Triangles(u32),
-    /// At most this fraction of the source's (rounded down).
+    /// At most this fraction of the source's (rounded down, but at least one).
     Ratio(f32),
 }
 
@@ -60,9 +60,11 @@ pub struct ReducedMesh {
 pub fn budget_triangles(budget: TriangleBudget, triangles: usize) -> usize {
     match budget {
         TriangleBudget::Triangles(count) => (count as usize).min(triangles),
-        TriangleBudget::Ratio(ratio) => {
-            ((ratio.clamp(0.0, 1.0) as f64 * triangles as f64).floor() as usize).min(triangles)
+        // At least one triangle of a mesh that has any: a ratio's level is never empty.
+        TriangleBudget::Ratio(ratio) if ratio > 0.0 => {
+            ((ratio.min(1.0) as f64 * triangles as f64).floor() as usize).clamp(1.min(triangles), triangles)
         }
+        TriangleBudget::Ratio(_) => 0,
     }
 }
 
@@ -321,6 +323,11 @@ fn simplify_groups(
                 result = sloppy;
                 reached = reached.max(sloppy_error * extent);
             }
+        }
+        if result.is_empty() && share > 0 {
+            // Collapsed to nothing (a lone triangle beside degenerate ones): the largest of the
+            // group's own triangles instead.
+            result = indices.clone();
         }
         let mut group_kept: Vec<[u32; 3]> =
             result.chunks_exact(3).map(|corners| [corners[0], corners[1], corners[2]]).collect();

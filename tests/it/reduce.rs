@@ -206,3 +206,40 @@ fn a_triangle_lod_of_the_bush_is_measured_in_pixel_shift_units() {
         last_loss = loss;
     }
 }
+
+/// An OBJ of `text` with no material library.
+fn obj_mesh(text: &str) -> Mesh {
+    let (mesh, _) = cirrus::mesh::load_mesh(Path::new("a.obj"), text.as_bytes(), &Default::default(), Path::new(""))
+        .expect("loads");
+    mesh
+}
+
+#[test]
+fn small_and_degenerate_meshes_keep_at_least_one_real_triangle() {
+    // A lone triangle beside degenerate ones: the simplifier collapses it, the largest of the
+    // group's own triangles is kept instead; a ratio never leaves a level empty.
+    let lone = obj_mesh("v 0 0 0\nv 1 0 0\nv 0 1 0\nv 2 2 2\nf 1 2 3\nf 1 1 2\nf 4 4 4\n");
+    let reduced = reduce(&lone, TriangleBudget::Ratio(0.01));
+    let kept: Vec<[[f32; 3]; 3]> = reduced
+        .mesh
+        .triangles
+        .iter()
+        .map(|triangle| triangle.map(|corner| reduced.mesh.positions[corner as usize]))
+        .collect();
+    assert_eq!(kept, vec![[[0.0, 0.0, 0.0], [1.0, 0.0, 0.0], [0.0, 1.0, 0.0]]]);
+    // A box's four sides (no vertex the simplifier may move): its smallest triangles dropped,
+    // the rest kept, and the error says how deep the hole is.
+    let mut sides = String::new();
+    for (index, [(x0, z0), (x1, z1)]) in
+        [[(0.0, 0.0), (1.0, 0.0)], [(1.0, 0.0), (1.0, 1.0)], [(1.0, 1.0), (0.0, 1.0)], [(0.0, 1.0), (0.0, 0.0)]]
+            .into_iter()
+            .enumerate()
+    {
+        sides.push_str(&format!("v {x0} 0 {z0}\nv {x1} 0 {z1}\nv {x1} 4 {z1}\nv {x0} 4 {z0}\n"));
+        let b = index * 4 + 1;
+        sides.push_str(&format!("f {} {} {}\nf {} {} {}\n", b, b + 1, b + 2, b, b + 2, b + 3));
+    }
+    let reduced = reduce(&obj_mesh(&sides), TriangleBudget::Triangles(6));
+    assert_eq!(reduced.mesh.triangles.len(), 6, "six of the eight side triangles");
+    assert!(reduced.error > 0.4, "a dropped 1 × 4 triangle leaves a hole half its diagonal deep: {}", reduced.error);
+}

@@ -1,6 +1,7 @@
 // Preview renders: a mesh (the source, or a billboard-cloud LOD) under one orthographic camera,
 // alpha-tested, double-sided, lit by one directional light plus ambient, on a neutral background.
-// Alpha is 1 where a surface was drawn: the silhouette.
+// Alpha is 1 where a surface was drawn: the silhouette. `fs_impostor` draws an impostor's frame
+// instead: unlit albedo, normal and depth.
 
 struct Camera {
     view_projection: mat4x4f,
@@ -50,8 +51,14 @@ fn vs_main(input: VertexIn) -> VertexOut {
     return out;
 }
 
-@fragment
-fn fs_main(input: VertexOut, @builtin(front_facing) front: bool) -> @location(0) vec4f {
+// The surface at a fragment: its albedo (alpha-tested: discarded below the cutoff) and its
+// shading normal, facing the camera.
+struct Surface {
+    albedo: vec3f,
+    normal: vec3f,
+}
+
+fn surface(input: VertexOut, front: bool) -> Surface {
     let albedo_sample = textureSample(albedo_map, linear_sampler, input.uv);
     let opacity_sample = textureSample(opacity_map, linear_sampler, input.uv);
     let normal_sample = textureSample(normal_map, linear_sampler, input.uv);
@@ -73,6 +80,28 @@ fn fs_main(input: VertexOut, @builtin(front_facing) front: bool) -> @location(0)
     if (!front) {
         n = -n;
     }
-    let light = 0.35 + 0.65 * abs(dot(n, normalize(camera.light.xyz)));
-    return vec4f(albedo.rgb * light, 1.0);
+    return Surface(albedo.rgb, n);
+}
+
+@fragment
+fn fs_main(input: VertexOut, @builtin(front_facing) front: bool) -> @location(0) vec4f {
+    let drawn = surface(input, front);
+    let light = 0.35 + 0.65 * abs(dot(drawn.normal, normalize(camera.light.xyz)));
+    return vec4f(drawn.albedo * light, 1.0);
+}
+
+// An impostor frame: the unlit albedo (alpha 1 where drawn) and the normal (world space, as
+// 0.5 + 0.5 n) with the depth (0 at the bounding sphere's near side, 1 at its far side).
+struct FrameOut {
+    @location(0) albedo: vec4f,
+    @location(1) normal_depth: vec4f,
+}
+
+@fragment
+fn fs_impostor(input: VertexOut, @builtin(front_facing) front: bool) -> FrameOut {
+    let drawn = surface(input, front);
+    var out: FrameOut;
+    out.albedo = vec4f(drawn.albedo, 1.0);
+    out.normal_depth = vec4f(drawn.normal * 0.5 + 0.5, input.clip.z);
+    return out;
 }

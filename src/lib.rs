@@ -19,6 +19,7 @@ pub mod texture;
 pub mod mesh;
 pub mod packing;
 pub mod gpu;
+pub mod impostor;
 pub mod preview;
 
 // The inputs: the pipeline file, validated into per-asset settings.

@@ -62,6 +62,8 @@ pub struct Gpu {
     /// A cell per key, so that threads wanting the same new texture upload it once.
     uploads: Mutex<HashMap<UploadKey, Arc<std::sync::OnceLock<Arc<wgpu::TextureView>>>>>,
     view_pipeline: wgpu::RenderPipeline,
+    /// `view.wgsl`'s `fs_impostor`: an impostor frame's albedo and normal + depth.
+    impostor_pipeline: wgpu::RenderPipeline,
     view_material_layout: wgpu::BindGroupLayout,
     /// Material bind groups by content (constants, texture hashes, cutoff).
     material_groups: Mutex<HashMap<blake3::Hash, Arc<wgpu::BindGroup>>>,
@@ -402,6 +404,14 @@ impl Gpu {
             &[Some(ALBEDO_FORMAT.into())],
             Some(depth_test()),
         );
+        let impostor_pipeline = mesh_pipeline(
+            &device,
+            "impostor frame",
+            &view_layout,
+            (&view_shader, "fs_impostor"),
+            &[Some(ALBEDO_FORMAT.into()), Some(DATA_FORMAT.into())],
+            Some(depth_test()),
+        );
         let top_down_pipeline = top_down_render::top_down_pipeline(&device, &frame_layout);
         Ok(Gpu {
             top_down_pipeline,
@@ -419,6 +429,7 @@ impl Gpu {
             white,
             uploads: Mutex::new(HashMap::new()),
             view_pipeline,
+            impostor_pipeline,
             view_material_layout,
             material_groups: Mutex::new(HashMap::new()),
         })

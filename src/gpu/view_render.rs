@@ -52,16 +52,49 @@ impl Gpu {
         light: [f32; 3],
         size: u32,
     ) -> Result<Vec<u8>, GpuError> {
+        let grey = wgpu::Color { r: 0.214, g: 0.214, b: 0.214, a: 0.0 };
+        let camera = CameraUniform { view_projection, light: extend(light) };
+        self.draw_view(mesh, camera, size, (&self.view_pipeline, &[(ALBEDO_FORMAT, grey)]))
+            .map(|mut images| images.remove(0))
+    }
+
+    /// Renders an impostor frame of `mesh` (`view.wgsl`'s `fs_impostor`) into two `size`² RGBA8
+    /// images: the unlit sRGB albedo with alpha 255 where drawn, and the world-space normal as
+    /// `0.5 + 0.5 n` with the depth (0 at the projection's near plane, 255 at its far one) in
+    /// alpha; both 0 where nothing was drawn.
+    pub fn render_impostor_frame(
+        &self,
+        mesh: &ViewMesh,
+        view_projection: [[f32; 4]; 4],
+        size: u32,
+    ) -> Result<[Vec<u8>; 2], GpuError> {
+        let camera = CameraUniform { view_projection, light: [0.0; 4] };
+        let targets = [(ALBEDO_FORMAT, wgpu::Color::TRANSPARENT), (DATA_FORMAT, wgpu::Color::TRANSPARENT)];
+        let mut images = self.draw_view(mesh, camera, size, (&self.impostor_pipeline, &targets))?;
+        let normal_depth = images.pop().unwrap_or_default();
+        Ok([images.pop().unwrap_or_default(), normal_depth])
+    }
+
+    /// Draws `mesh` with `pipeline` into one `size`² target per format (cleared to its colour),
+    /// depth-tested; returns each target's pixels.
+    fn draw_view(
+        &self,
+        mesh: &ViewMesh,
+        camera: CameraUniform,
+        size: u32,
+        (pipeline, formats): (&wgpu::RenderPipeline, &[(wgpu::TextureFormat, wgpu::Color)]),
+    ) -> Result<Vec<Vec<u8>>, GpuError> {
         self.catching_device_errors(|| {
-            let camera = CameraUniform { view_projection, light: extend(light) };
             let camera_buffer = self.constants_buffer(bytemuck::bytes_of(&camera));
             let camera_group = self.device.create_bind_group(&wgpu::BindGroupDescriptor {
                 label: Some("camera"),
                 layout: &self.frame_layout,
                 entries: &[wgpu::BindGroupEntry { binding: 0, resource: camera_buffer.as_entire_binding() }],
             });
-            let target = self.target(size, size, ALBEDO_FORMAT);
-            let view = target.create_view(&Default::default());
+            let targets: Vec<wgpu::Texture> =
+                formats.iter().map(|&(format, _)| self.target(size, size, format)).collect();
+            let views: Vec<wgpu::TextureView> =
+                targets.iter().map(|target| target.create_view(&Default::default())).collect();
             let depth = self.target(size, size, DEPTH_FORMAT).create_view(&Default::default());
             let mut draws = Vec::new();
             for (material_index, vertices) in &mesh.batches {
@@ -71,19 +104,23 @@ impl Gpu {
                 let buffer = self.vertex_buffer(vertices);
                 draws.push((buffer, vertices.len() as u32, self.view_material_group(&mesh.materials[*material_index])));
             }
+            let color_attachments: Vec<Option<wgpu::RenderPassColorAttachment>> = views
+                .iter()
+                .zip(formats)
+                .map(|(view, &(_, clear))| {
+                    Some(wgpu::RenderPassColorAttachment {
+                        view,
+                        depth_slice: None,
+                        resolve_target: None,
+                        ops: wgpu::Operations { load: wgpu::LoadOp::Clear(clear), store: wgpu::StoreOp::Store },
+                    })
+                })
+                .collect();
             let mut encoder = self.device.create_command_encoder(&Default::default());
             {
                 let mut pass = encoder.begin_render_pass(&wgpu::RenderPassDescriptor {
                     label: Some("view"),
-                    color_attachments: &[Some(wgpu::RenderPassColorAttachment {
-                        view: &view,
-                        depth_slice: None,
-                        resolve_target: None,
-                        ops: wgpu::Operations {
-                            load: wgpu::LoadOp::Clear(wgpu::Color { r: 0.214, g: 0.214, b: 0.214, a: 0.0 }),
-                            store: wgpu::StoreOp::Store,
-                        },
-                    })],
+                    color_attachments: &color_attachments,
                     depth_stencil_attachment: Some(wgpu::RenderPassDepthStencilAttachment {
                         view: &depth,
                         depth_ops: Some(wgpu::Operations {
@@ -94,7 +131,7 @@ impl Gpu {
                     }),
                     ..Default::default()
                 });
-                pass.set_pipeline(&self.view_pipeline);
+                pass.set_pipeline(pipeline);
                 pass.set_bind_group(0, &camera_group, &[]);
                 for (buffer, count, group) in &draws {
                     pass.set_bind_group(1, group, &[]);
@@ -102,7 +139,8 @@ impl Gpu {
                     pass.draw(0..*count, 0..1);
                 }
             }
-            self.read_back(encoder, &[&target]).map(|mut images| images.remove(0))
+            let targets: Vec<&wgpu::Texture> = targets.iter().collect();
+            self.read_back(encoder, &targets)
         })
     }
 

@@ -117,3 +117,32 @@ impl FrameGrid {
         }
     }
 }
+
+/// The image axes of the frame seen from `direction` (unit length, object to eye): `right` and
+/// `up` in world space, a right-handed camera looking along `−direction` with world +Y up (−Z
+/// up for a view from within 0.1° of straight above or below, where +Y is no guide).
+pub fn frame_axes(direction: Vec3) -> (Vec3, Vec3) {
+    let forward = -direction.normalize();
+    let hint = if direction.normalize().y.abs() > 0.999_998 { Vec3::NEG_Z } else { Vec3::Y };
+    let right = forward.cross(hint).normalize();
+    (right, right.cross(forward))
+}
+
+/// The orthographic camera of the frame seen from `direction`: the bounding sphere (`center`,
+/// `radius`) fills the frame, and depth runs from 0 at the sphere's near side to 1 at its far
+/// side (WebGPU's clip depth).
+pub fn frame_view_projection(center: Vec3, radius: f32, direction: Vec3) -> glam::Mat4 {
+    let radius = radius.max(1e-6);
+    let (right, up) = frame_axes(direction);
+    let forward = right.cross(up);
+    let eye = center - forward * 2.0 * radius;
+    let view = glam::Mat4::from_cols(
+        glam::Vec4::new(right.x, up.x, -forward.x, 0.0),
+        glam::Vec4::new(right.y, up.y, -forward.y, 0.0),
+        glam::Vec4::new(right.z, up.z, -forward.z, 0.0),
+        glam::Vec4::new(-right.dot(eye), -up.dot(eye), forward.dot(eye), 1.0),
+    );
+    let projection =
+        glam::camera::rh::proj::directx::orthographic(-radius, radius, -radius, radius, radius, 3.0 * radius);
+    projection * view
+}

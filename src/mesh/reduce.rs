@@ -332,31 +332,35 @@ fn simplify_groups(
         let mut group_kept: Vec<[u32; 3]> =
             result.chunks_exact(3).map(|corners| [corners[0], corners[1], corners[2]]).collect();
         if group_kept.len() > share {
-            // The largest triangles, in their order.
-            let mut by_area: Vec<usize> = (0..group_kept.len()).collect();
-            by_area.sort_by(|&a, &b| {
-                triangle_area(&mesh.positions, group_kept[b]).total_cmp(&triangle_area(&mesh.positions, group_kept[a]))
-            });
-            let mut keep = vec![false; group_kept.len()];
-            for &index in &by_area[..share] {
-                keep[index] = true;
-            }
-            // A dropped triangle leaves a hole about half its longest side deep.
-            for &index in &by_area[share..] {
-                let corners = group_kept[index].map(|corner| Vec3::from(mesh.positions[corner as usize]));
-                let longest = (0..3).map(|side| corners[side].distance(corners[(side + 1) % 3])).fold(0.0f32, f32::max);
-                reached = reached.max(0.5 * longest);
-            }
-            let mut index = 0;
-            group_kept.retain(|_| {
-                index += 1;
-                keep[index - 1]
-            });
+            reached = reached.max(keep_largest(&mesh.positions, &mut group_kept, share));
         }
         error = error.max(reached / extent);
         kept.extend(group_kept.into_iter().map(|corners| (corners, triangles[0])));
     }
     (kept, error)
+}
+
+/// Keeps the `count` largest of `triangles` (in their order); gives the depth of the deepest hole
+/// the others leave (half the longest side of the largest one dropped).
+fn keep_largest(positions: &[[f32; 3]], triangles: &mut Vec<[u32; 3]>, count: usize) -> f32 {
+    let mut by_area: Vec<usize> = (0..triangles.len()).collect();
+    by_area.sort_by(|&a, &b| triangle_area(positions, triangles[b]).total_cmp(&triangle_area(positions, triangles[a])));
+    let mut keep = vec![false; triangles.len()];
+    for &index in &by_area[..count.min(triangles.len())] {
+        keep[index] = true;
+    }
+    let mut hole = 0.0f32;
+    for &index in by_area.iter().skip(count) {
+        let corners = triangles[index].map(|corner| Vec3::from(positions[corner as usize]));
+        let longest = (0..3).map(|side| corners[side].distance(corners[(side + 1) % 3])).fold(0.0f32, f32::max);
+        hole = hole.max(0.5 * longest);
+    }
+    let mut index = 0;
+    triangles.retain(|_| {
+        index += 1;
+        keep[index - 1]
+    });
+    hole
 }
 
 /// The source mesh's vertices that `kept` uses (at `positions`), renumbered in order of first

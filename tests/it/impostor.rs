@@ -166,3 +166,115 @@ fn the_shader_picks_the_same_frames_with_the_same_weights_as_the_reference() {
         }
     }
 }
+
+/// A view of the OBJ `text` (no materials: one plain, opaque one).
+fn view_of(text: &str) -> cirrus::gpu::ViewMesh {
+    let (mesh, _) = cirrus::mesh::load_mesh(
+        std::path::Path::new("a.obj"),
+        text.as_bytes(),
+        &Default::default(),
+        std::path::Path::new(""),
+    )
+    .expect("loads");
+    cirrus::preview::mesh_view(&mesh, &[], 0.5, |_, _| Ok::<_, ()>(None)).expect("a view")
+}
+
+/// A unit sphere at the origin, `rings` × `2 rings` quads.
+fn sphere_obj(rings: u32) -> String {
+    let mut obj = String::new();
+    let segments = 2 * rings;
+    for ring in 0..=rings {
+        let polar = std::f32::consts::PI * ring as f32 / rings as f32;
+        for segment in 0..segments {
+            let azimuth = std::f32::consts::TAU * segment as f32 / segments as f32;
+            let (x, y, z) = (polar.sin() * azimuth.cos(), polar.cos(), polar.sin() * azimuth.sin());
+            obj.push_str(&format!("v {x} {y} {z}\nvn {x} {y} {z}\n"));
+        }
+    }
+    for ring in 0..rings {
+        for segment in 0..segments {
+            let at = |ring: u32, segment: u32| ring * segments + segment % segments + 1;
+            let [a, b, c, d] =
+                [at(ring, segment), at(ring, segment + 1), at(ring + 1, segment + 1), at(ring + 1, segment)];
+            obj.push_str(&format!("f {a}//{a} {b}//{b} {c}//{c}\nf {a}//{a} {c}//{c} {d}//{d}\n"));
+        }
+    }
+    obj
+}
+
+/// An axis-aligned box's OBJ faces from `low` to `high`, its vertices numbered from `first`.
+fn box_obj(low: [f32; 3], high: [f32; 3], first: u32) -> String {
+    let mut obj = String::new();
+    for corner in 0..8 {
+        let pick = |axis: usize| if corner >> axis & 1 == 1 { high[axis] } else { low[axis] };
+        obj.push_str(&format!("v {} {} {}\n", pick(0), pick(1), pick(2)));
+    }
+    for [a, b, c, d] in [[0, 2, 3, 1], [4, 5, 7, 6], [0, 1, 5, 4], [2, 6, 7, 3], [0, 4, 6, 2], [1, 3, 7, 5]] {
+        let [a, b, c, d] = [a, b, c, d].map(|corner| first + corner);
+        obj.push_str(&format!("f {a} {b} {c}\nf {a} {c} {d}\n"));
+    }
+    obj
+}
+
+/// One frame's texels (RGBA8 rows) cut out of an atlas.
+fn frame_texels(atlas: &cirrus::texture::Texture, grid: FrameGrid, size: u32, frame: u32) -> Vec<[u8; 4]> {
+    let (column, row) = (frame % grid.frames * size, frame / grid.frames * size);
+    let mut texels = Vec::new();
+    for y in row..row + size {
+        for x in column..column + size {
+            let at = ((y * atlas.width + x) * 4) as usize;
+            texels.push(atlas.pixels[at..at + 4].try_into().unwrap());
+        }
+    }
+    texels
+}
+
+#[test]
+fn a_sphere_s_frames_each_show_a_disc_facing_the_frame_s_direction_nearest_at_its_centre() {
+    let gpu = cirrus::gpu::gpu().expect("a GPU adapter (llvmpipe in CI)");
+    let (grid, size) = (FrameGrid { frames: 4, sphere: Sphere::Hemi }, 64);
+    let settings = cirrus::impostor::ImpostorSettings { grid, frame_size: size };
+    let frames = cirrus::impostor::bake_impostor(gpu, &view_of(&sphere_obj(32)), (Vec3::ZERO, 1.0), settings).unwrap();
+    assert_eq!((frames.albedo.width, frames.normal_depth.height), (4 * 64, 4 * 64));
+    for frame in 0..grid.frame_count() {
+        let albedo = frame_texels(&frames.albedo, grid, size, frame);
+        let covered = albedo.iter().filter(|texel| texel[3] == 255).count() as f64 / albedo.len() as f64;
+        assert!((covered - std::f64::consts::FRAC_PI_4).abs() < 0.03, "frame {frame}: {covered:.3} covered");
+        let normal_depth = frame_texels(&frames.normal_depth, grid, size, frame);
+        let centre = normal_depth[(size / 2 * size + size / 2) as usize];
+        let normal = Vec3::new(centre[0] as f32, centre[1] as f32, centre[2] as f32) / 127.5 - Vec3::ONE;
+        let direction = grid.frame_direction(frame);
+        assert!(normal.normalize().distance(direction) < 0.06, "frame {frame}: normal {normal} seen from {direction}");
+        assert!(centre[3] <= 4, "frame {frame}: the sphere's nearest point has depth {}", centre[3]);
+        let edge = normal_depth[(size / 2 * size + 4) as usize];
+        assert!(edge[3] > 60, "frame {frame}: near the rim the depth is {} (about half way)", edge[3]);
+    }
+}
+
+#[test]
+fn a_frame_s_image_axes_are_the_reference_s() {
+    // A bar along x with a block on its +x end.
+    let mut obj = box_obj([-1.0, -0.1, -0.1], [1.0, 0.1, 0.1], 1);
+    obj.push_str(&box_obj([0.6, -0.4, -0.4], [1.0, 0.4, 0.4], 9));
+    let gpu = cirrus::gpu::gpu().expect("a GPU adapter (llvmpipe in CI)");
+    let (grid, size) = (FrameGrid { frames: 3, sphere: Sphere::Hemi }, 32);
+    let settings = cirrus::impostor::ImpostorSettings { grid, frame_size: size };
+    let frames = cirrus::impostor::bake_impostor(gpu, &view_of(&obj), (Vec3::ZERO, 1.5), settings).unwrap();
+    for frame in [2, 4, 6] {
+        // From +z, from above and from −z: the block shows where the frame's right axis puts +x.
+        let (right, _) = cirrus::mesh::octahedral::frame_axes(grid.frame_direction(frame));
+        let texels = frame_texels(&frames.albedo, grid, size, frame);
+        let covered_in = |columns: std::ops::Range<u32>| {
+            (0..size)
+                .flat_map(|y| columns.clone().map(move |x| (y * size + x) as usize))
+                .filter(|&at| texels[at][3] == 255)
+                .count()
+        };
+        let (left, right_half) = (covered_in(0..size / 2), covered_in(size / 2..size));
+        if right.x > 0.5 {
+            assert!(right_half > left + 20, "frame {frame}: {left} left, {right_half} right");
+        } else {
+            assert!(left > right_half + 20, "frame {frame}: {left} left, {right_half} right");
+        }
+    }
+}

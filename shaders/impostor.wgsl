@@ -7,8 +7,9 @@
 // Frames sit at the grid's points: frame `j * frames + i` is seen from
 // `impostor_decode(vec2(i, j) / (frames - 1))`. `hemi` chooses the hemi-octahedron (upper half of
 // the sphere; views from below use the horizon's frames) or the full octahedron. A direction's
-// grid cell is split along its anti-diagonal; the three frames at the corners of the half that
-// holds it blend with its barycentric weights (they sum to 1; a frame's own direction gives it
+// grid cell is split along its anti-diagonal (on the full octahedron, in the two quadrants where
+// the equator runs the other way, along its main diagonal); the three frames at the corners of
+// the half that holds it blend with its barycentric weights (they sum to 1; a frame's own direction gives it
 // weight 1).
 
 struct ImpostorBlend {
@@ -74,6 +75,20 @@ fn impostor_blend(direction: vec3<f32>, frames: u32, hemi: bool) -> ImpostorBlen
     let cell = min(floor(grid), vec2<f32>(last - 1.0, last - 1.0));
     let fraction = grid - cell;
     let base = u32(cell.y) * frames + u32(cell.x);
+    // The full octahedron's cells split along the equator's direction in their quadrant.
+    let centre = (cell + 0.5) / last - 0.5;
+    if !hemi && centre.x * centre.y < 0.0 {
+        if fraction.x >= fraction.y {
+            return ImpostorBlend(
+                vec3<u32>(base, base + 1u, base + frames + 1u),
+                vec3<f32>(1.0 - fraction.x, fraction.x - fraction.y, fraction.y),
+            );
+        }
+        return ImpostorBlend(
+            vec3<u32>(base, base + frames, base + frames + 1u),
+            vec3<f32>(1.0 - fraction.y, fraction.y - fraction.x, fraction.x),
+        );
+    }
     if fraction.x + fraction.y <= 1.0 {
         return ImpostorBlend(
             vec3<u32>(base, base + 1u, base + frames),
@@ -84,4 +99,131 @@ fn impostor_blend(direction: vec3<f32>, frames: u32, hemi: bool) -> ImpostorBlen
         vec3<u32>(base + frames + 1u, base + 1u, base + frames),
         vec3<f32>(fraction.x + fraction.y - 1.0, 1.0 - fraction.y, 1.0 - fraction.x),
     );
+}
+
+// The image axes of the frame seen from `direction` (object to eye): a right-handed camera with
+// world +Y up (-Z up within 0.1° of straight above or below). `mesh::octahedral::frame_axes`.
+struct ImpostorAxes {
+    right: vec3<f32>,
+    up: vec3<f32>,
+}
+
+fn impostor_frame_axes(direction_in: vec3<f32>) -> ImpostorAxes {
+    let direction = normalize(direction_in);
+    let forward = -direction;
+    var hint = vec3<f32>(0.0, 1.0, 0.0);
+    if abs(direction.y) > 0.999998 {
+        hint = vec3<f32>(0.0, 0.0, -1.0);
+    }
+    let right = normalize(cross(forward, hint));
+    return ImpostorAxes(right, cross(right, forward));
+}
+
+// ---------------------------------------------------------------------------------------------
+// A reference renderer (cirrus's preview draws impostors with it): one camera-facing quad over
+// the bounding sphere; each fragment samples the three frames of the view's blend, each at the
+// point of the view ray that meets that frame's depth (one parallax step), and blends their
+// albedo and normal by weight and coverage, alpha-tested at the cutoff.
+//
+// Atlases: frame `j * frames + i` at column `i`, row `j`; albedo (sRGB, coverage in alpha),
+// normal_depth (`0.5 + 0.5 n` in world space, depth in alpha: 0 at the sphere's near side, 1 at
+// its far side, along the frame's direction).
+
+struct ImpostorView {
+    view_projection: mat4x4<f32>,
+    // xyz: object to eye (an orthographic camera's direction)
+    eye: vec4<f32>,
+    // xyz: towards the light
+    light: vec4<f32>,
+}
+
+struct ImpostorParams {
+    // xyz: the bounding sphere's centre, w: its radius
+    sphere: vec4<f32>,
+    // frames per side, 1 for a hemi-octahedron, unused, unused
+    grid: vec4<u32>,
+    // alpha cutoff, unused...
+    params: vec4<f32>,
+}
+
+@group(0) @binding(0) var<storage, read> impostor_view: ImpostorView;
+@group(0) @binding(1) var<storage, read> impostor: ImpostorParams;
+@group(0) @binding(2) var impostor_sampler: sampler;
+@group(0) @binding(3) var albedo_atlas: texture_2d<f32>;
+@group(0) @binding(4) var normal_depth_atlas: texture_2d<f32>;
+
+struct ImpostorVertexOut {
+    @builtin(position) clip: vec4<f32>,
+    @location(0) world: vec3<f32>,
+}
+
+@vertex
+fn impostor_vs(@builtin(vertex_index) index: u32) -> ImpostorVertexOut {
+    var corners = array<vec2<f32>, 6>(
+        vec2<f32>(-1.0, -1.0), vec2<f32>(1.0, -1.0), vec2<f32>(1.0, 1.0),
+        vec2<f32>(-1.0, -1.0), vec2<f32>(1.0, 1.0), vec2<f32>(-1.0, 1.0),
+    );
+    let axes = impostor_frame_axes(impostor_view.eye.xyz);
+    let corner = corners[index];
+    let world = impostor.sphere.xyz + (axes.right * corner.x + axes.up * corner.y) * impostor.sphere.w;
+    var out: ImpostorVertexOut;
+    out.clip = impostor_view.view_projection * vec4<f32>(world, 1.0);
+    out.world = world;
+    return out;
+}
+
+// Frame `frame`'s texel under the view ray through `world`, in the frame's own image (0..1):
+// where the ray crosses the frame's plane through the centre, then (parallax) where it meets
+// the depth the frame shows there, twice; outside 0..1 when the ray leaves the frame.
+fn impostor_frame_uv(frame: u32, world: vec3<f32>) -> vec2<f32> {
+    let frames = impostor.grid.x;
+    let hemi = impostor.grid.y != 0u;
+    let cell = vec2<f32>(f32(frame % frames), f32(frame / frames));
+    let direction = impostor_decode(cell / f32(frames - 1u), hemi);
+    let axes = impostor_frame_axes(direction);
+    let radius = impostor.sphere.w;
+    let eye = normalize(impostor_view.eye.xyz);
+    let start = world - impostor.sphere.xyz;
+    let along = max(dot(eye, direction), 0.05);
+    // The ray is start - t eye; a point of it at height h along the frame's direction has
+    // t = (dot(start, direction) - h) / along.
+    var point = start - eye * (dot(start, direction) / along);
+    var uv = vec2<f32>(dot(point, axes.right), -dot(point, axes.up)) / (2.0 * radius) + 0.5;
+    for (var step = 0; step < 2; step = step + 1) {
+        let texel = (cell + clamp(uv, vec2<f32>(0.0), vec2<f32>(1.0))) / f32(frames);
+        let shown = textureSampleLevel(normal_depth_atlas, impostor_sampler, texel, 0.0).a;
+        let height = radius - 2.0 * radius * shown;
+        point = start - eye * ((dot(start, direction) - height) / along);
+        uv = vec2<f32>(dot(point, axes.right), -dot(point, axes.up)) / (2.0 * radius) + 0.5;
+    }
+    return uv;
+}
+
+@fragment
+fn impostor_fs(input: ImpostorVertexOut) -> @location(0) vec4<f32> {
+    let frames = impostor.grid.x;
+    let blend = impostor_blend(impostor_view.eye.xyz, frames, impostor.grid.y != 0u);
+    var albedo = vec3<f32>(0.0);
+    var normal = vec3<f32>(0.0);
+    var coverage = 0.0;
+    for (var k = 0u; k < 3u; k = k + 1u) {
+        let frame = blend.frames[k];
+        let uv = impostor_frame_uv(frame, input.world);
+        if any(uv < vec2<f32>(0.0)) || any(uv > vec2<f32>(1.0)) {
+            continue;
+        }
+        let at = (vec2<f32>(f32(frame % frames), f32(frame / frames)) + uv) / f32(frames);
+        let colour = textureSampleLevel(albedo_atlas, impostor_sampler, at, 0.0);
+        let normal_depth = textureSampleLevel(normal_depth_atlas, impostor_sampler, at, 0.0);
+        let weight = blend.weights[k] * colour.a;
+        albedo += colour.rgb * weight;
+        normal += (normal_depth.xyz * 2.0 - 1.0) * weight;
+        coverage += weight;
+    }
+    if coverage < impostor.params.x || coverage <= 0.0 {
+        discard;
+    }
+    let n = normalize(normal);
+    let light = 0.35 + 0.65 * abs(dot(n, normalize(impostor_view.light.xyz)));
+    return vec4<f32>(albedo / coverage * light, 1.0);
 }

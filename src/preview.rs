@@ -23,7 +23,7 @@ use crate::texture::mips::MipSettings;
 use crate::texture::{SurfaceKind, Texture, TextureSlot};
 
 /// The 26 view directions, unit length: 6 face centres, 12 edge midpoints, 8 corners.
-pub(crate) fn view_directions() -> Vec<[f32; 3]> {
+pub fn view_directions() -> Vec<[f32; 3]> {
     let mut directions = Vec::new();
     for nonzero in 1..=3 {
         for x in -1i32..=1 {

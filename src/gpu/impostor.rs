@@ -1,17 +1,47 @@
-//! The impostor shader's frame selection run on the GPU: `shaders/impostor.wgsl`'s
-//! `impostor_blend` over a list of directions, in a compute pass, so that the shader engines
-//! copy is checked against the reference (`mesh::octahedral`) on the device that runs it.
+//! Octahedral impostors on the GPU, through `shaders/impostor.wgsl`: its reference renderer (one
+//! camera-facing quad blending three frames with a parallax step), and its frame selection run
+//! over a list of directions in a compute pass, so that the shader engines copy is checked
+//! against the reference (`mesh::octahedral`) on the device that runs it.
 
-use super::{Gpu, GpuError};
+use super::{Gpu, GpuError, ALBEDO_FORMAT, DATA_FORMAT};
 use crate::mesh::octahedral::{FrameGrid, Sphere};
+use crate::texture::Texture;
+
+/// An impostor as the reference renderer draws it: its frame grid, atlases and bounding sphere.
+pub struct ImpostorDraw<'a> {
+    pub grid: FrameGrid,
+    pub albedo: &'a Texture,
+    pub normal_depth: &'a Texture,
+    pub center: [f32; 3],
+    pub radius: f32,
+    pub alpha_cutoff: f32,
+}
+
+/// What `impostor.wgsl`'s renderer reads of the view.
+#[repr(C)]
+#[derive(Clone, Copy, bytemuck::Pod, bytemuck::Zeroable)]
+struct ImpostorViewUniform {
+    view_projection: [[f32; 4]; 4],
+    eye: [f32; 4],
+    light: [f32; 4],
+}
+
+/// What it reads of the impostor.
+#[repr(C)]
+#[derive(Clone, Copy, bytemuck::Pod, bytemuck::Zeroable)]
+struct ImpostorUniform {
+    sphere: [f32; 4],
+    grid: [u32; 4],
+    params: [f32; 4],
+}
 
 /// A compute entry point over `impostor.wgsl`: one invocation per direction, writing its three
 /// frames and (bit-cast) weights.
 const BLEND_ENTRY: &str = r#"
 struct Query { frames: u32, hemi: u32, count: u32, unused: u32 }
-@group(0) @binding(0) var<storage, read> query: Query;
-@group(0) @binding(1) var<storage, read> directions: array<vec4<f32>>;
-@group(0) @binding(2) var<storage, read_write> blends: array<vec4<u32>>;
+@group(1) @binding(0) var<storage, read> query: Query;
+@group(1) @binding(1) var<storage, read> directions: array<vec4<f32>>;
+@group(1) @binding(2) var<storage, read_write> blends: array<vec4<u32>>;
 
 @compute @workgroup_size(64)
 fn blend_main(@builtin(global_invocation_id) id: vec3<u32>) {
@@ -25,6 +55,97 @@ fn blend_main(@builtin(global_invocation_id) id: vec3<u32>) {
 "#;
 
 impl Gpu {
+    /// Renders `impostor` seen from `eye` (object to eye, unit length; the orthographic camera
+    /// `view_projection` looks along `−eye`) into a `size`² RGBA8 image, as `render_view` renders
+    /// a mesh: sRGB colour lit by `light` on mid-grey, alpha 255 where the impostor is drawn.
+    pub fn render_impostor_view(
+        &self,
+        impostor: &ImpostorDraw,
+        (view_projection, eye): ([[f32; 4]; 4], [f32; 3]),
+        light: [f32; 3],
+        size: u32,
+    ) -> Result<Vec<u8>, GpuError> {
+        self.catching_device_errors(|| {
+            let module = self.device.create_shader_module(wgpu::ShaderModuleDescriptor {
+                label: Some("impostor.wgsl"),
+                source: wgpu::ShaderSource::Wgsl(include_str!("../../shaders/impostor.wgsl").into()),
+            });
+            let pipeline = self.device.create_render_pipeline(&wgpu::RenderPipelineDescriptor {
+                label: Some("impostor"),
+                layout: None,
+                vertex: wgpu::VertexState {
+                    module: &module,
+                    entry_point: Some("impostor_vs"),
+                    compilation_options: Default::default(),
+                    buffers: &[],
+                },
+                fragment: Some(wgpu::FragmentState {
+                    module: &module,
+                    entry_point: Some("impostor_fs"),
+                    compilation_options: Default::default(),
+                    targets: &[Some(ALBEDO_FORMAT.into())],
+                }),
+                primitive: wgpu::PrimitiveState { cull_mode: None, ..Default::default() },
+                depth_stencil: None,
+                multisample: wgpu::MultisampleState::default(),
+                multiview_mask: None,
+                cache: None,
+            });
+            let [x, y, z] = eye;
+            let view = ImpostorViewUniform { view_projection, eye: [x, y, z, 0.0], light: super::extend(light) };
+            let [cx, cy, cz] = impostor.center;
+            let uniform = ImpostorUniform {
+                sphere: [cx, cy, cz, impostor.radius],
+                grid: [impostor.grid.frames, u32::from(impostor.grid.sphere == Sphere::Hemi), 0, 0],
+                params: [impostor.alpha_cutoff, 0.0, 0.0, 0.0],
+            };
+            let view_buffer = self.constants_buffer(bytemuck::bytes_of(&view));
+            let impostor_buffer = self.constants_buffer(bytemuck::bytes_of(&uniform));
+            let albedo = super::upload(&self.device, &self.queue, std::slice::from_ref(impostor.albedo), ALBEDO_FORMAT);
+            let normal_depth =
+                super::upload(&self.device, &self.queue, std::slice::from_ref(impostor.normal_depth), DATA_FORMAT);
+            let sampler = self.device.create_sampler(&wgpu::SamplerDescriptor {
+                label: Some("impostor frames"),
+                mag_filter: wgpu::FilterMode::Linear,
+                min_filter: wgpu::FilterMode::Linear,
+                ..Default::default()
+            });
+            let group = self.device.create_bind_group(&wgpu::BindGroupDescriptor {
+                label: Some("impostor"),
+                layout: &pipeline.get_bind_group_layout(0),
+                entries: &[
+                    wgpu::BindGroupEntry { binding: 0, resource: view_buffer.as_entire_binding() },
+                    wgpu::BindGroupEntry { binding: 1, resource: impostor_buffer.as_entire_binding() },
+                    wgpu::BindGroupEntry { binding: 2, resource: wgpu::BindingResource::Sampler(&sampler) },
+                    wgpu::BindGroupEntry { binding: 3, resource: wgpu::BindingResource::TextureView(&albedo) },
+                    wgpu::BindGroupEntry { binding: 4, resource: wgpu::BindingResource::TextureView(&normal_depth) },
+                ],
+            });
+            let target = self.target(size, size, ALBEDO_FORMAT);
+            let target_view = target.create_view(&Default::default());
+            let mut encoder = self.device.create_command_encoder(&Default::default());
+            {
+                let mut pass = encoder.begin_render_pass(&wgpu::RenderPassDescriptor {
+                    label: Some("impostor"),
+                    color_attachments: &[Some(wgpu::RenderPassColorAttachment {
+                        view: &target_view,
+                        depth_slice: None,
+                        resolve_target: None,
+                        ops: wgpu::Operations {
+                            load: wgpu::LoadOp::Clear(wgpu::Color { r: 0.214, g: 0.214, b: 0.214, a: 0.0 }),
+                            store: wgpu::StoreOp::Store,
+                        },
+                    })],
+                    ..Default::default()
+                });
+                pass.set_pipeline(&pipeline);
+                pass.set_bind_group(0, &group, &[]);
+                pass.draw(0..6, 0..1);
+            }
+            self.read_back(encoder, &[&target]).map(|mut images| images.remove(0))
+        })
+    }
+
     /// The frames and weights `impostor_blend` gives for each of `directions` on `grid`.
     pub fn impostor_blends(&self, grid: FrameGrid, directions: &[[f32; 3]]) -> Result<Vec<[(u32, f32); 3]>, GpuError> {
         if directions.is_empty() {
@@ -62,9 +183,14 @@ impl Gpu {
             usage: wgpu::BufferUsages::COPY_DST | wgpu::BufferUsages::MAP_READ,
             mapped_at_creation: false,
         });
+        let unused = self.device.create_bind_group(&wgpu::BindGroupDescriptor {
+            label: Some("impostor blend: the renderer's group, unused"),
+            layout: &pipeline.get_bind_group_layout(0),
+            entries: &[],
+        });
         let bind_group = self.device.create_bind_group(&wgpu::BindGroupDescriptor {
             label: Some("impostor blend"),
-            layout: &pipeline.get_bind_group_layout(0),
+            layout: &pipeline.get_bind_group_layout(1),
             entries: &[
                 wgpu::BindGroupEntry { binding: 0, resource: query.as_entire_binding() },
                 wgpu::BindGroupEntry { binding: 1, resource: inputs.as_entire_binding() },
@@ -79,7 +205,8 @@ impl Gpu {
             let mut pass =
                 encoder.begin_compute_pass(&wgpu::ComputePassDescriptor { label: None, timestamp_writes: None });
             pass.set_pipeline(&pipeline);
-            pass.set_bind_group(0, &bind_group, &[]);
+            pass.set_bind_group(0, &unused, &[]);
+            pass.set_bind_group(1, &bind_group, &[]);
             pass.dispatch_workgroups((directions.len() as u32).div_ceil(64), 1, 1);
         }
         encoder.copy_buffer_to_buffer(&outputs, 0, &readback, 0, size);

@@ -7,8 +7,10 @@
 //! Conventions: +Y is up; a direction is where the camera looks *from* (object to eye). The grid
 //! holds frames at its points, `u = i / (frames − 1)`, `v = j / (frames − 1)` (frame number
 //! `j · frames + i`), so the poles and the horizon are frames of their own, as in Ryan Brucks'
-//! impostor baker and Amplify Impostors. A direction's grid cell is split along its anti-diagonal into two
-//! triangles; the frames at the corners of the triangle that holds the direction blend with its
+//! impostor baker and Amplify Impostors. A direction's grid cell is split into two triangles
+//! along its anti-diagonal (on the full octahedron, in the two quadrants where the equator runs
+//! the other way, along its main diagonal, so that no triangle straddles the equator); the
+//! frames at the corners of the triangle that holds the direction blend with its
 //! barycentric weights, so the weights are continuous across cells and a frame's weight is 1 at
 //! its own direction.
 
@@ -106,6 +108,17 @@ impl FrameGrid {
         let fraction = grid - cell;
         let (i, j) = (cell.x as u32, cell.y as u32);
         let frame = |di: u32, dj: u32| (j + dj) * self.frames + i + di;
+        // On the full octahedron the equator crosses the square's quadrants along one diagonal
+        // or the other: cells are split along the equator's direction, so that no triangle
+        // blends a frame from above it with one from below it where the equator runs between.
+        let centre = (cell + 0.5) / last - 0.5;
+        if self.sphere == Sphere::Full && centre.x * centre.y < 0.0 {
+            return if fraction.x >= fraction.y {
+                [(frame(0, 0), 1.0 - fraction.x), (frame(1, 0), fraction.x - fraction.y), (frame(1, 1), fraction.y)]
+            } else {
+                [(frame(0, 0), 1.0 - fraction.y), (frame(0, 1), fraction.y - fraction.x), (frame(1, 1), fraction.x)]
+            };
+        }
         if fraction.x + fraction.y <= 1.0 {
             [(frame(0, 0), 1.0 - fraction.x - fraction.y), (frame(1, 0), fraction.x), (frame(0, 1), fraction.y)]
         } else {

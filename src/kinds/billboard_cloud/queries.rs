@@ -45,8 +45,9 @@ pub(crate) const RENDER: Stage = Stage { name: "render", version: 7 };
 pub(crate) const ATLAS: Stage = Stage { name: "atlas", version: 1 };
 /// 2: the OBJ alone (the MTL is written with the asset's packing).
 pub const LOD: Stage = Stage { name: "lod", version: 2 };
-/// A reduced level (`mesh::reduce`: meshoptimizer, cards thinned whole).
-pub(crate) const REDUCE: Stage = Stage { name: "reduce", version: 1 };
+/// A reduced level (`mesh::reduce`: meshoptimizer, cards thinned whole). 2: the OBJ's header
+/// names no asset (assets with the same mesh and budget share the entry).
+pub(crate) const REDUCE: Stage = Stage { name: "reduce", version: 2 };
 
 /// The deviation (a fraction of the mesh's largest extent) up to which a reduced level's
 /// simplifier prefers stopping to reaching its budget.
@@ -736,33 +737,13 @@ fn renders_from_entry(entry: CacheEntry) -> Option<HashMap<CacheKey, Arc<Vec<Pla
     (offset == buffer.len()).then_some(renders)
 }
 
-/// What a reduced level drew, against its source.
-#[derive(Clone, Debug, PartialEq, serde::Serialize, serde::Deserialize)]
-pub(crate) struct ReducedFigures {
-    pub triangles: u64,
-    pub vertices: u64,
-    /// The simplifier's largest deviation, a fraction of the mesh's largest extent, and in
-    /// world units.
-    pub error: f32,
-    pub error_world: f32,
-    /// The source's leaf cards and those kept.
-    pub cards: (u64, u64),
-    /// The leaf area drawn (cut-out materials' triangles) in the source and the level.
-    pub cut_out_area: (f64, f64),
-}
-
-/// A reduced level's `lod.obj` (`mtllib lod.mtl`), the geometry of its glTF (whose image names
-/// the outputs give: copies of the maps, named by content) and its figures.
-#[derive(Debug, PartialEq)]
-pub(crate) struct ReducedLevel {
-    pub obj: Arc<[u8]>,
-    pub geometry: crate::mesh::gltf::GltfGeometry,
-    pub figures: ReducedFigures,
-}
-
 /// A reduced level (stage `reduce`): the mesh under the level's triangle budget.
 #[salsa::tracked(returns(clone))]
-pub(crate) fn reduced_level(db: &dyn Db, asset: Asset, level: u32) -> Result<Arc<ReducedLevel>, Diagnostic> {
+pub(crate) fn reduced_level(
+    db: &dyn Db,
+    asset: Asset,
+    level: u32,
+) -> Result<Arc<super::reduced::ReducedLevel>, Diagnostic> {
     let name = level_label(db, asset, level);
     let Some(budget) = level_settings(db, asset, level).reduced else {
         return Err(Diagnostic::new(asset.main_file(db), format!("{name} is not a reduced level")));
@@ -775,60 +756,16 @@ pub(crate) fn reduced_level(db: &dyn Db, asset: Asset, level: u32) -> Result<Arc
     let key = key.part(&REDUCE_MAX_ERROR).finish();
     let from_entry = |entry: CacheEntry| {
         let (figures, obj, geometry) = crate::kinds::mesh_queries::written_mesh_from_entry(entry)?;
-        Some(ReducedLevel { obj, geometry, figures })
+        Some(super::reduced::ReducedLevel { obj, geometry, figures })
     };
     if let Some(reduced) = load_cached(db, REDUCE.name, key, from_entry) {
         record_cache_hit(db, REDUCE, name);
         return Ok(Arc::new(reduced));
     }
     let loaded = loaded_mesh(db, asset)?;
-    let reduced = timed(db, REDUCE, name, || Ok(reduce_level(&loaded.mesh, budget, name)))?;
+    let reduced = timed(db, REDUCE, name, || Ok(super::reduced::reduce_level(&loaded.mesh, budget)))?;
     crate::db::store_cached(db, REDUCE.name, key, || {
         crate::kinds::mesh_queries::written_mesh_entry(&reduced.figures, &reduced.obj, &reduced.geometry)
     });
     Ok(Arc::new(reduced))
-}
-
-/// `mesh` reduced to `budget` as a level's files (`header` names it in the OBJ).
-fn reduce_level(mesh: &crate::mesh::Mesh, budget: crate::mesh::reduce::TriangleBudget, header: &str) -> ReducedLevel {
-    let settings = crate::mesh::reduce::ReduceSettings { budget, max_error: REDUCE_MAX_ERROR };
-    let reduced = crate::mesh::reduce::reduce_mesh(mesh, &settings);
-    let extent = crate::mesh::reduce::mesh_extent(&mesh.positions);
-    let out = &reduced.mesh;
-    let names: Vec<String> = out.materials.iter().map(|material| material.name.clone()).collect();
-    let uvs = out.uvs.as_deref().unwrap_or(&[]);
-    let obj = crate::mesh::obj_text::obj_text(
-        &crate::mesh::obj_text::ObjMesh {
-            positions: &out.positions,
-            normals: &out.normals,
-            uvs,
-            triangles: &out.triangles,
-            triangle_materials: &out.triangle_materials,
-            material_names: &names,
-        },
-        &format!(
-            "{header}: {} of {} triangles, reduced by cirrus (meshoptimizer)",
-            out.triangles.len(),
-            mesh.triangles.len()
-        ),
-        "lod.mtl",
-    );
-    let geometry = crate::mesh::gltf::GltfGeometry {
-        positions: out.positions.clone(),
-        normals: out.normals.clone(),
-        uvs: uvs.to_vec(),
-        triangles: out.triangles.clone(),
-        triangle_materials: out.triangle_materials.clone(),
-        tangents: Vec::new(),
-    }
-    .with_tangents();
-    let figures = ReducedFigures {
-        triangles: out.triangles.len() as u64,
-        vertices: out.positions.len() as u64,
-        error: reduced.error,
-        error_world: reduced.error * extent,
-        cards: (reduced.cards.0 as u64, reduced.cards.1 as u64),
-        cut_out_area: reduced.cut_out_area,
-    };
-    ReducedLevel { obj: obj.into_bytes().into(), geometry, figures }
 }

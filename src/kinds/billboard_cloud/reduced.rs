@@ -1,15 +1,16 @@
 //! A LOD chain's reduced levels (`lods: [Reduced(Ratio(0.5)), …]`): the source's triangles
 //! brought under a budget (`mesh::reduce`), written as `lod.obj` + `lod.mtl` and `lod.gltf` +
 //! `lod.bin` over the source's materials, whose maps are copied into the level's `maps/` (named
-//! by content; in the level's folder, since loaders refuse paths out of a file's folder); their
-//! stage instance, report, and the level as an engine loads it (for the preview and the viewer).
+//! by content; in the level's folder, since loaders refuse paths out of a file's folder); the
+//! pure step from mesh to files (`reduce_level`), their stage instance, report, and the level
+//! as an engine loads it (for the preview and the viewer).
 
 use std::collections::BTreeMap;
 use std::path::{Path, PathBuf};
 use std::sync::Arc;
 
 use super::levels;
-use super::queries::{level_label, reduced_level, ReducedLevel, REDUCE};
+use super::queries::{level_label, reduced_level, REDUCE};
 use crate::db::{Asset, Db};
 use crate::diagnostic::Diagnostic;
 use crate::kinds::mesh_queries::loaded_mesh;
@@ -176,4 +177,68 @@ pub fn reduced_view_mesh(root: &Path, folder: &Path, alpha_cutoff: f32) -> Resul
     crate::preview::mesh_view(&mesh, &tangents, alpha_cutoff, |material, slot| {
         Ok::<_, Diagnostic>(maps.get(&(material.name.clone(), slot)).cloned())
     })
+}
+
+/// What a reduced level drew, against its source.
+#[derive(Clone, Debug, PartialEq, serde::Serialize, serde::Deserialize)]
+pub(crate) struct ReducedFigures {
+    pub triangles: u64,
+    pub vertices: u64,
+    /// The simplifier's largest deviation, a fraction of the mesh's largest extent, and in
+    /// world units.
+    pub error: f32,
+    pub error_world: f32,
+    /// The source's leaf cards and those kept.
+    pub cards: (u64, u64),
+    /// The leaf area drawn (cut-out materials' triangles) in the source and the level.
+    pub cut_out_area: (f64, f64),
+}
+
+/// A reduced level's `lod.obj` (`mtllib lod.mtl`), the geometry of its glTF (whose image names
+/// the outputs give: copies of the maps, named by content) and its figures.
+#[derive(Debug, PartialEq)]
+pub(crate) struct ReducedLevel {
+    pub obj: Arc<[u8]>,
+    pub geometry: crate::mesh::gltf::GltfGeometry,
+    pub figures: ReducedFigures,
+}
+
+/// `mesh` reduced to `budget` as a level's files.
+pub(crate) fn reduce_level(mesh: &crate::mesh::Mesh, budget: crate::mesh::reduce::TriangleBudget) -> ReducedLevel {
+    let settings = crate::mesh::reduce::ReduceSettings { budget, max_error: super::queries::REDUCE_MAX_ERROR };
+    let reduced = crate::mesh::reduce::reduce_mesh(mesh, &settings);
+    let extent = crate::mesh::reduce::mesh_extent(&mesh.positions);
+    let out = &reduced.mesh;
+    let names: Vec<String> = out.materials.iter().map(|material| material.name.clone()).collect();
+    let uvs = out.uvs.as_deref().unwrap_or(&[]);
+    let obj = crate::mesh::obj_text::obj_text(
+        &crate::mesh::obj_text::ObjMesh {
+            positions: &out.positions,
+            normals: &out.normals,
+            uvs,
+            triangles: &out.triangles,
+            triangle_materials: &out.triangle_materials,
+            material_names: &names,
+        },
+        &format!("reduced by cirrus (meshoptimizer): {} of {} triangles", out.triangles.len(), mesh.triangles.len()),
+        "lod.mtl",
+    );
+    let geometry = crate::mesh::gltf::GltfGeometry {
+        positions: out.positions.clone(),
+        normals: out.normals.clone(),
+        uvs: uvs.to_vec(),
+        triangles: out.triangles.clone(),
+        triangle_materials: out.triangle_materials.clone(),
+        tangents: Vec::new(),
+    }
+    .with_tangents();
+    let figures = ReducedFigures {
+        triangles: out.triangles.len() as u64,
+        vertices: out.positions.len() as u64,
+        error: reduced.error,
+        error_world: reduced.error * extent,
+        cards: (reduced.cards.0 as u64, reduced.cards.1 as u64),
+        cut_out_area: reduced.cut_out_area,
+    };
+    ReducedLevel { obj: obj.into_bytes().into(), geometry, figures }
 }

@@ -248,6 +248,13 @@ fn every_gltf_of_the_bundled_project_passes_the_khronos_validator_and_the_output
     };
     assert_eq!(alpha_mode("baked/materials/oak_leaves/oak_leaves/material.gltf"), "MASK");
     assert_eq!(alpha_mode("baked/steel/painted_steel/material.gltf"), "OPAQUE");
+    // A material is a tiling texture set: sampled REPEAT; a billboard atlas CLAMP.
+    let wrap = |relative: &str| {
+        let document: serde_json::Value = serde_json::from_slice(&project.read(relative)).unwrap();
+        document["samplers"][0]["wrapS"].as_u64().unwrap()
+    };
+    assert_eq!(wrap("baked/steel/painted_steel/material.gltf"), 10497);
+    assert_eq!(wrap("baked/bush/lod.gltf"), 33071);
     for (file, errors, warnings, infos, messages) in validate(&documents) {
         assert_eq!((errors, warnings), (0, 0), "{}: {messages}", file.display());
         // The LODs not even an info (an atlas page may have the sides its settings allow).

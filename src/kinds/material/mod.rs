@@ -153,7 +153,8 @@ impl Kind for Material {
                 metallic_roughness: None,
                 alpha: GltfAlpha::Opaque,
                 double_sided: false,
-                wrap: GltfWrap::Clamp,
+                // A material is a tiling texture set.
+                wrap: GltfWrap::Repeat,
             };
             for surface in SurfaceKind::MATERIAL {
                 let id = SurfaceId { group: material.name.clone(), surface };

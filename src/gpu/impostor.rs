@@ -3,7 +3,7 @@
 //! over a list of directions in a compute pass, so that the shader engines copy is checked
 //! against the reference (`mesh::octahedral`) on the device that runs it.
 
-use super::{Gpu, GpuError, ALBEDO_FORMAT, DATA_FORMAT};
+use super::{Gpu, GpuError, ALBEDO_FORMAT, DATA_FORMAT, VIEW_BACKGROUND};
 use crate::mesh::octahedral::{FrameGrid, Sphere};
 use crate::texture::Texture;
 
@@ -54,23 +54,40 @@ fn blend_main(@builtin(global_invocation_id) id: vec3<u32>) {
 }
 "#;
 
+/// The impostor pipelines: `view.wgsl`'s `fs_impostor` (a frame's albedo and normal + depth)
+/// and `impostor.wgsl`'s reference renderer with its sampler.
+pub(super) struct ImpostorPipelines {
+    pub frame: wgpu::RenderPipeline,
+    view: wgpu::RenderPipeline,
+    sampler: wgpu::Sampler,
+}
+
 impl Gpu {
-    /// Renders `impostor` seen from `eye` (object to eye, unit length; the orthographic camera
-    /// `view_projection` looks along `−eye`) into a `size`² RGBA8 image, as `render_view` renders
-    /// a mesh: sRGB colour lit by `light` on mid-grey, alpha 255 where the impostor is drawn.
-    pub fn render_impostor_view(
-        &self,
-        impostor: &ImpostorDraw,
-        (view_projection, eye): ([[f32; 4]; 4], [f32; 3]),
-        light: [f32; 3],
-        size: u32,
-    ) -> Result<Vec<u8>, GpuError> {
-        self.catching_device_errors(|| {
+    /// The impostor pipelines, made on first use.
+    pub(super) fn impostor_pipelines(&self) -> &ImpostorPipelines {
+        self.impostor.get_or_init(|| {
+            let view_shader = self.device.create_shader_module(wgpu::ShaderModuleDescriptor {
+                label: Some("view.wgsl"),
+                source: wgpu::ShaderSource::Wgsl(include_str!("../../shaders/view.wgsl").into()),
+            });
+            let view_layout = self.device.create_pipeline_layout(&wgpu::PipelineLayoutDescriptor {
+                label: Some("impostor frame"),
+                bind_group_layouts: &[Some(&self.frame_layout), Some(&self.view_material_layout)],
+                ..Default::default()
+            });
+            let frame = super::mesh_pipeline(
+                &self.device,
+                "impostor frame",
+                &view_layout,
+                (&view_shader, "fs_impostor"),
+                &[Some(ALBEDO_FORMAT.into()), Some(DATA_FORMAT.into())],
+                Some(super::depth_test()),
+            );
             let module = self.device.create_shader_module(wgpu::ShaderModuleDescriptor {
                 label: Some("impostor.wgsl"),
                 source: wgpu::ShaderSource::Wgsl(include_str!("../../shaders/impostor.wgsl").into()),
             });
-            let pipeline = self.device.create_render_pipeline(&wgpu::RenderPipelineDescriptor {
+            let view = self.device.create_render_pipeline(&wgpu::RenderPipelineDescriptor {
                 label: Some("impostor"),
                 layout: None,
                 vertex: wgpu::VertexState {
@@ -91,6 +108,28 @@ impl Gpu {
                 multiview_mask: None,
                 cache: None,
             });
+            let sampler = self.device.create_sampler(&wgpu::SamplerDescriptor {
+                label: Some("impostor frames"),
+                mag_filter: wgpu::FilterMode::Linear,
+                min_filter: wgpu::FilterMode::Linear,
+                ..Default::default()
+            });
+            ImpostorPipelines { frame, view, sampler }
+        })
+    }
+
+    /// Renders `impostor` seen from `eye` (object to eye, unit length; the orthographic camera
+    /// `view_projection` looks along `−eye`) into a `size`² RGBA8 image, as `render_view` renders
+    /// a mesh: sRGB colour lit by `light` on mid-grey, alpha 255 where the impostor is drawn.
+    pub fn render_impostor_view(
+        &self,
+        impostor: &ImpostorDraw,
+        (view_projection, eye): ([[f32; 4]; 4], [f32; 3]),
+        light: [f32; 3],
+        size: u32,
+    ) -> Result<Vec<u8>, GpuError> {
+        self.catching_device_errors(|| {
+            let ImpostorPipelines { view: pipeline, sampler, .. } = self.impostor_pipelines();
             let [x, y, z] = eye;
             let view = ImpostorViewUniform { view_projection, eye: [x, y, z, 0.0], light: super::extend(light) };
             let [cx, cy, cz] = impostor.center;
@@ -101,22 +140,16 @@ impl Gpu {
             };
             let view_buffer = self.constants_buffer(bytemuck::bytes_of(&view));
             let impostor_buffer = self.constants_buffer(bytemuck::bytes_of(&uniform));
-            let albedo = super::upload(&self.device, &self.queue, std::slice::from_ref(impostor.albedo), ALBEDO_FORMAT);
-            let normal_depth =
-                super::upload(&self.device, &self.queue, std::slice::from_ref(impostor.normal_depth), DATA_FORMAT);
-            let sampler = self.device.create_sampler(&wgpu::SamplerDescriptor {
-                label: Some("impostor frames"),
-                mag_filter: wgpu::FilterMode::Linear,
-                min_filter: wgpu::FilterMode::Linear,
-                ..Default::default()
-            });
+            // Uploaded once per content: every view of the same impostor shares them.
+            let albedo = self.levels_view(std::slice::from_ref(impostor.albedo), true);
+            let normal_depth = self.levels_view(std::slice::from_ref(impostor.normal_depth), false);
             let group = self.device.create_bind_group(&wgpu::BindGroupDescriptor {
                 label: Some("impostor"),
                 layout: &pipeline.get_bind_group_layout(0),
                 entries: &[
                     wgpu::BindGroupEntry { binding: 0, resource: view_buffer.as_entire_binding() },
                     wgpu::BindGroupEntry { binding: 1, resource: impostor_buffer.as_entire_binding() },
-                    wgpu::BindGroupEntry { binding: 2, resource: wgpu::BindingResource::Sampler(&sampler) },
+                    wgpu::BindGroupEntry { binding: 2, resource: wgpu::BindingResource::Sampler(sampler) },
                     wgpu::BindGroupEntry { binding: 3, resource: wgpu::BindingResource::TextureView(&albedo) },
                     wgpu::BindGroupEntry { binding: 4, resource: wgpu::BindingResource::TextureView(&normal_depth) },
                 ],
@@ -132,13 +165,13 @@ impl Gpu {
                         depth_slice: None,
                         resolve_target: None,
                         ops: wgpu::Operations {
-                            load: wgpu::LoadOp::Clear(wgpu::Color { r: 0.214, g: 0.214, b: 0.214, a: 0.0 }),
+                            load: wgpu::LoadOp::Clear(VIEW_BACKGROUND),
                             store: wgpu::StoreOp::Store,
                         },
                     })],
                     ..Default::default()
                 });
-                pass.set_pipeline(&pipeline);
+                pass.set_pipeline(pipeline);
                 pass.set_bind_group(0, &group, &[]);
                 pass.draw(0..6, 0..1);
             }

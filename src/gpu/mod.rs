@@ -63,8 +63,8 @@ pub struct Gpu {
     /// A cell per key, so that threads wanting the same new texture upload it once.
     uploads: Mutex<HashMap<UploadKey, Arc<std::sync::OnceLock<Arc<wgpu::TextureView>>>>>,
     view_pipeline: wgpu::RenderPipeline,
-    /// `view.wgsl`'s `fs_impostor`: an impostor frame's albedo and normal + depth.
-    impostor_pipeline: wgpu::RenderPipeline,
+    /// The impostor pipelines, made on first use: a bake that draws no impostor compiles none.
+    impostor: OnceLock<impostor::ImpostorPipelines>,
     view_material_layout: wgpu::BindGroupLayout,
     /// Material bind groups by content (constants, texture hashes, cutoff).
     material_groups: Mutex<HashMap<blake3::Hash, Arc<wgpu::BindGroup>>>,
@@ -238,6 +238,8 @@ type UploadKey = (blake3::Hash, bool, u32);
 const ALBEDO_FORMAT: wgpu::TextureFormat = wgpu::TextureFormat::Rgba8UnormSrgb;
 const DATA_FORMAT: wgpu::TextureFormat = wgpu::TextureFormat::Rgba8Unorm;
 const DEPTH_FORMAT: wgpu::TextureFormat = wgpu::TextureFormat::Depth32Float;
+/// The mid-grey behind preview views (linear; alpha 0: not drawn).
+const VIEW_BACKGROUND: wgpu::Color = wgpu::Color { r: 0.214, g: 0.214, b: 0.214, a: 0.0 };
 /// Where a plane's faces pass the alpha test, one byte per sample of a supersampled render.
 const COVERAGE_FORMAT: wgpu::TextureFormat = wgpu::TextureFormat::R8Unorm;
 /// Texels of one stack of plane rectangles (about 40 MB of targets and as much to read back).
@@ -405,14 +407,6 @@ impl Gpu {
             &[Some(ALBEDO_FORMAT.into())],
             Some(depth_test()),
         );
-        let impostor_pipeline = mesh_pipeline(
-            &device,
-            "impostor frame",
-            &view_layout,
-            (&view_shader, "fs_impostor"),
-            &[Some(ALBEDO_FORMAT.into()), Some(DATA_FORMAT.into())],
-            Some(depth_test()),
-        );
         let top_down_pipeline = top_down_render::top_down_pipeline(&device, &frame_layout);
         Ok(Gpu {
             top_down_pipeline,
@@ -430,7 +424,7 @@ impl Gpu {
             white,
             uploads: Mutex::new(HashMap::new()),
             view_pipeline,
-            impostor_pipeline,
+            impostor: OnceLock::new(),
             view_material_layout,
             material_groups: Mutex::new(HashMap::new()),
         })

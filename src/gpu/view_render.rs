@@ -52,9 +52,8 @@ impl Gpu {
         light: [f32; 3],
         size: u32,
     ) -> Result<Vec<u8>, GpuError> {
-        let grey = wgpu::Color { r: 0.214, g: 0.214, b: 0.214, a: 0.0 };
         let camera = CameraUniform { view_projection, light: extend(light) };
-        self.draw_view(mesh, camera, size, (&self.view_pipeline, &[(ALBEDO_FORMAT, grey)]))
+        self.draw_view(mesh, camera, size, (&self.view_pipeline, &[(ALBEDO_FORMAT, VIEW_BACKGROUND)]))
             .map(|mut images| images.remove(0))
     }
 
@@ -70,7 +69,7 @@ impl Gpu {
     ) -> Result<[Vec<u8>; 2], GpuError> {
         let camera = CameraUniform { view_projection, light: [0.0; 4] };
         let targets = [(ALBEDO_FORMAT, wgpu::Color::TRANSPARENT), (DATA_FORMAT, wgpu::Color::TRANSPARENT)];
-        let mut images = self.draw_view(mesh, camera, size, (&self.impostor_pipeline, &targets))?;
+        let mut images = self.draw_view(mesh, camera, size, (&self.impostor_pipelines().frame, &targets))?;
         let normal_depth = images.pop().unwrap_or_default();
         Ok([images.pop().unwrap_or_default(), normal_depth])
     }
@@ -183,7 +182,7 @@ impl Gpu {
     }
 
     /// A texture with explicit mip levels on the GPU (uploaded once per content).
-    fn levels_view(&self, levels: &[Texture], srgb: bool) -> Arc<wgpu::TextureView> {
+    pub(super) fn levels_view(&self, levels: &[Texture], srgb: bool) -> Arc<wgpu::TextureView> {
         let key = (levels[0].hash, srgb, levels.len() as u32);
         self.cached_upload(key, || {
             upload(&self.device, &self.queue, levels, if srgb { ALBEDO_FORMAT } else { DATA_FORMAT })

@@ -157,6 +157,50 @@ pub enum PreviewError {
     Write(std::io::Error),
 }
 
+/// The OBJ at `obj` (project-relative) with the MTL files and maps it names, read from under
+/// `root` as an engine reads them (each map decoded once), its cut-out materials alpha-tested at
+/// `alpha_cutoff`; paths must stay inside `source_root`. An atlas's remapped meshes and their
+/// sources, a billboard chain's reduced levels.
+pub(crate) fn mesh_view_from_files(
+    root: &Path,
+    obj: &Path,
+    (source_root, limits): (&Path, crate::texture::TextureLimits),
+    alpha_cutoff: f32,
+) -> Result<crate::gpu::ViewMesh, Diagnostic> {
+    let read = |path: &Path| {
+        crate::files::read_regular_file(&root.join(path), crate::files::MAX_SOURCE_BYTES)
+            .map_err(|error| Diagnostic::new(path, format!("cannot read: {error}")))
+    };
+    let bytes = read(obj)?;
+    let libraries: std::collections::BTreeMap<PathBuf, Option<Vec<u8>>> =
+        crate::mesh::material_libraries(obj, &bytes, source_root)
+            .into_iter()
+            .map(|path| {
+                let bytes = read(&path).ok();
+                (path, bytes)
+            })
+            .collect();
+    let (mesh, _) = crate::mesh::load_mesh(obj, &bytes, &libraries, source_root)?;
+    let uvs = mesh.uvs.as_deref().unwrap_or(&[]);
+    let tangents = crate::mesh::vertex_tangents(&mesh.positions, &mesh.normals, uvs, &mesh.triangles);
+    // Each file decoded once (a page is a material's albedo and opacity, and several materials').
+    let decoded: std::cell::RefCell<std::collections::BTreeMap<PathBuf, Arc<crate::texture::Texture>>> =
+        Default::default();
+    crate::preview::mesh_view(&mesh, &tangents, alpha_cutoff, |material, slot| {
+        let Some(path) = material.maps.get(&slot).filter(|_| mesh.uvs.is_some()) else { return Ok(None) };
+        let known = decoded.borrow().get(path).cloned();
+        let texture = match known {
+            Some(texture) => texture,
+            None => Arc::new(crate::texture::decode_texture(path, &read(path)?, limits)?),
+        };
+        decoded.borrow_mut().insert(path.clone(), texture.clone());
+        Ok(Some(match slot {
+            crate::texture::TextureSlot::Opacity => Arc::new(crate::texture::opacity_channel(&texture)),
+            _ => texture,
+        }))
+    })
+}
+
 /// Writes one comparison's `contact_sheet.png` and `metrics.json` into `folder`.
 pub(crate) fn write_preview(folder: &Path, preview: &crate::preview::Preview) -> Result<(), PreviewError> {
     let mut metrics = serde_json::to_vec_pretty(&preview.metrics).expect("metrics serialise");

@@ -102,6 +102,8 @@ pub(crate) struct OutputMaterials {
     /// core reads); a map of another format is left out with a warning.
     pub gltf: Vec<GltfMaterial>,
     pub warnings: Vec<Diagnostic>,
+    /// Every file the materials name (copies and `baked` artifacts), once, in order.
+    pub maps: Vec<PathBuf>,
 }
 
 /// Where a mesh's materials are named from: the source file the warnings name, and the folders
@@ -122,7 +124,7 @@ pub(crate) fn output_materials(
     places: &MaterialPlaces,
 ) -> OutputMaterials {
     let MaterialPlaces { source, mtl_folder, gltf_folder } = *places;
-    let mut result = OutputMaterials { mtl: String::new(), gltf: Vec::new(), warnings: Vec::new() };
+    let mut result = OutputMaterials { mtl: String::new(), gltf: Vec::new(), warnings: Vec::new(), maps: Vec::new() };
     for OutputMaterial { material, baked } in materials {
         let mut resolved: BTreeMap<TextureSlot, PathBuf> = BTreeMap::new();
         for (&slot, path) in &material.maps {
@@ -142,6 +144,7 @@ pub(crate) fn output_materials(
                 ));
             }
         }
+        result.maps.extend(resolved.values().cloned());
         let kept = MeshMaterial {
             maps: material
                 .maps
@@ -182,6 +185,8 @@ pub(crate) fn output_materials(
         result.warnings.extend(notes.into_iter().map(|note| Diagnostic::new(source, note)));
         result.gltf.push(gltf);
     }
+    result.maps.sort();
+    result.maps.dedup();
     result
 }
 
@@ -203,11 +208,13 @@ pub(crate) fn used_materials<'a>(
 }
 
 /// The used materials of a mesh the asset writes as an OBJ beside an MTL and a glTF, over copies
-/// of their maps: the MTL's text, the glTF materials, and each triangle's number among them.
+/// of their maps: the MTL's text, the glTF materials, each triangle's number among them, and
+/// the copies they name.
 pub(crate) struct WrittenMaterials {
     pub mtl: String,
     pub gltf: Vec<GltfMaterial>,
     pub triangle_materials: Vec<u32>,
+    pub maps: Vec<PathBuf>,
 }
 
 /// [`WrittenMaterials`] of a mesh whose triangles draw `triangle_materials` (indices into
@@ -226,5 +233,5 @@ pub(crate) fn written_materials(
     warnings.extend(named.warnings);
     let triangle_materials =
         triangle_materials.iter().map(|material| used.binary_search(material).unwrap_or(0) as u32).collect();
-    WrittenMaterials { mtl: named.mtl, gltf: named.gltf, triangle_materials }
+    WrittenMaterials { mtl: named.mtl, gltf: named.gltf, triangle_materials, maps: named.maps }
 }

@@ -146,15 +146,9 @@ pub fn frame_axes(direction: Vec3) -> (Vec3, Vec3) {
 /// side (WebGPU's clip depth).
 pub fn frame_view_projection(center: Vec3, radius: f32, direction: Vec3) -> glam::Mat4 {
     let radius = radius.max(1e-6);
-    let (right, up) = frame_axes(direction);
-    let forward = right.cross(up);
-    let eye = center - forward * 2.0 * radius;
-    let view = glam::Mat4::from_cols(
-        glam::Vec4::new(right.x, up.x, -forward.x, 0.0),
-        glam::Vec4::new(right.y, up.y, -forward.y, 0.0),
-        glam::Vec4::new(right.z, up.z, -forward.z, 0.0),
-        glam::Vec4::new(-right.dot(eye), -up.dot(eye), forward.dot(eye), 1.0),
-    );
+    // Looking at the centre with the frame's up, the camera's right is the frame's right.
+    let (_, up) = frame_axes(direction);
+    let view = glam::camera::rh::view::look_at_mat4(center + direction.normalize() * 2.0 * radius, center, up);
     let projection =
         glam::camera::rh::proj::directx::orthographic(-radius, radius, -radius, radius, radius, 3.0 * radius);
     projection * view

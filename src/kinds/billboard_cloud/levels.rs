@@ -66,7 +66,7 @@ pub(crate) fn settings_for(settings: &Settings, level: u32) -> LevelSettings {
 
 /// Whether level `level` is a reduced mesh (no planes, atlas or renders).
 pub(crate) fn is_reduced(settings: &Settings, level: u32) -> bool {
-    matches!(settings.own::<Own>().billboard.lods.get(level as usize), Some(LodLevel::Reduced(_)))
+    settings_for(settings, level).reduced.is_some()
 }
 
 /// The atlas settings of a level: the asset's, with the level's largest side.

@@ -596,10 +596,7 @@ pub fn preview_levels(
         .iter()
         .map(|&level| match options.stand_in {
             // A reduced level has no planes to stand in on: it is shown as baked.
-            _ if levels::is_reduced(settings, level) => {
-                reduced::reduced_view_mesh(&config.root, &folder.join(levels::level_folder(settings, level)), cutoff)
-            }
-            lod_preview::StandIn::Baked => {
+            stand_in if stand_in == lod_preview::StandIn::Baked || levels::is_reduced(settings, level) => {
                 read_lod_view_mesh(&config.root, &folder.join(levels::level_folder(settings, level)), cutoff)
             }
             stand_in => {
@@ -638,7 +635,8 @@ pub fn preview_levels(
 
 /// The baked LOD in `folder` (relative to `root`) as an engine loads it: a billboard cloud's
 /// `lod.obj` with the decoded levels of `albedo.ktx2` and `normal.ktx2`, alpha-tested at
-/// `alpha_cutoff`; a reduced level's `lod.obj` with its own materials (`reduced_view_mesh`).
+/// `alpha_cutoff`; a reduced level's `lod.obj` with its `lod.mtl` and the maps that names (in
+/// its `maps/`), its cut-out materials alpha-tested at `alpha_cutoff`.
 pub fn read_lod_view_mesh(root: &Path, folder: &Path, alpha_cutoff: f32) -> Result<crate::gpu::ViewMesh, Diagnostic> {
     let read = |file: &str| -> Result<(PathBuf, Vec<u8>), Diagnostic> {
         let path = folder.join(file);
@@ -647,7 +645,8 @@ pub fn read_lod_view_mesh(root: &Path, folder: &Path, alpha_cutoff: f32) -> Resu
     };
     let obj = read("lod.obj")?;
     if !obj.1.starts_with(lod_mesh::CLOUD_HEADER.as_bytes()) {
-        return reduced::reduced_view_mesh(root, folder, alpha_cutoff);
+        let limits = crate::texture::TextureLimits::default();
+        return crate::kinds::mesh_view_from_files(root, &obj.0, (folder, limits), alpha_cutoff);
     }
     lod_preview::lod_view_mesh(&lod_preview::LodFiles {
         obj,

@@ -2,11 +2,10 @@
 //! brought under a budget (`mesh::reduce`), written as `lod.obj` + `lod.mtl` and `lod.gltf` +
 //! `lod.bin` over the source's materials, whose maps are copied into the level's `maps/` (named
 //! by content; in the level's folder, since loaders refuse paths out of a file's folder); the
-//! pure step from mesh to files (`reduce_level`), their stage instance, report, and the level
-//! as an engine loads it (for the preview and the viewer).
+//! pure step from mesh to files (`reduce_level`), their stage instance and report (the preview
+//! and the viewer load the level as an engine does, `kinds::mesh_view_from_files`).
 
-use std::collections::BTreeMap;
-use std::path::{Path, PathBuf};
+use std::path::Path;
 use std::sync::Arc;
 
 use super::levels;
@@ -18,7 +17,6 @@ use crate::kinds::source_copies::{material_copy_paths, used_materials, written_m
 use crate::kinds::{AssetOutputs, StageInstance};
 use crate::mesh::gltf::{GltfMaterial, GltfMesh};
 use crate::summary::ArtifactRole;
-use crate::texture::TextureSlot;
 
 /// The files a reduced level writes into its folder (beside the copies of the maps).
 const LEVEL_FILES: [&str; 4] = ["lod.obj", "lod.mtl", "lod.gltf", "lod.bin"];
@@ -85,17 +83,12 @@ pub(crate) fn reduced_level_outputs(
         &places,
         warnings,
     );
+    let copies = written.maps;
     let chain =
         ReducedGltf { level: reduced.clone(), materials: written.gltf, triangle_materials: written.triangle_materials };
     let gltf = crate::mesh::gltf::gltf_files(&chain.mesh(), "lod.bin", crate::mesh::gltf::GENERATOR);
     let mtl = written.mtl.into_bytes();
     // The bytes an engine loads: the mesh, its material library and the maps it names.
-    let copies = material_copy_paths(
-        db,
-        asset,
-        &level_folder,
-        &used_materials(&loaded.mesh.materials, &reduced.geometry.triangle_materials).1,
-    );
     let (mut map_bytes, mut gpu_bytes) = (0, gltf.bin.len() as u64);
     for (path, _, contents) in outputs.files.iter().filter(|(path, _, _)| copies.contains(path)) {
         map_bytes += contents.len();
@@ -140,43 +133,6 @@ pub(crate) fn reduced_level_outputs(
         "gpu_bytes": gpu_bytes,
     });
     Ok((report, chain))
-}
-
-/// A reduced level in `folder` (relative to `root`) as an engine loads it: `lod.obj` with its
-/// `lod.mtl` and the maps that names (in its `maps/`), each cut-out material alpha-tested at
-/// `alpha_cutoff`.
-pub fn reduced_view_mesh(root: &Path, folder: &Path, alpha_cutoff: f32) -> Result<crate::gpu::ViewMesh, Diagnostic> {
-    let obj_path = folder.join("lod.obj");
-    let obj = crate::artifacts::read_artifact(root, &obj_path)?;
-    let mtl_path = folder.join("lod.mtl");
-    let libraries = BTreeMap::from([(mtl_path.clone(), crate::artifacts::read_artifact(root, &mtl_path).ok())]);
-    let (mesh, _) = crate::mesh::load_mesh(&obj_path, &obj, &libraries, folder)?;
-    let uvs = mesh.uvs.as_deref().unwrap_or(&[]);
-    let tangents = crate::mesh::vertex_tangents(&mesh.positions, &mesh.normals, uvs, &mesh.triangles);
-    let mut decoded: BTreeMap<PathBuf, Arc<crate::texture::Texture>> = BTreeMap::new();
-    let mut decode = |path: &Path| -> Result<Arc<crate::texture::Texture>, Diagnostic> {
-        if let Some(texture) = decoded.get(path) {
-            return Ok(texture.clone());
-        }
-        let bytes = crate::artifacts::read_artifact(root, path)?;
-        let texture = Arc::new(crate::texture::decode_texture(path, &bytes, Default::default())?);
-        decoded.insert(path.to_path_buf(), texture.clone());
-        Ok(texture)
-    };
-    let mut maps: BTreeMap<(String, TextureSlot), Arc<crate::texture::Texture>> = BTreeMap::new();
-    for material in &mesh.materials {
-        for (&slot, path) in material.maps.iter().filter(|_| mesh.uvs.is_some()) {
-            let texture = decode(path)?;
-            let texture = match slot {
-                TextureSlot::Opacity => Arc::new(crate::texture::opacity_channel(&texture)),
-                _ => texture,
-            };
-            maps.insert((material.name.clone(), slot), texture);
-        }
-    }
-    crate::preview::mesh_view(&mesh, &tangents, alpha_cutoff, |material, slot| {
-        Ok::<_, Diagnostic>(maps.get(&(material.name.clone(), slot)).cloned())
-    })
 }
 
 /// What a reduced level drew, against its source.

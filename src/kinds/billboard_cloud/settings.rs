@@ -83,12 +83,7 @@ impl LodLevel {
 
     /// The level as `pipeline.ron` writes it.
     fn written(self) -> String {
-        match self {
-            LodLevel::Quads(quads) => format!("Quads({quads})"),
-            LodLevel::Triangles(triangles) => format!("Triangles({triangles})"),
-            LodLevel::Reduced(TriangleBudget::Triangles(triangles)) => format!("Reduced(Triangles({triangles}))"),
-            LodLevel::Reduced(TriangleBudget::Ratio(ratio)) => format!("Reduced(Ratio({ratio}))"),
-        }
+        ron::to_string(&self).unwrap_or_else(|_| format!("{self:?}"))
     }
 }
 

@@ -125,9 +125,10 @@ fn impostor_frame_axes(direction_in: vec3<f32>) -> ImpostorAxes {
 // point of the view ray that meets that frame's depth (one parallax step), and blends their
 // albedo and normal by weight and coverage, alpha-tested at the cutoff.
 //
-// Atlases: frame `j * frames + i` at column `i`, row `j`; albedo (sRGB, coverage in alpha),
-// normal_depth (`0.5 + 0.5 n` in world space, depth in alpha: 0 at the sphere's near side, 1 at
-// its far side, along the frame's direction).
+// Atlases: frame `j * frames + i` at column `i`, row `j`, each with its mips; albedo (sRGB,
+// coverage in alpha), normal (`0.5 + 0.5 n` in RG, in the frame's axes: x right, y up, z towards
+// the frame's eye, rebuilt from x and y, as a tangent-space normal map stores it: BC5), depth (R:
+// 0 at the sphere's near side, 1 at its far side, along the frame's direction: BC4).
 
 struct ImpostorView {
     view_projection: mat4x4<f32>,
@@ -150,7 +151,8 @@ struct ImpostorParams {
 @group(0) @binding(1) var<storage, read> impostor: ImpostorParams;
 @group(0) @binding(2) var impostor_sampler: sampler;
 @group(0) @binding(3) var albedo_atlas: texture_2d<f32>;
-@group(0) @binding(4) var normal_depth_atlas: texture_2d<f32>;
+@group(0) @binding(4) var normal_atlas: texture_2d<f32>;
+@group(0) @binding(5) var depth_atlas: texture_2d<f32>;
 
 struct ImpostorVertexOut {
     @builtin(position) clip: vec4<f32>,
@@ -175,7 +177,7 @@ fn impostor_vs(@builtin(vertex_index) index: u32) -> ImpostorVertexOut {
 // Frame `frame`'s texel under the view ray through `world`, in the frame's own image (0..1):
 // where the ray crosses the frame's plane through the centre, then (parallax) where it meets
 // the depth the frame shows there, twice; outside 0..1 when the ray leaves the frame.
-fn impostor_frame_uv(frame: u32, world: vec3<f32>) -> vec2<f32> {
+fn impostor_frame_uv(frame: u32, world: vec3<f32>, lod: f32) -> vec2<f32> {
     let frames = impostor.grid.x;
     let hemi = impostor.grid.y != 0u;
     let cell = vec2<f32>(f32(frame % frames), f32(frame / frames));
@@ -191,7 +193,7 @@ fn impostor_frame_uv(frame: u32, world: vec3<f32>) -> vec2<f32> {
     var uv = vec2<f32>(dot(point, axes.right), -dot(point, axes.up)) / (2.0 * radius) + 0.5;
     for (var step = 0; step < 2; step = step + 1) {
         let texel = (cell + clamp(uv, vec2<f32>(0.0), vec2<f32>(1.0))) / f32(frames);
-        let shown = textureSampleLevel(normal_depth_atlas, impostor_sampler, texel, 0.0).a;
+        let shown = textureSampleLevel(depth_atlas, impostor_sampler, texel, lod).r;
         let height = radius - 2.0 * radius * shown;
         point = start - eye * ((dot(start, direction) - height) / along);
         uv = vec2<f32>(dot(point, axes.right), -dot(point, axes.up)) / (2.0 * radius) + 0.5;
@@ -202,22 +204,30 @@ fn impostor_frame_uv(frame: u32, world: vec3<f32>) -> vec2<f32> {
 @fragment
 fn impostor_fs(input: ImpostorVertexOut) -> @location(0) vec4<f32> {
     let frames = impostor.grid.x;
+    // The mip level: frame texels per screen pixel (taken before any branch).
+    let frame_texels = f32(textureDimensions(albedo_atlas).x) / f32(frames);
+    let pixel = max(length(dpdx(input.world)), length(dpdy(input.world)));
+    let lod = max(log2(pixel * frame_texels / (2.0 * impostor.sphere.w)), 0.0);
     let blend = impostor_blend(impostor_view.eye.xyz, frames, impostor.grid.y != 0u);
     var albedo = vec3<f32>(0.0);
     var normal = vec3<f32>(0.0);
     var coverage = 0.0;
     for (var k = 0u; k < 3u; k = k + 1u) {
         let frame = blend.frames[k];
-        let uv = impostor_frame_uv(frame, input.world);
+        let uv = impostor_frame_uv(frame, input.world, lod);
         if any(uv < vec2<f32>(0.0)) || any(uv > vec2<f32>(1.0)) {
             continue;
         }
-        let at = (vec2<f32>(f32(frame % frames), f32(frame / frames)) + uv) / f32(frames);
-        let colour = textureSampleLevel(albedo_atlas, impostor_sampler, at, 0.0);
-        let normal_depth = textureSampleLevel(normal_depth_atlas, impostor_sampler, at, 0.0);
+        let cell = vec2<f32>(f32(frame % frames), f32(frame / frames));
+        let at = (cell + uv) / f32(frames);
+        let colour = textureSampleLevel(albedo_atlas, impostor_sampler, at, lod);
+        let xy = textureSampleLevel(normal_atlas, impostor_sampler, at, lod).xy * 2.0 - 1.0;
+        let z = sqrt(max(1.0 - dot(xy, xy), 0.0));
+        let direction = impostor_decode(cell / f32(frames - 1u), impostor.grid.y != 0u);
+        let axes = impostor_frame_axes(direction);
         let weight = blend.weights[k] * colour.a;
         albedo += colour.rgb * weight;
-        normal += (normal_depth.xyz * 2.0 - 1.0) * weight;
+        normal += (axes.right * xy.x + axes.up * xy.y + normalize(direction) * z) * weight;
         coverage += weight;
     }
     if coverage < impostor.params.x || coverage <= 0.0 {

@@ -7,11 +7,14 @@ use super::{Gpu, GpuError, ALBEDO_FORMAT, DATA_FORMAT, VIEW_BACKGROUND};
 use crate::mesh::octahedral::{FrameGrid, Sphere};
 use crate::texture::Texture;
 
-/// An impostor as the reference renderer draws it: its frame grid, atlases and bounding sphere.
-pub struct ImpostorDraw<'a> {
+/// An impostor as the reference renderer draws it: its frame grid, its atlases (each a mip
+/// chain, level 0 first, as `impostor::ImpostorFrames` describes them) and bounding sphere.
+#[derive(Clone, Debug)]
+pub struct ImpostorDraw {
     pub grid: FrameGrid,
-    pub albedo: &'a Texture,
-    pub normal_depth: &'a Texture,
+    pub albedo: Vec<Texture>,
+    pub normal: Vec<Texture>,
+    pub depth: Vec<Texture>,
     pub center: [f32; 3],
     pub radius: f32,
     pub alpha_cutoff: f32,
@@ -60,6 +63,19 @@ pub(super) struct ImpostorPipelines {
     pub frame: wgpu::RenderPipeline,
     view: wgpu::RenderPipeline,
     sampler: wgpu::Sampler,
+}
+
+/// The direction towards the eye (object to eye, unit length) of an orthographic camera: the one
+/// that moves no point across the image, pointing where depth falls.
+fn orthographic_eye(view_projection: [[f32; 4]; 4]) -> glam::Vec3 {
+    let row =
+        |index: usize| glam::Vec3::new(view_projection[0][index], view_projection[1][index], view_projection[2][index]);
+    let eye = row(0).cross(row(1)).normalize_or(glam::Vec3::Z);
+    if row(2).dot(eye) > 0.0 {
+        -eye
+    } else {
+        eye
+    }
 }
 
 impl Gpu {
@@ -118,19 +134,20 @@ impl Gpu {
         })
     }
 
-    /// Renders `impostor` seen from `eye` (object to eye, unit length; the orthographic camera
-    /// `view_projection` looks along `−eye`) into a `size`² RGBA8 image, as `render_view` renders
-    /// a mesh: sRGB colour lit by `light` on mid-grey, alpha 255 where the impostor is drawn.
+    /// Renders `impostor` under the orthographic camera `view_projection` into a `size`² RGBA8
+    /// image, as `render_view` renders a mesh: sRGB colour lit by `light` on mid-grey, alpha 255
+    /// where the impostor is drawn.
     pub fn render_impostor_view(
         &self,
         impostor: &ImpostorDraw,
-        (view_projection, eye): ([[f32; 4]; 4], [f32; 3]),
+        view_projection: [[f32; 4]; 4],
         light: [f32; 3],
         size: u32,
     ) -> Result<Vec<u8>, GpuError> {
+        let eye = orthographic_eye(view_projection);
         self.catching_device_errors(|| {
             let ImpostorPipelines { view: pipeline, sampler, .. } = self.impostor_pipelines();
-            let [x, y, z] = eye;
+            let [x, y, z] = eye.to_array();
             let view = ImpostorViewUniform { view_projection, eye: [x, y, z, 0.0], light: super::extend(light) };
             let [cx, cy, cz] = impostor.center;
             let uniform = ImpostorUniform {
@@ -141,8 +158,9 @@ impl Gpu {
             let view_buffer = self.constants_buffer(bytemuck::bytes_of(&view));
             let impostor_buffer = self.constants_buffer(bytemuck::bytes_of(&uniform));
             // Uploaded once per content: every view of the same impostor shares them.
-            let albedo = self.levels_view(std::slice::from_ref(impostor.albedo), true);
-            let normal_depth = self.levels_view(std::slice::from_ref(impostor.normal_depth), false);
+            let albedo = self.levels_view(&impostor.albedo, true);
+            let normal = self.levels_view(&impostor.normal, false);
+            let depth = self.levels_view(&impostor.depth, false);
             let group = self.device.create_bind_group(&wgpu::BindGroupDescriptor {
                 label: Some("impostor"),
                 layout: &pipeline.get_bind_group_layout(0),
@@ -151,7 +169,8 @@ impl Gpu {
                     wgpu::BindGroupEntry { binding: 1, resource: impostor_buffer.as_entire_binding() },
                     wgpu::BindGroupEntry { binding: 2, resource: wgpu::BindingResource::Sampler(sampler) },
                     wgpu::BindGroupEntry { binding: 3, resource: wgpu::BindingResource::TextureView(&albedo) },
-                    wgpu::BindGroupEntry { binding: 4, resource: wgpu::BindingResource::TextureView(&normal_depth) },
+                    wgpu::BindGroupEntry { binding: 4, resource: wgpu::BindingResource::TextureView(&normal) },
+                    wgpu::BindGroupEntry { binding: 5, resource: wgpu::BindingResource::TextureView(&depth) },
                 ],
             });
             let target = self.target(size, size, ALBEDO_FORMAT);
@@ -257,5 +276,30 @@ impl Gpu {
         drop(mapped);
         readback.unmap();
         Ok(blends)
+    }
+}
+
+/// A LOD level as an engine draws it: a mesh with its materials, or an impostor through
+/// `impostor.wgsl`.
+#[derive(Clone, Debug)]
+pub enum LevelView {
+    Mesh(super::ViewMesh),
+    Impostor(ImpostorDraw),
+}
+
+impl Gpu {
+    /// Renders `level` under the orthographic camera `view_projection` into a `size`² RGBA8 image
+    /// (see [`Gpu::render_view`]).
+    pub fn render_level_view(
+        &self,
+        level: &LevelView,
+        view_projection: [[f32; 4]; 4],
+        light: [f32; 3],
+        size: u32,
+    ) -> Result<Vec<u8>, GpuError> {
+        match level {
+            LevelView::Mesh(mesh) => self.render_view(mesh, view_projection, light, size),
+            LevelView::Impostor(impostor) => self.render_impostor_view(impostor, view_projection, light, size),
+        }
     }
 }

@@ -10,7 +10,7 @@ pub mod top_down_render;
 mod view_render;
 mod window;
 
-pub use impostor::ImpostorDraw;
+pub use impostor::{ImpostorDraw, LevelView};
 pub use plane_render::{material_mip_settings, PlaneImages, PlaneRenderInput, RectangleFrame, RenderMaterial};
 pub use view_render::{ViewMaterial, ViewMesh};
 pub use window::WindowSurface;

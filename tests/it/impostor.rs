@@ -239,19 +239,34 @@ fn a_sphere_s_frames_each_show_a_disc_facing_the_frame_s_direction_nearest_at_it
     let (grid, size) = (FrameGrid { frames: 4, sphere: Sphere::Hemi }, 64);
     let settings = cirrus::impostor::ImpostorSettings { grid, frame_size: size };
     let frames = cirrus::impostor::bake_impostor(gpu, &view_of(&sphere_obj(32)), (Vec3::ZERO, 1.0), settings).unwrap();
-    assert_eq!((frames.albedo.width, frames.normal_depth.height), (4 * 64, 4 * 64));
+    assert_eq!((frames.albedo.width, frames.normal.height, frames.depth.height), (4 * 64, 4 * 64, 4 * 64));
     for frame in 0..grid.frame_count() {
         let albedo = frame_texels(&frames.albedo, grid, size, frame);
         let covered = albedo.iter().filter(|texel| texel[3] == 255).count() as f64 / albedo.len() as f64;
         assert!((covered - std::f64::consts::FRAC_PI_4).abs() < 0.03, "frame {frame}: {covered:.3} covered");
-        let normal_depth = frame_texels(&frames.normal_depth, grid, size, frame);
-        let centre = normal_depth[(size / 2 * size + size / 2) as usize];
-        let normal = Vec3::new(centre[0] as f32, centre[1] as f32, centre[2] as f32) / 127.5 - Vec3::ONE;
-        let direction = grid.frame_direction(frame);
-        assert!(normal.normalize().distance(direction) < 0.06, "frame {frame}: normal {normal} seen from {direction}");
-        assert!(centre[3] <= 4, "frame {frame}: the sphere's nearest point has depth {}", centre[3]);
-        let edge = normal_depth[(size / 2 * size + 4) as usize];
-        assert!(edge[3] > 60, "frame {frame}: near the rim the depth is {} (about half way)", edge[3]);
+        // Normals in the frame's axes: towards the eye at the centre, to the left near the left rim.
+        let (normals, depths) =
+            (frame_texels(&frames.normal, grid, size, frame), frame_texels(&frames.depth, grid, size, frame));
+        let normal_at = |at: u32| {
+            let texel = normals[at as usize];
+            Vec3::new(texel[0] as f32, texel[1] as f32, texel[2] as f32) / 127.5 - Vec3::ONE
+        };
+        let (centre, edge) = (size / 2 * size + size / 2, size / 2 * size + 4);
+        assert!(normal_at(centre).normalize().distance(Vec3::Z) < 0.06, "frame {frame}: normal {}", normal_at(centre));
+        assert!(normal_at(edge).x < -0.8, "frame {frame}: near the left rim the normal is {}", normal_at(edge));
+        assert!(
+            depths[centre as usize][0] <= 4,
+            "frame {frame}: the sphere's nearest point has depth {:?}",
+            depths[centre as usize]
+        );
+        assert!(
+            depths[edge as usize][0] > 60,
+            "frame {frame}: near the rim the depth is {:?} (about half way)",
+            depths[edge as usize]
+        );
+        // Outside the disc, the nearest covered texel's values; albedo's alpha stays 0.
+        assert_eq!(albedo[0][3], 0);
+        assert!(depths[0][0] > 100, "frame {frame}: the corner takes the rim's depth, {:?}", depths[0]);
     }
 }
 
@@ -307,8 +322,9 @@ fn impostor_ious(source: &cirrus::gpu::ViewMesh, grid: FrameGrid, frame_size: u3
     let frames = cirrus::impostor::bake_impostor(gpu, source, (Vec3::from(center), radius), settings).unwrap();
     let draw = cirrus::gpu::ImpostorDraw {
         grid,
-        albedo: &frames.albedo,
-        normal_depth: &frames.normal_depth,
+        albedo: vec![frames.albedo],
+        normal: vec![frames.normal],
+        depth: vec![frames.depth],
         center,
         radius,
         alpha_cutoff: 0.5,
@@ -319,7 +335,7 @@ fn impostor_ious(source: &cirrus::gpu::ViewMesh, grid: FrameGrid, frame_size: u3
         .map(|direction| {
             let camera = cirrus::preview::view_projection(center, radius, direction);
             let source = gpu.render_view(source, camera, light, 128).unwrap();
-            let impostor = gpu.render_impostor_view(&draw, (camera, direction), light, 128).unwrap();
+            let impostor = gpu.render_impostor_view(&draw, camera, light, 128).unwrap();
             let (mut both, mut either) = (0usize, 0usize);
             for (a, b) in source.chunks_exact(4).zip(impostor.chunks_exact(4)) {
                 both += usize::from(a[3] > 0 && b[3] > 0);

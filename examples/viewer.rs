@@ -16,7 +16,7 @@ use std::path::{Path, PathBuf};
 use std::sync::Arc;
 use std::time::Duration;
 
-use cirrus::gpu::{Gpu, ViewMesh, WindowSurface};
+use cirrus::gpu::{Gpu, LevelView, WindowSurface};
 use clap::Parser;
 use glam::Vec3;
 
@@ -93,7 +93,7 @@ struct Scene {
     levels: u32,
     level: u32,
     alpha_cutoff: f32,
-    mesh: ViewMesh,
+    mesh: LevelView,
     center: [f32; 3],
     radius: f32,
     camera: Camera,
@@ -103,15 +103,18 @@ impl Scene {
     fn load(options: &Options) -> Result<Scene, String> {
         let alpha_cutoff = options.alpha_cutoff.unwrap_or_else(|| report_alpha_cutoff(&options.folder).unwrap_or(0.5));
         let levels =
-            (0..10).take_while(|level| options.folder.join(format!("lod{level}/lod.obj")).is_file()).count() as u32;
+            (0..10).take_while(|level| options.folder.join(format!("lod{level}/lod.gltf")).is_file()).count() as u32;
         if options.lod > 0 && options.lod >= levels {
             return Err(format!("{} has no LOD level {}", options.folder.display(), options.lod));
         }
         let folder = options.folder.clone();
         let level_folder = level_folder(&folder, levels, options.lod);
-        let mesh = cirrus::kinds::billboard_cloud::read_lod_view_mesh(Path::new("."), &level_folder, alpha_cutoff)
+        let mesh = cirrus::kinds::billboard_cloud::read_level_view(Path::new("."), &level_folder, alpha_cutoff)
             .map_err(|error| error.to_string())?;
-        let (center, radius) = cirrus::preview::bounding_sphere(&mesh);
+        let (center, radius) = match &mesh {
+            LevelView::Mesh(mesh) => cirrus::preview::bounding_sphere(mesh),
+            LevelView::Impostor(impostor) => (impostor.center, impostor.radius),
+        };
         let camera = Camera { yaw: 0.6, pitch: 0.25, zoom: 1.0 };
         Ok(Scene { folder, levels, level: options.lod, alpha_cutoff, mesh, center, radius, camera })
     }
@@ -120,7 +123,7 @@ impl Scene {
     /// returned.
     fn reload(&mut self) -> Result<(), String> {
         let folder = level_folder(&self.folder, self.levels, self.level);
-        self.mesh = cirrus::kinds::billboard_cloud::read_lod_view_mesh(Path::new("."), &folder, self.alpha_cutoff)
+        self.mesh = cirrus::kinds::billboard_cloud::read_level_view(Path::new("."), &folder, self.alpha_cutoff)
             .map_err(|error| error.to_string())?;
         Ok(())
     }
@@ -160,7 +163,8 @@ impl Scene {
     /// A `size`² RGBA8 image of the LOD (mid-grey background, alpha 0 there).
     fn render(&self, gpu: &Gpu, size: u32) -> Result<Vec<u8>, String> {
         let matrix = self.camera.view_projection(self.center, self.radius);
-        gpu.render_view(&self.mesh, matrix, cirrus::preview::preview_light(), size).map_err(|error| error.to_string())
+        gpu.render_level_view(&self.mesh, matrix, cirrus::preview::preview_light(), size)
+            .map_err(|error| error.to_string())
     }
 }
 
@@ -261,7 +265,11 @@ fn write_screenshot(gpu: &Gpu, scene: &Scene, size: u32, path: &Path, what: &str
     }
     let png = cirrus::texture::preview::preview_png(&cirrus::texture::Texture::new(size, size, pixels));
     cirrus::files::write_if_changed(path, &png).map_err(|error| format!("cannot write {}: {error}", path.display()))?;
-    let triangles = scene.mesh.batches.iter().map(|(_, vertices)| vertices.len() / 3).sum::<usize>();
+    let triangles = match &scene.mesh {
+        LevelView::Mesh(mesh) => mesh.batches.iter().map(|(_, vertices)| vertices.len() / 3).sum::<usize>(),
+        // One camera-facing quad.
+        LevelView::Impostor(_) => 2,
+    };
     let coverage = 100.0 * covered as f64 / (size as f64 * size as f64);
     let level = if scene.levels > 0 { format!("lod{} of {}, ", scene.level, scene.levels) } else { String::new() };
     Ok(format!(

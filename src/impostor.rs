@@ -12,7 +12,7 @@ use crate::texture::fill::{fill_from_sources, texel_sources};
 use crate::texture::Texture;
 
 /// What an impostor is baked at.
-#[derive(Clone, Copy, Debug, PartialEq)]
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Hash)]
 pub struct ImpostorSettings {
     pub grid: FrameGrid,
     /// Each frame's side in texels.
@@ -22,12 +22,12 @@ pub struct ImpostorSettings {
 /// A baked impostor: its frames' atlases and the sphere they frame. Texels no surface covers
 /// take the values of the nearest covered texel of their frame (alpha stays 0), so that
 /// filtering and mips pull in no fringe.
-#[derive(Clone, Debug)]
+#[derive(Clone, Debug, PartialEq)]
 pub struct ImpostorFrames {
     pub settings: ImpostorSettings,
     pub center: Vec3,
     pub radius: f32,
-    /// sRGB albedo, alpha 255 where the mesh was drawn.
+    /// sRGB albedo, alpha the share of the texel the mesh covers.
     pub albedo: Texture,
     /// The normal in the frame's axes (x right, y up, z towards the frame's eye, never below 0)
     /// as `0.5 + 0.5 n` in RGB; alpha 255.
@@ -51,7 +51,10 @@ pub fn bake_impostor(
     for frame in 0..grid.frame_count() {
         let direction = grid.frame_direction(frame);
         let camera = frame_view_projection(center, radius, direction);
-        let [albedo, normal_depth] = gpu.render_impostor_frame(mesh, camera.to_cols_array_2d(), frame_size)?;
+        let samples = frame_samples_per_axis(frame_size);
+        let [albedo, normal_depth] =
+            gpu.render_impostor_frame(mesh, camera.to_cols_array_2d(), frame_size * samples)?;
+        let (albedo, normal_depth) = resolve_frame(&albedo, &normal_depth, frame_size, samples);
         let images = frame_surfaces(&albedo, &normal_depth, direction, frame_size);
         let (column, row) = ((frame % grid.frames * frame_size) as usize, (frame / grid.frames * frame_size) as usize);
         let row_bytes = frame_size as usize * 4;
@@ -64,6 +67,57 @@ pub fn bake_impostor(
     }
     let [albedo, normal, depth] = atlases.map(|pixels| Texture::new(side as u32, side as u32, pixels));
     Ok(ImpostorFrames { settings, center, radius, albedo, normal, depth })
+}
+
+/// Samples per texel along each axis a frame is rendered with: 4 (16 samples), fewer where the
+/// render would pass 1024 texels a side. A frame's texel covers many of the source's (its leaf
+/// cards are a few texels wide): rendered at its own size, alpha-tested materials sample their
+/// maps' small mips and lose their leaves.
+fn frame_samples_per_axis(frame_size: u32) -> u32 {
+    (1024 / frame_size.max(1)).clamp(1, 4)
+}
+
+/// A frame rendered at `samples`² samples per texel brought to `size`² texels: alpha the share
+/// of samples covered, colour (in linear light), normal and depth the mean of the covered ones.
+fn resolve_frame(albedo: &[u8], normal_depth: &[u8], size: u32, samples: u32) -> (Vec<u8>, Vec<u8>) {
+    if samples == 1 {
+        return (albedo.to_vec(), normal_depth.to_vec());
+    }
+    use crate::texture::color::{linear_to_srgb_u8, srgb_u8_to_linear};
+    let (size, samples) = (size as usize, samples as usize);
+    let sampled_row = size * samples;
+    let mut resolved = (vec![0u8; size * size * 4], vec![0u8; size * size * 4]);
+    for y in 0..size {
+        for x in 0..size {
+            let (mut colour, mut normal, mut depth, mut covered) = ([0.0f32; 3], Vec3::ZERO, 0.0f32, 0usize);
+            for sample_y in y * samples..(y + 1) * samples {
+                for sample_x in x * samples..(x + 1) * samples {
+                    let at = (sample_y * sampled_row + sample_x) * 4;
+                    if albedo[at + 3] == 0 {
+                        continue;
+                    }
+                    covered += 1;
+                    for channel in 0..3 {
+                        colour[channel] += srgb_u8_to_linear(albedo[at + channel]);
+                    }
+                    let texel = &normal_depth[at..at + 4];
+                    normal += Vec3::new(texel[0] as f32, texel[1] as f32, texel[2] as f32) / 127.5 - Vec3::ONE;
+                    depth += texel[3] as f32;
+                }
+            }
+            if covered == 0 {
+                continue;
+            }
+            let at = (y * size + x) * 4;
+            let share = covered as f32 / (samples * samples) as f32;
+            let colour = colour.map(|sum| linear_to_srgb_u8(sum / covered as f32));
+            resolved.0[at..at + 4].copy_from_slice(&[colour[0], colour[1], colour[2], (share * 255.0).round() as u8]);
+            let normal = (normal.normalize_or(Vec3::Z) * 127.5 + Vec3::splat(127.5)).round();
+            let depth = (depth / covered as f32).round() as u8;
+            resolved.1[at..at + 4].copy_from_slice(&[normal.x as u8, normal.y as u8, normal.z as u8, depth]);
+        }
+    }
+    resolved
 }
 
 /// One frame's albedo, frame-space normal and depth images, filled, from the frame renderer's

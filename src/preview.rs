@@ -111,16 +111,18 @@ pub fn preview(
     radius: f32,
     settings: PreviewSettings,
 ) -> Result<Preview, GpuError> {
-    let mut chain = preview_chain(gpu, source, &[lod], center, radius, settings)?;
+    let lod = crate::gpu::LevelView::Mesh(lod.clone());
+    let mut chain = preview_chain(gpu, source, &[&lod], center, radius, settings)?;
     Ok(chain.levels.remove(0))
 }
 
-/// Renders `source` and each of `lods` from the first `settings.views` directions (the source
-/// once per view), framing the sphere at `center` with `radius`.
+/// Renders `source` and each of `lods` (meshes or impostors, as an engine draws them) from the
+/// first `settings.views` directions (the source once per view), framing the sphere at `center`
+/// with `radius`.
 pub(crate) fn preview_chain(
     gpu: &Gpu,
     source: &ViewMesh,
-    lods: &[&ViewMesh],
+    lods: &[&crate::gpu::LevelView],
     center: [f32; 3],
     radius: f32,
     settings: PreviewSettings,
@@ -132,11 +134,11 @@ pub(crate) fn preview_chain(
     let mut shift_ious = Vec::new();
     for direction in view_directions().into_iter().take(settings.views) {
         let matrix = view_projection(center, radius, direction);
-        let source_view = render_resolved_view(gpu, source, matrix, light, settings)?;
+        let source_view = render_resolved_view(settings, |size| gpu.render_view(source, matrix, light, size))?;
         shift_ious.push(one_pixel_shift_iou(&source_view, settings.size));
         let mut images = Vec::with_capacity(1 + lods.len());
         for (lod, level_metrics) in lods.iter().zip(&mut metrics) {
-            let lod_view = render_resolved_view(gpu, lod, matrix, light, settings)?;
+            let lod_view = render_resolved_view(settings, |size| gpu.render_level_view(lod, matrix, light, size))?;
             let overlap = silhouette_overlap(&source_view, &lod_view);
             level_metrics.push(ViewMetrics {
                 direction,
@@ -201,15 +203,14 @@ impl ResolvedView {
     }
 }
 
+/// A view rendered at `settings.samples_per_axis`² samples per pixel by `render` (given the
+/// sampled image's side), resolved.
 fn render_resolved_view(
-    gpu: &Gpu,
-    mesh: &ViewMesh,
-    view_projection: [[f32; 4]; 4],
-    light: [f32; 3],
     settings: PreviewSettings,
+    render: impl FnOnce(u32) -> Result<Vec<u8>, GpuError>,
 ) -> Result<ResolvedView, GpuError> {
     let samples_per_axis = settings.samples_per_axis.max(1);
-    let samples = gpu.render_view(mesh, view_projection, light, settings.size * samples_per_axis)?;
+    let samples = render(settings.size * samples_per_axis)?;
     Ok(resolve_samples(&samples, settings.size, samples_per_axis))
 }
 

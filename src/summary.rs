@@ -205,7 +205,8 @@ pub enum ArtifactRole {
     Gltf,
     /// The binary buffer a glTF document names (`.bin`).
     GltfBuffer,
-    /// A table of entries in JSON (an atlas's `atlas.json`).
+    /// A description in JSON an engine reads (an atlas's `atlas.json`, an impostor's
+    /// `impostor.json`).
     Table,
     /// The asset's `report.json`.
     Report,

@@ -145,6 +145,8 @@ pub struct GltfMesh<'a> {
     /// Each triangle's index into `materials`.
     pub triangle_materials: &'a [u32],
     pub materials: &'a [GltfMaterial],
+    /// What the mesh's `extras` say (an impostor's description), if anything.
+    pub extras: Option<&'a serde_json::Value>,
 }
 
 /// The geometry of a [`GltfMesh`], owned: what a stage keeps (in its cache entry) so that the
@@ -186,6 +188,7 @@ impl GltfGeometry {
             triangles: &self.triangles,
             triangle_materials: &self.triangle_materials,
             materials,
+            extras: None,
         }
     }
 }
@@ -330,7 +333,7 @@ fn push_mesh(
     }
     let gltf_mesh = root.push(json::Mesh {
         extensions: None,
-        extras: Default::default(),
+        extras: mesh.extras.map(|extras| serde_json::value::to_raw_value(extras).expect("extras serialise")),
         name: Some(mesh.name.to_string()),
         primitives,
         weights: None,
@@ -529,6 +532,7 @@ pub fn swatch_files(material: GltfMaterial, bin_uri: &str, generator: &str) -> G
         triangles: &[[0, 1, 2], [0, 2, 3]],
         triangle_materials: &[],
         materials: std::slice::from_ref(&material),
+        extras: None,
     };
     gltf_files(&mesh, bin_uri, generator)
 }

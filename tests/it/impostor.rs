@@ -242,7 +242,7 @@ fn a_sphere_s_frames_each_show_a_disc_facing_the_frame_s_direction_nearest_at_it
     assert_eq!((frames.albedo.width, frames.normal.height, frames.depth.height), (4 * 64, 4 * 64, 4 * 64));
     for frame in 0..grid.frame_count() {
         let albedo = frame_texels(&frames.albedo, grid, size, frame);
-        let covered = albedo.iter().filter(|texel| texel[3] == 255).count() as f64 / albedo.len() as f64;
+        let covered = albedo.iter().filter(|texel| texel[3] > 127).count() as f64 / albedo.len() as f64;
         assert!((covered - std::f64::consts::FRAC_PI_4).abs() < 0.03, "frame {frame}: {covered:.3} covered");
         // Normals in the frame's axes: towards the eye at the centre, to the left near the left rim.
         let (normals, depths) =
@@ -286,7 +286,7 @@ fn a_frame_s_image_axes_are_the_reference_s() {
         let covered_in = |columns: std::ops::Range<u32>| {
             (0..size)
                 .flat_map(|y| columns.clone().map(move |x| (y * size + x) as usize))
-                .filter(|&at| texels[at][3] == 255)
+                .filter(|&at| texels[at][3] > 127)
                 .count()
         };
         let (left, right_half) = (covered_in(0..size / 2), covered_in(size / 2..size));
@@ -304,9 +304,7 @@ fn a_frame_s_image_axes_are_the_reference_s() {
     for frame in [0, 2, 6, 8] {
         let texels = frame_texels(&frames.albedo, grid, size, frame);
         let covered_rows = |rows: std::ops::Range<u32>| {
-            rows.flat_map(|y| (0..size).map(move |x| (y * size + x) as usize))
-                .filter(|&at| texels[at][3] == 255)
-                .count()
+            rows.flat_map(|y| (0..size).map(move |x| (y * size + x) as usize)).filter(|&at| texels[at][3] > 127).count()
         };
         let (top, bottom) = (covered_rows(0..size / 2), covered_rows(size / 2..size));
         assert!(top > bottom + 20, "frame {frame}: {top} covered in the top half, {bottom} in the bottom");

@@ -51,6 +51,7 @@ pub(super) fn preview(
         let remapped = mesh_view_from_files(&config.root, &remapped_obj, (Path::new(""), limits), ALPHA_CUTOFF)
             .map_err(PreviewError::Artifact)?;
         let (center, radius) = crate::preview::bounding_sphere(&source);
+        let remapped = crate::gpu::LevelView::Mesh(remapped);
         let mut compared = crate::preview::preview_chain(gpu, &source, &[&remapped], center, radius, options.settings)?;
         let compared = compared.levels.remove(0);
         let folder = options.out.join(relative.with_extension(""));

@@ -1,5 +1,5 @@
 //! A billboard cloud's LOD levels: what each level is asked for (a cloud's budget, ε and atlas,
-//! or a reduced mesh's triangles), its folder and its label. One level without `lods` (the
+//! a reduced mesh's triangles, or an impostor's frames), its folder and its label. One level without `lods` (the
 //! asset's folder); one per entry of a chain (`lod0/`, `lod1/`, …), each meant for half the
 //! screen size of the one before.
 
@@ -16,8 +16,11 @@ pub struct LevelSettings {
     pub screen_size: Option<u32>,
     /// The largest side its atlas may take.
     pub max_atlas_size: u32,
-    /// A reduced level's triangles (none: a billboard cloud, which the fields above describe).
+    /// A reduced level's triangles (none: a billboard cloud, which the fields above describe,
+    /// or an impostor).
     pub reduced: Option<TriangleBudget>,
+    /// An impostor level's frames (none: a billboard cloud or a reduced mesh).
+    pub impostor: Option<crate::impostor::ImpostorSettings>,
 }
 
 /// The levels an asset bakes: one per budget of its chain, else one.
@@ -61,12 +64,38 @@ pub(crate) fn settings_for(settings: &Settings, level: u32) -> LevelSettings {
             Some(LodLevel::Reduced(triangles)) => Some(triangles),
             _ => None,
         },
+        impostor: match entry {
+            Some(LodLevel::Impostor { frames, hemi, size }) => Some(impostor_settings(frames, hemi, size)),
+            _ => None,
+        },
+    }
+}
+
+/// An impostor level's frames: `frames` a side, each `size / frames` texels (down to a multiple
+/// of 4, whole blocks), on the hemi- or full octahedron.
+pub(crate) fn impostor_settings(frames: u32, hemi: bool, size: u32) -> crate::impostor::ImpostorSettings {
+    use crate::mesh::octahedral::{FrameGrid, Sphere};
+    let frames = frames.max(2);
+    crate::impostor::ImpostorSettings {
+        grid: FrameGrid { frames, sphere: if hemi { Sphere::Hemi } else { Sphere::Full } },
+        frame_size: ((size / frames) & !3).max(4),
     }
 }
 
 /// Whether level `level` is a reduced mesh (no planes, atlas or renders).
 pub(crate) fn is_reduced(settings: &Settings, level: u32) -> bool {
     settings_for(settings, level).reduced.is_some()
+}
+
+/// Whether level `level` is an impostor (its frames' atlases, no planes).
+pub(crate) fn is_impostor(settings: &Settings, level: u32) -> bool {
+    settings_for(settings, level).impostor.is_some()
+}
+
+/// Whether level `level` is a billboard cloud (planes, layout, renders, atlas).
+pub(crate) fn is_cloud(settings: &Settings, level: u32) -> bool {
+    let level = settings_for(settings, level);
+    level.reduced.is_none() && level.impostor.is_none()
 }
 
 /// The atlas settings of a level: the asset's, with the level's largest side.

@@ -81,6 +81,7 @@ impl LodGltfMesh {
             triangles: &self.triangles,
             triangle_materials: &[],
             materials: std::slice::from_ref(&self.material),
+            extras: None,
         }
     }
 }

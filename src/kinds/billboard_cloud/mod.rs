@@ -23,6 +23,7 @@ pub mod lod_mesh;
 pub mod lod_preview;
 pub mod levels;
 pub mod reduced;
+pub mod impostor_level;
 pub mod queries;
 
 use crate::summary::ArtifactRole;
@@ -49,13 +50,19 @@ use queries::{ATLAS, LAYOUT, LOD, PLANES, RENDER};
 
 pub struct BillboardCloud;
 
-/// A level's four atlas surfaces (their group is the level's folder); none for a reduced level.
+/// A level's surfaces (their group is the level's folder): a cloud's four atlas surfaces, an
+/// impostor's three; none for a reduced level.
 fn atlas_surfaces(db: &dyn Db, asset: Asset, level: u32) -> Vec<SurfaceId> {
-    if levels::is_reduced(asset.settings(db), level) {
-        return Vec::new();
-    }
-    let folder = levels::level_folder(asset.settings(db), level);
-    SurfaceKind::BILLBOARD.map(|surface| SurfaceId { group: folder.clone(), surface }).to_vec()
+    let settings = asset.settings(db);
+    let kinds: &[SurfaceKind] = if levels::is_reduced(settings, level) {
+        &[]
+    } else if levels::is_impostor(settings, level) {
+        &impostor_level::IMPOSTOR_SURFACES
+    } else {
+        &SurfaceKind::BILLBOARD
+    };
+    let folder = levels::level_folder(settings, level);
+    kinds.iter().map(|&surface| SurfaceId { group: folder.clone(), surface }).collect()
 }
 
 /// The level a surface belongs to (its group is the level's folder).
@@ -122,10 +129,14 @@ impl Kind for BillboardCloud {
                 label: level_label(db, asset, level).clone(),
             })
             .collect();
-        // When some level will render, the GPU starts and the textures are decoded, filtered
-        // and uploaded beside the planes (which run on one thread), not after them.
+        // When some level will render, the GPU starts, and for a cloud's renders the textures
+        // are decoded, filtered and uploaded beside the planes (which run on one thread), not
+        // after them.
         if levels.clone().any(|level| level_renders(db, asset, level)) {
             crate::gpu::start_gpu_in_background();
+        }
+        let settings = asset.settings(db);
+        if levels.clone().any(|level| levels::is_cloud(settings, level) && level_renders(db, asset, level)) {
             let uploads = loaded_mesh(db, asset).map_or(0, |loaded| material_texture_slots(&loaded).len() as u32);
             let name = asset.name(db);
             jobs.extend((0..uploads).map(|texture| Job {
@@ -145,6 +156,13 @@ impl Kind for BillboardCloud {
         match *step {
             Step::Layout { level } if levels::is_reduced(asset.settings(db), level) => {
                 queries::reduced_level(db, asset, level).map(|_| Vec::new())
+            }
+            // An impostor's surfaces ask for its frames when the cache does not hold them.
+            Step::Layout { level } if levels::is_impostor(asset.settings(db), level) => {
+                Ok(atlas_surfaces(db, asset, level)
+                    .into_iter()
+                    .map(|surface| Job { asset, label: surface.label(name), task: Task::Surface(surface), after: 1 })
+                    .collect())
             }
             Step::Layout { level } => {
                 let label = level_label(db, asset, level);
@@ -241,6 +259,30 @@ impl Kind for BillboardCloud {
                 instances.push(reduce);
                 continue;
             }
+            if levels::is_impostor(asset.settings(db), level) {
+                let mut impostor = impostor_level::impostor_instance(db, asset, level, &mesh, &mut decodes);
+                let level_folder = output_folder.join(&folder);
+                impostor.writes = impostor_level::IMPOSTOR_FILES.map(|file| level_folder.join(file)).to_vec();
+                impostor.writes.push(report.clone());
+                if chain_end {
+                    impostor.writes.push(output_folder.join("lods.gltf"));
+                }
+                let encode_settings = &asset.settings(db).encode;
+                let mut tails = Vec::new();
+                for surface in atlas_surfaces(db, asset, level) {
+                    let [mips, encode, mut write] = tail_instances(
+                        name,
+                        &surface,
+                        &impostor,
+                        &surface.written_files(output_folder, encode_settings),
+                    );
+                    write.writes.push(report.clone());
+                    tails.extend([mips, encode, write]);
+                }
+                instances.push(impostor);
+                instances.extend(tails);
+                continue;
+            }
             let planes = StageInstance::new(PLANES, label, &instance).reads_stage(&mesh);
             let layout = StageInstance::new(LAYOUT, label, &instance).reads_stage(&mesh).reads_stage(&planes);
             let mut atlas = StageInstance::new(ATLAS, label, &instance).reads_stage(&layout);
@@ -306,7 +348,16 @@ impl Kind for BillboardCloud {
     }
 
     fn surface_image(db: &dyn Db, asset: Asset, surface: &SurfaceId) -> Result<Arc<Texture>, Diagnostic> {
-        queries::atlas_surface(db, asset, level_of_surface(db, asset, surface)?, surface.surface)
+        let level = level_of_surface(db, asset, surface)?;
+        if levels::is_impostor(asset.settings(db), level) {
+            let frames = queries::impostor_frames(db, asset, level)?;
+            return Ok(Arc::new(match surface.surface {
+                SurfaceKind::Normal => frames.normal.clone(),
+                SurfaceKind::Height => frames.depth.clone(),
+                _ => frames.albedo.clone(),
+            }));
+        }
+        queries::atlas_surface(db, asset, level, surface.surface)
     }
 
     fn tail_settings(db: &dyn Db, asset: Asset, surface: &SurfaceId) -> Result<TailSettings, Diagnostic> {
@@ -321,7 +372,11 @@ impl Kind for BillboardCloud {
     }
 
     fn surface_recipe_key(db: &dyn Db, asset: Asset, surface: &SurfaceId) -> Result<Option<CacheKey>, Diagnostic> {
-        Ok(Some(queries::atlas_recipe_key(db, asset, level_of_surface(db, asset, surface)?)))
+        let level = level_of_surface(db, asset, surface)?;
+        if levels::is_impostor(asset.settings(db), level) {
+            return Ok(Some(queries::impostor_recipe_key(db, asset, level)));
+        }
+        Ok(Some(queries::atlas_recipe_key(db, asset, level)))
     }
 
     fn cutting_surface(surface: &SurfaceId) -> Option<SurfaceId> {
@@ -330,7 +385,11 @@ impl Kind for BillboardCloud {
     }
 
     fn surface_parts_key(db: &dyn Db, asset: Asset, surface: &SurfaceId) -> Result<Option<CacheKey>, Diagnostic> {
-        queries::atlas_surface_parts_key(db, asset, level_of_surface(db, asset, surface)?, surface.surface).map(Some)
+        let level = level_of_surface(db, asset, surface)?;
+        if levels::is_impostor(asset.settings(db), level) {
+            return Ok(None);
+        }
+        queries::atlas_surface_parts_key(db, asset, level, surface.surface).map(Some)
     }
 
     fn preview(
@@ -377,20 +436,25 @@ fn level_render_instances(
         if loaded.mesh.uvs.is_some() {
             for &material in &group.materials {
                 for path in loaded.mesh.materials[material as usize].maps.values() {
-                    let label = display_path(path);
-                    render.reads.push(Read::Stage(DECODE, label.clone()));
-                    decodes.entry(label).or_insert_with(|| {
-                        let mut decode = StageInstance::new(DECODE, display_path(path), display_path(path));
-                        decode.reads.push(Read::File(path.clone()));
-                        decode.shared = true;
-                        decode
-                    });
+                    read_decode(&mut render, path, decodes);
                 }
             }
         }
         renders.push(render);
     }
     renders
+}
+
+/// `stage` reads the decode of the texture `path` (added to `decodes`, shared by every level).
+fn read_decode(stage: &mut StageInstance, path: &Path, decodes: &mut BTreeMap<String, StageInstance>) {
+    let label = display_path(path);
+    stage.reads.push(Read::Stage(DECODE, label.clone()));
+    decodes.entry(label).or_insert_with(|| {
+        let mut decode = StageInstance::new(DECODE, display_path(path), display_path(path));
+        decode.reads.push(Read::File(path.to_path_buf()));
+        decode.shared = true;
+        decode
+    });
 }
 
 /// The files of a baked billboard cloud: each level's LOD mesh, textures and previews, and the
@@ -409,16 +473,18 @@ fn billboard_outputs(
     let mut chain = Vec::new();
     let mut warnings = Vec::new();
     for level in 0..levels::level_count(settings) {
-        let (report, mesh) = if levels::is_reduced(settings, level) {
+        let (report, mesh, error_world) = if levels::is_reduced(settings, level) {
             let (report, mesh) =
                 reduced::reduced_level_outputs(db, asset, level, output_folder, (&mut outputs, &mut warnings))?;
-            (report, ChainMesh::Reduced(mesh))
+            let error_world = mesh.level.figures.error_world;
+            (report, ChainMesh::Reduced(mesh), error_world)
+        } else if levels::is_impostor(settings, level) {
+            let (report, quad, error_world) =
+                impostor_level::impostor_level_outputs(db, asset, level, output_folder, &mut outputs)?;
+            (report, ChainMesh::Impostor(quad), error_world)
         } else {
-            level_outputs(db, asset, level, output_folder, &mut outputs)?
-        };
-        let error_world = match &mesh {
-            ChainMesh::Cloud(_) => billboard_planes(db, asset, level)?.mean_error,
-            ChainMesh::Reduced(reduced) => reduced.level.figures.error_world,
+            let (report, mesh) = level_outputs(db, asset, level, output_folder, &mut outputs)?;
+            (report, mesh, billboard_planes(db, asset, level)?.mean_error)
         };
         chain.push(ChainLevel { folder: levels::level_folder(settings, level), mesh, error_world });
         level_reports.push(report);
@@ -456,7 +522,8 @@ fn billboard_outputs(
 }
 
 /// One level as the chain's document draws it, and the error its switch coverage follows (world
-/// units: a cloud's mean plane error, a reduced mesh's largest deviation).
+/// units: a cloud's mean plane error, a reduced mesh's largest deviation, an impostor's
+/// `impostor_error_world`).
 struct ChainLevel {
     folder: String,
     mesh: ChainMesh,
@@ -466,6 +533,7 @@ struct ChainLevel {
 enum ChainMesh {
     Cloud(Box<lod_mesh::LodGltfMesh>),
     Reduced(reduced::ReducedGltf),
+    Impostor(impostor_level::ImpostorGltf),
 }
 
 /// A chain's `lods.gltf` (`MSFT_lod`, every level's `lod.bin` and images under its folder, the
@@ -478,6 +546,7 @@ fn chain_document(levels: &[ChainLevel], diameter: f32) -> (Vec<u8>, Vec<f32>) {
             mesh: match &level.mesh {
                 ChainMesh::Cloud(mesh) => mesh.mesh(),
                 ChainMesh::Reduced(mesh) => mesh.mesh(),
+                ChainMesh::Impostor(quad) => quad.mesh(),
             },
             folder: &level.folder,
         })
@@ -595,30 +664,24 @@ pub fn preview_levels(
     let lods = chosen
         .iter()
         .map(|&level| match options.stand_in {
-            // A reduced level has no planes to stand in on: it is shown as baked.
-            stand_in if stand_in == lod_preview::StandIn::Baked || levels::is_reduced(settings, level) => {
-                read_lod_view_mesh(&config.root, &folder.join(levels::level_folder(settings, level)), cutoff)
+            // Reduced and impostor levels have no planes to stand in on: they are shown as baked.
+            stand_in if stand_in == lod_preview::StandIn::Baked || !levels::is_cloud(settings, level) => {
+                read_level_view(&config.root, &folder.join(levels::level_folder(settings, level)), cutoff)
             }
             stand_in => {
                 let planes = queries::billboard_planes(db, input, level)?;
-                Ok(crate::gpu::ViewMesh {
+                Ok(crate::gpu::LevelView::Mesh(crate::gpu::ViewMesh {
                     batches: faces_on_planes(&loaded, &planes, stand_in),
                     materials: source.materials.clone(),
-                })
+                }))
             }
         })
         .collect::<Result<Vec<_>, _>>()
         .map_err(PreviewError::Artifact)?;
-    let positions = &loaded.mesh.positions;
-    let (min, max) = positions
-        .iter()
-        .fold((glam::Vec3::splat(f32::INFINITY), glam::Vec3::splat(f32::NEG_INFINITY)), |(min, max), &p| {
-            (min.min(glam::Vec3::from(p)), max.max(glam::Vec3::from(p)))
-        });
-    let center = 0.5 * (min + max);
-    let radius = positions.iter().map(|&p| glam::Vec3::from(p).distance(center)).fold(0.0, f32::max);
+    // The sphere the impostors' frames show.
+    let (center, radius) = planes::bounding_sphere(&loaded.mesh.positions);
     let gpu = crate::gpu::gpu()?;
-    let lod_refs: Vec<&crate::gpu::ViewMesh> = lods.iter().collect();
+    let lod_refs: Vec<&crate::gpu::LevelView> = lods.iter().collect();
     let preview = crate::preview::preview_chain(gpu, &source, &lod_refs, center.to_array(), radius, options.settings)?;
     let out = config.root.join(&options.out);
     let mut results = Vec::new();
@@ -633,8 +696,18 @@ pub fn preview_levels(
     Ok(results)
 }
 
-/// The baked LOD in `folder` (relative to `root`) as an engine loads it: a billboard cloud's
-/// `lod.obj` with the decoded levels of `albedo.ktx2` and `normal.ktx2`, alpha-tested at
+/// The baked LOD in `folder` (relative to `root`) as an engine draws it: an impostor through
+/// `impostor.json` (`impostor_level::read_impostor_view`), else the level's mesh
+/// (`read_lod_view_mesh`).
+pub fn read_level_view(root: &Path, folder: &Path, alpha_cutoff: f32) -> Result<crate::gpu::LevelView, Diagnostic> {
+    if impostor_level::is_impostor_folder(root, folder) {
+        return impostor_level::read_impostor_view(root, folder).map(crate::gpu::LevelView::Impostor);
+    }
+    read_lod_view_mesh(root, folder, alpha_cutoff).map(crate::gpu::LevelView::Mesh)
+}
+
+/// The baked LOD mesh in `folder` (relative to `root`) as an engine loads it: a billboard
+/// cloud's `lod.obj` with the decoded levels of `albedo.ktx2` and `normal.ktx2`, alpha-tested at
 /// `alpha_cutoff`; a reduced level's `lod.obj` with its `lod.mtl` and the maps that names (in
 /// its `maps/`), its cut-out materials alpha-tested at `alpha_cutoff`.
 pub fn read_lod_view_mesh(root: &Path, folder: &Path, alpha_cutoff: f32) -> Result<crate::gpu::ViewMesh, Diagnostic> {

@@ -98,8 +98,9 @@ struct Grid {
     centers: Vec<Vec3>,
 }
 
-/// The sphere ε is a fraction of: centred on the bounding box, through the farthest vertex.
-fn bounding_sphere(positions: &[[f32; 3]]) -> (Vec3, f32) {
+/// The sphere ε is a fraction of: centred on the bounding box, through the farthest vertex (an
+/// impostor's frames and the preview frame the same sphere).
+pub(crate) fn bounding_sphere(positions: &[[f32; 3]]) -> (Vec3, f32) {
     let (min, max) =
         positions.iter().fold((Vec3::splat(f32::INFINITY), Vec3::splat(f32::NEG_INFINITY)), |(min, max), &p| {
             (min.min(Vec3::from(p)), max.max(Vec3::from(p)))

@@ -49,6 +49,9 @@ pub const LOD: Stage = Stage { name: "lod", version: 2 };
 /// names no asset (assets with the same mesh and budget share the entry).
 pub(crate) const REDUCE: Stage = Stage { name: "reduce", version: 2 };
 
+/// An impostor level's frames (`impostor::bake_impostor`), rendered on the GPU.
+pub(crate) const IMPOSTOR: Stage = Stage { name: "impostor", version: 1 };
+
 /// The deviation (a fraction of the mesh's largest extent) up to which a reduced level's
 /// simplifier prefers stopping to reaching its budget.
 pub(crate) const REDUCE_MAX_ERROR: f32 = 0.01;
@@ -768,4 +771,50 @@ pub(crate) fn reduced_level(
         crate::kinds::mesh_queries::written_mesh_entry(&reduced.figures, &reduced.obj, &reduced.geometry)
     });
     Ok(Arc::new(reduced))
+}
+
+/// An impostor level's frames (stage `impostor`): the source with its materials rendered from
+/// every direction of the level's grid around the mesh's bounding sphere. Not kept in the
+/// persistent cache itself: its surfaces are, under [`impostor_recipe_key`], and a level whose
+/// surfaces are all there never asks for it.
+#[salsa::tracked(returns(clone))]
+pub(crate) fn impostor_frames(
+    db: &dyn Db,
+    asset: Asset,
+    level: u32,
+) -> Result<Arc<crate::impostor::ImpostorFrames>, Diagnostic> {
+    let name = level_label(db, asset, level);
+    let main_file = asset.main_file(db);
+    let Some(settings) = level_settings(db, asset, level).impostor else {
+        return Err(Diagnostic::new(main_file, format!("{name} is not an impostor level")));
+    };
+    let loaded = loaded_mesh(db, asset)?;
+    let view = super::source_view_mesh(db, asset, &loaded)?;
+    let sphere = super::planes::bounding_sphere(&loaded.mesh.positions);
+    timed(db, IMPOSTOR, name, || {
+        let gpu = crate::gpu::gpu().map_err(|error| Diagnostic::new(main_file, error.to_string()))?;
+        let frames = crate::impostor::bake_impostor(gpu, &view, sphere, settings)
+            .map_err(|error| Diagnostic::new(main_file, format!("{name}: {error}")))?;
+        Ok(Arc::new(frames))
+    })
+}
+
+/// What an impostor level's surfaces are made of: the mesh (with its MTL), the frames, the
+/// alpha cutoff, every texture the materials name, the GPU family that renders them.
+#[salsa::tracked(returns(copy))]
+pub(crate) fn impostor_recipe_key(db: &dyn Db, asset: Asset, level: u32) -> CacheKey {
+    let settings = level_settings(db, asset, level).impostor;
+    let (frames, hemi, frame_size) = settings.map_or((0, false, 0), |settings| {
+        (settings.grid.frames, settings.grid.sphere == crate::mesh::octahedral::Sphere::Hemi, settings.frame_size)
+    });
+    let key = stage_key(IMPOSTOR)
+        .part(crate::gpu::adapter_family())
+        .part(&mesh_cache_key(db, asset, asset.main_file(db).clone()).0)
+        .part(&frames)
+        .part(&hemi)
+        .part(&frame_size)
+        .part(&billboard_alpha_cutoff(db, asset));
+    let textures =
+        mesh_textures(db, asset).iter().filter_map(|path| asset_file(db, asset, path.clone())).collect::<Vec<_>>();
+    key_with_files(db, key, textures).finish()
 }

@@ -59,7 +59,16 @@ pub enum LodLevel {
     Triangles(u32),
     /// The source mesh with at most `Triangles(n)` or `Ratio(r)` of its triangles.
     Reduced(TriangleBudget),
+    /// An octahedral impostor: the mesh seen from `frames × frames` directions on the upper
+    /// half of the sphere (`hemi`) or all of it, in atlases of at most `size` texels a side;
+    /// drawn as one camera-facing quad by `shaders/impostor.wgsl`.
+    Impostor { frames: u32, hemi: bool, size: u32 },
 }
+
+/// The most frames a side an impostor may have.
+pub(crate) const MAX_IMPOSTOR_FRAMES: u32 = 32;
+/// The smallest side of an impostor's frame, in texels.
+pub(crate) const MIN_IMPOSTOR_FRAME: u32 = 16;
 
 impl LodLevel {
     /// The budget of a billboard-cloud level (none: a reduced one).
@@ -67,7 +76,7 @@ impl LodLevel {
         match self {
             LodLevel::Quads(quads) => Some(LodBudget::Quads(quads)),
             LodLevel::Triangles(triangles) => Some(LodBudget::Triangles(triangles)),
-            LodLevel::Reduced(_) => None,
+            LodLevel::Reduced(_) | LodLevel::Impostor { .. } => None,
         }
     }
 
@@ -78,25 +87,34 @@ impl LodLevel {
             LodLevel::Triangles(triangles) => Some(triangles as u64 / 2 * 2),
             LodLevel::Reduced(TriangleBudget::Triangles(triangles)) => Some(triangles as u64),
             LodLevel::Reduced(TriangleBudget::Ratio(_)) => None,
+            // One camera-facing quad.
+            LodLevel::Impostor { .. } => Some(2),
         }
     }
 
     /// The level as `pipeline.ron` writes it.
     fn written(self) -> String {
-        ron::to_string(&self).unwrap_or_else(|_| format!("{self:?}"))
+        match self {
+            LodLevel::Impostor { frames, hemi, size } => {
+                format!("Impostor(frames: {frames}, hemi: {hemi}, size: {size})")
+            }
+            _ => ron::to_string(&self).unwrap_or_else(|_| format!("{self:?}")),
+        }
     }
 }
 
 /// Whether `next` asks for less than `previous`: fewer triangles where both counts are known,
-/// a smaller ratio between two ratios; a ratio beside a count cannot be compared before the
-/// mesh is read and passes.
+/// a smaller ratio between two ratios, a smaller atlas between two impostors; a ratio beside a
+/// count cannot be compared before the mesh is read and passes.
 fn asks_for_less(previous: LodLevel, next: LodLevel) -> bool {
-    match (previous.triangles(), next.triangles()) {
-        (Some(previous), Some(next)) => next < previous,
-        _ => match (previous, next) {
-            (LodLevel::Reduced(TriangleBudget::Ratio(previous)), LodLevel::Reduced(TriangleBudget::Ratio(next))) => {
-                next < previous
-            }
+    match (previous, next) {
+        // Two impostors (one quad each): the next one's atlas is smaller.
+        (LodLevel::Impostor { size: previous, .. }, LodLevel::Impostor { size: next, .. }) => next < previous,
+        (LodLevel::Reduced(TriangleBudget::Ratio(previous)), LodLevel::Reduced(TriangleBudget::Ratio(next))) => {
+            next < previous
+        }
+        _ => match (previous.triangles(), next.triangles()) {
+            (Some(previous), Some(next)) => next < previous,
             _ => true,
         },
     }
@@ -203,6 +221,18 @@ pub(crate) fn merge_billboard(
                     "{}: a reduced level keeps a ratio in (0, 1) of the source's triangles",
                     level.written()
                 )),
+                LodLevel::Impostor { frames, .. } if !(2..=MAX_IMPOSTOR_FRAMES).contains(&frames) => {
+                    Some(format!("{}: an impostor has 2 to {MAX_IMPOSTOR_FRAMES} frames a side", level.written()))
+                }
+                LodLevel::Impostor { size, .. } if !(64..=8192).contains(&size) => {
+                    Some(format!("{}: an impostor's atlas is 64 to 8192 texels a side", level.written()))
+                }
+                LodLevel::Impostor { frames, size, .. } if size / frames < MIN_IMPOSTOR_FRAME => Some(format!(
+                    "{}: {frames} frames a side leave {} texels a frame in {size}; give each at least \
+                    {MIN_IMPOSTOR_FRAME} (fewer frames or a larger size)",
+                    level.written(),
+                    size / frames
+                )),
                 _ => None,
             };
             if let Some(problem) = problem {
@@ -224,7 +254,7 @@ pub(crate) fn merge_billboard(
                 anchor,
                 &format!(
                     "a LOD chain goes from the most detailed level to the least: each level must draw fewer \
-                    triangles than the one before ({})",
+                    triangles than the one before, an impostor after an impostor a smaller atlas ({})",
                     written.join(", ")
                 ),
             );

@@ -7,6 +7,7 @@ mod gpu;
 mod budget;
 pub mod chain;
 mod reduced_level;
+mod impostor_level;
 mod distance_alpha;
 mod layout;
 mod planes;

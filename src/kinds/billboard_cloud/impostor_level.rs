@@ -1,0 +1,286 @@
+//! A LOD chain's impostor levels (`lods: [..., Impostor(frames: 8, hemi: true, size: 1024)]`):
+//! the mesh's frames (`impostor::bake_impostor`, stage `impostor`) as three surfaces through the
+//! texture tail (`albedo`, `normal` in each frame's axes, `height` holding the depth), described
+//! in `impostor.json` for engines and drawn by `shaders/impostor.wgsl`; `lod.gltf` carries one
+//! quad showing the front frame (for a loader without the shader) with the description in the
+//! mesh's `extras`. Reading a level back as an engine does (`read_impostor_view`) serves the
+//! preview and the viewer.
+
+use std::path::{Path, PathBuf};
+
+use serde::{Deserialize, Serialize};
+
+use super::levels;
+use super::queries::{level_label, IMPOSTOR};
+use crate::db::{Asset, Db};
+use crate::diagnostic::Diagnostic;
+use crate::kinds::mesh_queries::mesh_textures;
+use crate::kinds::{AssetOutputs, StageInstance};
+use crate::mesh::gltf::{GltfAlpha, GltfMaterial, GltfMesh, GltfWrap};
+use crate::mesh::octahedral::{FrameGrid, Sphere};
+use crate::summary::ArtifactRole;
+use crate::texture::{SurfaceKind, Texture};
+
+/// An impostor level's surfaces: albedo with coverage, the frames' normals, their depth (in the
+/// height surface: a distance from the frame's centre plane, as a cloud's height is from its).
+pub(crate) const IMPOSTOR_SURFACES: [SurfaceKind; 3] = [SurfaceKind::Albedo, SurfaceKind::Normal, SurfaceKind::Height];
+
+/// The description of an impostor level an engine reads (`impostor.json`, and the `extras` of
+/// its `lod.gltf` mesh as `cirrus_impostor`).
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct ImpostorDescription {
+    /// The shader that draws it (its functions are the reference for engine ports).
+    pub shader: String,
+    /// Frames a side; frame `j · frames + i` is at column `i`, row `j` of every atlas, seen
+    /// from `impostor_decode(vec2(i, j) / (frames − 1), hemi)`.
+    pub frames: u32,
+    /// The upper half of the sphere (views from below use the horizon's frames), else all of it.
+    pub hemi: bool,
+    /// Each frame's side in texels; the atlases are `frames · frame_size` a side.
+    pub frame_size: u32,
+    /// The bounding sphere each frame shows, filling it.
+    pub center: [f32; 3],
+    pub radius: f32,
+    pub alpha_cutoff: f32,
+    /// The atlases, relative to this file: albedo (sRGB, coverage in alpha), the normal in the
+    /// frame's axes (x right, y up, z towards the frame's eye, rebuilt from x and y) and the depth
+    /// (0 at the sphere's near side, 1 at its far side, in the red channel).
+    pub albedo: String,
+    pub normal: String,
+    pub depth: String,
+}
+
+/// An impostor level's `impostor` stage instance: it reads the mesh stage and every texture the
+/// materials name (their decodes, added to `decodes`); the level's surfaces read it.
+pub(crate) fn impostor_instance(
+    db: &dyn Db,
+    asset: Asset,
+    level: u32,
+    mesh: &StageInstance,
+    decodes: &mut std::collections::BTreeMap<String, StageInstance>,
+) -> StageInstance {
+    let folder = levels::level_folder(asset.settings(db), level);
+    let mut impostor = StageInstance::new(IMPOSTOR, level_label(db, asset, level), &folder).reads_stage(mesh);
+    for path in mesh_textures(db, asset).iter() {
+        super::read_decode(&mut impostor, path, decodes);
+    }
+    impostor
+}
+
+/// The files an impostor level writes beside its surfaces' textures.
+pub(crate) const IMPOSTOR_FILES: [&str; 3] = ["impostor.json", "lod.gltf", "lod.bin"];
+
+/// An impostor level's quad as the chain's document draws it.
+pub(crate) struct ImpostorGltf {
+    positions: Vec<[f32; 3]>,
+    uvs: Vec<[f32; 2]>,
+    material: GltfMaterial,
+    extras: serde_json::Value,
+}
+
+impl ImpostorGltf {
+    pub fn mesh(&self) -> GltfMesh<'_> {
+        GltfMesh {
+            name: "impostor",
+            positions: &self.positions,
+            normals: &[[0.0, 0.0, 1.0]; 4],
+            tangents: &[[1.0, 0.0, 0.0, 1.0]; 4],
+            uvs: &self.uvs,
+            triangles: &[[0, 1, 2], [0, 2, 3]],
+            triangle_materials: &[],
+            materials: std::slice::from_ref(&self.material),
+            extras: Some(&self.extras),
+        }
+    }
+}
+
+/// The frame seen from closest to +Z (the front), on `grid`.
+fn front_frame(grid: FrameGrid) -> u32 {
+    (0..grid.frame_count())
+        .max_by(|&a, &b| grid.frame_direction(a).z.total_cmp(&grid.frame_direction(b).z))
+        .unwrap_or(0)
+}
+
+/// The quad of an impostor described by `description`: the bounding sphere's square facing +Z
+/// through its centre, showing the front frame of the atlases `images` (albedo, normal, ORM as
+/// the tail's previews name them).
+fn impostor_gltf(description: &ImpostorDescription, images: [Option<String>; 3]) -> ImpostorGltf {
+    let grid =
+        FrameGrid { frames: description.frames, sphere: if description.hemi { Sphere::Hemi } else { Sphere::Full } };
+    let frame = front_frame(grid);
+    let frames = grid.frames as f32;
+    let (column, row) = ((frame % grid.frames) as f32, (frame / grid.frames) as f32);
+    // OBJ's convention (origin bottom left): the frame's image rows run down.
+    let (u0, u1, v0, v1) = (column / frames, (column + 1.0) / frames, 1.0 - (row + 1.0) / frames, 1.0 - row / frames);
+    let ([x, y, z], r) = (description.center, description.radius);
+    let [albedo, normal, _] = images;
+    ImpostorGltf {
+        positions: vec![[x - r, y - r, z], [x + r, y - r, z], [x + r, y + r, z], [x - r, y + r, z]],
+        uvs: vec![[u0, v0], [u1, v0], [u1, v1], [u0, v1]],
+        material: GltfMaterial {
+            name: "impostor".into(),
+            base_colour_factor: [1.0; 4],
+            metallic_factor: 0.0,
+            roughness_factor: 1.0,
+            base_colour: albedo,
+            normal,
+            occlusion: None,
+            metallic_roughness: None,
+            alpha: GltfAlpha::Mask(description.alpha_cutoff),
+            double_sided: true,
+            wrap: GltfWrap::Clamp,
+        },
+        // Read back from its JSON, so that its numbers are written as `impostor.json` has them.
+        extras: serde_json::json!({
+            "cirrus_impostor": serde_json::to_string(description)
+                .ok()
+                .and_then(|text| serde_json::from_str::<serde_json::Value>(&text).ok())
+        }),
+    }
+}
+
+/// The world distance an impostor's view can be off the frames it blends: a point on the
+/// sphere's rim seen from halfway between neighbouring frames (the grid's side spans 180° of
+/// view on the hemi-octahedron, and its half-diagonal 180° on the full one), plus a texel.
+pub(crate) fn impostor_error_world(settings: crate::impostor::ImpostorSettings, radius: f32) -> f32 {
+    let steps = (settings.grid.frames - 1).max(1) as f32;
+    let step = match settings.grid.sphere {
+        Sphere::Hemi => std::f32::consts::PI / steps,
+        Sphere::Full => std::f32::consts::PI / steps * std::f32::consts::SQRT_2,
+    };
+    radius * (0.5 * step).sin() + 2.0 * radius / settings.frame_size as f32
+}
+
+/// An impostor level's files (added to `outputs`), its part of the report, and its quad for the
+/// chain's document.
+pub(crate) fn impostor_level_outputs(
+    db: &dyn Db,
+    asset: Asset,
+    level: u32,
+    output_folder: &Path,
+    outputs: &mut AssetOutputs,
+) -> Result<(serde_json::Value, ImpostorGltf, f32), Diagnostic> {
+    let settings = asset.settings(db);
+    let folder = levels::level_folder(settings, level);
+    let level_folder = output_folder.join(&folder);
+    let Some(impostor) = levels::settings_for(settings, level).impostor else {
+        return Err(Diagnostic::new(asset.main_file(db), format!("lod{level} is not an impostor level")));
+    };
+    let loaded = crate::kinds::mesh_queries::loaded_mesh(db, asset)?;
+    let (center, radius) = super::planes::bounding_sphere(&loaded.mesh.positions);
+    let side = impostor.grid.frames * impostor.frame_size;
+    let first_file = outputs.files.len();
+    let (mut bytes, mut gpu_bytes) = (0, 0);
+    let mut surfaces = Vec::new();
+    let mut names: [String; 3] = Default::default();
+    let mut previews: [Option<String>; 3] = Default::default();
+    for (index, surface) in super::atlas_surfaces(db, asset, level).into_iter().enumerate() {
+        let artifacts = crate::kinds::tail_queries::surface_artifacts(db, asset, surface.clone())?;
+        let [texture_path, preview_path] = surface.artifact_paths(output_folder, &settings.encode);
+        bytes += artifacts.texture_file.len();
+        gpu_bytes += crate::texture::encode::gpu_bytes(side, side, Some(settings.encode.format_of(surface.surface)));
+        names[index] = file_name(&texture_path);
+        previews[index] = Some(file_name(&preview_path));
+        outputs.add(texture_path, ArtifactRole::Texture, artifacts.texture_file.clone());
+        outputs.add(preview_path, ArtifactRole::Image, artifacts.preview_png.clone());
+        surfaces.push(artifacts.info.clone());
+    }
+    let [albedo, normal, depth] = names;
+    let description = ImpostorDescription {
+        shader: "shaders/impostor.wgsl".into(),
+        frames: impostor.grid.frames,
+        hemi: impostor.grid.sphere == Sphere::Hemi,
+        frame_size: impostor.frame_size,
+        center: center.to_array(),
+        radius,
+        alpha_cutoff: super::queries::billboard_alpha_cutoff(db, asset),
+        albedo,
+        normal,
+        depth,
+    };
+    let json = serde_json::to_vec_pretty(&description).expect("descriptions serialise");
+    let quad = impostor_gltf(&description, previews);
+    let gltf = crate::mesh::gltf::gltf_files(&quad.mesh(), "lod.bin", crate::mesh::gltf::GENERATOR);
+    gpu_bytes += gltf.bin.len() as u64;
+    bytes += json.len() + gltf.bin.len();
+    outputs.add(level_folder.join("impostor.json"), ArtifactRole::Table, json.into());
+    outputs.add(level_folder.join("lod.gltf"), ArtifactRole::Gltf, gltf.gltf.into());
+    outputs.add(level_folder.join("lod.bin"), ArtifactRole::GltfBuffer, gltf.bin.into());
+    for (path, _, _) in &outputs.files[first_file..] {
+        outputs.meanings.insert(path.clone(), serde_json::json!({ "lod": level }));
+    }
+    let error_world = impostor_error_world(impostor, radius);
+    let report = serde_json::json!({
+        "level": level,
+        "folder": folder,
+        "representation": "impostor",
+        "frames": impostor.grid.frames,
+        "hemi": impostor.grid.sphere == Sphere::Hemi,
+        "frame_size": impostor.frame_size,
+        "triangles": 2,
+        "atlas": { "width": side, "height": side },
+        "error_world": error_world,
+        "surfaces": surfaces,
+        // The bytes an engine loads: the three textures, the description and the quad's buffer.
+        "bytes": bytes,
+        "gpu_bytes": gpu_bytes,
+    });
+    Ok((report, quad, error_world))
+}
+
+fn file_name(path: &Path) -> String {
+    path.file_name().map(|name| name.to_string_lossy().into_owned()).unwrap_or_default()
+}
+
+/// Whether `folder` holds an impostor level.
+pub fn is_impostor_folder(root: &Path, folder: &Path) -> bool {
+    root.join(folder).join("impostor.json").is_file()
+}
+
+/// The impostor level baked into `folder` (relative to `root`) as an engine draws it: its
+/// description and the decoded levels of its three KTX2 textures (BC-decoded, so that renders
+/// show the compression).
+pub fn read_impostor_view(root: &Path, folder: &Path) -> Result<crate::gpu::ImpostorDraw, Diagnostic> {
+    let read = |file: &str| -> Result<(PathBuf, Vec<u8>), Diagnostic> {
+        let path = folder.join(file);
+        let bytes = crate::artifacts::read_artifact(root, &path)?;
+        Ok((path, bytes))
+    };
+    let (path, json) = read("impostor.json")?;
+    let description: ImpostorDescription = serde_json::from_slice(&json).map_err(|error| {
+        let position = crate::diagnostic::TextPosition { line: error.line() as u32, column: error.column() as u32 };
+        Diagnostic::at(&path, position, format!("not an impostor description: {error}"))
+    })?;
+    let grid =
+        FrameGrid { frames: description.frames, sphere: if description.hemi { Sphere::Hemi } else { Sphere::Full } };
+    if !(2..=super::settings::MAX_IMPOSTOR_FRAMES).contains(&grid.frames) {
+        return Err(Diagnostic::new(&path, format!("{} frames a side: an impostor has 2 to 32", grid.frames)));
+    }
+    let mut textures = Vec::new();
+    for name in [&description.albedo, &description.normal, &description.depth] {
+        if Path::new(name).components().count() != 1 {
+            return Err(Diagnostic::new(&path, format!("`{name}`: an impostor's textures lie beside its description")));
+        }
+        let (texture_path, bytes) = read(name)?;
+        let levels = super::lod_preview::decoded_ktx2_levels(&texture_path, &bytes)?;
+        let side = grid.frames * description.frame_size;
+        if levels.first().is_none_or(|level: &Texture| (level.width, level.height) != (side, side)) {
+            return Err(Diagnostic::new(
+                &texture_path,
+                format!("{} frames of {} texels need a {side}² texture", grid.frames, description.frame_size),
+            ));
+        }
+        textures.push(levels);
+    }
+    let [albedo, normal, depth]: [Vec<Texture>; 3] = textures.try_into().expect("three textures");
+    Ok(crate::gpu::ImpostorDraw {
+        grid,
+        albedo,
+        normal,
+        depth,
+        center: description.center,
+        radius: description.radius,
+        alpha_cutoff: description.alpha_cutoff,
+    })
+}

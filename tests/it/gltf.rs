@@ -235,9 +235,10 @@ fn every_gltf_of_the_bundled_project_passes_the_khronos_validator_and_the_output
     let output = project.run_cli(&["build"]);
     assert!(output.status.success(), "{}", String::from_utf8_lossy(&output.stderr));
     let documents = files_named(&project.path("baked"), "gltf");
-    // The bush and the four levels of its chain (a reduced mesh, then three billboard clouds).
+    // The bush and the five levels of its chain (a reduced mesh, three billboard clouds, an
+    // impostor).
     let billboard_levels = documents.iter().filter(|path| path.ends_with("lod.gltf")).count();
-    assert_eq!(billboard_levels, 5, "a lod.gltf beside every lod.obj: {documents:?}");
+    assert_eq!(billboard_levels, 6, "a lod.gltf in every level: {documents:?}");
     assert!(documents.contains(&project.path("baked/bush_lods/lods.gltf")), "the chain as one document");
     // Every material of the Material assets as a swatch, alpha-tested where its albedo is.
     let swatches = documents.iter().filter(|path| path.ends_with("material.gltf")).count();
@@ -267,7 +268,7 @@ fn every_gltf_of_the_bundled_project_passes_the_khronos_validator_and_the_output
     // lod.bin beside that level's lod.gltf, and the switch coverages are the report's.
     let chain: serde_json::Value = serde_json::from_slice(&project.read("baked/bush_lods/lods.gltf")).unwrap();
     assert_eq!(chain["scenes"][0]["nodes"], serde_json::json!([0]));
-    assert_eq!(chain["nodes"][0]["extensions"]["MSFT_lod"]["ids"], serde_json::json!([1, 2, 3]));
+    assert_eq!(chain["nodes"][0]["extensions"]["MSFT_lod"]["ids"], serde_json::json!([1, 2, 3, 4]));
     assert_eq!(chain["extensionsUsed"], serde_json::json!(["MSFT_lod"]));
     for (level, buffer) in chain["buffers"].as_array().unwrap().iter().enumerate() {
         let bin = project.read(&format!("baked/bush_lods/lod{level}/lod.bin"));
@@ -278,8 +279,13 @@ fn every_gltf_of_the_bundled_project_passes_the_khronos_validator_and_the_output
     let coverage = &chain["nodes"][0]["extras"]["MSFT_screencoverage"];
     assert_eq!(coverage, &report["screen_coverage"]);
     let coverage: Vec<f64> = coverage.as_array().unwrap().iter().map(|value| value.as_f64().unwrap()).collect();
-    assert_eq!(coverage.len(), 4);
-    assert!(coverage.windows(2).all(|pair| pair[0] > pair[1]) && coverage[3] == 0.0, "{coverage:?}");
+    assert_eq!(coverage.len(), 5);
+    assert!(coverage.windows(2).all(|pair| pair[0] > pair[1]) && coverage[4] == 0.0, "{coverage:?}");
+    // The impostor's quad carries its description, as impostor.json has it.
+    let impostor: serde_json::Value =
+        serde_json::from_slice(&project.read("baked/bush_lods/lod4/impostor.json")).unwrap();
+    assert_eq!(chain["meshes"][4]["extras"]["cirrus_impostor"], impostor);
+    assert_eq!((&impostor["frames"], &impostor["hemi"]), (&serde_json::json!(8), &serde_json::json!(false)));
     // The reduced level draws the bush's own materials over copies of their maps in its maps/
     // (tiling: repeated), named from the chain's document and from the level's own.
     let images: Vec<&str> =

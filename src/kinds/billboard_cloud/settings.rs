@@ -120,6 +120,33 @@ fn asks_for_less(previous: LodLevel, next: LodLevel) -> bool {
     }
 }
 
+/// What is wrong with one level of a chain on its own, if anything.
+fn level_problem(level: LodLevel) -> Option<String> {
+    match level {
+        LodLevel::Reduced(TriangleBudget::Triangles(triangles))
+            if !(1..=MAX_REDUCED_TRIANGLES).contains(&triangles) =>
+        {
+            Some(format!("{}: a reduced level keeps between 1 and {MAX_REDUCED_TRIANGLES} triangles", level.written()))
+        }
+        LodLevel::Reduced(TriangleBudget::Ratio(ratio)) if !(ratio > 0.0 && ratio < 1.0) => {
+            Some(format!("{}: a reduced level keeps a ratio in (0, 1) of the source's triangles", level.written()))
+        }
+        LodLevel::Impostor { frames, .. } if !(2..=MAX_IMPOSTOR_FRAMES).contains(&frames) => {
+            Some(format!("{}: an impostor has 2 to {MAX_IMPOSTOR_FRAMES} frames a side", level.written()))
+        }
+        LodLevel::Impostor { size, .. } if !(64..=8192).contains(&size) => {
+            Some(format!("{}: an impostor's atlas is 64 to 8192 texels a side", level.written()))
+        }
+        LodLevel::Impostor { frames, size, .. } if size / frames < MIN_IMPOSTOR_FRAME => Some(format!(
+            "{}: {frames} frames a side leave {} texels a frame in {size}; give each at least \
+            {MIN_IMPOSTOR_FRAME} (fewer frames or a larger size)",
+            level.written(),
+            size / frames
+        )),
+        _ => None,
+    }
+}
+
 /// The largest triangle count a reduced level may ask for.
 const MAX_REDUCED_TRIANGLES: u32 = 100_000_000;
 
@@ -207,37 +234,8 @@ pub(crate) fn merge_billboard(
                 "each level must allow between 1 and 1000000 quads (Triangles: at least 2)",
             );
         }
-        for level in lods {
-            let problem = match *level {
-                LodLevel::Reduced(TriangleBudget::Triangles(triangles))
-                    if !(1..=MAX_REDUCED_TRIANGLES).contains(&triangles) =>
-                {
-                    Some(format!(
-                        "{}: a reduced level keeps between 1 and {MAX_REDUCED_TRIANGLES} triangles",
-                        level.written()
-                    ))
-                }
-                LodLevel::Reduced(TriangleBudget::Ratio(ratio)) if !(ratio > 0.0 && ratio < 1.0) => Some(format!(
-                    "{}: a reduced level keeps a ratio in (0, 1) of the source's triangles",
-                    level.written()
-                )),
-                LodLevel::Impostor { frames, .. } if !(2..=MAX_IMPOSTOR_FRAMES).contains(&frames) => {
-                    Some(format!("{}: an impostor has 2 to {MAX_IMPOSTOR_FRAMES} frames a side", level.written()))
-                }
-                LodLevel::Impostor { size, .. } if !(64..=8192).contains(&size) => {
-                    Some(format!("{}: an impostor's atlas is 64 to 8192 texels a side", level.written()))
-                }
-                LodLevel::Impostor { frames, size, .. } if size / frames < MIN_IMPOSTOR_FRAME => Some(format!(
-                    "{}: {frames} frames a side leave {} texels a frame in {size}; give each at least \
-                    {MIN_IMPOSTOR_FRAME} (fewer frames or a larger size)",
-                    level.written(),
-                    size / frames
-                )),
-                _ => None,
-            };
-            if let Some(problem) = problem {
-                check.error_at_key("lods", anchor, &problem);
-            }
+        for problem in lods.iter().filter_map(|&level| level_problem(level)) {
+            check.error_at_key("lods", anchor, &problem);
         }
         if lods.is_empty() {
             check.error_at_key(

@@ -52,16 +52,18 @@ pub struct ImpostorDescription {
 }
 
 /// An impostor level's `impostor` stage instance: it reads the mesh stage and every texture the
-/// materials name (their decodes, added to `decodes`); the level's surfaces read it.
+/// materials name (their decodes, added to `decodes`) and writes the level's description and
+/// quad; the level's surfaces read it.
 pub(crate) fn impostor_instance(
     db: &dyn Db,
     asset: Asset,
     level: u32,
-    mesh: &StageInstance,
+    (output_folder, mesh): (&Path, &StageInstance),
     decodes: &mut std::collections::BTreeMap<String, StageInstance>,
 ) -> StageInstance {
     let folder = levels::level_folder(asset.settings(db), level);
     let mut impostor = StageInstance::new(IMPOSTOR, level_label(db, asset, level), &folder).reads_stage(mesh);
+    impostor.writes = IMPOSTOR_FILES.map(|file| output_folder.join(&folder).join(file)).to_vec();
     for path in mesh_textures(db, asset).iter() {
         super::read_decode(&mut impostor, path, decodes);
     }
@@ -69,7 +71,7 @@ pub(crate) fn impostor_instance(
 }
 
 /// The files an impostor level writes beside its surfaces' textures.
-pub(crate) const IMPOSTOR_FILES: [&str; 3] = ["impostor.json", "lod.gltf", "lod.bin"];
+const IMPOSTOR_FILES: [&str; 3] = ["impostor.json", "lod.gltf", "lod.bin"];
 
 /// An impostor level's quad as the chain's document draws it.
 pub(crate) struct ImpostorGltf {

@@ -235,7 +235,6 @@ impl Kind for BillboardCloud {
     }
 
     fn stage_instances(db: &dyn Db, asset: Asset, output_folder: &Path, errors: &[Diagnostic]) -> Vec<StageInstance> {
-        let name = asset.name(db);
         let main_file = asset.main_file(db);
         let mesh_label = display_path(main_file);
         let failed = !errors.is_empty();
@@ -260,25 +259,13 @@ impl Kind for BillboardCloud {
                 continue;
             }
             if levels::is_impostor(asset.settings(db), level) {
-                let mut impostor = impostor_level::impostor_instance(db, asset, level, &mesh, &mut decodes);
-                let level_folder = output_folder.join(&folder);
-                impostor.writes = impostor_level::IMPOSTOR_FILES.map(|file| level_folder.join(file)).to_vec();
+                let mut impostor =
+                    impostor_level::impostor_instance(db, asset, level, (output_folder, &mesh), &mut decodes);
                 impostor.writes.push(report.clone());
                 if chain_end {
                     impostor.writes.push(output_folder.join("lods.gltf"));
                 }
-                let encode_settings = &asset.settings(db).encode;
-                let mut tails = Vec::new();
-                for surface in atlas_surfaces(db, asset, level) {
-                    let [mips, encode, mut write] = tail_instances(
-                        name,
-                        &surface,
-                        &impostor,
-                        &surface.written_files(output_folder, encode_settings),
-                    );
-                    write.writes.push(report.clone());
-                    tails.extend([mips, encode, write]);
-                }
+                let tails = level_tail_instances(db, asset, level, (output_folder, &report), &impostor);
                 instances.push(impostor);
                 instances.extend(tails);
                 continue;
@@ -299,14 +286,7 @@ impl Kind for BillboardCloud {
                 atlas = atlas.reads_stage(render);
             }
             instances.extend(renders);
-            let encode_settings = &asset.settings(db).encode;
-            let mut tails = Vec::new();
-            for surface in atlas_surfaces(db, asset, level) {
-                let [mips, encode, mut write] =
-                    tail_instances(name, &surface, &atlas, &surface.written_files(output_folder, encode_settings));
-                write.writes.push(report.clone());
-                tails.extend([mips, encode, write]);
-            }
+            let tails = level_tail_instances(db, asset, level, (output_folder, &report), &atlas);
             atlas.writes.push(report.clone());
             instances.push(atlas);
             instances.extend(tails);
@@ -412,6 +392,26 @@ impl Kind for BillboardCloud {
             .collect();
         Ok(PreviewReport { rows, chain_sheet: several.then(|| options.out.join("contact_sheet.png")) })
     }
+}
+
+/// The tail's stage instances of a level's surfaces, read from `image` (the atlas, the impostor's
+/// frames); each write also writes the report.
+fn level_tail_instances(
+    db: &dyn Db,
+    asset: Asset,
+    level: u32,
+    (output_folder, report): (&Path, &PathBuf),
+    image: &StageInstance,
+) -> Vec<StageInstance> {
+    let encode_settings = &asset.settings(db).encode;
+    let mut tails = Vec::new();
+    for surface in atlas_surfaces(db, asset, level) {
+        let written = surface.written_files(output_folder, encode_settings);
+        let [mips, encode, mut write] = tail_instances(asset.name(db), &surface, image, &written);
+        write.writes.push(report.clone());
+        tails.extend([mips, encode, write]);
+    }
+    tails
 }
 
 /// A level's render stage instances, one per render group, each reading the decodes of its

@@ -101,18 +101,17 @@ impl Default for PreviewSettings {
     }
 }
 
-/// Renders `source` and `lod` from the first `settings.views` directions, framing the sphere at
-/// `center` with `radius`.
+/// Renders `source` and `lod` (a mesh or an impostor) from the first `settings.views`
+/// directions, framing the sphere at `center` with `radius`.
 pub fn preview(
     gpu: &Gpu,
     source: &ViewMesh,
-    lod: &ViewMesh,
+    lod: &crate::gpu::LevelView,
     center: [f32; 3],
     radius: f32,
     settings: PreviewSettings,
 ) -> Result<Preview, GpuError> {
-    let lod = crate::gpu::LevelView::Mesh(lod.clone());
-    let mut chain = preview_chain(gpu, source, &[&lod], center, radius, settings)?;
+    let mut chain = preview_chain(gpu, source, &[lod], center, radius, settings)?;
     Ok(chain.levels.remove(0))
 }
 

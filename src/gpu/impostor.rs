@@ -4,7 +4,7 @@
 //! against the reference (`mesh::octahedral`) on the device that runs it.
 
 use super::{Gpu, GpuError, ALBEDO_FORMAT, DATA_FORMAT, VIEW_BACKGROUND};
-use crate::mesh::octahedral::{FrameGrid, Sphere};
+use crate::mesh::octahedral::FrameGrid;
 use crate::texture::Texture;
 
 /// An impostor as the reference renderer draws it: its frame grid, its atlases (each a mip
@@ -152,7 +152,7 @@ impl Gpu {
             let [cx, cy, cz] = impostor.center;
             let uniform = ImpostorUniform {
                 sphere: [cx, cy, cz, impostor.radius],
-                grid: [impostor.grid.frames, u32::from(impostor.grid.sphere == Sphere::Hemi), 0, 0],
+                grid: [impostor.grid.frames, u32::from(impostor.grid.is_hemi()), 0, 0],
                 params: [impostor.alpha_cutoff, 0.0, 0.0, 0.0],
             };
             let view_buffer = self.constants_buffer(bytemuck::bytes_of(&view));
@@ -217,7 +217,7 @@ impl Gpu {
             compilation_options: Default::default(),
             cache: None,
         });
-        let query = [grid.frames, u32::from(grid.sphere == Sphere::Hemi), directions.len() as u32, 0];
+        let query = [grid.frames, u32::from(grid.is_hemi()), directions.len() as u32, 0];
         let query = self.filled_buffer("impostor query", bytemuck::cast_slice(&query), wgpu::BufferUsages::STORAGE);
         let padded: Vec<[f32; 4]> = directions.iter().map(|&[x, y, z]| [x, y, z, 0.0]).collect();
         let inputs =

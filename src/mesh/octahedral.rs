@@ -87,6 +87,16 @@ fn sign(value: f32) -> f32 {
 }
 
 impl FrameGrid {
+    /// `frames` a side on the hemi-octahedron (`hemi`) or the full one.
+    pub fn new(frames: u32, hemi: bool) -> FrameGrid {
+        FrameGrid { frames, sphere: if hemi { Sphere::Hemi } else { Sphere::Full } }
+    }
+
+    /// Whether the grid covers the upper half of the sphere only.
+    pub fn is_hemi(self) -> bool {
+        self.sphere == Sphere::Hemi
+    }
+
     /// The number of frames.
     pub fn frame_count(self) -> u32 {
         self.frames * self.frames

@@ -182,8 +182,8 @@ fn a_triangle_lod_of_the_bush_is_measured_in_pixel_shift_units() {
     let mut last_loss = 0.0;
     for ratio in [0.5f32, 0.25, 0.1] {
         let reduced = reduce(&bush, TriangleBudget::Ratio(ratio));
-        let preview = cirrus::preview::preview(gpu, &source, &bush_view(&reduced.mesh), center, radius, settings)
-            .expect("renders");
+        let lod = cirrus::gpu::LevelView::Mesh(bush_view(&reduced.mesh));
+        let preview = cirrus::preview::preview(gpu, &source, &lod, center, radius, settings).expect("renders");
         let metrics = &preview.metrics;
         let loss = (1.0 - metrics.mean_iou) / (1.0 - metrics.source_shift_iou);
         println!(

@@ -223,6 +223,15 @@ pub fn headless_viewer_options(arguments: &[&str], screenshot: &Path, folder: &P
     <crate::viewer::Options as clap::Parser>::try_parse_from(words.chain(paths)).expect("viewer options")
 }
 
+/// The lines a headless viewer run on the project's `folder` prints, with `arguments` (its
+/// screenshot is the project's `shot.png`).
+pub fn headless_viewer_lines(project: &TempProject, folder: &str, arguments: &[&str]) -> Vec<String> {
+    let options = headless_viewer_options(arguments, &project.path("shot.png"), &project.path(folder));
+    let mut lines = Vec::new();
+    crate::viewer::run(&options, &mut |line| lines.push(line)).expect("the viewer runs");
+    lines
+}
+
 /// The bundled bush (`examples/assets/trees/bush_2.obj`) as cirrus loads it.
 pub fn bundled_bush() -> cirrus::mesh::Mesh {
     let obj = std::fs::read(Path::new(env!("CARGO_MANIFEST_DIR")).join("examples/assets/trees/bush_2.obj"))

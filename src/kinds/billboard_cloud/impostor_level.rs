@@ -51,6 +51,13 @@ pub struct ImpostorDescription {
     pub depth: String,
 }
 
+impl ImpostorDescription {
+    /// The frame grid it describes.
+    pub fn grid(&self) -> FrameGrid {
+        FrameGrid::new(self.frames, self.hemi)
+    }
+}
+
 /// An impostor level's `impostor` stage instance: it reads the mesh stage and every texture the
 /// materials name (their decodes, added to `decodes`) and writes the level's description and
 /// quad; the level's surfaces read it.
@@ -105,18 +112,17 @@ fn front_frame(grid: FrameGrid) -> u32 {
 }
 
 /// The quad of an impostor described by `description`: the bounding sphere's square facing +Z
-/// through its centre, showing the front frame of the atlases `images` (albedo, normal, ORM as
-/// the tail's previews name them).
-fn impostor_gltf(description: &ImpostorDescription, images: [Option<String>; 3]) -> ImpostorGltf {
-    let grid =
-        FrameGrid { frames: description.frames, sphere: if description.hemi { Sphere::Hemi } else { Sphere::Full } };
+/// through its centre, showing the front frame of the atlases `images` (albedo and normal, as the
+/// tail's previews name them).
+fn impostor_gltf(description: &ImpostorDescription, images: [Option<String>; 2]) -> ImpostorGltf {
+    let grid = description.grid();
     let frame = front_frame(grid);
     let frames = grid.frames as f32;
     let (column, row) = ((frame % grid.frames) as f32, (frame / grid.frames) as f32);
     // OBJ's convention (origin bottom left): the frame's image rows run down.
     let (u0, u1, v0, v1) = (column / frames, (column + 1.0) / frames, 1.0 - (row + 1.0) / frames, 1.0 - row / frames);
     let ([x, y, z], r) = (description.center, description.radius);
-    let [albedo, normal, _] = images;
+    let [albedo, normal] = images;
     ImpostorGltf {
         positions: vec![[x - r, y - r, z], [x + r, y - r, z], [x + r, y + r, z], [x - r, y + r, z]],
         uvs: vec![[u0, v0], [u1, v0], [u1, v1], [u0, v1]],
@@ -173,26 +179,14 @@ pub(crate) fn impostor_level_outputs(
     let (center, radius) = super::planes::bounding_sphere(&loaded.mesh.positions);
     let side = impostor.grid.frames * impostor.frame_size;
     let first_file = outputs.files.len();
-    let (mut bytes, mut gpu_bytes) = (0, 0);
-    let mut surfaces = Vec::new();
-    let mut names: [String; 3] = Default::default();
-    let mut previews: [Option<String>; 3] = Default::default();
-    for (index, surface) in super::atlas_surfaces(db, asset, level).into_iter().enumerate() {
-        let artifacts = crate::kinds::tail_queries::surface_artifacts(db, asset, surface.clone())?;
-        let [texture_path, preview_path] = surface.artifact_paths(output_folder, &settings.encode);
-        bytes += artifacts.texture_file.len();
-        gpu_bytes += crate::texture::encode::gpu_bytes(side, side, Some(settings.encode.format_of(surface.surface)));
-        names[index] = file_name(&texture_path);
-        previews[index] = Some(file_name(&preview_path));
-        outputs.add(texture_path, ArtifactRole::Texture, artifacts.texture_file.clone());
-        outputs.add(preview_path, ArtifactRole::Image, artifacts.preview_png.clone());
-        surfaces.push(artifacts.info.clone());
-    }
-    let [albedo, normal, depth] = names;
+    let written = super::write_level_surfaces(db, asset, level, output_folder, (side, side), outputs)?;
+    let (mut bytes, mut gpu_bytes) = (written.bytes, written.gpu_bytes);
+    let name = |index: usize| written.names.get(index).cloned().unwrap_or_default();
+    let [(albedo, albedo_png), (normal, normal_png), (depth, _)] = [0, 1, 2].map(name);
     let description = ImpostorDescription {
         shader: "shaders/impostor.wgsl".into(),
         frames: impostor.grid.frames,
-        hemi: impostor.grid.sphere == Sphere::Hemi,
+        hemi: impostor.grid.is_hemi(),
         frame_size: impostor.frame_size,
         center: center.to_array(),
         radius,
@@ -202,7 +196,7 @@ pub(crate) fn impostor_level_outputs(
         depth,
     };
     let json = serde_json::to_vec_pretty(&description).expect("descriptions serialise");
-    let quad = impostor_gltf(&description, previews);
+    let quad = impostor_gltf(&description, [Some(albedo_png), Some(normal_png)]);
     let gltf = crate::mesh::gltf::gltf_files(&quad.mesh(), "lod.bin", crate::mesh::gltf::GENERATOR);
     gpu_bytes += gltf.bin.len() as u64;
     bytes += json.len() + gltf.bin.len();
@@ -218,21 +212,17 @@ pub(crate) fn impostor_level_outputs(
         "folder": folder,
         "representation": "impostor",
         "frames": impostor.grid.frames,
-        "hemi": impostor.grid.sphere == Sphere::Hemi,
+        "hemi": impostor.grid.is_hemi(),
         "frame_size": impostor.frame_size,
         "triangles": 2,
         "atlas": { "width": side, "height": side },
         "error_world": error_world,
-        "surfaces": surfaces,
+        "surfaces": written.infos,
         // The bytes an engine loads: the three textures, the description and the quad's buffer.
         "bytes": bytes,
         "gpu_bytes": gpu_bytes,
     });
     Ok((report, quad, error_world))
-}
-
-fn file_name(path: &Path) -> String {
-    path.file_name().map(|name| name.to_string_lossy().into_owned()).unwrap_or_default()
 }
 
 /// Whether `folder` holds an impostor level.
@@ -254,10 +244,12 @@ pub fn read_impostor_view(root: &Path, folder: &Path) -> Result<crate::gpu::Impo
         let position = crate::diagnostic::TextPosition { line: error.line() as u32, column: error.column() as u32 };
         Diagnostic::at(&path, position, format!("not an impostor description: {error}"))
     })?;
-    let grid =
-        FrameGrid { frames: description.frames, sphere: if description.hemi { Sphere::Hemi } else { Sphere::Full } };
+    let grid = description.grid();
     if !(2..=super::settings::MAX_IMPOSTOR_FRAMES).contains(&grid.frames) {
-        return Err(Diagnostic::new(&path, format!("{} frames a side: an impostor has 2 to 32", grid.frames)));
+        return Err(Diagnostic::new(
+            &path,
+            format!("{} frames a side: an impostor has 2 to {}", grid.frames, super::settings::MAX_IMPOSTOR_FRAMES),
+        ));
     }
     let mut textures = Vec::new();
     for name in [&description.albedo, &description.normal, &description.depth] {

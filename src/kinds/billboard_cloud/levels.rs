@@ -74,12 +74,9 @@ pub(crate) fn settings_for(settings: &Settings, level: u32) -> LevelSettings {
 /// An impostor level's frames: `frames` a side, each `size / frames` texels (down to a multiple
 /// of 4, whole blocks), on the hemi- or full octahedron.
 pub(crate) fn impostor_settings(frames: u32, hemi: bool, size: u32) -> crate::impostor::ImpostorSettings {
-    use crate::mesh::octahedral::{FrameGrid, Sphere};
+    use crate::mesh::octahedral::FrameGrid;
     let frames = frames.max(2);
-    crate::impostor::ImpostorSettings {
-        grid: FrameGrid { frames, sphere: if hemi { Sphere::Hemi } else { Sphere::Full } },
-        frame_size: ((size / frames) & !3).max(4),
-    }
+    crate::impostor::ImpostorSettings { grid: FrameGrid::new(frames, hemi), frame_size: ((size / frames) & !3).max(4) }
 }
 
 /// Whether level `level` is a reduced mesh (no planes, atlas or renders).

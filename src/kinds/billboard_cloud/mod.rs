@@ -583,20 +583,11 @@ fn level_outputs(
     let mut gpu_bytes = gltf.bin.len() as u64;
     outputs.add(level_folder.join("lod.gltf"), ArtifactRole::Gltf, gltf.gltf.clone().into());
     outputs.add(level_folder.join("lod.bin"), ArtifactRole::GltfBuffer, gltf.bin.clone().into());
-    let mut surfaces = Vec::new();
-    for surface in atlas_surfaces(db, asset, level) {
-        let artifacts = crate::kinds::tail_queries::surface_artifacts(db, asset, surface.clone())?;
-        let [texture_path, preview_path] = surface.artifact_paths(output_folder, &settings.encode);
-        bytes += artifacts.texture_file.len();
-        let format = settings.encode.format_of(surface.surface);
-        gpu_bytes += crate::texture::encode::gpu_bytes(layout.layout.width, layout.layout.height, Some(format));
-        outputs.add(texture_path, ArtifactRole::Texture, artifacts.texture_file.clone());
-        outputs.add(preview_path, ArtifactRole::Image, artifacts.preview_png.clone());
-        if let Some(orm_png) = &artifacts.orm_png {
-            outputs.add(level_folder.join("orm.png"), ArtifactRole::Image, orm_png.clone());
-        }
-        surfaces.push(artifacts.info.clone());
-    }
+    let written =
+        write_level_surfaces(db, asset, level, output_folder, (layout.layout.width, layout.layout.height), outputs)?;
+    bytes += written.bytes;
+    gpu_bytes += written.gpu_bytes;
+    let surfaces = written.infos;
     if levels::is_chain(settings) {
         // The manifest and the hot-reload batches name each file's level.
         for (path, _, _) in &outputs.files[first_file..] {
@@ -634,6 +625,45 @@ fn level_outputs(
         "gpu_bytes": gpu_bytes,
     });
     Ok((report, ChainMesh::Cloud(Box::new(chain))))
+}
+
+/// What a level's surfaces wrote: the texture files' bytes, their bytes on the GPU (every mip),
+/// each surface's figures, and each one's texture and preview file names.
+struct LevelSurfaces {
+    bytes: usize,
+    gpu_bytes: u64,
+    infos: Vec<crate::texture::tail::SurfaceInfo>,
+    names: Vec<(String, String)>,
+}
+
+/// Adds a level's surfaces from the tail (textures, previews, a cloud's `orm.png`) to `outputs`;
+/// `(width, height)` is their size.
+fn write_level_surfaces(
+    db: &dyn Db,
+    asset: Asset,
+    level: u32,
+    output_folder: &Path,
+    (width, height): (u32, u32),
+    outputs: &mut AssetOutputs,
+) -> Result<LevelSurfaces, Diagnostic> {
+    let encode = &asset.settings(db).encode;
+    let mut written = LevelSurfaces { bytes: 0, gpu_bytes: 0, infos: Vec::new(), names: Vec::new() };
+    let name = |path: &Path| path.file_name().map(|name| name.to_string_lossy().into_owned()).unwrap_or_default();
+    for surface in atlas_surfaces(db, asset, level) {
+        let artifacts = crate::kinds::tail_queries::surface_artifacts(db, asset, surface.clone())?;
+        let [texture_path, preview_path] = surface.artifact_paths(output_folder, encode);
+        written.bytes += artifacts.texture_file.len();
+        written.gpu_bytes += crate::texture::encode::gpu_bytes(width, height, Some(encode.format_of(surface.surface)));
+        written.names.push((name(&texture_path), name(&preview_path)));
+        let orm_path = preview_path.with_file_name("orm.png");
+        outputs.add(texture_path, ArtifactRole::Texture, artifacts.texture_file.clone());
+        outputs.add(preview_path, ArtifactRole::Image, artifacts.preview_png.clone());
+        if let Some(orm_png) = &artifacts.orm_png {
+            outputs.add(orm_path, ArtifactRole::Image, orm_png.clone());
+        }
+        written.infos.push(artifacts.info.clone());
+    }
+    Ok(written)
 }
 
 /// `cirrus preview` of a baked asset (`input`, built by the caller): renders it and its source

@@ -608,6 +608,12 @@ pub(crate) fn atlas_recipe_key(db: &dyn Db, asset: Asset, level: u32) -> CacheKe
         .part(crate::gpu::adapter_family())
         .part(&layout_cache_key(db, asset, level).0)
         .part(&billboard_alpha_cutoff(db, asset));
+    with_mesh_textures(db, asset, key)
+}
+
+/// `key` with the contents of every texture the mesh's materials name: what the renders of the
+/// atlas and of an impostor's frames sample.
+fn with_mesh_textures(db: &dyn Db, asset: Asset, key: CacheKeyBuilder) -> CacheKey {
     let textures =
         mesh_textures(db, asset).iter().filter_map(|path| asset_file(db, asset, path.clone())).collect::<Vec<_>>();
     key_with_files(db, key, textures).finish()
@@ -804,9 +810,8 @@ pub(crate) fn impostor_frames(
 #[salsa::tracked(returns(copy))]
 pub(crate) fn impostor_recipe_key(db: &dyn Db, asset: Asset, level: u32) -> CacheKey {
     let settings = level_settings(db, asset, level).impostor;
-    let (frames, hemi, frame_size) = settings.map_or((0, false, 0), |settings| {
-        (settings.grid.frames, settings.grid.sphere == crate::mesh::octahedral::Sphere::Hemi, settings.frame_size)
-    });
+    let (frames, hemi, frame_size) =
+        settings.map_or((0, false, 0), |settings| (settings.grid.frames, settings.grid.is_hemi(), settings.frame_size));
     let key = stage_key(IMPOSTOR)
         .part(crate::gpu::adapter_family())
         .part(&mesh_cache_key(db, asset, asset.main_file(db).clone()).0)
@@ -814,7 +819,5 @@ pub(crate) fn impostor_recipe_key(db: &dyn Db, asset: Asset, level: u32) -> Cach
         .part(&hemi)
         .part(&frame_size)
         .part(&billboard_alpha_cutoff(db, asset));
-    let textures =
-        mesh_textures(db, asset).iter().filter_map(|path| asset_file(db, asset, path.clone())).collect::<Vec<_>>();
-    key_with_files(db, key, textures).finish()
+    with_mesh_textures(db, asset, key)
 }

@@ -5,7 +5,6 @@
 //! switching levels.
 
 use std::collections::BTreeSet;
-use std::path::Path;
 
 use crate::support::{build, pattern_png, TempProject};
 
@@ -242,14 +241,7 @@ fn the_preview_compares_every_level_and_lays_the_chain_side_by_side() {
 fn the_viewer_switches_levels_with_the_digit_keys() {
     let project = chain_project("[Quads(12), Quads(4)]");
     build(&mut project.open());
-    let screenshot = project.path("shot.png");
-    let options = crate::support::headless_viewer_options(
-        &["--size", "96", "--press", "1x70"],
-        &screenshot,
-        &project.path("baked/tree"),
-    );
-    let mut lines = Vec::new();
-    crate::viewer::run(&options, &mut |line| lines.push(line)).expect("the viewer runs");
+    let lines = crate::support::headless_viewer_lines(&project, "baked/tree", &["--size", "96", "--press", "1x70"]);
     assert_eq!(lines.len(), 5, "{lines:?}");
     let triangles = |level: usize| 2 * lod_quads(&project.read(&format!("baked/tree/lod{level}/lod.obj")));
     assert!(lines[0].starts_with(&format!("loaded: lod0 of 2, {} triangles", triangles(0))), "{lines:?}");
@@ -257,5 +249,5 @@ fn the_viewer_switches_levels_with_the_digit_keys() {
     assert_eq!(lines[2], "key x does nothing");
     assert_eq!(lines[3], "key 7: no level 7, the chain has lod0 to lod1");
     assert!(lines[4].starts_with(&format!("showing lod0: lod0 of 2, {} triangles", triangles(0))), "{lines:?}");
-    assert!(Path::new(&screenshot).is_file());
+    assert!(project.path("shot.png").is_file());
 }

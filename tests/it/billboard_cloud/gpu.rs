@@ -243,7 +243,7 @@ fn sixteen_samples_per_pixel_keep_the_silhouette_iou_from_measuring_aliasing() {
     let gpu = gpu().expect("a GPU adapter (install mesa-vulkan-drivers for the software one)");
     // The same cut-out moved by a quarter pixel: a LOD could hardly be closer.
     let quarter_pixel = 0.25 * 2.0 / 64.0;
-    let (source, moved) = (speckled_quad(0.0), speckled_quad(quarter_pixel));
+    let (source, moved) = (speckled_quad(0.0), cirrus::gpu::LevelView::Mesh(speckled_quad(quarter_pixel)));
     let iou = |samples_per_axis| {
         let settings = PreviewSettings { views: 1, size: 64, samples_per_axis };
         let preview = preview(gpu, &source, &moved, [0.0; 3], 1.0, settings).expect("renders");

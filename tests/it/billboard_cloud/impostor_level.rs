@@ -86,14 +86,7 @@ fn the_preview_and_the_viewer_draw_an_impostor_level_through_its_shader() {
     // (Measured: 0.632 against the four quads' 0.554 at 48 px.)
     assert!(iou > 0.6 && iou > cloud, "the impostor's silhouette follows the tree's: {iou} (four quads: {cloud})");
 
-    let screenshot = project.path("shot.png");
-    let options = crate::support::headless_viewer_options(
-        &["--size", "96", "--press", "1"],
-        &screenshot,
-        &project.path("baked/tree"),
-    );
-    let mut lines = Vec::new();
-    crate::viewer::run(&options, &mut |line| lines.push(line)).expect("the viewer runs");
+    let lines = crate::support::headless_viewer_lines(&project, "baked/tree", &["--size", "96", "--press", "1"]);
     assert!(lines[1].starts_with("showing lod1: lod1 of 2, 2 triangles"), "{lines:?}");
     let covered: f64 = lines[1].split(", ").nth(2).and_then(|part| part.split('%').next()).unwrap().parse().unwrap();
     assert!(covered > 5.0, "{lines:?}");

@@ -109,14 +109,7 @@ fn the_preview_and_the_viewer_show_a_reduced_level_with_its_own_materials() {
     });
     assert!(iou[0] > 0.6 && iou[0] > iou[1], "half the triangles look more like the tree than four quads: {iou:?}");
 
-    let screenshot = project.path("shot.png");
-    let options = crate::support::headless_viewer_options(
-        &["--size", "96", "--press", "1"],
-        &screenshot,
-        &project.path("baked/tree"),
-    );
-    let mut lines = Vec::new();
-    crate::viewer::run(&options, &mut |line| lines.push(line)).expect("the viewer runs");
+    let lines = crate::support::headless_viewer_lines(&project, "baked/tree", &["--size", "96", "--press", "1"]);
     let triangles = faces(&project.read("baked/tree/lod0/lod.obj"));
     assert!(lines[0].starts_with(&format!("loaded: lod0 of 2, {triangles} triangles")), "{lines:?}");
     assert!(lines[1].starts_with("showing lod1: lod1 of 2, "), "{lines:?}");

@@ -98,13 +98,6 @@ pub(crate) fn save_manifest(output_dir: &Path, manifest: &Manifest) -> std::io::
     write_if_changed(&manifest_path(output_dir), &bytes)
 }
 
-/// The bytes of a baked artifact (`path` relative to `root`), for commands that read what a
-/// build wrote (the preview, the viewer).
-pub(crate) fn read_artifact(root: &Path, path: &Path) -> Result<Vec<u8>, crate::diagnostic::Diagnostic> {
-    crate::files::read_regular_file(&root.join(path), crate::files::MAX_SOURCE_BYTES)
-        .map_err(|error| crate::diagnostic::Diagnostic::new(path, format!("cannot read the baked artifact: {error}")))
-}
-
 /// Records an artifact in the manifest; true when the entry is new or its bytes changed.
 pub(crate) fn record_artifact(
     manifest: &mut Manifest,

@@ -126,6 +126,39 @@ pub(crate) fn preview_chain(
     radius: f32,
     settings: PreviewSettings,
 ) -> Result<ChainPreview, GpuError> {
+    let compared = compare_views(gpu, source, lods, center, radius, settings)?;
+    let levels = compared
+        .metrics
+        .into_iter()
+        .enumerate()
+        .map(|(level, metrics)| {
+            let pairs: Vec<Vec<&[u8]>> =
+                compared.views.iter().map(|images| vec![images[0].as_slice(), images[1 + level].as_slice()]).collect();
+            Preview { metrics, contact_sheet: contact_sheet(&pairs, settings.size) }
+        })
+        .collect();
+    let groups: Vec<Vec<&[u8]>> =
+        compared.views.iter().map(|images| images.iter().map(Vec::as_slice).collect()).collect();
+    Ok(ChainPreview { levels, chain_sheet: contact_sheet(&groups, settings.size) })
+}
+
+/// Each LOD's figures against the source, and every view's images (the source's, then each
+/// LOD's).
+struct ComparedViews {
+    metrics: Vec<PreviewMetrics>,
+    views: Vec<Vec<Vec<u8>>>,
+}
+
+/// Renders `source` and each of `lods` from the first `settings.views` directions (the source
+/// once per view) and compares them.
+fn compare_views(
+    gpu: &Gpu,
+    source: &ViewMesh,
+    lods: &[&crate::gpu::LevelView],
+    center: [f32; 3],
+    radius: f32,
+    settings: PreviewSettings,
+) -> Result<ComparedViews, GpuError> {
     let light = preview_light();
     let mut metrics: Vec<Vec<ViewMetrics>> = vec![Vec::new(); lods.len()];
     // Per view: the source's image, then each LOD's.
@@ -152,18 +185,88 @@ pub(crate) fn preview_chain(
         views.push(images);
     }
     let samples_per_pixel = settings.samples_per_axis * settings.samples_per_axis;
-    let levels = metrics
-        .into_iter()
-        .enumerate()
-        .map(|(level, views_metrics)| {
-            let pairs: Vec<Vec<&[u8]>> =
-                views.iter().map(|images| vec![images[0].as_slice(), images[1 + level].as_slice()]).collect();
-            let metrics = summarise_views(views_metrics, samples_per_pixel, &shift_ious);
-            Preview { metrics, contact_sheet: contact_sheet(&pairs, settings.size) }
-        })
-        .collect();
-    let groups: Vec<Vec<&[u8]>> = views.iter().map(|images| images.iter().map(Vec::as_slice).collect()).collect();
-    Ok(ChainPreview { levels, chain_sheet: contact_sheet(&groups, settings.size) })
+    let metrics = metrics.into_iter().map(|views| summarise_views(views, samples_per_pixel, &shift_ious)).collect();
+    Ok(ComparedViews { metrics, views })
+}
+
+/// The screen sizes (bounding-sphere diameters in pixels) a LOD chain's levels are measured at,
+/// smallest first.
+pub const HOLD_SIZES: [u32; 5] = [16, 32, 64, 128, 256];
+
+/// The most a LOD may lose, in px-shift units, and still hold at a screen size.
+pub const HOLD_LOSS: f64 = 1.0;
+
+/// A LOD's figures at one screen size.
+#[derive(Clone, Debug, PartialEq, Serialize, serde::Deserialize)]
+pub struct SizeFigures {
+    pub size: u32,
+    /// `None` when a pixel costs the source nothing there (an empty view): it holds.
+    pub loss_px_shift: Option<f64>,
+    pub mean_iou: f64,
+    pub mean_psnr: f64,
+}
+
+/// How far up the screen sizes a LOD holds against its source: its figures at each size
+/// measured (smallest first, up to the first where it loses more than [`HOLD_LOSS`]), and the
+/// largest size at which it held (`None`: not even at the smallest).
+#[derive(Clone, Debug, PartialEq, Serialize, serde::Deserialize)]
+pub struct Hold {
+    pub measured: Vec<SizeFigures>,
+    pub holds_to: Option<u32>,
+}
+
+/// How far each of `lods` holds against `source` over `sizes` (smallest first): every size
+/// renders the 26 views of the source once and of each LOD that held at every smaller size.
+/// The px-shift loss grows with the size (a pixel gets smaller against the same world error),
+/// so a LOD is not measured past the first size it fails at.
+pub fn holds(
+    gpu: &Gpu,
+    source: &ViewMesh,
+    lods: &[&crate::gpu::LevelView],
+    (center, radius): ([f32; 3], f32),
+    sizes: &[u32],
+    samples_per_axis: u32,
+) -> Result<Vec<Hold>, GpuError> {
+    let mut holds: Vec<Hold> = lods.iter().map(|_| Hold { measured: Vec::new(), holds_to: None }).collect();
+    let mut failed = vec![false; lods.len()];
+    for &size in sizes {
+        let measured: Vec<usize> = (0..lods.len()).filter(|&index| !failed[index]).collect();
+        if measured.is_empty() {
+            break;
+        }
+        let settings = PreviewSettings { views: 26, size, samples_per_axis };
+        let levels: Vec<&crate::gpu::LevelView> = measured.iter().map(|&index| lods[index]).collect();
+        let compared = compare_views(gpu, source, &levels, center, radius, settings)?;
+        for (&index, metrics) in measured.iter().zip(compared.metrics) {
+            let held = metrics.loss_px_shift.is_none_or(|loss| loss <= HOLD_LOSS);
+            holds[index].measured.push(SizeFigures {
+                size,
+                loss_px_shift: metrics.loss_px_shift,
+                mean_iou: metrics.mean_iou,
+                mean_psnr: metrics.mean_psnr,
+            });
+            if held {
+                holds[index].holds_to = Some(size);
+            } else {
+                failed[index] = true;
+            }
+        }
+    }
+    Ok(holds)
+}
+
+/// A chain's switch sizes from how far each level holds: level `k` may stand in for level
+/// `k − 1` (level 0: for the source) while the object's bounding sphere is at most `switch[k]`
+/// pixels across: the largest size at which it held, and no more than the level before's (so
+/// that a level is never shown closer than a more detailed one). 0: never (it did not hold at
+/// the smallest size measured).
+pub fn switch_sizes(holds: &[Hold]) -> Vec<u32> {
+    let mut sizes: Vec<u32> = Vec::with_capacity(holds.len());
+    for hold in holds {
+        let before = sizes.last().copied().unwrap_or(u32::MAX);
+        sizes.push(hold.holds_to.unwrap_or(0).min(before));
+    }
+    sizes
 }
 
 /// The mean and worst of one LOD's per-view figures.

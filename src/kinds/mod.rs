@@ -157,20 +157,17 @@ pub enum PreviewError {
     Write(std::io::Error),
 }
 
-/// The OBJ at `obj` (project-relative) with the MTL files and maps it names, read from under
-/// `root` as an engine reads them (each map decoded once), its cut-out materials alpha-tested at
+/// The OBJ at `obj` with the MTL files and maps it names, read from `files` as an engine reads
+/// them (each map decoded once), its cut-out materials alpha-tested at
 /// `alpha_cutoff`; paths must stay inside `source_root`. An atlas's remapped meshes and their
 /// sources, a billboard chain's reduced levels.
 pub(crate) fn mesh_view_from_files(
-    root: &Path,
+    files: &BakedFiles,
     obj: &Path,
     (source_root, limits): (&Path, crate::texture::TextureLimits),
     alpha_cutoff: f32,
 ) -> Result<crate::gpu::ViewMesh, Diagnostic> {
-    let read = |path: &Path| {
-        crate::files::read_regular_file(&root.join(path), crate::files::MAX_SOURCE_BYTES)
-            .map_err(|error| Diagnostic::new(path, format!("cannot read: {error}")))
-    };
+    let read = |path: &Path| files.read(path);
     let bytes = read(obj)?;
     let libraries: std::collections::BTreeMap<PathBuf, Option<Vec<u8>>> =
         crate::mesh::material_libraries(obj, &bytes, source_root)
@@ -595,6 +592,37 @@ impl AssetOutputs {
     /// Adds a file the asset writes, and what it is.
     pub(crate) fn add(&mut self, path: PathBuf, role: crate::summary::ArtifactRole, bytes: Arc<[u8]>) {
         self.files.push((path, role, bytes));
+    }
+}
+
+/// Where baked files are read from: the project on disk (paths relative to its root), or a
+/// build's outputs before they are written (paths as the kind added them).
+pub(crate) enum BakedFiles<'a> {
+    Disk(&'a Path),
+    Outputs(&'a AssetOutputs),
+}
+
+impl BakedFiles<'_> {
+    /// The bytes of `path`.
+    pub(crate) fn read(&self, path: &Path) -> Result<Vec<u8>, Diagnostic> {
+        match self {
+            BakedFiles::Disk(root) => crate::files::read_regular_file(&root.join(path), crate::files::MAX_SOURCE_BYTES)
+                .map_err(|error| Diagnostic::new(path, format!("cannot read: {error}"))),
+            BakedFiles::Outputs(outputs) => outputs
+                .files
+                .iter()
+                .find(|(written, _, _)| written == path)
+                .map(|(_, _, bytes)| bytes.to_vec())
+                .ok_or_else(|| Diagnostic::new(path, "the build writes no such file")),
+        }
+    }
+
+    /// Whether `path` is a file there.
+    pub(crate) fn exists(&self, path: &Path) -> bool {
+        match self {
+            BakedFiles::Disk(root) => root.join(path).is_file(),
+            BakedFiles::Outputs(outputs) => outputs.files.iter().any(|(written, _, _)| written == path),
+        }
     }
 }
 

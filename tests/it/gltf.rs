@@ -280,7 +280,8 @@ fn every_gltf_of_the_bundled_project_passes_the_khronos_validator_and_the_output
     assert_eq!(coverage, &report["screen_coverage"]);
     let coverage: Vec<f64> = coverage.as_array().unwrap().iter().map(|value| value.as_f64().unwrap()).collect();
     assert_eq!(coverage.len(), 5);
-    assert!(coverage.windows(2).all(|pair| pair[0] > pair[1]) && coverage[4] == 0.0, "{coverage:?}");
+    assert!(coverage.windows(2).all(|pair| pair[0] >= pair[1]) && coverage[4] == 0.0, "{coverage:?}");
+    assert!(coverage[0] > coverage[3], "{coverage:?}");
     // The impostor's quad carries its description, as impostor.json has it.
     let impostor: serde_json::Value =
         serde_json::from_slice(&project.read("baked/bush_lods/lod4/impostor.json")).unwrap();
@@ -385,24 +386,25 @@ fn a_billboard_lod_s_gltf_draws_the_obj_s_quads_with_gltf_s_uv_origin_an_alpha_t
 }
 
 #[test]
-fn a_chain_gives_way_to_its_next_level_where_that_level_s_error_is_one_pixel() {
+fn a_chain_gives_way_to_its_next_level_at_that_level_s_switch_size() {
     use cirrus::kinds::billboard_cloud::lod_mesh::{screen_coverage, COVERAGE_VIEWPORT};
     let (width, height) = COVERAGE_VIEWPORT;
-    let (diameter, errors) = (40.0f32, [0.1f32, 0.5, 1.0]);
-    let coverage = screen_coverage(&errors, diameter);
+    let switch_sizes = [256u32, 128, 64];
+    let coverage = screen_coverage(&switch_sizes);
     assert_eq!(coverage.len(), 3);
     assert_eq!(coverage[2], 0.0, "the last level is shown down to nothing");
     for level in 0..2 {
-        // The object's height in pixels at that coverage (its disc's area share), and the next
-        // level's error there.
-        let share = (coverage[level] * width / height / std::f32::consts::FRAC_PI_4).sqrt();
-        let pixels_per_unit = share * height / diameter;
-        assert!((errors[level + 1] * pixels_per_unit - 1.0).abs() < 1e-4, "level {level}: {coverage:?}");
+        // The diameter in pixels of the disc whose area share is that coverage: the next
+        // level's switch size.
+        let pixels = (coverage[level] * width * height / std::f32::consts::FRAC_PI_4).sqrt();
+        assert!((pixels - switch_sizes[level + 1] as f32).abs() < 1e-3, "level {level}: {coverage:?}");
     }
-    // A next level without error takes over at once (coverage 1, the most there is); a coarser
-    // level never asks for more coverage than the one before it.
-    assert_eq!(screen_coverage(&[0.5, 0.0], diameter), [1.0, 0.0]);
-    assert_eq!(screen_coverage(&[0.1, 1.0, 0.5], diameter)[1], screen_coverage(&[0.1, 1.0, 0.5], diameter)[0]);
+    // 128 px on 1920 × 1080: π/4 · 128² / 2073600.
+    assert!((coverage[0] - 0.0062056).abs() < 1e-6, "{coverage:?}");
+    // A next level that holds at any size takes over at once (coverage 1, the most there is); a
+    // level that never holds (0) is never shown, and neither is anything after it.
+    assert_eq!(screen_coverage(&[256, 100_000]), [1.0, 0.0]);
+    assert_eq!(screen_coverage(&[256, 0, 64]), [0.0, 0.0, 0.0]);
 }
 
 #[test]

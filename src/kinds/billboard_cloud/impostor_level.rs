@@ -17,7 +17,7 @@ use crate::diagnostic::Diagnostic;
 use crate::kinds::mesh_queries::mesh_textures;
 use crate::kinds::{AssetOutputs, StageInstance};
 use crate::mesh::gltf::{GltfAlpha, GltfMaterial, GltfMesh, GltfWrap};
-use crate::mesh::octahedral::{FrameGrid, Sphere};
+use crate::mesh::octahedral::FrameGrid;
 use crate::summary::ArtifactRole;
 use crate::texture::{SurfaceKind, Texture};
 
@@ -148,18 +148,6 @@ fn impostor_gltf(description: &ImpostorDescription, images: [Option<String>; 2])
     }
 }
 
-/// The world distance an impostor's view can be off the frames it blends: a point on the
-/// sphere's rim seen from halfway between neighbouring frames (the grid's side spans 180° of
-/// view on the hemi-octahedron, and its half-diagonal 180° on the full one), plus a texel.
-pub(crate) fn impostor_error_world(settings: crate::impostor::ImpostorSettings, radius: f32) -> f32 {
-    let steps = (settings.grid.frames - 1).max(1) as f32;
-    let step = match settings.grid.sphere {
-        Sphere::Hemi => std::f32::consts::PI / steps,
-        Sphere::Full => std::f32::consts::PI / steps * std::f32::consts::SQRT_2,
-    };
-    radius * (0.5 * step).sin() + 2.0 * radius / settings.frame_size as f32
-}
-
 /// An impostor level's files (added to `outputs`), its part of the report, and its quad for the
 /// chain's document.
 pub(crate) fn impostor_level_outputs(
@@ -168,7 +156,7 @@ pub(crate) fn impostor_level_outputs(
     level: u32,
     output_folder: &Path,
     outputs: &mut AssetOutputs,
-) -> Result<(serde_json::Value, ImpostorGltf, f32), Diagnostic> {
+) -> Result<(serde_json::Value, ImpostorGltf), Diagnostic> {
     let settings = asset.settings(db);
     let folder = levels::level_folder(settings, level);
     let level_folder = output_folder.join(&folder);
@@ -206,7 +194,6 @@ pub(crate) fn impostor_level_outputs(
     for (path, _, _) in &outputs.files[first_file..] {
         outputs.meanings.insert(path.clone(), serde_json::json!({ "lod": level }));
     }
-    let error_world = impostor_error_world(impostor, radius);
     let report = serde_json::json!({
         "level": level,
         "folder": folder,
@@ -216,27 +203,24 @@ pub(crate) fn impostor_level_outputs(
         "frame_size": impostor.frame_size,
         "triangles": 2,
         "atlas": { "width": side, "height": side },
-        "error_world": error_world,
         "surfaces": written.infos,
         // The bytes an engine loads: the three textures, the description and the quad's buffer.
         "bytes": bytes,
         "gpu_bytes": gpu_bytes,
     });
-    Ok((report, quad, error_world))
+    Ok((report, quad))
 }
 
-/// Whether `folder` holds an impostor level.
-pub fn is_impostor_folder(root: &Path, folder: &Path) -> bool {
-    root.join(folder).join("impostor.json").is_file()
-}
-
-/// The impostor level baked into `folder` (relative to `root`) as an engine draws it: its
-/// description and the decoded levels of its three KTX2 textures (BC-decoded, so that renders
-/// show the compression).
-pub fn read_impostor_view(root: &Path, folder: &Path) -> Result<crate::gpu::ImpostorDraw, Diagnostic> {
+/// The impostor level baked into `folder` of `files` as an engine draws it: its description and
+/// the decoded levels of its three KTX2 textures (BC-decoded, so that renders show the
+/// compression).
+pub(crate) fn read_impostor_view(
+    files: &crate::kinds::BakedFiles,
+    folder: &Path,
+) -> Result<crate::gpu::ImpostorDraw, Diagnostic> {
     let read = |file: &str| -> Result<(PathBuf, Vec<u8>), Diagnostic> {
         let path = folder.join(file);
-        let bytes = crate::artifacts::read_artifact(root, &path)?;
+        let bytes = files.read(&path)?;
         Ok((path, bytes))
     };
     let (path, json) = read("impostor.json")?;

@@ -128,20 +128,15 @@ pub const COVERAGE_VIEWPORT: (f32, f32) = (1920.0, 1080.0);
 
 /// A chain's `MSFT_screencoverage`: for each level, the least screen coverage at which it is
 /// shown, as Babylon.js reads it (the share of the viewport's area the object covers, here its
-/// bounding sphere's disc on a [`COVERAGE_VIEWPORT`]). Level `i` gives way where level `i + 1`'s
-/// measured error (`errors_world`, world units: the mean distance of its faces from their
-/// planes) projects to one pixel; the last level is shown down to nothing (0). Non-increasing,
-/// at most 1.
-pub fn screen_coverage(errors_world: &[f32], diameter_world: f32) -> Vec<f32> {
+/// bounding sphere's disc on a [`COVERAGE_VIEWPORT`]). Level `i` gives way where the object is
+/// `switch_sizes[i + 1]` pixels across (the measured switch sizes, `preview::switch_sizes`); the
+/// last level is shown down to nothing (0). Non-increasing, at most 1.
+pub fn screen_coverage(switch_sizes: &[u32]) -> Vec<f32> {
     let (width, height) = COVERAGE_VIEWPORT;
-    let mut coverage: Vec<f32> = errors_world
+    let mut coverage: Vec<f32> = switch_sizes
         .iter()
         .skip(1)
-        .map(|&error| {
-            // The share of the viewport's height at which `error` is one pixel.
-            let share = if error > 0.0 { diameter_world / (error * height) } else { f32::INFINITY };
-            (std::f32::consts::FRAC_PI_4 * share * share * height / width).min(1.0)
-        })
+        .map(|&pixels| (std::f32::consts::FRAC_PI_4 * pixels as f32 * pixels as f32 / (width * height)).min(1.0))
         .collect();
     coverage.push(0.0);
     for index in 1..coverage.len() {

@@ -38,8 +38,8 @@ use crate::diagnostic::{display_path, Diagnostic};
 use crate::kinds::billboard_cloud::settings::Settings as Own;
 use crate::kinds::mesh_queries::{loaded_mesh, mesh_textures, LoadedMesh};
 use crate::kinds::{
-    check_texture_file, tail_instances, AssetOutputs, Job, Kind, PreviewError, PreviewOptions, PreviewReport,
-    PreviewRow, Read, StageInstance, SurfaceId, Task,
+    check_texture_file, tail_instances, AssetOutputs, BakedFiles, Job, Kind, PreviewError, PreviewOptions,
+    PreviewReport, PreviewRow, Read, StageInstance, SurfaceId, Task,
 };
 use crate::mesh::gltf::{gltf_chain, GltfLevel};
 use crate::summary::ErrorSummary;
@@ -92,11 +92,24 @@ fn material_texture_slots(loaded: &LoadedMesh) -> Vec<(usize, TextureSlot)> {
 /// source texture's upload to the GPU, the render memo's load, one render batch, the LOD mesh.
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub(crate) enum Step {
-    Layout { level: u32 },
-    Upload { texture: u32 },
-    RenderMemo { level: u32 },
-    Render { level: u32, batch: u32 },
-    Lod { level: u32 },
+    Layout {
+        level: u32,
+    },
+    Upload {
+        texture: u32,
+    },
+    RenderMemo {
+        level: u32,
+    },
+    Render {
+        level: u32,
+        batch: u32,
+    },
+    Lod {
+        level: u32,
+    },
+    /// A chain's levels measured against the source (its switch sizes).
+    Switch,
 }
 
 impl crate::kinds::KindStep for Step {
@@ -107,6 +120,7 @@ impl crate::kinds::KindStep for Step {
             Step::RenderMemo { .. } => "render-memo",
             Step::Render { .. } => "render",
             Step::Lod { .. } => "lod",
+            Step::Switch => "switch",
         }
     }
 }
@@ -154,56 +168,13 @@ impl Kind for BillboardCloud {
     fn run_step(db: &dyn Db, asset: Asset, step: &Step) -> Result<Vec<Job>, Diagnostic> {
         let name = asset.name(db);
         match *step {
-            Step::Layout { level } if levels::is_reduced(asset.settings(db), level) => {
-                queries::reduced_level(db, asset, level).map(|_| Vec::new())
-            }
-            // An impostor's surfaces ask for its frames when the cache does not hold them.
-            Step::Layout { level } if levels::is_impostor(asset.settings(db), level) => {
-                Ok(atlas_surfaces(db, asset, level)
-                    .into_iter()
-                    .map(|surface| Job { asset, label: surface.label(name), task: Task::Surface(surface), after: 1 })
-                    .collect())
-            }
             Step::Layout { level } => {
-                let label = level_label(db, asset, level);
-                billboard_layout(db, asset, level)?;
-                let lod = Job { asset, task: Task::step(Step::Lod { level }), after: 1, label: format!("{label}/lod") };
-                let surfaces = atlas_surfaces(db, asset, level);
-                let surface_jobs = surfaces.iter().map(|surface| Job {
-                    asset,
-                    label: surface.label(name),
-                    task: Task::Surface(surface.clone()),
-                    after: 2,
-                });
-                // Renders are needed only for surfaces the persistent cache does not hold.
-                if !level_renders(db, asset, level) {
-                    return Ok([lod].into_iter().chain(surface_jobs).collect());
+                let mut jobs = level_jobs(db, asset, level)?;
+                if level == 0 && levels::is_chain(asset.settings(db)) {
+                    // The chain is measured once every level's surfaces are (wave 2).
+                    let label = format!("{name}/switch");
+                    jobs.push(Job { asset, task: Task::step(Step::Switch), after: 3, label });
                 }
-                // Renders are likely (unless every group is in the render memo): the slow loads
-                // (the render memo, the surfaces' last encodings; the textures went with the
-                // planes) run as jobs of their own before the renders, on every worker, instead
-                // of one after the other inside the first render.
-                let mut jobs = vec![Job {
-                    asset,
-                    task: Task::step(Step::RenderMemo { level }),
-                    after: 1,
-                    label: format!("{label}/render-memo"),
-                }];
-                jobs.extend(surfaces.iter().map(|surface| Job {
-                    asset,
-                    task: Task::LoadPreviousEncoding(surface.clone()),
-                    after: 1,
-                    label: surface.label(name),
-                }));
-                jobs.push(lod);
-                let batches = 0..queries::level_render_batches(db, asset, level).len() as u32;
-                jobs.extend(batches.map(|batch| Job {
-                    asset,
-                    task: Task::step(Step::Render { level, batch }),
-                    after: 1,
-                    label: format!("{label}/render{batch}"),
-                }));
-                jobs.extend(surface_jobs);
                 Ok(jobs)
             }
             Step::RenderMemo { level } => {
@@ -231,6 +202,11 @@ impl Kind for BillboardCloud {
                 Ok(Vec::new())
             }
             Step::Lod { level } => lod_files(db, asset, level).map(|_| Vec::new()),
+            Step::Switch => {
+                // A level's errors are its own jobs' to report (the outputs need every level).
+                let _ = queries::chain_holds(db, asset);
+                Ok(Vec::new())
+            }
         }
     }
 
@@ -243,18 +219,17 @@ impl Kind for BillboardCloud {
         mesh.writes.push(report.clone());
         let mut instances = vec![mesh.clone()];
         let mut decodes = BTreeMap::new();
+        // A chain's levels measured against the source: it reads the mesh and every level's
+        // files, and writes the chain's documents.
+        let mut switch = StageInstance::new(queries::SWITCH, asset.name(db), "lods").reads_stage(&mesh);
         for level in 0..levels::level_count(asset.settings(db)) {
             let folder = levels::level_folder(asset.settings(db), level);
             let label = level_label(db, asset, level);
             let instance = if folder.is_empty() { mesh_label.clone() } else { folder.clone() };
-            let chain_end =
-                levels::is_chain(asset.settings(db)) && level + 1 == levels::level_count(asset.settings(db));
             if levels::is_reduced(asset.settings(db), level) {
                 let mut reduce = reduced::reduce_instance(db, asset, level, output_folder, &mesh);
                 reduce.writes.push(report.clone());
-                if chain_end {
-                    reduce.writes.push(output_folder.join("lods.gltf"));
-                }
+                switch = switch.reads_stage(&reduce);
                 instances.push(reduce);
                 continue;
             }
@@ -262,10 +237,8 @@ impl Kind for BillboardCloud {
                 let mut impostor =
                     impostor_level::impostor_instance(db, asset, level, (output_folder, &mesh), &mut decodes);
                 impostor.writes.push(report.clone());
-                if chain_end {
-                    impostor.writes.push(output_folder.join("lods.gltf"));
-                }
                 let tails = level_tail_instances(db, asset, level, (output_folder, &report), &impostor);
+                switch = reads_level_end(switch, &tails);
                 instances.push(impostor);
                 instances.extend(tails);
                 continue;
@@ -276,10 +249,6 @@ impl Kind for BillboardCloud {
             let mut lod = StageInstance::new(LOD, label, &instance).reads_stage(&layout);
             let level_folder = output_folder.join(&folder);
             lod.writes = ["lod.obj", "lod.mtl", "lod.gltf", "lod.bin"].map(|file| level_folder.join(file)).to_vec();
-            if chain_end {
-                // The chain's document, made once every level's layout is.
-                lod.writes.push(output_folder.join("lods.gltf"));
-            }
             instances.extend([planes.clone(), layout.clone()]);
             let renders = level_render_instances(db, asset, level, [&mesh, &planes, &layout], &mut decodes);
             for render in &renders {
@@ -287,10 +256,15 @@ impl Kind for BillboardCloud {
             }
             instances.extend(renders);
             let tails = level_tail_instances(db, asset, level, (output_folder, &report), &atlas);
+            switch = reads_level_end(switch.reads_stage(&lod), &tails);
             atlas.writes.push(report.clone());
             instances.push(atlas);
             instances.extend(tails);
             instances.push(lod);
+        }
+        if levels::is_chain(asset.settings(db)) {
+            switch.writes = vec![output_folder.join("lods.gltf"), output_folder.join("lods.json"), report];
+            instances.push(switch);
         }
         instances.extend(decodes.into_values());
         for instance in &mut instances {
@@ -394,6 +368,67 @@ impl Kind for BillboardCloud {
     }
 }
 
+/// The jobs after a level's first step: a reduced level is done; an impostor's surfaces (which
+/// ask for its frames when the cache does not hold them); a cloud's LOD, render loads, renders
+/// and surfaces once its layout is known.
+fn level_jobs(db: &dyn Db, asset: Asset, level: u32) -> Result<Vec<Job>, Diagnostic> {
+    let name = asset.name(db);
+    if levels::is_reduced(asset.settings(db), level) {
+        return queries::reduced_level(db, asset, level).map(|_| Vec::new());
+    }
+    if levels::is_impostor(asset.settings(db), level) {
+        return Ok(atlas_surfaces(db, asset, level)
+            .into_iter()
+            .map(|surface| Job { asset, label: surface.label(name), task: Task::Surface(surface), after: 1 })
+            .collect());
+    }
+    let label = level_label(db, asset, level);
+    billboard_layout(db, asset, level)?;
+    let lod = Job { asset, task: Task::step(Step::Lod { level }), after: 1, label: format!("{label}/lod") };
+    let surfaces = atlas_surfaces(db, asset, level);
+    let surface_jobs = surfaces.iter().map(|surface| Job {
+        asset,
+        label: surface.label(name),
+        task: Task::Surface(surface.clone()),
+        after: 2,
+    });
+    // Renders are needed only for surfaces the persistent cache does not hold.
+    if !level_renders(db, asset, level) {
+        return Ok([lod].into_iter().chain(surface_jobs).collect());
+    }
+    // Renders are likely (unless every group is in the render memo): the slow loads
+    // (the render memo, the surfaces' last encodings; the textures went with the
+    // planes) run as jobs of their own before the renders, on every worker, instead
+    // of one after the other inside the first render.
+    let mut jobs = vec![Job {
+        asset,
+        task: Task::step(Step::RenderMemo { level }),
+        after: 1,
+        label: format!("{label}/render-memo"),
+    }];
+    jobs.extend(surfaces.iter().map(|surface| Job {
+        asset,
+        task: Task::LoadPreviousEncoding(surface.clone()),
+        after: 1,
+        label: surface.label(name),
+    }));
+    jobs.push(lod);
+    let batches = 0..queries::level_render_batches(db, asset, level).len() as u32;
+    jobs.extend(batches.map(|batch| Job {
+        asset,
+        task: Task::step(Step::Render { level, batch }),
+        after: 1,
+        label: format!("{label}/render{batch}"),
+    }));
+    jobs.extend(surface_jobs);
+    Ok(jobs)
+}
+
+/// `switch` reads the last stage of each surface's tail in `tails` (`level_tail_instances`).
+fn reads_level_end(switch: StageInstance, tails: &[StageInstance]) -> StageInstance {
+    tails.iter().skip(2).step_by(3).fold(switch, |switch, write| switch.reads_stage(write))
+}
+
 /// The tail's stage instances of a level's surfaces, read from `image` (the atlas, the impostor's
 /// frames); each write also writes the report.
 fn level_tail_instances(
@@ -458,7 +493,7 @@ fn read_decode(stage: &mut StageInstance, path: &Path, decodes: &mut BTreeMap<St
 }
 
 /// The files of a baked billboard cloud: each level's LOD mesh, textures and previews, and the
-/// report.
+/// report; a chain's `lods.gltf` and `lods.json` with the switch sizes measured on them.
 fn billboard_outputs(
     db: &dyn Db,
     asset: Asset,
@@ -469,26 +504,8 @@ fn billboard_outputs(
     let settings = asset.settings(db);
     let name = asset.name(db);
     let mut outputs = AssetOutputs::default();
-    let mut level_reports = Vec::new();
-    let mut chain = Vec::new();
     let mut warnings = Vec::new();
-    for level in 0..levels::level_count(settings) {
-        let (report, mesh, error_world) = if levels::is_reduced(settings, level) {
-            let (report, mesh) =
-                reduced::reduced_level_outputs(db, asset, level, output_folder, (&mut outputs, &mut warnings))?;
-            let error_world = mesh.level.figures.error_world;
-            (report, ChainMesh::Reduced(mesh), error_world)
-        } else if levels::is_impostor(settings, level) {
-            let (report, quad, error_world) =
-                impostor_level::impostor_level_outputs(db, asset, level, output_folder, &mut outputs)?;
-            (report, ChainMesh::Impostor(quad), error_world)
-        } else {
-            let (report, mesh) = level_outputs(db, asset, level, output_folder, &mut outputs)?;
-            (report, mesh, billboard_planes(db, asset, level)?.mean_error)
-        };
-        chain.push(ChainLevel { folder: levels::level_folder(settings, level), mesh, error_world });
-        level_reports.push(report);
-    }
+    let (mut level_reports, chain) = level_files(db, asset, output_folder, (&mut outputs, &mut warnings))?;
     let mut report = serde_json::json!({
         "asset": name,
         "kind": crate::config::AssetKind::BillboardCloud.name(),
@@ -498,14 +515,23 @@ fn billboard_outputs(
     });
     let fields = report.as_object_mut().expect("an object");
     if levels::is_chain(settings) {
-        let diameter = 2.0 * planes::bounding_sphere_radius(&loaded.mesh.positions);
-        let (document, coverage) = chain_document(&chain, diameter);
+        let holds = queries::chain_holds(db, asset)?;
+        let switch_sizes = crate::preview::switch_sizes(&holds);
+        let (document, coverage) = chain_document(&chain, &switch_sizes);
         outputs.add(output_folder.join("lods.gltf"), ArtifactRole::Gltf, document.into());
+        for ((report, hold), &switch_size) in level_reports.iter_mut().zip(holds.iter()).zip(&switch_sizes) {
+            if let serde_json::Value::Object(report) = report {
+                report.insert("switch_size".into(), serde_json::json!(switch_size));
+                report.insert("holds_to".into(), serde_json::json!(hold.holds_to));
+                report.insert("measured".into(), serde_json::json!(hold.measured));
+            }
+        }
+        let sphere = planes::bounding_sphere(&loaded.mesh.positions);
+        let lods_json = lods_document(name, sphere, &level_reports);
+        outputs.add(output_folder.join("lods.json"), ArtifactRole::Table, lods_json.into());
         // The least share of a 1920 × 1080 viewport's area at which each level is shown (see
         // `lod_mesh::screen_coverage`), as `lods.gltf` states it.
         fields.insert("screen_coverage".into(), serde_json::json!(coverage));
-    }
-    if levels::is_chain(settings) {
         fields.insert("levels".into(), serde_json::Value::Array(level_reports));
     } else if let Some(serde_json::Value::Object(level)) = level_reports.pop() {
         // One level: its figures are the asset's.
@@ -521,13 +547,100 @@ fn billboard_outputs(
     Ok(outputs)
 }
 
-/// One level as the chain's document draws it, and the error its switch coverage follows (world
-/// units: a cloud's mean plane error, a reduced mesh's largest deviation, an impostor's
-/// `impostor_error_world`).
+/// Every level's files (added to `outputs` under `output_folder`, material warnings to
+/// `warnings`), each level's part of the report, and each one's mesh for the chain's document.
+fn level_files(
+    db: &dyn Db,
+    asset: Asset,
+    output_folder: &Path,
+    (outputs, warnings): (&mut AssetOutputs, &mut Vec<Diagnostic>),
+) -> Result<(Vec<serde_json::Value>, Vec<ChainLevel>), Diagnostic> {
+    let settings = asset.settings(db);
+    let mut reports = Vec::new();
+    let mut chain = Vec::new();
+    for level in 0..levels::level_count(settings) {
+        let (report, mesh) = if levels::is_reduced(settings, level) {
+            let (report, mesh) = reduced::reduced_level_outputs(db, asset, level, output_folder, (outputs, warnings))?;
+            (report, ChainMesh::Reduced(mesh))
+        } else if levels::is_impostor(settings, level) {
+            let (report, quad) = impostor_level::impostor_level_outputs(db, asset, level, output_folder, outputs)?;
+            (report, ChainMesh::Impostor(quad))
+        } else {
+            level_outputs(db, asset, level, output_folder, outputs)?
+        };
+        chain.push(ChainLevel { folder: levels::level_folder(settings, level), mesh });
+        reports.push(report);
+    }
+    Ok((reports, chain))
+}
+
+/// How far each of a chain's levels `measured` holds against its source (stage `switch`): the levels as an
+/// engine draws them, read from the build's `files` (`level_files` under an empty folder), over
+/// the 26 views at each of `preview::HOLD_SIZES`.
+pub(crate) fn measure_chain(
+    db: &dyn Db,
+    asset: Asset,
+    files: &AssetOutputs,
+    measured: &[u32],
+) -> Result<Vec<crate::preview::Hold>, Diagnostic> {
+    let settings = asset.settings(db);
+    let cutoff = settings.own::<Own>().billboard.alpha_cutoff;
+    let loaded = loaded_mesh(db, asset)?;
+    let source = source_view_mesh(db, asset, &loaded)?;
+    let view = |level: u32| {
+        let folder = levels::level_folder(settings, level);
+        level_view(&BakedFiles::Outputs(files), Path::new(&folder), cutoff)
+    };
+    let views = measured.iter().map(|&level| view(level)).collect::<Result<Vec<_>, _>>()?;
+    let (center, radius) = planes::bounding_sphere(&loaded.mesh.positions);
+    let main_file = asset.main_file(db);
+    let gpu = crate::gpu::gpu().map_err(|error| Diagnostic::new(main_file, error.to_string()))?;
+    let views: Vec<&crate::gpu::LevelView> = views.iter().collect();
+    let sizes = crate::preview::HOLD_SIZES;
+    crate::preview::holds(gpu, &source, &views, (center.to_array(), radius), &sizes, SWITCH_SAMPLES_PER_AXIS)
+        .map_err(|error| Diagnostic::new(main_file, format!("measuring the chain: {error}")))
+}
+
+/// Samples per pixel along each axis when a chain's levels are measured (16 a pixel).
+const SWITCH_SAMPLES_PER_AXIS: u32 = 4;
+
+/// A chain's `lods.json` for engines: the bounding sphere whose diameter on screen picks a level,
+/// and each level's folder, glTF, representation, bytes and switch size (from `reports`, the
+/// levels' parts of the report with their switch sizes).
+fn lods_document(asset: &str, (center, radius): (glam::Vec3, f32), reports: &[serde_json::Value]) -> Vec<u8> {
+    let levels: Vec<serde_json::Value> = reports
+        .iter()
+        .map(|report| {
+            let folder = report["folder"].as_str().unwrap_or_default();
+            serde_json::json!({
+                "level": report["level"],
+                "gltf": format!("{folder}/lod.gltf"),
+                "representation": report["representation"],
+                "triangles": report["triangles"],
+                "gpu_bytes": report["gpu_bytes"],
+                "switch_size": report["switch_size"],
+            })
+        })
+        .collect();
+    let document = serde_json::json!({
+        "asset": asset,
+        "center": center.to_array(),
+        "radius": radius,
+        // Show level k while the sphere's diameter on screen, in pixels, is at most its
+        // switch_size and more than level k + 1's; above level 0's, the source. A level that
+        // never holds within one px-shift unit has 0.
+        "switch_size_unit": "pixels across the bounding sphere on screen",
+        "levels": levels,
+    });
+    let mut bytes = serde_json::to_vec_pretty(&document).expect("documents serialise");
+    bytes.push(b'\n');
+    bytes
+}
+
+/// One level as the chain's document draws it.
 struct ChainLevel {
     folder: String,
     mesh: ChainMesh,
-    error_world: f32,
 }
 
 enum ChainMesh {
@@ -537,9 +650,8 @@ enum ChainMesh {
 }
 
 /// A chain's `lods.gltf` (`MSFT_lod`, every level's `lod.bin` and images under its folder, the
-/// switch coverages from each level's error, `diameter` the bounding sphere's) and those
-/// coverages.
-fn chain_document(levels: &[ChainLevel], diameter: f32) -> (Vec<u8>, Vec<f32>) {
+/// switch coverages from the measured `switch_sizes`) and those coverages.
+fn chain_document(levels: &[ChainLevel], switch_sizes: &[u32]) -> (Vec<u8>, Vec<f32>) {
     let gltf_levels: Vec<GltfLevel> = levels
         .iter()
         .map(|level| GltfLevel {
@@ -551,8 +663,7 @@ fn chain_document(levels: &[ChainLevel], diameter: f32) -> (Vec<u8>, Vec<f32>) {
             folder: &level.folder,
         })
         .collect();
-    let errors: Vec<f32> = levels.iter().map(|level| level.error_world).collect();
-    let coverage = lod_mesh::screen_coverage(&errors, diameter);
+    let coverage = lod_mesh::screen_coverage(switch_sizes);
     (gltf_chain(&gltf_levels, "lod.bin", &coverage, crate::mesh::gltf::GENERATOR), coverage)
 }
 
@@ -730,26 +841,39 @@ pub fn preview_levels(
 /// `impostor.json` (`impostor_level::read_impostor_view`), else the level's mesh
 /// (`read_lod_view_mesh`).
 pub fn read_level_view(root: &Path, folder: &Path, alpha_cutoff: f32) -> Result<crate::gpu::LevelView, Diagnostic> {
-    if impostor_level::is_impostor_folder(root, folder) {
-        return impostor_level::read_impostor_view(root, folder).map(crate::gpu::LevelView::Impostor);
-    }
-    read_lod_view_mesh(root, folder, alpha_cutoff).map(crate::gpu::LevelView::Mesh)
+    level_view(&BakedFiles::Disk(root), folder, alpha_cutoff)
 }
 
-/// The baked LOD mesh in `folder` (relative to `root`) as an engine loads it: a billboard
-/// cloud's `lod.obj` with the decoded levels of `albedo.ktx2` and `normal.ktx2`, alpha-tested at
+/// The LOD in `folder` of `files` as an engine draws it (see [`read_level_view`]).
+pub(crate) fn level_view(
+    files: &BakedFiles,
+    folder: &Path,
+    alpha_cutoff: f32,
+) -> Result<crate::gpu::LevelView, Diagnostic> {
+    if files.exists(&folder.join("impostor.json")) {
+        return impostor_level::read_impostor_view(files, folder).map(crate::gpu::LevelView::Impostor);
+    }
+    read_lod_view_mesh(files, folder, alpha_cutoff).map(crate::gpu::LevelView::Mesh)
+}
+
+/// The baked LOD mesh in `folder` of `files` as an engine loads it: a billboard cloud's
+/// `lod.obj` with the decoded levels of `albedo.ktx2` and `normal.ktx2`, alpha-tested at
 /// `alpha_cutoff`; a reduced level's `lod.obj` with its `lod.mtl` and the maps that names (in
 /// its `maps/`), its cut-out materials alpha-tested at `alpha_cutoff`.
-pub fn read_lod_view_mesh(root: &Path, folder: &Path, alpha_cutoff: f32) -> Result<crate::gpu::ViewMesh, Diagnostic> {
+fn read_lod_view_mesh(
+    files: &BakedFiles,
+    folder: &Path,
+    alpha_cutoff: f32,
+) -> Result<crate::gpu::ViewMesh, Diagnostic> {
     let read = |file: &str| -> Result<(PathBuf, Vec<u8>), Diagnostic> {
         let path = folder.join(file);
-        let bytes = crate::artifacts::read_artifact(root, &path)?;
+        let bytes = files.read(&path)?;
         Ok((path, bytes))
     };
     let obj = read("lod.obj")?;
     if !obj.1.starts_with(lod_mesh::CLOUD_HEADER.as_bytes()) {
         let limits = crate::texture::TextureLimits::default();
-        return crate::kinds::mesh_view_from_files(root, &obj.0, (folder, limits), alpha_cutoff);
+        return crate::kinds::mesh_view_from_files(files, &obj.0, (folder, limits), alpha_cutoff);
     }
     lod_preview::lod_view_mesh(&lod_preview::LodFiles {
         obj,

@@ -52,6 +52,10 @@ pub(crate) const REDUCE: Stage = Stage { name: "reduce", version: 2 };
 /// An impostor level's frames (`impostor::bake_impostor`), rendered on the GPU.
 pub(crate) const IMPOSTOR: Stage = Stage { name: "impostor", version: 1 };
 
+/// A chain's switch sizes: every level rendered as an engine draws it beside the source, over
+/// the 26 views at each screen size of `preview::HOLD_SIZES` (`measure_chain`).
+pub(crate) const SWITCH: Stage = Stage { name: "switch", version: 1 };
+
 /// The deviation (a fraction of the mesh's largest extent) up to which a reduced level's
 /// simplifier prefers stopping to reaching its budget.
 pub(crate) const REDUCE_MAX_ERROR: f32 = 0.01;
@@ -820,4 +824,50 @@ pub(crate) fn impostor_recipe_key(db: &dyn Db, asset: Asset, level: u32) -> Cach
         .part(&frame_size)
         .part(&billboard_alpha_cutoff(db, asset));
     with_mesh_textures(db, asset, key)
+}
+
+/// How far each level of a chain holds against the source (stage `switch`, `measure_chain`).
+/// Each level's figures are kept in the persistent cache under the hash of every file it writes
+/// (as engines draw it), the source's mesh and textures, the cutoff, the sizes and the GPU
+/// family; the levels missing from it are measured together (the source rendered once per view
+/// and size), so an edit to one level measures that level alone.
+#[salsa::tracked(returns(clone))]
+pub(crate) fn chain_holds(db: &dyn Db, asset: Asset) -> Result<Arc<Vec<crate::preview::Hold>>, Diagnostic> {
+    let mut files = crate::kinds::AssetOutputs::default();
+    super::level_files(db, asset, std::path::Path::new(""), (&mut files, &mut Vec::new()))?;
+    let mut source_key = stage_key(SWITCH)
+        .part(crate::gpu::adapter_family())
+        .part(&mesh_cache_key(db, asset, asset.main_file(db).clone()).0)
+        .part(&billboard_alpha_cutoff(db, asset));
+    for size in crate::preview::HOLD_SIZES {
+        source_key = source_key.part(&size);
+    }
+    let source_key = with_mesh_textures(db, asset, source_key);
+    let settings = asset.settings(db);
+    let keys: Vec<CacheKey> = (0..super::levels::level_count(settings))
+        .map(|level| {
+            let folder = std::path::PathBuf::from(super::levels::level_folder(settings, level));
+            let level_files = files.files.iter().filter(|(path, _, _)| path.starts_with(&folder));
+            level_files
+                .fold(stage_key(SWITCH).part(&source_key.0), |key, (path, _, bytes)| {
+                    key.part(path).part(&blake3::hash(bytes))
+                })
+                .finish()
+        })
+        .collect();
+    let label = asset.name(db);
+    let from_entry = |entry: CacheEntry| entry.parts::<crate::preview::Hold, 0>().map(|(hold, [])| hold);
+    let mut holds: Vec<Option<crate::preview::Hold>> =
+        keys.iter().map(|&key| load_cached(db, SWITCH.name, key, from_entry)).collect();
+    let missing: Vec<u32> = (0..holds.len() as u32).filter(|&level| holds[level as usize].is_none()).collect();
+    if missing.is_empty() {
+        record_cache_hit(db, SWITCH, label);
+    } else {
+        let measured = timed(db, SWITCH, label, || super::measure_chain(db, asset, &files, &missing))?;
+        for (level, hold) in missing.into_iter().zip(measured) {
+            crate::db::store_cached(db, SWITCH.name, keys[level as usize], || CacheEntry::new(&hold, Vec::new(), true));
+            holds[level as usize] = Some(hold);
+        }
+    }
+    Ok(Arc::new(holds.into_iter().flatten().collect()))
 }

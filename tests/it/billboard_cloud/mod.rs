@@ -8,6 +8,7 @@ mod budget;
 pub mod chain;
 mod reduced_level;
 mod impostor_level;
+mod switch;
 mod distance_alpha;
 mod layout;
 mod planes;

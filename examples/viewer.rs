@@ -5,8 +5,9 @@
 //!     cargo run --release -- watch                      # in one terminal
 //!     cargo run --release --example viewer -- baked/bush --connect 127.0.0.1:7878
 //!
-//! opens a window (drag to orbit, wheel to zoom, R to reload, 0–9 to show that level of a LOD
-//! chain, Esc to quit). For machines without a display, `--headless --screenshot FILE` renders
+//! opens a window (drag to orbit, wheel or + and - to zoom, R to reload, Esc to quit). A LOD
+//! chain shows the level its `lods.json` switch sizes choose for the size on screen, fading the
+//! next one in with a dither over the band below each switch size; 0–9 pin a level, A unpins. For machines without a display, `--headless --screenshot FILE` renders
 //! into a PNG instead and rewrites it after every reload; `--reloads N` exits after N reloads,
 //! and `--press KEYS` presses keys after loading (scripts and tests use them).
 
@@ -17,8 +18,10 @@ use std::sync::Arc;
 use std::time::Duration;
 
 use cirrus::gpu::{Gpu, LevelView, WindowSurface};
+use cirrus::kinds::billboard_cloud::lod_mesh::{shown_levels, ShownLevels};
 use clap::Parser;
 use glam::Vec3;
+use std::collections::BTreeMap;
 
 #[derive(Parser, Debug, Clone)]
 #[command(about = "Shows a baked billboard-cloud LOD and reloads it on cirrus watch events")]
@@ -26,9 +29,14 @@ pub struct Options {
     /// The asset's output folder: holds lod.obj, albedo.ktx2, normal.ktx2 and report.json, or a
     /// chain's lod0/, lod1/, … each with its lod.obj and atlas.
     folder: PathBuf,
-    /// The level of a LOD chain to show first (keys 0–9 switch).
-    #[arg(long, default_value_t = 0)]
-    lod: u32,
+    /// Pin this level of a LOD chain (keys 0–9 pin another, A unpins); without it a chain with
+    /// `lods.json` shows the level its switch sizes choose for the sphere's size on screen,
+    /// cross-fading (dithered) over the band below each switch size.
+    #[arg(long)]
+    lod: Option<u32>,
+    /// The camera's zoom: at 1 the bounding sphere fills the image's side (+ and - change it).
+    #[arg(long, default_value_t = 1.0)]
+    zoom: f32,
     /// Keys to press after loading, one character each (e.g. `20`: level 2, then level 0); a
     /// headless viewer writes its screenshot again after each.
     #[arg(long, default_value = "")]
@@ -85,15 +93,20 @@ impl Camera {
     }
 }
 
-/// The shown LOD: its mesh, framing, and what the user did to the camera.
+/// The shown LOD: its levels (loaded as they are shown), framing, and what the user did to the
+/// camera.
 struct Scene {
     /// The asset's output folder.
     folder: PathBuf,
-    /// The levels of its LOD chain (0: not a chain) and the one shown.
+    /// The levels of its LOD chain (0: not a chain).
     levels: u32,
-    level: u32,
+    /// Each level's switch size from the chain's `lods.json` (empty without one).
+    switch_sizes: Vec<u32>,
+    /// The level a key (or `--lod`) pinned; `None`: chosen by the switch sizes as the camera
+    /// moves.
+    pinned: Option<u32>,
     alpha_cutoff: f32,
-    mesh: LevelView,
+    loaded: BTreeMap<u32, LevelView>,
     center: [f32; 3],
     radius: f32,
     camera: Camera,
@@ -104,44 +117,108 @@ impl Scene {
         let alpha_cutoff = options.alpha_cutoff.unwrap_or_else(|| report_alpha_cutoff(&options.folder).unwrap_or(0.5));
         let levels =
             (0..10).take_while(|level| options.folder.join(format!("lod{level}/lod.gltf")).is_file()).count() as u32;
-        if options.lod > 0 && options.lod >= levels {
-            return Err(format!("{} has no LOD level {}", options.folder.display(), options.lod));
+        if options.lod.is_some_and(|level| level > 0 && level >= levels) {
+            return Err(format!("{} has no LOD level {}", options.folder.display(), options.lod.unwrap_or(0)));
         }
-        let folder = options.folder.clone();
-        let level_folder = level_folder(&folder, levels, options.lod);
-        let mesh = cirrus::kinds::billboard_cloud::read_level_view(Path::new("."), &level_folder, alpha_cutoff)
-            .map_err(|error| error.to_string())?;
-        let (center, radius) = match &mesh {
+        let switch_sizes = if levels > 0 { chain_switch_sizes(&options.folder)? } else { Vec::new() };
+        let pinned = match options.lod {
+            Some(level) => Some(level),
+            None if switch_sizes.len() == levels as usize && levels > 0 => None,
+            None => Some(0),
+        };
+        let camera = Camera { yaw: 0.6, pitch: 0.25, zoom: options.zoom };
+        let mut scene = Scene {
+            folder: options.folder.clone(),
+            levels,
+            switch_sizes,
+            pinned,
+            alpha_cutoff,
+            loaded: BTreeMap::new(),
+            center: [0.0; 3],
+            radius: 1.0,
+            camera,
+        };
+        // The sphere of level 0 frames every level.
+        let (center, radius) = match scene.view(0)? {
             LevelView::Mesh(mesh) => cirrus::preview::bounding_sphere(mesh),
             LevelView::Impostor(impostor) => (impostor.center, impostor.radius),
         };
-        let camera = Camera { yaw: 0.6, pitch: 0.25, zoom: 1.0 };
-        Ok(Scene { folder, levels, level: options.lod, alpha_cutoff, mesh, center, radius, camera })
+        (scene.center, scene.radius) = (center, radius);
+        let shown = scene.shown(options.size);
+        scene.view(shown.level)?;
+        Ok(scene)
     }
 
-    /// Loads the shown level's artifacts again; on failure the old mesh stays and the error is
+    /// Level `level`, loaded from its artifacts the first time it is asked for.
+    fn view(&mut self, level: u32) -> Result<&LevelView, String> {
+        if !self.loaded.contains_key(&level) {
+            let folder = level_folder(&self.folder, self.levels, level);
+            let view = cirrus::kinds::billboard_cloud::read_level_view(Path::new("."), &folder, self.alpha_cutoff)
+                .map_err(|error| error.to_string())?;
+            self.loaded.insert(level, view);
+        }
+        Ok(&self.loaded[&level])
+    }
+
+    /// The bounding sphere's diameter on a `side`² image, in pixels (the camera is orthographic
+    /// and frames the sphere at zoom 1).
+    fn pixels_across(&self, side: u32) -> f32 {
+        side as f32 * self.camera.zoom
+    }
+
+    /// What is shown on a `side`² image: the pinned level, or the chain's choice at the size the
+    /// sphere has there.
+    fn shown(&self, side: u32) -> ShownLevels {
+        match self.pinned {
+            Some(level) => ShownLevels { level, fading_into: None },
+            None => shown_levels(&self.switch_sizes, self.pixels_across(side)),
+        }
+    }
+
+    /// Loads every level shown so far again; on failure the old ones stay and the error is
     /// returned.
     fn reload(&mut self) -> Result<(), String> {
-        let folder = level_folder(&self.folder, self.levels, self.level);
-        self.mesh = cirrus::kinds::billboard_cloud::read_level_view(Path::new("."), &folder, self.alpha_cutoff)
-            .map_err(|error| error.to_string())?;
+        let mut reloaded = BTreeMap::new();
+        for &level in self.loaded.keys() {
+            let folder = level_folder(&self.folder, self.levels, level);
+            let view = cirrus::kinds::billboard_cloud::read_level_view(Path::new("."), &folder, self.alpha_cutoff)
+                .map_err(|error| format!("lod{level}: {error}"))?;
+            reloaded.insert(level, view);
+        }
+        self.loaded = reloaded;
         Ok(())
     }
 
-    /// Whether a batch's files (relative to the asset's folder) touch the shown level.
+    /// Whether a batch's files (relative to the asset's folder) touch a level shown so far.
     fn shows_any(&self, files: &[String]) -> bool {
-        let shown = level_folder(Path::new(""), self.levels, self.level);
+        let shown: Vec<PathBuf> =
+            self.loaded.keys().map(|&level| level_folder(Path::new(""), self.levels, level)).collect();
         // A name without a folder in a chain is the resync marker, which touches every level.
-        files
-            .iter()
-            .any(|file| Path::new(file).parent().is_none_or(|parent| parent.as_os_str().is_empty() || parent == shown))
+        files.iter().any(|file| {
+            Path::new(file)
+                .parent()
+                .is_none_or(|parent| parent.as_os_str().is_empty() || shown.iter().any(|folder| parent == folder))
+        })
     }
 
-    /// What a key does: R reloads, a digit shows that level of the chain; `None` for other keys.
-    /// The camera stays where it was, so levels compare from the same view.
+    /// What a key does: R reloads, a digit pins that level of the chain, A lets the switch sizes
+    /// choose again, + and - zoom in and out; `None` for other keys. The camera stays where it
+    /// was, so levels compare from the same view.
     fn press(&mut self, key: &str) -> Option<Result<String, String>> {
         if key.eq_ignore_ascii_case("r") {
             return Some(self.reload().map(|()| "reloaded".to_string()));
+        }
+        if key == "+" || key == "-" {
+            let factor = if key == "+" { ZOOM_STEP } else { 1.0 / ZOOM_STEP };
+            self.camera.zoom = (self.camera.zoom * factor).clamp(MIN_ZOOM, MAX_ZOOM);
+            return Some(Ok(format!("zoom {:.3}", self.camera.zoom)));
+        }
+        if key.eq_ignore_ascii_case("a") {
+            if self.switch_sizes.len() != self.levels as usize || self.levels == 0 {
+                return Some(Err(format!("key {key}: {} has no lods.json to switch by", self.folder.display())));
+            }
+            self.pinned = None;
+            return Some(Ok("switching by size".to_string()));
         }
         let level = key.parse::<u32>().ok().filter(|_| key.len() == 1)?;
         if self.levels == 0 {
@@ -150,23 +227,57 @@ impl Scene {
         if level >= self.levels {
             return Some(Err(format!("key {key}: no level {level}, the chain has lod0 to lod{}", self.levels - 1)));
         }
-        let previous = std::mem::replace(&mut self.level, level);
-        Some(match self.reload() {
-            Ok(()) => Ok(format!("showing lod{level}")),
-            Err(error) => {
-                self.level = previous;
-                Err(format!("cannot show lod{level}, keeping lod{previous}: {error}"))
+        let previous = self.pinned.map_or("the level chosen by size".to_string(), |level| format!("lod{level}"));
+        Some(match self.view(level) {
+            Ok(_) => {
+                self.pinned = Some(level);
+                Ok(format!("showing lod{level}"))
             }
+            Err(error) => Err(format!("cannot show lod{level}, keeping {previous}: {error}")),
         })
     }
 
-    /// A `size`² RGBA8 image of the LOD (mid-grey background, alpha 0 there).
-    fn render(&self, gpu: &Gpu, size: u32) -> Result<Vec<u8>, String> {
+    /// A `size`² RGBA8 image of what is shown (mid-grey background, alpha 0 there): one level, or
+    /// two cross-faded by dithering.
+    fn render(&mut self, gpu: &Gpu, size: u32) -> Result<Vec<u8>, String> {
         let matrix = self.camera.view_projection(self.center, self.radius);
-        gpu.render_level_view(&self.mesh, matrix, cirrus::preview::preview_light(), size)
-            .map_err(|error| error.to_string())
+        let shown = self.shown(size);
+        let render = |scene: &mut Scene, level: u32| -> Result<Vec<u8>, String> {
+            let view = scene.view(level)?;
+            gpu.render_level_view(view, matrix, cirrus::preview::preview_light(), size)
+                .map_err(|error| error.to_string())
+        };
+        let image = render(self, shown.level)?;
+        match shown.fading_into {
+            Some((next, share)) => {
+                let next_image = render(self, next)?;
+                Ok(cirrus::preview::dithered_cross_fade(&image, &next_image, size, share))
+            }
+            None => Ok(image),
+        }
     }
 }
+
+/// Each level's switch size from the chain's `lods.json` in `folder` (empty without the file).
+fn chain_switch_sizes(folder: &Path) -> Result<Vec<u32>, String> {
+    let path = folder.join("lods.json");
+    let Ok(bytes) = std::fs::read(&path) else { return Ok(Vec::new()) };
+    let document: serde_json::Value =
+        serde_json::from_slice(&bytes).map_err(|error| format!("{}: {error}", path.display()))?;
+    let levels = document["levels"].as_array().ok_or_else(|| format!("{}: no `levels`", path.display()))?;
+    levels
+        .iter()
+        .map(|level| {
+            let size = level["switch_size"].as_u64().and_then(|size| u32::try_from(size).ok());
+            size.ok_or_else(|| format!("{}: a level without a `switch_size`", path.display()))
+        })
+        .collect()
+}
+
+/// How much a + or - key zooms, and how far the zoom goes.
+const ZOOM_STEP: f32 = 1.25;
+const MIN_ZOOM: f32 = 0.005;
+const MAX_ZOOM: f32 = 20.0;
 
 /// The folder of a level: the asset's own, or its `lod<N>/` in a chain of `levels` levels.
 fn level_folder(folder: &Path, levels: u32, level: u32) -> PathBuf {
@@ -213,10 +324,10 @@ pub fn run(options: &Options, report: &mut dyn FnMut(String)) -> Result<(), Stri
 /// at once when there is no server to follow).
 fn run_headless(gpu: &Gpu, mut scene: Scene, options: &Options, report: &mut dyn FnMut(String)) -> Result<(), String> {
     let screenshot = options.screenshot.as_deref().ok_or("--headless needs --screenshot FILE")?;
-    report(write_screenshot(gpu, &scene, options.size, screenshot, "loaded")?);
+    report(write_screenshot(gpu, &mut scene, options.size, screenshot, "loaded")?);
     for key in options.press.chars() {
         match scene.press(&key.to_string()) {
-            Some(Ok(what)) => report(write_screenshot(gpu, &scene, options.size, screenshot, &what)?),
+            Some(Ok(what)) => report(write_screenshot(gpu, &mut scene, options.size, screenshot, &what)?),
             Some(Err(error)) => report(error),
             None => report(format!("key {key} does nothing")),
         }
@@ -230,14 +341,15 @@ fn run_headless(gpu: &Gpu, mut scene: Scene, options: &Options, report: &mut dyn
         let Ok(event) = receiver.recv() else { return Err("the connection thread stopped".into()) };
         match event {
             ViewerEvent::Reload { revision, files } if !scene.shows_any(&files) => {
-                report(format!("r{revision}: {} changed, not the level shown (lod{})", files.join(", "), scene.level))
+                let shown = scene.shown(options.size).level;
+                report(format!("r{revision}: {} changed, not the level shown (lod{shown})", files.join(", ")))
             }
             ViewerEvent::Reload { revision, files } => match scene.reload() {
                 Ok(()) => {
                     reloads += 1;
                     report(write_screenshot(
                         gpu,
-                        &scene,
+                        &mut scene,
                         options.size,
                         screenshot,
                         &format!("reloaded r{revision} ({})", files.join(", ")),
@@ -257,7 +369,7 @@ fn failed_line(revision: u64, messages: &[String]) -> String {
 }
 
 /// Writes an opaque PNG of the scene; returns a line saying what it shows.
-fn write_screenshot(gpu: &Gpu, scene: &Scene, size: u32, path: &Path, what: &str) -> Result<String, String> {
+fn write_screenshot(gpu: &Gpu, scene: &mut Scene, size: u32, path: &Path, what: &str) -> Result<String, String> {
     let mut pixels = scene.render(gpu, size)?;
     let covered = pixels.chunks_exact(4).filter(|texel| texel[3] > 0).count();
     for texel in pixels.chunks_exact_mut(4) {
@@ -265,15 +377,26 @@ fn write_screenshot(gpu: &Gpu, scene: &Scene, size: u32, path: &Path, what: &str
     }
     let png = cirrus::texture::preview::preview_png(&cirrus::texture::Texture::new(size, size, pixels));
     cirrus::files::write_if_changed(path, &png).map_err(|error| format!("cannot write {}: {error}", path.display()))?;
-    let triangles = match &scene.mesh {
+    let shown = scene.shown(size);
+    let triangles = match scene.view(shown.level)? {
         LevelView::Mesh(mesh) => mesh.batches.iter().map(|(_, vertices)| vertices.len() / 3).sum::<usize>(),
         // One camera-facing quad.
         LevelView::Impostor(_) => 2,
     };
     let coverage = 100.0 * covered as f64 / (size as f64 * size as f64);
-    let level = if scene.levels > 0 { format!("lod{} of {}, ", scene.level, scene.levels) } else { String::new() };
+    let level = match (scene.levels, shown.fading_into) {
+        (0, _) => String::new(),
+        (levels, None) => format!("lod{} of {levels}, ", shown.level),
+        (levels, Some((next, share))) => {
+            format!("lod{} fading into lod{next} ({:.0}%) of {levels}, ", shown.level, 100.0 * share)
+        }
+    };
+    let switching = match scene.pinned {
+        None => format!("; switching by size, the sphere {:.1} px across", scene.pixels_across(size)),
+        Some(_) => String::new(),
+    };
     Ok(format!(
-        "{what}: {level}{triangles} triangles, {coverage:.1}% of the view covered; screenshot {}",
+        "{what}: {level}{triangles} triangles, {coverage:.1}% of the view covered; screenshot {}{switching}",
         path.display()
     ))
 }
@@ -412,7 +535,11 @@ struct WindowApp<'a> {
 
 impl WindowApp<'_> {
     fn title(&self, status: &str) -> String {
-        let level = if self.scene.levels > 0 { format!(" lod{}", self.scene.level) } else { String::new() };
+        let side = self.window.as_ref().map_or(768, |window| {
+            let size = window.inner_size();
+            size.width.min(size.height).max(1)
+        });
+        let level = if self.scene.levels > 0 { format!(" lod{}", self.scene.shown(side).level) } else { String::new() };
         format!("cirrus viewer: {}{level} ({status})", self.scene.folder.display())
     }
 
@@ -446,11 +573,8 @@ impl winit::application::ApplicationHandler<ViewerEvent> for WindowApp<'_> {
     fn user_event(&mut self, _event_loop: &winit::event_loop::ActiveEventLoop, event: ViewerEvent) {
         let status = match event {
             ViewerEvent::Reload { revision, files } if !self.scene.shows_any(&files) => {
-                (self.report)(format!(
-                    "r{revision}: {} changed, not the level shown (lod{})",
-                    files.join(", "),
-                    self.scene.level
-                ));
+                let shown = self.scene.shown(768).level;
+                (self.report)(format!("r{revision}: {} changed, not the level shown (lod{shown})", files.join(", ")));
                 format!("r{revision}")
             }
             ViewerEvent::Reload { revision, files } => match self.scene.reload() {
@@ -524,7 +648,8 @@ impl winit::application::ApplicationHandler<ViewerEvent> for WindowApp<'_> {
                     MouseScrollDelta::LineDelta(_, y) => y,
                     MouseScrollDelta::PixelDelta(position) => position.y as f32 / 40.0,
                 };
-                self.scene.camera.zoom = (self.scene.camera.zoom * 1.1f32.powf(steps)).clamp(0.2, 20.0);
+                self.scene.camera.zoom = (self.scene.camera.zoom * 1.1f32.powf(steps)).clamp(MIN_ZOOM, MAX_ZOOM);
+                window.set_title(&self.title(&format!("zoom {:.3}", self.scene.camera.zoom)));
                 window.request_redraw();
             }
             WindowEvent::RedrawRequested => {

@@ -269,6 +269,23 @@ pub fn switch_sizes(holds: &[Hold]) -> Vec<u32> {
     sizes
 }
 
+/// Two renders of one view cross-faded as a screen-door (dithered) fade draws them: each pixel
+/// of `from` and `into` (RGBA8, `size`² each) comes from `into` where the 4 × 4 ordered-dither
+/// threshold at that pixel is below `share`, else from `from`; an engine gets the same by
+/// discarding those pixels in each level's shader. `share` 0: `from`; 1: `into`.
+pub fn dithered_cross_fade(from: &[u8], into: &[u8], size: u32, share: f32) -> Vec<u8> {
+    const BAYER: [[u8; 4]; 4] = [[0, 8, 2, 10], [12, 4, 14, 6], [3, 11, 1, 9], [15, 7, 13, 5]];
+    let mut image = from.to_vec();
+    for (index, pixel) in image.chunks_exact_mut(4).enumerate() {
+        let (x, y) = (index % size as usize, index / size as usize);
+        let threshold = (BAYER[y % 4][x % 4] as f32 + 0.5) / 16.0;
+        if threshold < share {
+            pixel.copy_from_slice(&into[4 * index..4 * index + 4]);
+        }
+    }
+    image
+}
+
 /// The mean and worst of one LOD's per-view figures.
 fn summarise_views(views: Vec<ViewMetrics>, samples_per_pixel: u32, source_shift_ious: &[f64]) -> PreviewMetrics {
     let mean = |figure: fn(&ViewMetrics) -> f64| views.iter().map(figure).sum::<f64>() / views.len().max(1) as f64;

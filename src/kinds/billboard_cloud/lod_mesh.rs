@@ -144,3 +144,37 @@ pub fn screen_coverage(switch_sizes: &[u32]) -> Vec<f32> {
     }
     coverage
 }
+
+/// How far below a switch size the next level fades in: over sizes from `S` down to
+/// `S / FADE_BAND` the next level takes over a growing share of the pixels (a dithered
+/// cross-fade), and below that it is shown alone.
+pub const FADE_BAND: f32 = 1.25;
+
+/// What a chain shows at a screen size: one level, or one fading into the next.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct ShownLevels {
+    pub level: u32,
+    /// The next level and its share of the pixels, in (0, 1).
+    pub fading_into: Option<(u32, f32)>,
+}
+
+/// The levels a chain with `switch_sizes` (each level's, `preview::switch_sizes`) shows when its
+/// bounding sphere is `pixels` across: the last level whose switch size is at least `pixels`
+/// (level 0 above every switch size), fading in over the band below its switch size (from the
+/// level before).
+pub fn shown_levels(switch_sizes: &[u32], pixels: f32) -> ShownLevels {
+    let chosen = (1..switch_sizes.len()).rev().find(|&level| pixels <= switch_sizes[level] as f32);
+    let Some(level) = chosen else { return ShownLevels { level: 0, fading_into: None } };
+    let switch = switch_sizes[level] as f32;
+    let band_end = switch / FADE_BAND;
+    if pixels > band_end {
+        let share = ((switch - pixels) / (switch - band_end)).clamp(0.0, 1.0);
+        if share > 0.0 && share < 1.0 {
+            return ShownLevels { level: level as u32 - 1, fading_into: Some((level as u32, share)) };
+        }
+        if share == 0.0 {
+            return ShownLevels { level: level as u32 - 1, fading_into: None };
+        }
+    }
+    ShownLevels { level: level as u32, fading_into: None }
+}

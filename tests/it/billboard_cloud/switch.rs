@@ -4,6 +4,7 @@
 //! `MSFT_screencoverage`; the same figures `cirrus preview` gives; measured again only for the
 //! levels an edit changed.
 
+use cirrus::kinds::billboard_cloud::lod_mesh::{shown_levels, ShownLevels};
 use cirrus::preview::{switch_sizes, Hold, SizeFigures, HOLD_LOSS, HOLD_SIZES};
 
 use crate::billboard_cloud::chain::chain_project;
@@ -145,4 +146,108 @@ fn switch_sizes_follow_the_holds_and_never_rise_along_the_chain() {
     let holds = [hold(Some(256)), hold(Some(128)), hold(Some(256)), hold(None), hold(Some(32))];
     assert_eq!(switch_sizes(&holds), [256, 128, 128, 0, 0]);
     assert_eq!(switch_sizes(&[]), Vec::<u32>::new());
+}
+
+/// The part of a headless viewer line that says what it shows, and the sphere's size on screen.
+fn shown_and_pixels(line: &str) -> (String, f32) {
+    let shown = line.split_once(": ").unwrap().1.split_once(" of ").unwrap().0.to_string();
+    let pixels = line.split_once("the sphere ").unwrap().1.split_once(" px").unwrap().0.parse().unwrap();
+    (shown, pixels)
+}
+
+/// What the viewer says it shows for `shown` (a fade's share as a whole percentage, so within a
+/// point of what the line's rounded size gives).
+fn described(shown: ShownLevels) -> (String, Option<f32>) {
+    match shown.fading_into {
+        None => (format!("lod{}", shown.level), None),
+        Some((next, share)) => (format!("lod{} fading into lod{next}", shown.level), Some(100.0 * share)),
+    }
+}
+
+/// What a viewer line says it shows (as `described`).
+fn line_shows(shown: &str) -> (String, Option<f32>) {
+    match shown.split_once(" (") {
+        None => (shown.to_string(), None),
+        Some((levels, share)) => (levels.to_string(), share.trim_end_matches("%)").parse().ok()),
+    }
+}
+
+#[test]
+fn the_viewer_switches_levels_by_the_switch_sizes_with_a_dithered_cross_fade() {
+    let project = chain_project(CHAIN);
+    build(&mut project.open());
+    let lods: serde_json::Value = serde_json::from_slice(&project.read("baked/tree/lods.json")).unwrap();
+    let switch: Vec<u32> =
+        lods["levels"].as_array().unwrap().iter().map(|level| level["switch_size"].as_u64().unwrap() as u32).collect();
+
+    // Zooming out from 400 px across, a step of 1.25 at a time: each view shows what the switch
+    // sizes choose, and the chain goes from level 0 to the last level that holds somewhere.
+    let size = 96u32;
+    let zoom = format!("{}", 400.0 / size as f32);
+    let steps = "-".repeat(18);
+    let press = format!("--press={steps}");
+    let arguments = ["--size", "96", "--zoom", zoom.as_str(), press.as_str()];
+    let lines = crate::support::headless_viewer_lines(&project, "baked/tree", &arguments);
+    assert_eq!(lines.len(), 19, "{lines:#?}");
+    let mut levels_seen = Vec::new();
+    for line in &lines {
+        let (shown, pixels) = shown_and_pixels(line);
+        let ((levels, share), (expected_levels, expected_share)) =
+            (line_shows(&shown), described(shown_levels(&switch, pixels)));
+        assert_eq!(levels, expected_levels, "{line}");
+        assert_eq!(share.is_some(), expected_share.is_some(), "{line}");
+        assert!((share.unwrap_or(0.0) - expected_share.unwrap_or(0.0)).abs() <= 1.5, "{line}");
+        levels_seen.push(shown_levels(&switch, pixels).level);
+    }
+    assert!(levels_seen.windows(2).all(|pair| pair[0] <= pair[1]), "{levels_seen:?}");
+    assert_eq!(levels_seen[0], 0);
+    let last_holding = switch.iter().rposition(|&size| size > 0).unwrap() as u32;
+    assert_eq!(*levels_seen.last().unwrap(), last_holding, "{lines:#?}");
+
+    // Inside a band, each pixel comes from one of the two levels, as the dither says.
+    let level = (1..switch.len()).find(|&level| switch[level] > 0 && switch[level] < switch[level - 1]).unwrap();
+    let zoom = switch[level] as f32 / 1.1 / size as f32;
+    let shown = shown_levels(&switch, size as f32 * zoom);
+    let Some((next, share)) = shown.fading_into else { panic!("{shown:?} at {}", size as f32 * zoom) };
+    let zoom = format!("{zoom}");
+    let screenshot = |extra: &[&str]| {
+        let mut arguments = vec!["--size", "96", "--zoom", zoom.as_str()];
+        arguments.extend_from_slice(extra);
+        crate::support::headless_viewer_lines(&project, "baked/tree", &arguments);
+        image::load_from_memory(&project.read("shot.png")).unwrap().to_rgba8().into_raw()
+    };
+    let faded = screenshot(&[]);
+    let (from, into) = (screenshot(&["--lod", &shown.level.to_string()]), screenshot(&["--lod", &next.to_string()]));
+    assert_eq!(faded, cirrus::preview::dithered_cross_fade(&from, &into, size, share));
+    let differing = (0..faded.len() / 4).filter(|&pixel| from[4 * pixel..][..4] != into[4 * pixel..][..4]);
+    let taken = differing.clone().filter(|&pixel| faded[4 * pixel..][..4] == into[4 * pixel..][..4]).count();
+    let share_taken = taken as f32 / differing.count().max(1) as f32;
+    assert!((share_taken - share).abs() < 0.1, "{share_taken} of the differing pixels from lod{next}, {share} asked");
+
+    // A digit pins a level at any size, A lets the sizes choose again.
+    let lines = crate::support::headless_viewer_lines(&project, "baked/tree", &["--size", "96", "--press", "3a"]);
+    assert!(lines[1].starts_with("showing lod3: lod3 of 4, 2 triangles") && !lines[1].contains("switching"));
+    assert!(lines[2].starts_with("switching by size: lod0 of 4, ") && lines[2].contains("96.0 px across"));
+}
+
+#[test]
+fn a_chain_shows_each_level_below_its_switch_size_fading_in_over_the_band() {
+    let switch = [256, 128, 128, 32, 0];
+    let shown = |pixels: f32| shown_levels(&switch, pixels);
+    assert_eq!(shown(1000.0), ShownLevels { level: 0, fading_into: None });
+    assert_eq!(shown(128.0), ShownLevels { level: 1, fading_into: None }, "at the switch size: none of level 2 yet");
+    // 128 → 102.4: level 2 takes over; level 1, with the same switch size, is never alone.
+    let fading = |pixels: f32, (level, next, share): (u32, u32, f32)| {
+        let shown = shown(pixels);
+        let (shown_next, shown_share) = shown.fading_into.unwrap_or_else(|| panic!("{shown:?} at {pixels}"));
+        assert_eq!((shown.level, shown_next), (level, next), "at {pixels}");
+        assert!((shown_share - share).abs() < 1e-5, "{shown:?} at {pixels}");
+    };
+    fading(115.2, (1, 2, 0.5));
+    fading(125.44, (1, 2, 0.1));
+    assert_eq!(shown(102.4), ShownLevels { level: 2, fading_into: None });
+    fading(28.8, (2, 3, 0.5));
+    // A level that never holds is never shown.
+    assert_eq!(shown(1.0), ShownLevels { level: 3, fading_into: None });
+    assert_eq!(shown_levels(&[], 10.0), ShownLevels { level: 0, fading_into: None });
 }

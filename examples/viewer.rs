@@ -7,9 +7,10 @@
 //!
 //! opens a window (drag to orbit, wheel or + and - to zoom, R to reload, Esc to quit). A LOD
 //! chain shows the level its `lods.json` switch sizes choose for the size on screen, fading the
-//! next one in with a dither over the band below each switch size; 0–9 pin a level, A unpins. For machines without a display, `--headless --screenshot FILE` renders
-//! into a PNG instead and rewrites it after every reload; `--reloads N` exits after N reloads,
-//! and `--press KEYS` presses keys after loading (scripts and tests use them).
+//! next one in with a dither over the band below each switch size; 0–9 pin a level, A unpins.
+//! For machines without a display, `--headless --screenshot FILE` renders into a PNG instead and
+//! rewrites it after every reload; `--reloads N` exits after N reloads, and `--press KEYS`
+//! presses keys after loading (scripts and tests use them).
 
 use std::io::{BufRead, BufReader, Write};
 use std::net::TcpStream;

@@ -128,7 +128,10 @@ fn impostor_frame_axes(direction_in: vec3<f32>) -> ImpostorAxes {
 // Atlases: frame `j * frames + i` at column `i`, row `j`, each with its mips; albedo (sRGB,
 // coverage in alpha), normal (`0.5 + 0.5 n` in RG, in the frame's axes: x right, y up, z towards
 // the frame's eye, rebuilt from x and y, as a tangent-space normal map stores it: BC5), depth (R:
-// 0 at the sphere's near side, 1 at its far side, along the frame's direction: BC4).
+// 0 at the sphere's near side, 1 at its far side, along the frame's direction: BC4). Each frame
+// shows the part `impostor_rects[frame]` = (u0, v0, u1, v1) of the sphere's image (u along the
+// frame's right, v down its up axis, 0..1 across the sphere): the mesh's bounds from that
+// direction (`frame_rects` in impostor.json); (0, 0, 1, 1) is the whole sphere.
 
 struct ImpostorView {
     view_projection: mat4x4<f32>,
@@ -153,6 +156,7 @@ struct ImpostorParams {
 @group(0) @binding(3) var albedo_atlas: texture_2d<f32>;
 @group(0) @binding(4) var normal_atlas: texture_2d<f32>;
 @group(0) @binding(5) var depth_atlas: texture_2d<f32>;
+@group(0) @binding(6) var<storage, read> impostor_rects: array<vec4<f32>>;
 
 struct ImpostorVertexOut {
     @builtin(position) clip: vec4<f32>,
@@ -174,6 +178,13 @@ fn impostor_vs(@builtin(vertex_index) index: u32) -> ImpostorVertexOut {
     return out;
 }
 
+// A point of the sphere's image (0..1) in frame `frame`'s own image (0..1 across the part it
+// shows).
+fn impostor_in_rect(frame: u32, uv: vec2<f32>) -> vec2<f32> {
+    let rect = impostor_rects[frame];
+    return (uv - rect.xy) / max(rect.zw - rect.xy, vec2<f32>(1e-6));
+}
+
 // Frame `frame`'s texel under the view ray through `world`, in the frame's own image (0..1):
 // where the ray crosses the frame's plane through the centre, then (parallax) where it meets
 // the depth the frame shows there, twice; outside 0..1 when the ray leaves the frame.
@@ -190,13 +201,13 @@ fn impostor_frame_uv(frame: u32, world: vec3<f32>, lod: f32) -> vec2<f32> {
     // The ray is start - t eye; a point of it at height h along the frame's direction has
     // t = (dot(start, direction) - h) / along.
     var point = start - eye * (dot(start, direction) / along);
-    var uv = vec2<f32>(dot(point, axes.right), -dot(point, axes.up)) / (2.0 * radius) + 0.5;
+    var uv = impostor_in_rect(frame, vec2<f32>(dot(point, axes.right), -dot(point, axes.up)) / (2.0 * radius) + 0.5);
     for (var step = 0; step < 2; step = step + 1) {
         let texel = (cell + clamp(uv, vec2<f32>(0.0), vec2<f32>(1.0))) / f32(frames);
         let shown = textureSampleLevel(depth_atlas, impostor_sampler, texel, lod).r;
         let height = radius - 2.0 * radius * shown;
         point = start - eye * ((dot(start, direction) - height) / along);
-        uv = vec2<f32>(dot(point, axes.right), -dot(point, axes.up)) / (2.0 * radius) + 0.5;
+        uv = impostor_in_rect(frame, vec2<f32>(dot(point, axes.right), -dot(point, axes.up)) / (2.0 * radius) + 0.5);
     }
     return uv;
 }
@@ -204,16 +215,20 @@ fn impostor_frame_uv(frame: u32, world: vec3<f32>, lod: f32) -> vec2<f32> {
 @fragment
 fn impostor_fs(input: ImpostorVertexOut) -> @location(0) vec4<f32> {
     let frames = impostor.grid.x;
-    // The mip level: frame texels per screen pixel (taken before any branch).
+    // Frame texels per screen pixel across the whole sphere (taken before any branch); each
+    // frame's mip level scales it by the share of the sphere's image the frame shows.
     let frame_texels = f32(textureDimensions(albedo_atlas).x) / f32(frames);
     let pixel = max(length(dpdx(input.world)), length(dpdy(input.world)));
-    let lod = max(log2(pixel * frame_texels / (2.0 * impostor.sphere.w)), 0.0);
+    let texels_per_pixel = pixel * frame_texels / (2.0 * impostor.sphere.w);
     let blend = impostor_blend(impostor_view.eye.xyz, frames, impostor.grid.y != 0u);
     var albedo = vec3<f32>(0.0);
     var normal = vec3<f32>(0.0);
     var coverage = 0.0;
     for (var k = 0u; k < 3u; k = k + 1u) {
         let frame = blend.frames[k];
+        let rect = impostor_rects[frame];
+        let shown = max(min(rect.z - rect.x, rect.w - rect.y), 1e-6);
+        let lod = max(log2(texels_per_pixel / shown), 0.0);
         let uv = impostor_frame_uv(frame, input.world, lod);
         if any(uv < vec2<f32>(0.0)) || any(uv > vec2<f32>(1.0)) {
             continue;

@@ -3,11 +3,13 @@
 //! out in one atlas per surface (frame `j · frames + i` at column `i`, row `j`): the unlit albedo
 //! with its coverage in alpha, the normal in the frame's own axes (as a tangent-space normal map
 //! stores it, so that it travels as BC5), and the depth across the sphere (as a height map, BC4).
+//! Each frame shows only the part of the sphere's image the mesh covers from its direction
+//! (`frame_rects`), so the mesh fills the frame's texels.
 
 use glam::Vec3;
 
 use crate::gpu::{Gpu, GpuError, ViewMesh};
-use crate::mesh::octahedral::{frame_axes, frame_view_projection, FrameGrid};
+use crate::mesh::octahedral::{frame_axes, frame_rect_view_projection, FrameGrid};
 use crate::texture::fill::{fill_from_sources, texel_sources};
 use crate::texture::Texture;
 
@@ -35,6 +37,46 @@ pub struct ImpostorFrames {
     /// The depth along the frame's direction in R (0 at the sphere's near side, 255 at its far
     /// side), repeated in G and B; alpha 255.
     pub depth: Texture,
+    /// The part of the sphere's image each frame shows (`frame_rects`).
+    pub rects: Vec<[f32; 4]>,
+}
+
+/// The part of the sphere's image (`[u0, v0, u1, v1]`, as `mesh::octahedral::
+/// frame_rect_view_projection` takes it) that each frame of `settings.grid` shows: the bounds
+/// of `points` (the corners of the mesh's faces) seen from the frame's direction, widened by a
+/// texel and a half of the frame on each side and kept inside the sphere's image. No points:
+/// the whole image.
+pub fn frame_rects(points: &[Vec3], (center, radius): (Vec3, f32), settings: ImpostorSettings) -> Vec<[f32; 4]> {
+    let radius = radius.max(1e-6);
+    (0..settings.grid.frame_count())
+        .map(|frame| {
+            let direction = settings.grid.frame_direction(frame);
+            let (right, up) = frame_axes(direction);
+            let (mut low, mut high) = ([f32::INFINITY; 2], [f32::NEG_INFINITY; 2]);
+            for &point in points {
+                let offset = point - center;
+                let uv = [offset.dot(right) / (2.0 * radius) + 0.5, 0.5 - offset.dot(up) / (2.0 * radius)];
+                for axis in 0..2 {
+                    low[axis] = low[axis].min(uv[axis]);
+                    high[axis] = high[axis].max(uv[axis]);
+                }
+            }
+            if !(low[0] <= high[0] && low[1] <= high[1]) {
+                return crate::mesh::octahedral::FULL_FRAME;
+            }
+            let mut rect = [0.0f32; 4];
+            for axis in 0..2 {
+                // At least two texels of the whole image wide, then a texel and a half more each
+                // side of what it becomes.
+                let middle = 0.5 * (low[axis] + high[axis]);
+                let extent = (high[axis] - low[axis]).max(2.0 / settings.frame_size as f32);
+                let margin = extent * 1.5 / settings.frame_size as f32;
+                rect[axis] = (middle - 0.5 * extent - margin).max(0.0);
+                rect[axis + 2] = (middle + 0.5 * extent + margin).min(1.0);
+            }
+            rect
+        })
+        .collect()
 }
 
 /// Renders every frame of `settings.grid` of `mesh` (whose bounding sphere is `center`,
@@ -48,9 +90,15 @@ pub fn bake_impostor(
     let ImpostorSettings { grid, frame_size } = settings;
     let side = (grid.frames * frame_size) as usize;
     let mut atlases = [(); 3].map(|_| vec![0u8; side * side * 4]);
-    for frame in 0..grid.frame_count() {
+    let corners: Vec<Vec3> = mesh
+        .batches
+        .iter()
+        .flat_map(|(_, vertices)| vertices.iter().map(|vertex| Vec3::from(vertex.position)))
+        .collect();
+    let rects = frame_rects(&corners, (center, radius), settings);
+    for (frame, &rect) in (0..grid.frame_count()).zip(&rects) {
         let direction = grid.frame_direction(frame);
-        let camera = frame_view_projection(center, radius, direction);
+        let camera = frame_rect_view_projection(center, radius, direction, rect);
         let samples = frame_samples_per_axis(frame_size);
         let [albedo, normal_depth] =
             gpu.render_impostor_frame(mesh, camera.to_cols_array_2d(), frame_size * samples)?;
@@ -66,7 +114,7 @@ pub fn bake_impostor(
         }
     }
     let [albedo, normal, depth] = atlases.map(|pixels| Texture::new(side as u32, side as u32, pixels));
-    Ok(ImpostorFrames { settings, center, radius, albedo, normal, depth })
+    Ok(ImpostorFrames { settings, center, radius, albedo, normal, depth, rects })
 }
 
 /// Samples per texel along each axis a frame is rendered with: 4 (16 samples), fewer where the

@@ -207,18 +207,23 @@ pub struct SizeFigures {
 }
 
 /// How far up the screen sizes a LOD holds against its source: its figures at each size
-/// measured (smallest first, up to the first where it loses more than [`HOLD_LOSS`]), and the
-/// largest size at which it held (`None`: not even at the smallest).
+/// measured (smallest first, up to the second size in a row at which it loses more than
+/// [`HOLD_LOSS`]), and the largest size at which it held (`None`: at none).
 #[derive(Clone, Debug, PartialEq, Serialize, serde::Deserialize)]
 pub struct Hold {
     pub measured: Vec<SizeFigures>,
     pub holds_to: Option<u32>,
 }
 
+/// How many sizes in a row a LOD may fail at before it is measured no further. The loss grows
+/// with the size (a pixel gets smaller against the same world error), but not at every step: at
+/// 16 px a pixel is a sixteenth of the object, and a corpus impostor lost 1.01 units there and
+/// 0.4 at 32 and 64 px.
+const FAILURES_IN_A_ROW: usize = 2;
+
 /// How far each of `lods` holds against `source` over `sizes` (smallest first): every size
-/// renders the 26 views of the source once and of each LOD that held at every smaller size.
-/// The px-shift loss grows with the size (a pixel gets smaller against the same world error),
-/// so a LOD is not measured past the first size it fails at.
+/// renders the 26 views of the source once and of each LOD still measured, which is every LOD
+/// until it has failed at [`FAILURES_IN_A_ROW`] sizes in a row.
 pub fn holds(
     gpu: &Gpu,
     source: &ViewMesh,
@@ -228,9 +233,9 @@ pub fn holds(
     samples_per_axis: u32,
 ) -> Result<Vec<Hold>, GpuError> {
     let mut holds: Vec<Hold> = lods.iter().map(|_| Hold { measured: Vec::new(), holds_to: None }).collect();
-    let mut failed = vec![false; lods.len()];
+    let mut failures = vec![0usize; lods.len()];
     for &size in sizes {
-        let measured: Vec<usize> = (0..lods.len()).filter(|&index| !failed[index]).collect();
+        let measured: Vec<usize> = (0..lods.len()).filter(|&index| failures[index] < FAILURES_IN_A_ROW).collect();
         if measured.is_empty() {
             break;
         }
@@ -247,8 +252,9 @@ pub fn holds(
             });
             if held {
                 holds[index].holds_to = Some(size);
+                failures[index] = 0;
             } else {
-                failed[index] = true;
+                failures[index] += 1;
             }
         }
     }
@@ -258,8 +264,8 @@ pub fn holds(
 /// A chain's switch sizes from how far each level holds: level `k` may stand in for level
 /// `k − 1` (level 0: for the source) while the object's bounding sphere is at most `switch[k]`
 /// pixels across: the largest size at which it held, and no more than the level before's (so
-/// that a level is never shown closer than a more detailed one). 0: never (it did not hold at
-/// the smallest size measured).
+/// that a level is never shown closer than a more detailed one). 0: never (it held at no size
+/// measured).
 pub fn switch_sizes(holds: &[Hold]) -> Vec<u32> {
     let mut sizes: Vec<u32> = Vec::with_capacity(holds.len());
     for hold in holds {

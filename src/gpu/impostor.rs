@@ -18,6 +18,9 @@ pub struct ImpostorDraw {
     pub center: [f32; 3],
     pub radius: f32,
     pub alpha_cutoff: f32,
+    /// The part of the sphere's image each frame shows (`impostor::frame_rects`); empty: every
+    /// frame shows all of it.
+    pub rects: Vec<[f32; 4]>,
 }
 
 /// What `impostor.wgsl`'s renderer reads of the view.
@@ -157,6 +160,9 @@ impl Gpu {
             };
             let view_buffer = self.constants_buffer(bytemuck::bytes_of(&view));
             let impostor_buffer = self.constants_buffer(bytemuck::bytes_of(&uniform));
+            let full = vec![crate::mesh::octahedral::FULL_FRAME; impostor.grid.frame_count() as usize];
+            let rects = if impostor.rects.len() == full.len() { &impostor.rects } else { &full };
+            let rects_buffer = self.constants_buffer(bytemuck::cast_slice(rects));
             // Uploaded once per content: every view of the same impostor shares them.
             let albedo = self.levels_view(&impostor.albedo, true);
             let normal = self.levels_view(&impostor.normal, false);
@@ -171,6 +177,7 @@ impl Gpu {
                     wgpu::BindGroupEntry { binding: 3, resource: wgpu::BindingResource::TextureView(&albedo) },
                     wgpu::BindGroupEntry { binding: 4, resource: wgpu::BindingResource::TextureView(&normal) },
                     wgpu::BindGroupEntry { binding: 5, resource: wgpu::BindingResource::TextureView(&depth) },
+                    wgpu::BindGroupEntry { binding: 6, resource: rects_buffer.as_entire_binding() },
                 ],
             });
             let target = self.target(size, size, ALBEDO_FORMAT);

@@ -155,11 +155,24 @@ pub fn frame_axes(direction: Vec3) -> (Vec3, Vec3) {
 /// `radius`) fills the frame, and depth runs from 0 at the sphere's near side to 1 at its far
 /// side (WebGPU's clip depth).
 pub fn frame_view_projection(center: Vec3, radius: f32, direction: Vec3) -> glam::Mat4 {
+    frame_rect_view_projection(center, radius, direction, FULL_FRAME)
+}
+
+/// The whole of a frame's image: `[u0, v0, u1, v1]` of [`frame_rect_view_projection`].
+pub const FULL_FRAME: [f32; 4] = [0.0, 0.0, 1.0, 1.0];
+
+/// The orthographic camera of the part `rect` = `[u0, v0, u1, v1]` of the frame seen from
+/// `direction`: `u` runs along the frame's right and `v` down its up axis, 0 to 1 across the
+/// sphere (`u = dot(p − center, right) / 2r + ½`, `v = ½ − dot(p − center, up) / 2r`); depth
+/// runs across the sphere as in [`frame_view_projection`].
+pub fn frame_rect_view_projection(center: Vec3, radius: f32, direction: Vec3, rect: [f32; 4]) -> glam::Mat4 {
     let radius = radius.max(1e-6);
     // Looking at the centre with the frame's up, the camera's right is the frame's right.
     let (_, up) = frame_axes(direction);
     let view = glam::camera::rh::view::look_at_mat4(center + direction.normalize() * 2.0 * radius, center, up);
-    let projection =
-        glam::camera::rh::proj::directx::orthographic(-radius, radius, -radius, radius, radius, 3.0 * radius);
+    let [u0, v0, u1, v1] = rect;
+    let (left, right) = ((2.0 * u0 - 1.0) * radius, (2.0 * u1 - 1.0) * radius);
+    let (bottom, top) = ((1.0 - 2.0 * v1) * radius, (1.0 - 2.0 * v0) * radius);
+    let projection = glam::camera::rh::proj::directx::orthographic(left, right, bottom, top, radius, 3.0 * radius);
     projection * view
 }

@@ -326,6 +326,7 @@ fn impostor_ious(source: &cirrus::gpu::ViewMesh, grid: FrameGrid, frame_size: u3
         center,
         radius,
         alpha_cutoff: 0.5,
+        rects: frames.rects,
     };
     let light = cirrus::preview::preview_light();
     cirrus::preview::view_directions()
@@ -365,4 +366,64 @@ fn an_impostor_of_a_sphere_and_of_a_box_matches_its_source_from_every_preview_vi
     // depth; the hemi sphere at least 0.953, the box 0.951.)
     assert!(full.iter().all(|&iou| iou > 0.94), "full sphere: {full:?}");
     assert!(cube.iter().all(|&iou| iou > 0.95), "box: {cube:?}");
+}
+
+#[test]
+fn each_frame_shows_the_mesh_s_bounds_from_its_direction() {
+    // A pole 0.1 wide and 2 tall in a sphere of radius 1.5: seen from the side, its frame is
+    // the pole's width and height (over the sphere's 3), a texel and a half of margin each side;
+    // from above, its square section (widened to two texels of the whole image).
+    let settings =
+        cirrus::impostor::ImpostorSettings { grid: FrameGrid { frames: 3, sphere: Sphere::Full }, frame_size: 32 };
+    let mut corners = Vec::new();
+    for x in [-0.05, 0.05] {
+        for y in [-1.0, 1.0] {
+            for z in [-0.05, 0.05] {
+                corners.push(Vec3::new(x, y, z));
+            }
+        }
+    }
+    let rects = cirrus::impostor::frame_rects(&corners, (Vec3::ZERO, 1.5), settings);
+    assert_eq!(rects.len(), 9);
+    let expected = |width: f32, height: f32| {
+        // At least two texels of the whole image.
+        let side = |extent: f32| {
+            let extent = extent.max(2.0 / 32.0);
+            let margin = extent * 1.5 / 32.0;
+            [0.5 - extent / 2.0 - margin, 0.5 + extent / 2.0 + margin]
+        };
+        let ([u0, u1], [v0, v1]) = (side(width / 3.0), side(height / 3.0));
+        [u0, v0, u1, v1]
+    };
+    let close = |a: [f32; 4], b: [f32; 4]| a.iter().zip(b).all(|(a, b)| (a - b).abs() < 1e-5);
+    // Frame 4 looks from straight above (the full octahedron's centre); frame 1 (i = 1, j = 0)
+    // from the horizon along -Z, frame 3 along -X.
+    assert!(close(rects[4], expected(0.1, 0.1)), "from above: {:?}", rects[4]);
+    for frame in [1, 3] {
+        assert!(close(rects[frame], expected(0.1, 2.0)), "frame {frame}: {:?}", rects[frame]);
+    }
+    // No points: the whole image; points out to the sphere: clamped to it.
+    assert!(cirrus::impostor::frame_rects(&[], (Vec3::ZERO, 1.5), settings)
+        .iter()
+        .all(|rect| *rect == [0.0, 0.0, 1.0, 1.0]));
+    let far = [Vec3::new(-1.5, -1.5, -1.5), Vec3::new(1.5, 1.5, 1.5)];
+    assert!(cirrus::impostor::frame_rects(&far, (Vec3::ZERO, 1.5), settings)
+        .iter()
+        .all(|rect| *rect == [0.0, 0.0, 1.0, 1.0]));
+
+    // Baked, a pole 0.2 wide fills its side frames (the whole sphere's image would leave it 6 %
+    // of the texels), and its impostor keeps its silhouette: from every view but those between
+    // frames looking down its length, where three frames' tilted poles blend (ghosting).
+    let gpu = cirrus::gpu::gpu().expect("a GPU adapter (llvmpipe in CI)");
+    let pole = view_of(&box_obj([-0.1, -1.0, -0.1], [0.1, 1.0, 0.1], 1));
+    let grid = FrameGrid { frames: 9, sphere: Sphere::Full };
+    let settings = cirrus::impostor::ImpostorSettings { grid, frame_size: 32 };
+    let frames = cirrus::impostor::bake_impostor(gpu, &pole, (Vec3::ZERO, 1.5), settings).unwrap();
+    // Frame (4, 0) looks along -Z from the horizon.
+    let side = frame_texels(&frames.albedo, grid, 32, 4);
+    let covered = side.iter().filter(|texel| texel[3] > 127).count() as f64 / side.len() as f64;
+    assert!(covered > 0.7, "{covered} of the side frame covered");
+    let ious = impostor_ious(&pole, grid, 32);
+    let mean = ious.iter().sum::<f64>() / ious.len() as f64;
+    assert!(mean > 0.85 && ious.iter().all(|&iou| iou > 0.6), "pole: mean {mean}, {ious:?}");
 }

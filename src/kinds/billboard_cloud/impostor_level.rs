@@ -49,6 +49,11 @@ pub struct ImpostorDescription {
     pub albedo: String,
     pub normal: String,
     pub depth: String,
+    /// The part `[u0, v0, u1, v1]` of the sphere's image each frame shows (u along the frame's
+    /// right, v down its up axis, 0 to 1 across the sphere): the mesh's bounds from the frame's
+    /// direction, so the mesh fills the frame. Absent: every frame shows the whole sphere.
+    #[serde(default)]
+    pub frame_rects: Vec<[f32; 4]>,
 }
 
 impl ImpostorDescription {
@@ -166,6 +171,13 @@ pub(crate) fn impostor_level_outputs(
     let loaded = crate::kinds::mesh_queries::loaded_mesh(db, asset)?;
     let (center, radius) = super::planes::bounding_sphere(&loaded.mesh.positions);
     let side = impostor.grid.frames * impostor.frame_size;
+    let corners: Vec<glam::Vec3> = loaded
+        .mesh
+        .triangles
+        .iter()
+        .flat_map(|triangle| triangle.map(|corner| glam::Vec3::from(loaded.mesh.positions[corner as usize])))
+        .collect();
+    let frame_rects = crate::impostor::frame_rects(&corners, (center, radius), impostor);
     let first_file = outputs.files.len();
     let written = super::write_level_surfaces(db, asset, level, output_folder, (side, side), outputs)?;
     let (mut bytes, mut gpu_bytes) = (written.bytes, written.gpu_bytes);
@@ -182,6 +194,7 @@ pub(crate) fn impostor_level_outputs(
         albedo,
         normal,
         depth,
+        frame_rects,
     };
     let json = serde_json::to_vec_pretty(&description).expect("descriptions serialise");
     let quad = impostor_gltf(&description, [Some(albedo_png), Some(normal_png)]);
@@ -235,6 +248,19 @@ pub(crate) fn read_impostor_view(
             format!("{} frames a side: an impostor has 2 to {}", grid.frames, super::settings::MAX_IMPOSTOR_FRAMES),
         ));
     }
+    let rects = &description.frame_rects;
+    let inside = |rect: &[f32; 4]| {
+        rect.iter().all(|value| (0.0..=1.0).contains(value)) && rect[0] < rect[2] && rect[1] < rect[3]
+    };
+    if !rects.is_empty() && (rects.len() != grid.frame_count() as usize || !rects.iter().all(inside)) {
+        return Err(Diagnostic::new(
+            &path,
+            format!(
+                "`frame_rects` needs one [u0, v0, u1, v1] within 0..1 (u0 < u1, v0 < v1) for each of the {} frames",
+                grid.frame_count()
+            ),
+        ));
+    }
     let mut textures = Vec::new();
     for name in [&description.albedo, &description.normal, &description.depth] {
         if Path::new(name).components().count() != 1 {
@@ -260,5 +286,6 @@ pub(crate) fn read_impostor_view(
         center: description.center,
         radius: description.radius,
         alpha_cutoff: description.alpha_cutoff,
+        rects: description.frame_rects,
     })
 }

@@ -49,12 +49,14 @@ pub const LOD: Stage = Stage { name: "lod", version: 2 };
 /// names no asset (assets with the same mesh and budget share the entry).
 pub(crate) const REDUCE: Stage = Stage { name: "reduce", version: 2 };
 
-/// An impostor level's frames (`impostor::bake_impostor`), rendered on the GPU.
-pub(crate) const IMPOSTOR: Stage = Stage { name: "impostor", version: 1 };
+/// An impostor level's frames (`impostor::bake_impostor`), rendered on the GPU. 2: each frame
+/// shows the mesh's bounds from its direction (`impostor::frame_rects`), not the whole sphere.
+pub(crate) const IMPOSTOR: Stage = Stage { name: "impostor", version: 2 };
 
 /// A chain's switch sizes: every level rendered as an engine draws it beside the source, over
-/// the 26 views at each screen size of `preview::HOLD_SIZES` (`measure_chain`).
-pub(crate) const SWITCH: Stage = Stage { name: "switch", version: 1 };
+/// the 26 views at each screen size of `preview::HOLD_SIZES` (`measure_chain`). 2: a level is
+/// measured until it fails at two sizes in a row, not one.
+pub(crate) const SWITCH: Stage = Stage { name: "switch", version: 2 };
 
 /// The deviation (a fraction of the mesh's largest extent) up to which a reduced level's
 /// simplifier prefers stopping to reaching its budget.

@@ -438,7 +438,11 @@ fn follow_connection(
     let relative = |path: &str| -> Option<String> {
         let path = Path::new(path);
         let (parent, name) = (path.parent()?, path.file_name()?.to_string_lossy().into_owned());
-        if !["lod.obj", "lod.mtl", "albedo.ktx2", "normal.ktx2"].contains(&name.as_str()) {
+        // The meshes, an impostor's description, and the textures a level draws in any container.
+        let texture = name.split_once('.').is_some_and(|(stem, extension)| {
+            ["albedo", "normal", "height"].contains(&stem) && ["ktx2", "dds", "pvr"].contains(&extension)
+        });
+        if !texture && !["lod.obj", "lod.mtl", "impostor.json"].contains(&name.as_str()) {
             return None;
         }
         if folder.ends_with(parent) {

@@ -243,7 +243,8 @@ fn lcm(a: usize, b: usize) -> usize {
     a / gcd(a, b) * b
 }
 
-/// A KTX2 file read back: its block format and the block data of every level (level 0 first).
+/// A KTX2, DDS or PVR file read back: its block format and the block data of every level (level
+/// 0 first).
 #[derive(Clone, Debug, PartialEq)]
 pub struct Ktx2Texture {
     pub format: BlockFormat,
@@ -251,6 +252,55 @@ pub struct Ktx2Texture {
     pub width: u32,
     pub height: u32,
     pub levels: Vec<Vec<u8>>,
+}
+
+/// Reads a block-compressed texture in any container `write_container` writes (told apart by
+/// their first bytes): KTX2, DDS with its DX10 header, PVR v3.
+pub fn read_container(bytes: &[u8]) -> Result<Ktx2Texture, String> {
+    if bytes.starts_with(&KTX2_IDENTIFIER) {
+        return read_ktx2(bytes);
+    }
+    let u32_at = |offset: usize| {
+        bytes.get(offset..offset + 4).map(|b| u32::from_le_bytes(b.try_into().expect("4 bytes"))).ok_or("truncated")
+    };
+    let formats = [BlockFormat::Bc1, BlockFormat::Bc3, BlockFormat::Bc4, BlockFormat::Bc5, BlockFormat::Bc7]
+        .into_iter()
+        .flat_map(|format| [(format, false), (format, true)]);
+    let (format, srgb, width, height, level_count, data_start) = if bytes.starts_with(b"DDS ") {
+        if u32_at(84)? != u32::from_le_bytes(*b"DX10") {
+            return Err("a DDS file without the DX10 header".into());
+        }
+        let dxgi = u32_at(128)?;
+        let (format, srgb) = formats
+            .clone()
+            .find(|&(format, srgb)| dxgi_format(format, srgb) == dxgi)
+            .ok_or_else(|| format!("unsupported DXGI format {dxgi}"))?;
+        (format, srgb, u32_at(16)?, u32_at(12)?, u32_at(28)?.max(1), 148usize)
+    } else if u32_at(0) == Ok(PVR3_VERSION) {
+        let pixel_format = u64::from(u32_at(8)?) | (u64::from(u32_at(12)?) << 32);
+        let srgb = u32_at(16)? == 1;
+        let (format, _) = formats
+            .clone()
+            .find(|&(format, _)| pvr_format(format) == pixel_format)
+            .ok_or_else(|| format!("unsupported PVR pixel format {pixel_format}"))?;
+        (format, srgb, u32_at(28)?, u32_at(24)?, u32_at(44)?.max(1), 52usize + u32_at(48)? as usize)
+    } else {
+        return Err("not a KTX2, DDS or PVR file".into());
+    };
+    if width == 0 || height == 0 || width > 1 << 16 || height > 1 << 16 || level_count > 17 {
+        return Err(format!("{width}×{height} with {level_count} levels: not a texture cirrus writes"));
+    }
+    let block_bytes = if matches!(format, BlockFormat::Bc1 | BlockFormat::Bc4) { 8 } else { 16 };
+    let mut levels = Vec::with_capacity(level_count as usize);
+    let mut at = data_start;
+    for level in 0..level_count {
+        let (level_width, level_height) = ((width >> level).max(1), (height >> level).max(1));
+        let length = level_width.div_ceil(4) as usize * level_height.div_ceil(4) as usize * block_bytes;
+        let data = bytes.get(at..at + length).ok_or("a level lies outside the file")?;
+        levels.push(data.to_vec());
+        at += length;
+    }
+    Ok(Ktx2Texture { format, srgb, width, height, levels })
 }
 
 /// Reads a block-compressed KTX2 file as written by `write_container` (BC formats, one face and

@@ -267,7 +267,7 @@ pub(crate) fn read_impostor_view(
             return Err(Diagnostic::new(&path, format!("`{name}`: an impostor's textures lie beside its description")));
         }
         let (texture_path, bytes) = read(name)?;
-        let levels = super::lod_preview::decoded_ktx2_levels(&texture_path, &bytes)?;
+        let levels = super::lod_preview::decoded_texture_levels(&texture_path, &bytes)?;
         let side = grid.frames * description.frame_size;
         if levels.first().is_none_or(|level: &Texture| (level.width, level.height) != (side, side)) {
             return Err(Diagnostic::new(

@@ -68,14 +68,15 @@ pub fn stand_in_position(
 /// The files of a baked LOD, each with its path (for messages) and bytes.
 pub struct LodFiles {
     pub obj: (PathBuf, Vec<u8>),
+    /// The albedo and normal textures, in any container cirrus writes.
     pub albedo_ktx2: (PathBuf, Vec<u8>),
     pub normal_ktx2: (PathBuf, Vec<u8>),
     pub alpha_cutoff: f32,
 }
 
-/// The levels of a KTX2 texture (`path`, for messages), BC-decoded to RGBA8.
-pub(crate) fn decoded_ktx2_levels(path: &Path, bytes: &[u8]) -> Result<Vec<Texture>, Diagnostic> {
-    let ktx2 = crate::texture::container::read_ktx2(bytes).map_err(|error| Diagnostic::new(path, error))?;
+/// The levels of a KTX2, DDS or PVR texture (`path`, for messages), BC-decoded to RGBA8.
+pub(crate) fn decoded_texture_levels(path: &Path, bytes: &[u8]) -> Result<Vec<Texture>, Diagnostic> {
+    let ktx2 = crate::texture::container::read_container(bytes).map_err(|error| Diagnostic::new(path, error))?;
     Ok(ktx2
         .levels
         .iter()
@@ -93,7 +94,7 @@ pub fn lod_view_mesh(files: &LodFiles) -> Result<ViewMesh, Diagnostic> {
     let (obj_path, obj_bytes) = &files.obj;
     let folder = obj_path.parent().map(PathBuf::from).unwrap_or_default();
     let (mesh, _) = crate::mesh::load_mesh(obj_path, obj_bytes, &BTreeMap::new(), &folder)?;
-    let decode = |(path, bytes): &(PathBuf, Vec<u8>)| decoded_ktx2_levels(path, bytes);
+    let decode = |(path, bytes): &(PathBuf, Vec<u8>)| decoded_texture_levels(path, bytes);
     // BC5 holds X and Y only; the shader rebuilds Z from them.
     let normal = decode(&files.normal_ktx2)?
         .into_iter()

@@ -877,10 +877,17 @@ fn read_lod_view_mesh(
     }
     lod_preview::lod_view_mesh(&lod_preview::LodFiles {
         obj,
-        albedo_ktx2: read("albedo.ktx2")?,
-        normal_ktx2: read("normal.ktx2")?,
+        albedo_ktx2: read(&texture_file(files, folder, "albedo"))?,
+        normal_ktx2: read(&texture_file(files, folder, "normal"))?,
         alpha_cutoff,
     })
+}
+
+/// The name of the texture `stem` in `folder` of `files`, in whichever container the build
+/// wrote it (KTX2 when there is none, for the message).
+fn texture_file(files: &BakedFiles, folder: &Path, stem: &str) -> String {
+    let names = ["ktx2", "dds", "pvr"].map(|extension| format!("{stem}.{extension}"));
+    names.iter().find(|name| files.exists(&folder.join(name))).cloned().unwrap_or_else(|| names[0].clone())
 }
 
 /// The source's faces as `stand_in` draws them on the planes of `planes`.

@@ -253,3 +253,29 @@ fn a_chain_shows_each_level_below_its_switch_size_fading_in_over_the_band() {
     assert_eq!(shown(1.0), ShownLevels { level: 3, fading_into: None });
     assert_eq!(shown_levels(&[], 10.0), ShownLevels { level: 0, fading_into: None });
 }
+
+#[test]
+fn a_chain_in_dds_or_pvr_is_measured_and_previewed_as_in_ktx2() {
+    // Every level's textures read back from whichever container the build writes: the same
+    // blocks, so the same figures.
+    let chain = "[Quads(4), Impostor(frames: 4, hemi: false, size: 64)]";
+    let ktx2 = chain_project(chain);
+    build(&mut ktx2.open());
+    let measured = |project: &crate::support::TempProject| -> Vec<serde_json::Value> {
+        report_levels(project).iter().map(|level| level["measured"].clone()).collect()
+    };
+    for container in ["Dds", "Pvr"] {
+        let project = chain_project(chain);
+        let pipeline = String::from_utf8(project.read("pipeline.ron")).unwrap();
+        let pipeline =
+            pipeline.replace("atlas: (max_size", &format!("encode: (container: {container}), atlas: (max_size"));
+        std::fs::write(project.path("pipeline.ron"), pipeline).unwrap();
+        let summary = build(&mut project.open());
+        assert!(summary.all_ok(), "{container}: {}", summary.to_text());
+        let extension = container.to_lowercase();
+        assert!(project.path(&format!("baked/tree/lod0/albedo.{extension}")).is_file());
+        assert_eq!(measured(&project), measured(&ktx2), "{container}");
+        let output = project.run_cli(&["preview", "--asset", "tree", "--size", "32", "--views", "2"]);
+        assert_eq!(output.status.code(), Some(0), "{container}: {}", String::from_utf8_lossy(&output.stderr));
+    }
+}

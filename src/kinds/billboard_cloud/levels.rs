@@ -23,7 +23,7 @@ pub struct LevelSettings {
     pub impostor: Option<crate::impostor::ImpostorSettings>,
 }
 
-/// The levels an asset bakes: one per budget of its chain, else one.
+/// The levels of an asset's chain (one without a chain).
 pub fn level_count(settings: &Settings) -> u32 {
     settings.own::<Own>().billboard.lods.len().max(1) as u32
 }
@@ -33,23 +33,110 @@ pub(crate) fn is_chain(settings: &Settings) -> bool {
     !settings.own::<Own>().billboard.lods.is_empty()
 }
 
-/// What level `level` is asked for. A chain's level N halves level N − 1's screen size or texel
-/// density; with neither, its atlas's largest side is `max_size / 2^N` (at least 64 texels,
-/// a multiple of 4). Level 0, and the one level of an asset without a chain, take the settings
-/// as they are.
-pub(crate) fn settings_for(settings: &Settings, level: u32) -> LevelSettings {
+/// One thing an asset bakes (its queries' `level` argument is its index in [`slots`]): a level
+/// of its chain, or one candidate of an `Auto` level.
+#[derive(Clone, Debug, PartialEq)]
+pub struct Slot {
+    /// The chain's level it is (or is a candidate for).
+    pub level: u32,
+    /// What it bakes (never `Auto`); `None`: the asset's one level without a chain (`budget`).
+    pub bakes: Option<LodLevel>,
+    /// A candidate's largest atlas side (none: the chain's halving rule).
+    pub atlas_size: Option<u32>,
+    /// A candidate's name: its folder under `lod<N>/candidates/`.
+    pub candidate: Option<String>,
+}
+
+/// What an asset bakes: each level of its chain, an `Auto` level as its candidates
+/// ([`auto_candidates`]); one level without a chain.
+pub fn slots(settings: &Settings) -> Vec<Slot> {
+    let lods = &settings.own::<Own>().billboard.lods;
+    if lods.is_empty() {
+        return vec![Slot { level: 0, bakes: None, atlas_size: None, candidate: None }];
+    }
+    let mut slots = Vec::new();
+    for (level, &entry) in lods.iter().enumerate() {
+        match entry {
+            LodLevel::Auto { max_bytes } => slots.extend(auto_candidates(settings, level as u32, max_bytes)),
+            entry => slots.push(Slot { level: level as u32, bakes: Some(entry), atlas_size: None, candidate: None }),
+        }
+    }
+    slots
+}
+
+/// How many things an asset bakes ([`slots`]).
+pub fn slot_count(settings: &Settings) -> u32 {
+    slots(settings).len() as u32
+}
+
+/// The bytes on the GPU of a quad's vertex (position, normal, tangent, UV) and of its six
+/// indices, at most: what a candidate's mesh is budgeted at.
+const QUAD_MESH_BYTES: u64 = 4 * 48 + 6 * 4;
+
+/// The candidates of `level`, an `Auto` level of at most `max_bytes` on the GPU: billboard clouds
+/// of 16, 64 and 256 quads and full-sphere impostors of 8 and 12 frames a side, each with the
+/// largest power-of-two atlas (at least 64 texels, at most the asset's `max_size`; an impostor's
+/// frames at least 16 texels) whose surfaces with every mip, and its quads, fit. A candidate
+/// that fits at no size is left out.
+pub fn auto_candidates(settings: &Settings, level: u32, max_bytes: u64) -> Vec<Slot> {
+    use crate::texture::encode::gpu_bytes;
+    let max_size = settings.own::<Own>().atlas.max_size;
+    let encode = &settings.encode;
+    let surfaces_bytes = |surfaces: &[crate::texture::SurfaceKind], side: u32| -> u64 {
+        surfaces.iter().map(|&surface| gpu_bytes(side, side, Some(encode.format_of(surface)))).sum()
+    };
+    let sides = || (6..=13).rev().map(|power| 1u32 << power).filter(|&side| side <= max_size);
+    let mut candidates = Vec::new();
+    for quads in [16u32, 64, 256] {
+        let fits = |side: u32| {
+            surfaces_bytes(&crate::texture::SurfaceKind::BILLBOARD, side) + quads as u64 * QUAD_MESH_BYTES <= max_bytes
+        };
+        if let Some(side) = sides().find(|&side| fits(side)) {
+            candidates.push(Slot {
+                level,
+                bakes: Some(LodLevel::Quads(quads)),
+                atlas_size: Some(side),
+                candidate: Some(format!("quads{quads}")),
+            });
+        }
+    }
+    for frames in [8u32, 12] {
+        let fits = |side: u32| {
+            side / frames >= super::settings::MIN_IMPOSTOR_FRAME
+                && surfaces_bytes(&super::impostor_level::IMPOSTOR_SURFACES, side) + QUAD_MESH_BYTES <= max_bytes
+        };
+        if let Some(side) = sides().find(|&side| fits(side)) {
+            candidates.push(Slot {
+                level,
+                bakes: Some(LodLevel::Impostor { frames, hemi: false, size: side }),
+                atlas_size: Some(side),
+                candidate: Some(format!("impostor{frames}")),
+            });
+        }
+    }
+    candidates
+}
+
+/// What slot `slot` (of [`slots`]) is asked for. A chain's level N halves level N − 1's screen
+/// size or texel density; with neither, its atlas's largest side is `max_size / 2^N` (at least
+/// 64 texels, a multiple of 4), a candidate's its own. Level 0, and the one level of an asset
+/// without a chain, take the settings as they are.
+pub(crate) fn settings_for(settings: &Settings, slot: u32) -> LevelSettings {
     let billboard = &settings.own::<Own>().billboard;
-    let entry = billboard.lods.get(level as usize).copied();
+    let slot = slots(settings).into_iter().nth(slot as usize);
+    let (level, entry, atlas_size) = slot.map_or((0, None, None), |slot| (slot.level, slot.bakes, slot.atlas_size));
     let budget = match entry {
         Some(entry) => entry.cloud_budget(),
         None => billboard.budget,
     };
     let halvings = level.min(31);
     let max_size = settings.own::<Own>().atlas.max_size;
-    let max_atlas_size = if billboard.screen_size.is_none() && billboard.texel_density.is_none() {
-        ((max_size >> halvings).max(64.min(max_size))) & !3
-    } else {
-        max_size
+    let max_atlas_size = match atlas_size {
+        Some(side) => side,
+        None if billboard.screen_size.is_none() && billboard.texel_density.is_none() => {
+            ((max_size >> halvings).max(64.min(max_size))) & !3
+        }
+        None => max_size,
     };
     LevelSettings {
         planes: super::planes::PlaneSettings {
@@ -57,8 +144,12 @@ pub(crate) fn settings_for(settings: &Settings, level: u32) -> LevelSettings {
             max_planes: billboard.max_planes,
             max_quads: budget.map(crate::config::LodBudget::quads),
         },
-        texel_density: billboard.texel_density.map(|density| density / (1u64 << halvings) as f32),
-        screen_size: billboard.screen_size.map(|pixels| (pixels >> halvings).max(4)),
+        // A candidate's atlas is its own: the density fills it.
+        texel_density: billboard
+            .texel_density
+            .filter(|_| atlas_size.is_none())
+            .map(|density| density / (1u64 << halvings) as f32),
+        screen_size: billboard.screen_size.filter(|_| atlas_size.is_none()).map(|pixels| (pixels >> halvings).max(4)),
         max_atlas_size,
         reduced: match entry {
             Some(LodLevel::Reduced(triangles)) => Some(triangles),
@@ -100,13 +191,36 @@ pub(crate) fn level_atlas_settings(atlas: &PageSettings, level: &LevelSettings) 
     PageSettings { max_size: level.max_atlas_size, ..atlas.clone() }
 }
 
-/// The folder a level's files go to, inside the asset's: `lod<N>` in a chain, else none.
-pub fn level_folder(settings: &Settings, level: u32) -> String {
+/// The folder level `level` of the chain is written to, inside the asset's: `lod<N>` in a chain,
+/// else none.
+pub fn chain_folder(settings: &Settings, level: u32) -> String {
     if is_chain(settings) {
         format!("lod{level}")
     } else {
         String::new()
     }
+}
+
+/// The folder slot `slot`'s files go to, inside the asset's: its level's
+/// ([`chain_folder`]), or for a candidate `lod<N>/candidates/<name>`.
+pub fn level_folder(settings: &Settings, slot: u32) -> String {
+    match slots(settings).into_iter().nth(slot as usize) {
+        Some(Slot { level, candidate: Some(name), .. }) => format!("lod{level}/candidates/{name}"),
+        Some(Slot { level, .. }) => chain_folder(settings, level),
+        None => chain_folder(settings, slot),
+    }
+}
+
+/// The slot that bakes level `level` of the chain itself (none for an `Auto` level, whose
+/// candidates each have one).
+pub(crate) fn chain_slot(settings: &Settings, level: u32) -> Option<u32> {
+    let slots = slots(settings);
+    slots.iter().position(|slot| slot.level == level && slot.candidate.is_none()).map(|slot| slot as u32)
+}
+
+/// The slot whose folder is `folder` ([`level_folder`]).
+pub(crate) fn slot_of_folder(settings: &Settings, folder: &str) -> Option<u32> {
+    (0..slot_count(settings)).find(|&slot| level_folder(settings, slot) == folder)
 }
 
 /// The level of a chain folder name (`lod2` → 2); the asset's own folder is level 0.

@@ -65,10 +65,9 @@ fn atlas_surfaces(db: &dyn Db, asset: Asset, level: u32) -> Vec<SurfaceId> {
     kinds.iter().map(|&surface| SurfaceId { group: folder.clone(), surface }).collect()
 }
 
-/// The level a surface belongs to (its group is the level's folder).
+/// The slot a surface belongs to (its group is the slot's folder).
 fn level_of_surface(db: &dyn Db, asset: Asset, surface: &SurfaceId) -> Result<u32, Diagnostic> {
-    levels::level_of_folder(&surface.group)
-        .filter(|&level| level < levels::level_count(asset.settings(db)))
+    levels::slot_of_folder(asset.settings(db), &surface.group)
         .ok_or_else(|| Diagnostic::new(asset.main_file(db), format!("no LOD level `{}`", surface.group)))
 }
 
@@ -133,7 +132,7 @@ impl Kind for BillboardCloud {
     }
 
     fn first_jobs(db: &dyn Db, asset: Asset) -> Vec<Job> {
-        let levels = 0..levels::level_count(asset.settings(db));
+        let levels = 0..levels::slot_count(asset.settings(db));
         let mut jobs: Vec<Job> = levels
             .clone()
             .map(|level| Job {
@@ -222,7 +221,7 @@ impl Kind for BillboardCloud {
         // A chain's levels measured against the source: it reads the mesh and every level's
         // files, and writes the chain's documents.
         let mut switch = StageInstance::new(queries::SWITCH, asset.name(db), "lods").reads_stage(&mesh);
-        for level in 0..levels::level_count(asset.settings(db)) {
+        for level in 0..levels::slot_count(asset.settings(db)) {
             let folder = levels::level_folder(asset.settings(db), level);
             let label = level_label(db, asset, level);
             let instance = if folder.is_empty() { mesh_label.clone() } else { folder.clone() };
@@ -264,6 +263,9 @@ impl Kind for BillboardCloud {
         }
         if levels::is_chain(asset.settings(db)) {
             switch.writes = vec![output_folder.join("lods.gltf"), output_folder.join("lods.json"), report];
+            if !failed {
+                switch.writes.extend(chosen_copies(db, asset, output_folder));
+            }
             instances.push(switch);
         }
         instances.extend(decodes.into_values());
@@ -361,7 +363,7 @@ impl Kind for BillboardCloud {
             .map(|(level, metrics)| PreviewRow {
                 label: chain.then(|| format!("lod{level}")),
                 metrics,
-                folder: options.out.join(levels::level_folder(settings, level)),
+                folder: options.out.join(levels::chain_folder(settings, level)),
             })
             .collect();
         Ok(PreviewReport { rows, chain_sheet: several.then(|| options.out.join("contact_sheet.png")) })
@@ -492,7 +494,8 @@ fn read_decode(stage: &mut StageInstance, path: &Path, decodes: &mut BTreeMap<St
     });
 }
 
-/// The files of a baked billboard cloud: each level's LOD mesh, textures and previews, and the
+/// The files of a baked billboard cloud: each level's LOD mesh, textures and previews (an `Auto`
+/// level's candidates in its `candidates/`, the chosen one's also in the level's folder), and the
 /// report; a chain's `lods.gltf` and `lods.json` with the switch sizes measured on them.
 fn billboard_outputs(
     db: &dyn Db,
@@ -505,7 +508,7 @@ fn billboard_outputs(
     let name = asset.name(db);
     let mut outputs = AssetOutputs::default();
     let mut warnings = Vec::new();
-    let (mut level_reports, chain) = level_files(db, asset, output_folder, (&mut outputs, &mut warnings))?;
+    let (mut slot_reports, slot_meshes) = level_files(db, asset, output_folder, (&mut outputs, &mut warnings))?;
     let mut report = serde_json::json!({
         "asset": name,
         "kind": crate::config::AssetKind::BillboardCloud.name(),
@@ -516,10 +519,30 @@ fn billboard_outputs(
     let fields = report.as_object_mut().expect("an object");
     if levels::is_chain(settings) {
         let holds = queries::chain_holds(db, asset)?;
-        let switch_sizes = crate::preview::switch_sizes(&holds);
+        let chosen = (0..levels::level_count(settings))
+            .map(|level| chosen_slot(db, asset, level, (&slot_reports, &holds)))
+            .collect::<Result<Vec<u32>, Diagnostic>>()?;
+        let mut meshes: Vec<Option<ChainMesh>> = slot_meshes.into_iter().map(Some).collect();
+        let mut level_reports = Vec::new();
+        let mut chain = Vec::new();
+        let mut level_holds = Vec::new();
+        for (level, &slot) in chosen.iter().enumerate() {
+            let folder = levels::chain_folder(settings, level as u32);
+            let mut level_report = slot_reports[slot as usize].clone();
+            if let Some(auto) = auto_report(db, asset, level as u32, slot, (&slot_reports, &holds)) {
+                copy_candidate(&mut outputs, output_folder, &levels::level_folder(settings, slot), &folder, level);
+                level_report["folder"] = serde_json::json!(folder);
+                level_report["auto"] = auto;
+            }
+            let mesh = meshes[slot as usize].take().expect("each level's own slot");
+            chain.push(ChainLevel { folder, mesh });
+            level_reports.push(level_report);
+            level_holds.push(holds[slot as usize].clone());
+        }
+        let switch_sizes = crate::preview::switch_sizes(&level_holds);
         let (document, coverage) = chain_document(&chain, &switch_sizes);
         outputs.add(output_folder.join("lods.gltf"), ArtifactRole::Gltf, document.into());
-        for ((report, hold), &switch_size) in level_reports.iter_mut().zip(holds.iter()).zip(&switch_sizes) {
+        for ((report, hold), &switch_size) in level_reports.iter_mut().zip(&level_holds).zip(&switch_sizes) {
             if let serde_json::Value::Object(report) = report {
                 report.insert("switch_size".into(), serde_json::json!(switch_size));
                 report.insert("holds_to".into(), serde_json::json!(hold.holds_to));
@@ -533,7 +556,7 @@ fn billboard_outputs(
         // `lod_mesh::screen_coverage`), as `lods.gltf` states it.
         fields.insert("screen_coverage".into(), serde_json::json!(coverage));
         fields.insert("levels".into(), serde_json::Value::Array(level_reports));
-    } else if let Some(serde_json::Value::Object(level)) = level_reports.pop() {
+    } else if let Some(serde_json::Value::Object(level)) = slot_reports.pop() {
         // One level: its figures are the asset's.
         fields.extend(level.into_iter().filter(|(key, _)| key != "level" && key != "folder"));
     }
@@ -547,31 +570,176 @@ fn billboard_outputs(
     Ok(outputs)
 }
 
-/// Every level's files (added to `outputs` under `output_folder`, material warnings to
-/// `warnings`), each level's part of the report, and each one's mesh for the chain's document.
+/// The slot shown as level `level` of the chain: its own, or the `Auto` level's chosen
+/// candidate: among those whose bytes on the GPU fit, the one that holds to the largest screen
+/// size, then the one that loses least there, then the one with the fewest bytes.
+fn chosen_slot(
+    db: &dyn Db,
+    asset: Asset,
+    level: u32,
+    (reports, holds): (&[serde_json::Value], &[crate::preview::Hold]),
+) -> Result<u32, Diagnostic> {
+    let settings = asset.settings(db);
+    if let Some(slot) = levels::chain_slot(settings, level) {
+        return Ok(slot);
+    }
+    let max_bytes = auto_bytes(settings, level).unwrap_or(u64::MAX);
+    let slots = levels::slots(settings);
+    let fitting = (0..slots.len())
+        .filter(|&slot| slots[slot].level == level && !over_budget(db, asset, slot as u32, &reports[slot]));
+    let rank = |slot: &usize| {
+        let hold = &holds[*slot];
+        let at = hold.measured.iter().find(|figures| Some(figures.size) == hold.holds_to).or(hold.measured.first());
+        let loss = at.and_then(|figures| figures.loss_px_shift).unwrap_or(0.0);
+        (std::cmp::Reverse(hold.holds_to), ordered(loss), reports[*slot]["gpu_bytes"].as_u64(), *slot)
+    };
+    fitting.min_by_key(rank).map(|slot| slot as u32).ok_or_else(|| {
+        Diagnostic::new(
+            asset.main_file(db),
+            format!("lod{level}: no candidate fits in {max_bytes} bytes on the GPU (give Auto more bytes)"),
+        )
+    })
+}
+
+/// The bytes of level `level` when it is an `Auto` level.
+fn auto_bytes(settings: &crate::config::Settings, level: u32) -> Option<u64> {
+    match settings.own::<Own>().billboard.lods.get(level as usize) {
+        Some(&settings::LodLevel::Auto { max_bytes }) => Some(max_bytes),
+        _ => None,
+    }
+}
+
+/// Whether slot `slot` is a candidate whose bytes on the GPU (its `report`'s) pass its `Auto`
+/// level's.
+pub(crate) fn over_budget(db: &dyn Db, asset: Asset, slot: u32, report: &serde_json::Value) -> bool {
+    let settings = asset.settings(db);
+    let Some(spec) = levels::slots(settings).into_iter().nth(slot as usize).filter(|spec| spec.candidate.is_some())
+    else {
+        return false;
+    };
+    let max_bytes = auto_bytes(settings, spec.level).unwrap_or(u64::MAX);
+    report["gpu_bytes"].as_u64().is_none_or(|bytes| bytes > max_bytes)
+}
+
+/// A loss as an integer that orders as the loss does (in millionths of a px-shift unit).
+fn ordered(loss: f64) -> i64 {
+    (loss * 1e6).round() as i64
+}
+
+/// An `Auto` level's part of the report (none for another level): its bytes, the candidate
+/// chosen, and every candidate's bytes and figures.
+fn auto_report(
+    db: &dyn Db,
+    asset: Asset,
+    level: u32,
+    chosen: u32,
+    (reports, holds): (&[serde_json::Value], &[crate::preview::Hold]),
+) -> Option<serde_json::Value> {
+    let settings = asset.settings(db);
+    let Some(settings::LodLevel::Auto { max_bytes }) = settings.own::<Own>().billboard.lods.get(level as usize) else {
+        return None;
+    };
+    let slots = levels::slots(settings);
+    let candidates: Vec<serde_json::Value> = (0..slots.len())
+        .filter(|&slot| slots[slot].level == level)
+        .map(|slot| {
+            serde_json::json!({
+                "name": slots[slot].candidate,
+                "folder": levels::level_folder(settings, slot as u32),
+                "representation": reports[slot]["representation"],
+                "gpu_bytes": reports[slot]["gpu_bytes"],
+                "holds_to": holds[slot].holds_to,
+                "measured": holds[slot].measured,
+            })
+        })
+        .collect();
+    Some(serde_json::json!({
+        "max_bytes": max_bytes,
+        "chosen": slots[chosen as usize].candidate,
+        "candidates": candidates,
+    }))
+}
+
+/// The copies of the chosen candidates' files in their `Auto` levels' folders (`copy_candidate`):
+/// what the `switch` stage writes beside the chain's documents.
+fn chosen_copies(db: &dyn Db, asset: Asset, output_folder: &Path) -> Vec<PathBuf> {
+    let settings = asset.settings(db);
+    let mut outputs = AssetOutputs::default();
+    let auto_levels: Vec<u32> =
+        (0..levels::level_count(settings)).filter(|&level| auto_bytes(settings, level).is_some()).collect();
+    if auto_levels.is_empty() {
+        return Vec::new();
+    }
+    let (Ok((reports, _)), Ok(holds)) =
+        (level_files(db, asset, output_folder, (&mut outputs, &mut Vec::new())), queries::chain_holds(db, asset))
+    else {
+        return Vec::new();
+    };
+    let first_copy = outputs.files.len();
+    for level in auto_levels {
+        if let Ok(slot) = chosen_slot(db, asset, level, (&reports, &holds)) {
+            let (from, to) = (levels::level_folder(settings, slot), levels::chain_folder(settings, level));
+            copy_candidate(&mut outputs, output_folder, &from, &to, level as usize);
+        }
+    }
+    outputs.files.drain(first_copy..).map(|(path, _, _)| path).collect()
+}
+
+/// Adds copies of a chosen candidate's files (under `from`, inside `output_folder`) in its
+/// level's folder `to`, meaning that level.
+fn copy_candidate(outputs: &mut AssetOutputs, output_folder: &Path, from: &str, to: &str, level: usize) {
+    let (from, to) = (output_folder.join(from), output_folder.join(to));
+    let copies: Vec<(PathBuf, ArtifactRole, Arc<[u8]>)> = outputs
+        .files
+        .iter()
+        .filter_map(|(path, role, bytes)| {
+            let rest = path.strip_prefix(&from).ok()?;
+            Some((to.join(rest), *role, bytes.clone()))
+        })
+        .collect();
+    for (path, role, bytes) in copies {
+        outputs.meanings.insert(path.clone(), serde_json::json!({ "lod": level }));
+        outputs.add(path, role, bytes);
+    }
+}
+
+/// Every slot's files (added to `outputs` under `output_folder`, material warnings to
+/// `warnings`; meaning the chain's level, and for a candidate its name), each slot's part of the
+/// report, and each one's mesh for the chain's document.
 fn level_files(
     db: &dyn Db,
     asset: Asset,
     output_folder: &Path,
     (outputs, warnings): (&mut AssetOutputs, &mut Vec<Diagnostic>),
-) -> Result<(Vec<serde_json::Value>, Vec<ChainLevel>), Diagnostic> {
+) -> Result<(Vec<serde_json::Value>, Vec<ChainMesh>), Diagnostic> {
     let settings = asset.settings(db);
     let mut reports = Vec::new();
-    let mut chain = Vec::new();
-    for level in 0..levels::level_count(settings) {
-        let (report, mesh) = if levels::is_reduced(settings, level) {
-            let (report, mesh) = reduced::reduced_level_outputs(db, asset, level, output_folder, (outputs, warnings))?;
+    let mut meshes = Vec::new();
+    for (slot, spec) in levels::slots(settings).into_iter().enumerate() {
+        let (slot, first_file) = (slot as u32, outputs.files.len());
+        let (mut report, mesh) = if levels::is_reduced(settings, slot) {
+            let (report, mesh) = reduced::reduced_level_outputs(db, asset, slot, output_folder, (outputs, warnings))?;
             (report, ChainMesh::Reduced(mesh))
-        } else if levels::is_impostor(settings, level) {
-            let (report, quad) = impostor_level::impostor_level_outputs(db, asset, level, output_folder, outputs)?;
+        } else if levels::is_impostor(settings, slot) {
+            let (report, quad) = impostor_level::impostor_level_outputs(db, asset, slot, output_folder, outputs)?;
             (report, ChainMesh::Impostor(quad))
         } else {
-            level_outputs(db, asset, level, output_folder, outputs)?
+            level_outputs(db, asset, slot, output_folder, outputs)?
         };
-        chain.push(ChainLevel { folder: levels::level_folder(settings, level), mesh });
+        report["level"] = serde_json::json!(spec.level);
+        if levels::is_chain(settings) {
+            let meaning = match &spec.candidate {
+                Some(name) => serde_json::json!({ "lod": spec.level, "candidate": name }),
+                None => serde_json::json!({ "lod": spec.level }),
+            };
+            for (path, _, _) in &outputs.files[first_file..] {
+                outputs.meanings.insert(path.clone(), meaning.clone());
+            }
+        }
+        meshes.push(mesh);
         reports.push(report);
     }
-    Ok((reports, chain))
+    Ok((reports, meshes))
 }
 
 /// How far each of a chain's levels `measured` holds against its source (stage `switch`): the levels as an
@@ -806,11 +974,15 @@ pub fn preview_levels(
         .iter()
         .map(|&level| match options.stand_in {
             // Reduced and impostor levels have no planes to stand in on: they are shown as baked.
-            stand_in if stand_in == lod_preview::StandIn::Baked || !levels::is_cloud(settings, level) => {
-                read_level_view(&config.root, &folder.join(levels::level_folder(settings, level)), cutoff)
+            stand_in
+                if stand_in == lod_preview::StandIn::Baked
+                    || levels::chain_slot(settings, level).is_none_or(|slot| !levels::is_cloud(settings, slot)) =>
+            {
+                read_level_view(&config.root, &folder.join(levels::chain_folder(settings, level)), cutoff)
             }
             stand_in => {
-                let planes = queries::billboard_planes(db, input, level)?;
+                let slot = levels::chain_slot(settings, level).unwrap_or(level);
+                let planes = queries::billboard_planes(db, input, slot)?;
                 Ok(crate::gpu::LevelView::Mesh(crate::gpu::ViewMesh {
                     batches: faces_on_planes(&loaded, &planes, stand_in),
                     materials: source.materials.clone(),
@@ -827,7 +999,7 @@ pub fn preview_levels(
     let out = config.root.join(&options.out);
     let mut results = Vec::new();
     for (&level, level_preview) in chosen.iter().zip(preview.levels) {
-        crate::kinds::write_preview(&out.join(levels::level_folder(settings, level)), &level_preview)?;
+        crate::kinds::write_preview(&out.join(levels::chain_folder(settings, level)), &level_preview)?;
         results.push((level, level_preview.metrics));
     }
     if chosen.len() > 1 {

@@ -836,7 +836,7 @@ pub(crate) fn impostor_recipe_key(db: &dyn Db, asset: Asset, level: u32) -> Cach
 #[salsa::tracked(returns(clone))]
 pub(crate) fn chain_holds(db: &dyn Db, asset: Asset) -> Result<Arc<Vec<crate::preview::Hold>>, Diagnostic> {
     let mut files = crate::kinds::AssetOutputs::default();
-    super::level_files(db, asset, std::path::Path::new(""), (&mut files, &mut Vec::new()))?;
+    let (reports, _) = super::level_files(db, asset, std::path::Path::new(""), (&mut files, &mut Vec::new()))?;
     let mut source_key = stage_key(SWITCH)
         .part(crate::gpu::adapter_family())
         .part(&mesh_cache_key(db, asset, asset.main_file(db).clone()).0)
@@ -846,7 +846,7 @@ pub(crate) fn chain_holds(db: &dyn Db, asset: Asset) -> Result<Arc<Vec<crate::pr
     }
     let source_key = with_mesh_textures(db, asset, source_key);
     let settings = asset.settings(db);
-    let keys: Vec<CacheKey> = (0..super::levels::level_count(settings))
+    let keys: Vec<CacheKey> = (0..super::levels::slot_count(settings))
         .map(|level| {
             let folder = std::path::PathBuf::from(super::levels::level_folder(settings, level));
             let level_files = files.files.iter().filter(|(path, _, _)| path.starts_with(&folder));
@@ -861,6 +861,12 @@ pub(crate) fn chain_holds(db: &dyn Db, asset: Asset) -> Result<Arc<Vec<crate::pr
     let from_entry = |entry: CacheEntry| entry.parts::<crate::preview::Hold, 0>().map(|(hold, [])| hold);
     let mut holds: Vec<Option<crate::preview::Hold>> =
         keys.iter().map(|&key| load_cached(db, SWITCH.name, key, from_entry)).collect();
+    // A candidate over its level's bytes is never chosen: it is not measured.
+    for (slot, report) in reports.iter().enumerate() {
+        if super::over_budget(db, asset, slot as u32, report) {
+            holds[slot] = Some(crate::preview::Hold { measured: Vec::new(), holds_to: None });
+        }
+    }
     let missing: Vec<u32> = (0..holds.len() as u32).filter(|&level| holds[level as usize].is_none()).collect();
     if missing.is_empty() {
         record_cache_hit(db, SWITCH, label);

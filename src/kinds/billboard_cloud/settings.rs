@@ -63,7 +63,15 @@ pub enum LodLevel {
     /// half of the sphere (`hemi`) or all of it, in atlases of at most `size` texels a side;
     /// drawn as one camera-facing quad by `shaders/impostor.wgsl`.
     Impostor { frames: u32, hemi: bool, size: u32 },
+    /// The candidate that holds furthest among those whose bytes on the GPU fit `max_bytes`
+    /// (`levels::auto_candidates`: billboard clouds of 16, 64 and 256 quads and impostors of 8
+    /// and 12 frames, each with the largest atlas that fits), each baked and measured against
+    /// the source as the chain's levels are.
+    Auto { max_bytes: u64 },
 }
+
+/// The bounds of an `Auto` level's bytes.
+pub(crate) const AUTO_BYTES: std::ops::RangeInclusive<u64> = 32 * 1024..=1 << 30;
 
 /// The most frames a side an impostor may have.
 pub(crate) const MAX_IMPOSTOR_FRAMES: u32 = 32;
@@ -76,7 +84,7 @@ impl LodLevel {
         match self {
             LodLevel::Quads(quads) => Some(LodBudget::Quads(quads)),
             LodLevel::Triangles(triangles) => Some(LodBudget::Triangles(triangles)),
-            LodLevel::Reduced(_) | LodLevel::Impostor { .. } => None,
+            LodLevel::Reduced(_) | LodLevel::Impostor { .. } | LodLevel::Auto { .. } => None,
         }
     }
 
@@ -89,6 +97,7 @@ impl LodLevel {
             LodLevel::Reduced(TriangleBudget::Ratio(_)) => None,
             // One camera-facing quad.
             LodLevel::Impostor { .. } => Some(2),
+            LodLevel::Auto { .. } => None,
         }
     }
 
@@ -98,6 +107,7 @@ impl LodLevel {
             LodLevel::Impostor { frames, hemi, size } => {
                 format!("Impostor(frames: {frames}, hemi: {hemi}, size: {size})")
             }
+            LodLevel::Auto { max_bytes } => format!("Auto(max_bytes: {max_bytes})"),
             _ => ron::to_string(&self).unwrap_or_else(|_| format!("{self:?}")),
         }
     }
@@ -110,6 +120,7 @@ fn asks_for_less(previous: LodLevel, next: LodLevel) -> bool {
     match (previous, next) {
         // Two impostors (one quad each): the next one's atlas is smaller.
         (LodLevel::Impostor { size: previous, .. }, LodLevel::Impostor { size: next, .. }) => next < previous,
+        (LodLevel::Auto { max_bytes: previous }, LodLevel::Auto { max_bytes: next }) => next < previous,
         (LodLevel::Reduced(TriangleBudget::Ratio(previous)), LodLevel::Reduced(TriangleBudget::Ratio(next))) => {
             next < previous
         }
@@ -137,6 +148,12 @@ fn level_problem(level: LodLevel) -> Option<String> {
         LodLevel::Impostor { size, .. } if !(64..=8192).contains(&size) => {
             Some(format!("{}: an impostor's atlas is 64 to 8192 texels a side", level.written()))
         }
+        LodLevel::Auto { max_bytes } if !AUTO_BYTES.contains(&max_bytes) => Some(format!(
+            "{}: an automatic level's bytes are {} to {}",
+            level.written(),
+            AUTO_BYTES.start(),
+            AUTO_BYTES.end()
+        )),
         LodLevel::Impostor { frames, size, .. } if size / frames < MIN_IMPOSTOR_FRAME => Some(format!(
             "{}: {frames} frames a side leave {} texels a frame in {size}; give each at least \
             {MIN_IMPOSTOR_FRAME} (fewer frames or a larger size)",
@@ -252,7 +269,8 @@ pub(crate) fn merge_billboard(
                 anchor,
                 &format!(
                     "a LOD chain goes from the most detailed level to the least: each level must draw fewer \
-                    triangles than the one before, an impostor after an impostor a smaller atlas ({})",
+                    triangles than the one before, an impostor after an impostor a smaller atlas, an automatic \
+                    level after an automatic one fewer bytes ({})",
                     written.join(", ")
                 ),
             );

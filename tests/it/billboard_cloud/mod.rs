@@ -9,6 +9,7 @@ pub mod chain;
 mod reduced_level;
 mod impostor_level;
 mod switch;
+mod auto;
 mod distance_alpha;
 mod layout;
 mod planes;

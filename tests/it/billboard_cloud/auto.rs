@@ -1,0 +1,134 @@
+//! Chains that choose (`lods: [Auto(max_bytes: 262144), Auto(max_bytes: 65536)]`): each level's
+//! candidates (billboard clouds of 16, 64 and 256 quads, impostors of 8 and 12 frames, each with
+//! the largest atlas its bytes allow) baked into `lod<N>/candidates/`, measured against the
+//! source, the one that holds furthest within the bytes copied into `lod<N>/`; the same choice
+//! from a clean bake; a bark edit re-renders only bark, in every candidate.
+
+use std::collections::BTreeSet;
+
+use crate::billboard_cloud::chain::chain_project;
+use crate::support::{build, pattern_png};
+
+const CHAIN: &str = "[Auto(max_bytes: 262144), Auto(max_bytes: 65536)]";
+const BYTES: [u64; 2] = [262144, 65536];
+
+fn report(project: &crate::support::TempProject) -> serde_json::Value {
+    serde_json::from_slice(&project.read("baked/tree/report.json")).unwrap()
+}
+
+/// The candidate the rule picks from a level's report: within the bytes, the one that holds to
+/// the largest size, then the least loss there, then the fewest bytes.
+fn best_candidate(auto: &serde_json::Value, max_bytes: u64) -> String {
+    let candidates = auto["candidates"].as_array().unwrap();
+    let rank = |candidate: &&serde_json::Value| {
+        let holds_to = candidate["holds_to"].as_u64();
+        let measured = candidate["measured"].as_array().unwrap();
+        let at = measured.iter().find(|figures| figures["size"].as_u64() == holds_to).or(measured.first());
+        let loss = at.and_then(|figures| figures["loss_px_shift"].as_f64()).unwrap_or(0.0);
+        (std::cmp::Reverse(holds_to), (loss * 1e6).round() as i64, candidate["gpu_bytes"].as_u64())
+    };
+    let fitting = candidates.iter().filter(|candidate| candidate["gpu_bytes"].as_u64().unwrap() <= max_bytes);
+    fitting.min_by_key(rank).unwrap()["name"].as_str().unwrap().to_string()
+}
+
+#[test]
+fn an_auto_level_keeps_the_candidate_that_holds_furthest_within_its_bytes() {
+    let project = chain_project(CHAIN);
+    let mut cirrus = project.open();
+    let summary = build(&mut cirrus);
+    assert!(summary.all_ok(), "{}", summary.to_text());
+    let executed = cirrus.take_executed_stages();
+    assert_eq!(executed.iter().filter(|run| *run == "mesh(tree)").count(), 1, "one mesh stage: {executed:?}");
+
+    let built = report(&project);
+    let levels = built["levels"].as_array().unwrap();
+    assert_eq!(levels.len(), 2);
+    let manifest: serde_json::Value = serde_json::from_slice(&project.read("baked/manifest.json")).unwrap();
+    for (level, (entry, max_bytes)) in levels.iter().zip(BYTES).enumerate() {
+        let auto = &entry["auto"];
+        assert_eq!(auto["max_bytes"], max_bytes);
+        let candidates = auto["candidates"].as_array().unwrap();
+        let names: Vec<&str> = candidates.iter().map(|candidate| candidate["name"].as_str().unwrap()).collect();
+        assert!(names.contains(&"quads16") && names.iter().any(|name| name.starts_with("impostor")), "{names:?}");
+        // Each candidate baked in its own folder, with its bytes on the GPU as the level reports
+        // them; those over the bytes are not measured.
+        for candidate in candidates {
+            let folder = candidate["folder"].as_str().unwrap();
+            assert_eq!(folder, format!("lod{level}/candidates/{}", candidate["name"].as_str().unwrap()));
+            assert!(project.path(&format!("baked/tree/{folder}/lod.gltf")).is_file(), "{folder}");
+            let over = candidate["gpu_bytes"].as_u64().unwrap() > max_bytes;
+            assert_eq!(candidate["measured"].as_array().unwrap().is_empty(), over, "{candidate}");
+            assert_eq!(
+                manifest["artifacts"][&format!("baked/tree/{folder}/lod.gltf")]["meaning"],
+                serde_json::json!({ "lod": level, "candidate": candidate["name"] })
+            );
+        }
+        // The chosen one is the rule's, within the bytes, and its files are the level's.
+        let chosen = auto["chosen"].as_str().unwrap();
+        assert_eq!(chosen, best_candidate(auto, max_bytes), "lod{level}");
+        assert!(entry["gpu_bytes"].as_u64().unwrap() <= max_bytes, "{entry}");
+        let chosen_entry = candidates.iter().find(|candidate| candidate["name"] == chosen).unwrap();
+        assert_eq!(entry["gpu_bytes"], chosen_entry["gpu_bytes"]);
+        assert_eq!(entry["holds_to"], chosen_entry["holds_to"]);
+        assert_eq!(entry["folder"], format!("lod{level}"));
+        for file in ["lod.gltf", "lod.bin", "albedo.ktx2", "normal.ktx2"] {
+            let (shown, candidate) =
+                (format!("baked/tree/lod{level}/{file}"), format!("baked/tree/lod{level}/candidates/{chosen}/{file}"));
+            assert_eq!(project.read(&shown), project.read(&candidate), "{shown}");
+            assert_eq!(manifest["artifacts"][&shown]["meaning"], serde_json::json!({ "lod": level }));
+        }
+    }
+    // Engines see the chosen levels.
+    let lods: serde_json::Value = serde_json::from_slice(&project.read("baked/tree/lods.json")).unwrap();
+    for (entry, level) in lods["levels"].as_array().unwrap().iter().zip(levels) {
+        assert_eq!(entry["representation"], level["representation"]);
+        assert_eq!(entry["gpu_bytes"], level["gpu_bytes"]);
+    }
+    let lines = crate::support::headless_viewer_lines(&project, "baked/tree", &["--size", "64", "--press", "1"]);
+    assert!(lines[1].starts_with("showing lod1: lod1 of 2, "), "{lines:?}");
+
+    // A clean bake chooses the same, and measures the same.
+    let again = chain_project(CHAIN);
+    build(&mut again.open());
+    assert_eq!(again.read("baked/tree/lods.json"), project.read("baked/tree/lods.json"));
+    let rebuilt = report(&again);
+    for (level, entry) in levels.iter().enumerate() {
+        assert_eq!(rebuilt["levels"][level]["auto"], entry["auto"]);
+    }
+}
+
+#[test]
+fn a_bark_edit_rerenders_only_the_bark_of_every_candidate_and_a_restart_nothing() {
+    let project = chain_project(CHAIN);
+    let mut cirrus = project.open();
+    build(&mut cirrus);
+    cirrus.take_executed_stages();
+    let graph = cirrus.graph();
+    let reading = |texture: &str| -> BTreeSet<String> {
+        let decode = format!("decode({texture})");
+        graph
+            .edges
+            .iter()
+            .filter(|edge| edge.from == decode && edge.to.starts_with("render("))
+            .map(|edge| edge.to.clone())
+            .collect()
+    };
+    let (bark, leaves) = (reading("assets/bark.png"), reading("assets/leaf.png"));
+    assert!(bark.iter().any(|render| render.contains("lod1/candidates/")), "{bark:?}");
+    assert!(!leaves.is_subset(&bark), "some renders show leaves alone");
+
+    project.write("assets/bark.png", pattern_png(32, 32, 7));
+    let summary = build(&mut cirrus);
+    assert!(summary.all_ok(), "{}", summary.to_text());
+    let executed: BTreeSet<String> = cirrus.take_executed_stages().into_iter().collect();
+    let renders: BTreeSet<String> = executed.iter().filter(|run| run.starts_with("render(")).cloned().collect();
+    assert_eq!(renders, bark, "the bark's renders, in every candidate of every level");
+    // The impostors show the bark too: every one is baked again, and the chain measured again.
+    assert!(executed.iter().any(|run| run.starts_with("impostor(tree/lod0/candidates/")), "{executed:?}");
+    assert!(executed.contains("switch(tree)"));
+
+    let mut restarted = project.open();
+    let summary = build(&mut restarted);
+    assert!(summary.all_ok(), "{}", summary.to_text());
+    assert_eq!(restarted.take_executed_stages(), Vec::<String>::new());
+}

@@ -178,7 +178,6 @@ pub(crate) fn impostor_level_outputs(
         .flat_map(|triangle| triangle.map(|corner| glam::Vec3::from(loaded.mesh.positions[corner as usize])))
         .collect();
     let frame_rects = crate::impostor::frame_rects(&corners, (center, radius), impostor);
-    let first_file = outputs.files.len();
     let written = super::write_level_surfaces(db, asset, level, output_folder, (side, side), outputs)?;
     let (mut bytes, mut gpu_bytes) = (written.bytes, written.gpu_bytes);
     let name = |index: usize| written.names.get(index).cloned().unwrap_or_default();
@@ -204,9 +203,6 @@ pub(crate) fn impostor_level_outputs(
     outputs.add(level_folder.join("impostor.json"), ArtifactRole::Table, json.into());
     outputs.add(level_folder.join("lod.gltf"), ArtifactRole::Gltf, gltf.gltf.into());
     outputs.add(level_folder.join("lod.bin"), ArtifactRole::GltfBuffer, gltf.bin.into());
-    for (path, _, _) in &outputs.files[first_file..] {
-        outputs.meanings.insert(path.clone(), serde_json::json!({ "lod": level }));
-    }
     let report = serde_json::json!({
         "level": level,
         "folder": folder,

@@ -727,6 +727,7 @@ fn level_files(
             level_outputs(db, asset, slot, output_folder, outputs)?
         };
         report["level"] = serde_json::json!(spec.level);
+        // The manifest and the hot-reload batches name each file's level.
         if levels::is_chain(settings) {
             let meaning = match &spec.candidate {
                 Some(name) => serde_json::json!({ "lod": spec.level, "candidate": name }),
@@ -853,7 +854,6 @@ fn level_outputs(
     let planes = billboard_planes(db, asset, level)?;
     let layout = billboard_layout(db, asset, level)?;
     let level_folder = output_folder.join(&folder);
-    let first_file = outputs.files.len();
     let mut bytes = obj.len() + mtl.len();
     outputs.add(level_folder.join("lod.obj"), ArtifactRole::Mesh, obj.into_bytes().into());
     outputs.add(level_folder.join("lod.mtl"), ArtifactRole::Mtl, mtl.into_bytes().into());
@@ -867,12 +867,6 @@ fn level_outputs(
     bytes += written.bytes;
     gpu_bytes += written.gpu_bytes;
     let surfaces = written.infos;
-    if levels::is_chain(settings) {
-        // The manifest and the hot-reload batches name each file's level.
-        for (path, _, _) in &outputs.files[first_file..] {
-            outputs.meanings.insert(path.clone(), serde_json::json!({ "lod": level }));
-        }
-    }
     let atlas_coverage = queries::atlas_coverage_fraction(db, asset, level)?;
     let chain = lod_mesh::lod_gltf_mesh(&layout.rectangles, &layout.layout, queries::billboard_alpha_cutoff(db, asset));
     let report = serde_json::json!({

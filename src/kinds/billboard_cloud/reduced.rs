@@ -72,7 +72,6 @@ pub(crate) fn reduced_level_outputs(
     let level_folder = output_folder.join(&folder);
     let loaded = loaded_mesh(db, asset)?;
     let reduced = reduced_level(db, asset, level)?;
-    let first_file = outputs.files.len();
     let places = MaterialPlaces { source: asset.main_file(db), mtl_folder: &level_folder, gltf_folder: &level_folder };
     let written = written_materials(
         db,
@@ -102,10 +101,6 @@ pub(crate) fn reduced_level_outputs(
     outputs.add(level_folder.join("lod.mtl"), ArtifactRole::Mtl, mtl.into());
     outputs.add(level_folder.join("lod.gltf"), ArtifactRole::Gltf, gltf.gltf.into());
     outputs.add(level_folder.join("lod.bin"), ArtifactRole::GltfBuffer, gltf.bin.into());
-    // The manifest and the hot-reload batches name each file's level.
-    for (path, _, _) in &outputs.files[first_file..] {
-        outputs.meanings.insert(path.clone(), serde_json::json!({ "lod": level }));
-    }
     let figures = &reduced.figures;
     let budget = match levels::settings_for(settings, level).reduced {
         Some(crate::mesh::reduce::TriangleBudget::Triangles(count)) => serde_json::json!({ "triangles": count }),

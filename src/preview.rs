@@ -207,7 +207,7 @@ pub struct SizeFigures {
 }
 
 /// How far up the screen sizes a LOD holds against its source: its figures at each size
-/// measured (smallest first, up to the second size in a row at which it loses more than
+/// measured (smallest first, up to the first size after the smallest at which it loses more than
 /// [`HOLD_LOSS`]), and the largest size at which it held (`None`: at none).
 #[derive(Clone, Debug, PartialEq, Serialize, serde::Deserialize)]
 pub struct Hold {
@@ -215,15 +215,11 @@ pub struct Hold {
     pub holds_to: Option<u32>,
 }
 
-/// How many sizes in a row a LOD may fail at before it is measured no further. The loss grows
-/// with the size (a pixel gets smaller against the same world error), but not at every step: at
-/// 16 px a pixel is a sixteenth of the object, and a corpus impostor lost 1.01 units there and
-/// 0.4 at 32 and 64 px.
-const FAILURES_IN_A_ROW: usize = 2;
-
 /// How far each of `lods` holds against `source` over `sizes` (smallest first): every size
-/// renders the 26 views of the source once and of each LOD still measured, which is every LOD
-/// until it has failed at [`FAILURES_IN_A_ROW`] sizes in a row.
+/// renders the 26 views of the source once and of each LOD still measured. The loss grows with
+/// the size (a pixel gets smaller against the same world error), so a LOD is measured no further
+/// once it fails, except at the smallest size: at 16 px a pixel is a sixteenth of the object,
+/// and corpus impostors lost 1.00–1.01 units there and 0.4 at 32 and 64 px.
 pub fn holds(
     gpu: &Gpu,
     source: &ViewMesh,
@@ -233,9 +229,9 @@ pub fn holds(
     samples_per_axis: u32,
 ) -> Result<Vec<Hold>, GpuError> {
     let mut holds: Vec<Hold> = lods.iter().map(|_| Hold { measured: Vec::new(), holds_to: None }).collect();
-    let mut failures = vec![0usize; lods.len()];
-    for &size in sizes {
-        let measured: Vec<usize> = (0..lods.len()).filter(|&index| failures[index] < FAILURES_IN_A_ROW).collect();
+    let mut stopped = vec![false; lods.len()];
+    for (step, &size) in sizes.iter().enumerate() {
+        let measured: Vec<usize> = (0..lods.len()).filter(|&index| !stopped[index]).collect();
         if measured.is_empty() {
             break;
         }
@@ -252,9 +248,8 @@ pub fn holds(
             });
             if held {
                 holds[index].holds_to = Some(size);
-                failures[index] = 0;
-            } else {
-                failures[index] += 1;
+            } else if step > 0 {
+                stopped[index] = true;
             }
         }
     }

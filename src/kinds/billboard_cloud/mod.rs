@@ -573,7 +573,7 @@ fn billboard_outputs(
 /// The slot shown as level `level` of the chain: its own, or the `Auto` level's chosen
 /// candidate: among those whose bytes on the GPU fit, the one that holds to the largest screen
 /// size, then the one that loses least there, then the one with the fewest bytes.
-fn chosen_slot(
+pub(crate) fn chosen_slot(
     db: &dyn Db,
     asset: Asset,
     level: u32,
@@ -743,14 +743,15 @@ fn level_files(
     Ok((reports, meshes))
 }
 
-/// How far each of a chain's levels `measured` holds against its source (stage `switch`): the levels as an
+/// How far each of a chain's slots `measured` holds against its source (stage `switch`): as an
 /// engine draws them, read from the build's `files` (`level_files` under an empty folder), over
-/// the 26 views at each of `preview::HOLD_SIZES`.
+/// the 26 views at each of `sizes` (`preview::HOLD_SIZES` up to a cap).
 pub(crate) fn measure_chain(
     db: &dyn Db,
     asset: Asset,
     files: &AssetOutputs,
     measured: &[u32],
+    sizes: &[u32],
 ) -> Result<Vec<crate::preview::Hold>, Diagnostic> {
     let settings = asset.settings(db);
     let cutoff = settings.own::<Own>().billboard.alpha_cutoff;
@@ -765,8 +766,7 @@ pub(crate) fn measure_chain(
     let main_file = asset.main_file(db);
     let gpu = crate::gpu::gpu().map_err(|error| Diagnostic::new(main_file, error.to_string()))?;
     let views: Vec<&crate::gpu::LevelView> = views.iter().collect();
-    let sizes = crate::preview::HOLD_SIZES;
-    crate::preview::holds(gpu, &source, &views, (center.to_array(), radius), &sizes, SWITCH_SAMPLES_PER_AXIS)
+    crate::preview::holds(gpu, &source, &views, (center.to_array(), radius), sizes, SWITCH_SAMPLES_PER_AXIS)
         .map_err(|error| Diagnostic::new(main_file, format!("measuring the chain: {error}")))
 }
 

@@ -828,54 +828,61 @@ pub(crate) fn impostor_recipe_key(db: &dyn Db, asset: Asset, level: u32) -> Cach
     with_mesh_textures(db, asset, key)
 }
 
-/// How far each level of a chain holds against the source (stage `switch`, `measure_chain`).
-/// Each level's figures are kept in the persistent cache under the hash of every file it writes
-/// (as engines draw it), the source's mesh and textures, the cutoff, the sizes and the GPU
-/// family; the levels missing from it are measured together (the source rendered once per view
-/// and size), so an edit to one level measures that level alone.
+/// How far each level of a chain holds against the source (stage `switch`, `measure_chain`),
+/// level by level: a level is measured only up to the level before's switch size (it is never
+/// shown larger), so each level's sizes wait for the level before's choice. Each slot's figures
+/// are kept in the persistent cache under the hash of every file it writes (as engines draw it),
+/// the source's mesh and textures, the cutoff, the sizes measured and the GPU family; a level's
+/// slots missing from it are measured together (the source rendered once per view and size), so
+/// an edit measures again only the levels it changed and those whose sizes it changed.
 #[salsa::tracked(returns(clone))]
 pub(crate) fn chain_holds(db: &dyn Db, asset: Asset) -> Result<Arc<Vec<crate::preview::Hold>>, Diagnostic> {
     let mut files = crate::kinds::AssetOutputs::default();
     let (reports, _) = super::level_files(db, asset, std::path::Path::new(""), (&mut files, &mut Vec::new()))?;
-    let mut source_key = stage_key(SWITCH)
+    let source_key = stage_key(SWITCH)
         .part(crate::gpu::adapter_family())
         .part(&mesh_cache_key(db, asset, asset.main_file(db).clone()).0)
         .part(&billboard_alpha_cutoff(db, asset));
-    for size in crate::preview::HOLD_SIZES {
-        source_key = source_key.part(&size);
-    }
     let source_key = with_mesh_textures(db, asset, source_key);
     let settings = asset.settings(db);
-    let keys: Vec<CacheKey> = (0..super::levels::slot_count(settings))
-        .map(|level| {
-            let folder = std::path::PathBuf::from(super::levels::level_folder(settings, level));
-            let level_files = files.files.iter().filter(|(path, _, _)| path.starts_with(&folder));
-            level_files
-                .fold(stage_key(SWITCH).part(&source_key.0), |key, (path, _, bytes)| {
-                    key.part(path).part(&blake3::hash(bytes))
-                })
-                .finish()
-        })
-        .collect();
+    let slots = super::levels::slots(settings);
+    let slot_key = |slot: usize, sizes: &[u32]| {
+        let folder = std::path::PathBuf::from(super::levels::level_folder(settings, slot as u32));
+        let slot_files = files.files.iter().filter(|(path, _, _)| path.starts_with(&folder));
+        let key = sizes.iter().fold(stage_key(SWITCH).part(&source_key.0), |key, size| key.part(size));
+        slot_files.fold(key, |key, (path, _, bytes)| key.part(path).part(&blake3::hash(bytes))).finish()
+    };
     let label = asset.name(db);
     let from_entry = |entry: CacheEntry| entry.parts::<crate::preview::Hold, 0>().map(|(hold, [])| hold);
-    let mut holds: Vec<Option<crate::preview::Hold>> =
-        keys.iter().map(|&key| load_cached(db, SWITCH.name, key, from_entry)).collect();
-    // A candidate over its level's bytes is never chosen: it is not measured.
-    for (slot, report) in reports.iter().enumerate() {
-        if super::over_budget(db, asset, slot as u32, report) {
-            holds[slot] = Some(crate::preview::Hold { measured: Vec::new(), holds_to: None });
+    let unmeasured = || crate::preview::Hold { measured: Vec::new(), holds_to: None };
+    let mut holds: Vec<crate::preview::Hold> = slots.iter().map(|_| unmeasured()).collect();
+    let (mut ran, mut shown_up_to) = (false, u32::MAX);
+    for level in 0..super::levels::level_count(settings) {
+        let sizes: Vec<u32> = crate::preview::HOLD_SIZES.into_iter().filter(|&size| size <= shown_up_to).collect();
+        let mut missing = Vec::new();
+        // A candidate over its level's bytes is never chosen: it is not measured; nor is a level
+        // after one that is never shown.
+        let level_slots = (0..slots.len()).filter(|&slot| slots[slot].level == level && !sizes.is_empty());
+        for slot in level_slots.filter(|&slot| !super::over_budget(db, asset, slot as u32, &reports[slot])) {
+            match load_cached(db, SWITCH.name, slot_key(slot, &sizes), from_entry) {
+                Some(hold) => holds[slot] = hold,
+                None => missing.push(slot as u32),
+            }
         }
+        if !missing.is_empty() {
+            ran = true;
+            let measured = timed(db, SWITCH, label, || super::measure_chain(db, asset, &files, &missing, &sizes))?;
+            for (slot, hold) in missing.into_iter().zip(measured) {
+                let key = slot_key(slot as usize, &sizes);
+                crate::db::store_cached(db, SWITCH.name, key, || CacheEntry::new(&hold, Vec::new(), true));
+                holds[slot as usize] = hold;
+            }
+        }
+        let chosen = super::chosen_slot(db, asset, level, (&reports, &holds))?;
+        shown_up_to = holds[chosen as usize].holds_to.unwrap_or(0).min(shown_up_to);
     }
-    let missing: Vec<u32> = (0..holds.len() as u32).filter(|&level| holds[level as usize].is_none()).collect();
-    if missing.is_empty() {
+    if !ran {
         record_cache_hit(db, SWITCH, label);
-    } else {
-        let measured = timed(db, SWITCH, label, || super::measure_chain(db, asset, &files, &missing))?;
-        for (level, hold) in missing.into_iter().zip(measured) {
-            crate::db::store_cached(db, SWITCH.name, keys[level as usize], || CacheEntry::new(&hold, Vec::new(), true));
-            holds[level as usize] = Some(hold);
-        }
     }
-    Ok(Arc::new(holds.into_iter().flatten().collect()))
+    Ok(Arc::new(holds))
 }

@@ -56,8 +56,9 @@ fn an_auto_level_keeps_the_candidate_that_holds_furthest_within_its_bytes() {
             let folder = candidate["folder"].as_str().unwrap();
             assert_eq!(folder, format!("lod{level}/candidates/{}", candidate["name"].as_str().unwrap()));
             assert!(project.path(&format!("baked/tree/{folder}/lod.gltf")).is_file(), "{folder}");
-            let over = candidate["gpu_bytes"].as_u64().unwrap() > max_bytes;
-            assert_eq!(candidate["measured"].as_array().unwrap().is_empty(), over, "{candidate}");
+            if candidate["gpu_bytes"].as_u64().unwrap() > max_bytes {
+                assert!(candidate["measured"].as_array().unwrap().is_empty(), "{candidate}");
+            }
             assert_eq!(
                 manifest["artifacts"][&format!("baked/tree/{folder}/lod.gltf")]["meaning"],
                 serde_json::json!({ "lod": level, "candidate": candidate["name"] })

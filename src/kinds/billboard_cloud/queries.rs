@@ -863,7 +863,9 @@ pub(crate) fn chain_holds(db: &dyn Db, asset: Asset) -> Result<Arc<Vec<crate::pr
         // A candidate over its level's bytes is never chosen: it is not measured; nor is a level
         // after one that is never shown.
         let level_slots = (0..slots.len()).filter(|&slot| slots[slot].level == level && !sizes.is_empty());
-        for slot in level_slots.filter(|&slot| !super::over_budget(db, asset, slot as u32, &reports[slot])) {
+        for slot in
+            level_slots.filter(|&slot| !super::chain_outputs::over_budget(db, asset, slot as u32, &reports[slot]))
+        {
             match load_cached(db, SWITCH.name, slot_key(slot, &sizes), from_entry) {
                 Some(hold) => holds[slot] = hold,
                 None => missing.push(slot as u32),
@@ -871,14 +873,15 @@ pub(crate) fn chain_holds(db: &dyn Db, asset: Asset) -> Result<Arc<Vec<crate::pr
         }
         if !missing.is_empty() {
             ran = true;
-            let measured = timed(db, SWITCH, label, || super::measure_chain(db, asset, &files, &missing, &sizes))?;
+            let measured =
+                timed(db, SWITCH, label, || super::chain_outputs::measure_chain(db, asset, &files, &missing, &sizes))?;
             for (slot, hold) in missing.into_iter().zip(measured) {
                 let key = slot_key(slot as usize, &sizes);
                 crate::db::store_cached(db, SWITCH.name, key, || CacheEntry::new(&hold, Vec::new(), true));
                 holds[slot as usize] = hold;
             }
         }
-        let chosen = super::chosen_slot(db, asset, level, (&reports, &holds))?;
+        let chosen = super::chain_outputs::chosen_slot(db, asset, level, (&reports, &holds))?;
         shown_up_to = holds[chosen as usize].holds_to.unwrap_or(0).min(shown_up_to);
     }
     if !ran {

@@ -6,7 +6,7 @@
 
 use std::collections::BTreeSet;
 
-use crate::billboard_cloud::chain::chain_project;
+use crate::billboard_cloud::chain::{chain_project, renders_reading};
 use crate::support::{build, pattern_png};
 
 const CHAIN: &str = "[Auto(max_bytes: 262144), Auto(max_bytes: 65536)]";
@@ -104,17 +104,8 @@ fn a_bark_edit_rerenders_only_the_bark_of_every_candidate_and_a_restart_nothing(
     let mut cirrus = project.open();
     build(&mut cirrus);
     cirrus.take_executed_stages();
-    let graph = cirrus.graph();
-    let reading = |texture: &str| -> BTreeSet<String> {
-        let decode = format!("decode({texture})");
-        graph
-            .edges
-            .iter()
-            .filter(|edge| edge.from == decode && edge.to.starts_with("render("))
-            .map(|edge| edge.to.clone())
-            .collect()
-    };
-    let (bark, leaves) = (reading("assets/bark.png"), reading("assets/leaf.png"));
+    let (bark, leaves) =
+        (renders_reading(&mut cirrus, "assets/bark.png"), renders_reading(&mut cirrus, "assets/leaf.png"));
     assert!(bark.iter().any(|render| render.contains("lod1/candidates/")), "{bark:?}");
     assert!(!leaves.is_subset(&bark), "some renders show leaves alone");
 

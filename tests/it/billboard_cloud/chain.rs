@@ -97,7 +97,7 @@ fn a_chain_bakes_each_level_within_its_budget_into_its_own_folder() {
 }
 
 /// The render stages the graph says read the decode of `texture`.
-fn renders_reading(cirrus: &mut cirrus::project::Project, texture: &str) -> BTreeSet<String> {
+pub(crate) fn renders_reading(cirrus: &mut cirrus::project::Project, texture: &str) -> BTreeSet<String> {
     let graph = cirrus.graph();
     let decode = format!("decode({texture})");
     graph

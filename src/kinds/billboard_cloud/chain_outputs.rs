@@ -1,0 +1,300 @@
+//! A LOD chain's own outputs, once every slot's files are made (`level_files`): how far each
+//! level holds against the source (`measure_chain`, the `switch` stage's work), the slot shown
+//! as each level (an `Auto` level's chosen candidate, copied into its folder), and the chain's
+//! documents: `lods.gltf` with its switch coverages, `lods.json` for engines.
+
+use std::path::{Path, PathBuf};
+use std::sync::Arc;
+
+use super::settings::Settings as Own;
+use super::{
+    impostor_level, level_files, level_view, levels, lod_mesh, planes, queries, reduced, settings, source_view_mesh,
+};
+use crate::db::{Asset, Db};
+use crate::diagnostic::Diagnostic;
+use crate::kinds::mesh_queries::loaded_mesh;
+use crate::kinds::{AssetOutputs, BakedFiles};
+use crate::mesh::gltf::{gltf_chain, GltfLevel};
+use crate::summary::ArtifactRole;
+
+/// A chain's `lods.gltf` and `lods.json` (added to `outputs`), each level's part of the report
+/// (its chosen slot's, with its `Auto` choice and its switch size) and the switch coverages,
+/// from every slot's part of the report and mesh (`level_files`).
+pub(super) fn chain_files(
+    db: &dyn Db,
+    asset: Asset,
+    output_folder: &Path,
+    (slot_reports, slot_meshes): (&[serde_json::Value], Vec<ChainMesh>),
+    outputs: &mut AssetOutputs,
+) -> Result<(Vec<f32>, Vec<serde_json::Value>), Diagnostic> {
+    let settings = asset.settings(db);
+    let holds = queries::chain_holds(db, asset)?;
+    let chosen = chosen_slots(db, asset, slot_reports, &holds)?;
+    let mut meshes: Vec<Option<ChainMesh>> = slot_meshes.into_iter().map(Some).collect();
+    let mut level_reports = Vec::new();
+    let mut chain = Vec::new();
+    let mut level_holds = Vec::new();
+    for (level, &slot) in chosen.iter().enumerate() {
+        let folder = levels::chain_folder(settings, level as u32);
+        let mut level_report = slot_reports[slot as usize].clone();
+        if let Some(auto) = auto_report(db, asset, level as u32, slot, (slot_reports, &holds)) {
+            copy_candidate(outputs, output_folder, &levels::level_folder(settings, slot), &folder, level);
+            level_report["folder"] = serde_json::json!(folder);
+            level_report["auto"] = auto;
+        }
+        let mesh = meshes[slot as usize].take().expect("each level's own slot");
+        chain.push(ChainLevel { folder, mesh });
+        level_reports.push(level_report);
+        level_holds.push(holds[slot as usize].clone());
+    }
+    let switch_sizes = crate::preview::switch_sizes(&level_holds);
+    let (document, coverage) = chain_document(&chain, &switch_sizes);
+    outputs.add(output_folder.join("lods.gltf"), ArtifactRole::Gltf, document.into());
+    for ((report, hold), &switch_size) in level_reports.iter_mut().zip(&level_holds).zip(&switch_sizes) {
+        if let serde_json::Value::Object(report) = report {
+            report.insert("switch_size".into(), serde_json::json!(switch_size));
+            report.insert("holds_to".into(), serde_json::json!(hold.holds_to));
+            report.insert("measured".into(), serde_json::json!(hold.measured));
+        }
+    }
+    let loaded = loaded_mesh(db, asset)?;
+    let sphere = planes::bounding_sphere(&loaded.mesh.positions);
+    let lods_json = lods_document(asset.name(db), sphere, &level_reports);
+    outputs.add(output_folder.join("lods.json"), ArtifactRole::Table, lods_json.into());
+    Ok((coverage, level_reports))
+}
+
+/// The slot shown as each level of the chain (`chosen_slot`).
+fn chosen_slots(
+    db: &dyn Db,
+    asset: Asset,
+    reports: &[serde_json::Value],
+    holds: &[crate::preview::Hold],
+) -> Result<Vec<u32>, Diagnostic> {
+    (0..levels::level_count(asset.settings(db))).map(|level| chosen_slot(db, asset, level, (reports, holds))).collect()
+}
+
+/// The slot shown as level `level` of the chain: its own, or the `Auto` level's chosen
+/// candidate: among those whose bytes on the GPU fit, the one that holds to the largest screen
+/// size, then the one that loses least there, then the one with the fewest bytes.
+pub(crate) fn chosen_slot(
+    db: &dyn Db,
+    asset: Asset,
+    level: u32,
+    (reports, holds): (&[serde_json::Value], &[crate::preview::Hold]),
+) -> Result<u32, Diagnostic> {
+    let settings = asset.settings(db);
+    if let Some(slot) = levels::chain_slot(settings, level) {
+        return Ok(slot);
+    }
+    let max_bytes = auto_bytes(settings, level).unwrap_or(u64::MAX);
+    let slots = levels::slots(settings);
+    let fitting = (0..slots.len())
+        .filter(|&slot| slots[slot].level == level && !over_budget(db, asset, slot as u32, &reports[slot]));
+    let rank = |slot: &usize| {
+        let hold = &holds[*slot];
+        let at = hold.measured.iter().find(|figures| Some(figures.size) == hold.holds_to).or(hold.measured.first());
+        let loss = at.and_then(|figures| figures.loss_px_shift).unwrap_or(0.0);
+        (std::cmp::Reverse(hold.holds_to), ordered(loss), reports[*slot]["gpu_bytes"].as_u64(), *slot)
+    };
+    fitting.min_by_key(rank).map(|slot| slot as u32).ok_or_else(|| {
+        Diagnostic::new(
+            asset.main_file(db),
+            format!("lod{level}: no candidate fits in {max_bytes} bytes on the GPU (give Auto more bytes)"),
+        )
+    })
+}
+
+/// The bytes of level `level` when it is an `Auto` level.
+fn auto_bytes(settings: &crate::config::Settings, level: u32) -> Option<u64> {
+    match settings.own::<Own>().billboard.lods.get(level as usize) {
+        Some(&settings::LodLevel::Auto { max_bytes }) => Some(max_bytes),
+        _ => None,
+    }
+}
+
+/// Whether slot `slot` is a candidate whose bytes on the GPU (its `report`'s) pass its `Auto`
+/// level's.
+pub(crate) fn over_budget(db: &dyn Db, asset: Asset, slot: u32, report: &serde_json::Value) -> bool {
+    let settings = asset.settings(db);
+    let Some(spec) = levels::slots(settings).into_iter().nth(slot as usize).filter(|spec| spec.candidate.is_some())
+    else {
+        return false;
+    };
+    let max_bytes = auto_bytes(settings, spec.level).unwrap_or(u64::MAX);
+    report["gpu_bytes"].as_u64().is_none_or(|bytes| bytes > max_bytes)
+}
+
+/// A loss as an integer that orders as the loss does (in millionths of a px-shift unit).
+fn ordered(loss: f64) -> i64 {
+    (loss * 1e6).round() as i64
+}
+
+/// An `Auto` level's part of the report (none for another level): its bytes, the candidate
+/// chosen, and every candidate's bytes and figures.
+fn auto_report(
+    db: &dyn Db,
+    asset: Asset,
+    level: u32,
+    chosen: u32,
+    (reports, holds): (&[serde_json::Value], &[crate::preview::Hold]),
+) -> Option<serde_json::Value> {
+    let settings = asset.settings(db);
+    let Some(settings::LodLevel::Auto { max_bytes }) = settings.own::<Own>().billboard.lods.get(level as usize) else {
+        return None;
+    };
+    let slots = levels::slots(settings);
+    let candidates: Vec<serde_json::Value> = (0..slots.len())
+        .filter(|&slot| slots[slot].level == level)
+        .map(|slot| {
+            serde_json::json!({
+                "name": slots[slot].candidate,
+                "folder": levels::level_folder(settings, slot as u32),
+                "representation": reports[slot]["representation"],
+                "gpu_bytes": reports[slot]["gpu_bytes"],
+                "holds_to": holds[slot].holds_to,
+                "measured": holds[slot].measured,
+            })
+        })
+        .collect();
+    Some(serde_json::json!({
+        "max_bytes": max_bytes,
+        "chosen": slots[chosen as usize].candidate,
+        "candidates": candidates,
+    }))
+}
+
+/// The copies of the chosen candidates' files in their `Auto` levels' folders (`copy_candidate`):
+/// what the `switch` stage writes beside the chain's documents.
+pub(super) fn chosen_copies(db: &dyn Db, asset: Asset, output_folder: &Path) -> Vec<PathBuf> {
+    let settings = asset.settings(db);
+    if !(0..levels::level_count(settings)).any(|level| auto_bytes(settings, level).is_some()) {
+        return Vec::new();
+    }
+    let mut outputs = AssetOutputs::default();
+    let (Ok((reports, _)), Ok(holds)) =
+        (level_files(db, asset, output_folder, (&mut outputs, &mut Vec::new())), queries::chain_holds(db, asset))
+    else {
+        return Vec::new();
+    };
+    let Ok(chosen) = chosen_slots(db, asset, &reports, &holds) else { return Vec::new() };
+    let first_copy = outputs.files.len();
+    for (level, &slot) in chosen.iter().enumerate() {
+        if auto_bytes(settings, level as u32).is_some() {
+            let (from, to) = (levels::level_folder(settings, slot), levels::chain_folder(settings, level as u32));
+            copy_candidate(&mut outputs, output_folder, &from, &to, level);
+        }
+    }
+    outputs.files.drain(first_copy..).map(|(path, _, _)| path).collect()
+}
+
+/// Adds copies of a chosen candidate's files (under `from`, inside `output_folder`) in its
+/// level's folder `to`, meaning that level.
+fn copy_candidate(outputs: &mut AssetOutputs, output_folder: &Path, from: &str, to: &str, level: usize) {
+    let (from, to) = (output_folder.join(from), output_folder.join(to));
+    let copies: Vec<(PathBuf, ArtifactRole, Arc<[u8]>)> = outputs
+        .files
+        .iter()
+        .filter_map(|(path, role, bytes)| {
+            let rest = path.strip_prefix(&from).ok()?;
+            Some((to.join(rest), *role, bytes.clone()))
+        })
+        .collect();
+    for (path, role, bytes) in copies {
+        outputs.meanings.insert(path.clone(), serde_json::json!({ "lod": level }));
+        outputs.add(path, role, bytes);
+    }
+}
+
+/// How far each of a chain's slots `measured` holds against its source (stage `switch`): as an
+/// engine draws them, read from the build's `files` (`level_files` under an empty folder), over
+/// the 26 views at each of `sizes` (`preview::HOLD_SIZES` up to a cap).
+pub(crate) fn measure_chain(
+    db: &dyn Db,
+    asset: Asset,
+    files: &AssetOutputs,
+    measured: &[u32],
+    sizes: &[u32],
+) -> Result<Vec<crate::preview::Hold>, Diagnostic> {
+    let settings = asset.settings(db);
+    let cutoff = settings.own::<Own>().billboard.alpha_cutoff;
+    let loaded = loaded_mesh(db, asset)?;
+    let source = source_view_mesh(db, asset, &loaded)?;
+    let view = |level: u32| {
+        let folder = levels::level_folder(settings, level);
+        level_view(&BakedFiles::Outputs(files), Path::new(&folder), cutoff)
+    };
+    let views = measured.iter().map(|&level| view(level)).collect::<Result<Vec<_>, _>>()?;
+    let (center, radius) = planes::bounding_sphere(&loaded.mesh.positions);
+    let main_file = asset.main_file(db);
+    let gpu = crate::gpu::gpu().map_err(|error| Diagnostic::new(main_file, error.to_string()))?;
+    let views: Vec<&crate::gpu::LevelView> = views.iter().collect();
+    crate::preview::holds(gpu, &source, &views, (center.to_array(), radius), sizes, SWITCH_SAMPLES_PER_AXIS)
+        .map_err(|error| Diagnostic::new(main_file, format!("measuring the chain: {error}")))
+}
+
+/// Samples per pixel along each axis when a chain's levels are measured (16 a pixel).
+const SWITCH_SAMPLES_PER_AXIS: u32 = 4;
+
+/// A chain's `lods.json` for engines: the bounding sphere whose diameter on screen picks a level,
+/// and each level's folder, glTF, representation, bytes and switch size (from `reports`, the
+/// levels' parts of the report with their switch sizes).
+fn lods_document(asset: &str, (center, radius): (glam::Vec3, f32), reports: &[serde_json::Value]) -> Vec<u8> {
+    let levels: Vec<serde_json::Value> = reports
+        .iter()
+        .map(|report| {
+            let folder = report["folder"].as_str().unwrap_or_default();
+            serde_json::json!({
+                "level": report["level"],
+                "gltf": format!("{folder}/lod.gltf"),
+                "representation": report["representation"],
+                "triangles": report["triangles"],
+                "gpu_bytes": report["gpu_bytes"],
+                "switch_size": report["switch_size"],
+            })
+        })
+        .collect();
+    let document = serde_json::json!({
+        "asset": asset,
+        "center": center.to_array(),
+        "radius": radius,
+        // Show level k while the sphere's diameter on screen, in pixels, is at most its
+        // switch_size and more than level k + 1's; above level 0's, the source. A level that
+        // never holds within one px-shift unit has 0.
+        "switch_size_unit": "pixels across the bounding sphere on screen",
+        "levels": levels,
+    });
+    let mut bytes = serde_json::to_vec_pretty(&document).expect("documents serialise");
+    bytes.push(b'\n');
+    bytes
+}
+
+/// One level as the chain's document draws it.
+struct ChainLevel {
+    folder: String,
+    mesh: ChainMesh,
+}
+
+pub(super) enum ChainMesh {
+    Cloud(Box<lod_mesh::LodGltfMesh>),
+    Reduced(reduced::ReducedGltf),
+    Impostor(impostor_level::ImpostorGltf),
+}
+
+/// A chain's `lods.gltf` (`MSFT_lod`, every level's `lod.bin` and images under its folder, the
+/// switch coverages from the measured `switch_sizes`) and those coverages.
+fn chain_document(levels: &[ChainLevel], switch_sizes: &[u32]) -> (Vec<u8>, Vec<f32>) {
+    let gltf_levels: Vec<GltfLevel> = levels
+        .iter()
+        .map(|level| GltfLevel {
+            mesh: match &level.mesh {
+                ChainMesh::Cloud(mesh) => mesh.mesh(),
+                ChainMesh::Reduced(mesh) => mesh.mesh(),
+                ChainMesh::Impostor(quad) => quad.mesh(),
+            },
+            folder: &level.folder,
+        })
+        .collect();
+    let coverage = lod_mesh::screen_coverage(switch_sizes);
+    (gltf_chain(&gltf_levels, "lod.bin", &coverage, crate::mesh::gltf::GENERATOR), coverage)
+}

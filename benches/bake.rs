@@ -95,6 +95,40 @@ fn main() {
     if wanted("scale") {
         bench_scale();
     }
+    if wanted("memory") {
+        bench_memory();
+    }
+}
+
+/// Peak memory of `cirrus build` over 1 and 4 materials with a 2048² albedo each (a PNG of
+/// `make_level`'s noise): what one more large texture adds to a one-shot build (the build keeps
+/// its outputs until it publishes them, and no intermediate: `Retention::OutputsOnly`).
+fn bench_memory() {
+    const SIDE: u32 = 2048;
+    println!("memory: cirrus build, {SIDE}² albedo per material; CPU ISA {}", cirrus::isa::detected_isa().name());
+    let mut peaks = Vec::new();
+    for count in [1usize, 4] {
+        let dir = tempfile::tempdir().expect("temporary folder");
+        let mut assets = String::new();
+        for index in 0..count {
+            let folder = dir.path().join("assets");
+            std::fs::create_dir_all(&folder).expect("folder");
+            std::fs::write(folder.join(format!("t{index}.png")), make_level::noise_png(SIDE, SIDE, 3, index as u64))
+                .expect("png");
+            let material =
+                format!("Material $t{index} {{ Texture (attrib = \"diffuse\") {{string {{\"t{index}.png\"}}}} }}");
+            std::fs::write(folder.join(format!("t{index}.mymaterial")), material).expect("material");
+            assets.push_str(&format!("Material(name: \"t{index}\", material: \"t{index}.mymaterial\"),\n"));
+        }
+        let pipeline = format!("Pipeline(source: \"assets\", output: \"baked\", assets: [\n{assets}])");
+        std::fs::write(dir.path().join("pipeline.ron"), pipeline).expect("pipeline");
+        let (seconds, peak_mib) = timed_process(dir.path(), &["build"]);
+        println!("  {count} material(s): peak {peak_mib:.0} MiB, {seconds:.2} s");
+        peaks.push(peak_mib);
+    }
+    let per_texture = (peaks[1] - peaks[0]) / 3.0;
+    let per_texel = per_texture * 1024.0 * 1024.0 / f64::from(SIDE * SIDE);
+    println!("  each more texture: {per_texture:.0} MiB ({per_texel:.1} bytes per texel)");
 }
 
 /// A process's wall seconds and peak resident memory (MiB), its stdout discarded.

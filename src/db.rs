@@ -242,6 +242,23 @@ pub trait Db: salsa::Database {
     /// What a stage kept of its last run in this process under `name` (see [`recall`]).
     fn recalled(&self, name: &str) -> Option<Arc<dyn Any + Send + Sync>>;
     fn remember(&self, name: &str, value: Arc<dyn Any + Send + Sync>);
+    /// Drops what [`Db::remember`] kept under `name`.
+    fn forget(&self, name: &str);
+    /// What the process keeps of a build beyond its outputs.
+    fn retention(&self) -> Retention;
+}
+
+/// What a process keeps in memory of a build beyond its outputs.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
+pub enum Retention {
+    /// The intermediates a next build reuses (mip chains, blocks, the last encodings): the
+    /// daemon, and any project that builds again.
+    #[default]
+    KeepForNextBuild,
+    /// Only what the build publishes: `cirrus build`, whose process ends with the build (a next
+    /// process finds the last encodings in the persistent cache). Keeps a many-texture build's
+    /// memory from growing by the intermediates of every texture it baked.
+    OutputsOnly,
 }
 
 #[salsa::db]
@@ -251,16 +268,28 @@ pub struct Database {
     cache: Option<DiskCache>,
     logs: Arc<Logs>,
     memos: Arc<Mutex<HashMap<String, Arc<dyn Any + Send + Sync>>>>,
+    retention: Retention,
 }
 
 impl Database {
     pub fn new(cache: Option<DiskCache>) -> Database {
-        Database { storage: salsa::Storage::default(), cache, logs: Arc::default(), memos: Arc::default() }
+        Database::with_retention(cache, Retention::default())
+    }
+
+    pub(crate) fn with_retention(cache: Option<DiskCache>, retention: Retention) -> Database {
+        Database { storage: salsa::Storage::default(), cache, logs: Arc::default(), memos: Arc::default(), retention }
     }
 
     /// Uses another persistent cache from now on (the pipeline's output or shared cache changed).
     pub(crate) fn replace_disk_cache(&mut self, cache: Option<DiskCache>) {
         self.cache = cache;
+    }
+
+    /// The names of what stages keep in memory for their next run (see [`remember`]), sorted.
+    pub fn kept_memos(&self) -> Vec<String> {
+        let mut names: Vec<String> = self.memos.lock().expect("memo lock").keys().cloned().collect();
+        names.sort();
+        names
     }
 
     /// The stage bodies that ran since the last call, with their durations.
@@ -288,6 +317,14 @@ impl Db for Database {
 
     fn remember(&self, name: &str, value: Arc<dyn Any + Send + Sync>) {
         self.memos.lock().expect("memo lock").insert(name.to_string(), value);
+    }
+
+    fn forget(&self, name: &str) {
+        self.memos.lock().expect("memo lock").remove(name);
+    }
+
+    fn retention(&self) -> Retention {
+        self.retention
     }
 }
 
@@ -319,6 +356,11 @@ pub(crate) fn recall<T: Any + Send + Sync>(db: &dyn Db, memo: &Memo<T>) -> Optio
 /// Keeps `value` for the next run of the stage (see [`recall`]).
 pub(crate) fn remember<T: Any + Send + Sync>(db: &dyn Db, memo: &Memo<T>, value: Arc<T>) {
     db.remember(&memo.name, value);
+}
+
+/// Drops what was kept under `memo`.
+pub(crate) fn forget<T: Any + Send + Sync>(db: &dyn Db, memo: &Memo<T>) {
+    db.forget(&memo.name);
 }
 
 /// Runs a stage body, timing it and recording the run under `label`.
@@ -398,6 +440,20 @@ pub(crate) fn record_cache_hit(db: &dyn Db, stage: Stage, label: &str) {
 /// A source texture decoded to RGBA8 (the decode stage, labelled by the file's path).
 #[salsa::tracked(returns(clone))]
 pub(crate) fn decoded_texture(db: &dyn Db, file: SourceFile) -> Result<Arc<Texture>, Diagnostic> {
+    decode_source(db, file)
+}
+
+/// A source texture decoded for a surface that is made from it: memoized where the process
+/// builds again, else decoded for this use and dropped once the surface is made (a file that
+/// feeds several surfaces is then decoded by each: see [`Retention::OutputsOnly`]).
+pub(crate) fn decoded_for_surface(db: &dyn Db, file: SourceFile) -> Result<Arc<Texture>, Diagnostic> {
+    match db.retention() {
+        Retention::KeepForNextBuild => decoded_texture(db, file),
+        Retention::OutputsOnly => decode_source(db, file),
+    }
+}
+
+fn decode_source(db: &dyn Db, file: SourceFile) -> Result<Arc<Texture>, Diagnostic> {
     let contents = read_contents(db, file)?;
     let limits = texture_limits(db);
     let path = file.path(db);

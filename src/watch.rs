@@ -256,6 +256,7 @@ fn start(settings: &WatchSettings) -> Result<(Daemon<'_>, std::sync::mpsc::Recei
             source_reading: SourceReading::WhenInvalidated,
             remote_cache: settings.remote_cache.clone(),
             verify: false,
+            retention: crate::db::Retention::KeepForNextBuild,
         },
     );
 

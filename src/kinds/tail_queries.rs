@@ -10,7 +10,8 @@ use std::sync::Arc;
 
 use crate::cache::{CacheEntry, CacheKey, CacheKeyBuilder};
 use crate::db::{
-    load_cached, recall, record_cache_hit, remember, store_cached, store_cached_in_background, timed, Asset, Db, Stage,
+    forget, load_cached, recall, record_cache_hit, remember, store_cached, store_cached_in_background, timed, Asset,
+    Db, Retention, Stage,
 };
 use crate::diagnostic::Diagnostic;
 use crate::kinds::SurfaceId;
@@ -118,34 +119,54 @@ fn texture_memory(db: &dyn Db, width: u32, height: u32) -> crate::schedule::Memo
 /// The mip chain (stage `mips`), re-filtering only the tiles that changed since the last run.
 #[salsa::tracked(returns(clone))]
 pub(crate) fn surface_mips(db: &dyn Db, asset: Asset, surface: SurfaceId) -> Result<Arc<MipLevels>, Diagnostic> {
+    make_mips(db, asset, &surface).map(Arc::new)
+}
+
+fn make_mips(db: &dyn Db, asset: Asset, surface: &SurfaceId) -> Result<MipLevels, Diagnostic> {
     let image = tail_image(db, asset, surface.clone())?;
     let settings = mip_step_settings(db, asset, surface.clone())?;
     let label = surface.label(asset.name(db));
     let previous = previous_encoding(db, &label);
     let _memory = texture_memory(db, image.width, image.height);
-    Ok(Arc::new(timed(db, MIPS, &label, || tail_mips(&image, settings, previous.as_deref()))))
+    Ok(timed(db, MIPS, &label, || tail_mips(&image, settings, previous.as_deref())))
 }
 
 /// The blocks and their PSNR (stage `encode`), re-encoding only the blocks that changed.
 #[salsa::tracked(returns(clone))]
 pub(crate) fn surface_blocks(db: &dyn Db, asset: Asset, surface: SurfaceId) -> Result<Arc<EncodedSurface>, Diagnostic> {
     let mips = surface_mips(db, asset, surface.clone())?;
+    make_blocks(db, asset, &surface, &mips).map(Arc::new)
+}
+
+/// The blocks the surface's files are written from: memoized with its mip chain where the
+/// process builds again, else made and dropped with the files (see [`Retention`]).
+fn blocks_for_files(db: &dyn Db, asset: Asset, surface: &SurfaceId) -> Result<Arc<EncodedSurface>, Diagnostic> {
+    match db.retention() {
+        Retention::KeepForNextBuild => surface_blocks(db, asset, surface.clone()),
+        Retention::OutputsOnly => make_blocks(db, asset, surface, &make_mips(db, asset, surface)?).map(Arc::new),
+    }
+}
+
+fn make_blocks(db: &dyn Db, asset: Asset, surface: &SurfaceId, mips: &MipLevels) -> Result<EncodedSurface, Diagnostic> {
     let (format, quality, alpha_cutoff) = encode_step_settings(db, asset, surface.clone())?;
     let label = surface.label(asset.name(db));
     let previous = previous_encoding(db, &label);
     let memory = texture_memory(db, mips.levels[0].width, mips.levels[0].height);
     let hidden = hidden_blocks(db, asset, surface.clone())?;
     let encoded = timed(db, ENCODE, &label, || {
-        tail_encode(&mips, surface.surface, (format, quality), (alpha_cutoff, hidden.as_deref()), previous.as_deref())
+        tail_encode(mips, surface.surface, (format, quality), (alpha_cutoff, hidden.as_deref()), previous.as_deref())
     });
     drop(memory);
-    let remembered = Arc::new(PreviousEncoding::of(&mips, &encoded));
+    let remembered = Arc::new(PreviousEncoding::of(mips, &encoded));
     if memo_worth_storing(format) {
         let memo = remembered.clone();
         store_cached_in_background(db, ENCODING_MEMO, encoding_memo_key(&label), move || encoding_entry(&memo));
     }
-    remember(db, &encoding_memo_name(&label), remembered);
-    Ok(Arc::new(encoded))
+    match db.retention() {
+        Retention::KeepForNextBuild => remember(db, &encoding_memo_name(&label), remembered),
+        Retention::OutputsOnly => forget(db, &encoding_memo_name(&label)),
+    }
+    Ok(encoded)
 }
 
 /// The surface in the other formats its kind allows, when the asset's report asks
@@ -183,7 +204,7 @@ pub(crate) fn surface_files(
         record_cache_hit(db, WRITE, &label);
         return Ok(Arc::new(artifacts));
     }
-    let encoded = surface_blocks(db, asset, surface.clone())?;
+    let encoded = blocks_for_files(db, asset, &surface)?;
     let (container, zstd) = write_step_settings(db, asset, surface.clone())?;
     let packing = settings.packing;
     let artifacts =

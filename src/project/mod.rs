@@ -48,6 +48,8 @@ pub struct ProjectOptions {
     /// Hash every source file and every artifact instead of trusting the build record's
     /// metadata (`cirrus build --verify`).
     pub verify: bool,
+    /// What the process keeps of a build beyond its outputs.
+    pub retention: crate::db::Retention,
 }
 
 impl Default for ProjectOptions {
@@ -57,6 +59,7 @@ impl Default for ProjectOptions {
             source_reading: SourceReading::EveryBuild,
             remote_cache: Default::default(),
             verify: false,
+            retention: Default::default(),
         }
     }
 }
@@ -222,7 +225,7 @@ impl Project {
         }
         let mut project = Project {
             config,
-            db: Database::new(cache),
+            db: Database::with_retention(cache, options.retention),
             files: HashMap::new(),
             assets: HashMap::new(),
             source_reading: options.source_reading,

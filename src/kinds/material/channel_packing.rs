@@ -15,6 +15,11 @@ const CONSTANT_SURFACE_SIDE: u32 = 4;
 /// `sources` must hold one entry per slot of `kind.slots()`, in that order.
 pub(crate) fn pack_surface(kind: SurfaceKind, sources: &[Option<&Texture>], constants: &MaterialConstants) -> Texture {
     assert_eq!(sources.len(), kind.slots().len(), "one source per slot");
+    // An albedo map alone is its own surface: sharing its texels keeps one copy of them in
+    // memory instead of two (the decoded map and the surface, both memoized).
+    if let (SurfaceKind::Albedo, [Some(albedo), None]) = (kind, sources) {
+        return (*albedo).clone();
+    }
     let width = sources.iter().flatten().map(|texture| texture.width).max().unwrap_or(CONSTANT_SURFACE_SIDE);
     let height = sources.iter().flatten().map(|texture| texture.height).max().unwrap_or(CONSTANT_SURFACE_SIDE);
     let resampled: Vec<Option<Vec<u8>>> = sources

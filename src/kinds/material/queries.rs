@@ -7,7 +7,7 @@ use std::sync::Arc;
 use super::channel_packing::pack_surface;
 use super::definition::{parse_material_file, MaterialConstants, MaterialFile};
 use crate::cache::{CacheKey, CacheKeyBuilder, KeyPart};
-use crate::db::{cached_json, decoded_texture, read_contents, stage_key, timed, Asset, Db, SourceFile, Stage};
+use crate::db::{cached_json, decoded_for_surface, read_contents, stage_key, timed, Asset, Db, SourceFile, Stage};
 use crate::diagnostic::{display_path, Diagnostic};
 use crate::kinds::material::settings::Settings as Own;
 use crate::kinds::{Read, SurfaceId};
@@ -134,15 +134,24 @@ pub(crate) fn surface_recipe(db: &dyn Db, asset: Asset, surface: SurfaceId) -> R
 #[salsa::tracked(returns(clone))]
 pub(crate) fn packed_surface(db: &dyn Db, asset: Asset, surface: SurfaceId) -> Result<Arc<Texture>, Diagnostic> {
     let recipe = surface_recipe(db, asset, surface.clone())?;
-    let mut decoded = Vec::new();
+    let mut decoded: Vec<Option<Arc<Texture>>> = Vec::new();
+    let mut files = Vec::new();
     for source in &recipe.sources {
         decoded.push(match source {
-            Some(MapSource::File(file)) => Some(decoded_texture(db, *file)?),
+            // A file in several slots (an ORM map) is decoded once.
+            Some(MapSource::File(file)) => match files.iter().position(|seen| *seen == Some(*file)) {
+                Some(slot) => decoded[slot].clone(),
+                None => Some(decoded_for_surface(db, *file)?),
+            },
             Some(MapSource::Asset { asset: source, name, surface, .. }) => {
                 let image = source.kind(db).surface_image(db, *source, surface);
                 Some(image.map_err(|error| from_ao_source(db, asset, name, error))?)
             }
             None => None,
+        });
+        files.push(match source {
+            Some(MapSource::File(file)) => Some(*file),
+            _ => None,
         });
     }
     timed(db, PACK, &surface.label(asset.name(db)), || {

@@ -170,3 +170,42 @@ fn a_restart_with_unchanged_sources_runs_no_stage() {
     "#]]
     .assert_debug_eq(&ran);
 }
+
+#[test]
+fn a_build_that_keeps_only_its_outputs_writes_the_same_files_and_the_next_process_reuses_its_encodings() {
+    use cirrus::db::Retention;
+    use cirrus::project::{Project, ProjectOptions};
+    let open = |project: &TempProject, retention| {
+        let config = cirrus::config::load_pipeline(&project.path("pipeline.ron")).expect("valid pipeline");
+        Project::open(config, ProjectOptions { retention, ..Default::default() })
+    };
+    let surfaces = ["one/albedo.ktx2", "one/normal.ktx2", "one/mra.ktx2", "two/mra.ktx2", "one/albedo.png"];
+    let files = |project: &TempProject| surfaces.map(|file| project.read(&format!("baked/first/{file}")));
+    let (kept, outputs_only) = (two_asset_project("Bc7"), two_asset_project("Bc7"));
+    let mut keeping = open(&kept, Retention::KeepForNextBuild);
+    build(&mut keeping);
+    let mut one_shot = open(&outputs_only, Retention::OutputsOnly);
+    build(&mut one_shot);
+    assert_eq!(files(&kept), files(&outputs_only), "the same files either way");
+    // What the daemon keeps for its next build (the last encoding of each surface), `cirrus
+    // build` drops with its files: a many-texture build grows by its outputs alone.
+    let encodings = |project: &Project| {
+        project.database().kept_memos().into_iter().filter(|name| name.starts_with("encoding-memo")).count()
+    };
+    assert!(encodings(&keeping) >= 4, "{:?}", keeping.database().kept_memos());
+    assert_eq!(encodings(&one_shot), 0, "{:?}", one_shot.database().kept_memos());
+
+    // The next process re-encodes an edited albedo from the encodings on disk: the same files
+    // as a build from nothing.
+    let mut pixels = crate::support::decode_png(&pattern_png(32, 32, 0)).pixels.to_vec();
+    pixels[..16].copy_from_slice(&[255, 0, 0, 255, 0, 255, 0, 255, 0, 0, 255, 255, 9, 9, 9, 255]);
+    let edited = crate::support::png_bytes(32, 32, &pixels);
+    outputs_only.write("assets/albedo.png", &edited);
+    let summary = build(&mut open(&outputs_only, Retention::OutputsOnly));
+    assert!(ran_stages(&summary).contains(&"first: encode(one/albedo)".to_string()), "{:?}", ran_stages(&summary));
+    let fresh = two_asset_project("Bc7");
+    fresh.write("assets/albedo.png", &edited);
+    build(&mut open(&fresh, Retention::OutputsOnly));
+    assert_eq!(files(&fresh), files(&outputs_only));
+    assert_ne!(files(&fresh)[0], files(&kept)[0], "the edit shows");
+}

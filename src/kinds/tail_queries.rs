@@ -80,6 +80,15 @@ pub(crate) fn surface_image(db: &dyn Db, asset: Asset, surface: SurfaceId) -> Re
 #[salsa::tracked(returns(clone))]
 fn tail_image(db: &dyn Db, asset: Asset, surface: SurfaceId) -> Result<Arc<Texture>, Diagnostic> {
     let image = surface_image(db, asset, surface.clone())?;
+    in_tail_order(db, asset, &surface, image)
+}
+
+fn in_tail_order(
+    db: &dyn Db,
+    asset: Asset,
+    surface: &SurfaceId,
+    image: Arc<Texture>,
+) -> Result<Arc<Texture>, Diagnostic> {
     let packing = tail_settings(db, asset, surface.clone())?.packing;
     Ok(match (surface.surface, packing) {
         (SurfaceKind::Mra, Packing::Orm) => Arc::new(crate::texture::tail::swap_red_and_blue(&image)),
@@ -87,26 +96,48 @@ fn tail_image(db: &dyn Db, asset: Asset, surface: SurfaceId) -> Result<Arc<Textu
     })
 }
 
+/// The tail's image of a surface for its files: memoized where the process builds again, else
+/// made by the kind for this use and dropped with it (see [`Retention`]).
+fn files_image(db: &dyn Db, asset: Asset, surface: &SurfaceId) -> Result<Arc<Texture>, Diagnostic> {
+    match db.retention() {
+        Retention::KeepForNextBuild => tail_image(db, asset, surface.clone()),
+        Retention::OutputsOnly => in_tail_order(db, asset, surface, asset.kind(db).surface_image(db, asset, surface)?),
+    }
+}
+
 /// The blocks of the surface that its asset's alpha test hides (see [`HiddenBlocks`]): from the
 /// alpha of the albedo that cuts it out, when that albedo is alpha-tested. Equal masks compare
 /// equal, so an edit of the albedo's colours alone re-encodes nothing here.
 #[salsa::tracked(returns(clone))]
 fn hidden_blocks(db: &dyn Db, asset: Asset, surface: SurfaceId) -> Result<Option<Arc<HiddenBlocks>>, Diagnostic> {
-    let Some(albedo) = asset.kind(db).cutting_surface(&surface) else { return Ok(None) };
+    hidden_blocks_of(db, asset, &surface, &*tail_image(db, asset, surface.clone())?)
+}
+
+/// The hidden blocks of `surface`, whose image is `image`.
+fn hidden_blocks_of(
+    db: &dyn Db,
+    asset: Asset,
+    surface: &SurfaceId,
+    image: &Texture,
+) -> Result<Option<Arc<HiddenBlocks>>, Diagnostic> {
+    let Some(albedo) = asset.kind(db).cutting_surface(surface) else { return Ok(None) };
     if tail_settings(db, asset, albedo.clone())?.alpha_cutoff.is_none() {
         return Ok(None);
     }
-    let image = tail_image(db, asset, surface.clone())?;
-    let sizes = match mip_step_settings(db, asset, surface)?.mips {
+    let sizes = match mip_step_settings(db, asset, surface.clone())?.mips {
         true => crate::texture::mips::chain_sizes(image.width, image.height),
         false => vec![(image.width, image.height)],
     };
-    Ok(HiddenBlocks::of_alpha(&*tail_image(db, asset, albedo)?, &sizes).map(Arc::new))
+    let hidden = match albedo == *surface {
+        true => HiddenBlocks::of_alpha(image, &sizes),
+        false => HiddenBlocks::of_alpha(&*files_image(db, asset, &albedo)?, &sizes),
+    };
+    Ok(hidden.map(Arc::new))
 }
 
 /// The cache key part that names a surface's hidden blocks (empty when it has none).
-fn hidden_key(db: &dyn Db, asset: Asset, surface: &SurfaceId) -> Result<String, Diagnostic> {
-    Ok(hidden_blocks(db, asset, surface.clone())?.map_or_else(String::new, |hidden| hidden.hash.to_hex().to_string()))
+fn hidden_key(hidden: Option<&HiddenBlocks>) -> String {
+    hidden.map_or_else(String::new, |hidden| hidden.hash.to_hex().to_string())
 }
 
 /// A `width` × `height` texture's working set reserved from the process's texture memory budget
@@ -119,42 +150,38 @@ fn texture_memory(db: &dyn Db, width: u32, height: u32) -> crate::schedule::Memo
 /// The mip chain (stage `mips`), re-filtering only the tiles that changed since the last run.
 #[salsa::tracked(returns(clone))]
 pub(crate) fn surface_mips(db: &dyn Db, asset: Asset, surface: SurfaceId) -> Result<Arc<MipLevels>, Diagnostic> {
-    make_mips(db, asset, &surface).map(Arc::new)
+    make_mips(db, asset, &surface, &*tail_image(db, asset, surface.clone())?).map(Arc::new)
 }
 
-fn make_mips(db: &dyn Db, asset: Asset, surface: &SurfaceId) -> Result<MipLevels, Diagnostic> {
-    let image = tail_image(db, asset, surface.clone())?;
+fn make_mips(db: &dyn Db, asset: Asset, surface: &SurfaceId, image: &Texture) -> Result<MipLevels, Diagnostic> {
     let settings = mip_step_settings(db, asset, surface.clone())?;
     let label = surface.label(asset.name(db));
     let previous = previous_encoding(db, &label);
     let _memory = texture_memory(db, image.width, image.height);
-    Ok(timed(db, MIPS, &label, || tail_mips(&image, settings, previous.as_deref())))
+    Ok(timed(db, MIPS, &label, || tail_mips(image, settings, previous.as_deref())))
 }
 
 /// The blocks and their PSNR (stage `encode`), re-encoding only the blocks that changed.
 #[salsa::tracked(returns(clone))]
 pub(crate) fn surface_blocks(db: &dyn Db, asset: Asset, surface: SurfaceId) -> Result<Arc<EncodedSurface>, Diagnostic> {
     let mips = surface_mips(db, asset, surface.clone())?;
-    make_blocks(db, asset, &surface, &mips).map(Arc::new)
+    let hidden = hidden_blocks(db, asset, surface.clone())?;
+    make_blocks(db, asset, &surface, &mips, hidden.as_deref()).map(Arc::new)
 }
 
-/// The blocks the surface's files are written from: memoized with its mip chain where the
-/// process builds again, else made and dropped with the files (see [`Retention`]).
-fn blocks_for_files(db: &dyn Db, asset: Asset, surface: &SurfaceId) -> Result<Arc<EncodedSurface>, Diagnostic> {
-    match db.retention() {
-        Retention::KeepForNextBuild => surface_blocks(db, asset, surface.clone()),
-        Retention::OutputsOnly => make_blocks(db, asset, surface, &make_mips(db, asset, surface)?).map(Arc::new),
-    }
-}
-
-fn make_blocks(db: &dyn Db, asset: Asset, surface: &SurfaceId, mips: &MipLevels) -> Result<EncodedSurface, Diagnostic> {
+fn make_blocks(
+    db: &dyn Db,
+    asset: Asset,
+    surface: &SurfaceId,
+    mips: &MipLevels,
+    hidden: Option<&HiddenBlocks>,
+) -> Result<EncodedSurface, Diagnostic> {
     let (format, quality, alpha_cutoff) = encode_step_settings(db, asset, surface.clone())?;
     let label = surface.label(asset.name(db));
     let previous = previous_encoding(db, &label);
     let memory = texture_memory(db, mips.levels[0].width, mips.levels[0].height);
-    let hidden = hidden_blocks(db, asset, surface.clone())?;
     let encoded = timed(db, ENCODE, &label, || {
-        tail_encode(mips, surface.surface, (format, quality), (alpha_cutoff, hidden.as_deref()), previous.as_deref())
+        tail_encode(mips, surface.surface, (format, quality), (alpha_cutoff, hidden), previous.as_deref())
     });
     drop(memory);
     let remembered = Arc::new(PreviousEncoding::of(mips, &encoded));
@@ -188,29 +215,42 @@ pub(crate) fn surface_format_comparison(
     Ok(Arc::new(crate::texture::tail::format_comparison(&mips, surface.surface, &others, quality)))
 }
 
-/// The container and preview (stage `write`); from the persistent cache when a surface with
-/// the same texels and settings was baked before.
+/// The container and preview (stage `write`), with the content key they are cached under; from
+/// the persistent cache when a surface with the same texels and settings was baked before. Where
+/// the process builds again, the image, mips and blocks are memoized; else they are made here
+/// and dropped with the files (see [`Retention`]).
 #[salsa::tracked(returns(clone))]
 pub(crate) fn surface_files(
     db: &dyn Db,
     asset: Asset,
     surface: SurfaceId,
-) -> Result<Arc<SurfaceArtifacts>, Diagnostic> {
-    let image = tail_image(db, asset, surface.clone())?;
+) -> Result<(Arc<SurfaceArtifacts>, CacheKey), Diagnostic> {
     let settings = tail_settings(db, asset, surface.clone())?;
     let label = surface.label(asset.name(db));
-    let content_key = content_key(&settings, &image, &hidden_key(db, asset, &surface)?);
+    let keeping = db.retention() == Retention::KeepForNextBuild;
+    let image = files_image(db, asset, &surface)?;
+    let hidden = match keeping {
+        true => hidden_blocks(db, asset, surface.clone())?,
+        false => hidden_blocks_of(db, asset, &surface, &image)?,
+    };
+    let content_key = content_key(&settings, &image, &hidden_key(hidden.as_deref()));
     if let Some(artifacts) = load_cached(db, SURFACE_ENTRY, content_key, artifacts_from_entry) {
         record_cache_hit(db, WRITE, &label);
-        return Ok(Arc::new(artifacts));
+        return Ok((Arc::new(artifacts), content_key));
     }
-    let encoded = blocks_for_files(db, asset, &surface)?;
+    let encoded = match keeping {
+        true => surface_blocks(db, asset, surface.clone())?,
+        false => {
+            let mips = make_mips(db, asset, &surface, &image)?;
+            Arc::new(make_blocks(db, asset, &surface, &mips, hidden.as_deref())?)
+        }
+    };
     let (container, zstd) = write_step_settings(db, asset, surface.clone())?;
     let packing = settings.packing;
     let artifacts =
         timed(db, WRITE, &label, || tail_write(&image, (surface.surface, packing), &encoded, container, zstd));
     store_cached(db, SURFACE_ENTRY, content_key, || artifacts_entry(&artifacts));
-    Ok(Arc::new(artifacts))
+    Ok((Arc::new(artifacts), content_key))
 }
 
 /// A surface's finished files: from the persistent cache by its recipe when the kind can name
@@ -239,9 +279,8 @@ pub(crate) fn surface_artifacts(
             found
         }
         None => {
-            let artifacts = surface_files(db, asset, surface.clone())?;
-            let image = tail_image(db, asset, surface.clone())?;
-            (artifacts, Some(content_key(&settings, &image, &hidden_key(db, asset, &surface)?)))
+            let (artifacts, content) = surface_files(db, asset, surface.clone())?;
+            (artifacts, Some(content))
         }
     };
     // Both keys name the content entry from now on (found by parts: the content key is the

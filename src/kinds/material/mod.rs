@@ -25,7 +25,7 @@ use crate::kinds::{check_texture_file, tail_instances, AssetOutputs, Job, Kind, 
 use crate::summary::ErrorSummary;
 use crate::texture::tail::{SurfaceInfo, TailSettings};
 use crate::texture::{SurfaceKind, Texture};
-use queries::{material_file, packed_surface, referenced_textures, surface_recipe, MapSource, PACK, PARSE};
+use queries::{material_file, referenced_textures, surface_recipe, MapSource, PACK, PARSE};
 
 pub struct Material;
 
@@ -246,7 +246,7 @@ impl Kind for Material {
     }
 
     fn surface_image(db: &dyn Db, asset: Asset, surface: &SurfaceId) -> Result<Arc<Texture>, Diagnostic> {
-        packed_surface(db, asset, surface.clone())
+        queries::surface_for_tail(db, asset, surface)
     }
 
     fn tail_settings(db: &dyn Db, asset: Asset, surface: &SurfaceId) -> Result<TailSettings, Diagnostic> {

@@ -133,6 +133,19 @@ pub(crate) fn surface_recipe(db: &dyn Db, asset: Asset, surface: SurfaceId) -> R
 /// The surface packed from its source maps (stage `pack`).
 #[salsa::tracked(returns(clone))]
 pub(crate) fn packed_surface(db: &dyn Db, asset: Asset, surface: SurfaceId) -> Result<Arc<Texture>, Diagnostic> {
+    pack(db, asset, &surface)
+}
+
+/// The surface packed from its source maps, for a tail that keeps it (through
+/// [`packed_surface`]) or uses it once (see `db::Retention`).
+pub(crate) fn surface_for_tail(db: &dyn Db, asset: Asset, surface: &SurfaceId) -> Result<Arc<Texture>, Diagnostic> {
+    match db.retention() {
+        crate::db::Retention::KeepForNextBuild => packed_surface(db, asset, surface.clone()),
+        crate::db::Retention::OutputsOnly => pack(db, asset, surface),
+    }
+}
+
+fn pack(db: &dyn Db, asset: Asset, surface: &SurfaceId) -> Result<Arc<Texture>, Diagnostic> {
     let recipe = surface_recipe(db, asset, surface.clone())?;
     let mut decoded: Vec<Option<Arc<Texture>>> = Vec::new();
     let mut files = Vec::new();

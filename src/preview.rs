@@ -193,6 +193,15 @@ fn compare_views(
 /// smallest first.
 pub const HOLD_SIZES: [u32; 5] = [16, 32, 64, 128, 256];
 
+/// Samples per pixel along each axis when a LOD is measured at `size` pixels: 16 a pixel (4 × 4)
+/// up to 64 px, then 4 (2 × 2), so that no render is over 512 texels across. A render's cost is
+/// its texels (on a software adapter, 90 % of a chain's measuring is rasterising them), and at
+/// 128 and 256 px a view holds 65,536 and 262,144 samples at 2 × 2, enough for its IoU; the
+/// loss in px-shift units is against the source moved a pixel at the same samples.
+pub fn hold_samples_per_axis(size: u32) -> u32 {
+    (256 / size.max(1)).clamp(2, 4)
+}
+
 /// The most a LOD may lose, in px-shift units, and still hold at a screen size.
 pub const HOLD_LOSS: f64 = 1.0;
 
@@ -226,7 +235,6 @@ pub fn holds(
     lods: &[&crate::gpu::LevelView],
     (center, radius): ([f32; 3], f32),
     sizes: &[u32],
-    samples_per_axis: u32,
 ) -> Result<Vec<Hold>, GpuError> {
     let mut holds: Vec<Hold> = lods.iter().map(|_| Hold { measured: Vec::new(), holds_to: None }).collect();
     let mut stopped = vec![false; lods.len()];
@@ -235,7 +243,7 @@ pub fn holds(
         if measured.is_empty() {
             break;
         }
-        let settings = PreviewSettings { views: 26, size, samples_per_axis };
+        let settings = PreviewSettings { views: 26, size, samples_per_axis: hold_samples_per_axis(size) };
         let levels: Vec<&crate::gpu::LevelView> = measured.iter().map(|&index| lods[index]).collect();
         let compared = compare_views(gpu, source, &levels, center, radius, settings)?;
         for (&index, metrics) in measured.iter().zip(compared.metrics) {

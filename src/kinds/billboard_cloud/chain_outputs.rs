@@ -229,12 +229,9 @@ pub(crate) fn measure_chain(
     let main_file = asset.main_file(db);
     let gpu = crate::gpu::gpu().map_err(|error| Diagnostic::new(main_file, error.to_string()))?;
     let views: Vec<&crate::gpu::LevelView> = views.iter().collect();
-    crate::preview::holds(gpu, &source, &views, (center.to_array(), radius), sizes, SWITCH_SAMPLES_PER_AXIS)
+    crate::preview::holds(gpu, &source, &views, (center.to_array(), radius), sizes)
         .map_err(|error| Diagnostic::new(main_file, format!("measuring the chain: {error}")))
 }
-
-/// Samples per pixel along each axis when a chain's levels are measured (16 a pixel).
-const SWITCH_SAMPLES_PER_AXIS: u32 = 4;
 
 /// A chain's `lods.json` for engines: the bounding sphere whose diameter on screen picks a level,
 /// and each level's folder, glTF, representation, bytes and switch size (from `reports`, the

@@ -55,8 +55,9 @@ pub(crate) const IMPOSTOR: Stage = Stage { name: "impostor", version: 2 };
 
 /// A chain's switch sizes: every level rendered as an engine draws it beside the source, over
 /// the 26 views at each screen size of `preview::HOLD_SIZES` (`measure_chain`). 2: a level is
-/// measured until it fails at two sizes in a row, not one.
-pub(crate) const SWITCH: Stage = Stage { name: "switch", version: 2 };
+/// measured until it fails at two sizes in a row, not one; 3: 2 × 2 samples a pixel at 128 and
+/// 256 px (`preview::hold_samples_per_axis`).
+pub(crate) const SWITCH: Stage = Stage { name: "switch", version: 3 };
 
 /// The deviation (a fraction of the mesh's largest extent) up to which a reduced level's
 /// simplifier prefers stopping to reaching its budget.

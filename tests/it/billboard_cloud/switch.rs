@@ -153,6 +153,10 @@ fn switch_sizes_follow_the_holds_and_never_rise_along_the_chain() {
     let holds = [hold(Some(256)), hold(Some(128)), hold(Some(256)), hold(None), hold(Some(32))];
     assert_eq!(switch_sizes(&holds), [256, 128, 128, 0, 0]);
     assert_eq!(switch_sizes(&[]), Vec::<u32>::new());
+    // 16 samples a pixel where pixels are few, 4 where a render would pass 512 texels across.
+    let samples: Vec<u32> = HOLD_SIZES.iter().map(|&size| cirrus::preview::hold_samples_per_axis(size)).collect();
+    assert_eq!(samples, [4, 4, 4, 2, 2]);
+    assert!(HOLD_SIZES.iter().zip(&samples).all(|(size, samples)| size * samples <= 512 && size * samples >= 64));
 }
 
 /// The part of a headless viewer line that says what it shows, and the sphere's size on screen.

@@ -67,6 +67,9 @@ fn main() {
         if wanted("billboard-chain") {
             bench_billboard_chain(&corpus);
         }
+        if wanted("billboard-auto") {
+            bench_billboard_auto(repository, &corpus);
+        }
         if wanted("watch") {
             bench_watch(&corpus);
         }
@@ -1225,6 +1228,99 @@ fn bench_billboard_budget(corpus: &Path) {
             "billboard-budget: {tree} (the source against itself moved 1 pixel: IoU {source_shift_iou:.3}): {}",
             figures.join(" ")
         );
+    }
+}
+
+/// Chains that choose (issue 40): per tree (the corpus oak, ash and bush, and the bundled bush)
+/// a four-level chain `Auto(2 MiB), Auto(512 KiB), Auto(128 KiB), Auto(32 KiB)` baked as a
+/// process beside one default bake (bar ≤ 3×), with its picks and switch sizes; then every
+/// candidate of the first three levels (the budgets) beside the source over the 26 views at 64,
+/// 256 and 1024 px (16, 4 and 1 samples a pixel): loss in px-shift units and PSNR, the pick
+/// starred, a candidate over its bytes marked. Bars: the pick within 0.005 IoU of the best
+/// candidate; at 64 px and 128 KiB the pick holds (≤ 1 px-shift unit).
+fn bench_billboard_auto(repository: &Path, corpus: &Path) {
+    const BUDGETS: [(&str, u64); 4] =
+        [("2 MiB", 2 << 20), ("512 KiB", 512 << 10), ("128 KiB", 128 << 10), ("32 KiB", 32 << 10)];
+    const SIZES: [(u32, u32); 3] = [(64, 4), (256, 2), (1024, 1)];
+    println!("billboard-auto: CPU ISA {}, GPU {}", cirrus::isa::detected_isa().name(), cirrus::gpu::adapter_family());
+    let bundled = repository.join("examples/assets");
+    let trees = [("corpus", corpus, "oak_medium"), ("corpus", corpus, "ash_small"), ("corpus", corpus, "bush_2")];
+    for (label, source, tree) in trees.into_iter().chain([("bundled", bundled.as_path(), "bush_2")]) {
+        let single = tree_project(source, &format!(r#"BillboardCloud(name: "tree", mesh: "trees/{tree}.obj")"#));
+        let (single_seconds, _, _) = build_process(single.path());
+        let lods: Vec<String> = BUDGETS.iter().map(|(_, bytes)| format!("Auto(max_bytes: {bytes})")).collect();
+        let chain = tree_project(
+            source,
+            &format!(
+                r#"BillboardCloud(name: "tree", mesh: "trees/{tree}.obj", billboard: (lods: [{}]))"#,
+                lods.join(", ")
+            ),
+        );
+        let (chain_seconds, chain_mib, _) = build_process(chain.path());
+        let report: serde_json::Value =
+            serde_json::from_slice(&std::fs::read(chain.path().join("baked/tree/report.json")).unwrap()).unwrap();
+        let levels = report["levels"].as_array().expect("levels").clone();
+        let picks: Vec<&str> = levels.iter().map(|level| level["auto"]["chosen"].as_str().unwrap_or("-")).collect();
+        let switch: Vec<u64> = levels.iter().map(|level| level["switch_size"].as_u64().unwrap_or(0)).collect();
+        println!(
+            "billboard-auto: {label} {tree}: four Auto levels {chain_seconds:.2} s ({chain_mib:.0} MiB, switch stage \
+             {:.1} s of work) vs one default bake {single_seconds:.2} s: {:.1}× (bar ≤ 3×); picks {picks:?}, switch \
+             sizes {switch:?} px",
+            report["stage_ms"]["switch"].as_f64().unwrap_or(0.0) / 1e3,
+            chain_seconds / single_seconds
+        );
+        let mut project = Project::open(load_pipeline(&chain.path().join("pipeline.ron")).unwrap(), Default::default());
+        let input = project.built_asset("tree").expect("the chain builds");
+        for (size, samples_per_axis) in SIZES {
+            let settings = cirrus::preview::PreviewSettings { views: 26, size, samples_per_axis };
+            let start = Instant::now();
+            let slots =
+                cirrus::kinds::billboard_cloud::preview_slots(project.database(), input, project.config(), settings)
+                    .expect("preview");
+            let seconds = start.elapsed().as_secs_f64();
+            for (level, (budget, bytes)) in BUDGETS.iter().enumerate().take(3) {
+                let entry = |name: &str| {
+                    let candidates = levels[level]["auto"]["candidates"].as_array().cloned().unwrap_or_default();
+                    candidates.into_iter().find(|candidate| candidate["name"] == name).unwrap_or_default()
+                };
+                let mut row = Vec::new();
+                let (mut best, mut picked) = (0.0f64, None);
+                for (_, folder, metrics) in slots.iter().filter(|(slot_level, _, _)| *slot_level == level as u32) {
+                    let name = folder.rsplit('/').next().unwrap_or(folder);
+                    let over = entry(name)["gpu_bytes"].as_u64().unwrap_or(0) > *bytes;
+                    let loss = metrics.loss_px_shift.unwrap_or(0.0);
+                    let mark = if over {
+                        " (over)"
+                    } else if name == picks[level] {
+                        "*"
+                    } else {
+                        ""
+                    };
+                    row.push(format!("{name}{mark} {loss:.2} u/{:.1} dB", metrics.mean_psnr));
+                    if !over {
+                        best = best.max(metrics.mean_iou);
+                    }
+                    if name == picks[level] {
+                        picked = Some((metrics.mean_iou, loss));
+                    }
+                }
+                let verdict = match picked {
+                    Some((iou, loss)) => format!(
+                        "pick {} the best IoU by {:.3}{}",
+                        if iou >= best - 0.005 { "within 0.005 of" } else { "BELOW" },
+                        best - iou,
+                        if size == 64 && *bytes == 128 << 10 {
+                            format!("; holds at 64 px: {}", if loss <= 1.0 { "yes" } else { "NO" })
+                        } else {
+                            String::new()
+                        }
+                    ),
+                    None => "no pick".to_string(),
+                };
+                println!("billboard-auto:   {tree} {budget} at {size} px: {}; {verdict}", row.join(", "));
+            }
+            println!("billboard-auto:   ({size} px: {} slots measured in {seconds:.1} s)", slots.len());
+        }
     }
 }
 

@@ -126,7 +126,9 @@ pub(crate) fn preview_chain(
     radius: f32,
     settings: PreviewSettings,
 ) -> Result<ChainPreview, GpuError> {
-    let compared = compare_views(gpu, source, lods, center, radius, settings)?;
+    let mut views = Vec::new();
+    let compared = compare_views(gpu, source, lods, center, radius, settings, |images| views.push(images))?;
+    let compared = ComparedViews { metrics: compared, views };
     let levels = compared
         .metrics
         .into_iter()
@@ -149,8 +151,22 @@ struct ComparedViews {
     views: Vec<Vec<Vec<u8>>>,
 }
 
+/// Each of `lods` (meshes or impostors, as an engine draws them) against `source` from the
+/// first `settings.views` directions, the source rendered once a view; no image is kept (at
+/// 1024 px, a chain's views would take gigabytes).
+pub fn compare_only(
+    gpu: &Gpu,
+    source: &ViewMesh,
+    lods: &[&crate::gpu::LevelView],
+    (center, radius): ([f32; 3], f32),
+    settings: PreviewSettings,
+) -> Result<Vec<PreviewMetrics>, GpuError> {
+    compare_views(gpu, source, lods, center, radius, settings, |_| {})
+}
+
 /// Renders `source` and each of `lods` from the first `settings.views` directions (the source
-/// once per view) and compares them.
+/// once per view) and compares them; each view's images (the source's, then each LOD's) go to
+/// `view_images`.
 fn compare_views(
     gpu: &Gpu,
     source: &ViewMesh,
@@ -158,11 +174,10 @@ fn compare_views(
     center: [f32; 3],
     radius: f32,
     settings: PreviewSettings,
-) -> Result<ComparedViews, GpuError> {
+    mut view_images: impl FnMut(Vec<Vec<u8>>),
+) -> Result<Vec<PreviewMetrics>, GpuError> {
     let light = preview_light();
     let mut metrics: Vec<Vec<ViewMetrics>> = vec![Vec::new(); lods.len()];
-    // Per view: the source's image, then each LOD's.
-    let mut views: Vec<Vec<Vec<u8>>> = Vec::new();
     let mut shift_ious = Vec::new();
     for direction in view_directions().into_iter().take(settings.views) {
         let matrix = view_projection(center, radius, direction);
@@ -182,11 +197,10 @@ fn compare_views(
             images.push(lod_view.rgba);
         }
         images.insert(0, source_view.rgba);
-        views.push(images);
+        view_images(images);
     }
     let samples_per_pixel = settings.samples_per_axis * settings.samples_per_axis;
-    let metrics = metrics.into_iter().map(|views| summarise_views(views, samples_per_pixel, &shift_ious)).collect();
-    Ok(ComparedViews { metrics, views })
+    Ok(metrics.into_iter().map(|views| summarise_views(views, samples_per_pixel, &shift_ious)).collect())
 }
 
 /// The screen sizes (bounding-sphere diameters in pixels) a LOD chain's levels are measured at,
@@ -245,8 +259,8 @@ pub fn holds(
         }
         let settings = PreviewSettings { views: 26, size, samples_per_axis: hold_samples_per_axis(size) };
         let levels: Vec<&crate::gpu::LevelView> = measured.iter().map(|&index| lods[index]).collect();
-        let compared = compare_views(gpu, source, &levels, center, radius, settings)?;
-        for (&index, metrics) in measured.iter().zip(compared.metrics) {
+        let compared = compare_views(gpu, source, &levels, center, radius, settings, |_| {})?;
+        for (&index, metrics) in measured.iter().zip(compared) {
             let held = metrics.loss_px_shift.is_none_or(|loss| loss <= HOLD_LOSS);
             holds[index].measured.push(SizeFigures {
                 size,

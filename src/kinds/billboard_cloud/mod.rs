@@ -746,6 +746,34 @@ pub fn preview_levels(
     Ok(results)
 }
 
+/// A built chain's every slot (each level, or each candidate of an `Auto` level: its folder)
+/// beside the source over the views of `settings`, the source rendered once a view: what the
+/// `billboard-auto` bench tabulates per budget and screen size. Nothing is written, no image kept.
+pub fn preview_slots(
+    db: &dyn Db,
+    input: Asset,
+    config: &PipelineConfig,
+    settings: crate::preview::PreviewSettings,
+) -> Result<Vec<(u32, String, crate::preview::PreviewMetrics)>, PreviewError> {
+    let asset_settings = input.settings(db);
+    let loaded = loaded_mesh(db, input).map_err(PreviewError::Artifact)?;
+    let source = source_view_mesh(db, input, &loaded).map_err(PreviewError::Artifact)?;
+    let cutoff = asset_settings.own::<Own>().billboard.alpha_cutoff;
+    let asset_folder = config.output.join(input.name(db));
+    let slots = levels::slots(asset_settings);
+    let folders: Vec<String> = (0..slots.len() as u32).map(|slot| levels::level_folder(asset_settings, slot)).collect();
+    let views = folders
+        .iter()
+        .map(|folder| read_level_view(&config.root, &asset_folder.join(folder), cutoff))
+        .collect::<Result<Vec<_>, _>>()
+        .map_err(PreviewError::Artifact)?;
+    let (center, radius) = planes::bounding_sphere(&loaded.mesh.positions);
+    let gpu = crate::gpu::gpu()?;
+    let view_refs: Vec<&crate::gpu::LevelView> = views.iter().collect();
+    let metrics = crate::preview::compare_only(gpu, &source, &view_refs, (center.to_array(), radius), settings)?;
+    Ok(slots.iter().zip(folders).zip(metrics).map(|((slot, folder), metrics)| (slot.level, folder, metrics)).collect())
+}
+
 /// The baked LOD in `folder` (relative to `root`) as an engine draws it: an impostor through
 /// `impostor.json` (`impostor_level::read_impostor_view`), else the level's mesh
 /// (`read_lod_view_mesh`).

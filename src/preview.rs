@@ -127,7 +127,10 @@ pub(crate) fn preview_chain(
     settings: PreviewSettings,
 ) -> Result<ChainPreview, GpuError> {
     let mut views = Vec::new();
-    let compared = compare_views(gpu, source, lods, center, radius, settings, |images| views.push(images))?;
+    let compared =
+        compare_views(gpu, source, lods, (center, radius), settings, &mut SourceViews::default(), |images| {
+            views.push(images)
+        })?;
     let compared = ComparedViews { metrics: compared, views };
     let levels = compared
         .metrics
@@ -151,6 +154,14 @@ struct ComparedViews {
     views: Vec<Vec<Vec<u8>>>,
 }
 
+/// The source's views rendered so far (each with its one-pixel-shift IoU), by size, samples and
+/// direction: measurements of one source in one framing that share them render each view once
+/// (a chain measured level by level).
+#[derive(Default)]
+pub struct SourceViews {
+    views: std::collections::HashMap<(u32, u32, usize), Arc<(ResolvedView, f64)>>,
+}
+
 /// Each of `lods` (meshes or impostors, as an engine draws them) against `source` from the
 /// first `settings.views` directions, the source rendered once a view; no image is kept (at
 /// 1024 px, a chain's views would take gigabytes).
@@ -161,7 +172,7 @@ pub fn compare_only(
     (center, radius): ([f32; 3], f32),
     settings: PreviewSettings,
 ) -> Result<Vec<PreviewMetrics>, GpuError> {
-    compare_views(gpu, source, lods, center, radius, settings, |_| {})
+    compare_views(gpu, source, lods, (center, radius), settings, &mut SourceViews::default(), |_| {})
 }
 
 /// Renders `source` and each of `lods` from the first `settings.views` directions (the source
@@ -171,22 +182,33 @@ fn compare_views(
     gpu: &Gpu,
     source: &ViewMesh,
     lods: &[&crate::gpu::LevelView],
-    center: [f32; 3],
-    radius: f32,
+    (center, radius): ([f32; 3], f32),
     settings: PreviewSettings,
+    source_views: &mut SourceViews,
     mut view_images: impl FnMut(Vec<Vec<u8>>),
 ) -> Result<Vec<PreviewMetrics>, GpuError> {
     let light = preview_light();
     let mut metrics: Vec<Vec<ViewMetrics>> = vec![Vec::new(); lods.len()];
     let mut shift_ious = Vec::new();
-    for direction in view_directions().into_iter().take(settings.views) {
+    for (index, direction) in view_directions().into_iter().take(settings.views).enumerate() {
         let matrix = view_projection(center, radius, direction);
-        let source_view = render_resolved_view(settings, |size| gpu.render_view(source, matrix, light, size))?;
-        shift_ious.push(one_pixel_shift_iou(&source_view, settings.size));
+        let key = (settings.size, settings.samples_per_axis, index);
+        let source_view = match source_views.views.get(&key) {
+            Some(view) => view.clone(),
+            None => {
+                let view = render_resolved_view(settings, |size| gpu.render_view(source, matrix, light, size))?;
+                let shift_iou = one_pixel_shift_iou(&view, settings.size);
+                let view = Arc::new((view, shift_iou));
+                source_views.views.insert(key, view.clone());
+                view
+            }
+        };
+        let (source_view, shift_iou) = (&source_view.0, source_view.1);
+        shift_ious.push(shift_iou);
         let mut images = Vec::with_capacity(1 + lods.len());
         for (lod, level_metrics) in lods.iter().zip(&mut metrics) {
             let lod_view = render_resolved_view(settings, |size| gpu.render_level_view(lod, matrix, light, size))?;
-            let overlap = silhouette_overlap(&source_view, &lod_view);
+            let overlap = silhouette_overlap(source_view, &lod_view);
             level_metrics.push(ViewMetrics {
                 direction,
                 iou: overlap.iou,
@@ -196,7 +218,7 @@ fn compare_views(
             });
             images.push(lod_view.rgba);
         }
-        images.insert(0, source_view.rgba);
+        images.insert(0, source_view.rgba.clone());
         view_images(images);
     }
     let samples_per_pixel = settings.samples_per_axis * settings.samples_per_axis;
@@ -249,6 +271,7 @@ pub fn holds(
     lods: &[&crate::gpu::LevelView],
     (center, radius): ([f32; 3], f32),
     sizes: &[u32],
+    source_views: &mut SourceViews,
 ) -> Result<Vec<Hold>, GpuError> {
     let mut holds: Vec<Hold> = lods.iter().map(|_| Hold { measured: Vec::new(), holds_to: None }).collect();
     let mut stopped = vec![false; lods.len()];
@@ -259,7 +282,7 @@ pub fn holds(
         }
         let settings = PreviewSettings { views: 26, size, samples_per_axis: hold_samples_per_axis(size) };
         let levels: Vec<&crate::gpu::LevelView> = measured.iter().map(|&index| lods[index]).collect();
-        let compared = compare_views(gpu, source, &levels, center, radius, settings, |_| {})?;
+        let compared = compare_views(gpu, source, &levels, (center, radius), settings, source_views, |_| {})?;
         for (&index, metrics) in measured.iter().zip(compared) {
             let held = metrics.loss_px_shift.is_none_or(|loss| loss <= HOLD_LOSS);
             holds[index].measured.push(SizeFigures {

@@ -213,8 +213,8 @@ pub(crate) fn measure_chain(
     db: &dyn Db,
     asset: Asset,
     files: &AssetOutputs,
-    measured: &[u32],
-    sizes: &[u32],
+    (measured, sizes): (&[u32], &[u32]),
+    source_views: &mut crate::preview::SourceViews,
 ) -> Result<Vec<crate::preview::Hold>, Diagnostic> {
     let settings = asset.settings(db);
     let cutoff = settings.own::<Own>().billboard.alpha_cutoff;
@@ -229,7 +229,7 @@ pub(crate) fn measure_chain(
     let main_file = asset.main_file(db);
     let gpu = crate::gpu::gpu().map_err(|error| Diagnostic::new(main_file, error.to_string()))?;
     let views: Vec<&crate::gpu::LevelView> = views.iter().collect();
-    crate::preview::holds(gpu, &source, &views, (center.to_array(), radius), sizes)
+    crate::preview::holds(gpu, &source, &views, (center.to_array(), radius), sizes, source_views)
         .map_err(|error| Diagnostic::new(main_file, format!("measuring the chain: {error}")))
 }
 

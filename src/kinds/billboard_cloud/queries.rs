@@ -858,6 +858,8 @@ pub(crate) fn chain_holds(db: &dyn Db, asset: Asset) -> Result<Arc<Vec<crate::pr
     let unmeasured = || crate::preview::Hold { measured: Vec::new(), holds_to: None };
     let mut holds: Vec<crate::preview::Hold> = slots.iter().map(|_| unmeasured()).collect();
     let (mut ran, mut shown_up_to) = (false, u32::MAX);
+    // The source's renders, shared by the levels' measurements.
+    let mut source_views = crate::preview::SourceViews::default();
     for level in 0..super::levels::level_count(settings) {
         let sizes: Vec<u32> = crate::preview::HOLD_SIZES.into_iter().filter(|&size| size <= shown_up_to).collect();
         let mut missing = Vec::new();
@@ -874,8 +876,9 @@ pub(crate) fn chain_holds(db: &dyn Db, asset: Asset) -> Result<Arc<Vec<crate::pr
         }
         if !missing.is_empty() {
             ran = true;
-            let measured =
-                timed(db, SWITCH, label, || super::chain_outputs::measure_chain(db, asset, &files, &missing, &sizes))?;
+            let measured = timed(db, SWITCH, label, || {
+                super::chain_outputs::measure_chain(db, asset, &files, (&missing, &sizes), &mut source_views)
+            })?;
             for (slot, hold) in missing.into_iter().zip(measured) {
                 let key = slot_key(slot as usize, &sizes);
                 crate::db::store_cached(db, SWITCH.name, key, || CacheEntry::new(&hold, Vec::new(), true));

@@ -251,13 +251,15 @@ pub trait Db: salsa::Database {
 /// What a process keeps in memory of a build beyond its outputs.
 #[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
 pub enum Retention {
-    /// The intermediates a next build reuses (mip chains, blocks, the last encodings): the
-    /// daemon, and any project that builds again.
+    /// The intermediates a next build reuses (surface images, mip chains, blocks, the last
+    /// encodings, decoded maps): the daemon, and any project that builds again.
     #[default]
     KeepForNextBuild,
     /// Only what the build publishes: `cirrus build`, whose process ends with the build (a next
-    /// process finds the last encodings in the persistent cache). Keeps a many-texture build's
-    /// memory from growing by the intermediates of every texture it baked.
+    /// process finds the last encodings in the persistent cache). The surface job makes what it
+    /// needs outside salsa's memos (its reads still go through tracked queries, so it reruns when
+    /// they change) and drops it with the files: a many-texture build's memory grows by each
+    /// texture's source bytes and files, not by its intermediates.
     OutputsOnly,
 }
 

@@ -51,14 +51,13 @@ fn an_auto_level_keeps_the_candidate_that_holds_furthest_within_its_bytes() {
         let names: Vec<&str> = candidates.iter().map(|candidate| candidate["name"].as_str().unwrap()).collect();
         assert!(names.contains(&"quads16") && names.iter().any(|name| name.starts_with("impostor")), "{names:?}");
         // Each candidate baked in its own folder, with its bytes on the GPU as the level reports
-        // them; those over the bytes are not measured.
+        // them, all within the level's bytes (one whose quads would not pack in an atlas the
+        // bytes allow is not baked).
         for candidate in candidates {
             let folder = candidate["folder"].as_str().unwrap();
             assert_eq!(folder, format!("lod{level}/candidates/{}", candidate["name"].as_str().unwrap()));
             assert!(project.path(&format!("baked/tree/{folder}/lod.gltf")).is_file(), "{folder}");
-            if candidate["gpu_bytes"].as_u64().unwrap() > max_bytes {
-                assert!(candidate["measured"].as_array().unwrap().is_empty(), "{candidate}");
-            }
+            assert!(candidate["gpu_bytes"].as_u64().unwrap() <= max_bytes, "{candidate}");
             assert_eq!(
                 manifest["artifacts"][&format!("baked/tree/{folder}/lod.gltf")]["meaning"],
                 serde_json::json!({ "lod": level, "candidate": candidate["name"] })
@@ -123,4 +122,35 @@ fn a_bark_edit_rerenders_only_the_bark_of_every_candidate_and_a_restart_nothing(
     let summary = build(&mut restarted);
     assert!(summary.all_ok(), "{}", summary.to_text());
     assert_eq!(restarted.take_executed_stages(), Vec::<String>::new());
+}
+
+#[test]
+fn a_candidate_whose_quads_cannot_pack_in_its_bytes_is_not_baked() {
+    // The bundled bush has planes enough for 256 quads: at 128 KiB they would need a 256² atlas
+    // of at least one block each (317 KB), at 32 KiB 64 quads a 128² one (79 KB).
+    let project = crate::support::TempProject::new(
+        r#"Pipeline(source: "assets", output: "baked", assets: [
+            BillboardCloud(name: "tree", mesh: "trees/bush_2.obj",
+                           billboard: (lods: [Auto(max_bytes: 131072), Auto(max_bytes: 32768)])),
+        ])"#,
+    );
+    let trees = std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("examples/assets/trees");
+    project.copy_folder(&trees, "assets/trees");
+    let summary = build(&mut project.open());
+    assert!(summary.all_ok(), "{}", summary.to_text());
+    let built = report(&project);
+    let mut names = Vec::new();
+    for (entry, max_bytes) in built["levels"].as_array().unwrap().iter().zip([131072u64, 32768]) {
+        for candidate in entry["auto"]["candidates"].as_array().unwrap() {
+            assert!(candidate["gpu_bytes"].as_u64().unwrap() <= max_bytes, "{candidate}");
+        }
+        let level: Vec<&str> = entry["auto"]["candidates"]
+            .as_array()
+            .unwrap()
+            .iter()
+            .map(|candidate| candidate["name"].as_str().unwrap())
+            .collect();
+        names.push(level.join(" "));
+    }
+    assert_eq!(names, ["quads16 quads64 impostor8", "quads16"]);
 }

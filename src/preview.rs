@@ -126,32 +126,24 @@ pub(crate) fn preview_chain(
     radius: f32,
     settings: PreviewSettings,
 ) -> Result<ChainPreview, GpuError> {
-    let mut views = Vec::new();
-    let compared =
-        compare_views(gpu, source, lods, (center, radius), settings, &mut SourceViews::default(), |images| {
-            views.push(images)
-        })?;
-    let compared = ComparedViews { metrics: compared, views };
-    let levels = compared
-        .metrics
+    // Per view: the source's image, then each LOD's.
+    let mut views: Vec<Vec<Vec<u8>>> = Vec::new();
+    let mut keep = |source: &[u8], mut images: Vec<Vec<u8>>| {
+        images.insert(0, source.to_vec());
+        views.push(images)
+    };
+    let metrics = compare_views(gpu, source, lods, (center, radius), settings, &mut SourceViews::default(), &mut keep)?;
+    let levels = metrics
         .into_iter()
         .enumerate()
         .map(|(level, metrics)| {
             let pairs: Vec<Vec<&[u8]>> =
-                compared.views.iter().map(|images| vec![images[0].as_slice(), images[1 + level].as_slice()]).collect();
+                views.iter().map(|images| vec![images[0].as_slice(), images[1 + level].as_slice()]).collect();
             Preview { metrics, contact_sheet: contact_sheet(&pairs, settings.size) }
         })
         .collect();
-    let groups: Vec<Vec<&[u8]>> =
-        compared.views.iter().map(|images| images.iter().map(Vec::as_slice).collect()).collect();
+    let groups: Vec<Vec<&[u8]>> = views.iter().map(|images| images.iter().map(Vec::as_slice).collect()).collect();
     Ok(ChainPreview { levels, chain_sheet: contact_sheet(&groups, settings.size) })
-}
-
-/// Each LOD's figures against the source, and every view's images (the source's, then each
-/// LOD's).
-struct ComparedViews {
-    metrics: Vec<PreviewMetrics>,
-    views: Vec<Vec<Vec<u8>>>,
 }
 
 /// The source's views rendered so far (each with its one-pixel-shift IoU), by size, samples and
@@ -172,12 +164,12 @@ pub fn compare_only(
     (center, radius): ([f32; 3], f32),
     settings: PreviewSettings,
 ) -> Result<Vec<PreviewMetrics>, GpuError> {
-    compare_views(gpu, source, lods, (center, radius), settings, &mut SourceViews::default(), |_| {})
+    compare_views(gpu, source, lods, (center, radius), settings, &mut SourceViews::default(), |_, _| {})
 }
 
 /// Renders `source` and each of `lods` from the first `settings.views` directions (the source
 /// once per view) and compares them; each view's images (the source's, then each LOD's) go to
-/// `view_images`.
+/// `view_images`, which may keep them.
 fn compare_views(
     gpu: &Gpu,
     source: &ViewMesh,
@@ -185,7 +177,7 @@ fn compare_views(
     (center, radius): ([f32; 3], f32),
     settings: PreviewSettings,
     source_views: &mut SourceViews,
-    mut view_images: impl FnMut(Vec<Vec<u8>>),
+    mut view_images: impl FnMut(&[u8], Vec<Vec<u8>>),
 ) -> Result<Vec<PreviewMetrics>, GpuError> {
     let light = preview_light();
     let mut metrics: Vec<Vec<ViewMetrics>> = vec![Vec::new(); lods.len()];
@@ -205,7 +197,7 @@ fn compare_views(
         };
         let (source_view, shift_iou) = (&source_view.0, source_view.1);
         shift_ious.push(shift_iou);
-        let mut images = Vec::with_capacity(1 + lods.len());
+        let mut images = Vec::with_capacity(lods.len());
         for (lod, level_metrics) in lods.iter().zip(&mut metrics) {
             let lod_view = render_resolved_view(settings, |size| gpu.render_level_view(lod, matrix, light, size))?;
             let overlap = silhouette_overlap(source_view, &lod_view);
@@ -218,8 +210,7 @@ fn compare_views(
             });
             images.push(lod_view.rgba);
         }
-        images.insert(0, source_view.rgba.clone());
-        view_images(images);
+        view_images(&source_view.rgba, images);
     }
     let samples_per_pixel = settings.samples_per_axis * settings.samples_per_axis;
     Ok(metrics.into_iter().map(|views| summarise_views(views, samples_per_pixel, &shift_ious)).collect())
@@ -282,7 +273,7 @@ pub fn holds(
         }
         let settings = PreviewSettings { views: 26, size, samples_per_axis: hold_samples_per_axis(size) };
         let levels: Vec<&crate::gpu::LevelView> = measured.iter().map(|&index| lods[index]).collect();
-        let compared = compare_views(gpu, source, &levels, (center, radius), settings, source_views, |_| {})?;
+        let compared = compare_views(gpu, source, &levels, (center, radius), settings, source_views, |_, _| {})?;
         for (&index, metrics) in measured.iter().zip(compared) {
             let held = metrics.loss_px_shift.is_none_or(|loss| loss <= HOLD_LOSS);
             holds[index].measured.push(SizeFigures {

@@ -148,12 +148,15 @@ pub(crate) fn surface_for_tail(db: &dyn Db, asset: Asset, surface: &SurfaceId) -
 fn pack(db: &dyn Db, asset: Asset, surface: &SurfaceId) -> Result<Arc<Texture>, Diagnostic> {
     let recipe = surface_recipe(db, asset, surface.clone())?;
     let mut decoded: Vec<Option<Arc<Texture>>> = Vec::new();
-    let mut files = Vec::new();
-    for source in &recipe.sources {
+    for (slot, source) in recipe.sources.iter().enumerate() {
+        let earlier_slot_of = |file: &SourceFile| {
+            let same = |earlier: &Option<MapSource>| matches!(earlier, Some(MapSource::File(seen)) if seen == file);
+            recipe.sources[..slot].iter().position(same)
+        };
         decoded.push(match source {
             // A file in several slots (an ORM map) is decoded once.
-            Some(MapSource::File(file)) => match files.iter().position(|seen| *seen == Some(*file)) {
-                Some(slot) => decoded[slot].clone(),
+            Some(MapSource::File(file)) => match earlier_slot_of(file) {
+                Some(earlier) => decoded[earlier].clone(),
                 None => Some(decoded_for_surface(db, *file)?),
             },
             Some(MapSource::Asset { asset: source, name, surface, .. }) => {
@@ -161,10 +164,6 @@ fn pack(db: &dyn Db, asset: Asset, surface: &SurfaceId) -> Result<Arc<Texture>, 
                 Some(image.map_err(|error| from_ao_source(db, asset, name, error))?)
             }
             None => None,
-        });
-        files.push(match source {
-            Some(MapSource::File(file)) => Some(*file),
-            _ => None,
         });
     }
     timed(db, PACK, &surface.label(asset.name(db)), || {

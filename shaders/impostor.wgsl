@@ -185,6 +185,14 @@ fn impostor_in_rect(frame: u32, uv: vec2<f32>) -> vec2<f32> {
     return (uv - rect.xy) / max(rect.zw - rect.xy, vec2<f32>(1e-6));
 }
 
+// The mip level of `atlas` that shows what level `lod` of the albedo atlas shows: the normal and
+// depth atlases may be stored at a half or a quarter of the albedo's side (the same frames, the
+// same coordinates), their level 0 being the albedo's level 1 or 2.
+fn impostor_smaller_lod(atlas: texture_2d<f32>, lod: f32) -> f32 {
+    let halvings = log2(f32(textureDimensions(albedo_atlas).x) / f32(textureDimensions(atlas).x));
+    return max(lod - halvings, 0.0);
+}
+
 // Frame `frame`'s texel under the view ray through `world`, in the frame's own image (0..1):
 // where the ray crosses the frame's plane through the centre, then (parallax) where it meets
 // the depth the frame shows there, twice; outside 0..1 when the ray leaves the frame.
@@ -204,7 +212,7 @@ fn impostor_frame_uv(frame: u32, world: vec3<f32>, lod: f32) -> vec2<f32> {
     var uv = impostor_in_rect(frame, vec2<f32>(dot(point, axes.right), -dot(point, axes.up)) / (2.0 * radius) + 0.5);
     for (var step = 0; step < 2; step = step + 1) {
         let texel = (cell + clamp(uv, vec2<f32>(0.0), vec2<f32>(1.0))) / f32(frames);
-        let shown = textureSampleLevel(depth_atlas, impostor_sampler, texel, lod).r;
+        let shown = textureSampleLevel(depth_atlas, impostor_sampler, texel, impostor_smaller_lod(depth_atlas, lod)).r;
         let height = radius - 2.0 * radius * shown;
         point = start - eye * ((dot(start, direction) - height) / along);
         uv = impostor_in_rect(frame, vec2<f32>(dot(point, axes.right), -dot(point, axes.up)) / (2.0 * radius) + 0.5);
@@ -236,7 +244,8 @@ fn impostor_fs(input: ImpostorVertexOut) -> @location(0) vec4<f32> {
         let cell = vec2<f32>(f32(frame % frames), f32(frame / frames));
         let at = (cell + uv) / f32(frames);
         let colour = textureSampleLevel(albedo_atlas, impostor_sampler, at, lod);
-        let xy = textureSampleLevel(normal_atlas, impostor_sampler, at, lod).xy * 2.0 - 1.0;
+        let xy = textureSampleLevel(normal_atlas, impostor_sampler, at, impostor_smaller_lod(normal_atlas, lod)).xy
+            * 2.0 - 1.0;
         let z = sqrt(max(1.0 - dot(xy, xy), 0.0));
         let direction = impostor_decode(cell / f32(frames - 1u), impostor.grid.y != 0u);
         let axes = impostor_frame_axes(direction);

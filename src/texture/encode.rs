@@ -183,13 +183,20 @@ impl HiddenBlocks {
     /// The hidden blocks of a mip chain of `sizes` (level 0 first) under `albedo` (the size of
     /// level 0). A texel of a lower level is hidden when every texel its box filter reads on the
     /// level above is (a footprint of `scale` texels, widened to whole texels). None when no
-    /// block is hidden or the sizes do not match.
+    /// block is hidden or the sizes do not match. A surface stored smaller than its albedo (a
+    /// level of the albedo's mip chain, see `mips::reduced_level`) starts at the albedo's level
+    /// of that size.
     pub fn of_alpha(albedo: &Texture, sizes: &[(u32, u32)]) -> Option<HiddenBlocks> {
-        if sizes.first() != Some(&(albedo.width, albedo.height)) {
-            return None;
-        }
+        let &first = sizes.first()?;
+        let albedo_sizes = crate::texture::mips::chain_sizes(albedo.width, albedo.height);
+        let start = albedo_sizes.iter().position(|&size| size == first)?;
         let mut zero: Vec<bool> = albedo.pixels.chunks_exact(4).map(|texel| texel[3] == 0).collect();
         let (mut width, mut height) = (albedo.width as usize, albedo.height as usize);
+        for &(new_width, new_height) in &albedo_sizes[1..=start] {
+            let (new_width, new_height) = (new_width as usize, new_height as usize);
+            zero = reduced_zeros(&zero, (width, height), (new_width, new_height));
+            (width, height) = (new_width, new_height);
+        }
         let mut levels = Vec::with_capacity(sizes.len());
         for (index, &(new_width, new_height)) in sizes.iter().enumerate() {
             let (new_width, new_height) = (new_width as usize, new_height as usize);

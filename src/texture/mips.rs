@@ -24,6 +24,17 @@ pub fn mip_chain(level0: &Texture, settings: MipSettings) -> Vec<Texture> {
     full_chain(level0, settings).0
 }
 
+/// Level `halvings` of [`mip_chain`] (level 0 itself for 0): a surface stored at a fraction of
+/// the size it was made at, filtered as its lower levels would be.
+pub fn reduced_level(level0: &Texture, settings: MipSettings, halvings: u32) -> Texture {
+    if halvings == 0 {
+        return level0.clone();
+    }
+    let mut chain = mip_chain(level0, settings);
+    let last = chain.len() - 1;
+    chain.swap_remove((halvings as usize).min(last))
+}
+
 /// Side of the tiles that [`mip_chain_reusing`] filters again on their own: with sizes that are
 /// multiples of it, each of the first `REUSE_TILE_LEVELS` levels reduces within the tile.
 const REUSE_TILE: usize = 64;

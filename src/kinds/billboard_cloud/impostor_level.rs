@@ -37,7 +37,10 @@ pub struct ImpostorDescription {
     pub frames: u32,
     /// The upper half of the sphere (views from below use the horizon's frames), else all of it.
     pub hemi: bool,
-    /// Each frame's side in texels; the atlases are `frames · frame_size` a side.
+    /// Each frame's side in texels; the albedo atlas is `frames · frame_size` a side, the normal
+    /// and depth atlases that or a half or a quarter of it (as their files say: a level of the
+    /// same frames' mip chain, sampled with the same coordinates and the mip level offset by
+    /// the ratio of the sides).
     pub frame_size: u32,
     /// The bounding sphere each frame shows, filling it.
     pub center: [f32; 3],
@@ -178,7 +181,7 @@ pub(crate) fn impostor_level_outputs(
         .flat_map(|triangle| triangle.map(|corner| glam::Vec3::from(loaded.mesh.positions[corner as usize])))
         .collect();
     let frame_rects = crate::impostor::frame_rects(&corners, (center, radius), impostor);
-    let written = super::write_level_surfaces(db, asset, level, output_folder, (side, side), outputs)?;
+    let written = super::write_level_surfaces(db, asset, level, output_folder, outputs)?;
     let (mut bytes, mut gpu_bytes) = (written.bytes, written.gpu_bytes);
     let name = |index: usize| written.names.get(index).cloned().unwrap_or_default();
     let [(albedo, albedo_png), (normal, normal_png), (depth, _)] = [0, 1, 2].map(name);
@@ -264,11 +267,20 @@ pub(crate) fn read_impostor_view(
         }
         let (texture_path, bytes) = read(name)?;
         let levels = super::lod_preview::decoded_texture_levels(&texture_path, &bytes)?;
+        // The albedo at the frames' size; the normal and depth at it or halved up to twice.
         let side = grid.frames * description.frame_size;
-        if levels.first().is_none_or(|level: &Texture| (level.width, level.height) != (side, side)) {
+        let sides: Vec<u32> = match name == &description.albedo {
+            true => vec![side],
+            false => (0..=2).map(|halvings| side >> halvings).filter(|&side| side >= grid.frames).collect(),
+        };
+        let fits = |level: &Texture| {
+            level.width == level.height && sides.contains(&level.width) && level.width % grid.frames == 0
+        };
+        if !levels.first().is_some_and(fits) {
+            let sizes = sides.iter().map(|side| format!("{side}²")).collect::<Vec<_>>().join(", ");
             return Err(Diagnostic::new(
                 &texture_path,
-                format!("{} frames of {} texels need a {side}² texture", grid.frames, description.frame_size),
+                format!("{} frames of {} texels need a texture of {sizes}", grid.frames, description.frame_size),
             ));
         }
         textures.push(levels);

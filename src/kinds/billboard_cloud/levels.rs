@@ -7,6 +7,7 @@ use crate::config::Settings;
 use crate::kinds::billboard_cloud::settings::{LodLevel, Settings as Own};
 use crate::mesh::reduce::TriangleBudget;
 use crate::packing::PageSettings;
+use crate::texture::SurfaceKind;
 
 /// What one level of a billboard cloud is asked for.
 #[derive(Clone, Copy, Debug, PartialEq)]
@@ -21,6 +22,39 @@ pub struct LevelSettings {
     pub reduced: Option<TriangleBudget>,
     /// An impostor level's frames (none: a billboard cloud or a reduced mesh).
     pub impostor: Option<crate::impostor::ImpostorSettings>,
+    /// How many times each surface but the albedo halves the albedo's side (an `Auto`
+    /// candidate's, see [`allot_surfaces`]; none elsewhere).
+    pub surface_halvings: SurfaceHalvings,
+}
+
+/// How many times each surface of a level but its albedo halves the albedo's side: it is stored
+/// as that level of its mip chain (`texture::mips::reduced_level`), with the same UVs.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq, Hash, serde::Serialize)]
+pub struct SurfaceHalvings {
+    pub mra: u32,
+    pub normal: u32,
+    pub height: u32,
+}
+
+impl SurfaceHalvings {
+    /// The halvings of `surface` (the albedo's: none).
+    pub fn of(self, surface: SurfaceKind) -> u32 {
+        match surface {
+            SurfaceKind::Mra => self.mra,
+            SurfaceKind::Normal => self.normal,
+            SurfaceKind::Height => self.height,
+            SurfaceKind::Albedo | SurfaceKind::Ao => 0,
+        }
+    }
+
+    fn of_mut(&mut self, surface: SurfaceKind) -> Option<&mut u32> {
+        match surface {
+            SurfaceKind::Mra => Some(&mut self.mra),
+            SurfaceKind::Normal => Some(&mut self.normal),
+            SurfaceKind::Height => Some(&mut self.height),
+            SurfaceKind::Albedo | SurfaceKind::Ao => None,
+        }
+    }
 }
 
 /// The levels of an asset's chain (one without a chain).
@@ -45,6 +79,8 @@ pub struct Slot {
     pub atlas_size: Option<u32>,
     /// A candidate's name: its folder under `lod<N>/candidates/`.
     pub candidate: Option<String>,
+    /// A candidate's surfaces smaller than its albedo (none elsewhere).
+    pub halvings: SurfaceHalvings,
 }
 
 /// What an asset bakes: each level of its chain, an `Auto` level as its candidates
@@ -52,13 +88,19 @@ pub struct Slot {
 pub fn slots(settings: &Settings) -> Vec<Slot> {
     let lods = &settings.own::<Own>().billboard.lods;
     if lods.is_empty() {
-        return vec![Slot { level: 0, bakes: None, atlas_size: None, candidate: None }];
+        return vec![Slot { level: 0, bakes: None, atlas_size: None, candidate: None, halvings: Default::default() }];
     }
     let mut slots = Vec::new();
     for (level, &entry) in lods.iter().enumerate() {
         match entry {
             LodLevel::Auto { max_bytes } => slots.extend(auto_candidates(settings, level as u32, max_bytes)),
-            entry => slots.push(Slot { level: level as u32, bakes: Some(entry), atlas_size: None, candidate: None }),
+            entry => slots.push(Slot {
+                level: level as u32,
+                bakes: Some(entry),
+                atlas_size: None,
+                candidate: None,
+                halvings: Default::default(),
+            }),
         }
     }
     slots
@@ -84,46 +126,105 @@ fn quads_pack(quads: u32, side: u32, padding: u32) -> bool {
     quads as f64 * cell * cell <= PACKED_SHARE * side as f64 * side as f64
 }
 
+/// The most times a surface of an `Auto` candidate halves its albedo's side.
+const MAX_SURFACE_HALVINGS: u32 = 2;
+
+/// The order in which a candidate's surfaces besides its albedo win back texels: the normal
+/// (lighting), the height (an impostor's depth, a cloud's relief), the packed surface.
+const SURFACE_PRIORITY: [SurfaceKind; 3] = [SurfaceKind::Normal, SurfaceKind::Height, SurfaceKind::Mra];
+
+/// How a candidate's `surfaces` share `max_bytes` (its mesh's bytes taken out) with the albedo at
+/// `side`: every other surface at most `max_halvings` (and [`MAX_SURFACE_HALVINGS`]) times
+/// smaller, then each, in [`SURFACE_PRIORITY`] order and one halving a round, as large as the
+/// bytes allow. The albedo carries the coverage that the silhouette is cut from, which is what
+/// a far level loses first (a 128 KiB cloud at 128² with every surface loses 2.8 px-shift units
+/// on the oak at 64 px, at 256² 0.95). None when even the smallest do not fit.
+pub fn allot_surfaces(
+    surfaces: &[SurfaceKind],
+    side: u32,
+    max_halvings: u32,
+    bytes_of: impl Fn(SurfaceKind, u32) -> u64,
+    max_bytes: u64,
+) -> Option<SurfaceHalvings> {
+    let max_halvings = max_halvings.min(MAX_SURFACE_HALVINGS);
+    let mut halvings = SurfaceHalvings::default();
+    for &surface in surfaces {
+        if let Some(value) = halvings.of_mut(surface) {
+            *value = max_halvings;
+        }
+    }
+    let bytes = |halvings: &SurfaceHalvings| -> u64 {
+        surfaces.iter().map(|&surface| bytes_of(surface, side >> halvings.of(surface))).sum()
+    };
+    if bytes(&halvings) > max_bytes {
+        return None;
+    }
+    for _ in 0..max_halvings {
+        for surface in SURFACE_PRIORITY.into_iter().filter(|surface| surfaces.contains(surface)) {
+            let mut larger = halvings;
+            let Some(value) = larger.of_mut(surface) else { continue };
+            if *value > 0 {
+                *value -= 1;
+                if bytes(&larger) <= max_bytes {
+                    halvings = larger;
+                }
+            }
+        }
+    }
+    Some(halvings)
+}
+
 /// The candidates of `level`, an `Auto` level of at most `max_bytes` on the GPU: billboard clouds
 /// of 16, 64 and 256 quads and full-sphere impostors of 8 and 12 frames a side, each with the
-/// largest power-of-two atlas (at least 64 texels, at most the asset's `max_size`; an impostor's
-/// frames at least 16 texels) whose surfaces with every mip, and its quads, fit, and in which
-/// its quads pack (see [`quads_pack`]). A candidate that fits at no size is left out.
+/// largest power-of-two albedo (at least 64 texels, at most the asset's `max_size`; an
+/// impostor's frames at least 16 texels) beside which its other surfaces fit, up to four times
+/// smaller a side ([`allot_surfaces`]), with its quads, and in which its quads pack (see
+/// [`quads_pack`]). A candidate that fits at no size is left out.
 pub fn auto_candidates(settings: &Settings, level: u32, max_bytes: u64) -> Vec<Slot> {
     use crate::texture::encode::gpu_bytes;
     let (max_size, padding) = (settings.own::<Own>().atlas.max_size, settings.own::<Own>().atlas.padding);
     let encode = &settings.encode;
-    let surfaces_bytes = |surfaces: &[crate::texture::SurfaceKind], side: u32| -> u64 {
-        surfaces.iter().map(|&surface| gpu_bytes(side, side, Some(encode.format_of(surface)))).sum()
-    };
+    let bytes_of = |surface: SurfaceKind, side: u32| gpu_bytes(side, side, Some(encode.format_of(surface)));
     let sides = || (6..=13).rev().map(|power| 1u32 << power).filter(|&side| side <= max_size);
     let mut candidates = Vec::new();
     for quads in [16u32, 64, 256] {
+        let Some(mesh_bytes) = max_bytes.checked_sub(quads as u64 * QUAD_MESH_BYTES) else { continue };
         let fits = |side: u32| {
             quads_pack(quads, side, padding)
-                && surfaces_bytes(&crate::texture::SurfaceKind::BILLBOARD, side) + quads as u64 * QUAD_MESH_BYTES
-                    <= max_bytes
+                .then(|| allot_surfaces(&SurfaceKind::BILLBOARD, side, u32::MAX, bytes_of, mesh_bytes))
+                .flatten()
         };
-        if let Some(side) = sides().find(|&side| fits(side)) {
+        if let Some((side, halvings)) = sides().find_map(|side| fits(side).map(|halvings| (side, halvings))) {
             candidates.push(Slot {
                 level,
                 bakes: Some(LodLevel::Quads(quads)),
                 atlas_size: Some(side),
                 candidate: Some(format!("quads{quads}")),
+                halvings,
             });
         }
     }
     for frames in [8u32, 12] {
+        let Some(mesh_bytes) = max_bytes.checked_sub(QUAD_MESH_BYTES) else { continue };
         let fits = |side: u32| {
-            side / frames >= super::settings::MIN_IMPOSTOR_FRAME
-                && surfaces_bytes(&super::impostor_level::IMPOSTOR_SURFACES, side) + QUAD_MESH_BYTES <= max_bytes
+            let frame = impostor_settings(frames, false, side).frame_size;
+            // Each frame keeps whole blocks at every size its surfaces are stored at.
+            let max_halvings =
+                (0..=MAX_SURFACE_HALVINGS).take_while(|&halvings| frame % (4 << halvings) == 0).last().unwrap_or(0);
+            (side / frames >= super::settings::MIN_IMPOSTOR_FRAME)
+                .then(|| {
+                    let surfaces = &super::impostor_level::IMPOSTOR_SURFACES;
+                    allot_surfaces(surfaces, frames * frame, max_halvings, bytes_of, mesh_bytes)
+                })
+                .flatten()
         };
-        if let Some(side) = sides().find(|&side| fits(side)) {
+        if let Some((side, halvings)) = sides().find_map(|side| fits(side).map(|halvings| (side, halvings))) {
             candidates.push(Slot {
                 level,
                 bakes: Some(LodLevel::Impostor { frames, hemi: false, size: side }),
                 atlas_size: Some(side),
                 candidate: Some(format!("impostor{frames}")),
+                halvings,
             });
         }
     }
@@ -137,7 +238,8 @@ pub fn auto_candidates(settings: &Settings, level: u32, max_bytes: u64) -> Vec<S
 pub(crate) fn settings_for(settings: &Settings, slot: u32) -> LevelSettings {
     let billboard = &settings.own::<Own>().billboard;
     let slot = slots(settings).into_iter().nth(slot as usize);
-    let (level, entry, atlas_size) = slot.map_or((0, None, None), |slot| (slot.level, slot.bakes, slot.atlas_size));
+    let (level, entry, atlas_size, surface_halvings) = slot
+        .map_or((0, None, None, Default::default()), |slot| (slot.level, slot.bakes, slot.atlas_size, slot.halvings));
     let budget = match entry {
         Some(entry) => entry.cloud_budget(),
         None => billboard.budget,
@@ -172,6 +274,7 @@ pub(crate) fn settings_for(settings: &Settings, slot: u32) -> LevelSettings {
             Some(LodLevel::Impostor { frames, hemi, size }) => Some(impostor_settings(frames, hemi, size)),
             _ => None,
         },
+        surface_halvings,
     }
 }
 

@@ -66,6 +66,16 @@ fn atlas_surfaces(db: &dyn Db, asset: Asset, level: u32) -> Vec<SurfaceId> {
     kinds.iter().map(|&surface| SurfaceId { group: folder.clone(), surface }).collect()
 }
 
+/// `key` for `surface` of `level` when the surface is stored smaller than it is made (its
+/// halvings), else `key` itself (so that the keys of surfaces at their full size stay as they
+/// were).
+fn with_halvings(db: &dyn Db, asset: Asset, level: u32, surface: &SurfaceId, key: CacheKey) -> CacheKey {
+    match queries::level_settings(db, asset, level).surface_halvings.of(surface.surface) {
+        0 => key,
+        halvings => crate::db::stage_key(queries::SURFACE_HALVINGS).part(&key.0).part(&halvings).finish(),
+    }
+}
+
 /// The slot a surface belongs to (its group is the slot's folder).
 fn level_of_surface(db: &dyn Db, asset: Asset, surface: &SurfaceId) -> Result<u32, Diagnostic> {
     levels::slot_of_folder(asset.settings(db), &surface.group)
@@ -306,15 +316,25 @@ impl Kind for BillboardCloud {
 
     fn surface_image(db: &dyn Db, asset: Asset, surface: &SurfaceId) -> Result<Arc<Texture>, Diagnostic> {
         let level = level_of_surface(db, asset, surface)?;
-        if levels::is_impostor(asset.settings(db), level) {
+        let halvings = queries::level_settings(db, asset, level).surface_halvings.of(surface.surface);
+        let image = if levels::is_impostor(asset.settings(db), level) {
             let frames = queries::impostor_frames(db, asset, level)?;
-            return Ok(Arc::new(match surface.surface {
+            Arc::new(match surface.surface {
                 SurfaceKind::Normal => frames.normal.clone(),
                 SurfaceKind::Height => frames.depth.clone(),
                 _ => frames.albedo.clone(),
-            }));
-        }
-        queries::atlas_surface(db, asset, level, surface.surface)
+            })
+        } else {
+            queries::atlas_surface(db, asset, level, surface.surface)?
+        };
+        Ok(match halvings {
+            0 => image,
+            _ => Arc::new(crate::texture::mips::reduced_level(
+                &image,
+                crate::texture::mips::MipSettings { kind: surface.surface, alpha_cutoff: None },
+                halvings,
+            )),
+        })
     }
 
     fn tail_settings(db: &dyn Db, asset: Asset, surface: &SurfaceId) -> Result<TailSettings, Diagnostic> {
@@ -330,10 +350,11 @@ impl Kind for BillboardCloud {
 
     fn surface_recipe_key(db: &dyn Db, asset: Asset, surface: &SurfaceId) -> Result<Option<CacheKey>, Diagnostic> {
         let level = level_of_surface(db, asset, surface)?;
-        if levels::is_impostor(asset.settings(db), level) {
-            return Ok(Some(queries::impostor_recipe_key(db, asset, level)));
-        }
-        Ok(Some(queries::atlas_recipe_key(db, asset, level)))
+        let key = match levels::is_impostor(asset.settings(db), level) {
+            true => queries::impostor_recipe_key(db, asset, level),
+            false => queries::atlas_recipe_key(db, asset, level),
+        };
+        Ok(Some(with_halvings(db, asset, level, surface, key)))
     }
 
     fn cutting_surface(surface: &SurfaceId) -> Option<SurfaceId> {
@@ -346,7 +367,8 @@ impl Kind for BillboardCloud {
         if levels::is_impostor(asset.settings(db), level) {
             return Ok(None);
         }
-        queries::atlas_surface_parts_key(db, asset, level, surface.surface).map(Some)
+        let key = queries::atlas_surface_parts_key(db, asset, level, surface.surface)?;
+        Ok(Some(with_halvings(db, asset, level, surface, key)))
     }
 
     fn preview(
@@ -605,8 +627,7 @@ fn level_outputs(
     let mut gpu_bytes = gltf.bin.len() as u64;
     outputs.add(level_folder.join("lod.gltf"), ArtifactRole::Gltf, gltf.gltf.clone().into());
     outputs.add(level_folder.join("lod.bin"), ArtifactRole::GltfBuffer, gltf.bin.clone().into());
-    let written =
-        write_level_surfaces(db, asset, level, output_folder, (layout.layout.width, layout.layout.height), outputs)?;
+    let written = write_level_surfaces(db, asset, level, output_folder, outputs)?;
     bytes += written.bytes;
     gpu_bytes += written.gpu_bytes;
     let surfaces = written.infos;
@@ -652,14 +673,12 @@ struct LevelSurfaces {
     names: Vec<(String, String)>,
 }
 
-/// Adds a level's surfaces from the tail (textures, previews, a cloud's `orm.png`) to `outputs`;
-/// `(width, height)` is their size.
+/// Adds a level's surfaces from the tail (textures, previews, a cloud's `orm.png`) to `outputs`.
 fn write_level_surfaces(
     db: &dyn Db,
     asset: Asset,
     level: u32,
     output_folder: &Path,
-    (width, height): (u32, u32),
     outputs: &mut AssetOutputs,
 ) -> Result<LevelSurfaces, Diagnostic> {
     let encode = &asset.settings(db).encode;
@@ -669,6 +688,8 @@ fn write_level_surfaces(
         let artifacts = crate::kinds::tail_queries::surface_artifacts(db, asset, surface.clone())?;
         let [texture_path, preview_path] = surface.artifact_paths(output_folder, encode);
         written.bytes += artifacts.texture_file.len();
+        // Each at its own size: an `Auto` candidate's surfaces may be smaller than its albedo.
+        let (width, height) = (artifacts.info.width, artifacts.info.height);
         written.gpu_bytes += crate::texture::encode::gpu_bytes(width, height, Some(encode.format_of(surface.surface)));
         written.names.push((name(&texture_path), name(&preview_path)));
         let orm_path = preview_path.with_file_name("orm.png");

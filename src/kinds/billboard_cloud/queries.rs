@@ -58,6 +58,8 @@ pub(crate) const IMPOSTOR: Stage = Stage { name: "impostor", version: 2 };
 /// measured until it fails at two sizes in a row, not one; 3: 2 × 2 samples a pixel at 128 and
 /// 256 px (`preview::hold_samples_per_axis`).
 pub(crate) const SWITCH: Stage = Stage { name: "switch", version: 3 };
+/// The cache keys of surfaces stored smaller than they are made (`levels::SurfaceHalvings`).
+pub(crate) const SURFACE_HALVINGS: Stage = Stage { name: "surface-halvings", version: 1 };
 
 /// The deviation (a fraction of the mesh's largest extent) up to which a reduced level's
 /// simplifier prefers stopping to reaching its budget.

@@ -152,5 +152,54 @@ fn a_candidate_whose_quads_cannot_pack_in_its_bytes_is_not_baked() {
             .collect();
         names.push(level.join(" "));
     }
-    assert_eq!(names, ["quads16 quads64 impostor8", "quads16"]);
+    // At 32 KiB the impostor's 16-texel frames fit because its normal and depth are stored at
+    // half its albedo's side.
+    assert_eq!(names, ["quads16 quads64 impostor8", "quads16 impostor8"]);
+}
+
+/// The level 0 size of a baked texture file.
+fn texture_side(project: &crate::support::TempProject, path: &str) -> (u32, u32) {
+    let texture = cirrus::texture::container::read_container(&project.read(path)).unwrap();
+    (texture.width, texture.height)
+}
+
+#[test]
+fn an_auto_candidate_gives_its_bytes_to_its_albedo_first() {
+    // 128 KiB for the bundled bush. With every surface at one side, a 16-quad cloud's atlas
+    // would be 128² (albedo, packed, normal and height: 4.7 bytes a texel with mips) and an
+    // 8-frame impostor's 128² (16-texel frames); with the albedo first, the cloud's albedo is
+    // 256² and the impostor's frames 32 texels, the other surfaces at a half or a quarter side.
+    let project = crate::support::TempProject::new(
+        r#"Pipeline(source: "assets", output: "baked", assets: [
+            BillboardCloud(name: "tree", mesh: "trees/bush_2.obj", billboard: (lods: [Auto(max_bytes: 131072)])),
+        ])"#,
+    );
+    let trees = std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("examples/assets/trees");
+    project.copy_folder(&trees, "assets/trees");
+    let summary = build(&mut project.open());
+    assert!(summary.all_ok(), "{}", summary.to_text());
+    let built = report(&project);
+    let candidates = built["levels"][0]["auto"]["candidates"].as_array().unwrap();
+    let folder = |name: &str| format!("baked/tree/lod0/candidates/{name}");
+    for candidate in candidates {
+        // Measured as an engine draws it, within its bytes counted at each file's own size.
+        assert!(!candidate["measured"].as_array().unwrap().is_empty(), "{candidate}");
+        assert!(candidate["gpu_bytes"].as_u64().unwrap() <= 131072, "{candidate}");
+    }
+    let quads = folder("quads16");
+    assert_eq!(texture_side(&project, &format!("{quads}/albedo.ktx2")), (256, 256));
+    let [normal, height, mra] =
+        ["normal", "height", "mra"].map(|name| texture_side(&project, &format!("{quads}/{name}.ktx2")));
+    assert_eq!(normal, (128, 128), "the normal wins back texels first");
+    assert_eq!(height, (128, 128));
+    assert_eq!(mra, (64, 64), "the packed surface last");
+
+    let impostor = folder("impostor8");
+    let description: serde_json::Value =
+        serde_json::from_slice(&project.read(&format!("{impostor}/impostor.json"))).unwrap();
+    assert_eq!(description["frame_size"], 32);
+    assert_eq!(texture_side(&project, &format!("{impostor}/albedo.ktx2")), (256, 256));
+    for name in ["normal", "height"] {
+        assert_eq!(texture_side(&project, &format!("{impostor}/{name}.ktx2")), (128, 128), "{name}");
+    }
 }

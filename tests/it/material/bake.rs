@@ -613,7 +613,11 @@ fn blocks_the_albedo_hides_are_encoded_fast_and_the_shown_ones_exactly_as_before
     assert!(hidden.levels[3].iter().all(|&is_hidden| !is_hidden), "level 3 (8 × 5) reads shown texels");
     let opaque = cirrus::texture::Texture::new(width, height, vec![255; (width * height * 4) as usize]);
     assert!(HiddenBlocks::of_alpha(&opaque, &sizes).is_none(), "an opaque albedo hides nothing");
-    assert!(HiddenBlocks::of_alpha(&albedo, &sizes[1..]).is_none(), "another size hides nothing");
+    // A surface stored at half the albedo's size (an `Auto` candidate's normal) hides what the
+    // albedo's level 1 hides; a size off the albedo's chain hides nothing.
+    let halved = HiddenBlocks::of_alpha(&albedo, &sizes[1..]).expect("level 1 hides blocks");
+    assert_eq!(halved.levels, hidden.levels[1..]);
+    assert!(HiddenBlocks::of_alpha(&albedo, &chain_sizes(64, 40)).is_none(), "another size hides nothing");
 
     let fingerprints = BlockFingerprints::of(&levels[0]);
     for format in [BlockFormat::Bc1, BlockFormat::Bc4, BlockFormat::Bc5, BlockFormat::Bc7] {

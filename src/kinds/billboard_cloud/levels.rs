@@ -206,22 +206,24 @@ pub fn auto_candidates(settings: &Settings, level: u32, max_bytes: u64) -> Vec<S
     }
     for frames in [8u32, 12] {
         let Some(mesh_bytes) = max_bytes.checked_sub(QUAD_MESH_BYTES) else { continue };
+        // The largest frame (a multiple of 4 texels, of 8 or 16 where its other surfaces are
+        // stored at a half or a quarter side, so that each frame keeps whole blocks in them).
         let fits = |side: u32| {
-            let frame = impostor_settings(frames, false, side).frame_size;
-            // Each frame keeps whole blocks at every size its surfaces are stored at.
-            let max_halvings =
-                (0..=MAX_SURFACE_HALVINGS).take_while(|&halvings| frame % (4 << halvings) == 0).last().unwrap_or(0);
-            (side / frames >= super::settings::MIN_IMPOSTOR_FRAME)
-                .then(|| {
+            (0..=MAX_SURFACE_HALVINGS)
+                .filter_map(|max_halvings| {
+                    let frame = side / frames / (4 << max_halvings) * (4 << max_halvings);
                     let surfaces = &super::impostor_level::IMPOSTOR_SURFACES;
-                    allot_surfaces(surfaces, frames * frame, max_halvings, bytes_of, mesh_bytes)
+                    (frame >= super::settings::MIN_IMPOSTOR_FRAME)
+                        .then(|| allot_surfaces(surfaces, frames * frame, max_halvings, bytes_of, mesh_bytes))
+                        .flatten()
+                        .map(|halvings| (frame, halvings))
                 })
-                .flatten()
+                .max_by_key(|&(frame, _)| frame)
         };
-        if let Some((side, halvings)) = sides().find_map(|side| fits(side).map(|halvings| (side, halvings))) {
+        if let Some((side, (frame, halvings))) = sides().find_map(|side| fits(side).map(|fit| (side, fit))) {
             candidates.push(Slot {
                 level,
-                bakes: Some(LodLevel::Impostor { frames, hemi: false, size: side }),
+                bakes: Some(LodLevel::Impostor { frames, hemi: false, size: frames * frame }),
                 atlas_size: Some(side),
                 candidate: Some(format!("impostor{frames}")),
                 halvings,

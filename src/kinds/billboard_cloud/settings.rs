@@ -65,7 +65,8 @@ pub enum LodLevel {
     Impostor { frames: u32, hemi: bool, size: u32 },
     /// The candidate that holds furthest among those whose bytes on the GPU fit `max_bytes`
     /// (`levels::auto_candidates`: billboard clouds of 16, 64 and 256 quads and impostors of 8
-    /// and 12 frames, each with the largest atlas that fits), each baked and measured against
+    /// and 12 frames, each with the largest albedo that fits beside its other surfaces, these
+    /// stored up to four times smaller a side), each baked and measured against
     /// the source as the chain's levels are.
     Auto { max_bytes: u64 },
 }

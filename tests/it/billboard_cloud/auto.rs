@@ -152,9 +152,9 @@ fn a_candidate_whose_quads_cannot_pack_in_its_bytes_is_not_baked() {
             .collect();
         names.push(level.join(" "));
     }
-    // At 32 KiB the impostor's 16-texel frames fit because its normal and depth are stored at
-    // half its albedo's side.
-    assert_eq!(names, ["quads16 quads64 impostor8", "quads16 impostor8"]);
+    // Impostors of 16-texel frames fit (12 a side at 128 KiB, 8 at 32 KiB) because their normal
+    // and depth are stored at a half or a quarter of their albedo's side.
+    assert_eq!(names, ["quads16 quads64 impostor8 impostor12", "quads16 impostor8"]);
 }
 
 /// The level 0 size of a baked texture file.

@@ -427,3 +427,76 @@ fn each_frame_shows_the_mesh_s_bounds_from_its_direction() {
     let mean = ious.iter().sum::<f64>() / ious.len() as f64;
     assert!(mean > 0.85 && ious.iter().all(|&iou| iou > 0.6), "pole: mean {mean}, {ious:?}");
 }
+
+/// `levels`' every level upsampled twice (each texel repeated 2 × 2): level `k` then holds
+/// what level `k + 1` of a chain twice the size holds.
+fn doubled(levels: &[cirrus::texture::Texture]) -> Vec<cirrus::texture::Texture> {
+    levels
+        .iter()
+        .map(|level| {
+            let (width, height) = (level.width * 2, level.height * 2);
+            let pixels = (0..width * height)
+                .flat_map(|at| {
+                    let (x, y) = (at % width / 2, at / width / 2);
+                    let texel = ((y * level.width + x) * 4) as usize;
+                    level.pixels[texel..texel + 4].to_vec()
+                })
+                .collect();
+            cirrus::texture::Texture::new(width, height, pixels)
+        })
+        .collect()
+}
+
+#[test]
+fn normal_and_depth_atlases_stored_at_half_the_albedo_s_side_draw_as_the_full_ones() {
+    // An `Auto` candidate may store an impostor's normal and depth at a half or a quarter of
+    // its albedo's side: level 0 of the stored chain is level 1 or 2 of the full one. The
+    // shader offsets their mip level by the ratio of the sides, so where every pixel reads
+    // level 1 or below (a 32-texel frame drawn 12 pixels across), the draw is the full one's.
+    use cirrus::texture::mips::{mip_chain, MipSettings};
+    use cirrus::texture::SurfaceKind;
+    let gpu = cirrus::gpu::gpu().expect("a GPU adapter (llvmpipe in CI)");
+    let sphere = view_of(&sphere_obj(16));
+    let (center, radius) = cirrus::preview::bounding_sphere(&sphere);
+    let grid = FrameGrid { frames: 8, sphere: Sphere::Full };
+    let settings = cirrus::impostor::ImpostorSettings { grid, frame_size: 32 };
+    let frames = cirrus::impostor::bake_impostor(gpu, &sphere, (Vec3::from(center), radius), settings).unwrap();
+    let chain = |texture: &cirrus::texture::Texture, kind| mip_chain(texture, MipSettings { kind, alpha_cutoff: None });
+    let albedo = mip_chain(&frames.albedo, MipSettings { kind: SurfaceKind::Albedo, alpha_cutoff: Some(0.5) });
+    let (normal, depth) = (chain(&frames.normal, SurfaceKind::Normal), chain(&frames.depth, SurfaceKind::Height));
+    let draw =
+        |normal: Vec<cirrus::texture::Texture>, depth: Vec<cirrus::texture::Texture>| cirrus::gpu::ImpostorDraw {
+            grid,
+            albedo: albedo.clone(),
+            normal,
+            depth,
+            center,
+            radius,
+            alpha_cutoff: 0.5,
+            rects: frames.rects.clone(),
+        };
+    let full = draw(normal.clone(), depth.clone());
+    let halved = draw(normal[1..].to_vec(), depth[1..].to_vec());
+    let quartered = draw(normal[2..].to_vec(), depth[2..].to_vec());
+    // What a shader that sampled them at the albedo's level would draw: the full side, one
+    // level coarser.
+    let coarser = draw(doubled(&normal[1..]), doubled(&depth[1..]));
+    let light = cirrus::preview::preview_light();
+    let mut coarser_differs = 0;
+    for direction in cirrus::preview::view_directions() {
+        let camera = cirrus::preview::view_projection(center, radius, direction);
+        let reference = gpu.render_impostor_view(&full, camera, light, 12).unwrap();
+        let differing = |a: &[u8], b: &[u8]| a.iter().zip(b).filter(|(a, b)| a != b).count();
+        let half = gpu.render_impostor_view(&halved, camera, light, 12).unwrap();
+        assert_eq!(differing(&half, &reference), 0, "{direction:?}: bytes that differ at 12 px");
+        let coarse = gpu.render_impostor_view(&coarser, camera, light, 12).unwrap();
+        coarser_differs += usize::from(reference.iter().zip(&coarse).any(|(a, b)| a.abs_diff(*b) > 2));
+        // A quarter side reads level 2 where the draw reads level 1: equal where it reads 2.
+        let (reference, quarter) = (
+            gpu.render_impostor_view(&full, camera, light, 6).unwrap(),
+            gpu.render_impostor_view(&quartered, camera, light, 6).unwrap(),
+        );
+        assert_eq!(differing(&quarter, &reference), 0, "{direction:?}: bytes that differ at 6 px");
+    }
+    assert!(coarser_differs >= 20, "one level coarser shows in {coarser_differs} of 26 views");
+}

@@ -288,6 +288,16 @@ pub(crate) fn impostor_settings(frames: u32, hemi: bool, size: u32) -> crate::im
     crate::impostor::ImpostorSettings { grid: FrameGrid::new(frames, hemi), frame_size: ((size / frames) & !3).max(4) }
 }
 
+/// The first billboard-cloud slot that asks for the same planes as `slot` (`slot` itself when
+/// none before it does, or when it is not a cloud).
+pub(crate) fn first_slot_with_planes(settings: &Settings, slot: u32) -> u32 {
+    if !is_cloud(settings, slot) {
+        return slot;
+    }
+    let planes = settings_for(settings, slot).planes;
+    (0..slot).find(|&other| is_cloud(settings, other) && settings_for(settings, other).planes == planes).unwrap_or(slot)
+}
+
 /// Whether level `level` is a reduced mesh (no planes, atlas or renders).
 pub(crate) fn is_reduced(settings: &Settings, level: u32) -> bool {
     settings_for(settings, level).reduced.is_some()

@@ -103,6 +103,14 @@ pub(crate) fn billboard_planes(
     level: u32,
 ) -> Result<Arc<super::planes::PlaneSet>, Diagnostic> {
     let name = level_label(db, asset, level);
+    // Slots asking for the same planes (an `Auto` chain's candidates of one quad count, at
+    // every level) share the first one's, even while it is being computed.
+    let first = super::levels::first_slot_with_planes(asset.settings(db), level);
+    if first != level {
+        let planes = billboard_planes(db, asset, first)?;
+        record_cache_hit(db, PLANES, name);
+        return Ok(planes);
+    }
     cached_json(db, PLANES, name, planes_cache_key(db, asset, level), || {
         let loaded = loaded_mesh(db, asset)?;
         let settings = level_settings(db, asset, level).planes;

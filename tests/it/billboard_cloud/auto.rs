@@ -39,6 +39,10 @@ fn an_auto_level_keeps_the_candidate_that_holds_furthest_within_its_bytes() {
     assert!(summary.all_ok(), "{}", summary.to_text());
     let executed = cirrus.take_executed_stages();
     assert_eq!(executed.iter().filter(|run| *run == "mesh(tree)").count(), 1, "one mesh stage: {executed:?}");
+    // One planes stage per quad count, shared by that count's candidates at every level.
+    let planes: Vec<&String> = executed.iter().filter(|run| run.starts_with("planes(")).collect();
+    assert_eq!(planes.len(), 3, "{planes:?}");
+    assert!(planes.iter().all(|run| run.starts_with("planes(tree/lod0/")), "{planes:?}");
 
     let built = report(&project);
     let levels = built["levels"].as_array().unwrap();

@@ -147,10 +147,19 @@ fn auto_report(
     let candidates: Vec<serde_json::Value> = (0..slots.len())
         .filter(|&slot| slots[slot].level == level)
         .map(|slot| {
+            // Each surface's side: the albedo's, the others' at a half or a quarter of it where
+            // that let the albedo double (`levels::allot_surfaces`).
+            let sides: serde_json::Map<String, serde_json::Value> = reports[slot]["surfaces"]
+                .as_array()
+                .into_iter()
+                .flatten()
+                .filter_map(|info| Some((info["surface"].as_str()?.to_lowercase(), info["width"].clone())))
+                .collect();
             serde_json::json!({
                 "name": slots[slot].candidate,
                 "folder": levels::level_folder(settings, slot as u32),
                 "representation": reports[slot]["representation"],
+                "surface_sides": sides,
                 "gpu_bytes": reports[slot]["gpu_bytes"],
                 "holds_to": holds[slot].holds_to,
                 "measured": holds[slot].measured,

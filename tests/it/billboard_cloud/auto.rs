@@ -197,6 +197,9 @@ fn an_auto_candidate_gives_its_bytes_to_its_albedo_first() {
     assert_eq!(normal, (128, 128), "the normal wins back texels first");
     assert_eq!(height, (128, 128));
     assert_eq!(mra, (64, 64), "the packed surface last");
+    let quads16 = candidates.iter().find(|candidate| candidate["name"] == "quads16").unwrap();
+    let sides = serde_json::json!({ "albedo": 256, "mra": 64, "normal": 128, "height": 128 });
+    assert_eq!(quads16["surface_sides"], sides, "the report lists each surface's side");
 
     let impostor = folder("impostor8");
     let description: serde_json::Value =

@@ -274,7 +274,7 @@ pub(crate) fn read_impostor_view(
             false => (0..=2).map(|halvings| side >> halvings).filter(|&side| side >= grid.frames).collect(),
         };
         let fits = |level: &Texture| {
-            level.width == level.height && sides.contains(&level.width) && level.width % grid.frames == 0
+            level.width == level.height && sides.contains(&level.width) && level.width.is_multiple_of(grid.frames)
         };
         if !levels.first().is_some_and(fits) {
             let sizes = sides.iter().map(|side| format!("{side}²")).collect::<Vec<_>>().join(", ");

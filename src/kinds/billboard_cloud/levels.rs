@@ -29,7 +29,7 @@ pub struct LevelSettings {
 
 /// How many times each surface of a level but its albedo halves the albedo's side: it is stored
 /// as that level of its mip chain (`texture::mips::reduced_level`), with the same UVs.
-#[derive(Clone, Copy, Debug, Default, PartialEq, Eq, Hash, serde::Serialize)]
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
 pub struct SurfaceHalvings {
     pub mra: u32,
     pub normal: u32,

@@ -120,8 +120,9 @@ fn impostor_frame_axes(direction_in: vec3<f32>) -> ImpostorAxes {
 }
 
 // ---------------------------------------------------------------------------------------------
-// A reference renderer (cirrus's preview draws impostors with it): one camera-facing quad over
-// the bounding sphere; each fragment samples the three frames of the view's blend, each at the
+// A reference renderer (cirrus's preview draws impostors with it): one camera-facing polygon
+// over the bounding sphere (`hull` of `impostor.json`: an octagon holding the mesh's outline from
+// every direction, or the sphere's square); each fragment samples the three frames of the view's blend, each at the
 // point of the view ray that meets that frame's depth (one parallax step), and blends their
 // albedo and normal by weight and coverage, alpha-tested at the cutoff.
 //
@@ -148,6 +149,10 @@ struct ImpostorParams {
     grid: vec4<u32>,
     // alpha cutoff, unused...
     params: vec4<f32>,
+    // The polygon drawn, eight points [x, y] two a vector (xy, zw), in the view's right and up
+    // axes through the sphere's centre, in units of its radius: a fitted octagon, or the
+    // sphere's square (its last points repeated).
+    hull: array<vec4<f32>, 4>,
 }
 
 @group(0) @binding(0) var<storage, read> impostor_view: ImpostorView;
@@ -163,14 +168,20 @@ struct ImpostorVertexOut {
     @location(0) world: vec3<f32>,
 }
 
+// Point `k` (0..8) of the polygon drawn.
+fn impostor_hull_point(k: u32) -> vec2<f32> {
+    let pair = impostor.hull[k / 2u];
+    return select(pair.xy, pair.zw, k % 2u == 1u);
+}
+
+// 18 vertices: the polygon as a fan of six triangles (0, t + 1, t + 2).
 @vertex
 fn impostor_vs(@builtin(vertex_index) index: u32) -> ImpostorVertexOut {
-    var corners = array<vec2<f32>, 6>(
-        vec2<f32>(-1.0, -1.0), vec2<f32>(1.0, -1.0), vec2<f32>(1.0, 1.0),
-        vec2<f32>(-1.0, -1.0), vec2<f32>(1.0, 1.0), vec2<f32>(-1.0, 1.0),
-    );
+    let triangle = index / 3u;
+    let corner_of_triangle = index % 3u;
+    let point = select(triangle + corner_of_triangle, 0u, corner_of_triangle == 0u);
     let axes = impostor_frame_axes(impostor_view.eye.xyz);
-    let corner = corners[index];
+    let corner = impostor_hull_point(point);
     let world = impostor.sphere.xyz + (axes.right * corner.x + axes.up * corner.y) * impostor.sphere.w;
     var out: ImpostorVertexOut;
     out.clip = impostor_view.view_projection * vec4<f32>(world, 1.0);

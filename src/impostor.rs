@@ -79,6 +79,71 @@ pub fn frame_rects(points: &[Vec3], (center, radius): (Vec3, f32), settings: Imp
         .collect()
 }
 
+/// Directions the outline of [`view_hull`] is taken from (a Fibonacci sphere: about 6° apart).
+const HULL_DIRECTIONS: usize = 1024;
+
+/// How far [`view_hull`] stands off the outlines it saw, as a fraction of the radius: the
+/// directions between its samples, and the parallax step's reach past the mesh.
+const HULL_MARGIN: f32 = 0.03;
+
+/// The polygon a camera-facing impostor is drawn as, instead of the bounding sphere's square:
+/// eight points `[x, y]` (counter-clockwise, some may coincide) in the view's right and up axes
+/// (`mesh::octahedral::frame_axes` of the direction to the eye) through the sphere's centre,
+/// in units of its radius, within the square `[-1, 1]²`. It is the octagon of the slabs `x`,
+/// `y`, `x + y` and `x − y` that holds the outline of `points` (the mesh's vertices) seen from
+/// every one of [`HULL_DIRECTIONS`] directions, widened by [`HULL_MARGIN`]: a tree's narrow
+/// crown and empty corners are no longer drawn and discarded. No points: the square.
+pub fn view_hull(points: &[Vec3], (center, radius): (Vec3, f32)) -> [[f32; 2]; 8] {
+    use rayon::prelude::*;
+    let square =
+        [[-1.0, -1.0], [1.0, -1.0], [1.0, 1.0], [-1.0, 1.0], [-1.0, 1.0], [-1.0, 1.0], [-1.0, 1.0], [-1.0, 1.0]];
+    if points.is_empty() {
+        return square;
+    }
+    let radius = radius.max(1e-6);
+    let golden = std::f32::consts::PI * (3.0 - 5f32.sqrt());
+    // Per slab (x, y, x + y, x − y) the most and the least (as the most of the negation).
+    let extremes = (0..HULL_DIRECTIONS)
+        .into_par_iter()
+        .map(|index| {
+            let y = 1.0 - 2.0 * (index as f32 + 0.5) / HULL_DIRECTIONS as f32;
+            let ring = (1.0 - y * y).max(0.0).sqrt();
+            let angle = golden * index as f32;
+            let (right, up) = frame_axes(Vec3::new(ring * angle.cos(), y, ring * angle.sin()));
+            let mut most = [f32::NEG_INFINITY; 8];
+            for &point in points {
+                let offset = (point - center) / radius;
+                let (x, y) = (offset.dot(right), offset.dot(up));
+                for (slot, value) in [x, y, x + y, x - y].into_iter().enumerate() {
+                    most[2 * slot] = most[2 * slot].max(value);
+                    most[2 * slot + 1] = most[2 * slot + 1].max(-value);
+                }
+            }
+            most
+        })
+        .reduce(|| [f32::NEG_INFINITY; 8], |a, b| std::array::from_fn(|slot| a[slot].max(b[slot])));
+    let diagonal = HULL_MARGIN * std::f32::consts::SQRT_2;
+    let (x_max, x_min) = ((extremes[0] + HULL_MARGIN).min(1.0), (-extremes[1] - HULL_MARGIN).max(-1.0));
+    let (y_max, y_min) = ((extremes[2] + HULL_MARGIN).min(1.0), (-extremes[3] - HULL_MARGIN).max(-1.0));
+    let (s_max, s_min, t_max, t_min) =
+        (extremes[4] + diagonal, -extremes[5] - diagonal, extremes[6] + diagonal, -extremes[7] - diagonal);
+    if !(x_min < x_max && y_min < y_max) {
+        return square;
+    }
+    let clamp = |[x, y]: [f32; 2]| [x.clamp(x_min, x_max), y.clamp(y_min, y_max)];
+    [
+        [x_max, x_max - t_max],
+        [x_max, s_max - x_max],
+        [s_max - y_max, y_max],
+        [t_min + y_max, y_max],
+        [x_min, x_min - t_min],
+        [x_min, s_min - x_min],
+        [s_min - y_min, y_min],
+        [t_max + y_min, y_min],
+    ]
+    .map(clamp)
+}
+
 /// Renders every frame of `settings.grid` of `mesh` (whose bounding sphere is `center`,
 /// `radius`) into the atlases.
 pub fn bake_impostor(

@@ -1,5 +1,5 @@
 //! Octahedral impostors on the GPU, through `shaders/impostor.wgsl`: its reference renderer (one
-//! camera-facing quad blending three frames with a parallax step), and its frame selection run
+//! camera-facing polygon blending three frames with a parallax step), and its frame selection run
 //! over a list of directions in a compute pass, so that the shader engines copy is checked
 //! against the reference (`mesh::octahedral`) on the device that runs it.
 
@@ -21,6 +21,8 @@ pub struct ImpostorDraw {
     /// The part of the sphere's image each frame shows (`impostor::frame_rects`); empty: every
     /// frame shows all of it.
     pub rects: Vec<[f32; 4]>,
+    /// The polygon it is drawn as (`impostor::view_hull`); none: the sphere's square.
+    pub hull: Option<[[f32; 2]; 8]>,
 }
 
 /// What `impostor.wgsl`'s renderer reads of the view.
@@ -39,7 +41,13 @@ struct ImpostorUniform {
     sphere: [f32; 4],
     grid: [u32; 4],
     params: [f32; 4],
+    /// The eight points of the polygon drawn, two a vector.
+    hull: [[f32; 4]; 4],
 }
+
+/// The sphere's square as eight points of a polygon (the last ones repeated).
+const SQUARE_HULL: [[f32; 2]; 8] =
+    [[-1.0, -1.0], [1.0, -1.0], [1.0, 1.0], [-1.0, 1.0], [-1.0, 1.0], [-1.0, 1.0], [-1.0, 1.0], [-1.0, 1.0]];
 
 /// A compute entry point over `impostor.wgsl`: one invocation per direction, writing its three
 /// frames and (bit-cast) weights.
@@ -157,6 +165,12 @@ impl Gpu {
                 sphere: [cx, cy, cz, impostor.radius],
                 grid: [impostor.grid.frames, u32::from(impostor.grid.is_hemi()), 0, 0],
                 params: [impostor.alpha_cutoff, 0.0, 0.0, 0.0],
+                hull: {
+                    let hull = impostor.hull.unwrap_or(SQUARE_HULL);
+                    std::array::from_fn(|pair| {
+                        [hull[2 * pair][0], hull[2 * pair][1], hull[2 * pair + 1][0], hull[2 * pair + 1][1]]
+                    })
+                },
             };
             let view_buffer = self.constants_buffer(bytemuck::bytes_of(&view));
             let impostor_buffer = self.constants_buffer(bytemuck::bytes_of(&uniform));
@@ -199,7 +213,8 @@ impl Gpu {
                 });
                 pass.set_pipeline(pipeline);
                 pass.set_bind_group(0, &group, &[]);
-                pass.draw(0..6, 0..1);
+                // The polygon as a fan of six triangles.
+                pass.draw(0..18, 0..1);
             }
             self.read_back(encoder, &[&target]).map(|mut images| images.remove(0))
         })

@@ -57,6 +57,12 @@ pub struct ImpostorDescription {
     /// direction, so the mesh fills the frame. Absent: every frame shows the whole sphere.
     #[serde(default)]
     pub frame_rects: Vec<[f32; 4]>,
+    /// The polygon to draw instead of the sphere's square (`impostor::view_hull`): eight points
+    /// `[x, y]`, counter-clockwise (some may coincide), in the view's right and up axes through
+    /// the centre, in units of the radius; drawn as a fan (0, k, k + 1). It holds the mesh's
+    /// outline from every direction, so it cuts overdraw, not the impostor. Absent: the square.
+    #[serde(default)]
+    pub hull: Vec<[f32; 2]>,
 }
 
 impl ImpostorDescription {
@@ -197,6 +203,7 @@ pub(crate) fn impostor_level_outputs(
         normal,
         depth,
         frame_rects,
+        hull: super::queries::impostor_hull(db, asset)?.to_vec(),
     };
     let json = serde_json::to_vec_pretty(&description).expect("descriptions serialise");
     let quad = impostor_gltf(&description, [Some(albedo_png), Some(normal_png)]);
@@ -213,7 +220,8 @@ pub(crate) fn impostor_level_outputs(
         "frames": impostor.grid.frames,
         "hemi": impostor.grid.is_hemi(),
         "frame_size": impostor.frame_size,
-        "triangles": 2,
+        // The shader draws the hull as a fan of six (the glTF's quad, for loaders without it: 2).
+        "triangles": 6,
         "atlas": { "width": side, "height": side },
         "surfaces": written.infos,
         // The bytes an engine loads: the three textures, the description and the quad's buffer.
@@ -260,6 +268,10 @@ pub(crate) fn read_impostor_view(
             ),
         ));
     }
+    let hull = &description.hull;
+    if !hull.is_empty() && (hull.len() != 8 || !hull.iter().flatten().all(|value| (-1.0..=1.0).contains(value))) {
+        return Err(Diagnostic::new(&path, "`hull` needs eight [x, y] points within -1..1 (or none: the square)"));
+    }
     let mut textures = Vec::new();
     for name in [&description.albedo, &description.normal, &description.depth] {
         if Path::new(name).components().count() != 1 {
@@ -295,5 +307,6 @@ pub(crate) fn read_impostor_view(
         radius: description.radius,
         alpha_cutoff: description.alpha_cutoff,
         rects: description.frame_rects,
+        hull: description.hull.try_into().ok(),
     })
 }

@@ -763,6 +763,16 @@ fn renders_from_entry(entry: CacheEntry) -> Option<HashMap<CacheKey, Arc<Vec<Pla
     (offset == buffer.len()).then_some(renders)
 }
 
+/// The polygon an asset's impostor levels are drawn as (`impostor::view_hull`): the mesh's
+/// outline from every direction, the same for all of them.
+#[salsa::tracked(returns(clone))]
+pub(crate) fn impostor_hull(db: &dyn Db, asset: Asset) -> Result<[[f32; 2]; 8], Diagnostic> {
+    let loaded = loaded_mesh(db, asset)?;
+    let (center, radius) = super::planes::bounding_sphere(&loaded.mesh.positions);
+    let points: Vec<glam::Vec3> = loaded.mesh.positions.iter().map(|&point| glam::Vec3::from(point)).collect();
+    Ok(crate::impostor::view_hull(&points, (center, radius)))
+}
+
 /// A reduced level (stage `reduce`): the mesh under the level's triangle budget.
 #[salsa::tracked(returns(clone))]
 pub(crate) fn reduced_level(

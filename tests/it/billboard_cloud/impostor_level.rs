@@ -39,7 +39,13 @@ fn an_impostor_level_bakes_its_frames_through_the_tail_once_and_again_after_a_ba
         (level["frames"].as_u64(), level["frame_size"].as_u64(), level["hemi"].as_bool()),
         (Some(8), Some(32), Some(false))
     );
-    assert_eq!(level["triangles"], 2);
+    assert_eq!(level["triangles"], 6, "the hull's fan");
+    // The fitted hull: eight points within the sphere's square, cutting some of it.
+    let hull: Vec<[f32; 2]> = serde_json::from_value(description["hull"].clone()).unwrap();
+    assert_eq!(hull.len(), 8);
+    assert!(hull.iter().flatten().all(|value| (-1.0..=1.0).contains(value)), "{hull:?}");
+    let twice_area: f32 = (0..8).map(|k| hull[k][0] * hull[(k + 1) % 8][1] - hull[(k + 1) % 8][0] * hull[k][1]).sum();
+    assert!(twice_area / 2.0 < 0.9 * 4.0, "the hull covers {} of the square", twice_area / 8.0);
     assert_eq!(
         (&description["frames"], &description["frame_size"], &description["hemi"], &description["depth"]),
         (&serde_json::json!(8), &serde_json::json!(32), &serde_json::json!(false), &serde_json::json!("height.ktx2"))

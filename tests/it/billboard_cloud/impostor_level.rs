@@ -97,3 +97,25 @@ fn the_preview_and_the_viewer_draw_an_impostor_level_through_its_shader() {
     let covered: f64 = lines[1].split(", ").nth(2).and_then(|part| part.split('%').next()).unwrap().parse().unwrap();
     assert!(covered > 5.0, "{lines:?}");
 }
+
+#[test]
+fn an_impostor_description_with_a_broken_hull_is_refused_with_its_file_named() {
+    let project = chain_project(CHAIN);
+    let output = project.run_cli(&["build"]);
+    assert_eq!(output.status.code(), Some(0), "{}", String::from_utf8_lossy(&output.stderr));
+    let path = "baked/tree/lod1/impostor.json";
+    let mut description: serde_json::Value = serde_json::from_slice(&project.read(path)).unwrap();
+    description["hull"] = serde_json::json!([[0.0, 0.0], [2.0, 0.0], [0.0, 1.0]]);
+    project.write(path, serde_json::to_vec(&description).unwrap());
+    // The viewer reads the level as an engine would, from the files as they are, says why it
+    // cannot show it and keeps the level it shows.
+    let options = crate::support::headless_viewer_options(
+        &["--size", "32", "--press", "1"],
+        &project.path("shot.png"),
+        &project.path("baked/tree"),
+    );
+    let mut lines = Vec::new();
+    crate::viewer::run(&options, &mut |line| lines.push(line)).expect("the viewer keeps running");
+    let refused = lines.iter().find(|line| line.starts_with("cannot show lod1")).expect("lod1 is refused");
+    assert!(refused.contains("lod1/impostor.json: `hull` needs eight [x, y] points"), "{lines:?}");
+}

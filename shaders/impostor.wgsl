@@ -122,9 +122,9 @@ fn impostor_frame_axes(direction_in: vec3<f32>) -> ImpostorAxes {
 // ---------------------------------------------------------------------------------------------
 // A reference renderer (cirrus's preview draws impostors with it): one camera-facing polygon
 // over the bounding sphere (`hull` of `impostor.json`: an octagon holding the mesh's outline from
-// every direction, or the sphere's square); each fragment samples the three frames of the view's blend, each at the
-// point of the view ray that meets that frame's depth (one parallax step), and blends their
-// albedo and normal by weight and coverage, alpha-tested at the cutoff.
+// every direction, or the sphere's square); each fragment samples the three frames of the view's
+// blend, each at the point of the view ray that meets that frame's depth (one parallax step), and
+// blends their albedo and normal by weight and coverage, alpha-tested at the cutoff.
 //
 // Atlases: frame `j * frames + i` at column `i`, row `j`, each with its mips; albedo (sRGB,
 // coverage in alpha), normal (`0.5 + 0.5 n` in RG, in the frame's axes: x right, y up, z towards

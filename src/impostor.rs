@@ -79,6 +79,11 @@ pub fn frame_rects(points: &[Vec3], (center, radius): (Vec3, f32), settings: Imp
         .collect()
 }
 
+/// The bounding sphere's square as the eight points of a [`view_hull`] (the last ones repeated):
+/// what an impostor without a fitted hull is drawn as.
+pub const SQUARE_HULL: [[f32; 2]; 8] =
+    [[-1.0, -1.0], [1.0, -1.0], [1.0, 1.0], [-1.0, 1.0], [-1.0, 1.0], [-1.0, 1.0], [-1.0, 1.0], [-1.0, 1.0]];
+
 /// Directions the outline of [`view_hull`] is taken from (a Fibonacci sphere: about 6° apart).
 const HULL_DIRECTIONS: usize = 1024;
 
@@ -95,10 +100,8 @@ const HULL_MARGIN: f32 = 0.03;
 /// crown and empty corners are no longer drawn and discarded. No points: the square.
 pub fn view_hull(points: &[Vec3], (center, radius): (Vec3, f32)) -> [[f32; 2]; 8] {
     use rayon::prelude::*;
-    let square =
-        [[-1.0, -1.0], [1.0, -1.0], [1.0, 1.0], [-1.0, 1.0], [-1.0, 1.0], [-1.0, 1.0], [-1.0, 1.0], [-1.0, 1.0]];
     if points.is_empty() {
-        return square;
+        return SQUARE_HULL;
     }
     let radius = radius.max(1e-6);
     let golden = std::f32::consts::PI * (3.0 - 5f32.sqrt());
@@ -128,7 +131,7 @@ pub fn view_hull(points: &[Vec3], (center, radius): (Vec3, f32)) -> [[f32; 2]; 8
     let (s_max, s_min, t_max, t_min) =
         (extremes[4] + diagonal, -extremes[5] - diagonal, extremes[6] + diagonal, -extremes[7] - diagonal);
     if !(x_min < x_max && y_min < y_max) {
-        return square;
+        return SQUARE_HULL;
     }
     let clamp = |[x, y]: [f32; 2]| [x.clamp(x_min, x_max), y.clamp(y_min, y_max)];
     [

@@ -45,10 +45,6 @@ struct ImpostorUniform {
     hull: [[f32; 4]; 4],
 }
 
-/// The sphere's square as eight points of a polygon (the last ones repeated).
-const SQUARE_HULL: [[f32; 2]; 8] =
-    [[-1.0, -1.0], [1.0, -1.0], [1.0, 1.0], [-1.0, 1.0], [-1.0, 1.0], [-1.0, 1.0], [-1.0, 1.0], [-1.0, 1.0]];
-
 /// A compute entry point over `impostor.wgsl`: one invocation per direction, writing its three
 /// frames and (bit-cast) weights.
 const BLEND_ENTRY: &str = r#"
@@ -166,7 +162,7 @@ impl Gpu {
                 grid: [impostor.grid.frames, u32::from(impostor.grid.is_hemi()), 0, 0],
                 params: [impostor.alpha_cutoff, 0.0, 0.0, 0.0],
                 hull: {
-                    let hull = impostor.hull.unwrap_or(SQUARE_HULL);
+                    let hull = impostor.hull.unwrap_or(crate::impostor::SQUARE_HULL);
                     std::array::from_fn(|pair| {
                         [hull[2 * pair][0], hull[2 * pair][1], hull[2 * pair + 1][0], hull[2 * pair + 1][1]]
                     })

@@ -9,7 +9,7 @@
 use glam::Vec3;
 
 use crate::gpu::{Gpu, GpuError, ViewMesh};
-use crate::mesh::octahedral::{frame_axes, frame_rect_view_projection, FrameGrid};
+use crate::mesh::octahedral::{frame_axes, frame_rect_view_projection, FrameGrid, SQUARE_HULL};
 use crate::texture::fill::{fill_from_sources, texel_sources};
 use crate::texture::Texture;
 
@@ -78,11 +78,6 @@ pub fn frame_rects(points: &[Vec3], (center, radius): (Vec3, f32), settings: Imp
         })
         .collect()
 }
-
-/// The bounding sphere's square as the eight points of a [`view_hull`] (the last ones repeated):
-/// what an impostor without a fitted hull is drawn as.
-pub const SQUARE_HULL: [[f32; 2]; 8] =
-    [[-1.0, -1.0], [1.0, -1.0], [1.0, 1.0], [-1.0, 1.0], [-1.0, 1.0], [-1.0, 1.0], [-1.0, 1.0], [-1.0, 1.0]];
 
 /// Directions the outline of [`view_hull`] is taken from (a Fibonacci sphere: about 6° apart).
 const HULL_DIRECTIONS: usize = 1024;

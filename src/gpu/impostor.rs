@@ -162,7 +162,7 @@ impl Gpu {
                 grid: [impostor.grid.frames, u32::from(impostor.grid.is_hemi()), 0, 0],
                 params: [impostor.alpha_cutoff, 0.0, 0.0, 0.0],
                 hull: {
-                    let hull = impostor.hull.unwrap_or(crate::impostor::SQUARE_HULL);
+                    let hull = impostor.hull.unwrap_or(crate::mesh::octahedral::SQUARE_HULL);
                     std::array::from_fn(|pair| {
                         [hull[2 * pair][0], hull[2 * pair][1], hull[2 * pair + 1][0], hull[2 * pair + 1][1]]
                     })

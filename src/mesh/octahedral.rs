@@ -158,6 +158,12 @@ pub fn frame_view_projection(center: Vec3, radius: f32, direction: Vec3) -> glam
     frame_rect_view_projection(center, radius, direction, FULL_FRAME)
 }
 
+/// The bounding sphere's square as the eight points of an impostor's hull (`impostor::
+/// view_hull`; the last ones repeated), in the view's axes in units of the radius: what an
+/// impostor without a fitted hull is drawn as.
+pub const SQUARE_HULL: [[f32; 2]; 8] =
+    [[-1.0, -1.0], [1.0, -1.0], [1.0, 1.0], [-1.0, 1.0], [-1.0, 1.0], [-1.0, 1.0], [-1.0, 1.0], [-1.0, 1.0]];
+
 /// The whole of a frame's image: `[u0, v0, u1, v1]` of [`frame_rect_view_projection`].
 pub const FULL_FRAME: [f32; 4] = [0.0, 0.0, 1.0, 1.0];
 

@@ -317,23 +317,23 @@ impl Kind for BillboardCloud {
     fn surface_image(db: &dyn Db, asset: Asset, surface: &SurfaceId) -> Result<Arc<Texture>, Diagnostic> {
         let level = level_of_surface(db, asset, surface)?;
         let halvings = queries::level_settings(db, asset, level).surface_halvings.of(surface.surface);
-        let image = if levels::is_impostor(asset.settings(db), level) {
-            let frames = queries::impostor_frames(db, asset, level)?;
-            Arc::new(match surface.surface {
-                SurfaceKind::Normal => frames.normal.clone(),
-                SurfaceKind::Height => frames.depth.clone(),
-                _ => frames.albedo.clone(),
-            })
-        } else {
-            queries::atlas_surface(db, asset, level, surface.surface)?
+        // Stored at its size, or (an `Auto` candidate's) at a level of its mip chain.
+        let stored = |image: &Texture| {
+            let settings = crate::texture::mips::MipSettings { kind: surface.surface, alpha_cutoff: None };
+            crate::texture::mips::reduced_level(image, settings, halvings)
         };
+        if levels::is_impostor(asset.settings(db), level) {
+            let frames = queries::impostor_frames(db, asset, level)?;
+            return Ok(Arc::new(stored(match surface.surface {
+                SurfaceKind::Normal => &frames.normal,
+                SurfaceKind::Height => &frames.depth,
+                _ => &frames.albedo,
+            })));
+        }
+        let image = queries::atlas_surface(db, asset, level, surface.surface)?;
         Ok(match halvings {
             0 => image,
-            _ => Arc::new(crate::texture::mips::reduced_level(
-                &image,
-                crate::texture::mips::MipSettings { kind: surface.surface, alpha_cutoff: None },
-                halvings,
-            )),
+            _ => Arc::new(stored(&image)),
         })
     }
 

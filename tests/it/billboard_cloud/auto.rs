@@ -128,21 +128,26 @@ fn a_bark_edit_rerenders_only_the_bark_of_every_candidate_and_a_restart_nothing(
     assert_eq!(restarted.take_executed_stages(), Vec::<String>::new());
 }
 
-#[test]
-fn a_candidate_whose_quads_cannot_pack_in_its_bytes_is_not_baked() {
-    // The bundled bush has planes enough for 256 quads: at 128 KiB they would need a 256² atlas
-    // of at least one block each (317 KB), at 32 KiB 64 quads a 128² one (79 KB).
-    let project = crate::support::TempProject::new(
+/// The bundled bush (`examples/assets/trees/bush_2.obj`) built with `lods`, and its report.
+fn built_bundled_bush(lods: &str) -> (crate::support::TempProject, serde_json::Value) {
+    let project = crate::support::TempProject::new(&format!(
         r#"Pipeline(source: "assets", output: "baked", assets: [
-            BillboardCloud(name: "tree", mesh: "trees/bush_2.obj",
-                           billboard: (lods: [Auto(max_bytes: 131072), Auto(max_bytes: 32768)])),
-        ])"#,
-    );
+            BillboardCloud(name: "tree", mesh: "trees/bush_2.obj", billboard: (lods: {lods})),
+        ])"#
+    ));
     let trees = std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("examples/assets/trees");
     project.copy_folder(&trees, "assets/trees");
     let summary = build(&mut project.open());
     assert!(summary.all_ok(), "{}", summary.to_text());
     let built = report(&project);
+    (project, built)
+}
+
+#[test]
+fn a_candidate_whose_quads_cannot_pack_in_its_bytes_is_not_baked() {
+    // The bundled bush has planes enough for 256 quads: at 128 KiB they would need a 256² atlas
+    // of at least one block each (317 KB), at 32 KiB 64 quads a 128² one (79 KB).
+    let (_project, built) = built_bundled_bush("[Auto(max_bytes: 131072), Auto(max_bytes: 32768)]");
     let mut names = Vec::new();
     for (entry, max_bytes) in built["levels"].as_array().unwrap().iter().zip([131072u64, 32768]) {
         for candidate in entry["auto"]["candidates"].as_array().unwrap() {
@@ -163,7 +168,7 @@ fn a_candidate_whose_quads_cannot_pack_in_its_bytes_is_not_baked() {
 
 /// The level 0 size of a baked texture file.
 fn texture_side(project: &crate::support::TempProject, path: &str) -> (u32, u32) {
-    let texture = cirrus::texture::container::read_container(&project.read(path)).unwrap();
+    let texture = crate::support::read_ktx2(&project.read(path));
     (texture.width, texture.height)
 }
 
@@ -173,16 +178,7 @@ fn an_auto_candidate_gives_its_bytes_to_its_albedo_first() {
     // would be 128² (albedo, packed, normal and height: 4.7 bytes a texel with mips) and an
     // 8-frame impostor's 128² (16-texel frames); with the albedo first, the cloud's albedo is
     // 256² and the impostor's frames 32 texels, the other surfaces at a half or a quarter side.
-    let project = crate::support::TempProject::new(
-        r#"Pipeline(source: "assets", output: "baked", assets: [
-            BillboardCloud(name: "tree", mesh: "trees/bush_2.obj", billboard: (lods: [Auto(max_bytes: 131072)])),
-        ])"#,
-    );
-    let trees = std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("examples/assets/trees");
-    project.copy_folder(&trees, "assets/trees");
-    let summary = build(&mut project.open());
-    assert!(summary.all_ok(), "{}", summary.to_text());
-    let built = report(&project);
+    let (project, built) = built_bundled_bush("[Auto(max_bytes: 131072)]");
     let candidates = built["levels"][0]["auto"]["candidates"].as_array().unwrap();
     let folder = |name: &str| format!("baked/tree/lod0/candidates/{name}");
     for candidate in candidates {

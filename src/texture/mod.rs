@@ -17,6 +17,7 @@ pub mod quality;
 pub mod container;
 pub mod preview;
 pub mod tail;
+pub mod channel_packing;
 
 use std::fmt;
 use std::io::Cursor;

@@ -45,6 +45,14 @@ pub struct MaterialConstants {
     pub alpha_cutoff: Option<f32>,
 }
 
+impl MaterialConstants {
+    /// What the packed surfaces take where a map is missing.
+    pub fn pack_constants(&self) -> crate::texture::channel_packing::PackConstants {
+        let MaterialConstants { albedo, metallic, roughness, ao, .. } = *self;
+        crate::texture::channel_packing::PackConstants { albedo, metallic, roughness, ao }
+    }
+}
+
 impl Default for MaterialConstants {
     fn default() -> Self {
         MaterialConstants { albedo: [1.0; 4], metallic: 0.0, roughness: 1.0, ao: 1.0, alpha_cutoff: None }

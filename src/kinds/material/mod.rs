@@ -6,7 +6,6 @@
 
 pub mod settings;
 pub mod definition;
-pub mod channel_packing;
 pub mod queries;
 
 use crate::mesh::gltf::{swatch_files, GltfAlpha, GltfMaterial, GltfWrap};

@@ -4,13 +4,13 @@
 use std::path::PathBuf;
 use std::sync::Arc;
 
-use super::channel_packing::pack_surface;
 use super::definition::{parse_material_file, MaterialConstants, MaterialFile};
 use crate::cache::{CacheKey, CacheKeyBuilder, KeyPart};
 use crate::db::{cached_json, decoded_for_surface, read_contents, stage_key, timed, Asset, Db, SourceFile, Stage};
 use crate::diagnostic::{display_path, Diagnostic};
 use crate::kinds::material::settings::Settings as Own;
 use crate::kinds::{Read, SurfaceId};
+use crate::texture::channel_packing::pack_surface;
 use crate::texture::{SurfaceKind, Texture, TextureSlot};
 
 pub(crate) const PARSE: Stage = Stage { name: "parse", version: 1 };
@@ -168,7 +168,7 @@ fn pack(db: &dyn Db, asset: Asset, surface: &SurfaceId) -> Result<Arc<Texture>, 
     }
     timed(db, PACK, &surface.label(asset.name(db)), || {
         let sources: Vec<Option<&Texture>> = decoded.iter().map(|texture| texture.as_deref()).collect();
-        Ok(Arc::new(pack_surface(surface.surface, &sources, &recipe.constants)))
+        Ok(Arc::new(pack_surface(surface.surface, &sources, &recipe.constants.pack_constants())))
     })
 }
 

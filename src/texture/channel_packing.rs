@@ -1,19 +1,29 @@
 //! Packed surfaces: the five source maps packed into the three GPU textures of a baked material
 //! (albedo+opacity, metallic/roughness/AO, normal XY), each at the largest size of its sources,
-//! smaller sources resampled with a Catmull-Rom filter, constants where a map is missing.
+//! smaller sources resampled with a Catmull-Rom filter, constants where a map is missing. Used by
+//! the material kind and by the maps of a billboard chain's reduced levels.
 
-use super::definition::MaterialConstants;
 use crate::texture::color::{
     decode_normal, encode_normal, linear_to_srgb_u8, normalize_tangent_normal, srgb_u8_to_linear, unorm_u8,
 };
 use crate::texture::{SurfaceKind, Texture, TextureSlot};
+
+/// The values a packed surface takes where its material has no map.
+#[derive(Clone, Debug, PartialEq)]
+pub struct PackConstants {
+    /// The albedo without a map (linear RGB, alpha).
+    pub albedo: [f32; 4],
+    pub metallic: f32,
+    pub roughness: f32,
+    pub ao: f32,
+}
 
 /// Size of a surface with no source map at all: one BC block.
 const CONSTANT_SURFACE_SIDE: u32 = 4;
 
 /// Packs `kind` from its source maps (`None` where the material has no such map).
 /// `sources` must hold one entry per slot of `kind.slots()`, in that order.
-pub(crate) fn pack_surface(kind: SurfaceKind, sources: &[Option<&Texture>], constants: &MaterialConstants) -> Texture {
+pub fn pack_surface(kind: SurfaceKind, sources: &[Option<&Texture>], constants: &PackConstants) -> Texture {
     assert_eq!(sources.len(), kind.slots().len(), "one source per slot");
     // An albedo map alone is its own surface: sharing its texels keeps one copy of them in
     // memory instead of two (the decoded map and the surface, both memoized).

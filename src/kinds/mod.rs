@@ -165,7 +165,7 @@ pub(crate) fn mesh_view_from_files(
     files: &BakedFiles,
     obj: &Path,
     (source_root, limits): (&Path, crate::texture::TextureLimits),
-    alpha_cutoff: f32,
+    (alpha_cutoff, maps): (f32, MapFiles),
 ) -> Result<crate::gpu::ViewMesh, Diagnostic> {
     let read = |path: &Path| files.read(path);
     let bytes = read(obj)?;
@@ -186,9 +186,13 @@ pub(crate) fn mesh_view_from_files(
     crate::preview::mesh_view(&mesh, &tangents, alpha_cutoff, |material, slot| {
         let Some(path) = material.maps.get(&slot).filter(|_| mesh.uvs.is_some()) else { return Ok(None) };
         let known = decoded.borrow().get(path).cloned();
-        let texture = match known {
-            Some(texture) => texture,
-            None => Arc::new(crate::texture::decode_texture(path, &read(path)?, limits)?),
+        let texture = match (known, maps.twin(files, path)) {
+            (Some(texture), _) => texture,
+            (None, Some(twin)) => {
+                let levels = crate::texture::quality::decoded_container_levels(&twin, &read(&twin)?)?;
+                Arc::new(levels.into_iter().next().ok_or_else(|| Diagnostic::new(&twin, "a texture without levels"))?)
+            }
+            (None, None) => Arc::new(crate::texture::decode_texture(path, &read(path)?, limits)?),
         };
         decoded.borrow_mut().insert(path.clone(), texture.clone());
         Ok(Some(match slot {
@@ -196,6 +200,28 @@ pub(crate) fn mesh_view_from_files(
             _ => texture,
         }))
     })
+}
+
+/// Which file [`mesh_view_from_files`] reads a map from.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub(crate) enum MapFiles {
+    /// The file the MTL names.
+    AsNamed,
+    /// The block-compressed twin the tail wrote beside a PNG it names (`albedo.ktx2`, `.dds` or
+    /// `.pvr` beside `albedo.png`), BC-decoded: what an engine that loads the KTX2 draws. The
+    /// PNG where there is none.
+    BlockCompressedTwins,
+}
+
+impl MapFiles {
+    /// The twin of the map at `path` in `files` that this reads instead of it.
+    fn twin(self, files: &BakedFiles, path: &Path) -> Option<PathBuf> {
+        if self == MapFiles::AsNamed || path.extension().is_none_or(|extension| extension != "png") {
+            return None;
+        }
+        let twins = ["ktx2", "dds", "pvr"].map(|extension| path.with_extension(extension));
+        twins.into_iter().find(|twin| files.exists(twin))
+    }
 }
 
 /// Writes one comparison's `contact_sheet.png` and `metrics.json` into `folder`.

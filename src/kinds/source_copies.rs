@@ -208,13 +208,11 @@ pub(crate) fn used_materials<'a>(
 }
 
 /// The used materials of a mesh the asset writes as an OBJ beside an MTL and a glTF, over copies
-/// of their maps: the MTL's text, the glTF materials, each triangle's number among them, and
-/// the copies they name.
+/// of their maps: the MTL's text, the glTF materials and each triangle's number among them.
 pub(crate) struct WrittenMaterials {
     pub mtl: String,
     pub gltf: Vec<GltfMaterial>,
     pub triangle_materials: Vec<u32>,
-    pub maps: Vec<PathBuf>,
 }
 
 /// [`WrittenMaterials`] of a mesh whose triangles draw `triangle_materials` (indices into
@@ -233,5 +231,5 @@ pub(crate) fn written_materials(
     warnings.extend(named.warnings);
     let triangle_materials =
         triangle_materials.iter().map(|material| used.binary_search(material).unwrap_or(0) as u32).collect();
-    WrittenMaterials { mtl: named.mtl, gltf: named.gltf, triangle_materials, maps: named.maps }
+    WrittenMaterials { mtl: named.mtl, gltf: named.gltf, triangle_materials }
 }

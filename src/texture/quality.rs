@@ -292,3 +292,22 @@ fn psnr_of_squared_error(squared_error: u64, samples: u64) -> f64 {
     let mse = squared_error as f64 / samples.max(1) as f64;
     (10.0 * (255.0f64 * 255.0 / mse).log10()).min(LOSSLESS_PSNR_DB)
 }
+
+/// The levels of a KTX2, DDS or PVR texture (`path`, for messages), BC-decoded to RGBA8 with
+/// the GPU's arithmetic ([`decode_blocks`]).
+pub(crate) fn decoded_container_levels(
+    path: &std::path::Path,
+    bytes: &[u8],
+) -> Result<Vec<Texture>, crate::diagnostic::Diagnostic> {
+    let container = crate::texture::container::read_container(bytes)
+        .map_err(|error| crate::diagnostic::Diagnostic::new(path, error))?;
+    Ok(container
+        .levels
+        .iter()
+        .enumerate()
+        .map(|(level, blocks)| {
+            let (width, height) = ((container.width >> level).max(1), (container.height >> level).max(1));
+            decode_blocks(container.format, blocks, width, height)
+        })
+        .collect())
+}

@@ -287,14 +287,15 @@ fn every_gltf_of_the_bundled_project_passes_the_khronos_validator_and_the_output
         serde_json::from_slice(&project.read("baked/bush_lods/lod4/impostor.json")).unwrap();
     assert_eq!(chain["meshes"][4]["extras"]["cirrus_impostor"], impostor);
     assert_eq!((&impostor["frames"], &impostor["hemi"]), (&serde_json::json!(8), &serde_json::json!(false)));
-    // The reduced level draws the bush's own materials over copies of their maps in its maps/
-    // (tiling: repeated), named from the chain's document and from the level's own.
+    // The reduced level draws the bush's own materials over their packed maps in its
+    // materials/ (tiling: repeated), named from the chain's document and from the level's own.
     let images: Vec<&str> =
         chain["images"].as_array().unwrap().iter().map(|image| image["uri"].as_str().unwrap()).collect();
-    assert!(images.iter().any(|uri| uri.starts_with("lod0/maps/aspen_color.")), "{images:?}");
+    assert!(images.contains(&"lod0/materials/leaves/albedo.png"), "{images:?}");
+    assert!(images.contains(&"lod0/materials/bark/orm.png"), "{images:?}");
     let level: serde_json::Value = serde_json::from_slice(&project.read("baked/bush_lods/lod0/lod.gltf")).unwrap();
     let uri = level["images"][0]["uri"].as_str().unwrap();
-    assert!(uri.starts_with("maps/") && project.path("baked/bush_lods/lod0").join(uri).is_file(), "{uri}");
+    assert!(uri.starts_with("materials/") && project.path("baked/bush_lods/lod0").join(uri).is_file(), "{uri}");
     assert_eq!(level["samplers"][0]["wrapS"], 10497, "REPEAT");
     // The atlas-remapped bush and the tessellated cow, beside their OBJs.
     for document in ["baked/foliage/trees-bush_2.gltf", "baked/spot_height/tessellated.gltf"] {

@@ -45,13 +45,21 @@ pub(super) fn preview(
     for mesh in meshes {
         let relative = remapped_mesh_path(db, asset, mesh);
         let remapped_obj = config.output.join(&options.asset).join(remapped_mesh_file(db, asset, mesh));
-        let source =
-            mesh_view_from_files(&BakedFiles::Disk(&config.root), mesh, (&config.source, limits), ALPHA_CUTOFF)
-                .map_err(PreviewError::Artifact)?;
+        let source = mesh_view_from_files(
+            &BakedFiles::Disk(&config.root),
+            mesh,
+            (&config.source, limits),
+            (ALPHA_CUTOFF, crate::kinds::MapFiles::AsNamed),
+        )
+        .map_err(PreviewError::Artifact)?;
         // The remapped mesh may name anything inside the project, as an engine would read it.
-        let remapped =
-            mesh_view_from_files(&BakedFiles::Disk(&config.root), &remapped_obj, (Path::new(""), limits), ALPHA_CUTOFF)
-                .map_err(PreviewError::Artifact)?;
+        let remapped = mesh_view_from_files(
+            &BakedFiles::Disk(&config.root),
+            &remapped_obj,
+            (Path::new(""), limits),
+            (ALPHA_CUTOFF, crate::kinds::MapFiles::AsNamed),
+        )
+        .map_err(PreviewError::Artifact)?;
         let (center, radius) = crate::preview::bounding_sphere(&source);
         let remapped = crate::gpu::LevelView::Mesh(remapped);
         let mut compared = crate::preview::preview_chain(gpu, &source, &[&remapped], center, radius, options.settings)?;

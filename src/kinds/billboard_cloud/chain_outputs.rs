@@ -182,7 +182,7 @@ pub(super) fn chosen_copies(db: &dyn Db, asset: Asset, output_folder: &Path) -> 
     }
     let mut outputs = AssetOutputs::default();
     let (Ok((reports, _)), Ok(holds)) =
-        (level_files(db, asset, output_folder, (&mut outputs, &mut Vec::new())), queries::chain_holds(db, asset))
+        (level_files(db, asset, output_folder, &mut outputs), queries::chain_holds(db, asset))
     else {
         return Vec::new();
     };

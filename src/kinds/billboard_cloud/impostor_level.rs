@@ -278,7 +278,7 @@ pub(crate) fn read_impostor_view(
             return Err(Diagnostic::new(&path, format!("`{name}`: an impostor's textures lie beside its description")));
         }
         let (texture_path, bytes) = read(name)?;
-        let levels = super::lod_preview::decoded_texture_levels(&texture_path, &bytes)?;
+        let levels = crate::texture::quality::decoded_container_levels(&texture_path, &bytes)?;
         // The albedo at the frames' size; the normal and depth at it or halved up to twice.
         let side = grid.frames * description.frame_size;
         let sides: Vec<u32> = match name == &description.albedo {

@@ -25,6 +25,9 @@ pub struct LevelSettings {
     /// How many times each surface but the albedo halves the albedo's side (an `Auto`
     /// candidate's, see [`allot_surfaces`]; none elsewhere).
     pub surface_halvings: SurfaceHalvings,
+    /// An `Auto` candidate's bytes on the GPU (its level's): what a reduced candidate's maps
+    /// are sized by, once its mesh is made (none elsewhere).
+    pub max_bytes: Option<u64>,
 }
 
 /// How many times each surface of a level but its albedo halves the albedo's side: it is stored
@@ -81,6 +84,8 @@ pub struct Slot {
     pub candidate: Option<String>,
     /// A candidate's surfaces smaller than its albedo (none elsewhere).
     pub halvings: SurfaceHalvings,
+    /// A candidate's bytes on the GPU (its `Auto` level's; none elsewhere).
+    pub max_bytes: Option<u64>,
 }
 
 /// What an asset bakes: each level of its chain, an `Auto` level as its candidates
@@ -88,7 +93,15 @@ pub struct Slot {
 pub fn slots(settings: &Settings) -> Vec<Slot> {
     let lods = &settings.own::<Own>().billboard.lods;
     if lods.is_empty() {
-        return vec![Slot { level: 0, bakes: None, atlas_size: None, candidate: None, halvings: Default::default() }];
+        let one = Slot {
+            level: 0,
+            bakes: None,
+            atlas_size: None,
+            candidate: None,
+            halvings: Default::default(),
+            max_bytes: None,
+        };
+        return vec![one];
     }
     let mut slots = Vec::new();
     for (level, &entry) in lods.iter().enumerate() {
@@ -100,6 +113,7 @@ pub fn slots(settings: &Settings) -> Vec<Slot> {
                 atlas_size: None,
                 candidate: None,
                 halvings: Default::default(),
+                max_bytes: None,
             }),
         }
     }
@@ -201,6 +215,7 @@ pub fn auto_candidates(settings: &Settings, level: u32, max_bytes: u64) -> Vec<S
                 atlas_size: Some(side),
                 candidate: Some(format!("quads{quads}")),
                 halvings,
+                max_bytes: Some(max_bytes),
             });
         }
     }
@@ -227,11 +242,34 @@ pub fn auto_candidates(settings: &Settings, level: u32, max_bytes: u64) -> Vec<S
                 atlas_size: Some(side),
                 candidate: Some(format!("impostor{frames}")),
                 halvings,
+                max_bytes: Some(max_bytes),
             });
         }
     }
+    // The source's triangles under a budget that leaves its maps the other half of the bytes
+    // (each at most `max_size` a side; sized once the mesh is made, `reduced::allot_maps`).
+    let triangles = max_bytes / 2 / REDUCED_TRIANGLE_BYTES;
+    if triangles >= MIN_AUTO_REDUCED_TRIANGLES {
+        let triangles = triangles.min(super::settings::MAX_REDUCED_TRIANGLES as u64) as u32;
+        candidates.push(Slot {
+            level,
+            bakes: Some(LodLevel::Reduced(TriangleBudget::Triangles(triangles))),
+            atlas_size: Some(max_size),
+            candidate: Some(format!("reduced{triangles}")),
+            halvings: Default::default(),
+            max_bytes: Some(max_bytes),
+        });
+    }
     candidates
 }
+
+/// The bytes on the GPU a reduced mesh's triangle is budgeted at: its three indices and two
+/// vertices (position, normal, tangent, UV): a leaf card's two triangles have four corners.
+const REDUCED_TRIANGLE_BYTES: u64 = 3 * 4 + 2 * 48;
+
+/// The fewest triangles an `Auto` level's reduced candidate keeps: below it a tree is a trunk
+/// and a few cards, which no level is better off with.
+const MIN_AUTO_REDUCED_TRIANGLES: u64 = 256;
 
 /// What slot `slot` (of [`slots`]) is asked for. A chain's level N halves level N − 1's screen
 /// size or texel density; with neither, its atlas's largest side is `max_size / 2^N` (at least
@@ -240,8 +278,10 @@ pub fn auto_candidates(settings: &Settings, level: u32, max_bytes: u64) -> Vec<S
 pub(crate) fn settings_for(settings: &Settings, slot: u32) -> LevelSettings {
     let billboard = &settings.own::<Own>().billboard;
     let slot = slots(settings).into_iter().nth(slot as usize);
-    let (level, entry, atlas_size, surface_halvings) = slot
-        .map_or((0, None, None, Default::default()), |slot| (slot.level, slot.bakes, slot.atlas_size, slot.halvings));
+    let (level, entry, atlas_size, surface_halvings, max_bytes) = slot
+        .map_or((0, None, None, Default::default(), None), |slot| {
+            (slot.level, slot.bakes, slot.atlas_size, slot.halvings, slot.max_bytes)
+        });
     let budget = match entry {
         Some(entry) => entry.cloud_budget(),
         None => billboard.budget,
@@ -277,6 +317,7 @@ pub(crate) fn settings_for(settings: &Settings, slot: u32) -> LevelSettings {
             _ => None,
         },
         surface_halvings,
+        max_bytes,
     }
 }
 

@@ -5,7 +5,7 @@
 use glam::Vec3;
 
 use std::collections::BTreeMap;
-use std::path::{Path, PathBuf};
+use std::path::PathBuf;
 use std::sync::Arc;
 
 use crate::diagnostic::Diagnostic;
@@ -74,27 +74,13 @@ pub struct LodFiles {
     pub alpha_cutoff: f32,
 }
 
-/// The levels of a KTX2, DDS or PVR texture (`path`, for messages), BC-decoded to RGBA8.
-pub(crate) fn decoded_texture_levels(path: &Path, bytes: &[u8]) -> Result<Vec<Texture>, Diagnostic> {
-    let ktx2 = crate::texture::container::read_container(bytes).map_err(|error| Diagnostic::new(path, error))?;
-    Ok(ktx2
-        .levels
-        .iter()
-        .enumerate()
-        .map(|(level, blocks)| {
-            let (width, height) = ((ktx2.width >> level).max(1), (ktx2.height >> level).max(1));
-            crate::texture::quality::decode_blocks(ktx2.format, blocks, width, height)
-        })
-        .collect())
-}
-
 /// The baked LOD as an engine sees it: `lod.obj` with the decoded KTX2 atlas levels (BC-decoded,
 /// so renders show the compression), alpha-tested and double-sided.
 pub fn lod_view_mesh(files: &LodFiles) -> Result<ViewMesh, Diagnostic> {
     let (obj_path, obj_bytes) = &files.obj;
     let folder = obj_path.parent().map(PathBuf::from).unwrap_or_default();
     let (mesh, _) = crate::mesh::load_mesh(obj_path, obj_bytes, &BTreeMap::new(), &folder)?;
-    let decode = |(path, bytes): &(PathBuf, Vec<u8>)| decoded_texture_levels(path, bytes);
+    let decode = |(path, bytes): &(PathBuf, Vec<u8>)| crate::texture::quality::decoded_container_levels(path, bytes);
     // BC5 holds X and Y only; the shader rebuilds Z from them.
     let normal = decode(&files.normal_ktx2)?
         .into_iter()

@@ -51,18 +51,18 @@ use queries::{ATLAS, LAYOUT, LOD, PLANES, RENDER};
 
 pub struct BillboardCloud;
 
-/// A level's surfaces (their group is the level's folder): a cloud's four atlas surfaces, an
-/// impostor's three; none for a reduced level.
+/// A level's surfaces: a cloud's four atlas surfaces, an impostor's three (their group is the
+/// level's folder); a reduced level's maps, up to three a material (`reduced::ReducedMaps`;
+/// none before its mesh is made, or when it fails).
 fn atlas_surfaces(db: &dyn Db, asset: Asset, level: u32) -> Vec<SurfaceId> {
     let settings = asset.settings(db);
-    let kinds: &[SurfaceKind] = if levels::is_reduced(settings, level) {
-        &[]
-    } else if levels::is_impostor(settings, level) {
-        &impostor_level::IMPOSTOR_SURFACES
-    } else {
-        &SurfaceKind::BILLBOARD
-    };
     let folder = levels::level_folder(settings, level);
+    if levels::is_reduced(settings, level) {
+        let Ok(maps) = queries::reduced_maps(db, asset, level) else { return Vec::new() };
+        return maps.surfaces(&folder).into_iter().map(|(_, surface, _)| surface).collect();
+    }
+    let kinds: &[SurfaceKind] =
+        if levels::is_impostor(settings, level) { &impostor_level::IMPOSTOR_SURFACES } else { &SurfaceKind::BILLBOARD };
     kinds.iter().map(|&surface| SurfaceId { group: folder.clone(), surface }).collect()
 }
 
@@ -76,17 +76,38 @@ fn with_halvings(db: &dyn Db, asset: Asset, level: u32, surface: &SurfaceId, key
     }
 }
 
-/// The slot a surface belongs to (its group is the slot's folder).
+/// The slot a surface belongs to (its group is the slot's folder, or a reduced level's
+/// material's: `<folder>/materials/<name>`).
 fn level_of_surface(db: &dyn Db, asset: Asset, surface: &SurfaceId) -> Result<u32, Diagnostic> {
-    levels::slot_of_folder(asset.settings(db), &surface.group)
-        .ok_or_else(|| Diagnostic::new(asset.main_file(db), format!("no LOD level `{}`", surface.group)))
+    let settings = asset.settings(db);
+    let slot = levels::slot_of_folder(settings, &surface.group).or_else(|| {
+        let folder = reduced::level_of_group(&surface.group)?;
+        levels::slot_of_folder(settings, folder).filter(|&slot| levels::is_reduced(settings, slot))
+    });
+    slot.ok_or_else(|| Diagnostic::new(asset.main_file(db), format!("no LOD level `{}`", surface.group)))
 }
 
-/// Whether some of a level's atlas surfaces are not in the persistent cache (so it renders).
+/// A reduced level's map surface: its slot, material and halvings.
+fn reduced_map_of(db: &dyn Db, asset: Asset, surface: &SurfaceId) -> Result<Option<(u32, u32, u32)>, Diagnostic> {
+    let level = level_of_surface(db, asset, surface)?;
+    if !levels::is_reduced(asset.settings(db), level) {
+        return Ok(None);
+    }
+    let folder = levels::level_folder(asset.settings(db), level);
+    let maps = queries::reduced_maps(db, asset, level)?;
+    let (material, halvings) = maps
+        .find(&folder, &surface.group, surface.surface)
+        .ok_or_else(|| Diagnostic::new(asset.main_file(db), format!("no map `{}` in {folder}", surface.instance())))?;
+    Ok(Some((level, material, halvings)))
+}
+
+/// Whether some of a level's atlas surfaces are not in the persistent cache (so it renders; a
+/// reduced level never does).
 fn level_renders(db: &dyn Db, asset: Asset, level: u32) -> bool {
-    !atlas_surfaces(db, asset, level)
-        .iter()
-        .all(|surface| crate::kinds::tail_queries::surface_in_cache(db, asset, surface))
+    !levels::is_reduced(asset.settings(db), level)
+        && !atlas_surfaces(db, asset, level)
+            .iter()
+            .all(|surface| crate::kinds::tail_queries::surface_in_cache(db, asset, surface))
 }
 
 /// Every (material, slot) whose texture the renders sample, in material order.
@@ -237,10 +258,11 @@ impl Kind for BillboardCloud {
             let label = level_label(db, asset, level);
             let instance = if folder.is_empty() { mesh_label.clone() } else { folder.clone() };
             if levels::is_reduced(asset.settings(db), level) {
-                let mut reduce = reduced::reduce_instance(db, asset, level, output_folder, &mesh);
-                reduce.writes.push(report.clone());
-                switch = switch.reads_stage(&reduce);
-                instances.push(reduce);
+                let reduce =
+                    reduced::reduce_instances(db, asset, level, (output_folder, &report), (&mesh, &mut decodes));
+                switch = switch.reads_stage(&reduce[0]);
+                switch = reduce[1..].iter().skip(3).step_by(4).fold(switch, |switch, write| switch.reads_stage(write));
+                instances.extend(reduce);
                 continue;
             }
             if levels::is_impostor(asset.settings(db), level) {
@@ -315,6 +337,9 @@ impl Kind for BillboardCloud {
     }
 
     fn surface_image(db: &dyn Db, asset: Asset, surface: &SurfaceId) -> Result<Arc<Texture>, Diagnostic> {
+        if let Some((_, material, halvings)) = reduced_map_of(db, asset, surface)? {
+            return queries::reduced_map_image(db, asset, (material, halvings), surface);
+        }
         let level = level_of_surface(db, asset, surface)?;
         let halvings = queries::level_settings(db, asset, level).surface_halvings.of(surface.surface);
         // Stored at its size, or (an `Auto` candidate's) at a level of its mip chain.
@@ -349,6 +374,9 @@ impl Kind for BillboardCloud {
     }
 
     fn surface_recipe_key(db: &dyn Db, asset: Asset, surface: &SurfaceId) -> Result<Option<CacheKey>, Diagnostic> {
+        if let Some((_, material, halvings)) = reduced_map_of(db, asset, surface)? {
+            return queries::reduced_map_key(db, asset, (material, halvings), surface.surface).map(Some);
+        }
         let level = level_of_surface(db, asset, surface)?;
         let key = match levels::is_impostor(asset.settings(db), level) {
             true => queries::impostor_recipe_key(db, asset, level),
@@ -364,7 +392,7 @@ impl Kind for BillboardCloud {
 
     fn surface_parts_key(db: &dyn Db, asset: Asset, surface: &SurfaceId) -> Result<Option<CacheKey>, Diagnostic> {
         let level = level_of_surface(db, asset, surface)?;
-        if levels::is_impostor(asset.settings(db), level) {
+        if !levels::is_cloud(asset.settings(db), level) {
             return Ok(None);
         }
         let key = queries::atlas_surface_parts_key(db, asset, level, surface.surface)?;
@@ -399,9 +427,9 @@ impl Kind for BillboardCloud {
 fn level_jobs(db: &dyn Db, asset: Asset, level: u32) -> Result<Vec<Job>, Diagnostic> {
     let name = asset.name(db);
     if levels::is_reduced(asset.settings(db), level) {
-        return queries::reduced_level(db, asset, level).map(|_| Vec::new());
+        queries::reduced_level(db, asset, level)?;
     }
-    if levels::is_impostor(asset.settings(db), level) {
+    if !levels::is_cloud(asset.settings(db), level) {
         return Ok(atlas_surfaces(db, asset, level)
             .into_iter()
             .map(|surface| Job { asset, label: surface.label(name), task: Task::Surface(surface), after: 1 })
@@ -506,7 +534,7 @@ fn level_render_instances(
 }
 
 /// `stage` reads the decode of the texture `path` (added to `decodes`, shared by every level).
-fn read_decode(stage: &mut StageInstance, path: &Path, decodes: &mut BTreeMap<String, StageInstance>) {
+pub(super) fn read_decode(stage: &mut StageInstance, path: &Path, decodes: &mut BTreeMap<String, StageInstance>) {
     let label = display_path(path);
     stage.reads.push(Read::Stage(DECODE, label.clone()));
     decodes.entry(label).or_insert_with(|| {
@@ -530,8 +558,7 @@ fn billboard_outputs(
     let settings = asset.settings(db);
     let name = asset.name(db);
     let mut outputs = AssetOutputs::default();
-    let mut warnings = Vec::new();
-    let (mut slot_reports, slot_meshes) = level_files(db, asset, output_folder, (&mut outputs, &mut warnings))?;
+    let (mut slot_reports, slot_meshes) = level_files(db, asset, output_folder, &mut outputs)?;
     let mut report = serde_json::json!({
         "asset": name,
         "kind": crate::config::AssetKind::BillboardCloud.name(),
@@ -555,20 +582,20 @@ fn billboard_outputs(
         "stage_ms".into(),
         serde_json::to_value(crate::kinds::asset_stage_ms(name, runs)).expect("times serialise"),
     );
-    outputs.warnings = loaded.warnings.iter().chain(&warnings).map(ErrorSummary::from).collect();
+    outputs.warnings = loaded.warnings.iter().map(ErrorSummary::from).collect();
     fields.insert("warnings".into(), serde_json::to_value(&outputs.warnings).expect("warnings serialise"));
     outputs.report = Some(serde_json::to_vec_pretty(&report).expect("reports serialise"));
     Ok(outputs)
 }
 
-/// Every slot's files (added to `outputs` under `output_folder`, material warnings to
-/// `warnings`; meaning the chain's level, and for a candidate its name), each slot's part of the
-/// report, and each one's mesh for the chain's document.
+/// Every slot's files (added to `outputs` under `output_folder`, meaning the chain's level, and
+/// for a candidate its name), each slot's part of the report, and each one's mesh for the
+/// chain's document.
 fn level_files(
     db: &dyn Db,
     asset: Asset,
     output_folder: &Path,
-    (outputs, warnings): (&mut AssetOutputs, &mut Vec<Diagnostic>),
+    outputs: &mut AssetOutputs,
 ) -> Result<(Vec<serde_json::Value>, Vec<ChainMesh>), Diagnostic> {
     let settings = asset.settings(db);
     let mut reports = Vec::new();
@@ -576,7 +603,7 @@ fn level_files(
     for (slot, spec) in levels::slots(settings).into_iter().enumerate() {
         let (slot, first_file) = (slot as u32, outputs.files.len());
         let (mut report, mesh) = if levels::is_reduced(settings, slot) {
-            let (report, mesh) = reduced::reduced_level_outputs(db, asset, slot, output_folder, (outputs, warnings))?;
+            let (report, mesh) = reduced::reduced_level_outputs(db, asset, slot, output_folder, outputs)?;
             (report, ChainMesh::Reduced(mesh))
         } else if levels::is_impostor(settings, slot) {
             let (report, quad) = impostor_level::impostor_level_outputs(db, asset, slot, output_folder, outputs)?;
@@ -666,15 +693,15 @@ fn level_outputs(
 
 /// What a level's surfaces wrote: the texture files' bytes, their bytes on the GPU (every mip),
 /// each surface's figures, and each one's texture and preview file names.
-struct LevelSurfaces {
-    bytes: usize,
-    gpu_bytes: u64,
-    infos: Vec<crate::texture::tail::SurfaceInfo>,
-    names: Vec<(String, String)>,
+pub(super) struct LevelSurfaces {
+    pub bytes: usize,
+    pub gpu_bytes: u64,
+    pub infos: Vec<crate::texture::tail::SurfaceInfo>,
+    pub names: Vec<(String, String)>,
 }
 
 /// Adds a level's surfaces from the tail (textures, previews, a cloud's `orm.png`) to `outputs`.
-fn write_level_surfaces(
+pub(super) fn write_level_surfaces(
     db: &dyn Db,
     asset: Asset,
     level: u32,
@@ -817,7 +844,7 @@ pub(crate) fn level_view(
 /// The baked LOD mesh in `folder` of `files` as an engine loads it: a billboard cloud's
 /// `lod.obj` with the decoded levels of `albedo.ktx2` and `normal.ktx2`, alpha-tested at
 /// `alpha_cutoff`; a reduced level's `lod.obj` with its `lod.mtl` and the maps that names (in
-/// its `maps/`), its cut-out materials alpha-tested at `alpha_cutoff`.
+/// its `materials/`, each read from its BC-decoded KTX2), alpha-tested at `alpha_cutoff`.
 fn read_lod_view_mesh(
     files: &BakedFiles,
     folder: &Path,
@@ -831,7 +858,8 @@ fn read_lod_view_mesh(
     let obj = read("lod.obj")?;
     if !obj.1.starts_with(lod_mesh::CLOUD_HEADER.as_bytes()) {
         let limits = crate::texture::TextureLimits::default();
-        return crate::kinds::mesh_view_from_files(files, &obj.0, (folder, limits), alpha_cutoff);
+        let maps = crate::kinds::MapFiles::BlockCompressedTwins;
+        return crate::kinds::mesh_view_from_files(files, &obj.0, (folder, limits), (alpha_cutoff, maps));
     }
     lod_preview::lod_view_mesh(&lod_preview::LodFiles {
         obj,

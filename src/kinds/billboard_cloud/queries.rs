@@ -58,6 +58,9 @@ pub(crate) const IMPOSTOR: Stage = Stage { name: "impostor", version: 2 };
 /// measured until it fails at two sizes in a row, not one; 3: 2 × 2 samples a pixel at 128 and
 /// 256 px (`preview::hold_samples_per_axis`).
 pub(crate) const SWITCH: Stage = Stage { name: "switch", version: 3 };
+/// A reduced level's map surface: its material's source maps packed
+/// (`texture::channel_packing`), stored at a level of its mip chain (`reduced::allot_maps`).
+pub(crate) const MAPS: Stage = Stage { name: "maps", version: 1 };
 /// The cache keys of surfaces stored smaller than they are made (`levels::SurfaceHalvings`).
 pub(crate) const SURFACE_HALVINGS: Stage = Stage { name: "surface-halvings", version: 1 };
 
@@ -806,6 +809,141 @@ pub(crate) fn reduced_level(
     Ok(Arc::new(reduced))
 }
 
+/// The materials a reduced level draws and the sizes of their maps (`reduced::allot_maps`): each
+/// at most the level's largest side, an `Auto` candidate's as large as its bytes allow beside
+/// its mesh. Read from the maps' headers, not their texels.
+#[salsa::tracked(returns(clone))]
+pub(crate) fn reduced_maps(
+    db: &dyn Db,
+    asset: Asset,
+    level: u32,
+) -> Result<Arc<super::reduced::ReducedMaps>, Diagnostic> {
+    use super::reduced::{allot_maps, material_folders, material_surfaces, surface_sources, MapSizing};
+    let loaded = loaded_mesh(db, asset)?;
+    let reduced = reduced_level(db, asset, level)?;
+    let mut used = reduced.geometry.triangle_materials.clone();
+    used.sort_unstable();
+    used.dedup();
+    used.retain(|&material| (material as usize) < loaded.mesh.materials.len());
+    let materials: Vec<&crate::mesh::MeshMaterial> =
+        used.iter().map(|&material| &loaded.mesh.materials[material as usize]).collect();
+    let names: Vec<&str> = materials.iter().map(|material| material.name.as_str()).collect();
+    let folders = material_folders(&names);
+    let limits = crate::db::texture_limits(db);
+    let mut sizes = Vec::new();
+    for material in &materials {
+        let mut surfaces = Vec::new();
+        for surface in material_surfaces(material).into_iter().filter(|_| loaded.mesh.uvs.is_some()) {
+            let (mut width, mut height) = (0, 0);
+            for path in surface_sources(material, surface).into_iter().flatten() {
+                let Some(file) = asset_file(db, asset, path.clone()) else { continue };
+                let contents = crate::db::read_contents(db, file)?;
+                let (w, h) = crate::texture::probe_texture(path, &contents.bytes, limits)?;
+                (width, height) = (width.max(w), height.max(h));
+            }
+            if width > 0 {
+                surfaces.push((surface, (width, height)));
+            }
+        }
+        sizes.push(surfaces);
+    }
+    let settings = level_settings(db, asset, level);
+    // An `Auto` candidate's maps share its bytes with its mesh (its glTF buffer, which holds
+    // tangents when a map is a normal map).
+    let bytes = settings.max_bytes.map(|max_bytes| {
+        let normal_mapped = sizes.iter().flatten().any(|(surface, _)| *surface == SurfaceKind::Normal);
+        let vertices = reduced.geometry.positions.len() as u64;
+        let tangents = if normal_mapped && !reduced.geometry.uvs.is_empty() { 16 * vertices } else { 0 };
+        let uvs = 8 * reduced.geometry.uvs.len() as u64;
+        let mesh = 24 * vertices + tangents + uvs + 12 * reduced.geometry.triangles.len() as u64;
+        max_bytes.saturating_sub(mesh)
+    });
+    let encode = &asset.settings(db).encode;
+    let bytes_of = |surface: SurfaceKind, width: u32, height: u32| {
+        crate::texture::encode::gpu_bytes(width, height, Some(encode.format_of(surface)))
+    };
+    let sizing = MapSizing { surfaces: &sizes, max_side: settings.max_atlas_size, bytes };
+    let (side, halvings) = allot_maps(&sizing, bytes_of);
+    let materials = used
+        .iter()
+        .zip(folders)
+        .zip(halvings)
+        .map(|((&material, folder), surfaces)| super::reduced::MaterialMaps { material, folder, surfaces })
+        .collect();
+    Ok(Arc::new(super::reduced::ReducedMaps { materials, side }))
+}
+
+/// The source mesh's materials: equal after an edit of its geometry alone, so that a reduced
+/// level's maps, which read them, are not made again for it.
+#[salsa::tracked(returns(clone))]
+pub(crate) fn source_materials(db: &dyn Db, asset: Asset) -> Result<Arc<Vec<crate::mesh::MeshMaterial>>, Diagnostic> {
+    Ok(Arc::new(loaded_mesh(db, asset)?.mesh.materials.clone()))
+}
+
+/// The source maps a reduced level's map surface `surface` of material `material` is packed
+/// from, and the constants where one is missing.
+fn map_recipe(
+    db: &dyn Db,
+    asset: Asset,
+    material: &crate::mesh::MeshMaterial,
+    surface: SurfaceKind,
+) -> (Vec<Option<SourceFile>>, crate::texture::channel_packing::PackConstants) {
+    let sources = super::reduced::surface_sources(material, surface)
+        .into_iter()
+        .map(|path| path.and_then(|path| asset_file(db, asset, path.clone())))
+        .collect();
+    // The MTL's `Kd` and `d` stay factors over the albedo; metallic and roughness are packed.
+    let constants = crate::texture::channel_packing::PackConstants {
+        albedo: [1.0; 4],
+        metallic: material.metallic,
+        roughness: material.roughness,
+        ao: 1.0,
+    };
+    (sources, constants)
+}
+
+/// What a reduced level's map surface is made of: the stage's version, the surface, its
+/// halvings, the constants and each source map's content.
+pub(crate) fn reduced_map_key(
+    db: &dyn Db,
+    asset: Asset,
+    (material, halvings): (u32, u32),
+    surface: SurfaceKind,
+) -> Result<CacheKey, Diagnostic> {
+    let materials = source_materials(db, asset)?;
+    let (sources, constants) = map_recipe(db, asset, &materials[material as usize], surface);
+    let mut key = stage_key(MAPS).part(&surface).part(&halvings).part(&constants.albedo).part(&constants.metallic);
+    key = key.part(&constants.roughness);
+    for source in sources {
+        key = match source {
+            Some(file) => key.part(&crate::db::read_contents(db, file)?.hash),
+            None => key.part("none"),
+        };
+    }
+    Ok(key.finish())
+}
+
+/// A reduced level's map surface (stage `maps`): material `material`'s source maps packed as
+/// `surface`, stored `halvings` levels down its mip chain.
+pub(crate) fn reduced_map_image(
+    db: &dyn Db,
+    asset: Asset,
+    (material, halvings): (u32, u32),
+    surface: &crate::kinds::SurfaceId,
+) -> Result<Arc<Texture>, Diagnostic> {
+    let materials = source_materials(db, asset)?;
+    let (sources, constants) = map_recipe(db, asset, &materials[material as usize], surface.surface);
+    // The opacity's channel is taken by the packing.
+    let decoded = sources.into_iter().map(|source| source.map(|file| decoded_texture(db, file)).transpose());
+    let decoded = decoded.collect::<Result<Vec<_>, _>>()?;
+    timed(db, MAPS, &surface.label(asset.name(db)), || {
+        let sources: Vec<Option<&Texture>> = decoded.iter().map(|texture| texture.as_deref()).collect();
+        let packed = crate::texture::channel_packing::pack_surface(surface.surface, &sources, &constants);
+        let settings = crate::texture::mips::MipSettings { kind: surface.surface, alpha_cutoff: None };
+        Ok(Arc::new(crate::texture::mips::reduced_level(&packed, settings, halvings)))
+    })
+}
+
 /// An impostor level's frames (stage `impostor`): the source with its materials rendered from
 /// every direction of the level's grid around the mesh's bounding sphere. Not kept in the
 /// persistent cache itself: its surfaces are, under [`impostor_recipe_key`], and a level whose
@@ -859,7 +997,7 @@ pub(crate) fn impostor_recipe_key(db: &dyn Db, asset: Asset, level: u32) -> Cach
 #[salsa::tracked(returns(clone))]
 pub(crate) fn chain_holds(db: &dyn Db, asset: Asset) -> Result<Arc<Vec<crate::preview::Hold>>, Diagnostic> {
     let mut files = crate::kinds::AssetOutputs::default();
-    let (reports, _) = super::level_files(db, asset, std::path::Path::new(""), (&mut files, &mut Vec::new()))?;
+    let (reports, _) = super::level_files(db, asset, std::path::Path::new(""), &mut files)?;
     let source_key = stage_key(SWITCH)
         .part(crate::gpu::adapter_family())
         .part(&mesh_cache_key(db, asset, asset.main_file(db).clone()).0)

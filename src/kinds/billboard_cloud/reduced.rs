@@ -1,48 +1,241 @@
-//! A LOD chain's reduced levels (`lods: [Reduced(Ratio(0.5)), …]`): the source's triangles
-//! brought under a budget (`mesh::reduce`), written as `lod.obj` + `lod.mtl` and `lod.gltf` +
-//! `lod.bin` over the source's materials, whose maps are copied into the level's `maps/` (named
-//! by content; in the level's folder, since loaders refuse paths out of a file's folder); the
-//! pure step from mesh to files (`reduce_level`), their stage instance and report (the preview
-//! and the viewer load the level as an engine does, `kinds::mesh_view_from_files`).
+//! A LOD chain's reduced levels (`lods: [Reduced(Ratio(0.5)), …]`, and an `Auto` level's
+//! `reduced<N>` candidate): the source's triangles brought under a budget (`mesh::reduce`),
+//! written as `lod.obj` + `lod.mtl` and `lod.gltf` + `lod.bin`, each material over its maps
+//! packed (albedo + opacity, mra, normal: `texture::channel_packing`) and block-compressed by
+//! the one texture tail into the level's `materials/<name>/`, each at most the level's largest
+//! side, an `Auto` candidate's as large as its bytes allow beside its mesh (`allot_maps`). The
+//! pure steps from mesh to files (`reduce_level`), their stage instances and report (the
+//! preview and the viewer load the level as an engine does, its maps BC-decoded).
 
 use std::path::Path;
 use std::sync::Arc;
 
 use super::levels;
-use super::queries::{level_label, reduced_level, REDUCE};
+use super::queries::{level_label, reduced_level, reduced_maps, MAPS, REDUCE};
 use crate::db::{Asset, Db};
 use crate::diagnostic::Diagnostic;
 use crate::kinds::mesh_queries::loaded_mesh;
-use crate::kinds::source_copies::{material_copy_paths, used_materials, written_materials, MaterialPlaces};
-use crate::kinds::{AssetOutputs, StageInstance};
+use crate::kinds::{AssetOutputs, StageInstance, SurfaceId};
 use crate::mesh::gltf::{GltfMaterial, GltfMesh};
+use crate::mesh::MeshMaterial;
 use crate::summary::ArtifactRole;
+use crate::texture::{SurfaceKind, TextureSlot};
 
-/// The files a reduced level writes into its folder (beside the copies of the maps).
+/// The files a reduced level writes into its folder (beside its maps).
 const LEVEL_FILES: [&str; 4] = ["lod.obj", "lod.mtl", "lod.gltf", "lod.bin"];
 
-/// A reduced level's `reduce` stage instance: it reads the mesh stage and writes the level's
-/// files and the copies of the maps its materials name.
-pub(crate) fn reduce_instance(
+/// The folder of a reduced level's maps, inside the level's: `materials/<name>/`.
+pub(crate) const MATERIALS_FOLDER: &str = "materials";
+
+/// A reduced level's stage instances: `reduce` (reads the mesh stage, writes the level's files),
+/// and per surface of its maps `maps` (reads the MTL files, or an `Auto` candidate's `reduce`,
+/// and the decodes of the surface's source maps, added to `decodes`) and the tail's.
+pub(crate) fn reduce_instances(
     db: &dyn Db,
     asset: Asset,
     level: u32,
-    output_folder: &Path,
-    mesh: &StageInstance,
-) -> StageInstance {
-    let folder = levels::level_folder(asset.settings(db), level);
+    (output_folder, report): (&Path, &std::path::PathBuf),
+    (mesh, decodes): (&StageInstance, &mut std::collections::BTreeMap<String, StageInstance>),
+) -> Vec<StageInstance> {
+    let settings = asset.settings(db);
+    let folder = levels::level_folder(settings, level);
     let level_folder = output_folder.join(&folder);
     let mut reduce = StageInstance::new(REDUCE, level_label(db, asset, level), &folder).reads_stage(mesh);
     reduce.writes = LEVEL_FILES.map(|file| level_folder.join(file)).to_vec();
-    if let (Ok(loaded), Ok(reduced)) = (loaded_mesh(db, asset), reduced_level(db, asset, level)) {
-        let chosen = used_materials(&loaded.mesh.materials, &reduced.geometry.triangle_materials).1;
-        reduce.writes.extend(material_copy_paths(db, asset, &level_folder, &chosen));
+    reduce.writes.push(report.clone());
+    let mut instances = vec![reduce.clone()];
+    let (Ok(loaded), Ok(maps)) = (loaded_mesh(db, asset), reduced_maps(db, asset, level)) else { return instances };
+    let name = asset.name(db);
+    // An `Auto` candidate's maps are sized by its mesh's bytes; the others' read only the
+    // materials (the MTL files) and their maps.
+    let sized_by_mesh = levels::settings_for(settings, level).max_bytes.is_some();
+    let libraries = crate::kinds::mesh_queries::mesh_library_paths_of(db, asset, asset.main_file(db).clone());
+    for (material, surface, _) in maps.surfaces(&folder) {
+        let mut pack = StageInstance::new(MAPS, surface.label(name), surface.instance());
+        match sized_by_mesh {
+            true => pack = pack.reads_stage(&reduce),
+            false => pack.reads.extend(libraries.iter().map(|library| crate::kinds::Read::File(library.clone()))),
+        }
+        let sources = surface_sources(&loaded.mesh.materials[material as usize], surface.surface);
+        for path in sources.into_iter().flatten() {
+            super::read_decode(&mut pack, path, decodes);
+        }
+        let written = surface.written_files(output_folder, &settings.encode);
+        let [mips, encode, mut write] = crate::kinds::tail_instances(name, &surface, &pack, &written);
+        write.writes.push(report.clone());
+        instances.extend([pack, mips, encode, write]);
     }
-    reduce
+    instances
 }
 
-/// A reduced level as the chain's document draws it: its geometry and its used materials (maps
-/// relative to the level's folder).
+/// The source maps a material's `surface` is packed from, in `surface.slots()` order (none
+/// where it has no such map or no UVs to draw it with).
+pub(crate) fn surface_sources(material: &MeshMaterial, surface: SurfaceKind) -> Vec<Option<&std::path::PathBuf>> {
+    surface.slots().iter().map(|slot| material.maps.get(slot)).collect()
+}
+
+/// The surfaces a material's maps make: the albedo (with its opacity), the packed metallic /
+/// roughness / AO, the normal; only those with at least one map (the others stay the MTL's
+/// constants).
+pub(crate) fn material_surfaces(material: &MeshMaterial) -> Vec<SurfaceKind> {
+    SurfaceKind::MATERIAL
+        .into_iter()
+        .filter(|&surface| surface_sources(material, surface).iter().any(Option::is_some))
+        .collect()
+}
+
+/// One material a reduced level draws, and its maps.
+#[derive(Clone, Debug, PartialEq, Eq)]
+pub(crate) struct MaterialMaps {
+    /// Its index among the source mesh's materials.
+    pub material: u32,
+    /// Its folder under the level's `materials/`: its name made safe for a path, and unique.
+    pub folder: String,
+    /// Each surface its maps make ([`material_surfaces`]), with how many times its stored side
+    /// halves the side it is packed at (a level of its mip chain, `texture::mips::reduced_level`).
+    pub surfaces: Vec<(SurfaceKind, u32)>,
+}
+
+/// The materials a reduced level draws (those its triangles use, in the source's order) and
+/// their maps' sizes.
+#[derive(Clone, Debug, PartialEq, Eq)]
+pub(crate) struct ReducedMaps {
+    pub materials: Vec<MaterialMaps>,
+    /// The largest side a map may take ([`allot_maps`]).
+    pub side: u32,
+}
+
+impl ReducedMaps {
+    /// Every map surface (material index, surface id, halvings); a surface's group is
+    /// `<folder>/materials/<material folder>`.
+    pub fn surfaces(&self, folder: &str) -> Vec<(u32, SurfaceId, u32)> {
+        let mut surfaces = Vec::new();
+        for material in &self.materials {
+            for &(surface, halvings) in &material.surfaces {
+                let group = material_group(folder, &material.folder);
+                surfaces.push((material.material, SurfaceId { group, surface }, halvings));
+            }
+        }
+        surfaces
+    }
+
+    /// The material whose maps are in the group `group` of the level in `folder`, and the
+    /// halvings of its `surface`.
+    pub fn find(&self, folder: &str, group: &str, surface: SurfaceKind) -> Option<(u32, u32)> {
+        let material = self.materials.iter().find(|material| material_group(folder, &material.folder) == group)?;
+        let &(_, halvings) = material.surfaces.iter().find(|(kind, _)| *kind == surface)?;
+        Some((material.material, halvings))
+    }
+
+    /// Each triangle's material as the level's documents number them (its place among the used).
+    pub fn triangle_materials(&self, source: &[u32]) -> Vec<u32> {
+        let used: Vec<u32> = self.materials.iter().map(|material| material.material).collect();
+        source.iter().map(|material| used.binary_search(material).unwrap_or(0) as u32).collect()
+    }
+}
+
+/// The group of a material's map surfaces in the level in `folder`.
+fn material_group(folder: &str, material_folder: &str) -> String {
+    format!("{folder}/{MATERIALS_FOLDER}/{material_folder}")
+}
+
+/// The level folder of a reduced level's map group (`lod1/materials/bark` → `lod1`).
+pub(crate) fn level_of_group(group: &str) -> Option<&str> {
+    let (folder, material) = group.rsplit_once(&format!("/{MATERIALS_FOLDER}/"))?;
+    (!material.contains('/')).then_some(folder)
+}
+
+/// Folder names for materials named `names`: each name's letters, digits, `-` and `_` (others
+/// become `_`; an empty name `material`), with `_<index>` after a name an earlier one took.
+pub(crate) fn material_folders(names: &[&str]) -> Vec<String> {
+    let mut taken = std::collections::BTreeSet::new();
+    names
+        .iter()
+        .enumerate()
+        .map(|(index, name)| {
+            let safe: String =
+                name.chars().map(|c| if c.is_ascii_alphanumeric() || c == '-' || c == '_' { c } else { '_' }).collect();
+            let safe = if safe.is_empty() { "material".to_string() } else { safe };
+            let folder = if taken.contains(&safe) { format!("{safe}_{index}") } else { safe };
+            taken.insert(folder.clone());
+            folder
+        })
+        .collect()
+}
+
+/// The smallest side a reduced `Auto` candidate's maps are tried at.
+const MIN_MAP_SIDE: u32 = 16;
+
+/// How a reduced level's maps are sized: each material's `surfaces` with the size it is packed
+/// at; the largest side any may take (`max_side`); an `Auto` candidate's bytes on the GPU left
+/// beside its mesh (`bytes`, none elsewhere), `bytes_of` a `width` × `height` surface's.
+pub(crate) struct MapSizing<'a> {
+    pub surfaces: &'a [Vec<(SurfaceKind, (u32, u32))>],
+    pub max_side: u32,
+    pub bytes: Option<u64>,
+}
+
+/// The side of a reduced level's maps and each material surface's halvings ([`MapSizing`]):
+/// every map at most `max_side`; with bytes, the largest power-of-two side (down to
+/// [`MIN_MAP_SIDE`]) at which the albedos fit with the other surfaces up to four times smaller
+/// (`levels::allot_surfaces`, as a candidate's atlas). None fit: the smallest, which the
+/// candidate's bytes then report as over its budget.
+pub(crate) fn allot_maps(
+    sizing: &MapSizing,
+    bytes_of: impl Fn(SurfaceKind, u32, u32) -> u64,
+) -> (u32, Vec<Vec<(SurfaceKind, u32)>>) {
+    let halvings_at = |size: (u32, u32), side: u32| {
+        let largest = size.0.max(size.1);
+        (0..32).find(|&halvings| largest >> halvings <= side.max(1)).unwrap_or(31)
+    };
+    let stored = |size: (u32, u32), halvings: u32| {
+        let sizes = crate::texture::mips::chain_sizes(size.0, size.1);
+        sizes[(halvings as usize).min(sizes.len() - 1)]
+    };
+    let at = |side: u32, levels: &levels::SurfaceHalvings| -> Vec<Vec<(SurfaceKind, u32)>> {
+        sizing
+            .surfaces
+            .iter()
+            .map(|surfaces| {
+                surfaces
+                    .iter()
+                    .map(|&(surface, size)| (surface, halvings_at(size, side >> levels.of(surface))))
+                    .collect()
+            })
+            .collect()
+    };
+    let kinds: Vec<SurfaceKind> = SurfaceKind::MATERIAL
+        .into_iter()
+        .filter(|kind| sizing.surfaces.iter().flatten().any(|(s, _)| s == kind))
+        .collect();
+    let Some(bytes) = sizing.bytes else { return (sizing.max_side, at(sizing.max_side, &Default::default())) };
+    let bytes_at = |surface: SurfaceKind, side: u32| -> u64 {
+        let surfaces = sizing.surfaces.iter().flatten().filter(|(kind, _)| *kind == surface);
+        surfaces
+            .map(|&(_, size)| {
+                let (width, height) = stored(size, halvings_at(size, side));
+                bytes_of(surface, width, height)
+            })
+            .sum()
+    };
+    let mut side = sizing.max_side.next_power_of_two().min(1 << 15);
+    if side > sizing.max_side {
+        side /= 2;
+    }
+    loop {
+        if let Some(levels) = levels::allot_surfaces(&kinds, side, u32::MAX, bytes_at, bytes) {
+            return (side, at(side, &levels));
+        }
+        if side / 2 < MIN_MAP_SIDE {
+            let smallest = levels::SurfaceHalvings { mra: 2, normal: 2, height: 2 };
+            return (side, at(side, &smallest));
+        }
+        side /= 2;
+    }
+}
+
+/// The mesh (OBJ and glTF geometry) and figures a reduced level's files are made of, its
+/// glTF materials over its packed maps, each triangle's among them.
 pub(crate) struct ReducedGltf {
     pub level: Arc<ReducedLevel>,
     pub materials: Vec<GltfMaterial>,
@@ -58,49 +251,88 @@ impl ReducedGltf {
     }
 }
 
-/// A reduced level's files (added to `outputs`, its material warnings to `warnings`), its part
-/// of the report and its mesh for the chain's document.
+/// A reduced level's `lod.mtl` text and glTF materials: each used material of `materials` with
+/// its constants over its packed maps in `materials/<folder>/` (`packed`: the stem of its mra
+/// surface, `mra` or `orm`; glTF reads `orm.png`). The albedo carries the opacity in its alpha
+/// (a cut-out's `map_d` names it too).
+pub(crate) fn packed_materials(
+    materials: &[MeshMaterial],
+    maps: &ReducedMaps,
+    packed: &str,
+) -> (String, Vec<GltfMaterial>) {
+    let mut mtl = String::from("# cirrus reduced level: maps packed and block-compressed (KTX2 beside each PNG)\n");
+    let mut gltf = Vec::new();
+    for material_maps in &maps.materials {
+        let source = &materials[material_maps.material as usize];
+        let has = |surface: SurfaceKind| material_maps.surfaces.iter().any(|(kind, _)| *kind == surface);
+        let file = |stem: &str| format!("{MATERIALS_FOLDER}/{}/{stem}.png", material_maps.folder);
+        let mut kept = MeshMaterial {
+            maps: Default::default(),
+            cut_out: source.cut_out || source.maps.contains_key(&TextureSlot::Opacity),
+            map_options: Default::default(),
+            ..source.clone()
+        };
+        let mut keep = |slot: TextureSlot, name: String| {
+            if let Some(options) = source.map_options.get(&slot) {
+                kept.map_options.insert(slot, options.clone());
+            }
+            kept.maps.insert(slot, name.into());
+        };
+        if has(SurfaceKind::Albedo) {
+            keep(TextureSlot::Albedo, file("albedo"));
+        }
+        if has(SurfaceKind::Normal) {
+            keep(TextureSlot::Normal, file("normal"));
+        }
+        if has(SurfaceKind::Mra) {
+            keep(TextureSlot::Roughness, file(packed));
+            keep(TextureSlot::Ao, file(packed));
+        }
+        mtl.push('\n');
+        mtl.push_str(&crate::mesh::obj_text::mtl_material_text(&kept, |_, path| crate::diagnostic::display_path(path)));
+        kept.maps.remove(&TextureSlot::Roughness);
+        kept.maps.remove(&TextureSlot::Ao);
+        let (mut material, _) =
+            crate::mesh::gltf::material_from_mtl(&kept, |_, path| Some(crate::diagnostic::display_path(path)));
+        if has(SurfaceKind::Mra) {
+            // The packed image holds the constants where a map was missing.
+            material.occlusion = Some(file("orm"));
+            material.metallic_roughness = Some(file("orm"));
+            (material.metallic_factor, material.roughness_factor) = (1.0, 1.0);
+        }
+        gltf.push(material);
+    }
+    (mtl, gltf)
+}
+
+/// A reduced level's files (added to `outputs`): its mesh, material library, glTF and maps
+/// (through the tail); its part of the report and its mesh for the chain's document.
 pub(crate) fn reduced_level_outputs(
     db: &dyn Db,
     asset: Asset,
     level: u32,
     output_folder: &Path,
-    (outputs, warnings): (&mut AssetOutputs, &mut Vec<Diagnostic>),
+    outputs: &mut AssetOutputs,
 ) -> Result<(serde_json::Value, ReducedGltf), Diagnostic> {
     let settings = asset.settings(db);
     let folder = levels::level_folder(settings, level);
     let level_folder = output_folder.join(&folder);
     let loaded = loaded_mesh(db, asset)?;
     let reduced = reduced_level(db, asset, level)?;
-    let places = MaterialPlaces { source: asset.main_file(db), mtl_folder: &level_folder, gltf_folder: &level_folder };
-    let written = written_materials(
-        db,
-        asset,
-        &level_folder,
-        outputs,
-        (&loaded.mesh.materials, &reduced.geometry.triangle_materials),
-        &places,
-        warnings,
-    );
-    let copies = written.maps;
-    let chain =
-        ReducedGltf { level: reduced.clone(), materials: written.gltf, triangle_materials: written.triangle_materials };
+    let maps = reduced_maps(db, asset, level)?;
+    let (mtl, materials) = packed_materials(&loaded.mesh.materials, &maps, settings.encode.packing.stem());
+    let triangle_materials = maps.triangle_materials(&reduced.geometry.triangle_materials);
+    let chain = ReducedGltf { level: reduced.clone(), materials, triangle_materials };
     let gltf = crate::mesh::gltf::gltf_files(&chain.mesh(), "lod.bin", crate::mesh::gltf::GENERATOR);
-    let mtl = written.mtl.into_bytes();
-    // The bytes an engine loads: the mesh, its material library and the maps it names.
-    let (mut map_bytes, mut gpu_bytes) = (0, gltf.bin.len() as u64);
-    for (path, _, contents) in outputs.files.iter().filter(|(path, _, _)| copies.contains(path)) {
-        map_bytes += contents.len();
-        // The copies are uploaded as they are: RGBA8, mips made on load.
-        if let Ok((width, height)) = crate::texture::probe_texture(path, contents, Default::default()) {
-            gpu_bytes += crate::texture::encode::gpu_bytes(width, height, None);
-        }
-    }
-    let bytes = reduced.obj.len() + mtl.len() + map_bytes;
+    let mtl = mtl.into_bytes();
+    let bytes = reduced.obj.len() + mtl.len();
+    // What the GPU holds: the glTF's vertex and index buffer, the maps with their mips.
+    let gpu_bytes = gltf.bin.len() as u64;
     outputs.add(level_folder.join("lod.obj"), ArtifactRole::Mesh, reduced.obj.clone());
     outputs.add(level_folder.join("lod.mtl"), ArtifactRole::Mtl, mtl.into());
     outputs.add(level_folder.join("lod.gltf"), ArtifactRole::Gltf, gltf.gltf.into());
     outputs.add(level_folder.join("lod.bin"), ArtifactRole::GltfBuffer, gltf.bin.into());
+    let written = super::write_level_surfaces(db, asset, level, output_folder, outputs)?;
     let figures = &reduced.figures;
     let budget = match levels::settings_for(settings, level).reduced {
         Some(crate::mesh::reduce::TriangleBudget::Triangles(count)) => serde_json::json!({ "triangles": count }),
@@ -122,10 +354,11 @@ pub(crate) fn reduced_level_outputs(
         "cards": { "source": figures.cards.0, "kept": figures.cards.1 },
         // The leaf area drawn (cut-out materials), against the source's.
         "leaf_area": if source_area > 0.0 { Some(((kept_area / source_area) * 1e4).round() / 1e4) } else { None },
-        "maps": copies.iter().map(|path| crate::diagnostic::display_path(path)).collect::<Vec<_>>(),
-        "bytes": bytes,
-        // What the GPU holds: the glTF's vertex and index buffer and the maps with their mips.
-        "gpu_bytes": gpu_bytes,
+        // The largest side of its maps, and each one's figures.
+        "map_side": maps.side,
+        "surfaces": written.infos,
+        "bytes": bytes + written.bytes,
+        "gpu_bytes": gpu_bytes + written.gpu_bytes,
     });
     Ok((report, chain))
 }

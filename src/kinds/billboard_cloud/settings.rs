@@ -166,7 +166,7 @@ fn level_problem(level: LodLevel) -> Option<String> {
 }
 
 /// The largest triangle count a reduced level may ask for.
-const MAX_REDUCED_TRIANGLES: u32 = 100_000_000;
+pub(crate) const MAX_REDUCED_TRIANGLES: u32 = 100_000_000;
 
 #[derive(Deserialize, Default, Clone)]
 #[serde(deny_unknown_fields)]

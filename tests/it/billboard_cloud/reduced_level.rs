@@ -1,12 +1,15 @@
 //! Reduced levels of a LOD chain (`lods: [Reduced(Triangles(30)), Quads(4)]`): the mesh under its
-//! triangle budget in `lod0/` over copies of its maps, no planes, atlas or renders for it; a map
-//! edit copies the map again and rewrites the MTL without reducing again; a restart runs nothing;
-//! the preview and the viewer show the level with its own materials.
+//! triangle budget in `lod0/` over its materials' maps packed and block-compressed by the tail,
+//! no planes, atlas or renders for it; a map edit encodes that map again without reducing again;
+//! a restart runs nothing; the preview and the viewer show the level with its own materials.
 
 use std::collections::BTreeSet;
 
+use cirrus::config::BlockFormat;
+use cirrus::texture::quality::decode_blocks;
+
 use crate::billboard_cloud::chain::chain_project;
-use crate::support::{build, pattern_png};
+use crate::support::{build, ktx2_level, pattern_png, read_ktx2, PsnrSum};
 
 /// Faces of an OBJ.
 fn faces(obj: &[u8]) -> usize {
@@ -23,7 +26,7 @@ fn mtl_maps(mtl: &[u8]) -> BTreeSet<String> {
 }
 
 #[test]
-fn a_reduced_level_keeps_its_budget_over_copies_of_its_maps_and_a_map_edit_reduces_nothing() {
+fn a_reduced_level_keeps_its_budget_over_its_maps_block_compressed_and_a_map_edit_reduces_nothing() {
     let project = chain_project("[Reduced(Triangles(30)), Quads(4)]");
     let mut cirrus = project.open();
     let summary = build(&mut cirrus);
@@ -38,6 +41,8 @@ fn a_reduced_level_keeps_its_budget_over_copies_of_its_maps_and_a_map_edit_reduc
     for stage in ["planes(tree/lod0)", "layout(tree/lod0)", "render(tree/lod0", "atlas(tree/lod0)", "lod(tree/lod0)"] {
         assert_eq!(count(stage), 0, "a reduced level has no {stage}: {executed:?}");
     }
+    // Each of its maps packed and encoded once: bark albedo and normal, the leaf's albedo.
+    assert_eq!((count("maps(tree/lod0/materials/"), count("encode(tree/lod0/materials/")), (3, 3), "{executed:?}");
     let obj = project.read("baked/tree/lod0/lod.obj");
     let triangles = faces(&obj);
     assert!(triangles <= 30 && triangles > 0, "{triangles} triangles for a budget of 30");
@@ -47,47 +52,68 @@ fn a_reduced_level_keeps_its_budget_over_copies_of_its_maps_and_a_map_edit_reduc
     assert_eq!(level["budget"], serde_json::json!({ "triangles": 30 }));
     assert_eq!(level["triangles"], triangles);
     assert_eq!(report["levels"][1]["representation"], "billboard_cloud");
-    // Every map the level's MTL names is a copy in its own maps/, marked as the level's.
+    // The MTL names each material's packed maps in materials/<name>/: a PNG for loaders, a KTX2
+    // beside it for the GPU, both marked as the level's; the leaf's albedo carries its cut-out.
     let manifest: serde_json::Value = serde_json::from_slice(&project.read("baked/manifest.json")).unwrap();
-    let maps = mtl_maps(&project.read("baked/tree/lod0/lod.mtl"));
-    assert_eq!(maps.len(), 3, "bark, its normal map and the leaf: {maps:?}");
-    let mut bytes = obj.len() + project.read("baked/tree/lod0/lod.mtl").len();
-    for map in &maps {
-        assert!(map.starts_with("maps/"), "{map}");
-        let path = format!("baked/tree/lod0/{map}");
-        bytes += project.read(&path).len();
-        assert_eq!(manifest["artifacts"][&path]["meaning"], serde_json::json!({ "lod": 0 }), "{path}");
+    let mtl = project.read("baked/tree/lod0/lod.mtl");
+    let maps = mtl_maps(&mtl);
+    let expected = ["materials/bark/albedo.png", "materials/bark/normal.png", "materials/leaves/albedo.png"];
+    assert_eq!(maps, expected.iter().map(|map| map.to_string()).collect::<BTreeSet<_>>());
+    assert!(
+        String::from_utf8_lossy(&mtl).contains("map_d materials/leaves/albedo.png"),
+        "{}",
+        String::from_utf8_lossy(&mtl)
+    );
+    let (mut bytes, mut gpu_bytes) = (obj.len() + mtl.len(), project.read("baked/tree/lod0/lod.bin").len() as u64);
+    // Each at its source's size (the level's largest side is 256): bark 32², its normal map 4²,
+    // the leaf 64².
+    for (map, side) in expected.iter().zip([32, 4, 64]) {
+        let texture = format!("baked/tree/lod0/{}", map.replace(".png", ".ktx2"));
+        for path in [format!("baked/tree/lod0/{map}"), texture.clone()] {
+            assert_eq!(manifest["artifacts"][&path]["meaning"], serde_json::json!({ "lod": 0 }), "{path}");
+        }
+        let file = project.read(&texture);
+        let ktx2 = read_ktx2(&file);
+        assert_eq!((ktx2.width, ktx2.height), (side, side), "{texture}");
+        bytes += file.len();
+        gpu_bytes += ktx2.levels.iter().map(|level| level.2).sum::<u64>();
     }
-    assert_eq!(level["bytes"], bytes, "the mesh, its MTL and its maps");
-    // What the GPU holds: the glTF's buffer and the maps as RGBA8 with full mip chains (bark
-    // 32², its normal map 4², the leaf 64²).
-    let rgba8 = |side: u64| (0..=side.ilog2()).map(|level| (side >> level).pow(2) * 4).sum::<u64>();
-    let buffer = project.read("baked/tree/lod0/lod.bin").len() as u64;
-    assert_eq!(level["gpu_bytes"], buffer + rgba8(32) + rgba8(4) + rgba8(64));
-    let bark_copy = maps.iter().find(|map| map.starts_with("maps/bark.")).unwrap().clone();
-    assert_eq!(project.read(&format!("baked/tree/lod0/{bark_copy}")), project.read("assets/bark.png"));
+    assert_eq!(level["bytes"], bytes, "the mesh, its MTL and its textures");
+    assert_eq!(level["gpu_bytes"], gpu_bytes, "the glTF's buffer and the textures with their mips");
+    // The bark as the GPU decodes it, against its source.
+    let albedo = project.read("baked/tree/lod0/materials/bark/albedo.ktx2");
+    let ktx2 = read_ktx2(&albedo);
+    let decoded = decode_blocks(BlockFormat::Bc7, &ktx2_level(&albedo, &ktx2, 0), 32, 32);
+    let source = image::load_from_memory(&project.read("assets/bark.png")).unwrap().to_rgba8();
+    let mut psnr = PsnrSum::default();
+    for (expected, actual) in source.pixels().zip(decoded.pixels.chunks_exact(4)) {
+        psnr.add(expected.0, actual.try_into().unwrap(), 3);
+    }
+    assert!(psnr.psnr() > 35.0, "the bark's albedo at {:.1} dB", psnr.psnr());
 
-    // A bark edit: the bark is copied again under a new name and the MTL names it; nothing is
-    // reduced again and the mesh is the same.
+    // A bark edit: the bark's albedo alone is packed and encoded again; nothing is reduced
+    // again and the mesh and its MTL are the same.
     project.write("assets/bark.png", pattern_png(32, 32, 7));
     let summary = build(&mut cirrus);
     assert!(summary.all_ok(), "{}", summary.to_text());
     let executed = cirrus.take_executed_stages();
-    assert!(executed.iter().all(|run| !run.contains("tree/lod0")), "{executed:?}");
+    let level_runs: Vec<&String> = executed.iter().filter(|run| run.contains("tree/lod0")).collect();
+    assert!(
+        !level_runs.is_empty() && level_runs.iter().all(|run| run.contains("tree/lod0/materials/bark/albedo")),
+        "{executed:?}"
+    );
     assert_eq!(project.read("baked/tree/lod0/lod.obj"), obj);
-    let edited = mtl_maps(&project.read("baked/tree/lod0/lod.mtl"));
-    let new_bark = edited.iter().find(|map| map.starts_with("maps/bark.")).unwrap();
-    assert_ne!(new_bark, &bark_copy);
-    assert_eq!(project.read(&format!("baked/tree/lod0/{new_bark}")), project.read("assets/bark.png"));
-    assert!(!project.path(&format!("baked/tree/lod0/{bark_copy}")).exists(), "the stale copy is deleted");
+    assert_eq!(project.read("baked/tree/lod0/lod.mtl"), mtl);
+    assert_ne!(project.read("baked/tree/lod0/materials/bark/albedo.ktx2"), albedo);
 
-    // A restart runs nothing: the reduced level is in the persistent cache.
+    // A restart runs nothing: the reduced level and its maps are in the persistent cache.
     let mut restarted = project.open();
     let summary = build(&mut restarted);
     assert!(summary.all_ok(), "{}", summary.to_text());
     assert_eq!(restarted.take_executed_stages(), Vec::<String>::new());
-    // A new budget re-runs that level only, from the cache's mesh, and measures it again (the
-    // source's textures decoded to render the source beside it).
+    // A new budget re-runs that level's mesh only, from the cache's mesh (its maps are the
+    // same), and measures it again (the source's textures decoded to render the source beside
+    // it).
     let pipeline = String::from_utf8(project.read("pipeline.ron")).unwrap();
     std::fs::write(project.path("pipeline.ron"), pipeline.replace("Reduced(Triangles(30))", "Reduced(Ratio(0.25))"))
         .unwrap();

@@ -148,13 +148,18 @@ fn auto_report(
         .filter(|&slot| slots[slot].level == level)
         .map(|slot| {
             // Each surface's side: the albedo's, the others' at a half or a quarter of it where
-            // that let the albedo double (`levels::allot_surfaces`).
-            let sides: serde_json::Map<String, serde_json::Value> = reports[slot]["surfaces"]
-                .as_array()
-                .into_iter()
-                .flatten()
-                .filter_map(|info| Some((info["surface"].as_str()?.to_lowercase(), info["width"].clone())))
-                .collect();
+            // that let the albedo double (`levels::allot_surfaces`); a reduced level's by
+            // material (`bark/albedo`).
+            let side = |info: &serde_json::Value| {
+                let surface = info["surface"].as_str()?.to_lowercase();
+                let name = match info["material"].as_str() {
+                    Some(material) => format!("{material}/{surface}"),
+                    None => surface,
+                };
+                Some((name, info["width"].clone()))
+            };
+            let sides: serde_json::Map<String, serde_json::Value> =
+                reports[slot]["surfaces"].as_array().into_iter().flatten().filter_map(side).collect();
             serde_json::json!({
                 "name": slots[slot].candidate,
                 "folder": levels::level_folder(settings, slot as u32),

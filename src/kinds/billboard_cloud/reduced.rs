@@ -333,6 +333,18 @@ pub(crate) fn reduced_level_outputs(
     outputs.add(level_folder.join("lod.gltf"), ArtifactRole::Gltf, gltf.gltf.into());
     outputs.add(level_folder.join("lod.bin"), ArtifactRole::GltfBuffer, gltf.bin.into());
     let written = super::write_level_surfaces(db, asset, level, output_folder, outputs)?;
+    // Each map's figures with its material's folder name.
+    let surfaces: Vec<serde_json::Value> = maps
+        .surfaces(&folder)
+        .iter()
+        .zip(&written.infos)
+        .map(|((_, surface, _), info)| {
+            let mut info = serde_json::to_value(info).expect("surface figures serialise");
+            let material = surface.group.rsplit('/').next().unwrap_or_default();
+            info["material"] = serde_json::json!(material);
+            info
+        })
+        .collect();
     let figures = &reduced.figures;
     let budget = match levels::settings_for(settings, level).reduced {
         Some(crate::mesh::reduce::TriangleBudget::Triangles(count)) => serde_json::json!({ "triangles": count }),
@@ -356,7 +368,7 @@ pub(crate) fn reduced_level_outputs(
         "leaf_area": if source_area > 0.0 { Some(((kept_area / source_area) * 1e4).round() / 1e4) } else { None },
         // The largest side of its maps, and each one's figures.
         "map_side": maps.side,
-        "surfaces": written.infos,
+        "surfaces": surfaces,
         "bytes": bytes + written.bytes,
         "gpu_bytes": gpu_bytes + written.gpu_bytes,
     });

@@ -210,4 +210,24 @@ fn an_auto_candidate_gives_its_bytes_to_its_albedo_first() {
     for name in ["normal", "height"] {
         assert_eq!(texture_side(&project, &format!("{impostor}/{name}.ktx2")), (128, 128), "{name}");
     }
+
+    // The reduced candidate: at most 606 triangles, and its materials' maps (bark albedo, mra
+    // and normal, the leaves' albedo, all 1024² in the source) at the side they share in the
+    // bytes its mesh leaves (at 256 the two albedos alone would pass them), its bytes on the GPU
+    // the glTF's buffer and the KTX2s'.
+    let reduced = folder("reduced606");
+    let obj = project.read(&format!("{reduced}/lod.obj"));
+    let triangles = String::from_utf8_lossy(&obj).lines().filter(|line| line.starts_with("f ")).count();
+    assert!(triangles <= 606 && triangles > 300, "{triangles}");
+    let entry = candidates.iter().find(|candidate| candidate["name"] == "reduced606").unwrap();
+    let maps = ["bark/albedo", "bark/mra", "bark/normal", "leaves/albedo"];
+    let sides = serde_json::Value::Object(maps.iter().map(|map| (map.to_string(), serde_json::json!(128))).collect());
+    assert_eq!(entry["surface_sides"], sides);
+    let mut gpu_bytes = project.read(&format!("{reduced}/lod.bin")).len() as u64;
+    for map in maps {
+        let ktx2 = crate::support::read_ktx2(&project.read(&format!("{reduced}/materials/{map}.ktx2")));
+        assert_eq!((ktx2.width, ktx2.height), (128, 128), "{map}");
+        gpu_bytes += ktx2.levels.iter().map(|level| level.2).sum::<u64>();
+    }
+    assert_eq!(entry["gpu_bytes"], gpu_bytes);
 }

@@ -152,3 +152,30 @@ fn the_preview_and_the_viewer_show_a_reduced_level_with_its_own_materials() {
     assert!(lines[0].starts_with(&format!("loaded: lod0 of 2, {triangles} triangles")), "{lines:?}");
     assert!(lines[1].starts_with("showing lod1: lod1 of 2, "), "{lines:?}");
 }
+
+#[test]
+fn a_reduced_level_s_maps_stay_in_its_folder_whatever_its_materials_are_named() {
+    // Names that climb out of the folder, and that collide once made safe for a path.
+    let project = chain_project("[Reduced(Ratio(0.5)), Quads(4)]");
+    let renamed = |file: &str| {
+        let text = String::from_utf8(project.read(file)).unwrap();
+        let text = text.replace("mtl bark", "mtl ../../bark").replace("mtl leaves", "mtl .._.._bark");
+        project.write(file, text);
+    };
+    renamed("assets/tree.obj");
+    renamed("assets/tree.mtl");
+    let summary = build(&mut project.open());
+    assert!(summary.all_ok(), "{}", summary.to_text());
+    let maps = mtl_maps(&project.read("baked/tree/lod0/lod.mtl"));
+    let expected =
+        ["materials/______bark/albedo.png", "materials/______bark/normal.png", "materials/______bark_1/albedo.png"];
+    assert_eq!(maps, expected.iter().map(|map| map.to_string()).collect::<BTreeSet<_>>());
+    for map in expected {
+        assert!(project.path(&format!("baked/tree/lod0/{map}")).is_file(), "{map}");
+        assert!(project.path(&format!("baked/tree/lod0/{}", map.replace(".png", ".ktx2"))).is_file(), "{map}");
+    }
+    // Nothing was written above the level's folder.
+    let stray: Vec<_> =
+        ["baked/bark", "baked/tree/bark", "bark"].iter().filter(|path| project.path(path).exists()).collect();
+    assert!(stray.is_empty(), "{stray:?}");
+}

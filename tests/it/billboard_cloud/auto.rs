@@ -123,6 +123,24 @@ fn a_bark_edit_rerenders_only_the_bark_of_every_candidate_and_a_restart_nothing(
     assert_eq!(renders, bark, "the bark's renders, in every candidate of every level");
     // The impostors show the bark too: every one is baked again, and the chain measured again.
     assert!(executed.iter().any(|run| run.starts_with("impostor(tree/lod0/candidates/")), "{executed:?}");
+    // The reduced candidates (one a level) pack their bark's albedo again, not its normal map
+    // nor the leaves, and reduce nothing (at the same size in both, one may find the other's in
+    // the cache).
+    let maps: Vec<&str> = executed.iter().filter(|run| run.starts_with("maps(")).map(String::as_str).collect();
+    let bark_albedo = |run: &&str| {
+        ["lod0/candidates/reduced1213", "lod1/candidates/reduced303"]
+            .iter()
+            .any(|folder| **run == format!("maps(tree/{folder}/materials/bark/albedo)"))
+    };
+    assert!(!maps.is_empty() && maps.iter().all(bark_albedo), "{maps:?}");
+    assert!(!executed.iter().any(|run| run.starts_with("reduce(")), "{executed:?}");
+    let bark = |level: &str| project.read(&format!("baked/tree/{level}/materials/bark/albedo.ktx2"));
+    assert_eq!(bark("lod0/candidates/reduced1213"), bark("lod1/candidates/reduced303"));
+    assert_eq!(
+        crate::support::read_ktx2(&bark("lod0/candidates/reduced1213")).width,
+        32,
+        "the edited bark at its own size"
+    );
     assert!(executed.contains("switch(tree)"));
 
     let mut restarted = project.open();

@@ -789,13 +789,17 @@ pub fn mikktspace_tangents(
     corners.tangents.into_iter().zip(fallback).map(|(tangent, fallback)| tangent.unwrap_or(fallback)).collect()
 }
 
-/// Per-vertex tangents (xyz, handedness in w) from UV derivatives, for normal mapping.
+/// Per-vertex tangents (xyz, handedness in w) from UV derivatives, for normal mapping (a mesh
+/// without UVs, which draws no map: +x everywhere).
 pub(crate) fn vertex_tangents(
     positions: &[[f32; 3]],
     normals: &[[f32; 3]],
     uvs: &[[f32; 2]],
     triangles: &[[u32; 3]],
 ) -> Vec<[f32; 4]> {
+    if uvs.len() < positions.len() {
+        return vec![[1.0, 0.0, 0.0, 1.0]; positions.len()];
+    }
     let mut tangents = vec![glam::Vec3::ZERO; positions.len()];
     let mut bitangents = vec![glam::Vec3::ZERO; positions.len()];
     for triangle in triangles {

@@ -179,3 +179,36 @@ fn a_reduced_level_s_maps_stay_in_its_folder_whatever_its_materials_are_named() 
         ["baked/bark", "baked/tree/bark", "bark"].iter().filter(|path| project.path(path).exists()).collect();
     assert!(stray.is_empty(), "{stray:?}");
 }
+
+#[test]
+fn a_mesh_without_texture_coordinates_reduces_to_its_constants() {
+    // Forty cards without `vt`: their material's map cannot be drawn, so no level bakes maps.
+    let project = crate::support::TempProject::new(
+        r#"Pipeline(source: "assets", output: "baked", assets: [
+            BillboardCloud(name: "cards", mesh: "cards.obj", billboard: (lods: [Reduced(Ratio(0.5)), Auto(max_bytes: 65536)])),
+        ])"#,
+    );
+    let mut obj = String::from("mtllib cards.mtl\nusemtl bark\n");
+    for card in 0..40 {
+        let (angle, height) = (card as f32 * 0.3, card as f32 * 0.05);
+        let (x, z) = (angle.cos(), angle.sin());
+        for (dx, dy) in [(0.0, 0.0), (0.2, 0.0), (0.2, 0.3), (0.0, 0.3)] {
+            obj.push_str(&format!("v {} {} {z}\n", x + dx, height + dy));
+        }
+        let first = card * 4 + 1;
+        obj.push_str(&format!("f {first} {} {}\nf {first} {} {}\n", first + 1, first + 2, first + 2, first + 3));
+    }
+    project.write("assets/cards.obj", obj);
+    project.write("assets/cards.mtl", "newmtl bark\nKd 0.5 0.4 0.3\nmap_Kd bark.png\n");
+    project.write("assets/bark.png", pattern_png(8, 8, 3));
+    let summary = build(&mut project.open());
+    assert!(summary.all_ok(), "{}", summary.to_text());
+    assert!(mtl_maps(&project.read("baked/cards/lod0/lod.mtl")).is_empty());
+    assert!(!project.path("baked/cards/lod0/materials").exists());
+    let report: serde_json::Value = serde_json::from_slice(&project.read("baked/cards/report.json")).unwrap();
+    let level = &report["levels"][0];
+    assert_eq!(level["surfaces"], serde_json::json!([]));
+    assert_eq!(level["gpu_bytes"], project.read("baked/cards/lod0/lod.bin").len());
+    // The reduced level is measured as the others are (half the cards hold at small sizes).
+    assert!(level["holds_to"].as_u64().is_some_and(|size| size >= 16), "{level}");
+}

@@ -913,7 +913,7 @@ pub(crate) fn reduced_map_key(
     let materials = source_materials(db, asset)?;
     let (sources, constants) = map_recipe(db, asset, &materials[material as usize], surface);
     let mut key = stage_key(MAPS).part(&surface).part(&halvings).part(&constants.albedo).part(&constants.metallic);
-    key = key.part(&constants.roughness);
+    key = key.part(&constants.roughness).part(&map_alpha_cutoff(db, asset, surface));
     for source in sources {
         key = match source {
             Some(file) => key.part(&crate::db::read_contents(db, file)?.hash),
@@ -939,9 +939,16 @@ pub(crate) fn reduced_map_image(
     timed(db, MAPS, &surface.label(asset.name(db)), || {
         let sources: Vec<Option<&Texture>> = decoded.iter().map(|texture| texture.as_deref()).collect();
         let packed = crate::texture::channel_packing::pack_surface(surface.surface, &sources, &constants);
-        let settings = crate::texture::mips::MipSettings { kind: surface.surface, alpha_cutoff: None };
+        let alpha_cutoff = map_alpha_cutoff(db, asset, surface.surface);
+        let settings = crate::texture::mips::MipSettings { kind: surface.surface, alpha_cutoff };
         Ok(Arc::new(crate::texture::mips::reduced_level(&packed, settings, halvings)))
     })
+}
+
+/// The alpha test a reduced level's map surface keeps its coverage for when it is stored smaller
+/// than its sources (an albedo's: the cards' leaves would thin out level by level without it).
+fn map_alpha_cutoff(db: &dyn Db, asset: Asset, surface: SurfaceKind) -> Option<f32> {
+    (surface == SurfaceKind::Albedo).then(|| billboard_alpha_cutoff(db, asset))
 }
 
 /// An impostor level's frames (stage `impostor`): the source with its materials rendered from

@@ -193,7 +193,9 @@ pub fn allot_surfaces(
 /// largest power-of-two albedo (at least 64 texels, at most the asset's `max_size`; an
 /// impostor's frames at least 16 texels) beside which its other surfaces fit, up to four times
 /// smaller a side ([`allot_surfaces`]), with its quads, and in which its quads pack (see
-/// [`quads_pack`]). A candidate that fits at no size is left out.
+/// [`quads_pack`]); and the source's triangles under half the bytes (at
+/// [`REDUCED_TRIANGLE_BYTES`] a triangle), its maps sized by the rest once its mesh is made
+/// (`reduced::allot_maps`). A candidate that fits at no size is left out.
 pub fn auto_candidates(settings: &Settings, level: u32, max_bytes: u64) -> Vec<Slot> {
     use crate::texture::encode::gpu_bytes;
     let (max_size, padding) = (settings.own::<Own>().atlas.max_size, settings.own::<Own>().atlas.padding);

@@ -260,6 +260,8 @@ impl Kind for BillboardCloud {
             if levels::is_reduced(asset.settings(db), level) {
                 let reduce =
                     reduced::reduce_instances(db, asset, level, (output_folder, &report), (&mesh, &mut decodes));
+                // `reduce`, then each map's `maps`, `mips`, `encode` and `write`: the switch reads
+                // `reduce` and each `write`.
                 switch = switch.reads_stage(&reduce[0]);
                 switch = reduce[1..].iter().skip(3).step_by(4).fold(switch, |switch, write| switch.reads_stage(write));
                 instances.extend(reduce);
@@ -421,9 +423,9 @@ impl Kind for BillboardCloud {
     }
 }
 
-/// The jobs after a level's first step: a reduced level is done; an impostor's surfaces (which
-/// ask for its frames when the cache does not hold them); a cloud's LOD, render loads, renders
-/// and surfaces once its layout is known.
+/// The jobs after a level's first step: a reduced level's maps once its mesh is made (their
+/// sizes may depend on it); an impostor's surfaces (which ask for its frames when the cache does
+/// not hold them); a cloud's LOD, render loads, renders and surfaces once its layout is known.
 fn level_jobs(db: &dyn Db, asset: Asset, level: u32) -> Result<Vec<Job>, Diagnostic> {
     let name = asset.name(db);
     if levels::is_reduced(asset.settings(db), level) {

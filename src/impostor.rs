@@ -46,11 +46,23 @@ pub struct ImpostorFrames {
 /// of `points` (the corners of the mesh's faces) seen from the frame's direction, widened by a
 /// texel and a half of the frame on each side and kept inside the sphere's image. No points:
 /// the whole image.
-pub fn frame_rects(points: &[Vec3], (center, radius): (Vec3, f32), settings: ImpostorSettings) -> Vec<[f32; 4]> {
+pub fn frame_rects(points: &[Vec3], sphere: (Vec3, f32), settings: ImpostorSettings) -> Vec<[f32; 4]> {
+    frame_rects_with_margin(points, sphere, settings.grid, settings.frame_size)
+}
+
+/// [`frame_rects`] of `grid` with the margins of frames of `margin_frame` texels (the smallest
+/// of the sizes that share one render: see [`reduced_frames`]).
+pub fn frame_rects_with_margin(
+    points: &[Vec3],
+    (center, radius): (Vec3, f32),
+    grid: crate::mesh::octahedral::FrameGrid,
+    margin_frame: u32,
+) -> Vec<[f32; 4]> {
     let radius = radius.max(1e-6);
-    (0..settings.grid.frame_count())
+    let margin_frame = margin_frame.max(1) as f32;
+    (0..grid.frame_count())
         .map(|frame| {
-            let direction = settings.grid.frame_direction(frame);
+            let direction = grid.frame_direction(frame);
             let (right, up) = frame_axes(direction);
             let (mut low, mut high) = ([f32::INFINITY; 2], [f32::NEG_INFINITY; 2]);
             for &point in points {
@@ -69,8 +81,8 @@ pub fn frame_rects(points: &[Vec3], (center, radius): (Vec3, f32), settings: Imp
                 // At least two texels of the whole image wide, then a texel and a half more each
                 // side of what it becomes.
                 let middle = 0.5 * (low[axis] + high[axis]);
-                let extent = (high[axis] - low[axis]).max(2.0 / settings.frame_size as f32);
-                let margin = extent * 1.5 / settings.frame_size as f32;
+                let extent = (high[axis] - low[axis]).max(2.0 / margin_frame);
+                let margin = extent * 1.5 / margin_frame;
                 rect[axis] = (middle - 0.5 * extent - margin).max(0.0);
                 rect[axis + 2] = (middle + 0.5 * extent + margin).min(1.0);
             }
@@ -147,8 +159,20 @@ pub fn view_hull(points: &[Vec3], (center, radius): (Vec3, f32)) -> [[f32; 2]; 8
 pub fn bake_impostor(
     gpu: &Gpu,
     mesh: &ViewMesh,
+    sphere: (Vec3, f32),
+    settings: ImpostorSettings,
+) -> Result<ImpostorFrames, GpuError> {
+    bake_impostor_with_margin(gpu, mesh, sphere, settings, settings.frame_size)
+}
+
+/// [`bake_impostor`] with the frames' margins of `margin_frame`-texel frames
+/// ([`frame_rects_with_margin`]), for frames that smaller ones are reduced from.
+pub fn bake_impostor_with_margin(
+    gpu: &Gpu,
+    mesh: &ViewMesh,
     (center, radius): (Vec3, f32),
     settings: ImpostorSettings,
+    margin_frame: u32,
 ) -> Result<ImpostorFrames, GpuError> {
     let ImpostorSettings { grid, frame_size } = settings;
     let side = (grid.frames * frame_size) as usize;
@@ -158,7 +182,7 @@ pub fn bake_impostor(
         .iter()
         .flat_map(|(_, vertices)| vertices.iter().map(|vertex| Vec3::from(vertex.position)))
         .collect();
-    let rects = frame_rects(&corners, (center, radius), settings);
+    let rects = frame_rects_with_margin(&corners, (center, radius), grid, margin_frame);
     for (frame, &rect) in (0..grid.frame_count()).zip(&rects) {
         let direction = grid.frame_direction(frame);
         let camera = frame_rect_view_projection(center, radius, direction, rect);
@@ -178,6 +202,30 @@ pub fn bake_impostor(
     }
     let [albedo, normal, depth] = atlases.map(|pixels| Texture::new(side as u32, side as u32, pixels));
     Ok(ImpostorFrames { settings, center, radius, albedo, normal, depth, rects })
+}
+
+/// `frames` at frames `2^halvings` times smaller: each atlas reduced as its mip chain reduces it
+/// (`texture::mips::reduced_level`: colour in linear light and weighted by alpha, the albedo's
+/// alpha-tested coverage at `alpha_cutoff` kept, normals renormalised, depth averaged). A
+/// frame's side is a multiple of `2^halvings`, so no texel mixes two frames; the rects stay
+/// `frames`'s. The same views at a smaller size without rendering them again: an impostor
+/// frame costs about 11 ms to render on a software adapter whatever its size (the oak's mesh).
+pub fn reduced_frames(frames: &ImpostorFrames, halvings: u32, alpha_cutoff: f32) -> ImpostorFrames {
+    use crate::texture::mips::{reduced_level, MipSettings};
+    use crate::texture::SurfaceKind;
+    let reduce = |image: &Texture, kind: SurfaceKind, alpha_cutoff: Option<f32>| {
+        reduced_level(image, MipSettings { kind, alpha_cutoff }, halvings)
+    };
+    let settings = ImpostorSettings { frame_size: (frames.settings.frame_size >> halvings).max(1), ..frames.settings };
+    ImpostorFrames {
+        settings,
+        albedo: reduce(&frames.albedo, SurfaceKind::Albedo, Some(alpha_cutoff)),
+        normal: reduce(&frames.normal, SurfaceKind::Normal, None),
+        depth: reduce(&frames.depth, SurfaceKind::Height, None),
+        center: frames.center,
+        radius: frames.radius,
+        rects: frames.rects.clone(),
+    }
 }
 
 /// Samples per texel along each axis a frame is rendered with: 4 (16 samples), fewer where the

@@ -85,6 +85,10 @@ pub(crate) fn impostor_instance(
     let folder = levels::level_folder(asset.settings(db), level);
     let mut impostor = StageInstance::new(IMPOSTOR, level_label(db, asset, level), &folder).reads_stage(mesh);
     impostor.writes = IMPOSTOR_FILES.map(|file| output_folder.join(&folder).join(file)).to_vec();
+    // Frames reduced from another level's read that level's render.
+    if let Some(render) = super::queries::impostor_render(db, asset, level).filter(|render| render.source != level) {
+        impostor.reads.push(crate::kinds::Read::Stage(IMPOSTOR, level_label(db, asset, render.source).clone()));
+    }
     for path in mesh_textures(db, asset).iter() {
         super::read_decode(&mut impostor, path, decodes);
     }
@@ -186,7 +190,9 @@ pub(crate) fn impostor_level_outputs(
         .iter()
         .flat_map(|triangle| triangle.map(|corner| glam::Vec3::from(loaded.mesh.positions[corner as usize])))
         .collect();
-    let frame_rects = crate::impostor::frame_rects(&corners, (center, radius), impostor);
+    let margin_frame =
+        super::queries::impostor_render(db, asset, level).map_or(impostor.frame_size, |r| r.margin_frame);
+    let frame_rects = crate::impostor::frame_rects_with_margin(&corners, (center, radius), impostor.grid, margin_frame);
     let written = super::write_level_surfaces(db, asset, level, output_folder, outputs)?;
     let (mut bytes, mut gpu_bytes) = (written.bytes, written.gpu_bytes);
     let name = |index: usize| written.names.get(index).cloned().unwrap_or_default();

@@ -331,6 +331,41 @@ pub(crate) fn impostor_settings(frames: u32, hemi: bool, size: u32) -> crate::im
     crate::impostor::ImpostorSettings { grid: FrameGrid::new(frames, hemi), frame_size: ((size / frames) & !3).max(4) }
 }
 
+/// How an impostor slot's frames are made: rendered (`source` is the slot itself), or reduced
+/// `halvings` times from those of `source`, the slot with the same grid and the largest frame
+/// that is a power-of-two multiple of its own (`impostor::reduced_frames`: renders of the same
+/// views run once). Every slot sharing a render keeps the margins of the smallest frame among
+/// them (`margin_frame`, `impostor::frame_rects_with_margin`).
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub struct ImpostorRender {
+    pub source: u32,
+    pub halvings: u32,
+    pub margin_frame: u32,
+}
+
+/// [`ImpostorRender`] of slot `slot` (none: not an impostor).
+pub(crate) fn impostor_render(settings: &Settings, slot: u32) -> Option<ImpostorRender> {
+    let own = settings_for(settings, slot).impostor?;
+    let impostors: Vec<(u32, crate::impostor::ImpostorSettings)> =
+        (0..slot_count(settings)).filter_map(|other| Some((other, settings_for(settings, other).impostor?))).collect();
+    let source_of = |of: crate::impostor::ImpostorSettings| -> (u32, u32) {
+        let multiple = |other: &crate::impostor::ImpostorSettings| {
+            other.grid == of.grid
+                && other.frame_size % of.frame_size == 0
+                && (other.frame_size / of.frame_size).is_power_of_two()
+        };
+        impostors
+            .iter()
+            .filter(|(_, other)| multiple(other))
+            .max_by_key(|(other_slot, other)| (other.frame_size, std::cmp::Reverse(*other_slot)))
+            .map_or((slot, 0), |(other_slot, other)| (*other_slot, (other.frame_size / of.frame_size).ilog2()))
+    };
+    let (source, halvings) = source_of(own);
+    let sharing = impostors.iter().filter(|(_, other)| other.grid == own.grid && source_of(*other).0 == source);
+    let margin_frame = sharing.map(|(_, other)| other.frame_size).min().unwrap_or(own.frame_size);
+    Some(ImpostorRender { source, halvings, margin_frame })
+}
+
 /// The first billboard-cloud slot that asks for the same planes as `slot` (`slot` itself when
 /// none before it does, or when it is not a cloud).
 pub(crate) fn first_slot_with_planes(settings: &Settings, slot: u32) -> u32 {

@@ -51,7 +51,9 @@ pub(crate) const REDUCE: Stage = Stage { name: "reduce", version: 2 };
 
 /// An impostor level's frames (`impostor::bake_impostor`), rendered on the GPU. 2: each frame
 /// shows the mesh's bounds from its direction (`impostor::frame_rects`), not the whole sphere.
-pub(crate) const IMPOSTOR: Stage = Stage { name: "impostor", version: 2 };
+/// 4: frames of one grid at power-of-two multiples of each other share one render (the largest,
+/// with the smallest one's margins); 3 was never released.
+pub(crate) const IMPOSTOR: Stage = Stage { name: "impostor", version: 4 };
 
 /// A chain's switch sizes: every level rendered as an engine draws it beside the source, over
 /// the 26 views at each screen size of `preview::HOLD_SIZES` (`measure_chain`). 2: a level is
@@ -966,15 +968,29 @@ pub(crate) fn impostor_frames(
     let Some(settings) = level_settings(db, asset, level).impostor else {
         return Err(Diagnostic::new(main_file, format!("{name} is not an impostor level")));
     };
+    let render = impostor_render(db, asset, level).expect("an impostor level");
+    if render.source != level {
+        let source = impostor_frames(db, asset, render.source)?;
+        let cutoff = billboard_alpha_cutoff(db, asset);
+        return timed(db, IMPOSTOR, name, || {
+            Ok(Arc::new(crate::impostor::reduced_frames(&source, render.halvings, cutoff)))
+        });
+    }
     let loaded = loaded_mesh(db, asset)?;
     let view = super::source_view_mesh(db, asset, &loaded)?;
     let sphere = super::planes::bounding_sphere(&loaded.mesh.positions);
     timed(db, IMPOSTOR, name, || {
         let gpu = crate::gpu::gpu().map_err(|error| Diagnostic::new(main_file, error.to_string()))?;
-        let frames = crate::impostor::bake_impostor(gpu, &view, sphere, settings)
+        let frames = crate::impostor::bake_impostor_with_margin(gpu, &view, sphere, settings, render.margin_frame)
             .map_err(|error| Diagnostic::new(main_file, format!("{name}: {error}")))?;
         Ok(Arc::new(frames))
     })
+}
+
+/// How an impostor level's frames are made (`levels::impostor_render`; none: not an impostor).
+#[salsa::tracked(returns(copy))]
+pub(crate) fn impostor_render(db: &dyn Db, asset: Asset, level: u32) -> Option<super::levels::ImpostorRender> {
+    super::levels::impostor_render(asset.settings(db), level)
 }
 
 /// What an impostor level's surfaces are made of: the mesh (with its MTL), the frames, the
@@ -984,12 +1000,17 @@ pub(crate) fn impostor_recipe_key(db: &dyn Db, asset: Asset, level: u32) -> Cach
     let settings = level_settings(db, asset, level).impostor;
     let (frames, hemi, frame_size) =
         settings.map_or((0, false, 0), |settings| (settings.grid.frames, settings.grid.is_hemi(), settings.frame_size));
+    // The frames it is reduced from (their size) and the margins they share.
+    let render = impostor_render(db, asset, level);
+    let rendered_size = render.map_or(0, |render| frame_size << render.halvings);
     let key = stage_key(IMPOSTOR)
         .part(crate::gpu::adapter_family())
         .part(&mesh_cache_key(db, asset, asset.main_file(db).clone()).0)
         .part(&frames)
         .part(&hemi)
         .part(&frame_size)
+        .part(&rendered_size)
+        .part(&render.map_or(0, |render| render.margin_frame))
         .part(&billboard_alpha_cutoff(db, asset));
     with_mesh_textures(db, asset, key)
 }

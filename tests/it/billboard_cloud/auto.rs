@@ -168,7 +168,7 @@ fn built_bundled_bush(lods: &str) -> (crate::support::TempProject, serde_json::V
 fn a_candidate_whose_quads_cannot_pack_in_its_bytes_is_not_baked() {
     // The bundled bush has planes enough for 256 quads: at 128 KiB they would need a 256² atlas
     // of at least one block each (317 KB), at 32 KiB 64 quads a 128² one (79 KB).
-    let (_project, built) = built_bundled_bush("[Auto(max_bytes: 131072), Auto(max_bytes: 32768)]");
+    let (project, built) = built_bundled_bush("[Auto(max_bytes: 131072), Auto(max_bytes: 32768)]");
     let mut names = Vec::new();
     for (entry, max_bytes) in built["levels"].as_array().unwrap().iter().zip([131072u64, 32768]) {
         for candidate in entry["auto"]["candidates"].as_array().unwrap() {
@@ -187,6 +187,29 @@ fn a_candidate_whose_quads_cannot_pack_in_its_bytes_is_not_baked() {
     // A reduced candidate keeps 128 KiB / 2 / 108 bytes a triangle = 606 triangles; at 32 KiB
     // it would keep too few (151) to be worth measuring.
     assert_eq!(names, ["quads16 quads64 impostor8 impostor12 reduced606", "quads16 impostor8"]);
+
+    // The two 8 × 8 impostors (frames of 32 and 16 texels) are one render of the same 64 views:
+    // the smaller's frames show the same rects, and its albedo is the larger's next mip level
+    // (each BC-decoded).
+    let impostor = |level: u32, file: &str| project.read(&format!("baked/tree/lod{level}/candidates/impostor8/{file}"));
+    let [large, small]: [serde_json::Value; 2] =
+        [0, 1].map(|level| serde_json::from_slice(&impostor(level, "impostor.json")).unwrap());
+    assert_eq!((&large["frame_size"], &small["frame_size"]), (&serde_json::json!(32), &serde_json::json!(16)));
+    assert_eq!(large["frame_rects"], small["frame_rects"]);
+    let decoded = |bytes: &[u8], level: usize| {
+        let ktx2 = crate::support::read_ktx2(bytes);
+        let (width, height) = (ktx2.width >> level, ktx2.height >> level);
+        let blocks = crate::support::ktx2_level(bytes, &ktx2, level);
+        cirrus::texture::quality::decode_blocks(cirrus::config::BlockFormat::Bc7, &blocks, width, height)
+    };
+    let (large_albedo, small_albedo) = (impostor(0, "albedo.ktx2"), impostor(1, "albedo.ktx2"));
+    let (half, own) = (decoded(&large_albedo, 1), decoded(&small_albedo, 0));
+    assert_eq!((half.width, half.height), (own.width, own.height));
+    let mut psnr = crate::support::PsnrSum::default();
+    for (a, b) in half.pixels.chunks_exact(4).zip(own.pixels.chunks_exact(4)) {
+        psnr.add(a.try_into().unwrap(), b.try_into().unwrap(), 4);
+    }
+    assert!(psnr.psnr() > 30.0, "{:.1} dB", psnr.psnr());
 }
 
 /// The level 0 size of a baked texture file.

@@ -351,7 +351,7 @@ pub(crate) fn impostor_render(settings: &Settings, slot: u32) -> Option<Impostor
     let source_of = |of: crate::impostor::ImpostorSettings| -> (u32, u32) {
         let multiple = |other: &crate::impostor::ImpostorSettings| {
             other.grid == of.grid
-                && other.frame_size % of.frame_size == 0
+                && other.frame_size.is_multiple_of(of.frame_size)
                 && (other.frame_size / of.frame_size).is_power_of_two()
         };
         impostors

@@ -175,6 +175,14 @@ impl GltfGeometry {
         self
     }
 
+    /// The bytes of the buffer [`gltf_files`] writes for this geometry (positions, normals, UVs,
+    /// tangents where `normal_mapped` and it has them, `u32` indices), before writing it.
+    pub fn buffer_bytes(&self, normal_mapped: bool) -> u64 {
+        let tangents = if normal_mapped { 16 * self.tangents.len() } else { 0 };
+        let vertices = 12 * (self.positions.len() + self.normals.len()) + 8 * self.uvs.len() + tangents;
+        (vertices + 12 * self.triangles.len()) as u64
+    }
+
     /// The mesh over this geometry drawn with `materials`: with its tangents when one of them
     /// has a normal map.
     pub fn mesh<'a>(&'a self, name: &'a str, materials: &'a [GltfMaterial]) -> GltfMesh<'a> {

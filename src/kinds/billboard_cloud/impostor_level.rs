@@ -191,7 +191,7 @@ pub(crate) fn impostor_level_outputs(
         .flat_map(|triangle| triangle.map(|corner| glam::Vec3::from(loaded.mesh.positions[corner as usize])))
         .collect();
     let margin_frame =
-        super::queries::impostor_render(db, asset, level).map_or(impostor.frame_size, |r| r.margin_frame);
+        super::queries::impostor_render(db, asset, level).map_or(impostor.frame_size, |render| render.margin_frame);
     let frame_rects = crate::impostor::frame_rects_with_margin(&corners, (center, radius), impostor.grid, margin_frame);
     let written = super::write_level_surfaces(db, asset, level, output_folder, outputs)?;
     let (mut bytes, mut gpu_bytes) = (written.bytes, written.gpu_bytes);

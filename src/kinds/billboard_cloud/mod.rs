@@ -23,6 +23,7 @@ pub mod lod_mesh;
 pub mod lod_preview;
 pub mod levels;
 pub mod reduced;
+mod reduced_queries;
 pub mod impostor_level;
 pub mod chain_outputs;
 pub mod queries;

@@ -48,7 +48,7 @@ pub(crate) fn reduce_instances(
     let name = asset.name(db);
     // An `Auto` candidate's maps are sized by its mesh's bytes; the others' read only the
     // materials (the MTL files) and their maps.
-    let sized_by_mesh = levels::settings_for(settings, level).max_bytes.is_some();
+    let sized_by_mesh = super::queries::level_settings(db, asset, level).max_bytes.is_some();
     let libraries = crate::kinds::mesh_queries::mesh_library_paths_of(db, asset, asset.main_file(db).clone());
     for (material, surface, _) in maps.surfaces(&folder) {
         let mut pack = StageInstance::new(MAPS, surface.label(name), surface.instance());
@@ -218,10 +218,7 @@ pub(crate) fn allot_maps(
             })
             .sum()
     };
-    let mut side = sizing.max_side.next_power_of_two().min(1 << 15);
-    if side > sizing.max_side {
-        side /= 2;
-    }
+    let mut side = 1u32 << sizing.max_side.max(1).ilog2();
     loop {
         if let Some(levels) = levels::allot_surfaces(&kinds, side, u32::MAX, bytes_at, bytes) {
             return (side, at(side, &levels));

@@ -1,0 +1,156 @@
+//! The BillboardCloud kind's tracked functions for a reduced level's maps (stage `maps`): which
+//! materials it draws and at what sizes (`reduced::allot_maps`), and each map surface's image
+//! and cache key, for the texture tail. Thin glue over `reduced` and `texture::channel_packing`.
+
+use std::sync::Arc;
+
+use super::queries::{billboard_alpha_cutoff, level_settings, reduced_level, MAPS};
+use crate::cache::CacheKey;
+use crate::db::{asset_file, decoded_texture, stage_key, timed, Asset, Db, SourceFile};
+use crate::diagnostic::Diagnostic;
+use crate::kinds::mesh_queries::loaded_mesh;
+use crate::texture::{SurfaceKind, Texture};
+
+/// The materials a reduced level draws and the sizes of their maps (`reduced::allot_maps`): each
+/// at most the level's largest side, an `Auto` candidate's as large as its bytes allow beside
+/// its mesh. Read from the maps' headers, not their texels.
+#[salsa::tracked(returns(clone))]
+pub(crate) fn reduced_maps(
+    db: &dyn Db,
+    asset: Asset,
+    level: u32,
+) -> Result<Arc<crate::kinds::billboard_cloud::reduced::ReducedMaps>, Diagnostic> {
+    use crate::kinds::billboard_cloud::reduced::{
+        allot_maps, material_folders, material_surfaces, surface_sources, MapSizing,
+    };
+    let loaded = loaded_mesh(db, asset)?;
+    let reduced = reduced_level(db, asset, level)?;
+    let mut used = reduced.geometry.triangle_materials.clone();
+    used.sort_unstable();
+    used.dedup();
+    used.retain(|&material| (material as usize) < loaded.mesh.materials.len());
+    let materials: Vec<&crate::mesh::MeshMaterial> =
+        used.iter().map(|&material| &loaded.mesh.materials[material as usize]).collect();
+    let names: Vec<&str> = materials.iter().map(|material| material.name.as_str()).collect();
+    let folders = material_folders(&names);
+    let limits = crate::db::texture_limits(db);
+    let mut sizes = Vec::new();
+    for material in &materials {
+        let mut surfaces = Vec::new();
+        for surface in material_surfaces(material).into_iter().filter(|_| loaded.mesh.uvs.is_some()) {
+            let (mut width, mut height) = (0, 0);
+            for path in surface_sources(material, surface).into_iter().flatten() {
+                let Some(file) = asset_file(db, asset, path.clone()) else { continue };
+                let contents = crate::db::read_contents(db, file)?;
+                let (w, h) = crate::texture::probe_texture(path, &contents.bytes, limits)?;
+                (width, height) = (width.max(w), height.max(h));
+            }
+            if width > 0 {
+                surfaces.push((surface, (width, height)));
+            }
+        }
+        sizes.push(surfaces);
+    }
+    let settings = level_settings(db, asset, level);
+    // An `Auto` candidate's maps share its bytes with its mesh (its glTF buffer, which holds
+    // tangents when a map is a normal map).
+    let bytes = settings.max_bytes.map(|max_bytes| {
+        let normal_mapped = sizes.iter().flatten().any(|(surface, _)| *surface == SurfaceKind::Normal);
+        max_bytes.saturating_sub(reduced.geometry.buffer_bytes(normal_mapped))
+    });
+    let encode = &asset.settings(db).encode;
+    let bytes_of = |surface: SurfaceKind, width: u32, height: u32| {
+        crate::texture::encode::gpu_bytes(width, height, Some(encode.format_of(surface)))
+    };
+    let sizing = MapSizing { surfaces: &sizes, max_side: settings.max_atlas_size, bytes };
+    let (side, halvings) = allot_maps(&sizing, bytes_of);
+    let materials = used
+        .iter()
+        .zip(folders)
+        .zip(halvings)
+        .map(|((&material, folder), surfaces)| crate::kinds::billboard_cloud::reduced::MaterialMaps {
+            material,
+            folder,
+            surfaces,
+        })
+        .collect();
+    Ok(Arc::new(crate::kinds::billboard_cloud::reduced::ReducedMaps { materials, side }))
+}
+
+/// The source mesh's materials: equal after an edit of its geometry alone, so that a reduced
+/// level's maps, which read them, are not made again for it.
+#[salsa::tracked(returns(clone))]
+pub(crate) fn source_materials(db: &dyn Db, asset: Asset) -> Result<Arc<Vec<crate::mesh::MeshMaterial>>, Diagnostic> {
+    Ok(Arc::new(loaded_mesh(db, asset)?.mesh.materials.clone()))
+}
+
+/// The source maps a reduced level's map surface `surface` of material `material` is packed
+/// from, and the constants where one is missing.
+fn map_recipe(
+    db: &dyn Db,
+    asset: Asset,
+    material: &crate::mesh::MeshMaterial,
+    surface: SurfaceKind,
+) -> (Vec<Option<SourceFile>>, crate::texture::channel_packing::PackConstants) {
+    let sources = crate::kinds::billboard_cloud::reduced::surface_sources(material, surface)
+        .into_iter()
+        .map(|path| path.and_then(|path| asset_file(db, asset, path.clone())))
+        .collect();
+    // The MTL's `Kd` and `d` stay factors over the albedo; metallic and roughness are packed.
+    let constants = crate::texture::channel_packing::PackConstants {
+        albedo: [1.0; 4],
+        metallic: material.metallic,
+        roughness: material.roughness,
+        ao: 1.0,
+    };
+    (sources, constants)
+}
+
+/// What a reduced level's map surface is made of: the stage's version, the surface, its
+/// halvings, the constants and each source map's content.
+pub(crate) fn reduced_map_key(
+    db: &dyn Db,
+    asset: Asset,
+    (material, halvings): (u32, u32),
+    surface: SurfaceKind,
+) -> Result<CacheKey, Diagnostic> {
+    let materials = source_materials(db, asset)?;
+    let (sources, constants) = map_recipe(db, asset, &materials[material as usize], surface);
+    let mut key = stage_key(MAPS).part(&surface).part(&halvings).part(&constants.albedo).part(&constants.metallic);
+    key = key.part(&constants.roughness).part(&map_alpha_cutoff(db, asset, surface));
+    for source in sources {
+        key = match source {
+            Some(file) => key.part(&crate::db::read_contents(db, file)?.hash),
+            None => key.part("none"),
+        };
+    }
+    Ok(key.finish())
+}
+
+/// A reduced level's map surface (stage `maps`): material `material`'s source maps packed as
+/// `surface`, stored `halvings` levels down its mip chain.
+pub(crate) fn reduced_map_image(
+    db: &dyn Db,
+    asset: Asset,
+    (material, halvings): (u32, u32),
+    surface: &crate::kinds::SurfaceId,
+) -> Result<Arc<Texture>, Diagnostic> {
+    let materials = source_materials(db, asset)?;
+    let (sources, constants) = map_recipe(db, asset, &materials[material as usize], surface.surface);
+    // The opacity's channel is taken by the packing.
+    let decoded = sources.into_iter().map(|source| source.map(|file| decoded_texture(db, file)).transpose());
+    let decoded = decoded.collect::<Result<Vec<_>, _>>()?;
+    timed(db, MAPS, &surface.label(asset.name(db)), || {
+        let sources: Vec<Option<&Texture>> = decoded.iter().map(|texture| texture.as_deref()).collect();
+        let packed = crate::texture::channel_packing::pack_surface(surface.surface, &sources, &constants);
+        let alpha_cutoff = map_alpha_cutoff(db, asset, surface.surface);
+        let settings = crate::texture::mips::MipSettings { kind: surface.surface, alpha_cutoff };
+        Ok(Arc::new(crate::texture::mips::reduced_level(&packed, settings, halvings)))
+    })
+}
+
+/// The alpha test a reduced level's map surface keeps its coverage for when it is stored smaller
+/// than its sources (an albedo's: the cards' leaves would thin out level by level without it).
+fn map_alpha_cutoff(db: &dyn Db, asset: Asset, surface: SurfaceKind) -> Option<f32> {
+    (surface == SurfaceKind::Albedo).then(|| billboard_alpha_cutoff(db, asset))
+}

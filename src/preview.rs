@@ -244,18 +244,46 @@ pub struct SizeFigures {
 
 /// How far up the screen sizes a LOD holds against its source: its figures at each size
 /// measured (smallest first, up to the first size after the smallest at which it loses more than
-/// [`HOLD_LOSS`]), and the largest size at which it held (`None`: at none).
+/// [`HOLD_LOSS`], or at which it was outranked), and the largest size at which it held (`None`:
+/// at none).
 #[derive(Clone, Debug, PartialEq, Serialize, serde::Deserialize)]
 pub struct Hold {
     pub measured: Vec<SizeFigures>,
     pub holds_to: Option<u32>,
+    /// The size after which it was measured no further though it held there: it lost more than
+    /// [`OUTRANKED_RATIO`] times what the best LOD measured beside it lost (see [`holds`]).
+    #[serde(default)]
+    pub outranked_at: Option<u32>,
 }
 
-/// How far each of `lods` holds against `source` over `sizes` (smallest first): every size
-/// renders the 26 views of the source once and of each LOD still measured. The loss grows with
-/// the size (a pixel gets smaller against the same world error), so a LOD is measured no further
-/// once it fails, except at the smallest size: at 16 px a pixel is a sixteenth of the object,
-/// and corpus impostors lost 1.00–1.01 units there and 0.4 at 32 and 64 px.
+impl Hold {
+    /// Nothing measured yet.
+    pub fn unmeasured() -> Hold {
+        Hold { measured: Vec::new(), holds_to: None, outranked_at: None }
+    }
+}
+
+/// How many times the least loss among LODs measured together (competing for one level) a LOD
+/// may lose at a size and still be measured at the next one. A LOD's loss grows with the screen
+/// size about in proportion to its error in world units, so two LODs' losses keep their ratio:
+/// on the corpus trees it moved by at most 1.3× between 64 and 1024 px (16× the size), and one
+/// that loses twice the best never caught up with it.
+pub const OUTRANKED_RATIO: f64 = 2.0;
+
+/// The least loss (px-shift units) the outranking compares against: below it, figures are
+/// noise (a few samples of 26 views), and no LOD is dropped for losing twice as little.
+pub const OUTRANKED_FLOOR: f64 = 0.1;
+
+/// How far each of `lods`, competing for one level of a chain, holds against `source` over
+/// `sizes` (smallest first): every size renders the 26 views of the source once and of each LOD
+/// still measured. The loss grows with the size (a pixel gets smaller against the same world
+/// error), so a LOD is measured no further once it fails, except at the smallest size: at 16 px
+/// a pixel is a sixteenth of the object, and corpus impostors lost 1.00–1.01 units there and 0.4
+/// at 32 and 64 px. Nor, from the second size on, once it is outranked: it held but lost more
+/// than [`OUTRANKED_RATIO`] times the least loss there (at least [`OUTRANKED_FLOOR`]); whoever
+/// ranks them by how far they hold, then by their loss, would not pick it (on the oak's 2 MiB
+/// level: five candidates losing 0.33–0.53 units at 32 px beside triangles losing 0.06, whose
+/// renders at 64 to 256 px were half of a chain's measuring).
 pub fn holds(
     gpu: &Gpu,
     source: &ViewMesh,
@@ -264,7 +292,7 @@ pub fn holds(
     sizes: &[u32],
     source_views: &mut SourceViews,
 ) -> Result<Vec<Hold>, GpuError> {
-    let mut holds: Vec<Hold> = lods.iter().map(|_| Hold { measured: Vec::new(), holds_to: None }).collect();
+    let mut holds: Vec<Hold> = lods.iter().map(|_| Hold::unmeasured()).collect();
     let mut stopped = vec![false; lods.len()];
     for (step, &size) in sizes.iter().enumerate() {
         let measured: Vec<usize> = (0..lods.len()).filter(|&index| !stopped[index]).collect();
@@ -288,8 +316,33 @@ pub fn holds(
                 stopped[index] = true;
             }
         }
+        if step > 0 {
+            outrank(&mut holds, &measured, &mut stopped);
+        }
     }
     Ok(holds)
+}
+
+/// Stops measuring the LODs of `measured` that held at the size just measured but lost more than
+/// [`OUTRANKED_RATIO`] times the least loss of those that held there (see [`holds`]).
+fn outrank(holds: &mut [Hold], measured: &[usize], stopped: &mut [bool]) {
+    // Each LOD that held at the size just measured, with its loss there.
+    let held: Vec<(usize, u32, f64)> = measured
+        .iter()
+        .filter_map(|&index| {
+            let figures = holds[index].measured.last()?;
+            let loss = figures.loss_px_shift.unwrap_or(0.0);
+            (holds[index].holds_to == Some(figures.size)).then_some((index, figures.size, loss))
+        })
+        .collect();
+    let Some(best) = held.iter().map(|&(_, _, loss)| loss).min_by(f64::total_cmp) else {
+        return;
+    };
+    let bar = OUTRANKED_RATIO * best.max(OUTRANKED_FLOOR);
+    for (index, size, _) in held.into_iter().filter(|&(_, _, loss)| loss > bar) {
+        holds[index].outranked_at = Some(size);
+        stopped[index] = true;
+    }
 }
 
 /// A chain's switch sizes from how far each level holds: level `k` may stand in for level

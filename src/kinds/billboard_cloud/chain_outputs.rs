@@ -168,6 +168,7 @@ fn auto_report(
                 "gpu_bytes": reports[slot]["gpu_bytes"],
                 "holds_to": holds[slot].holds_to,
                 "measured": holds[slot].measured,
+                "outranked_at": holds[slot].outranked_at,
             })
         })
         .collect();

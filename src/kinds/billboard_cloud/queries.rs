@@ -60,8 +60,9 @@ pub(crate) const IMPOSTOR: Stage = Stage { name: "impostor", version: 4 };
 /// A chain's switch sizes: every level rendered as an engine draws it beside the source, over
 /// the 26 views at each screen size of `preview::HOLD_SIZES` (`measure_chain`). 2: a level is
 /// measured until it fails at two sizes in a row, not one; 3: 2 × 2 samples a pixel at 128 and
-/// 256 px (`preview::hold_samples_per_axis`).
-pub(crate) const SWITCH: Stage = Stage { name: "switch", version: 3 };
+/// 256 px (`preview::hold_samples_per_axis`); 4: a level's candidates cached together, and one
+/// outranked by another no longer measured (`preview::holds`).
+pub(crate) const SWITCH: Stage = Stage { name: "switch", version: 4 };
 /// A reduced level's map surface: its material's source maps packed
 /// (`texture::channel_packing`), stored at a level of its mip chain (`reduced::allot_maps`).
 pub(crate) const MAPS: Stage = Stage { name: "maps", version: 1 };
@@ -877,11 +878,12 @@ pub(crate) fn impostor_recipe_key(db: &dyn Db, asset: Asset, level: u32) -> Cach
 
 /// How far each level of a chain holds against the source (stage `switch`, `measure_chain`),
 /// level by level: a level is measured only up to the level before's switch size (it is never
-/// shown larger), so each level's sizes wait for the level before's choice. Each slot's figures
-/// are kept in the persistent cache under the hash of every file it writes (as engines draw it),
-/// the source's mesh and textures, the cutoff, the sizes measured and the GPU family; a level's
-/// slots missing from it are measured together (the source rendered once per view and size), so
-/// an edit measures again only the levels it changed and those whose sizes it changed.
+/// shown larger), so each level's sizes wait for the level before's choice. A level's figures
+/// (those of its candidates, measured together: each one's depends on the others', which may
+/// outrank it, `preview::holds`) are kept in the persistent cache under the hash of every file
+/// its slots write (as engines draw them), the source's mesh and textures, the cutoff, the sizes
+/// measured and the GPU family, the source rendered once per view and size for all levels; an
+/// edit measures again only the levels it changed and those whose sizes it changed.
 #[salsa::tracked(returns(clone))]
 pub(crate) fn chain_holds(db: &dyn Db, asset: Asset) -> Result<Arc<Vec<crate::preview::Hold>>, Diagnostic> {
     let mut files = crate::kinds::AssetOutputs::default();
@@ -893,41 +895,48 @@ pub(crate) fn chain_holds(db: &dyn Db, asset: Asset) -> Result<Arc<Vec<crate::pr
     let source_key = with_mesh_textures(db, asset, source_key);
     let settings = asset.settings(db);
     let slots = super::levels::slots(settings);
-    let slot_key = |slot: usize, sizes: &[u32]| {
-        let folder = std::path::PathBuf::from(super::levels::level_folder(settings, slot as u32));
-        let slot_files = files.files.iter().filter(|(path, _, _)| path.starts_with(&folder));
+    let level_key = |level_slots: &[u32], sizes: &[u32]| {
         let key = sizes.iter().fold(stage_key(SWITCH).part(&source_key.0), |key, size| key.part(size));
-        slot_files.fold(key, |key, (path, _, bytes)| key.part(path).part(&blake3::hash(bytes))).finish()
+        level_slots
+            .iter()
+            .fold(key, |key, &slot| {
+                let folder = std::path::PathBuf::from(super::levels::level_folder(settings, slot));
+                let slot_files = files.files.iter().filter(|(path, _, _)| path.starts_with(&folder));
+                slot_files.fold(key.part(&slot), |key, (path, _, bytes)| key.part(path).part(&blake3::hash(bytes)))
+            })
+            .finish()
     };
     let label = asset.name(db);
-    let from_entry = |entry: CacheEntry| entry.parts::<crate::preview::Hold, 0>().map(|(hold, [])| hold);
-    let unmeasured = || crate::preview::Hold { measured: Vec::new(), holds_to: None };
-    let mut holds: Vec<crate::preview::Hold> = slots.iter().map(|_| unmeasured()).collect();
+    let from_entry = |entry: CacheEntry| entry.parts::<Vec<crate::preview::Hold>, 0>().map(|(holds, [])| holds);
+    let mut holds: Vec<crate::preview::Hold> = slots.iter().map(|_| crate::preview::Hold::unmeasured()).collect();
     let (mut ran, mut shown_up_to) = (false, u32::MAX);
     // The source's renders, shared by the levels' measurements.
     let mut source_views = crate::preview::SourceViews::default();
     for level in 0..super::levels::level_count(settings) {
         let sizes: Vec<u32> = crate::preview::HOLD_SIZES.into_iter().filter(|&size| size <= shown_up_to).collect();
-        let mut missing = Vec::new();
         // A candidate over its level's bytes is never chosen: it is not measured; nor is a level
         // after one that is never shown.
-        let level_slots = (0..slots.len()).filter(|&slot| slots[slot].level == level && !sizes.is_empty());
-        for slot in
-            level_slots.filter(|&slot| !super::chain_outputs::over_budget(db, asset, slot as u32, &reports[slot]))
-        {
-            match load_cached(db, SWITCH.name, slot_key(slot, &sizes), from_entry) {
-                Some(hold) => holds[slot] = hold,
-                None => missing.push(slot as u32),
-            }
-        }
-        if !missing.is_empty() {
-            ran = true;
-            let measured = timed(db, SWITCH, label, || {
-                super::chain_outputs::measure_chain(db, asset, &files, (&missing, &sizes), &mut source_views)
-            })?;
-            for (slot, hold) in missing.into_iter().zip(measured) {
-                let key = slot_key(slot as usize, &sizes);
-                crate::db::store_cached(db, SWITCH.name, key, || CacheEntry::new(&hold, Vec::new(), true));
+        let level_slots: Vec<u32> = (0..slots.len() as u32)
+            .filter(|&slot| slots[slot as usize].level == level && !sizes.is_empty())
+            .filter(|&slot| !super::chain_outputs::over_budget(db, asset, slot, &reports[slot as usize]))
+            .collect();
+        if !level_slots.is_empty() {
+            let key = level_key(&level_slots, &sizes);
+            let cached =
+                load_cached(db, SWITCH.name, key, from_entry).filter(|cached| cached.len() == level_slots.len());
+            let measured = match cached {
+                Some(measured) => measured,
+                None => {
+                    ran = true;
+                    let measured = timed(db, SWITCH, label, || {
+                        let measured_slots = (level_slots.as_slice(), sizes.as_slice());
+                        super::chain_outputs::measure_chain(db, asset, &files, measured_slots, &mut source_views)
+                    })?;
+                    crate::db::store_cached(db, SWITCH.name, key, || CacheEntry::new(&measured, Vec::new(), true));
+                    measured
+                }
+            };
+            for (slot, hold) in level_slots.into_iter().zip(measured) {
                 holds[slot as usize] = hold;
             }
         }

@@ -31,6 +31,39 @@ fn best_candidate(auto: &serde_json::Value, max_bytes: u64) -> String {
     fitting.min_by_key(rank).unwrap()["name"].as_str().unwrap().to_string()
 }
 
+/// Checks that each of a level's `candidates` was measured from the smallest size up to its
+/// first failure after it, or up to the size at which it was outranked: it held there, but lost
+/// more than `OUTRANKED_RATIO` times the least loss of the candidates that held there (at least
+/// `OUTRANKED_FLOOR`), or else up to the largest size the level was measured at. How many were
+/// outranked.
+fn measured_until_failed_or_outranked(candidates: &[serde_json::Value]) -> usize {
+    use cirrus::preview::{Hold, HOLD_LOSS, HOLD_SIZES, OUTRANKED_FLOOR, OUTRANKED_RATIO};
+    let holds: Vec<Hold> =
+        candidates.iter().map(|candidate| serde_json::from_value(candidate.clone()).unwrap()).collect();
+    let loss_at = |hold: &Hold, size: u32| {
+        let figures = hold.measured.iter().find(|figures| figures.size == size)?;
+        Some(figures.loss_px_shift.unwrap_or(0.0))
+    };
+    let largest = holds.iter().filter_map(|hold| hold.measured.last()).map(|figures| figures.size).max().unwrap();
+    let mut outranked = 0;
+    for (step, size) in HOLD_SIZES.into_iter().enumerate().filter(|&(_, size)| size <= largest) {
+        let held = holds.iter().filter_map(|hold| loss_at(hold, size)).filter(|&loss| loss <= HOLD_LOSS);
+        let bar = OUTRANKED_RATIO * held.fold(f64::MAX, f64::min).max(OUTRANKED_FLOOR);
+        for (hold, candidate) in holds.iter().zip(candidates) {
+            let Some(loss) = loss_at(hold, size) else { continue };
+            let sizes: Vec<u32> = hold.measured.iter().map(|figures| figures.size).collect();
+            assert_eq!(sizes, HOLD_SIZES[..sizes.len()], "{candidate}");
+            let is_outranked = step > 0 && loss <= HOLD_LOSS && loss > bar;
+            let stops = step > 0 && loss > HOLD_LOSS || is_outranked;
+            let is_last = *sizes.last().unwrap() == size;
+            assert_eq!(is_last, stops || size == largest, "measured at {size} px: {candidate}");
+            assert_eq!(hold.outranked_at == Some(size), is_outranked, "at {size} px (bar {bar}): {candidate}");
+            outranked += usize::from(is_outranked);
+        }
+    }
+    outranked
+}
+
 #[test]
 fn an_auto_level_keeps_the_candidate_that_holds_furthest_within_its_bytes() {
     let project = chain_project(CHAIN);
@@ -48,6 +81,7 @@ fn an_auto_level_keeps_the_candidate_that_holds_furthest_within_its_bytes() {
     let levels = built["levels"].as_array().unwrap();
     assert_eq!(levels.len(), 2);
     let manifest: serde_json::Value = serde_json::from_slice(&project.read("baked/manifest.json")).unwrap();
+    let mut outranked = 0;
     for (level, (entry, max_bytes)) in levels.iter().zip(BYTES).enumerate() {
         let auto = &entry["auto"];
         assert_eq!(auto["max_bytes"], max_bytes);
@@ -67,6 +101,7 @@ fn an_auto_level_keeps_the_candidate_that_holds_furthest_within_its_bytes() {
                 serde_json::json!({ "lod": level, "candidate": candidate["name"] })
             );
         }
+        outranked += measured_until_failed_or_outranked(candidates);
         // The chosen one is the rule's, within the bytes, and its files are the level's.
         let chosen = auto["chosen"].as_str().unwrap();
         assert_eq!(chosen, best_candidate(auto, max_bytes), "lod{level}");
@@ -85,6 +120,9 @@ fn an_auto_level_keeps_the_candidate_that_holds_furthest_within_its_bytes() {
             assert_eq!(manifest["artifacts"][&shown]["meaning"], serde_json::json!({ "lod": level }));
         }
     }
+    // The reduced candidates lose next to nothing: the others are measured no further once they
+    // lose twice what those do.
+    assert!(outranked > 0, "none outranked");
     // Engines see the chosen levels.
     let lods: serde_json::Value = serde_json::from_slice(&project.read("baked/tree/lods.json")).unwrap();
     for (entry, level) in lods["levels"].as_array().unwrap().iter().zip(levels) {

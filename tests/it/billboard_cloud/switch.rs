@@ -49,7 +49,7 @@ fn a_chain_s_levels_are_measured_and_their_switch_sizes_written_for_engines() {
         for figures in &measured {
             assert!((0.0..=1.0).contains(&figures.mean_iou) && figures.mean_psnr > 10.0, "lod{level}: {entry}");
         }
-        switch.push(Hold { measured, holds_to });
+        switch.push(Hold { measured, holds_to, outranked_at: None });
     }
     // Each level's switch size: where it holds, never above the level before's.
     let expected = switch_sizes(&switch);
@@ -147,7 +147,7 @@ fn an_edit_measures_again_only_the_levels_it_changed_and_a_restart_nothing() {
 
 #[test]
 fn switch_sizes_follow_the_holds_and_never_rise_along_the_chain() {
-    let hold = |holds_to: Option<u32>| Hold { measured: Vec::new(), holds_to };
+    let hold = |holds_to: Option<u32>| Hold { measured: Vec::new(), holds_to, outranked_at: None };
     // A level that holds further than the one before switches where that one does; one that
     // never holds (not even at 16 px) is never shown, nor is anything after it.
     let holds = [hold(Some(256)), hold(Some(128)), hold(Some(256)), hold(None), hold(Some(32))];

@@ -204,19 +204,21 @@ pub fn bake_impostor_with_margin(
     Ok(ImpostorFrames { settings, center, radius, albedo, normal, depth, rects })
 }
 
-/// `frames` at frames `2^halvings` times smaller: each atlas reduced as its mip chain reduces it
-/// (`texture::mips::reduced_level`: colour in linear light and weighted by alpha, the albedo's
-/// alpha-tested coverage at `alpha_cutoff` kept, normals renormalised, depth averaged). A
-/// frame's side is a multiple of `2^halvings`, so no texel mixes two frames; the rects stay
-/// `frames`'s. The same views at a smaller size without rendering them again: an impostor
-/// frame costs about 11 ms to render on a software adapter whatever its size (the oak's mesh).
-pub fn reduced_frames(frames: &ImpostorFrames, halvings: u32, alpha_cutoff: f32) -> ImpostorFrames {
-    use crate::texture::mips::{reduced_level, MipSettings};
+/// `frames` at frames `factor` times smaller: each atlas reduced as its mip chain reduces it
+/// (`texture::mips::reduced_by`: colour in linear light and weighted by alpha, the albedo's
+/// alpha-tested coverage at `alpha_cutoff` kept, normals renormalised, depth averaged; a factor
+/// that is no power of two in one box filter). A frame's side is a multiple of `factor`, so no
+/// texel mixes two frames; the rects stay `frames`'s. The same views at a smaller size without
+/// rendering them again: an impostor frame costs about 11 ms to render on a software adapter
+/// whatever its size (the oak's mesh).
+pub fn reduced_frames(frames: &ImpostorFrames, factor: u32, alpha_cutoff: f32) -> ImpostorFrames {
+    use crate::texture::mips::{reduced_by, MipSettings};
     use crate::texture::SurfaceKind;
     let reduce = |image: &Texture, kind: SurfaceKind, alpha_cutoff: Option<f32>| {
-        reduced_level(image, MipSettings { kind, alpha_cutoff }, halvings)
+        reduced_by(image, MipSettings { kind, alpha_cutoff }, factor)
     };
-    let settings = ImpostorSettings { frame_size: (frames.settings.frame_size >> halvings).max(1), ..frames.settings };
+    let settings =
+        ImpostorSettings { frame_size: (frames.settings.frame_size / factor.max(1)).max(1), ..frames.settings };
     ImpostorFrames {
         settings,
         albedo: reduce(&frames.albedo, SurfaceKind::Albedo, Some(alpha_cutoff)),

@@ -35,6 +35,49 @@ pub fn reduced_level(level0: &Texture, settings: MipSettings, halvings: u32) -> 
     chain.swap_remove((halvings as usize).min(last))
 }
 
+/// `level0` stored `factor` times smaller a side (its sides multiples of `factor`):
+/// [`reduced_level`] where `factor` is a power of two, else one box filter of `factor`² texels in
+/// the space a chain filters in, level 0's alpha-tested coverage kept as a chain's levels keep
+/// it (an impostor's frames reduced from a render at five times their size).
+pub fn reduced_by(level0: &Texture, settings: MipSettings, factor: u32) -> Texture {
+    let factor = factor.max(1);
+    if factor.is_power_of_two() {
+        return reduced_level(level0, settings, factor.ilog2());
+    }
+    let (width, height) = ((level0.width / factor).max(1), (level0.height / factor).max(1));
+    let to_filter = filter_space_of(settings.kind);
+    let reduced = Texels::Level0(&level0.pixels, to_filter).reduce(level0.width, level0.height, width, height);
+    let straight = keeps_straight_colour(level0, settings).then(|| {
+        Texels::Level0(&level0.pixels, straight_linear_texel as FilterTexel).reduce(
+            level0.width,
+            level0.height,
+            width,
+            height,
+        )
+    });
+    let alpha_scale = coverage_keeping_scale(&reduced, settings, level_coverage(level0, settings));
+    from_filter_space(&reduced, straight.as_deref(), width, height, settings.kind, alpha_scale)
+}
+
+/// The share of `level0`'s texels that pass its alpha test (`None`: it has none).
+fn level_coverage(level0: &Texture, settings: MipSettings) -> Option<f32> {
+    let to_filter = filter_space_of(settings.kind);
+    settings.alpha_cutoff.map(|cutoff| {
+        let passing = level0.pixels.par_chunks_exact(4).filter(|texel| to_filter(texel)[3] > cutoff).count();
+        passing as f32 / (level0.pixels.len() / 4).max(1) as f32
+    })
+}
+
+/// The alpha scale that gives the `reduced` texels of a level level 0's `coverage` at the
+/// alpha test (1: no test, or all or nothing passes on level 0, and so on every level).
+fn coverage_keeping_scale(reduced: &[[f32; 4]], settings: MipSettings, coverage: Option<f32>) -> f32 {
+    match (settings.alpha_cutoff, coverage) {
+        (Some(_), Some(coverage)) if coverage == 0.0 || coverage == 1.0 => 1.0,
+        (Some(cutoff), Some(coverage)) => coverage_alpha_scale(reduced, cutoff, coverage),
+        _ => 1.0,
+    }
+}
+
 /// Side of the tiles that [`mip_chain_reusing`] filters again on their own: with sizes that are
 /// multiples of it, each of the first `REUSE_TILE_LEVELS` levels reduces within the tile.
 const REUSE_TILE: usize = 64;
@@ -99,10 +142,7 @@ fn full_chain(level0: &Texture, settings: MipSettings) -> (Vec<Texture>, Option<
     // alpha-tested edge would then pull the visible colour toward black.
     let straight = keeps_straight_colour(level0, settings)
         .then_some(Texels::Level0(&level0.pixels, straight_linear_texel as FilterTexel));
-    let coverage = settings.alpha_cutoff.map(|cutoff| {
-        let passing = level0.pixels.par_chunks_exact(4).filter(|texel| to_filter(texel)[3] > cutoff).count();
-        passing as f32 / (level0.pixels.len() / 4).max(1) as f32
-    });
+    let coverage = level_coverage(level0, settings);
     let mut chain = Chain { levels: vec![level0.clone()], alpha_scales: vec![1.0], tile_level: None };
     let keep_tile_level = reusable_size(level0.width, level0.height);
     extend_chain(&mut chain, current, straight, settings, coverage, keep_tile_level);
@@ -162,12 +202,7 @@ fn extend_chain(
         let reduced = current.reduce(width, height, next_width, next_height);
         let reduced_straight = straight.map(|colour| colour.reduce(width, height, next_width, next_height));
         (width, height) = (next_width, next_height);
-        let alpha_scale = match (settings.alpha_cutoff, coverage) {
-            // All or nothing passes on level 0, so on every level: no scale keeps it better.
-            (Some(_), Some(coverage)) if coverage == 0.0 || coverage == 1.0 => 1.0,
-            (Some(cutoff), Some(coverage)) => coverage_alpha_scale(&reduced, cutoff, coverage),
-            _ => 1.0,
-        };
+        let alpha_scale = coverage_keeping_scale(&reduced, settings, coverage);
         let level = from_filter_space(&reduced, reduced_straight.as_deref(), width, height, settings.kind, alpha_scale);
         chain.levels.push(level);
         chain.alpha_scales.push(alpha_scale);

@@ -562,3 +562,35 @@ fn an_impostor_drawn_as_its_fitted_hull_shows_what_its_square_shows_with_less_ov
         }
     }
 }
+
+#[test]
+fn frames_reduced_five_times_from_a_larger_render_keep_each_frame_s_coverage_within_it() {
+    let gpu = cirrus::gpu::gpu().expect("a GPU adapter (llvmpipe in CI)");
+    let grid = FrameGrid { frames: 4, sphere: Sphere::Hemi };
+    let settings = cirrus::impostor::ImpostorSettings { grid, frame_size: 40 };
+    // Rendered at 40 texels a frame with the margins of 8-texel frames, as a chain's 12 × 12
+    // impostors at 80 and 16 texels share one render.
+    let view = view_of(&sphere_obj(32));
+    let large = cirrus::impostor::bake_impostor_with_margin(gpu, &view, (Vec3::ZERO, 1.0), settings, 8).unwrap();
+    let small = cirrus::impostor::reduced_frames(&large, 5, 0.5);
+    assert_eq!(small.settings.frame_size, 8);
+    assert_eq!((small.albedo.width, small.normal.width, small.depth.height), (32, 32, 32));
+    assert_eq!(small.rects, large.rects);
+    let covered =
+        |texels: &[[u8; 4]]| texels.iter().filter(|texel| texel[3] > 127).count() as f64 / texels.len() as f64;
+    for frame in 0..grid.frame_count() {
+        let (large_texels, small_texels) =
+            (frame_texels(&large.albedo, grid, 40, frame), frame_texels(&small.albedo, grid, 8, frame));
+        // The disc keeps its share of the frame to within a texel of the 64 (the coverage is
+        // kept over the whole atlas), and stays inside its frame: the corners are still empty.
+        let (large_share, small_share) = (covered(&large_texels), covered(&small_texels));
+        assert!((large_share - small_share).abs() < 1.5 / 64.0, "frame {frame}: {large_share:.3} -> {small_share:.3}");
+        for corner in [0, 7, 56, 63] {
+            assert_eq!(small_texels[corner][3], 0, "frame {frame}: corner {corner} {:?}", small_texels[corner]);
+        }
+        assert!(small_texels[4 * 8 + 4][3] > 127, "frame {frame}: the centre {:?}", small_texels[4 * 8 + 4]);
+        // Depth is the mean of the footprint: the nearest point stays near the centre.
+        let depths = frame_texels(&small.depth, grid, 8, frame);
+        assert!(depths[4 * 8 + 4][0] < 40, "frame {frame}: depth at the centre {:?}", depths[4 * 8 + 4]);
+    }
+}

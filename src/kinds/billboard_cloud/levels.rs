@@ -332,14 +332,14 @@ pub(crate) fn impostor_settings(frames: u32, hemi: bool, size: u32) -> crate::im
 }
 
 /// How an impostor slot's frames are made: rendered (`source` is the slot itself), or reduced
-/// `halvings` times from those of `source`, the slot with the same grid and the largest frame
-/// that is a power-of-two multiple of its own (`impostor::reduced_frames`: renders of the same
+/// `factor` times a side from those of `source`, the slot with the same grid and the largest
+/// frame that is a whole multiple of its own (`impostor::reduced_frames`: renders of the same
 /// views run once). Every slot sharing a render keeps the margins of the smallest frame among
 /// them (`margin_frame`, `impostor::frame_rects_with_margin`).
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
 pub struct ImpostorRender {
     pub source: u32,
-    pub halvings: u32,
+    pub factor: u32,
     pub margin_frame: u32,
 }
 
@@ -350,20 +350,18 @@ pub(crate) fn impostor_render(settings: &Settings, slot: u32) -> Option<Impostor
         (0..slot_count(settings)).filter_map(|other| Some((other, settings_for(settings, other).impostor?))).collect();
     let source_of = |of: crate::impostor::ImpostorSettings| -> (u32, u32) {
         let multiple = |other: &crate::impostor::ImpostorSettings| {
-            other.grid == of.grid
-                && other.frame_size.is_multiple_of(of.frame_size)
-                && (other.frame_size / of.frame_size).is_power_of_two()
+            other.grid == of.grid && other.frame_size.is_multiple_of(of.frame_size)
         };
         impostors
             .iter()
             .filter(|(_, other)| multiple(other))
             .max_by_key(|(other_slot, other)| (other.frame_size, std::cmp::Reverse(*other_slot)))
-            .map_or((slot, 0), |(other_slot, other)| (*other_slot, (other.frame_size / of.frame_size).ilog2()))
+            .map_or((slot, 1), |(other_slot, other)| (*other_slot, other.frame_size / of.frame_size))
     };
-    let (source, halvings) = source_of(own);
+    let (source, factor) = source_of(own);
     let sharing = impostors.iter().filter(|(_, other)| other.grid == own.grid && source_of(*other).0 == source);
     let margin_frame = sharing.map(|(_, other)| other.frame_size).min().unwrap_or(own.frame_size);
-    Some(ImpostorRender { source, halvings, margin_frame })
+    Some(ImpostorRender { source, factor, margin_frame })
 }
 
 /// The first billboard-cloud slot that asks for the same planes as `slot` (`slot` itself when

@@ -53,7 +53,7 @@ pub(crate) const REDUCE: Stage = Stage { name: "reduce", version: 2 };
 
 /// An impostor level's frames (`impostor::bake_impostor`), rendered on the GPU. 2: each frame
 /// shows the mesh's bounds from its direction (`impostor::frame_rects`), not the whole sphere.
-/// 4: frames of one grid at power-of-two multiples of each other share one render (the largest,
+/// 4: frames of one grid at whole multiples of each other share one render (the largest,
 /// with the smallest one's margins); 3 was never released.
 pub(crate) const IMPOSTOR: Stage = Stage { name: "impostor", version: 4 };
 
@@ -834,7 +834,7 @@ pub(crate) fn impostor_frames(
         let source = impostor_frames(db, asset, render.source)?;
         let cutoff = billboard_alpha_cutoff(db, asset);
         return timed(db, IMPOSTOR, name, || {
-            Ok(Arc::new(crate::impostor::reduced_frames(&source, render.halvings, cutoff)))
+            Ok(Arc::new(crate::impostor::reduced_frames(&source, render.factor, cutoff)))
         });
     }
     let loaded = loaded_mesh(db, asset)?;
@@ -863,7 +863,7 @@ pub(crate) fn impostor_recipe_key(db: &dyn Db, asset: Asset, level: u32) -> Cach
         settings.map_or((0, false, 0), |settings| (settings.grid.frames, settings.grid.is_hemi(), settings.frame_size));
     // The frames it is reduced from (their size) and the margins they share.
     let render = impostor_render(db, asset, level);
-    let rendered_size = render.map_or(0, |render| frame_size << render.halvings);
+    let rendered_size = render.map_or(0, |render| frame_size * render.factor);
     let key = stage_key(IMPOSTOR)
         .part(crate::gpu::adapter_family())
         .part(&mesh_cache_key(db, asset, asset.main_file(db).clone()).0)

@@ -301,6 +301,7 @@ pub fn load_mesh(
     check_scale(obj_file, &mesh)?;
     if faces_without_uvs.len() == mesh.triangles.len() {
         mesh.uvs = None;
+        warnings.extend(without_maps_for_want_of_uvs(obj_file, &mut materials, &mesh.triangle_materials));
     } else if !faces_without_uvs.is_empty() {
         for name in &objects_without_uvs {
             warnings.push(Diagnostic::new(
@@ -338,6 +339,37 @@ pub fn load_mesh(
     }
     mesh.materials = materials;
     Ok((mesh, warnings))
+}
+
+/// The maps of every material of `materials` that `triangle_materials` uses dropped, for a mesh
+/// without texture coordinates (nothing could place them), and a warning naming those that had
+/// any (`None`: none had): their faces take the constants, as an object without UVs in a mesh
+/// with them does.
+fn without_maps_for_want_of_uvs(
+    obj_file: &Path,
+    materials: &mut [MeshMaterial],
+    triangle_materials: &[u32],
+) -> Option<Diagnostic> {
+    let used: std::collections::BTreeSet<u32> = triangle_materials.iter().copied().collect();
+    let mut named = Vec::new();
+    for index in used {
+        let material = &mut materials[index as usize];
+        if !material.maps.is_empty() {
+            named.push(format!("`{}`", material.name));
+            material.maps.clear();
+            material.map_options.clear();
+        }
+    }
+    (!named.is_empty()).then(|| {
+        Diagnostic::new(
+            obj_file,
+            format!(
+                "the OBJ has no texture coordinates: the maps of {} are not drawn (nor read); its faces take \
+                 their materials' constants",
+                named.join(", ")
+            ),
+        )
+    })
 }
 
 /// Where the first `keyword` statement (`vt`, `v`) with a number that is not finite starts.

@@ -200,6 +200,23 @@ fn a_mesh_without_texture_coordinates_reduces_to_its_constants() {
     }
     project.write("assets/cards.obj", obj);
     project.write("assets/cards.mtl", "newmtl bark\nKd 0.5 0.4 0.3\nmap_Kd bark.png\n");
+    // The map is never read: a missing one fails nothing, and the build says why it is unused.
+    let summary = build(&mut project.open());
+    assert!(summary.all_ok(), "{}", summary.to_text());
+    let json: serde_json::Value = serde_json::from_str(&summary.to_json()).unwrap();
+    let warnings: Vec<&str> = json["assets"][0]["warnings"]
+        .as_array()
+        .into_iter()
+        .flatten()
+        .filter_map(|warning| warning["message"].as_str())
+        .collect();
+    assert!(
+        warnings.contains(
+            &"the OBJ has no texture coordinates: the maps of `bark` are not drawn (nor read); its faces take their \
+              materials' constants"
+        ),
+        "{warnings:?}"
+    );
     project.write("assets/bark.png", pattern_png(8, 8, 3));
     let summary = build(&mut project.open());
     assert!(summary.all_ok(), "{}", summary.to_text());

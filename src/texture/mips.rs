@@ -21,7 +21,7 @@ pub struct MipSettings {
 
 /// Level 0 followed by every smaller level down to 1×1.
 pub fn mip_chain(level0: &Texture, settings: MipSettings) -> Vec<Texture> {
-    full_chain(level0, settings).0
+    full_chain(level0, settings, usize::MAX).0
 }
 
 /// Level `halvings` of [`mip_chain`] (level 0 itself for 0): a surface stored at a fraction of
@@ -30,9 +30,10 @@ pub fn reduced_level(level0: &Texture, settings: MipSettings, halvings: u32) -> 
     if halvings == 0 {
         return level0.clone();
     }
-    let mut chain = mip_chain(level0, settings);
-    let last = chain.len() - 1;
-    chain.swap_remove((halvings as usize).min(last))
+    // The chain down to that level only: each level's alpha scale is sought from level 0's
+    // coverage alone, so the levels above are those of the whole chain.
+    let mut chain = full_chain(level0, settings, halvings as usize + 1).0;
+    chain.pop().expect("level 0")
 }
 
 /// `level0` stored `factor` times smaller a side (its sides multiples of `factor`):
@@ -124,14 +125,15 @@ pub fn mip_chain_reusing(
 ) -> (Vec<Texture>, Option<MipReuse>) {
     previous
         .and_then(|previous| refilter_changed_tiles(level0, level0_blocks, settings, previous))
-        .unwrap_or_else(|| full_chain(level0, settings))
+        .unwrap_or_else(|| full_chain(level0, settings, usize::MAX))
 }
 
 fn reusable_size(width: u32, height: u32) -> bool {
     (width as usize).is_multiple_of(REUSE_TILE) && (height as usize).is_multiple_of(REUSE_TILE)
 }
 
-fn full_chain(level0: &Texture, settings: MipSettings) -> (Vec<Texture>, Option<MipReuse>) {
+/// Level 0 and the levels below it, `max_levels` at most, and what a next chain may reuse.
+fn full_chain(level0: &Texture, settings: MipSettings, max_levels: usize) -> (Vec<Texture>, Option<MipReuse>) {
     // Reduce from unscaled float levels so that coverage scaling does not compound. Level 0's
     // bytes are converted to filter space as the first reduction reads them (four 2048² surfaces
     // would otherwise each allocate, fault in and fill 64 MiB of floats for one pass).
@@ -143,7 +145,7 @@ fn full_chain(level0: &Texture, settings: MipSettings) -> (Vec<Texture>, Option<
     let straight = keeps_straight_colour(level0, settings)
         .then_some(Texels::Level0(&level0.pixels, straight_linear_texel as FilterTexel));
     let coverage = level_coverage(level0, settings);
-    let mut chain = Chain { levels: vec![level0.clone()], alpha_scales: vec![1.0], tile_level: None };
+    let mut chain = Chain { levels: vec![level0.clone()], alpha_scales: vec![1.0], tile_level: None, max_levels };
     let keep_tile_level = reusable_size(level0.width, level0.height);
     extend_chain(&mut chain, current, straight, settings, coverage, keep_tile_level);
     let reuse = chain.tile_level.map(|tile_level| MipReuse {
@@ -161,11 +163,13 @@ fn keeps_straight_colour(level0: &Texture, settings: MipSettings) -> bool {
     settings.kind == SurfaceKind::Albedo && level0.pixels.par_chunks_exact(4).any(|texel| texel[3] == 0)
 }
 
-/// Levels made so far, the alpha scale of each, and the tile level's texels once reached.
+/// Levels made so far, the alpha scale of each, the tile level's texels once reached, and how
+/// many levels the chain stops at (down to 1×1 at most).
 struct Chain {
     levels: Vec<Texture>,
     alpha_scales: Vec<f32>,
     tile_level: Option<TileLevel>,
+    max_levels: usize,
 }
 
 /// The sizes of a full mip chain of a `width` × `height` level 0, level 0 first: each level
@@ -186,7 +190,7 @@ fn next_level_size(width: u32, height: u32) -> (u32, u32) {
 }
 
 /// Reduces `current` (the filter-space texels of the chain's last level) level by level down to
-/// 1×1, appending each level and its alpha scale.
+/// 1×1 (or the chain's `max_levels`), appending each level and its alpha scale.
 fn extend_chain(
     chain: &mut Chain,
     mut current: Texels,
@@ -197,7 +201,7 @@ fn extend_chain(
 ) {
     let last = chain.levels.last().expect("level 0");
     let (mut width, mut height) = (last.width, last.height);
-    while width > 1 || height > 1 {
+    while (width > 1 || height > 1) && chain.levels.len() < chain.max_levels {
         let (next_width, next_height) = next_level_size(width, height);
         let reduced = current.reduce(width, height, next_width, next_height);
         let reduced_straight = straight.map(|colour| colour.reduce(width, height, next_width, next_height));
@@ -342,8 +346,8 @@ fn refilter_changed_tiles(
             straight[*tile] = *texel;
         }
     }
-    let mut chain =
-        Chain { levels, alpha_scales: previous.reuse.alpha_scales[..=REUSE_TILE_LEVELS].to_vec(), tile_level: None };
+    let alpha_scales = previous.reuse.alpha_scales[..=REUSE_TILE_LEVELS].to_vec();
+    let mut chain = Chain { levels, alpha_scales, tile_level: None, max_levels: usize::MAX };
     extend_chain(
         &mut chain,
         Texels::Stored(tile_level.texels.clone()),

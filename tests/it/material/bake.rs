@@ -640,3 +640,25 @@ fn blocks_the_albedo_hides_are_encoded_fast_and_the_shown_ones_exactly_as_before
         assert!(differing > 0, "{format:?}: hidden blocks encoded as before");
     }
 }
+
+#[test]
+fn a_level_of_the_chain_made_alone_is_that_level_of_the_whole_chain() {
+    use cirrus::texture::mips::{mip_chain, reduced_level, MipSettings};
+    use cirrus::texture::SurfaceKind;
+    // An alpha-tested albedo (coverage sought level by level) and a normal map, 256 × 128.
+    let albedo = decode_png(&cutout_png(256, 128));
+    let normal = decode_png(&pattern_png(256, 128, 7));
+    for (texture, settings) in [
+        (&albedo, MipSettings { kind: SurfaceKind::Albedo, alpha_cutoff: Some(0.5) }),
+        (&normal, MipSettings { kind: SurfaceKind::Normal, alpha_cutoff: None }),
+    ] {
+        let chain = mip_chain(texture, settings);
+        assert_eq!(chain.len(), 9);
+        for halvings in 0..=10u32 {
+            let alone = reduced_level(texture, settings, halvings);
+            let level = &chain[(halvings as usize).min(chain.len() - 1)];
+            assert_eq!((alone.width, alone.height), (level.width, level.height), "{settings:?} {halvings}");
+            assert!(alone.pixels == level.pixels, "{settings:?}: level {halvings} differs");
+        }
+    }
+}

@@ -360,6 +360,28 @@ pub fn switch_sizes(holds: &[Hold]) -> Vec<u32> {
     sizes
 }
 
+/// Why a level of a chain is never shown (see [`never_shown_levels`]).
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum NeverShown {
+    /// It held within one px-shift unit at no size measured (its switch size is 0).
+    HoldsAtNoSize,
+    /// The next level holds as far, up to this size: it takes over wherever this one would show.
+    NextHoldsAsFar(u32),
+}
+
+/// The levels of a chain with these `switch_sizes` (from [`switch_sizes`]) that are never shown,
+/// and why: each costs its bytes and its bake for nothing.
+pub fn never_shown_levels(switch_sizes: &[u32]) -> Vec<(usize, NeverShown)> {
+    let next = |level: usize| switch_sizes.get(level + 1).copied();
+    (0..switch_sizes.len())
+        .filter_map(|level| match switch_sizes[level] {
+            0 => Some((level, NeverShown::HoldsAtNoSize)),
+            size if next(level) == Some(size) => Some((level, NeverShown::NextHoldsAsFar(size))),
+            _ => None,
+        })
+        .collect()
+}
+
 /// Two renders of one view cross-faded as a screen-door (dithered) fade draws them: each pixel
 /// of `from` and `into` (RGBA8, `size`² each) comes from `into` where the 4 × 4 ordered-dither
 /// threshold at that pixel is below `share`, else from `from`; an engine gets the same by

@@ -248,6 +248,27 @@ pub(crate) fn measure_chain(
         .map_err(|error| Diagnostic::new(main_file, format!("measuring the chain: {error}")))
 }
 
+/// A warning (naming `file`, the asset's mesh) for each level of a chain with these switch
+/// sizes that is never shown.
+pub(super) fn never_shown_warnings(file: &Path, switch_sizes: &[u32]) -> Vec<Diagnostic> {
+    use crate::preview::NeverShown;
+    crate::preview::never_shown_levels(switch_sizes)
+        .into_iter()
+        .map(|(level, why)| {
+            let why = match why {
+                NeverShown::HoldsAtNoSize => {
+                    "it holds within one px-shift unit at no screen size measured (16 px and up)".to_string()
+                }
+                NeverShown::NextHoldsAsFar(size) => format!("lod{} holds as far, up to {size} px", level + 1),
+            };
+            Diagnostic::new(
+                file,
+                format!("lod{level} of the chain is never shown, and costs its bytes for nothing: {why}"),
+            )
+        })
+        .collect()
+}
+
 /// A chain's `lods.json` for engines: the bounding sphere whose diameter on screen picks a level,
 /// and each level's folder, glTF, representation, bytes and switch size (from `reports`, the
 /// levels' parts of the report with their switch sizes).

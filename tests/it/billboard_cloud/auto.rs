@@ -123,6 +123,30 @@ fn an_auto_level_keeps_the_candidate_that_holds_furthest_within_its_bytes() {
     // The reduced candidates lose next to nothing: the others are measured no further once they
     // lose twice what those do.
     assert!(outranked > 0, "none outranked");
+    // A level that the next one holds as far as is never shown, and the build says so.
+    let switch: Vec<u64> = levels.iter().map(|level| level["switch_size"].as_u64().unwrap()).collect();
+    let json: serde_json::Value = serde_json::from_str(&summary.to_json()).unwrap();
+    let never_shown: Vec<&str> = json["assets"][0]["warnings"]
+        .as_array()
+        .into_iter()
+        .flatten()
+        .filter_map(|warning| warning["message"].as_str())
+        .filter(|message| message.contains("never shown"))
+        .collect();
+    let expected: Vec<String> = (0..switch.len() - 1)
+        .filter(|&level| switch[level] == switch[level + 1])
+        .map(|level| {
+            format!(
+                "lod{level} of the chain is never shown, and costs its bytes for nothing: lod{} holds as far, up to {} \
+                 px",
+                level + 1,
+                switch[level]
+            )
+        })
+        .collect();
+    assert_eq!(never_shown, expected, "switch sizes {switch:?}");
+    // On the fixture both levels pick their triangles and hold to 256 px: lod0 is never shown.
+    assert_eq!(expected.len(), 1, "switch sizes {switch:?}");
     // Engines see the chosen levels.
     let lods: serde_json::Value = serde_json::from_slice(&project.read("baked/tree/lods.json")).unwrap();
     for (entry, level) in lods["levels"].as_array().unwrap().iter().zip(levels) {

@@ -5,7 +5,7 @@
 //! levels an edit changed.
 
 use cirrus::kinds::billboard_cloud::lod_mesh::{shown_levels, ShownLevels};
-use cirrus::preview::{switch_sizes, Hold, SizeFigures, HOLD_LOSS, HOLD_SIZES};
+use cirrus::preview::{never_shown_levels, switch_sizes, Hold, NeverShown, SizeFigures, HOLD_LOSS, HOLD_SIZES};
 
 use crate::billboard_cloud::chain::chain_project;
 use crate::support::{build, pattern_png};
@@ -153,6 +153,12 @@ fn switch_sizes_follow_the_holds_and_never_rise_along_the_chain() {
     let holds = [hold(Some(256)), hold(Some(128)), hold(Some(256)), hold(None), hold(Some(32))];
     assert_eq!(switch_sizes(&holds), [256, 128, 128, 0, 0]);
     assert_eq!(switch_sizes(&[]), Vec::<u32>::new());
+    // Level 1 is never shown (level 2 takes over wherever it would be), nor are levels 3 and 4.
+    assert_eq!(
+        never_shown_levels(&switch_sizes(&holds)),
+        [(1, NeverShown::NextHoldsAsFar(128)), (3, NeverShown::HoldsAtNoSize), (4, NeverShown::HoldsAtNoSize)]
+    );
+    assert_eq!(never_shown_levels(&[256, 128, 64, 32]), []);
     // 16 samples a pixel where pixels are few, 4 where a render would pass 512 texels across.
     let samples: Vec<u32> = HOLD_SIZES.iter().map(|&size| cirrus::preview::hold_samples_per_axis(size)).collect();
     assert_eq!(samples, [4, 4, 4, 2, 2]);

@@ -45,19 +45,25 @@ pub fn reduced_by(level0: &Texture, settings: MipSettings, factor: u32) -> Textu
     if factor.is_power_of_two() {
         return reduced_level(level0, settings, factor.ilog2());
     }
-    let (width, height) = ((level0.width / factor).max(1), (level0.height / factor).max(1));
-    let to_filter = filter_space_of(settings.kind);
-    let reduced = Texels::Level0(&level0.pixels, to_filter).reduce(level0.width, level0.height, width, height);
-    let straight = keeps_straight_colour(level0, settings).then(|| {
-        Texels::Level0(&level0.pixels, straight_linear_texel as FilterTexel).reduce(
-            level0.width,
-            level0.height,
-            width,
-            height,
-        )
-    });
-    let alpha_scale = coverage_keeping_scale(&reduced, settings, level_coverage(level0, settings));
-    from_filter_space(&reduced, straight.as_deref(), width, height, settings.kind, alpha_scale)
+    let to = ((level0.width / factor).max(1), (level0.height / factor).max(1));
+    let (current, straight) = level0_texels(level0, settings);
+    let coverage = level_coverage(level0, settings);
+    reduced_texels(&current, straight.as_ref(), (level0.width, level0.height), to, settings, coverage).level
+}
+
+/// Level 0's texels as a chain's first reduction reads them, and their straight colour where a
+/// chain keeps it.
+fn level0_texels(level0: &Texture, settings: MipSettings) -> (Texels<'_>, Option<Texels<'_>>) {
+    // Reduce from unscaled float levels so that coverage scaling does not compound. Level 0's
+    // bytes are converted to filter space as the first reduction reads them (four 2048² surfaces
+    // would otherwise each allocate, fault in and fill 64 MiB of floats for one pass).
+    let current = Texels::Level0(&level0.pixels, filter_space_of(settings.kind));
+    // Straight (not alpha-weighted) linear colour, for albedo texels whose whole footprint is
+    // transparent: alpha weighting would leave them black, and bilinear filtering at an
+    // alpha-tested edge would then pull the visible colour toward black.
+    let straight = keeps_straight_colour(level0, settings)
+        .then_some(Texels::Level0(&level0.pixels, straight_linear_texel as FilterTexel));
+    (current, straight)
 }
 
 /// The share of `level0`'s texels that pass its alpha test (`None`: it has none).
@@ -134,16 +140,7 @@ fn reusable_size(width: u32, height: u32) -> bool {
 
 /// Level 0 and the levels below it, `max_levels` at most, and what a next chain may reuse.
 fn full_chain(level0: &Texture, settings: MipSettings, max_levels: usize) -> (Vec<Texture>, Option<MipReuse>) {
-    // Reduce from unscaled float levels so that coverage scaling does not compound. Level 0's
-    // bytes are converted to filter space as the first reduction reads them (four 2048² surfaces
-    // would otherwise each allocate, fault in and fill 64 MiB of floats for one pass).
-    let to_filter = filter_space_of(settings.kind);
-    let current = Texels::Level0(&level0.pixels, to_filter);
-    // Straight (not alpha-weighted) linear colour, for albedo texels whose whole footprint is
-    // transparent: alpha weighting would leave them black, and bilinear filtering at an
-    // alpha-tested edge would then pull the visible colour toward black.
-    let straight = keeps_straight_colour(level0, settings)
-        .then_some(Texels::Level0(&level0.pixels, straight_linear_texel as FilterTexel));
+    let (current, straight) = level0_texels(level0, settings);
     let coverage = level_coverage(level0, settings);
     let mut chain = Chain { levels: vec![level0.clone()], alpha_scales: vec![1.0], tile_level: None, max_levels };
     let keep_tile_level = reusable_size(level0.width, level0.height);
@@ -202,12 +199,10 @@ fn extend_chain(
     let last = chain.levels.last().expect("level 0");
     let (mut width, mut height) = (last.width, last.height);
     while (width > 1 || height > 1) && chain.levels.len() < chain.max_levels {
-        let (next_width, next_height) = next_level_size(width, height);
-        let reduced = current.reduce(width, height, next_width, next_height);
-        let reduced_straight = straight.map(|colour| colour.reduce(width, height, next_width, next_height));
-        (width, height) = (next_width, next_height);
-        let alpha_scale = coverage_keeping_scale(&reduced, settings, coverage);
-        let level = from_filter_space(&reduced, reduced_straight.as_deref(), width, height, settings.kind, alpha_scale);
+        let next = next_level_size(width, height);
+        let ReducedLevel { level, texels: reduced, straight: reduced_straight, alpha_scale } =
+            reduced_texels(&current, straight.as_ref(), (width, height), next, settings, coverage);
+        (width, height) = next;
         chain.levels.push(level);
         chain.alpha_scales.push(alpha_scale);
         if keep_tile_level && chain.levels.len() == REUSE_TILE_LEVELS + 1 {
@@ -216,6 +211,32 @@ fn extend_chain(
         current = Texels::Stored(reduced);
         straight = reduced_straight.map(Texels::Stored);
     }
+}
+
+/// A level made from the one above it, and what the next level reduces.
+struct ReducedLevel {
+    level: Texture,
+    /// Its filter-space texels (before the alpha scale) and straight colour, where kept.
+    texels: Vec<[f32; 4]>,
+    straight: Option<Vec<[f32; 4]>>,
+    alpha_scale: f32,
+}
+
+/// `current` (`from` texels, with their `straight` colour where kept) reduced to `to` texels,
+/// with level 0's `coverage` kept at the alpha test.
+fn reduced_texels(
+    current: &Texels,
+    straight: Option<&Texels>,
+    (width, height): (u32, u32),
+    (new_width, new_height): (u32, u32),
+    settings: MipSettings,
+    coverage: Option<f32>,
+) -> ReducedLevel {
+    let texels = current.reduce(width, height, new_width, new_height);
+    let straight = straight.map(|colour| colour.reduce(width, height, new_width, new_height));
+    let alpha_scale = coverage_keeping_scale(&texels, settings, coverage);
+    let level = from_filter_space(&texels, straight.as_deref(), new_width, new_height, settings.kind, alpha_scale);
+    ReducedLevel { level, texels, straight, alpha_scale }
 }
 
 /// A level's texels in filter space: stored, or level 0's RGBA8 bytes converted as they are read.

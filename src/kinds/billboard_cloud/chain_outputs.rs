@@ -17,9 +17,10 @@ use crate::kinds::{AssetOutputs, BakedFiles};
 use crate::mesh::gltf::{gltf_chain, GltfLevel};
 use crate::summary::ArtifactRole;
 
-/// A chain's `lods.gltf` and `lods.json` (added to `outputs`), each level's part of the report
-/// (its chosen slot's, with its `Auto` choice and its switch size) and the switch coverages,
-/// from every slot's part of the report and mesh (`level_files`).
+/// A chain's `lods.gltf` and `lods.json` (added to `outputs`, with a warning for each level never
+/// shown), each level's part of the report (its chosen slot's, with its `Auto` choice and its
+/// switch size) and the switch coverages, from every slot's part of the report and mesh
+/// (`level_files`).
 pub(super) fn chain_files(
     db: &dyn Db,
     asset: Asset,
@@ -48,6 +49,8 @@ pub(super) fn chain_files(
         level_holds.push(holds[slot as usize].clone());
     }
     let switch_sizes = crate::preview::switch_sizes(&level_holds);
+    let never_shown = never_shown_warnings(asset.main_file(db), &switch_sizes);
+    outputs.warnings.extend(never_shown.iter().map(crate::summary::ErrorSummary::from));
     let (document, coverage) = chain_document(&chain, &switch_sizes);
     outputs.add(output_folder.join("lods.gltf"), ArtifactRole::Gltf, document.into());
     for ((report, hold), &switch_size) in level_reports.iter_mut().zip(&level_holds).zip(&switch_sizes) {
@@ -250,7 +253,7 @@ pub(crate) fn measure_chain(
 
 /// A warning (naming `file`, the asset's mesh) for each level of a chain with these switch
 /// sizes that is never shown.
-pub(super) fn never_shown_warnings(file: &Path, switch_sizes: &[u32]) -> Vec<Diagnostic> {
+fn never_shown_warnings(file: &Path, switch_sizes: &[u32]) -> Vec<Diagnostic> {
     use crate::preview::NeverShown;
     crate::preview::never_shown_levels(switch_sizes)
         .into_iter()

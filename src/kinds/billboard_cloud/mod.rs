@@ -570,13 +570,11 @@ fn billboard_outputs(
         "alpha_cutoff": settings.own::<Own>().billboard.alpha_cutoff,
     });
     let fields = report.as_object_mut().expect("an object");
-    let mut warnings = loaded.warnings.clone();
+    // The mesh's warnings, then the chain's (a level never shown).
+    outputs.warnings = loaded.warnings.iter().map(ErrorSummary::from).collect();
     if levels::is_chain(settings) {
         let (coverage, level_reports) =
             chain_outputs::chain_files(db, asset, output_folder, (slot_reports.as_slice(), slot_meshes), &mut outputs)?;
-        let switch_sizes: Vec<u32> =
-            level_reports.iter().map(|level| level["switch_size"].as_u64().unwrap_or(0) as u32).collect();
-        warnings.extend(chain_outputs::never_shown_warnings(asset.main_file(db), &switch_sizes));
         // The least share of a 1920 × 1080 viewport's area at which each level is shown (see
         // `lod_mesh::screen_coverage`), as `lods.gltf` states it.
         fields.insert("screen_coverage".into(), serde_json::json!(coverage));
@@ -589,7 +587,6 @@ fn billboard_outputs(
         "stage_ms".into(),
         serde_json::to_value(crate::kinds::asset_stage_ms(name, runs)).expect("times serialise"),
     );
-    outputs.warnings = warnings.iter().map(ErrorSummary::from).collect();
     fields.insert("warnings".into(), serde_json::to_value(&outputs.warnings).expect("warnings serialise"));
     outputs.report = Some(serde_json::to_vec_pretty(&report).expect("reports serialise"));
     Ok(outputs)

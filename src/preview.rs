@@ -127,12 +127,12 @@ pub(crate) fn preview_chain(
     settings: PreviewSettings,
 ) -> Result<ChainPreview, GpuError> {
     // Per view: the source's image, then each LOD's.
-    let mut views: Vec<Vec<Vec<u8>>> = Vec::new();
-    let mut keep = |source: &[u8], mut images: Vec<Vec<u8>>| {
-        images.insert(0, source.to_vec());
-        views.push(images)
-    };
-    let metrics = compare_views(gpu, source, lods, (center, radius), settings, &mut SourceViews::default(), &mut keep)?;
+    let mut views: Vec<Vec<Vec<u8>>> =
+        vec![vec![Vec::new(); 1 + lods.len()]; view_directions().len().min(settings.views)];
+    let mut keep = |slot: usize, view: usize, image: &[u8]| views[view][slot] = image.to_vec();
+    let sphere = (center, radius);
+    let mut metrics = compare_views(gpu, source, lods, sphere, &[settings], &mut SourceViews::default(), &mut keep)?;
+    let metrics = metrics.pop().unwrap_or_default();
     let levels = metrics
         .into_iter()
         .enumerate()
@@ -164,56 +164,95 @@ pub fn compare_only(
     (center, radius): ([f32; 3], f32),
     settings: PreviewSettings,
 ) -> Result<Vec<PreviewMetrics>, GpuError> {
-    compare_views(gpu, source, lods, (center, radius), settings, &mut SourceViews::default(), |_, _| {})
+    let mut sources = SourceViews::default();
+    let mut metrics = compare_views(gpu, source, lods, (center, radius), &[settings], &mut sources, |_, _, _| {})?;
+    Ok(metrics.pop().unwrap_or_default())
 }
 
 /// Renders `source` and each of `lods` from the first `settings.views` directions (the source
-/// once per view) and compares them; each view's images (the source's, then each LOD's) go to
-/// `view_images`, which may keep them.
+/// once per view; each in batches, `Gpu::render_views`) and compares them at each of
+/// `resolutions`, which render at one side (`size × samples_per_axis`) and so share the renders
+/// (64 px at 4 × 4 samples and 128 px at 2 × 2: both 256²); each image (slot 0: the source's,
+/// `1 + k`: `lods[k]`'s) at `resolutions[0]` goes to `view_images` with its view's index, which
+/// may keep it. Returns each resolution's metrics, one per LOD.
 fn compare_views(
     gpu: &Gpu,
     source: &ViewMesh,
     lods: &[&crate::gpu::LevelView],
     (center, radius): ([f32; 3], f32),
-    settings: PreviewSettings,
+    resolutions: &[PreviewSettings],
     source_views: &mut SourceViews,
-    mut view_images: impl FnMut(&[u8], Vec<Vec<u8>>),
-) -> Result<Vec<PreviewMetrics>, GpuError> {
+    mut view_images: impl FnMut(usize, usize, &[u8]),
+) -> Result<Vec<Vec<PreviewMetrics>>, GpuError> {
+    let Some(&first) = resolutions.first() else {
+        return Ok(Vec::new());
+    };
+    let render_side = |settings: PreviewSettings| settings.size * settings.samples_per_axis.max(1);
+    debug_assert!(resolutions.iter().all(|&settings| render_side(settings) == render_side(first)));
     let light = preview_light();
-    let mut metrics: Vec<Vec<ViewMetrics>> = vec![Vec::new(); lods.len()];
-    let mut shift_ious = Vec::new();
-    for (index, direction) in view_directions().into_iter().take(settings.views).enumerate() {
-        let matrix = view_projection(center, radius, direction);
-        let key = (settings.size, settings.samples_per_axis, index);
-        let source_view = match source_views.views.get(&key) {
-            Some(view) => view.clone(),
-            None => {
-                let view = render_resolved_view(settings, |size| gpu.render_view(source, matrix, light, size))?;
-                let shift_iou = one_pixel_shift_iou(&view, settings.size);
-                let view = Arc::new((view, shift_iou));
-                source_views.views.insert(key, view.clone());
-                view
+    let directions: Vec<[f32; 3]> = view_directions().into_iter().take(first.views).collect();
+    let matrices: Vec<[[f32; 4]; 4]> =
+        directions.iter().map(|&direction| view_projection(center, radius, direction)).collect();
+    let key = |settings: PreviewSettings, index: usize| (settings.size, settings.samples_per_axis, index);
+    let missing: Vec<usize> = (0..matrices.len())
+        .filter(|&index| resolutions.iter().any(|&settings| !source_views.views.contains_key(&key(settings, index))))
+        .collect();
+    if !missing.is_empty() {
+        for batch in missing.chunks(crate::gpu::views_per_batch(render_side(first), 1)) {
+            let batch_matrices: Vec<[[f32; 4]; 4]> = batch.iter().map(|&index| matrices[index]).collect();
+            let images = gpu.render_views(source, &batch_matrices, light, render_side(first))?;
+            for (&index, image) in batch.iter().zip(images) {
+                for &settings in resolutions {
+                    let view = resolve_samples(&image, settings.size, settings.samples_per_axis.max(1));
+                    let shift_iou = one_pixel_shift_iou(&view, settings.size);
+                    source_views.views.insert(key(settings, index), Arc::new((view, shift_iou)));
+                }
             }
-        };
-        let (source_view, shift_iou) = (&source_view.0, source_view.1);
-        shift_ious.push(shift_iou);
-        let mut images = Vec::with_capacity(lods.len());
-        for (lod, level_metrics) in lods.iter().zip(&mut metrics) {
-            let lod_view = render_resolved_view(settings, |size| gpu.render_level_view(lod, matrix, light, size))?;
-            let overlap = silhouette_overlap(source_view, &lod_view);
-            level_metrics.push(ViewMetrics {
-                direction,
-                iou: overlap.iou,
-                missed: overlap.missed,
-                extra: overlap.extra,
-                psnr: rgb_psnr(&source_view.rgba, &lod_view.rgba),
-            });
-            images.push(lod_view.rgba);
         }
-        view_images(&source_view.rgba, images);
     }
-    let samples_per_pixel = settings.samples_per_axis * settings.samples_per_axis;
-    Ok(metrics.into_iter().map(|views| summarise_views(views, samples_per_pixel, &shift_ious)).collect())
+    let source_views: Vec<Vec<Arc<(ResolvedView, f64)>>> = resolutions
+        .iter()
+        .map(|&settings| (0..matrices.len()).map(|index| source_views.views[&key(settings, index)].clone()).collect())
+        .collect();
+    for (index, view) in source_views[0].iter().enumerate() {
+        view_images(0, index, &view.0.rgba);
+    }
+    let mut metrics: Vec<Vec<PreviewMetrics>> = resolutions.iter().map(|_| Vec::with_capacity(lods.len())).collect();
+    for (slot, lod) in lods.iter().enumerate() {
+        // Rendered a batch at a time (`Gpu::render_views`), each batch resolved before the next.
+        let mut images = Vec::with_capacity(matrices.len());
+        for batch in matrices.chunks(crate::gpu::views_per_batch(render_side(first), 1)) {
+            let rendered = gpu.render_level_views(lod, batch, light, render_side(first))?;
+            images.extend(rendered.into_iter().map(|image| {
+                let resolve = |settings: &PreviewSettings| {
+                    resolve_samples(&image, settings.size, settings.samples_per_axis.max(1))
+                };
+                resolutions.iter().map(resolve).collect::<Vec<ResolvedView>>()
+            }));
+        }
+        for (resolution, (&settings, sources)) in resolutions.iter().zip(&source_views).enumerate() {
+            let mut level_metrics = Vec::with_capacity(images.len());
+            for (index, image) in images.iter_mut().enumerate() {
+                let lod_view = std::mem::take(&mut image[resolution]);
+                let source_view = &sources[index].0;
+                let overlap = silhouette_overlap(source_view, &lod_view);
+                level_metrics.push(ViewMetrics {
+                    direction: directions[index],
+                    iou: overlap.iou,
+                    missed: overlap.missed,
+                    extra: overlap.extra,
+                    psnr: rgb_psnr(&source_view.rgba, &lod_view.rgba),
+                });
+                if resolution == 0 {
+                    view_images(1 + slot, index, &lod_view.rgba);
+                }
+            }
+            let shift_ious: Vec<f64> = sources.iter().map(|view| view.1).collect();
+            let samples_per_pixel = settings.samples_per_axis * settings.samples_per_axis;
+            metrics[resolution].push(summarise_views(level_metrics, samples_per_pixel, &shift_ious));
+        }
+    }
+    Ok(metrics)
 }
 
 /// The screen sizes (bounding-sphere diameters in pixels) a LOD chain's levels are measured at,
@@ -295,30 +334,42 @@ pub fn holds(
 ) -> Result<Vec<Hold>, GpuError> {
     let mut holds: Vec<Hold> = lods.iter().map(|_| Hold::unmeasured()).collect();
     let mut stopped = vec![false; lods.len()];
-    for (step, &size) in sizes.iter().enumerate() {
-        let measured: Vec<usize> = (0..lods.len()).filter(|&index| !stopped[index]).collect();
-        if measured.is_empty() {
+    let resolution = |size: u32| PreviewSettings { views: 26, size, samples_per_axis: hold_samples_per_axis(size) };
+    let render_side = |size: u32| size * hold_samples_per_axis(size);
+    let mut step = 0;
+    while step < sizes.len() {
+        let rendered: Vec<usize> = (0..lods.len()).filter(|&index| !stopped[index]).collect();
+        if rendered.is_empty() {
             break;
         }
-        let settings = PreviewSettings { views: 26, size, samples_per_axis: hold_samples_per_axis(size) };
-        let levels: Vec<&crate::gpu::LevelView> = measured.iter().map(|&index| lods[index]).collect();
-        let compared = compare_views(gpu, source, &levels, (center, radius), settings, source_views, |_, _| {})?;
-        for (&index, metrics) in measured.iter().zip(compared) {
-            let held = metrics.loss_px_shift.is_none_or(|loss| loss <= HOLD_LOSS);
-            holds[index].measured.push(SizeFigures {
-                size,
-                loss_px_shift: metrics.loss_px_shift,
-                mean_iou: metrics.mean_iou,
-                mean_psnr: metrics.mean_psnr,
-            });
-            if held {
-                holds[index].holds_to = Some(size);
-            } else if step > 0 {
-                stopped[index] = true;
+        // The sizes from this one on that render at its side: measured from the same renders, each
+        // as if alone (a LOD stopped at one is not counted at the next).
+        let shared = sizes[step..].iter().take_while(|&&size| render_side(size) == render_side(sizes[step])).count();
+        let resolutions: Vec<PreviewSettings> =
+            sizes[step..step + shared].iter().map(|&size| resolution(size)).collect();
+        let levels: Vec<&crate::gpu::LevelView> = rendered.iter().map(|&index| lods[index]).collect();
+        let compared = compare_views(gpu, source, &levels, (center, radius), &resolutions, source_views, |_, _, _| {})?;
+        for (size_metrics, settings) in compared.into_iter().zip(&resolutions) {
+            let measured: Vec<usize> = rendered.iter().copied().filter(|&index| !stopped[index]).collect();
+            let figures = rendered.iter().copied().zip(size_metrics).filter(|(index, _)| measured.contains(index));
+            for (index, metrics) in figures {
+                let held = metrics.loss_px_shift.is_none_or(|loss| loss <= HOLD_LOSS);
+                holds[index].measured.push(SizeFigures {
+                    size: settings.size,
+                    loss_px_shift: metrics.loss_px_shift,
+                    mean_iou: metrics.mean_iou,
+                    mean_psnr: metrics.mean_psnr,
+                });
+                if held {
+                    holds[index].holds_to = Some(settings.size);
+                } else if step > 0 {
+                    stopped[index] = true;
+                }
             }
-        }
-        if step > 0 {
-            outrank(&mut holds, &measured, &mut stopped);
+            if step > 0 {
+                outrank(&mut holds, &measured, &mut stopped);
+            }
+            step += 1;
         }
     }
     Ok(holds)
@@ -422,6 +473,7 @@ fn summarise_views(views: Vec<ViewMetrics>, samples_per_pixel: u32, source_shift
 
 /// A view resolved to its pixels: the sRGB colour (the mean of the pixel's samples, taken in
 /// linear light; alpha 255 where any sample is covered) and how many samples are covered.
+#[derive(Default)]
 pub struct ResolvedView {
     pub rgba: Vec<u8>,
     pub covered: Vec<u16>,
@@ -433,17 +485,6 @@ impl ResolvedView {
     pub fn in_silhouette(&self, index: usize) -> bool {
         2 * self.covered[index] >= self.samples_per_pixel
     }
-}
-
-/// A view rendered at `settings.samples_per_axis`² samples per pixel by `render` (given the
-/// sampled image's side), resolved.
-fn render_resolved_view(
-    settings: PreviewSettings,
-    render: impl FnOnce(u32) -> Result<Vec<u8>, GpuError>,
-) -> Result<ResolvedView, GpuError> {
-    let samples_per_axis = settings.samples_per_axis.max(1);
-    let samples = render(settings.size * samples_per_axis)?;
-    Ok(resolve_samples(&samples, settings.size, samples_per_axis))
 }
 
 /// Box-resolves an RGBA image of `size × samples_per_axis` pixels square (from

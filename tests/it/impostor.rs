@@ -594,3 +594,40 @@ fn frames_reduced_five_times_from_a_larger_render_keep_each_frame_s_coverage_wit
         assert!(depths[4 * 8 + 4][0] < 40, "frame {frame}: depth at the centre {:?}", depths[4 * 8 + 4]);
     }
 }
+
+#[test]
+fn views_drawn_in_batches_are_those_drawn_one_at_a_time_and_sizes_sharing_a_render_measure_as_alone() {
+    use cirrus::preview::{hold_samples_per_axis, view_directions, view_projection, PreviewSettings};
+    let gpu = cirrus::gpu::gpu().expect("a GPU adapter (llvmpipe in CI)");
+    let source = view_of(&sphere_obj(12));
+    let (center, radius) = cirrus::preview::bounding_sphere(&source);
+    let light = cirrus::preview::preview_light();
+    // Three views at 1024²: more than one batch (`gpu::views_per_batch`), the last one short.
+    let cameras: Vec<[[f32; 4]; 4]> =
+        view_directions().into_iter().take(3).map(|direction| view_projection(center, radius, direction)).collect();
+    assert!(cirrus::gpu::views_per_batch(1024, 1) < cameras.len());
+    let batched = gpu.render_views(&source, &cameras, light, 1024).unwrap();
+    let frames = gpu.render_impostor_frames(&source, &cameras, 1024).unwrap();
+    assert_eq!((batched.len(), frames.len()), (3, 3));
+    for ((&camera, image), frame) in cameras.iter().zip(&batched).zip(&frames) {
+        assert_eq!(*image, gpu.render_view(&source, camera, light, 1024).unwrap());
+        assert_eq!(frame[0], gpu.render_impostor_frames(&source, &[camera], 1024).unwrap()[0][0]);
+        assert!(image.chunks_exact(4).any(|pixel| pixel[3] > 0) && frame[1].chunks_exact(4).any(|texel| texel[3] > 0));
+    }
+
+    // A box inside the sphere against it at 64 and 128 px, which render at one side (256²):
+    // measured together from the same renders, each size's figures are those it gets alone.
+    assert_eq!(64 * hold_samples_per_axis(64), 128 * hold_samples_per_axis(128));
+    let lod = cirrus::gpu::LevelView::Mesh(view_of(&box_obj([-0.7; 3], [0.7; 3], 1)));
+    let mut sources = cirrus::preview::SourceViews::default();
+    let holds = cirrus::preview::holds(gpu, &source, &[&lod], (center, radius), &[64, 128], &mut sources).unwrap();
+    assert_eq!(holds[0].measured.iter().map(|figures| figures.size).collect::<Vec<_>>(), [64, 128]);
+    for figures in &holds[0].measured {
+        let settings =
+            PreviewSettings { views: 26, size: figures.size, samples_per_axis: hold_samples_per_axis(figures.size) };
+        let alone = cirrus::preview::compare_only(gpu, &source, &[&lod], (center, radius), settings).unwrap();
+        assert!(alone[0].mean_iou < 0.95, "the box is not the sphere: {}", alone[0].mean_iou);
+        assert_eq!((figures.mean_iou, figures.loss_px_shift), (alone[0].mean_iou, alone[0].loss_px_shift));
+        assert_eq!(figures.mean_psnr, alone[0].mean_psnr);
+    }
+}

@@ -54,8 +54,9 @@ pub(crate) const REDUCE: Stage = Stage { name: "reduce", version: 2 };
 /// An impostor level's frames (`impostor::bake_impostor`), rendered on the GPU. 2: each frame
 /// shows the mesh's bounds from its direction (`impostor::frame_rects`), not the whole sphere.
 /// 4: frames of one grid at whole multiples of each other share one render (the largest,
-/// with the smallest one's margins); 3 was never released.
-pub(crate) const IMPOSTOR: Stage = Stage { name: "impostor", version: 4 };
+/// with the smallest one's margins); 3 was never released; 5: frames over 64 texels rendered at
+/// fewer samples, near 256 texels a side (`impostor::frame_samples_per_axis`).
+pub(crate) const IMPOSTOR: Stage = Stage { name: "impostor", version: 5 };
 
 /// A chain's switch sizes: every level rendered as an engine draws it beside the source, over
 /// the 26 views at each screen size of `preview::HOLD_SIZES` (`measure_chain`). 2: a level is

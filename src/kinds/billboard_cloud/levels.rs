@@ -188,8 +188,9 @@ pub fn allot_surfaces(
     Some(halvings)
 }
 
-/// The candidates of `level`, an `Auto` level of at most `max_bytes` on the GPU: billboard clouds
-/// of 16, 64 and 256 quads and full-sphere impostors of 8 and 12 frames a side, each with the
+/// The candidates of `level`, an `Auto` level of at most `max_bytes` on the GPU: the billboard
+/// clouds and full-sphere impostors of the asset's `auto` settings (by default 64 quads and 8
+/// frames a side; `settings::AutoCandidates`), each with the
 /// largest power-of-two albedo (at least 64 texels, at most the asset's `max_size`; an
 /// impostor's frames at least 16 texels) beside which its other surfaces fit, up to four times
 /// smaller a side ([`allot_surfaces`]), with its quads, and in which its quads pack (see
@@ -202,8 +203,9 @@ pub fn auto_candidates(settings: &Settings, level: u32, max_bytes: u64) -> Vec<S
     let encode = &settings.encode;
     let bytes_of = |surface: SurfaceKind, side: u32| gpu_bytes(side, side, Some(encode.format_of(surface)));
     let sides = || (6..=13).rev().map(|power| 1u32 << power).filter(|&side| side <= max_size);
+    let auto = &settings.own::<Own>().billboard.auto;
     let mut candidates = Vec::new();
-    for quads in [16u32, 64, 256] {
+    for &quads in &auto.quads {
         let Some(mesh_bytes) = max_bytes.checked_sub(quads as u64 * QUAD_MESH_BYTES) else { continue };
         let fits = |side: u32| {
             quads_pack(quads, side, padding)
@@ -221,7 +223,7 @@ pub fn auto_candidates(settings: &Settings, level: u32, max_bytes: u64) -> Vec<S
             });
         }
     }
-    for frames in [8u32, 12] {
+    for &frames in &auto.impostor_frames {
         let Some(mesh_bytes) = max_bytes.checked_sub(QUAD_MESH_BYTES) else { continue };
         // The largest frame (a multiple of 4 texels, of 8 or 16 where its other surfaces are
         // stored at a half or a quarter side, so that each frame keeps whole blocks in them).

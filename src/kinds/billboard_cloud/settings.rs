@@ -26,7 +26,29 @@ pub struct BillboardSettings {
     /// its atlas's largest side is `max_size / 2^N` (at least 64). Empty: one LOD (`budget`, or
     /// ε) in the asset's folder.
     pub lods: Vec<LodLevel>,
+    /// What an `Auto` level bakes and measures besides the reduced triangles.
+    pub auto: AutoCandidates,
     pub alpha_cutoff: f32,
+}
+
+/// The billboard clouds and impostors an `Auto` level bakes as candidates (each where it fits
+/// the level's bytes), beside the source's triangles reduced. By default one of each: 64 quads
+/// and 8 × 8 frames, the only clouds and impostors any level of the corpus trees' four-level
+/// chains picked among 16, 64 and 256 quads and 8 and 12 frames (at 2 MiB, 512, 128 and 32 KiB,
+/// measured up to 1024 px); each more costs its bake and its measuring (the oak's chain took 8.3
+/// s with these, 14.3 s with all five).
+#[derive(Clone, Debug, PartialEq, Serialize)]
+pub struct AutoCandidates {
+    /// Billboard clouds of these many quads (ascending, each once).
+    pub quads: Vec<u32>,
+    /// Full-sphere impostors of these many frames a side (ascending, each once).
+    pub impostor_frames: Vec<u32>,
+}
+
+impl Default for AutoCandidates {
+    fn default() -> AutoCandidates {
+        AutoCandidates { quads: vec![64], impostor_frames: vec![8] }
+    }
 }
 
 /// The most levels a LOD chain may have (the viewer switches them with keys 0–9).
@@ -64,9 +86,9 @@ pub enum LodLevel {
     /// drawn as one camera-facing quad by `shaders/impostor.wgsl`.
     Impostor { frames: u32, hemi: bool, size: u32 },
     /// The candidate that holds furthest among those whose bytes on the GPU fit `max_bytes`
-    /// (`levels::auto_candidates`: billboard clouds of 16, 64 and 256 quads and impostors of 8
-    /// and 12 frames, each with the largest albedo that fits beside its other surfaces, these
-    /// stored up to four times smaller a side), each baked and measured against
+    /// (`levels::auto_candidates`: the billboard clouds and impostors of [`AutoCandidates`] and
+    /// the source's triangles reduced, each with the largest albedo that fits beside its other
+    /// surfaces, these stored up to four times smaller a side), each baked and measured against
     /// the source as the chain's levels are.
     Auto { max_bytes: u64 },
 }
@@ -181,7 +203,15 @@ pub(crate) struct BillboardOverrides {
     #[serde(default, deserialize_with = "explicit")]
     pub screen_size: Option<Option<u32>>,
     pub lods: Option<Vec<LodLevel>>,
+    pub auto: Option<AutoOverrides>,
     pub alpha_cutoff: Option<f32>,
+}
+
+#[derive(Deserialize, Default, Clone)]
+#[serde(deny_unknown_fields)]
+pub(crate) struct AutoOverrides {
+    pub quads: Option<Vec<u32>>,
+    pub impostor_frames: Option<Vec<u32>>,
 }
 
 #[derive(Deserialize, Default, Clone)]
@@ -278,6 +308,9 @@ pub(crate) fn merge_billboard(
         }
         settings.lods = lods.clone();
     }
+    if let Some(auto) = &billboard.auto {
+        merge_auto(check, &mut settings.auto, auto, anchor);
+    }
     if !settings.lods.is_empty() && settings.budget.is_some() {
         check.error_at_key("lods", anchor, "give budget or lods, not both: a chain's levels carry their own budgets");
     }
@@ -293,6 +326,26 @@ pub(crate) fn merge_billboard(
             check.error_at_key("alpha_cutoff", anchor, "alpha_cutoff must be in [0, 1]");
         }
         settings.alpha_cutoff = cutoff;
+    }
+}
+
+fn merge_auto(check: &mut dyn Check, settings: &mut AutoCandidates, auto: &AutoOverrides, anchor: usize) {
+    let lists = [
+        (&auto.quads, &mut settings.quads, "quads", 1..=1_000_000u32),
+        (&auto.impostor_frames, &mut settings.impostor_frames, "impostor_frames", 2..=MAX_IMPOSTOR_FRAMES),
+    ];
+    for (given, list, name, range) in lists {
+        let Some(given) = given else { continue };
+        if let Some(outside) = given.iter().find(|count| !range.contains(count)) {
+            let message =
+                format!("auto.{name} must each be between {} and {} (not {outside})", range.start(), range.end());
+            check.error_at_key("auto", anchor, &message);
+        }
+        if given.windows(2).any(|pair| pair[0] >= pair[1]) {
+            let message = format!("auto.{name} must go up, each count once (each names its candidate): {given:?}");
+            check.error_at_key("auto", anchor, &message);
+        }
+        *list = given.clone();
     }
 }
 
@@ -312,6 +365,7 @@ impl Default for BillboardSettings {
             texel_density: None,
             screen_size: None,
             lods: Vec::new(),
+            auto: AutoCandidates::default(),
             alpha_cutoff: 0.5,
         }
     }

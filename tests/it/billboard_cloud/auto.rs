@@ -1,15 +1,19 @@
 //! Chains that choose (`lods: [Auto(max_bytes: 262144), Auto(max_bytes: 65536)]`): each level's
-//! candidates (billboard clouds of 16, 64 and 256 quads, impostors of 8 and 12 frames, each with
-//! the largest atlas its bytes allow) baked into `lod<N>/candidates/`, measured against the
-//! source, the one that holds furthest within the bytes copied into `lod<N>/`; the same choice
-//! from a clean bake; a bark edit re-renders only bark, in every candidate.
+//! candidates (by default a billboard cloud of 64 quads and an 8 × 8 impostor; here mostly the
+//! wider search of `auto: (quads: [16, 64, 256], impostor_frames: [8, 12])`, each with the
+//! largest atlas its bytes allow, and the source's triangles reduced) baked into
+//! `lod<N>/candidates/`, measured against the source, the one that holds furthest within the
+//! bytes copied into `lod<N>/`; the same choice from a clean bake; a bark edit re-renders only
+//! bark, in every candidate.
 
 use std::collections::BTreeSet;
 
 use crate::billboard_cloud::chain::{chain_project, renders_reading};
 use crate::support::{build, pattern_png};
 
-const CHAIN: &str = "[Auto(max_bytes: 262144), Auto(max_bytes: 65536)]";
+/// The chain, with every cloud and impostor the search may try: `billboard: (lods: …)` goes on.
+const CHAIN: &str =
+    "[Auto(max_bytes: 262144), Auto(max_bytes: 65536)], auto: (quads: [16, 64, 256], impostor_frames: [8, 12])";
 const BYTES: [u64; 2] = [262144, 65536];
 
 fn report(project: &crate::support::TempProject) -> serde_json::Value {
@@ -227,7 +231,8 @@ fn built_bundled_bush(lods: &str) -> (crate::support::TempProject, serde_json::V
 #[test]
 fn a_candidate_whose_quads_cannot_pack_in_its_bytes_is_not_baked() {
     // The bundled bush has planes enough for 256 quads: at 128 KiB they would need a 256² atlas
-    // of at least one block each (317 KB), at 32 KiB 64 quads a 128² one (79 KB).
+    // of at least one block each (317 KB), at 32 KiB 64 quads a 128² one (79 KB). Searched by
+    // default: 64 quads and 8 × 8 frames.
     let (project, built) = built_bundled_bush("[Auto(max_bytes: 131072), Auto(max_bytes: 32768)]");
     let mut names = Vec::new();
     for (entry, max_bytes) in built["levels"].as_array().unwrap().iter().zip([131072u64, 32768]) {
@@ -242,11 +247,11 @@ fn a_candidate_whose_quads_cannot_pack_in_its_bytes_is_not_baked() {
             .collect();
         names.push(level.join(" "));
     }
-    // Impostors of 16-texel frames fit (12 a side at 128 KiB, 8 at 32 KiB) because their normal
-    // and depth are stored at a half or a quarter of their albedo's side.
+    // Impostors of 16-texel frames fit (8 a side at 32 KiB) because their normal and depth are
+    // stored at a half or a quarter of their albedo's side.
     // A reduced candidate keeps 128 KiB / 2 / 108 bytes a triangle = 606 triangles; at 32 KiB
     // it would keep too few (151) to be worth measuring.
-    assert_eq!(names, ["quads16 quads64 impostor8 impostor12 reduced606", "quads16 impostor8"]);
+    assert_eq!(names, ["quads64 impostor8 reduced606", "impostor8"]);
 
     // The two 8 × 8 impostors (frames of 32 and 16 texels) are one render of the same 64 views:
     // the smaller's frames show the same rects, and its albedo is the larger's next mip level
@@ -284,7 +289,8 @@ fn an_auto_candidate_gives_its_bytes_to_its_albedo_first() {
     // would be 128² (albedo, packed, normal and height: 4.7 bytes a texel with mips) and an
     // 8-frame impostor's 128² (16-texel frames); with the albedo first, the cloud's albedo is
     // 256² and the impostor's frames 32 texels, the other surfaces at a half or a quarter side.
-    let (project, built) = built_bundled_bush("[Auto(max_bytes: 131072)]");
+    let (project, built) =
+        built_bundled_bush("[Auto(max_bytes: 131072)], auto: (quads: [16, 64], impostor_frames: [8])");
     let candidates = built["levels"][0]["auto"]["candidates"].as_array().unwrap();
     let folder = |name: &str| format!("baked/tree/lod0/candidates/{name}");
     for candidate in candidates {

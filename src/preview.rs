@@ -313,18 +313,18 @@ pub const OUTRANKED_RATIO: f64 = 2.0;
 /// noise (a few samples of 26 views), and no LOD is dropped for losing twice as little.
 pub const OUTRANKED_FLOOR: f64 = 0.1;
 
-/// How far each of `lods`, competing for one level of a chain, holds against `source` over
-/// `sizes` (smallest first): every size renders the 26 views of the source once and of each LOD
-/// still measured, sizes that render at one side ([`hold_samples_per_axis`]: 64 and 128 px, both
-/// 256²) once for both, each then judged as if measured alone (the oak's chain: 1.2 s of its
-/// 8.5 s of measuring saved, every figure the same). The loss grows with the size (a pixel gets smaller against the same world
-/// error), so a LOD is measured no further once it fails, except at the smallest size: at 16 px
-/// a pixel is a sixteenth of the object, and corpus impostors lost 1.00–1.01 units there and 0.4
-/// at 32 and 64 px. Nor, from the second size on, once it is outranked: it held but lost more
-/// than [`OUTRANKED_RATIO`] times the least loss there (at least [`OUTRANKED_FLOOR`]); whoever
-/// ranks them by how far they hold, then by their loss, would not pick it (on the oak's 2 MiB
-/// level: five candidates losing 0.33–0.53 units at 32 px beside triangles losing 0.06, whose
-/// renders at 64 to 256 px were half of a chain's measuring).
+/// How far each of `lods`, competing for one level of a chain, holds against `source` over `sizes`
+/// (smallest first): every size renders the 26 views of the source once and of each LOD still
+/// measured, sizes that render at one side ([`hold_samples_per_axis`]: 64 and 128 px, both 256²)
+/// once for both, each then judged as if measured alone (the oak's chain: 1.2 s of its 8.5 s of
+/// measuring saved, every figure the same). The loss grows with the size (a pixel gets smaller
+/// against the same world error), so a LOD is measured no further once it fails, except at the
+/// smallest size: at 16 px a pixel is a sixteenth of the object, and corpus impostors lost
+/// 1.00–1.01 units there and 0.4 at 32 and 64 px. Nor, from the second size on, once it is
+/// outranked: it held but lost more than [`OUTRANKED_RATIO`] times the least loss there (at least
+/// [`OUTRANKED_FLOOR`]); whoever ranks them by how far they hold, then by their loss, would not
+/// pick it (on the oak's 2 MiB level: five candidates losing 0.33–0.53 units at 32 px beside
+/// triangles losing 0.06, whose renders at 64 to 256 px were half of a chain's measuring).
 pub fn holds(
     gpu: &Gpu,
     source: &ViewMesh,

@@ -4,7 +4,8 @@
 //! largest atlas its bytes allow, and the source's triangles reduced) baked into
 //! `lod<N>/candidates/`, measured against the source, the one that holds furthest within the
 //! bytes copied into `lod<N>/`; the same choice from a clean bake; a bark edit re-renders only
-//! bark, in every candidate.
+//! bark, in every candidate; widening the search bakes only the new candidate, narrowing it
+//! again runs nothing and removes its files.
 
 use std::collections::BTreeSet;
 
@@ -337,4 +338,39 @@ fn an_auto_candidate_gives_its_bytes_to_its_albedo_first() {
         gpu_bytes += ktx2.levels.iter().map(|level| level.2).sum::<u64>();
     }
     assert_eq!(entry["gpu_bytes"], gpu_bytes);
+}
+
+#[test]
+fn widening_the_search_bakes_only_the_new_candidate_and_narrowing_it_removes_its_files() {
+    let (project, built) = built_bundled_bush("[Auto(max_bytes: 131072)]");
+    let names = |built: &serde_json::Value| -> Vec<String> {
+        let candidates = built["levels"][0]["auto"]["candidates"].as_array().unwrap();
+        candidates.iter().map(|candidate| candidate["name"].as_str().unwrap().to_string()).collect()
+    };
+    assert_eq!(names(&built), ["quads64", "impostor8", "reduced606"]);
+    let pipeline = String::from_utf8(project.read("pipeline.ron")).unwrap();
+    let widened = pipeline
+        .replace("(lods: [Auto(max_bytes: 131072)])", "(lods: [Auto(max_bytes: 131072)], auto: (quads: [16, 64]))");
+    assert_ne!(widened, pipeline);
+
+    // Widened: the 16-quad cloud is baked and the level measured again; nothing of the others.
+    project.write("pipeline.ron", &widened);
+    let mut cirrus = project.open();
+    let summary = build(&mut cirrus);
+    assert!(summary.all_ok(), "{}", summary.to_text());
+    let executed = cirrus.take_executed_stages();
+    let candidates: Vec<&String> = executed.iter().filter(|run| run.contains("/candidates/")).collect();
+    assert!(!candidates.is_empty() && candidates.iter().all(|run| run.contains("/candidates/quads16")), "{executed:?}");
+    assert!(executed.contains(&"switch(tree)".to_string()), "{executed:?}");
+    assert_eq!(names(&report(&project)), ["quads16", "quads64", "impostor8", "reduced606"]);
+    assert!(project.path("baked/tree/lod0/candidates/quads16/lod.gltf").is_file());
+
+    // Narrowed again: every stage from the cache, and the 16-quad cloud's files gone.
+    project.write("pipeline.ron", &pipeline);
+    let mut cirrus = project.open();
+    let summary = build(&mut cirrus);
+    assert!(summary.all_ok(), "{}", summary.to_text());
+    assert_eq!(cirrus.take_executed_stages(), Vec::<String>::new());
+    assert_eq!(names(&report(&project)), ["quads64", "impostor8", "reduced606"]);
+    assert!(!project.path("baked/tree/lod0/candidates/quads16").exists());
 }

@@ -190,23 +190,19 @@ pub fn bake_impostor_with_margin(
         .map(|(&direction, &rect)| frame_rect_view_projection(center, radius, direction, rect).to_cols_array_2d())
         .collect();
     let samples = frame_samples_per_axis(frame_size);
-    let batch = crate::gpu::views_per_batch(frame_size * samples, 2);
-    for (first, batch_cameras) in (0..).step_by(batch).zip(cameras.chunks(batch)) {
-        let rendered = gpu.render_impostor_frames(mesh, batch_cameras, frame_size * samples)?;
-        for (frame, [albedo, normal_depth]) in (first..).zip(rendered) {
-            let (albedo, normal_depth) = resolve_frame(&albedo, &normal_depth, frame_size, samples);
-            let images = frame_surfaces(&albedo, &normal_depth, directions[frame as usize], frame_size);
-            let (column, row) =
-                ((frame % grid.frames * frame_size) as usize, (frame / grid.frames * frame_size) as usize);
-            let row_bytes = frame_size as usize * 4;
-            for (atlas, image) in atlases.iter_mut().zip(&images) {
-                for y in 0..frame_size as usize {
-                    let at = ((row + y) * side + column) * 4;
-                    atlas[at..at + row_bytes].copy_from_slice(&image[y * row_bytes..][..row_bytes]);
-                }
+    gpu.render_impostor_frames(mesh, &cameras, frame_size * samples, |frame, [albedo, normal_depth]| {
+        let (albedo, normal_depth) = resolve_frame(&albedo, &normal_depth, frame_size, samples);
+        let images = frame_surfaces(&albedo, &normal_depth, directions[frame], frame_size);
+        let frame = frame as u32;
+        let (column, row) = ((frame % grid.frames * frame_size) as usize, (frame / grid.frames * frame_size) as usize);
+        let row_bytes = frame_size as usize * 4;
+        for (atlas, image) in atlases.iter_mut().zip(&images) {
+            for y in 0..frame_size as usize {
+                let at = ((row + y) * side + column) * 4;
+                atlas[at..at + row_bytes].copy_from_slice(&image[y * row_bytes..][..row_bytes]);
             }
         }
-    }
+    })?;
     let [albedo, normal, depth] = atlases.map(|pixels| Texture::new(side as u32, side as u32, pixels));
     Ok(ImpostorFrames { settings, center, radius, albedo, normal, depth, rects })
 }

@@ -197,17 +197,14 @@ fn compare_views(
     let missing: Vec<usize> = (0..matrices.len())
         .filter(|&index| resolutions.iter().any(|&settings| !source_views.views.contains_key(&key(settings, index))))
         .collect();
-    for batch in missing.chunks(crate::gpu::views_per_batch(render_side(first), 1)) {
-        let batch_matrices: Vec<[[f32; 4]; 4]> = batch.iter().map(|&index| matrices[index]).collect();
-        let images = gpu.render_views(source, &batch_matrices, light, render_side(first))?;
-        for (&index, image) in batch.iter().zip(images) {
-            for &settings in resolutions {
-                let view = resolve_samples(&image, settings.size, settings.samples_per_axis.max(1));
-                let shift_iou = one_pixel_shift_iou(&view, settings.size);
-                source_views.views.insert(key(settings, index), Arc::new((view, shift_iou)));
-            }
+    let missing_matrices: Vec<[[f32; 4]; 4]> = missing.iter().map(|&index| matrices[index]).collect();
+    gpu.render_views(source, &missing_matrices, light, render_side(first), |position, image| {
+        for &settings in resolutions {
+            let view = resolve_samples(&image, settings.size, settings.samples_per_axis.max(1));
+            let shift_iou = one_pixel_shift_iou(&view, settings.size);
+            source_views.views.insert(key(settings, missing[position]), Arc::new((view, shift_iou)));
         }
-    }
+    })?;
     // Each resolution's source views, in view order.
     let sources: Vec<Vec<Arc<(ResolvedView, f64)>>> = resolutions
         .iter()
@@ -218,24 +215,14 @@ fn compare_views(
     }
     let mut metrics: Vec<Vec<PreviewMetrics>> = resolutions.iter().map(|_| Vec::with_capacity(lods.len())).collect();
     for (slot, lod) in lods.iter().enumerate() {
-        // Rendered a batch at a time (`Gpu::render_views`), each batch resolved before the next.
-        let mut images = Vec::with_capacity(matrices.len());
-        for batch in matrices.chunks(crate::gpu::views_per_batch(render_side(first), 1)) {
-            let rendered = gpu.render_level_views(lod, batch, light, render_side(first))?;
-            images.extend(rendered.into_iter().map(|image| {
-                let resolve = |settings: &PreviewSettings| {
-                    resolve_samples(&image, settings.size, settings.samples_per_axis.max(1))
-                };
-                resolutions.iter().map(resolve).collect::<Vec<ResolvedView>>()
-            }));
-        }
-        for (resolution, (&settings, source_views)) in resolutions.iter().zip(&sources).enumerate() {
-            let mut level_metrics = Vec::with_capacity(images.len());
-            for (index, image) in images.iter_mut().enumerate() {
-                let lod_view = std::mem::take(&mut image[resolution]);
+        // Each view compared at every resolution as it comes back from its batch.
+        let mut level_metrics: Vec<Vec<ViewMetrics>> = resolutions.iter().map(|_| Vec::new()).collect();
+        gpu.render_level_views(lod, &matrices, light, render_side(first), |index, image| {
+            for (resolution, (settings, source_views)) in resolutions.iter().zip(&sources).enumerate() {
+                let lod_view = resolve_samples(&image, settings.size, settings.samples_per_axis.max(1));
                 let source_view = &source_views[index].0;
                 let overlap = silhouette_overlap(source_view, &lod_view);
-                level_metrics.push(ViewMetrics {
+                level_metrics[resolution].push(ViewMetrics {
                     direction: directions[index],
                     iou: overlap.iou,
                     missed: overlap.missed,
@@ -246,9 +233,12 @@ fn compare_views(
                     view_images(1 + slot, index, &lod_view.rgba);
                 }
             }
+        })?;
+        let by_resolution = resolutions.iter().zip(&sources).zip(level_metrics).zip(&mut metrics);
+        for (((settings, source_views), views), resolution_metrics) in by_resolution {
             let shift_ious: Vec<f64> = source_views.iter().map(|view| view.1).collect();
             let samples_per_pixel = settings.samples_per_axis * settings.samples_per_axis;
-            metrics[resolution].push(summarise_views(level_metrics, samples_per_pixel, &shift_ious));
+            resolution_metrics.push(summarise_views(views, samples_per_pixel, &shift_ious));
         }
     }
     Ok(metrics)
@@ -474,7 +464,6 @@ fn summarise_views(views: Vec<ViewMetrics>, samples_per_pixel: u32, source_shift
 
 /// A view resolved to its pixels: the sRGB colour (the mean of the pixel's samples, taken in
 /// linear light; alpha 255 where any sample is covered) and how many samples are covered.
-#[derive(Default)]
 pub struct ResolvedView {
     pub rgba: Vec<u8>,
     pub covered: Vec<u16>,

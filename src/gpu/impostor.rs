@@ -151,18 +151,21 @@ impl Gpu {
         light: [f32; 3],
         size: u32,
     ) -> Result<Vec<u8>, GpuError> {
-        self.render_impostor_views(impostor, &[view_projection], light, size).map(|mut images| images.remove(0))
+        let mut image = Vec::new();
+        self.render_impostor_views(impostor, &[view_projection], light, size, |_, view| image = view)?;
+        Ok(image)
     }
 
     /// [`Gpu::render_impostor_view`] under each of `view_projections`, drawn in batches as
-    /// [`Gpu::render_views`] draws a mesh's (one image each, in order).
+    /// [`Gpu::render_views`] draws a mesh's: each image goes to `each` with its view's index.
     pub fn render_impostor_views(
         &self,
         impostor: &ImpostorDraw,
         view_projections: &[[[f32; 4]; 4]],
         light: [f32; 3],
         size: u32,
-    ) -> Result<Vec<Vec<u8>>, GpuError> {
+        mut each: impl FnMut(usize, Vec<u8>),
+    ) -> Result<(), GpuError> {
         self.catching_device_errors(|| {
             let ImpostorPipelines { view: pipeline, sampler, .. } = self.impostor_pipelines();
             let [cx, cy, cz] = impostor.center;
@@ -185,54 +188,49 @@ impl Gpu {
             let albedo = self.levels_view(&impostor.albedo, true);
             let normal = self.levels_view(&impostor.normal, false);
             let depth = self.levels_view(&impostor.depth, false);
-            let mut images = Vec::with_capacity(view_projections.len());
-            for batch in view_projections.chunks(super::view_render::views_per_batch(size, 1)) {
-                let mut encoder = self.device.create_command_encoder(&Default::default());
-                let mut targets = Vec::with_capacity(batch.len());
-                for &view_projection in batch {
-                    let [x, y, z] = orthographic_eye(view_projection).to_array();
-                    let view =
-                        ImpostorViewUniform { view_projection, eye: [x, y, z, 0.0], light: super::extend(light) };
-                    let view_buffer = self.constants_buffer(bytemuck::bytes_of(&view));
-                    let group = self.device.create_bind_group(&wgpu::BindGroupDescriptor {
-                        label: Some("impostor"),
-                        layout: &pipeline.get_bind_group_layout(0),
-                        entries: &[
-                            wgpu::BindGroupEntry { binding: 0, resource: view_buffer.as_entire_binding() },
-                            wgpu::BindGroupEntry { binding: 1, resource: impostor_buffer.as_entire_binding() },
-                            wgpu::BindGroupEntry { binding: 2, resource: wgpu::BindingResource::Sampler(sampler) },
-                            wgpu::BindGroupEntry { binding: 3, resource: wgpu::BindingResource::TextureView(&albedo) },
-                            wgpu::BindGroupEntry { binding: 4, resource: wgpu::BindingResource::TextureView(&normal) },
-                            wgpu::BindGroupEntry { binding: 5, resource: wgpu::BindingResource::TextureView(&depth) },
-                            wgpu::BindGroupEntry { binding: 6, resource: rects_buffer.as_entire_binding() },
-                        ],
-                    });
-                    let target = self.target(size, size, ALBEDO_FORMAT);
-                    let target_view = target.create_view(&Default::default());
-                    let mut pass = encoder.begin_render_pass(&wgpu::RenderPassDescriptor {
-                        label: Some("impostor"),
-                        color_attachments: &[Some(wgpu::RenderPassColorAttachment {
-                            view: &target_view,
-                            depth_slice: None,
-                            resolve_target: None,
-                            ops: wgpu::Operations {
-                                load: wgpu::LoadOp::Clear(VIEW_BACKGROUND),
-                                store: wgpu::StoreOp::Store,
-                            },
-                        })],
-                        ..Default::default()
-                    });
-                    pass.set_pipeline(pipeline);
-                    pass.set_bind_group(0, &group, &[]);
-                    // The polygon as a fan of six triangles.
-                    pass.draw(0..18, 0..1);
-                    drop(pass);
-                    targets.push(target);
-                }
-                let targets: Vec<&wgpu::Texture> = targets.iter().collect();
-                images.extend(self.read_back(encoder, &targets)?);
-            }
-            Ok(images)
+            let record = |encoder: &mut wgpu::CommandEncoder, index: usize| {
+                let view_projection = view_projections[index];
+                let [x, y, z] = orthographic_eye(view_projection).to_array();
+                let view = ImpostorViewUniform { view_projection, eye: [x, y, z, 0.0], light: super::extend(light) };
+                let view_buffer = self.constants_buffer(bytemuck::bytes_of(&view));
+                let group = self.device.create_bind_group(&wgpu::BindGroupDescriptor {
+                    label: Some("impostor"),
+                    layout: &pipeline.get_bind_group_layout(0),
+                    entries: &[
+                        wgpu::BindGroupEntry { binding: 0, resource: view_buffer.as_entire_binding() },
+                        wgpu::BindGroupEntry { binding: 1, resource: impostor_buffer.as_entire_binding() },
+                        wgpu::BindGroupEntry { binding: 2, resource: wgpu::BindingResource::Sampler(sampler) },
+                        wgpu::BindGroupEntry { binding: 3, resource: wgpu::BindingResource::TextureView(&albedo) },
+                        wgpu::BindGroupEntry { binding: 4, resource: wgpu::BindingResource::TextureView(&normal) },
+                        wgpu::BindGroupEntry { binding: 5, resource: wgpu::BindingResource::TextureView(&depth) },
+                        wgpu::BindGroupEntry { binding: 6, resource: rects_buffer.as_entire_binding() },
+                    ],
+                });
+                let target = self.target(size, size, ALBEDO_FORMAT);
+                let target_view = target.create_view(&Default::default());
+                let mut pass = encoder.begin_render_pass(&wgpu::RenderPassDescriptor {
+                    label: Some("impostor"),
+                    color_attachments: &[Some(wgpu::RenderPassColorAttachment {
+                        view: &target_view,
+                        depth_slice: None,
+                        resolve_target: None,
+                        ops: wgpu::Operations {
+                            load: wgpu::LoadOp::Clear(VIEW_BACKGROUND),
+                            store: wgpu::StoreOp::Store,
+                        },
+                    })],
+                    ..Default::default()
+                });
+                pass.set_pipeline(pipeline);
+                pass.set_bind_group(0, &group, &[]);
+                // The polygon as a fan of six triangles.
+                pass.draw(0..18, 0..1);
+                drop(pass);
+                vec![target]
+            };
+            self.draw_in_batches((view_projections.len(), size, 1), record, |index, mut images| {
+                each(index, images.remove(0))
+            })
         })
     }
 
@@ -341,18 +339,19 @@ impl Gpu {
         }
     }
 
-    /// [`Gpu::render_level_view`] under each of `view_projections`, drawn in batches (one image
-    /// each, in order).
+    /// [`Gpu::render_level_view`] under each of `view_projections`, drawn in batches: each image
+    /// goes to `each` with its view's index, in order.
     pub fn render_level_views(
         &self,
         level: &LevelView,
         view_projections: &[[[f32; 4]; 4]],
         light: [f32; 3],
         size: u32,
-    ) -> Result<Vec<Vec<u8>>, GpuError> {
+        each: impl FnMut(usize, Vec<u8>),
+    ) -> Result<(), GpuError> {
         match level {
-            LevelView::Mesh(mesh) => self.render_views(mesh, view_projections, light, size),
-            LevelView::Impostor(impostor) => self.render_impostor_views(impostor, view_projections, light, size),
+            LevelView::Mesh(mesh) => self.render_views(mesh, view_projections, light, size, each),
+            LevelView::Impostor(impostor) => self.render_impostor_views(impostor, view_projections, light, size, each),
         }
     }
 }

@@ -55,6 +55,34 @@ pub fn views_per_batch(size: u32, targets: usize) -> usize {
 }
 
 impl Gpu {
+    /// Draws `count` views, each `size`² with `targets` colour targets, in batches of
+    /// [`views_per_batch`]: `record` records view `index`'s pass into its batch's encoder and
+    /// returns its targets; each batch is read back at once, and each view's targets' pixels go to
+    /// `each` with its index, in order, before the next batch is drawn (so that at most a batch's
+    /// pixels are held).
+    pub(super) fn draw_in_batches(
+        &self,
+        (count, size, targets): (usize, u32, usize),
+        mut record: impl FnMut(&mut wgpu::CommandEncoder, usize) -> Vec<wgpu::Texture>,
+        mut each: impl FnMut(usize, Vec<Vec<u8>>),
+    ) -> Result<(), GpuError> {
+        let batch = views_per_batch(size, targets);
+        for first in (0..count).step_by(batch) {
+            let views = first..(first + batch).min(count);
+            let mut encoder = self.device.create_command_encoder(&Default::default());
+            let mut drawn: Vec<wgpu::Texture> = Vec::with_capacity(views.len() * targets);
+            for index in views.clone() {
+                drawn.extend(record(&mut encoder, index));
+            }
+            let drawn: Vec<&wgpu::Texture> = drawn.iter().collect();
+            let mut pixels = self.read_back(encoder, &drawn)?.into_iter();
+            for index in views {
+                each(index, pixels.by_ref().take(targets).collect());
+            }
+        }
+        Ok(())
+    }
+
     /// Renders `mesh` under an orthographic camera into a `size`² RGBA8 image (sRGB colour on a
     /// mid-grey background; alpha 255 where a surface was drawn, 0 elsewhere).
     pub fn render_view(
@@ -64,62 +92,64 @@ impl Gpu {
         light: [f32; 3],
         size: u32,
     ) -> Result<Vec<u8>, GpuError> {
-        self.render_views(mesh, &[view_projection], light, size).map(|mut images| images.remove(0))
+        let mut image = Vec::new();
+        self.render_views(mesh, &[view_projection], light, size, |_, view| image = view)?;
+        Ok(image)
     }
 
-    /// [`Gpu::render_view`] under each of `view_projections`, drawn in batches (one image each,
-    /// in order).
+    /// [`Gpu::render_view`] under each of `view_projections`, drawn in batches
+    /// ([`Gpu::draw_in_batches`]): each image goes to `each` with its view's index, in order.
     pub fn render_views(
         &self,
         mesh: &ViewMesh,
         view_projections: &[[[f32; 4]; 4]],
         light: [f32; 3],
         size: u32,
-    ) -> Result<Vec<Vec<u8>>, GpuError> {
+        mut each: impl FnMut(usize, Vec<u8>),
+    ) -> Result<(), GpuError> {
         let cameras: Vec<CameraUniform> = view_projections
             .iter()
             .map(|&view_projection| CameraUniform { view_projection, light: extend(light) })
             .collect();
-        let views =
-            self.draw_views(mesh, &cameras, size, (&self.view_pipeline, &[(ALBEDO_FORMAT, VIEW_BACKGROUND)]))?;
-        Ok(views.into_iter().map(|mut images| images.remove(0)).collect())
+        let pipeline = (&self.view_pipeline, [(ALBEDO_FORMAT, VIEW_BACKGROUND)].as_slice());
+        self.draw_views(mesh, &cameras, size, pipeline, |index, mut images| each(index, images.remove(0)))
     }
 
     /// Renders impostor frames of `mesh` (`view.wgsl`'s `fs_impostor`), one under each of
     /// `view_projections`, each into two `size`² RGBA8 images: the unlit sRGB albedo with alpha
     /// 255 where drawn, and the world-space normal as `0.5 + 0.5 n` with the depth (0 at the
     /// projection's near plane, 255 at its far one) in alpha; both 0 where nothing was drawn.
+    /// Drawn in batches: each frame's images go to `each` with its index, in order.
     pub fn render_impostor_frames(
         &self,
         mesh: &ViewMesh,
         view_projections: &[[[f32; 4]; 4]],
         size: u32,
-    ) -> Result<Vec<[Vec<u8>; 2]>, GpuError> {
+        mut each: impl FnMut(usize, [Vec<u8>; 2]),
+    ) -> Result<(), GpuError> {
         let cameras: Vec<CameraUniform> = view_projections
             .iter()
             .map(|&view_projection| CameraUniform { view_projection, light: [0.0; 4] })
             .collect();
         let targets = [(ALBEDO_FORMAT, wgpu::Color::TRANSPARENT), (DATA_FORMAT, wgpu::Color::TRANSPARENT)];
-        let views = self.draw_views(mesh, &cameras, size, (&self.impostor_pipelines().frame, &targets))?;
-        Ok(views
-            .into_iter()
-            .map(|mut images| {
-                let normal_depth = images.pop().unwrap_or_default();
-                [images.pop().unwrap_or_default(), normal_depth]
-            })
-            .collect())
+        self.draw_views(mesh, &cameras, size, (&self.impostor_pipelines().frame, &targets), |index, mut images| {
+            let normal_depth = images.pop().unwrap_or_default();
+            each(index, [images.pop().unwrap_or_default(), normal_depth])
+        })
     }
 
     /// Draws `mesh` with `pipeline` under each of `cameras` into one `size`² target per format
-    /// (cleared to its colour), depth-tested, in batches of [`views_per_batch`]; returns each
-    /// view's targets' pixels. The mesh's vertices and materials are bound once for all views.
+    /// (cleared to its colour), depth-tested, in batches ([`Gpu::draw_in_batches`]); each view's
+    /// targets' pixels go to `each`. The mesh's vertices and materials are bound once for all
+    /// views.
     fn draw_views(
         &self,
         mesh: &ViewMesh,
         cameras: &[CameraUniform],
         size: u32,
         (pipeline, formats): (&wgpu::RenderPipeline, &[(wgpu::TextureFormat, wgpu::Color)]),
-    ) -> Result<Vec<Vec<Vec<u8>>>, GpuError> {
+        each: impl FnMut(usize, Vec<Vec<u8>>),
+    ) -> Result<(), GpuError> {
         self.catching_device_errors(|| {
             let mut draws = Vec::new();
             for (material_index, vertices) in &mesh.batches {
@@ -129,64 +159,54 @@ impl Gpu {
                 let buffer = self.vertex_buffer(vertices);
                 draws.push((buffer, vertices.len() as u32, self.view_material_group(&mesh.materials[*material_index])));
             }
-            let mut images = Vec::with_capacity(cameras.len());
-            for batch in cameras.chunks(views_per_batch(size, formats.len())) {
-                let mut encoder = self.device.create_command_encoder(&Default::default());
-                let mut targets: Vec<wgpu::Texture> = Vec::with_capacity(batch.len() * formats.len());
-                for camera in batch {
-                    let camera_buffer = self.constants_buffer(bytemuck::bytes_of(camera));
-                    let camera_group = self.device.create_bind_group(&wgpu::BindGroupDescriptor {
-                        label: Some("camera"),
-                        layout: &self.frame_layout,
-                        entries: &[wgpu::BindGroupEntry { binding: 0, resource: camera_buffer.as_entire_binding() }],
-                    });
-                    let view_targets: Vec<wgpu::Texture> =
-                        formats.iter().map(|&(format, _)| self.target(size, size, format)).collect();
-                    let views: Vec<wgpu::TextureView> =
-                        view_targets.iter().map(|target| target.create_view(&Default::default())).collect();
-                    let depth = self.target(size, size, DEPTH_FORMAT).create_view(&Default::default());
-                    let color_attachments: Vec<Option<wgpu::RenderPassColorAttachment>> = views
-                        .iter()
-                        .zip(formats)
-                        .map(|(view, &(_, clear))| {
-                            Some(wgpu::RenderPassColorAttachment {
-                                view,
-                                depth_slice: None,
-                                resolve_target: None,
-                                ops: wgpu::Operations { load: wgpu::LoadOp::Clear(clear), store: wgpu::StoreOp::Store },
-                            })
+            let record = |encoder: &mut wgpu::CommandEncoder, index: usize| {
+                let camera_buffer = self.constants_buffer(bytemuck::bytes_of(&cameras[index]));
+                let camera_group = self.device.create_bind_group(&wgpu::BindGroupDescriptor {
+                    label: Some("camera"),
+                    layout: &self.frame_layout,
+                    entries: &[wgpu::BindGroupEntry { binding: 0, resource: camera_buffer.as_entire_binding() }],
+                });
+                let targets: Vec<wgpu::Texture> =
+                    formats.iter().map(|&(format, _)| self.target(size, size, format)).collect();
+                let views: Vec<wgpu::TextureView> =
+                    targets.iter().map(|target| target.create_view(&Default::default())).collect();
+                let depth = self.target(size, size, DEPTH_FORMAT).create_view(&Default::default());
+                let color_attachments: Vec<Option<wgpu::RenderPassColorAttachment>> = views
+                    .iter()
+                    .zip(formats)
+                    .map(|(view, &(_, clear))| {
+                        Some(wgpu::RenderPassColorAttachment {
+                            view,
+                            depth_slice: None,
+                            resolve_target: None,
+                            ops: wgpu::Operations { load: wgpu::LoadOp::Clear(clear), store: wgpu::StoreOp::Store },
                         })
-                        .collect();
-                    let mut pass = encoder.begin_render_pass(&wgpu::RenderPassDescriptor {
-                        label: Some("view"),
-                        color_attachments: &color_attachments,
-                        depth_stencil_attachment: Some(wgpu::RenderPassDepthStencilAttachment {
-                            view: &depth,
-                            depth_ops: Some(wgpu::Operations {
-                                load: wgpu::LoadOp::Clear(1.0),
-                                store: wgpu::StoreOp::Discard,
-                            }),
-                            stencil_ops: None,
+                    })
+                    .collect();
+                let mut pass = encoder.begin_render_pass(&wgpu::RenderPassDescriptor {
+                    label: Some("view"),
+                    color_attachments: &color_attachments,
+                    depth_stencil_attachment: Some(wgpu::RenderPassDepthStencilAttachment {
+                        view: &depth,
+                        depth_ops: Some(wgpu::Operations {
+                            load: wgpu::LoadOp::Clear(1.0),
+                            store: wgpu::StoreOp::Discard,
                         }),
-                        ..Default::default()
-                    });
-                    pass.set_pipeline(pipeline);
-                    pass.set_bind_group(0, &camera_group, &[]);
-                    for (buffer, count, group) in &draws {
-                        pass.set_bind_group(1, group, &[]);
-                        pass.set_vertex_buffer(0, buffer.slice(..));
-                        pass.draw(0..*count, 0..1);
-                    }
-                    drop(pass);
-                    targets.extend(view_targets);
+                        stencil_ops: None,
+                    }),
+                    ..Default::default()
+                });
+                pass.set_pipeline(pipeline);
+                pass.set_bind_group(0, &camera_group, &[]);
+                for (buffer, count, group) in &draws {
+                    pass.set_bind_group(1, group, &[]);
+                    pass.set_vertex_buffer(0, buffer.slice(..));
+                    pass.draw(0..*count, 0..1);
                 }
-                let targets: Vec<&wgpu::Texture> = targets.iter().collect();
-                let mut pixels = self.read_back(encoder, &targets)?.into_iter();
-                for _ in batch {
-                    images.push(pixels.by_ref().take(formats.len()).collect());
-                }
-            }
-            Ok(images)
+                drop(pass);
+                targets
+            };
+            self.draw_in_batches((cameras.len(), size, formats.len()), record, each)
         })
     }
 

@@ -606,12 +606,16 @@ fn views_drawn_in_batches_are_those_drawn_one_at_a_time_and_sizes_sharing_a_rend
     let cameras: Vec<[[f32; 4]; 4]> =
         view_directions().into_iter().take(3).map(|direction| view_projection(center, radius, direction)).collect();
     assert!(cirrus::gpu::views_per_batch(1024, 1) < cameras.len());
-    let batched = gpu.render_views(&source, &cameras, light, 1024).unwrap();
-    let frames = gpu.render_impostor_frames(&source, &cameras, 1024).unwrap();
+    // Each image as the batches hand it over.
+    let (mut batched, mut frames) = (Vec::new(), Vec::new());
+    gpu.render_views(&source, &cameras, light, 1024, |_, image| batched.push(image)).unwrap();
+    gpu.render_impostor_frames(&source, &cameras, 1024, |_, images| frames.push(images)).unwrap();
     assert_eq!((batched.len(), frames.len()), (3, 3));
     for ((&camera, image), frame) in cameras.iter().zip(&batched).zip(&frames) {
         assert_eq!(*image, gpu.render_view(&source, camera, light, 1024).unwrap());
-        assert_eq!(frame[0], gpu.render_impostor_frames(&source, &[camera], 1024).unwrap()[0][0]);
+        let mut alone = Vec::new();
+        gpu.render_impostor_frames(&source, &[camera], 1024, |_, [albedo, _]| alone = albedo).unwrap();
+        assert_eq!(frame[0], alone);
         assert!(image.chunks_exact(4).any(|pixel| pixel[3] > 0) && frame[1].chunks_exact(4).any(|texel| texel[3] > 0));
     }
 

@@ -447,6 +447,7 @@ fn wait_for_edit(
             Ok(message) => return Some(message),
             Err(std::sync::mpsc::RecvTimeoutError::Timeout) => {
                 project.save_deferred();
+                crate::memory::release_freed_memory();
                 *last_saved = Instant::now();
                 record_saved = true;
             }

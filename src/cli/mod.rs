@@ -329,21 +329,9 @@ fn configure_threads() {
     let _ = rayon::ThreadPoolBuilder::new().num_threads(threads).build_global();
 }
 
-/// Large buffers (images, mip levels, blocks: 1 MiB and up) straight from the system and back
-/// to it when freed. glibc's default raises its threshold to the largest buffer freed so far, so
-/// a build's freed 16 MiB images are kept in its heaps, and peak memory grows with every texture
-/// baked on another thread: four 2048² albedos peaked at 315 MB, with a fixed threshold 260 MB.
-fn release_large_buffers() {
-    #[cfg(all(target_os = "linux", target_env = "gnu"))]
-    // SAFETY: mallopt only sets an allocator parameter; called before the worker threads start.
-    unsafe {
-        libc::mallopt(libc::M_MMAP_THRESHOLD, 1 << 20);
-    }
-}
-
 fn run_command(cli: Cli) -> ExitCode {
     ignore_file_size_signal();
-    release_large_buffers();
+    crate::memory::configure_allocator();
     init_logging(cli.verbose);
     configure_threads();
     let remote_cache = match RemoteCacheOverride::parse(cli.remote_cache.as_deref(), cli.remote_cache_mode.as_deref()) {

@@ -12,7 +12,7 @@ struct Camera {
 struct Material {
     // rgb: albedo factor (linear), a: constant opacity
     albedo: vec4f,
-    // has albedo map, has opacity map, has normal map, normal map stores z (else rebuilt)
+    // has albedo map, unused, unused, normal map stores z (else rebuilt)
     flags: vec4f,
     // alpha cutoff, unused...
     params: vec4f,
@@ -26,6 +26,12 @@ struct Material {
 @group(1) @binding(2) var albedo_map: texture_2d<f32>;
 @group(1) @binding(3) var opacity_map: texture_2d<f32>;
 @group(1) @binding(4) var normal_map: texture_2d<f32>;
+
+// Whether the material has an opacity map and a normal map: a pipeline for each combination
+// (`Gpu::view_pipelines`), so that a map the material lacks is not sampled at all (on llvmpipe
+// every sample is a filtered fetch for each fragment, discarded ones included).
+override HAS_OPACITY_MAP: bool = true;
+override HAS_NORMAL_MAP: bool = true;
 
 struct VertexIn {
     @location(0) position: vec3f,
@@ -60,15 +66,18 @@ struct Surface {
 
 fn surface(input: VertexOut, front: bool) -> Surface {
     let albedo_sample = textureSample(albedo_map, linear_sampler, input.uv);
-    let opacity_sample = textureSample(opacity_map, linear_sampler, input.uv);
-    let normal_sample = textureSample(normal_map, linear_sampler, input.uv);
+    var mapped_opacity = 1.0;
+    if (HAS_OPACITY_MAP) {
+        mapped_opacity = textureSample(opacity_map, linear_sampler, input.uv).a;
+    }
     let albedo = select(vec4f(1.0), albedo_sample, material.flags.x > 0.5) * vec4f(material.albedo.rgb, 1.0);
-    let opacity = albedo.a * select(1.0, opacity_sample.a, material.flags.y > 0.5) * material.albedo.a;
+    let opacity = albedo.a * mapped_opacity * material.albedo.a;
     if (opacity < material.params.x) {
         discard;
     }
     var n = normalize(input.normal);
-    if (material.flags.z > 0.5) {
+    if (HAS_NORMAL_MAP) {
+        let normal_sample = textureSample(normal_map, linear_sampler, input.uv);
         let t = normalize(input.tangent.xyz - n * dot(n, input.tangent.xyz));
         let b = cross(n, t) * input.tangent.w;
         var mapped = normal_sample.xyz * 2.0 - 1.0;

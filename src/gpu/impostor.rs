@@ -67,7 +67,7 @@ fn blend_main(@builtin(global_invocation_id) id: vec3<u32>) {
 /// The impostor pipelines: `view.wgsl`'s `fs_impostor` (a frame's albedo and normal + depth)
 /// and `impostor.wgsl`'s reference renderer with its sampler.
 pub(super) struct ImpostorPipelines {
-    pub frame: wgpu::RenderPipeline,
+    pub frame: super::view_render::MapPipelines,
     view: wgpu::RenderPipeline,
     sampler: wgpu::Sampler,
 }
@@ -98,13 +98,10 @@ impl Gpu {
                 bind_group_layouts: &[Some(&self.frame_layout), Some(&self.view_material_layout)],
                 ..Default::default()
             });
-            let frame = super::mesh_pipeline(
-                &self.device,
-                "impostor frame",
-                &view_layout,
-                (&view_shader, "fs_impostor"),
-                &[Some(ALBEDO_FORMAT.into()), Some(DATA_FORMAT.into())],
-                Some(super::depth_test()),
+            let frame = super::view_render::MapPipelines::new(
+                (view_shader, "fs_impostor"),
+                view_layout,
+                &[ALBEDO_FORMAT, DATA_FORMAT],
             );
             let module = self.device.create_shader_module(wgpu::ShaderModuleDescriptor {
                 label: Some("impostor.wgsl"),

@@ -63,7 +63,8 @@ pub struct Gpu {
     /// Uploaded source textures by content hash and colour space.
     /// A cell per key, so that threads wanting the same new texture upload it once.
     uploads: Mutex<HashMap<UploadKey, Arc<std::sync::OnceLock<Arc<wgpu::TextureView>>>>>,
-    view_pipeline: wgpu::RenderPipeline,
+    /// `view.wgsl`'s `fs_main`, for each set of maps a material has.
+    view_pipelines: view_render::MapPipelines,
     /// The impostor pipelines, made on first use: a bake that draws no impostor compiles none.
     impostor: OnceLock<impostor::ImpostorPipelines>,
     view_material_layout: wgpu::BindGroupLayout,
@@ -367,13 +368,14 @@ impl Gpu {
         });
         let targets: Vec<Option<wgpu::ColorTargetState>> =
             [ALBEDO_FORMAT, DATA_FORMAT, DATA_FORMAT, DATA_FORMAT].iter().map(|&format| Some(format.into())).collect();
-        let pipeline = mesh_pipeline(&device, "plane", &layout, (&shader, "fs_main"), &targets, Some(depth_test()));
+        let pipeline =
+            mesh_pipeline(&device, "plane", &layout, (&shader, "fs_main", &[]), &targets, Some(depth_test()));
         // Coverage is the union of every face's: no depth test.
         let coverage_pipeline = mesh_pipeline(
             &device,
             "plane coverage",
             &layout,
-            (&shader, "fs_coverage"),
+            (&shader, "fs_coverage", &[]),
             &[Some(COVERAGE_FORMAT.into())],
             None,
         );
@@ -400,14 +402,7 @@ impl Gpu {
             bind_group_layouts: &[Some(&frame_layout), Some(&view_material_layout)],
             ..Default::default()
         });
-        let view_pipeline = mesh_pipeline(
-            &device,
-            "view",
-            &view_layout,
-            (&view_shader, "fs_main"),
-            &[Some(ALBEDO_FORMAT.into())],
-            Some(depth_test()),
-        );
+        let view_pipelines = view_render::MapPipelines::new((view_shader, "fs_main"), view_layout, &[ALBEDO_FORMAT]);
         let top_down_pipeline = top_down_render::top_down_pipeline(&device, &frame_layout);
         Ok(Gpu {
             top_down_pipeline,
@@ -424,7 +419,7 @@ impl Gpu {
             sampler,
             white,
             uploads: Mutex::new(HashMap::new()),
-            view_pipeline,
+            view_pipelines,
             impostor: OnceLock::new(),
             view_material_layout,
             material_groups: Mutex::new(HashMap::new()),
@@ -556,13 +551,13 @@ fn depth_test() -> wgpu::DepthStencilState {
 }
 
 /// A pipeline drawing `RenderVertex` triangles double-sided (with `depth`'s test, when given)
-/// through the vertex shader `vs_main` and the fragment entry point named beside the shader:
-/// the one shape the plane bake, its coverage and the preview use.
+/// through the vertex shader `vs_main` and the fragment entry point named beside the shader, with
+/// its overridable constants: the one shape the plane bake, its coverage and the preview use.
 fn mesh_pipeline(
     device: &wgpu::Device,
     label: &str,
     layout: &wgpu::PipelineLayout,
-    (shader, fragment_entry): (&wgpu::ShaderModule, &str),
+    (shader, fragment_entry, constants): (&wgpu::ShaderModule, &str, &[(&str, f64)]),
     targets: &[Option<wgpu::ColorTargetState>],
     depth: Option<wgpu::DepthStencilState>,
 ) -> wgpu::RenderPipeline {
@@ -583,7 +578,7 @@ fn mesh_pipeline(
         fragment: Some(wgpu::FragmentState {
             module: shader,
             entry_point: Some(fragment_entry),
-            compilation_options: Default::default(),
+            compilation_options: wgpu::PipelineCompilationOptions { constants, ..Default::default() },
             targets,
         }),
         primitive: wgpu::PrimitiveState { cull_mode: None, ..Default::default() },

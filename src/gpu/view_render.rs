@@ -34,6 +34,43 @@ struct CameraUniform {
     light: [f32; 4],
 }
 
+/// The pipelines of one `view.wgsl` fragment entry point, one for each set of maps a material has
+/// (its `HAS_OPACITY_MAP` and `HAS_NORMAL_MAP`), each made on first use: a map the material lacks
+/// is not sampled. On llvmpipe a sample is a filtered fetch for every fragment, discarded ones
+/// included: the oak's leaves have no normal map and its bark no opacity map.
+pub(super) struct MapPipelines {
+    shader: (wgpu::ShaderModule, &'static str),
+    layout: wgpu::PipelineLayout,
+    formats: Vec<wgpu::TextureFormat>,
+    /// By `opacity map + 2 × normal map`.
+    pipelines: [std::sync::OnceLock<wgpu::RenderPipeline>; 4],
+}
+
+impl MapPipelines {
+    /// The pipelines of `shader`'s fragment entry point, drawing into one target per format,
+    /// depth-tested.
+    pub(super) fn new(
+        shader: (wgpu::ShaderModule, &'static str),
+        layout: wgpu::PipelineLayout,
+        formats: &[wgpu::TextureFormat],
+    ) -> MapPipelines {
+        MapPipelines { shader, layout, formats: formats.to_vec(), pipelines: Default::default() }
+    }
+
+    /// The pipeline that draws `material`.
+    fn for_material(&self, device: &wgpu::Device, material: &ViewMaterial) -> &wgpu::RenderPipeline {
+        let (opacity, normal) = (material.opacity.is_some(), material.normal.is_some());
+        self.pipelines[opacity as usize + 2 * normal as usize].get_or_init(|| {
+            let targets: Vec<Option<wgpu::ColorTargetState>> =
+                self.formats.iter().map(|&format| Some(format.into())).collect();
+            let constants =
+                [("HAS_OPACITY_MAP", f64::from(u8::from(opacity))), ("HAS_NORMAL_MAP", f64::from(u8::from(normal)))];
+            let (shader, entry) = (&self.shader.0, self.shader.1);
+            mesh_pipeline(device, entry, &self.layout, (shader, entry, &constants), &targets, Some(depth_test()))
+        })
+    }
+}
+
 #[repr(C)]
 #[derive(Clone, Copy, Pod, Zeroable)]
 struct ViewMaterialUniform {
@@ -111,7 +148,7 @@ impl Gpu {
             .iter()
             .map(|&view_projection| CameraUniform { view_projection, light: extend(light) })
             .collect();
-        let pipeline = (&self.view_pipeline, [(ALBEDO_FORMAT, VIEW_BACKGROUND)].as_slice());
+        let pipeline = (&self.view_pipelines, [(ALBEDO_FORMAT, VIEW_BACKGROUND)].as_slice());
         self.draw_views(mesh, &cameras, size, pipeline, |index, mut images| each(index, images.remove(0)))
     }
 
@@ -147,7 +184,7 @@ impl Gpu {
         mesh: &ViewMesh,
         cameras: &[CameraUniform],
         size: u32,
-        (pipeline, formats): (&wgpu::RenderPipeline, &[(wgpu::TextureFormat, wgpu::Color)]),
+        (pipelines, formats): (&MapPipelines, &[(wgpu::TextureFormat, wgpu::Color)]),
         each: impl FnMut(usize, Vec<Vec<u8>>),
     ) -> Result<(), GpuError> {
         self.catching_device_errors(|| {
@@ -157,7 +194,9 @@ impl Gpu {
                     continue;
                 }
                 let buffer = self.vertex_buffer(vertices);
-                draws.push((buffer, vertices.len() as u32, self.view_material_group(&mesh.materials[*material_index])));
+                let material = &mesh.materials[*material_index];
+                let pipeline = pipelines.for_material(&self.device, material);
+                draws.push((buffer, vertices.len() as u32, self.view_material_group(material), pipeline));
             }
             let record = |encoder: &mut wgpu::CommandEncoder, index: usize| {
                 let camera_buffer = self.constants_buffer(bytemuck::bytes_of(&cameras[index]));
@@ -196,9 +235,9 @@ impl Gpu {
                     }),
                     ..Default::default()
                 });
-                pass.set_pipeline(pipeline);
                 pass.set_bind_group(0, &camera_group, &[]);
-                for (buffer, count, group) in &draws {
+                for (buffer, count, group, pipeline) in &draws {
+                    pass.set_pipeline(pipeline);
                     pass.set_bind_group(1, group, &[]);
                     pass.set_vertex_buffer(0, buffer.slice(..));
                     pass.draw(0..*count, 0..1);
@@ -214,12 +253,7 @@ impl Gpu {
         let flag = |present: bool| if present { 1.0 } else { 0.0 };
         let uniform = ViewMaterialUniform {
             albedo: material.albedo_factor,
-            flags: [
-                flag(material.albedo.is_some()),
-                flag(material.opacity.is_some()),
-                flag(material.normal.is_some()),
-                flag(material.normal_has_z),
-            ],
+            flags: [flag(material.albedo.is_some()), 0.0, 0.0, flag(material.normal_has_z)],
             params: [material.alpha_cutoff, 0.0, 0.0, 0.0],
         };
         let buffer = self.constants_buffer(bytemuck::bytes_of(&uniform));

@@ -23,6 +23,7 @@ mod isa;
 mod impostor;
 mod occlusion;
 mod packing;
+mod preview;
 mod reduce;
 mod scale;
 mod tidy;

@@ -180,11 +180,17 @@ pub(crate) fn run_jobs<T: JobTask>(
     Some(finished)
 }
 
+/// What an item reports when a query it waited for panicked on another thread (whose own item
+/// reports the panic's message).
+pub const PROPAGATED_PANIC: &str = "a stage it waited for panicked on another worker (see the error reported there)";
+
 /// Runs `work` for every item on worker threads, each with its own database clone; a panic
-/// fails only its item. `describe` names an item's file (for that failure) and progress label.
-/// Raising `cancel` stops the workers: those inside a query unwind with `salsa::Cancelled`
-/// (their clones' cancellation tokens), the rest take no new item; unfinished items are `None`.
-pub(crate) fn run_parallel<T: Sync, R: Send>(
+/// fails only its item, and so does a query's panic on another thread that this item's query
+/// waited for (salsa unwinds the waiter with `Cancelled::PropagatedPanic`): that is not a
+/// cancellation. `describe` names an item's file (for that failure) and progress label. Raising
+/// `cancel` stops the workers: those inside a query unwind with `salsa::Cancelled` (their
+/// clones' cancellation tokens), the rest take no new item; unfinished items are `None`.
+pub fn run_parallel<T: Sync, R: Send>(
     db: &Database,
     items: &[T],
     describe: &(dyn Fn(&Database, &T) -> (PathBuf, String) + Sync),
@@ -213,13 +219,22 @@ pub(crate) fn run_parallel<T: Sync, R: Send>(
                     let started = std::time::Instant::now();
                     let result = match std::panic::catch_unwind(AssertUnwindSafe(|| work(&db, item))) {
                         Ok(result) => result,
-                        Err(panic) if panic.is::<salsa::Cancelled>() => break,
                         Err(panic) => {
+                            let propagated = matches!(
+                                panic.downcast_ref::<salsa::Cancelled>(),
+                                Some(salsa::Cancelled::PropagatedPanic)
+                            );
+                            if panic.is::<salsa::Cancelled>() && (!propagated || cancel.is_raised()) {
+                                break;
+                            }
                             let message = panic
                                 .downcast_ref::<String>()
                                 .cloned()
                                 .or_else(|| panic.downcast_ref::<&str>().map(|text| text.to_string()))
-                                .unwrap_or_else(|| "unknown panic".to_string());
+                                .unwrap_or_else(|| {
+                                    let unknown = if propagated { PROPAGATED_PANIC } else { "unknown panic" };
+                                    unknown.to_string()
+                                });
                             let (file, label) = describe(&db, item);
                             Err(Diagnostic::new(file, format!("internal error while baking `{label}`: {message}")))
                         }

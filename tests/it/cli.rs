@@ -177,6 +177,36 @@ fn check_passes_on_the_bundled_pipeline_and_reports_each_kind_s_problems() {
 }
 
 #[test]
+fn a_panic_fails_its_own_job_and_the_jobs_that_waited_for_it_not_the_build() {
+    use cirrus::db::Database;
+    use cirrus::diagnostic::Diagnostic;
+    // One job panics inside a stage; another waited for that stage on another worker, which salsa
+    // unwinds with `Cancelled::PropagatedPanic`: an error of its own, not a cancelled build (it
+    // was reported as "the build was cancelled by a newer edit").
+    let items = ["panics", "waited", "fine"];
+    let describe = |_: &Database, item: &&str| (std::path::PathBuf::from(format!("{item}.obj")), item.to_string());
+    let work = |_: &Database, item: &&str| -> Result<u32, Diagnostic> {
+        match *item {
+            "panics" => panic!("index 9 out of bounds"),
+            "waited" => std::panic::resume_unwind(Box::new(salsa::Cancelled::PropagatedPanic)),
+            _ => Ok(7),
+        }
+    };
+    let cancel = cirrus::schedule::CancelFlag::default();
+    let results = cirrus::schedule::run_parallel(&Database::new(None), &items, &describe, &work, &|_| {}, &cancel);
+    let message = |index: usize| match &results[index] {
+        Some(Err(diagnostic)) => format!("{}: {}", diagnostic.file.display(), diagnostic.message),
+        other => panic!("item {index}: {:?}", other.as_ref().map(|result| result.as_ref().map_err(|_| ()))),
+    };
+    assert_eq!(message(0), "panics.obj: internal error while baking `panics`: index 9 out of bounds");
+    assert_eq!(
+        message(1),
+        format!("waited.obj: internal error while baking `waited`: {}", cirrus::schedule::PROPAGATED_PANIC)
+    );
+    assert!(matches!(results[2], Some(Ok(7))));
+}
+
+#[test]
 fn the_progress_estimate_weights_each_sort_of_job_by_what_it_took() {
     use cirrus::schedule::{remaining_seconds, Progress};
     use std::collections::BTreeMap;

@@ -28,8 +28,9 @@ struct Material {
 @group(1) @binding(4) var normal_map: texture_2d<f32>;
 
 // Whether the material has an opacity map and a normal map: a pipeline for each combination
-// (`Gpu::view_pipelines`), so that a map the material lacks is not sampled at all (on llvmpipe
-// every sample is a filtered fetch for each fragment, discarded ones included).
+// (`view_render::MapPipelines`, for `fs_main` and `fs_impostor` alike), so that a map the material
+// lacks is not sampled at all (on llvmpipe every sample is a filtered fetch for each fragment,
+// discarded ones included). An engine porting this shader reads the maps its material has.
 override HAS_OPACITY_MAP: bool = true;
 override HAS_NORMAL_MAP: bool = true;
 

@@ -66,7 +66,8 @@ impl MapPipelines {
             let constants =
                 [("HAS_OPACITY_MAP", f64::from(u8::from(opacity))), ("HAS_NORMAL_MAP", f64::from(u8::from(normal)))];
             let (shader, entry) = (&self.shader.0, self.shader.1);
-            mesh_pipeline(device, entry, &self.layout, (shader, entry, &constants), &targets, Some(depth_test()))
+            let label = format!("{entry}, opacity map {opacity}, normal map {normal}");
+            mesh_pipeline(device, &label, &self.layout, (shader, entry, &constants), &targets, Some(depth_test()))
         })
     }
 }

@@ -36,7 +36,7 @@ pub struct BillboardSettings {
 /// and 8 × 8 frames. Searching 16, 64 and 256 quads and 8 and 12 frames, the four-level chains
 /// (2 MiB, 512, 128 and 32 KiB) of the corpus oak, ash and bush and the bundled bush picked
 /// these or the triangles at every level, as they do with the default; each more costs its
-/// bake and its measuring (the oak's chain: 8.0 s by default, 13.9 s with all five).
+/// bake and its measuring (the oak's chain: 7.0 s by default, 12.2 s with all five).
 #[derive(Clone, Debug, PartialEq, Serialize)]
 pub struct AutoCandidates {
     /// Billboard clouds of these many quads (ascending, each once).

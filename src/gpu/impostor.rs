@@ -89,20 +89,7 @@ impl Gpu {
     /// The impostor pipelines, made on first use.
     pub(super) fn impostor_pipelines(&self) -> &ImpostorPipelines {
         self.impostor.get_or_init(|| {
-            let view_shader = self.device.create_shader_module(wgpu::ShaderModuleDescriptor {
-                label: Some("view.wgsl"),
-                source: wgpu::ShaderSource::Wgsl(include_str!("../../shaders/view.wgsl").into()),
-            });
-            let view_layout = self.device.create_pipeline_layout(&wgpu::PipelineLayoutDescriptor {
-                label: Some("impostor frame"),
-                bind_group_layouts: &[Some(&self.frame_layout), Some(&self.view_material_layout)],
-                ..Default::default()
-            });
-            let frame = super::view_render::MapPipelines::new(
-                (view_shader, "fs_impostor"),
-                view_layout,
-                &[ALBEDO_FORMAT, DATA_FORMAT],
-            );
+            let frame = self.view_pipelines.for_entry("fs_impostor", &[ALBEDO_FORMAT, DATA_FORMAT]);
             let module = self.device.create_shader_module(wgpu::ShaderModuleDescriptor {
                 label: Some("impostor.wgsl"),
                 source: wgpu::ShaderSource::Wgsl(include_str!("../../shaders/impostor.wgsl").into()),

@@ -57,6 +57,11 @@ impl MapPipelines {
         MapPipelines { shader, layout, formats: formats.to_vec(), pipelines: Default::default() }
     }
 
+    /// The pipelines of another fragment entry point of the same shader, with the same layout.
+    pub(super) fn for_entry(&self, entry: &'static str, formats: &[wgpu::TextureFormat]) -> MapPipelines {
+        MapPipelines::new((self.shader.0.clone(), entry), self.layout.clone(), formats)
+    }
+
     /// The pipeline that draws `material`.
     fn for_material(&self, device: &wgpu::Device, material: &ViewMaterial) -> &wgpu::RenderPipeline {
         let (opacity, normal) = (material.opacity.is_some(), material.normal.is_some());

@@ -135,9 +135,7 @@ impl Gpu {
         light: [f32; 3],
         size: u32,
     ) -> Result<Vec<u8>, GpuError> {
-        let mut image = Vec::new();
-        self.render_impostor_views(impostor, &[view_projection], light, size, |_, view| image = view)?;
-        Ok(image)
+        super::one_view(|each| self.render_impostor_views(impostor, &[view_projection], light, size, each))
     }
 
     /// [`Gpu::render_impostor_view`] under each of `view_projections`, drawn in batches as
@@ -317,10 +315,7 @@ impl Gpu {
         light: [f32; 3],
         size: u32,
     ) -> Result<Vec<u8>, GpuError> {
-        match level {
-            LevelView::Mesh(mesh) => self.render_view(mesh, view_projection, light, size),
-            LevelView::Impostor(impostor) => self.render_impostor_view(impostor, view_projection, light, size),
-        }
+        super::one_view(|each| self.render_level_views(level, &[view_projection], light, size, each))
     }
 
     /// [`Gpu::render_level_view`] under each of `view_projections`, drawn in batches: each image

@@ -550,6 +550,14 @@ fn depth_test() -> wgpu::DepthStencilState {
     }
 }
 
+/// The image of a batched renderer (`render`, handed the callback that takes each view's image)
+/// drawing a single view.
+fn one_view(render: impl FnOnce(&mut dyn FnMut(usize, Vec<u8>)) -> Result<(), GpuError>) -> Result<Vec<u8>, GpuError> {
+    let mut image = Vec::new();
+    render(&mut |_, view| image = view)?;
+    Ok(image)
+}
+
 /// A pipeline drawing `RenderVertex` triangles double-sided (with `depth`'s test, when given)
 /// through the vertex shader `vs_main` and the fragment entry point named beside the shader, with
 /// its overridable constants: the one shape the plane bake, its coverage and the preview use.

@@ -135,9 +135,7 @@ impl Gpu {
         light: [f32; 3],
         size: u32,
     ) -> Result<Vec<u8>, GpuError> {
-        let mut image = Vec::new();
-        self.render_views(mesh, &[view_projection], light, size, |_, view| image = view)?;
-        Ok(image)
+        super::one_view(|each| self.render_views(mesh, &[view_projection], light, size, each))
     }
 
     /// [`Gpu::render_view`] under each of `view_projections`, drawn in batches

@@ -309,9 +309,15 @@ pub const OUTRANKED_FLOOR: f64 = 0.1;
 /// once for both, each then judged as if measured alone (the oak's chain: 1.2 s of its 8.5 s of
 /// measuring saved, every figure the same). The loss grows with the size (a pixel gets smaller
 /// against the same world error), so a LOD is measured no further once it fails, except at the
-/// smallest size: at 16 px a pixel is a sixteenth of the object, and corpus impostors lost
-/// 1.00–1.01 units there and 0.4 at 32 and 64 px. Nor, from the second size on, once it is
-/// outranked: it held but lost more than [`OUTRANKED_RATIO`] times the least loss there (at least
+/// smallest size: there the oak chain's impostors and its 64-quad clouds at 512 KiB and 2 MiB lose
+/// 0.92–1.00 units (0.33–0.67 at 32 px), because the source's leaf cards are a sample or two
+/// across, drawn from the 1–4-texel levels of their maps' chains, which cannot keep a card's
+/// coverage: the source thins out (against itself moved a pixel: IoU 0.32, 0.65 at 32 px), and a
+/// level that keeps its foliage covers 170–207 % more than the source's silhouette. Drawing the
+/// source from its maps' level 0 alone is no better reference: those levels then lost 0.24–0.50
+/// units at 16 px, but the source's own triangles, drawn through their mips, lost 1.95 there and
+/// 0.25–0.48 at every size from 32 px up (against 0.06–0.16). Nor, from the second size on, once
+/// it is outranked: it held but lost more than [`OUTRANKED_RATIO`] times the least loss there (at least
 /// [`OUTRANKED_FLOOR`]); whoever ranks them by how far they hold, then by their loss, would not
 /// pick it (on the oak's 2 MiB level: five candidates losing 0.33–0.53 units at 32 px beside
 /// triangles losing 0.06, whose renders at 64 to 256 px were half of a chain's measuring).

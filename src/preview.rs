@@ -316,10 +316,10 @@ pub const OUTRANKED_FLOOR: f64 = 0.1;
 /// level that keeps its foliage covers 170–207 % more than the source's silhouette. Drawing the
 /// source from its maps' level 0 alone is no better reference: those levels then lost 0.24–0.50
 /// units at 16 px, but the source's own triangles, drawn through their mips, lost 1.95 there and
-/// 0.25–0.48 at every size from 32 px up (against 0.06–0.16). Nor, from the second size on, once
-/// it is outranked: it held but lost more than [`OUTRANKED_RATIO`] times the least loss there (at least
-/// [`OUTRANKED_FLOOR`]); whoever ranks them by how far they hold, then by their loss, would not
-/// pick it (on the oak's 2 MiB level: five candidates losing 0.33–0.53 units at 32 px beside
+/// 0.25–0.48 at every size from 32 px up (against 0.06–0.16). Nor, from the second size on, once it
+/// is outranked: it held but lost more than [`OUTRANKED_RATIO`] times the least loss there (at
+/// least [`OUTRANKED_FLOOR`]); whoever ranks them by how far they hold, then by their loss, would
+/// not pick it (on the oak's 2 MiB level: five candidates losing 0.33–0.53 units at 32 px beside
 /// triangles losing 0.06, whose renders at 64 to 256 px were half of a chain's measuring).
 pub fn holds(
     gpu: &Gpu,

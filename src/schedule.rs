@@ -220,11 +220,9 @@ pub fn run_parallel<T: Sync, R: Send>(
                     let result = match std::panic::catch_unwind(AssertUnwindSafe(|| work(&db, item))) {
                         Ok(result) => result,
                         Err(panic) => {
-                            let propagated = matches!(
-                                panic.downcast_ref::<salsa::Cancelled>(),
-                                Some(salsa::Cancelled::PropagatedPanic)
-                            );
-                            if panic.is::<salsa::Cancelled>() && (!propagated || cancel.is_raised()) {
+                            let cancelled = panic.downcast_ref::<salsa::Cancelled>();
+                            let propagated = matches!(cancelled, Some(salsa::Cancelled::PropagatedPanic));
+                            if cancelled.is_some() && (!propagated || cancel.is_raised()) {
                                 break;
                             }
                             let message = panic

@@ -147,7 +147,8 @@ struct ImpostorParams {
     sphere: vec4<f32>,
     // frames per side, 1 for a hemi-octahedron, unused, unused
     grid: vec4<u32>,
-    // alpha cutoff, unused...
+    // alpha cutoff; how many times the normal atlas's side and the depth atlas's halve the albedo
+    // atlas's (0, 1 or 2: log2 of the ratio of the sides); unused
     params: vec4<f32>,
     // The polygon drawn, eight points [x, y] two a vector (xy, zw), in the view's right and up
     // axes through the sphere's centre, in units of its radius: a fitted octagon, or the
@@ -163,15 +164,46 @@ struct ImpostorParams {
 @group(0) @binding(5) var depth_atlas: texture_2d<f32>;
 @group(0) @binding(6) var<storage, read> impostor_rects: array<vec4<f32>>;
 
+// What the vertex stage passes on: the point drawn, and what is the same at every fragment of a
+// view (the three frames of its blend, their weights, and each frame's direction and image axes),
+// worked out once a vertex instead of once a fragment.
 struct ImpostorVertexOut {
     @builtin(position) clip: vec4<f32>,
     @location(0) world: vec3<f32>,
+    @location(1) @interpolate(flat) frames: vec3<u32>,
+    @location(2) @interpolate(flat) weights: vec3<f32>,
+    @location(3) @interpolate(flat) direction0: vec3<f32>,
+    @location(4) @interpolate(flat) right0: vec3<f32>,
+    @location(5) @interpolate(flat) up0: vec3<f32>,
+    @location(6) @interpolate(flat) direction1: vec3<f32>,
+    @location(7) @interpolate(flat) right1: vec3<f32>,
+    @location(8) @interpolate(flat) up1: vec3<f32>,
+    @location(9) @interpolate(flat) direction2: vec3<f32>,
+    @location(10) @interpolate(flat) right2: vec3<f32>,
+    @location(11) @interpolate(flat) up2: vec3<f32>,
+}
+
+// One frame of a view's blend, as the fragment stage reads it.
+struct ImpostorFrame {
+    index: u32,
+    weight: f32,
+    // where it was rendered from (unit, object to eye)
+    direction: vec3<f32>,
+    axes: ImpostorAxes,
 }
 
 // Point `k` (0..8) of the polygon drawn.
 fn impostor_hull_point(k: u32) -> vec2<f32> {
     let pair = impostor.hull[k / 2u];
     return select(pair.xy, pair.zw, k % 2u == 1u);
+}
+
+// Frame `frame`'s direction and axes.
+fn impostor_frame(frame: u32, weight: f32) -> ImpostorFrame {
+    let frames = impostor.grid.x;
+    let cell = vec2<f32>(f32(frame % frames), f32(frame / frames));
+    let direction = impostor_decode(cell / f32(frames - 1u), impostor.grid.y != 0u);
+    return ImpostorFrame(frame, weight, direction, impostor_frame_axes(direction));
 }
 
 // 18 vertices: the polygon as a fan of six triangles (0, t + 1, t + 2).
@@ -186,7 +218,40 @@ fn impostor_vs(@builtin(vertex_index) index: u32) -> ImpostorVertexOut {
     var out: ImpostorVertexOut;
     out.clip = impostor_view.view_projection * vec4<f32>(world, 1.0);
     out.world = world;
+    let blend = impostor_blend(impostor_view.eye.xyz, impostor.grid.x, impostor.grid.y != 0u);
+    out.frames = blend.frames;
+    out.weights = blend.weights;
+    let first = impostor_frame(blend.frames.x, blend.weights.x);
+    let second = impostor_frame(blend.frames.y, blend.weights.y);
+    let third = impostor_frame(blend.frames.z, blend.weights.z);
+    out.direction0 = first.direction;
+    out.right0 = first.axes.right;
+    out.up0 = first.axes.up;
+    out.direction1 = second.direction;
+    out.right1 = second.axes.right;
+    out.up1 = second.axes.up;
+    out.direction2 = third.direction;
+    out.right2 = third.axes.right;
+    out.up2 = third.axes.up;
     return out;
+}
+
+// Frame `k` (0..3) of the view's blend, from the vertex stage's outputs.
+fn impostor_blend_frame(input: ImpostorVertexOut, k: u32) -> ImpostorFrame {
+    switch k {
+        case 0u: {
+            let axes = ImpostorAxes(input.right0, input.up0);
+            return ImpostorFrame(input.frames.x, input.weights.x, input.direction0, axes);
+        }
+        case 1u: {
+            let axes = ImpostorAxes(input.right1, input.up1);
+            return ImpostorFrame(input.frames.y, input.weights.y, input.direction1, axes);
+        }
+        default: {
+            let axes = ImpostorAxes(input.right2, input.up2);
+            return ImpostorFrame(input.frames.z, input.weights.z, input.direction2, axes);
+        }
+    }
 }
 
 // A point of the sphere's image (0..1) in frame `frame`'s own image (0..1 across the part it
@@ -196,23 +261,24 @@ fn impostor_in_rect(frame: u32, uv: vec2<f32>) -> vec2<f32> {
     return (uv - rect.xy) / max(rect.zw - rect.xy, vec2<f32>(1e-6));
 }
 
-// The mip level of `atlas` that shows what level `lod` of the albedo atlas shows: the normal and
-// depth atlases may be stored at a half or a quarter of the albedo's side (the same frames, the
-// same coordinates), their level 0 being the albedo's level 1 or 2.
-fn impostor_smaller_lod(atlas: texture_2d<f32>, lod: f32) -> f32 {
-    let halvings = log2(f32(textureDimensions(albedo_atlas).x) / f32(textureDimensions(atlas).x));
+// The mip level of an atlas whose side is the albedo atlas's halved `halvings` times that shows
+// what level `lod` of the albedo atlas shows: the normal and depth atlases may be stored at a half
+// or a quarter of the albedo's side (the same frames, the same coordinates), their level 0 being
+// the albedo's level 1 or 2 (`impostor.params`).
+fn impostor_smaller_lod(halvings: f32, lod: f32) -> f32 {
     return max(lod - halvings, 0.0);
 }
 
-// Frame `frame`'s texel under the view ray through `world`, in the frame's own image (0..1):
-// where the ray crosses the frame's plane through the centre, then (parallax) where it meets
-// the depth the frame shows there, twice; outside 0..1 when the ray leaves the frame.
-fn impostor_frame_uv(frame: u32, world: vec3<f32>, lod: f32) -> vec2<f32> {
+// `shown_frame`'s texel under the view ray through `world`, in the frame's own image (0..1):
+// where the ray crosses the frame's plane through the centre, then (parallax) where it meets the
+// depth the frame shows there (the depth atlas read at mip level `depth_lod`), twice; outside
+// 0..1 when the ray leaves the frame.
+fn impostor_frame_uv(shown_frame: ImpostorFrame, world: vec3<f32>, depth_lod: f32) -> vec2<f32> {
     let frames = impostor.grid.x;
-    let hemi = impostor.grid.y != 0u;
+    let frame = shown_frame.index;
     let cell = vec2<f32>(f32(frame % frames), f32(frame / frames));
-    let direction = impostor_decode(cell / f32(frames - 1u), hemi);
-    let axes = impostor_frame_axes(direction);
+    let direction = shown_frame.direction;
+    let axes = shown_frame.axes;
     let radius = impostor.sphere.w;
     let eye = normalize(impostor_view.eye.xyz);
     let start = world - impostor.sphere.xyz;
@@ -223,7 +289,7 @@ fn impostor_frame_uv(frame: u32, world: vec3<f32>, lod: f32) -> vec2<f32> {
     var uv = impostor_in_rect(frame, vec2<f32>(dot(point, axes.right), -dot(point, axes.up)) / (2.0 * radius) + 0.5);
     for (var step = 0; step < 2; step = step + 1) {
         let texel = (cell + clamp(uv, vec2<f32>(0.0), vec2<f32>(1.0))) / f32(frames);
-        let shown = textureSampleLevel(depth_atlas, impostor_sampler, texel, impostor_smaller_lod(depth_atlas, lod)).r;
+        let shown = textureSampleLevel(depth_atlas, impostor_sampler, texel, depth_lod).r;
         let height = radius - 2.0 * radius * shown;
         point = start - eye * ((dot(start, direction) - height) / along);
         uv = impostor_in_rect(frame, vec2<f32>(dot(point, axes.right), -dot(point, axes.up)) / (2.0 * radius) + 0.5);
@@ -239,30 +305,29 @@ fn impostor_fs(input: ImpostorVertexOut) -> @location(0) vec4<f32> {
     let frame_texels = f32(textureDimensions(albedo_atlas).x) / f32(frames);
     let pixel = max(length(dpdx(input.world)), length(dpdy(input.world)));
     let texels_per_pixel = pixel * frame_texels / (2.0 * impostor.sphere.w);
-    let blend = impostor_blend(impostor_view.eye.xyz, frames, impostor.grid.y != 0u);
     var albedo = vec3<f32>(0.0);
     var normal = vec3<f32>(0.0);
     var coverage = 0.0;
     for (var k = 0u; k < 3u; k = k + 1u) {
-        let frame = blend.frames[k];
+        let shown_frame = impostor_blend_frame(input, k);
+        let frame = shown_frame.index;
         let rect = impostor_rects[frame];
         let shown = max(min(rect.z - rect.x, rect.w - rect.y), 1e-6);
         let lod = max(log2(texels_per_pixel / shown), 0.0);
-        let uv = impostor_frame_uv(frame, input.world, lod);
+        let uv = impostor_frame_uv(shown_frame, input.world, impostor_smaller_lod(impostor.params.z, lod));
         if any(uv < vec2<f32>(0.0)) || any(uv > vec2<f32>(1.0)) {
             continue;
         }
         let cell = vec2<f32>(f32(frame % frames), f32(frame / frames));
         let at = (cell + uv) / f32(frames);
         let colour = textureSampleLevel(albedo_atlas, impostor_sampler, at, lod);
-        let xy = textureSampleLevel(normal_atlas, impostor_sampler, at, impostor_smaller_lod(normal_atlas, lod)).xy
+        let xy = textureSampleLevel(normal_atlas, impostor_sampler, at, impostor_smaller_lod(impostor.params.y, lod)).xy
             * 2.0 - 1.0;
         let z = sqrt(max(1.0 - dot(xy, xy), 0.0));
-        let direction = impostor_decode(cell / f32(frames - 1u), impostor.grid.y != 0u);
-        let axes = impostor_frame_axes(direction);
-        let weight = blend.weights[k] * colour.a;
+        let axes = shown_frame.axes;
+        let weight = shown_frame.weight * colour.a;
         albedo += colour.rgb * weight;
-        normal += (axes.right * xy.x + axes.up * xy.y + normalize(direction) * z) * weight;
+        normal += (axes.right * xy.x + axes.up * xy.y + shown_frame.direction * z) * weight;
         coverage += weight;
     }
     if coverage < impostor.params.x || coverage <= 0.0 {

@@ -151,10 +151,15 @@ impl Gpu {
         self.catching_device_errors(|| {
             let ImpostorPipelines { view: pipeline, sampler, .. } = self.impostor_pipelines();
             let [cx, cy, cz] = impostor.center;
+            // How many times an atlas's side halves the albedo atlas's (`impostor_smaller_lod`).
+            let halvings = |atlas: &[Texture]| match (impostor.albedo.first(), atlas.first()) {
+                (Some(albedo), Some(atlas)) => (albedo.width as f32 / atlas.width.max(1) as f32).log2(),
+                _ => 0.0,
+            };
             let uniform = ImpostorUniform {
                 sphere: [cx, cy, cz, impostor.radius],
                 grid: [impostor.grid.frames, u32::from(impostor.grid.is_hemi()), 0, 0],
-                params: [impostor.alpha_cutoff, 0.0, 0.0, 0.0],
+                params: [impostor.alpha_cutoff, halvings(&impostor.normal), halvings(&impostor.depth), 0.0],
                 hull: {
                     let hull = impostor.hull.unwrap_or(crate::mesh::octahedral::SQUARE_HULL);
                     std::array::from_fn(|pair| {

@@ -76,16 +76,17 @@ const READINESS_PROBE: &str = "readiness-probe";
 /// gRPC port, and the S3 gateway's other protocols.
 const PORTS_PER_SERVER: u16 = 13;
 
-/// A base port whose `PORTS_PER_SERVER` ports are all free now.
+/// A base port whose `PORTS_PER_SERVER` ports are all free now, between 20,000 and 32,767: below
+/// Linux's ephemeral ports (32,768 on), which any outgoing connection may take meanwhile.
 fn free_ports() -> u16 {
     static NEXT: std::sync::Mutex<u16> = std::sync::Mutex::new(0);
     let mut next = NEXT.lock().unwrap();
     if *next == 0 {
-        *next = 20_000 + (std::process::id() % 1_500) as u16 * 20;
+        *next = 20_000 + (std::process::id() % 600) as u16 * 20;
     }
     for _ in 0..200 {
         let base = *next;
-        *next = if base > 60_000 { 20_000 } else { base + 20 };
+        *next = if base >= 32_000 { 20_000 } else { base + 20 };
         if (base..base + PORTS_PER_SERVER).all(|port| TcpListener::bind(("127.0.0.1", port)).is_ok()) {
             return base;
         }
@@ -94,17 +95,33 @@ fn free_ports() -> u16 {
 }
 
 impl SeaweedServer {
+    /// A server on free ports. A port found free may be taken before `weed` binds it (the
+    /// other tests' connections, their servers): a server that exits before it serves is started
+    /// again on other ports, twice at most.
     pub fn start() -> SeaweedServer {
-        let folder = tempfile::tempdir().unwrap();
-        let base = free_ports();
-        let log = folder.path().join("weed.log");
-        let mut server = SeaweedServer { child: None, base, port: base + 6, log, folder, probe_written: false };
-        server.restart();
-        server
+        let mut failures = Vec::new();
+        while failures.len() < 3 {
+            let folder = tempfile::tempdir().unwrap();
+            let base = free_ports();
+            let log = folder.path().join("weed.log");
+            let mut server = SeaweedServer { child: None, base, port: base + 6, log, folder, probe_written: false };
+            match server.try_start() {
+                Ok(()) => return server,
+                Err(failure) => failures.push(failure),
+            }
+        }
+        panic!("weed mini exited before it served S3, three times:\n{}", failures.join("\n"));
     }
 
     /// Starts (again, after `stop`) the server on its ports and data folder, and waits for it.
     pub fn restart(&mut self) {
+        if let Err(failure) = self.try_start() {
+            panic!("{failure}");
+        }
+    }
+
+    /// [`SeaweedServer::restart`], or why the server exited before it served.
+    fn try_start(&mut self) -> Result<(), String> {
         assert!(self.child.is_none(), "the server is running");
         let weed = weed_binary();
         let folder = self.folder.path();
@@ -151,7 +168,7 @@ impl SeaweedServer {
             .spawn()
             .unwrap_or_else(|error| panic!("cannot start {}: {error}", weed.display()));
         self.child = Some(child);
-        self.wait_until_ready();
+        self.wait_until_ready()
     }
 
     /// Waits until the bucket answers a listing (the server makes it after it starts) and a
@@ -159,12 +176,23 @@ impl SeaweedServer {
     /// answers before the volume server has registered again, and reads of the old data fail
     /// with 500 for a few seconds. The probe is written on the first start (outside every
     /// test's prefix) and read on each start, so a restart waits until the old data is served.
-    fn wait_until_ready(&mut self) {
+    /// Err when it exited first, with its log's and its error output's tails.
+    fn wait_until_ready(&mut self) -> Result<(), String> {
         let start = Instant::now();
         let mut bucket = None;
         while start.elapsed() < Duration::from_secs(90) {
             if let Some(status) = self.child.as_mut().unwrap().try_wait().unwrap() {
-                panic!("weed mini exited ({status}) before it served S3: {}", self.log_tail());
+                self.child = None;
+                let errors = std::fs::read_to_string(self.folder.path().join("weed.err")).unwrap_or_default();
+                let errors: Vec<&str> = errors.lines().rev().take(10).collect();
+                let errors: Vec<&str> = errors.into_iter().rev().collect();
+                return Err(format!(
+                    "weed mini on ports {}-{} exited ({status}) before it served S3: {}\n{}",
+                    self.base,
+                    self.base + PORTS_PER_SERVER - 1,
+                    self.log_tail(),
+                    errors.join("\n")
+                ));
             }
             if http_status(self.port, &format!("/{BUCKET}")) == Some(200) {
                 let bucket = bucket.get_or_insert_with(|| self.bucket());
@@ -172,7 +200,7 @@ impl SeaweedServer {
                     self.probe_written = bucket.try_put(READINESS_PROBE, b"ready".to_vec()).is_ok();
                 }
                 if self.probe_written && bucket.try_get(READINESS_PROBE).as_deref() == Some(b"ready".as_slice()) {
-                    return;
+                    return Ok(());
                 }
             }
             std::thread::sleep(Duration::from_millis(100));

@@ -94,6 +94,13 @@ fn free_ports() -> u16 {
     panic!("no run of {PORTS_PER_SERVER} free loopback ports for weed mini");
 }
 
+/// The last `lines` lines of the text file at `path` (none when it cannot be read).
+fn file_tail(path: &Path, lines: usize) -> String {
+    let text = std::fs::read_to_string(path).unwrap_or_default();
+    let tail: Vec<&str> = text.lines().rev().take(lines).collect();
+    tail.into_iter().rev().collect::<Vec<_>>().join("\n")
+}
+
 impl SeaweedServer {
     /// A server on free ports. A port found free may be taken before `weed` binds it (the
     /// other tests' connections, their servers): a server that exits before it serves is started
@@ -183,15 +190,12 @@ impl SeaweedServer {
         while start.elapsed() < Duration::from_secs(90) {
             if let Some(status) = self.child.as_mut().unwrap().try_wait().unwrap() {
                 self.child = None;
-                let errors = std::fs::read_to_string(self.folder.path().join("weed.err")).unwrap_or_default();
-                let errors: Vec<&str> = errors.lines().rev().take(10).collect();
-                let errors: Vec<&str> = errors.into_iter().rev().collect();
                 return Err(format!(
                     "weed mini on ports {}-{} exited ({status}) before it served S3: {}\n{}",
                     self.base,
                     self.base + PORTS_PER_SERVER - 1,
                     self.log_tail(),
-                    errors.join("\n")
+                    file_tail(&self.folder.path().join("weed.err"), 10)
                 ));
             }
             if http_status(self.port, &format!("/{BUCKET}")) == Some(200) {
@@ -209,8 +213,7 @@ impl SeaweedServer {
     }
 
     fn log_tail(&self) -> String {
-        let log = std::fs::read_to_string(&self.log).unwrap_or_default();
-        log.lines().rev().take(20).collect::<Vec<_>>().into_iter().rev().collect::<Vec<_>>().join("\n")
+        file_tail(&self.log, 20)
     }
 
     pub fn endpoint(&self) -> String {

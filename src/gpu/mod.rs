@@ -8,7 +8,7 @@ mod impostor;
 mod plane_render;
 pub mod top_down_render;
 mod view_render;
-pub use view_render::views_per_batch;
+pub use view_render::{front_to_back, views_per_batch};
 mod window;
 
 pub use impostor::{ImpostorDraw, LevelView};

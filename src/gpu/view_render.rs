@@ -182,7 +182,7 @@ impl Gpu {
     /// Draws `mesh` with `pipeline` under each of `cameras` into one `size`² target per format
     /// (cleared to its colour), depth-tested, in batches ([`Gpu::draw_in_batches`]); each view's
     /// targets' pixels go to `each`. The mesh's vertices and materials are bound once for all
-    /// views.
+    /// views; each view draws each material's triangles nearest first ([`front_to_back`]).
     fn draw_views(
         &self,
         mesh: &ViewMesh,
@@ -200,9 +200,18 @@ impl Gpu {
                 let buffer = self.vertex_buffer(vertices);
                 let material = &mesh.materials[*material_index];
                 let pipeline = pipelines.for_material(&self.device, material);
-                draws.push((buffer, vertices.len() as u32, self.view_material_group(material), pipeline));
+                draws.push((vertices, buffer, self.view_material_group(material), pipeline));
             }
             let record = |encoder: &mut wgpu::CommandEncoder, index: usize| {
+                // Each batch's triangles nearest first under this view's camera.
+                let orders: Vec<(wgpu::Buffer, u32)> = draws
+                    .iter()
+                    .map(|(vertices, ..)| {
+                        let order = front_to_back(vertices, &cameras[index].view_projection);
+                        let usage = wgpu::BufferUsages::INDEX;
+                        (self.filled_buffer("triangle order", bytemuck::cast_slice(&order), usage), order.len() as u32)
+                    })
+                    .collect();
                 let camera_buffer = self.constants_buffer(bytemuck::bytes_of(&cameras[index]));
                 let camera_group = self.device.create_bind_group(&wgpu::BindGroupDescriptor {
                     label: Some("camera"),
@@ -240,11 +249,12 @@ impl Gpu {
                     ..Default::default()
                 });
                 pass.set_bind_group(0, &camera_group, &[]);
-                for (buffer, count, group, pipeline) in &draws {
+                for ((_, buffer, group, pipeline), (order, count)) in draws.iter().zip(&orders) {
                     pass.set_pipeline(pipeline);
                     pass.set_bind_group(1, group, &[]);
                     pass.set_vertex_buffer(0, buffer.slice(..));
-                    pass.draw(0..*count, 0..1);
+                    pass.set_index_buffer(order.slice(..), wgpu::IndexFormat::Uint32);
+                    pass.draw_indexed(0..*count, 0, 0..1);
                 }
                 drop(pass);
                 targets
@@ -294,3 +304,43 @@ impl Gpu {
         })
     }
 }
+
+/// The vertex indices of `vertices`' triangles (three vertices each, as drawn), nearest first
+/// under the orthographic `view_projection` (by the depth of each triangle's centroid, in
+/// [`DEPTH_STEPS`] steps between the nearest and the farthest; triangles in one step keep their
+/// order). Drawn in this order, a fragment behind one already drawn fails the depth test before
+/// its shader runs, alpha test included (llvmpipe tests depth early and writes it late when a
+/// shader discards): the oak's preview renders (its four levels and the source, 26 views at
+/// 512²) took 3.15–3.43 s against 3.48–3.78 s in the mesh's own order, and 3.72–4.54 s farthest
+/// first. The image is the same but where two surfaces are at one depth.
+pub fn front_to_back(vertices: &[RenderVertex], view_projection: &[[f32; 4]; 4]) -> Vec<u32> {
+    let depth = |vertex: &RenderVertex| {
+        let [x, y, z] = vertex.position;
+        view_projection[0][2] * x + view_projection[1][2] * y + view_projection[2][2] * z
+    };
+    let depths: Vec<f32> = vertices.chunks_exact(3).map(|corners| corners.iter().map(depth).sum::<f32>()).collect();
+    let (near, far) =
+        depths.iter().fold((f32::INFINITY, f32::NEG_INFINITY), |(near, far), &depth| (near.min(depth), far.max(depth)));
+    let scale = if far > near { (DEPTH_STEPS - 1) as f32 / (far - near) } else { 0.0 };
+    let step = |depth: f32| (((depth - near) * scale) as usize).min(DEPTH_STEPS - 1);
+    // A counting sort: each step's first place in the order.
+    let mut starts = vec![0u32; DEPTH_STEPS + 1];
+    for &depth in &depths {
+        starts[step(depth) + 1] += 1;
+    }
+    for index in 0..DEPTH_STEPS {
+        starts[index + 1] += starts[index];
+    }
+    let mut order = vec![0u32; depths.len() * 3];
+    for (triangle, &depth) in depths.iter().enumerate() {
+        let place = &mut starts[step(depth)];
+        let first = 3 * triangle as u32;
+        let at = 3 * *place as usize;
+        order[at..at + 3].copy_from_slice(&[first, first + 1, first + 2]);
+        *place += 1;
+    }
+    order
+}
+
+/// How finely [`front_to_back`] orders triangles by depth.
+const DEPTH_STEPS: usize = 4096;

@@ -1,5 +1,6 @@
 //! Preview renders of materials: each map a material has changes what is drawn, and a map it
-//! lacks draws as a neutral one (the preview draws each set of maps with its own pipeline).
+//! lacks draws as a neutral one (the preview draws each set of maps with its own pipeline); a
+//! view draws triangles nearest first, and the image does not depend on their order.
 
 use std::sync::Arc;
 
@@ -83,4 +84,50 @@ fn each_map_changes_the_render_and_a_missing_map_draws_as_a_neutral_one() {
     let mixed_row = row(&draw(vec![plain, red]));
     assert_eq!(mixed_row[left], row(&plain_image)[left], "the plain square shows through the hole");
     assert_eq!(mixed_row[right][1], 0, "the red square is in front on the right: {:?}", mixed_row[right]);
+}
+
+#[test]
+fn a_view_draws_triangles_nearest_first_and_the_image_does_not_depend_on_their_order() {
+    use cirrus::gpu::front_to_back;
+    // Three squares (two triangles each) at z 0.5, −0.5 and 0, listed in that order.
+    let vertices: Vec<RenderVertex> = [0.5, -0.5, 0.0].into_iter().flat_map(square).collect();
+    let from = |z: f32| cirrus::preview::view_projection([0.0; 3], 1.5, [0.0, 0.0, z]);
+    let triangles = |order: Vec<u32>| -> Vec<u32> {
+        assert!(order.chunks_exact(3).all(|corners| corners[1] == corners[0] + 1 && corners[2] == corners[0] + 2));
+        order.chunks_exact(3).map(|corners| corners[0] / 3).collect()
+    };
+    // From +z the square at 0.5 is nearest; triangles at one depth keep their order.
+    assert_eq!(triangles(front_to_back(&vertices, &from(1.0))), [0, 1, 4, 5, 2, 3]);
+    assert_eq!(triangles(front_to_back(&vertices, &from(-1.0))), [2, 3, 4, 5, 0, 1]);
+    assert_eq!(triangles(front_to_back(&vertices[..6], &from(1.0))), [0, 1]);
+    assert!(front_to_back(&[], &from(1.0)).is_empty());
+    // A red square in front of a grey one, listed either way round: one image, red in front.
+    let gpu = cirrus::gpu::gpu().expect("a GPU adapter (llvmpipe in CI)");
+    let material = |albedo_factor: [f32; 4]| ViewMaterial { albedo_factor, alpha_cutoff: 0.5, ..Default::default() };
+    let materials = vec![material([0.5, 0.5, 0.5, 1.0]), material([1.0, 0.0, 0.0, 1.0])];
+    let draw = |batches: Vec<(usize, Vec<RenderVertex>)>| {
+        let mesh = ViewMesh { batches, materials: materials.clone() };
+        gpu.render_view(&mesh, from(1.0), [0.0, 0.0, 1.0], 32).unwrap()
+    };
+    // The nearer square the narrower: the farther one shows at its sides.
+    let one = |z: f32| {
+        square(z).into_iter().map(move |mut vertex| {
+            vertex.position[0] *= 1.0 - z;
+            vertex
+        })
+    };
+    let both: Vec<RenderVertex> = one(0.3).chain(one(-0.3)).collect();
+    let reversed: Vec<RenderVertex> = one(-0.3).chain(one(0.3)).collect();
+    let image = draw(vec![(1, both)]);
+    assert_eq!(draw(vec![(1, reversed)]), image);
+    let pixel = |image: &[u8], x: usize| image[(16 * 32 + x) * 4..(16 * 32 + x) * 4 + 3].to_vec();
+    assert_eq!(pixel(&image, 16)[..2], [255, 0], "red in the middle");
+    let (grey_first, red_first) = (
+        draw(vec![(0, one(-0.3).collect()), (1, one(0.3).collect())]),
+        draw(vec![(1, one(0.3).collect()), (0, one(-0.3).collect())]),
+    );
+    assert_eq!(grey_first, red_first);
+    assert_eq!(pixel(&grey_first, 16)[..2], [255, 0], "red in the middle");
+    let side = pixel(&grey_first, 28);
+    assert!(side[0] == side[1] && side[0] > 0, "grey at the side: {side:?}");
 }

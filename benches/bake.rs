@@ -1369,8 +1369,48 @@ fn bench_billboard_auto(repository: &Path, corpus: &Path) {
                 println!("billboard-auto:   {tree} {budget} at {size} px: {}; {verdict}", row.join(", "));
             }
             println!("billboard-auto:   ({size} px: {} slots measured in {seconds:.1} s)", slots.len());
+            if let Some(screen) = cirrus::preview::screen_samples_per_axis(size) {
+                screening_check(&project, input, (size, screen), &slots);
+            }
         }
     }
+}
+
+/// The `switch` stage's screening at `size` px (`preview::holds`) checked on every slot of a
+/// built chain measured there (`measured`, at the stage's own samples): each slot measured
+/// again at `screen_samples` a side, and counted where the screening fails one that holds
+/// measured (bar: never), with the range of the measured loss over the screened one.
+fn screening_check(
+    project: &Project,
+    input: cirrus::db::Asset,
+    (size, screen_samples): (u32, u32),
+    measured: &[(u32, String, cirrus::preview::PreviewMetrics)],
+) {
+    let settings = cirrus::preview::PreviewSettings { views: 26, size, samples_per_axis: screen_samples };
+    let screened = cirrus::kinds::billboard_cloud::preview_slots(project.database(), input, project.config(), settings)
+        .expect("preview");
+    let (mut misjudged, mut ratios) = (Vec::new(), Vec::new());
+    for ((_, folder, screen), (_, _, metrics)) in screened.iter().zip(measured) {
+        let (Some(screen_loss), Some(loss)) = (screen.loss_px_shift, metrics.loss_px_shift) else { continue };
+        if screen_loss > cirrus::preview::HOLD_LOSS && loss <= cirrus::preview::HOLD_LOSS {
+            misjudged.push(format!("{folder} ({screen_loss:.2} screened, {loss:.2} measured)"));
+        }
+        if screen_loss > 0.05 {
+            ratios.push(loss / screen_loss);
+        }
+    }
+    let (low, high) =
+        ratios.iter().fold((f64::INFINITY, 0.0f64), |(low, high), &ratio| (low.min(ratio), high.max(ratio)));
+    println!(
+        "billboard-auto:   screening at {size} px, {} sample(s) a pixel: {} of {} slots fail it though they hold \
+         at {} (bar: none){}; measured loss / screened loss {low:.2}–{high:.2} over the {} losing over 0.05",
+        screen_samples * screen_samples,
+        misjudged.len(),
+        screened.len(),
+        measured.first().map_or(0, |(_, _, metrics)| metrics.samples_per_pixel),
+        if misjudged.is_empty() { String::new() } else { format!(": {}", misjudged.join(", ")) },
+        ratios.len()
+    );
 }
 
 /// A three-level LOD chain (512, 128 and 32 quads) of each corpus tree as a process, beside a

@@ -260,10 +260,26 @@ pub fn hold_samples_per_axis(size: u32) -> u32 {
 /// The most a LOD may lose, in px-shift units, and still hold at a screen size.
 pub const HOLD_LOSS: f64 = 1.0;
 
+/// The side (texels) of the renders a size whose own render is larger is screened at: at 256 px
+/// a LOD is first measured at one sample a pixel, from the 256² renders of 64 and 128 px (see
+/// [`holds`]).
+pub const SCREEN_SIDE: u32 = 256;
+
+/// Samples per pixel along each axis when a LOD is screened at `size` pixels before it is
+/// measured there ([`holds`]): `None` where its measurement renders at no more than
+/// [`SCREEN_SIDE`] (nothing to save), or `size` does not divide it.
+pub fn screen_samples_per_axis(size: u32) -> Option<u32> {
+    let over = size * hold_samples_per_axis(size) > SCREEN_SIDE;
+    (over && size <= SCREEN_SIDE && SCREEN_SIDE % size.max(1) == 0).then(|| SCREEN_SIDE / size.max(1))
+}
+
 /// A LOD's figures at one screen size.
 #[derive(Clone, Debug, PartialEq, Serialize, serde::Deserialize)]
 pub struct SizeFigures {
     pub size: u32,
+    /// The samples per pixel behind these figures: [`hold_samples_per_axis`]², or fewer where
+    /// the LOD failed at its screening ([`screen_samples_per_axis`]) and was measured no further.
+    pub samples_per_pixel: u32,
     /// `None` when a pixel costs the source nothing there (an empty view): it holds.
     pub loss_px_shift: Option<f64>,
     pub mean_iou: f64,
@@ -321,6 +337,18 @@ pub const OUTRANKED_FLOOR: f64 = 0.1;
 /// least [`OUTRANKED_FLOOR`]); whoever ranks them by how far they hold, then by their loss, would
 /// not pick it (on the oak's 2 MiB level: five candidates losing 0.33–0.53 units at 32 px beside
 /// triangles losing 0.06, whose renders at 64 to 256 px were half of a chain's measuring).
+///
+/// A size whose renders are larger than [`SCREEN_SIDE`] (256 px, at 2 × 2 samples: 512²) is
+/// first screened at one sample a pixel from the renders of 64 and 128 px, which cost nothing
+/// more; a LOD that loses more than [`HOLD_LOSS`] there fails there without its 512² renders,
+/// figures and all at one sample a pixel (`SizeFigures::samples_per_pixel`); every other LOD,
+/// and so every LOD that holds there, is measured at 2 × 2 as before. What that relies on: a LOD
+/// loses more at 2 × 2 samples than at one (its aliasing and the source's, moved a pixel, count
+/// in both the loss and the unit at one sample). On the four corpus and bundled trees' chains
+/// at 256 px every one of the 12 candidates measured there did (by 1.1–1.6 times), and the
+/// `billboard-auto` bench counts, for every candidate of the wide search, how often the screening
+/// fails one that holds at 2 × 2. The oak's chain: `switch` 4.5 → 2.8 s of work, every pick and
+/// switch size the same.
 pub fn holds(
     gpu: &Gpu,
     source: &ViewMesh,
@@ -333,30 +361,58 @@ pub fn holds(
     let mut stopped = vec![false; lods.len()];
     let resolution = |size: u32| PreviewSettings { views: 26, size, samples_per_axis: hold_samples_per_axis(size) };
     let render_side = |size: u32| size * hold_samples_per_axis(size);
+    let figures = |settings: PreviewSettings, metrics: &PreviewMetrics| SizeFigures {
+        size: settings.size,
+        samples_per_pixel: metrics.samples_per_pixel,
+        loss_px_shift: metrics.loss_px_shift,
+        mean_iou: metrics.mean_iou,
+        mean_psnr: metrics.mean_psnr,
+    };
+    let fails = |figures: &SizeFigures| figures.loss_px_shift.is_some_and(|loss| loss > HOLD_LOSS);
+    // Each LOD's figures at the sizes it was screened at.
+    let mut screened: Vec<Vec<SizeFigures>> = lods.iter().map(|_| Vec::new()).collect();
     let mut step = 0;
     while step < sizes.len() {
+        // A LOD that failed its screening at this size fails here, measured no further.
+        for index in 0..lods.len() {
+            let screen = screened[index].iter().find(|figures| figures.size == sizes[step] && fails(figures));
+            if let Some(failed) = screen.filter(|_| !stopped[index] && step > 0) {
+                holds[index].measured.push(failed.clone());
+                stopped[index] = true;
+            }
+        }
         let rendered: Vec<usize> = (0..lods.len()).filter(|&index| !stopped[index]).collect();
         if rendered.is_empty() {
             break;
         }
         // The sizes from this one on that render at its side: measured from the same renders, each
-        // as if alone (a LOD stopped at one is not counted at the next).
+        // as if alone (a LOD stopped at one is not counted at the next); then the later sizes
+        // screened at this side.
         let shared = sizes[step..].iter().take_while(|&&size| render_side(size) == render_side(sizes[step])).count();
-        let resolutions: Vec<PreviewSettings> =
+        let mut resolutions: Vec<PreviewSettings> =
             sizes[step..step + shared].iter().map(|&size| resolution(size)).collect();
+        resolutions.extend(sizes[step + shared..].iter().filter_map(|&size| {
+            let samples_per_axis = screen_samples_per_axis(size)?;
+            (size * samples_per_axis == render_side(sizes[step])).then_some(PreviewSettings {
+                views: 26,
+                size,
+                samples_per_axis,
+            })
+        }));
         let levels: Vec<&crate::gpu::LevelView> = rendered.iter().map(|&index| lods[index]).collect();
-        let compared = compare_views(gpu, source, &levels, (center, radius), &resolutions, source_views, |_, _, _| {})?;
-        for (size_metrics, settings) in compared.into_iter().zip(&resolutions) {
+        let mut compared =
+            compare_views(gpu, source, &levels, (center, radius), &resolutions, source_views, |_, _, _| {})?;
+        for (screen_metrics, &settings) in compared.split_off(shared).into_iter().zip(&resolutions[shared..]) {
+            for (&index, metrics) in rendered.iter().zip(&screen_metrics) {
+                screened[index].push(figures(settings, metrics));
+            }
+        }
+        for (size_metrics, &settings) in compared.into_iter().zip(&resolutions) {
             let measured: Vec<usize> = rendered.iter().copied().filter(|&index| !stopped[index]).collect();
-            let figures = rendered.iter().copied().zip(size_metrics).filter(|(index, _)| measured.contains(index));
-            for (index, metrics) in figures {
+            let size_figures = rendered.iter().copied().zip(size_metrics).filter(|(index, _)| measured.contains(index));
+            for (index, metrics) in size_figures {
                 let held = metrics.loss_px_shift.is_none_or(|loss| loss <= HOLD_LOSS);
-                holds[index].measured.push(SizeFigures {
-                    size: settings.size,
-                    loss_px_shift: metrics.loss_px_shift,
-                    mean_iou: metrics.mean_iou,
-                    mean_psnr: metrics.mean_psnr,
-                });
+                holds[index].measured.push(figures(settings, &metrics));
                 if held {
                     holds[index].holds_to = Some(settings.size);
                 } else if step > 0 {

@@ -635,3 +635,50 @@ fn views_drawn_in_batches_are_those_drawn_one_at_a_time_and_sizes_sharing_a_rend
         assert_eq!(figures.mean_psnr, alone[0].mean_psnr);
     }
 }
+
+#[test]
+fn a_lod_failing_its_screening_at_one_sample_a_pixel_is_not_rendered_at_more_and_one_passing_it_is() {
+    use cirrus::preview::{hold_samples_per_axis, screen_samples_per_axis, PreviewSettings, HOLD_SIZES};
+    // Only 256 px, whose own renders (2 × 2 samples) are 512², is screened: at one sample a pixel,
+    // from the 256² renders of 64 and 128 px.
+    let screens: Vec<Option<u32>> = HOLD_SIZES.iter().map(|&size| screen_samples_per_axis(size)).collect();
+    assert_eq!(screens, [None, None, None, None, Some(1)]);
+    let gpu = cirrus::gpu::gpu().expect("a GPU adapter (llvmpipe in CI)");
+    let source = view_of(&sphere_obj(12));
+    let sphere = cirrus::preview::bounding_sphere(&source);
+    // The sphere itself, and the sphere 0.7 % smaller: its loss grows with the size, within one
+    // px-shift unit at 128 px, past it at 256.
+    let mut smaller = source.clone();
+    for (_, vertices) in &mut smaller.batches {
+        for vertex in vertices.iter_mut() {
+            vertex.position =
+                std::array::from_fn(|axis| sphere.0[axis] + 0.993 * (vertex.position[axis] - sphere.0[axis]));
+        }
+    }
+    let (same, smaller) = (cirrus::gpu::LevelView::Mesh(source.clone()), cirrus::gpu::LevelView::Mesh(smaller));
+    // Each measured alone (the sphere would outrank the smaller one), the source's renders shared.
+    let mut sources = cirrus::preview::SourceViews::default();
+    let mut hold = |lod: &cirrus::gpu::LevelView| {
+        let holds = cirrus::preview::holds(gpu, &source, &[lod], sphere, &[64, 128, 256], &mut sources).unwrap();
+        let figures: Vec<(u32, u32)> =
+            holds[0].measured.iter().map(|figures| (figures.size, figures.samples_per_pixel)).collect();
+        (holds[0].clone(), figures)
+    };
+    // The smaller sphere holds at 128 px, fails its screening at 256 and is measured no further.
+    let (failed, sampled) = hold(&smaller);
+    assert_eq!(sampled, [(64, 16), (128, 4), (256, 1)]);
+    assert_eq!(failed.holds_to, Some(128));
+    let screen = PreviewSettings { views: 26, size: 256, samples_per_axis: 1 };
+    let alone = cirrus::preview::compare_only(gpu, &source, &[&smaller], sphere, screen).unwrap();
+    let last = failed.measured.last().unwrap();
+    assert!(alone[0].loss_px_shift.unwrap() > 1.0, "{:?}", alone[0].loss_px_shift);
+    assert_eq!((last.mean_iou, last.loss_px_shift), (alone[0].mean_iou, alone[0].loss_px_shift));
+    // Where it is measured at 256 px as it would be unscreened (2 × 2), it loses more still.
+    let measured = PreviewSettings { samples_per_axis: hold_samples_per_axis(256), ..screen };
+    let unscreened = cirrus::preview::compare_only(gpu, &source, &[&smaller], sphere, measured).unwrap();
+    assert!(unscreened[0].loss_px_shift.unwrap() > 1.0, "{:?}", unscreened[0].loss_px_shift);
+    // The sphere itself passes its screening and is measured at 2 × 2 samples.
+    let (held, sampled) = hold(&same);
+    assert_eq!(sampled, [(64, 16), (128, 4), (256, 4)]);
+    assert_eq!(held.holds_to, Some(256));
+}

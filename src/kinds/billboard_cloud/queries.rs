@@ -62,8 +62,9 @@ pub(crate) const IMPOSTOR: Stage = Stage { name: "impostor", version: 5 };
 /// the 26 views at each screen size of `preview::HOLD_SIZES` (`measure_chain`). 2: a level is
 /// measured until it fails at two sizes in a row, not one; 3: 2 × 2 samples a pixel at 128 and
 /// 256 px (`preview::hold_samples_per_axis`); 4: a level's candidates cached together, and one
-/// outranked by another no longer measured (`preview::holds`).
-pub(crate) const SWITCH: Stage = Stage { name: "switch", version: 4 };
+/// outranked by another no longer measured (`preview::holds`); 5: 256 px screened at one sample a
+/// pixel first, and figures say their samples.
+pub(crate) const SWITCH: Stage = Stage { name: "switch", version: 5 };
 /// A reduced level's map surface: its material's source maps packed
 /// (`texture::channel_packing`), stored at a level of its mip chain (`reduced::allot_maps`).
 pub(crate) const MAPS: Stage = Stage { name: "maps", version: 1 };

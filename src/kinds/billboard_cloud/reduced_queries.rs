@@ -128,25 +128,64 @@ pub(crate) fn reduced_map_key(
 }
 
 /// A reduced level's map surface (stage `maps`): material `material`'s source maps packed as
-/// `surface`, stored `halvings` levels down its mip chain.
+/// `surface`, stored `halvings` levels down its mip chain (from [`packed_map_levels`], shared by
+/// every reduced level and candidate that stores it smaller).
 pub(crate) fn reduced_map_image(
     db: &dyn Db,
     asset: Asset,
     (material, halvings): (u32, u32),
     surface: &crate::kinds::SurfaceId,
 ) -> Result<Arc<Texture>, Diagnostic> {
+    let label = surface.label(asset.name(db));
+    if halvings == 0 {
+        return timed(db, MAPS, &label, || Ok(Arc::new(packed_map(db, asset, material, surface.surface)?)));
+    }
+    let levels = packed_map_levels(db, asset, material, surface.surface)?;
+    // A map smaller than 2^halvings a side stops at its 1 × 1 level, as its chain does.
+    match levels.get(halvings as usize - 1).or(levels.last()) {
+        Some(level) => timed(db, MAPS, &label, || Ok(level.clone())),
+        None => timed(db, MAPS, &label, || Ok(Arc::new(packed_map(db, asset, material, surface.surface)?))),
+    }
+}
+
+/// Every level below level 0 of the mip chain of material `material`'s source maps packed as
+/// `surface` ([`packed_map`]; `mips::mip_chain`, whose level `k` is `mips::reduced_level`'s at
+/// `k` halvings): packed and filtered once for every reduced level and candidate of a chain that
+/// stores the map smaller than its sources (the bundled bush's four-level chain packed each of
+/// its four maps three times). Level 0 is not kept: the levels below it hold a third of its
+/// texels.
+#[salsa::tracked(returns(clone))]
+pub(crate) fn packed_map_levels(
+    db: &dyn Db,
+    asset: Asset,
+    material: u32,
+    surface: SurfaceKind,
+) -> Result<Arc<Vec<Arc<Texture>>>, Diagnostic> {
+    let material_name = &source_materials(db, asset)?[material as usize].name;
+    let label = format!("{}/materials/{material_name}/{}", asset.name(db), surface.name());
+    timed(db, PACK, &label, || {
+        let packed = packed_map(db, asset, material, surface)?;
+        let alpha_cutoff = map_alpha_cutoff(db, asset, surface);
+        let settings = crate::texture::mips::MipSettings { kind: surface, alpha_cutoff };
+        let chain = crate::texture::mips::mip_chain(&packed, settings);
+        Ok(Arc::new(chain.into_iter().skip(1).map(Arc::new).collect()))
+    })
+}
+
+/// The packing and mip chain behind the reduced levels' maps stored smaller than their sources
+/// ([`packed_map_levels`]), once per material and surface: a stage of its own for the log and
+/// the stage times, never cached on its own (each level's map is, under `maps`).
+const PACK: crate::db::Stage = crate::db::Stage { name: "pack", version: 1 };
+
+/// Material `material`'s source maps packed as `surface` (`texture::channel_packing`).
+fn packed_map(db: &dyn Db, asset: Asset, material: u32, surface: SurfaceKind) -> Result<Texture, Diagnostic> {
     let materials = source_materials(db, asset)?;
-    let (sources, constants) = map_recipe(db, asset, &materials[material as usize], surface.surface);
+    let (sources, constants) = map_recipe(db, asset, &materials[material as usize], surface);
     // The opacity's channel is taken by the packing.
     let decoded = sources.into_iter().map(|source| source.map(|file| decoded_texture(db, file)).transpose());
     let decoded = decoded.collect::<Result<Vec<_>, _>>()?;
-    timed(db, MAPS, &surface.label(asset.name(db)), || {
-        let sources: Vec<Option<&Texture>> = decoded.iter().map(|texture| texture.as_deref()).collect();
-        let packed = crate::texture::channel_packing::pack_surface(surface.surface, &sources, &constants);
-        let alpha_cutoff = map_alpha_cutoff(db, asset, surface.surface);
-        let settings = crate::texture::mips::MipSettings { kind: surface.surface, alpha_cutoff };
-        Ok(Arc::new(crate::texture::mips::reduced_level(&packed, settings, halvings)))
-    })
+    let sources: Vec<Option<&Texture>> = decoded.iter().map(|texture| texture.as_deref()).collect();
+    Ok(crate::texture::channel_packing::pack_surface(surface, &sources, &constants))
 }
 
 /// The alpha test a reduced level's map surface keeps its coverage for when it is stored smaller

@@ -198,6 +198,9 @@ fn a_bark_edit_rerenders_only_the_bark_of_every_candidate_and_a_restart_nothing(
             .any(|folder| **run == format!("maps(tree/{folder}/materials/bark/albedo)"))
     };
     assert!(!maps.is_empty() && maps.iter().all(bark_albedo), "{maps:?}");
+    // Those stored smaller than their source take their level from one packing and mip chain.
+    let packs: Vec<&str> = executed.iter().filter(|run| run.starts_with("pack(")).map(String::as_str).collect();
+    assert!(packs.iter().all(|run| *run == "pack(tree/materials/bark/albedo)") && packs.len() <= 1, "{packs:?}");
     assert!(!executed.iter().any(|run| run.starts_with("reduce(")), "{executed:?}");
     let bark = |level: &str| project.read(&format!("baked/tree/{level}/materials/bark/albedo.ktx2"));
     assert_eq!(bark("lod0/candidates/reduced1213"), bark("lod1/candidates/reduced303"));
@@ -216,6 +219,12 @@ fn a_bark_edit_rerenders_only_the_bark_of_every_candidate_and_a_restart_nothing(
 
 /// The bundled bush (`examples/assets/trees/bush_2.obj`) built with `lods`, and its report.
 fn built_bundled_bush(lods: &str) -> (crate::support::TempProject, serde_json::Value) {
+    let (project, built, _) = built_bundled_bush_running(lods);
+    (project, built)
+}
+
+/// [`built_bundled_bush`], and the stage instances its build ran.
+fn built_bundled_bush_running(lods: &str) -> (crate::support::TempProject, serde_json::Value, Vec<String>) {
     let project = crate::support::TempProject::new(&format!(
         r#"Pipeline(source: "assets", output: "baked", assets: [
             BillboardCloud(name: "tree", mesh: "trees/bush_2.obj", billboard: (lods: {lods})),
@@ -223,10 +232,54 @@ fn built_bundled_bush(lods: &str) -> (crate::support::TempProject, serde_json::V
     ));
     let trees = std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("examples/assets/trees");
     project.copy_folder(&trees, "assets/trees");
-    let summary = build(&mut project.open());
+    let mut cirrus = project.open();
+    let summary = build(&mut cirrus);
     assert!(summary.all_ok(), "{}", summary.to_text());
     let built = report(&project);
-    (project, built)
+    (project, built, cirrus.take_executed_stages())
+}
+
+#[test]
+fn reduced_candidates_storing_a_map_smaller_take_their_levels_from_one_packing_and_mip_chain() {
+    // Two levels whose reduced candidates store the bush's 1024² maps at 512² or smaller.
+    let (project, built, executed) = built_bundled_bush_running("[Auto(max_bytes: 524288), Auto(max_bytes: 131072)]");
+    let reduced: Vec<String> = built["levels"]
+        .as_array()
+        .unwrap()
+        .iter()
+        .flat_map(|level| level["auto"]["candidates"].as_array().unwrap().clone())
+        .filter(|candidate| candidate["representation"] == "reduced")
+        .map(|candidate| candidate["folder"].as_str().unwrap().to_string())
+        .collect();
+    assert_eq!(reduced.len(), 2, "{built}");
+    let runs = |stage: &str| -> Vec<String> {
+        let mut runs: Vec<String> = executed.iter().filter(|run| run.starts_with(stage)).cloned().collect();
+        runs.sort();
+        runs
+    };
+    // Each candidate's maps made, from one packing and chain per material and map.
+    let surfaces = ["bark/albedo", "bark/mra", "bark/normal", "leaves/albedo"];
+    let mut maps: Vec<String> = reduced
+        .iter()
+        .flat_map(|folder| surfaces.map(|surface| format!("maps(tree/{folder}/materials/{surface})")))
+        .collect();
+    maps.sort();
+    assert_eq!(runs("maps("), maps);
+    assert_eq!(runs("pack("), surfaces.map(|surface| format!("pack(tree/materials/{surface})")));
+    for folder in &reduced {
+        let side = texture_side(&project, &format!("baked/tree/{folder}/materials/bark/albedo.ktx2"));
+        assert!(side.0 < 1024, "{folder}: {side:?}");
+    }
+    // What that relies on: a chain's level k is the level a reduction by k halvings stores.
+    let pixels =
+        (0..64 * 64).flat_map(|index: u32| [(index * 7) as u8, (index / 3) as u8, 90, (index * 13 % 256) as u8]);
+    let source = cirrus::texture::Texture::new(64, 64, pixels.collect());
+    let settings =
+        cirrus::texture::mips::MipSettings { kind: cirrus::texture::SurfaceKind::Albedo, alpha_cutoff: Some(0.5) };
+    let chain = cirrus::texture::mips::mip_chain(&source, settings);
+    for (halvings, level) in chain.iter().enumerate() {
+        assert_eq!(cirrus::texture::mips::reduced_level(&source, settings, halvings as u32).pixels, level.pixels);
+    }
 }
 
 #[test]

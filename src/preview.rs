@@ -265,6 +265,12 @@ pub const HOLD_LOSS: f64 = 1.0;
 /// [`holds`]).
 pub const SCREEN_SIDE: u32 = 256;
 
+/// The most a LOD may lose at its screening (px-shift units, at one sample a pixel) and hold
+/// there without being measured at [`hold_samples_per_axis`], when it is the only one left to
+/// measure ([`holds`]): [`HOLD_LOSS`] over 1.5, where every candidate of the four corpus and
+/// bundled trees' wide searches at 256 px lost 1.04–1.32 times as much measured as screened.
+pub const SCREEN_HOLD_LOSS: f64 = HOLD_LOSS / 1.5;
+
 /// Samples per pixel along each axis when a LOD is screened at `size` pixels before it is
 /// measured there ([`holds`]): `None` where its measurement renders at no more than
 /// [`SCREEN_SIDE`] (nothing to save), or `size` does not divide it.
@@ -341,14 +347,16 @@ pub const OUTRANKED_FLOOR: f64 = 0.1;
 /// A size whose renders are larger than [`SCREEN_SIDE`] (256 px, at 2 × 2 samples: 512²) is
 /// first screened at one sample a pixel from the renders of 64 and 128 px, which cost nothing
 /// more; a LOD that loses more than [`HOLD_LOSS`] there fails there without its 512² renders,
-/// figures and all at one sample a pixel (`SizeFigures::samples_per_pixel`); every other LOD,
-/// and so every LOD that holds there, is measured at 2 × 2 as before. What that relies on: a LOD
-/// loses more at 2 × 2 samples than at one (its aliasing and the source's, moved a pixel, count
-/// in both the loss and the unit at one sample). On the four corpus and bundled trees' chains
-/// at 256 px every one of the 12 candidates measured there did (by 1.1–1.6 times), and the
-/// `billboard-auto` bench counts, for every candidate of the wide search, how often the screening
-/// fails one that holds at 2 × 2. The oak's chain: `switch` 4.5 → 2.8 s of work, every pick and
-/// switch size the same.
+/// figures and all at one sample a pixel (`SizeFigures::samples_per_pixel`), and the only LOD
+/// left, if it loses at most [`SCREEN_HOLD_LOSS`], holds there the same way; every other LOD is
+/// measured at 2 × 2 as before, so that candidates ranked by their loss at a size are ranked at
+/// one sampling. What that relies on: a LOD loses more at 2 × 2 samples than at one (its
+/// aliasing and the source's, moved a pixel, count in both the loss and the unit at one sample),
+/// and not 1.5 times more: over every candidate of the wide searches of the corpus oak, ash and
+/// bush and the bundled bush at 256 px, 1.04–1.32 times (76 slots, 0.05 units and more). The
+/// `billboard-auto` bench prints that range and counts the candidates the screening would
+/// misjudge either way (bar: none; none on those four). Their default chains then render nothing
+/// at 512²: `switch` work 3.5–5.1 → 2.4–3.1 s, every pick and switch size the same.
 pub fn holds(
     gpu: &Gpu,
     source: &ViewMesh,
@@ -375,8 +383,8 @@ pub fn holds(
     while step < sizes.len() {
         // A LOD that failed its screening at this size fails here, measured no further.
         for index in 0..lods.len() {
-            let screen = screened[index].iter().find(|figures| figures.size == sizes[step] && fails(figures));
-            if let Some(failed) = screen.filter(|_| !stopped[index] && step > 0) {
+            let failed_screen = screened[index].iter().find(|figures| figures.size == sizes[step] && fails(figures));
+            if let Some(failed) = failed_screen.filter(|_| !stopped[index] && step > 0) {
                 holds[index].measured.push(failed.clone());
                 stopped[index] = true;
             }
@@ -384,6 +392,18 @@ pub fn holds(
         let rendered: Vec<usize> = (0..lods.len()).filter(|&index| !stopped[index]).collect();
         if rendered.is_empty() {
             break;
+        }
+        // The only LOD left, losing so little at its screening that it holds here measured as well,
+        // holds here: nothing to rank it against.
+        let screen = |index: usize| screened[index].iter().find(|figures| figures.size == sizes[step]);
+        let clear = |figures: &&SizeFigures| figures.loss_px_shift.is_none_or(|loss| loss <= SCREEN_HOLD_LOSS);
+        if let [index] = rendered[..] {
+            if let Some(held) = screen(index).filter(clear) {
+                holds[index].measured.push(held.clone());
+                holds[index].holds_to = Some(sizes[step]);
+                step += 1;
+                continue;
+            }
         }
         // The sizes from this one on that render at its side: measured from the same renders, each
         // as if alone (a LOD stopped at one is not counted at the next); then the later sizes

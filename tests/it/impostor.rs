@@ -637,7 +637,7 @@ fn views_drawn_in_batches_are_those_drawn_one_at_a_time_and_sizes_sharing_a_rend
 }
 
 #[test]
-fn a_lod_failing_its_screening_at_one_sample_a_pixel_is_not_rendered_at_more_and_one_passing_it_is() {
+fn a_lod_failing_its_screening_at_one_sample_a_pixel_is_not_rendered_at_more_nor_one_left_alone_passing_it() {
     use cirrus::preview::{hold_samples_per_axis, screen_samples_per_axis, PreviewSettings, HOLD_SIZES};
     // Only 256 px, whose own renders (2 × 2 samples) are 512², is screened: at one sample a pixel,
     // from the 256² renders of 64 and 128 px.
@@ -677,8 +677,26 @@ fn a_lod_failing_its_screening_at_one_sample_a_pixel_is_not_rendered_at_more_and
     let measured = PreviewSettings { samples_per_axis: hold_samples_per_axis(256), ..screen };
     let unscreened = cirrus::preview::compare_only(gpu, &source, &[&smaller], sphere, measured).unwrap();
     assert!(unscreened[0].loss_px_shift.unwrap() > 1.0, "{:?}", unscreened[0].loss_px_shift);
-    // The sphere itself passes its screening and is measured at 2 × 2 samples.
+    // The sphere itself, alone, loses nothing at its screening: it holds there.
     let (held, sampled) = hold(&same);
-    assert_eq!(sampled, [(64, 16), (128, 4), (256, 4)]);
+    assert_eq!(sampled, [(64, 16), (128, 4), (256, 1)]);
     assert_eq!(held.holds_to, Some(256));
+    // Beside the sphere 0.02 % smaller (neither outranks the other), both are measured at 2 × 2:
+    // each is ranked at the samples of the other.
+    let mut nearly = source.clone();
+    for (_, vertices) in &mut nearly.batches {
+        for vertex in vertices.iter_mut() {
+            vertex.position =
+                std::array::from_fn(|axis| sphere.0[axis] + 0.9998 * (vertex.position[axis] - sphere.0[axis]));
+        }
+    }
+    let nearly = cirrus::gpu::LevelView::Mesh(nearly);
+    let both = cirrus::preview::holds(gpu, &source, &[&same, &nearly], sphere, &[64, 128, 256], &mut sources).unwrap();
+    for hold in &both {
+        let sampled: Vec<(u32, u32)> =
+            hold.measured.iter().map(|figures| (figures.size, figures.samples_per_pixel)).collect();
+        assert_eq!(sampled, [(64, 16), (128, 4), (256, 4)], "{hold:?}");
+        assert_eq!(hold.holds_to, Some(256));
+    }
+    assert!(both[1].measured[2].loss_px_shift > both[0].measured[2].loss_px_shift);
 }

@@ -63,8 +63,9 @@ pub(crate) const IMPOSTOR: Stage = Stage { name: "impostor", version: 5 };
 /// measured until it fails at two sizes in a row, not one; 3: 2 × 2 samples a pixel at 128 and
 /// 256 px (`preview::hold_samples_per_axis`); 4: a level's candidates cached together, and one
 /// outranked by another no longer measured (`preview::holds`); 5: 256 px screened at one sample a
-/// pixel first, and figures say their samples.
-pub(crate) const SWITCH: Stage = Stage { name: "switch", version: 5 };
+/// pixel first, and figures say their samples; 6: the only candidate left holds at 256 px on its
+/// screening when it loses at most `preview::SCREEN_HOLD_LOSS` there.
+pub(crate) const SWITCH: Stage = Stage { name: "switch", version: 6 };
 /// A reduced level's map surface: its material's source maps packed
 /// (`texture::channel_packing`), stored at a level of its mip chain (`reduced::allot_maps`).
 pub(crate) const MAPS: Stage = Stage { name: "maps", version: 1 };

@@ -276,7 +276,7 @@ pub const SCREEN_HOLD_LOSS: f64 = HOLD_LOSS / 1.5;
 /// [`SCREEN_SIDE`] (nothing to save), or `size` does not divide it.
 pub fn screen_samples_per_axis(size: u32) -> Option<u32> {
     let over = size * hold_samples_per_axis(size) > SCREEN_SIDE;
-    (over && size <= SCREEN_SIDE && SCREEN_SIDE % size.max(1) == 0).then(|| SCREEN_SIDE / size.max(1))
+    (over && size <= SCREEN_SIDE && SCREEN_SIDE.is_multiple_of(size.max(1))).then(|| SCREEN_SIDE / size.max(1))
 }
 
 /// A LOD's figures at one screen size.

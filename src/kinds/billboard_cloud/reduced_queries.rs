@@ -137,14 +137,17 @@ pub(crate) fn reduced_map_image(
     surface: &crate::kinds::SurfaceId,
 ) -> Result<Arc<Texture>, Diagnostic> {
     let label = surface.label(asset.name(db));
-    if halvings == 0 {
-        return timed(db, MAPS, &label, || Ok(Arc::new(packed_map(db, asset, material, surface.surface)?)));
-    }
-    let levels = packed_map_levels(db, asset, material, surface.surface)?;
+    let levels = match halvings {
+        0 => Arc::new(Vec::new()),
+        _ => packed_map_levels(db, asset, material, surface.surface)?,
+    };
     // A map smaller than 2^halvings a side stops at its 1 × 1 level, as its chain does.
-    match levels.get(halvings as usize - 1).or(levels.last()) {
+    match levels.get((halvings as usize).saturating_sub(1)).or(levels.last()) {
         Some(level) => timed(db, MAPS, &label, || Ok(level.clone())),
-        None => timed(db, MAPS, &label, || Ok(Arc::new(packed_map(db, asset, material, surface.surface)?))),
+        None => {
+            let sources = map_sources(db, asset, material, surface.surface)?;
+            timed(db, MAPS, &label, || Ok(Arc::new(packed_map(surface.surface, &sources))))
+        }
     }
 }
 
@@ -163,11 +166,11 @@ pub(crate) fn packed_map_levels(
 ) -> Result<Arc<Vec<Arc<Texture>>>, Diagnostic> {
     let material_name = &source_materials(db, asset)?[material as usize].name;
     let label = format!("{}/materials/{material_name}/{}", asset.name(db), surface.name());
+    let sources = map_sources(db, asset, material, surface)?;
+    let alpha_cutoff = map_alpha_cutoff(db, asset, surface);
     timed(db, PACK, &label, || {
-        let packed = packed_map(db, asset, material, surface)?;
-        let alpha_cutoff = map_alpha_cutoff(db, asset, surface);
         let settings = crate::texture::mips::MipSettings { kind: surface, alpha_cutoff };
-        let chain = crate::texture::mips::mip_chain(&packed, settings);
+        let chain = crate::texture::mips::mip_chain(&packed_map(surface, &sources), settings);
         Ok(Arc::new(chain.into_iter().skip(1).map(Arc::new).collect()))
     })
 }
@@ -177,15 +180,22 @@ pub(crate) fn packed_map_levels(
 /// the stage times, never cached on its own (each level's map is, under `maps`).
 const PACK: crate::db::Stage = crate::db::Stage { name: "pack", version: 1 };
 
-/// Material `material`'s source maps packed as `surface` (`texture::channel_packing`).
-fn packed_map(db: &dyn Db, asset: Asset, material: u32, surface: SurfaceKind) -> Result<Texture, Diagnostic> {
+/// The decoded source maps a map surface is packed from, and the constants where one is missing.
+type MapSources = (Vec<Option<Arc<Texture>>>, crate::texture::channel_packing::PackConstants);
+
+/// Material `material`'s source maps that `surface` is packed from ([`map_recipe`]), decoded.
+fn map_sources(db: &dyn Db, asset: Asset, material: u32, surface: SurfaceKind) -> Result<MapSources, Diagnostic> {
     let materials = source_materials(db, asset)?;
     let (sources, constants) = map_recipe(db, asset, &materials[material as usize], surface);
     // The opacity's channel is taken by the packing.
     let decoded = sources.into_iter().map(|source| source.map(|file| decoded_texture(db, file)).transpose());
-    let decoded = decoded.collect::<Result<Vec<_>, _>>()?;
-    let sources: Vec<Option<&Texture>> = decoded.iter().map(|texture| texture.as_deref()).collect();
-    Ok(crate::texture::channel_packing::pack_surface(surface, &sources, &constants))
+    Ok((decoded.collect::<Result<Vec<_>, _>>()?, constants))
+}
+
+/// `sources` packed as `surface` (`texture::channel_packing`).
+fn packed_map(surface: SurfaceKind, (sources, constants): &MapSources) -> Texture {
+    let sources: Vec<Option<&Texture>> = sources.iter().map(|texture| texture.as_deref()).collect();
+    crate::texture::channel_packing::pack_surface(surface, &sources, constants)
 }
 
 /// The alpha test a reduced level's map surface keeps its coverage for when it is stored smaller

@@ -1238,14 +1238,18 @@ const AUTO_BAR_RUNS: usize = 3;
 /// Chains that choose (issue 40): per tree (the corpus oak, ash and bush, and the bundled bush)
 /// a four-level chain `Auto(2 MiB), Auto(512 KiB), Auto(128 KiB), Auto(32 KiB)` baked as a
 /// process beside one default bake (bar ≤ 3×, medians of [`AUTO_BAR_RUNS`] runs), with its
-/// picks and switch sizes; then every candidate of the first three levels (the budgets) beside the source over the 26 views at 64,
-/// 256 and 1024 px (16, 4 and 1 samples a pixel): loss in px-shift units and PSNR, the pick
-/// starred, a candidate over its bytes marked. Bars: the pick within 0.005 IoU of the best
-/// candidate; at 64 px and 128 KiB the pick holds (≤ 1 px-shift unit).
+/// picks and switch sizes; then every candidate of the first three levels (the budgets) beside
+/// the source over the 26 views at 64, 256 and 1024 px (16, 4 and 1 samples a pixel;
+/// `CIRRUS_BENCH_AUTO_1024_SAMPLES=4` measures 1024 px at 16 too): loss in px-shift units and
+/// PSNR, the pick starred, a candidate over its bytes marked. Bars: the pick within 0.005 IoU of
+/// the best candidate; at 64 px and 128 KiB the pick holds (≤ 1 px-shift unit).
 fn bench_billboard_auto(repository: &Path, corpus: &Path) {
     const BUDGETS: [(&str, u64); 4] =
         [("2 MiB", 2 << 20), ("512 KiB", 512 << 10), ("128 KiB", 128 << 10), ("32 KiB", 32 << 10)];
-    const SIZES: [(u32, u32); 3] = [(64, 4), (256, 2), (1024, 1)];
+    // 1024 px at one sample a pixel unless `CIRRUS_BENCH_AUTO_1024_SAMPLES` (per axis) asks for
+    // more: at 4 (16 a pixel, 4096² renders) llvmpipe takes 7–9 min a tree.
+    let samples_1024 = std::env::var("CIRRUS_BENCH_AUTO_1024_SAMPLES").ok().and_then(|samples| samples.parse().ok());
+    let sizes: [(u32, u32); 3] = [(64, 4), (256, 2), (1024, samples_1024.unwrap_or(1).clamp(1, 4))];
     println!("billboard-auto: CPU ISA {}, GPU {}", cirrus::isa::detected_isa().name(), cirrus::gpu::adapter_family());
     let bundled = repository.join("examples/assets");
     let trees = [("corpus", corpus, "oak_medium"), ("corpus", corpus, "ash_small"), ("corpus", corpus, "bush_2")];
@@ -1315,7 +1319,7 @@ fn bench_billboard_auto(repository: &Path, corpus: &Path) {
             default_levels.iter().map(|level| level["switch_size"].as_u64().unwrap_or(0)).collect();
         let mut project = Project::open(load_pipeline(&chain.path().join("pipeline.ron")).unwrap(), Default::default());
         let input = project.built_asset("tree").expect("the chain builds");
-        for (size, samples_per_axis) in SIZES {
+        for (size, samples_per_axis) in sizes {
             let settings = cirrus::preview::PreviewSettings { views: 26, size, samples_per_axis };
             let start = Instant::now();
             let slots =

@@ -284,7 +284,8 @@ pub fn screen_samples_per_axis(size: u32) -> Option<u32> {
 pub struct SizeFigures {
     pub size: u32,
     /// The samples per pixel behind these figures: [`hold_samples_per_axis`]², or fewer where
-    /// the LOD failed at its screening ([`screen_samples_per_axis`]) and was measured no further.
+    /// its screening ([`screen_samples_per_axis`]) decided the size and it was not measured there
+    /// (see [`holds`]).
     pub samples_per_pixel: u32,
     /// `None` when a pixel costs the source nothing there (an empty view): it holds.
     pub loss_px_shift: Option<f64>,
@@ -381,10 +382,10 @@ pub fn holds(
     let mut screened: Vec<Vec<SizeFigures>> = lods.iter().map(|_| Vec::new()).collect();
     let mut step = 0;
     while step < sizes.len() {
+        let screen = |index: usize| screened[index].iter().find(|figures| figures.size == sizes[step]);
         // A LOD that failed its screening at this size fails here, measured no further.
         for index in 0..lods.len() {
-            let failed_screen = screened[index].iter().find(|figures| figures.size == sizes[step] && fails(figures));
-            if let Some(failed) = failed_screen.filter(|_| !stopped[index] && step > 0) {
+            if let Some(failed) = screen(index).filter(|figures| fails(figures) && !stopped[index] && step > 0) {
                 holds[index].measured.push(failed.clone());
                 stopped[index] = true;
             }
@@ -395,7 +396,6 @@ pub fn holds(
         }
         // The only LOD left, losing so little at its screening that it holds here measured as well,
         // holds here: nothing to rank it against.
-        let screen = |index: usize| screened[index].iter().find(|figures| figures.size == sizes[step]);
         let clear = |figures: &&SizeFigures| figures.loss_px_shift.is_none_or(|loss| loss <= SCREEN_HOLD_LOSS);
         if let [index] = rendered[..] {
             if let Some(held) = screen(index).filter(clear) {
@@ -431,8 +431,9 @@ pub fn holds(
             let measured: Vec<usize> = rendered.iter().copied().filter(|&index| !stopped[index]).collect();
             let size_figures = rendered.iter().copied().zip(size_metrics).filter(|(index, _)| measured.contains(index));
             for (index, metrics) in size_figures {
-                let held = metrics.loss_px_shift.is_none_or(|loss| loss <= HOLD_LOSS);
-                holds[index].measured.push(figures(settings, &metrics));
+                let size_figures = figures(settings, &metrics);
+                let held = !fails(&size_figures);
+                holds[index].measured.push(size_figures);
                 if held {
                     holds[index].holds_to = Some(settings.size);
                 } else if step > 0 {

@@ -4,14 +4,16 @@
 //! `PROTOCOL.md`.
 //!
 //! Every client has a reader thread (bounded lines; malformed input is answered with an `error`
-//! message and never reaches the daemon) and a writer thread fed by a bounded queue, so a slow
-//! or vanished client never blocks the daemon: when its queue is full it is disconnected.
+//! message and never reaches the daemon) and a writer thread fed by a queue bounded in messages
+//! and bytes (`Outbox`), so a slow or vanished client never blocks the daemon nor grows it: a
+//! reply that would pass the bound is answered with an `error`, and a client whose batches no
+//! longer fit, or whose errors no longer fit either, is disconnected.
 
 use std::collections::VecDeque;
-use std::io::{BufRead, BufReader, Write};
+use std::io::{BufRead, BufReader, Read, Write};
 use std::net::{Shutdown, SocketAddr, TcpListener, TcpStream};
-use std::sync::mpsc::{sync_channel, Receiver, SyncSender, TrySendError};
-use std::sync::{Arc, Mutex};
+use std::sync::{Arc, Condvar, Mutex};
+use std::time::{Duration, Instant};
 
 use serde::{Deserialize, Serialize};
 
@@ -28,15 +30,21 @@ pub(crate) struct ServerSettings {
     pub max_line_bytes: usize,
     /// How many batches are kept for `since` replay.
     pub history: usize,
-    /// Messages queued for one client before it is disconnected as too slow.
-    pub client_queue: usize,
+    /// Bytes queued for one client, at most (a single message larger than this is queued only
+    /// when nothing else is): a reply that would pass it is answered with an `error` instead, and
+    /// a batch that would pass it disconnects the client (it can reconnect with `since`).
+    pub client_queue_bytes: usize,
     /// Clients connected at once; more are answered with an error and closed, unless one of
-    /// them is idle (see `idle_grace`).
+    /// them may give way (see `idle_grace`).
     pub max_clients: usize,
-    /// A client that has neither subscribed nor sent a request for this long is idle: when every
-    /// slot is taken, a new client takes the slot of the longest idle one, so that idle
-    /// connections cannot lock everyone out.
-    pub idle_grace: std::time::Duration,
+    /// A client that has not subscribed and connected this long ago may give way: when every
+    /// slot is taken, a new client takes the slot of the one connected longest, so that
+    /// connections that only ping or say nothing cannot lock an engine out.
+    pub idle_grace: Duration,
+    /// Browser pages (WebSocket `Origin`s) allowed besides loopback ones (`http://127.0.0.1:8080`,
+    /// `http://localhost:…`, `http://[::1]:…`); a request without an `Origin` (not a browser) is
+    /// always allowed.
+    pub allowed_origins: Vec<String>,
 }
 
 impl Default for ServerSettings {
@@ -44,9 +52,10 @@ impl Default for ServerSettings {
         ServerSettings {
             max_line_bytes: 64 * 1024,
             history: 1024,
-            client_queue: 4096,
+            client_queue_bytes: 16 << 20,
             max_clients: 64,
-            idle_grace: std::time::Duration::from_secs(5),
+            idle_grace: Duration::from_secs(5),
+            allowed_origins: Vec::new(),
         }
     }
 }
@@ -126,11 +135,100 @@ fn line(message: &Outgoing) -> Arc<str> {
 
 struct Client {
     id: u64,
-    queue: SyncSender<Arc<str>>,
+    outbox: Arc<Outbox>,
     stream: TcpStream,
     subscribed: bool,
-    /// When it connected or last sent a request.
-    last_request: std::time::Instant,
+    /// When it connected.
+    connected: Instant,
+}
+
+impl Drop for Client {
+    /// A client leaving the list closes its queue: its writer sends what is queued and stops.
+    fn drop(&mut self) {
+        self.outbox.close();
+    }
+}
+
+/// One client's outgoing messages, bounded in bytes.
+struct Outbox {
+    queue: Mutex<OutboxQueue>,
+    ready: Condvar,
+}
+
+struct OutboxQueue {
+    messages: VecDeque<Arc<str>>,
+    bytes: usize,
+    closed: bool,
+    /// When a message was last taken off (or the queue was last empty): a client that reads.
+    progress: Instant,
+}
+
+impl Outbox {
+    fn new() -> Outbox {
+        let queue = OutboxQueue { messages: VecDeque::new(), bytes: 0, closed: false, progress: Instant::now() };
+        Outbox { queue: Mutex::new(queue), ready: Condvar::new() }
+    }
+
+    /// Queues `message` when it keeps the queue within `max_bytes` (or the queue is empty: one
+    /// message larger than the bound still goes); else gives the bytes already queued.
+    fn push(&self, message: Arc<str>, max_bytes: usize) -> Result<(), usize> {
+        let mut queue = self.queue.lock().expect("client queue");
+        let fits = queue.messages.is_empty() || queue.bytes + message.len() <= max_bytes;
+        if queue.closed || !fits {
+            return Err(queue.bytes);
+        }
+        if queue.messages.is_empty() {
+            queue.progress = Instant::now();
+        }
+        queue.bytes += message.len();
+        queue.messages.push_back(message);
+        self.ready.notify_one();
+        Ok(())
+    }
+
+    /// The next message, waiting for one; `None` once the queue is closed and sent.
+    fn pop(&self) -> Option<Arc<str>> {
+        let mut queue = self.queue.lock().expect("client queue");
+        loop {
+            if let Some(message) = queue.pop() {
+                return Some(message);
+            }
+            if queue.closed {
+                return None;
+            }
+            queue = self.ready.wait(queue).expect("client queue");
+        }
+    }
+
+    /// The next message if one is queued; `Err` once the queue is closed and sent.
+    fn try_pop(&self) -> Result<Option<Arc<str>>, ()> {
+        let mut queue = self.queue.lock().expect("client queue");
+        match queue.pop() {
+            Some(message) => Ok(Some(message)),
+            None if queue.closed => Err(()),
+            None => Ok(None),
+        }
+    }
+
+    fn close(&self) {
+        self.queue.lock().expect("client queue").closed = true;
+        self.ready.notify_all();
+    }
+
+    /// The bytes queued, and how long since the client last took a message.
+    fn backlog(&self) -> (usize, Duration) {
+        let queue = self.queue.lock().expect("client queue");
+        (queue.bytes, queue.progress.elapsed())
+    }
+}
+
+impl OutboxQueue {
+    fn pop(&mut self) -> Option<Arc<str>> {
+        let message = self.messages.pop_front()?;
+        self.bytes -= message.len();
+        self.progress = Instant::now();
+        Some(message)
+    }
 }
 
 struct State {
@@ -161,7 +259,7 @@ pub(crate) struct Server {
     address: SocketAddr,
     graph_source: Arc<Mutex<Option<GraphSource>>>,
     /// Connections not yet given a slot (being told apart, or in a WebSocket handshake).
-    pending: Arc<std::sync::atomic::AtomicUsize>,
+    openings: Arc<Openings>,
 }
 
 #[derive(Debug, thiserror::Error)]
@@ -198,7 +296,7 @@ impl Server {
             settings,
             address,
             graph_source: Arc::new(Mutex::new(None)),
-            pending: Arc::default(),
+            openings: Arc::default(),
         };
         let accepting = server.clone();
         std::thread::Builder::new()
@@ -234,7 +332,7 @@ impl Server {
         while state.history.len() > self.settings.history {
             state.history.pop_front();
         }
-        state.clients.retain(|client| !client.subscribed || send(client, message.clone()));
+        state.clients.retain(|client| !client.subscribed || self.send(client, message.clone()));
     }
 
     /// Tells every subscribed client that a build of the edits to `files` (project-relative)
@@ -242,7 +340,7 @@ impl Server {
     pub(crate) fn building(&self, files: &[String]) {
         let mut state = self.state.lock().expect("server state");
         let message = line(&Outgoing::Building { revision: state.revision, files });
-        state.clients.retain(|client| !client.subscribed || send(client, message.clone()));
+        state.clients.retain(|client| !client.subscribed || self.send(client, message.clone()));
     }
 
     /// The output folder that `hello` names from now on (the pipeline file named another), and
@@ -279,37 +377,40 @@ impl Server {
         graph
     }
 
-    /// Serves a new connection on a thread of its own (the accept loop never waits on a client);
-    /// closes it at once when `max_clients` others are still being told apart or shaking hands
-    /// (each for at most `WEBSOCKET_HANDSHAKE`), so half-open connections cannot pile up threads.
+    /// Serves a new connection on a thread of its own (the accept loop never waits on a client).
+    /// At most `max_clients` connections may be opening at once (being told apart, or shaking
+    /// hands, each for at most `WEBSOCKET_HANDSHAKE` from its connection): with all of them
+    /// taken, the oldest one opening for longer than `OPENING_GRACE` is closed to make room (a
+    /// browser's handshake takes milliseconds), else the new one is closed, so half-open
+    /// connections can neither pile up threads nor lock engines out.
     fn accept(&self, stream: TcpStream) {
-        use std::sync::atomic::Ordering;
-        if self.pending.fetch_add(1, Ordering::SeqCst) >= self.settings.max_clients {
-            self.pending.fetch_sub(1, Ordering::SeqCst);
+        let Some(opening) = self.openings.enter(&stream, self.settings.max_clients) else {
             let _ = stream.shutdown(Shutdown::Both);
             tracing::warn!(
                 "hot-reload server: {} connections still opening: closed a new one",
                 self.settings.max_clients
             );
             return;
-        }
+        };
         let server = self.clone();
-        let spawned = std::thread::Builder::new().name("cirrus-client".into()).spawn(move || server.serve(stream));
+        let openings = self.openings.clone();
+        let spawned = std::thread::Builder::new()
+            .name("cirrus-client".into())
+            .spawn(move || server.serve(stream, &Opening { openings: &openings, id: opening }));
         if let Err(error) = spawned {
-            self.pending.fetch_sub(1, Ordering::SeqCst);
+            self.openings.leave(opening);
             tracing::warn!("hot-reload server: cannot start a client thread: {error}");
         }
     }
 
     /// One connection: a WebSocket when it opens with an HTTP request (a browser's upgrade),
     /// else JSON lines.
-    fn serve(&self, stream: TcpStream) {
+    fn serve(&self, stream: TcpStream, opening: &Opening) {
         let _ = stream.set_nodelay(true);
-        let opening = Opening { pending: &self.pending, open: std::cell::Cell::new(true) };
         if opens_with_http(&stream) {
-            self.serve_websocket(stream, &opening);
+            self.serve_websocket(stream, opening);
         } else {
-            self.serve_lines(stream, &opening);
+            self.serve_lines(stream, opening);
         }
     }
 
@@ -329,27 +430,36 @@ impl Server {
         };
         let _ = std::thread::Builder::new()
             .name(format!("cirrus-client-{id}-write"))
-            .spawn(move || write_loop(writer_stream, outgoing));
+            .spawn(move || write_loop(writer_stream, &outgoing));
         self.read_loop(id, reader_stream);
         self.disconnect(id);
         tracing::info!("hot-reload client {id} disconnected");
     }
 
     /// The same messages over a WebSocket (RFC 6455, `tungstenite`): one JSON message per text
-    /// frame each way. One thread reads (polling every `WEBSOCKET_POLL`) and sends what the
-    /// client's queue holds.
+    /// frame each way. The handshake must finish within `WEBSOCKET_HANDSHAKE` of the connection
+    /// (however slowly its bytes come), from a page `origin_allowed` accepts. Then one thread
+    /// reads (polling every `WEBSOCKET_POLL`) and sends what the client's queue holds.
     fn serve_websocket(&self, stream: TcpStream, opening: &Opening) {
-        let limit = Some(self.settings.max_line_bytes);
+        // Frames up to `WEBSOCKET_MAX_MESSAGE` are read and, when over `max_line_bytes`, answered
+        // with an error; a larger one closes the connection (1009), since its rest cannot be skipped.
+        let limit = Some(WEBSOCKET_MAX_MESSAGE.max(self.settings.max_line_bytes));
         let config = tungstenite::protocol::WebSocketConfig::default().max_message_size(limit).max_frame_size(limit);
-        let _ = stream.set_read_timeout(Some(WEBSOCKET_HANDSHAKE));
         let Ok(raw) = stream.try_clone() else { return };
-        let mut socket = match tungstenite::accept_with_config(raw, Some(config)) {
+        let _ = stream.set_write_timeout(Some(WEBSOCKET_HANDSHAKE));
+        let raw = DeadlineStream { stream: raw, deadline: Some(Instant::now() + WEBSOCKET_HANDSHAKE) };
+        let origins = &self.settings.allowed_origins;
+        #[allow(clippy::result_large_err)] // tungstenite's error response type, not ours to box
+        let check_origin = |request: &_, response| check_origin(request, response, origins);
+        let mut socket = match tungstenite::accept_hdr_with_config(raw, check_origin, Some(config)) {
             Ok(socket) => socket,
             Err(error) => {
                 tracing::info!("hot-reload server: a WebSocket handshake failed: {error}");
                 return;
             }
         };
+        socket.get_mut().deadline = None;
+        let _ = stream.set_write_timeout(None);
         let registered = self.register(&stream);
         opening.finish();
         let (id, outgoing) = match registered {
@@ -367,19 +477,36 @@ impl Server {
         tracing::info!("hot-reload client {id} (WebSocket) disconnected");
     }
 
-    fn websocket_loop(&self, id: u64, socket: &mut tungstenite::WebSocket<TcpStream>, outgoing: &Receiver<Arc<str>>) {
-        use std::sync::mpsc::TryRecvError;
-        use tungstenite::{Error, Message};
+    /// Serves a WebSocket client until it leaves: its queue sent, its messages handled, a ping
+    /// sent after `WEBSOCKET_PING` of silence from it and the connection closed after
+    /// `WEBSOCKET_SILENCE` (browsers answer pings by themselves), so a vanished page does not
+    /// keep its slot.
+    fn websocket_loop(&self, id: u64, socket: &mut tungstenite::WebSocket<DeadlineStream>, outgoing: &Outbox) {
+        use tungstenite::protocol::frame::{coding::CloseCode, CloseFrame};
+        use tungstenite::{error::CapacityError, Error, Message};
+        let close = |socket: &mut tungstenite::WebSocket<DeadlineStream>, code: CloseCode, reason: String| {
+            let _ = socket.close(Some(CloseFrame { code, reason: reason.into() }));
+            let _ = socket.flush();
+        };
+        let (mut heard, mut pinged) = (Instant::now(), Instant::now());
         loop {
             loop {
-                match outgoing.try_recv() {
-                    Ok(message) if socket.send(Message::text(message.trim_end())).is_err() => return,
-                    Ok(_) => {}
-                    Err(TryRecvError::Empty) => break,
-                    Err(TryRecvError::Disconnected) => return,
+                match outgoing.try_pop() {
+                    Ok(Some(message)) if socket.send(Message::text(message.trim_end())).is_err() => return,
+                    Ok(Some(_)) => {}
+                    Ok(None) => break,
+                    Err(()) => return,
                 }
             }
-            match socket.read() {
+            let read = socket.read();
+            if !matches!(&read, Err(Error::Io(error)) if is_timeout(error)) {
+                heard = Instant::now();
+            }
+            match read {
+                Ok(Message::Text(text)) if text.len() > self.settings.max_line_bytes => {
+                    let message = format!("message longer than {} bytes", self.settings.max_line_bytes);
+                    self.reply(id, Outgoing::Error { message });
+                }
                 Ok(Message::Text(text)) if !self.handle_line(id, text.as_bytes()) => return,
                 Ok(Message::Binary(_)) => self.reply(
                     id,
@@ -392,46 +519,60 @@ impl Server {
                     return;
                 }
                 Ok(_) => {}
-                Err(Error::Io(error))
-                    if matches!(error.kind(), std::io::ErrorKind::WouldBlock | std::io::ErrorKind::TimedOut) => {}
-                Err(Error::Capacity(_)) => {
-                    let message = format!("message longer than {} bytes", self.settings.max_line_bytes);
-                    self.reply(id, Outgoing::Error { message });
+                Err(Error::Io(error)) if is_timeout(&error) => {
+                    if heard.elapsed() >= WEBSOCKET_SILENCE {
+                        tracing::info!("hot-reload client {id} answered no ping for {WEBSOCKET_SILENCE:?}: closed");
+                        let reason = format!("no answer to pings for {} s", WEBSOCKET_SILENCE.as_secs());
+                        return close(socket, CloseCode::Away, reason);
+                    }
+                    if heard.elapsed() >= WEBSOCKET_PING && pinged.elapsed() >= WEBSOCKET_PING {
+                        pinged = Instant::now();
+                        if socket.send(Message::Ping(Default::default())).is_err() {
+                            return;
+                        }
+                    }
                 }
+                Err(Error::Capacity(CapacityError::MessageTooLong { size, max_size })) => {
+                    let reason = format!("a message of {size} bytes, over {max_size}");
+                    return close(socket, CloseCode::Size, reason);
+                }
+                Err(Error::Utf8(_)) => return close(socket, CloseCode::Invalid, "a text frame not in UTF-8".into()),
+                Err(Error::Protocol(error)) => return close(socket, CloseCode::Protocol, error.to_string()),
                 Err(_) => return,
             }
         }
     }
 
-    /// Takes a client slot for a new connection (the longest idle client gives up its own when
-    /// every slot is taken) and queues `hello`: the client's id and queue, or the refusal to send
-    /// it when no slot is free.
-    fn register(&self, stream: &TcpStream) -> Result<(u64, Receiver<Arc<str>>), Arc<str>> {
+    /// Takes a client slot for a new connection (when every slot is taken, the unsubscribed
+    /// client connected longest, past `idle_grace`, gives up its own) and queues `hello`: the
+    /// client's id and queue, or the refusal to send it when no slot is free.
+    fn register(&self, stream: &TcpStream) -> Result<(u64, Arc<Outbox>), Arc<str>> {
         let Ok(stream) = stream.try_clone() else {
             return Err(line(&Outgoing::Error { message: "the connection failed".into() }));
         };
-        let (queue, outgoing) = sync_channel::<Arc<str>>(self.settings.client_queue);
+        let outbox = Arc::new(Outbox::new());
         let mut state = self.state.lock().expect("server state");
         if state.clients.len() >= self.settings.max_clients {
-            // The longest idle client (never subscribed, silent past the grace) makes room.
+            // Subscribed clients are engines and keep their slots; of the others (idle, or only
+            // pinging and asking), the one connected longest makes room.
             let idle = state
                 .clients
                 .iter()
                 .enumerate()
-                .filter(|(_, client)| !client.subscribed && client.last_request.elapsed() >= self.settings.idle_grace)
-                .min_by_key(|(_, client)| client.last_request)
+                .filter(|(_, client)| !client.subscribed && client.connected.elapsed() >= self.settings.idle_grace)
+                .min_by_key(|(_, client)| client.connected)
                 .map(|(position, _)| position);
             if let Some(position) = idle {
                 let client = state.clients.remove(position);
                 let notice = line(&Outgoing::Error {
                     message: format!(
-                        "idle for {:.0} s while every slot was taken: disconnected",
-                        client.last_request.elapsed().as_secs_f64()
+                        "connected {:.0} s without subscribing while every slot was taken: disconnected",
+                        client.connected.elapsed().as_secs_f64()
                     ),
                 });
-                let _ = client.queue.try_send(notice);
+                let _ = client.outbox.push(notice, usize::MAX);
                 let _ = client.stream.shutdown(Shutdown::Read);
-                tracing::info!("hot-reload client {} was idle: its slot went to a new client", client.id);
+                tracing::info!("hot-reload client {} had not subscribed: its slot went to a new client", client.id);
             }
         }
         if state.clients.len() >= self.settings.max_clients {
@@ -448,20 +589,18 @@ impl Server {
             output: state.output.clone(),
         });
         let peer = stream.peer_addr().map(|address| address.to_string()).unwrap_or_default();
-        let client = Client { id, queue, stream, subscribed: false, last_request: std::time::Instant::now() };
-        if !send(&client, hello) {
+        let client = Client { id, outbox: outbox.clone(), stream, subscribed: false, connected: Instant::now() };
+        if !self.send(&client, hello) {
             return Err(line(&Outgoing::Error { message: "could not queue the greeting".into() }));
         }
         state.clients.push(client);
         tracing::info!("hot-reload client {id} connected from {peer}");
-        Ok((id, outgoing))
+        Ok((id, outbox))
     }
 
-    /// Notes a request from client `id`; false when it is no longer connected.
-    fn touch(&self, id: u64) -> bool {
-        let mut state = self.state.lock().expect("server state");
-        let client = state.clients.iter_mut().find(|client| client.id == id);
-        client.map(|client| client.last_request = std::time::Instant::now()).is_some()
+    /// Whether client `id` still holds a slot.
+    fn connected(&self, id: u64) -> bool {
+        self.state.lock().expect("server state").clients.iter().any(|client| client.id == id)
     }
 
     fn disconnect(&self, id: u64) {
@@ -490,7 +629,7 @@ impl Server {
     /// One message from client `id`: a request handled, or an error answered; false when the
     /// client no longer holds a slot (it went to another while this one was idle).
     fn handle_line(&self, id: u64, bytes: &[u8]) -> bool {
-        if !self.touch(id) {
+        if !self.connected(id) {
             return false;
         }
         match parse_request(bytes) {
@@ -511,7 +650,7 @@ impl Server {
                 let mut state = self.state.lock().expect("server state");
                 let message =
                     line(&Outgoing::State { revision: state.revision, artifacts: state.artifacts.values().collect() });
-                state.clients.retain(|client| client.id != id || send(client, message.clone()));
+                state.clients.retain(|client| client.id != id || self.send_reply(client, message.clone()));
             }
             Request::Subscribe { since } => {
                 let mut state = self.state.lock().expect("server state");
@@ -543,7 +682,7 @@ impl Server {
                 let Some(client) = state.clients.iter_mut().find(|client| client.id == id) else { return };
                 client.subscribed = true;
                 let client = &*client;
-                let delivered = replay.into_iter().all(|message| send(client, message));
+                let delivered = replay.into_iter().all(|message| self.send(client, message));
                 if !delivered {
                     state.clients.retain(|client| client.id != id);
                 }
@@ -582,7 +721,48 @@ impl Server {
     fn reply(&self, id: u64, message: Outgoing) {
         let message = line(&message);
         let mut state = self.state.lock().expect("server state");
-        state.clients.retain(|client| client.id != id || send(client, message.clone()));
+        state.clients.retain(|client| client.id != id || self.send_reply(client, message.clone()));
+    }
+
+    /// Queues `message` (a batch, a replay, `hello`) for `client`; false (and the connection
+    /// closed) when its queue cannot take it: a client that misses a batch must reconnect.
+    fn send(&self, client: &Client, message: Arc<str>) -> bool {
+        match client.outbox.push(message, self.settings.client_queue_bytes) {
+            Ok(()) => true,
+            Err(queued) => {
+                tracing::warn!("hot-reload client {} is not reading ({queued} bytes queued): disconnected", client.id);
+                let _ = client.stream.shutdown(Shutdown::Both);
+                false
+            }
+        }
+    }
+
+    /// Queues a reply to one of `client`'s requests. A reply that would pass the queue's bound
+    /// is answered with a short `error` instead (within `REFUSAL_RESERVE` over the bound); a
+    /// client that stays over the bound, asking while it has read nothing for `CLIENT_STALL` or
+    /// until even those errors no longer fit, is disconnected. False when it was.
+    fn send_reply(&self, client: &Client, message: Arc<str>) -> bool {
+        let bound = self.settings.client_queue_bytes;
+        let Err(queued) = client.outbox.push(message.clone(), bound) else { return true };
+        let (_, stalled) = client.outbox.backlog();
+        let refusal = line(&Outgoing::Error {
+            message: format!(
+                "reply of {} bytes not sent: {queued} bytes are queued for this client already (at most {bound}); \
+                 read them, then ask again",
+                message.len()
+            ),
+        });
+        if stalled < CLIENT_STALL && client.outbox.push(refusal, bound + REFUSAL_RESERVE).is_ok() {
+            return true;
+        }
+        let (queued, stalled) = client.outbox.backlog();
+        tracing::warn!(
+            "hot-reload client {} asks without reading ({queued} bytes queued, none read for {:.1} s): disconnected",
+            client.id,
+            stalled.as_secs_f64()
+        );
+        let _ = client.stream.shutdown(Shutdown::Both);
+        false
     }
 }
 
@@ -610,29 +790,47 @@ fn manifest_artifacts(
         .collect()
 }
 
-/// Queues `message` for `client`; false (and the connection closed) when its queue is full.
-fn send(client: &Client, message: Arc<str>) -> bool {
-    match client.queue.try_send(message) {
-        Ok(()) => true,
-        Err(TrySendError::Full(_)) | Err(TrySendError::Disconnected(_)) => {
-            tracing::warn!("hot-reload client {} is not reading: disconnected", client.id);
-            let _ = client.stream.shutdown(Shutdown::Both);
-            false
+/// The connections still opening (not yet told apart, or in a WebSocket handshake), with when
+/// each connected, so that the oldest can be closed to make room.
+#[derive(Default)]
+struct Openings {
+    entries: Mutex<Vec<(u64, Instant, TcpStream)>>,
+    next: std::sync::atomic::AtomicU64,
+}
+
+impl Openings {
+    /// Counts `stream` as opening: its id, or `None` when `limit` are opening and none for longer
+    /// than `OPENING_GRACE` (the oldest that is gives its place and is closed).
+    fn enter(&self, stream: &TcpStream, limit: usize) -> Option<u64> {
+        let mut entries = self.entries.lock().expect("openings");
+        if entries.len() >= limit {
+            let oldest = (0..entries.len()).min_by_key(|&position| entries[position].1)?;
+            if entries[oldest].1.elapsed() < OPENING_GRACE {
+                return None;
+            }
+            let (_, _, stalled) = entries.swap_remove(oldest);
+            let _ = stalled.shutdown(Shutdown::Both);
+            tracing::info!("hot-reload server: a connection opening for over {OPENING_GRACE:?} closed for a new one");
         }
+        let id = self.next.fetch_add(1, std::sync::atomic::Ordering::Relaxed);
+        entries.push((id, Instant::now(), stream.try_clone().ok()?));
+        Some(id)
+    }
+
+    fn leave(&self, id: u64) {
+        self.entries.lock().expect("openings").retain(|(entry, _, _)| *entry != id);
     }
 }
 
-/// A connection still opening, counted in `Server::pending` until it is given a slot or closed.
+/// A connection still opening, counted in `Server::openings` until it is given a slot or closed.
 struct Opening<'a> {
-    pending: &'a std::sync::atomic::AtomicUsize,
-    open: std::cell::Cell<bool>,
+    openings: &'a Openings,
+    id: u64,
 }
 
 impl Opening<'_> {
     fn finish(&self) {
-        if self.open.replace(false) {
-            self.pending.fetch_sub(1, std::sync::atomic::Ordering::SeqCst);
-        }
+        self.openings.leave(self.id);
     }
 }
 
@@ -642,14 +840,103 @@ impl Drop for Opening<'_> {
     }
 }
 
+/// A stream whose reads fail once its deadline passes, however slowly bytes arrive (a read
+/// timeout alone restarts with every byte): the WebSocket handshake's.
+struct DeadlineStream {
+    stream: TcpStream,
+    deadline: Option<Instant>,
+}
+
+impl Read for DeadlineStream {
+    fn read(&mut self, buffer: &mut [u8]) -> std::io::Result<usize> {
+        if let Some(deadline) = self.deadline {
+            let left = deadline.saturating_duration_since(Instant::now());
+            if left.is_zero() {
+                return Err(std::io::Error::new(std::io::ErrorKind::TimedOut, "the WebSocket handshake took too long"));
+            }
+            self.stream.set_read_timeout(Some(left))?;
+        }
+        self.stream.read(buffer)
+    }
+}
+
+impl Write for DeadlineStream {
+    fn write(&mut self, buffer: &[u8]) -> std::io::Result<usize> {
+        self.stream.write(buffer)
+    }
+
+    fn flush(&mut self) -> std::io::Result<()> {
+        self.stream.flush()
+    }
+}
+
+fn is_timeout(error: &std::io::Error) -> bool {
+    matches!(error.kind(), std::io::ErrorKind::WouldBlock | std::io::ErrorKind::TimedOut)
+}
+
+/// The WebSocket handshake's answer: a page that `origin_allowed` refuses gets 403 Forbidden.
+#[allow(clippy::result_large_err)] // tungstenite's error response type, not ours to box
+fn check_origin(
+    request: &tungstenite::handshake::server::Request,
+    response: tungstenite::handshake::server::Response,
+    origins: &[String],
+) -> Result<tungstenite::handshake::server::Response, tungstenite::handshake::server::ErrorResponse> {
+    let origin = request.headers().get("origin").map(|origin| String::from_utf8_lossy(origin.as_bytes()));
+    match origin {
+        Some(origin) if !origin_allowed(&origin, origins) => {
+            tracing::warn!(
+                "hot-reload server: refused a WebSocket from the page at {origin} (not a loopback page, nor one of \
+                 `--allow-origin`)"
+            );
+            let mut refusal = tungstenite::handshake::server::ErrorResponse::new(Some(format!(
+                "pages from {origin} may not connect: start the daemon with --allow-origin {origin}\n"
+            )));
+            *refusal.status_mut() = tungstenite::http::StatusCode::FORBIDDEN;
+            Err(refusal)
+        }
+        _ => Ok(response),
+    }
+}
+
+/// Whether a browser page at `origin` may open a WebSocket: loopback pages (`http(s)://`
+/// `localhost`, `127.x.x.x` or `[::1]`, any port) and those `allowed` names exactly (`*` allows
+/// every page).
+fn origin_allowed(origin: &str, allowed: &[String]) -> bool {
+    if allowed.iter().any(|allowed| allowed == "*" || allowed.trim_end_matches('/') == origin) {
+        return true;
+    }
+    let Some(rest) = origin.strip_prefix("http://").or_else(|| origin.strip_prefix("https://")) else {
+        return false;
+    };
+    let host = match rest.strip_prefix('[') {
+        Some(bracketed) => bracketed.split_once(']').map_or("", |(host, _)| host),
+        None => rest.split(':').next().unwrap_or(""),
+    };
+    host.eq_ignore_ascii_case("localhost")
+        || host.parse::<std::net::IpAddr>().is_ok_and(|address| address.is_loopback())
+}
+
+/// How long a connection may be opening before a newer one may take its place when every
+/// opening slot is taken.
+const OPENING_GRACE: Duration = Duration::from_secs(1);
+/// Bytes of `error` answers a client's queue may hold over its bound (see `send_reply`).
+const REFUSAL_RESERVE: usize = 1 << 20;
+/// How long a client over its queue's bound may go on asking without reading (`send_reply`).
+const CLIENT_STALL: Duration = Duration::from_secs(5);
+/// The largest WebSocket message read (a larger one closes the connection with 1009).
+const WEBSOCKET_MAX_MESSAGE: usize = 1 << 20;
+/// Silence from a WebSocket client after which it is pinged, and after which it is closed.
+const WEBSOCKET_PING: Duration = Duration::from_secs(5);
+const WEBSOCKET_SILENCE: Duration = Duration::from_secs(15);
+
 /// How long a new connection may stay silent before it is taken for a JSON-lines client (a
 /// WebSocket client opens with its HTTP request at once; a JSON-lines client that waits for
 /// `hello` gets it this much later).
-const SNIFF_WINDOW: std::time::Duration = std::time::Duration::from_millis(150);
-/// How long a WebSocket handshake may take.
-const WEBSOCKET_HANDSHAKE: std::time::Duration = std::time::Duration::from_secs(5);
+const SNIFF_WINDOW: Duration = Duration::from_millis(150);
+/// How long a WebSocket handshake may take, from the connection.
+const WEBSOCKET_HANDSHAKE: Duration = Duration::from_secs(5);
 /// How often a WebSocket client's thread looks at its queue between reads.
-const WEBSOCKET_POLL: std::time::Duration = std::time::Duration::from_millis(10);
+const WEBSOCKET_POLL: Duration = Duration::from_millis(10);
 
 /// Whether a connection's first bytes, within `SNIFF_WINDOW`, are an HTTP request (`G` of
 /// `GET`: no JSON message starts with it).
@@ -661,8 +948,8 @@ fn opens_with_http(stream: &TcpStream) -> bool {
     http
 }
 
-fn write_loop(mut stream: TcpStream, outgoing: Receiver<Arc<str>>) {
-    for message in outgoing {
+fn write_loop(mut stream: TcpStream, outgoing: &Outbox) {
+    while let Some(message) = outgoing.pop() {
         if stream.write_all(message.as_bytes()).is_err() {
             let _ = stream.shutdown(Shutdown::Both);
             return;

@@ -27,6 +27,8 @@ pub struct WatchSettings {
     pub pipeline: PathBuf,
     /// Overrides `server` of `pipeline.ron`.
     pub listen: Option<SocketAddr>,
+    /// Web pages allowed to open a WebSocket besides loopback ones (`--allow-origin`).
+    pub allowed_origins: Vec<String>,
     /// The debouncer's window: events closer than this become one batch.
     pub debounce: Duration,
     /// Stop after this many finished builds (tests and benchmarks); run forever when `None`.
@@ -264,7 +266,9 @@ fn start(settings: &WatchSettings) -> Result<(Daemon<'_>, std::sync::mpsc::Recei
     let server = match listen {
         Some(address) => {
             let manifest = crate::artifacts::load_manifest(&config.output_dir());
-            Some(Server::start(address, ServerSettings::default(), project.revision(), &config.output, &manifest)?)
+            let server_settings =
+                ServerSettings { allowed_origins: settings.allowed_origins.clone(), ..ServerSettings::default() };
+            Some(Server::start(address, server_settings, project.revision(), &config.output, &manifest)?)
         }
         None => None,
     };

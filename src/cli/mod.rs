@@ -100,6 +100,10 @@ pub enum Command {
         /// `server` of the pipeline). The protocol has no authentication: keep it on loopback.
         #[arg(long, value_name = "ADDR", value_parser = crate::config::resolve_socket_address)]
         listen: Option<std::net::SocketAddr>,
+        /// A web page's origin (`https://editor.example:8443`) allowed to open a WebSocket, besides
+        /// pages served from this machine (loopback); repeat for more, `*` for every page.
+        #[arg(long, value_name = "ORIGIN", value_parser = parse_origin)]
+        allow_origin: Vec<String>,
         /// Events closer together than this many milliseconds become one batch.
         #[arg(long, default_value_t = 50, value_name = "MS")]
         debounce_ms: u64,
@@ -177,6 +181,19 @@ fn parse_byte_size(text: &str) -> Result<u64, String> {
     let value: u64 =
         digits.trim().parse().map_err(|_| format!("`{text}` is not a size in bytes (e.g. 1048576, 500M, 2G)"))?;
     value.checked_mul(1 << shift).ok_or_else(|| format!("`{text}` is too large"))
+}
+
+/// A web page's origin as browsers send it: `http(s)://host[:port]`, no path (or `*`).
+fn parse_origin(text: &str) -> Result<String, String> {
+    let origin = text.trim().trim_end_matches('/');
+    let host = origin.strip_prefix("http://").or_else(|| origin.strip_prefix("https://"));
+    match host {
+        _ if origin == "*" => Ok(origin.to_string()),
+        Some(host) if !host.is_empty() && !host.contains(['/', '?', '#', ' ']) => Ok(origin.to_string()),
+        _ => Err(format!(
+            "`{text}` is not a page's origin: write it as a browser sends it, e.g. https://editor.example:8443"
+        )),
+    }
 }
 
 /// The preview's stand-ins on the command line (`lod_preview` knows nothing of clap).
@@ -350,9 +367,16 @@ fn run_command(cli: Cli) -> ExitCode {
         }
         Command::Check { pipeline, assets, json } => check(pipeline, &assets, json),
         Command::Cache { command } => cache::run(command, options),
-        Command::Watch { pipeline, listen, debounce_ms } => {
+        Command::Watch { pipeline, listen, allow_origin, debounce_ms } => {
             let debounce = std::time::Duration::from_millis(debounce_ms);
-            let settings = crate::watch::WatchSettings { pipeline, listen, debounce, max_builds: None, remote_cache };
+            let settings = crate::watch::WatchSettings {
+                pipeline,
+                listen,
+                allowed_origins: allow_origin,
+                debounce,
+                max_builds: None,
+                remote_cache,
+            };
             match crate::watch::watch(&settings) {
                 Ok(()) => ExitCode::SUCCESS,
                 Err(error) => {

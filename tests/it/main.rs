@@ -24,6 +24,7 @@ mod impostor;
 mod occlusion;
 mod packing;
 mod preview;
+mod protocol;
 mod reduce;
 mod scale;
 mod tidy;

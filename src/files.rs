@@ -14,12 +14,49 @@ pub(crate) const TEMPORARY_PREFIX: &str = ".cirrus-tmp-";
 /// Writes `bytes` to `path` atomically unless the file already holds exactly these bytes.
 /// Returns whether the file changed.
 pub fn write_if_changed(path: &Path, bytes: &[u8]) -> std::io::Result<bool> {
+    match stage_if_changed(path, bytes)? {
+        Some(staged) => staged.commit().map(|()| true),
+        None => Ok(false),
+    }
+}
+
+/// A file's new bytes written beside it under a temporary name, renamed into place by
+/// [`StagedFile::commit`]; dropped uncommitted, it is deleted. Staging every file of an asset
+/// before renaming any lets a failed write leave all of them as they were.
+pub struct StagedFile {
+    temporary: tempfile::TempPath,
+    path: PathBuf,
+}
+
+impl StagedFile {
+    /// Renames the file into place.
+    pub fn commit(self) -> std::io::Result<()> {
+        self.temporary.persist(&self.path).map_err(|error| error.error)
+    }
+}
+
+/// The longest file name most file systems take (Linux's `NAME_MAX`, NTFS's and APFS's 255).
+const MAX_FILE_NAME_BYTES: usize = 255;
+
+/// Writes `bytes` beside `path` under a temporary name, unless `path` already holds exactly
+/// these bytes (`None`). Refuses, before writing anything, a name longer than 255 bytes and a
+/// folder in the file's place, so that the rename after cannot fail for them.
+pub fn stage_if_changed(path: &Path, bytes: &[u8]) -> std::io::Result<Option<StagedFile>> {
+    if path.file_name().is_some_and(|name| name.len() > MAX_FILE_NAME_BYTES) {
+        return Err(std::io::Error::new(
+            std::io::ErrorKind::InvalidFilename,
+            format!("its file name is longer than {MAX_FILE_NAME_BYTES} bytes"),
+        ));
+    }
     // Read back at most the new length (a longer file differs anyway); a FIFO or device put in
     // place of an artifact is not read (it would block) but replaced.
     if let Ok(existing) = read_regular_file(path, bytes.len() as u64) {
         if existing == bytes {
-            return Ok(false);
+            return Ok(None);
         }
+    }
+    if std::fs::symlink_metadata(path).is_ok_and(|metadata| metadata.is_dir()) {
+        return Err(std::io::Error::new(std::io::ErrorKind::IsADirectory, "a folder is in its place"));
     }
     let folder = path.parent().unwrap_or(Path::new("."));
     std::fs::create_dir_all(folder)?;
@@ -33,8 +70,7 @@ pub fn write_if_changed(path: &Path, bytes: &[u8]) -> std::io::Result<bool> {
     }
     temporary.write_all(bytes)?;
     temporary.as_file().sync_data()?;
-    temporary.persist(path).map_err(|error| error.error)?;
-    Ok(true)
+    Ok(Some(StagedFile { temporary: temporary.into_temp_path(), path: path.to_path_buf() }))
 }
 
 /// Reads the file at `path` when it is a regular file (symbolic links followed) of at most

@@ -347,7 +347,7 @@ pub fn watch(settings: &WatchSettings) -> Result<(), WatchError> {
         for reply in graph_requests.drain(..) {
             let _ = reply.send((daemon.project.revision(), daemon.project.graph()));
         }
-        if !first {
+        if !first && pending.is_empty() {
             // Block for the next edit (the watcher gone ends the daemon); graph requests are
             // answered meanwhile, and the record is written once the daemon is idle.
             let Some(message) = wait_for_edit(&mut daemon.project, &messages, &mut last_saved) else {
@@ -383,7 +383,8 @@ pub fn watch(settings: &WatchSettings) -> Result<(), WatchError> {
         let batch = bake_batch(&mut daemon, &changed_files, first);
         first = false;
         match batch {
-            Batch::Published => {}
+            // Files the batch read that moved meanwhile make the next batch at once.
+            Batch::Published { moved } => pending.extend(moved),
             Batch::Cancelled => {
                 // The next build covers this batch's edits too (their inputs are set already).
                 pending.extend(changed_files);
@@ -424,7 +425,10 @@ struct Daemon<'a> {
 
 /// How a batch ended.
 enum Batch {
-    Published,
+    /// `moved`: files it read that are no longer as it read them (`Project::moved_since_read`).
+    Published {
+        moved: Vec<PathBuf>,
+    },
     /// A newer edit cancelled it.
     Cancelled,
     Failed,
@@ -585,7 +589,14 @@ fn bake_batch(daemon: &mut Daemon, changed_files: &[PathBuf], first: bool) -> Ba
     // their files join the watched sources.
     let rebuilt: HashSet<String> = summary.assets.iter().map(|asset| asset.name.clone()).collect();
     let sources = if first { daemon.project.source_paths() } else { daemon.project.source_paths_of(&rebuilt) };
-    daemon.filter.write().expect("event filter").sources.extend(sources);
+    // Watched first, then checked: an edit after the check is an event the filter now keeps.
+    let moved = {
+        daemon.filter.write().expect("event filter").sources.extend(sources.iter().cloned());
+        daemon.project.moved_since_read(&sources)
+    };
+    if !moved.is_empty() {
+        tracing::info!("{} file(s) the batch read changed while it baked: baking again", moved.len());
+    }
     // The engine hears first; the log's graph (which may compute a cached billboard's
     // layout) after, and only of the assets of this batch.
     if let Some(server) = &daemon.server {
@@ -593,7 +604,7 @@ fn bake_batch(daemon: &mut Daemon, changed_files: &[PathBuf], first: bool) -> Ba
     }
     let graph = daemon.project.graph_of_assets(Some(&rebuilt));
     log_batch(&summary, changed_files, &graph, ms);
-    Batch::Published
+    Batch::Published { moved }
 }
 
 /// Applies a watcher message; true when the source folder must be watched again. A graph

@@ -11,7 +11,7 @@ use crate::cache::CacheKey;
 pub use crate::config::AssetKind;
 use crate::config::{AssetConfig, PipelineConfig};
 use crate::db::{Asset, Db, Stage, StageRun};
-use crate::diagnostic::Diagnostic;
+use crate::diagnostic::{display_path, Diagnostic};
 use crate::texture::tail::TailSettings;
 use crate::texture::{SurfaceKind, Texture};
 
@@ -673,6 +673,52 @@ pub(crate) fn asset_stage_ms<'a>(asset_name: &str, runs: &'a [StageRun]) -> std:
         *ms = (*ms * 10.0).round() / 10.0;
     }
     stage_ms
+}
+
+/// `cirrus check`'s word on the maps a mesh's used materials name that the asset copies into its
+/// output (those `copied` says): each must be the image its name says, as a build requires
+/// (`texture::check_image_file`); a problem names the MTL statement.
+pub(crate) fn check_copied_maps(
+    config: &PipelineConfig,
+    mesh_file: &Path,
+    mesh: &crate::mesh::Mesh,
+    copied: impl Fn(&Path) -> bool,
+) -> Vec<Diagnostic> {
+    let read = |path: &Path| crate::sources::read_source(&config.root, &config.source, path);
+    let Ok(contents) = read(mesh_file) else { return Vec::new() };
+    let libraries: std::collections::BTreeMap<PathBuf, Option<Vec<u8>>> =
+        crate::mesh::material_libraries(mesh_file, &contents.bytes, &config.source)
+            .into_iter()
+            .map(|library| {
+                let bytes = read(&library).ok().map(|contents| contents.bytes.to_vec());
+                (library, bytes)
+            })
+            .collect();
+    let mut used: Vec<u32> = mesh.triangle_materials.clone();
+    used.sort_unstable();
+    used.dedup();
+    let mut problems = Vec::new();
+    for material in used.iter().filter_map(|&index| mesh.materials.get(index as usize)) {
+        for (&slot, path) in material.maps.iter().filter(|(_, path)| copied(path)) {
+            // A map that cannot be read is the build's warning, not a copy's problem.
+            let Ok(contents) = read(path) else { continue };
+            let Err(problem) = crate::texture::check_image_file(path, &contents.bytes, config.limits.texture) else {
+                continue;
+            };
+            let message = format!(
+                "material `{}`: its {} map `{}` would not be copied into the output: {}",
+                material.name,
+                slot.name(),
+                display_path(path.strip_prefix(&config.source).unwrap_or(path)),
+                problem.message
+            );
+            problems.push(match crate::mesh::map_statement(&libraries, &material.name, slot) {
+                Some((library, position)) => Diagnostic::at(library, position, message),
+                None => Diagnostic::new(mesh_file, message),
+            });
+        }
+    }
+    problems
 }
 
 /// An OBJ of the source folder loaded for `cirrus check`, with the MTL files it names (a

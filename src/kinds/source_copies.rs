@@ -48,22 +48,34 @@ fn source_copy<'db>(
     Some((output_folder.join(SOURCE_COPIES).join(name), contents))
 }
 
-/// Copies the source file `path` into the asset's output ([`source_copy_path`]), once; a PNG
-/// loses its colour-space chunks on the way (`png_without_colour_chunks`: the same pixels).
-/// Gives the copy's path, or `None` when the file cannot be read.
-pub(crate) fn copy_source(
+/// Why a source file was not copied into the output.
+enum NotCopied {
+    /// It cannot be read (missing, or not a regular file).
+    Unreadable,
+    /// It is not the image its name says (a link to a file of another kind, a broken image).
+    NotAnImage(Diagnostic),
+}
+
+/// Copies the source file `path` into the asset's output ([`source_copy_path`]), once, after
+/// checking that it is the image its extension names and decodes (`check_image_file`: a map is
+/// never a copy of some other file that a link leads to); a PNG loses its colour-space chunks
+/// on the way (`png_without_colour_chunks`: the same pixels). Gives the copy's path.
+fn copy_source(
     db: &dyn Db,
     asset: Asset,
     output_folder: &Path,
     outputs: &mut AssetOutputs,
     path: &Path,
-) -> Option<PathBuf> {
-    let (copy, contents) = source_copy(db, asset, output_folder, path)?;
+) -> Result<PathBuf, NotCopied> {
+    let (copy, contents) = source_copy(db, asset, output_folder, path).ok_or(NotCopied::Unreadable)?;
     if !outputs.files.iter().any(|(written, _, _)| *written == copy) {
+        let relative = crate::db::source_relative(db, path);
+        crate::texture::check_image_file(&relative, &contents.bytes, crate::db::texture_limits(db))
+            .map_err(NotCopied::NotAnImage)?;
         let plain_png = crate::texture::preview::png_without_colour_chunks(&contents.bytes);
         outputs.add(copy.clone(), ArtifactRole::Image, plain_png.map_or_else(|| contents.bytes.clone(), Into::into));
     }
-    Some(copy)
+    Ok(copy)
 }
 
 /// The copies [`output_materials`] makes of `materials`' maps (those `baked` does not stand in
@@ -94,7 +106,8 @@ pub(crate) struct OutputMaterial<'a> {
 }
 
 /// The materials of a mesh as the output names them: each map either what `baked` gives or a
-/// copy of the source (`copy_source`); a map that cannot be read is left out with a warning.
+/// copy of the source (`copy_source`); a map that cannot be read is left out with a warning, one
+/// that is not the image its name says is an error naming the MTL statement.
 pub(crate) struct OutputMaterials {
     /// Each material's statements, maps relative to `mtl_folder`.
     pub mtl: String,
@@ -102,6 +115,7 @@ pub(crate) struct OutputMaterials {
     /// core reads); a map of another format is left out with a warning.
     pub gltf: Vec<GltfMaterial>,
     pub warnings: Vec<Diagnostic>,
+    pub errors: Vec<Diagnostic>,
     /// Every file the materials name (copies and `baked` artifacts), once, in order.
     pub maps: Vec<PathBuf>,
 }
@@ -124,16 +138,28 @@ pub(crate) fn output_materials(
     places: &MaterialPlaces,
 ) -> OutputMaterials {
     let MaterialPlaces { source, mtl_folder, gltf_folder } = *places;
-    let mut result = OutputMaterials { mtl: String::new(), gltf: Vec::new(), warnings: Vec::new(), maps: Vec::new() };
+    let mut result = OutputMaterials {
+        mtl: String::new(),
+        gltf: Vec::new(),
+        warnings: Vec::new(),
+        errors: Vec::new(),
+        maps: Vec::new(),
+    };
     for OutputMaterial { material, baked } in materials {
         let mut resolved: BTreeMap<TextureSlot, PathBuf> = BTreeMap::new();
         for (&slot, path) in &material.maps {
             if let Some(artifact) = baked.get(&slot) {
                 resolved.insert(slot, artifact.clone());
-            } else if let Some(copy) = copy_source(db, asset, output_folder, outputs, path) {
-                resolved.insert(slot, copy);
-            } else {
-                result.warnings.push(Diagnostic::new(
+                continue;
+            }
+            match copy_source(db, asset, output_folder, outputs, path) {
+                Ok(copy) => {
+                    resolved.insert(slot, copy);
+                }
+                Err(NotCopied::NotAnImage(problem)) => {
+                    result.errors.push(not_an_image(db, asset, source, material, slot, &problem));
+                }
+                Err(NotCopied::Unreadable) => result.warnings.push(Diagnostic::new(
                     source,
                     format!(
                         "material `{}`: its {} map `{}` cannot be read and is left out of the output's materials",
@@ -141,7 +167,7 @@ pub(crate) fn output_materials(
                         slot.name(),
                         display_path(&crate::db::source_relative(db, path))
                     ),
-                ));
+                )),
             }
         }
         result.maps.extend(resolved.values().cloned());
@@ -190,6 +216,31 @@ pub(crate) fn output_materials(
     result
 }
 
+/// The error for a map of `material` that is not the image its name says, at the MTL statement
+/// that names it when `source` (an OBJ) has one.
+fn not_an_image(
+    db: &dyn Db,
+    asset: Asset,
+    source: &Path,
+    material: &MeshMaterial,
+    slot: TextureSlot,
+    problem: &Diagnostic,
+) -> Diagnostic {
+    let message = format!(
+        "material `{}`: its {} map `{}` is not copied into the output: {}",
+        material.name,
+        slot.name(),
+        display_path(&problem.file),
+        problem.message
+    );
+    let is_obj = source.extension().is_some_and(|extension| extension.eq_ignore_ascii_case("obj"));
+    let libraries = if is_obj { crate::kinds::mesh_queries::library_bytes(db, asset, source) } else { BTreeMap::new() };
+    match crate::mesh::map_statement(&libraries, &material.name, slot) {
+        Some((library, position)) => Diagnostic::at(library, position, message),
+        None => Diagnostic::new(source, message),
+    }
+}
+
 /// The materials a mesh's triangles use (`triangle_materials`, indices into `materials`), their
 /// numbers in order, and as the output names them (each over copies of its maps).
 pub(crate) fn used_materials<'a>(
@@ -213,6 +264,8 @@ pub(crate) struct WrittenMaterials {
     pub mtl: String,
     pub gltf: Vec<GltfMaterial>,
     pub triangle_materials: Vec<u32>,
+    /// Maps that are not the images their names say (`OutputMaterials::errors`).
+    pub errors: Vec<Diagnostic>,
 }
 
 /// [`WrittenMaterials`] of a mesh whose triangles draw `triangle_materials` (indices into
@@ -231,5 +284,5 @@ pub(crate) fn written_materials(
     warnings.extend(named.warnings);
     let triangle_materials =
         triangle_materials.iter().map(|material| used.binary_search(material).unwrap_or(0) as u32).collect();
-    WrittenMaterials { mtl: named.mtl, gltf: named.gltf, triangle_materials }
+    WrittenMaterials { mtl: named.mtl, gltf: named.gltf, triangle_materials, errors: named.errors }
 }

@@ -766,6 +766,43 @@ pub fn texture_paths(libraries: &BTreeMap<PathBuf, Option<Vec<u8>>>, source_root
     paths
 }
 
+/// Where the MTL libraries name `slot`'s map of material `material`: the library and the
+/// statement's position, for diagnostics about that map.
+pub fn map_statement(
+    libraries: &BTreeMap<PathBuf, Option<Vec<u8>>>,
+    material: &str,
+    slot: TextureSlot,
+) -> Option<(PathBuf, crate::diagnostic::TextPosition)> {
+    let keywords: &[&str] = match slot {
+        TextureSlot::Albedo => &["map_Kd"],
+        TextureSlot::Opacity => &["map_d"],
+        TextureSlot::Normal => &["norm", "map_Bump", "map_bump", "bump"],
+        TextureSlot::Metallic => &["map_Pm"],
+        TextureSlot::Roughness => &["map_Pr"],
+        TextureSlot::Ao => &["map_ao", "map_AO"],
+    };
+    libraries.iter().find_map(|(library, bytes)| {
+        let text = String::from_utf8_lossy(bytes.as_deref()?);
+        let mut current = None;
+        let mut offset = 0;
+        for line in text.split_inclusive('\n') {
+            let start = offset;
+            offset += line.len();
+            let mut words = line.split_whitespace();
+            match words.next() {
+                Some("newmtl") => current = Some(words.collect::<Vec<_>>().join(" ")),
+                Some(keyword) if keywords.contains(&keyword) && current.as_deref() == Some(material) => {
+                    let indent = line.len() - line.trim_start().len();
+                    let position = crate::diagnostic::TextPosition::of_byte_offset(&text, start + indent);
+                    return Some((library.clone(), position));
+                }
+                _ => {}
+            }
+        }
+        None
+    })
+}
+
 /// Per-vertex MikkTSpace tangents (xyz, handedness in w: bitangent = w · normal × tangent),
 /// the frame normal-map bakers and glTF loaders use, from UVs in the OBJ's convention (v up:
 /// what glTF's `TANGENT` means with its flipped v). MikkTSpace frames face corners; a vertex

@@ -15,7 +15,6 @@ use crate::cache::DiskCache;
 use crate::config::{AssetConfig, PipelineConfig};
 use crate::db::{Asset, Database, Db, SourceFile, StageRun};
 use crate::diagnostic::{display_path, Diagnostic};
-use crate::files::write_if_changed;
 use crate::kinds::{stage_node_id, Read, StageInstance};
 use crate::record::{AssetRecord, BuildRecord, FileStamp, InstanceRecord, ReadRecord};
 use crate::sources::{read_source_stamped, rule_matches};
@@ -335,6 +334,22 @@ impl Project {
             }
         }
         paths
+    }
+
+    /// Those of `paths` (source files a build read) that are not as the build read them: written,
+    /// created or deleted since. The daemon asks after each batch, since an edit to a file that
+    /// no asset read yet (a texture a new material names) is not watched for until the batch
+    /// that reads it ends, and its event may have come and gone meanwhile.
+    pub(crate) fn moved_since_read(&self, paths: &BTreeSet<PathBuf>) -> Vec<PathBuf> {
+        paths
+            .iter()
+            .filter(|path| {
+                // A file that could not be read has no stamp recorded: it moved if it is there now.
+                let read = self.record.files.get(*path).map(|file| file.stamp);
+                FileStamp::read(&self.config.root.join(path)) != read
+            })
+            .cloned()
+            .collect()
     }
 
     /// Marks every source file as possibly changed (after a watcher overflow or error).
@@ -816,29 +831,42 @@ impl Project {
 
     /// Writes one artifact (project-relative `path`) if its bytes changed and records its hash;
     /// false when it could not be written. A report that differs only in its timings is kept.
-    fn write_artifact(
+    /// Writes an asset's `files` (project-relative paths) as one: each changed one is staged beside
+    /// its place first, and only when all are is each renamed into place, in order; a file that
+    /// cannot be staged leaves every one as it was. Records what is in place in `produced`.
+    fn write_artifacts(
         &self,
-        path: &Path,
-        bytes: &[u8],
+        files: &[(&PathBuf, &[u8])],
         errors: &mut Vec<Diagnostic>,
         produced: &mut BTreeMap<String, String>,
-    ) -> bool {
-        let absolute = self.config.root.join(path);
-        if path.file_name().is_some_and(|name| name == "report.json") {
-            if let Some(existing) = crate::artifacts::same_report_on_disk(&absolute, bytes) {
-                produced.insert(display_path(path), blake3::hash(&existing).to_hex().to_string());
-                return true;
+    ) {
+        let mut staged = Vec::new();
+        let mut unchanged = Vec::new();
+        for &(path, bytes) in files {
+            let absolute = self.config.root.join(path);
+            if path.file_name().is_some_and(|name| name == "report.json") {
+                if let Some(existing) = crate::artifacts::same_report_on_disk(&absolute, bytes) {
+                    unchanged.push((display_path(path), blake3::hash(&existing).to_hex().to_string()));
+                    continue;
+                }
+            }
+            let hash = blake3::hash(bytes).to_hex().to_string();
+            match crate::files::stage_if_changed(&absolute, bytes) {
+                Ok(Some(file)) => staged.push((path, hash, file)),
+                Ok(None) => unchanged.push((display_path(path), hash)),
+                Err(error) => errors.push(Diagnostic::new(path, format!("cannot write the artifact: {error}"))),
             }
         }
-        match write_if_changed(&absolute, bytes) {
-            Ok(_) => {
-                produced.insert(display_path(path), blake3::hash(bytes).to_hex().to_string());
-                true
-            }
-            Err(error) => {
+        if !errors.is_empty() {
+            return;
+        }
+        produced.extend(unchanged);
+        for (path, hash, file) in staged {
+            if let Err(error) = file.commit() {
                 errors.push(Diagnostic::new(path, format!("cannot write the artifact: {error}")));
-                false
+                return;
             }
+            produced.insert(display_path(path), hash);
         }
     }
 }

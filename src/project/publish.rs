@@ -52,19 +52,24 @@ impl Project {
         let kind = asset.kind(&self.db);
         // Project-relative artifact path → blake3 hex of what this build wrote there.
         let mut produced = BTreeMap::new();
-        let mut all_written = true;
         let mut roles: BTreeMap<String, ArtifactRole> = BTreeMap::new();
-        for (path, role, bytes) in &outputs.files {
-            all_written &= self.write_artifact(path, bytes, &mut errors, &mut produced);
+        for (path, role, _) in &outputs.files {
             roles.insert(display_path(path), *role);
         }
         roles.insert(display_path(&folder.join("report.json")), ArtifactRole::Report);
         let warnings = outputs.warnings;
-        // The report comes last and describes the files above: it is written only when they
-        // all are (a failed write keeps the last good report with its files).
-        if let (Some(mut report), true) = (outputs.report, all_written) {
-            report.push(b'\n');
-            self.write_artifact(&folder.join("report.json"), &report, &mut errors, &mut produced);
+        // A failed asset keeps its last good artifacts, all of them: nothing of it is written.
+        // Else every changed file is first written beside its place, and only when all are, each
+        // is renamed into place, the report (which describes the others) last.
+        if errors.is_empty() {
+            let report = outputs.report.map(|mut report| {
+                report.push(b'\n');
+                (folder.join("report.json"), report)
+            });
+            let files = outputs.files.iter().map(|(path, _, bytes)| (path, &bytes[..]));
+            let files: Vec<(&PathBuf, &[u8])> =
+                files.chain(report.as_ref().map(|(path, bytes)| (path, &bytes[..]))).collect();
+            self.write_artifacts(&files, &mut errors, &mut produced);
         }
         let asset_folder = format!("{}/", display_path(&folder));
         for (path, hash) in &produced {

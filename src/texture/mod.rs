@@ -298,6 +298,31 @@ pub fn decode_texture(file: &Path, bytes: &[u8], limits: TextureLimits) -> Resul
     Ok(Texture::new(rgba.width(), rgba.height(), rgba.into_raw()))
 }
 
+/// Checks that `bytes` are the image `file`'s extension names (PNG, JPEG, TGA, BMP or GIF; the
+/// bytes' own signature must agree) and decode whole within `limits`: what a file copied into
+/// the output as an image must pass, so that a map named `x.png` is never anything else.
+pub fn check_image_file(file: &Path, bytes: &[u8], limits: TextureLimits) -> Result<(), Diagnostic> {
+    let named = image::ImageFormat::from_path(file).ok().filter(|format| {
+        matches!(
+            format,
+            image::ImageFormat::Png
+                | image::ImageFormat::Jpeg
+                | image::ImageFormat::Tga
+                | image::ImageFormat::Bmp
+                | image::ImageFormat::Gif
+        )
+    });
+    let Some(named) = named else {
+        return Err(Diagnostic::new(file, "its name is not that of a PNG, JPEG, TGA, BMP or GIF image"));
+    };
+    let found = image::guess_format(bytes).ok();
+    if found.is_some_and(|found| found != named) || (found.is_none() && named != image::ImageFormat::Tga) {
+        let what = found.map_or_else(|| "not an image".to_string(), |found| format!("a {found:?} image"));
+        return Err(Diagnostic::new(file, format!("it is named as a {named:?} image but is {what}")));
+    }
+    decode_texture(file, bytes, limits).map(|_| ())
+}
+
 fn image_reader<'a>(file: &Path, bytes: &'a [u8]) -> Result<image::ImageReader<Cursor<&'a [u8]>>, Diagnostic> {
     let mut reader = image::ImageReader::new(Cursor::new(bytes))
         .with_guessed_format()

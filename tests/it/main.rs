@@ -19,6 +19,7 @@ mod graph;
 mod seaweed;
 mod shared_cache;
 mod hostile;
+mod hostile_outputs;
 mod isa;
 mod impostor;
 mod occlusion;

@@ -693,3 +693,139 @@ fn a_texture_added_under_an_atlas_glob_joins_the_atlas_while_watching_and_leaves
     assert_eq!(batch["failed"], serde_json::json!([]), "{batch}");
     assert_eq!(entries(&project), ["icons/more/b.png"]);
 }
+
+/// Every file under the output folder (the cache and the manifest left out), reports without
+/// their timings: what a clean build of the same sources must write too.
+fn comparable_outputs(root: &std::path::Path) -> BTreeMap<String, String> {
+    let mut outputs = BTreeMap::new();
+    let baked = root.join("baked");
+    if !baked.exists() {
+        return outputs;
+    }
+    for path in crate::support::files_under(&baked) {
+        let relative = path.strip_prefix(root).unwrap().to_string_lossy().replace('\\', "/");
+        if relative.starts_with("baked/.cirrus/") || relative == "baked/manifest.json" {
+            continue;
+        }
+        let bytes = std::fs::read(&path).unwrap();
+        let value = if relative.ends_with("report.json") {
+            let mut report: Value = serde_json::from_slice(&bytes).unwrap();
+            report.as_object_mut().map(|object| object.remove("stage_ms"));
+            report.to_string()
+        } else {
+            blake3::hash(&bytes).to_hex().to_string()
+        };
+        outputs.insert(relative, value);
+    }
+    outputs
+}
+
+#[test]
+fn after_a_random_burst_of_creates_edits_deletes_and_renames_the_daemon_writes_what_a_clean_build_writes() {
+    // Materials under a rule, each naming textures that may not exist yet: an edit of a texture
+    // that no asset read yet used to be lost when it came during the batch that first read it
+    // (30 materials created, their textures rewritten 0.3 s later: all 30 stale for good).
+    let project = TempProject::new(
+        r#"Pipeline(source: "assets", output: "baked", rules: [(glob: "extra/*.mymaterial", kind: Material)])"#,
+    );
+    let material = |texture: usize, other: usize| {
+        format!(
+            "Material $m {{\n  Texture (attrib = \"diffuse\") {{string {{\"../tex/t{texture}.png\"}}}}\n  Texture (attrib = \
+             \"normal\") {{string {{\"../tex/t{other}.png\"}}}}\n}}\n"
+        )
+    };
+    for index in 0..4 {
+        project.write(&format!("assets/tex/t{index}.png"), pattern_png(16, 16, index as u32));
+    }
+    // Textures no asset reads yet, large enough that the batch reading them is still baking
+    // when they are rewritten.
+    for index in 0..30 {
+        project.write(&format!("assets/tex/t{}.png", 100 + index), pattern_png(256, 256, 300 + index as u32));
+    }
+    project.write("assets/extra/m0.mymaterial", material(0, 1));
+    let daemon = Daemon::start(&project);
+    let mut client = daemon.connect();
+    client.subscribe(Some(0));
+    client.batch();
+    // First the issue's sequence: 30 new materials over 30 textures no asset reads, the
+    // textures rewritten 0.3 s later.
+    for index in 0..30 {
+        project.write(&format!("assets/extra/new{index}.mymaterial"), material(100 + index, 100 + index));
+    }
+    std::thread::sleep(Duration::from_millis(300));
+    for index in 0..30 {
+        project.write(&format!("assets/tex/t{}.png", 100 + index), pattern_png(256, 256, 500 + index as u32));
+    }
+    // Then a random burst over 40 material and 40 texture names (a fixed seed: the same every run).
+    let mut seed = 0x2545_f491_4f6c_dd1du64;
+    let mut next = |bound: usize| {
+        seed ^= seed << 13;
+        seed ^= seed >> 7;
+        seed ^= seed << 17;
+        (seed % bound as u64) as usize
+    };
+    for step in 0..600 {
+        let (material_name, texture) = (format!("assets/extra/m{}.mymaterial", next(40)), next(40));
+        match next(10) {
+            0..=2 => project.write(&material_name, material(texture, next(40))),
+            3..=5 => project.write(&format!("assets/tex/t{texture}.png"), pattern_png(16, 16, step as u32)),
+            6 => {
+                let _ = std::fs::remove_file(project.path(&material_name));
+            }
+            7 => {
+                let _ = std::fs::remove_file(project.path(&format!("assets/tex/t{texture}.png")));
+            }
+            8 => {
+                let to = format!("assets/extra/m{}.mymaterial", next(40));
+                let _ = std::fs::rename(project.path(&material_name), project.path(&to));
+            }
+            _ => {
+                let to = format!("assets/tex/t{}.png", next(40));
+                let _ = std::fs::rename(project.path(&format!("assets/tex/t{texture}.png")), project.path(&to));
+            }
+        }
+        if next(8) == 0 {
+            std::thread::sleep(Duration::from_millis(next(40) as u64));
+        }
+    }
+    // Settled: no message for 3 s.
+    let started = Instant::now();
+    while !client.quiet_for(Duration::from_secs(3)) {
+        client.receive();
+        assert!(started.elapsed() < Duration::from_secs(180), "the daemon never settled");
+    }
+    let watched = comparable_outputs(project.root());
+    let clean = TempProject::new(&String::from_utf8(project.read("pipeline.ron")).unwrap());
+    clean.copy_folder(&project.path("assets"), "assets");
+    let summary = crate::support::build(&mut clean.open());
+    // An asset that fails keeps its last good outputs in the daemon, and has none in a clean
+    // build: only the others compare.
+    let failed: Vec<String> = summary
+        .assets
+        .iter()
+        .filter(|asset| !asset.errors.is_empty())
+        .map(|asset| format!("baked/extra/{}/", asset.name.trim_start_matches("extra/")))
+        .collect();
+    let compared = |outputs: BTreeMap<String, String>| -> BTreeMap<String, String> {
+        outputs.into_iter().filter(|(path, _)| !failed.iter().any(|folder| path.starts_with(folder))).collect()
+    };
+    let (watched, expected) = (compared(watched), compared(comparable_outputs(clean.root())));
+    for index in 0..30 {
+        assert!(expected.contains_key(&format!("baked/extra/new{index}/report.json")), "new{index} bakes");
+    }
+    let missing: Vec<&String> = expected.keys().filter(|path| !watched.contains_key(*path)).collect();
+    let extra: Vec<&String> = watched.keys().filter(|path| !expected.contains_key(*path)).collect();
+    let differing: Vec<&String> = expected
+        .iter()
+        .filter(|(path, value)| watched.get(*path).is_some_and(|other| other != *value))
+        .map(|(path, _)| path)
+        .collect();
+    assert!(
+        missing.is_empty() && extra.is_empty() && differing.is_empty(),
+        "the daemon's output differs from a clean build's ({} files): missing {missing:?}, extra {extra:?}, \
+         differing {differing:?}\n{}",
+        expected.len(),
+        daemon.log.lock().unwrap().clone()
+    );
+    assert!(expected.len() > 100, "{} files", expected.len());
+}

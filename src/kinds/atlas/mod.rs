@@ -263,6 +263,8 @@ impl Kind for Atlas {
                     problems.push(Diagnostic::new(&mesh_file, error.to_string()));
                 }
             }
+            let atlased = |map: &Path| files.iter().any(|file| file == map);
+            problems.extend(crate::kinds::check_copied_maps(config, &mesh_file, &mesh, |map| !atlased(map)));
             if asset.settings.own::<Own>().pack.trim {
                 problems.extend(uvs_beyond_trim(config, &mesh_file, &mesh, &files));
             }
@@ -466,6 +468,10 @@ fn mesh_outputs(
             remapped.materials.iter().map(|material| output_material(output_folder, material)).collect();
         let named = output_materials(db, asset, output_folder, outputs, &chosen, &places);
         warnings.extend(named.warnings);
+        if !named.errors.is_empty() {
+            errors.extend(named.errors);
+            continue;
+        }
         let stem = obj_path.file_stem().map_or_else(|| "mesh".into(), |stem| stem.to_string_lossy().into_owned());
         let gltf = crate::mesh::gltf::gltf_files(
             &remapped.geometry.mesh(&stem, &named.gltf),
@@ -480,6 +486,7 @@ fn mesh_outputs(
     let chosen: Vec<OutputMaterial> =
         materials.values().map(|(material, _)| output_material(output_folder, material)).collect();
     let places = MaterialPlaces { source: asset.main_file(db), mtl_folder: output_folder, gltf_folder: output_folder };
+    // (Its maps are the meshes' own, whose problems the meshes' calls above reported.)
     let named = output_materials(db, asset, output_folder, outputs, &chosen, &places);
     let mut mtl = format!("# cirrus: materials of the meshes remapped onto atlas `{}`\n\n", asset.name(db));
     mtl.push_str(&named.mtl);

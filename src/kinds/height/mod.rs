@@ -209,6 +209,9 @@ impl Kind for Height {
         match crate::kinds::check_mesh_file(config, low_file) {
             Ok((mesh, warnings)) => {
                 problems.extend(warnings);
+                if asset.settings.own::<Own>().tessellate.is_some() {
+                    problems.extend(crate::kinds::check_copied_maps(config, low_file, &mesh, |_| true));
+                }
                 let settings = &asset.settings;
                 let needs_uvs = settings.own::<Own>().height.projection == HeightProjection::Normals
                     || settings.own::<Own>().tessellate.is_some_and(|tessellate| tessellate.displace);
@@ -401,7 +404,7 @@ fn height_outputs(
         let obj_path = output_folder.join("tessellated.obj");
         outputs.add(obj_path.clone(), ArtifactRole::Mesh, files.obj.clone());
         let gltf_path =
-            tessellated_gltf(db, asset, output_folder, &files, &low.loaded.mesh, &mut outputs, &mut material_warnings);
+            tessellated_gltf(db, asset, output_folder, &files, &low.loaded.mesh, &mut outputs, &mut material_warnings)?;
         tessellated = Some(TessellatedReport {
             obj: display_path(&obj_path),
             gltf: display_path(&gltf_path),
@@ -460,7 +463,8 @@ fn height_outputs(
 }
 
 /// `tessellated.mtl`, `tessellated.gltf` and its `tessellated.bin`: the tessellated mesh's used
-/// materials over copies of their maps in the output (`source_copies`). Gives the glTF's path.
+/// materials over copies of their maps in the output (`source_copies`). Gives the glTF's path,
+/// or the first map that is not the image its name says.
 fn tessellated_gltf(
     db: &dyn Db,
     asset: Asset,
@@ -469,7 +473,7 @@ fn tessellated_gltf(
     low: &crate::mesh::Mesh,
     outputs: &mut AssetOutputs,
     warnings: &mut Vec<Diagnostic>,
-) -> PathBuf {
+) -> Result<PathBuf, Diagnostic> {
     use crate::kinds::source_copies::{written_materials, MaterialPlaces};
     let geometry = &files.geometry;
     let places = MaterialPlaces { source: asset.main_file(db), mtl_folder: output_folder, gltf_folder: output_folder };
@@ -482,6 +486,9 @@ fn tessellated_gltf(
         &places,
         warnings,
     );
+    if let Some(error) = written.errors.into_iter().next() {
+        return Err(error);
+    }
     outputs.add(output_folder.join("tessellated.mtl"), ArtifactRole::Mtl, written.mtl.into_bytes().into());
     let mesh = crate::mesh::gltf::GltfMesh {
         triangle_materials: &written.triangle_materials,
@@ -491,5 +498,5 @@ fn tessellated_gltf(
     let gltf_path = output_folder.join("tessellated.gltf");
     outputs.add(gltf_path.clone(), ArtifactRole::Gltf, gltf.gltf.into());
     outputs.add(output_folder.join("tessellated.bin"), ArtifactRole::GltfBuffer, gltf.bin.into());
-    gltf_path
+    Ok(gltf_path)
 }

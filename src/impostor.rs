@@ -162,17 +162,18 @@ pub fn bake_impostor(
     sphere: (Vec3, f32),
     settings: ImpostorSettings,
 ) -> Result<ImpostorFrames, GpuError> {
-    bake_impostor_with_margin(gpu, mesh, sphere, settings, settings.frame_size)
+    bake_impostor_with_margin(gpu, mesh, sphere, (settings, settings.frame_size), &crate::mesh::never)
 }
 
 /// [`bake_impostor`] with the frames' margins of `margin_frame`-texel frames
-/// ([`frame_rects_with_margin`]), for frames that smaller ones are reduced from.
+/// ([`frame_rects_with_margin`]), for frames that smaller ones are reduced from; between batches
+/// of frames `should_stop` may end it (`GpuError::Stopped`).
 pub fn bake_impostor_with_margin(
     gpu: &Gpu,
     mesh: &ViewMesh,
     (center, radius): (Vec3, f32),
-    settings: ImpostorSettings,
-    margin_frame: u32,
+    (settings, margin_frame): (ImpostorSettings, u32),
+    should_stop: crate::mesh::ShouldStop,
 ) -> Result<ImpostorFrames, GpuError> {
     let ImpostorSettings { grid, frame_size } = settings;
     let side = (grid.frames * frame_size) as usize;
@@ -190,19 +191,25 @@ pub fn bake_impostor_with_margin(
         .map(|(&direction, &rect)| frame_rect_view_projection(center, radius, direction, rect).to_cols_array_2d())
         .collect();
     let samples = frame_samples_per_axis(frame_size);
-    gpu.render_impostor_frames(mesh, &cameras, frame_size * samples, |frame, [albedo, normal_depth]| {
-        let (albedo, normal_depth) = resolve_frame(&albedo, &normal_depth, frame_size, samples);
-        let images = frame_surfaces(&albedo, &normal_depth, directions[frame], frame_size);
-        let frame = frame as u32;
-        let (column, row) = ((frame % grid.frames * frame_size) as usize, (frame / grid.frames * frame_size) as usize);
-        let row_bytes = frame_size as usize * 4;
-        for (atlas, image) in atlases.iter_mut().zip(&images) {
-            for y in 0..frame_size as usize {
-                let at = ((row + y) * side + column) * 4;
-                atlas[at..at + row_bytes].copy_from_slice(&image[y * row_bytes..][..row_bytes]);
+    gpu.render_impostor_frames(
+        mesh,
+        &cameras,
+        (frame_size * samples, should_stop),
+        |frame, [albedo, normal_depth]| {
+            let (albedo, normal_depth) = resolve_frame(&albedo, &normal_depth, frame_size, samples);
+            let images = frame_surfaces(&albedo, &normal_depth, directions[frame], frame_size);
+            let frame = frame as u32;
+            let (column, row) =
+                ((frame % grid.frames * frame_size) as usize, (frame / grid.frames * frame_size) as usize);
+            let row_bytes = frame_size as usize * 4;
+            for (atlas, image) in atlases.iter_mut().zip(&images) {
+                for y in 0..frame_size as usize {
+                    let at = ((row + y) * side + column) * 4;
+                    atlas[at..at + row_bytes].copy_from_slice(&image[y * row_bytes..][..row_bytes]);
+                }
             }
-        }
-    })?;
+        },
+    )?;
     let [albedo, normal, depth] = atlases.map(|pixels| Texture::new(side as u32, side as u32, pixels));
     Ok(ImpostorFrames { settings, center, radius, albedo, normal, depth, rects })
 }
@@ -241,7 +248,7 @@ pub fn reduced_frames(frames: &ImpostorFrames, factor: u32, alpha_cutoff: f32) -
 /// 256²); frames reduced from a large one (`reduced_frames`) still get 16 samples a texel or
 /// more. On the oak's `Auto` chain this took the impostor stage from 3.8 to 2.4 s of work; the
 /// impostor candidates' losses moved by −0.05 to +0.10 px-shift units, the picks did not.
-fn frame_samples_per_axis(frame_size: u32) -> u32 {
+pub(crate) fn frame_samples_per_axis(frame_size: u32) -> u32 {
     (256 / frame_size.max(1)).clamp(2, 4)
 }
 

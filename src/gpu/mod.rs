@@ -42,6 +42,9 @@ pub enum GpuError {
     Device(String),
     #[error("GPU rendering failed: {0}")]
     Render(String),
+    /// The work's `ShouldStop` said so (a build cancelled by a newer edit); not a failure.
+    #[error("stopped before it finished")]
+    Stopped,
 }
 
 /// The device and everything created once for it.

@@ -3,6 +3,8 @@
 
 use std::sync::Arc;
 
+use crate::mesh::ShouldStop;
+
 use bytemuck::{Pod, Zeroable};
 
 use super::*;
@@ -102,15 +104,19 @@ impl Gpu {
     /// [`views_per_batch`]: `record` records view `index`'s pass into its batch's encoder and
     /// returns its targets; each batch is read back at once, and each view's targets' pixels go to
     /// `each` with its index, in order, before the next batch is drawn (so that at most a batch's
-    /// pixels are held).
+    /// pixels are held). Before each batch, `should_stop` may end the work (`GpuError::Stopped`).
     pub(super) fn draw_in_batches(
         &self,
         (count, size, targets): (usize, u32, usize),
+        should_stop: ShouldStop,
         mut record: impl FnMut(&mut wgpu::CommandEncoder, usize) -> Vec<wgpu::Texture>,
         mut each: impl FnMut(usize, Vec<Vec<u8>>),
     ) -> Result<(), GpuError> {
         let batch = views_per_batch(size, targets);
         for first in (0..count).step_by(batch) {
+            if should_stop() {
+                return Err(GpuError::Stopped);
+            }
             let views = first..(first + batch).min(count);
             let mut encoder = self.device.create_command_encoder(&Default::default());
             let mut drawn: Vec<wgpu::Texture> = Vec::with_capacity(views.len() * targets);
@@ -153,7 +159,8 @@ impl Gpu {
             .map(|&view_projection| CameraUniform { view_projection, light: extend(light) })
             .collect();
         let pipeline = (&self.view_pipelines, [(ALBEDO_FORMAT, VIEW_BACKGROUND)].as_slice());
-        self.draw_views(mesh, &cameras, size, pipeline, |index, mut images| each(index, images.remove(0)))
+        let never = &crate::mesh::never;
+        self.draw_views(mesh, &cameras, (size, never), pipeline, |index, mut images| each(index, images.remove(0)))
     }
 
     /// Renders impostor frames of `mesh` (`view.wgsl`'s `fs_impostor`), one under each of
@@ -165,7 +172,7 @@ impl Gpu {
         &self,
         mesh: &ViewMesh,
         view_projections: &[[[f32; 4]; 4]],
-        size: u32,
+        (size, should_stop): (u32, ShouldStop),
         mut each: impl FnMut(usize, [Vec<u8>; 2]),
     ) -> Result<(), GpuError> {
         let cameras: Vec<CameraUniform> = view_projections
@@ -173,7 +180,8 @@ impl Gpu {
             .map(|&view_projection| CameraUniform { view_projection, light: [0.0; 4] })
             .collect();
         let targets = [(ALBEDO_FORMAT, wgpu::Color::TRANSPARENT), (DATA_FORMAT, wgpu::Color::TRANSPARENT)];
-        self.draw_views(mesh, &cameras, size, (&self.impostor_pipelines().frame, &targets), |index, mut images| {
+        let pipelines = (&self.impostor_pipelines().frame, &targets[..]);
+        self.draw_views(mesh, &cameras, (size, should_stop), pipelines, |index, mut images| {
             let normal_depth = images.pop().unwrap_or_default();
             each(index, [images.pop().unwrap_or_default(), normal_depth])
         })
@@ -187,7 +195,7 @@ impl Gpu {
         &self,
         mesh: &ViewMesh,
         cameras: &[CameraUniform],
-        size: u32,
+        (size, should_stop): (u32, ShouldStop),
         (pipelines, formats): (&MapPipelines, &[(wgpu::TextureFormat, wgpu::Color)]),
         each: impl FnMut(usize, Vec<Vec<u8>>),
     ) -> Result<(), GpuError> {
@@ -259,7 +267,7 @@ impl Gpu {
                 drop(pass);
                 targets
             };
-            self.draw_in_batches((cameras.len(), size, formats.len()), record, each)
+            self.draw_in_batches((cameras.len(), size, formats.len()), should_stop, record, each)
         })
     }
 

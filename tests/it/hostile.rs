@@ -1191,3 +1191,47 @@ fn rule_matched_files_deleted_while_they_bake_leave_at_once_and_what_was_publish
     let never_withdrawn: Vec<&String> = published.difference(&withdrawn).collect();
     assert!(never_withdrawn.is_empty(), "published as changed, never as removed: {never_withdrawn:?}");
 }
+
+#[test]
+fn an_impostor_level_of_minutes_is_warned_about_and_an_edit_back_under_watch_cancels_it_within_seconds() {
+    // 32 × 32 frames of 256² (rendered at 512²) into an 8192² atlas: the impostor stage alone ran
+    // 147 s on llvmpipe, and an edit back to a cheap level waited 224 s for its batch.
+    let costly = "billboard: (lods: [Impostor(frames: 32, hemi: false, size: 8192)])";
+    let pipeline = |lods: &str| {
+        format!(
+            r#"Pipeline(source: "assets", output: "baked", assets: [
+                BillboardCloud(name: "bush", mesh: "trees/bush_2.obj", atlas: (max_size: 512), {lods}),
+            ])"#
+        )
+    };
+    let project = TempProject::new(&pipeline(costly));
+    project.copy_folder(&Path::new(env!("CARGO_MANIFEST_DIR")).join("examples/assets/trees"), "assets/trees");
+    let check = text(&run_with_deadline(&project, &["check"], Duration::from_secs(60)));
+    assert!(check.contains("lod0 `Impostor(frames:32,hemi:false,size:8192)`: renders and encodes about"), "{check}");
+    assert!(check.contains("× the median of the other levels"), "{check}");
+    // The bundled chain's levels are not warned about.
+    project.write(
+        "pipeline.ron",
+        pipeline("billboard: (lods: [Reduced(Ratio(0.5)), Quads(64), Impostor(frames: 8, hemi: false, size: 512)])"),
+    );
+    let check = text(&run_with_deadline(&project, &["check"], Duration::from_secs(60)));
+    assert!(!check.contains("renders and encodes about"), "{check}");
+
+    project.write("pipeline.ron", pipeline(costly));
+    let daemon = Daemon::start(&project);
+    let mut client = daemon.connect();
+    client.subscribe(Some(0));
+    // The first build is rendering frames now; the user takes the level back.
+    std::thread::sleep(Duration::from_secs(8));
+    project.write("pipeline.ron", pipeline("billboard: (lods: [Impostor(frames: 8, hemi: false, size: 512)])"));
+    let edited = Instant::now();
+    let batch = next_batch(&daemon, &mut client);
+    let waited = edited.elapsed();
+    assert_eq!(batch["failed"], serde_json::json!([]), "{batch}");
+    let log = daemon.log.lock().unwrap().clone();
+    assert!(log.contains("build cancelled by a newer edit"), "{log}");
+    assert!(waited < Duration::from_secs(60), "the edit back waited {waited:?} for the costly frames");
+    println!("an edit back during the 32 × 32 impostor's frames was baked {waited:?} later");
+    let report: serde_json::Value = serde_json::from_slice(&project.read("baked/bush/report.json")).unwrap();
+    assert_eq!(report["levels"][0]["frames"], 8, "{report}");
+}

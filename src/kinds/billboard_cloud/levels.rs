@@ -445,3 +445,68 @@ pub fn label(asset_name: &str, folder: &str) -> String {
         format!("{asset_name}/{folder}")
     }
 }
+
+/// Texels a slot renders and encodes, estimated from its settings alone (`cirrus check`'s
+/// measure of what a level costs): an impostor renders each frame at its supersampling (unless
+/// its frames are reduced from another slot's) and encodes three atlases; a cloud renders its
+/// atlas (about once over) and encodes four; a reduced level encodes its maps (three at most a
+/// side of the level's largest).
+pub(crate) fn estimated_texels(settings: &Settings, slot: u32) -> u64 {
+    let level = settings_for(settings, slot);
+    let side = |side: u32| u64::from(side).pow(2);
+    if let Some(impostor) = level.impostor {
+        let atlas = side(impostor.grid.frames * impostor.frame_size);
+        let rendered = match impostor_render(settings, slot) {
+            Some(render) if render.source != slot => 0,
+            _ => {
+                let samples = crate::impostor::frame_samples_per_axis(impostor.frame_size);
+                u64::from(impostor.grid.frame_count()) * side(impostor.frame_size * samples)
+            }
+        };
+        return rendered + 3 * atlas;
+    }
+    let atlas = side(level.max_atlas_size);
+    match level.reduced {
+        Some(_) => 3 * atlas,
+        None => 5 * atlas,
+    }
+}
+
+/// A slot estimated to cost more than this many times the median of the others (and of a plain
+/// cloud at the asset's `max_size`), and more than [`COSTLY_SLOT_TEXELS`], is warned about.
+const COSTLY_SLOT_FACTOR: u64 = 16;
+const COSTLY_SLOT_TEXELS: u64 = 64 << 20;
+
+/// `cirrus check`'s warnings about slots whose estimated cost ([`estimated_texels`]) is far
+/// above the others': each names the slot, its cost beside theirs, and what costs less.
+pub(crate) fn costly_slot_warnings(settings: &Settings) -> Vec<String> {
+    let count = slot_count(settings);
+    let costs: Vec<u64> = (0..count).map(|slot| estimated_texels(settings, slot)).collect();
+    let plain_cloud = 5 * u64::from(settings.own::<Own>().atlas.max_size).pow(2);
+    let all_slots = slots(settings);
+    let mut warnings = Vec::new();
+    for (slot, &cost) in costs.iter().enumerate() {
+        let mut others: Vec<u64> =
+            costs.iter().enumerate().filter(|(other, _)| *other != slot).map(|(_, &cost)| cost).collect();
+        others.push(plain_cloud);
+        others.sort_unstable();
+        let median = others[others.len() / 2].max(1);
+        if cost <= COSTLY_SLOT_TEXELS || cost <= COSTLY_SLOT_FACTOR * median {
+            continue;
+        }
+        let described = all_slots
+            .get(slot)
+            .and_then(|slot| slot.bakes)
+            .map_or_else(String::new, |bakes| format!(" `{}`", ron::to_string(&bakes).unwrap_or_default()));
+        let level = all_slots.get(slot).map_or(0, |slot| slot.level);
+        warnings.push(format!(
+            "lod{level}{described}: renders and encodes about {} M texels, {}× the median of the other levels and \
+             of a plain cloud ({} M): its bake takes minutes where theirs take seconds; fewer frames or a smaller \
+             `size` bake sooner",
+            cost >> 20,
+            cost / median,
+            median >> 20
+        ));
+    }
+    warnings
+}

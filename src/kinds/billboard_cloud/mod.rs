@@ -336,6 +336,8 @@ impl Kind for BillboardCloud {
                 problems.push(Diagnostic::new(path, message));
             }
         }
+        let costly = levels::costly_slot_warnings(&asset.settings);
+        problems.extend(costly.into_iter().map(|message| Diagnostic::new(&config.file, message).as_warning()));
         problems
     }
 

@@ -845,8 +845,21 @@ pub(crate) fn impostor_frames(
     let sphere = super::planes::bounding_sphere(&loaded.mesh.positions);
     timed(db, IMPOSTOR, name, || {
         let gpu = crate::gpu::gpu().map_err(|error| Diagnostic::new(main_file, error.to_string()))?;
-        let frames = crate::impostor::bake_impostor_with_margin(gpu, &view, sphere, settings, render.margin_frame)
-            .map_err(|error| Diagnostic::new(main_file, format!("{name}: {error}")))?;
+        // Cancellable between batches of frames: a 32 × 32 grid of 256² frames takes minutes on a
+        // software adapter, and an edit back to a cheaper level must not wait for it.
+        let frames = crate::db::stoppable(db, |should_stop| {
+            match crate::impostor::bake_impostor_with_margin(
+                gpu,
+                &view,
+                sphere,
+                (settings, render.margin_frame),
+                should_stop,
+            ) {
+                Err(crate::gpu::GpuError::Stopped) => Err(crate::mesh::Stopped),
+                frames => Ok(frames),
+            }
+        })
+        .map_err(|error| Diagnostic::new(main_file, format!("{name}: {error}")))?;
         Ok(Arc::new(frames))
     })
 }

@@ -84,12 +84,21 @@ pub(crate) fn manifest_path(output_dir: &Path) -> PathBuf {
     output_dir.join("manifest.json")
 }
 
-/// The manifest of the last build, or an empty one.
+/// The manifest of the last build, or an empty one (parsed as it is read). One that is there but
+/// cannot be read, is too large or is not a manifest is warned about: the build writes a new one.
 pub(crate) fn load_manifest(output_dir: &Path) -> Manifest {
-    crate::files::read_regular_file(&manifest_path(output_dir), MAX_MANIFEST_BYTES)
-        .ok()
-        .and_then(|bytes| serde_json::from_slice(&bytes).ok())
-        .unwrap_or_default()
+    let path = manifest_path(output_dir);
+    match crate::files::read_json_file(&path, MAX_MANIFEST_BYTES) {
+        Ok(manifest) => manifest,
+        Err(error) if error.is_not_found() => Manifest::default(),
+        Err(error) => {
+            tracing::warn!(
+                "{} {error}: this build writes a new one (artifacts it does not list are left alone)",
+                crate::diagnostic::display_path(&path)
+            );
+            Manifest::default()
+        }
+    }
 }
 
 pub(crate) fn save_manifest(output_dir: &Path, manifest: &Manifest) -> std::io::Result<bool> {

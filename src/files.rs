@@ -87,6 +87,18 @@ pub(crate) fn read_regular_file_with_metadata(
     limit: u64,
 ) -> Result<(Vec<u8>, std::fs::Metadata), ReadError> {
     use std::io::Read;
+    let (file, metadata) = open_regular_file(path, limit)?;
+    let mut bytes = Vec::with_capacity(metadata.len() as usize);
+    (&file).take(limit + 1).read_to_end(&mut bytes).map_err(ReadError::of)?;
+    if bytes.len() as u64 > limit {
+        return Err(ReadError::TooLarge { limit });
+    }
+    Ok((bytes, metadata))
+}
+
+/// Opens `path` for reading when it is a regular file of at most `limit` bytes by its metadata
+/// (non-blocking, checked on the open handle: see [`read_regular_file`]).
+fn open_regular_file(path: &Path, limit: u64) -> Result<(std::fs::File, std::fs::Metadata), ReadError> {
     let mut options = std::fs::OpenOptions::new();
     options.read(true);
     #[cfg(unix)]
@@ -106,12 +118,31 @@ pub(crate) fn read_regular_file_with_metadata(
     if metadata.len() > limit {
         return Err(ReadError::TooLarge { limit });
     }
-    let mut bytes = Vec::with_capacity(metadata.len() as usize);
-    (&file).take(limit + 1).read_to_end(&mut bytes).map_err(ReadError::of)?;
-    if bytes.len() as u64 > limit {
-        return Err(ReadError::TooLarge { limit });
+    Ok((file, metadata))
+}
+
+/// Why a JSON file of cirrus's own (the manifest, the build record) was not read.
+#[derive(Debug, thiserror::Error)]
+pub(crate) enum JsonFileError {
+    #[error("{0}")]
+    Read(ReadError),
+    #[error("is not valid JSON of its kind: {0}")]
+    Malformed(serde_json::Error),
+}
+
+impl JsonFileError {
+    pub(crate) fn is_not_found(&self) -> bool {
+        matches!(self, JsonFileError::Read(error) if error.is_not_found())
     }
-    Ok((bytes, metadata))
+}
+
+/// Parses the JSON file at `path` (a regular file of at most `limit` bytes) as it is read, so
+/// that its bytes are never held whole beside what they parse to.
+pub(crate) fn read_json_file<T: serde::de::DeserializeOwned>(path: &Path, limit: u64) -> Result<T, JsonFileError> {
+    use std::io::Read;
+    let (file, _) = open_regular_file(path, limit).map_err(JsonFileError::Read)?;
+    let reader = std::io::BufReader::with_capacity(1 << 16, file.take(limit));
+    serde_json::from_reader(reader).map_err(JsonFileError::Malformed)
 }
 
 fn describe_bytes(bytes: u64) -> String {

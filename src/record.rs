@@ -225,8 +225,9 @@ pub struct BuildRecord {
 /// The record's format version: a record of another version is rebuilt.
 const RECORD_VERSION: u32 = 1;
 
-/// Largest `record.json` read back (about 2 KB per asset).
-const MAX_RECORD_BYTES: u64 = 1 << 30;
+/// Largest `record.json` read back (about 2 KB per asset: 256 MiB is over 100,000 assets). It is
+/// parsed as it is read, never held whole.
+const MAX_RECORD_BYTES: u64 = 256 << 20;
 
 pub(crate) fn record_path(output_dir: &Path) -> PathBuf {
     output_dir.join(".cirrus").join("record.json")
@@ -281,16 +282,13 @@ impl BuildRecord {
     /// every source hashed once, every asset checked through its stages).
     pub fn load(output_dir: &Path) -> BuildRecord {
         let path = record_path(output_dir);
-        let bytes = match crate::files::read_regular_file(&path, MAX_RECORD_BYTES) {
-            Ok(bytes) => bytes,
-            Err(_) => return BuildRecord::default(),
-        };
-        match serde_json::from_slice::<BuildRecord>(&bytes) {
+        match crate::files::read_json_file::<BuildRecord>(&path, MAX_RECORD_BYTES) {
             Ok(record) if record.version == RECORD_VERSION => record,
             Ok(_) => BuildRecord::default(),
+            Err(error) if error.is_not_found() => BuildRecord::default(),
             Err(error) => {
                 tracing::warn!(
-                    "{} is damaged ({error}); rebuilding it (every source is hashed once)",
+                    "{} {error}; rebuilding it (every source is hashed once)",
                     crate::diagnostic::display_path(&path)
                 );
                 BuildRecord::default()

@@ -530,16 +530,20 @@ impl DiskCache {
         fetched
     }
 
-    /// The shared store's entry under `key`, verified, kept in the local folder.
+    /// The shared store's entry under `key`, verified as it streams into the local folder
+    /// (`RemoteStore::fetch_to_file`), then decoded from there as a local entry is.
     fn fetch_remote(&self, stage: &str, key: CacheKey) -> Option<CacheEntry> {
         let remote = self.remote.as_ref()?;
-        let bytes = remote.fetch(stage, key)?;
-        let entry = decode_entry(&bytes, stage, key);
+        let path = self.entry_path(stage, key);
+        let folder = path.parent().expect("entry paths have a folder");
+        let temporary = remote.fetch_to_file(stage, key, &entry_header(stage, key), folder)?.ok()?;
+        let entry = crate::files::read_regular_file(temporary.path(), MAX_ENTRY_BYTES)
+            .ok()
+            .and_then(|bytes| decode_entry(&bytes, stage, key));
         remote.verified(stage, key, entry.is_some());
         let entry = entry?;
-        let path = self.entry_path(stage, key);
-        if let Err(error) = write_atomically(&path, |file| file.write_all(&bytes)) {
-            tracing::warn!("cannot write cache entry {}: {error}", path.display());
+        if let Err(error) = temporary.persist(&path) {
+            tracing::warn!("cannot write cache entry {}: {}", path.display(), error.error);
         }
         REMOTE_HIT.with(|hit| hit.set(true));
         Some(entry)

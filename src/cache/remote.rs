@@ -232,6 +232,9 @@ struct Shared {
     settings: RemoteCacheSettings,
     store: Arc<dyn ObjectStore>,
     prefix: StorePath,
+    /// The team's key (`CIRRUS_CACHE_KEY`): objects are then signed entries, in a folder of
+    /// their own (`signed/`), and an object without a good signature is a miss.
+    signing: Option<[u8; 32]>,
     health: Mutex<Health>,
     counters: Counters,
     /// Keys whose object failed verification: the next upload overwrites them.
@@ -300,6 +303,7 @@ impl RemoteStore {
             }
             RemoteLocation::Memory(name) => (memory_store(name), String::new()),
         };
+        let signing = signing_key_from_environment().map_err(error)?;
         let runtime = tokio::runtime::Builder::new_multi_thread()
             .worker_threads(2)
             .thread_name("cirrus-remote-cache")
@@ -310,6 +314,7 @@ impl RemoteStore {
             settings,
             store,
             prefix: StorePath::from(prefix),
+            signing,
             health: Mutex::new(Health::Untried),
             counters: Counters::default(),
             corrupt_keys: Mutex::default(),
@@ -330,12 +335,50 @@ impl RemoteStore {
     pub fn settings(&self) -> &RemoteCacheSettings {
         &self.shared.settings
     }
+
+    /// Whether entries are signed with a team key (`CIRRUS_CACHE_KEY`).
+    pub fn signs(&self) -> bool {
+        self.shared.signing.is_some()
+    }
+}
+
+/// The environment variable holding the team's key for signed entries.
+pub const CACHE_KEY_VARIABLE: &str = "CIRRUS_CACHE_KEY";
+
+/// The shortest key taken (a passphrase or, better, `openssl rand -hex 32`).
+const MIN_CACHE_KEY_CHARS: usize = 32;
+
+/// The signing key `CIRRUS_CACHE_KEY` gives (derived from its text), none when it is not set.
+fn signing_key_from_environment() -> Result<Option<[u8; 32]>, String> {
+    let Some(text) = std::env::var_os(CACHE_KEY_VARIABLE) else { return Ok(None) };
+    let text = text.to_string_lossy();
+    let text = text.trim();
+    if text.chars().count() < MIN_CACHE_KEY_CHARS {
+        return Err(format!(
+            "{CACHE_KEY_VARIABLE} is {} characters long: a team key needs at least {MIN_CACHE_KEY_CHARS} (make one \
+             with `openssl rand -hex 32`)",
+            text.chars().count()
+        ));
+    }
+    Ok(Some(blake3::derive_key("cirrus 2026-12 shared cache entry signing", text.as_bytes())))
+}
+
+/// Why a fetched object is no entry (then a miss, and the key is overwritten by its next upload).
+#[derive(Debug)]
+pub(crate) enum Unverified {
+    /// Larger than any entry can be (its size, refused before a byte is read).
+    TooLarge(u64),
+    /// Not the entry of this stage and key, cut short, or its checksum (or signature) is wrong.
+    Corrupt,
 }
 
 impl Shared {
     fn object_path(&self, stage: &str, key: CacheKey) -> StorePath {
         let hex = key.0.to_hex();
         let mut path = self.prefix.clone();
+        if self.signing.is_some() {
+            path = path.join("signed");
+        }
         for part in [stage, &hex[..2], &hex[2..]] {
             path = path.clone().join(part);
         }
@@ -449,9 +492,20 @@ pub fn shares(stage: &str) -> bool {
 }
 
 impl RemoteStore {
-    /// The object stored under `stage` and `key`, unverified (the caller decodes it); `None` when
-    /// there is none, the store is not answering, or entries of `stage` are not shared.
-    pub fn fetch(&self, stage: &str, key: CacheKey) -> Option<Vec<u8>> {
+    /// Streams the object stored under `stage` and `key` into a temporary file in `folder`,
+    /// verifying it as it arrives: it must start with `header` (the entry's stage and key), its
+    /// last 32 bytes must be the blake3 of the rest (the entry's checksum), and with a team key
+    /// it must end with its signature (a keyed blake3 of the entry, not written to the file). So
+    /// an object is never held in memory whole, and one that is no entry costs at most its
+    /// bytes on disk until it shows. `None` when there is none, the store is not answering or
+    /// entries of `stage` are not shared; `Some(Err)` when the object is no entry (counted).
+    pub(crate) fn fetch_to_file(
+        &self,
+        stage: &str,
+        key: CacheKey,
+        header: &[u8],
+        folder: &std::path::Path,
+    ) -> Option<Result<tempfile::NamedTempFile, Unverified>> {
         let shared = &self.shared;
         if !shares(stage) || shared.corrupt_keys.lock().expect("corrupt keys lock").contains(&(stage.to_string(), key))
         {
@@ -463,43 +517,51 @@ impl RemoteStore {
         }
         let path = shared.object_path(stage, key);
         let limit = self.max_object_bytes;
-        // Streamed into a buffer of the announced size: an object larger than any entry (or than
-        // it announced) is refused as soon as that shows, and never held twice.
+        let temporary = std::fs::create_dir_all(folder)
+            .and_then(|()| tempfile::Builder::new().prefix(crate::files::TEMPORARY_PREFIX).tempfile_in(folder));
+        let mut temporary = match temporary {
+            Ok(temporary) => temporary,
+            Err(error) => {
+                tracing::warn!("cannot write a cache entry into {}: {error}", folder.display());
+                return None;
+            }
+        };
         let fetched = self.runtime.block_on(async {
             tokio::time::timeout(TRANSFER_TIMEOUT, async {
                 use futures_util::StreamExt;
                 let result = shared.store.get(&path).await?;
                 let size = result.meta.size;
                 if size > limit {
-                    return Ok(Err(size));
+                    return Ok(Err(Unverified::TooLarge(size)));
                 }
-                let mut bytes = Vec::with_capacity(size as usize);
+                let mut check = StreamCheck::new(header, shared.signing.as_ref(), size);
                 let mut stream = result.into_stream();
                 while let Some(chunk) = stream.next().await {
                     let chunk = chunk?;
-                    if (bytes.len() + chunk.len()) as u64 > size {
-                        return Ok(Err((bytes.len() + chunk.len()) as u64));
+                    if let Err(unverified) = check.take(&chunk, temporary.as_file_mut()) {
+                        return Ok(Err(unverified));
                     }
-                    bytes.extend_from_slice(&chunk);
                 }
-                Ok::<_, object_store::Error>(Ok(bytes))
+                Ok::<_, object_store::Error>(check.finish(temporary.as_file_mut()).map(|()| check.received))
             })
             .await
         });
         match fetched {
-            Ok(Ok(Ok(bytes))) => {
-                shared.counters.bytes_downloaded.fetch_add(bytes.len() as u64, Ordering::Relaxed);
-                Some(bytes)
+            Ok(Ok(Ok(received))) => {
+                shared.counters.bytes_downloaded.fetch_add(received, Ordering::Relaxed);
+                Some(Ok(temporary))
             }
-            Ok(Ok(Err(size))) => {
-                tracing::warn!(
-                    "shared cache {}: the {stage} object {} is {size} bytes, more than an entry can be ({limit}); \
-                        not downloaded, computing it",
-                    shared.settings.url,
-                    &key.0.to_hex()[..16]
-                );
+            Ok(Ok(Err(unverified))) => {
+                if let Unverified::TooLarge(size) = unverified {
+                    tracing::warn!(
+                        "shared cache {}: the {stage} object {} is {size} bytes, more than an entry can be ({limit}); \
+                            not downloaded, computing it",
+                        shared.settings.url,
+                        &key.0.to_hex()[..16]
+                    );
+                }
                 self.verified(stage, key, false);
-                None
+                Some(Err(unverified))
             }
             Ok(Err(object_store::Error::NotFound { .. })) => {
                 shared.counters.misses.fetch_add(1, Ordering::Relaxed);
@@ -547,6 +609,11 @@ impl RemoteStore {
         }
         let overwrite = self.shared.corrupt_keys.lock().expect("corrupt keys lock").remove(&(stage.to_string(), key));
         let mode = if overwrite { PutMode::Overwrite } else { PutMode::Create };
+        let mut bytes = bytes;
+        if let Some(signing) = &self.shared.signing {
+            let signature = blake3::keyed_hash(signing, &bytes);
+            bytes.extend_from_slice(signature.as_bytes());
+        }
         let (remote, path, length) = (self.shared.clone(), self.shared.object_path(stage, key), bytes.len() as u64);
         let task = self.runtime.spawn(async move {
             let options = PutOptions { mode, ..Default::default() };
@@ -592,6 +659,88 @@ impl RemoteStore {
             bytes_uploaded: take(&counters.bytes_uploaded),
             errors: take(&counters.errors),
         }
+    }
+}
+
+/// The checks of [`RemoteStore::fetch_to_file`] over an object's bytes as they arrive: the
+/// header first, then the checksum (and signature) over all but the last 32 (64) bytes, which
+/// are held back until the end; every byte but the signature goes to the file.
+struct StreamCheck<'a> {
+    header: &'a [u8],
+    announced: u64,
+    received: u64,
+    body: blake3::Hasher,
+    signed: Option<blake3::Hasher>,
+    /// The last bytes received, not yet hashed (the checksum and the signature, at the end).
+    held: Vec<u8>,
+}
+
+impl<'a> StreamCheck<'a> {
+    fn new(header: &'a [u8], signing: Option<&[u8; 32]>, announced: u64) -> StreamCheck<'a> {
+        StreamCheck {
+            header,
+            announced,
+            received: 0,
+            body: blake3::Hasher::new(),
+            signed: signing.map(blake3::Hasher::new_keyed),
+            held: Vec::new(),
+        }
+    }
+
+    /// How many trailing bytes are held back: the checksum, and the signature when signed.
+    fn trailer(&self) -> usize {
+        if self.signed.is_some() {
+            64
+        } else {
+            32
+        }
+    }
+
+    fn take(&mut self, chunk: &[u8], file: &mut std::fs::File) -> Result<(), Unverified> {
+        use std::io::Write;
+        let start = self.received as usize;
+        self.received += chunk.len() as u64;
+        if self.received > self.announced {
+            return Err(Unverified::Corrupt);
+        }
+        // The header, as far as it reaches into this chunk.
+        if start < self.header.len() {
+            let end = self.header.len().min(start + chunk.len());
+            if chunk[..end - start] != self.header[start..end] {
+                return Err(Unverified::Corrupt);
+            }
+        }
+        self.held.extend_from_slice(chunk);
+        let ready = self.held.len().saturating_sub(self.trailer());
+        if ready > 0 {
+            let bytes = &self.held[..ready];
+            self.body.update(bytes);
+            if let Some(signed) = &mut self.signed {
+                signed.update(bytes);
+            }
+            file.write_all(bytes).map_err(|_| Unverified::Corrupt)?;
+            self.held.drain(..ready);
+        }
+        Ok(())
+    }
+
+    /// Checks the held trailer and writes the entry's checksum to the file.
+    fn finish(&mut self, file: &mut std::fs::File) -> Result<(), Unverified> {
+        use std::io::Write;
+        if self.held.len() != self.trailer() || self.received < self.header.len() as u64 {
+            return Err(Unverified::Corrupt);
+        }
+        let (checksum, signature) = self.held.split_at(32);
+        if self.body.finalize().as_bytes() != checksum {
+            return Err(Unverified::Corrupt);
+        }
+        if let Some(signed) = &mut self.signed {
+            signed.update(checksum);
+            if signed.finalize().as_bytes() != signature {
+                return Err(Unverified::Corrupt);
+            }
+        }
+        file.write_all(checksum).and_then(|()| file.flush()).map_err(|_| Unverified::Corrupt)
     }
 }
 

@@ -214,6 +214,12 @@ impl Project {
         let manifest_stamp = FileStamp::read(&crate::artifacts::manifest_path(&config.output_dir()));
         let mut record = BuildRecord::load(&config.output_dir());
         record.keep_within(&config.source, &config.output);
+        if manifest_stamp.is_none() && !record.assets.is_empty() {
+            tracing::warn!(
+                "{} is missing: this build writes a new one (artifacts it does not list are left alone)",
+                display_path(&crate::artifacts::manifest_path(&config.output))
+            );
+        }
         // Only a build that was interrupted leaves temporary files: the output folder is walked
         // for them only then.
         if crate::record::interrupted_build(&config.output_dir()) {

@@ -168,11 +168,12 @@ impl Project {
     ) {
         let output_dir = self.config.output_dir();
         manifest.revision = next_revision;
+        // The revision, which must never be issued twice, is also kept beside the record: a
+        // manifest deleted or damaged by hand does not take it back.
+        crate::record::save_revision(&output_dir, next_revision);
         if self.source_reading == SourceReading::WhenInvalidated {
-            // The daemon: the manifest waits for an idle moment (`save_deferred`); the revision,
-            // which must never be issued twice, is written now.
+            // The daemon: the manifest waits for an idle moment (`save_deferred`).
             self.manifest_unsaved = true;
-            crate::record::save_revision(&output_dir, next_revision);
         } else if let Err(error) = save_manifest(&output_dir, manifest) {
             // Without the manifest, the next build cannot tell its artifacts from the user's
             // files: every asset of this build fails, so scripts and CI notice.

@@ -1235,3 +1235,155 @@ fn an_impostor_level_of_minutes_is_warned_about_and_an_edit_back_under_watch_can
     let report: serde_json::Value = serde_json::from_slice(&project.read("baked/bush/report.json")).unwrap();
     assert_eq!(report["levels"][0]["frames"], 8, "{report}");
 }
+
+#[test]
+fn a_huge_build_record_is_parsed_as_it_is_read_or_refused_by_its_size_without_being_read() {
+    let project = material_project();
+    assert!(build(&mut project.open()).all_ok());
+    let record = project.path("baked/.cirrus/record.json");
+    // 200 MB of whitespace inside a valid record: parsed as it streams, never held whole (it was
+    // read whole, then parsed: the bytes alone were 200 MB).
+    let mut padded = b"{".to_vec();
+    padded.resize(200 << 20, b' ');
+    padded.extend_from_slice(br#""version":1,"files":{},"assets":{}}"#);
+    std::fs::write(&record, &padded).unwrap();
+    drop(padded);
+    let (output, padded_peak) = run_measuring_memory(&project, &["build"], &[], Duration::from_secs(120));
+    assert!(output.status.success(), "{}", text(&output));
+    // 600 MB (sparse: nothing is written to disk), over the 256 MiB limit: not read at all.
+    let file = std::fs::File::create(&record).unwrap();
+    file.set_len(600 << 20).unwrap();
+    drop(file);
+    let (output, huge_peak) = run_measuring_memory(&project, &["build"], &[], Duration::from_secs(120));
+    assert!(output.status.success(), "{}", text(&output));
+    assert!(text(&output).contains("record.json is larger than 256 MiB; rebuilding it"), "{}", text(&output));
+    println!("build record of 200 MB padding: peak {padded_peak} MiB; of 600 MB: peak {huge_peak} MiB");
+    assert!(padded_peak < 120 && huge_peak < 120, "peaks {padded_peak} and {huge_peak} MiB");
+}
+
+#[test]
+fn a_garbage_truncated_or_deleted_manifest_is_warned_about_and_the_revision_never_goes_back() {
+    let project = material_project();
+    let revision = |project: &TempProject| manifest(project)["revision"].as_u64().unwrap();
+    for seed in 0..5 {
+        project.write("assets/albedo.png", pattern_png(32, 32, 10 + seed));
+        assert!(build(&mut project.open()).all_ok());
+    }
+    let mut last = revision(&project);
+    assert!(last >= 5, "{last}");
+    let manifest_path = project.path("baked/manifest.json");
+    let whole = std::fs::read(&manifest_path).unwrap();
+    let damages: [(&str, Option<Vec<u8>>); 3] = [
+        ("is not valid JSON of its kind", Some(b"garbage".to_vec())),
+        ("is not valid JSON of its kind", Some(whole[..whole.len() / 2].to_vec())),
+        ("is missing", None),
+    ];
+    for (seed, (said, damage)) in damages.into_iter().enumerate() {
+        match damage {
+            Some(bytes) => std::fs::write(&manifest_path, bytes).unwrap(),
+            None => std::fs::remove_file(&manifest_path).unwrap(),
+        }
+        project.write("assets/albedo.png", pattern_png(32, 32, 20 + seed as u32));
+        let output = run_with_deadline(&project, &["build"], Duration::from_secs(60));
+        assert!(output.status.success(), "{}", text(&output));
+        assert!(text(&output).contains(&format!("baked/manifest.json {said}")), "{said}: {}", text(&output));
+        let now = revision(&project);
+        assert!(now > last, "the revision went from {last} to {now}");
+        last = now;
+    }
+}
+
+/// `material_project` over a `file://` shared store in `store`.
+fn project_with_store(store: &Path) -> TempProject {
+    let project = material_project();
+    let pipeline = std::fs::read_to_string(project.path("pipeline.ron")).unwrap();
+    let with_store =
+        pipeline.replacen("Pipeline(", &format!("Pipeline(cache: (remote: Some(\"file://{}\")), ", store.display()), 1);
+    project.write("pipeline.ron", with_store);
+    project
+}
+
+/// The shared store's entry objects (the store's own probe left out).
+fn store_objects(store: &Path) -> Vec<std::path::PathBuf> {
+    let mut objects = crate::support::files_under(store);
+    objects.retain(|path| !path.to_string_lossy().contains("cirrus-probe"));
+    objects
+}
+
+#[test]
+fn a_shared_store_object_that_is_no_entry_is_verified_as_it_streams_to_disk_not_held_in_memory() {
+    // An object under the size limit (1 GiB) whose bytes are no entry used to be read whole into
+    // memory before its checksum said so: three 1,000 MB objects took a build to 2.03 GB.
+    let store = tempfile::tempdir().unwrap();
+    let project = project_with_store(store.path());
+    assert!(run_with_deadline(&project, &["build"], Duration::from_secs(60)).status.success());
+    let objects = store_objects(store.path());
+    assert!(objects.len() >= 3, "{objects:?}");
+    // The largest keeps its header (stage and key) and grows to 600 MB of zeros (sparse).
+    let largest = objects.iter().max_by_key(|object| std::fs::metadata(object).unwrap().len()).unwrap();
+    std::fs::OpenOptions::new().write(true).open(largest).unwrap().set_len(600 << 20).unwrap();
+    std::fs::remove_dir_all(project.path("baked")).unwrap();
+    let (output, peak_mib) = run_measuring_memory(&project, &["build"], &[], Duration::from_secs(120));
+    assert!(output.status.success(), "{}", text(&output));
+    assert!(text(&output).contains("failed verification"), "{}", text(&output));
+    println!("a 600 MB object that is no entry: build peak {peak_mib} MiB");
+    assert!(peak_mib < 200, "peak {peak_mib} MiB: the object was held in memory");
+    let leftovers: Vec<_> = crate::support::files_under(&project.path("baked"))
+        .into_iter()
+        .filter(|path| path.to_string_lossy().contains(".cirrus-tmp"))
+        .collect();
+    assert!(leftovers.is_empty(), "{leftovers:?}");
+    assert!(project.path("baked/rock/rock/albedo.ktx2").is_file());
+}
+
+#[test]
+fn with_a_team_key_only_entries_signed_with_it_are_used_and_a_forged_one_is_a_miss() {
+    let key = ("CIRRUS_CACHE_KEY", "0123456789abcdef0123456789abcdef-team-key");
+    let run = |project: &TempProject, environment: &[(&str, &str)]| {
+        let mut command = Command::new(env!("CARGO_BIN_EXE_cirrus"));
+        command.args(["build", "-v"]).envs(environment.iter().copied()).current_dir(project.root());
+        let output = run_command_with_deadline(&mut command, Duration::from_secs(120));
+        assert!(output.status.success(), "{}", text(&output));
+        text(&output)
+    };
+    let store = tempfile::tempdir().unwrap();
+    let first = project_with_store(store.path());
+    run(&first, &[key]);
+    let signed = store_objects(&store.path().join("signed"));
+    assert!(!signed.is_empty() && store_objects(store.path()).len() == signed.len(), "only signed objects");
+    let clean_albedo = first.read("baked/rock/rock/albedo.ktx2");
+
+    // Someone with write access (but not the key) replaces every entry with another project's,
+    // its blake3 checksum made anew: an unsigned machine would take it.
+    let other_store = tempfile::tempdir().unwrap();
+    let other = project_with_store(other_store.path());
+    other.write("assets/albedo.png", pattern_png(32, 32, 77));
+    run(&other, &[]);
+    for object in &signed {
+        let relative = object.strip_prefix(store.path().join("signed")).unwrap();
+        if let Ok(mut forged) = std::fs::read(other_store.path().join(relative)) {
+            let body = forged.len() - 32;
+            let checksum = blake3::hash(&forged[..body]);
+            forged[body..].copy_from_slice(checksum.as_bytes());
+            // A signature of the right length, made without the key.
+            forged.extend_from_slice(blake3::hash(&forged).as_bytes());
+            std::fs::write(object, forged).unwrap();
+        }
+    }
+    let second = project_with_store(store.path());
+    let said = run(&second, &[key]);
+    assert!(said.contains("failed verification"), "{said}");
+    assert_eq!(second.read("baked/rock/rock/albedo.ktx2"), clean_albedo, "the forged entries were not used");
+
+    // A third machine with the key is served by what the second uploaded over the forgeries.
+    let third = project_with_store(store.path());
+    let said = run(&third, &[key]);
+    assert!(!said.contains("failed verification"), "{said}");
+    assert_eq!(third.read("baked/rock/rock/albedo.ktx2"), clean_albedo);
+
+    // A key too short to be one is a configuration error, not a silent unsigned cache.
+    let mut command = Command::new(env!("CARGO_BIN_EXE_cirrus"));
+    command.arg("build").env("CIRRUS_CACHE_KEY", "hunter2").current_dir(third.root());
+    let said = text(&run_command_with_deadline(&mut command, Duration::from_secs(60)));
+    assert!(said.contains("CIRRUS_CACHE_KEY is 7 characters long"), "{said}");
+}

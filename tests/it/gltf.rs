@@ -61,7 +61,8 @@ fn validator_folder() -> PathBuf {
     match found {
         Ok(folder) => folder.clone(),
         Err(why) => panic!(
-            "the glTF tests need Node and npm's gltf-validator@{VALIDATOR_VERSION} (`.ci/run` installs them): {why}"
+            "the glTF tests need Node and npm's gltf-validator@{VALIDATOR_VERSION}, installed into target/tmp on first \
+             use (Debian/Ubuntu: `apt-get install nodejs npm`; `.ci/run` installs them): {why}"
         ),
     }
 }

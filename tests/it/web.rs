@@ -29,7 +29,7 @@ fn web_example() -> PathBuf {
             .args(["install", "--no-audit", "--no-fund", "--silent", "--prefix"])
             .arg(&folder)
             .output()
-            .expect("npm runs (the web test needs Node and npm)");
+            .expect("npm runs (the web test needs Node and npm: Debian/Ubuntu `apt-get install nodejs npm`)");
         assert!(output.status.success(), "npm install: {}", String::from_utf8_lossy(&output.stderr));
     }
     folder
@@ -64,6 +64,53 @@ fn start_until(command: &mut Command, marker: &str, from_stderr: bool) -> (Kille
     (Killed(child), line)
 }
 
+/// The Chromium to run: `CIRRUS_CHROMIUM`, else `chromium`, `chromium-browser`, `google-chrome` or
+/// `google-chrome-stable` on the `PATH`, else one installed from npm into `target/tmp/chromium`
+/// (`tools/install-chromium.sh`, once), so that the README's test command needs no Chromium
+/// installed by hand. Fails naming what to install when none can be had.
+fn chromium() -> Command {
+    static FOUND: std::sync::OnceLock<Result<(PathBuf, Option<PathBuf>), String>> = std::sync::OnceLock::new();
+    let found = FOUND.get_or_init(|| {
+        if let Some(path) = std::env::var_os("CIRRUS_CHROMIUM").filter(|path| !path.is_empty()) {
+            return Ok((PathBuf::from(path), None));
+        }
+        let on_path =
+            ["chromium", "chromium-browser", "google-chrome", "google-chrome-stable"].iter().find_map(|name| {
+                std::env::split_paths(&std::env::var_os("PATH").unwrap_or_default())
+                    .map(|folder| folder.join(name))
+                    .find(|path| path.is_file())
+            });
+        if let Some(path) = on_path {
+            return Ok((path, None));
+        }
+        let root = Path::new(env!("CARGO_MANIFEST_DIR"));
+        let folder = root.join("target/tmp/chromium");
+        if !folder.join("chromium").is_file() {
+            let installed = Command::new("bash").arg(root.join("tools/install-chromium.sh")).arg(&folder).output();
+            match installed {
+                Ok(output) if output.status.success() => {}
+                Ok(output) => return Err(String::from_utf8_lossy(&output.stderr).into_owned()),
+                Err(error) => return Err(error.to_string()),
+            }
+        }
+        Ok((folder.join("chromium"), Some(folder)))
+    });
+    match found {
+        Ok((path, None)) => Command::new(path),
+        Ok((path, Some(folder))) => {
+            let mut command = Command::new(path);
+            command.env("LD_LIBRARY_PATH", folder.join("lib")).env("FONTCONFIG_PATH", folder.join("fonts"));
+            command
+        }
+        Err(why) => panic!(
+            "the web test needs Chromium and found none: no CIRRUS_CHROMIUM, no chromium or google-chrome on the \
+             PATH, and installing it from npm (tools/install-chromium.sh, which needs Node, npm and tar) failed: \
+             {why}\nInstall it (Debian/Ubuntu: `apt-get install chromium`) or set CIRRUS_CHROMIUM to a Chromium or \
+             Chrome executable."
+        ),
+    }
+}
+
 /// A DevTools-protocol session on one page of headless Chromium.
 struct Browser {
     _process: Killed,
@@ -76,7 +123,7 @@ impl Browser {
     fn open(url: &str, size: u32) -> Browser {
         let profile = tempfile::tempdir().unwrap().keep();
         let (process, line) = start_until(
-            Command::new("chromium")
+            chromium()
                 .args(["--headless=new", "--no-sandbox", "--use-angle=swiftshader", "--enable-unsafe-swiftshader"])
                 .args(["--hide-scrollbars", "--remote-debugging-port=0", "--no-first-run"])
                 .arg(format!("--window-size={size},{size}"))

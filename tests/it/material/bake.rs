@@ -662,3 +662,76 @@ fn a_level_of_the_chain_made_alone_is_that_level_of_the_whole_chain() {
         }
     }
 }
+
+#[test]
+fn normal_maps_whose_texels_are_not_unit_vectors_are_renormalised_before_encoding_and_at_every_level() {
+    // A JPEG normal map's texels are vectors of length 0.13–1.6 (the corpus barks): the shader
+    // rebuilds Z assuming unit XY, so what BC5 stores must be the unit vector's X and Y, at
+    // every mip level, never the raw channels.
+    let (width, height) = (64u32, 64u32);
+    let mut seed = 12345u32;
+    let mut next = || {
+        seed = seed.wrapping_mul(1_664_525).wrapping_add(1_013_904_223);
+        (seed >> 8) as f32 / (1u32 << 24) as f32
+    };
+    let mut rgba = Vec::new();
+    let mut unit = Vec::new();
+    for y in 0..height {
+        for x in 0..width {
+            // A smooth field of directions, each at a random length.
+            let (u, v) = (x as f32 / width as f32, y as f32 / height as f32);
+            let direction = glam::Vec3::new((u * 6.0).sin() * 0.5, (v * 5.0).cos() * 0.5, 1.0).normalize();
+            let length = 0.2 + 1.4 * next();
+            let stored = (direction * length).clamp(glam::Vec3::splat(-1.0), glam::Vec3::ONE);
+            let byte = |c: f32| ((c * 0.5 + 0.5) * 255.0).round() as u8;
+            rgba.extend_from_slice(&[byte(stored.x), byte(stored.y), byte(stored.z), 255]);
+            let decoded = glam::Vec3::new(byte(stored.x) as f32, byte(stored.y) as f32, byte(stored.z) as f32) / 127.5
+                - glam::Vec3::ONE;
+            unit.push(decoded.normalize());
+        }
+    }
+    let project = TempProject::new(
+        r#"Pipeline(source: "assets", output: "baked", assets: [Material(name: "n", material: "n.mymaterial")])"#,
+    );
+    project.write("assets/normal.png", crate::support::png_bytes(width, height, &rgba));
+    project.write("assets/n.mymaterial", "Material $n { Texture (attrib = \"normal\") {string {\"normal.png\"}} }\n");
+    assert!(build(&mut project.open()).all_ok());
+    let bytes = project.read("baked/n/n/normal.ktx2");
+    let ktx2 = read_ktx2(&bytes);
+    let decode_xy = |texel: [u8; 4]| glam::Vec2::new(texel[0] as f32, texel[1] as f32) / 127.5 - glam::Vec2::ONE;
+    // Level 0 against the unit vectors' X and Y.
+    let level0 = decode_blocks(BlockFormat::Bc5, &ktx2_level(&bytes, &ktx2, 0), width, height);
+    let mut squared = 0.0f64;
+    for (index, normal) in unit.iter().enumerate() {
+        let xy = decode_xy(level0.texel(index as u32 % width, index as u32 / width));
+        squared += f64::from((xy - normal.truncate()).length_squared());
+    }
+    let psnr_unit = 10.0 * (4.0 / (squared / (2.0 * unit.len() as f64))).log10();
+    assert!(psnr_unit > 40.0, "BC5 against the unit vectors' XY: {psnr_unit:.2} dB");
+    // Every level rebuilds to a unit vector close to the mean direction of its footprint.
+    for level in 0..ktx2.levels.len() {
+        let (side_x, side_y) = ((width >> level).max(1), (height >> level).max(1));
+        let decoded = decode_blocks(BlockFormat::Bc5, &ktx2_level(&bytes, &ktx2, level), side_x, side_y);
+        let scale = width / side_x;
+        let mut worst = 1.0f32;
+        for y in 0..side_y {
+            for x in 0..side_x {
+                let xy = decode_xy(decoded.texel(x, y));
+                assert!(xy.length_squared() <= 1.03, "level {level}: X² + Y² = {} at {x}, {y}", xy.length_squared());
+                let rebuilt = xy.extend((1.0 - xy.length_squared()).max(0.0).sqrt());
+                let mut mean = glam::Vec3::ZERO;
+                for dy in 0..scale {
+                    for dx in 0..scale {
+                        mean += unit[((y * scale + dy) * width + x * scale + dx) as usize];
+                    }
+                }
+                worst = worst.min(rebuilt.dot(mean.normalize()));
+            }
+        }
+        assert!(
+            worst > 0.97,
+            "level {level}: a texel is {:.1}° off its footprint's direction",
+            worst.acos().to_degrees()
+        );
+    }
+}

@@ -171,6 +171,14 @@ pub(crate) use asset_names::{reserved_asset_name, AssetFolders};
 
 /// A glob over paths relative to the source folder (`*` stops at `/`, `**` crosses folders).
 pub(crate) fn source_glob(glob: &str) -> Result<globset::GlobMatcher, String> {
+    // A glob matches paths inside the source folder: one that climbs out or starts at the root
+    // could never match, and used to fail later as "no texture matches".
+    let climbs = glob.split(['/', '\\']).any(|part| part == "..");
+    if climbs || glob.starts_with(['/', '\\']) || glob.as_bytes().get(1) == Some(&b':') {
+        return Err(format!(
+            "`{glob}` leads outside the source folder: globs are relative to `source` and stay inside it"
+        ));
+    }
     globset::GlobBuilder::new(glob)
         .literal_separator(true)
         .build()

@@ -124,25 +124,31 @@ pub struct RemoteCacheOverride {
 }
 
 impl RemoteCacheOverride {
-    /// From `--remote-cache URL|off` and `--remote-cache-mode read-only|read-write`.
+    /// From `--remote-cache URL|off` and `--remote-cache-mode read-only|read-write`; an error
+    /// starts with the flag it is about.
     pub fn parse(url: Option<&str>, mode: Option<&str>) -> Result<RemoteCacheOverride, String> {
-        let location =
-            match url {
-                None => None,
-                Some("") => return Err(
-                    "it is empty (an unset shell variable?): name a URL (s3://bucket/prefix, file:///folder) or `off`"
-                        .into(),
-                ),
-                Some("off" | "none") => Some(None),
-                Some(url) => Some(Some((url.to_string(), parse_remote_url(url)?))),
-            };
+        let location = match url {
+            None => None,
+            Some("") => {
+                return Err("--remote-cache: it is empty (an unset shell variable?): name a URL (s3://bucket/prefix, \
+                     file:///folder) or `off`"
+                    .into())
+            }
+            Some("off" | "none") => Some(None),
+            Some(url) => {
+                Some(Some((url.to_string(), parse_remote_url(url).map_err(|why| format!("--remote-cache: {why}"))?)))
+            }
+        };
         let mode = match mode {
             None => None,
-            Some("") => return Err("the mode is empty (an unset shell variable?): read-write or read-only".into()),
-            Some(text) => Some(
-                RemoteCacheMode::parse(text)
-                    .ok_or_else(|| format!("`{text}` is not a shared cache mode: read-write or read-only"))?,
-            ),
+            Some("") => {
+                return Err(
+                    "--remote-cache-mode: the mode is empty (an unset shell variable?): read-write or read-only".into(),
+                )
+            }
+            Some(text) => Some(RemoteCacheMode::parse(text).ok_or_else(|| {
+                format!("--remote-cache-mode: `{text}` is not a shared cache mode: read-write or read-only")
+            })?),
         };
         Ok(RemoteCacheOverride { location, mode })
     }
@@ -176,8 +182,17 @@ pub struct RemoteCacheError {
 
 /// A request that gets no answer within this is a store that does not answer.
 const PROBE_TIMEOUT: Duration = Duration::from_millis(750);
-/// How long a download or upload of one entry may take.
-const TRANSFER_TIMEOUT: Duration = Duration::from_secs(30);
+/// How long a download may wait for its answer or for its next bytes: a store frozen mid-build
+/// costs that build this long, not a transfer's whole allowance.
+const STALL_TIMEOUT: Duration = Duration::from_secs(5);
+/// The longest any one request may take (the HTTP client's own limit).
+const REQUEST_TIMEOUT: Duration = Duration::from_secs(600);
+
+/// How long an upload of `bytes` may take: `STALL_TIMEOUT`, plus the time at 4 MiB/s (a put is
+/// one request, whose progress cannot be watched).
+fn upload_timeout(bytes: u64) -> Duration {
+    (STALL_TIMEOUT + Duration::from_secs_f64(bytes as f64 / f64::from(4u32 << 20))).min(REQUEST_TIMEOUT)
+}
 /// How long a store that failed is left alone.
 pub const RETRY_AFTER: Duration = Duration::from_secs(10);
 
@@ -275,7 +290,7 @@ impl RemoteStore {
                 install_tls_provider();
                 let client = object_store::ClientOptions::new()
                     .with_connect_timeout(PROBE_TIMEOUT)
-                    .with_timeout(TRANSFER_TIMEOUT)
+                    .with_timeout(REQUEST_TIMEOUT)
                     .with_allow_http(true);
                 let retry = object_store::RetryConfig {
                     max_retries: 1,
@@ -408,6 +423,9 @@ impl Shared {
         };
         match failure {
             None => {
+                if self.settings.mode == RemoteCacheMode::ReadOnly {
+                    self.warn_unless_listing(runtime);
+                }
                 *health = Health::Answering;
                 true
             }
@@ -421,6 +439,32 @@ impl Shared {
                 *health = Health::Failed(Instant::now());
                 false
             }
+        }
+    }
+
+    /// A read-only machine never uploads, so a store that answers the probe but is no S3 store
+    /// (`AWS_ENDPOINT_URL` naming a web server: every object "not found") would only miss,
+    /// silently. Listing the prefix tells: a warning when it fails (the store is still used: a
+    /// read-only credential may lack the right to list).
+    fn warn_unless_listing(&self, runtime: &tokio::runtime::Runtime) {
+        static WARNED: std::sync::atomic::AtomicBool = std::sync::atomic::AtomicBool::new(false);
+        let listing = std::panic::catch_unwind(std::panic::AssertUnwindSafe(|| {
+            runtime.block_on(async {
+                tokio::time::timeout(PROBE_TIMEOUT, self.store.list_with_delimiter(Some(&self.prefix))).await
+            })
+        }));
+        let why = match listing {
+            Ok(Ok(Ok(_))) => return,
+            Ok(Ok(Err(error))) => short_error(&error),
+            Ok(Err(_)) => format!("no answer within {} ms", PROBE_TIMEOUT.as_millis()),
+            Err(panic) => panic_text(&panic),
+        };
+        if !WARNED.swap(true, Ordering::Relaxed) {
+            tracing::warn!(
+                "shared cache {} answers, but listing it failed ({why}): if AWS_ENDPOINT_URL is not an S3 endpoint, \
+                 every lookup of this read-only machine misses",
+                self.settings.url
+            );
         }
     }
 
@@ -458,6 +502,12 @@ pub(crate) fn check_endpoint_environment() -> Result<(), String> {
     for variable in ENDPOINT_VARIABLES {
         let Some(value) = std::env::var_os(variable) else { continue };
         let value = value.to_string_lossy();
+        // (The URL parser trims spaces that the S3 client then chokes on.)
+        if value.trim() != value {
+            return Err(format!(
+                "{variable}=`{value}` has spaces around it; give the endpoint alone, e.g. http://127.0.0.1:8333"
+            ));
+        }
         let parsed = url::Url::parse(&value).map_err(|why| why.to_string()).and_then(|url| {
             if !matches!(url.scheme(), "http" | "https") {
                 Err(format!("its scheme is `{}`, not http or https", url.scheme()))
@@ -526,25 +576,30 @@ impl RemoteStore {
                 return None;
             }
         };
+        // Each step (the answer, then each chunk) must come within `STALL_TIMEOUT`.
         let fetched = self.runtime.block_on(async {
-            tokio::time::timeout(TRANSFER_TIMEOUT, async {
-                use futures_util::StreamExt;
-                let result = shared.store.get(&path).await?;
-                let size = result.meta.size;
-                if size > limit {
-                    return Ok(Err(Unverified::TooLarge(size)));
+            use futures_util::StreamExt;
+            let result = match tokio::time::timeout(STALL_TIMEOUT, shared.store.get(&path)).await {
+                Ok(Ok(result)) => result,
+                Ok(Err(error)) => return Ok(Err(error)),
+                Err(elapsed) => return Err(elapsed),
+            };
+            let size = result.meta.size;
+            if size > limit {
+                return Ok(Ok(Err(Unverified::TooLarge(size))));
+            }
+            let mut check = StreamCheck::new(header, shared.signing.as_ref(), size);
+            let mut stream = result.into_stream();
+            while let Some(chunk) = tokio::time::timeout(STALL_TIMEOUT, stream.next()).await? {
+                let chunk = match chunk {
+                    Ok(chunk) => chunk,
+                    Err(error) => return Ok(Err(error)),
+                };
+                if let Err(unverified) = check.take(&chunk, temporary.as_file_mut()) {
+                    return Ok(Ok(Err(unverified)));
                 }
-                let mut check = StreamCheck::new(header, shared.signing.as_ref(), size);
-                let mut stream = result.into_stream();
-                while let Some(chunk) = stream.next().await {
-                    let chunk = chunk?;
-                    if let Err(unverified) = check.take(&chunk, temporary.as_file_mut()) {
-                        return Ok(Err(unverified));
-                    }
-                }
-                Ok::<_, object_store::Error>(check.finish(temporary.as_file_mut()).map(|()| check.received))
-            })
-            .await
+            }
+            Ok(Ok(check.finish(temporary.as_file_mut()).map(|()| check.received)))
         });
         match fetched {
             Ok(Ok(Ok(received))) => {
@@ -552,15 +607,13 @@ impl RemoteStore {
                 Some(Ok(temporary))
             }
             Ok(Ok(Err(unverified))) => {
-                if let Unverified::TooLarge(size) = unverified {
-                    tracing::warn!(
-                        "shared cache {}: the {stage} object {} is {size} bytes, more than an entry can be ({limit}); \
-                            not downloaded, computing it",
-                        shared.settings.url,
-                        &key.0.to_hex()[..16]
-                    );
-                }
-                self.verified(stage, key, false);
+                let why = match unverified {
+                    Unverified::TooLarge(size) => {
+                        format!("is {size} bytes, more than an entry can be ({limit}); not downloaded")
+                    }
+                    Unverified::Corrupt => "failed verification".to_string(),
+                };
+                self.unverified(stage, key, &why);
                 Some(Err(unverified))
             }
             Ok(Err(object_store::Error::NotFound { .. })) => {
@@ -572,7 +625,7 @@ impl RemoteStore {
                 None
             }
             Err(_) => {
-                shared.failed("a download", &format!("no answer within {} s", TRANSFER_TIMEOUT.as_secs()));
+                shared.failed("a download", &format!("nothing came for {} s", STALL_TIMEOUT.as_secs()));
                 None
             }
         }
@@ -581,19 +634,25 @@ impl RemoteStore {
     /// Counts a fetched object that verified (a hit) or did not (corrupt: a miss, and the key
     /// is overwritten by its next upload).
     pub(crate) fn verified(&self, stage: &str, key: CacheKey, good: bool) {
-        let shared = &self.shared;
         if good {
-            shared.counters.hits.fetch_add(1, Ordering::Relaxed);
+            self.shared.counters.hits.fetch_add(1, Ordering::Relaxed);
         } else {
-            shared.counters.corrupt.fetch_add(1, Ordering::Relaxed);
-            shared.counters.misses.fetch_add(1, Ordering::Relaxed);
-            tracing::warn!(
-                "shared cache {}: the {stage} entry {} failed verification; computing it",
-                shared.settings.url,
-                &key.0.to_hex()[..16]
-            );
-            shared.corrupt_keys.lock().expect("corrupt keys lock").insert((stage.to_string(), key));
+            self.unverified(stage, key, "failed verification");
         }
+    }
+
+    /// Counts an object that is no entry (`why`, said once): a miss, and the key is overwritten by
+    /// its next upload.
+    fn unverified(&self, stage: &str, key: CacheKey, why: &str) {
+        let shared = &self.shared;
+        shared.counters.corrupt.fetch_add(1, Ordering::Relaxed);
+        shared.counters.misses.fetch_add(1, Ordering::Relaxed);
+        tracing::warn!(
+            "shared cache {}: the {stage} entry {} {why}; computing it",
+            shared.settings.url,
+            &key.0.to_hex()[..16]
+        );
+        shared.corrupt_keys.lock().expect("corrupt keys lock").insert((stage.to_string(), key));
     }
 
     /// Whether this machine uploads entries of `stage` (read-write mode, a shared stage).
@@ -617,9 +676,11 @@ impl RemoteStore {
         let (remote, path, length) = (self.shared.clone(), self.shared.object_path(stage, key), bytes.len() as u64);
         let task = self.runtime.spawn(async move {
             let options = PutOptions { mode, ..Default::default() };
-            let put =
-                tokio::time::timeout(TRANSFER_TIMEOUT, remote.store.put_opts(&path, PutPayload::from(bytes), options))
-                    .await;
+            let put = tokio::time::timeout(
+                upload_timeout(length),
+                remote.store.put_opts(&path, PutPayload::from(bytes), options),
+            )
+            .await;
             match put {
                 Ok(Ok(_)) => {
                     remote.counters.uploads.fetch_add(1, Ordering::Relaxed);
@@ -629,7 +690,8 @@ impl RemoteStore {
                     remote.counters.already_present.fetch_add(1, Ordering::Relaxed);
                 }
                 Ok(Err(error)) => remote.failed("an upload", &short_error(&error)),
-                Err(_) => remote.failed("an upload", &format!("no answer within {} s", TRANSFER_TIMEOUT.as_secs())),
+                Err(_) => remote
+                    .failed("an upload", &format!("no answer within {:.0} s", upload_timeout(length).as_secs_f64())),
             }
         });
         self.uploads.lock().expect("uploads lock").push(task);

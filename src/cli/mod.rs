@@ -354,7 +354,7 @@ fn run_command(cli: Cli) -> ExitCode {
     let remote_cache = match RemoteCacheOverride::parse(cli.remote_cache.as_deref(), cli.remote_cache_mode.as_deref()) {
         Ok(remote_cache) => remote_cache,
         Err(why) => {
-            eprintln!("error: --remote-cache: {why}");
+            eprintln!("error: {why}");
             return ExitCode::from(EXIT_USAGE);
         }
     };

@@ -112,3 +112,61 @@ pub(crate) fn obj_text(mesh: &ObjMesh, header: &str, material_library: &str) -> 
     }
     obj
 }
+
+/// The statements of an OBJ that a mesh written back by [`obj_text`] does not keep: its object
+/// and group names (`o`, `g`: the faces are grouped by material) and its lines and points (`l`,
+/// `p`), as one message each with the first statement's line; none when there are none.
+pub(crate) fn obj_statements_not_kept(text: &str) -> Vec<(u32, String)> {
+    let mut found: Vec<(&str, u32, usize)> = Vec::new();
+    for (number, line) in text.lines().enumerate() {
+        let Some(keyword) = line.split_whitespace().next() else { continue };
+        if !matches!(keyword, "o" | "g" | "l" | "p") {
+            continue;
+        }
+        match found.iter_mut().find(|(seen, _, _)| *seen == keyword) {
+            Some((_, _, count)) => *count += 1,
+            None => found.push((keyword, number as u32 + 1, 1)),
+        }
+    }
+    found
+        .into_iter()
+        .map(|(keyword, line, count)| {
+            let what = match keyword {
+                "o" | "g" => "names (the written mesh groups its faces by material)",
+                _ => "elements (the written mesh keeps triangles only)",
+            };
+            (line, format!("{count} `{keyword}` statement(s) are not kept: {what}"))
+        })
+        .collect()
+}
+
+/// The statements of material `material` in an MTL file's `text` that [`mtl_material_text`]
+/// does not write (it writes `Kd`, `d`, `Pr`, `Pm` and the maps cirrus reads): the line of the
+/// first one and the list of their keywords, or none.
+pub(crate) fn mtl_statements_not_kept(text: &str, material: &str) -> Option<(u32, Vec<String>)> {
+    const KEPT: [&str; 13] =
+        ["newmtl", "Kd", "d", "Tr", "Pr", "Pm", "map_Kd", "map_d", "norm", "map_Bump", "map_bump", "bump", "map_Pm"];
+    const ALSO_KEPT: [&str; 3] = ["map_Pr", "map_ao", "map_AO"];
+    let mut current = None;
+    let mut first = None;
+    let mut keywords: Vec<String> = Vec::new();
+    for (number, line) in text.lines().enumerate() {
+        let mut words = line.split_whitespace();
+        let Some(keyword) = words.next() else { continue };
+        if keyword.starts_with('#') {
+            continue;
+        }
+        if keyword == "newmtl" {
+            current = Some(words.collect::<Vec<_>>().join(" "));
+            continue;
+        }
+        if current.as_deref() != Some(material) || KEPT.contains(&keyword) || ALSO_KEPT.contains(&keyword) {
+            continue;
+        }
+        first.get_or_insert(number as u32 + 1);
+        if !keywords.iter().any(|seen| seen == keyword) {
+            keywords.push(keyword.to_string());
+        }
+    }
+    first.map(|line| (line, keywords))
+}

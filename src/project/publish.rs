@@ -95,7 +95,7 @@ impl Project {
             news.removed_artifacts.extend(remove_artifacts(&self.config, manifest, stale));
         }
         let instances = kind.stage_instances(&self.db, asset, &folder, &errors);
-        let stages = stage_summaries(&instances, run_index, !errors.is_empty(), &failed_jobs);
+        let stages = stage_summaries(&instances, run_index, (&errors, &failed_jobs));
         for (instance, stage) in instances.iter().zip(&stages) {
             let state = stage.status.name();
             let ms = (stage.status == StageStatus::Ran).then_some((stage.ms * 10.0).round() / 10.0);

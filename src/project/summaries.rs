@@ -62,9 +62,17 @@ impl<'a> RunIndex<'a> {
 pub(super) fn stage_summaries(
     instances: &[StageInstance],
     runs: &RunIndex,
-    asset_failed: bool,
-    failed_jobs: &HashSet<String>,
+    (errors, failed_jobs): (&[Diagnostic], &HashSet<String>),
 ) -> Vec<StageSummary> {
+    let asset_failed = !errors.is_empty();
+    // A stage that ran and failed: it is marked failed and reads the file an error names (the
+    // OBJ a mesh stage could not parse), so that the summary's `failed` counts it.
+    let failed_here = |instance: &StageInstance| {
+        instance.failed
+            && instance.reads.iter().any(
+                |read| matches!(read, crate::kinds::Read::File(path) if errors.iter().any(|error| &error.file == path)),
+            )
+    };
     let facts: Vec<InstanceRuns> = instances.iter().map(|instance| runs.get(instance)).collect();
     let any_hit = facts.iter().any(|facts| facts.local_hit || facts.remote_hit);
     let every_hit_remote = any_hit && !facts.iter().any(|facts| facts.local_hit);
@@ -73,6 +81,7 @@ pub(super) fn stage_summaries(
         .zip(facts)
         .map(|(instance, facts)| {
             let (status, ms) = match facts.ran_ms {
+                Some(ms) if asset_failed && failed_here(instance) => (StageStatus::Failed, ms),
                 Some(ms) => (StageStatus::Ran, ms),
                 None if asset_failed && (instance.failed || failed_jobs.contains(&instance.label)) => {
                     (StageStatus::Failed, 0.0)

@@ -224,7 +224,7 @@ pub fn probe_texture(file: &Path, bytes: &[u8], limits: TextureLimits) -> Result
     if width > MAX_TEXTURE_SIDE || height > MAX_TEXTURE_SIDE {
         return Err(Diagnostic::new(
             file,
-            format!("the image is {width}×{height}, larger than the decoder limit of {MAX_TEXTURE_SIDE}² texels"),
+            format!("the image is {width}×{height}: the decoder takes sides of at most {MAX_TEXTURE_SIDE} texels"),
         ));
     }
     limits.check(file, width, height)?;
@@ -283,7 +283,7 @@ pub fn decode_texture(file: &Path, bytes: &[u8], limits: TextureLimits) -> Resul
         let message = match error {
             image::ImageError::Limits(_) => {
                 format!(
-                    "the image is larger than the decoder limits ({MAX_TEXTURE_SIDE}² texels, {} MiB)",
+                    "the image is larger than the decoder limits (sides of {MAX_TEXTURE_SIDE} texels, {} MiB)",
                     MAX_DECODE_BYTES >> 20
                 )
             }

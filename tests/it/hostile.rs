@@ -837,6 +837,8 @@ fn a_shared_store_object_larger_than_any_entry_is_refused_without_being_read() {
     assert!(output.status.success(), "{}", text(&output));
     assert!(peak_mib < 400, "peak {peak_mib} MiB: an oversized object was read");
     assert!(text(&output).contains("more than an entry can be"), "{}", text(&output));
+    // One warning per object: its size, not also "failed verification".
+    assert!(!text(&output).contains("failed verification"), "{}", text(&output));
     assert!(project.path("baked/rock/rock/albedo.ktx2").is_file());
 }
 
@@ -1386,4 +1388,142 @@ fn with_a_team_key_only_entries_signed_with_it_are_used_and_a_forged_one_is_a_mi
     command.arg("build").env("CIRRUS_CACHE_KEY", "hunter2").current_dir(third.root());
     let said = text(&run_command_with_deadline(&mut command, Duration::from_secs(60)));
     assert!(said.contains("CIRRUS_CACHE_KEY is 7 characters long"), "{said}");
+}
+
+/// An atlas of one texture and the mesh `m/<mesh>` over it, whose MTL is `mtl` after `map_Kd`.
+fn atlas_mesh_project(mesh: &str, obj_extra: &str, mtl_extra: &str) -> TempProject {
+    let project = TempProject::new(
+        r#"Pipeline(source: "assets", output: "baked", assets: [
+            Atlas(name: "at", textures: ["m/*.png"], meshes: ["m/*.obj"]),
+        ])"#,
+    );
+    project.write("assets/m/x.png", pattern_png(16, 16, 3));
+    project.write("assets/m/a.mtl", format!("newmtl a\nKd 1 1 1\nmap_Kd x.png\n{mtl_extra}"));
+    project.write(
+        &format!("assets/m/{mesh}"),
+        format!(
+            "mtllib a.mtl\n{obj_extra}v 0 0 0\nv 1 0 0\nv 0 1 0\nvt 0 0\nvt 1 0\nvt 0 1\nusemtl a\nf 1/1 2/2 3/3\n"
+        ),
+    );
+    project
+}
+
+#[test]
+fn the_fourth_rounds_low_ones() {
+    // What the remapped OBJ and atlas.mtl leave out is warned about, at its line.
+    let project =
+        atlas_mesh_project("m.obj", "o tree\ng trunk\nl 1 2\n", "Ks 0.5 0.5 0.5\nNs 20\nillum 2\nmap_Ks s.png\n");
+    let summary = build(&mut project.open());
+    assert!(summary.all_ok(), "{}", summary.to_text());
+    let report = String::from_utf8(project.read("baked/at/report.json")).unwrap();
+    for said in ["1 `o` statement(s) are not kept", "1 `g` statement(s)", "1 `l` statement(s)"] {
+        assert!(report.contains(said), "{said}: {report}");
+    }
+    assert!(report.contains("material `a`: `Ks`, `Ns`, `illum`, `map_Ks` are not written to atlas.mtl"), "{report}");
+
+    // A mesh named `..obj` keeps its extension (it was written as `m-..`).
+    let project = atlas_mesh_project("..obj", "", "");
+    assert!(build(&mut project.open()).all_ok());
+    assert!(project.path("baked/at/m-..obj").is_file());
+    assert!(!project.path("baked/at/m-..").exists());
+
+    // A map linked to a device or a folder says so (it was "does not exist").
+    for (target, said) in [("/dev/zero", "is not a regular file"), ("/tmp", "is a folder")] {
+        let project = atlas_mesh_project("m.obj", "", "map_Pr r.png\n");
+        std::os::unix::fs::symlink(target, project.path("assets/m/r.png")).unwrap();
+        let said_text = build(&mut project.open()).to_text();
+        assert!(said_text.contains(said) && !said_text.contains("does not exist"), "{target}: {said_text}");
+    }
+
+    // An atlas glob that climbs out of the source folder is named as such.
+    let error = parse_pipeline(
+        Path::new("pipeline.ron"),
+        r#"Pipeline(source: "assets", output: "baked", assets: [Atlas(name: "at", textures: ["../other/*.png"])])"#,
+    )
+    .unwrap_err()
+    .to_string();
+    assert!(error.contains("`../other/*.png` leads outside the source folder"), "{error}");
+
+    // An OBJ that does not parse counts its stage failed in the summary (it said `0 failed`).
+    let project = TempProject::new(
+        r#"Pipeline(source: "assets", output: "baked", assets: [AmbientOcclusion(name: "ao", mesh: "bad.obj")])"#,
+    );
+    project.write("assets/bad.obj", "v 0 0 0\nv 1 0 0\nv 0 1 0\nf 1 2 99\n");
+    let said_text = build(&mut project.open()).to_text();
+    assert!(said_text.contains("1 failed") && said_text.contains("bad.obj:4:1"), "{said_text}");
+
+    // A 1 × 262144 image is over the side limit, not "16384² texels".
+    let project = material_project();
+    project.write("assets/albedo.png", crate::support::png_bytes(1, 262_144, &vec![255u8; 262_144 * 4]));
+    let said_text = build(&mut project.open()).to_text();
+    assert!(
+        said_text.contains("the decoder takes sides of at most 16384 texels") && !said_text.contains("16384²"),
+        "{said_text}"
+    );
+
+    // `--remote-cache-mode bogus` names its own flag.
+    let said = text_of(&project.run_cli(&["build", "--remote-cache-mode", "bogus"]));
+    assert!(said.contains("error: --remote-cache-mode: `bogus` is not a shared cache mode"), "{said}");
+
+    // A space around AWS_ENDPOINT_URL is a clear error, not a panic inside the S3 client.
+    let project = material_project();
+    let mut command = Command::new(env!("CARGO_BIN_EXE_cirrus"));
+    command
+        .args(["build", "--remote-cache", "s3://bucket/prefix"])
+        .env("AWS_ENDPOINT_URL", " http://127.0.0.1:9")
+        .current_dir(project.root());
+    let said = text_of(&run_command_with_deadline(&mut command, Duration::from_secs(60)));
+    assert!(said.contains("has spaces around it") && !said.contains("panicked"), "{said}");
+}
+
+fn text_of(output: &Output) -> String {
+    text(output)
+}
+
+#[test]
+fn the_low_mesh_of_a_height_bake_whose_uvs_are_all_equal_is_blamed_not_the_overlap() {
+    let project = TempProject::new(
+        r#"Pipeline(source: "assets", output: "baked", assets: [Height(name: "h", high: "high.obj", low: "low.obj")])"#,
+    );
+    let quad = |y: f32, vt: &str| {
+        format!("v 0 {y} 0\nv 1 {y} 0\nv 1 {y} 1\nv 0 {y} 1\n{vt}vn 0 1 0\nf 1/1/1 2/2/1 3/3/1\nf 1/1/1 3/3/1 4/4/1\n")
+    };
+    project.write("assets/high.obj", quad(0.05, "vt 0 0\nvt 1 0\nvt 1 1\nvt 0 1\n"));
+    project.write("assets/low.obj", quad(0.0, "vt 0.5 0.5\nvt 0.5 0.5\nvt 0.5 0.5\nvt 0.5 0.5\n"));
+    let text = build(&mut project.open()).to_text();
+    assert!(text.contains("the low mesh's UVs cover no texel"), "{text}");
+    assert!(!text.contains("do the two meshes overlap"), "{text}");
+}
+
+#[test]
+fn a_read_only_machine_whose_endpoint_is_no_s3_store_is_warned_that_every_lookup_misses() {
+    // A web server that answers 404 to everything: the HEAD probe took it for a store.
+    let listener = std::net::TcpListener::bind("127.0.0.1:0").unwrap();
+    let address = listener.local_addr().unwrap();
+    std::thread::spawn(move || {
+        for stream in listener.incoming().flatten() {
+            let mut stream = stream;
+            let mut request = [0u8; 4096];
+            let _ = std::io::Read::read(&mut stream, &mut request);
+            let body = "<html>not here</html>";
+            let reply = format!(
+                "HTTP/1.1 404 Not Found\r\nContent-Type: text/html\r\nContent-Length: {}\r\nConnection: close\r\n\r\n{body}",
+                body.len()
+            );
+            let _ = std::io::Write::write_all(&mut stream, reply.as_bytes());
+        }
+    });
+    let project = material_project();
+    let mut command = Command::new(env!("CARGO_BIN_EXE_cirrus"));
+    command
+        .args(["build", "--remote-cache", "s3://bucket/prefix", "--remote-cache-mode", "read-only"])
+        .env("AWS_ENDPOINT_URL", format!("http://{address}"))
+        .env("AWS_ACCESS_KEY_ID", "x")
+        .env("AWS_SECRET_ACCESS_KEY", "y")
+        .env("AWS_REGION", "us-east-1")
+        .current_dir(project.root());
+    let output = run_command_with_deadline(&mut command, Duration::from_secs(60));
+    let said = text(&output);
+    assert!(output.status.success(), "{said}");
+    assert!(said.contains("answers, but listing it failed") && said.contains("every lookup"), "{said}");
 }

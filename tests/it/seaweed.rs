@@ -247,6 +247,23 @@ impl SeaweedServer {
         Bucket { store, runtime: tokio::runtime::Builder::new_current_thread().enable_all().build().unwrap() }
     }
 
+    /// Freezes the server (SIGSTOP): connections stay open and nothing answers, as a store whose
+    /// machine hangs. `thaw` lets it go on.
+    pub fn freeze(&self) {
+        self.signal("-STOP");
+    }
+
+    pub fn thaw(&self) {
+        self.signal("-CONT");
+    }
+
+    fn signal(&self, signal: &str) {
+        if let Some(child) = &self.child {
+            let status = Command::new("kill").arg(signal).arg(child.id().to_string()).status().expect("kill runs");
+            assert!(status.success(), "kill {signal} {}", child.id());
+        }
+    }
+
     pub fn stop(&mut self) {
         if let Some(mut child) = self.child.take() {
             let _ = child.kill();
@@ -257,6 +274,7 @@ impl SeaweedServer {
 
 impl Drop for SeaweedServer {
     fn drop(&mut self) {
+        self.thaw();
         self.stop();
     }
 }

@@ -277,6 +277,37 @@ fn a_store_that_stops_mid_build_is_a_warning_and_the_build_finishes_locally() {
 }
 
 #[test]
+fn a_store_that_freezes_mid_build_costs_that_build_seconds_not_a_transfer_timeout() {
+    // A store that hangs (SIGSTOP: connections open, nothing answers) after the probe used to
+    // hold each download for 30 s, the whole transfer's allowance.
+    let server = SeaweedServer::start();
+    let project = team_project();
+    let url = ["--remote-cache", "s3://cirrus/frozen"];
+    assert!(build_with(&project, &server.environment(), &url).success);
+    let checkout = checkout_of(&project);
+    let started = Instant::now();
+    let child = build_command(&checkout, &server.environment(), &url)
+        .stdout(Stdio::piped())
+        .stderr(Stdio::piped())
+        .spawn()
+        .unwrap();
+    // The first entry fetched means the build is under way: freeze the store there.
+    while local_entries(&checkout).is_empty() {
+        assert!(started.elapsed() < Duration::from_secs(60), "no entry fetched within 60 s");
+        std::thread::sleep(Duration::from_millis(5));
+    }
+    server.freeze();
+    let run = build_run(child.wait_with_output().unwrap());
+    let took = started.elapsed();
+    server.thaw();
+    assert!(run.success, "{}", run.stderr);
+    assert!(run.stderr.contains("building locally"), "{}", run.stderr);
+    println!("a store frozen mid-build: the build took {took:?}");
+    assert!(took < Duration::from_secs(20), "the build took {took:?} with the store frozen");
+    assert_eq!(artifacts(&checkout), artifacts(&project), "the same bytes, from the store or baked here");
+}
+
+#[test]
 fn the_daemon_keeps_baking_while_the_store_is_away_and_uses_it_again_when_it_comes_back() {
     let mut server = SeaweedServer::start();
     let bucket = server.bucket();

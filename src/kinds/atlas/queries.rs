@@ -629,7 +629,14 @@ pub(crate) fn mesh_map_paths(db: &dyn Db, asset: Asset, mesh: &std::path::Path) 
 /// A mesh's path in the source folder with the extension `.obj`: what its stages are named by
 /// (`foliage/meshes/trees/bush_2.obj`).
 pub(crate) fn remapped_mesh_path(db: &dyn Db, asset: Asset, mesh: &std::path::Path) -> PathBuf {
-    mesh.strip_prefix(asset.source_root(db)).unwrap_or(mesh).with_extension("obj")
+    let relative = mesh.strip_prefix(asset.source_root(db)).unwrap_or(mesh);
+    // By hand: `with_extension` makes `..obj` into `..` (its stem `.` is special to it).
+    let name = relative.file_name().map_or_else(String::new, |name| name.to_string_lossy().into_owned());
+    let stem = match name.rsplit_once('.') {
+        Some((stem, _)) if !stem.is_empty() => stem,
+        _ => name.as_str(),
+    };
+    relative.with_file_name(format!("{stem}.obj"))
 }
 
 /// A remapped mesh's file in the asset's output folder: [`remapped_mesh_path`] with its folders
@@ -704,19 +711,23 @@ pub(crate) fn remapped_mesh(
         .into_iter()
         .map(|path| (path.clone(), asset_file(db, asset, path)))
         .collect();
-    // Whether each texture the mesh's materials name exists (not its texels: a texel edit
-    // leaves the remap alone).
-    let map_files: HashMap<PathBuf, bool> = mesh_map_paths(db, asset, &mesh)
+    // Why each texture the mesh's materials name cannot be read, if it cannot (not its texels:
+    // a texel edit leaves the remap alone).
+    let map_files: HashMap<PathBuf, Option<String>> = mesh_map_paths(db, asset, &mesh)
         .into_iter()
         .map(|path| {
-            let exists = asset_file(db, asset, path.clone()).is_some_and(|file| crate::db::file_readable(db, file));
-            (path, exists)
+            let unreadable = match asset_file(db, asset, path.clone()) {
+                Some(file) => file.contents(db).as_ref().err().map(ToString::to_string),
+                None => Some("file not found".to_string()),
+            };
+            (path, unreadable)
         })
         .collect();
     let mut missing: Vec<String> = map_files
         .iter()
-        .filter(|(_, exists)| !**exists)
-        .map(|(path, _)| display_path(&crate::db::source_relative(db, path)))
+        .filter_map(|(path, why)| {
+            Some(format!("{}: {}", display_path(&crate::db::source_relative(db, path)), why.as_ref()?))
+        })
         .collect();
     missing.sort();
     let key = stage_key(REMAP).part(&crate::db::relocatable_hash(db, &*layout)).part(&missing[..]);
@@ -739,11 +750,12 @@ pub(crate) fn remapped_mesh(
             for &material in loaded.triangle_materials.iter().collect::<std::collections::BTreeSet<_>>() {
                 let Some(material) = loaded.materials.get(material as usize) else { continue };
                 for path in material.maps.values() {
-                    if !map_files.get(path).copied().unwrap_or(true) {
+                    if let Some(Some(why)) = map_files.get(path) {
                         let texture = display_path(path.strip_prefix(asset.source_root(db)).unwrap_or(path));
                         return Err(remap_error(super::remap::RemapError::MissingMap {
                             material: material.name.clone(),
                             texture,
+                            why: why.clone(),
                         }));
                     }
                 }
@@ -756,8 +768,9 @@ pub(crate) fn remapped_mesh(
                 super::remap::remap_mesh(&loaded, &targets, &chosen, library, &header).map_err(remap_error)?;
             let remap_warnings =
                 remapped.warnings.iter().map(|warning| Diagnostic::new(&mesh, warning.message.clone()));
+            let not_kept = statements_not_kept(&mesh, &contents.bytes, &library_bytes, &remapped.materials);
             Ok(super::remap::RemappedMesh {
-                warnings: warnings.into_iter().chain(remap_warnings).collect(),
+                warnings: warnings.into_iter().chain(remap_warnings).chain(not_kept).collect(),
                 ..remapped
             })
         })
@@ -765,9 +778,45 @@ pub(crate) fn remapped_mesh(
     .map(Arc::new)
 }
 
+/// Warnings for what the remapped OBJ and `atlas.mtl` leave out of their sources: the OBJ's
+/// object and group names, lines and points, and the MTL statements of its used materials that
+/// `atlas.mtl` does not write (`Ks`, `Ns`, `illum`, `map_Ks`…), each at its first line.
+fn statements_not_kept(
+    mesh: &std::path::Path,
+    obj: &[u8],
+    libraries: &std::collections::BTreeMap<PathBuf, Option<Vec<u8>>>,
+    materials: &[super::remap::RemappedMaterial],
+) -> Vec<Diagnostic> {
+    use crate::diagnostic::TextPosition;
+    use crate::mesh::obj_text::{mtl_statements_not_kept, obj_statements_not_kept};
+    let at = |line: u32| TextPosition { line, column: 1 };
+    let mut warnings: Vec<Diagnostic> = obj_statements_not_kept(&String::from_utf8_lossy(obj))
+        .into_iter()
+        .map(|(line, message)| Diagnostic::at(mesh, at(line), message).as_warning())
+        .collect();
+    for material in materials {
+        let name = &material.material.name;
+        let found = libraries.iter().find_map(|(library, bytes)| {
+            let text = String::from_utf8_lossy(bytes.as_deref()?);
+            mtl_statements_not_kept(&text, name).map(|found| (library, found))
+        });
+        if let Some((library, (line, keywords))) = found {
+            let keywords: Vec<String> = keywords.iter().map(|keyword| format!("`{keyword}`")).collect();
+            let message = format!(
+                "material `{name}`: {} are not written to atlas.mtl, which keeps Kd, d, Pr, Pm and the maps cirrus \
+                 reads",
+                keywords.join(", ")
+            );
+            warnings.push(Diagnostic::at(library, at(line), message).as_warning());
+        }
+    }
+    warnings
+}
+
 /// 2: with the mesh's load warnings.
 /// 3: UVs onto each texture's own place (aliases), maps' -s and -o kept, unused materials ignored.
 /// 4: a map's path relative to the MTL file that names it.
 /// 5: with the mesh's glTF geometry; beside `atlas.mtl` (`mtllib atlas.mtl`).
 /// 6: the glTF geometry's tangents MikkTSpace's.
-pub(crate) const REMAP: Stage = Stage { name: "remap", version: 6 };
+/// 7: warnings for the OBJ and MTL statements the output does not keep.
+pub(crate) const REMAP: Stage = Stage { name: "remap", version: 7 };

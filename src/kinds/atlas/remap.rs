@@ -52,10 +52,12 @@ pub(crate) enum RemapError {
         rectangles or at different places in one: one UV set cannot address both"
     )]
     TwoRectangles { material: String, first: String, second: String },
+    /// `why`: the read error (not found, a folder, a FIFO or device, too large…).
     #[error(
-        "material `{material}` maps `{texture}`, which does not exist: the remapped mesh would point at a missing file"
+        "material `{material}` maps `{texture}`, which cannot be read ({why}): the remapped mesh would point at a \
+         missing file"
     )]
-    MissingMap { material: String, texture: String },
+    MissingMap { material: String, texture: String, why: String },
 }
 
 /// A texture a remapped material may name: an atlas entry's own texture or one of its aliases,

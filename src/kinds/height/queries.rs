@@ -289,6 +289,20 @@ pub(crate) fn height_map(
             })?
         }
     };
+    if map.measured_texels == 0
+        && map.missed_texels == 0
+        && map_projection(&settings, reference) == HeightProjection::Normals
+    {
+        // No texel cast a ray at all: the UV layout covers none, whatever the high mesh is.
+        return Err(Diagnostic::new(
+            low_path,
+            format!(
+                "the low mesh's UVs cover no texel of the {size}² map: its triangles have no area in UV space (are its \
+                 `vt` all equal?)",
+                size = settings.size
+            ),
+        ));
+    }
     if map.measured_texels == 0 {
         let message = match map_projection(&settings, reference) {
             HeightProjection::Normals => format!(

@@ -200,6 +200,13 @@ pub(crate) fn file_readable(db: &dyn Db, file: SourceFile) -> bool {
     file.contents(db).is_ok()
 }
 
+/// Why a file could not be read (none: it could), with the same firewall as [`file_readable`]:
+/// an edit of a readable file changes nothing here.
+#[salsa::tracked(returns(clone))]
+pub(crate) fn file_read_error(db: &dyn Db, file: SourceFile) -> Option<String> {
+    file.contents(db).as_ref().err().map(ToString::to_string)
+}
+
 pub(crate) fn read_contents(db: &dyn Db, file: SourceFile) -> Result<&FileContents, Diagnostic> {
     file.contents(db).as_ref().map_err(|error| Diagnostic::new(file.path(db), error.clone()))
 }

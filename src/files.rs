@@ -126,7 +126,7 @@ fn open_regular_file(path: &Path, limit: u64) -> Result<(std::fs::File, std::fs:
 pub(crate) enum JsonFileError {
     #[error("{0}")]
     Read(ReadError),
-    #[error("is not valid JSON of its kind: {0}")]
+    #[error("is damaged (not valid JSON of its kind: {0})")]
     Malformed(serde_json::Error),
 }
 

@@ -5,12 +5,18 @@
 //! - **Where.** An entry lives at `<prefix>/<stage>/<first two hex digits>/<the rest>`, the
 //!   local cache's own layout, so one store serves every checkout folder and every machine.
 //! - **Verified.** What comes back is the local entry format: its header names the stage and
-//!   key it was stored under and it ends with the blake3 of everything before it. The disk cache
-//!   decodes it before anything uses it, so a corrupt, truncated or foreign object is a miss.
-//!   A key found corrupt is overwritten by the next upload of it; every other upload is a
-//!   conditional create (`If-None-Match: *` on S3), so machines racing on a key are harmless.
-//! - **Never in the way.** Every request has a short deadline. The first request of a build
-//!   is a probe (a `HEAD` that must answer within `PROBE_TIMEOUT`); a store that does not answer,
+//!   key it was stored under and it ends with the blake3 of everything before it. It is checked
+//!   as it streams into a temporary file of the local cache (`StreamCheck`: never held whole in
+//!   memory), then decoded before anything uses it, so a corrupt, truncated or foreign object is
+//!   a miss. A key found corrupt is overwritten by the next upload of it; every other upload is
+//!   a conditional create (`If-None-Match: *` on S3), so machines racing on a key are harmless.
+//! - **Signed, with a team key.** With `CIRRUS_CACHE_KEY` set, an object is the entry followed
+//!   by a keyed blake3 of it, under `<prefix>/signed/`: one without a good signature is a miss,
+//!   so write access to the store is not enough to ship a bake.
+//! - **Never in the way.** Every request has a short deadline: a download's answer and each of
+//!   its chunks within `STALL_TIMEOUT`, an upload within `upload_timeout` of its size. The first
+//!   request of a build is a probe (a `HEAD` that must answer within `PROBE_TIMEOUT`, and on a
+//!   read-only machine a listing, which a web server that is no store fails); a store that does not answer,
 //!   or any request that fails other than by "not found", is a warning, and the store is left
 //!   alone for `RETRY_AFTER`, so a build goes on locally and a daemon uses the store again
 //!   when it comes back.

@@ -350,8 +350,13 @@ impl Project {
         paths
             .iter()
             .filter(|path| {
-                // A file that could not be read has no stamp recorded: it moved if it is there now.
-                let read = self.record.files.get(*path).map(|file| file.stamp);
+                // A file the build could not read had no stamp then (the record may hold an older
+                // one): it moved if it is there now.
+                let read_failed = match self.files.get(*path) {
+                    Some(file) => file.contents(&self.db).is_err(),
+                    None => matches!(self.known.get(*path), Some(Err(_))),
+                };
+                let read = self.record.files.get(*path).map(|file| file.stamp).filter(|_| !read_failed);
                 FileStamp::read(&self.config.root.join(path)) != read
             })
             .cloned()

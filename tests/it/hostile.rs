@@ -1276,8 +1276,8 @@ fn a_garbage_truncated_or_deleted_manifest_is_warned_about_and_the_revision_neve
     let manifest_path = project.path("baked/manifest.json");
     let whole = std::fs::read(&manifest_path).unwrap();
     let damages: [(&str, Option<Vec<u8>>); 3] = [
-        ("is not valid JSON of its kind", Some(b"garbage".to_vec())),
-        ("is not valid JSON of its kind", Some(whole[..whole.len() / 2].to_vec())),
+        ("is damaged (not valid JSON of its kind", Some(b"garbage".to_vec())),
+        ("is damaged (not valid JSON of its kind", Some(whole[..whole.len() / 2].to_vec())),
         ("is missing", None),
     ];
     for (seed, (said, damage)) in damages.into_iter().enumerate() {

@@ -717,7 +717,7 @@ pub(crate) fn remapped_mesh(
         .into_iter()
         .map(|path| {
             let unreadable = match asset_file(db, asset, path.clone()) {
-                Some(file) => file.contents(db).as_ref().err().map(ToString::to_string),
+                Some(file) => crate::db::file_read_error(db, file),
                 None => Some("file not found".to_string()),
             };
             (path, unreadable)

@@ -487,6 +487,7 @@ impl Server {
         let close = |socket: &mut tungstenite::WebSocket<DeadlineStream>, code: CloseCode, reason: String| {
             let _ = socket.close(Some(CloseFrame { code, reason: reason.into() }));
             let _ = socket.flush();
+            drain_before_closing(&socket.get_ref().stream);
         };
         let (mut heard, mut pinged) = (Instant::now(), Instant::now());
         loop {
@@ -870,6 +871,22 @@ impl Write for DeadlineStream {
     }
 }
 
+/// Reads and drops what a client still sends (the rest of a message too long to read) for at
+/// most `CLOSE_DRAIN`, after the close frame went out and the writing half was shut: closing a
+/// socket with unread bytes resets it, and the client would lose the close frame.
+fn drain_before_closing(stream: &TcpStream) {
+    let _ = stream.shutdown(Shutdown::Write);
+    let deadline = Instant::now() + CLOSE_DRAIN;
+    let mut buffer = [0u8; 64 * 1024];
+    while let Some(left) = deadline.checked_duration_since(Instant::now()).filter(|left| !left.is_zero()) {
+        let _ = stream.set_read_timeout(Some(left));
+        match (&*stream).read(&mut buffer) {
+            Ok(0) | Err(_) => return,
+            Ok(_) => {}
+        }
+    }
+}
+
 fn is_timeout(error: &std::io::Error) -> bool {
     matches!(error.kind(), std::io::ErrorKind::WouldBlock | std::io::ErrorKind::TimedOut)
 }
@@ -919,6 +936,8 @@ fn origin_allowed(origin: &str, allowed: &[String]) -> bool {
 /// How long a connection may be opening before a newer one may take its place when every
 /// opening slot is taken.
 const OPENING_GRACE: Duration = Duration::from_secs(1);
+/// How long a WebSocket closed by the daemon is drained of what its client still sends.
+const CLOSE_DRAIN: Duration = Duration::from_secs(1);
 /// Bytes of `error` answers a client's queue may hold over its bound (see `send_reply`).
 const REFUSAL_RESERVE: usize = 1 << 20;
 /// How long a client over its queue's bound may go on asking without reading (`send_reply`).

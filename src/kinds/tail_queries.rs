@@ -180,8 +180,13 @@ fn make_blocks(
     let label = surface.label(asset.name(db));
     let previous = previous_encoding(db, &label);
     let memory = texture_memory(db, mips.levels[0].width, mips.levels[0].height);
+    // Cancellable between tasks of blocks: an 8192² atlas takes seconds to encode.
     let encoded = timed(db, ENCODE, &label, || {
-        tail_encode(mips, surface.surface, (format, quality), (alpha_cutoff, hidden), previous.as_deref())
+        crate::db::stoppable(db, |should_stop| {
+            let encoding = (previous.as_deref(), should_stop);
+            tail_encode(mips, surface.surface, (format, quality), (alpha_cutoff, hidden), encoding)
+                .map_err(|_| crate::mesh::Stopped)
+        })
     });
     drop(memory);
     let remembered = Arc::new(PreviousEncoding::of(mips, &encoded));

@@ -105,9 +105,21 @@ pub struct BlockEncodeSettings {
     pub srgb: bool,
 }
 
+/// Whether long work should stop now (a build cancelled by a newer edit): asked between tasks
+/// of blocks. Work it stops gives [`Stopped`], and what it made is thrown away.
+pub(crate) type StopCheck<'a> = &'a (dyn Fn() -> bool + Sync);
+
+/// Block encoding stopped by its [`StopCheck`].
+#[derive(Debug)]
+pub(crate) struct Stopped;
+
+fn never() -> bool {
+    false
+}
+
 /// Encodes every level of a mip chain (level 0 first).
 pub fn encode_levels(levels: &[Texture], settings: BlockEncodeSettings) -> EncodedTexture {
-    encode_levels_hiding(levels, settings, |_| None)
+    encode_levels_hiding(levels, settings, |_| None, &never)
 }
 
 /// [`encode_levels`], the blocks `hidden_of(level)` marks at the fastest setting.
@@ -115,11 +127,12 @@ fn encode_levels_hiding<'a>(
     levels: &[Texture],
     settings: BlockEncodeSettings,
     hidden_of: impl Fn(usize) -> Option<&'a [bool]>,
+    stop: StopCheck,
 ) -> EncodedTexture {
     let encoded = levels
         .iter()
         .enumerate()
-        .map(|(index, level)| Arc::from(encode_level_hiding(level, settings, hidden_of(index))))
+        .map(|(index, level)| Arc::from(encode_level_hiding(level, settings, hidden_of(index), stop)))
         .collect();
     encoded_texture(levels, settings, encoded)
 }
@@ -154,16 +167,21 @@ const BLOCKS_PER_TASK: usize = 1024;
 /// blocks repeat, and a block's encoding depends on its texels only, so the result is the same
 /// as encoding every block.
 pub fn encode_level(level: &Texture, settings: BlockEncodeSettings) -> Vec<u8> {
-    encode_level_hiding(level, settings, None)
+    encode_level_hiding(level, settings, None, &never)
 }
 
 /// [`encode_level`], the blocks `hidden` marks (one flag per block, rows of blocks from the top)
 /// at the fastest setting.
-fn encode_level_hiding(level: &Texture, settings: BlockEncodeSettings, hidden: Option<&[bool]>) -> Vec<u8> {
+fn encode_level_hiding(
+    level: &Texture,
+    settings: BlockEncodeSettings,
+    hidden: Option<&[bool]>,
+    stop: StopCheck,
+) -> Vec<u8> {
     let channels = format_channels(settings.format);
     let texels = block_texels(level, channels);
     let blocks: Vec<&[u8]> = texels.chunks_exact(16 * channels).collect();
-    encode_block_list(&blocks, settings, hidden)
+    encode_block_list(&blocks, (settings, hidden), stop)
 }
 
 /// The blocks of each level of a surface that no alpha test shows: where the albedo that
@@ -262,7 +280,11 @@ fn format_channels(format: BlockFormat) -> usize {
 
 /// Encodes a list of blocks (16 texels each, rows top to bottom), in order; those `hidden`
 /// marks at the fastest setting.
-fn encode_block_list(blocks: &[&[u8]], settings: BlockEncodeSettings, hidden: Option<&[bool]>) -> Vec<u8> {
+fn encode_block_list(
+    blocks: &[&[u8]],
+    (settings, hidden): (BlockEncodeSettings, Option<&[bool]>),
+    stop: StopCheck,
+) -> Vec<u8> {
     let channels = format_channels(settings.format);
     let block_count = blocks.len();
     // Each block's number among the distinct blocks, and the first block of each. Blocks are
@@ -317,7 +339,8 @@ fn encode_block_list(blocks: &[&[u8]], settings: BlockEncodeSettings, hidden: Op
     let mut encoded = vec![0u8; distinct.len() * size];
     for (numbers, quality) in groups {
         let blocks: Vec<&[u8]> = numbers.iter().map(|&number| distinct[number as usize]).collect();
-        let fresh = encode_blocks(&blocks, settings.format, channels, quality, &bc7_settings(quality, settings.alpha));
+        let profile = (quality, &bc7_settings(quality, settings.alpha));
+        let fresh = encode_blocks(&blocks, (settings.format, channels), profile, stop);
         for (index, &number) in numbers.iter().enumerate() {
             encoded[number as usize * size..][..size].copy_from_slice(&fresh[index * size..][..size]);
         }
@@ -355,13 +378,13 @@ fn alpha_coverage(block: &[u8]) -> AlphaCoverage {
     }
 }
 
-/// Encodes `blocks` (each 16 texels of `channels` bytes, rows top to bottom), in parallel.
+/// Encodes `blocks` (each 16 texels of `channels` bytes, rows top to bottom), in parallel; a
+/// task that starts once `stop` says so encodes nothing (the caller throws the result away).
 fn encode_blocks(
     blocks: &[&[u8]],
-    format: BlockFormat,
-    channels: usize,
-    quality: EncodeQuality,
-    bc7_settings: &intel_tex_2::bc7::EncodeSettings,
+    (format, channels): (BlockFormat, usize),
+    (quality, bc7_settings): (EncodeQuality, &intel_tex_2::bc7::EncodeSettings),
+    stop: StopCheck,
 ) -> Vec<u8> {
     let size = block_bytes(format);
     let mut encoded = vec![0u8; blocks.len() * size];
@@ -369,6 +392,9 @@ fn encode_blocks(
         // cirrus's own BC4 search, one channel at a time (BC5: red, then green).
         let search = super::bc4::Bc4Search::for_quality(quality);
         encoded.par_chunks_mut(size).zip(blocks.par_iter()).with_min_len(64).for_each(|(output, block)| {
+            if stop() {
+                return;
+            }
             for (channel, output) in output.chunks_exact_mut(8).enumerate() {
                 let values: [u8; 16] = std::array::from_fn(|texel| block[texel * channels + channel]);
                 output.copy_from_slice(&super::bc4::encode_bc4_block(&values, search));
@@ -378,6 +404,9 @@ fn encode_blocks(
     }
     encoded.par_chunks_mut(size * BLOCKS_PER_TASK).zip(blocks.par_chunks(BLOCKS_PER_TASK)).for_each(
         |(output, blocks)| {
+            if stop() {
+                return;
+            }
             // The blocks side by side: one row of blocks, 4 texels high.
             let row_len = 4 * channels;
             let stride = blocks.len() * row_len;
@@ -491,6 +520,31 @@ pub fn encode_levels_reusing(
     (settings, hidden): (BlockEncodeSettings, Option<&HiddenBlocks>),
     previous: Option<PreviousBlocks>,
 ) -> EncodedTexture {
+    encode_levels_stoppable(levels, level0_blocks, (settings, hidden), previous, &never).expect("never stops")
+}
+
+/// [`encode_levels_reusing`], asking `stop` between tasks of blocks.
+pub(crate) fn encode_levels_stoppable(
+    levels: &[Texture],
+    level0_blocks: &BlockFingerprints,
+    (settings, hidden): (BlockEncodeSettings, Option<&HiddenBlocks>),
+    previous: Option<PreviousBlocks>,
+    stop: StopCheck,
+) -> Result<EncodedTexture, Stopped> {
+    let encoded = encode_levels_unchecked(levels, level0_blocks, (settings, hidden), previous, stop);
+    if stop() {
+        return Err(Stopped);
+    }
+    Ok(encoded)
+}
+
+fn encode_levels_unchecked(
+    levels: &[Texture],
+    level0_blocks: &BlockFingerprints,
+    (settings, hidden): (BlockEncodeSettings, Option<&HiddenBlocks>),
+    previous: Option<PreviousBlocks>,
+    stop: StopCheck,
+) -> EncodedTexture {
     let hidden = hidden.filter(|hidden| {
         hidden.levels.len() == levels.len()
             && hidden.levels.iter().zip(levels).all(|(flags, level)| {
@@ -498,14 +552,14 @@ pub fn encode_levels_reusing(
             })
     });
     let hidden_of = |index: usize| hidden.map(|hidden| &hidden.levels[index][..]);
-    let encode_level = |index: usize, level: &Texture| encode_level_hiding(level, settings, hidden_of(index));
+    let encode_level = |index: usize, level: &Texture| encode_level_hiding(level, settings, hidden_of(index), stop);
     let Some(previous) = previous.filter(|previous| {
         previous.encoded.format == settings.format
             && previous.encoded.srgb == settings.srgb
             && previous.lower_levels.len() + 1 == levels.len()
             && previous.encoded.levels.len() == levels.len()
     }) else {
-        return encode_levels_hiding(levels, settings, hidden_of);
+        return encode_levels_hiding(levels, settings, hidden_of, stop);
     };
     let size = block_bytes(settings.format);
     let encoded: Vec<Arc<[u8]>> = levels
@@ -551,8 +605,8 @@ pub fn encode_levels_reusing(
                 .map(|hidden| changed.iter().map(|&(bx, by)| hidden[by as usize * blocks_x + bx as usize]).collect());
             let fresh = encode_block_list(
                 &texels.chunks_exact(16 * channels).collect::<Vec<_>>(),
-                settings,
-                changed_hidden.as_deref(),
+                (settings, changed_hidden.as_deref()),
+                stop,
             );
             let mut blocks = old_blocks.to_vec();
             for (index, &(bx, by)) in changed.iter().enumerate() {

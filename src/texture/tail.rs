@@ -9,7 +9,7 @@ use std::sync::Arc;
 use crate::texture::color::has_transparency;
 use crate::texture::container::write_container;
 use crate::texture::encode::{
-    encode_levels_reusing, BlockEncodeSettings, EncodedTexture, HiddenBlocks, PreviousBlocks,
+    encode_levels_stoppable, BlockEncodeSettings, EncodedTexture, HiddenBlocks, PreviousBlocks, StopCheck, Stopped,
 };
 use crate::texture::fingerprint::BlockFingerprints;
 use crate::texture::format::{BlockFormat, Container, EncodeQuality, Packing};
@@ -185,13 +185,13 @@ pub(crate) fn tail_encode(
     surface: SurfaceKind,
     (format, quality): (BlockFormat, EncodeQuality),
     (alpha_cutoff, hidden): (Option<f32>, Option<&HiddenBlocks>),
-    previous: Option<&PreviousEncoding>,
-) -> EncodedSurface {
+    (previous, stop): (Option<&PreviousEncoding>, StopCheck),
+) -> Result<EncodedSurface, Stopped> {
     let settings = BlockEncodeSettings { format, quality, alpha: mips.alpha_tested, srgb: surface.is_srgb() };
     let hidden_hash = hidden.map(|hidden| hidden.hash);
     let previous =
         previous.filter(|previous| previous.encoded.settings == settings && previous.encoded.hidden == hidden_hash);
-    let texture = encode_levels_reusing(
+    let texture = encode_levels_stoppable(
         &mips.levels,
         &mips.level0_blocks,
         (settings, hidden),
@@ -200,7 +200,8 @@ pub(crate) fn tail_encode(
             lower_levels: &previous.lower_levels,
             encoded: &previous.encoded.texture,
         }),
-    );
+        stop,
+    )?;
     let image = &mips.levels[0];
     let block_errors = block_errors_reusing(
         format,
@@ -216,7 +217,7 @@ pub(crate) fn tail_encode(
         }),
     );
     let psnr_db = (block_errors.psnr(image.width, image.height) * 100.0).round() / 100.0;
-    EncodedSurface { settings, hidden: hidden_hash, texture, block_errors: Arc::new(block_errors), psnr_db }
+    Ok(EncodedSurface { settings, hidden: hidden_hash, texture, block_errors: Arc::new(block_errors), psnr_db })
 }
 
 /// What a surface would measure in another format: its cost and level 0's PSNR.

@@ -335,6 +335,7 @@ fn websocket_messages_over_the_limit_are_answered_once_and_bad_ones_get_a_close_
     // Over a MiB: closed with 1009 (the rest of such a frame cannot be skipped).
     let mut socket = websocket(&daemon, None).unwrap();
     next_message(&mut socket).unwrap();
-    socket.send(Message::text("x".repeat(2 << 20))).unwrap();
+    // (The daemon may close before the whole message is written: the write's error is no matter.)
+    let _ = socket.send(Message::text("x".repeat(2 << 20)));
     assert_eq!(next_message(&mut socket).err(), Some(Some(CloseCode::Size)));
 }

@@ -904,7 +904,7 @@ fn bench_ambient_occlusion(corpus: &Path) {
         let tiles = materials
             .iter()
             .map(|own| {
-                bake_tile_with_rays(&occluders, &bake_mesh, own, size, region, &settings(rays), &cirrus::mesh::never)
+                bake_tile_with_rays(&occluders, &bake_mesh, own, size, region, &settings(rays), &cirrus::stop::never)
                     .unwrap()
             })
             .collect();
@@ -934,7 +934,7 @@ fn bench_ambient_occlusion(corpus: &Path) {
         &mesh.normals,
         &mesh.triangles,
         offset,
-        Casting { settings: &settings(256), should_stop: &cirrus::mesh::never },
+        Casting { settings: &settings(256), should_stop: &cirrus::stop::never },
     )
     .unwrap()
     .into_iter()

@@ -415,18 +415,18 @@ pub(crate) fn timed_together<T>(db: &dyn Db, stage: Stage, labels: &[(String, f6
 }
 
 /// Records that a stage's result came from the persistent cache, and whether the shared store
-/// Runs long `work` that asks its [`ShouldStop`](crate::mesh::ShouldStop) between units (points,
+/// Runs long `work` that asks its [`ShouldStop`](crate::stop::ShouldStop) between units (points,
 /// batches of rays): a cancellation of this database (a newer edit under `watch`) stops it within
 /// a unit, and the query unwinds as salsa's cancellation does, leaving no result behind.
 pub(crate) fn stoppable<T>(
     db: &dyn Db,
-    work: impl FnOnce(crate::mesh::ShouldStop) -> Result<T, crate::mesh::Stopped>,
+    work: impl FnOnce(crate::stop::ShouldStop) -> Result<T, crate::stop::Stopped>,
 ) -> T {
     let token = db.cancellation_token();
     let should_stop = move || token.is_cancelled();
     match work(&should_stop) {
         Ok(value) => value,
-        Err(crate::mesh::Stopped) => {
+        Err(crate::stop::Stopped) => {
             db.unwind_if_revision_cancelled();
             std::panic::resume_unwind(Box::new(salsa::Cancelled::Local))
         }

@@ -162,7 +162,7 @@ pub fn bake_impostor(
     sphere: (Vec3, f32),
     settings: ImpostorSettings,
 ) -> Result<ImpostorFrames, GpuError> {
-    bake_impostor_with_margin(gpu, mesh, sphere, (settings, settings.frame_size), &crate::mesh::never)
+    bake_impostor_with_margin(gpu, mesh, sphere, (settings, settings.frame_size), &crate::stop::never)
 }
 
 /// [`bake_impostor`] with the frames' margins of `margin_frame`-texel frames
@@ -173,7 +173,7 @@ pub fn bake_impostor_with_margin(
     mesh: &ViewMesh,
     (center, radius): (Vec3, f32),
     (settings, margin_frame): (ImpostorSettings, u32),
-    should_stop: crate::mesh::ShouldStop,
+    should_stop: crate::stop::ShouldStop,
 ) -> Result<ImpostorFrames, GpuError> {
     let ImpostorSettings { grid, frame_size } = settings;
     let side = (grid.frames * frame_size) as usize;

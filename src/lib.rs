@@ -5,11 +5,13 @@
 
 // Leaves: the one list of asset kinds (a macro, first so that every module below may use it),
 // how every problem with an input is reported, safe file reading and writing and path
-// normalisation, the CPU kernels' level, the allocator's settings, the OpenDDL parser.
+// normalisation, the check long work asks before it goes on, the CPU kernels' level, the
+// allocator's settings, the OpenDDL parser.
 #[macro_use]
 mod kind_list;
 pub mod diagnostic;
 pub mod files;
+pub mod stop;
 pub mod isa;
 pub mod memory;
 pub mod openddl;

@@ -215,7 +215,7 @@ impl Gpu {
                 drop(pass);
                 vec![target]
             };
-            self.draw_in_batches((view_projections.len(), size, 1), &crate::mesh::never, record, |index, mut images| {
+            self.draw_in_batches((view_projections.len(), size, 1), &crate::stop::never, record, |index, mut images| {
                 each(index, images.remove(0))
             })
         })

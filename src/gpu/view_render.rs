@@ -3,7 +3,7 @@
 
 use std::sync::Arc;
 
-use crate::mesh::ShouldStop;
+use crate::stop::ShouldStop;
 
 use bytemuck::{Pod, Zeroable};
 
@@ -159,7 +159,7 @@ impl Gpu {
             .map(|&view_projection| CameraUniform { view_projection, light: extend(light) })
             .collect();
         let pipeline = (&self.view_pipelines, [(ALBEDO_FORMAT, VIEW_BACKGROUND)].as_slice());
-        let never = &crate::mesh::never;
+        let never = &crate::stop::never;
         self.draw_views(mesh, &cameras, (size, never), pipeline, |index, mut images| each(index, images.remove(0)))
     }
 

@@ -185,7 +185,6 @@ fn make_blocks(
         crate::db::stoppable(db, |should_stop| {
             let encoding = (previous.as_deref(), should_stop);
             tail_encode(mips, surface.surface, (format, quality), (alpha_cutoff, hidden), encoding)
-                .map_err(|_| crate::mesh::Stopped)
         })
     });
     drop(memory);

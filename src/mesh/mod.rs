@@ -23,19 +23,6 @@ use crate::diagnostic::Diagnostic;
 use crate::files::normalize_relative_path;
 use crate::texture::TextureSlot;
 
-/// Asked between units of long work (points, batches of rays): `true` stops the work with
-/// [`Stopped`]. The driver passes its cancellation check; tests and benches pass [`never`].
-pub(crate) type ShouldStop<'a> = &'a (dyn Fn() -> bool + Sync);
-
-/// Long work stopped because [`ShouldStop`] said so; what it made is thrown away.
-#[derive(Clone, Copy, Debug, PartialEq, Eq)]
-pub struct Stopped;
-
-/// A [`ShouldStop`] that never stops.
-pub fn never() -> bool {
-    false
-}
-
 /// Appended to the name of the copy of a material that faces without texture coordinates use
 /// (they take its constants, not its maps).
 pub(crate) const WITHOUT_UVS_SUFFIX: &str = " (no UVs)";

@@ -7,7 +7,7 @@
 use glam::Vec3;
 
 use super::rays::{build_triangle_bvh, offset_ray_origin, BackFaces, TriangleBvh};
-use super::{ShouldStop, Stopped};
+use crate::stop::{ShouldStop, Stopped};
 
 /// The rays a point casts and when to stop casting them.
 #[derive(Clone, Copy)]
@@ -143,7 +143,7 @@ pub fn occlusion_at(
     settings: &OcclusionSettings,
     seed: u32,
 ) -> Occlusion {
-    occlusion_from(bvh, point, normal, normal, triangle, seed, Casting { settings, should_stop: &super::never })
+    occlusion_from(bvh, point, normal, normal, triangle, seed, Casting { settings, should_stop: &crate::stop::never })
         .expect("never stops")
 }
 

@@ -7,6 +7,7 @@ use std::sync::Arc;
 
 use rayon::prelude::*;
 
+use crate::stop::{never, ShouldStop, Stopped};
 use crate::texture::fingerprint::BlockFingerprints;
 use crate::texture::format::{BlockFormat, EncodeQuality};
 use crate::texture::Texture;
@@ -105,18 +106,6 @@ pub struct BlockEncodeSettings {
     pub srgb: bool,
 }
 
-/// Whether long work should stop now (a build cancelled by a newer edit): asked between tasks
-/// of blocks. Work it stops gives [`Stopped`], and what it made is thrown away.
-pub(crate) type StopCheck<'a> = &'a (dyn Fn() -> bool + Sync);
-
-/// Block encoding stopped by its [`StopCheck`].
-#[derive(Debug)]
-pub(crate) struct Stopped;
-
-fn never() -> bool {
-    false
-}
-
 /// Encodes every level of a mip chain (level 0 first).
 pub fn encode_levels(levels: &[Texture], settings: BlockEncodeSettings) -> EncodedTexture {
     encode_levels_hiding(levels, settings, |_| None, &never)
@@ -127,7 +116,7 @@ fn encode_levels_hiding<'a>(
     levels: &[Texture],
     settings: BlockEncodeSettings,
     hidden_of: impl Fn(usize) -> Option<&'a [bool]>,
-    stop: StopCheck,
+    stop: ShouldStop,
 ) -> EncodedTexture {
     let encoded = levels
         .iter()
@@ -176,7 +165,7 @@ fn encode_level_hiding(
     level: &Texture,
     settings: BlockEncodeSettings,
     hidden: Option<&[bool]>,
-    stop: StopCheck,
+    stop: ShouldStop,
 ) -> Vec<u8> {
     let channels = format_channels(settings.format);
     let texels = block_texels(level, channels);
@@ -283,7 +272,7 @@ fn format_channels(format: BlockFormat) -> usize {
 fn encode_block_list(
     blocks: &[&[u8]],
     (settings, hidden): (BlockEncodeSettings, Option<&[bool]>),
-    stop: StopCheck,
+    stop: ShouldStop,
 ) -> Vec<u8> {
     let channels = format_channels(settings.format);
     let block_count = blocks.len();
@@ -384,7 +373,7 @@ fn encode_blocks(
     blocks: &[&[u8]],
     (format, channels): (BlockFormat, usize),
     (quality, bc7_settings): (EncodeQuality, &intel_tex_2::bc7::EncodeSettings),
-    stop: StopCheck,
+    stop: ShouldStop,
 ) -> Vec<u8> {
     let size = block_bytes(format);
     let mut encoded = vec![0u8; blocks.len() * size];
@@ -529,7 +518,7 @@ pub(crate) fn encode_levels_stoppable(
     level0_blocks: &BlockFingerprints,
     (settings, hidden): (BlockEncodeSettings, Option<&HiddenBlocks>),
     previous: Option<PreviousBlocks>,
-    stop: StopCheck,
+    stop: ShouldStop,
 ) -> Result<EncodedTexture, Stopped> {
     let encoded = encode_levels_unchecked(levels, level0_blocks, (settings, hidden), previous, stop);
     if stop() {
@@ -543,7 +532,7 @@ fn encode_levels_unchecked(
     level0_blocks: &BlockFingerprints,
     (settings, hidden): (BlockEncodeSettings, Option<&HiddenBlocks>),
     previous: Option<PreviousBlocks>,
-    stop: StopCheck,
+    stop: ShouldStop,
 ) -> EncodedTexture {
     let hidden = hidden.filter(|hidden| {
         hidden.levels.len() == levels.len()

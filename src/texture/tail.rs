@@ -6,10 +6,11 @@
 
 use std::sync::Arc;
 
+use crate::stop::{ShouldStop, Stopped};
 use crate::texture::color::has_transparency;
 use crate::texture::container::write_container;
 use crate::texture::encode::{
-    encode_levels_stoppable, BlockEncodeSettings, EncodedTexture, HiddenBlocks, PreviousBlocks, StopCheck, Stopped,
+    encode_levels_stoppable, BlockEncodeSettings, EncodedTexture, HiddenBlocks, PreviousBlocks,
 };
 use crate::texture::fingerprint::BlockFingerprints;
 use crate::texture::format::{BlockFormat, Container, EncodeQuality, Packing};
@@ -185,7 +186,7 @@ pub(crate) fn tail_encode(
     surface: SurfaceKind,
     (format, quality): (BlockFormat, EncodeQuality),
     (alpha_cutoff, hidden): (Option<f32>, Option<&HiddenBlocks>),
-    (previous, stop): (Option<&PreviousEncoding>, StopCheck),
+    (previous, stop): (Option<&PreviousEncoding>, ShouldStop),
 ) -> Result<EncodedSurface, Stopped> {
     let settings = BlockEncodeSettings { format, quality, alpha: mips.alpha_tested, srgb: surface.is_srgb() };
     let hidden_hash = hidden.map(|hidden| hidden.hash);

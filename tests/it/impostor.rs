@@ -572,7 +572,7 @@ fn frames_reduced_five_times_from_a_larger_render_keep_each_frame_s_coverage_wit
     // impostors at 80 and 16 texels share one render.
     let view = view_of(&sphere_obj(32));
     let large =
-        cirrus::impostor::bake_impostor_with_margin(gpu, &view, (Vec3::ZERO, 1.0), (settings, 8), &cirrus::mesh::never)
+        cirrus::impostor::bake_impostor_with_margin(gpu, &view, (Vec3::ZERO, 1.0), (settings, 8), &cirrus::stop::never)
             .unwrap();
     let small = cirrus::impostor::reduced_frames(&large, 5, 0.5);
     assert_eq!(small.settings.frame_size, 8);
@@ -611,13 +611,13 @@ fn views_drawn_in_batches_are_those_drawn_one_at_a_time_and_sizes_sharing_a_rend
     // Each image as the batches hand it over.
     let (mut batched, mut frames) = (Vec::new(), Vec::new());
     gpu.render_views(&source, &cameras, light, 1024, |_, image| batched.push(image)).unwrap();
-    gpu.render_impostor_frames(&source, &cameras, (1024, &cirrus::mesh::never), |_, images| frames.push(images))
+    gpu.render_impostor_frames(&source, &cameras, (1024, &cirrus::stop::never), |_, images| frames.push(images))
         .unwrap();
     assert_eq!((batched.len(), frames.len()), (3, 3));
     for ((&camera, image), frame) in cameras.iter().zip(&batched).zip(&frames) {
         assert_eq!(*image, gpu.render_view(&source, camera, light, 1024).unwrap());
         let mut alone = Vec::new();
-        gpu.render_impostor_frames(&source, &[camera], (1024, &cirrus::mesh::never), |_, [albedo, _]| alone = albedo)
+        gpu.render_impostor_frames(&source, &[camera], (1024, &cirrus::stop::never), |_, [albedo, _]| alone = albedo)
             .unwrap();
         assert_eq!(frame[0], alone);
         assert!(image.chunks_exact(4).any(|pixel| pixel[3] > 0) && frame[1].chunks_exact(4).any(|texel| texel[3] > 0));

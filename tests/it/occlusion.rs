@@ -381,7 +381,7 @@ fn texels_bake_the_occlusion_of_their_surface_point_and_tiles_bake_what_the_whol
         &triangles,
         &coverage,
         size,
-        Casting { settings: &settings, should_stop: &cirrus::mesh::never },
+        Casting { settings: &settings, should_stop: &cirrus::stop::never },
     )
     .unwrap();
     // Texel (8, 8): its centre (u, v) = (0.53125, 0.46875) is floor point (0.125, 0, 0.125), seed 8 × 16 + 8.
@@ -401,7 +401,7 @@ fn texels_bake_the_occlusion_of_their_surface_point_and_tiles_bake_what_the_whol
             &triangles,
             &tile,
             size,
-            Casting { settings: &settings, should_stop: &cirrus::mesh::never },
+            Casting { settings: &settings, should_stop: &cirrus::stop::never },
         )
         .unwrap();
         for row in 0..8 {

@@ -8,7 +8,7 @@ use glam::Vec3;
 use crate::mesh::occlusion::{occlusion_of_texels, Casting, Occluders, OcclusionSettings};
 use crate::mesh::rays::BackFaces;
 use crate::mesh::uv_raster::{rasterize_uv, TexelRegion};
-use crate::mesh::{ShouldStop, Stopped};
+use crate::stop::{ShouldStop, Stopped};
 
 /// Tiles are squares of this many texels (fewer at the map's right and bottom edges).
 pub(crate) const TILE_SIZE: u32 = 128;

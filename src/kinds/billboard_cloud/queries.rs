@@ -855,7 +855,7 @@ pub(crate) fn impostor_frames(
                 (settings, render.margin_frame),
                 should_stop,
             ) {
-                Err(crate::gpu::GpuError::Stopped) => Err(crate::mesh::Stopped),
+                Err(crate::gpu::GpuError::Stopped) => Err(crate::stop::Stopped),
                 frames => Ok(frames),
             }
         })

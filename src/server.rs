@@ -4,19 +4,25 @@
 //! `PROTOCOL.md`.
 //!
 //! Every client has a reader thread (bounded lines; malformed input is answered with an `error`
-//! message and never reaches the daemon) and a writer thread fed by a queue bounded in messages
-//! and bytes (`Outbox`), so a slow or vanished client never blocks the daemon nor grows it: a
+//! message and never reaches the daemon) and a writer thread fed by a queue bounded in bytes
+//! (`Outbox`), so a slow or vanished client never blocks the daemon nor grows it: a
 //! reply that would pass the bound is answered with an `error`, and a client whose batches no
-//! longer fit, or whose errors no longer fit either, is disconnected.
+//! longer fit, or whose errors no longer fit either, is disconnected. A WebSocket comes from a
+//! page `origins` allows.
+
+mod origins;
+mod outbox;
 
 use std::collections::VecDeque;
 use std::io::{BufRead, BufReader, Read, Write};
 use std::net::{Shutdown, SocketAddr, TcpListener, TcpStream};
-use std::sync::{Arc, Condvar, Mutex};
+use std::sync::{Arc, Mutex};
 use std::time::{Duration, Instant};
 
 use serde::{Deserialize, Serialize};
 
+use self::origins::check_origin;
+use self::outbox::Outbox;
 use crate::graph::{Graph, GraphFormat};
 use crate::summary::ChangedArtifact;
 
@@ -146,88 +152,6 @@ impl Drop for Client {
     /// A client leaving the list closes its queue: its writer sends what is queued and stops.
     fn drop(&mut self) {
         self.outbox.close();
-    }
-}
-
-/// One client's outgoing messages, bounded in bytes.
-struct Outbox {
-    queue: Mutex<OutboxQueue>,
-    ready: Condvar,
-}
-
-struct OutboxQueue {
-    messages: VecDeque<Arc<str>>,
-    bytes: usize,
-    closed: bool,
-    /// When a message was last taken off (or the queue was last empty): a client that reads.
-    progress: Instant,
-}
-
-impl Outbox {
-    fn new() -> Outbox {
-        let queue = OutboxQueue { messages: VecDeque::new(), bytes: 0, closed: false, progress: Instant::now() };
-        Outbox { queue: Mutex::new(queue), ready: Condvar::new() }
-    }
-
-    /// Queues `message` when it keeps the queue within `max_bytes` (or the queue is empty: one
-    /// message larger than the bound still goes); else gives the bytes already queued.
-    fn push(&self, message: Arc<str>, max_bytes: usize) -> Result<(), usize> {
-        let mut queue = self.queue.lock().expect("client queue");
-        let fits = queue.messages.is_empty() || queue.bytes + message.len() <= max_bytes;
-        if queue.closed || !fits {
-            return Err(queue.bytes);
-        }
-        if queue.messages.is_empty() {
-            queue.progress = Instant::now();
-        }
-        queue.bytes += message.len();
-        queue.messages.push_back(message);
-        self.ready.notify_one();
-        Ok(())
-    }
-
-    /// The next message, waiting for one; `None` once the queue is closed and sent.
-    fn pop(&self) -> Option<Arc<str>> {
-        let mut queue = self.queue.lock().expect("client queue");
-        loop {
-            if let Some(message) = queue.pop() {
-                return Some(message);
-            }
-            if queue.closed {
-                return None;
-            }
-            queue = self.ready.wait(queue).expect("client queue");
-        }
-    }
-
-    /// The next message if one is queued; `Err` once the queue is closed and sent.
-    fn try_pop(&self) -> Result<Option<Arc<str>>, ()> {
-        let mut queue = self.queue.lock().expect("client queue");
-        match queue.pop() {
-            Some(message) => Ok(Some(message)),
-            None if queue.closed => Err(()),
-            None => Ok(None),
-        }
-    }
-
-    fn close(&self) {
-        self.queue.lock().expect("client queue").closed = true;
-        self.ready.notify_all();
-    }
-
-    /// The bytes queued, and how long since the client last took a message.
-    fn backlog(&self) -> (usize, Duration) {
-        let queue = self.queue.lock().expect("client queue");
-        (queue.bytes, queue.progress.elapsed())
-    }
-}
-
-impl OutboxQueue {
-    fn pop(&mut self) -> Option<Arc<str>> {
-        let message = self.messages.pop_front()?;
-        self.bytes -= message.len();
-        self.progress = Instant::now();
-        Some(message)
     }
 }
 
@@ -889,48 +813,6 @@ fn drain_before_closing(stream: &TcpStream) {
 
 fn is_timeout(error: &std::io::Error) -> bool {
     matches!(error.kind(), std::io::ErrorKind::WouldBlock | std::io::ErrorKind::TimedOut)
-}
-
-/// The WebSocket handshake's answer: a page that `origin_allowed` refuses gets 403 Forbidden.
-#[allow(clippy::result_large_err)] // tungstenite's error response type, not ours to box
-fn check_origin(
-    request: &tungstenite::handshake::server::Request,
-    response: tungstenite::handshake::server::Response,
-    origins: &[String],
-) -> Result<tungstenite::handshake::server::Response, tungstenite::handshake::server::ErrorResponse> {
-    let origin = request.headers().get("origin").map(|origin| String::from_utf8_lossy(origin.as_bytes()));
-    match origin {
-        Some(origin) if !origin_allowed(&origin, origins) => {
-            tracing::warn!(
-                "hot-reload server: refused a WebSocket from the page at {origin} (not a loopback page, nor one of \
-                 `--allow-origin`)"
-            );
-            let mut refusal = tungstenite::handshake::server::ErrorResponse::new(Some(format!(
-                "pages from {origin} may not connect: start the daemon with --allow-origin {origin}\n"
-            )));
-            *refusal.status_mut() = tungstenite::http::StatusCode::FORBIDDEN;
-            Err(refusal)
-        }
-        _ => Ok(response),
-    }
-}
-
-/// Whether a browser page at `origin` may open a WebSocket: loopback pages (`http(s)://`
-/// `localhost`, `127.x.x.x` or `[::1]`, any port) and those `allowed` names exactly (`*` allows
-/// every page).
-fn origin_allowed(origin: &str, allowed: &[String]) -> bool {
-    if allowed.iter().any(|allowed| allowed == "*" || allowed.trim_end_matches('/') == origin) {
-        return true;
-    }
-    let Some(rest) = origin.strip_prefix("http://").or_else(|| origin.strip_prefix("https://")) else {
-        return false;
-    };
-    let host = match rest.strip_prefix('[') {
-        Some(bracketed) => bracketed.split_once(']').map_or("", |(host, _)| host),
-        None => rest.split(':').next().unwrap_or(""),
-    };
-    host.eq_ignore_ascii_case("localhost")
-        || host.parse::<std::net::IpAddr>().is_ok_and(|address| address.is_loopback())
 }
 
 /// How long a connection may be opening before a newer one may take its place when every

@@ -675,6 +675,25 @@ pub(crate) fn asset_stage_ms<'a>(asset_name: &str, runs: &'a [StageRun]) -> std:
     stage_ms
 }
 
+/// The MTL files of the OBJ `mesh_file` (whose bytes are `obj`) for `cirrus check`, as a build
+/// reads them: a missing one `None` (the load warns of it), an unreadable one an error.
+fn check_mesh_libraries(
+    config: &PipelineConfig,
+    mesh_file: &Path,
+    obj: &[u8],
+) -> Result<std::collections::BTreeMap<PathBuf, Option<Vec<u8>>>, Diagnostic> {
+    let mut libraries = std::collections::BTreeMap::new();
+    for library in crate::mesh::material_libraries(mesh_file, obj, &config.source) {
+        let bytes = match crate::sources::read_source(&config.root, &config.source, &library) {
+            Ok(contents) => Some(contents.bytes.to_vec()),
+            Err(error) if error.is_not_found() => None,
+            Err(error) => return Err(Diagnostic::new(&library, error)),
+        };
+        libraries.insert(library, bytes);
+    }
+    Ok(libraries)
+}
+
 /// `cirrus check`'s word on the maps a mesh's used materials name that the asset copies into its
 /// output (those `copied` says): each must be the image its name says, as a build requires
 /// (`texture::check_image_file`); a problem names the MTL statement.
@@ -686,19 +705,10 @@ pub(crate) fn check_copied_maps(
 ) -> Vec<Diagnostic> {
     let read = |path: &Path| crate::sources::read_source(&config.root, &config.source, path);
     let Ok(contents) = read(mesh_file) else { return Vec::new() };
-    let libraries: std::collections::BTreeMap<PathBuf, Option<Vec<u8>>> =
-        crate::mesh::material_libraries(mesh_file, &contents.bytes, &config.source)
-            .into_iter()
-            .map(|library| {
-                let bytes = read(&library).ok().map(|contents| contents.bytes.to_vec());
-                (library, bytes)
-            })
-            .collect();
-    let mut used: Vec<u32> = mesh.triangle_materials.clone();
-    used.sort_unstable();
-    used.dedup();
+    let libraries = check_mesh_libraries(config, mesh_file, &contents.bytes).unwrap_or_default();
+    let (_, used) = crate::kinds::source_copies::used_materials(&mesh.materials, &mesh.triangle_materials);
     let mut problems = Vec::new();
-    for material in used.iter().filter_map(|&index| mesh.materials.get(index as usize)) {
+    for crate::kinds::source_copies::OutputMaterial { material, .. } in used {
         for (&slot, path) in material.maps.iter().filter(|(_, path)| copied(path)) {
             // A map that cannot be read is the build's warning, not a copy's problem.
             let Ok(contents) = read(path) else { continue };
@@ -712,10 +722,12 @@ pub(crate) fn check_copied_maps(
                 display_path(path.strip_prefix(&config.source).unwrap_or(path)),
                 problem.message
             );
-            problems.push(match crate::mesh::map_statement(&libraries, &material.name, slot) {
-                Some((library, position)) => Diagnostic::at(library, position, message),
-                None => Diagnostic::new(mesh_file, message),
-            });
+            problems.push(crate::kinds::source_copies::map_diagnostic(
+                &libraries,
+                (material, slot),
+                mesh_file,
+                message,
+            ));
         }
     }
     problems
@@ -727,17 +739,9 @@ pub(crate) fn check_mesh_file(
     config: &PipelineConfig,
     mesh_file: &Path,
 ) -> Result<(crate::mesh::Mesh, Vec<Diagnostic>), Diagnostic> {
-    let read = |path: &Path| crate::sources::read_source(&config.root, &config.source, path);
-    let contents = read(mesh_file).map_err(|error| Diagnostic::new(mesh_file, error))?;
-    let mut libraries = std::collections::BTreeMap::new();
-    for library in crate::mesh::material_libraries(mesh_file, &contents.bytes, &config.source) {
-        let bytes = match read(&library) {
-            Ok(contents) => Some(contents.bytes.to_vec()),
-            Err(error) if error.is_not_found() => None,
-            Err(error) => return Err(Diagnostic::new(&library, error)),
-        };
-        libraries.insert(library, bytes);
-    }
+    let contents = crate::sources::read_source(&config.root, &config.source, mesh_file)
+        .map_err(|error| Diagnostic::new(mesh_file, error))?;
+    let libraries = check_mesh_libraries(config, mesh_file, &contents.bytes)?;
     let (mesh, warnings) = crate::mesh::load_mesh(mesh_file, &contents.bytes, &libraries, &config.source)?;
     Ok((mesh, warnings.iter().map(Diagnostic::as_warning).collect()))
 }

@@ -235,9 +235,20 @@ fn not_an_image(
     );
     let is_obj = source.extension().is_some_and(|extension| extension.eq_ignore_ascii_case("obj"));
     let libraries = if is_obj { crate::kinds::mesh_queries::library_bytes(db, asset, source) } else { BTreeMap::new() };
-    match crate::mesh::map_statement(&libraries, &material.name, slot) {
+    map_diagnostic(&libraries, (material, slot), source, message)
+}
+
+/// `message` about `slot`'s map of `material`, at the MTL statement of `libraries` that names
+/// it, else on `fallback` (the mesh): how a build and `cirrus check` both name a bad map.
+pub(crate) fn map_diagnostic(
+    libraries: &BTreeMap<PathBuf, Option<Vec<u8>>>,
+    (material, slot): (&MeshMaterial, TextureSlot),
+    fallback: &Path,
+    message: String,
+) -> Diagnostic {
+    match crate::mesh::map_statement(libraries, &material.name, slot) {
         Some((library, position)) => Diagnostic::at(library, position, message),
-        None => Diagnostic::new(source, message),
+        None => Diagnostic::new(fallback, message),
     }
 }
 

@@ -87,18 +87,8 @@ pub(crate) fn manifest_path(output_dir: &Path) -> PathBuf {
 /// The manifest of the last build, or an empty one (parsed as it is read). One that is there but
 /// cannot be read, is too large or is not a manifest is warned about: the build writes a new one.
 pub(crate) fn load_manifest(output_dir: &Path) -> Manifest {
-    let path = manifest_path(output_dir);
-    match crate::files::read_json_file(&path, MAX_MANIFEST_BYTES) {
-        Ok(manifest) => manifest,
-        Err(error) if error.is_not_found() => Manifest::default(),
-        Err(error) => {
-            tracing::warn!(
-                "{} {error}: this build writes a new one (artifacts it does not list are left alone)",
-                crate::diagnostic::display_path(&path)
-            );
-            Manifest::default()
-        }
-    }
+    let instead = "this build writes a new one (artifacts it does not list are left alone)";
+    crate::files::read_own_json(&manifest_path(output_dir), MAX_MANIFEST_BYTES, instead)
 }
 
 pub(crate) fn save_manifest(output_dir: &Path, manifest: &Manifest) -> std::io::Result<bool> {

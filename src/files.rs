@@ -123,7 +123,7 @@ fn open_regular_file(path: &Path, limit: u64) -> Result<(std::fs::File, std::fs:
 
 /// Why a JSON file of cirrus's own (the manifest, the build record) was not read.
 #[derive(Debug, thiserror::Error)]
-pub(crate) enum JsonFileError {
+enum JsonFileError {
     #[error("{0}")]
     Read(ReadError),
     #[error("is damaged (not valid JSON of its kind: {0})")]
@@ -131,18 +131,32 @@ pub(crate) enum JsonFileError {
 }
 
 impl JsonFileError {
-    pub(crate) fn is_not_found(&self) -> bool {
+    fn is_not_found(&self) -> bool {
         matches!(self, JsonFileError::Read(error) if error.is_not_found())
     }
 }
 
 /// Parses the JSON file at `path` (a regular file of at most `limit` bytes) as it is read, so
 /// that its bytes are never held whole beside what they parse to.
-pub(crate) fn read_json_file<T: serde::de::DeserializeOwned>(path: &Path, limit: u64) -> Result<T, JsonFileError> {
+fn read_json_file<T: serde::de::DeserializeOwned>(path: &Path, limit: u64) -> Result<T, JsonFileError> {
     use std::io::Read;
     let (file, _) = open_regular_file(path, limit).map_err(JsonFileError::Read)?;
     let reader = std::io::BufReader::with_capacity(1 << 16, file.take(limit));
     serde_json::from_reader(reader).map_err(JsonFileError::Malformed)
+}
+
+/// A JSON file of cirrus's own (the manifest, the build record) through [`read_json_file`]: its
+/// value, or the default when there is none, and with a warning naming the file, the problem
+/// and what is done `instead` when it cannot be read or parsed.
+pub(crate) fn read_own_json<T: serde::de::DeserializeOwned + Default>(path: &Path, limit: u64, instead: &str) -> T {
+    match read_json_file(path, limit) {
+        Ok(value) => value,
+        Err(error) if error.is_not_found() => T::default(),
+        Err(error) => {
+            tracing::warn!("{} {error}; {instead}", crate::diagnostic::display_path(path));
+            T::default()
+        }
+    }
 }
 
 fn describe_bytes(bytes: u64) -> String {

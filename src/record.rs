@@ -281,18 +281,12 @@ impl BuildRecord {
     /// The record in `output_dir`, or an empty one (none yet, or unreadable: then it is rebuilt,
     /// every source hashed once, every asset checked through its stages).
     pub fn load(output_dir: &Path) -> BuildRecord {
-        let path = record_path(output_dir);
-        match crate::files::read_json_file::<BuildRecord>(&path, MAX_RECORD_BYTES) {
-            Ok(record) if record.version == RECORD_VERSION => record,
-            Ok(_) => BuildRecord::default(),
-            Err(error) if error.is_not_found() => BuildRecord::default(),
-            Err(error) => {
-                tracing::warn!(
-                    "{} {error}; rebuilding it (every source is hashed once)",
-                    crate::diagnostic::display_path(&path)
-                );
-                BuildRecord::default()
-            }
+        let instead = "rebuilding it (every source is hashed once)";
+        let record: BuildRecord = crate::files::read_own_json(&record_path(output_dir), MAX_RECORD_BYTES, instead);
+        if record.version == RECORD_VERSION {
+            record
+        } else {
+            BuildRecord::default()
         }
     }
 

@@ -356,15 +356,10 @@ impl RemoteStore {
     pub fn settings(&self) -> &RemoteCacheSettings {
         &self.shared.settings
     }
-
-    /// Whether entries are signed with a team key (`CIRRUS_CACHE_KEY`).
-    pub fn signs(&self) -> bool {
-        self.shared.signing.is_some()
-    }
 }
 
 /// The environment variable holding the team's key for signed entries.
-pub const CACHE_KEY_VARIABLE: &str = "CIRRUS_CACHE_KEY";
+const CACHE_KEY_VARIABLE: &str = "CIRRUS_CACHE_KEY";
 
 /// The shortest key taken (a passphrase or, better, `openssl rand -hex 32`).
 const MIN_CACHE_KEY_CHARS: usize = 32;

@@ -840,11 +840,10 @@ impl Project {
         std::mem::take(&mut self.executed).into_iter().collect()
     }
 
-    /// Writes one artifact (project-relative `path`) if its bytes changed and records its hash;
-    /// false when it could not be written. A report that differs only in its timings is kept.
     /// Writes an asset's `files` (project-relative paths) as one: each changed one is staged beside
     /// its place first, and only when all are is each renamed into place, in order; a file that
-    /// cannot be staged leaves every one as it was. Records what is in place in `produced`.
+    /// cannot be staged leaves every one as it was. A report that differs only in its timings is
+    /// kept. Records what is in place (path → blake3 hex) in `produced`.
     fn write_artifacts(
         &self,
         files: &[(&PathBuf, &[u8])],

@@ -753,6 +753,22 @@ pub fn texture_paths(libraries: &BTreeMap<PathBuf, Option<Vec<u8>>>, source_root
     paths
 }
 
+/// The MTL statements each map slot is read from (`mesh_material`, through tobj for the
+/// normal map's `map_Bump` and `bump`); the first is the one cirrus writes (`obj_text`).
+pub(crate) const MAP_STATEMENTS: [(TextureSlot, &[&str]); 6] = [
+    (TextureSlot::Albedo, &["map_Kd"]),
+    (TextureSlot::Opacity, &["map_d"]),
+    (TextureSlot::Normal, &["norm", "map_Bump", "map_bump", "bump"]),
+    (TextureSlot::Metallic, &["map_Pm"]),
+    (TextureSlot::Roughness, &["map_Pr"]),
+    (TextureSlot::Ao, &["map_ao", "map_AO"]),
+];
+
+/// The MTL statements `slot`'s map is read from ([`MAP_STATEMENTS`]).
+pub(crate) fn map_keywords(slot: TextureSlot) -> &'static [&'static str] {
+    MAP_STATEMENTS.iter().find(|(of, _)| *of == slot).map_or(&[], |(_, keywords)| keywords)
+}
+
 /// Where the MTL libraries name `slot`'s map of material `material`: the library and the
 /// statement's position, for diagnostics about that map.
 pub fn map_statement(
@@ -760,14 +776,7 @@ pub fn map_statement(
     material: &str,
     slot: TextureSlot,
 ) -> Option<(PathBuf, crate::diagnostic::TextPosition)> {
-    let keywords: &[&str] = match slot {
-        TextureSlot::Albedo => &["map_Kd"],
-        TextureSlot::Opacity => &["map_d"],
-        TextureSlot::Normal => &["norm", "map_Bump", "map_bump", "bump"],
-        TextureSlot::Metallic => &["map_Pm"],
-        TextureSlot::Roughness => &["map_Pr"],
-        TextureSlot::Ao => &["map_ao", "map_AO"],
-    };
+    let keywords = map_keywords(slot);
     libraries.iter().find_map(|(library, bytes)| {
         let text = String::from_utf8_lossy(bytes.as_deref()?);
         let mut current = None;

@@ -9,16 +9,9 @@ use std::path::{Component, Path, PathBuf};
 use super::MeshMaterial;
 use crate::texture::TextureSlot;
 
-/// The MTL statement of a map slot.
+/// The MTL statement a map slot is written as (the first it is read from).
 fn slot_keyword(slot: TextureSlot) -> &'static str {
-    match slot {
-        TextureSlot::Albedo => "map_Kd",
-        TextureSlot::Opacity => "map_d",
-        TextureSlot::Normal => "norm",
-        TextureSlot::Metallic => "map_Pm",
-        TextureSlot::Roughness => "map_Pr",
-        TextureSlot::Ao => "map_ao",
-    }
+    super::map_keywords(slot).first().copied().unwrap_or("map_Kd")
 }
 
 /// One material's MTL statements, each map's file named by `map_file`.
@@ -144,9 +137,10 @@ pub(crate) fn obj_statements_not_kept(text: &str) -> Vec<(u32, String)> {
 /// does not write (it writes `Kd`, `d`, `Pr`, `Pm` and the maps cirrus reads): the line of the
 /// first one and the list of their keywords, or none.
 pub(crate) fn mtl_statements_not_kept(text: &str, material: &str) -> Option<(u32, Vec<String>)> {
-    const KEPT: [&str; 13] =
-        ["newmtl", "Kd", "d", "Tr", "Pr", "Pm", "map_Kd", "map_d", "norm", "map_Bump", "map_bump", "bump", "map_Pm"];
-    const ALSO_KEPT: [&str; 3] = ["map_Pr", "map_ao", "map_AO"];
+    const KEPT: [&str; 6] = ["newmtl", "Kd", "d", "Tr", "Pr", "Pm"];
+    let kept = |keyword: &str| {
+        KEPT.contains(&keyword) || super::MAP_STATEMENTS.iter().any(|(_, keywords)| keywords.contains(&keyword))
+    };
     let mut current = None;
     let mut first = None;
     let mut keywords: Vec<String> = Vec::new();
@@ -160,7 +154,7 @@ pub(crate) fn mtl_statements_not_kept(text: &str, material: &str) -> Option<(u32
             current = Some(words.collect::<Vec<_>>().join(" "));
             continue;
         }
-        if current.as_deref() != Some(material) || KEPT.contains(&keyword) || ALSO_KEPT.contains(&keyword) {
+        if current.as_deref() != Some(material) || kept(keyword) {
             continue;
         }
         first.get_or_insert(number as u32 + 1);

@@ -302,18 +302,8 @@ pub fn decode_texture(file: &Path, bytes: &[u8], limits: TextureLimits) -> Resul
 /// bytes' own signature must agree) and decode whole within `limits`: what a file copied into
 /// the output as an image must pass, so that a map named `x.png` is never anything else.
 pub fn check_image_file(file: &Path, bytes: &[u8], limits: TextureLimits) -> Result<(), Diagnostic> {
-    let named = image::ImageFormat::from_path(file).ok().filter(|format| {
-        matches!(
-            format,
-            image::ImageFormat::Png
-                | image::ImageFormat::Jpeg
-                | image::ImageFormat::Tga
-                | image::ImageFormat::Bmp
-                | image::ImageFormat::Gif
-        )
-    });
-    let Some(named) = named else {
-        return Err(Diagnostic::new(file, "its name is not that of a PNG, JPEG, TGA, BMP or GIF image"));
+    let Some(named) = image::ImageFormat::from_path(file).ok().filter(|&format| decodable(format)) else {
+        return Err(Diagnostic::new(file, format!("its name is not that of {DECODABLE}")));
     };
     let found = image::guess_format(bytes).ok();
     if found.is_some_and(|found| found != named) || (found.is_none() && named != image::ImageFormat::Tga) {
@@ -327,27 +317,23 @@ fn image_reader<'a>(file: &Path, bytes: &'a [u8]) -> Result<image::ImageReader<C
     let mut reader = image::ImageReader::new(Cursor::new(bytes))
         .with_guessed_format()
         .map_err(|error| Diagnostic::new(file, format!("cannot read the image: {error}")))?;
+    let not_decodable = || Diagnostic::new(file, format!("not {DECODABLE}"));
     if reader.format().is_none() {
-        reader.set_format(
-            image::ImageFormat::from_path(file)
-                .map_err(|_| Diagnostic::new(file, "not a PNG, JPEG, TGA, BMP or GIF image"))?,
-        );
+        reader.set_format(image::ImageFormat::from_path(file).map_err(|_| not_decodable())?);
     }
-    let format = reader.format();
-    if !matches!(
-        format,
-        Some(
-            image::ImageFormat::Png
-                | image::ImageFormat::Jpeg
-                | image::ImageFormat::Tga
-                | image::ImageFormat::Bmp
-                | image::ImageFormat::Gif
-        )
-    ) {
-        return Err(Diagnostic::new(file, "not a PNG, JPEG, TGA, BMP or GIF image"));
+    if !reader.format().is_some_and(decodable) {
+        return Err(not_decodable());
     }
     Ok(reader)
 }
+
+/// The image formats cirrus decodes, and how messages name them.
+fn decodable(format: image::ImageFormat) -> bool {
+    use image::ImageFormat::{Bmp, Gif, Jpeg, Png, Tga};
+    matches!(format, Png | Jpeg | Tga | Bmp | Gif)
+}
+
+const DECODABLE: &str = "a PNG, JPEG, TGA, BMP or GIF image";
 
 /// An opacity map as one grey value in every channel (alpha included, so alpha-aware mips keep
 /// its coverage): the alpha channel when the image has transparency (an

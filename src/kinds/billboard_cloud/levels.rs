@@ -465,11 +465,16 @@ pub(crate) fn estimated_texels(settings: &Settings, slot: u32) -> u64 {
         };
         return rendered + 3 * atlas;
     }
-    let atlas = side(level.max_atlas_size);
     match level.reduced {
-        Some(_) => 3 * atlas,
-        None => 5 * atlas,
+        Some(_) => 3 * side(level.max_atlas_size),
+        None => cloud_texels(level.max_atlas_size),
     }
+}
+
+/// A cloud's [`estimated_texels`] with an atlas of `side` a side: rendered about once over, and
+/// its four surfaces encoded.
+fn cloud_texels(side: u32) -> u64 {
+    5 * u64::from(side).pow(2)
 }
 
 /// A slot estimated to cost more than this many times the median of the others (and of a plain
@@ -482,7 +487,7 @@ const COSTLY_SLOT_TEXELS: u64 = 64 << 20;
 pub(crate) fn costly_slot_warnings(settings: &Settings) -> Vec<String> {
     let count = slot_count(settings);
     let costs: Vec<u64> = (0..count).map(|slot| estimated_texels(settings, slot)).collect();
-    let plain_cloud = 5 * u64::from(settings.own::<Own>().atlas.max_size).pow(2);
+    let plain_cloud = cloud_texels(settings.own::<Own>().atlas.max_size);
     let all_slots = slots(settings);
     let mut warnings = Vec::new();
     for (slot, &cost) in costs.iter().enumerate() {

@@ -166,7 +166,7 @@ fn remove_empty_folders(output: &Path, file: &Path) {
 /// The file of a stale artifact that may be deleted (`None` when it is gone already), or why it
 /// must not be: outside the output folder, not a regular file, or not the bytes cirrus wrote.
 fn stale_artifact_file(config: &PipelineConfig, path: &str, hash: &str) -> Result<Option<PathBuf>, String> {
-    let normalized = crate::files::normalize_relative_path(Path::new(path));
+    let normalized = base::paths::normalize_relative_path(Path::new(path));
     let inside_output = normalized.as_ref().is_some_and(|normalized| {
         display_path(normalized) == path && normalized.starts_with(&config.output) && normalized != &config.output
     });

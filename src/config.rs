@@ -7,11 +7,11 @@ use std::path::{Path, PathBuf};
 use serde::{Deserialize, Serialize};
 
 use crate::diagnostic::{Diagnostic, TextPosition};
-use crate::files::normalize_relative_path;
 use crate::kinds::ambient_occlusion::settings::merge_ao;
 use crate::kinds::atlas::settings::merge_pack;
 use crate::kinds::billboard_cloud::settings::{merge_atlas, merge_billboard};
 use crate::kinds::height::settings::{merge_height, tessellate_settings};
+use base::paths::normalize_relative_path;
 
 pub(crate) mod sections;
 mod settings;

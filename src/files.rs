@@ -2,7 +2,7 @@
 //! (sources, artifacts, the cache, the record) and the libraries build on.
 
 use std::io::Write;
-use std::path::{Component, Path, PathBuf};
+use std::path::{Path, PathBuf};
 
 /// Largest source file read (textures, meshes, materials).
 pub(crate) const MAX_SOURCE_BYTES: u64 = 512 << 20;
@@ -213,21 +213,4 @@ impl From<ReadError> for String {
     fn from(error: ReadError) -> String {
         error.to_string()
     }
-}
-
-/// Resolves `.` and `..` lexically; `None` when the path is absolute or climbs out of its base.
-pub(crate) fn normalize_relative_path(path: &Path) -> Option<PathBuf> {
-    let text = path.to_string_lossy().replace('\\', "/");
-    let mut parts: Vec<String> = Vec::new();
-    for component in Path::new(&text).components() {
-        match component {
-            Component::CurDir => {}
-            Component::ParentDir => {
-                parts.pop()?;
-            }
-            Component::Normal(part) => parts.push(part.to_string_lossy().into_owned()),
-            Component::RootDir | Component::Prefix(_) => return None,
-        }
-    }
-    Some(parts.iter().collect())
 }

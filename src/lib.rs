@@ -4,26 +4,22 @@
 //! loop left is inside `kinds/` (a kind's `mod.rs` and its queries).
 
 // Leaves: the one list of asset kinds (a macro, first so that every module below may use it),
-// how every problem with an input is reported, safe file reading and writing and path
-// normalisation, the check long work asks before it goes on, the CPU kernels' level, the
-// allocator's settings, the OpenDDL parser.
+// safe file reading and writing, the allocator's settings.
 #[macro_use]
 mod kind_list;
-pub mod diagnostic;
 pub mod files;
-pub mod stop;
-pub mod isa;
 pub mod memory;
-pub mod openddl;
 
-// Shared libraries: pure functions over plain data (no salsa, no IO), named by role; the
-// previews render through the GPU device.
-pub mod texture;
-pub mod mesh;
-pub mod packing;
-pub mod gpu;
-pub mod impostor;
-pub mod preview;
+// The shared libraries, crates of their own under crates/ that depend on nothing of this one:
+// pure functions over plain data (no salsa, no IO), named by role; the previews and impostors
+// render through the GPU device. Re-exported under the names the modules below use.
+pub use base::{diagnostic, isa, stop};
+pub use gpu;
+pub use mesh;
+pub use openddl;
+pub use packing;
+pub use render::{impostor, preview};
+pub use texture;
 
 // The inputs: the pipeline file, validated into per-asset settings.
 pub mod config;

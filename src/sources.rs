@@ -73,7 +73,7 @@ pub(crate) fn glob_matches(config: &PipelineConfig, globs: &[String]) -> Vec<Pat
     let found = source_files_where(config, |relative| matchers.iter().any(|matcher| matcher.is_match(relative)));
     let mut files: Vec<PathBuf> = found.into_iter().map(|relative| config.source.join(relative)).collect();
     for plain in globs.iter().filter(|glob| !glob.contains(['*', '?', '[', ']', '{', '}'])) {
-        let Some(path) = crate::files::normalize_relative_path(&config.source.join(plain)) else { continue };
+        let Some(path) = base::paths::normalize_relative_path(&config.source.join(plain)) else { continue };
         if path.starts_with(&config.source) && !files.contains(&path) {
             files.push(path);
         }

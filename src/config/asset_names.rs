@@ -4,7 +4,7 @@
 use std::collections::{HashMap, HashSet};
 use std::path::Path;
 
-use crate::files::normalize_relative_path;
+use base::paths::normalize_relative_path;
 
 pub(super) fn valid_asset_name(name: &str) -> bool {
     // Compared as text: `a//b` and `a/./b` are the same folder as `a/b` and would pass a path

@@ -21,15 +21,9 @@ mod shared_cache;
 mod hostile;
 mod hostile_outputs;
 mod isa;
-mod impostor;
-mod occlusion;
-mod packing;
-mod preview;
 mod protocol;
-mod reduce;
 mod scale;
 mod tidy;
-mod uv_raster;
 mod watch;
 mod web;
 

@@ -7,9 +7,9 @@ use std::path::{Path, PathBuf};
 use serde::{Deserialize, Serialize};
 
 use crate::diagnostic::{Diagnostic, TextPosition};
-use crate::files::normalize_relative_path;
 use crate::openddl::{self, Structure, StructureBody, Value};
 use crate::texture::TextureSlot;
+use base::paths::normalize_relative_path;
 
 /// The slot a `Texture (attrib = "…")` fills.
 fn slot_from_attrib(attrib: &str) -> Option<TextureSlot> {

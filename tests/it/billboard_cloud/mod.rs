@@ -3,13 +3,11 @@
 //! preview renderers on the GPU.
 
 pub mod bake;
-mod gpu;
 mod budget;
 pub mod chain;
 mod reduced_level;
 mod impostor_level;
 mod switch;
 mod auto;
-mod distance_alpha;
 mod layout;
 mod planes;

@@ -5,7 +5,6 @@
 
 mod bake;
 mod incremental;
-mod pn;
 
 use crate::support::TempProject;
 

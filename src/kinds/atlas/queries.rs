@@ -20,6 +20,7 @@ use crate::texture::Texture;
 use super::page::{
     composite_page_keeping_sources, crop, opaque_bounds, recomposite_page, uv_texel_rect, PageEntry, TrimRect,
 };
+use super::remap::UvReach;
 use crate::kinds::atlas::settings::Settings as Own;
 
 pub(crate) const TRIM: Stage = Stage { name: "trim", version: 1 };
@@ -160,22 +161,6 @@ pub(crate) fn kept_texture(db: &dyn Db, file: SourceFile, rect: TrimRect) -> Res
         }
         Ok(timed(db, TRIM, &label, || kept_part(&texture, rect)))
     })
-}
-
-/// The texture coordinates a material of a mesh uses on an atlased texture: their range.
-#[derive(Clone, Copy, Debug, PartialEq, serde::Serialize, serde::Deserialize)]
-pub(crate) struct UvReach {
-    pub u: [f32; 2],
-    pub v: [f32; 2],
-}
-
-impl UvReach {
-    pub fn union(self, other: UvReach) -> UvReach {
-        UvReach {
-            u: [self.u[0].min(other.u[0]), self.u[1].max(other.u[1])],
-            v: [self.v[0].min(other.v[0]), self.v[1].max(other.v[1])],
-        }
-    }
 }
 
 /// Where the asset's meshes sample each of its textures (stage `reach`): for every texture a

@@ -286,6 +286,22 @@ pub(crate) fn remap_mesh(
     Ok(RemappedMesh { obj, materials, geometry, warnings })
 }
 
+/// The texture coordinates a material of a mesh uses on an atlased texture: their range.
+#[derive(Clone, Copy, Debug, PartialEq, serde::Serialize, serde::Deserialize)]
+pub(crate) struct UvReach {
+    pub u: [f32; 2],
+    pub v: [f32; 2],
+}
+
+impl UvReach {
+    pub fn union(self, other: UvReach) -> UvReach {
+        UvReach {
+            u: [self.u[0].min(other.u[0]), self.u[1].max(other.u[1])],
+            v: [self.v[0].min(other.v[0]), self.v[1].max(other.v[1])],
+        }
+    }
+}
+
 /// Fails when the triangles of material `material` (index into the mesh's materials) use UVs
 /// outside [0, 1]: they repeat the texture, which an atlas rectangle cannot (`entry` names the
 /// atlased texture in the message).
@@ -336,11 +352,8 @@ fn material_uv_range(mesh: &Mesh, material: usize, transform: &dyn Fn([f32; 2]) 
 /// Where the materials of `mesh` that some triangle uses sample each texture `atlased` accepts
 /// (any slot): the range of their texture coordinates (after the map's `-s` and `-o`), per
 /// texture, over the materials that map it.
-pub(crate) fn material_uv_reach(
-    mesh: &Mesh,
-    atlased: impl Fn(&Path) -> bool,
-) -> Vec<(std::path::PathBuf, super::queries::UvReach)> {
-    let mut reach: BTreeMap<std::path::PathBuf, super::queries::UvReach> = BTreeMap::new();
+pub(crate) fn material_uv_reach(mesh: &Mesh, atlased: impl Fn(&Path) -> bool) -> Vec<(std::path::PathBuf, UvReach)> {
+    let mut reach: BTreeMap<std::path::PathBuf, UvReach> = BTreeMap::new();
     for (index, material) in mesh.materials.iter().enumerate() {
         let slots: Vec<TextureSlot> =
             material.maps.iter().filter(|(_, path)| atlased(path)).map(|(&slot, _)| slot).collect();
@@ -349,7 +362,7 @@ pub(crate) fn material_uv_reach(
         }
         let (transform, _) = material_uv_transform(material, &slots);
         let Some([u_min, u_max, v_min, v_max]) = material_uv_range(mesh, index, &transform) else { continue };
-        let range = super::queries::UvReach { u: [u_min, u_max], v: [v_min, v_max] };
+        let range = UvReach { u: [u_min, u_max], v: [v_min, v_max] };
         for slot in slots {
             let path = material.maps[&slot].clone();
             reach.entry(path).and_modify(|known| *known = known.union(range)).or_insert(range);

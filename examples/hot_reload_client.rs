@@ -2,7 +2,7 @@
 //! Run `cargo run --release -- watch` in one terminal and
 //! `cargo run --release --example hot_reload_client [ADDR] [SINCE]` in another (ADDR defaults to
 //! 127.0.0.1:7878, the bundled pipeline's `server`). It reconnects when the daemon restarts and
-//! asks for what it missed with `since`. The protocol is described in PROTOCOL.md.
+//! asks for what it missed with `since`. The protocol is described in docs/PROTOCOL.md.
 
 use std::io::{BufRead, BufReader, Write};
 use std::net::TcpStream;

@@ -42,7 +42,7 @@ pub struct Options {
     /// headless viewer writes its screenshot again after each.
     #[arg(long, default_value = "")]
     press: String,
-    /// The hot-reload server of `cirrus watch` (see PROTOCOL.md); without it nothing reloads.
+    /// The hot-reload server of `cirrus watch` (see docs/PROTOCOL.md); without it nothing reloads.
     #[arg(long)]
     connect: Option<String>,
     /// Render into --screenshot instead of a window.

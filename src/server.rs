@@ -1,7 +1,7 @@
 //! The hot-reload server (an IO edge): newline-delimited JSON over TCP, and the same messages
 //! over a WebSocket on the same port (a connection that opens with an HTTP request), many
 //! clients at once, `since` replay, and the graph request. The protocol is documented in
-//! `PROTOCOL.md`.
+//! `docs/PROTOCOL.md`.
 //!
 //! Every client has a reader thread (bounded lines; malformed input is answered with an `error`
 //! message and never reaches the daemon) and a writer thread fed by a queue bounded in bytes

@@ -1,4 +1,4 @@
-// The cirrus web example: subscribes to `cirrus watch` over WebSocket (PROTOCOL.md), loads every
+// The cirrus web example: subscribes to `cirrus watch` over WebSocket (docs/PROTOCOL.md), loads every
 // asset's glTF with GLTFLoader (+ KTX2Loader for KHR_texture_basisu), and reloads an asset when a
 // batch names one of its artifacts.
 //

@@ -1,7 +1,7 @@
 //! cirrus: an incremental asset-pipeline daemon that bakes meshes into billboard-cloud LODs and
 //! texture sets into block-compressed GPU materials. The modules are listed bottom-up, as they
-//! stack: each group imports only the groups above it (the tidy test checks it), and the one
-//! loop left is inside `kinds/` (a kind's `mod.rs` and its queries).
+//! stack: each group imports only the groups above it (the tidy test checks it); the loops left,
+//! each a folder's module and files under it, are listed in that test and in ARCHITECTURE.md.
 
 // Leaves: the one list of asset kinds (a macro, first so that every module below may use it),
 // safe file reading and writing, the allocator's settings.

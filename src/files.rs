@@ -214,3 +214,17 @@ impl From<ReadError> for String {
         error.to_string()
     }
 }
+
+/// Writes a file through a temporary file in its folder renamed into place, so that readers
+/// (other processes too) see the whole file or none.
+pub(crate) fn write_atomically(
+    path: &Path,
+    write: impl FnOnce(&mut std::fs::File) -> std::io::Result<()>,
+) -> std::io::Result<()> {
+    let folder = path.parent().expect("entry paths have a folder");
+    std::fs::create_dir_all(folder)?;
+    let mut temporary = tempfile::Builder::new().prefix(TEMPORARY_PREFIX).tempfile_in(folder)?;
+    write(temporary.as_file_mut())?;
+    temporary.persist(path).map_err(|error| error.error)?;
+    Ok(())
+}

@@ -144,213 +144,13 @@ use std::sync::Arc;
 
 use rayon::prelude::*;
 
+pub mod key;
 pub mod remote;
 pub mod upkeep;
 
-use remote::{RemoteCounts, RemoteStore};
-
-/// A content address: the blake3 hash of everything a stage result depends on.
-#[derive(Clone, Copy, Debug, PartialEq, Eq, Hash)]
-pub struct CacheKey(pub blake3::Hash);
-
-/// Builds a `CacheKey` from a stage name, its version and every input that can change its
-/// result; it also keeps a short description of each part, for `cirrus cache explain`.
-pub struct CacheKeyBuilder {
-    hasher: blake3::Hasher,
-    parts: Vec<String>,
-}
-
-impl CacheKeyBuilder {
-    pub fn new(stage: &str, version: u32) -> CacheKeyBuilder {
-        let mut hasher = blake3::Hasher::new();
-        hasher.update(b"cirrus-cache-v2\0");
-        CacheKeyBuilder { hasher, parts: Vec::new() }.part(stage).part(&version)
-    }
-
-    /// Adds raw bytes as one part (length-prefixed).
-    pub fn bytes(mut self, bytes: &[u8]) -> Self {
-        self.hasher.update(&(bytes.len() as u64).to_le_bytes());
-        self.hasher.update(bytes);
-        if self.parts.len() < MAX_DESCRIBED_PARTS {
-            self.parts.push(describe_part(bytes));
-        }
-        self
-    }
-
-    /// Adds a value in its key encoding (see the module docs).
-    pub fn part(self, part: &(impl KeyPart + ?Sized)) -> Self {
-        part.add_to(self)
-    }
-
-    pub fn finish(self) -> CacheKey {
-        let key = CacheKey(self.hasher.finalize());
-        key_parts::remember(key, self.parts);
-        key
-    }
-}
-
-/// Parts described per key (the rest still enter the hash).
-const MAX_DESCRIBED_PARTS: usize = 256;
-
-/// A part as a person can compare it: short text as it is, numbers, hashes by their start.
-fn describe_part(bytes: &[u8]) -> String {
-    if let Ok(text) = std::str::from_utf8(bytes) {
-        if (2..=96).contains(&text.len()) && text.chars().all(|character| !character.is_control()) {
-            return format!("`{text}`");
-        }
-    }
-    match bytes.len() {
-        0 => "(empty)".to_string(),
-        1 => bytes[0].to_string(),
-        4 => u32::from_le_bytes(bytes.try_into().expect("four bytes")).to_string(),
-        8 => u64::from_le_bytes(bytes.try_into().expect("eight bytes")).to_string(),
-        32 => format!("hash {}", &blake3::Hash::from_bytes(bytes.try_into().expect("32 bytes")).to_hex()[..16]),
-        length => format!("{length} bytes, xxh3 {:016x}", xxhash_rust::xxh3::xxh3_64(bytes)),
-    }
-}
-
-/// The parts of the keys made in this process, for the lookups a build records.
-pub mod key_parts {
-    use std::collections::HashMap;
-    use std::sync::{Arc, Mutex};
-
-    use super::CacheKey;
-
-    /// Keys remembered at most; past it every key is forgotten and remembering starts again
-    /// (explain then says less of the keys made before).
-    const MAX_KEYS: usize = 1 << 18;
-
-    static PARTS: Mutex<Option<HashMap<CacheKey, Arc<[String]>>>> = Mutex::new(None);
-
-    pub(crate) fn remember(key: CacheKey, parts: Vec<String>) {
-        let mut known = PARTS.lock().expect("key parts lock");
-        let known = known.get_or_insert_with(HashMap::new);
-        if known.len() >= MAX_KEYS {
-            known.clear();
-        }
-        known.insert(key, parts.into());
-    }
-
-    pub fn of(key: CacheKey) -> Option<Arc<[String]>> {
-        PARTS.lock().expect("key parts lock").as_ref()?.get(&key).cloned()
-    }
-}
-
-/// A value with a fixed byte encoding in cache keys: one or more parts.
-pub trait KeyPart {
-    fn add_to(&self, key: CacheKeyBuilder) -> CacheKeyBuilder;
-}
-
-impl KeyPart for str {
-    fn add_to(&self, key: CacheKeyBuilder) -> CacheKeyBuilder {
-        key.bytes(self.as_bytes())
-    }
-}
-
-impl KeyPart for String {
-    fn add_to(&self, key: CacheKeyBuilder) -> CacheKeyBuilder {
-        key.bytes(self.as_bytes())
-    }
-}
-
-impl KeyPart for Path {
-    fn add_to(&self, key: CacheKeyBuilder) -> CacheKeyBuilder {
-        key.part(crate::diagnostic::display_path(self).as_str())
-    }
-}
-
-impl KeyPart for PathBuf {
-    fn add_to(&self, key: CacheKeyBuilder) -> CacheKeyBuilder {
-        key.part(self.as_path())
-    }
-}
-
-impl KeyPart for u32 {
-    fn add_to(&self, key: CacheKeyBuilder) -> CacheKeyBuilder {
-        key.bytes(&self.to_le_bytes())
-    }
-}
-
-impl KeyPart for u64 {
-    fn add_to(&self, key: CacheKeyBuilder) -> CacheKeyBuilder {
-        key.bytes(&self.to_le_bytes())
-    }
-}
-
-impl KeyPart for i32 {
-    fn add_to(&self, key: CacheKeyBuilder) -> CacheKeyBuilder {
-        key.bytes(&self.to_le_bytes())
-    }
-}
-
-impl KeyPart for f32 {
-    fn add_to(&self, key: CacheKeyBuilder) -> CacheKeyBuilder {
-        key.bytes(&self.to_bits().to_le_bytes())
-    }
-}
-
-impl KeyPart for bool {
-    fn add_to(&self, key: CacheKeyBuilder) -> CacheKeyBuilder {
-        key.bytes(&[u8::from(*self)])
-    }
-}
-
-impl KeyPart for blake3::Hash {
-    fn add_to(&self, key: CacheKeyBuilder) -> CacheKeyBuilder {
-        key.bytes(self.as_bytes())
-    }
-}
-
-impl<T: KeyPart> KeyPart for Option<T> {
-    fn add_to(&self, key: CacheKeyBuilder) -> CacheKeyBuilder {
-        match self {
-            None => key.bytes(&[0]),
-            Some(value) => key.bytes(&[1]).part(value),
-        }
-    }
-}
-
-impl<T: KeyPart, const N: usize> KeyPart for [T; N] {
-    fn add_to(&self, key: CacheKeyBuilder) -> CacheKeyBuilder {
-        self.iter().fold(key, |key, item| key.part(item))
-    }
-}
-
-/// Slices enter with their length, so that `[a, b]` then `c` differs from `[a]` then `b, c`.
-impl<T: KeyPart> KeyPart for [T] {
-    fn add_to(&self, key: CacheKeyBuilder) -> CacheKeyBuilder {
-        self.iter().fold(key.part(&(self.len() as u32)), |key, item| key.part(item))
-    }
-}
-
-impl<A: KeyPart, B: KeyPart> KeyPart for (A, B) {
-    fn add_to(&self, key: CacheKeyBuilder) -> CacheKeyBuilder {
-        key.part(&self.0).part(&self.1)
-    }
-}
-
-/// Enums enter keys by their names as `pipeline.ron` writes them (their `Debug` text is the
-/// same today, but that is not a contract).
-macro_rules! key_part_by_name {
-    ($type:ty { $($variant:ident),* $(,)? }) => {
-        impl KeyPart for $type {
-            fn add_to(&self, key: CacheKeyBuilder) -> CacheKeyBuilder {
-                key.part(match self { $(<$type>::$variant => stringify!($variant),)* })
-            }
-        }
-    };
-}
-
-key_part_by_name!(crate::texture::format::BlockFormat { Bc1, Bc3, Bc4, Bc5, Bc7 });
-key_part_by_name!(crate::texture::format::Container { Ktx2, Dds, Pvr });
-key_part_by_name!(crate::texture::format::Packing { Mra, Orm });
-key_part_by_name!(crate::texture::format::EncodeQuality { UltraFast, VeryFast, Fast, Basic, Slow, Exhaustive });
-
-impl KeyPart for crate::texture::SurfaceKind {
-    fn add_to(&self, key: CacheKeyBuilder) -> CacheKeyBuilder {
-        key.part(self.name())
-    }
-}
+pub use key::{CacheKey, CacheKeyBuilder, KeyPart};
+use remote::RemoteStore;
+pub(crate) use upkeep::CacheCounts;
 
 /// Largest cache entry read back.
 const MAX_ENTRY_BYTES: u64 = 4 << 30;
@@ -372,15 +172,6 @@ pub struct DiskCache {
 struct LocalCounters {
     hits: AtomicU64,
     misses: AtomicU64,
-}
-
-/// What the caches did in one build: local hits and misses (a local miss may still be a remote
-/// hit), and the shared store's counts when there is one.
-#[derive(Clone, Copy, Debug, Default, PartialEq, Eq, serde::Serialize, serde::Deserialize)]
-pub(crate) struct CacheCounts {
-    pub local_hits: u64,
-    pub local_misses: u64,
-    pub remote: Option<RemoteCounts>,
 }
 
 thread_local! {
@@ -523,7 +314,7 @@ impl DiskCache {
                     asset: CURRENT_ASSET.with(|current| current.borrow().clone()),
                     stage: stage.to_string(),
                     key: key.0.to_hex().to_string(),
-                    parts: key_parts::of(key).map(|parts| parts.to_vec()).unwrap_or_default(),
+                    parts: key::key_parts::of(key).map(|parts| parts.to_vec()).unwrap_or_default(),
                 });
             }
         }
@@ -575,11 +366,11 @@ impl DiskCache {
     /// Writes an entry (temporary file, then rename) and gives its bytes to the shared store.
     fn write_entry(&self, stage: &str, key: CacheKey, entry: &CacheEntry) {
         let path = self.entry_path(stage, key);
-        if let Err(error) = write_atomically(&path, |file| write_entry_to(file, stage, key, entry)) {
+        if let Err(error) = crate::files::write_atomically(&path, |file| write_entry_to(file, stage, key, entry)) {
             tracing::warn!("cannot write cache entry {}: {error}", path.display());
             return;
         }
-        if let Some(parts) = key_parts::of(key) {
+        if let Some(parts) = key::key_parts::of(key) {
             upkeep::record_key_parts(&self.folder, stage, key, &parts);
         }
         if let Some(remote) = self.remote.as_ref().filter(|remote| remote.uploads(stage)) {
@@ -601,17 +392,6 @@ impl DiskCache {
             remote.wait_for_uploads();
         }
     }
-}
-
-/// Writes a file through a temporary file in its folder renamed into place, so that readers
-/// (other processes too) see the whole file or none.
-fn write_atomically(path: &Path, write: impl FnOnce(&mut std::fs::File) -> std::io::Result<()>) -> std::io::Result<()> {
-    let folder = path.parent().expect("entry paths have a folder");
-    std::fs::create_dir_all(folder)?;
-    let mut temporary = tempfile::Builder::new().prefix(crate::files::TEMPORARY_PREFIX).tempfile_in(folder)?;
-    write(temporary.as_file_mut())?;
-    temporary.persist(path).map_err(|error| error.error)?;
-    Ok(())
 }
 
 fn entry_size(entry: &CacheEntry) -> usize {

@@ -32,7 +32,7 @@ use std::time::{Duration, Instant};
 use object_store::path::Path as StorePath;
 use object_store::{ObjectStore, ObjectStoreExt, PutMode, PutOptions, PutPayload};
 
-use super::CacheKey;
+use super::key::CacheKey;
 
 /// Whether a machine may add entries to the shared store.
 #[derive(Clone, Copy, Debug, Default, PartialEq, Eq, serde::Deserialize, serde::Serialize)]

@@ -9,7 +9,7 @@
 use std::path::{Path, PathBuf};
 use std::time::SystemTime;
 
-use super::CacheCounts;
+use super::remote::RemoteCounts;
 
 /// Records that the entry at `path` was used now (for `gc`); a read-only cache keeps its times.
 pub(crate) fn mark_used(path: &Path) {
@@ -122,7 +122,7 @@ fn forget_deleted_key_parts(folder: &Path) {
             }
         }
         if let Err(error) =
-            super::write_atomically(&file.path(), |file| std::io::Write::write_all(file, kept.as_bytes()))
+            crate::files::write_atomically(&file.path(), |file| std::io::Write::write_all(file, kept.as_bytes()))
         {
             tracing::warn!("cannot rewrite {}: {error}", file.path().display());
         }
@@ -168,7 +168,7 @@ const KEY_PARTS_FOLDER: &str = "key-parts";
 
 /// Records the parts of a stored entry's key (a line appended to `key-parts/<stage>.jsonl`; a
 /// line under 4 KiB is appended whole even with another process appending).
-pub(crate) fn record_key_parts(folder: &Path, stage: &str, key: super::CacheKey, parts: &[String]) {
+pub(crate) fn record_key_parts(folder: &Path, stage: &str, key: super::key::CacheKey, parts: &[String]) {
     let mut line = serde_json::to_string(&(key.0.to_hex().as_str(), parts)).expect("parts serialise");
     line.push('\n');
     let path = folder.join(KEY_PARTS_FOLDER).join(format!("{stage}.jsonl"));
@@ -197,7 +197,7 @@ pub(crate) struct LastBuildAsset {
 pub(crate) fn write_last_build(folder: &Path, last: &LastBuild) {
     let path = folder.join(LAST_BUILD_FILE);
     let json = serde_json::to_vec(last).expect("counts serialise");
-    if let Err(error) = super::write_atomically(&path, |file| std::io::Write::write_all(file, &json)) {
+    if let Err(error) = crate::files::write_atomically(&path, |file| std::io::Write::write_all(file, &json)) {
         tracing::warn!("cannot write {}: {error}", path.display());
     }
 }
@@ -206,4 +206,13 @@ pub(crate) fn write_last_build(folder: &Path, last: &LastBuild) {
 pub(crate) fn read_last_build(folder: &Path) -> Option<LastBuild> {
     let bytes = crate::files::read_regular_file(&folder.join(LAST_BUILD_FILE), 16 << 20).ok()?;
     serde_json::from_slice(&bytes).ok()
+}
+
+/// What the caches did in one build: local hits and misses (a local miss may still be a remote
+/// hit), and the shared store's counts when there is one.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq, serde::Serialize, serde::Deserialize)]
+pub(crate) struct CacheCounts {
+    pub local_hits: u64,
+    pub local_misses: u64,
+    pub remote: Option<RemoteCounts>,
 }

@@ -60,7 +60,7 @@ pub struct Occlusion {
 pub(crate) const INSIDE_PROBE_RAYS: u32 = 32;
 
 /// The `index`-th point of the R2 sequence in [0, 1)².
-pub(crate) fn r2_point(index: u32) -> [f64; 2] {
+pub fn r2_point(index: u32) -> [f64; 2] {
     // 1/φ₂ and 1/φ₂², φ₂ the plastic number (the real root of x³ = x + 1).
     const A1: f64 = 0.754_877_666_246_692_8;
     const A2: f64 = 0.569_840_290_998_053_3;
@@ -78,7 +78,7 @@ fn mix(mut value: u32) -> u32 {
 }
 
 /// The shift of the sequence for the sample point `seed` (its texel or vertex index).
-pub(crate) fn sequence_shift(seed: u32) -> [f64; 2] {
+pub fn sequence_shift(seed: u32) -> [f64; 2] {
     let first = mix(seed ^ 0x9e37_79b9);
     let second = mix(first ^ 0x7f4a_7c15);
     [first as f64 / 4_294_967_296.0, second as f64 / 4_294_967_296.0]

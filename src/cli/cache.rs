@@ -3,19 +3,65 @@
 
 use std::collections::BTreeMap;
 use std::fmt::Write as _;
-use std::path::Path;
+use std::path::{Path, PathBuf};
 use std::process::ExitCode;
 
-use super::{load_pipeline_or_report, CacheCommand, EXIT_USAGE};
+use clap::Subcommand;
+
+use super::output::{load_pipeline_or_report, out, outln, EXIT_USAGE};
 use crate::cache::upkeep::{collect_garbage, entry_files, read_last_build, recorded_key_parts, LastBuild, Miss};
 use crate::diagnostic::display_path;
 use crate::project::ProjectOptions;
+
+/// `cirrus cache`: what it is asked.
+#[derive(Debug, Subcommand)]
+pub enum CacheCommand {
+    /// Local entries and bytes, and the last build's hits and misses, local and remote.
+    Stats {
+        /// The pipeline file.
+        #[arg(long, default_value = "pipeline.ron")]
+        pipeline: PathBuf,
+    },
+    /// For each stage of an asset: where its result was found, or which part of its key
+    /// differs from the nearest entry.
+    Explain {
+        /// The pipeline file.
+        #[arg(long, default_value = "pipeline.ron")]
+        pipeline: PathBuf,
+        #[arg(long)]
+        asset: String,
+    },
+    /// Deletes the least recently used local entries until the folder holds at most BYTES
+    /// (suffixes K, M, G: 1024-based).
+    Gc {
+        /// The pipeline file.
+        #[arg(long, default_value = "pipeline.ron")]
+        pipeline: PathBuf,
+        #[arg(long, value_name = "BYTES", value_parser = parse_byte_size)]
+        max_size: u64,
+    },
+}
+
+/// `500M`, `2G`, `1048576`: bytes with an optional 1024-based suffix.
+fn parse_byte_size(text: &str) -> Result<u64, String> {
+    let text = text.trim();
+    let (digits, shift) = match text.char_indices().last() {
+        Some((at, 'k' | 'K')) => (&text[..at], 10),
+        Some((at, 'm' | 'M')) => (&text[..at], 20),
+        Some((at, 'g' | 'G')) => (&text[..at], 30),
+        Some((at, 't' | 'T')) => (&text[..at], 40),
+        _ => (text, 0),
+    };
+    let value: u64 =
+        digits.trim().parse().map_err(|_| format!("`{text}` is not a size in bytes (e.g. 1048576, 500M, 2G)"))?;
+    value.checked_mul(1 << shift).ok_or_else(|| format!("`{text}` is too large"))
+}
 
 pub fn run(command: CacheCommand, options: ProjectOptions) -> ExitCode {
     match command {
         CacheCommand::Stats { pipeline } => with_cache_folder(&pipeline, |folder, config| {
             let remote = options.remote_cache.apply(config.remote_cache.as_ref());
-            super::out!("{}", stats_text(folder, remote.as_ref().map(|remote| remote.url.as_str())));
+            out!("{}", stats_text(folder, remote.as_ref().map(|remote| remote.url.as_str())));
             ExitCode::SUCCESS
         }),
         CacheCommand::Explain { pipeline, asset } => with_cache_folder(&pipeline, |folder, config| {
@@ -29,7 +75,7 @@ pub fn run(command: CacheCommand, options: ProjectOptions) -> ExitCode {
             }
             match explain_text(folder, &asset) {
                 Some(text) => {
-                    super::out!("{text}");
+                    out!("{text}");
                     ExitCode::SUCCESS
                 }
                 None => {
@@ -43,7 +89,7 @@ pub fn run(command: CacheCommand, options: ProjectOptions) -> ExitCode {
         }),
         CacheCommand::Gc { pipeline, max_size } => with_cache_folder(&pipeline, |folder, _| {
             let collected = collect_garbage(folder, max_size);
-            super::outln!(
+            outln!(
                 "deleted {} entries ({}), kept {} entries ({}) in {}",
                 collected.deleted_entries,
                 human_bytes(collected.deleted_bytes),

@@ -2,6 +2,7 @@
 //! (0: every asset baked, 1: some asset failed, 2: usage or configuration error).
 
 mod cache;
+mod output;
 
 use std::io::IsTerminal;
 use std::path::PathBuf;
@@ -10,8 +11,9 @@ use std::process::ExitCode;
 use clap::{Parser, Subcommand, ValueEnum};
 
 use crate::cache::remote::RemoteCacheOverride;
-use crate::config::load_pipeline;
 use crate::project::{BuildOptions, Progress, Project, ProjectOptions};
+use cache::CacheCommand;
+pub(crate) use output::{load_pipeline_or_report, out, outln, EXIT_ASSET_FAILED, EXIT_USAGE};
 
 #[derive(Debug, Parser)]
 #[command(
@@ -140,49 +142,6 @@ pub enum Command {
     },
 }
 
-#[derive(Debug, Subcommand)]
-pub enum CacheCommand {
-    /// Local entries and bytes, and the last build's hits and misses, local and remote.
-    Stats {
-        /// The pipeline file.
-        #[arg(long, default_value = "pipeline.ron")]
-        pipeline: PathBuf,
-    },
-    /// For each stage of an asset: where its result was found, or which part of its key
-    /// differs from the nearest entry.
-    Explain {
-        /// The pipeline file.
-        #[arg(long, default_value = "pipeline.ron")]
-        pipeline: PathBuf,
-        #[arg(long)]
-        asset: String,
-    },
-    /// Deletes the least recently used local entries until the folder holds at most BYTES
-    /// (suffixes K, M, G: 1024-based).
-    Gc {
-        /// The pipeline file.
-        #[arg(long, default_value = "pipeline.ron")]
-        pipeline: PathBuf,
-        #[arg(long, value_name = "BYTES", value_parser = parse_byte_size)]
-        max_size: u64,
-    },
-}
-
-/// `500M`, `2G`, `1048576`: bytes with an optional 1024-based suffix.
-fn parse_byte_size(text: &str) -> Result<u64, String> {
-    let text = text.trim();
-    let (digits, shift) = match text.char_indices().last() {
-        Some((at, 'k' | 'K')) => (&text[..at], 10),
-        Some((at, 'm' | 'M')) => (&text[..at], 20),
-        Some((at, 'g' | 'G')) => (&text[..at], 30),
-        Some((at, 't' | 'T')) => (&text[..at], 40),
-        _ => (text, 0),
-    };
-    let value: u64 =
-        digits.trim().parse().map_err(|_| format!("`{text}` is not a size in bytes (e.g. 1048576, 500M, 2G)"))?;
-    value.checked_mul(1 << shift).ok_or_else(|| format!("`{text}` is too large"))
-}
-
 /// A web page's origin as browsers send it: `http(s)://host[:port]`, no path (or `*`).
 fn parse_origin(text: &str) -> Result<String, String> {
     let origin = text.trim().trim_end_matches('/');
@@ -224,9 +183,6 @@ pub enum SummaryFormat {
     Json,
 }
 
-pub(crate) const EXIT_ASSET_FAILED: u8 = 1;
-pub(crate) const EXIT_USAGE: u8 = 2;
-
 pub(crate) fn init_logging(verbose: u8) {
     let default = match verbose {
         0 => "warn",
@@ -249,36 +205,6 @@ pub(crate) fn init_logging(verbose: u8) {
         .with_ansi(ansi)
         .try_init();
 }
-
-/// Set when a write to standard output failed (a full disk, `/dev/full`, a closed pipe): said
-/// once on stderr, and the command exits with [`EXIT_ASSET_FAILED`] instead of panicking.
-static STDOUT_FAILED: std::sync::atomic::AtomicBool = std::sync::atomic::AtomicBool::new(false);
-
-/// Writes to standard output (through the `out!` and `outln!` macros); a failure is recorded in
-/// [`STDOUT_FAILED`].
-pub(crate) fn write_stdout(arguments: std::fmt::Arguments) {
-    use std::io::Write;
-    use std::sync::atomic::Ordering;
-    if STDOUT_FAILED.load(Ordering::Relaxed) {
-        return;
-    }
-    let mut stdout = std::io::stdout().lock();
-    if let Err(error) = stdout.write_fmt(arguments).and_then(|()| stdout.flush()) {
-        STDOUT_FAILED.store(true, Ordering::Relaxed);
-        eprintln!("error: could not write to standard output: {error}");
-    }
-}
-
-/// `print!` that reports a failed write instead of panicking.
-macro_rules! out {
-    ($($argument:tt)*) => { $crate::cli::write_stdout(format_args!($($argument)*)) };
-}
-
-/// `println!` that reports a failed write instead of panicking.
-macro_rules! outln {
-    ($($argument:tt)*) => { $crate::cli::write_stdout(format_args!("{}\n", format_args!($($argument)*))) };
-}
-pub(crate) use {out, outln};
 
 /// A file grown past `ulimit -f` fails its write (`EFBIG`, reported like any failed write)
 /// instead of the signal killing the process without a word.
@@ -312,7 +238,7 @@ pub fn parse_command_line() -> Result<Cli, ExitCode> {
 
 pub fn run(cli: Cli) -> ExitCode {
     let status = run_command(cli);
-    if STDOUT_FAILED.load(std::sync::atomic::Ordering::Relaxed) && status == ExitCode::SUCCESS {
+    if output::stdout_failed() && status == ExitCode::SUCCESS {
         return ExitCode::from(EXIT_ASSET_FAILED);
     }
     status
@@ -391,14 +317,6 @@ fn run_command(cli: Cli) -> ExitCode {
             preview(pipeline, asset, settings, out, lod, stand_in, options)
         }
     }
-}
-
-/// The validated pipeline, or the usage exit status after printing why it is not valid.
-pub(crate) fn load_pipeline_or_report(pipeline: &std::path::Path) -> Result<crate::config::PipelineConfig, ExitCode> {
-    load_pipeline(pipeline).map_err(|error| {
-        eprintln!("{error}");
-        ExitCode::from(EXIT_USAGE)
-    })
 }
 
 fn build(pipeline: PathBuf, assets: Vec<String>, format: SummaryFormat, options: ProjectOptions) -> ExitCode {

@@ -308,7 +308,6 @@ fn the_modules_form_a_straight_stack_but_for_the_loops_listed_here() {
     cycles.sort();
     let listed: String = cycles.iter().map(|cycle| format!("{}\n", cycle.join(" "))).collect();
     expect_test::expect![[r#"
-        cli cli/cache
         kinds kinds/billboard_cloud kinds/billboard_cloud/chain_outputs kinds/billboard_cloud/impostor_level kinds/billboard_cloud/levels kinds/billboard_cloud/queries kinds/billboard_cloud/reduced kinds/billboard_cloud/reduced_queries kinds/mesh_queries kinds/source_copies kinds/tail_queries
         project project/graph project/publish project/summaries project/unchanged
     "#]].assert_eq(&listed);

@@ -11,13 +11,16 @@ use crate::cache::CacheKey;
 pub use crate::config::AssetKind;
 use crate::config::{AssetConfig, PipelineConfig};
 use crate::db::{Asset, Db, Stage, StageRun};
-use crate::diagnostic::{display_path, Diagnostic};
+use crate::diagnostic::Diagnostic;
 use crate::texture::tail::TailSettings;
 use crate::texture::{SurfaceKind, Texture};
+pub(crate) use surface::SurfaceId;
 
 pub mod tail_queries;
 pub mod mesh_queries;
 pub mod source_copies;
+pub mod checks;
+pub mod surface;
 pub mod material;
 pub mod billboard_cloud;
 pub mod atlas;
@@ -117,7 +120,7 @@ pub struct PreviewOptions {
     pub lod: Option<u32>,
     /// A billboard cloud: what stands for each level beside the source, the baked LOD or the
     /// source's faces moved onto the level's planes.
-    pub stand_in: billboard_cloud::lod_preview::StandIn,
+    pub stand_in: crate::kinds::billboard_cloud::lod_preview::StandIn,
 }
 
 /// One comparison of a preview: what stood beside the source (a LOD level, a remapped mesh;
@@ -410,60 +413,6 @@ macro_rules! kinds {
 
 with_kinds!(kinds);
 
-/// One surface that ends in the texture tail: `group` names what it belongs to inside the asset
-/// (a material's name; empty for an asset's own surfaces, like a billboard cloud's atlas).
-#[derive(Clone, Debug, PartialEq, Eq, Hash, PartialOrd, Ord)]
-pub(crate) struct SurfaceId {
-    pub group: String,
-    pub surface: SurfaceKind,
-}
-
-impl SurfaceId {
-    /// The instance label of the surface's tail stages: `asset/group/surface` or `asset/surface`.
-    pub fn label(&self, asset_name: &str) -> String {
-        format!("{asset_name}/{}", self.instance())
-    }
-
-    /// The surface's name inside its asset: `group/surface` or `surface`.
-    pub fn instance(&self) -> String {
-        if self.group.is_empty() {
-            self.surface.name().to_string()
-        } else {
-            format!("{}/{}", self.group, self.surface.name())
-        }
-    }
-
-    /// The folder of its files: the asset folder, or its group's inside it.
-    pub(crate) fn folder(&self, output_folder: &Path) -> PathBuf {
-        if self.group.is_empty() {
-            output_folder.to_path_buf()
-        } else {
-            output_folder.join(&self.group)
-        }
-    }
-
-    /// Its texture and preview files inside the asset folder, named by the surface (a packed
-    /// surface by its channel order: `mra` or `orm`) in `encode`'s container.
-    pub(crate) fn artifact_paths(&self, output_folder: &Path, encode: &crate::config::EncodeSettings) -> [PathBuf; 2] {
-        let folder = self.folder(output_folder);
-        let stem = match self.surface {
-            SurfaceKind::Mra => encode.packing.stem(),
-            surface => surface.name(),
-        };
-        [folder.join(format!("{stem}.{}", encode.container.extension())), folder.join(format!("{stem}.png"))]
-    }
-
-    /// The files of its write stage: its [`SurfaceId::artifact_paths`], and for a packed surface
-    /// in `Mra` order the `orm.png` glTF reads.
-    pub(crate) fn written_files(&self, output_folder: &Path, encode: &crate::config::EncodeSettings) -> Vec<PathBuf> {
-        let mut files = self.artifact_paths(output_folder, encode).to_vec();
-        if self.surface == SurfaceKind::Mra && encode.packing == crate::texture::format::Packing::Mra {
-            files.push(self.folder(output_folder).join("orm.png"));
-        }
-        files
-    }
-}
-
 /// Work for a worker thread: one step of an asset, or one surface through the tail.
 pub(crate) type Job = crate::schedule::Job<Task>;
 
@@ -652,14 +601,6 @@ impl BakedFiles<'_> {
     }
 }
 
-/// Reads a texture's header for `check`: readable, decodable, within the texture limits.
-pub(crate) fn check_texture_file(config: &PipelineConfig, path: &Path) -> Result<(), String> {
-    let contents = crate::sources::read_source(&config.root, &config.source, path)?;
-    crate::texture::probe_texture(path, &contents.bytes, config.limits.texture)
-        .map(|_| ())
-        .map_err(|diagnostic| diagnostic.message)
-}
-
 /// Milliseconds each stage of an asset spent in this build (runs labelled by the asset's name
 /// or below it, cache hits left out), for its report.
 pub(crate) fn asset_stage_ms<'a>(asset_name: &str, runs: &'a [StageRun]) -> std::collections::BTreeMap<&'a str, f64> {
@@ -673,75 +614,4 @@ pub(crate) fn asset_stage_ms<'a>(asset_name: &str, runs: &'a [StageRun]) -> std:
         *ms = (*ms * 10.0).round() / 10.0;
     }
     stage_ms
-}
-
-/// The MTL files of the OBJ `mesh_file` (whose bytes are `obj`) for `cirrus check`, as a build
-/// reads them: a missing one `None` (the load warns of it), an unreadable one an error.
-fn check_mesh_libraries(
-    config: &PipelineConfig,
-    mesh_file: &Path,
-    obj: &[u8],
-) -> Result<std::collections::BTreeMap<PathBuf, Option<Vec<u8>>>, Diagnostic> {
-    let mut libraries = std::collections::BTreeMap::new();
-    for library in crate::mesh::material_libraries(mesh_file, obj, &config.source) {
-        let bytes = match crate::sources::read_source(&config.root, &config.source, &library) {
-            Ok(contents) => Some(contents.bytes.to_vec()),
-            Err(error) if error.is_not_found() => None,
-            Err(error) => return Err(Diagnostic::new(&library, error)),
-        };
-        libraries.insert(library, bytes);
-    }
-    Ok(libraries)
-}
-
-/// `cirrus check`'s word on the maps a mesh's used materials name that the asset copies into its
-/// output (those `copied` says): each must be the image its name says, as a build requires
-/// (`texture::check_image_file`); a problem names the MTL statement.
-pub(crate) fn check_copied_maps(
-    config: &PipelineConfig,
-    mesh_file: &Path,
-    mesh: &crate::mesh::Mesh,
-    copied: impl Fn(&Path) -> bool,
-) -> Vec<Diagnostic> {
-    let read = |path: &Path| crate::sources::read_source(&config.root, &config.source, path);
-    let Ok(contents) = read(mesh_file) else { return Vec::new() };
-    let libraries = check_mesh_libraries(config, mesh_file, &contents.bytes).unwrap_or_default();
-    let (_, used) = crate::kinds::source_copies::used_materials(&mesh.materials, &mesh.triangle_materials);
-    let mut problems = Vec::new();
-    for crate::kinds::source_copies::OutputMaterial { material, .. } in used {
-        for (&slot, path) in material.maps.iter().filter(|(_, path)| copied(path)) {
-            // A map that cannot be read is the build's warning, not a copy's problem.
-            let Ok(contents) = read(path) else { continue };
-            let Err(problem) = crate::texture::check_image_file(path, &contents.bytes, config.limits.texture) else {
-                continue;
-            };
-            let message = format!(
-                "material `{}`: its {} map `{}` would not be copied into the output: {}",
-                material.name,
-                slot.name(),
-                display_path(path.strip_prefix(&config.source).unwrap_or(path)),
-                problem.message
-            );
-            problems.push(crate::kinds::source_copies::map_diagnostic(
-                &libraries,
-                (material, slot),
-                mesh_file,
-                message,
-            ));
-        }
-    }
-    problems
-}
-
-/// An OBJ of the source folder loaded for `cirrus check`, with the MTL files it names (a
-/// missing MTL is a load warning, as in a build); the load warnings come back as warnings.
-pub(crate) fn check_mesh_file(
-    config: &PipelineConfig,
-    mesh_file: &Path,
-) -> Result<(crate::mesh::Mesh, Vec<Diagnostic>), Diagnostic> {
-    let contents = crate::sources::read_source(&config.root, &config.source, mesh_file)
-        .map_err(|error| Diagnostic::new(mesh_file, error))?;
-    let libraries = check_mesh_libraries(config, mesh_file, &contents.bytes)?;
-    let (mesh, warnings) = crate::mesh::load_mesh(mesh_file, &contents.bytes, &libraries, &config.source)?;
-    Ok((mesh, warnings.iter().map(Diagnostic::as_warning).collect()))
 }

@@ -14,7 +14,7 @@ use crate::db::{
     Db, Retention, Stage,
 };
 use crate::diagnostic::Diagnostic;
-use crate::kinds::SurfaceId;
+use crate::kinds::surface::SurfaceId;
 use crate::texture::encode::HiddenBlocks;
 use crate::texture::fingerprint::BlockFingerprints;
 use crate::texture::format::Packing;

@@ -146,7 +146,7 @@ impl Kind for AmbientOcclusion {
     /// are reported as problems too.
     fn check(config: &PipelineConfig, asset: &AssetConfig) -> Vec<Diagnostic> {
         let main_file = &config.source.join(asset.source.main_file());
-        let (mesh, mut problems) = match crate::kinds::check_mesh_file(config, main_file) {
+        let (mesh, mut problems) = match crate::kinds::checks::check_mesh_file(config, main_file) {
             Ok(loaded) => loaded,
             Err(diagnostic) => return vec![diagnostic],
         };

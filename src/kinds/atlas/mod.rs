@@ -19,8 +19,9 @@ use crate::cache::CacheKey;
 use crate::config::{AssetConfig, PipelineConfig};
 use crate::db::{Asset, Db, StageRun, DECODE};
 use crate::diagnostic::{display_path, Diagnostic};
+use crate::kinds::checks::check_texture_file;
 use crate::kinds::source_copies::{material_copy_paths, output_materials, MaterialPlaces, OutputMaterial};
-use crate::kinds::{check_texture_file, tail_instances, AssetOutputs, Job, Kind, Read, StageInstance, SurfaceId, Task};
+use crate::kinds::{tail_instances, AssetOutputs, Job, Kind, Read, StageInstance, SurfaceId, Task};
 use crate::texture::tail::TailSettings;
 use crate::texture::{SurfaceKind, Texture};
 
@@ -244,7 +245,7 @@ impl Kind for Atlas {
             .filter_map(|path| check_texture_file(config, path).err().map(|message| Diagnostic::new(path, message)))
             .collect();
         for mesh_file in crate::sources::glob_matches(config, meshes) {
-            let (mesh, warnings) = match crate::kinds::check_mesh_file(config, &mesh_file) {
+            let (mesh, warnings) = match crate::kinds::checks::check_mesh_file(config, &mesh_file) {
                 Ok(loaded) => loaded,
                 Err(diagnostic) => {
                     problems.push(diagnostic);
@@ -264,7 +265,7 @@ impl Kind for Atlas {
                 }
             }
             let atlased = |map: &Path| files.iter().any(|file| file == map);
-            problems.extend(crate::kinds::check_copied_maps(config, &mesh_file, &mesh, |map| !atlased(map)));
+            problems.extend(crate::kinds::checks::check_copied_maps(config, &mesh_file, &mesh, |map| !atlased(map)));
             if asset.settings.own::<Own>().pack.trim {
                 problems.extend(uvs_beyond_trim(config, &mesh_file, &mesh, &files));
             }

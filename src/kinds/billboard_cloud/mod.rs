@@ -38,10 +38,11 @@ use crate::config::{AssetConfig, PipelineConfig};
 use crate::db::{Asset, Db, StageRun, DECODE};
 use crate::diagnostic::{display_path, Diagnostic};
 use crate::kinds::billboard_cloud::settings::Settings as Own;
+use crate::kinds::checks::check_texture_file;
 use crate::kinds::mesh_queries::{loaded_mesh, mesh_textures, LoadedMesh};
 use crate::kinds::{
-    check_texture_file, tail_instances, AssetOutputs, BakedFiles, Job, Kind, PreviewError, PreviewOptions,
-    PreviewReport, PreviewRow, Read, StageInstance, SurfaceId, Task,
+    tail_instances, AssetOutputs, BakedFiles, Job, Kind, PreviewError, PreviewOptions, PreviewReport, PreviewRow, Read,
+    StageInstance, SurfaceId, Task,
 };
 use crate::summary::ErrorSummary;
 use crate::texture::tail::TailSettings;
@@ -325,7 +326,7 @@ impl Kind for BillboardCloud {
     /// readable and within the limits; warnings are reported as problems too.
     fn check(config: &PipelineConfig, asset: &AssetConfig) -> Vec<Diagnostic> {
         let main_file = &config.source.join(asset.source.main_file());
-        let (mesh, mut problems) = match crate::kinds::check_mesh_file(config, main_file) {
+        let (mesh, mut problems) = match crate::kinds::checks::check_mesh_file(config, main_file) {
             Ok(loaded) => loaded,
             Err(diagnostic) => return vec![diagnostic],
         };

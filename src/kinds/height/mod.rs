@@ -206,11 +206,11 @@ impl Kind for Height {
     fn check(config: &PipelineConfig, asset: &AssetConfig) -> Vec<Diagnostic> {
         let low_file = &config.source.join(asset.source.main_file());
         let mut problems = Vec::new();
-        match crate::kinds::check_mesh_file(config, low_file) {
+        match crate::kinds::checks::check_mesh_file(config, low_file) {
             Ok((mesh, warnings)) => {
                 problems.extend(warnings);
                 if asset.settings.own::<Own>().tessellate.is_some() {
-                    problems.extend(crate::kinds::check_copied_maps(config, low_file, &mesh, |_| true));
+                    problems.extend(crate::kinds::checks::check_copied_maps(config, low_file, &mesh, |_| true));
                 }
                 let settings = &asset.settings;
                 let needs_uvs = settings.own::<Own>().height.projection == HeightProjection::Normals
@@ -236,7 +236,7 @@ impl Kind for Height {
         {
             let high = &asset.settings.own::<Own>().high_mesh;
             let high_file = &config.source.join(high);
-            match crate::kinds::check_mesh_file(config, high_file) {
+            match crate::kinds::checks::check_mesh_file(config, high_file) {
                 Ok((mesh, warnings)) => {
                     problems.extend(warnings);
                     if mesh.triangles.is_empty() {

@@ -1,5 +1,5 @@
-//! Reading and writing files safely, and normalising relative paths: the leaf every IO edge
-//! (sources, artifacts, the cache, the record) and the libraries build on.
+//! Reading and writing files safely: the leaf every IO edge (sources, artifacts, the cache, the
+//! record) builds on.
 
 use std::io::Write;
 use std::path::{Path, PathBuf};
@@ -58,9 +58,7 @@ pub fn stage_if_changed(path: &Path, bytes: &[u8]) -> std::io::Result<Option<Sta
     if std::fs::symlink_metadata(path).is_ok_and(|metadata| metadata.is_dir()) {
         return Err(std::io::Error::new(std::io::ErrorKind::IsADirectory, "a folder is in its place"));
     }
-    let folder = path.parent().unwrap_or(Path::new("."));
-    std::fs::create_dir_all(folder)?;
-    let mut temporary = tempfile::Builder::new().prefix(TEMPORARY_PREFIX).tempfile_in(folder)?;
+    let mut temporary = temporary_file_in(path.parent().unwrap_or(Path::new(".")))?;
     #[cfg(unix)]
     {
         // Artifacts are read by engines and tools running as other users: rw-r--r--, not the
@@ -221,10 +219,15 @@ pub(crate) fn write_atomically(
     path: &Path,
     write: impl FnOnce(&mut std::fs::File) -> std::io::Result<()>,
 ) -> std::io::Result<()> {
-    let folder = path.parent().expect("entry paths have a folder");
-    std::fs::create_dir_all(folder)?;
-    let mut temporary = tempfile::Builder::new().prefix(TEMPORARY_PREFIX).tempfile_in(folder)?;
+    let mut temporary = temporary_file_in(path.parent().expect("entry paths have a folder"))?;
     write(temporary.as_file_mut())?;
     temporary.persist(path).map_err(|error| error.error)?;
     Ok(())
+}
+
+/// A new temporary file in `folder` (created when missing), named with [`TEMPORARY_PREFIX`] so
+/// that one a killed build leaves behind is swept.
+fn temporary_file_in(folder: &Path) -> std::io::Result<tempfile::NamedTempFile> {
+    std::fs::create_dir_all(folder)?;
+    tempfile::Builder::new().prefix(TEMPORARY_PREFIX).tempfile_in(folder)
 }

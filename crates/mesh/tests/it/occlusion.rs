@@ -234,7 +234,10 @@ fn the_bvh_finds_what_testing_every_triangle_finds_with_either_kernel() {
                 let expected_back = back < front.map_or(f32::INFINITY, |(_, distance)| distance);
                 if !same_hit || blocked != front.is_some() || cast.nearest_is_back_face != expected_back {
                     disagreements += 1;
-                    eprintln!("{name}: ray {index} {back_faces:?}: {cast:?} blocked {blocked}, expected {front:?} back {expected_back}");
+                    eprintln!(
+                        "{name}: ray {index} {back_faces:?}: {cast:?} blocked {blocked}, \
+                         expected {front:?} back {expected_back}"
+                    );
                 }
             }
         }

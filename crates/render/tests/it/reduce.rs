@@ -126,7 +126,8 @@ fn leaf_cards_thin_a_few_at_a_time_and_the_leaf_area_drawn_is_bounded() {
         let (cards, kept) = reduced.cards;
         let (source_area, area) = reduced.cut_out_area;
         println!(
-            "bush at {ratio}: {} of {} triangles, {kept} of {cards} cards, leaf area {:.3} of the source's, error {:.4}",
+            "bush at {ratio}: {} of {} triangles, {kept} of {cards} cards, \
+             leaf area {:.3} of the source's, error {:.4}",
             reduced.mesh.triangles.len(),
             bush.triangles.len(),
             area / source_area,
@@ -186,7 +187,8 @@ fn a_triangle_lod_of_the_bush_is_measured_in_pixel_shift_units() {
         let metrics = &preview.metrics;
         let loss = (1.0 - metrics.mean_iou) / (1.0 - metrics.source_shift_iou);
         println!(
-            "bush at {ratio} ({} triangles) at 128 px: mean IoU {:.4}, {loss:.2} px-shift units (one pixel costs the source {:.4}), missed {:.3}, extra {:.3}",
+            "bush at {ratio} ({} triangles) at 128 px: mean IoU {:.4}, {loss:.2} px-shift units \
+             (one pixel costs the source {:.4}), missed {:.3}, extra {:.3}",
             reduced.mesh.triangles.len(),
             metrics.mean_iou,
             1.0 - metrics.source_shift_iou,

@@ -24,7 +24,8 @@ mod seaweed;
 #[allow(dead_code)]
 mod make_level;
 
-use cirrus::config::{load_pipeline, BlockFormat, EncodeQuality};
+use cirrus::config::{BlockFormat, EncodeQuality};
+use cirrus::pipeline::load_pipeline;
 use cirrus::project::{BuildOptions, Project, ProjectOptions};
 use cirrus::texture::encode::BlockEncodeSettings;
 use cirrus::texture::mips::{mip_chain, MipSettings};

@@ -1,5 +1,7 @@
 //! `pipeline.ron`: parsed in two levels, a serde mirror of the file (`raw`) and then validated,
-//! resolved per-asset settings (`PipelineConfig`). Every error names the file, line and column.
+//! resolved per-asset settings (`PipelineConfig`). The shared parts are here (folders, rules,
+//! limits, cache, `encode`); each kind's entry and sections are its own (`KindEntry`), given as
+//! the list of kinds (`EntryKinds`). Every error names the file, line and column.
 
 use std::net::SocketAddr;
 use std::path::{Path, PathBuf};
@@ -7,15 +9,15 @@ use std::path::{Path, PathBuf};
 use serde::{Deserialize, Serialize};
 
 use crate::diagnostic::{Diagnostic, TextPosition};
-use crate::kinds::ambient_occlusion::settings::merge_ao;
-use crate::kinds::atlas::settings::merge_pack;
-use crate::kinds::billboard_cloud::settings::{merge_atlas, merge_billboard};
-use crate::kinds::height::settings::{merge_height, tessellate_settings};
 use base::paths::normalize_relative_path;
 
-pub(crate) mod sections;
+pub mod sections;
+mod encode;
+pub use encode::*;
 mod settings;
-pub use settings::*;
+pub use settings::Settings;
+mod entry;
+pub use entry::{AssetReference, EntryCheck, EntryKinds, KindEntry, KindFields, KindSettings};
 
 /// The `AssetKind` enum of the one list of kinds (`kind_list.rs`): a pipeline's `kind:` names.
 macro_rules! asset_kind_enum {
@@ -88,6 +90,8 @@ pub struct Rule {
     pub glob: String,
     pub matcher: globset::GlobMatcher,
     pub kind: AssetKind,
+    /// The settings of the assets it makes: its kind's, from `defaults:`.
+    pub settings: Settings,
 }
 
 /// The validated pipeline.
@@ -102,7 +106,6 @@ pub struct PipelineConfig {
     /// The artifact folder, relative to `root`.
     pub output: PathBuf,
     pub server: Option<SocketAddr>,
-    pub defaults: Defaults,
     pub assets: Vec<AssetConfig>,
     pub rules: Vec<Rule>,
     pub limits: Limits,
@@ -145,12 +148,8 @@ impl PipelineConfig {
     pub fn rule_asset(&self, relative: &Path) -> Option<AssetConfig> {
         let rule = self.rules.iter().find(|rule| rule.matcher.is_match(relative))?;
         let name = crate::diagnostic::display_path(&relative.with_extension(""));
-        // An Atlas or a Height is refused when the pipeline is read: a rule makes one asset per file.
-        if matches!(rule.kind, AssetKind::Atlas | AssetKind::Height) {
-            return None;
-        }
         let source = AssetSource::of_file(rule.kind, relative);
-        Some(AssetConfig { name, source, settings: Settings::of_kind(rule.kind, &self.defaults) })
+        Some(AssetConfig { name, source, settings: rule.settings.clone() })
     }
 }
 
@@ -166,8 +165,9 @@ mod raw;
 
 /// What an asset may be called, and which names share a folder.
 mod asset_names;
+pub(crate) use asset_names::reserved_asset_name;
 use asset_names::valid_asset_name;
-pub(crate) use asset_names::{reserved_asset_name, AssetFolders};
+pub use asset_names::AssetFolders;
 
 /// A glob over paths relative to the source folder (`*` stops at `/`, `**` crosses folders).
 pub(crate) fn source_glob(glob: &str) -> Result<globset::GlobMatcher, String> {
@@ -189,9 +189,10 @@ pub(crate) fn source_glob(glob: &str) -> Result<globset::GlobMatcher, String> {
 /// Largest `pipeline.ron` read.
 const MAX_PIPELINE_BYTES: u64 = 16 << 20;
 
-/// Reads and validates `pipeline.ron` at `file`, then checks on disk that the output folder,
-/// with symbolic links resolved, neither holds nor lies inside the source folder.
-pub fn load_pipeline(file: &Path) -> Result<PipelineConfig, ConfigError> {
+/// Reads and validates `pipeline.ron` at `file` with the entries of `Kinds`, then checks on disk
+/// that the output folder, with symbolic links resolved, neither holds nor lies inside the
+/// source folder.
+pub fn load_pipeline_with<Kinds: EntryKinds>(file: &Path) -> Result<PipelineConfig, ConfigError> {
     let fail = |message: String| ConfigError { diagnostics: vec![Diagnostic::new(file, message)] };
     let bytes = crate::files::read_regular_file(file, MAX_PIPELINE_BYTES).map_err(|why| {
         // "is not a regular file", "is larger than …" read as a sentence; the rest are reasons.
@@ -206,7 +207,7 @@ pub fn load_pipeline(file: &Path) -> Result<PipelineConfig, ConfigError> {
             TextPosition::of_byte_offset(&String::from_utf8_lossy(error.as_bytes()), error.utf8_error().valid_up_to());
         ConfigError { diagnostics: vec![Diagnostic::at(file, position, "the pipeline file is not UTF-8 text")] }
     })?;
-    let config = parse_pipeline(file, &text)?;
+    let config = parse_pipeline_with::<Kinds>(file, &text)?;
     let (source, output) =
         (resolve_existing_prefix(&config.source_dir()), resolve_existing_prefix(&config.output_dir()));
     if let Some(overlap) = folder_overlap(&source, &output) {
@@ -261,27 +262,37 @@ fn folder_overlap(source: &Path, output: &Path) -> Option<&'static str> {
     }
 }
 
-/// Parses and validates the text of a `pipeline.ron` that lives at `file`.
-pub fn parse_pipeline(file: &Path, text: &str) -> Result<PipelineConfig, ConfigError> {
-    let options = ron::Options::default().with_default_extension(ron::extensions::Extensions::IMPLICIT_SOME);
+/// Parses and validates the text of a `pipeline.ron` that lives at `file`, with the entries of
+/// `Kinds`.
+pub fn parse_pipeline_with<Kinds: EntryKinds>(file: &Path, text: &str) -> Result<PipelineConfig, ConfigError> {
     // Editors on Windows may save a byte-order mark.
     let text = text.strip_prefix('\u{feff}').unwrap_or(text);
-    let raw: raw::Pipeline = options.from_str(text).map_err(|error| ConfigError {
-        diagnostics: vec![Diagnostic::at(
-            file,
-            TextPosition { line: error.position.line as u32, column: error.position.col as u32 },
-            ron_message(&error, text),
-        )],
-    })?;
+    let validation = Validation {
+        file,
+        text,
+        kinds: Kinds::KINDS,
+        limits: Limits::default(),
+        encode: EncodeSettings::default(),
+        diagnostics: Vec::new(),
+    };
+    let raw: raw::Pipeline<Kinds::Entry> =
+        validation.read().map_err(|diagnostic| ConfigError { diagnostics: vec![diagnostic] })?;
     let root = file.parent().map(Path::to_path_buf).unwrap_or_default();
     let root = if root.as_os_str().is_empty() { PathBuf::from(".") } else { root };
-    Validator { file, text, diagnostics: Vec::new() }.validate(raw, root)
+    validation.validate::<Kinds>(raw, root)
+}
+
+/// The options every reading of `pipeline.ron` takes: `Some` implicit, and an entry written as
+/// its kind's fields (`Material(name: …)`, the kind's `Entry` struct in the variant).
+fn ron_options() -> ron::Options {
+    use ron::extensions::Extensions;
+    ron::Options::default().with_default_extension(Extensions::IMPLICIT_SOME | Extensions::UNWRAP_VARIANT_NEWTYPES)
 }
 
 /// What a RON error means to the person who wrote the file: an unknown kind or field with the
 /// closest known one, and other errors with the field whose value they are in (RON says only
 /// "Expected comma" of `max_size: 2048.0`).
-fn ron_message(error: &ron::error::SpannedError, text: &str) -> String {
+fn ron_message(error: &ron::error::SpannedError, text: &str, kinds: &[KindFields]) -> String {
     use crate::diagnostic::did_you_mean;
     let list = |names: &[&str]| names.iter().map(|name| format!("`{name}`")).collect::<Vec<_>>().join(", ");
     match &error.code {
@@ -302,12 +313,18 @@ fn ron_message(error: &ron::error::SpannedError, text: &str) -> String {
         {
             // A settings section of another kind: said with the kinds that read it.
             let kind = outer.as_deref().unwrap_or_default();
-            match SECTION_READERS.iter().find(|(section, _)| section == found) {
-                Some((section, readers)) => format!(
-                    "a {kind} asset does not read `{section}` settings (only {readers} do); its fields are {}",
+            let readers: Vec<&str> = kinds
+                .iter()
+                .filter(|other| other.fields.contains(&found.as_str()))
+                .map(|other| other.kind.name())
+                .collect();
+            match readers.as_slice() {
+                [_, ..] => format!(
+                    "a {kind} asset does not read `{found}` settings (only {} assets do); its fields are {}",
+                    readers.join(" and "),
                     list(expected)
                 ),
-                None => format!(
+                [] => format!(
                     "unknown field `{found}` in a {kind} asset{}; expected one of {}",
                     did_you_mean(found, expected.iter().copied()),
                     list(expected)
@@ -361,19 +378,6 @@ fn ron_message(error: &ron::error::SpannedError, text: &str) -> String {
     }
 }
 
-/// Each settings section of an asset and the kinds that read it (for the error of a section
-/// written on a kind that does not).
-const SECTION_READERS: &[(&str, &str)] = &[
-    ("billboard", "BillboardCloud assets (and Material ones, for `alpha_cutoff`)"),
-    ("atlas", "BillboardCloud assets"),
-    ("pack", "Atlas assets"),
-    ("ao", "AmbientOcclusion assets"),
-    ("height", "Height assets"),
-    ("tessellate", "Height assets"),
-    ("report", "Material assets"),
-    ("ao_source", "Material assets"),
-];
-
 /// The byte offset of a 1-based line and (character) column.
 fn byte_offset(text: &str, line: usize, column: usize) -> usize {
     let line_start: usize = text.split_inclusive('\n').take(line.saturating_sub(1)).map(str::len).sum();
@@ -400,20 +404,90 @@ fn field_before(text: &str, offset: usize) -> Option<(&str, &str)> {
     (!name.is_empty() && !name.starts_with(|character: char| character.is_ascii_digit())).then_some((name, value))
 }
 
-struct Validator<'a> {
-    file: &'a Path,
-    text: &'a str,
+/// The reading of one `pipeline.ron`: its text, the kinds' fields, what is resolved so far that
+/// entries are checked against, and every problem found.
+pub struct Validation<'text> {
+    file: &'text Path,
+    text: &'text str,
+    kinds: &'static [KindFields],
+    limits: Limits,
+    /// `defaults:`'s `encode` section, resolved.
+    encode: EncodeSettings,
     diagnostics: Vec<Diagnostic>,
 }
 
-impl sections::Check for Validator<'_> {
+impl sections::Check for Validation<'_> {
     fn error_at_key(&mut self, key: &str, anchor: usize, message: &str) {
-        Validator::error_at_key(self, key, anchor, message);
+        Validation::error_at_key(self, key, anchor, message);
     }
 }
 
-impl Validator<'_> {
-    fn validate(mut self, raw: raw::Pipeline, root: PathBuf) -> Result<PipelineConfig, ConfigError> {
+impl Validation<'_> {
+    /// The whole text read as `T` (a diagnostic at ron's position, said for people).
+    fn read<T: serde::de::DeserializeOwned>(&self) -> Result<T, Diagnostic> {
+        ron_options().from_str(self.text).map_err(|error| {
+            let position = TextPosition { line: error.position.line as u32, column: error.position.col as u32 };
+            Diagnostic::at(self.file, position, ron_message(&error, self.text, self.kinds))
+        })
+    }
+
+    fn push_unique(&mut self, diagnostic: Diagnostic) {
+        // Two kinds reading one section (the alpha test) find its problems twice.
+        if !self.diagnostics.contains(&diagnostic) {
+            self.diagnostics.push(diagnostic);
+        }
+    }
+
+    /// Kind `K`'s settings from its sections of `defaults:` (one more reading of the text).
+    pub fn kind_defaults<K: KindEntry>(&mut self) -> KindSettings {
+        let written = match self.read::<raw::KindDefaults<K::Defaults>>() {
+            Ok(read) => read.defaults,
+            Err(diagnostic) => {
+                self.push_unique(diagnostic);
+                K::Defaults::default()
+            }
+        };
+        let mut found = Validation {
+            file: self.file,
+            text: self.text,
+            kinds: self.kinds,
+            limits: self.limits,
+            encode: self.encode.clone(),
+            diagnostics: Vec::new(),
+        };
+        let settings = K::defaults(&written, &mut found);
+        for diagnostic in found.diagnostics {
+            self.push_unique(diagnostic);
+        }
+        KindSettings::new(settings)
+    }
+
+    /// One entry of kind `K`: its name (valid, not reserved, not colliding with `names`), its
+    /// `encode` over the defaults', its source and settings over `defaults` (its kind's).
+    pub fn resolve_entry<K: KindEntry>(
+        &mut self,
+        entry: &K::Entry,
+        defaults: &[KindSettings],
+        names: &mut AssetFolders,
+    ) -> Option<AssetConfig> {
+        let (name, encode_written) = K::name_and_encode(entry);
+        let anchor = self.offset_of_value(name, 0).unwrap_or(0);
+        self.check_asset_name(name, anchor, names);
+        let kind_defaults = defaults.iter().find(|settings| settings.kind() == K::KIND)?;
+        let kind_defaults = Settings { encode: EncodeSettings::default(), kind: kind_defaults.clone() };
+        let name = name.to_string();
+        let mut check = EntryCheck { check: self, anchor, name: &name };
+        let (source, own) = K::resolve(entry, kind_defaults.own::<K>(), &mut check)?;
+        let mut encode = self.encode.clone();
+        merge_encode(self, &mut encode, encode_written, anchor);
+        Some(AssetConfig { name: name.clone(), source, settings: Settings { encode, kind: KindSettings::new(own) } })
+    }
+
+    fn validate<Kinds: EntryKinds>(
+        mut self,
+        raw: raw::Pipeline<Kinds::Entry>,
+        root: PathBuf,
+    ) -> Result<PipelineConfig, ConfigError> {
         let source = self.project_path(&raw.source, "source", 0);
         let output = self.project_path(&raw.output, "output", 0);
         if let Some(overlap) =
@@ -429,13 +503,11 @@ impl Validator<'_> {
                 None
             }
         });
-        let defaults = self.merge_settings(&Defaults::default(), &raw.defaults, 0);
-        let mut limits = Limits::default();
         if let Some(mib) = raw.limits.texture_memory_mib {
             if !(16..=1 << 24).contains(&mib) {
                 self.error_at_key("texture_memory_mib", 0, "texture_memory_mib must be between 16 and 16777216 (MiB)");
             }
-            limits.texture.working_set = mib << 20;
+            self.limits.texture.working_set = mib << 20;
         }
         let remote_cache =
             raw.cache.remote.as_ref().and_then(|url| match crate::cache::remote::parse_remote_url(url) {
@@ -450,33 +522,32 @@ impl Validator<'_> {
                 }
             });
 
+        self.check_default_sections(&raw.defaults.sections);
+        let mut encode = EncodeSettings::default();
+        merge_encode(&mut self, &mut encode, &raw.defaults.encode, 0);
+        self.encode = encode;
+        let defaults = Kinds::defaults(&mut self);
+
         let mut assets = Vec::new();
         let mut names = AssetFolders::default();
-        for asset in &raw.assets {
-            if let Some(config) = self.validate_asset(asset, &defaults, &limits, &mut names) {
+        for entry in &raw.assets {
+            if let Some(config) = Kinds::resolve(&mut self, entry, &defaults, &mut names) {
                 assets.push(config);
             }
         }
 
-        self.check_ao_sources(&assets, &raw.rules);
+        self.check_asset_references(&assets, &raw.rules);
 
         let mut rules = Vec::new();
         for rule in &raw.rules {
-            match rule.kind {
-                AssetKind::Atlas => self.error_at_value(
-                    &rule.glob,
-                    0,
-                    "a rule makes one asset per file: an Atlas is listed under `assets` with its globs",
-                ),
-                AssetKind::Height => self.error_at_value(
-                    &rule.glob,
-                    0,
-                    "a rule makes one asset per file: a Height reads a high and a low mesh, listed under `assets`",
-                ),
-                _ => {}
+            let refusal = self.kinds.iter().find(|kind| kind.kind == rule.kind).and_then(|kind| kind.rule_refusal);
+            if let Some(refusal) = refusal {
+                self.error_at_value(&rule.glob, 0, &format!("a rule makes one asset per file: {refusal}"));
             }
+            let Some(own) = defaults.iter().find(|settings| settings.kind() == rule.kind) else { continue };
+            let settings = Settings { encode: self.encode.clone(), kind: own.clone() };
             match source_glob(&rule.glob) {
-                Ok(matcher) => rules.push(Rule { glob: rule.glob.clone(), matcher, kind: rule.kind }),
+                Ok(matcher) => rules.push(Rule { glob: rule.glob.clone(), matcher, kind: rule.kind, settings }),
                 Err(error) => self.error_at_value(&rule.glob, 0, &format!("bad glob: {error}")),
             }
         }
@@ -488,10 +559,9 @@ impl Validator<'_> {
                 source,
                 output,
                 server,
-                defaults,
                 assets,
                 rules,
-                limits,
+                limits: self.limits,
                 remote_cache,
             })
         } else {
@@ -499,107 +569,32 @@ impl Validator<'_> {
         }
     }
 
-    /// One listed asset: its name (valid, not reserved, not colliding with `names`), its files,
-    /// its settings (the defaults with its own sections merged) within the texture budget.
-    fn validate_asset(
-        &mut self,
-        asset: &raw::Asset,
-        defaults: &Defaults,
-        limits: &Limits,
-        names: &mut AssetFolders,
-    ) -> Option<AssetConfig> {
-        // Each kind's own settings; the others keep the defaults.
-        let mut overrides = raw::SettingsOverrides::default();
-        let (name, path, encode, kind) = match asset {
-            raw::Asset::Material { name, material, billboard, encode, report, .. } => {
-                overrides.billboard = billboard.clone();
-                overrides.report = report.clone();
-                (name, Some(material), encode, AssetKind::Material)
+    /// Each section of `defaults:` is `encode` or one some kind reads.
+    fn check_default_sections(&mut self, sections: &[String]) {
+        let mut known: Vec<&str> = vec!["encode"];
+        for name in self.kinds.iter().flat_map(|kind| kind.defaults) {
+            if !known.contains(name) {
+                known.push(name);
             }
-            raw::Asset::BillboardCloud { name, mesh, billboard, atlas, encode } => {
-                (overrides.billboard, overrides.atlas) = (billboard.clone(), atlas.clone());
-                (name, Some(mesh), encode, AssetKind::BillboardCloud)
-            }
-            raw::Asset::Atlas { name, pack, encode, .. } => {
-                overrides.pack = pack.clone();
-                (name, None, encode, AssetKind::Atlas)
-            }
-            raw::Asset::AmbientOcclusion { name, mesh, ao, encode } => {
-                overrides.ao = ao.clone();
-                (name, Some(mesh), encode, AssetKind::AmbientOcclusion)
-            }
-            raw::Asset::Height { name, low, height, encode, .. } => {
-                overrides.height = height.clone();
-                (name, Some(low), encode, AssetKind::Height)
-            }
-        };
-        overrides.encode = encode.clone();
-        let anchor = self.offset_of_value(name, 0).unwrap_or(0);
-        self.check_asset_name(name, anchor, names);
-        let relative = match path {
-            Some(path) => Some(self.source_path(path, anchor)?),
-            None => None,
-        };
-        let merged = self.merge_settings(defaults, &overrides, anchor);
-        let mut settings = Settings::of_kind(kind, &merged);
-        match (asset, &mut settings.kind) {
-            (raw::Asset::Material { ao_source, .. }, KindSettings::Material(own)) => own.ao_source = ao_source.clone(),
-            (raw::Asset::Height { high, tessellate, .. }, KindSettings::Height(own)) => {
-                own.high_mesh = self.source_path(high, anchor)?;
-                own.tessellate = tessellate.as_ref().map(|tessellate| tessellate_settings(self, tessellate, anchor));
-            }
-            _ => {}
         }
-        // Each atlas surface (each material's AO map) goes through the texture tail: the
-        // same budget holds.
-        let surface_side = match kind {
-            AssetKind::BillboardCloud => Some(("atlas", merged.atlas.max_size, "max_size")),
-            AssetKind::AmbientOcclusion => Some(("AO map", merged.ao.size, "size")),
-            AssetKind::Height => Some(("height map", merged.height.size, "size")),
-            _ => None,
-        };
-        if let Some((what, side, setting)) = surface_side {
-            let needed = crate::texture::TextureLimits::working_set_of(side, side);
-            if needed > limits.texture.working_set {
+        for section in sections {
+            if !known.contains(&section.as_str()) {
+                let list = known.iter().map(|name| format!("`{name}`")).collect::<Vec<_>>().join(", ");
                 let message = format!(
-                    "asset `{name}`: a {side}² {what} needs about {} MiB per surface, more than the texture \
-                        memory budget of {} MiB \
-                     (lower {setting} or raise `limits: (texture_memory_mib: …)`)",
-                    needed >> 20,
-                    limits.texture.working_set >> 20
+                    "unknown field `{section}` in `defaults`{}; expected one of {list}",
+                    crate::diagnostic::did_you_mean(section, known.iter().copied())
                 );
-                self.error_at_value(name, anchor, &message);
+                let from = find_key(self.text, "defaults").unwrap_or(0);
+                self.error_at_key(section, from, &message);
             }
         }
-        let source = match (asset, relative) {
-            (raw::Asset::Atlas { textures, meshes, .. }, _) => {
-                if textures.is_empty() {
-                    self.error_at_value(
-                        name,
-                        anchor,
-                        &format!("asset `{name}`: an atlas needs at least one texture glob"),
-                    );
-                }
-                for glob in textures.iter().chain(meshes) {
-                    if let Err(error) = source_glob(glob) {
-                        self.error_at_value(glob, anchor, &format!("bad glob: {error}"));
-                    }
-                }
-                AssetSource { kind, main_file: PathBuf::new(), glob_lists: vec![textures.clone(), meshes.clone()] }
-            }
-            (_, Some(relative)) => AssetSource::of_file(kind, relative),
-            (_, None) => unreachable!("materials, billboard clouds, AO and height bakes name their files"),
-        };
-        Some(AssetConfig { name: name.clone(), source, settings })
     }
 
     /// An asset's name: valid, in its normal form, not reserved, and sharing no folder with an
     /// asset listed before it (`names`, which it joins).
-    fn check_asset_name(&mut self, name: &String, anchor: usize, names: &mut AssetFolders) {
+    fn check_asset_name(&mut self, name: &str, anchor: usize, names: &mut AssetFolders) {
         let normal_form = normalize_relative_path(Path::new(name)).map(|path| crate::diagnostic::display_path(&path));
-        if valid_asset_name(&name.replace("//", "/").replace("/./", "/"))
-            && normal_form.as_deref() != Some(name.as_str())
-        {
+        if valid_asset_name(&name.replace("//", "/").replace("/./", "/")) && normal_form.as_deref() != Some(name) {
             let normal_form = normal_form.unwrap_or_default();
             self.error_at_value(
                 name,
@@ -618,7 +613,7 @@ impl Validator<'_> {
         }
         let collision = names.collision(name).map(str::to_string);
         names.insert(name);
-        if collision.as_ref() == Some(name) {
+        if collision.as_deref() == Some(name) {
             let second = self.offset_of_value(name, anchor + name.len() + 2).unwrap_or(anchor);
             self.error_at_value(name, second, &format!("asset name `{name}` is used twice"));
         } else if let Some(other) = collision {
@@ -630,78 +625,25 @@ impl Validator<'_> {
         }
     }
 
-    /// Each `ao_source` names an `AmbientOcclusion` asset: a listed one, or (when a rule makes
-    /// AmbientOcclusion assets, whose names are known only once files are listed) any name
-    /// that is not a listed asset of another kind; the build reports a name no asset has.
-    fn check_ao_sources(&mut self, assets: &[AssetConfig], rules: &[raw::Rule]) {
-        let rules_make_ao = rules.iter().any(|rule| rule.kind == AssetKind::AmbientOcclusion);
+    /// Each asset another's settings name (a Material's `ao_source`) is of the kind they must
+    /// be: a listed one, or (when a rule makes assets of that kind, whose names are known only
+    /// once files are listed) any name that is not a listed asset of another kind; the build
+    /// reports a name no asset has.
+    fn check_asset_references(&mut self, assets: &[AssetConfig], rules: &[raw::Rule]) {
         for asset in assets {
-            let Some(source) = asset.settings.reads_asset() else { continue };
-            let name = &asset.name;
+            let Some(reference) = asset.settings.kind.reference() else { continue };
+            let (name, field, source, wanted) = (&asset.name, reference.field, reference.asset, reference.kind);
+            let rules_make_it = rules.iter().any(|rule| rule.kind == wanted);
             let message = match assets.iter().find(|other| other.name == source).map(|other| other.source.kind()) {
-                Some(AssetKind::AmbientOcclusion) => continue,
-                Some(kind) => format!(
-                    "asset `{name}`: ao_source `{source}` is a {kind:?} asset; it must name an AmbientOcclusion asset"
-                ),
-                None if rules_make_ao => continue,
-                None => format!("asset `{name}`: ao_source `{source}` names no asset of the pipeline"),
+                Some(kind) if kind == wanted => continue,
+                Some(kind) => {
+                    format!("asset `{name}`: {field} `{source}` is a {kind:?} asset; it must name an {wanted:?} asset")
+                }
+                None if rules_make_it => continue,
+                None => format!("asset `{name}`: {field} `{source}` names no asset of the pipeline"),
             };
             let anchor = self.offset_of_value(name, 0).unwrap_or(0);
             self.error_at_value(source, anchor, &message);
-        }
-    }
-
-    fn merge_settings(&mut self, base: &Defaults, overrides: &raw::SettingsOverrides, anchor: usize) -> Defaults {
-        let mut settings = base.clone();
-        merge_billboard(self, &mut settings.billboard, &overrides.billboard, anchor);
-        merge_atlas(self, &mut settings.atlas, &overrides.atlas, anchor);
-        merge_pack(self, &mut settings.pack, &overrides.pack, anchor);
-        merge_ao(self, &mut settings.ao, &overrides.ao, anchor);
-        merge_height(self, &mut settings.height, &overrides.height, anchor);
-        self.merge_encode(&mut settings.encode, &overrides.encode, anchor);
-        settings.report.compare_formats = overrides.report.compare_formats.unwrap_or(settings.report.compare_formats);
-        settings
-    }
-
-    fn merge_encode(&mut self, settings: &mut EncodeSettings, encode: &raw::EncodeOverrides, anchor: usize) {
-        use crate::texture::SurfaceKind;
-        let surfaces: [(&str, Option<BlockFormat>, &[BlockFormat], &mut BlockFormat); 5] = [
-            ("albedo", encode.albedo, allowed_formats(SurfaceKind::Albedo), &mut settings.albedo),
-            ("mra", encode.mra, allowed_formats(SurfaceKind::Mra), &mut settings.mra),
-            ("normal", encode.normal, allowed_formats(SurfaceKind::Normal), &mut settings.normal),
-            ("height", encode.height, allowed_formats(SurfaceKind::Height), &mut settings.height),
-            ("ao", encode.ao, allowed_formats(SurfaceKind::Ao), &mut settings.ao),
-        ];
-        let mut format_errors = Vec::new();
-        for (key, value, allowed, target) in surfaces {
-            if let Some(format) = value {
-                if !allowed.contains(&format) {
-                    format_errors
-                        .push((key, format!("{format:?} cannot hold the {key} surface; use one of {allowed:?}")));
-                }
-                *target = format;
-            }
-        }
-        for (key, message) in format_errors {
-            self.error_at_key(key, anchor, &message);
-        }
-        if let Some(mips) = encode.mips {
-            settings.mips = mips;
-        }
-        if let Some(container) = encode.container {
-            settings.container = container;
-        }
-        if let Some(zstd) = encode.zstd {
-            if zstd.is_some_and(|level| !(1..=22).contains(&level)) {
-                self.error_at_key("zstd", anchor, "zstd level must be between 1 and 22");
-            }
-            settings.zstd = zstd;
-        }
-        if let Some(quality) = encode.quality {
-            settings.quality = quality;
-        }
-        if let Some(packing) = encode.packing {
-            settings.packing = packing;
         }
     }
 

@@ -39,6 +39,8 @@ pub mod graph;
 // The asset kinds: the one list of kinds and the questions the driver asks them, then one
 // folder per kind.
 pub mod kinds;
+// `pipeline.ron` read with every kind's entry.
+pub mod pipeline;
 
 // The driver: inputs in, jobs on workers, artifacts out; it names no kind.
 pub mod project;

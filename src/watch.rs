@@ -15,8 +15,9 @@ use std::time::{Duration, Instant};
 use notify::{EventKind, RecursiveMode};
 use notify_debouncer_full::{new_debouncer, DebounceEventResult};
 
-use crate::config::{load_pipeline, ConfigError, PipelineConfig};
+use crate::config::{ConfigError, PipelineConfig};
 use crate::diagnostic::display_path;
+use crate::pipeline::load_pipeline;
 use crate::project::{BuildError, BuildOptions, CancelFlag, Project, ProjectOptions, SourceReading};
 use crate::server::{BatchEvent, FailedEntry, Server, ServerSettings};
 use crate::summary::{AssetStatus, BuildSummary, StageStatus};

@@ -44,7 +44,7 @@ pub(crate) use {out, outln};
 
 /// The validated pipeline, or the usage exit status after printing why it is not valid.
 pub(crate) fn load_pipeline_or_report(pipeline: &std::path::Path) -> Result<crate::config::PipelineConfig, ExitCode> {
-    crate::config::load_pipeline(pipeline).map_err(|error| {
+    crate::pipeline::load_pipeline(pipeline).map_err(|error| {
         eprintln!("{error}");
         ExitCode::from(EXIT_USAGE)
     })

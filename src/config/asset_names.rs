@@ -33,7 +33,7 @@ pub(crate) fn reserved_asset_name(name: &str) -> Option<String> {
 /// same or one folder lies inside the other (`x` and `x/m`: the stale-artifact cleanup of one
 /// would delete the other's files).
 #[derive(Default)]
-pub(crate) struct AssetFolders {
+pub struct AssetFolders {
     names: HashSet<String>,
     /// Each folder that holds a name's folder (`x` and `x/m` for `x/m/n`), with one such name.
     outer: HashMap<String, String>,

@@ -1,25 +1,27 @@
 //! The serde mirror of `pipeline.ron`: what the file may say, before validation (every field
 //! optional where a default applies; `deny_unknown_fields` throughout, so a typo is an error).
+//! The shared parts are read with the entries of every kind (`Pipeline<Entry>`); each kind then
+//! reads its own sections of `defaults:` (`KindDefaults`, one pass each).
 
+use std::fmt;
+
+use serde::de::{Deserializer, IgnoredAny, MapAccess, Visitor};
 use serde::Deserialize;
 
-use super::sections::explicit;
-use super::{
-    AoOverrides, AssetKind, AtlasOverrides, BillboardOverrides, BlockFormat, Container, EncodeQuality, HeightOverrides,
-    PackOverrides, ReportOverrides, TessellateOverrides,
-};
+use super::encode::EncodeOverrides;
+use super::AssetKind;
 
 #[derive(Deserialize)]
 #[serde(deny_unknown_fields)]
-pub struct Pipeline {
+pub struct Pipeline<Entry> {
     pub source: String,
     pub output: String,
     #[serde(default)]
     pub server: Option<String>,
     #[serde(default)]
-    pub defaults: SettingsOverrides,
-    #[serde(default)]
-    pub assets: Vec<Asset>,
+    pub defaults: Defaults,
+    #[serde(default = "Vec::new")]
+    pub assets: Vec<Entry>,
     #[serde(default)]
     pub rules: Vec<Rule>,
     #[serde(default)]
@@ -44,97 +46,64 @@ pub struct Limits {
     pub texture_memory_mib: Option<u64>,
 }
 
-#[derive(Deserialize, Default)]
-#[serde(deny_unknown_fields)]
-pub(crate) struct SettingsOverrides {
-    #[serde(default)]
-    pub billboard: BillboardOverrides,
-    #[serde(default)]
-    pub atlas: AtlasOverrides,
-    #[serde(default)]
-    pub pack: PackOverrides,
-    #[serde(default)]
-    pub ao: AoOverrides,
-    #[serde(default)]
-    pub height: HeightOverrides,
-    #[serde(default)]
+/// `defaults:` as the shared part reads it: the `encode` section, and the names of the others
+/// (each checked against the sections some kind reads; each kind reads its own).
+#[derive(Default)]
+pub struct Defaults {
     pub encode: EncodeOverrides,
-    #[serde(default)]
-    pub report: ReportOverrides,
+    pub sections: Vec<String>,
 }
 
-#[derive(Deserialize, Default, Clone)]
-#[serde(deny_unknown_fields)]
-pub(crate) struct EncodeOverrides {
-    pub albedo: Option<BlockFormat>,
-    pub mra: Option<BlockFormat>,
-    pub normal: Option<BlockFormat>,
-    pub height: Option<BlockFormat>,
-    pub ao: Option<BlockFormat>,
-    pub mips: Option<bool>,
-    pub container: Option<Container>,
-    #[serde(default, deserialize_with = "explicit")]
-    pub zstd: Option<Option<i32>>,
-    pub quality: Option<EncodeQuality>,
-    pub packing: Option<crate::texture::format::Packing>,
+impl<'de> Deserialize<'de> for Defaults {
+    fn deserialize<D: Deserializer<'de>>(deserializer: D) -> Result<Defaults, D::Error> {
+        struct DefaultsVisitor;
+        impl<'de> Visitor<'de> for DefaultsVisitor {
+            type Value = Defaults;
+            fn expecting(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
+                f.write_str("the defaults' sections, `(encode: (…), …)`")
+            }
+            fn visit_map<A: MapAccess<'de>>(self, mut map: A) -> Result<Defaults, A::Error> {
+                let mut defaults = Defaults::default();
+                while let Some(SectionName(section)) = map.next_key()? {
+                    if section == "encode" {
+                        defaults.encode = map.next_value()?;
+                    } else {
+                        map.next_value::<IgnoredAny>()?;
+                    }
+                    defaults.sections.push(section);
+                }
+                Ok(defaults)
+            }
+        }
+        deserializer.deserialize_struct("defaults", &[], DefaultsVisitor)
+    }
 }
 
+/// A section's name, read as the identifier it is (ron reads no string there).
+struct SectionName(String);
+
+impl<'de> Deserialize<'de> for SectionName {
+    fn deserialize<D: Deserializer<'de>>(deserializer: D) -> Result<SectionName, D::Error> {
+        struct NameVisitor;
+        impl Visitor<'_> for NameVisitor {
+            type Value = SectionName;
+            fn expecting(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
+                f.write_str("a section's name")
+            }
+            fn visit_str<E: serde::de::Error>(self, name: &str) -> Result<SectionName, E> {
+                Ok(SectionName(name.to_string()))
+            }
+        }
+        deserializer.deserialize_identifier(NameVisitor)
+    }
+}
+
+/// `pipeline.ron` as one kind reads it: only its sections of `defaults:`.
 #[derive(Deserialize)]
-#[serde(deny_unknown_fields)]
-pub enum Asset {
-    Material {
-        name: String,
-        material: String,
-        /// An `AmbientOcclusion` asset whose maps replace the materials' `ao` textures.
-        #[serde(default)]
-        ao_source: Option<String>,
-        #[serde(default)]
-        report: ReportOverrides,
-        /// Only its `alpha_cutoff` (an alpha-tested albedo's).
-        #[serde(default)]
-        billboard: BillboardOverrides,
-        #[serde(default)]
-        encode: EncodeOverrides,
-    },
-    BillboardCloud {
-        name: String,
-        mesh: String,
-        #[serde(default)]
-        billboard: BillboardOverrides,
-        #[serde(default)]
-        atlas: AtlasOverrides,
-        #[serde(default)]
-        encode: EncodeOverrides,
-    },
-    Atlas {
-        name: String,
-        textures: Vec<String>,
-        #[serde(default)]
-        meshes: Vec<String>,
-        #[serde(default)]
-        pack: PackOverrides,
-        #[serde(default)]
-        encode: EncodeOverrides,
-    },
-    AmbientOcclusion {
-        name: String,
-        mesh: String,
-        #[serde(default)]
-        ao: AoOverrides,
-        #[serde(default)]
-        encode: EncodeOverrides,
-    },
-    Height {
-        name: String,
-        high: String,
-        low: String,
-        #[serde(default)]
-        height: HeightOverrides,
-        #[serde(default)]
-        tessellate: Option<TessellateOverrides>,
-        #[serde(default)]
-        encode: EncodeOverrides,
-    },
+#[serde(rename = "Pipeline")]
+pub struct KindDefaults<Sections: Default> {
+    #[serde(default)]
+    pub defaults: Sections,
 }
 
 #[derive(Deserialize)]

@@ -1,11 +1,11 @@
 //! What the kinds' settings files share: how a merge reports a bad value (`Check`, with the
-//! text's position), a page's size checks, and the deserializer of an explicit `None`. A leaf:
-//! it imports no kind and nothing of `config` above it.
+//! text's position), a page's size checks, the deserializer of an explicit `None`, and the alpha
+//! test two kinds read. A leaf: it imports no kind and nothing of `config` above it.
 
 use serde::{Deserialize, Deserializer};
 
 /// Where a settings merge reports a bad value: at the key, searched from the asset's entry.
-pub(crate) trait Check {
+pub trait Check {
     fn error_at_key(&mut self, key: &str, anchor: usize, message: &str);
 }
 
@@ -39,4 +39,32 @@ where
     T: Deserialize<'de>,
 {
     Option::<T>::deserialize(deserializer).map(Some)
+}
+
+/// The alpha test of an alpha-tested albedo, which two kinds read (a `Material`'s albedo, a
+/// `BillboardCloud`'s atlases): `alpha_cutoff`, written in the `billboard` section.
+#[derive(Deserialize, Default, Clone)]
+#[serde(rename = "billboard", deny_unknown_fields)]
+pub(crate) struct AlphaTestOverrides {
+    pub alpha_cutoff: Option<f32>,
+}
+
+/// The `billboard` section of `defaults:` as a kind that reads only its alpha test sees it (the
+/// section's other fields are the billboard cloud's, which checks them).
+#[derive(Deserialize, Default, Clone)]
+pub(crate) struct AlphaTestOfDefaults {
+    pub alpha_cutoff: Option<f32>,
+}
+
+/// The alpha cutoff every kind starts from.
+pub(crate) const DEFAULT_ALPHA_CUTOFF: f32 = 0.5;
+
+/// `alpha_cutoff` merged over `cutoff`, checked.
+pub(crate) fn merge_alpha_cutoff(check: &mut dyn Check, cutoff: &mut f32, given: Option<f32>, anchor: usize) {
+    if let Some(given) = given {
+        if !(0.0..=1.0).contains(&given) {
+            check.error_at_key("alpha_cutoff", anchor, "alpha_cutoff must be in [0, 1]");
+        }
+        *cutoff = given;
+    }
 }

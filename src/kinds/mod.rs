@@ -1,8 +1,8 @@
 //! The asset kinds: the questions the driver asks each of them (`Kind`), their dispatch over the
 //! one list of kinds (`kind_list.rs`), and what the answers are made of: jobs to run on workers,
 //! stage instances (the build summary, the graph dump and the event-log labels all come from
-//! them) and outputs. Adding a kind: a folder with a `Kind` implementation, one line in the list,
-//! its variant in `config/raw.rs` (the file's mirror) and its settings (see ARCHITECTURE.md).
+//! them) and outputs. Adding a kind: a folder with a `Kind` implementation and its settings (its
+//! `pipeline.ron` entry, `config::KindEntry`), and one line in the list (see ARCHITECTURE.md).
 
 use std::path::{Path, PathBuf};
 use std::sync::Arc;
@@ -21,6 +21,7 @@ pub mod mesh_queries;
 pub mod source_copies;
 pub mod checks;
 pub mod surface;
+pub mod entries;
 pub mod material;
 pub mod billboard_cloud;
 pub mod atlas;

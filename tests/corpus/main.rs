@@ -3,7 +3,7 @@
 
 use std::path::{Path, PathBuf};
 
-use cirrus::config::load_pipeline;
+use cirrus::pipeline::load_pipeline;
 
 #[path = "../shared/ispc_reference.rs"]
 mod ispc_reference;

@@ -5,7 +5,8 @@ use std::collections::BTreeSet;
 use std::path::{Path, PathBuf};
 
 use cirrus::cache::CacheKeyBuilder;
-use cirrus::config::{BlockFormat, Container, Defaults, EncodeQuality};
+use cirrus::config::{BlockFormat, Container, EncodeQuality};
+use cirrus::kinds::billboard_cloud::settings::{default_billboard_atlas, BillboardSettings};
 use expect_test::expect;
 
 use crate::support::build;
@@ -18,11 +19,11 @@ fn cache_entries(output: &Path) -> BTreeSet<PathBuf> {
 
 #[test]
 fn keys_have_a_pinned_encoding() {
-    let settings = Defaults::default();
+    let (billboard, atlas) = (BillboardSettings::default(), default_billboard_atlas());
     let key = CacheKeyBuilder::new("example", 3)
-        .part(&settings.billboard.epsilon)
-        .part(&settings.billboard.max_planes)
-        .part(&settings.atlas.power_of_two)
+        .part(&billboard.epsilon)
+        .part(&billboard.max_planes)
+        .part(&atlas.power_of_two)
         .part(&cirrus::texture::SurfaceKind::Normal)
         .part(&(BlockFormat::Bc5, EncodeQuality::Slow))
         .part(&(Container::Dds, Some(19)))

@@ -3,7 +3,8 @@
 
 use std::path::Path;
 
-use cirrus::config::{parse_pipeline, AssetKind, AssetSource, BlockFormat, Container};
+use cirrus::config::{AssetKind, AssetSource, BlockFormat, Container};
+use cirrus::pipeline::parse_pipeline;
 
 #[test]
 fn defaults_apply_and_assets_override_them() {
@@ -50,4 +51,32 @@ fn malformed_pipelines_report_file_line_and_column() {
         let error = parse_pipeline(Path::new("pipeline.ron"), &text).expect_err("the fixture is malformed");
         expect_test::expect_file![path.with_extension("expected")].assert_eq(&format!("{error}\n"));
     }
+}
+
+/// The alpha test is a setting two kinds read: `defaults:`'s `billboard.alpha_cutoff` reaches
+/// materials and billboard clouds, each entry may override it, and an asset a rule makes gets
+/// its kind's defaults.
+#[test]
+fn the_shared_alpha_test_reaches_both_kinds_that_read_it() {
+    use cirrus::kinds::{billboard_cloud, material};
+    let text = r#"Pipeline(
+        source: "assets", output: "out",
+        defaults: (billboard: (alpha_cutoff: 0.25, epsilon: 0.05), report: (compare_formats: true)),
+        assets: [
+            Material(name: "bark", material: "bark.mymaterial"),
+            Material(name: "leaf", material: "leaf.mymaterial", billboard: (alpha_cutoff: 0.75)),
+            BillboardCloud(name: "oak", mesh: "oak.obj"),
+        ],
+        rules: [(glob: "**/*.mymaterial", kind: Material), (glob: "**/*.obj", kind: BillboardCloud)],
+    )"#;
+    let config = parse_pipeline(Path::new("pipeline.ron"), text).expect("valid");
+    let cutoff = |index: usize| config.assets[index].settings.own::<material::settings::Settings>().alpha_cutoff;
+    assert_eq!((cutoff(0), cutoff(1)), (0.25, 0.75));
+    let oak = config.assets[2].settings.own::<billboard_cloud::settings::Settings>();
+    assert_eq!((oak.billboard.alpha_cutoff, oak.billboard.epsilon), (0.25, 0.05));
+    let rock = config.asset_for_rule_match(Path::new("rock.mymaterial")).expect("a rule makes it");
+    let rock = rock.settings.own::<material::settings::Settings>();
+    assert_eq!((rock.alpha_cutoff, rock.report.compare_formats), (0.25, true));
+    let pine = config.asset_for_rule_match(Path::new("pine.obj")).expect("a rule makes it");
+    assert_eq!(pine.settings.own::<billboard_cloud::settings::Settings>().billboard.epsilon, 0.05);
 }

@@ -6,8 +6,8 @@
 use std::collections::BTreeSet;
 use std::path::Path;
 
-use cirrus::config::load_pipeline;
 use cirrus::graph::NodeKind;
+use cirrus::pipeline::load_pipeline;
 use cirrus::project::{Project, ProjectOptions};
 use cirrus::summary::{AssetStatus, StageStatus};
 

@@ -227,7 +227,7 @@ fn fuzz_pipeline_validation() {
         "\\",
     ];
     let executions = fuzz("pipeline", seeds, &tokens, |bytes| {
-        cirrus::config::parse_pipeline(Path::new("pipeline.ron"), &String::from_utf8_lossy(bytes)).is_ok()
+        cirrus::pipeline::parse_pipeline(Path::new("pipeline.ron"), &String::from_utf8_lossy(bytes)).is_ok()
     });
     assert!(executions > 0);
 }

@@ -5,8 +5,8 @@
 use std::collections::BTreeSet;
 use std::path::Path;
 
-use cirrus::config::load_pipeline;
 use cirrus::graph::{Graph, NodeKind};
+use cirrus::pipeline::load_pipeline;
 use cirrus::project::{Project, ProjectOptions};
 use expect_test::expect;
 

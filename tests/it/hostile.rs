@@ -8,7 +8,7 @@ use std::path::Path;
 use std::process::{Command, Output, Stdio};
 use std::time::{Duration, Instant};
 
-use cirrus::config::{load_pipeline, parse_pipeline};
+use cirrus::pipeline::{load_pipeline, parse_pipeline};
 
 use crate::support::{build, pattern_png, TempProject};
 use crate::watch::{changed_paths, output_hashes, watched_project, Client, Daemon};

@@ -39,7 +39,7 @@ fn a_one_texture_edit_in_a_level_of_a_thousand_assets_runs_only_that_assets_stag
     let dir = tempfile::tempdir().unwrap();
     let level = write_level(dir.path(), &LevelSettings { assets: 1000 }).unwrap();
     assert_eq!(level.counts, [900, 70, 30]);
-    let config = cirrus::config::load_pipeline(&level.pipeline).unwrap();
+    let config = cirrus::pipeline::load_pipeline(&level.pipeline).unwrap();
     let mut project = cirrus::project::Project::open(config.clone(), Default::default());
     let cold = build(&mut project);
     assert!(cold.all_ok(), "{}", cold.to_text());

@@ -3,7 +3,7 @@
 
 use std::path::{Path, PathBuf};
 
-use cirrus::config::load_pipeline;
+use cirrus::pipeline::load_pipeline;
 use cirrus::project::{BuildOptions, Project, ProjectOptions};
 use cirrus::summary::BuildSummary;
 use cirrus::texture::Texture;

@@ -332,9 +332,9 @@ pub(crate) const LONG_BAKE_SECONDS: f64 = 300.0;
 
 /// The rays a bake casts, estimated from the mesh: per material, the texels its UV triangles
 /// cover (their area, at most the whole map) times `rays`; per vertex in `Vertices` mode.
-pub(crate) fn estimated_rays(mesh: &crate::mesh::Mesh, settings: &crate::config::AoSettings) -> u64 {
+pub(crate) fn estimated_rays(mesh: &crate::mesh::Mesh, settings: &super::settings::AoSettings) -> u64 {
     let Some(uvs) = &mesh.uvs else { return 0 };
-    if settings.mode == crate::config::AoMode::Vertices {
+    if settings.mode == super::settings::AoMode::Vertices {
         return mesh.positions.len() as u64 * u64::from(settings.rays);
     }
     let mut areas = vec![0.0f64; mesh.materials.len()];
@@ -354,7 +354,7 @@ pub(crate) fn estimated_rays(mesh: &crate::mesh::Mesh, settings: &crate::config:
 pub(crate) fn long_bake_warning(
     file: &std::path::Path,
     mesh: &crate::mesh::Mesh,
-    settings: &crate::config::AoSettings,
+    settings: &super::settings::AoSettings,
     cores: usize,
 ) -> Option<crate::diagnostic::Diagnostic> {
     let rays = estimated_rays(mesh, settings);

@@ -19,7 +19,7 @@ use std::sync::Arc;
 use serde::Serialize;
 
 use crate::cache::CacheKey;
-use crate::config::{AoMode, AssetConfig, PipelineConfig};
+use crate::config::{AssetConfig, PipelineConfig};
 use crate::db::{Asset, Db, StageRun};
 use crate::diagnostic::{display_path, Diagnostic};
 use crate::kinds::ambient_occlusion::settings::Settings as Own;
@@ -33,6 +33,7 @@ use bake::material_tiles;
 use queries::{
     ao_map, ao_map_key, ao_settings, bake_geometry, material_label, tile_label, BakeGeometry, BAKE, BVH, FILL, VERTICES,
 };
+use settings::AoMode;
 
 pub struct AmbientOcclusion;
 

@@ -13,8 +13,8 @@ use super::bake::{
     assemble_map, bake_tile_from_vertices, bake_tile_with_rays, map_png16, material_tiles, occluders_within_reach,
     tile_triangles, triangle_boxes, AoMap, BakeMesh, TileBake, TileId,
 };
+use super::settings::{AoMode, AoOccluders, AoSettings};
 use crate::cache::{CacheEntry, CacheKey};
-use crate::config::{AoMode, AoOccluders, AoSettings};
 use crate::db::{
     from_pod_blob, hash_of_parts, load_cached, pod_blob, recall, record_cache_hit, remember, stage_key, stoppable,
     store_cached, timed, Asset, ByHash, Db, Stage,

@@ -1,10 +1,11 @@
-//! The `AmbientOcclusion` kind's settings: its `ao` section as `pipeline.ron` writes it
-//! (overrides), as it resolves (settings), and its checks. A leaf: it imports only the
-//! libraries and `config/sections`.
+//! The `AmbientOcclusion` kind's part of `pipeline.ron`: its entry (`AmbientOcclusion(name: …,
+//! mesh: …)`), its `ao` section as written (overrides), as it resolves (settings), and its
+//! checks. A leaf: it imports only the libraries and `config`'s shared parts.
 
 use serde::{Deserialize, Serialize};
 
 use crate::config::sections::{explicit, Check};
+use crate::config::{AssetKind, AssetSource, EncodeOverrides, EntryCheck, KindEntry};
 use crate::mesh::occlusion::RayDistribution;
 
 /// How an `AmbientOcclusion` asset bakes: per texel (rays from every texel's surface point) or
@@ -45,7 +46,7 @@ pub struct AoSettings {
 
 #[derive(Deserialize, Default, Clone)]
 #[serde(deny_unknown_fields)]
-pub(crate) struct AoOverrides {
+pub struct AoOverrides {
     pub size: Option<u32>,
     pub rays: Option<u32>,
     pub mode: Option<AoMode>,
@@ -58,7 +59,7 @@ pub(crate) struct AoOverrides {
     pub padding: Option<u32>,
 }
 
-pub(crate) fn merge_ao(check: &mut dyn Check, settings: &mut AoSettings, ao: &AoOverrides, anchor: usize) {
+fn merge_ao(check: &mut dyn Check, settings: &mut AoSettings, ao: &AoOverrides, anchor: usize) {
     if let Some(size) = ao.size {
         if !(16..=16384).contains(&size) || size % 4 != 0 {
             check.error_at_key("size", anchor, "size must be a multiple of 4 between 16 and 16384");
@@ -111,7 +112,55 @@ impl Default for AoSettings {
 }
 
 /// An `AmbientOcclusion` asset's own settings.
-#[derive(Clone, Debug, PartialEq, Serialize)]
+#[derive(Clone, Debug, PartialEq)]
 pub struct Settings {
     pub ao: AoSettings,
+}
+
+/// An `AmbientOcclusion` entry as `pipeline.ron` writes it.
+#[derive(Deserialize)]
+#[serde(rename = "AmbientOcclusion", deny_unknown_fields)]
+pub struct Entry {
+    name: String,
+    mesh: String,
+    #[serde(default)]
+    ao: AoOverrides,
+    #[serde(default)]
+    encode: EncodeOverrides,
+}
+
+/// The sections of `defaults:` an AO bake reads.
+#[derive(Deserialize, Default)]
+#[serde(rename = "defaults")]
+pub struct Defaults {
+    #[serde(default)]
+    ao: AoOverrides,
+}
+
+impl KindEntry for Settings {
+    const KIND: AssetKind = AssetKind::AmbientOcclusion;
+    const FIELDS: &'static [&'static str] = &["ao"];
+    const DEFAULTS: &'static [&'static str] = &["ao"];
+    type Entry = Entry;
+    type Defaults = Defaults;
+
+    fn defaults(written: &Defaults, check: &mut dyn Check) -> Settings {
+        let mut settings = Settings { ao: AoSettings::default() };
+        merge_ao(check, &mut settings.ao, &written.ao, 0);
+        settings
+    }
+
+    fn name_and_encode(entry: &Entry) -> (&str, &EncodeOverrides) {
+        (&entry.name, &entry.encode)
+    }
+
+    fn resolve(entry: &Entry, defaults: &Settings, check: &mut EntryCheck<'_, '_>) -> Option<(AssetSource, Settings)> {
+        let mesh = check.source_path(&entry.mesh)?;
+        let mut settings = defaults.clone();
+        let anchor = check.anchor();
+        merge_ao(check, &mut settings.ao, &entry.ao, anchor);
+        // Each material's AO map goes through the texture tail: the same budget holds.
+        check.surface_budget("AO map", settings.ao.size, "size");
+        Some((AssetSource::of_file(AssetKind::AmbientOcclusion, mesh), settings))
+    }
 }

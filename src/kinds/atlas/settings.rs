@@ -1,9 +1,13 @@
-//! The `Atlas` kind's settings: its `pack` section as `pipeline.ron` writes it (overrides), as it
-//! resolves (settings), and its checks. A leaf: it imports only `config/sections`.
+//! The `Atlas` kind's part of `pipeline.ron`: its entry (`Atlas(name: …, textures: […])`), its
+//! `pack` section as written (overrides), as it resolves (settings), and its checks. A leaf: it
+//! imports only `config`'s shared parts.
+
+use std::path::PathBuf;
 
 use serde::{Deserialize, Serialize};
 
 use crate::config::sections::{page_size_overrides, Check};
+use crate::config::{AssetKind, AssetSource, EncodeOverrides, EntryCheck, KindEntry};
 
 /// How an `Atlas` asset packs its textures onto pages.
 #[derive(Clone, Debug, PartialEq, Eq, Hash, Serialize)]
@@ -18,7 +22,7 @@ pub struct PackSettings {
 
 #[derive(Deserialize, Default, Clone)]
 #[serde(deny_unknown_fields)]
-pub(crate) struct PackOverrides {
+pub struct PackOverrides {
     pub max_size: Option<u32>,
     pub padding: Option<u32>,
     pub rotate: Option<bool>,
@@ -27,7 +31,7 @@ pub(crate) struct PackOverrides {
     pub pages: Option<u32>,
 }
 
-pub(crate) fn merge_pack(check: &mut dyn Check, settings: &mut PackSettings, pack: &PackOverrides, anchor: usize) {
+fn merge_pack(check: &mut dyn Check, settings: &mut PackSettings, pack: &PackOverrides, anchor: usize) {
     page_size_overrides(check, pack.max_size, pack.padding, anchor, &mut settings.max_size, &mut settings.padding);
     if let Some(pages) = pack.pages {
         if !(1..=64).contains(&pages) {
@@ -47,7 +51,64 @@ impl Default for PackSettings {
 }
 
 /// An `Atlas` asset's own settings.
-#[derive(Clone, Debug, PartialEq, Serialize)]
+#[derive(Clone, Debug, PartialEq)]
 pub struct Settings {
     pub pack: PackSettings,
+}
+
+/// An `Atlas` entry as `pipeline.ron` writes it: named by globs, not by a file.
+#[derive(Deserialize)]
+#[serde(rename = "Atlas", deny_unknown_fields)]
+pub struct Entry {
+    name: String,
+    textures: Vec<String>,
+    #[serde(default)]
+    meshes: Vec<String>,
+    #[serde(default)]
+    pack: PackOverrides,
+    #[serde(default)]
+    encode: EncodeOverrides,
+}
+
+/// The sections of `defaults:` an atlas reads.
+#[derive(Deserialize, Default)]
+#[serde(rename = "defaults")]
+pub struct Defaults {
+    #[serde(default)]
+    pack: PackOverrides,
+}
+
+impl KindEntry for Settings {
+    const KIND: AssetKind = AssetKind::Atlas;
+    const FIELDS: &'static [&'static str] = &["pack"];
+    const DEFAULTS: &'static [&'static str] = &["pack"];
+    const RULE_REFUSAL: Option<&'static str> = Some("an Atlas is listed under `assets` with its globs");
+    type Entry = Entry;
+    type Defaults = Defaults;
+
+    fn defaults(written: &Defaults, check: &mut dyn Check) -> Settings {
+        let mut settings = Settings { pack: PackSettings::default() };
+        merge_pack(check, &mut settings.pack, &written.pack, 0);
+        settings
+    }
+
+    fn name_and_encode(entry: &Entry) -> (&str, &EncodeOverrides) {
+        (&entry.name, &entry.encode)
+    }
+
+    fn resolve(entry: &Entry, defaults: &Settings, check: &mut EntryCheck<'_, '_>) -> Option<(AssetSource, Settings)> {
+        let mut settings = defaults.clone();
+        let anchor = check.anchor();
+        merge_pack(check, &mut settings.pack, &entry.pack, anchor);
+        if entry.textures.is_empty() {
+            let message = format!("asset `{}`: an atlas needs at least one texture glob", check.name());
+            let name = check.name().to_string();
+            check.error_at_value(&name, &message);
+        }
+        for glob in entry.textures.iter().chain(&entry.meshes) {
+            check.glob(glob);
+        }
+        let glob_lists = vec![entry.textures.clone(), entry.meshes.clone()];
+        Some((AssetSource { kind: AssetKind::Atlas, main_file: PathBuf::new(), glob_lists }, settings))
+    }
 }

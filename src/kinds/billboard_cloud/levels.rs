@@ -303,7 +303,7 @@ pub(crate) fn settings_for(settings: &Settings, slot: u32) -> LevelSettings {
         planes: super::planes::PlaneSettings {
             epsilon: billboard.epsilon,
             max_planes: billboard.max_planes,
-            max_quads: budget.map(crate::config::LodBudget::quads),
+            max_quads: budget.map(super::settings::LodBudget::quads),
         },
         // A candidate's atlas is its own: the density fills it.
         texel_density: billboard

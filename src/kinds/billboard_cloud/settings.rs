@@ -1,10 +1,11 @@
-//! The `BillboardCloud` kind's settings: its `billboard` and `atlas` sections as `pipeline.ron`
-//! writes them (overrides), as they resolve (settings), and their checks. A leaf: it imports
-//! only the libraries and `config/sections`.
+//! The `BillboardCloud` kind's part of `pipeline.ron`: its entry (`BillboardCloud(name: …, mesh:
+//! …)`), its `billboard` and `atlas` sections as written (overrides), as they resolve (settings),
+//! and their checks. A leaf: it imports only the libraries and `config`'s shared parts.
 
 use serde::{Deserialize, Serialize};
 
-use crate::config::sections::{explicit, page_size_overrides, Check};
+use crate::config::sections::{explicit, merge_alpha_cutoff, page_size_overrides, Check};
+use crate::config::{AssetKind, AssetSource, EncodeOverrides, EntryCheck, KindEntry};
 use crate::mesh::reduce::TriangleBudget;
 use crate::packing::PageSettings;
 
@@ -192,7 +193,7 @@ pub(crate) const MAX_REDUCED_TRIANGLES: u32 = 100_000_000;
 
 #[derive(Deserialize, Default, Clone)]
 #[serde(deny_unknown_fields)]
-pub(crate) struct BillboardOverrides {
+pub struct BillboardOverrides {
     pub epsilon: Option<f32>,
     #[serde(default, deserialize_with = "explicit")]
     pub max_planes: Option<Option<u32>>,
@@ -209,20 +210,20 @@ pub(crate) struct BillboardOverrides {
 
 #[derive(Deserialize, Default, Clone)]
 #[serde(deny_unknown_fields)]
-pub(crate) struct AutoOverrides {
+pub struct AutoOverrides {
     pub quads: Option<Vec<u32>>,
     pub impostor_frames: Option<Vec<u32>>,
 }
 
 #[derive(Deserialize, Default, Clone)]
 #[serde(deny_unknown_fields)]
-pub(crate) struct AtlasOverrides {
+pub struct AtlasOverrides {
     pub max_size: Option<u32>,
     pub padding: Option<u32>,
     pub power_of_two: Option<bool>,
 }
 
-pub(crate) fn merge_billboard(
+fn merge_billboard(
     check: &mut dyn Check,
     settings: &mut BillboardSettings,
     billboard: &BillboardOverrides,
@@ -321,12 +322,7 @@ pub(crate) fn merge_billboard(
             "give texel_density or screen_size, not both: each sets the atlas's texels per unit",
         );
     }
-    if let Some(cutoff) = billboard.alpha_cutoff {
-        if !(0.0..=1.0).contains(&cutoff) {
-            check.error_at_key("alpha_cutoff", anchor, "alpha_cutoff must be in [0, 1]");
-        }
-        settings.alpha_cutoff = cutoff;
-    }
+    merge_alpha_cutoff(check, &mut settings.alpha_cutoff, billboard.alpha_cutoff, anchor);
 }
 
 fn merge_auto(check: &mut dyn Check, settings: &mut AutoCandidates, auto: &AutoOverrides, anchor: usize) {
@@ -349,7 +345,7 @@ fn merge_auto(check: &mut dyn Check, settings: &mut AutoCandidates, auto: &AutoO
     }
 }
 
-pub(crate) fn merge_atlas(check: &mut dyn Check, settings: &mut PageSettings, atlas: &AtlasOverrides, anchor: usize) {
+fn merge_atlas(check: &mut dyn Check, settings: &mut PageSettings, atlas: &AtlasOverrides, anchor: usize) {
     page_size_overrides(check, atlas.max_size, atlas.padding, anchor, &mut settings.max_size, &mut settings.padding);
     if let Some(power_of_two) = atlas.power_of_two {
         settings.power_of_two = power_of_two;
@@ -366,7 +362,7 @@ impl Default for BillboardSettings {
             screen_size: None,
             lods: Vec::new(),
             auto: AutoCandidates::default(),
-            alpha_cutoff: 0.5,
+            alpha_cutoff: crate::config::sections::DEFAULT_ALPHA_CUTOFF,
         }
     }
 }
@@ -377,8 +373,71 @@ pub fn default_billboard_atlas() -> PageSettings {
 }
 
 /// A `BillboardCloud` asset's own settings.
-#[derive(Clone, Debug, PartialEq, Serialize)]
+#[derive(Clone, Debug, PartialEq)]
 pub struct Settings {
     pub billboard: BillboardSettings,
     pub atlas: PageSettings,
+}
+
+/// A `BillboardCloud` entry as `pipeline.ron` writes it.
+#[derive(Deserialize)]
+#[serde(rename = "BillboardCloud", deny_unknown_fields)]
+pub struct Entry {
+    name: String,
+    mesh: String,
+    #[serde(default)]
+    billboard: BillboardOverrides,
+    #[serde(default)]
+    atlas: AtlasOverrides,
+    #[serde(default)]
+    encode: EncodeOverrides,
+}
+
+/// The sections of `defaults:` a billboard cloud reads.
+#[derive(Deserialize, Default)]
+#[serde(rename = "defaults")]
+pub struct Defaults {
+    #[serde(default)]
+    billboard: BillboardOverrides,
+    #[serde(default)]
+    atlas: AtlasOverrides,
+}
+
+impl KindEntry for Settings {
+    const KIND: AssetKind = AssetKind::BillboardCloud;
+    const FIELDS: &'static [&'static str] = &["billboard", "atlas"];
+    const DEFAULTS: &'static [&'static str] = &["billboard", "atlas"];
+    type Entry = Entry;
+    type Defaults = Defaults;
+
+    fn defaults(written: &Defaults, check: &mut dyn Check) -> Settings {
+        let mut settings = Settings { billboard: BillboardSettings::default(), atlas: default_billboard_atlas() };
+        merge(check, &mut settings, &written.billboard, &written.atlas, 0);
+        settings
+    }
+
+    fn name_and_encode(entry: &Entry) -> (&str, &EncodeOverrides) {
+        (&entry.name, &entry.encode)
+    }
+
+    fn resolve(entry: &Entry, defaults: &Settings, check: &mut EntryCheck<'_, '_>) -> Option<(AssetSource, Settings)> {
+        let mesh = check.source_path(&entry.mesh)?;
+        let mut settings = defaults.clone();
+        let anchor = check.anchor();
+        merge(check, &mut settings, &entry.billboard, &entry.atlas, anchor);
+        // Each atlas surface goes through the texture tail: the same budget holds.
+        check.surface_budget("atlas", settings.atlas.max_size, "max_size");
+        Some((AssetSource::of_file(AssetKind::BillboardCloud, mesh), settings))
+    }
+}
+
+fn merge(
+    check: &mut dyn Check,
+    settings: &mut Settings,
+    billboard: &BillboardOverrides,
+    atlas: &AtlasOverrides,
+    at: usize,
+) {
+    merge_billboard(check, &mut settings.billboard, billboard, at);
+    merge_atlas(check, &mut settings.atlas, atlas, at);
 }

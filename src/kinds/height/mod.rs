@@ -22,7 +22,7 @@ use std::sync::Arc;
 use serde::Serialize;
 
 use crate::cache::CacheKey;
-use crate::config::{AssetConfig, HeightProjection, PipelineConfig};
+use crate::config::{AssetConfig, PipelineConfig};
 use crate::db::{Asset, Db, StageRun};
 use crate::diagnostic::{display_path, Diagnostic};
 use crate::kinds::height::settings::Settings as Own;
@@ -38,6 +38,7 @@ use queries::{
     map_label, tessellate_settings, tessellated_files, MapReference, Measured, BAKE, BVH, DISPLACE, DISTANCE,
     TESSELLATE,
 };
+use settings::HeightProjection;
 
 pub struct Height;
 

@@ -11,8 +11,8 @@ use std::sync::Arc;
 use glam::Vec3;
 
 use super::bake::{bake_along_normals, bake_top_down, HeightMap, LowSurface, RayReach, RayStart};
+use super::settings::{HeightProjection, HeightSettings, TessellateSettings};
 use crate::cache::{CacheEntry, CacheKey};
-use crate::config::{HeightProjection, HeightSettings, TessellateSettings};
 use crate::db::{
     from_pod_blob, hash_of_parts, load_cached, pod_blob, record_cache_hit, stage_key, store_cached, timed, Asset,
     ByHash, Db, Stage,

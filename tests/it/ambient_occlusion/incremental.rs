@@ -12,7 +12,7 @@ fn reconfigure(project: &TempProject, cirrus: &mut cirrus::project::Project, fro
     let pipeline = String::from_utf8(project.read("pipeline.ron")).unwrap();
     assert!(pipeline.contains(from), "{pipeline}");
     std::fs::write(project.path("pipeline.ron"), pipeline.replace(from, to)).unwrap();
-    cirrus.reconfigure(cirrus::config::load_pipeline(&project.path("pipeline.ron")).unwrap());
+    cirrus.reconfigure(cirrus::pipeline::load_pipeline(&project.path("pipeline.ron")).unwrap());
 }
 
 #[test]

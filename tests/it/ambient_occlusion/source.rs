@@ -81,7 +81,7 @@ fn rebaking_the_source_repacks_only_the_mra_surfaces_that_read_it_and_the_graph_
 
     let pipeline = String::from_utf8(project.read("pipeline.ron")).unwrap();
     std::fs::write(project.path("pipeline.ron"), pipeline.replace("rays: 16", "rays: 32")).unwrap();
-    cirrus.reconfigure(cirrus::config::load_pipeline(&project.path("pipeline.ron")).unwrap());
+    cirrus.reconfigure(cirrus::pipeline::load_pipeline(&project.path("pipeline.ron")).unwrap());
     assert!(build(&mut cirrus).all_ok());
     let material_stages: Vec<String> =
         cirrus.take_executed_stages().into_iter().filter(|stage| stage.contains("(mat/")).collect();

@@ -304,7 +304,7 @@ fn a_settings_change_reruns_only_the_stages_that_read_it() {
     let pipeline = std::fs::read_to_string(project.path("pipeline.ron")).unwrap();
     // The block format: the encode and write of the page, nothing before them.
     project.write("pipeline.ron", pipeline.replace("padding: 4)", "padding: 4), encode: (albedo: Bc3)").as_bytes());
-    cirrus.reconfigure(cirrus::config::load_pipeline(&project.path("pipeline.ron")).unwrap());
+    cirrus.reconfigure(cirrus::pipeline::load_pipeline(&project.path("pipeline.ron")).unwrap());
     assert!(build(&mut cirrus).all_ok());
     expect_test::expect![[r#"
         [
@@ -318,7 +318,7 @@ fn a_settings_change_reruns_only_the_stages_that_read_it() {
         "pipeline.ron",
         pipeline.replace("padding: 4)", "padding: 4, trim: false), encode: (albedo: Bc3)").as_bytes(),
     );
-    cirrus.reconfigure(cirrus::config::load_pipeline(&project.path("pipeline.ron")).unwrap());
+    cirrus.reconfigure(cirrus::pipeline::load_pipeline(&project.path("pipeline.ron")).unwrap());
     assert!(build(&mut cirrus).all_ok());
     let ran = cirrus.take_executed_stages();
     assert!(ran.iter().all(|stage| !stage.starts_with("decode")), "{ran:?}");

@@ -152,7 +152,7 @@ fn a_bark_texture_edit_rerenders_only_bark_planes_and_leaves_the_lod_alone() {
             .replace("atlas: (max_size: 256, padding: 2)", "atlas: (max_size: 256, padding: 2), encode: (mra: Bc7)"),
     )
     .unwrap();
-    cirrus.reconfigure(cirrus::config::load_pipeline(&project.path("pipeline.ron")).unwrap());
+    cirrus.reconfigure(cirrus::pipeline::load_pipeline(&project.path("pipeline.ron")).unwrap());
     build(&mut cirrus);
     // The bark edit found the mra surface in the cache by its parts without compositing it:
     // it is composited now, with the same texels, so its mips do not run again.

@@ -156,7 +156,7 @@ fn a_bark_edit_rerenders_only_the_bark_of_each_level_and_a_budget_edit_only_its_
     // A new budget for level 1 re-runs level 1 only: level 0 keeps everything.
     let pipeline = String::from_utf8(project.read("pipeline.ron")).unwrap();
     std::fs::write(project.path("pipeline.ron"), pipeline.replace("Quads(4)", "Quads(2)")).unwrap();
-    cirrus.reconfigure(cirrus::config::load_pipeline(&project.path("pipeline.ron")).unwrap());
+    cirrus.reconfigure(cirrus::pipeline::load_pipeline(&project.path("pipeline.ron")).unwrap());
     let summary = build(&mut cirrus);
     assert!(summary.all_ok(), "{}", summary.to_text());
     let executed = cirrus.take_executed_stages();

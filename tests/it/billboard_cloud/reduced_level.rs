@@ -117,7 +117,7 @@ fn a_reduced_level_keeps_its_budget_over_its_maps_block_compressed_and_a_map_edi
     let pipeline = String::from_utf8(project.read("pipeline.ron")).unwrap();
     std::fs::write(project.path("pipeline.ron"), pipeline.replace("Reduced(Triangles(30))", "Reduced(Ratio(0.25))"))
         .unwrap();
-    restarted.reconfigure(cirrus::config::load_pipeline(&project.path("pipeline.ron")).unwrap());
+    restarted.reconfigure(cirrus::pipeline::load_pipeline(&project.path("pipeline.ron")).unwrap());
     build(&mut restarted);
     let mut executed = restarted.take_executed_stages();
     executed.sort();

@@ -117,7 +117,7 @@ fn an_edit_measures_again_only_the_levels_it_changed_and_a_restart_nothing() {
     // come from the cache (the measure of level 2 alone shows in its figures only).
     let pipeline = String::from_utf8(project.read("pipeline.ron")).unwrap();
     std::fs::write(project.path("pipeline.ron"), pipeline.replace("Quads(2)", "Quads(3)")).unwrap();
-    cirrus.reconfigure(cirrus::config::load_pipeline(&project.path("pipeline.ron")).unwrap());
+    cirrus.reconfigure(cirrus::pipeline::load_pipeline(&project.path("pipeline.ron")).unwrap());
     let summary = build(&mut cirrus);
     assert!(summary.all_ok(), "{}", summary.to_text());
     let executed = cirrus.take_executed_stages();

@@ -11,7 +11,7 @@ fn reconfigure(project: &TempProject, cirrus: &mut cirrus::project::Project, fro
     let pipeline = String::from_utf8(project.read("pipeline.ron")).unwrap();
     assert!(pipeline.contains(from), "{pipeline}");
     std::fs::write(project.path("pipeline.ron"), pipeline.replace(from, to)).unwrap();
-    cirrus.reconfigure(cirrus::config::load_pipeline(&project.path("pipeline.ron")).unwrap());
+    cirrus.reconfigure(cirrus::pipeline::load_pipeline(&project.path("pipeline.ron")).unwrap());
 }
 
 /// Bumps of `amplitude` (an amplitude alone scales every distance alike: the 16-bit map stays

@@ -124,7 +124,7 @@ fn changing_a_setting_reruns_only_the_stages_that_read_it() {
     cirrus.take_executed_stages();
     let pipeline = String::from_utf8(project.read("pipeline.ron")).unwrap();
     std::fs::write(project.path("pipeline.ron"), pipeline.replace("albedo: Bc7", "albedo: Bc3")).unwrap();
-    cirrus.reconfigure(cirrus::config::load_pipeline(&project.path("pipeline.ron")).unwrap());
+    cirrus.reconfigure(cirrus::pipeline::load_pipeline(&project.path("pipeline.ron")).unwrap());
     build(&mut cirrus);
     expect![[r#"
         [
@@ -176,7 +176,7 @@ fn a_build_that_keeps_only_its_outputs_writes_the_same_files_and_the_next_proces
     use cirrus::db::Retention;
     use cirrus::project::{Project, ProjectOptions};
     let open = |project: &TempProject, retention| {
-        let config = cirrus::config::load_pipeline(&project.path("pipeline.ron")).expect("valid pipeline");
+        let config = cirrus::pipeline::load_pipeline(&project.path("pipeline.ron")).expect("valid pipeline");
         Project::open(config, ProjectOptions { retention, ..Default::default() })
     };
     let surfaces = ["one/albedo.ktx2", "one/normal.ktx2", "one/mra.ktx2", "two/mra.ktx2", "one/albedo.png"];

@@ -317,7 +317,6 @@ fn the_modules_form_a_straight_stack_but_for_the_loops_listed_here() {
         kinds/billboard_cloud
         kinds/billboard_cloud/chain_outputs
         kinds/billboard_cloud/impostor_level
-        kinds/billboard_cloud/levels
         kinds/billboard_cloud/queries
         kinds/billboard_cloud/reduced
         kinds/billboard_cloud/reduced_queries

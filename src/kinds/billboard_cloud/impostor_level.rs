@@ -19,11 +19,7 @@ use crate::kinds::{AssetOutputs, StageInstance};
 use crate::mesh::gltf::{GltfAlpha, GltfMaterial, GltfMesh, GltfWrap};
 use crate::mesh::octahedral::FrameGrid;
 use crate::summary::ArtifactRole;
-use crate::texture::{SurfaceKind, Texture};
-
-/// An impostor level's surfaces: albedo with coverage, the frames' normals, their depth (in the
-/// height surface: a distance from the frame's centre plane, as a cloud's height is from its).
-pub(crate) const IMPOSTOR_SURFACES: [SurfaceKind; 3] = [SurfaceKind::Albedo, SurfaceKind::Normal, SurfaceKind::Height];
+use crate::texture::Texture;
 
 /// The description of an impostor level an engine reads (`impostor.json`, and the `extras` of
 /// its `lod.gltf` mesh as `cirrus_impostor`).

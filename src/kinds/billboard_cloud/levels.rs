@@ -9,6 +9,10 @@ use crate::mesh::reduce::TriangleBudget;
 use crate::packing::PageSettings;
 use crate::texture::SurfaceKind;
 
+/// An impostor level's surfaces: albedo with coverage, the frames' normals, their depth (in the
+/// height surface: a distance from the frame's centre plane, as a cloud's height is from its).
+pub(crate) const IMPOSTOR_SURFACES: [SurfaceKind; 3] = [SurfaceKind::Albedo, SurfaceKind::Normal, SurfaceKind::Height];
+
 /// What one level of a billboard cloud is asked for.
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub struct LevelSettings {
@@ -231,7 +235,7 @@ pub fn auto_candidates(settings: &Settings, level: u32, max_bytes: u64) -> Vec<S
             (0..=MAX_SURFACE_HALVINGS)
                 .filter_map(|max_halvings| {
                     let frame = side / frames / (4 << max_halvings) * (4 << max_halvings);
-                    let surfaces = &super::impostor_level::IMPOSTOR_SURFACES;
+                    let surfaces = &IMPOSTOR_SURFACES;
                     (frame >= super::settings::MIN_IMPOSTOR_FRAME)
                         .then(|| allot_surfaces(surfaces, frames * frame, max_halvings, bytes_of, mesh_bytes))
                         .flatten()

@@ -64,7 +64,7 @@ fn atlas_surfaces(db: &dyn Db, asset: Asset, level: u32) -> Vec<SurfaceId> {
         return maps.surfaces(&folder).into_iter().map(|(_, surface, _)| surface).collect();
     }
     let kinds: &[SurfaceKind] =
-        if levels::is_impostor(settings, level) { &impostor_level::IMPOSTOR_SURFACES } else { &SurfaceKind::BILLBOARD };
+        if levels::is_impostor(settings, level) { &levels::IMPOSTOR_SURFACES } else { &SurfaceKind::BILLBOARD };
     kinds.iter().map(|&surface| SurfaceId { group: folder.clone(), surface }).collect()
 }
 

@@ -447,16 +447,9 @@ impl Validation<'_> {
                 K::Defaults::default()
             }
         };
-        let mut found = Validation {
-            file: self.file,
-            text: self.text,
-            kinds: self.kinds,
-            limits: self.limits,
-            encode: self.encode.clone(),
-            diagnostics: Vec::new(),
-        };
-        let settings = K::defaults(&written, &mut found);
-        for diagnostic in found.diagnostics {
+        let before = self.diagnostics.len();
+        let settings = K::defaults(&written, self);
+        for diagnostic in self.diagnostics.split_off(before) {
             self.push_unique(diagnostic);
         }
         KindSettings::new(settings)
@@ -473,11 +466,10 @@ impl Validation<'_> {
         let (name, encode_written) = K::name_and_encode(entry);
         let anchor = self.offset_of_value(name, 0).unwrap_or(0);
         self.check_asset_name(name, anchor, names);
-        let kind_defaults = defaults.iter().find(|settings| settings.kind() == K::KIND)?;
-        let kind_defaults = Settings { encode: EncodeSettings::default(), kind: kind_defaults.clone() };
+        let kind_defaults = defaults.iter().find_map(KindSettings::downcast::<K>)?;
         let name = name.to_string();
         let mut check = EntryCheck { check: self, anchor, name: &name };
-        let (source, own) = K::resolve(entry, kind_defaults.own::<K>(), &mut check)?;
+        let (source, own) = K::resolve(entry, kind_defaults, &mut check)?;
         let mut encode = self.encode.clone();
         merge_encode(self, &mut encode, encode_written, anchor);
         Some(AssetConfig { name: name.clone(), source, settings: Settings { encode, kind: KindSettings::new(own) } })

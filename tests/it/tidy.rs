@@ -314,13 +314,6 @@ fn the_modules_form_a_straight_stack_but_for_the_loops_listed_here() {
     let listed: Vec<String> = cycles.iter().map(|cycle| cycle.join("\n")).collect();
     let listed = listed.join("\n\n") + "\n";
     expect_test::expect![[r#"
-        kinds/billboard_cloud
-        kinds/billboard_cloud/chain_outputs
-        kinds/billboard_cloud/impostor_level
-        kinds/billboard_cloud/queries
-        kinds/billboard_cloud/reduced
-        kinds/billboard_cloud/reduced_queries
-
         project
         project/graph
         project/publish

@@ -1,19 +1,19 @@
-//! A LOD chain's own outputs, once every slot's files are made (`level_files`): how far each
-//! level holds against the source (`measure_chain`, the `switch` stage's work), the slot shown
-//! as each level (an `Auto` level's chosen candidate, copied into its folder), and the chain's
-//! documents: `lods.gltf` with its switch coverages, `lods.json` for engines.
+//! A LOD chain's own outputs, once every slot's files are made (`level_files`) and measured
+//! (`chain_queries`): each level's part of the report (an `Auto` level's choice among its
+//! candidates, the chosen one's files copied into its folder), and the chain's documents:
+//! `lods.gltf` with its switch coverages, `lods.json` for engines.
 
 use std::path::{Path, PathBuf};
 use std::sync::Arc;
 
+use super::chain_queries::{auto_bytes, chain_holds, chosen_slots};
+use super::level_outputs::{level_files, ChainMesh};
 use super::settings::Settings as Own;
-use super::{
-    impostor_level, level_files, level_view, levels, lod_mesh, planes, queries, reduced, settings, source_view_mesh,
-};
+use super::{levels, lod_mesh, planes, settings};
 use crate::db::{Asset, Db};
 use crate::diagnostic::Diagnostic;
 use crate::kinds::mesh_queries::loaded_mesh;
-use crate::kinds::{AssetOutputs, BakedFiles};
+use crate::kinds::AssetOutputs;
 use crate::mesh::gltf::{gltf_chain, GltfLevel};
 use crate::summary::ArtifactRole;
 
@@ -29,7 +29,7 @@ pub(super) fn chain_files(
     outputs: &mut AssetOutputs,
 ) -> Result<(Vec<f32>, Vec<serde_json::Value>), Diagnostic> {
     let settings = asset.settings(db);
-    let holds = queries::chain_holds(db, asset)?;
+    let holds = chain_holds(db, asset)?;
     let chosen = chosen_slots(db, asset, slot_reports, &holds)?;
     let mut meshes: Vec<Option<ChainMesh>> = slot_meshes.into_iter().map(Some).collect();
     let mut level_reports = Vec::new();
@@ -65,72 +65,6 @@ pub(super) fn chain_files(
     let lods_json = lods_document(asset.name(db), sphere, &level_reports);
     outputs.add(output_folder.join("lods.json"), ArtifactRole::Table, lods_json.into());
     Ok((coverage, level_reports))
-}
-
-/// The slot shown as each level of the chain (`chosen_slot`).
-fn chosen_slots(
-    db: &dyn Db,
-    asset: Asset,
-    reports: &[serde_json::Value],
-    holds: &[crate::preview::Hold],
-) -> Result<Vec<u32>, Diagnostic> {
-    (0..levels::level_count(asset.settings(db))).map(|level| chosen_slot(db, asset, level, (reports, holds))).collect()
-}
-
-/// The slot shown as level `level` of the chain: its own, or the `Auto` level's chosen
-/// candidate: among those whose bytes on the GPU fit, the one that holds to the largest screen
-/// size, then the one that loses least there, then the one with the fewest bytes.
-pub(crate) fn chosen_slot(
-    db: &dyn Db,
-    asset: Asset,
-    level: u32,
-    (reports, holds): (&[serde_json::Value], &[crate::preview::Hold]),
-) -> Result<u32, Diagnostic> {
-    let settings = asset.settings(db);
-    if let Some(slot) = levels::chain_slot(settings, level) {
-        return Ok(slot);
-    }
-    let max_bytes = auto_bytes(settings, level).unwrap_or(u64::MAX);
-    let slots = levels::slots(settings);
-    let fitting = (0..slots.len())
-        .filter(|&slot| slots[slot].level == level && !over_budget(db, asset, slot as u32, &reports[slot]));
-    let rank = |slot: &usize| {
-        let hold = &holds[*slot];
-        let at = hold.measured.iter().find(|figures| Some(figures.size) == hold.holds_to).or(hold.measured.first());
-        let loss = at.and_then(|figures| figures.loss_px_shift).unwrap_or(0.0);
-        (std::cmp::Reverse(hold.holds_to), ordered(loss), reports[*slot]["gpu_bytes"].as_u64(), *slot)
-    };
-    fitting.min_by_key(rank).map(|slot| slot as u32).ok_or_else(|| {
-        Diagnostic::new(
-            asset.main_file(db),
-            format!("lod{level}: no candidate fits in {max_bytes} bytes on the GPU (give Auto more bytes)"),
-        )
-    })
-}
-
-/// The bytes of level `level` when it is an `Auto` level.
-fn auto_bytes(settings: &crate::config::Settings, level: u32) -> Option<u64> {
-    match settings.own::<Own>().billboard.lods.get(level as usize) {
-        Some(&settings::LodLevel::Auto { max_bytes }) => Some(max_bytes),
-        _ => None,
-    }
-}
-
-/// Whether slot `slot` is a candidate whose bytes on the GPU (its `report`'s) pass its `Auto`
-/// level's.
-pub(crate) fn over_budget(db: &dyn Db, asset: Asset, slot: u32, report: &serde_json::Value) -> bool {
-    let settings = asset.settings(db);
-    let Some(spec) = levels::slots(settings).into_iter().nth(slot as usize).filter(|spec| spec.candidate.is_some())
-    else {
-        return false;
-    };
-    let max_bytes = auto_bytes(settings, spec.level).unwrap_or(u64::MAX);
-    report["gpu_bytes"].as_u64().is_none_or(|bytes| bytes > max_bytes)
-}
-
-/// A loss as an integer that orders as the loss does (in millionths of a px-shift unit).
-fn ordered(loss: f64) -> i64 {
-    (loss * 1e6).round() as i64
 }
 
 /// An `Auto` level's part of the report (none for another level): its bytes, the candidate
@@ -190,8 +124,7 @@ pub(super) fn chosen_copies(db: &dyn Db, asset: Asset, output_folder: &Path) -> 
         return Vec::new();
     }
     let mut outputs = AssetOutputs::default();
-    let (Ok((reports, _)), Ok(holds)) =
-        (level_files(db, asset, output_folder, &mut outputs), queries::chain_holds(db, asset))
+    let (Ok((reports, _)), Ok(holds)) = (level_files(db, asset, output_folder, &mut outputs), chain_holds(db, asset))
     else {
         return Vec::new();
     };
@@ -222,33 +155,6 @@ fn copy_candidate(outputs: &mut AssetOutputs, output_folder: &Path, from: &str, 
         outputs.meanings.insert(path.clone(), serde_json::json!({ "lod": level }));
         outputs.add(path, role, bytes);
     }
-}
-
-/// How far each of a chain's slots `measured` holds against its source (stage `switch`): as an
-/// engine draws them, read from the build's `files` (`level_files` under an empty folder), over
-/// the 26 views at each of `sizes` (`preview::HOLD_SIZES` up to a cap).
-pub(crate) fn measure_chain(
-    db: &dyn Db,
-    asset: Asset,
-    files: &AssetOutputs,
-    (measured, sizes): (&[u32], &[u32]),
-    source_views: &mut crate::preview::SourceViews,
-) -> Result<Vec<crate::preview::Hold>, Diagnostic> {
-    let settings = asset.settings(db);
-    let cutoff = settings.own::<Own>().billboard.alpha_cutoff;
-    let loaded = loaded_mesh(db, asset)?;
-    let source = source_view_mesh(db, asset, &loaded)?;
-    let view = |level: u32| {
-        let folder = levels::level_folder(settings, level);
-        level_view(&BakedFiles::Outputs(files), Path::new(&folder), cutoff)
-    };
-    let views = measured.iter().map(|&level| view(level)).collect::<Result<Vec<_>, _>>()?;
-    let (center, radius) = planes::bounding_sphere(&loaded.mesh.positions);
-    let main_file = asset.main_file(db);
-    let gpu = crate::gpu::gpu().map_err(|error| Diagnostic::new(main_file, error.to_string()))?;
-    let views: Vec<&crate::gpu::LevelView> = views.iter().collect();
-    crate::preview::holds(gpu, &source, &views, (center.to_array(), radius), sizes, source_views)
-        .map_err(|error| Diagnostic::new(main_file, format!("measuring the chain: {error}")))
 }
 
 /// A warning (naming `file`, the asset's mesh) for each level of a chain with these switch
@@ -309,12 +215,6 @@ fn lods_document(asset: &str, (center, radius): (glam::Vec3, f32), reports: &[se
 struct ChainLevel {
     folder: String,
     mesh: ChainMesh,
-}
-
-pub(super) enum ChainMesh {
-    Cloud(Box<lod_mesh::LodGltfMesh>),
-    Reduced(reduced::ReducedGltf),
-    Impostor(impostor_level::ImpostorGltf),
 }
 
 /// A chain's `lods.gltf` (`MSFT_lod`, every level's `lod.bin` and images under its folder, the

@@ -86,7 +86,7 @@ pub(crate) fn impostor_instance(
         impostor.reads.push(crate::kinds::Read::Stage(IMPOSTOR, level_label(db, asset, render.source).clone()));
     }
     for path in mesh_textures(db, asset).iter() {
-        super::read_decode(&mut impostor, path, decodes);
+        super::surfaces::read_decode(&mut impostor, path, decodes);
     }
     impostor
 }
@@ -189,7 +189,7 @@ pub(crate) fn impostor_level_outputs(
     let margin_frame =
         super::queries::impostor_render(db, asset, level).map_or(impostor.frame_size, |render| render.margin_frame);
     let frame_rects = crate::impostor::frame_rects_with_margin(&corners, (center, radius), impostor.grid, margin_frame);
-    let written = super::write_level_surfaces(db, asset, level, output_folder, outputs)?;
+    let written = super::surfaces::write_level_surfaces(db, asset, level, output_folder, outputs)?;
     let (mut bytes, mut gpu_bytes) = (written.bytes, written.gpu_bytes);
     let name = |index: usize| written.names.get(index).cloned().unwrap_or_default();
     let [(albedo, albedo_png), (normal, normal_png), (depth, _)] = [0, 1, 2].map(name);

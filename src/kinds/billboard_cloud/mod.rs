@@ -23,94 +23,41 @@ pub mod lod_mesh;
 pub mod lod_preview;
 pub mod levels;
 pub mod reduced;
-mod reduced_queries;
-pub mod impostor_level;
-pub mod chain_outputs;
 pub mod queries;
+mod reduced_queries;
+mod surfaces;
+mod reduced_outputs;
+pub mod impostor_level;
+mod views;
+mod level_outputs;
+mod chain_queries;
+pub mod chain_outputs;
 
-use crate::summary::ArtifactRole;
+pub use views::read_level_view;
+
 use std::collections::BTreeMap;
 use std::path::{Path, PathBuf};
 use std::sync::Arc;
 
 use crate::cache::CacheKey;
 use crate::config::{AssetConfig, PipelineConfig};
-use crate::db::{Asset, Db, StageRun, DECODE};
+use crate::db::{Asset, Db, StageRun};
 use crate::diagnostic::{display_path, Diagnostic};
 use crate::kinds::billboard_cloud::settings::Settings as Own;
 use crate::kinds::checks::check_texture_file;
 use crate::kinds::mesh_queries::{loaded_mesh, mesh_textures, LoadedMesh};
 use crate::kinds::{
-    tail_instances, AssetOutputs, BakedFiles, Job, Kind, PreviewError, PreviewOptions, PreviewReport, PreviewRow, Read,
-    StageInstance, SurfaceId, Task,
+    tail_instances, AssetOutputs, Job, Kind, PreviewError, PreviewOptions, PreviewReport, PreviewRow, StageInstance,
+    SurfaceId, Task,
 };
 use crate::summary::ErrorSummary;
 use crate::texture::tail::TailSettings;
 use crate::texture::{SurfaceKind, Texture, TextureSlot};
-use chain_outputs::ChainMesh;
-use queries::{billboard_layout, billboard_planes, level_label, lod_files, render_label};
+use queries::{billboard_layout, level_label, lod_files, render_label, source_view_mesh};
 use queries::{ATLAS, LAYOUT, LOD, PLANES, RENDER};
+use surfaces::{atlas_surfaces, level_of_surface, level_renders, read_decode, reduced_map_of, with_halvings};
 
 pub struct BillboardCloud;
-
-/// A level's surfaces: a cloud's four atlas surfaces, an impostor's three (their group is the
-/// level's folder); a reduced level's maps, up to three a material (`reduced::ReducedMaps`;
-/// none before its mesh is made, or when it fails).
-fn atlas_surfaces(db: &dyn Db, asset: Asset, level: u32) -> Vec<SurfaceId> {
-    let settings = asset.settings(db);
-    let folder = levels::level_folder(settings, level);
-    if levels::is_reduced(settings, level) {
-        let Ok(maps) = queries::reduced_maps(db, asset, level) else { return Vec::new() };
-        return maps.surfaces(&folder).into_iter().map(|(_, surface, _)| surface).collect();
-    }
-    let kinds: &[SurfaceKind] =
-        if levels::is_impostor(settings, level) { &levels::IMPOSTOR_SURFACES } else { &SurfaceKind::BILLBOARD };
-    kinds.iter().map(|&surface| SurfaceId { group: folder.clone(), surface }).collect()
-}
-
-/// `key` for `surface` of `level` when the surface is stored smaller than it is made (its
-/// halvings), else `key` itself (so that the keys of surfaces at their full size stay as they
-/// were).
-fn with_halvings(db: &dyn Db, asset: Asset, level: u32, surface: &SurfaceId, key: CacheKey) -> CacheKey {
-    match queries::level_settings(db, asset, level).surface_halvings.of(surface.surface) {
-        0 => key,
-        halvings => crate::db::stage_key(queries::SURFACE_HALVINGS).part(&key.0).part(&halvings).finish(),
-    }
-}
-
-/// The slot a surface belongs to (its group is the slot's folder, or a reduced level's
-/// material's: `<folder>/materials/<name>`).
-fn level_of_surface(db: &dyn Db, asset: Asset, surface: &SurfaceId) -> Result<u32, Diagnostic> {
-    let settings = asset.settings(db);
-    let slot = levels::slot_of_folder(settings, &surface.group).or_else(|| {
-        let folder = reduced::level_of_group(&surface.group)?;
-        levels::slot_of_folder(settings, folder).filter(|&slot| levels::is_reduced(settings, slot))
-    });
-    slot.ok_or_else(|| Diagnostic::new(asset.main_file(db), format!("no LOD level `{}`", surface.group)))
-}
-
-/// A reduced level's map surface: its slot, material and halvings.
-fn reduced_map_of(db: &dyn Db, asset: Asset, surface: &SurfaceId) -> Result<Option<(u32, u32, u32)>, Diagnostic> {
-    let level = level_of_surface(db, asset, surface)?;
-    if !levels::is_reduced(asset.settings(db), level) {
-        return Ok(None);
-    }
-    let folder = levels::level_folder(asset.settings(db), level);
-    let maps = queries::reduced_maps(db, asset, level)?;
-    let (material, halvings) = maps
-        .find(&folder, &surface.group, surface.surface)
-        .ok_or_else(|| Diagnostic::new(asset.main_file(db), format!("no map `{}` in {folder}", surface.instance())))?;
-    Ok(Some((level, material, halvings)))
-}
-
-/// Whether some of a level's atlas surfaces are not in the persistent cache (so it renders; a
-/// reduced level never does).
-fn level_renders(db: &dyn Db, asset: Asset, level: u32) -> bool {
-    !levels::is_reduced(asset.settings(db), level)
-        && !atlas_surfaces(db, asset, level)
-            .iter()
-            .all(|surface| crate::kinds::tail_queries::surface_in_cache(db, asset, surface))
-}
 
 /// Every (material, slot) whose texture the renders sample, in material order.
 fn material_texture_slots(loaded: &LoadedMesh) -> Vec<(usize, TextureSlot)> {
@@ -237,7 +184,7 @@ impl Kind for BillboardCloud {
             Step::Lod { level } => lod_files(db, asset, level).map(|_| Vec::new()),
             Step::Switch => {
                 // A level's errors are its own jobs' to report (the outputs need every level).
-                let _ = queries::chain_holds(db, asset);
+                let _ = chain_queries::chain_holds(db, asset);
                 Ok(Vec::new())
             }
         }
@@ -260,8 +207,13 @@ impl Kind for BillboardCloud {
             let label = level_label(db, asset, level);
             let instance = if folder.is_empty() { mesh_label.clone() } else { folder.clone() };
             if levels::is_reduced(asset.settings(db), level) {
-                let reduce =
-                    reduced::reduce_instances(db, asset, level, (output_folder, &report), (&mesh, &mut decodes));
+                let reduce = reduced_outputs::reduce_instances(
+                    db,
+                    asset,
+                    level,
+                    (output_folder, &report),
+                    (&mesh, &mut decodes),
+                );
                 // `reduce`, then each map's `maps`, `mips`, `encode` and `write`: the switch reads
                 // `reduce` and each `write`.
                 switch = switch.reads_stage(&reduce[0]);
@@ -344,7 +296,7 @@ impl Kind for BillboardCloud {
 
     fn surface_image(db: &dyn Db, asset: Asset, surface: &SurfaceId) -> Result<Arc<Texture>, Diagnostic> {
         if let Some((_, material, halvings)) = reduced_map_of(db, asset, surface)? {
-            return queries::reduced_map_image(db, asset, (material, halvings), surface);
+            return reduced_queries::reduced_map_image(db, asset, (material, halvings), surface);
         }
         let level = level_of_surface(db, asset, surface)?;
         let halvings = queries::level_settings(db, asset, level).surface_halvings.of(surface.surface);
@@ -381,7 +333,7 @@ impl Kind for BillboardCloud {
 
     fn surface_recipe_key(db: &dyn Db, asset: Asset, surface: &SurfaceId) -> Result<Option<CacheKey>, Diagnostic> {
         if let Some((_, material, halvings)) = reduced_map_of(db, asset, surface)? {
-            return queries::reduced_map_key(db, asset, (material, halvings), surface.surface).map(Some);
+            return reduced_queries::reduced_map_key(db, asset, (material, halvings), surface.surface).map(Some);
         }
         let level = level_of_surface(db, asset, surface)?;
         let key = match levels::is_impostor(asset.settings(db), level) {
@@ -539,18 +491,6 @@ fn level_render_instances(
     renders
 }
 
-/// `stage` reads the decode of the texture `path` (added to `decodes`, shared by every level).
-pub(super) fn read_decode(stage: &mut StageInstance, path: &Path, decodes: &mut BTreeMap<String, StageInstance>) {
-    let label = display_path(path);
-    stage.reads.push(Read::Stage(DECODE, label.clone()));
-    decodes.entry(label).or_insert_with(|| {
-        let mut decode = StageInstance::new(DECODE, display_path(path), display_path(path));
-        decode.reads.push(Read::File(path.to_path_buf()));
-        decode.shared = true;
-        decode
-    });
-}
-
 /// The files of a baked billboard cloud: each level's LOD mesh, textures and previews (an `Auto`
 /// level's candidates in its `candidates/`, the chosen one's also in the level's folder), and the
 /// report; a chain's `lods.gltf` and `lods.json` with the switch sizes measured on them.
@@ -564,7 +504,7 @@ fn billboard_outputs(
     let settings = asset.settings(db);
     let name = asset.name(db);
     let mut outputs = AssetOutputs::default();
-    let (mut slot_reports, slot_meshes) = level_files(db, asset, output_folder, &mut outputs)?;
+    let (mut slot_reports, slot_meshes) = level_outputs::level_files(db, asset, output_folder, &mut outputs)?;
     let mut report = serde_json::json!({
         "asset": name,
         "kind": crate::config::AssetKind::BillboardCloud.name(),
@@ -593,148 +533,6 @@ fn billboard_outputs(
     fields.insert("warnings".into(), serde_json::to_value(&outputs.warnings).expect("warnings serialise"));
     outputs.report = Some(serde_json::to_vec_pretty(&report).expect("reports serialise"));
     Ok(outputs)
-}
-
-/// Every slot's files (added to `outputs` under `output_folder`, meaning the chain's level, and
-/// for a candidate its name), each slot's part of the report, and each one's mesh for the
-/// chain's document.
-fn level_files(
-    db: &dyn Db,
-    asset: Asset,
-    output_folder: &Path,
-    outputs: &mut AssetOutputs,
-) -> Result<(Vec<serde_json::Value>, Vec<ChainMesh>), Diagnostic> {
-    let settings = asset.settings(db);
-    let mut reports = Vec::new();
-    let mut meshes = Vec::new();
-    for (slot, spec) in levels::slots(settings).into_iter().enumerate() {
-        let (slot, first_file) = (slot as u32, outputs.files.len());
-        let (mut report, mesh) = if levels::is_reduced(settings, slot) {
-            let (report, mesh) = reduced::reduced_level_outputs(db, asset, slot, output_folder, outputs)?;
-            (report, ChainMesh::Reduced(mesh))
-        } else if levels::is_impostor(settings, slot) {
-            let (report, quad) = impostor_level::impostor_level_outputs(db, asset, slot, output_folder, outputs)?;
-            (report, ChainMesh::Impostor(quad))
-        } else {
-            level_outputs(db, asset, slot, output_folder, outputs)?
-        };
-        report["level"] = serde_json::json!(spec.level);
-        // The manifest and the hot-reload batches name each file's level.
-        if levels::is_chain(settings) {
-            let meaning = match &spec.candidate {
-                Some(name) => serde_json::json!({ "lod": spec.level, "candidate": name }),
-                None => serde_json::json!({ "lod": spec.level }),
-            };
-            for (path, _, _) in &outputs.files[first_file..] {
-                outputs.meanings.insert(path.clone(), meaning.clone());
-            }
-        }
-        meshes.push(mesh);
-        reports.push(report);
-    }
-    Ok((reports, meshes))
-}
-
-/// One billboard-cloud level's files (added to `outputs`), its part of the report (what it
-/// draws, the error it was made with, its atlas, its surfaces, and the bytes an engine loads:
-/// `lod.obj`, `lod.mtl` and the four textures; previews aside) and its mesh for the chain.
-fn level_outputs(
-    db: &dyn Db,
-    asset: Asset,
-    level: u32,
-    output_folder: &Path,
-    outputs: &mut AssetOutputs,
-) -> Result<(serde_json::Value, ChainMesh), Diagnostic> {
-    let settings = asset.settings(db);
-    let folder = levels::level_folder(settings, level);
-    let level_settings = queries::level_settings(db, asset, level);
-    let obj = (*lod_files(db, asset, level)?).clone();
-    let mtl = lod_mesh::lod_mtl("billboard_cloud", settings.encode.packing.stem());
-    let planes = billboard_planes(db, asset, level)?;
-    let layout = billboard_layout(db, asset, level)?;
-    let level_folder = output_folder.join(&folder);
-    let mut bytes = obj.len() + mtl.len();
-    outputs.add(level_folder.join("lod.obj"), ArtifactRole::Mesh, obj.into_bytes().into());
-    outputs.add(level_folder.join("lod.mtl"), ArtifactRole::Mtl, mtl.into_bytes().into());
-    let gltf = queries::lod_gltf(db, asset, level)?;
-    // What the GPU holds: the glTF's vertex and index buffer and the textures with their mips.
-    let mut gpu_bytes = gltf.bin.len() as u64;
-    outputs.add(level_folder.join("lod.gltf"), ArtifactRole::Gltf, gltf.gltf.clone().into());
-    outputs.add(level_folder.join("lod.bin"), ArtifactRole::GltfBuffer, gltf.bin.clone().into());
-    let written = write_level_surfaces(db, asset, level, output_folder, outputs)?;
-    bytes += written.bytes;
-    gpu_bytes += written.gpu_bytes;
-    let surfaces = written.infos;
-    let atlas_coverage = queries::atlas_coverage_fraction(db, asset, level)?;
-    let chain = lod_mesh::lod_gltf_mesh(&layout.rectangles, &layout.layout, queries::billboard_alpha_cutoff(db, asset));
-    let report = serde_json::json!({
-        "level": level,
-        "folder": folder,
-        "representation": "billboard_cloud",
-        "planes": planes.planes.len(),
-        "quads": layout.layout.placements.len(),
-        "triangles": 2 * layout.layout.placements.len(),
-        // The quad budget (none: ε decides) and the ε it was met with.
-        "budget_quads": level_settings.planes.max_quads,
-        // Faces of solid materials drawn on another plane's quad too (crack filling).
-        "faces_also_drawn": layout.rectangles.iter().map(|rectangle| rectangle.also_drawn.len()).sum::<usize>(),
-        "epsilon": planes.epsilon_fraction,
-        "epsilon_world": planes.epsilon,
-        "max_error_world": planes.max_error,
-        "mean_error_world": planes.mean_error,
-        "seam_gap_world": planes.seam_gap,
-        "atlas": {
-            "width": layout.layout.width,
-            "height": layout.layout.height,
-            "texel_density": layout.layout.texel_density,
-            "screen_size": level_settings.screen_size,
-            "occupancy": (layout.layout.occupancy * 1e4).round() / 1e4,
-            "coverage": atlas_coverage,
-        },
-        "surfaces": surfaces,
-        "bytes": bytes,
-        "gpu_bytes": gpu_bytes,
-    });
-    Ok((report, ChainMesh::Cloud(Box::new(chain))))
-}
-
-/// What a level's surfaces wrote: the texture files' bytes, their bytes on the GPU (every mip),
-/// each surface's figures, and each one's texture and preview file names.
-pub(super) struct LevelSurfaces {
-    pub bytes: usize,
-    pub gpu_bytes: u64,
-    pub infos: Vec<crate::texture::tail::SurfaceInfo>,
-    pub names: Vec<(String, String)>,
-}
-
-/// Adds a level's surfaces from the tail (textures, previews, a cloud's `orm.png`) to `outputs`.
-pub(super) fn write_level_surfaces(
-    db: &dyn Db,
-    asset: Asset,
-    level: u32,
-    output_folder: &Path,
-    outputs: &mut AssetOutputs,
-) -> Result<LevelSurfaces, Diagnostic> {
-    let encode = &asset.settings(db).encode;
-    let mut written = LevelSurfaces { bytes: 0, gpu_bytes: 0, infos: Vec::new(), names: Vec::new() };
-    let name = |path: &Path| path.file_name().map(|name| name.to_string_lossy().into_owned()).unwrap_or_default();
-    for surface in atlas_surfaces(db, asset, level) {
-        let artifacts = crate::kinds::tail_queries::surface_artifacts(db, asset, surface.clone())?;
-        let [texture_path, preview_path] = surface.artifact_paths(output_folder, encode);
-        written.bytes += artifacts.texture_file.len();
-        // Each at its own size: an `Auto` candidate's surfaces may be smaller than its albedo.
-        let (width, height) = (artifacts.info.width, artifacts.info.height);
-        written.gpu_bytes += crate::texture::encode::gpu_bytes(width, height, Some(encode.format_of(surface.surface)));
-        written.names.push((name(&texture_path), name(&preview_path)));
-        let orm_path = preview_path.with_file_name("orm.png");
-        outputs.add(texture_path, ArtifactRole::Texture, artifacts.texture_file.clone());
-        outputs.add(preview_path, ArtifactRole::Image, artifacts.preview_png.clone());
-        if let Some(orm_png) = &artifacts.orm_png {
-            outputs.add(orm_path, ArtifactRole::Image, orm_png.clone());
-        }
-        written.infos.push(artifacts.info.clone());
-    }
-    Ok(written)
 }
 
 /// `cirrus preview` of a baked asset (`input`, built by the caller): renders it and its source
@@ -829,60 +627,6 @@ pub fn preview_slots(
     Ok(slots.iter().zip(folders).zip(metrics).map(|((slot, folder), metrics)| (slot.level, folder, metrics)).collect())
 }
 
-/// The baked LOD in `folder` (relative to `root`) as an engine draws it: an impostor through
-/// `impostor.json` (`impostor_level::read_impostor_view`), else the level's mesh
-/// (`read_lod_view_mesh`).
-pub fn read_level_view(root: &Path, folder: &Path, alpha_cutoff: f32) -> Result<crate::gpu::LevelView, Diagnostic> {
-    level_view(&BakedFiles::Disk(root), folder, alpha_cutoff)
-}
-
-/// The LOD in `folder` of `files` as an engine draws it (see [`read_level_view`]).
-pub(crate) fn level_view(
-    files: &BakedFiles,
-    folder: &Path,
-    alpha_cutoff: f32,
-) -> Result<crate::gpu::LevelView, Diagnostic> {
-    if files.exists(&folder.join("impostor.json")) {
-        return impostor_level::read_impostor_view(files, folder).map(crate::gpu::LevelView::Impostor);
-    }
-    read_lod_view_mesh(files, folder, alpha_cutoff).map(crate::gpu::LevelView::Mesh)
-}
-
-/// The baked LOD mesh in `folder` of `files` as an engine loads it: a billboard cloud's
-/// `lod.obj` with the decoded levels of `albedo.ktx2` and `normal.ktx2`, alpha-tested at
-/// `alpha_cutoff`; a reduced level's `lod.obj` with its `lod.mtl` and the maps that names (in
-/// its `materials/`, each read from its BC-decoded KTX2), alpha-tested at `alpha_cutoff`.
-fn read_lod_view_mesh(
-    files: &BakedFiles,
-    folder: &Path,
-    alpha_cutoff: f32,
-) -> Result<crate::gpu::ViewMesh, Diagnostic> {
-    let read = |file: &str| -> Result<(PathBuf, Vec<u8>), Diagnostic> {
-        let path = folder.join(file);
-        let bytes = files.read(&path)?;
-        Ok((path, bytes))
-    };
-    let obj = read("lod.obj")?;
-    if !obj.1.starts_with(lod_mesh::CLOUD_HEADER.as_bytes()) {
-        let limits = crate::texture::TextureLimits::default();
-        let maps = crate::kinds::MapFiles::BlockCompressedTwins;
-        return crate::kinds::mesh_view_from_files(files, &obj.0, (folder, limits), (alpha_cutoff, maps));
-    }
-    lod_preview::lod_view_mesh(&lod_preview::LodFiles {
-        obj,
-        albedo_ktx2: read(&texture_file(files, folder, "albedo"))?,
-        normal_ktx2: read(&texture_file(files, folder, "normal"))?,
-        alpha_cutoff,
-    })
-}
-
-/// The name of the texture `stem` in `folder` of `files`, in whichever container the build
-/// wrote it (KTX2 when there is none, for the message).
-fn texture_file(files: &BakedFiles, folder: &Path, stem: &str) -> String {
-    let names = ["ktx2", "dds", "pvr"].map(|extension| format!("{stem}.{extension}"));
-    names.iter().find(|name| files.exists(&folder.join(name))).cloned().unwrap_or_else(|| names[0].clone())
-}
-
 /// The source's faces as `stand_in` draws them on the planes of `planes`.
 fn faces_on_planes(
     loaded: &LoadedMesh,
@@ -906,18 +650,5 @@ fn faces_on_planes(
             corner,
             plane_of_face[face as usize],
         )
-    })
-}
-
-/// The source mesh with its decoded maps (mipmapped as for rendering).
-fn source_view_mesh(db: &dyn Db, input: Asset, loaded: &LoadedMesh) -> Result<crate::gpu::ViewMesh, Diagnostic> {
-    let cutoff = input.settings(db).own::<Own>().billboard.alpha_cutoff;
-    crate::preview::mesh_view(&loaded.mesh, &loaded.tangents, cutoff, |material, slot| {
-        let Some(path) = material.maps.get(&slot).filter(|_| loaded.mesh.uvs.is_some()) else { return Ok(None) };
-        let Some(file) = crate::db::asset_file(db, input, path.clone()) else { return Ok(None) };
-        match slot {
-            TextureSlot::Opacity => crate::db::opacity_texture(db, file).map(Some),
-            _ => crate::db::decoded_texture(db, file).map(Some),
-        }
     })
 }

@@ -12,6 +12,7 @@ use std::collections::{BTreeMap, HashMap};
 use std::path::PathBuf;
 use std::sync::Arc;
 
+use crate::kinds::mesh_queries::LoadedMesh;
 use crate::mesh::gltf::GltfFiles;
 
 use super::layout::Layout;
@@ -27,8 +28,6 @@ use crate::gpu::PlaneImages;
 use crate::kinds::billboard_cloud::settings::Settings as Own;
 use crate::kinds::mesh_queries::{loaded_mesh, mesh_cache_key, mesh_textures};
 use crate::texture::{SurfaceKind, Texture, TextureSlot};
-
-pub(crate) use super::reduced_queries::{reduced_map_image, reduced_map_key, reduced_maps};
 
 // Planes 2: each plane is fitted to its faces (least squares within ε). 3: faces then move to
 // their nearest plane holding their material (rounds of reassignment and refitting). 5: a
@@ -71,10 +70,6 @@ pub(crate) const SWITCH: Stage = Stage { name: "switch", version: 6 };
 pub(crate) const MAPS: Stage = Stage { name: "maps", version: 1 };
 /// The cache keys of surfaces stored smaller than they are made (`levels::SurfaceHalvings`).
 pub(crate) const SURFACE_HALVINGS: Stage = Stage { name: "surface-halvings", version: 1 };
-
-/// The deviation (a fraction of the mesh's largest extent) up to which a reduced level's
-/// simplifier prefers stopping to reaching its budget.
-pub(crate) const REDUCE_MAX_ERROR: f32 = 0.01;
 
 impl KeyPart for crate::packing::PageSettings {
     fn add_to(&self, key: CacheKeyBuilder) -> CacheKeyBuilder {
@@ -641,7 +636,7 @@ pub(crate) fn atlas_recipe_key(db: &dyn Db, asset: Asset, level: u32) -> CacheKe
 
 /// `key` with the contents of every texture the mesh's materials name: what the renders of the
 /// atlas and of an impostor's frames sample.
-fn with_mesh_textures(db: &dyn Db, asset: Asset, key: CacheKeyBuilder) -> CacheKey {
+pub(super) fn with_mesh_textures(db: &dyn Db, asset: Asset, key: CacheKeyBuilder) -> CacheKey {
     let textures =
         mesh_textures(db, asset).iter().filter_map(|path| asset_file(db, asset, path.clone())).collect::<Vec<_>>();
     key_with_files(db, key, textures).finish()
@@ -800,7 +795,7 @@ pub(crate) fn reduced_level(
         crate::mesh::reduce::TriangleBudget::Triangles(count) => key.part("triangles").part(&count),
         crate::mesh::reduce::TriangleBudget::Ratio(ratio) => key.part("ratio").part(&ratio),
     };
-    let key = key.part(&REDUCE_MAX_ERROR).finish();
+    let key = key.part(&super::reduced::REDUCE_MAX_ERROR).finish();
     let from_entry = |entry: CacheEntry| {
         let (figures, obj, geometry) = crate::kinds::mesh_queries::written_mesh_from_entry(entry)?;
         Some(super::reduced::ReducedLevel { obj, geometry, figures })
@@ -841,7 +836,7 @@ pub(crate) fn impostor_frames(
         });
     }
     let loaded = loaded_mesh(db, asset)?;
-    let view = super::source_view_mesh(db, asset, &loaded)?;
+    let view = source_view_mesh(db, asset, &loaded)?;
     let sphere = super::planes::bounding_sphere(&loaded.mesh.positions);
     timed(db, IMPOSTOR, name, || {
         let gpu = crate::gpu::gpu().map_err(|error| Diagnostic::new(main_file, error.to_string()))?;
@@ -892,75 +887,19 @@ pub(crate) fn impostor_recipe_key(db: &dyn Db, asset: Asset, level: u32) -> Cach
     with_mesh_textures(db, asset, key)
 }
 
-/// How far each level of a chain holds against the source (stage `switch`, `measure_chain`),
-/// level by level: a level is measured only up to the level before's switch size (it is never
-/// shown larger), so each level's sizes wait for the level before's choice. A level's figures
-/// (those of its candidates, measured together: each one's depends on the others', which may
-/// outrank it, `preview::holds`) are kept in the persistent cache under the hash of every file
-/// its slots write (as engines draw them), the source's mesh and textures, the cutoff, the sizes
-/// measured and the GPU family, the source rendered once per view and size for all levels; an
-/// edit measures again only the levels it changed and those whose sizes it changed.
-#[salsa::tracked(returns(clone))]
-pub(crate) fn chain_holds(db: &dyn Db, asset: Asset) -> Result<Arc<Vec<crate::preview::Hold>>, Diagnostic> {
-    let mut files = crate::kinds::AssetOutputs::default();
-    let (reports, _) = super::level_files(db, asset, std::path::Path::new(""), &mut files)?;
-    let source_key = stage_key(SWITCH)
-        .part(crate::gpu::adapter_family())
-        .part(&mesh_cache_key(db, asset, asset.main_file(db).clone()).0)
-        .part(&billboard_alpha_cutoff(db, asset));
-    let source_key = with_mesh_textures(db, asset, source_key);
-    let settings = asset.settings(db);
-    let slots = super::levels::slots(settings);
-    let level_key = |level_slots: &[u32], sizes: &[u32]| {
-        let key = sizes.iter().fold(stage_key(SWITCH).part(&source_key.0), |key, size| key.part(size));
-        level_slots
-            .iter()
-            .fold(key, |key, &slot| {
-                let folder = std::path::PathBuf::from(super::levels::level_folder(settings, slot));
-                let slot_files = files.files.iter().filter(|(path, _, _)| path.starts_with(&folder));
-                slot_files.fold(key.part(&slot), |key, (path, _, bytes)| key.part(path).part(&blake3::hash(bytes)))
-            })
-            .finish()
-    };
-    let label = asset.name(db);
-    let from_entry = |entry: CacheEntry| entry.parts::<Vec<crate::preview::Hold>, 0>().map(|(holds, [])| holds);
-    let mut holds: Vec<crate::preview::Hold> = slots.iter().map(|_| crate::preview::Hold::unmeasured()).collect();
-    let (mut ran, mut shown_up_to) = (false, u32::MAX);
-    // The source's renders, shared by the levels' measurements.
-    let mut source_views = crate::preview::SourceViews::default();
-    for level in 0..super::levels::level_count(settings) {
-        let sizes: Vec<u32> = crate::preview::HOLD_SIZES.into_iter().filter(|&size| size <= shown_up_to).collect();
-        // A candidate over its level's bytes is never chosen: it is not measured; nor is a level
-        // after one that is never shown.
-        let level_slots: Vec<u32> = (0..slots.len() as u32)
-            .filter(|&slot| slots[slot as usize].level == level && !sizes.is_empty())
-            .filter(|&slot| !super::chain_outputs::over_budget(db, asset, slot, &reports[slot as usize]))
-            .collect();
-        if !level_slots.is_empty() {
-            let key = level_key(&level_slots, &sizes);
-            let cached =
-                load_cached(db, SWITCH.name, key, from_entry).filter(|cached| cached.len() == level_slots.len());
-            let measured = match cached {
-                Some(measured) => measured,
-                None => {
-                    ran = true;
-                    let measured = timed(db, SWITCH, label, || {
-                        let measured_slots = (level_slots.as_slice(), sizes.as_slice());
-                        super::chain_outputs::measure_chain(db, asset, &files, measured_slots, &mut source_views)
-                    })?;
-                    crate::db::store_cached(db, SWITCH.name, key, || CacheEntry::new(&measured, Vec::new(), true));
-                    measured
-                }
-            };
-            for (slot, hold) in level_slots.into_iter().zip(measured) {
-                holds[slot as usize] = hold;
-            }
+/// The source mesh with its decoded maps (mipmapped as for rendering).
+pub(super) fn source_view_mesh(
+    db: &dyn Db,
+    input: Asset,
+    loaded: &LoadedMesh,
+) -> Result<crate::gpu::ViewMesh, Diagnostic> {
+    let cutoff = input.settings(db).own::<Own>().billboard.alpha_cutoff;
+    crate::preview::mesh_view(&loaded.mesh, &loaded.tangents, cutoff, |material, slot| {
+        let Some(path) = material.maps.get(&slot).filter(|_| loaded.mesh.uvs.is_some()) else { return Ok(None) };
+        let Some(file) = crate::db::asset_file(db, input, path.clone()) else { return Ok(None) };
+        match slot {
+            TextureSlot::Opacity => crate::db::opacity_texture(db, file).map(Some),
+            _ => crate::db::decoded_texture(db, file).map(Some),
         }
-        let chosen = super::chain_outputs::chosen_slot(db, asset, level, (&reports, &holds))?;
-        shown_up_to = holds[chosen as usize].holds_to.unwrap_or(0).min(shown_up_to);
-    }
-    if !ran {
-        record_cache_hit(db, SWITCH, label);
-    }
-    Ok(Arc::new(holds))
+    })
 }

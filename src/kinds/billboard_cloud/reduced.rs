@@ -4,69 +4,26 @@
 //! packed (albedo + opacity, mra, normal: `texture::channel_packing`) and block-compressed by
 //! the one texture tail into the level's `materials/<name>/`, each at most the level's largest
 //! side, an `Auto` candidate's as large as its bytes allow beside its mesh (`allot_maps`). The
-//! pure steps from mesh to files (`reduce_level`), their stage instances and report (the
-//! preview and the viewer load the level as an engine does, its maps BC-decoded).
+//! pure steps from mesh to files (`reduce_level`), maps and materials; the tracked functions
+//! are `reduced_queries`', the stage instances and files `reduced_outputs`'.
 
-use std::path::Path;
 use std::sync::Arc;
 
 use super::levels;
-use super::queries::{level_label, reduced_level, reduced_maps, MAPS, REDUCE};
-use crate::db::{Asset, Db};
-use crate::diagnostic::Diagnostic;
-use crate::kinds::mesh_queries::loaded_mesh;
-use crate::kinds::{AssetOutputs, StageInstance, SurfaceId};
+use crate::kinds::SurfaceId;
 use crate::mesh::gltf::{GltfMaterial, GltfMesh};
 use crate::mesh::MeshMaterial;
-use crate::summary::ArtifactRole;
 use crate::texture::{SurfaceKind, TextureSlot};
 
 /// The files a reduced level writes into its folder (beside its maps).
-const LEVEL_FILES: [&str; 4] = ["lod.obj", "lod.mtl", "lod.gltf", "lod.bin"];
+pub(super) const LEVEL_FILES: [&str; 4] = ["lod.obj", "lod.mtl", "lod.gltf", "lod.bin"];
 
 /// The folder of a reduced level's maps, inside the level's: `materials/<name>/`.
 pub(crate) const MATERIALS_FOLDER: &str = "materials";
 
-/// A reduced level's stage instances: `reduce` (reads the mesh stage, writes the level's files),
-/// and per surface of its maps `maps` (reads the MTL files, or an `Auto` candidate's `reduce`,
-/// and the decodes of the surface's source maps, added to `decodes`) and the tail's.
-pub(crate) fn reduce_instances(
-    db: &dyn Db,
-    asset: Asset,
-    level: u32,
-    (output_folder, report): (&Path, &std::path::PathBuf),
-    (mesh, decodes): (&StageInstance, &mut std::collections::BTreeMap<String, StageInstance>),
-) -> Vec<StageInstance> {
-    let settings = asset.settings(db);
-    let folder = levels::level_folder(settings, level);
-    let level_folder = output_folder.join(&folder);
-    let mut reduce = StageInstance::new(REDUCE, level_label(db, asset, level), &folder).reads_stage(mesh);
-    reduce.writes = LEVEL_FILES.map(|file| level_folder.join(file)).to_vec();
-    reduce.writes.push(report.clone());
-    let mut instances = vec![reduce.clone()];
-    let (Ok(loaded), Ok(maps)) = (loaded_mesh(db, asset), reduced_maps(db, asset, level)) else { return instances };
-    let name = asset.name(db);
-    // An `Auto` candidate's maps are sized by its mesh's bytes; the others' read only the
-    // materials (the MTL files) and their maps.
-    let sized_by_mesh = super::queries::level_settings(db, asset, level).max_bytes.is_some();
-    let libraries = crate::kinds::mesh_queries::mesh_library_paths_of(db, asset, asset.main_file(db).clone());
-    for (material, surface, _) in maps.surfaces(&folder) {
-        let mut pack = StageInstance::new(MAPS, surface.label(name), surface.instance());
-        match sized_by_mesh {
-            true => pack = pack.reads_stage(&reduce),
-            false => pack.reads.extend(libraries.iter().map(|library| crate::kinds::Read::File(library.clone()))),
-        }
-        let sources = surface_sources(&loaded.mesh.materials[material as usize], surface.surface);
-        for path in sources.into_iter().flatten() {
-            super::read_decode(&mut pack, path, decodes);
-        }
-        let written = surface.written_files(output_folder, &settings.encode);
-        let [mips, encode, mut write] = crate::kinds::tail_instances(name, &surface, &pack, &written);
-        write.writes.push(report.clone());
-        instances.extend([pack, mips, encode, write]);
-    }
-    instances
-}
+/// The deviation (a fraction of the mesh's largest extent) up to which a reduced level's
+/// simplifier prefers stopping to reaching its budget.
+pub(crate) const REDUCE_MAX_ERROR: f32 = 0.01;
 
 /// The source maps a material's `surface` is packed from, in `surface.slots()` order (none
 /// where it has no such map or no UVs to draw it with).
@@ -302,76 +259,6 @@ pub(crate) fn packed_materials(
     (mtl, gltf)
 }
 
-/// A reduced level's files (added to `outputs`): its mesh, material library, glTF and maps
-/// (through the tail); its part of the report and its mesh for the chain's document.
-pub(crate) fn reduced_level_outputs(
-    db: &dyn Db,
-    asset: Asset,
-    level: u32,
-    output_folder: &Path,
-    outputs: &mut AssetOutputs,
-) -> Result<(serde_json::Value, ReducedGltf), Diagnostic> {
-    let settings = asset.settings(db);
-    let folder = levels::level_folder(settings, level);
-    let level_folder = output_folder.join(&folder);
-    let loaded = loaded_mesh(db, asset)?;
-    let reduced = reduced_level(db, asset, level)?;
-    let maps = reduced_maps(db, asset, level)?;
-    let (mtl, materials) = packed_materials(&loaded.mesh.materials, &maps, settings.encode.packing.stem());
-    let triangle_materials = maps.triangle_materials(&reduced.geometry.triangle_materials);
-    let chain = ReducedGltf { level: reduced.clone(), materials, triangle_materials };
-    let gltf = crate::mesh::gltf::gltf_files(&chain.mesh(), "lod.bin", crate::mesh::gltf::GENERATOR);
-    let mtl = mtl.into_bytes();
-    let bytes = reduced.obj.len() + mtl.len();
-    // What the GPU holds: the glTF's vertex and index buffer, the maps with their mips.
-    let gpu_bytes = gltf.bin.len() as u64;
-    outputs.add(level_folder.join("lod.obj"), ArtifactRole::Mesh, reduced.obj.clone());
-    outputs.add(level_folder.join("lod.mtl"), ArtifactRole::Mtl, mtl.into());
-    outputs.add(level_folder.join("lod.gltf"), ArtifactRole::Gltf, gltf.gltf.into());
-    outputs.add(level_folder.join("lod.bin"), ArtifactRole::GltfBuffer, gltf.bin.into());
-    let written = super::write_level_surfaces(db, asset, level, output_folder, outputs)?;
-    // Each map's figures with its material's folder name.
-    let surfaces: Vec<serde_json::Value> = maps
-        .surfaces(&folder)
-        .iter()
-        .zip(&written.infos)
-        .map(|((_, surface, _), info)| {
-            let mut info = serde_json::to_value(info).expect("surface figures serialise");
-            let material = surface.group.rsplit('/').next().unwrap_or_default();
-            info["material"] = serde_json::json!(material);
-            info
-        })
-        .collect();
-    let figures = &reduced.figures;
-    let budget = match levels::settings_for(settings, level).reduced {
-        Some(crate::mesh::reduce::TriangleBudget::Triangles(count)) => serde_json::json!({ "triangles": count }),
-        Some(crate::mesh::reduce::TriangleBudget::Ratio(ratio)) => serde_json::json!({ "ratio": ratio }),
-        None => serde_json::Value::Null,
-    };
-    let (source_area, kept_area) = figures.cut_out_area;
-    let report = serde_json::json!({
-        "level": level,
-        "folder": folder,
-        "representation": "reduced",
-        "budget": budget,
-        "triangles": figures.triangles,
-        "vertices": figures.vertices,
-        // The simplifier's largest deviation: a fraction of the mesh's largest extent, and in
-        // world units.
-        "error": figures.error,
-        "error_world": figures.error_world,
-        "cards": { "source": figures.cards.0, "kept": figures.cards.1 },
-        // The leaf area drawn (cut-out materials), against the source's.
-        "leaf_area": if source_area > 0.0 { Some(((kept_area / source_area) * 1e4).round() / 1e4) } else { None },
-        // The largest side of its maps, and each one's figures.
-        "map_side": maps.side,
-        "surfaces": surfaces,
-        "bytes": bytes + written.bytes,
-        "gpu_bytes": gpu_bytes + written.gpu_bytes,
-    });
-    Ok((report, chain))
-}
-
 /// What a reduced level drew, against its source.
 #[derive(Clone, Debug, PartialEq, serde::Serialize, serde::Deserialize)]
 pub(crate) struct ReducedFigures {
@@ -398,7 +285,7 @@ pub(crate) struct ReducedLevel {
 
 /// `mesh` reduced to `budget` as a level's files.
 pub(crate) fn reduce_level(mesh: &crate::mesh::Mesh, budget: crate::mesh::reduce::TriangleBudget) -> ReducedLevel {
-    let settings = crate::mesh::reduce::ReduceSettings { budget, max_error: super::queries::REDUCE_MAX_ERROR };
+    let settings = crate::mesh::reduce::ReduceSettings { budget, max_error: REDUCE_MAX_ERROR };
     let reduced = crate::mesh::reduce::reduce_mesh(mesh, &settings);
     let extent = crate::mesh::reduce::mesh_extent(&mesh.positions);
     let out = &reduced.mesh;

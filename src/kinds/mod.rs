@@ -14,7 +14,7 @@ use crate::db::{Asset, Db, Stage, StageRun};
 use crate::diagnostic::Diagnostic;
 use crate::texture::tail::TailSettings;
 use crate::texture::{SurfaceKind, Texture};
-pub(crate) use surface::SurfaceId;
+pub(crate) use surface::{SurfaceId, SurfacePart};
 
 pub mod tail_queries;
 pub mod mesh_queries;

@@ -6,14 +6,35 @@ use std::path::{Path, PathBuf};
 use crate::texture::SurfaceKind;
 
 /// One surface that ends in the texture tail: `group` names what it belongs to inside the asset
-/// (a material's name; empty for an asset's own surfaces, like a billboard cloud's atlas).
+/// (a material's name; empty for an asset's own surfaces, like a billboard cloud's atlas), for
+/// labels and folders; `part` says the same in numbers, for the kind that made it to read back.
 #[derive(Clone, Debug, PartialEq, Eq, Hash, PartialOrd, Ord)]
 pub(crate) struct SurfaceId {
     pub group: String,
     pub surface: SurfaceKind,
+    pub part: SurfacePart,
+}
+
+/// Which part of its asset a surface belongs to, as its kind numbers them (a billboard cloud's
+/// level slot and a reduced level's material, an atlas's page; zero where a kind has one part),
+/// so that a kind finds the part again without parsing the group's text back.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq, Hash, PartialOrd, Ord)]
+pub(crate) struct SurfacePart {
+    pub index: u32,
+    pub item: Option<u32>,
 }
 
 impl SurfaceId {
+    /// The surface `surface` of the group `group`, the kind's only part of that name.
+    pub fn new(group: impl Into<String>, surface: SurfaceKind) -> SurfaceId {
+        SurfaceId { group: group.into(), surface, part: SurfacePart::default() }
+    }
+
+    /// The same part's surface `surface` (another of its surfaces).
+    pub fn sibling(&self, surface: SurfaceKind) -> SurfaceId {
+        SurfaceId { surface, ..self.clone() }
+    }
+
     /// The instance label of the surface's tail stages: `asset/group/surface` or `asset/surface`.
     pub fn label(&self, asset_name: &str) -> String {
         format!("{asset_name}/{}", self.instance())

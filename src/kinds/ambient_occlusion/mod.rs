@@ -39,7 +39,7 @@ pub struct AmbientOcclusion;
 
 /// The tail surface of a baked material.
 fn material_surface(folder: &str) -> SurfaceId {
-    SurfaceId { group: folder.to_string(), surface: SurfaceKind::Ao }
+    SurfaceId::new(folder, SurfaceKind::Ao)
 }
 
 /// The baked material a tail surface is.

@@ -21,7 +21,7 @@ use crate::db::{Asset, Db, StageRun, DECODE};
 use crate::diagnostic::{display_path, Diagnostic};
 use crate::kinds::checks::check_texture_file;
 use crate::kinds::source_copies::{material_copy_paths, output_materials, MaterialPlaces, OutputMaterial};
-use crate::kinds::{tail_instances, AssetOutputs, Job, Kind, Read, StageInstance, SurfaceId, Task};
+use crate::kinds::{tail_instances, AssetOutputs, Job, Kind, Read, StageInstance, SurfaceId, SurfacePart, Task};
 use crate::texture::tail::TailSettings;
 use crate::texture::{SurfaceKind, Texture};
 
@@ -37,12 +37,12 @@ pub struct Atlas;
 
 /// The tail surface of page `page`.
 fn page_surface(page: u32) -> SurfaceId {
-    SurfaceId { group: page_group(page), surface: SurfaceKind::Albedo }
+    SurfaceId { group: page_group(page), surface: SurfaceKind::Albedo, part: SurfacePart { index: page, item: None } }
 }
 
 /// The page a surface of this kind is.
-fn surface_page(surface: &SurfaceId) -> Option<u32> {
-    surface.group.strip_prefix("page")?.parse().ok()
+fn surface_page(surface: &SurfaceId) -> u32 {
+    surface.part.index
 }
 
 /// A page's texture and preview files.
@@ -274,9 +274,7 @@ impl Kind for Atlas {
     }
 
     fn surface_image(db: &dyn Db, asset: Asset, surface: &SurfaceId) -> Result<Arc<Texture>, Diagnostic> {
-        let page = surface_page(surface)
-            .ok_or_else(|| Diagnostic::new(asset.source_root(db), format!("no atlas page {}", surface.group)))?;
-        atlas_page(db, asset, page)
+        atlas_page(db, asset, surface_page(surface))
     }
 
     fn tail_settings(db: &dyn Db, asset: Asset, _surface: &SurfaceId) -> Result<TailSettings, Diagnostic> {
@@ -285,7 +283,7 @@ impl Kind for Atlas {
     }
 
     fn surface_recipe_key(db: &dyn Db, asset: Asset, surface: &SurfaceId) -> Result<Option<CacheKey>, Diagnostic> {
-        surface_page(surface).map(|page| page_recipe_key(db, asset, page)).transpose()
+        page_recipe_key(db, asset, surface_page(surface)).map(Some)
     }
 
     fn preview(

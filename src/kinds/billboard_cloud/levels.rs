@@ -428,11 +428,6 @@ pub(crate) fn chain_slot(settings: &Settings, level: u32) -> Option<u32> {
     slots.iter().position(|slot| slot.level == level && slot.candidate.is_none()).map(|slot| slot as u32)
 }
 
-/// The slot whose folder is `folder` ([`level_folder`]).
-pub(crate) fn slot_of_folder(settings: &Settings, folder: &str) -> Option<u32> {
-    (0..slot_count(settings)).find(|&slot| level_folder(settings, slot) == folder)
-}
-
 /// The level of a chain folder name (`lod2` → 2); the asset's own folder is level 0.
 pub fn level_of_folder(folder: &str) -> Option<u32> {
     if folder.is_empty() {

@@ -55,7 +55,7 @@ use crate::texture::tail::TailSettings;
 use crate::texture::{SurfaceKind, Texture, TextureSlot};
 use queries::{billboard_layout, level_label, lod_files, render_label, source_view_mesh};
 use queries::{ATLAS, LAYOUT, LOD, PLANES, RENDER};
-use surfaces::{atlas_surfaces, level_of_surface, level_renders, read_decode, reduced_map_of, with_halvings};
+use surfaces::{level_renders, level_surfaces, read_decode, reduced_map_of, slot_of_surface, with_halvings};
 
 pub struct BillboardCloud;
 
@@ -295,10 +295,10 @@ impl Kind for BillboardCloud {
     }
 
     fn surface_image(db: &dyn Db, asset: Asset, surface: &SurfaceId) -> Result<Arc<Texture>, Diagnostic> {
-        if let Some((_, material, halvings)) = reduced_map_of(db, asset, surface)? {
+        if let Some((material, halvings)) = reduced_map_of(db, asset, surface)? {
             return reduced_queries::reduced_map_image(db, asset, (material, halvings), surface);
         }
-        let level = level_of_surface(db, asset, surface)?;
+        let level = slot_of_surface(db, asset, surface)?;
         let halvings = queries::level_settings(db, asset, level).surface_halvings.of(surface.surface);
         // Stored at its size, or (an `Auto` candidate's) at a level of its mip chain.
         let stored = |image: &Texture| {
@@ -332,10 +332,10 @@ impl Kind for BillboardCloud {
     }
 
     fn surface_recipe_key(db: &dyn Db, asset: Asset, surface: &SurfaceId) -> Result<Option<CacheKey>, Diagnostic> {
-        if let Some((_, material, halvings)) = reduced_map_of(db, asset, surface)? {
+        if let Some((material, halvings)) = reduced_map_of(db, asset, surface)? {
             return reduced_queries::reduced_map_key(db, asset, (material, halvings), surface.surface).map(Some);
         }
-        let level = level_of_surface(db, asset, surface)?;
+        let level = slot_of_surface(db, asset, surface)?;
         let key = match levels::is_impostor(asset.settings(db), level) {
             true => queries::impostor_recipe_key(db, asset, level),
             false => queries::atlas_recipe_key(db, asset, level),
@@ -344,12 +344,11 @@ impl Kind for BillboardCloud {
     }
 
     fn cutting_surface(surface: &SurfaceId) -> Option<SurfaceId> {
-        (surface.surface != SurfaceKind::Albedo)
-            .then(|| SurfaceId { group: surface.group.clone(), surface: SurfaceKind::Albedo })
+        (surface.surface != SurfaceKind::Albedo).then(|| surface.sibling(SurfaceKind::Albedo))
     }
 
     fn surface_parts_key(db: &dyn Db, asset: Asset, surface: &SurfaceId) -> Result<Option<CacheKey>, Diagnostic> {
-        let level = level_of_surface(db, asset, surface)?;
+        let level = slot_of_surface(db, asset, surface)?;
         if !levels::is_cloud(asset.settings(db), level) {
             return Ok(None);
         }
@@ -388,7 +387,7 @@ fn level_jobs(db: &dyn Db, asset: Asset, level: u32) -> Result<Vec<Job>, Diagnos
         queries::reduced_level(db, asset, level)?;
     }
     if !levels::is_cloud(asset.settings(db), level) {
-        return Ok(atlas_surfaces(db, asset, level)
+        return Ok(level_surfaces(db, asset, level)
             .into_iter()
             .map(|surface| Job { asset, label: surface.label(name), task: Task::Surface(surface), after: 1 })
             .collect());
@@ -396,7 +395,7 @@ fn level_jobs(db: &dyn Db, asset: Asset, level: u32) -> Result<Vec<Job>, Diagnos
     let label = level_label(db, asset, level);
     billboard_layout(db, asset, level)?;
     let lod = Job { asset, task: Task::step(Step::Lod { level }), after: 1, label: format!("{label}/lod") };
-    let surfaces = atlas_surfaces(db, asset, level);
+    let surfaces = level_surfaces(db, asset, level);
     let surface_jobs = surfaces.iter().map(|surface| Job {
         asset,
         label: surface.label(name),
@@ -451,7 +450,7 @@ fn level_tail_instances(
 ) -> Vec<StageInstance> {
     let encode_settings = &asset.settings(db).encode;
     let mut tails = Vec::new();
-    for surface in atlas_surfaces(db, asset, level) {
+    for surface in level_surfaces(db, asset, level) {
         let written = surface.written_files(output_folder, encode_settings);
         let [mips, encode, mut write] = tail_instances(asset.name(db), &surface, image, &written);
         write.writes.push(report.clone());

@@ -10,7 +10,7 @@
 use std::sync::Arc;
 
 use super::levels;
-use crate::kinds::SurfaceId;
+use crate::kinds::{SurfaceId, SurfacePart};
 use crate::mesh::gltf::{GltfMaterial, GltfMesh};
 use crate::mesh::MeshMaterial;
 use crate::texture::{SurfaceKind, TextureSlot};
@@ -63,25 +63,30 @@ pub(crate) struct ReducedMaps {
 }
 
 impl ReducedMaps {
-    /// Every map surface (material index, surface id, halvings); a surface's group is
-    /// `<folder>/materials/<material folder>`.
-    pub fn surfaces(&self, folder: &str) -> Vec<(u32, SurfaceId, u32)> {
+    /// Every map surface of the level in slot `slot` and folder `folder`, with its halvings: a
+    /// surface's group is `<folder>/materials/<material folder>`, its part the slot and the
+    /// material's index among the source's.
+    pub fn surfaces(&self, folder: &str, slot: u32) -> Vec<(SurfaceId, u32)> {
         let mut surfaces = Vec::new();
         for material in &self.materials {
+            let group = format!("{folder}/{MATERIALS_FOLDER}/{}", material.folder);
+            let part = SurfacePart { index: slot, item: Some(material.material) };
             for &(surface, halvings) in &material.surfaces {
-                let group = material_group(folder, &material.folder);
-                surfaces.push((material.material, SurfaceId { group, surface }, halvings));
+                surfaces.push((SurfaceId { group: group.clone(), surface, part }, halvings));
             }
         }
         surfaces
     }
 
-    /// The material whose maps are in the group `group` of the level in `folder`, and the
-    /// halvings of its `surface`.
-    pub fn find(&self, folder: &str, group: &str, surface: SurfaceKind) -> Option<(u32, u32)> {
-        let material = self.materials.iter().find(|material| material_group(folder, &material.folder) == group)?;
-        let &(_, halvings) = material.surfaces.iter().find(|(kind, _)| *kind == surface)?;
-        Some((material.material, halvings))
+    /// The maps of material `material` (its index among the source's), if the level draws it.
+    pub fn of_material(&self, material: u32) -> Option<&MaterialMaps> {
+        self.materials.iter().find(|maps| maps.material == material)
+    }
+
+    /// The halvings of material `material`'s `surface`, if the level has that map.
+    pub fn halvings(&self, material: u32, surface: SurfaceKind) -> Option<u32> {
+        let maps = self.of_material(material)?;
+        maps.surfaces.iter().find(|(kind, _)| *kind == surface).map(|&(_, halvings)| halvings)
     }
 
     /// Each triangle's material as the level's documents number them (its place among the used).
@@ -89,17 +94,6 @@ impl ReducedMaps {
         let used: Vec<u32> = self.materials.iter().map(|material| material.material).collect();
         source.iter().map(|material| used.binary_search(material).unwrap_or(0) as u32).collect()
     }
-}
-
-/// The group of a material's map surfaces in the level in `folder`.
-fn material_group(folder: &str, material_folder: &str) -> String {
-    format!("{folder}/{MATERIALS_FOLDER}/{material_folder}")
-}
-
-/// The level folder of a reduced level's map group (`lod1/materials/bark` → `lod1`).
-pub(crate) fn level_of_group(group: &str) -> Option<&str> {
-    let (folder, material) = group.rsplit_once(&format!("/{MATERIALS_FOLDER}/"))?;
-    (!material.contains('/')).then_some(folder)
 }
 
 /// Folder names for materials named `names`: each name's letters, digits, `-` and `_` (others

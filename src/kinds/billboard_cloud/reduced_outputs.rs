@@ -37,7 +37,8 @@ pub(crate) fn reduce_instances(
     // materials (the MTL files) and their maps.
     let sized_by_mesh = super::queries::level_settings(db, asset, level).max_bytes.is_some();
     let libraries = crate::kinds::mesh_queries::mesh_library_paths_of(db, asset, asset.main_file(db).clone());
-    for (material, surface, _) in maps.surfaces(&folder) {
+    for (surface, _) in maps.surfaces(&folder, level) {
+        let material = surface.part.item.unwrap_or_default();
         let mut pack = StageInstance::new(MAPS, surface.label(name), surface.instance());
         match sized_by_mesh {
             true => pack = pack.reads_stage(&reduce),
@@ -85,12 +86,13 @@ pub(crate) fn reduced_level_outputs(
     let written = surfaces::write_level_surfaces(db, asset, level, output_folder, outputs)?;
     // Each map's figures with its material's folder name.
     let surfaces: Vec<serde_json::Value> = maps
-        .surfaces(&folder)
+        .surfaces(&folder, level)
         .iter()
         .zip(&written.infos)
-        .map(|((_, surface, _), info)| {
+        .map(|((surface, _), info)| {
             let mut info = serde_json::to_value(info).expect("surface figures serialise");
-            let material = surface.group.rsplit('/').next().unwrap_or_default();
+            let of_material = surface.part.item.and_then(|material| maps.of_material(material));
+            let material = of_material.map_or("", |maps| maps.folder.as_str());
             info["material"] = serde_json::json!(material);
             info
         })

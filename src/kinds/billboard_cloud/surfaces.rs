@@ -6,27 +6,28 @@
 use std::collections::BTreeMap;
 use std::path::Path;
 
-use super::{levels, queries, reduced, reduced_queries};
+use super::{levels, queries, reduced_queries};
 use crate::cache::CacheKey;
 use crate::db::{Asset, Db, DECODE};
 use crate::diagnostic::{display_path, Diagnostic};
-use crate::kinds::{AssetOutputs, Read, StageInstance, SurfaceId};
+use crate::kinds::{AssetOutputs, Read, StageInstance, SurfaceId, SurfacePart};
 use crate::summary::ArtifactRole;
 use crate::texture::SurfaceKind;
 
 /// A level's surfaces: a cloud's four atlas surfaces, an impostor's three (their group is the
-/// level's folder); a reduced level's maps, up to three a material (`reduced::ReducedMaps`;
-/// none before its mesh is made, or when it fails).
-pub(super) fn atlas_surfaces(db: &dyn Db, asset: Asset, level: u32) -> Vec<SurfaceId> {
+/// level's folder, their part the level's slot); a reduced level's maps, up to three a material
+/// (`reduced::ReducedMaps`; none before its mesh is made, or when it fails).
+pub(super) fn level_surfaces(db: &dyn Db, asset: Asset, level: u32) -> Vec<SurfaceId> {
     let settings = asset.settings(db);
     let folder = levels::level_folder(settings, level);
     if levels::is_reduced(settings, level) {
         let Ok(maps) = reduced_queries::reduced_maps(db, asset, level) else { return Vec::new() };
-        return maps.surfaces(&folder).into_iter().map(|(_, surface, _)| surface).collect();
+        return maps.surfaces(&folder, level).into_iter().map(|(surface, _)| surface).collect();
     }
     let kinds: &[SurfaceKind] =
         if levels::is_impostor(settings, level) { &levels::IMPOSTOR_SURFACES } else { &SurfaceKind::BILLBOARD };
-    kinds.iter().map(|&surface| SurfaceId { group: folder.clone(), surface }).collect()
+    let part = SurfacePart { index: level, item: None };
+    kinds.iter().map(|&surface| SurfaceId { group: folder.clone(), surface, part }).collect()
 }
 
 /// `key` for `surface` of `level` when the surface is stored smaller than it is made (its
@@ -39,40 +40,35 @@ pub(super) fn with_halvings(db: &dyn Db, asset: Asset, level: u32, surface: &Sur
     }
 }
 
-/// The slot a surface belongs to (its group is the slot's folder, or a reduced level's
-/// material's: `<folder>/materials/<name>`).
-pub(super) fn level_of_surface(db: &dyn Db, asset: Asset, surface: &SurfaceId) -> Result<u32, Diagnostic> {
-    let settings = asset.settings(db);
-    let slot = levels::slot_of_folder(settings, &surface.group).or_else(|| {
-        let folder = reduced::level_of_group(&surface.group)?;
-        levels::slot_of_folder(settings, folder).filter(|&slot| levels::is_reduced(settings, slot))
-    });
-    slot.ok_or_else(|| Diagnostic::new(asset.main_file(db), format!("no LOD level `{}`", surface.group)))
+/// The slot a surface belongs to (its part's index), one the asset still has.
+pub(super) fn slot_of_surface(db: &dyn Db, asset: Asset, surface: &SurfaceId) -> Result<u32, Diagnostic> {
+    let slot = surface.part.index;
+    match slot < levels::slot_count(asset.settings(db)) {
+        true => Ok(slot),
+        false => Err(Diagnostic::new(asset.main_file(db), format!("no LOD level `{}`", surface.group))),
+    }
 }
 
-/// A reduced level's map surface: its slot, material and halvings.
-pub(super) fn reduced_map_of(
-    db: &dyn Db,
-    asset: Asset,
-    surface: &SurfaceId,
-) -> Result<Option<(u32, u32, u32)>, Diagnostic> {
-    let level = level_of_surface(db, asset, surface)?;
-    if !levels::is_reduced(asset.settings(db), level) {
+/// A reduced level's map surface: its material (the part's item) and halvings; none for the
+/// surfaces of other levels.
+pub(super) fn reduced_map_of(db: &dyn Db, asset: Asset, surface: &SurfaceId) -> Result<Option<(u32, u32)>, Diagnostic> {
+    let level = slot_of_surface(db, asset, surface)?;
+    let Some(material) = surface.part.item.filter(|_| levels::is_reduced(asset.settings(db), level)) else {
         return Ok(None);
-    }
-    let folder = levels::level_folder(asset.settings(db), level);
+    };
     let maps = reduced_queries::reduced_maps(db, asset, level)?;
-    let (material, halvings) = maps
-        .find(&folder, &surface.group, surface.surface)
-        .ok_or_else(|| Diagnostic::new(asset.main_file(db), format!("no map `{}` in {folder}", surface.instance())))?;
-    Ok(Some((level, material, halvings)))
+    let halvings = maps.halvings(material, surface.surface).ok_or_else(|| {
+        let folder = levels::level_folder(asset.settings(db), level);
+        Diagnostic::new(asset.main_file(db), format!("no map `{}` in {folder}", surface.instance()))
+    })?;
+    Ok(Some((material, halvings)))
 }
 
 /// Whether some of a level's atlas surfaces are not in the persistent cache (so it renders; a
 /// reduced level never does).
 pub(super) fn level_renders(db: &dyn Db, asset: Asset, level: u32) -> bool {
     !levels::is_reduced(asset.settings(db), level)
-        && !atlas_surfaces(db, asset, level)
+        && !level_surfaces(db, asset, level)
             .iter()
             .all(|surface| crate::kinds::tail_queries::surface_in_cache(db, asset, surface))
 }
@@ -109,7 +105,7 @@ pub(super) fn write_level_surfaces(
     let encode = &asset.settings(db).encode;
     let mut written = LevelSurfaces { bytes: 0, gpu_bytes: 0, infos: Vec::new(), names: Vec::new() };
     let name = |path: &Path| path.file_name().map(|name| name.to_string_lossy().into_owned()).unwrap_or_default();
-    for surface in atlas_surfaces(db, asset, level) {
+    for surface in level_surfaces(db, asset, level) {
         let artifacts = crate::kinds::tail_queries::surface_artifacts(db, asset, surface.clone())?;
         let [texture_path, preview_path] = surface.artifact_paths(output_folder, encode);
         written.bytes += artifacts.texture_file.len();

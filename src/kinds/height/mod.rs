@@ -44,7 +44,7 @@ pub struct Height;
 
 /// The map's tail surface: the asset's own `height`.
 fn height_surface() -> SurfaceId {
-    SurfaceId { group: String::new(), surface: SurfaceKind::Height }
+    SurfaceId::new(String::new(), SurfaceKind::Height)
 }
 
 /// The meshes measured against the high one, as the settings ask.

@@ -33,7 +33,7 @@ pub struct Material;
 fn surfaces(parsed: &definition::MaterialFile) -> Vec<SurfaceId> {
     let materials = parsed.materials.iter();
     materials
-        .flat_map(|material| SurfaceKind::MATERIAL.map(|surface| SurfaceId { group: material.name.clone(), surface }))
+        .flat_map(|material| SurfaceKind::MATERIAL.map(|surface| SurfaceId::new(material.name.clone(), surface)))
         .collect()
 }
 
@@ -157,7 +157,7 @@ impl Kind for Material {
                 wrap: GltfWrap::Repeat,
             };
             for surface in SurfaceKind::MATERIAL {
-                let id = SurfaceId { group: material.name.clone(), surface };
+                let id = SurfaceId::new(material.name.clone(), surface);
                 let Ok(artifacts) = crate::kinds::tail_queries::surface_artifacts(db, asset, id.clone()) else {
                     continue;
                 };
@@ -199,7 +199,7 @@ impl Kind for Material {
                 }
             }
             // The material as glTF: a swatch square an engine or viewer can load as it is.
-            let folder = SurfaceId { group: material.name.clone(), surface: SurfaceKind::Albedo }.folder(output_folder);
+            let folder = SurfaceId::new(material.name.clone(), SurfaceKind::Albedo).folder(output_folder);
             let files = swatch_files(swatch, "material.bin", crate::mesh::gltf::GENERATOR);
             outputs.add(folder.join("material.gltf"), ArtifactRole::Gltf, files.gltf.into());
             outputs.add(folder.join("material.bin"), ArtifactRole::GltfBuffer, files.bin.into());

@@ -76,7 +76,7 @@ fn ao_source_map(db: &dyn Db, asset: Asset, material: &str) -> Result<Option<Map
     let Some(source) = crate::db::asset_named(db, name) else {
         return Err(Diagnostic::new(reader, format!("ao_source `{name}` names no asset of the pipeline")));
     };
-    let surface = SurfaceId { group: material.to_string(), surface: SurfaceKind::Ao };
+    let surface = SurfaceId::new(material, SurfaceKind::Ao);
     match source
         .kind(db)
         .provided_surface_stage(db, source, &surface)

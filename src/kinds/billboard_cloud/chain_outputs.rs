@@ -8,8 +8,9 @@ use std::sync::Arc;
 
 use super::chain_queries::{auto_bytes, chain_holds, chosen_slots};
 use super::level_outputs::{level_files, ChainMesh};
+use super::report::{AutoReport, CandidateReport, LevelReport, LodsDocument, LodsLevel, SurfaceFigures, SwitchFigures};
 use super::settings::Settings as Own;
-use super::{levels, lod_mesh, planes, settings};
+use super::{levels, lod_mesh, planes, report, settings};
 use crate::db::{Asset, Db};
 use crate::diagnostic::Diagnostic;
 use crate::kinds::mesh_queries::loaded_mesh;
@@ -25,9 +26,9 @@ pub(super) fn chain_files(
     db: &dyn Db,
     asset: Asset,
     output_folder: &Path,
-    (slot_reports, slot_meshes): (&[serde_json::Value], Vec<ChainMesh>),
+    (slot_reports, slot_meshes): (&[LevelReport], Vec<ChainMesh>),
     outputs: &mut AssetOutputs,
-) -> Result<(Vec<f32>, Vec<serde_json::Value>), Diagnostic> {
+) -> Result<(Vec<f32>, Vec<LevelReport>), Diagnostic> {
     let settings = asset.settings(db);
     let holds = chain_holds(db, asset)?;
     let chosen = chosen_slots(db, asset, slot_reports, &holds)?;
@@ -40,8 +41,8 @@ pub(super) fn chain_files(
         let mut level_report = slot_reports[slot as usize].clone();
         if let Some(auto) = auto_report(db, asset, level as u32, slot, (slot_reports, &holds)) {
             copy_candidate(outputs, output_folder, &levels::level_folder(settings, slot), &folder, level);
-            level_report["folder"] = serde_json::json!(folder);
-            level_report["auto"] = auto;
+            level_report.folder = folder.clone();
+            level_report.auto = Some(auto);
         }
         let mesh = meshes[slot as usize].take().expect("each level's own slot");
         chain.push(ChainLevel { folder, mesh });
@@ -54,11 +55,7 @@ pub(super) fn chain_files(
     let (document, coverage) = chain_document(&chain, &switch_sizes);
     outputs.add(output_folder.join("lods.gltf"), ArtifactRole::Gltf, document.into());
     for ((report, hold), &switch_size) in level_reports.iter_mut().zip(&level_holds).zip(&switch_sizes) {
-        if let serde_json::Value::Object(report) = report {
-            report.insert("switch_size".into(), serde_json::json!(switch_size));
-            report.insert("holds_to".into(), serde_json::json!(hold.holds_to));
-            report.insert("measured".into(), serde_json::json!(hold.measured));
-        }
+        report.switch = Some(SwitchFigures { switch_size, holds_to: hold.holds_to, measured: hold.measured.clone() });
     }
     let loaded = loaded_mesh(db, asset)?;
     let sphere = planes::bounding_sphere(&loaded.mesh.positions);
@@ -74,46 +71,41 @@ fn auto_report(
     asset: Asset,
     level: u32,
     chosen: u32,
-    (reports, holds): (&[serde_json::Value], &[crate::preview::Hold]),
-) -> Option<serde_json::Value> {
+    (reports, holds): (&[LevelReport], &[crate::preview::Hold]),
+) -> Option<AutoReport> {
     let settings = asset.settings(db);
     let Some(settings::LodLevel::Auto { max_bytes }) = settings.own::<Own>().billboard.lods.get(level as usize) else {
         return None;
     };
     let slots = levels::slots(settings);
-    let candidates: Vec<serde_json::Value> = (0..slots.len())
+    let candidates = (0..slots.len())
         .filter(|&slot| slots[slot].level == level)
         .map(|slot| {
             // Each surface's side: the albedo's, the others' at a half or a quarter of it where
             // that let the albedo double (`levels::allot_surfaces`); a reduced level's by
             // material (`bark/albedo`).
-            let side = |info: &serde_json::Value| {
-                let surface = info["surface"].as_str()?.to_lowercase();
-                let name = match info["material"].as_str() {
-                    Some(material) => format!("{material}/{surface}"),
-                    None => surface,
+            let side = |surface: &SurfaceFigures| {
+                let kind = surface.info.surface.name();
+                let name = match &surface.material {
+                    Some(material) => format!("{material}/{kind}"),
+                    None => kind.to_string(),
                 };
-                Some((name, info["width"].clone()))
+                (name, surface.info.width)
             };
-            let sides: serde_json::Map<String, serde_json::Value> =
-                reports[slot]["surfaces"].as_array().into_iter().flatten().filter_map(side).collect();
-            serde_json::json!({
-                "name": slots[slot].candidate,
-                "folder": levels::level_folder(settings, slot as u32),
-                "representation": reports[slot]["representation"],
-                "surface_sides": sides,
-                "gpu_bytes": reports[slot]["gpu_bytes"],
-                "holds_to": holds[slot].holds_to,
-                "measured": holds[slot].measured,
-                "outranked_at": holds[slot].outranked_at,
-            })
+            let figures = &reports[slot].figures;
+            CandidateReport {
+                name: slots[slot].candidate.clone(),
+                folder: levels::level_folder(settings, slot as u32),
+                representation: figures.representation,
+                surface_sides: figures.surfaces.iter().map(side).collect(),
+                gpu_bytes: figures.gpu_bytes,
+                holds_to: holds[slot].holds_to,
+                measured: holds[slot].measured.clone(),
+                outranked_at: holds[slot].outranked_at,
+            }
         })
         .collect();
-    Some(serde_json::json!({
-        "max_bytes": max_bytes,
-        "chosen": slots[chosen as usize].candidate,
-        "candidates": candidates,
-    }))
+    Some(AutoReport { max_bytes: *max_bytes, chosen: slots[chosen as usize].candidate.clone(), candidates })
 }
 
 /// The copies of the chosen candidates' files in their `Auto` levels' folders (`copy_candidate`):
@@ -152,7 +144,7 @@ fn copy_candidate(outputs: &mut AssetOutputs, output_folder: &Path, from: &str, 
         })
         .collect();
     for (path, role, bytes) in copies {
-        outputs.meanings.insert(path.clone(), serde_json::json!({ "lod": level }));
+        outputs.meanings.insert(path.clone(), report::file_meaning(level as u32, None));
         outputs.add(path, role, bytes);
     }
 }
@@ -178,35 +170,29 @@ fn never_shown_warnings(file: &Path, switch_sizes: &[u32]) -> Vec<Diagnostic> {
         .collect()
 }
 
-/// A chain's `lods.json` for engines: the bounding sphere whose diameter on screen picks a level,
-/// and each level's folder, glTF, representation, bytes and switch size (from `reports`, the
-/// levels' parts of the report with their switch sizes).
-fn lods_document(asset: &str, (center, radius): (glam::Vec3, f32), reports: &[serde_json::Value]) -> Vec<u8> {
-    let levels: Vec<serde_json::Value> = reports
+/// A chain's `lods.json` for engines ([`LodsDocument`]): the bounding sphere whose diameter on
+/// screen picks a level, and each level's glTF, representation, bytes and switch size (from
+/// `reports`, the levels' parts of the report with their switch sizes).
+fn lods_document(asset: &str, (center, radius): (glam::Vec3, f32), reports: &[LevelReport]) -> Vec<u8> {
+    let levels = reports
         .iter()
-        .map(|report| {
-            let folder = report["folder"].as_str().unwrap_or_default();
-            serde_json::json!({
-                "level": report["level"],
-                "gltf": format!("{folder}/lod.gltf"),
-                "representation": report["representation"],
-                "triangles": report["triangles"],
-                "gpu_bytes": report["gpu_bytes"],
-                "switch_size": report["switch_size"],
-            })
+        .map(|report| LodsLevel {
+            level: report.level,
+            gltf: format!("{}/lod.gltf", report.folder),
+            representation: report.figures.representation,
+            triangles: report.figures.triangles,
+            gpu_bytes: report.figures.gpu_bytes,
+            switch_size: report.switch.as_ref().map(|switch| switch.switch_size),
         })
         .collect();
-    let document = serde_json::json!({
-        "asset": asset,
-        "center": center.to_array(),
-        "radius": radius,
-        // Show level k while the sphere's diameter on screen, in pixels, is at most its
-        // switch_size and more than level k + 1's; above level 0's, the source. A level that
-        // never holds within one px-shift unit has 0.
-        "switch_size_unit": "pixels across the bounding sphere on screen",
-        "levels": levels,
-    });
-    let mut bytes = serde_json::to_vec_pretty(&document).expect("documents serialise");
+    let document = LodsDocument {
+        asset,
+        center: center.to_array(),
+        radius,
+        switch_size_unit: "pixels across the bounding sphere on screen",
+        levels,
+    };
+    let mut bytes = report::sorted_json(&document);
     bytes.push(b'\n');
     bytes
 }

@@ -6,6 +6,7 @@ use std::path::Path;
 use std::sync::Arc;
 
 use super::queries::{billboard_alpha_cutoff, source_view_mesh, with_mesh_textures, SWITCH};
+use super::report::LevelReport;
 use super::settings::Settings as Own;
 use super::{level_outputs, levels, planes, settings, views};
 use crate::cache::CacheEntry;
@@ -91,7 +92,7 @@ pub(crate) fn chain_holds(db: &dyn Db, asset: Asset) -> Result<Arc<Vec<crate::pr
 pub(super) fn chosen_slots(
     db: &dyn Db,
     asset: Asset,
-    reports: &[serde_json::Value],
+    reports: &[LevelReport],
     holds: &[crate::preview::Hold],
 ) -> Result<Vec<u32>, Diagnostic> {
     (0..levels::level_count(asset.settings(db))).map(|level| chosen_slot(db, asset, level, (reports, holds))).collect()
@@ -104,7 +105,7 @@ pub(crate) fn chosen_slot(
     db: &dyn Db,
     asset: Asset,
     level: u32,
-    (reports, holds): (&[serde_json::Value], &[crate::preview::Hold]),
+    (reports, holds): (&[LevelReport], &[crate::preview::Hold]),
 ) -> Result<u32, Diagnostic> {
     let settings = asset.settings(db);
     if let Some(slot) = levels::chain_slot(settings, level) {
@@ -118,7 +119,7 @@ pub(crate) fn chosen_slot(
         let hold = &holds[*slot];
         let at = hold.measured.iter().find(|figures| Some(figures.size) == hold.holds_to).or(hold.measured.first());
         let loss = at.and_then(|figures| figures.loss_px_shift).unwrap_or(0.0);
-        (std::cmp::Reverse(hold.holds_to), ordered(loss), reports[*slot]["gpu_bytes"].as_u64(), *slot)
+        (std::cmp::Reverse(hold.holds_to), ordered(loss), reports[*slot].figures.gpu_bytes, *slot)
     };
     fitting.min_by_key(rank).map(|slot| slot as u32).ok_or_else(|| {
         Diagnostic::new(
@@ -138,14 +139,14 @@ pub(super) fn auto_bytes(settings: &crate::config::Settings, level: u32) -> Opti
 
 /// Whether slot `slot` is a candidate whose bytes on the GPU (its `report`'s) pass its `Auto`
 /// level's.
-pub(crate) fn over_budget(db: &dyn Db, asset: Asset, slot: u32, report: &serde_json::Value) -> bool {
+pub(crate) fn over_budget(db: &dyn Db, asset: Asset, slot: u32, report: &LevelReport) -> bool {
     let settings = asset.settings(db);
     let Some(spec) = levels::slots(settings).into_iter().nth(slot as usize).filter(|spec| spec.candidate.is_some())
     else {
         return false;
     };
     let max_bytes = auto_bytes(settings, spec.level).unwrap_or(u64::MAX);
-    report["gpu_bytes"].as_u64().is_none_or(|bytes| bytes > max_bytes)
+    report.figures.gpu_bytes > max_bytes
 }
 
 /// A loss as an integer that orders as the loss does (in millionths of a px-shift unit).

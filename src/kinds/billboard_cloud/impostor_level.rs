@@ -12,6 +12,7 @@ use serde::{Deserialize, Serialize};
 
 use super::levels;
 use super::queries::{level_label, IMPOSTOR};
+use super::report::{ImpostorFigures, LevelDetail, LevelFigures, LevelReport, Representation, Side, SurfaceFigures};
 use crate::db::{Asset, Db};
 use crate::diagnostic::Diagnostic;
 use crate::kinds::mesh_queries::mesh_textures;
@@ -164,13 +165,13 @@ fn impostor_gltf(description: &ImpostorDescription, images: [Option<String>; 2])
 
 /// An impostor level's files (added to `outputs`), its part of the report, and its quad for the
 /// chain's document.
-pub(crate) fn impostor_level_outputs(
+pub(super) fn impostor_level_outputs(
     db: &dyn Db,
     asset: Asset,
     level: u32,
     output_folder: &Path,
     outputs: &mut AssetOutputs,
-) -> Result<(serde_json::Value, ImpostorGltf), Diagnostic> {
+) -> Result<(LevelReport, ImpostorGltf), Diagnostic> {
     let settings = asset.settings(db);
     let folder = levels::level_folder(settings, level);
     let level_folder = output_folder.join(&folder);
@@ -215,21 +216,23 @@ pub(crate) fn impostor_level_outputs(
     outputs.add(level_folder.join("impostor.json"), ArtifactRole::Table, json.into());
     outputs.add(level_folder.join("lod.gltf"), ArtifactRole::Gltf, gltf.gltf.into());
     outputs.add(level_folder.join("lod.bin"), ArtifactRole::GltfBuffer, gltf.bin.into());
-    let report = serde_json::json!({
-        "level": level,
-        "folder": folder,
-        "representation": "impostor",
-        "frames": impostor.grid.frames,
-        "hemi": impostor.grid.is_hemi(),
-        "frame_size": impostor.frame_size,
+    let detail = ImpostorFigures {
+        frames: impostor.grid.frames,
+        hemi: impostor.grid.is_hemi(),
+        frame_size: impostor.frame_size,
+        atlas: Side { width: side, height: side },
+    };
+    let figures = LevelFigures {
+        representation: Representation::Impostor,
         // The shader draws the hull as a fan of six (the glTF's quad, for loaders without it: 2).
-        "triangles": 6,
-        "atlas": { "width": side, "height": side },
-        "surfaces": written.infos,
+        triangles: 6,
         // The bytes an engine loads: the three textures, the description and the quad's buffer.
-        "bytes": bytes,
-        "gpu_bytes": gpu_bytes,
-    });
+        bytes: bytes as u64,
+        gpu_bytes,
+        surfaces: SurfaceFigures::of(written.infos),
+        detail: LevelDetail::Impostor(detail),
+    };
+    let report = LevelReport::new(level, folder, figures);
     Ok((report, quad))
 }
 

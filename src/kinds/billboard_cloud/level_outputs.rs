@@ -5,7 +5,8 @@
 use std::path::Path;
 
 use super::queries::{billboard_layout, billboard_planes, lod_files};
-use super::{impostor_level, levels, lod_mesh, queries, reduced, reduced_outputs, surfaces};
+use super::report::{CloudAtlas, CloudFigures, LevelDetail, LevelFigures, LevelReport, Representation, SurfaceFigures};
+use super::{impostor_level, levels, lod_mesh, queries, reduced, reduced_outputs, report, surfaces};
 use crate::db::{Asset, Db};
 use crate::diagnostic::Diagnostic;
 use crate::kinds::AssetOutputs;
@@ -19,7 +20,7 @@ pub(super) fn level_files(
     asset: Asset,
     output_folder: &Path,
     outputs: &mut AssetOutputs,
-) -> Result<(Vec<serde_json::Value>, Vec<ChainMesh>), Diagnostic> {
+) -> Result<(Vec<LevelReport>, Vec<ChainMesh>), Diagnostic> {
     let settings = asset.settings(db);
     let mut reports = Vec::new();
     let mut meshes = Vec::new();
@@ -34,13 +35,10 @@ pub(super) fn level_files(
         } else {
             level_outputs(db, asset, slot, output_folder, outputs)?
         };
-        report["level"] = serde_json::json!(spec.level);
+        report.level = spec.level;
         // The manifest and the hot-reload batches name each file's level.
         if levels::is_chain(settings) {
-            let meaning = match &spec.candidate {
-                Some(name) => serde_json::json!({ "lod": spec.level, "candidate": name }),
-                None => serde_json::json!({ "lod": spec.level }),
-            };
+            let meaning = report::file_meaning(spec.level, spec.candidate.as_deref());
             for (path, _, _) in &outputs.files[first_file..] {
                 outputs.meanings.insert(path.clone(), meaning.clone());
             }
@@ -60,7 +58,7 @@ fn level_outputs(
     level: u32,
     output_folder: &Path,
     outputs: &mut AssetOutputs,
-) -> Result<(serde_json::Value, ChainMesh), Diagnostic> {
+) -> Result<(LevelReport, ChainMesh), Diagnostic> {
     let settings = asset.settings(db);
     let folder = levels::level_folder(settings, level);
     let level_settings = queries::level_settings(db, asset, level);
@@ -80,37 +78,36 @@ fn level_outputs(
     let written = surfaces::write_level_surfaces(db, asset, level, output_folder, outputs)?;
     bytes += written.bytes;
     gpu_bytes += written.gpu_bytes;
-    let surfaces = written.infos;
     let atlas_coverage = queries::atlas_coverage_fraction(db, asset, level)?;
     let chain = lod_mesh::lod_gltf_mesh(&layout.rectangles, &layout.layout, queries::billboard_alpha_cutoff(db, asset));
-    let report = serde_json::json!({
-        "level": level,
-        "folder": folder,
-        "representation": "billboard_cloud",
-        "planes": planes.planes.len(),
-        "quads": layout.layout.placements.len(),
-        "triangles": 2 * layout.layout.placements.len(),
-        // The quad budget (none: ε decides) and the ε it was met with.
-        "budget_quads": level_settings.planes.max_quads,
-        // Faces of solid materials drawn on another plane's quad too (crack filling).
-        "faces_also_drawn": layout.rectangles.iter().map(|rectangle| rectangle.also_drawn.len()).sum::<usize>(),
-        "epsilon": planes.epsilon_fraction,
-        "epsilon_world": planes.epsilon,
-        "max_error_world": planes.max_error,
-        "mean_error_world": planes.mean_error,
-        "seam_gap_world": planes.seam_gap,
-        "atlas": {
-            "width": layout.layout.width,
-            "height": layout.layout.height,
-            "texel_density": layout.layout.texel_density,
-            "screen_size": level_settings.screen_size,
-            "occupancy": (layout.layout.occupancy * 1e4).round() / 1e4,
-            "coverage": atlas_coverage,
+    let cloud = CloudFigures {
+        planes: planes.planes.len(),
+        quads: layout.layout.placements.len(),
+        budget_quads: level_settings.planes.max_quads,
+        faces_also_drawn: layout.rectangles.iter().map(|rectangle| rectangle.also_drawn.len()).sum(),
+        epsilon: planes.epsilon_fraction,
+        epsilon_world: planes.epsilon,
+        max_error_world: planes.max_error,
+        mean_error_world: planes.mean_error,
+        seam_gap_world: planes.seam_gap,
+        atlas: CloudAtlas {
+            width: layout.layout.width,
+            height: layout.layout.height,
+            texel_density: layout.layout.texel_density,
+            screen_size: level_settings.screen_size,
+            occupancy: (layout.layout.occupancy * 1e4).round() / 1e4,
+            coverage: atlas_coverage,
         },
-        "surfaces": surfaces,
-        "bytes": bytes,
-        "gpu_bytes": gpu_bytes,
-    });
+    };
+    let figures = LevelFigures {
+        representation: Representation::BillboardCloud,
+        triangles: 2 * layout.layout.placements.len() as u64,
+        bytes: bytes as u64,
+        gpu_bytes,
+        surfaces: SurfaceFigures::of(written.infos),
+        detail: LevelDetail::Cloud(cloud),
+    };
+    let report = LevelReport::new(level, folder, figures);
     Ok((report, ChainMesh::Cloud(Box::new(chain))))
 }
 

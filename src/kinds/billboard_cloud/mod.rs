@@ -22,6 +22,7 @@ pub mod atlas;
 pub mod lod_mesh;
 pub mod lod_preview;
 pub mod levels;
+mod report;
 pub mod reduced;
 pub mod queries;
 mod reduced_queries;
@@ -504,33 +505,28 @@ fn billboard_outputs(
     let name = asset.name(db);
     let mut outputs = AssetOutputs::default();
     let (mut slot_reports, slot_meshes) = level_outputs::level_files(db, asset, output_folder, &mut outputs)?;
-    let mut report = serde_json::json!({
-        "asset": name,
-        "kind": crate::config::AssetKind::BillboardCloud.name(),
-        "mesh": display_path(asset.main_file(db)),
-        "faces": loaded.mesh.triangles.len(),
-        "alpha_cutoff": settings.own::<Own>().billboard.alpha_cutoff,
-    });
-    let fields = report.as_object_mut().expect("an object");
     // The mesh's warnings, then the chain's (a level never shown).
     outputs.warnings = loaded.warnings.iter().map(ErrorSummary::from).collect();
-    if levels::is_chain(settings) {
-        let (coverage, level_reports) =
+    let levels = if levels::is_chain(settings) {
+        let (screen_coverage, levels) =
             chain_outputs::chain_files(db, asset, output_folder, (slot_reports.as_slice(), slot_meshes), &mut outputs)?;
-        // The least share of a 1920 × 1080 viewport's area at which each level is shown (see
-        // `lod_mesh::screen_coverage`), as `lods.gltf` states it.
-        fields.insert("screen_coverage".into(), serde_json::json!(coverage));
-        fields.insert("levels".into(), serde_json::Value::Array(level_reports));
-    } else if let Some(serde_json::Value::Object(level)) = slot_reports.pop() {
+        report::ReportLevels::Chain { screen_coverage, levels }
+    } else {
         // One level: its figures are the asset's.
-        fields.extend(level.into_iter().filter(|(key, _)| key != "level" && key != "folder"));
-    }
-    fields.insert(
-        "stage_ms".into(),
-        serde_json::to_value(crate::kinds::asset_stage_ms(name, runs)).expect("times serialise"),
-    );
-    fields.insert("warnings".into(), serde_json::to_value(&outputs.warnings).expect("warnings serialise"));
-    outputs.report = Some(serde_json::to_vec_pretty(&report).expect("reports serialise"));
+        let one = slot_reports.pop().ok_or_else(|| Diagnostic::new(asset.main_file(db), "no level to bake"))?;
+        report::ReportLevels::One(one.figures)
+    };
+    let report = report::AssetReport {
+        asset: name,
+        kind: crate::config::AssetKind::BillboardCloud.name(),
+        mesh: display_path(asset.main_file(db)),
+        faces: loaded.mesh.triangles.len(),
+        alpha_cutoff: settings.own::<Own>().billboard.alpha_cutoff,
+        levels,
+        stage_ms: crate::kinds::asset_stage_ms(name, runs),
+        warnings: outputs.warnings.clone(),
+    };
+    outputs.report = Some(report::sorted_json(&report));
     Ok(outputs)
 }
 

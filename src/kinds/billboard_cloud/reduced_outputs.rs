@@ -7,7 +7,8 @@ use std::path::Path;
 use super::queries::{level_label, reduced_level, MAPS, REDUCE};
 use super::reduced::{packed_materials, surface_sources, ReducedGltf, LEVEL_FILES};
 use super::reduced_queries::reduced_maps;
-use super::{levels, surfaces};
+use super::report::{Cards, LevelDetail, LevelFigures, LevelReport, ReducedBudget, Representation, SurfaceFigures};
+use super::{levels, report, surfaces};
 use crate::db::{Asset, Db};
 use crate::diagnostic::Diagnostic;
 use crate::kinds::mesh_queries::loaded_mesh;
@@ -64,7 +65,7 @@ pub(crate) fn reduced_level_outputs(
     level: u32,
     output_folder: &Path,
     outputs: &mut AssetOutputs,
-) -> Result<(serde_json::Value, ReducedGltf), Diagnostic> {
+) -> Result<(LevelReport, ReducedGltf), Diagnostic> {
     let settings = asset.settings(db);
     let folder = levels::level_folder(settings, level);
     let level_folder = output_folder.join(&folder);
@@ -85,44 +86,40 @@ pub(crate) fn reduced_level_outputs(
     outputs.add(level_folder.join("lod.bin"), ArtifactRole::GltfBuffer, gltf.bin.into());
     let written = surfaces::write_level_surfaces(db, asset, level, output_folder, outputs)?;
     // Each map's figures with its material's folder name.
-    let surfaces: Vec<serde_json::Value> = maps
+    let surfaces: Vec<SurfaceFigures> = maps
         .surfaces(&folder, level)
         .iter()
-        .zip(&written.infos)
+        .zip(written.infos)
         .map(|((surface, _), info)| {
-            let mut info = serde_json::to_value(info).expect("surface figures serialise");
             let of_material = surface.part.item.and_then(|material| maps.of_material(material));
-            let material = of_material.map_or("", |maps| maps.folder.as_str());
-            info["material"] = serde_json::json!(material);
-            info
+            let material = of_material.map_or(String::new(), |maps| maps.folder.clone());
+            SurfaceFigures { info, material: Some(material) }
         })
         .collect();
     let figures = &reduced.figures;
     let budget = match levels::settings_for(settings, level).reduced {
-        Some(crate::mesh::reduce::TriangleBudget::Triangles(count)) => serde_json::json!({ "triangles": count }),
-        Some(crate::mesh::reduce::TriangleBudget::Ratio(ratio)) => serde_json::json!({ "ratio": ratio }),
-        None => serde_json::Value::Null,
+        Some(crate::mesh::reduce::TriangleBudget::Triangles(count)) => Some(ReducedBudget::Triangles(count)),
+        Some(crate::mesh::reduce::TriangleBudget::Ratio(ratio)) => Some(ReducedBudget::Ratio(ratio)),
+        None => None,
     };
     let (source_area, kept_area) = figures.cut_out_area;
-    let report = serde_json::json!({
-        "level": level,
-        "folder": folder,
-        "representation": "reduced",
-        "budget": budget,
-        "triangles": figures.triangles,
-        "vertices": figures.vertices,
-        // The simplifier's largest deviation: a fraction of the mesh's largest extent, and in
-        // world units.
-        "error": figures.error,
-        "error_world": figures.error_world,
-        "cards": { "source": figures.cards.0, "kept": figures.cards.1 },
-        // The leaf area drawn (cut-out materials), against the source's.
-        "leaf_area": if source_area > 0.0 { Some(((kept_area / source_area) * 1e4).round() / 1e4) } else { None },
-        // The largest side of its maps, and each one's figures.
-        "map_side": maps.side,
-        "surfaces": surfaces,
-        "bytes": bytes + written.bytes,
-        "gpu_bytes": gpu_bytes + written.gpu_bytes,
-    });
+    let detail = report::ReducedFigures {
+        budget,
+        vertices: figures.vertices,
+        error: figures.error,
+        error_world: figures.error_world,
+        cards: Cards { source: figures.cards.0, kept: figures.cards.1 },
+        leaf_area: (source_area > 0.0).then(|| ((kept_area / source_area) * 1e4).round() / 1e4),
+        map_side: maps.side,
+    };
+    let figures = LevelFigures {
+        representation: Representation::Reduced,
+        triangles: figures.triangles,
+        bytes: (bytes + written.bytes) as u64,
+        gpu_bytes: gpu_bytes + written.gpu_bytes,
+        surfaces,
+        detail: LevelDetail::Reduced(detail),
+    };
+    let report = LevelReport::new(level, folder, figures);
     Ok((report, chain))
 }

@@ -55,7 +55,7 @@ pub(crate) fn same_report_on_disk(path: &Path, report: &[u8]) -> Option<Vec<u8>>
 
 /// One artifact in the manifest.
 #[derive(Clone, Debug, PartialEq, Eq, Serialize, Deserialize)]
-pub(crate) struct ManifestEntry {
+pub struct ManifestEntry {
     pub asset: String,
     /// blake3 hex digest of the file.
     pub hash: String,
@@ -72,7 +72,7 @@ pub(crate) struct ManifestEntry {
 
 /// `<output>/manifest.json`: paths are relative to the project folder, with `/` separators.
 #[derive(Clone, Debug, Default, PartialEq, Eq, Serialize, Deserialize)]
-pub(crate) struct Manifest {
+pub struct Manifest {
     pub revision: u64,
     pub artifacts: BTreeMap<String, ManifestEntry>,
 }

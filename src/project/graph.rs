@@ -1,7 +1,13 @@
 //! The dependency graph of the project (or of some assets): from the kinds' stage instances,
 //! or from the record for assets it holds unchanged.
 
-use super::*;
+use std::collections::HashSet;
+use std::path::Path;
+
+use super::Project;
+use crate::diagnostic::display_path;
+use crate::kinds::{stage_node_id, Read, StageInstance};
+use crate::record::{InstanceRecord, ReadRecord};
 
 impl Project {
     /// The dependency graph of every asset: source files, stage instances and artifacts, with
@@ -18,7 +24,7 @@ impl Project {
         let mut graph = GraphBuilder::default();
         let manifest = self.take_manifest();
         let listed = self.asset_list_and_conflicts();
-        self.keep_clean_for(&listed);
+        self.clean.keep_for(&listed);
         let list = &listed.0;
         // An asset that the record holds as it is now: its instances from there; any other
         // through its kind (which may read its sources and run the stages that tell them).
@@ -30,7 +36,8 @@ impl Project {
             if let Some(instances) = self.built_instances.get(&config.name).filter(|_| last_build_holds) {
                 all_instances.push((config.name.clone(), instances.clone()));
             } else if self.unchanged_asset(config, list, &manifest) {
-                all_instances.push((config.name.clone(), self.record.assets[&config.name].instances()));
+                let record = self.skip.asset(&config.name).expect("an unchanged asset is recorded");
+                all_instances.push((config.name.clone(), record.instances()));
             } else {
                 synced.push((config.clone(), self.sync_asset(config)));
             }
@@ -95,7 +102,7 @@ impl Project {
         let path = Path::new(path);
         let present = match self.files.get(path) {
             Some(file) => file.contents(&self.db).is_ok(),
-            None => matches!(self.known.get(path), Some(Ok(_))) || self.record.files.contains_key(path),
+            None => matches!(self.known.get(path), Some(Ok(_))) || self.skip.record().files.contains_key(path),
         };
         graph.node(crate::graph::Node {
             id: id.clone(),

@@ -10,30 +10,34 @@ use std::sync::Arc;
 
 use salsa::Setter;
 
-use crate::artifacts::{load_manifest, record_artifact, remove_artifacts, save_manifest, Manifest};
+use crate::artifacts::{remove_artifacts, Manifest};
 use crate::cache::DiskCache;
 use crate::config::{AssetConfig, PipelineConfig};
 use crate::db::{Asset, Database, Db, SourceFile, StageRun};
 use crate::diagnostic::{display_path, Diagnostic};
-use crate::kinds::{stage_node_id, Read, StageInstance};
-use crate::record::{AssetRecord, BuildRecord, FileStamp, InstanceRecord, ReadRecord};
-use crate::sources::{read_source_stamped, rule_matches};
-use crate::summary::{
-    ArtifactSummary, AssetStatus, AssetSummary, BuildSummary, ChangedArtifact, ErrorSummary, StageStatus, StageSummary,
-};
+use crate::kinds::stage_node_id;
+use crate::record::{FileStamp, InstanceRecord};
+use crate::summary::{AssetStatus, BuildSummary};
 
 pub use crate::schedule::{CancelFlag, Progress};
 
+mod asset_list;
+mod clean;
 mod graph;
 mod publish;
+mod publish_state;
+mod skip_record;
 mod source_files;
 mod summaries;
 mod unchanged;
 
-use graph::instance_record;
-use publish::{BakedAsset, BuildNews};
-use summaries::{asset_artifacts, runs_by_asset, stage_summaries, RunIndex};
-use unchanged::executable_identity;
+// The project's parts, each a type of its own (public so that the tests read each alone).
+pub use asset_list::{list_assets, AssetList, AssetLists};
+pub use clean::CleanAssets;
+pub use publish_state::PublishState;
+use publish_state::{BakedAsset, BuildNews};
+pub use skip_record::SkipRecord;
+use summaries::{runs_by_asset, RunIndex};
 
 /// How a project is opened.
 #[derive(Clone, Debug)]
@@ -141,46 +145,23 @@ pub struct Project {
     /// [`Project::assets_synced`].
     syncs: u64,
     options: ProjectOptions,
-    /// The build record: source files' metadata and hashes, baked assets' fingerprints.
-    record: BuildRecord,
-    /// The record differs from the one on disk.
-    record_changed: bool,
+    /// The build record, and what decides from it that an asset is passed over.
+    skip: SkipRecord,
     /// Content hashes (or why a file cannot be read) of files that have no salsa input, valid
     /// while the file is in `fresh`.
     known: HashMap<PathBuf, Result<blake3::Hash, crate::files::ReadError>>,
-    /// Assets whose artifacts this process wrote or checked against the record: the daemon,
-    /// which holds the output folder's lock, does not check them again.
-    trusted_artifacts: HashSet<String>,
-    /// What identifies this executable in fingerprints (a rebuilt cirrus trusts no record).
-    identity: blake3::Hash,
-    /// The hash of each distinct asset settings seen (most assets share their rule's), with the
-    /// pipeline-wide values that enter fingerprints.
-    settings_hashes: Vec<(crate::config::Settings, blake3::Hash)>,
-    /// The manifest as last read or written, with the stamp its file had then: read again only
-    /// when the file changed meanwhile.
-    manifest: Option<(Option<FileStamp>, Manifest)>,
-    /// The daemon's asset list, until an edit may change it.
-    asset_list_kept: std::cell::RefCell<Option<Arc<AssetList>>>,
-    /// The daemon's assets known to be as the record holds them, for the asset list in
-    /// `clean_list`: passed over without a fingerprint until a file they read changes.
-    clean: HashSet<String>,
-    clean_list: Option<Arc<AssetList>>,
-    /// The assets that read each source file (for `clean`; may name an asset that no longer
-    /// reads it, which only costs that asset a fingerprint).
-    readers: HashMap<PathBuf, Vec<String>>,
-    /// The asset list whose departed assets' artifacts were last removed.
-    departures_checked: Option<Arc<AssetList>>,
-    /// The manifest kept in memory differs from the file (the daemon writes it when idle).
-    manifest_unsaved: bool,
+    /// The manifest as last read or written.
+    published: PublishState,
+    /// The asset list (the daemon keeps it until an edit may change it).
+    asset_lists: AssetLists,
+    /// The daemon's assets known to be as the record holds them, and each file's readers.
+    clean: CleanAssets,
     /// Source files read (and hashed) since the last build finished.
     files_read: usize,
     /// What `file_hash` read of files without an input, for `source_file` to take instead of
     /// reading them again (emptied when a build ends).
     unclaimed: HashMap<PathBuf, crate::db::FileRead>,
 }
-
-/// The assets of the pipeline, and the rule-matched files that do not become assets.
-type AssetList = (Vec<AssetConfig>, Vec<Diagnostic>);
 
 /// Bump when what enters an asset's fingerprint changes.
 const FINGERPRINT_VERSION: u32 = 1;
@@ -208,13 +189,11 @@ fn open_disk_cache(config: &PipelineConfig, options: &ProjectOptions) -> Option<
 impl Project {
     pub fn open(config: PipelineConfig, options: ProjectOptions) -> Project {
         let cache = open_disk_cache(&config, &options);
-        let manifest = load_manifest(&config.output_dir());
+        let published = PublishState::load(&config.output_dir());
         // (A daemon writes the manifest when idle, and the revision of every batch at once.)
-        let revision = manifest.revision.max(crate::record::saved_revision(&config.output_dir()));
-        let manifest_stamp = FileStamp::read(&crate::artifacts::manifest_path(&config.output_dir()));
-        let mut record = BuildRecord::load(&config.output_dir());
-        record.keep_within(&config.source, &config.output);
-        if manifest_stamp.is_none() && !record.assets.is_empty() {
+        let revision = published.revision().max(crate::record::saved_revision(&config.output_dir()));
+        let skip = SkipRecord::load(&config);
+        if !published.had_file() && !skip.record().assets.is_empty() {
             tracing::warn!(
                 "{} is missing: this build writes a new one (artifacts it does not list are left alone)",
                 display_path(&crate::artifacts::manifest_path(&config.output))
@@ -228,6 +207,7 @@ impl Project {
                 tracing::info!("deleted {swept} temporary file(s) left by an interrupted build");
             }
         }
+        let across_builds = options.source_reading == SourceReading::WhenInvalidated;
         let mut project = Project {
             config,
             db: Database::with_retention(cache, options.retention),
@@ -244,19 +224,11 @@ impl Project {
             built_instances: HashMap::new(),
             syncs: 0,
             options,
-            record,
-            record_changed: false,
+            skip,
             known: HashMap::new(),
-            trusted_artifacts: HashSet::new(),
-            identity: executable_identity(),
-            settings_hashes: Vec::new(),
-            manifest: Some((manifest_stamp, manifest)),
-            asset_list_kept: Default::default(),
-            clean: HashSet::new(),
-            clean_list: None,
-            readers: HashMap::new(),
-            departures_checked: None,
-            manifest_unsaved: false,
+            published,
+            asset_lists: AssetLists::default(),
+            clean: CleanAssets::new(across_builds),
             files_read: 0,
             unclaimed: HashMap::new(),
         };
@@ -324,7 +296,7 @@ impl Project {
     /// Every source file read so far (project-relative), and every file that the record says
     /// a baked asset reads.
     pub(crate) fn source_paths(&self) -> BTreeSet<PathBuf> {
-        let recorded = self.record.assets.values().flat_map(|asset| asset.files.iter());
+        let recorded = self.skip.record().assets.values().flat_map(|asset| asset.files.iter());
         self.files.keys().chain(recorded).cloned().collect()
     }
 
@@ -335,7 +307,7 @@ impl Project {
             if let Some(&asset) = self.assets.get(name) {
                 paths.extend(asset.files(&self.db).keys().cloned());
             }
-            if let Some(record) = self.record.assets.get(name) {
+            if let Some(record) = self.skip.asset(name) {
                 paths.extend(record.files.iter().cloned());
             }
         }
@@ -356,7 +328,7 @@ impl Project {
                     Some(file) => file.contents(&self.db).is_err(),
                     None => matches!(self.known.get(*path), Some(Err(_))),
                 };
-                let read = self.record.files.get(*path).map(|file| file.stamp).filter(|_| !read_failed);
+                let read = self.skip.record().files.get(*path).map(|file| file.stamp).filter(|_| !read_failed);
                 FileStamp::read(&self.config.root.join(path)) != read
             })
             .cloned()
@@ -368,7 +340,7 @@ impl Project {
         self.fresh.clear();
         self.built_instances.clear();
         self.clean.clear();
-        *self.asset_list_kept.get_mut() = None;
+        self.asset_lists.forget();
     }
 
     pub fn config(&self) -> &PipelineConfig {
@@ -385,9 +357,9 @@ impl Project {
             self.db.replace_disk_cache(open_disk_cache(&config, &self.options));
         }
         self.config = config;
-        *self.asset_list_kept.get_mut() = None;
+        self.asset_lists.forget();
         self.built_instances.clear();
-        self.settings_hashes.clear();
+        self.skip.forget_settings_hashes();
         self.clean.clear();
         self.sync_limits();
     }
@@ -427,71 +399,13 @@ impl Project {
     /// The daemon keeps them until an edit may change them (see `refresh_sources`); a build
     /// lists them afresh.
     pub(crate) fn asset_list_and_conflicts(&self) -> Arc<AssetList> {
-        let mut kept = self.asset_list_kept.borrow_mut();
-        if let Some(list) = kept.as_ref().filter(|_| self.source_reading == SourceReading::WhenInvalidated) {
-            return list.clone();
-        }
-        let list = Arc::new(self.list_assets());
-        *kept = Some(list.clone());
-        list
+        self.asset_lists.get(&self.config, self.source_reading == SourceReading::WhenInvalidated)
     }
 
-    /// Forgets the kept asset list when `path` (project-relative) may change it: a file that
-    /// a rule matches, or one no asset reads (new, or a folder).
+    /// Forgets the kept asset list when `path` (project-relative) may change it.
     fn forget_asset_list_for(&mut self, path: &Path) {
-        if self.config.rules.is_empty() {
-            return;
-        }
-        let known = self.files.contains_key(path) || self.record.files.contains_key(path);
-        let matched = path.strip_prefix(&self.config.source).is_ok_and(|relative| {
-            let relative = PathBuf::from(display_path(relative));
-            self.config.rules.iter().any(|rule| rule.matcher.is_match(&relative))
-        });
-        if !known || matched {
-            *self.asset_list_kept.get_mut() = None;
-        }
-    }
-
-    fn list_assets(&self) -> AssetList {
-        let mut assets = self.config.assets.clone();
-        let mut conflicts = Vec::new();
-        let mut folders = crate::config::AssetFolders::default();
-        let mut by_name: HashMap<String, usize> = HashMap::new();
-        for (index, asset) in assets.iter().enumerate() {
-            folders.insert(&asset.name);
-            by_name.insert(asset.name.clone(), index);
-        }
-        let listed_files: HashSet<&Path> = self.config.assets.iter().map(|asset| asset.source.main_file()).collect();
-        for relative in rule_matches(&self.config) {
-            if listed_files.contains(relative.as_path()) {
-                continue;
-            }
-            let Some(asset) = self.config.rule_asset(&relative) else { continue };
-            let file = self.config.source.join(&relative);
-            if let Some(reserved) = crate::config::reserved_asset_name(&asset.name) {
-                conflicts
-                    .push(Diagnostic::new(file, format!("matches a rule but is not baked: {reserved}")).as_warning());
-            } else if let Some(other) = folders.collision(&asset.name).map(|name| &assets[by_name[name]]) {
-                conflicts.push(
-                    Diagnostic::new(
-                        file,
-                        format!(
-                            "matches a rule but is not baked: its asset name `{}` collides with the asset `{}` \
-                            ({})",
-                            asset.name,
-                            other.name,
-                            display_path(&self.config.source.join(other.source.main_file()))
-                        ),
-                    )
-                    .as_warning(),
-                );
-            } else {
-                folders.insert(&asset.name);
-                by_name.insert(asset.name.clone(), assets.len());
-                assets.push(asset);
-            }
-        }
-        (assets, conflicts)
+        let known = self.files.contains_key(path) || self.skip.record().files.contains_key(path);
+        self.asset_lists.forget_for(&self.config, path, known);
     }
 
     /// The asset's input, its settings and every file its kind reads, set only where changed.
@@ -593,7 +507,7 @@ impl Project {
             tracing::warn!("{conflict}");
         }
         require_assets(&options.only_assets, all_assets, &self.config.file)?;
-        self.keep_clean_for(&listed);
+        self.clean.keep_for(&listed);
         self.built_instances.clear();
         let selected: Vec<&AssetConfig> = all_assets
             .iter()
@@ -681,7 +595,7 @@ impl Project {
         // any more in the record: pruning costs a pass over every file.)
         if self.source_reading == SourceReading::EveryBuild {
             if options.only_assets.is_empty() {
-                self.prune_record(all_assets);
+                self.skip.prune(all_assets);
             }
             self.save_record();
         }
@@ -764,12 +678,12 @@ impl Project {
     /// source folder took along: they failed, and keep their last good artifacts); only a new
     /// asset list can have lost assets, so the daemon looks once per list. Returns what it removed.
     fn remove_departed(&mut self, listed: &Arc<AssetList>, manifest: &mut Manifest) -> Vec<String> {
-        let unchecked = self.source_reading == SourceReading::EveryBuild
-            || !self.departures_checked.as_ref().is_some_and(|checked| Arc::ptr_eq(checked, listed));
-        if !unchecked || !self.config.source_dir().is_dir() {
+        let checked =
+            self.source_reading == SourceReading::WhenInvalidated && self.asset_lists.departures_checked(listed);
+        if checked || !self.config.source_dir().is_dir() {
             return Vec::new();
         }
-        self.departures_checked = Some(listed.clone());
+        self.asset_lists.note_departures_checked(listed);
         let names: HashSet<&str> = listed.0.iter().map(|asset| asset.name.as_str()).collect();
         let gone = manifest.artifacts.iter().filter(|(_, entry)| !names.contains(entry.asset.as_str()));
         let gone = gone.map(|(path, _)| path.clone()).collect();
@@ -778,20 +692,12 @@ impl Project {
 
     /// The manifest on disk: the one kept when its file did not change since.
     fn take_manifest(&mut self) -> Manifest {
-        let output_dir = self.config.output_dir();
-        let stamp = FileStamp::read(&crate::artifacts::manifest_path(&output_dir));
-        match self.manifest.take() {
-            // Unsaved (the daemon's), or as the file still is.
-            Some((_, manifest)) if self.manifest_unsaved => manifest,
-            Some((kept, manifest)) if kept == stamp && stamp.is_some() => manifest,
-            _ => load_manifest(&output_dir),
-        }
+        self.published.take(&self.config.output_dir())
     }
 
     /// Keeps the manifest as it is on disk now, for the next [`Project::take_manifest`].
     fn keep_manifest(&mut self, manifest: Manifest) {
-        let stamp = FileStamp::read(&crate::artifacts::manifest_path(&self.config.output_dir()));
-        self.manifest = Some((stamp, manifest));
+        self.published.keep(&self.config.output_dir(), manifest);
     }
 
     /// Adds stage runs to the history (revision, milliseconds) and the executed log.

@@ -2,27 +2,21 @@
 //! summary, statuses and record; the summaries of the assets passed over; the manifest saved;
 //! what the cache's `explain` reads of the build.
 
-use super::*;
+use std::collections::{BTreeMap, HashSet};
+use std::path::PathBuf;
+
+use super::graph::instance_record;
+use super::publish_state::{BakedAsset, BuildNews};
+use super::summaries::{asset_artifacts, stage_summaries, RunIndex};
+use super::{Project, SourceReading};
+use crate::artifacts::{record_artifact, remove_artifacts, save_manifest, Manifest};
+use crate::config::AssetConfig;
+use crate::db::{Asset, Db};
+use crate::diagnostic::display_path;
+use crate::kinds::stage_node_id;
+use crate::record::{AssetRecord, FileStamp, InstanceRecord};
 use crate::summary::ArtifactRole;
-
-/// An asset's outputs as its kind made them, with its errors and the labels of its failed jobs.
-pub(super) struct BakedAsset {
-    pub errors: Vec<Diagnostic>,
-    pub failed_jobs: HashSet<String>,
-    pub folder: PathBuf,
-    pub outputs: crate::kinds::AssetOutputs,
-}
-
-/// What a build's publishing gathers: whether anything changed, the artifacts it wrote and
-/// removed, each asset's summary, and each stage instance's status for the graph.
-#[derive(Default)]
-pub(super) struct BuildNews {
-    pub changed: bool,
-    pub changed_artifacts: Vec<ChangedArtifact>,
-    pub removed_artifacts: Vec<String>,
-    pub summaries: Vec<AssetSummary>,
-    pub statuses: HashMap<String, (&'static str, Option<f64>)>,
-}
+use crate::summary::{AssetStatus, AssetSummary, ChangedArtifact, ErrorSummary, StageStatus, StageSummary};
 
 impl Project {
     /// Writes one baked asset's artifacts (the report last, only when every file was written),
@@ -103,8 +97,6 @@ impl Project {
         }
         let records: Vec<InstanceRecord> = instances.iter().map(instance_record).collect();
         // The record lets the next build pass over this asset while nothing it reads moves.
-        self.record_changed = true;
-        self.trusted_artifacts.remove(&config.name);
         match fingerprint.filter(|_| errors.is_empty()) {
             Some(fingerprint) => {
                 let artifacts = produced
@@ -113,13 +105,12 @@ impl Project {
                     .collect();
                 let files = asset.files(&self.db).keys().cloned().collect();
                 let record = AssetRecord::new(fingerprint, files, artifacts, &records, warnings.clone());
-                self.record.assets.insert(config.name.clone(), record);
-                self.trusted_artifacts.insert(config.name.clone());
+                self.skip.insert_asset(&config.name, record);
                 self.clean.remove(&config.name);
                 self.mark_clean(&config.name);
             }
             None => {
-                self.record.assets.remove(&config.name);
+                self.skip.remove_asset(&config.name);
                 self.clean.remove(&config.name);
             }
         }
@@ -138,7 +129,7 @@ impl Project {
 
     /// The summary of an asset the record let the build pass over.
     pub(super) fn passed_over_summary(&self, config: &AssetConfig, manifest: &Manifest) -> AssetSummary {
-        let record = &self.record.assets[&config.name];
+        let record = self.skip.asset(&config.name).expect("an asset passed over is recorded");
         let listed = crate::artifacts::artifacts_of(manifest, &config.name, &self.config.output.join(&config.name));
         let stages = record.stages().into_iter().map(|(stage, instance)| StageSummary {
             stage,
@@ -173,14 +164,14 @@ impl Project {
         crate::record::save_revision(&output_dir, next_revision);
         if self.source_reading == SourceReading::WhenInvalidated {
             // The daemon: the manifest waits for an idle moment (`save_deferred`).
-            self.manifest_unsaved = true;
+            self.published.mark_unsaved();
         } else if let Err(error) = save_manifest(&output_dir, manifest) {
             // Without the manifest, the next build cannot tell its artifacts from the user's
             // files: every asset of this build fails, so scripts and CI notice.
             let file = display_path(&self.config.output.join("manifest.json"));
             tracing::error!("cannot write {file}: {error}");
             for summary in summaries {
-                self.record.assets.remove(&summary.name);
+                self.skip.remove_asset(&summary.name);
                 summary.status = AssetStatus::Failed;
                 summary.errors.push(ErrorSummary {
                     file: file.clone(),

@@ -1,7 +1,14 @@
 //! Source files as the driver sees them: content hashes from the record's stamps or a read,
 //! and the salsa inputs of the files an asset's kind reads.
 
-use super::*;
+use std::path::Path;
+
+use salsa::Setter;
+
+use super::{file_node_id, Project};
+use crate::db::SourceFile;
+use crate::record::FileStamp;
+use crate::sources::read_source_stamped;
 
 impl Project {
     /// Reads `paths` again now; true when any of them is new to the project or its bytes changed,
@@ -11,7 +18,7 @@ impl Project {
         let mut changed = self.sources_changed_since_build;
         for path in paths {
             self.forget_asset_list_for(path);
-            self.unclean_readers_of(path);
+            self.clean.unclean_readers_of(path);
             let before = self.last_known_hash(path);
             self.fresh.remove(path);
             let after = self.file_hash(path);
@@ -24,7 +31,9 @@ impl Project {
     pub(super) fn last_known_hash(&self, path: &Path) -> Option<Result<blake3::Hash, crate::files::ReadError>> {
         match self.files.get(path) {
             Some(file) => Some(file.contents(&self.db).as_ref().map(|contents| contents.hash).map_err(Clone::clone)),
-            None => self.known.get(path).cloned().or_else(|| self.record.files.get(path).map(|file| Ok(file.hash))),
+            None => {
+                self.known.get(path).cloned().or_else(|| self.skip.record().files.get(path).map(|file| Ok(file.hash)))
+            }
         }
     }
 
@@ -44,7 +53,7 @@ impl Project {
         let seen_at = crate::record::now();
         if !self.options.verify {
             let trusted = FileStamp::read(&self.config.root.join(path))
-                .and_then(|stamp| self.record.trusted_hash(path, &stamp))
+                .and_then(|stamp| self.skip.trusted_hash(path, &stamp))
                 .filter(|_| self.config.source_dir().is_dir());
             if let Some(hash) = trusted {
                 self.fresh.insert(path.to_path_buf());
@@ -53,9 +62,9 @@ impl Project {
             }
         }
         self.files_read += 1;
-        let recorded = self.record.files.get(path).map(|file| file.hash);
+        let recorded = self.skip.record().files.get(path).map(|file| file.hash);
         let read = read_source_stamped(&self.config.root, &self.config.source, path).map(|(contents, stamp)| {
-            self.record_changed |= self.record.remember_file(path, stamp, contents.hash, seen_at);
+            self.skip.remember_file(path, stamp, contents.hash, seen_at);
             contents
         });
         let hash = read.as_ref().map(|contents| contents.hash).map_err(Clone::clone);
@@ -82,7 +91,7 @@ impl Project {
                 let seen_at = crate::record::now();
                 self.files_read += 1;
                 read_source_stamped(&self.config.root, &self.config.source, path).map(|(contents, stamp)| {
-                    self.record_changed |= self.record.remember_file(path, stamp, contents.hash, seen_at);
+                    self.skip.remember_file(path, stamp, contents.hash, seen_at);
                     contents
                 })
             }

@@ -1,6 +1,12 @@
 //! A build's summary pieces: each asset's stage runs and their statuses, its artifacts.
 
-use super::*;
+use std::collections::{BTreeSet, HashMap, HashSet};
+
+use crate::artifacts::Manifest;
+use crate::db::StageRun;
+use crate::diagnostic::Diagnostic;
+use crate::kinds::StageInstance;
+use crate::summary::{ArtifactSummary, StageStatus, StageSummary};
 
 /// The stage runs labelled by each asset's name or below it (`name/…`): what its kind's report
 /// may time. One pass over the runs, each label looked up at each of its `/`.

@@ -1,87 +1,30 @@
 //! Passing over what did not move: an asset's fingerprint, whether the build record holds it
 //! unchanged (its artifacts as written), the daemon's clean set, and writing the record.
 
-use super::*;
+use std::collections::HashMap;
+use std::path::PathBuf;
+
+use super::{Project, SourceReading, FINGERPRINT_VERSION};
+use crate::artifacts::Manifest;
+use crate::config::AssetConfig;
+use crate::db::Asset;
+use crate::diagnostic::display_path;
 
 impl Project {
-    /// The assets that read `path` are no longer known to be clean.
-    pub(super) fn unclean_readers_of(&mut self, path: &Path) {
-        for reader in self.readers.get(path).into_iter().flatten() {
-            self.clean.remove(reader);
-        }
-    }
-
-    /// Marks an asset clean: passed over without a fingerprint until a file it reads changes
-    /// (the daemon), or until the next build (which starts afresh).
+    /// Marks an asset clean (`CleanAssets::mark`), indexed under the files its input or its
+    /// record says it reads.
     pub(super) fn mark_clean(&mut self, name: &str) {
-        if !self.clean.insert(name.to_string()) || self.source_reading != SourceReading::WhenInvalidated {
-            return;
-        }
-        let files: Vec<PathBuf> = match self.assets.get(name) {
-            Some(&asset) => asset.files(&self.db).keys().cloned().collect(),
-            None => self.record.assets.get(name).map(|record| record.files.clone()).unwrap_or_default(),
-        };
-        for file in files {
-            let readers = self.readers.entry(file).or_default();
-            if !readers.iter().any(|reader| reader == name) {
-                readers.push(name.to_string());
-            }
-        }
-    }
-
-    /// Keeps the clean assets whose configuration is the same in `list` as in the list they
-    /// were found clean for.
-    pub(super) fn keep_clean_for(&mut self, list: &Arc<AssetList>) {
-        match &self.clean_list {
-            Some(old) if Arc::ptr_eq(old, list) => return,
-            Some(old) => {
-                let before: HashMap<&str, &AssetConfig> =
-                    old.0.iter().map(|asset| (asset.name.as_str(), asset)).collect();
-                let same: HashSet<&str> = list
-                    .0
-                    .iter()
-                    .filter(|asset| before.get(asset.name.as_str()).is_some_and(|old| *old == *asset))
-                    .map(|asset| asset.name.as_str())
-                    .collect();
-                self.clean.retain(|name| same.contains(name.as_str()));
-            }
-            None => self.clean.clear(),
-        }
-        self.clean_list = Some(list.clone());
+        let (assets, db, skip) = (&self.assets, &self.db, &self.skip);
+        self.clean.mark(name, || match assets.get(name) {
+            Some(&asset) => asset.files(db).keys().cloned().collect(),
+            None => skip.files_of(name),
+        });
     }
 
     /// The files of the source folder that an asset's globs list (none for most kinds).
     pub(super) fn listed_sources(&self, config: &AssetConfig) -> Vec<Vec<PathBuf>> {
         let lists = config.source.glob_lists();
         lists.into_iter().map(|globs| crate::sources::glob_matches(&self.config, globs)).collect()
-    }
-
-    /// The hash of an asset's configuration with the pipeline-wide settings its outputs depend
-    /// on (most assets share their rule's settings: each distinct one is formatted once).
-    pub(super) fn config_hash(&mut self, config: &AssetConfig) -> blake3::Hash {
-        let settings = match self.settings_hashes.iter().find(|(seen, _)| *seen == config.settings) {
-            Some((_, hash)) => *hash,
-            None => {
-                let text = format!(
-                    "{:?}|{:?}|{:?}|{:?}|{}",
-                    config.settings,
-                    self.config.source,
-                    self.config.output,
-                    self.config.limits,
-                    crate::isa::kernel_isa().name()
-                );
-                let hash = blake3::hash(text.as_bytes());
-                if self.settings_hashes.len() >= 64 {
-                    self.settings_hashes.remove(0);
-                }
-                self.settings_hashes.push((config.settings.clone(), hash));
-                hash
-            }
-        };
-        let mut hasher = blake3::Hasher::new();
-        hasher.update(settings.as_bytes()).update(config.name.as_bytes()).update(b"\0");
-        hasher.update(format!("{:?}", config.source).as_bytes());
-        hasher.finalize()
     }
 
     /// The fingerprint of an asset that reads `files` and lists `listed`: everything its outputs
@@ -99,8 +42,9 @@ impl Project {
     ) -> Option<blake3::Hash> {
         let mut hasher = blake3::Hasher::new();
         hasher.update(&FINGERPRINT_VERSION.to_le_bytes());
-        hasher.update(self.identity.as_bytes());
-        hasher.update(self.config_hash(config).as_bytes());
+        hasher.update(self.skip.identity().as_bytes());
+        let config_hash = self.skip.config_hash(config, &self.config);
+        hasher.update(config_hash.as_bytes());
         for list in listed {
             hasher.update(&(list.len() as u64).to_le_bytes());
             for path in list {
@@ -137,7 +81,7 @@ impl Project {
         }
         let (files, listed) = match built.get(&config.name) {
             Some(&asset) => (asset.files(&self.db).keys().cloned().collect(), (**asset.listed(&self.db)).clone()),
-            None => (self.record.assets.get(&config.name)?.files.clone(), self.listed_sources(config)),
+            None => (self.skip.asset(&config.name)?.files.clone(), self.listed_sources(config)),
         };
         self.fingerprint(config, &files, &listed, all_assets, built, depth)
     }
@@ -157,31 +101,18 @@ impl Project {
         if !checked_every_time && self.clean.contains(&config.name) {
             return true;
         }
-        let Some(recorded) = self.record.assets.get(&config.name).map(|record| record.fingerprint) else {
+        let Some(recorded) = self.skip.asset(&config.name).map(|record| record.fingerprint) else {
             return false;
         };
         if self.current_fingerprint(config, all_assets, &HashMap::new(), 0) != Some(recorded) {
             return false;
         }
-        if self.source_reading == SourceReading::WhenInvalidated && self.trusted_artifacts.contains(&config.name) {
+        if self.source_reading == SourceReading::WhenInvalidated && self.skip.trusts(&config.name) {
             self.mark_clean(&config.name);
             return true;
         }
-        let record = &self.record.assets[&config.name];
-        let intact = record.artifacts.iter().all(|(path, stamp)| {
-            let Some(entry) = manifest.artifacts.get(path).filter(|entry| entry.asset == config.name) else {
-                return false;
-            };
-            let file = self.config.root.join(path);
-            if self.options.verify {
-                crate::files::read_regular_file(&file, crate::files::MAX_SOURCE_BYTES)
-                    .is_ok_and(|bytes| blake3::hash(&bytes).to_hex().as_str() == entry.hash)
-            } else {
-                FileStamp::read(&file) == Some(*stamp)
-            }
-        });
+        let intact = self.skip.check_artifacts(&config.name, manifest, &self.config.root, self.options.verify);
         if intact {
-            self.trusted_artifacts.insert(config.name.clone());
             self.mark_clean(&config.name);
         }
         intact
@@ -190,57 +121,15 @@ impl Project {
     /// Writes what the daemon keeps in memory between idle moments: the manifest and the
     /// build record, each when it changed since it was last written.
     pub(crate) fn save_deferred(&mut self) {
-        if self.manifest_unsaved {
-            if let Some((_, manifest)) = self.manifest.take() {
-                if let Err(error) = save_manifest(&self.config.output_dir(), &manifest) {
-                    tracing::error!(
-                        "cannot write {}: {error}",
-                        display_path(&self.config.output.join("manifest.json"))
-                    );
-                }
-                self.keep_manifest(manifest);
-            }
-            self.manifest_unsaved = false;
-        }
+        self.published.save(&self.config.output_dir(), &self.config.output.join("manifest.json"));
         self.save_record();
     }
 
-    /// Writes the build record when it changed since it was last written.
+    /// Writes the build record when it changed since it was last written (never without the
+    /// persistent cache).
     pub(super) fn save_record(&mut self) {
-        if !self.record_changed || !self.options.persistent_cache {
-            return;
-        }
-        match self.record.save(&self.config.output_dir()) {
-            Ok(()) => self.record_changed = false,
-            Err(error) => tracing::warn!(
-                "cannot write {}: {error} (the next build hashes its sources again)",
-                display_path(&crate::record::record_path(&self.config.output))
-            ),
+        if self.options.persistent_cache {
+            self.skip.save(&self.config);
         }
     }
-
-    /// Drops the record's assets that left the pipeline and the files no recorded asset reads.
-    pub(super) fn prune_record(&mut self, all_assets: &[AssetConfig]) {
-        let names: HashSet<&str> = all_assets.iter().map(|asset| asset.name.as_str()).collect();
-        let before = (self.record.assets.len(), self.record.files.len());
-        self.record.assets.retain(|name, _| names.contains(name.as_str()));
-        let read: HashSet<&PathBuf> = self.record.assets.values().flat_map(|asset| asset.files.iter()).collect();
-        let files = std::mem::take(&mut self.record.files);
-        self.record.files = files.into_iter().filter(|(path, _)| read.contains(path)).collect();
-        self.record_changed |= before != (self.record.assets.len(), self.record.files.len());
-    }
-}
-
-/// What identifies this executable in fingerprints: its version and its file's size and
-/// modification time, so that a rebuilt cirrus (whose stages may bake otherwise) trusts no
-/// fingerprint an older one recorded. Unknown: a value no record holds.
-pub(super) fn executable_identity() -> blake3::Hash {
-    let file = std::env::current_exe().ok().and_then(|path| Some((FileStamp::read(&path)?, path)));
-    let text = match file {
-        Some((stamp, path)) => {
-            format!("{}|{}|{}|{}", env!("CARGO_PKG_VERSION"), path.display(), stamp.size, stamp.modified)
-        }
-        None => format!("unknown|{}", crate::record::now()),
-    };
-    blake3::hash(text.as_bytes())
 }

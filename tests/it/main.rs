@@ -21,6 +21,7 @@ mod shared_cache;
 mod hostile;
 mod hostile_outputs;
 mod isa;
+mod project_parts;
 mod protocol;
 mod scale;
 mod tidy;

@@ -7,14 +7,13 @@
 use std::path::{Path, PathBuf};
 use std::sync::Arc;
 
-use crate::cache::CacheKey;
 pub use crate::config::AssetKind;
 use crate::config::{AssetConfig, PipelineConfig};
 use crate::db::{Asset, Db, Stage, StageRun};
 use crate::diagnostic::Diagnostic;
 use crate::texture::tail::TailSettings;
-use crate::texture::{SurfaceKind, Texture};
-pub(crate) use surface::{SurfaceId, SurfacePart};
+use crate::texture::SurfaceKind;
+pub(crate) use surface::{SurfaceFn, SurfaceId, SurfacePart, SurfacePlan};
 
 pub mod tail_queries;
 pub mod mesh_queries;
@@ -62,32 +61,9 @@ pub(crate) trait Kind {
     /// `cirrus check`: the asset's sources validated without baking.
     fn check(config: &PipelineConfig, asset: &AssetConfig) -> Vec<Diagnostic>;
 
-    /// The image of one of the asset's tail surfaces.
-    fn surface_image(db: &dyn Db, asset: Asset, surface: &SurfaceId) -> Result<Arc<Texture>, Diagnostic>;
-
-    /// The tail settings of one of the asset's surfaces.
-    fn tail_settings(db: &dyn Db, asset: Asset, surface: &SurfaceId) -> Result<TailSettings, Diagnostic>;
-
-    /// A key for what the surface's image is made of, cheap to compute (source hashes and
-    /// settings), so that a surface already in the persistent cache needs no image at all.
-    fn surface_recipe_key(db: &dyn Db, asset: Asset, surface: &SurfaceId) -> Result<Option<CacheKey>, Diagnostic>;
-
-    /// A key for what the surface's image is put together from, asked when the recipe missed:
-    /// dearer (it may run the stages before the image) but cheaper than the image, and finer
-    /// than the recipe (an edit that leaves this surface's parts alone finds it), or none.
-    fn surface_parts_key(_db: &dyn Db, _asset: Asset, _surface: &SurfaceId) -> Result<Option<CacheKey>, Diagnostic> {
-        Ok(None)
-    }
-
-    /// The surface whose alpha test cuts `surface` out (an atlas's albedo, for the atlas's
-    /// other surfaces): the tail encodes the blocks it hides entirely at the fastest setting
-    /// (see `texture::encode::HiddenBlocks`). None: every block is shown. The kind's recipe and
-    /// parts keys of `surface` must then also name what that surface's alpha is made of (the
-    /// billboard's parts key holds the atlas coverage, which is where its albedo's alpha is
-    /// not 0).
-    fn cutting_surface(_surface: &SurfaceId) -> Option<SurfaceId> {
-        None
-    }
+    /// What the tail needs of one of the asset's surfaces: its settings, the surface that cuts
+    /// it out, and the functions that name its recipe and parts and make its image.
+    fn surface_plan(db: &dyn Db, asset: Asset, surface: &SurfaceId) -> Result<SurfacePlan, Diagnostic>;
 
     /// The stage whose result is the image of `surface`, for another asset that reads the
     /// surface as a source (a `Material`'s `ao_source`): none when this kind makes no such
@@ -336,53 +312,14 @@ macro_rules! kinds {
                 }
             }
 
-            pub(crate) fn surface_image(
+            pub(crate) fn surface_plan(
                 self,
                 db: &dyn Db,
                 asset: Asset,
                 surface: &SurfaceId,
-            ) -> Result<Arc<Texture>, Diagnostic> {
+            ) -> Result<SurfacePlan, Diagnostic> {
                 match self {
-                    $(AssetKind::$name => <$folder::$name>::surface_image(db, asset, surface)),*
-                }
-            }
-
-            pub(crate) fn tail_settings(
-                self,
-                db: &dyn Db,
-                asset: Asset,
-                surface: &SurfaceId,
-            ) -> Result<TailSettings, Diagnostic> {
-                match self {
-                    $(AssetKind::$name => <$folder::$name>::tail_settings(db, asset, surface)),*
-                }
-            }
-
-            pub(crate) fn surface_recipe_key(
-                self,
-                db: &dyn Db,
-                asset: Asset,
-                surface: &SurfaceId,
-            ) -> Result<Option<CacheKey>, Diagnostic> {
-                match self {
-                    $(AssetKind::$name => <$folder::$name>::surface_recipe_key(db, asset, surface)),*
-                }
-            }
-
-            pub(crate) fn cutting_surface(self, surface: &SurfaceId) -> Option<SurfaceId> {
-                match self {
-                    $(AssetKind::$name => <$folder::$name>::cutting_surface(surface)),*
-                }
-            }
-
-            pub(crate) fn surface_parts_key(
-                self,
-                db: &dyn Db,
-                asset: Asset,
-                surface: &SurfaceId,
-            ) -> Result<Option<CacheKey>, Diagnostic> {
-                match self {
-                    $(AssetKind::$name => <$folder::$name>::surface_parts_key(db, asset, surface)),*
+                    $(AssetKind::$name => <$folder::$name>::surface_plan(db, asset, surface)),*
                 }
             }
 

@@ -1,9 +1,15 @@
 //! The surfaces that end in the shared texture tail, as the tail, the kinds and the driver name
-//! them: an asset's surface by its group and kind, with its label and its files.
+//! them: an asset's surface by its group and kind, with its label and its files, and the plan
+//! its kind gives the tail for it.
 
 use std::path::{Path, PathBuf};
+use std::sync::Arc;
 
-use crate::texture::SurfaceKind;
+use crate::cache::CacheKey;
+use crate::db::{Asset, Db};
+use crate::diagnostic::Diagnostic;
+use crate::texture::tail::TailSettings;
+use crate::texture::{SurfaceKind, Texture};
 
 /// One surface that ends in the texture tail: `group` names what it belongs to inside the asset
 /// (a material's name; empty for an asset's own surfaces, like a billboard cloud's atlas), for
@@ -79,3 +85,50 @@ impl SurfaceId {
         files
     }
 }
+
+/// One of a kind's answers about one of its surfaces (`db`, the asset, the surface).
+pub(crate) type SurfaceFn<T> = fn(&dyn Db, Asset, &SurfaceId) -> Result<T, Diagnostic>;
+
+/// What the tail needs of a surface, as its kind plans it in one answer (`Kind::surface_plan`):
+/// its tail settings and the surface that cuts it out, and the kind's functions that name its
+/// recipe and its parts and make its image, which the tail calls only when it needs them (a
+/// surface whose recipe the persistent cache holds never asks for its parts or its image).
+#[derive(Clone, Debug)]
+pub(crate) struct SurfacePlan {
+    pub settings: TailSettings,
+    /// The surface whose alpha test cuts this one out (an atlas's albedo, for the atlas's other
+    /// surfaces; the albedo itself): the tail encodes the blocks it hides entirely at the
+    /// fastest setting (see `texture::encode::HiddenBlocks`). None: every block is shown. The
+    /// recipe and parts keys must then also name what that surface's alpha is made of (the
+    /// billboard's parts key holds the atlas coverage, which is where its albedo's alpha is not 0).
+    pub cutting: Option<SurfaceId>,
+    /// A key for what the image is made of, cheap to compute (source hashes and settings), so
+    /// that a surface already in the persistent cache needs no image at all.
+    pub recipe: SurfaceFn<Option<CacheKey>>,
+    /// A key for what the image is put together from, asked when the recipe missed: dearer (it
+    /// may run the stages before the image) but cheaper than the image, and finer than the
+    /// recipe (an edit that leaves this surface's parts alone finds it), or none.
+    pub parts: SurfaceFn<Option<CacheKey>>,
+    /// The surface's image.
+    pub image: SurfaceFn<Arc<Texture>>,
+}
+
+impl SurfacePlan {
+    /// A plan with `settings` whose image `image` makes and whose recipe `recipe` names, with no
+    /// parts key and no surface that cuts it out.
+    pub fn new(settings: TailSettings, recipe: SurfaceFn<Option<CacheKey>>, image: SurfaceFn<Arc<Texture>>) -> Self {
+        SurfacePlan { settings, cutting: None, recipe, parts: |_, _, _| Ok(None), image }
+    }
+}
+
+impl PartialEq for SurfacePlan {
+    fn eq(&self, other: &Self) -> bool {
+        self.settings == other.settings
+            && self.cutting == other.cutting
+            && std::ptr::fn_addr_eq(self.recipe, other.recipe)
+            && std::ptr::fn_addr_eq(self.parts, other.parts)
+            && std::ptr::fn_addr_eq(self.image, other.image)
+    }
+}
+
+impl Eq for SurfacePlan {}

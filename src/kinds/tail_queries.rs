@@ -14,7 +14,7 @@ use crate::db::{
     Db, Retention, Stage,
 };
 use crate::diagnostic::Diagnostic;
-use crate::kinds::surface::SurfaceId;
+use crate::kinds::surface::{SurfaceId, SurfacePlan};
 use crate::texture::encode::HiddenBlocks;
 use crate::texture::fingerprint::BlockFingerprints;
 use crate::texture::format::Packing;
@@ -41,9 +41,15 @@ const SURFACE_ENTRY_VERSION: u32 = 6;
 /// The entry under a surface's recipe key: the content key of its files.
 const SURFACE_RECIPE_ENTRY: &str = "surface-recipe";
 
+/// The kind's plan of a surface: the tail's one question to the kind about it.
+#[salsa::tracked(returns(clone))]
+pub(crate) fn surface_plan(db: &dyn Db, asset: Asset, surface: SurfaceId) -> Result<SurfacePlan, Diagnostic> {
+    asset.kind(db).surface_plan(db, asset, &surface)
+}
+
 #[salsa::tracked(returns(clone))]
 pub(crate) fn tail_settings(db: &dyn Db, asset: Asset, surface: SurfaceId) -> Result<TailSettings, Diagnostic> {
-    asset.kind(db).tail_settings(db, asset, &surface)
+    surface_plan(db, asset, surface).map(|plan| plan.settings)
 }
 
 #[salsa::tracked(returns(clone))]
@@ -72,7 +78,7 @@ fn write_step_settings(
 /// The surface's image, made by its kind.
 #[salsa::tracked(returns(clone))]
 pub(crate) fn surface_image(db: &dyn Db, asset: Asset, surface: SurfaceId) -> Result<Arc<Texture>, Diagnostic> {
-    asset.kind(db).surface_image(db, asset, &surface)
+    (surface_plan(db, asset, surface.clone())?.image)(db, asset, &surface)
 }
 
 /// The image the tail filters and encodes: the kind's, in the channel order of the asset's
@@ -101,7 +107,10 @@ fn in_tail_order(
 fn files_image(db: &dyn Db, asset: Asset, surface: &SurfaceId) -> Result<Arc<Texture>, Diagnostic> {
     match db.retention() {
         Retention::KeepForNextBuild => tail_image(db, asset, surface.clone()),
-        Retention::OutputsOnly => in_tail_order(db, asset, surface, asset.kind(db).surface_image(db, asset, surface)?),
+        Retention::OutputsOnly => {
+            let image = (surface_plan(db, asset, surface.clone())?.image)(db, asset, surface)?;
+            in_tail_order(db, asset, surface, image)
+        }
     }
 }
 
@@ -120,7 +129,7 @@ fn hidden_blocks_of(
     surface: &SurfaceId,
     image: &Texture,
 ) -> Result<Option<Arc<HiddenBlocks>>, Diagnostic> {
-    let Some(albedo) = asset.kind(db).cutting_surface(surface) else { return Ok(None) };
+    let Some(albedo) = surface_plan(db, asset, surface.clone())?.cutting else { return Ok(None) };
     if tail_settings(db, asset, albedo.clone())?.alpha_cutoff.is_none() {
         return Ok(None);
     }
@@ -266,15 +275,14 @@ pub(crate) fn surface_artifacts(
     asset: Asset,
     surface: SurfaceId,
 ) -> Result<Arc<SurfaceArtifacts>, Diagnostic> {
-    let settings = tail_settings(db, asset, surface.clone())?;
-    let kind = asset.kind(db);
-    let recipe_key = recipe_key(db, asset, &surface, &settings)?;
+    let plan = surface_plan(db, asset, surface.clone())?;
+    let settings = &plan.settings;
+    let recipe_key = recipe_key(db, asset, &surface, settings)?;
     if let Some(artifacts) = recipe_key.and_then(|key| artifacts_by_recipe(db, key)) {
         record_cache_hit(db, WRITE, &surface.label(asset.name(db)));
         return Ok(Arc::new(artifacts));
     }
-    let parts_key =
-        kind.surface_parts_key(db, asset, &surface)?.map(|parts| surface_key(&settings).part(&parts.0).finish());
+    let parts_key = (plan.parts)(db, asset, &surface)?.map(|parts| surface_key(settings).part(&parts.0).finish());
     let from_parts =
         parts_key.and_then(|key| artifacts_by_recipe(db, key).map(|artifacts| (Arc::new(artifacts), None)));
     let (artifacts, content) = match from_parts {
@@ -336,7 +344,7 @@ fn recipe_key(
     surface: &SurfaceId,
     settings: &TailSettings,
 ) -> Result<Option<CacheKey>, Diagnostic> {
-    let recipe = asset.kind(db).surface_recipe_key(db, asset, surface)?;
+    let recipe = (surface_plan(db, asset, surface.clone())?.recipe)(db, asset, surface)?;
     Ok(recipe.map(|recipe| surface_key(settings).part(&recipe.0).finish()))
 }
 

@@ -25,9 +25,9 @@ use crate::diagnostic::{display_path, Diagnostic};
 use crate::kinds::ambient_occlusion::settings::Settings as Own;
 use crate::kinds::mesh_queries::mesh_instance;
 use crate::kinds::Read;
-use crate::kinds::{tail_instances, AssetOutputs, Job, Kind, StageInstance, SurfaceId, Task};
+use crate::kinds::{tail_instances, AssetOutputs, Job, Kind, StageInstance, SurfaceFn, SurfaceId, SurfacePlan, Task};
 use crate::summary::ErrorSummary;
-use crate::texture::tail::{SurfaceInfo, TailSettings};
+use crate::texture::tail::SurfaceInfo;
 use crate::texture::{SurfaceKind, Texture};
 use bake::material_tiles;
 use queries::{
@@ -166,19 +166,19 @@ impl Kind for AmbientOcclusion {
         problems
     }
 
-    fn surface_image(db: &dyn Db, asset: Asset, surface: &SurfaceId) -> Result<Arc<Texture>, Diagnostic> {
-        let (_, material) = surface_material(db, asset, surface)?;
-        Ok(Arc::new(bake::map_texture(&ao_map(db, asset, material)?.map)))
-    }
-
-    fn tail_settings(db: &dyn Db, asset: Asset, surface: &SurfaceId) -> Result<TailSettings, Diagnostic> {
+    fn surface_plan(db: &dyn Db, asset: Asset, surface: &SurfaceId) -> Result<SurfacePlan, Diagnostic> {
         let encode = &asset.settings(db).encode;
-        Ok(crate::kinds::tail_settings_from(encode, surface.surface, encode.format_of(surface.surface), None))
-    }
-
-    fn surface_recipe_key(db: &dyn Db, asset: Asset, surface: &SurfaceId) -> Result<Option<CacheKey>, Diagnostic> {
-        let (_, material) = surface_material(db, asset, surface)?;
-        ao_map_key(db, asset, material).map(Some)
+        let settings =
+            crate::kinds::tail_settings_from(encode, surface.surface, encode.format_of(surface.surface), None);
+        let image: SurfaceFn<Arc<Texture>> = |db, asset, surface| {
+            let (_, material) = surface_material(db, asset, surface)?;
+            Ok(Arc::new(bake::map_texture(&ao_map(db, asset, material)?.map)))
+        };
+        let recipe: SurfaceFn<Option<CacheKey>> = |db, asset, surface| {
+            let (_, material) = surface_material(db, asset, surface)?;
+            ao_map_key(db, asset, material).map(Some)
+        };
+        Ok(SurfacePlan::new(settings, recipe, image))
     }
 
     fn provided_surface_stage(db: &dyn Db, asset: Asset, surface: &SurfaceId) -> Result<Option<Read>, Diagnostic> {

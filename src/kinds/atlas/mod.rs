@@ -21,8 +21,9 @@ use crate::db::{Asset, Db, StageRun, DECODE};
 use crate::diagnostic::{display_path, Diagnostic};
 use crate::kinds::checks::check_texture_file;
 use crate::kinds::source_copies::{material_copy_paths, output_materials, MaterialPlaces, OutputMaterial};
-use crate::kinds::{tail_instances, AssetOutputs, Job, Kind, Read, StageInstance, SurfaceId, SurfacePart, Task};
-use crate::texture::tail::TailSettings;
+use crate::kinds::{
+    tail_instances, AssetOutputs, Job, Kind, Read, StageInstance, SurfaceFn, SurfaceId, SurfacePart, SurfacePlan, Task,
+};
 use crate::texture::{SurfaceKind, Texture};
 
 use crate::kinds::atlas::settings::Settings as Own;
@@ -273,17 +274,13 @@ impl Kind for Atlas {
         problems
     }
 
-    fn surface_image(db: &dyn Db, asset: Asset, surface: &SurfaceId) -> Result<Arc<Texture>, Diagnostic> {
-        atlas_page(db, asset, surface_page(surface))
-    }
-
-    fn tail_settings(db: &dyn Db, asset: Asset, _surface: &SurfaceId) -> Result<TailSettings, Diagnostic> {
+    fn surface_plan(db: &dyn Db, asset: Asset, _surface: &SurfaceId) -> Result<SurfacePlan, Diagnostic> {
         let encode = &asset.settings(db).encode;
-        Ok(crate::kinds::tail_settings_from(encode, SurfaceKind::Albedo, encode.albedo, None))
-    }
-
-    fn surface_recipe_key(db: &dyn Db, asset: Asset, surface: &SurfaceId) -> Result<Option<CacheKey>, Diagnostic> {
-        page_recipe_key(db, asset, surface_page(surface)).map(Some)
+        let settings = crate::kinds::tail_settings_from(encode, SurfaceKind::Albedo, encode.albedo, None);
+        let image: SurfaceFn<Arc<Texture>> = |db, asset, surface| atlas_page(db, asset, surface_page(surface));
+        let recipe: SurfaceFn<Option<CacheKey>> =
+            |db, asset, surface| page_recipe_key(db, asset, surface_page(surface)).map(Some);
+        Ok(SurfacePlan::new(settings, recipe, image))
     }
 
     fn preview(

@@ -92,7 +92,7 @@ pub(crate) fn atlas_coverage(layout: &Layout, planes: &[&PlaneImages]) -> AtlasC
 /// layout order), then every texel takes the values of the texel `sources` names (from
 /// [`texel_sources`] of the same coverage), rows in parallel. Albedo alpha stays 0 on
 /// uncovered texels. Surfaces are composited one by one, so that a surface whose parts did not
-/// change is never composited (see the kind's `surface_parts_key`).
+/// change is never composited (see the kind's `surface_parts_key`, its surfaces' `SurfacePlan::parts`).
 pub(crate) fn composite_atlas_surface(
     layout: &Layout,
     planes: &[&PlaneImages],

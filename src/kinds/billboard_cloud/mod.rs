@@ -49,10 +49,9 @@ use crate::kinds::checks::check_texture_file;
 use crate::kinds::mesh_queries::{loaded_mesh, mesh_textures, LoadedMesh};
 use crate::kinds::{
     tail_instances, AssetOutputs, Job, Kind, PreviewError, PreviewOptions, PreviewReport, PreviewRow, StageInstance,
-    SurfaceId, Task,
+    SurfaceId, SurfacePlan, Task,
 };
 use crate::summary::ErrorSummary;
-use crate::texture::tail::TailSettings;
 use crate::texture::{SurfaceKind, Texture, TextureSlot};
 use queries::{billboard_layout, level_label, lod_files, render_label, source_view_mesh};
 use queries::{ATLAS, LAYOUT, LOD, PLANES, RENDER};
@@ -295,66 +294,21 @@ impl Kind for BillboardCloud {
         problems
     }
 
-    fn surface_image(db: &dyn Db, asset: Asset, surface: &SurfaceId) -> Result<Arc<Texture>, Diagnostic> {
-        if let Some((material, halvings)) = reduced_map_of(db, asset, surface)? {
-            return reduced_queries::reduced_map_image(db, asset, (material, halvings), surface);
-        }
-        let level = slot_of_surface(db, asset, surface)?;
-        let halvings = queries::level_settings(db, asset, level).surface_halvings.of(surface.surface);
-        // Stored at its size, or (an `Auto` candidate's) at a level of its mip chain.
-        let stored = |image: &Texture| {
-            let settings = crate::texture::mips::MipSettings { kind: surface.surface, alpha_cutoff: None };
-            crate::texture::mips::reduced_level(image, settings, halvings)
-        };
-        if levels::is_impostor(asset.settings(db), level) {
-            let frames = queries::impostor_frames(db, asset, level)?;
-            return Ok(Arc::new(stored(match surface.surface {
-                SurfaceKind::Normal => &frames.normal,
-                SurfaceKind::Height => &frames.depth,
-                _ => &frames.albedo,
-            })));
-        }
-        let image = queries::atlas_surface(db, asset, level, surface.surface)?;
-        Ok(match halvings {
-            0 => image,
-            _ => Arc::new(stored(&image)),
-        })
-    }
-
-    fn tail_settings(db: &dyn Db, asset: Asset, surface: &SurfaceId) -> Result<TailSettings, Diagnostic> {
+    fn surface_plan(db: &dyn Db, asset: Asset, surface: &SurfaceId) -> Result<SurfacePlan, Diagnostic> {
         let settings = asset.settings(db);
         let encode = &settings.encode;
-        Ok(crate::kinds::tail_settings_from(
-            encode,
-            surface.surface,
-            encode.format_of(surface.surface),
-            (surface.surface == SurfaceKind::Albedo).then_some(settings.own::<Own>().billboard.alpha_cutoff),
-        ))
-    }
-
-    fn surface_recipe_key(db: &dyn Db, asset: Asset, surface: &SurfaceId) -> Result<Option<CacheKey>, Diagnostic> {
-        if let Some((material, halvings)) = reduced_map_of(db, asset, surface)? {
-            return reduced_queries::reduced_map_key(db, asset, (material, halvings), surface.surface).map(Some);
-        }
-        let level = slot_of_surface(db, asset, surface)?;
-        let key = match levels::is_impostor(asset.settings(db), level) {
-            true => queries::impostor_recipe_key(db, asset, level),
-            false => queries::atlas_recipe_key(db, asset, level),
-        };
-        Ok(Some(with_halvings(db, asset, level, surface, key)))
-    }
-
-    fn cutting_surface(surface: &SurfaceId) -> Option<SurfaceId> {
-        (surface.surface != SurfaceKind::Albedo).then(|| surface.sibling(SurfaceKind::Albedo))
-    }
-
-    fn surface_parts_key(db: &dyn Db, asset: Asset, surface: &SurfaceId) -> Result<Option<CacheKey>, Diagnostic> {
-        let level = slot_of_surface(db, asset, surface)?;
-        if !levels::is_cloud(asset.settings(db), level) {
-            return Ok(None);
-        }
-        let key = queries::atlas_surface_parts_key(db, asset, level, surface.surface)?;
-        Ok(Some(with_halvings(db, asset, level, surface, key)))
+        let alpha_cutoff =
+            (surface.surface == SurfaceKind::Albedo).then_some(settings.own::<Own>().billboard.alpha_cutoff);
+        let tail =
+            crate::kinds::tail_settings_from(encode, surface.surface, encode.format_of(surface.surface), alpha_cutoff);
+        Ok(SurfacePlan {
+            settings: tail,
+            // The atlas's (and an impostor's) other surfaces are cut out by its albedo.
+            cutting: (surface.surface != SurfaceKind::Albedo).then(|| surface.sibling(SurfaceKind::Albedo)),
+            recipe: surface_recipe_key,
+            parts: surface_parts_key,
+            image: surface_image,
+        })
     }
 
     fn preview(
@@ -377,6 +331,57 @@ impl Kind for BillboardCloud {
             .collect();
         Ok(PreviewReport { rows, chain_sheet: several.then(|| options.out.join("contact_sheet.png")) })
     }
+}
+
+/// The image of one of the asset's surfaces: a reduced level's map, an impostor's frames, a
+/// cloud's atlas surface (each stored at its size, or at a level of its mip chain).
+fn surface_image(db: &dyn Db, asset: Asset, surface: &SurfaceId) -> Result<Arc<Texture>, Diagnostic> {
+    if let Some((material, halvings)) = reduced_map_of(db, asset, surface)? {
+        return reduced_queries::reduced_map_image(db, asset, (material, halvings), surface);
+    }
+    let level = slot_of_surface(db, asset, surface)?;
+    let halvings = queries::level_settings(db, asset, level).surface_halvings.of(surface.surface);
+    // Stored at its size, or (an `Auto` candidate's) at a level of its mip chain.
+    let stored = |image: &Texture| {
+        let settings = crate::texture::mips::MipSettings { kind: surface.surface, alpha_cutoff: None };
+        crate::texture::mips::reduced_level(image, settings, halvings)
+    };
+    if levels::is_impostor(asset.settings(db), level) {
+        let frames = queries::impostor_frames(db, asset, level)?;
+        return Ok(Arc::new(stored(match surface.surface {
+            SurfaceKind::Normal => &frames.normal,
+            SurfaceKind::Height => &frames.depth,
+            _ => &frames.albedo,
+        })));
+    }
+    let image = queries::atlas_surface(db, asset, level, surface.surface)?;
+    Ok(match halvings {
+        0 => image,
+        _ => Arc::new(stored(&image)),
+    })
+}
+
+/// What a surface's image is made of (`SurfacePlan::recipe`).
+fn surface_recipe_key(db: &dyn Db, asset: Asset, surface: &SurfaceId) -> Result<Option<CacheKey>, Diagnostic> {
+    if let Some((material, halvings)) = reduced_map_of(db, asset, surface)? {
+        return reduced_queries::reduced_map_key(db, asset, (material, halvings), surface.surface).map(Some);
+    }
+    let level = slot_of_surface(db, asset, surface)?;
+    let key = match levels::is_impostor(asset.settings(db), level) {
+        true => queries::impostor_recipe_key(db, asset, level),
+        false => queries::atlas_recipe_key(db, asset, level),
+    };
+    Ok(Some(with_halvings(db, asset, level, surface, key)))
+}
+
+/// What a cloud level's atlas surface is put together from (`SurfacePlan::parts`).
+fn surface_parts_key(db: &dyn Db, asset: Asset, surface: &SurfaceId) -> Result<Option<CacheKey>, Diagnostic> {
+    let level = slot_of_surface(db, asset, surface)?;
+    if !levels::is_cloud(asset.settings(db), level) {
+        return Ok(None);
+    }
+    let key = queries::atlas_surface_parts_key(db, asset, level, surface.surface)?;
+    Ok(Some(with_halvings(db, asset, level, surface, key)))
 }
 
 /// The jobs after a level's first step: a reduced level's maps once its mesh is made (their

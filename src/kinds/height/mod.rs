@@ -27,10 +27,10 @@ use crate::db::{Asset, Db, StageRun};
 use crate::diagnostic::{display_path, Diagnostic};
 use crate::kinds::height::settings::Settings as Own;
 use crate::kinds::mesh_queries::{mesh_files_of, mesh_instance_of};
-use crate::kinds::{tail_instances, AssetOutputs, Job, Kind, StageInstance, SurfaceId, Task};
+use crate::kinds::{tail_instances, AssetOutputs, Job, Kind, StageInstance, SurfaceFn, SurfaceId, SurfacePlan, Task};
 use crate::mesh::surface_distance::SurfaceDistance;
 use crate::summary::ErrorSummary;
-use crate::texture::tail::{SurfaceInfo, TailSettings};
+use crate::texture::tail::SurfaceInfo;
 use crate::texture::{SurfaceKind, Texture};
 use bake::Quantization;
 use queries::{
@@ -250,19 +250,17 @@ impl Kind for Height {
         problems
     }
 
-    fn surface_image(db: &dyn Db, asset: Asset, _surface: &SurfaceId) -> Result<Arc<Texture>, Diagnostic> {
-        let files = height_map(db, asset, MapReference::Low)?;
-        let map = &files.map;
-        Ok(Arc::new(crate::texture::grey16_texture(map.size, map.size, &map.values16())))
-    }
-
-    fn tail_settings(db: &dyn Db, asset: Asset, surface: &SurfaceId) -> Result<TailSettings, Diagnostic> {
+    fn surface_plan(db: &dyn Db, asset: Asset, surface: &SurfaceId) -> Result<SurfacePlan, Diagnostic> {
         let encode = &asset.settings(db).encode;
-        Ok(crate::kinds::tail_settings_from(encode, surface.surface, encode.format_of(surface.surface), None))
-    }
-
-    fn surface_recipe_key(db: &dyn Db, asset: Asset, _surface: &SurfaceId) -> Result<Option<CacheKey>, Diagnostic> {
-        map_key(db, asset, MapReference::Low).map(Some)
+        let settings =
+            crate::kinds::tail_settings_from(encode, surface.surface, encode.format_of(surface.surface), None);
+        let image: SurfaceFn<Arc<Texture>> = |db, asset, _| {
+            let files = height_map(db, asset, MapReference::Low)?;
+            let map = &files.map;
+            Ok(Arc::new(crate::texture::grey16_texture(map.size, map.size, &map.values16())))
+        };
+        let recipe: SurfaceFn<Option<CacheKey>> = |db, asset, _| map_key(db, asset, MapReference::Low).map(Some);
+        Ok(SurfacePlan::new(settings, recipe, image))
     }
 }
 

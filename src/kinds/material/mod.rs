@@ -21,9 +21,11 @@ use crate::db::{Asset, Db, StageRun, DECODE};
 use crate::diagnostic::{display_path, Diagnostic};
 use crate::kinds::checks::check_texture_file;
 use crate::kinds::material::settings::Settings as Own;
-use crate::kinds::{tail_instances, AssetOutputs, Job, Kind, Read, StageInstance, SurfaceId, Task};
+use crate::kinds::{
+    tail_instances, AssetOutputs, Job, Kind, Read, StageInstance, SurfaceFn, SurfaceId, SurfacePlan, Task,
+};
 use crate::summary::ErrorSummary;
-use crate::texture::tail::{SurfaceInfo, TailSettings};
+use crate::texture::tail::SurfaceInfo;
 use crate::texture::{SurfaceKind, Texture};
 use queries::{material_file, referenced_textures, surface_recipe, MapSource, PACK, PARSE};
 
@@ -182,7 +184,8 @@ impl Kind for Material {
                     SurfaceKind::Albedo => {
                         swatch.base_colour = preview_name();
                         if artifacts.info.alpha_tested {
-                            let cutoff = Self::tail_settings(db, asset, &id).ok().and_then(|tail| tail.alpha_cutoff);
+                            let tail = crate::kinds::tail_queries::tail_settings(db, asset, id.clone());
+                            let cutoff = tail.ok().and_then(|tail| tail.alpha_cutoff);
                             (swatch.alpha, swatch.double_sided) = (GltfAlpha::Mask(cutoff.unwrap_or(0.5)), true);
                         }
                     }
@@ -245,11 +248,7 @@ impl Kind for Material {
         problems
     }
 
-    fn surface_image(db: &dyn Db, asset: Asset, surface: &SurfaceId) -> Result<Arc<Texture>, Diagnostic> {
-        queries::surface_for_tail(db, asset, surface)
-    }
-
-    fn tail_settings(db: &dyn Db, asset: Asset, surface: &SurfaceId) -> Result<TailSettings, Diagnostic> {
+    fn surface_plan(db: &dyn Db, asset: Asset, surface: &SurfaceId) -> Result<SurfacePlan, Diagnostic> {
         let settings = asset.settings(db);
         let encode = &settings.encode;
         let alpha_cutoff = match surface.surface {
@@ -259,11 +258,12 @@ impl Kind for Material {
             }
             _ => None,
         };
-        Ok(crate::kinds::tail_settings_from(encode, surface.surface, encode.format_of(surface.surface), alpha_cutoff))
-    }
-
-    fn surface_recipe_key(db: &dyn Db, asset: Asset, surface: &SurfaceId) -> Result<Option<CacheKey>, Diagnostic> {
-        queries::surface_recipe_key(db, asset, surface.clone()).map(Some)
+        let settings =
+            crate::kinds::tail_settings_from(encode, surface.surface, encode.format_of(surface.surface), alpha_cutoff);
+        let image: SurfaceFn<Arc<Texture>> = queries::surface_for_tail;
+        let recipe: SurfaceFn<Option<CacheKey>> =
+            |db, asset, surface| queries::surface_recipe_key(db, asset, surface.clone()).map(Some);
+        Ok(SurfacePlan::new(settings, recipe, image))
     }
 }
 

@@ -160,7 +160,8 @@ fn pack(db: &dyn Db, asset: Asset, surface: &SurfaceId) -> Result<Arc<Texture>, 
                 None => Some(decoded_for_surface(db, *file)?),
             },
             Some(MapSource::Asset { asset: source, name, surface, .. }) => {
-                let image = source.kind(db).surface_image(db, *source, surface);
+                let plan = crate::kinds::tail_queries::surface_plan(db, *source, surface.clone());
+                let image = plan.and_then(|plan| (plan.image)(db, *source, surface));
                 Some(image.map_err(|error| from_ao_source(db, asset, name, error))?)
             }
             None => None,
@@ -182,10 +183,11 @@ pub(crate) fn surface_recipe_key(db: &dyn Db, asset: Asset, surface: SurfaceId) 
         key = match source {
             Some(MapSource::File(file)) => key.part(&read_contents(db, *file)?.hash),
             Some(MapSource::Asset { asset: source, surface, .. }) => {
-                match source.kind(db).surface_recipe_key(db, *source, surface)? {
+                let plan = crate::kinds::tail_queries::surface_plan(db, *source, surface.clone())?;
+                match (plan.recipe)(db, *source, surface)? {
                     Some(recipe) => key.part("asset").part(&recipe.0),
                     // No cheap key: what the image holds.
-                    None => key.part("image").part(&source.kind(db).surface_image(db, *source, surface)?.hash),
+                    None => key.part("image").part(&(plan.image)(db, *source, surface)?.hash),
                 }
             }
             None => key.part("none"),

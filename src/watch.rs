@@ -4,7 +4,7 @@
 //! next build starts from the newest inputs. Each finished build is logged and published to the
 //! hot-reload server.
 
-use std::collections::{BTreeSet, HashSet};
+use std::collections::BTreeSet;
 use std::io::Write as _;
 use std::net::SocketAddr;
 use std::path::{Path, PathBuf};
@@ -18,7 +18,8 @@ use notify_debouncer_full::{new_debouncer, DebounceEventResult};
 use crate::config::{ConfigError, PipelineConfig};
 use crate::diagnostic::display_path;
 use crate::pipeline::load_pipeline;
-use crate::project::{BuildError, BuildOptions, CancelFlag, Project, ProjectOptions, SourceReading};
+use crate::project::batch::{BatchHooks, BatchOutcome, BatchRequest};
+use crate::project::{CancelFlag, Project, ProjectOptions, SourceReading};
 use crate::server::{BatchEvent, FailedEntry, Server, ServerSettings};
 use crate::summary::{AssetStatus, BuildSummary, StageStatus};
 
@@ -375,15 +376,11 @@ pub fn watch(settings: &WatchSettings) -> Result<(), WatchError> {
             }
         }
         let changed_files: Vec<PathBuf> = std::mem::take(&mut pending).into_iter().collect();
-        let changed = daemon.project.refresh_sources(changed_files.iter().map(PathBuf::as_path));
-        if !force_build && !reconfigured && !changed {
-            tracing::debug!("{} file(s) touched with identical bytes: nothing to do", changed_files.len());
-            continue;
-        }
-        force_build = false;
-        let batch = bake_batch(&mut daemon, &changed_files, first);
-        first = false;
+        let rebuild = std::mem::take(&mut force_build) || reconfigured;
+        let batch = bake_batch(&mut daemon, &changed_files, (rebuild, first));
+        first &= matches!(batch, Batch::Unchanged);
         match batch {
+            Batch::Unchanged => continue,
             // Files the batch read that moved meanwhile make the next batch at once.
             Batch::Published { moved } => pending.extend(moved),
             Batch::Cancelled => {
@@ -426,7 +423,9 @@ struct Daemon<'a> {
 
 /// How a batch ended.
 enum Batch {
-    /// `moved`: files it read that are no longer as it read them (`Project::moved_since_read`).
+    /// Touched with identical bytes: nothing to do.
+    Unchanged,
+    /// `moved`: files it read that are no longer as it read them.
     Published {
         moved: Vec<PathBuf>,
     },
@@ -548,64 +547,54 @@ fn reload_pipeline(daemon: &mut Daemon) -> bool {
 
 /// Builds the batch of `changed_files` and publishes it: the engine hears first, then the log
 /// (with the graph of the assets the batch looked into).
-fn bake_batch(daemon: &mut Daemon, changed_files: &[PathBuf], first: bool) -> Batch {
-    if let Some(server) = &daemon.server {
-        server.building(&changed_files.iter().map(|file| display_path(file)).collect::<Vec<_>>());
-    }
-    // The files this build is about to read count as sources already: a folder of new
-    // rule-matched files deleted while they bake (one event for the folder) cancels it.
-    // (Without rules no asset is new to the watcher: no walk of the source folder.)
-    if !daemon.project.config().rules.is_empty() {
-        let main_files: Vec<PathBuf> = daemon
-            .project
-            .asset_list()
-            .iter()
-            .map(|asset| daemon.project.config().source.join(asset.source.main_file()))
-            .collect();
-        daemon.filter.write().expect("event filter").sources.extend(main_files);
-    }
+fn bake_batch(daemon: &mut Daemon, changed_files: &[PathBuf], (rebuild, first): (bool, bool)) -> Batch {
+    let request = BatchRequest { changed: changed_files, rebuild, first, cancel: daemon.cancel.clone() };
+    let mut hooks = DaemonHooks { server: daemon.server.as_ref(), filter: &daemon.filter };
     let start = Instant::now();
-    let options = BuildOptions {
-        cancel: Some(daemon.cancel.clone()),
-        always_new_revision: !first,
-        omit_unchanged: true,
-        ..Default::default()
-    };
-    let summary = match daemon.project.build(&options, &|_| {}) {
-        Ok(summary) => summary,
-        Err(BuildError::Cancelled) => {
-            tracing::info!(
-                "build cancelled by a newer edit after {:.0} ms; restarting",
-                start.elapsed().as_secs_f64() * 1e3
-            );
-            return Batch::Cancelled;
+    match daemon.project.bake_batch(&request, &mut hooks) {
+        BatchOutcome::Unchanged => Batch::Unchanged,
+        BatchOutcome::Cancelled => {
+            let ms = start.elapsed().as_secs_f64() * 1e3;
+            tracing::info!("build cancelled by a newer edit after {ms:.0} ms; restarting");
+            Batch::Cancelled
         }
-        Err(error) => {
+        BatchOutcome::Failed(error) => {
             tracing::error!("{error}");
-            return Batch::Failed;
+            Batch::Failed
         }
-    };
-    let ms = start.elapsed().as_secs_f64() * 1e3;
-    // The summary lists the assets this batch looked into (the others were passed over):
-    // their files join the watched sources.
-    let rebuilt: HashSet<String> = summary.assets.iter().map(|asset| asset.name.clone()).collect();
-    let sources = if first { daemon.project.source_paths() } else { daemon.project.source_paths_of(&rebuilt) };
-    // Watched first, then checked: an edit after the check is an event the filter now keeps.
-    let moved = {
-        daemon.filter.write().expect("event filter").sources.extend(sources.iter().cloned());
-        daemon.project.moved_since_read(&sources)
-    };
-    if !moved.is_empty() {
-        tracing::info!("{} file(s) the batch read changed while it baked: baking again", moved.len());
+        BatchOutcome::Published { summary, graph, ms, moved } => {
+            if !moved.is_empty() {
+                tracing::info!("{} file(s) the batch read changed while it baked: baking again", moved.len());
+            }
+            log_batch(&summary, changed_files, &graph, ms);
+            Batch::Published { moved }
+        }
     }
-    // The engine hears first; the log's graph (which may compute a cached billboard's
-    // layout) after, and only of the assets of this batch.
-    if let Some(server) = &daemon.server {
-        server.publish(&batch_event(&summary, ms));
+}
+
+/// What a batch tells the daemon as it runs: the server hears that it started and, first, what
+/// it built; the event filter keeps the files it reads.
+struct DaemonHooks<'a> {
+    server: Option<&'a Server>,
+    filter: &'a RwLock<EventFilter>,
+}
+
+impl BatchHooks for DaemonHooks<'_> {
+    fn started(&mut self, changed: &[PathBuf]) {
+        if let Some(server) = self.server {
+            server.building(&changed.iter().map(|file| display_path(file)).collect::<Vec<_>>());
+        }
     }
-    let graph = daemon.project.graph_of_assets(Some(&rebuilt));
-    log_batch(&summary, changed_files, &graph, ms);
-    Batch::Published { moved }
+
+    fn watch(&mut self, files: Vec<PathBuf>) {
+        self.filter.write().expect("event filter").sources.extend(files);
+    }
+
+    fn built(&mut self, summary: &BuildSummary, ms: f64) {
+        if let Some(server) = self.server {
+            server.publish(&batch_event(summary, ms));
+        }
+    }
 }
 
 /// Applies a watcher message; true when the source folder must be watched again. A graph

@@ -22,6 +22,7 @@ use crate::summary::{AssetStatus, BuildSummary};
 pub use crate::schedule::{CancelFlag, Progress};
 
 mod asset_list;
+pub mod batch;
 mod clean;
 mod graph;
 mod publish;

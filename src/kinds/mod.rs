@@ -222,38 +222,78 @@ impl PreviewError {
     }
 }
 
-/// What the scheduler asks of a kind's step.
-pub(crate) trait KindStep: Clone + std::fmt::Debug + PartialEq + Send + Sync {
+/// What the scheduler asks of a kind's step, and the kind that runs it.
+pub(crate) trait KindStep: Clone + std::fmt::Debug + PartialEq + Send + Sync + 'static {
+    /// The kind whose `run_step` runs it.
+    type Kind: Kind<Step = Self>;
+
     /// The sort of work it is, for estimating how long the waiting jobs take (the steps of one
     /// sort take about as long as each other).
     fn sort(&self) -> &'static str;
 }
 
+/// A step of some kind's own (its `Kind::Step`), as a job carries it: the kind's type erased, so
+/// that the driver and the scheduler name no kind's steps (the kind runs its own).
+#[derive(Clone)]
+pub(crate) struct Step(Arc<dyn AnyStep>);
+
+/// A kind's step behind [`Step`].
+trait AnyStep: std::fmt::Debug + Send + Sync {
+    fn sort(&self) -> &'static str;
+    fn run(&self, db: &dyn Db, asset: Asset) -> Result<Vec<Job>, Diagnostic>;
+    /// Whether `other` is a step of the same kind, equal to this one.
+    fn same(&self, other: &dyn std::any::Any) -> bool;
+    fn as_any(&self) -> &dyn std::any::Any;
+}
+
+impl<S: KindStep> AnyStep for S {
+    fn sort(&self) -> &'static str {
+        KindStep::sort(self)
+    }
+
+    fn run(&self, db: &dyn Db, asset: Asset) -> Result<Vec<Job>, Diagnostic> {
+        S::Kind::run_step(db, asset, self)
+    }
+
+    fn same(&self, other: &dyn std::any::Any) -> bool {
+        other.downcast_ref::<S>().is_some_and(|other| other == self)
+    }
+
+    fn as_any(&self) -> &dyn std::any::Any {
+        self
+    }
+}
+
+impl Step {
+    fn sort(&self) -> &'static str {
+        self.0.sort()
+    }
+}
+
+impl<S: KindStep> From<S> for Step {
+    fn from(step: S) -> Step {
+        Step(Arc::new(step))
+    }
+}
+
+impl PartialEq for Step {
+    /// Steps of one kind compare as that kind's; steps of two kinds differ.
+    fn eq(&self, other: &Step) -> bool {
+        self.0.same(other.0.as_any())
+    }
+}
+
+impl std::fmt::Debug for Step {
+    fn fmt(&self, formatter: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        self.0.fmt(formatter)
+    }
+}
+
 /// The dispatch of the one list of kinds (`kind_list.rs`): each kind's type is `folder::Name`.
-/// It generates one method per question of `Kind` and the `Step` that carries any kind's step
-/// (a kind left out is a compile error: the `match`es are exhaustive).
+/// It generates one method per question of `Kind` (a kind left out is a compile error: the
+/// `match`es are exhaustive).
 macro_rules! kinds {
     ($($name:ident => $folder:ident),* $(,)?) => {
-        /// A step of one kind's own (its `Kind::Step`), as a job carries it.
-        #[derive(Clone, Debug, PartialEq)]
-        pub(crate) enum Step {
-            $($name(<$folder::$name as Kind>::Step)),*
-        }
-
-        impl Step {
-            fn sort(&self) -> &'static str {
-                match self {
-                    $(Step::$name(step) => step.sort()),*
-                }
-            }
-        }
-
-        $(impl From<<$folder::$name as Kind>::Step> for Step {
-            fn from(step: <$folder::$name as Kind>::Step) -> Step {
-                Step::$name(step)
-            }
-        })*
-
         /// Runs a job on a worker: a surface through the shared tail, a step by its kind.
         pub(crate) fn run_job(db: &dyn Db, job: &Job) -> Result<Vec<Job>, Diagnostic> {
             match &job.task {
@@ -264,7 +304,7 @@ macro_rules! kinds {
                     tail_queries::load_previous_encoding(db, job.asset, surface);
                     Ok(Vec::new())
                 }
-                $(Task::Step(Step::$name(step)) => <$folder::$name>::run_step(db, job.asset, step),)*
+                Task::Step(step) => step.0.run(db, job.asset),
             }
         }
 

@@ -64,6 +64,8 @@ pub(crate) enum Step {
 }
 
 impl crate::kinds::KindStep for Step {
+    type Kind = AmbientOcclusion;
+
     fn sort(&self) -> &'static str {
         "plan"
     }

@@ -63,6 +63,8 @@ pub(crate) enum Step {
 }
 
 impl crate::kinds::KindStep for Step {
+    type Kind = Atlas;
+
     fn sort(&self) -> &'static str {
         match self {
             Step::Layout => "layout",

@@ -93,6 +93,8 @@ pub(crate) enum Step {
 }
 
 impl crate::kinds::KindStep for Step {
+    type Kind = BillboardCloud;
+
     fn sort(&self) -> &'static str {
         match self {
             Step::Layout { .. } => "layout",

@@ -69,6 +69,8 @@ pub(crate) enum Step {
 }
 
 impl crate::kinds::KindStep for Step {
+    type Kind = Height;
+
     fn sort(&self) -> &'static str {
         match self {
             Step::Plan => "plan",

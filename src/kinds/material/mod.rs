@@ -46,6 +46,8 @@ pub(crate) enum Step {
 }
 
 impl crate::kinds::KindStep for Step {
+    type Kind = Material;
+
     fn sort(&self) -> &'static str {
         "parse"
     }

@@ -99,9 +99,7 @@ fn auto_report(
                 representation: figures.representation,
                 surface_sides: figures.surfaces.iter().map(side).collect(),
                 gpu_bytes: figures.gpu_bytes,
-                holds_to: holds[slot].holds_to,
-                measured: holds[slot].measured.clone(),
-                outranked_at: holds[slot].outranked_at,
+                hold: holds[slot].clone(),
             }
         })
         .collect();

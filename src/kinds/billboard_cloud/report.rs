@@ -8,7 +8,7 @@ use std::collections::BTreeMap;
 
 use serde::Serialize;
 
-use crate::preview::SizeFigures;
+use crate::preview::{Hold, SizeFigures};
 use crate::summary::ErrorSummary;
 use crate::texture::tail::SurfaceInfo;
 
@@ -195,9 +195,9 @@ pub(super) struct CandidateReport {
     /// Each surface's side (a reduced level's by material: `bark/albedo`).
     pub surface_sides: BTreeMap<String, u32>,
     pub gpu_bytes: u64,
-    pub holds_to: Option<u32>,
-    pub measured: Vec<SizeFigures>,
-    pub outranked_at: Option<u32>,
+    /// How far it holds against the source (`holds_to`, `measured`, `outranked_at`).
+    #[serde(flatten)]
+    pub hold: Hold,
 }
 
 /// A chain's `lods.json` for engines.

@@ -6,8 +6,6 @@
 use std::net::SocketAddr;
 use std::path::{Path, PathBuf};
 
-use serde::{Deserialize, Serialize};
-
 use crate::diagnostic::{Diagnostic, TextPosition};
 use base::paths::normalize_relative_path;
 
@@ -19,30 +17,53 @@ pub use settings::Settings;
 mod entry;
 pub use entry::{AssetReference, EntryCheck, EntryKinds, KindEntry, KindFields, KindSettings};
 
-/// The `AssetKind` enum of the one list of kinds (`kind_list.rs`): a pipeline's `kind:` names.
-macro_rules! asset_kind_enum {
-    ($($name:ident => $folder:ident),* $(,)?) => {
-        /// A kind of asset, as `pipeline.ron` names it (`rules: [(glob: …, kind: Material)]`).
-        #[derive(Clone, Copy, Debug, PartialEq, Eq, Hash, Serialize, Deserialize)]
-        pub enum AssetKind {
-            $($name),*
-        }
-
-        impl AssetKind {
-            /// Every kind, in the list's order.
-            pub const ALL: &[AssetKind] = &[$(AssetKind::$name),*];
-
-            /// The kind's name in `pipeline.ron`, summaries and reports.
-            pub fn name(self) -> &'static str {
-                match self {
-                    $(AssetKind::$name => stringify!($name)),*
-                }
-            }
-        }
-    };
+/// A kind of asset: its name (in `pipeline.ron`'s `kind:`, summaries and reports) and the
+/// questions the driver asks it, held here without their type (`kinds::KindQuestions`: they read
+/// the database, which stands above `config`). Each kind's folder makes its own (`KIND`); two are
+/// the same kind when their names are.
+#[derive(Clone, Copy)]
+pub struct AssetKind {
+    name: &'static str,
+    questions: &'static (dyn std::any::Any + Send + Sync),
 }
 
-with_kinds!(asset_kind_enum);
+impl AssetKind {
+    pub const fn new(name: &'static str, questions: &'static (dyn std::any::Any + Send + Sync)) -> AssetKind {
+        AssetKind { name, questions }
+    }
+
+    /// The kind's name in `pipeline.ron`, summaries and reports.
+    pub fn name(self) -> &'static str {
+        self.name
+    }
+
+    /// The questions the driver asks the kind, as its folder made them.
+    pub fn questions(self) -> &'static (dyn std::any::Any + Send + Sync) {
+        self.questions
+    }
+}
+
+impl PartialEq for AssetKind {
+    fn eq(&self, other: &AssetKind) -> bool {
+        self.name == other.name
+    }
+}
+
+impl Eq for AssetKind {}
+
+impl std::hash::Hash for AssetKind {
+    fn hash<H: std::hash::Hasher>(&self, state: &mut H) {
+        self.name.hash(state);
+    }
+}
+
+impl std::fmt::Debug for AssetKind {
+    /// As the enum it stands for printed (`Material`): the record's configuration hash is made of
+    /// this text.
+    fn fmt(&self, formatter: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        formatter.write_str(self.name)
+    }
+}
 
 /// What an asset is made from: its kind, the file it is named after, and the globs whose
 /// matches it reads, whatever its kind (a kind's other files are its settings').
@@ -275,7 +296,7 @@ pub fn parse_pipeline_with<Kinds: EntryKinds>(file: &Path, text: &str) -> Result
         encode: EncodeSettings::default(),
         diagnostics: Vec::new(),
     };
-    let raw: raw::Pipeline<Kinds::Entry> =
+    let raw: raw::Pipeline<Kinds::Entry, Kinds::KindName> =
         validation.read().map_err(|diagnostic| ConfigError { diagnostics: vec![diagnostic] })?;
     let root = file.parent().map(Path::to_path_buf).unwrap_or_default();
     let root = if root.as_os_str().is_empty() { PathBuf::from(".") } else { root };
@@ -309,7 +330,7 @@ fn ron_message(error: &ron::error::SpannedError, text: &str, kinds: &[KindFields
             )
         }
         ron::Error::NoSuchStructField { expected, found, outer }
-            if AssetKind::ALL.iter().any(|kind| Some(kind.name()) == outer.as_deref()) =>
+            if kinds.iter().any(|kind| Some(kind.kind.name()) == outer.as_deref()) =>
         {
             // A settings section of another kind: said with the kinds that read it.
             let kind = outer.as_deref().unwrap_or_default();
@@ -477,9 +498,11 @@ impl Validation<'_> {
 
     fn validate<Kinds: EntryKinds>(
         mut self,
-        raw: raw::Pipeline<Kinds::Entry>,
+        raw: raw::Pipeline<Kinds::Entry, Kinds::KindName>,
         root: PathBuf,
     ) -> Result<PipelineConfig, ConfigError> {
+        let raw_rules: Vec<raw::Rule<AssetKind>> =
+            raw.rules.iter().map(|rule| raw::Rule { glob: rule.glob.clone(), kind: rule.kind.into() }).collect();
         let source = self.project_path(&raw.source, "source", 0);
         let output = self.project_path(&raw.output, "output", 0);
         if let Some(overlap) =
@@ -528,10 +551,10 @@ impl Validation<'_> {
             }
         }
 
-        self.check_asset_references(&assets, &raw.rules);
+        self.check_asset_references(&assets, &raw_rules);
 
         let mut rules = Vec::new();
-        for rule in &raw.rules {
+        for rule in &raw_rules {
             let refusal = self.kinds.iter().find(|kind| kind.kind == rule.kind).and_then(|kind| kind.rule_refusal);
             if let Some(refusal) = refusal {
                 self.error_at_value(&rule.glob, 0, &format!("a rule makes one asset per file: {refusal}"));
@@ -621,7 +644,7 @@ impl Validation<'_> {
     /// be: a listed one, or (when a rule makes assets of that kind, whose names are known only
     /// once files are listed) any name that is not a listed asset of another kind; the build
     /// reports a name no asset has.
-    fn check_asset_references(&mut self, assets: &[AssetConfig], rules: &[raw::Rule]) {
+    fn check_asset_references(&mut self, assets: &[AssetConfig], rules: &[raw::Rule<AssetKind>]) {
         for asset in assets {
             let Some(reference) = asset.settings.kind.reference() else { continue };
             let (name, field, source, wanted) = (&asset.name, reference.field, reference.asset, reference.kind);

@@ -111,6 +111,9 @@ impl Check for EntryCheck<'_, '_> {
 pub trait EntryKinds {
     /// An entry under `assets:` of any kind (`#[serde(rename = "Asset")]`: errors call it so).
     type Entry: DeserializeOwned;
+    /// A kind's name as a rule's `kind:` is written (`#[serde(rename = "AssetKind")]`), and the
+    /// kind it names.
+    type KindName: DeserializeOwned + Copy + Into<AssetKind>;
     /// Each kind with the fields its entries may carry and the sections of `defaults:` it reads.
     const KINDS: &'static [KindFields];
 

@@ -1,6 +1,6 @@
 //! The serde mirror of `pipeline.ron`: what the file may say, before validation (every field
 //! optional where a default applies; `deny_unknown_fields` throughout, so a typo is an error).
-//! The shared parts are read with the entries of every kind (`Pipeline<Entry>`); each kind then
+//! The shared parts are read with the entries and names of every kind (`Pipeline<Entry, Kind>`); each kind then
 //! reads its own sections of `defaults:` (`KindDefaults`, one pass each).
 
 use std::fmt;
@@ -9,11 +9,10 @@ use serde::de::{Deserializer, IgnoredAny, MapAccess, Visitor};
 use serde::Deserialize;
 
 use super::encode::EncodeOverrides;
-use super::AssetKind;
 
 #[derive(Deserialize)]
 #[serde(deny_unknown_fields)]
-pub struct Pipeline<Entry> {
+pub struct Pipeline<Entry, Kind> {
     pub source: String,
     pub output: String,
     #[serde(default)]
@@ -22,8 +21,8 @@ pub struct Pipeline<Entry> {
     pub defaults: Defaults,
     #[serde(default = "Vec::new")]
     pub assets: Vec<Entry>,
-    #[serde(default)]
-    pub rules: Vec<Rule>,
+    #[serde(default = "Vec::new")]
+    pub rules: Vec<Rule<Kind>>,
     #[serde(default)]
     pub limits: Limits,
     #[serde(default)]
@@ -108,7 +107,8 @@ pub struct KindDefaults<Sections: Default> {
 
 #[derive(Deserialize)]
 #[serde(deny_unknown_fields)]
-pub struct Rule {
+pub struct Rule<Kind> {
     pub glob: String,
-    pub kind: AssetKind,
+    /// As written (the list of kinds' enum of names), then the kind it names.
+    pub kind: Kind,
 }

@@ -289,107 +289,114 @@ impl std::fmt::Debug for Step {
     }
 }
 
-/// The dispatch of the one list of kinds (`kind_list.rs`): each kind's type is `folder::Name`.
-/// It generates one method per question of `Kind` (a kind left out is a compile error: the
-/// `match`es are exhaustive).
-macro_rules! kinds {
-    ($($name:ident => $folder:ident),* $(,)?) => {
-        /// Runs a job on a worker: a surface through the shared tail, a step by its kind.
-        pub(crate) fn run_job(db: &dyn Db, job: &Job) -> Result<Vec<Job>, Diagnostic> {
-            match &job.task {
-                Task::Surface(surface) => {
-                    tail_queries::surface_artifacts(db, job.asset, surface.clone()).map(|_| Vec::new())
-                }
-                Task::LoadPreviousEncoding(surface) => {
-                    tail_queries::load_previous_encoding(db, job.asset, surface);
-                    Ok(Vec::new())
-                }
-                Task::Step(step) => step.0.run(db, job.asset),
-            }
+/// Runs a job on a worker: a surface through the shared tail, a step by its kind.
+pub(crate) fn run_job(db: &dyn Db, job: &Job) -> Result<Vec<Job>, Diagnostic> {
+    match &job.task {
+        Task::Surface(surface) => tail_queries::surface_artifacts(db, job.asset, surface.clone()).map(|_| Vec::new()),
+        Task::LoadPreviousEncoding(surface) => {
+            tail_queries::load_previous_encoding(db, job.asset, surface);
+            Ok(Vec::new())
         }
-
-        impl AssetKind {
-            pub(crate) fn files_to_read(self, db: &dyn Db, asset: Asset) -> Vec<PathBuf> {
-                match self {
-                    $(AssetKind::$name => <$folder::$name>::files_to_read(db, asset)),*
-                }
-            }
-
-            pub(crate) fn first_jobs(self, db: &dyn Db, asset: Asset) -> Vec<Job> {
-                match self {
-                    $(AssetKind::$name => <$folder::$name>::first_jobs(db, asset)),*
-                }
-            }
-
-            pub(crate) fn stage_instances(
-                self,
-                db: &dyn Db,
-                asset: Asset,
-                output_folder: &Path,
-                errors: &[Diagnostic],
-            ) -> Vec<StageInstance> {
-                match self {
-                    $(AssetKind::$name => <$folder::$name>::stage_instances(db, asset, output_folder, errors)),*
-                }
-            }
-
-            pub(crate) fn outputs(
-                self,
-                db: &dyn Db,
-                asset: Asset,
-                output_folder: &Path,
-                errors: &mut Vec<Diagnostic>,
-                runs: &[StageRun],
-            ) -> AssetOutputs {
-                match self {
-                    $(AssetKind::$name => <$folder::$name>::outputs(db, asset, output_folder, errors, runs)),*
-                }
-            }
-
-            pub fn check(self, config: &PipelineConfig, asset: &AssetConfig) -> Vec<Diagnostic> {
-                match self {
-                    $(AssetKind::$name => <$folder::$name>::check(config, asset)),*
-                }
-            }
-
-            pub(crate) fn surface_plan(
-                self,
-                db: &dyn Db,
-                asset: Asset,
-                surface: &SurfaceId,
-            ) -> Result<SurfacePlan, Diagnostic> {
-                match self {
-                    $(AssetKind::$name => <$folder::$name>::surface_plan(db, asset, surface)),*
-                }
-            }
-
-            pub fn preview(
-                self,
-                db: &dyn Db,
-                asset: Asset,
-                config: &PipelineConfig,
-                options: &PreviewOptions,
-            ) -> Result<PreviewReport, PreviewError> {
-                match self {
-                    $(AssetKind::$name => <$folder::$name>::preview(db, asset, config, options)),*
-                }
-            }
-
-            pub(crate) fn provided_surface_stage(
-                self,
-                db: &dyn Db,
-                asset: Asset,
-                surface: &SurfaceId,
-            ) -> Result<Option<Read>, Diagnostic> {
-                match self {
-                    $(AssetKind::$name => <$folder::$name>::provided_surface_stage(db, asset, surface)),*
-                }
-            }
-        }
-    };
+        Task::Step(step) => step.0.run(db, job.asset),
+    }
 }
 
-with_kinds!(kinds);
+/// The questions of [`Kind`] as one kind answers them: what its [`AssetKind`] holds (made by
+/// its folder, `KIND`), so that the driver asks any kind without naming it.
+pub struct KindQuestions {
+    files_to_read: fn(&dyn Db, Asset) -> Vec<PathBuf>,
+    first_jobs: fn(&dyn Db, Asset) -> Vec<Job>,
+    stage_instances: fn(&dyn Db, Asset, &Path, &[Diagnostic]) -> Vec<StageInstance>,
+    outputs: fn(&dyn Db, Asset, &Path, &mut Vec<Diagnostic>, &[StageRun]) -> AssetOutputs,
+    check: fn(&PipelineConfig, &AssetConfig) -> Vec<Diagnostic>,
+    surface_plan: fn(&dyn Db, Asset, &SurfaceId) -> Result<SurfacePlan, Diagnostic>,
+    provided_surface_stage: fn(&dyn Db, Asset, &SurfaceId) -> Result<Option<Read>, Diagnostic>,
+    preview: fn(&dyn Db, Asset, &PipelineConfig, &PreviewOptions) -> Result<PreviewReport, PreviewError>,
+}
+
+impl KindQuestions {
+    /// Kind `K`'s answers.
+    pub const fn of<K: Kind>() -> KindQuestions {
+        KindQuestions {
+            files_to_read: K::files_to_read,
+            first_jobs: K::first_jobs,
+            stage_instances: K::stage_instances,
+            outputs: K::outputs,
+            check: K::check,
+            surface_plan: K::surface_plan,
+            provided_surface_stage: K::provided_surface_stage,
+            preview: K::preview,
+        }
+    }
+}
+
+/// Each question of [`Kind`], asked of whichever kind this is.
+impl AssetKind {
+    fn answers(self) -> &'static KindQuestions {
+        self.questions().downcast_ref().expect("a kind's questions are its KindQuestions")
+    }
+
+    pub(crate) fn files_to_read(self, db: &dyn Db, asset: Asset) -> Vec<PathBuf> {
+        (self.answers().files_to_read)(db, asset)
+    }
+
+    pub(crate) fn first_jobs(self, db: &dyn Db, asset: Asset) -> Vec<Job> {
+        (self.answers().first_jobs)(db, asset)
+    }
+
+    pub(crate) fn stage_instances(
+        self,
+        db: &dyn Db,
+        asset: Asset,
+        output_folder: &Path,
+        errors: &[Diagnostic],
+    ) -> Vec<StageInstance> {
+        (self.answers().stage_instances)(db, asset, output_folder, errors)
+    }
+
+    pub(crate) fn outputs(
+        self,
+        db: &dyn Db,
+        asset: Asset,
+        output_folder: &Path,
+        errors: &mut Vec<Diagnostic>,
+        runs: &[StageRun],
+    ) -> AssetOutputs {
+        (self.answers().outputs)(db, asset, output_folder, errors, runs)
+    }
+
+    pub fn check(self, config: &PipelineConfig, asset: &AssetConfig) -> Vec<Diagnostic> {
+        (self.answers().check)(config, asset)
+    }
+
+    pub(crate) fn surface_plan(
+        self,
+        db: &dyn Db,
+        asset: Asset,
+        surface: &SurfaceId,
+    ) -> Result<SurfacePlan, Diagnostic> {
+        (self.answers().surface_plan)(db, asset, surface)
+    }
+
+    pub fn preview(
+        self,
+        db: &dyn Db,
+        asset: Asset,
+        config: &PipelineConfig,
+        options: &PreviewOptions,
+    ) -> Result<PreviewReport, PreviewError> {
+        (self.answers().preview)(db, asset, config, options)
+    }
+
+    pub(crate) fn provided_surface_stage(
+        self,
+        db: &dyn Db,
+        asset: Asset,
+        surface: &SurfaceId,
+    ) -> Result<Option<Read>, Diagnostic> {
+        (self.answers().provided_surface_stage)(db, asset, surface)
+    }
+}
 
 /// Work for a worker thread: one step of an asset, or one surface through the tail.
 pub(crate) type Job = crate::schedule::Job<Task>;

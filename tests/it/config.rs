@@ -3,7 +3,7 @@
 
 use std::path::Path;
 
-use cirrus::config::{AssetKind, AssetSource, BlockFormat, Container};
+use cirrus::config::{AssetSource, BlockFormat, Container};
 use cirrus::pipeline::parse_pipeline;
 
 #[test]
@@ -21,7 +21,7 @@ fn defaults_apply_and_assets_override_them() {
     assert_eq!(config.root, Path::new("project"));
     assert_eq!(config.source_dir(), Path::new("project/assets"));
     let bark = &config.assets[0];
-    assert_eq!(bark.source, AssetSource::of_file(AssetKind::Material, "materials/bark.mymaterial"));
+    assert_eq!(bark.source, AssetSource::of_file(cirrus::kinds::material::KIND, "materials/bark.mymaterial"));
     assert_eq!(bark.settings.encode.mra, BlockFormat::Bc7, "from defaults");
     assert_eq!(bark.settings.encode.container, Container::Dds, "asset override");
     assert_eq!(bark.settings.encode.zstd, None, "an explicit None overrides a default");

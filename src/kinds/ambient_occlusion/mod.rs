@@ -37,6 +37,10 @@ use settings::AoMode;
 
 pub struct AmbientOcclusion;
 
+/// The kind, as `pipeline.ron` and the driver name it.
+pub const KIND: crate::config::AssetKind = crate::config::AssetKind::new("AmbientOcclusion", &QUESTIONS);
+const QUESTIONS: crate::kinds::KindQuestions = crate::kinds::KindQuestions::of::<AmbientOcclusion>();
+
 /// The tail surface of a baked material.
 fn material_surface(folder: &str) -> SurfaceId {
     SurfaceId::new(folder, SurfaceKind::Ao)
@@ -333,7 +337,7 @@ fn ao_outputs(db: &dyn Db, asset: Asset, output_folder: &Path, runs: &[StageRun]
     let name = asset.name(db);
     let report = AoReport {
         asset: name.clone(),
-        kind: crate::config::AssetKind::AmbientOcclusion.name(),
+        kind: KIND.name(),
         mesh: display_path(asset.main_file(db)),
         mode: settings.mode,
         rays_per_texel: settings.rays,

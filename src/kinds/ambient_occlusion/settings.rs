@@ -138,7 +138,7 @@ pub struct Defaults {
 }
 
 impl KindEntry for Settings {
-    const KIND: AssetKind = AssetKind::AmbientOcclusion;
+    const KIND: AssetKind = super::KIND;
     const FIELDS: &'static [&'static str] = &["ao"];
     const DEFAULTS: &'static [&'static str] = &["ao"];
     type Entry = Entry;
@@ -161,6 +161,6 @@ impl KindEntry for Settings {
         merge_ao(check, &mut settings.ao, &entry.ao, anchor);
         // Each material's AO map goes through the texture tail: the same budget holds.
         check.surface_budget("AO map", settings.ao.size, "size");
-        Some((AssetSource::of_file(AssetKind::AmbientOcclusion, mesh), settings))
+        Some((AssetSource::of_file(super::KIND, mesh), settings))
     }
 }

@@ -36,6 +36,10 @@ use table::{AtlasPage, Table};
 
 pub struct Atlas;
 
+/// The kind, as `pipeline.ron` and the driver name it.
+pub const KIND: crate::config::AssetKind = crate::config::AssetKind::new("Atlas", &QUESTIONS);
+const QUESTIONS: crate::kinds::KindQuestions = crate::kinds::KindQuestions::of::<Atlas>();
+
 /// The tail surface of page `page`.
 fn page_surface(page: u32) -> SurfaceId {
     SurfaceId { group: page_group(page), surface: SurfaceKind::Albedo, part: SurfacePart { index: page, item: None } }
@@ -375,7 +379,7 @@ fn atlas_outputs(
     let meshes = mesh_outputs(db, asset, output_folder, &mut outputs, errors, &mut warnings);
     let report = serde_json::json!({
         "asset": asset.name(db),
-        "kind": crate::config::AssetKind::Atlas.name(),
+        "kind": KIND.name(),
         "entries": layout.entries.len(),
         "textures": atlas_texture_files(db, asset).len(),
         "pages": layout.packing.pages,

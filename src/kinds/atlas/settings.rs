@@ -79,7 +79,7 @@ pub struct Defaults {
 }
 
 impl KindEntry for Settings {
-    const KIND: AssetKind = AssetKind::Atlas;
+    const KIND: AssetKind = super::KIND;
     const FIELDS: &'static [&'static str] = &["pack"];
     const DEFAULTS: &'static [&'static str] = &["pack"];
     const RULE_REFUSAL: Option<&'static str> = Some("an Atlas is listed under `assets` with its globs");
@@ -109,6 +109,6 @@ impl KindEntry for Settings {
             check.glob(glob);
         }
         let glob_lists = vec![entry.textures.clone(), entry.meshes.clone()];
-        Some((AssetSource { kind: AssetKind::Atlas, main_file: PathBuf::new(), glob_lists }, settings))
+        Some((AssetSource { kind: super::KIND, main_file: PathBuf::new(), glob_lists }, settings))
     }
 }

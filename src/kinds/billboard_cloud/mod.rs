@@ -59,6 +59,10 @@ use surfaces::{level_renders, level_surfaces, read_decode, reduced_map_of, slot_
 
 pub struct BillboardCloud;
 
+/// The kind, as `pipeline.ron` and the driver name it.
+pub const KIND: crate::config::AssetKind = crate::config::AssetKind::new("BillboardCloud", &QUESTIONS);
+const QUESTIONS: crate::kinds::KindQuestions = crate::kinds::KindQuestions::of::<BillboardCloud>();
+
 /// Every (material, slot) whose texture the renders sample, in material order.
 fn material_texture_slots(loaded: &LoadedMesh) -> Vec<(usize, TextureSlot)> {
     if loaded.mesh.uvs.is_none() {
@@ -525,7 +529,7 @@ fn billboard_outputs(
     };
     let report = report::AssetReport {
         asset: name,
-        kind: crate::config::AssetKind::BillboardCloud.name(),
+        kind: KIND.name(),
         mesh: display_path(asset.main_file(db)),
         faces: loaded.mesh.triangles.len(),
         alpha_cutoff: settings.own::<Own>().billboard.alpha_cutoff,
@@ -546,7 +550,7 @@ pub fn preview_levels(
     config: &PipelineConfig,
     options: &PreviewOptions,
 ) -> Result<Vec<(u32, crate::preview::PreviewMetrics)>, PreviewError> {
-    if input.kind(db) != crate::config::AssetKind::BillboardCloud {
+    if input.kind(db) != KIND {
         return Err(PreviewError::NotPreviewable { name: options.asset.clone(), kind: input.kind(db).name() });
     }
     let settings = input.settings(db);

@@ -404,7 +404,7 @@ pub struct Defaults {
 }
 
 impl KindEntry for Settings {
-    const KIND: AssetKind = AssetKind::BillboardCloud;
+    const KIND: AssetKind = super::KIND;
     const FIELDS: &'static [&'static str] = &["billboard", "atlas"];
     const DEFAULTS: &'static [&'static str] = &["billboard", "atlas"];
     type Entry = Entry;
@@ -427,7 +427,7 @@ impl KindEntry for Settings {
         merge(check, &mut settings, &entry.billboard, &entry.atlas, anchor);
         // Each atlas surface goes through the texture tail: the same budget holds.
         check.surface_budget("atlas", settings.atlas.max_size, "max_size");
-        Some((AssetSource::of_file(AssetKind::BillboardCloud, mesh), settings))
+        Some((AssetSource::of_file(super::KIND, mesh), settings))
     }
 }
 

@@ -42,6 +42,10 @@ use settings::HeightProjection;
 
 pub struct Height;
 
+/// The kind, as `pipeline.ron` and the driver name it.
+pub const KIND: crate::config::AssetKind = crate::config::AssetKind::new("Height", &QUESTIONS);
+const QUESTIONS: crate::kinds::KindQuestions = crate::kinds::KindQuestions::of::<Height>();
+
 /// The map's tail surface: the asset's own `height`.
 fn height_surface() -> SurfaceId {
     SurfaceId::new(String::new(), SurfaceKind::Height)
@@ -442,7 +446,7 @@ fn height_outputs(
     warnings.extend(material_warnings.iter().map(ErrorSummary::from));
     let report = HeightReport {
         asset: name.clone(),
-        kind: crate::config::AssetKind::Height.name(),
+        kind: KIND.name(),
         high: display_path(&high_path(db, asset)),
         low: display_path(asset.main_file(db)),
         projection: settings.projection,

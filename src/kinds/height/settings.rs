@@ -127,7 +127,7 @@ pub struct Defaults {
 }
 
 impl KindEntry for Settings {
-    const KIND: AssetKind = AssetKind::Height;
+    const KIND: AssetKind = super::KIND;
     const FIELDS: &'static [&'static str] = &["height", "tessellate"];
     const DEFAULTS: &'static [&'static str] = &["height"];
     const RULE_REFUSAL: Option<&'static str> = Some("a Height reads a high and a low mesh, listed under `assets`");
@@ -155,6 +155,6 @@ impl KindEntry for Settings {
             entry.tessellate.as_ref().map(|tessellate| tessellate_settings(check, tessellate, anchor));
         // The height map goes through the texture tail: the same budget holds.
         check.surface_budget("height map", settings.height.size, "size");
-        Some((AssetSource::of_file(AssetKind::Height, low), settings))
+        Some((AssetSource::of_file(super::KIND, low), settings))
     }
 }

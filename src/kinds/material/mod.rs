@@ -31,6 +31,10 @@ use queries::{material_file, referenced_textures, surface_recipe, MapSource, PAC
 
 pub struct Material;
 
+/// The kind, as `pipeline.ron` and the driver name it.
+pub const KIND: crate::config::AssetKind = crate::config::AssetKind::new("Material", &QUESTIONS);
+const QUESTIONS: crate::kinds::KindQuestions = crate::kinds::KindQuestions::of::<Material>();
+
 /// The surfaces of every material of the asset, in file order.
 fn surfaces(parsed: &definition::MaterialFile) -> Vec<SurfaceId> {
     let materials = parsed.materials.iter();
@@ -216,7 +220,7 @@ impl Kind for Material {
         }
         let report = MaterialReport {
             asset: asset.name(db).clone(),
-            kind: crate::config::AssetKind::Material.name(),
+            kind: KIND.name(),
             file: display_path(asset.main_file(db)),
             materials,
             warnings: parsed.warnings.iter().map(ErrorSummary::from).collect(),

@@ -61,7 +61,7 @@ pub struct Defaults {
 }
 
 impl KindEntry for Settings {
-    const KIND: AssetKind = AssetKind::Material;
+    const KIND: AssetKind = super::KIND;
     const FIELDS: &'static [&'static str] = &["report", "ao_source", "billboard"];
     const DEFAULTS: &'static [&'static str] = &["report", "billboard"];
     type Entry = Entry;
@@ -87,12 +87,12 @@ impl KindEntry for Settings {
         let anchor = check.anchor();
         merge(check, &mut settings, &entry.report, entry.billboard.alpha_cutoff, anchor);
         settings.ao_source = entry.ao_source.clone();
-        Some((AssetSource::of_file(AssetKind::Material, material), settings))
+        Some((AssetSource::of_file(super::KIND, material), settings))
     }
 
     fn reads_asset(&self) -> Option<AssetReference<'_>> {
         let asset = self.ao_source.as_deref()?;
-        Some(AssetReference { field: "ao_source", asset, kind: AssetKind::AmbientOcclusion })
+        Some(AssetReference { field: "ao_source", asset, kind: crate::kinds::ambient_occlusion::KIND })
     }
 }
 

@@ -1,46 +1,37 @@
 //! cirrus: an incremental asset-pipeline daemon that bakes meshes into billboard-cloud LODs and
-//! texture sets into block-compressed GPU materials. The modules are listed bottom-up, as they
-//! stack: each group imports only the groups above it (the tidy test checks it); the loops left,
-//! each a folder's module and files under it, are listed in that test and in ARCHITECTURE.md.
+//! texture sets into block-compressed GPU materials. This crate is the application: the one list
+//! of kinds, the driver, the daemon and the command line. The machinery that names no kind is
+//! `cirrus-core` (crates/core), each kind a crate of its own under kinds/; both are re-exported
+//! here under the names the modules below use. The modules are listed bottom-up, as they stack.
 
-// Leaves: the one list of asset kinds (a macro, first so that every module below may use it),
-// safe file reading and writing, the allocator's settings.
+// The one list of asset kinds (a macro, first so that every module below may use it).
 #[macro_use]
 mod kind_list;
-pub mod files;
-pub mod memory;
 
-// The shared libraries, crates of their own under crates/ that depend on nothing of this one:
-// pure functions over plain data (no salsa, no IO), named by role; the previews and impostors
-// render through the GPU device. Re-exported under the names the modules below use.
-pub use base::{diagnostic, isa, stop};
-pub use gpu;
-pub use mesh;
-pub use openddl;
-pub use packing;
-pub use render::{impostor, preview};
-pub use texture;
+// The shared libraries and the machinery (crates/), which depend on nothing of this one.
+pub use cirrus_core::{cache, config, db, files, memory, record, schedule, sources, summary};
+pub use cirrus_core::{diagnostic, gpu, impostor, isa, mesh, openddl, packing, preview, stop, texture};
 
-// The inputs: the pipeline file, validated into per-asset settings.
-pub mod config;
+// The asset kinds: what a kind is (the machinery's `kinds`), each kind's crate under the name of
+// its folder, and what the one list of kinds makes of them (`entries`: the `pipeline.ron`
+// entries, a rule's `kind:` names, every kind).
+pub mod kinds {
+    pub use cirrus_core::kinds::*;
 
-// The machinery, which names no kind: the persistent cache, the database, reading sources,
-// writing artifacts, the build record, running jobs on workers, what a build reports, the
-// dependency graph.
-pub mod cache;
-pub mod db;
-pub mod sources;
-pub mod artifacts;
-pub mod summary;
-pub mod record;
-pub mod schedule;
-pub mod graph;
+    pub use cirrus_ambient_occlusion as ambient_occlusion;
+    pub use cirrus_atlas as atlas;
+    pub use cirrus_billboard_cloud as billboard_cloud;
+    pub use cirrus_height as height;
+    pub use cirrus_material as material;
 
-// The asset kinds: the one list of kinds and the questions the driver asks them, then one
-// folder per kind.
-pub mod kinds;
+    pub mod entries;
+}
 // `pipeline.ron` read with every kind's entry.
 pub mod pipeline;
+
+// Writing artifacts, the dependency graph.
+pub mod artifacts;
+pub mod graph;
 
 // The driver: inputs in, jobs on workers, artifacts out; it names no kind.
 pub mod project;

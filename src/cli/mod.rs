@@ -90,8 +90,8 @@ pub enum Command {
         /// atlas costs: `projected` (each corner onto its face's plane: the cloud's geometry) or
         /// `translated` (each face along its plane's normal, keeping its shape: displacement
         /// alone).
-        #[arg(long, value_enum, default_value_t = crate::kinds::billboard_cloud::lod_preview::StandIn::Baked)]
-        stand_in: crate::kinds::billboard_cloud::lod_preview::StandIn,
+        #[arg(long, value_parser = stand_in_parser(), default_value = "baked")]
+        stand_in: crate::kinds::StandIn,
     },
     /// Bake, then watch the sources and re-bake what each edit invalidated; tell engines over TCP.
     Watch {
@@ -155,15 +155,12 @@ fn parse_origin(text: &str) -> Result<String, String> {
     }
 }
 
-/// The preview's stand-ins on the command line (`lod_preview` knows nothing of clap).
-impl ValueEnum for crate::kinds::billboard_cloud::lod_preview::StandIn {
-    fn value_variants<'a>() -> &'a [Self] {
-        &crate::kinds::billboard_cloud::lod_preview::StandIn::ALL
-    }
-
-    fn to_possible_value(&self) -> Option<clap::builder::PossibleValue> {
-        Some(clap::builder::PossibleValue::new(self.name()))
-    }
+/// The preview's stand-ins on the command line, by name (`kinds::StandIn` knows nothing of clap).
+fn stand_in_parser() -> impl clap::builder::TypedValueParser<Value = crate::kinds::StandIn> {
+    use crate::kinds::StandIn;
+    use clap::builder::TypedValueParser;
+    clap::builder::PossibleValuesParser::new(StandIn::ALL.map(StandIn::name))
+        .map(|name| StandIn::ALL.into_iter().find(|stand_in| stand_in.name() == name).expect("a listed stand-in"))
 }
 
 /// The graph formats on the command line (`graph` is a data module and knows nothing of clap).
@@ -454,7 +451,7 @@ fn preview(
     settings: crate::preview::PreviewSettings,
     out: Option<PathBuf>,
     lod: Option<u32>,
-    stand_in: crate::kinds::billboard_cloud::lod_preview::StandIn,
+    stand_in: crate::kinds::StandIn,
     options: ProjectOptions,
 ) -> ExitCode {
     let config = match load_pipeline_or_report(&pipeline) {
@@ -463,7 +460,7 @@ fn preview(
     };
     // A stand-in's sheets go beside the baked LOD's, not over them.
     let folder = match stand_in {
-        crate::kinds::billboard_cloud::lod_preview::StandIn::Baked => "preview".to_string(),
+        crate::kinds::StandIn::Baked => "preview".to_string(),
         other => format!("preview_{}", other.name()),
     };
     let out = out.unwrap_or_else(|| config.output.join(&asset).join(folder));
@@ -486,7 +483,7 @@ fn preview(
         }
     };
     let stand_in = match stand_in {
-        crate::kinds::billboard_cloud::lod_preview::StandIn::Baked => String::new(),
+        crate::kinds::StandIn::Baked => String::new(),
         other => format!("source faces {} onto the planes: ", other.name()),
     };
     for row in &report.rows {

@@ -41,7 +41,9 @@ macro_rules! entries {
         impl EntryKinds for Entries {
             type Entry = AssetEntry;
             type KindName = KindName;
-            const KINDS: &'static [KindFields] = &[$(KindFields::of::<crate::kinds::$folder::settings::Settings>()),*];
+            const KINDS: &'static [KindFields] = &[
+                $(KindFields::of::<crate::kinds::$folder::settings::Settings>(crate::kinds::$folder::KIND)),*
+            ];
 
             fn defaults(validation: &mut Validation<'_>) -> Vec<KindSettings> {
                 vec![$(validation.kind_defaults::<crate::kinds::$folder::settings::Settings>()),*]

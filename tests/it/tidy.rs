@@ -11,19 +11,44 @@ fn rust_files(folder: &str) -> Vec<PathBuf> {
     files
 }
 
-/// The path of a file under `src/` (`watch.rs`, `kinds/mod.rs`), or of a library's file from the
+/// A file's name as a module of the application, whose three parts keep the names they had
+/// as one crate: `src/` (the application) and `crates/core/src/` (the machinery) from their roots
+/// (`watch.rs`, `db.rs`, `kinds/mod.rs`; the machinery's root is `core.rs`), a kind's
+/// `kinds/<kind>/src/` as `kinds/<kind>/` (its `lib.rs` as `mod.rs`); a library's file from the
 /// repository's root (`crates/mesh/src/lib.rs`).
 fn module(path: &Path) -> String {
     let root = Path::new(env!("CARGO_MANIFEST_DIR"));
-    let relative = path.strip_prefix(root.join("src")).or_else(|_| path.strip_prefix(root)).unwrap();
-    relative.to_string_lossy().replace('\\', "/")
+    let relative = path.strip_prefix(root).unwrap().to_string_lossy().replace('\\', "/");
+    if relative == "crates/core/src/lib.rs" {
+        return "core.rs".to_string();
+    }
+    if let Some(file) = relative.strip_prefix("src/").or_else(|| relative.strip_prefix("crates/core/src/")) {
+        return file.to_string();
+    }
+    if let Some((kind, file)) = relative.strip_prefix("kinds/").and_then(|rest| rest.split_once("/src/")) {
+        return format!("kinds/{kind}/{}", if file == "lib.rs" { "mod.rs" } else { file });
+    }
+    relative
 }
 
-/// The Rust files of the application (`src/`) and of the libraries (`crates/*/src/`).
-fn source_files() -> Vec<PathBuf> {
+/// The Rust files of the application (`src/`, `crates/core/src/`, `kinds/*/src/`).
+fn application_files() -> Vec<PathBuf> {
     let mut files = rust_files("src");
+    files.extend(rust_files("crates/core/src"));
+    files.extend(rust_files("kinds").into_iter().filter(|path| module(path).starts_with("kinds/")));
+    files
+}
+
+/// The Rust files of the application and of the libraries (`crates/*/src/`).
+fn source_files() -> Vec<PathBuf> {
+    let mut files = application_files();
     files.extend(rust_files("crates").into_iter().filter(|path| module(path).contains("/src/")));
     files
+}
+
+/// The file of an application module (`db.rs`, `project/mod.rs`).
+fn file_of(name: &str) -> PathBuf {
+    application_files().into_iter().find(|path| module(path) == name).unwrap_or_else(|| panic!("no module {name}"))
 }
 
 /// The code of a file without its comments (doc comments name salsa and wgpu freely).
@@ -47,8 +72,10 @@ fn modules_using(needles: &[&str]) -> Vec<String> {
 
 #[test]
 fn every_file_starts_by_saying_what_it_is_for() {
-    let files: Vec<PathBuf> =
-        ["src", "crates", "tests", "benches", "examples"].iter().flat_map(|folder| rust_files(folder)).collect();
+    let files: Vec<PathBuf> = ["src", "crates", "kinds", "tests", "benches", "examples"]
+        .iter()
+        .flat_map(|folder| rust_files(folder))
+        .collect();
     assert!(files.len() > 40);
     let silent: Vec<&PathBuf> =
         files.iter().filter(|path| !std::fs::read_to_string(path).unwrap().starts_with("//!")).collect();
@@ -118,8 +145,7 @@ fn the_driver_and_the_machinery_name_no_kind() {
         "cli/cache.rs",
     ];
     for module in machinery {
-        let path = Path::new(env!("CARGO_MANIFEST_DIR")).join("src").join(module);
-        let code = code(&path);
+        let code = code(&file_of(module));
         let lower = code.to_lowercase();
         for kind in ["material", "billboard", "planes", "atlas", "ambient", "occlusion"] {
             assert!(!lower.contains(kind), "{module} names `{kind}`");
@@ -137,13 +163,12 @@ fn the_driver_and_the_machinery_name_no_kind() {
 /// names (`mod x;` and `x::`).
 fn module_imports() -> std::collections::BTreeMap<String, std::collections::BTreeSet<String>> {
     use std::collections::{BTreeMap, BTreeSet};
-    let root = Path::new(env!("CARGO_MANIFEST_DIR")).join("src");
     let name_of = |path: &Path| -> String {
-        let relative = path.strip_prefix(&root).unwrap().with_extension("");
-        let text = relative.to_string_lossy().replace('\\', "/");
-        text.strip_suffix("/mod").unwrap_or(&text).to_string()
+        let name = module(path);
+        let name = name.strip_suffix(".rs").unwrap_or(&name);
+        name.strip_suffix("/mod").unwrap_or(name).to_string()
     };
-    let files = rust_files("src");
+    let files = application_files();
     let modules: BTreeSet<String> = files.iter().map(|path| name_of(path)).collect();
     let resolve = |segments: &[&str]| -> Option<String> {
         (1..=segments.len()).rev().map(|n| segments[..n].join("/")).find(|candidate| modules.contains(candidate))
@@ -214,10 +239,17 @@ fn module_imports() -> std::collections::BTreeMap<String, std::collections::BTre
             module.split('/').rev().skip(1).collect::<Vec<_>>().into_iter().rev().collect()
         };
         let mut named = BTreeSet::new();
+        // A kind's `crate::` is its own crate (`kinds/<kind>`), whose root names the machinery's
+        // modules (`crate::db`) as they are.
+        let own_crate: Vec<&str> =
+            if module.starts_with("kinds/") { module.split('/').take(2).collect() } else { vec![] };
         for (at, _) in code.match_indices("crate::") {
             for segments in paths(&code[at + "crate::".len()..], &is_segment) {
                 let segments: Vec<&str> = segments.iter().map(String::as_str).collect();
-                named.extend(resolve(&segments));
+                let own: Vec<&str> = own_crate.iter().copied().chain(segments.iter().copied()).collect();
+                let own_module = !own_crate.is_empty()
+                    && (segments.is_empty() || modules.contains(&own[..own_crate.len() + 1].join("/")));
+                named.extend(if own_module { resolve(&own) } else { resolve(&segments) });
             }
         }
         // `super::` is the parent of a folder's own module (`a/b/mod.rs`: `a`), and the folder
@@ -232,8 +264,11 @@ fn module_imports() -> std::collections::BTreeMap<String, std::collections::BTre
         for line in code.lines() {
             let line = line.trim_start().trim_start_matches("pub ").trim_start_matches("pub(crate) ");
             let Some(child) = line.strip_prefix("mod ").and_then(|rest| rest.strip_suffix(';')) else { continue };
-            let child_module =
-                if module == "lib" { child.to_string() } else { format!("{}/{child}", parent.join("/")) };
+            let child_module = if module == "lib" || module == "core" {
+                child.to_string()
+            } else {
+                format!("{}/{child}", parent.join("/"))
+            };
             // A path that starts with the child (`x::…`, `self::x::…`), not one that passes
             // through it (`crate::a::x::…`, resolved above).
             let starts_a_path = |(at, _): (usize, &str)| {
@@ -246,6 +281,7 @@ fn module_imports() -> std::collections::BTreeMap<String, std::collections::BTre
         }
         named.remove(&module);
         named.remove("lib");
+        named.remove("core");
         imports.insert(module, named);
     }
     imports

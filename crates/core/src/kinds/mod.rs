@@ -301,12 +301,17 @@ pub struct KindQuestions {
     files_to_read: fn(&dyn Db, Asset) -> Vec<PathBuf>,
     first_jobs: fn(&dyn Db, Asset) -> Vec<Job>,
     stage_instances: fn(&dyn Db, Asset, &Path, &[Diagnostic]) -> Vec<StageInstance>,
-    outputs: fn(&dyn Db, Asset, &Path, &mut Vec<Diagnostic>, &[StageRun]) -> AssetOutputs,
+    outputs: OutputsFn,
     check: fn(&PipelineConfig, &AssetConfig) -> Vec<Diagnostic>,
     surface_plan: fn(&dyn Db, Asset, &SurfaceId) -> Result<SurfacePlan, Diagnostic>,
-    provided_surface_stage: fn(&dyn Db, Asset, &SurfaceId) -> Result<Option<Read>, Diagnostic>,
+    provided_surface_stage: ProvidedSurfaceFn,
     preview: fn(&dyn Db, Asset, &PipelineConfig, &PreviewOptions) -> Result<PreviewReport, PreviewError>,
 }
+
+/// [`Kind::outputs`].
+type OutputsFn = fn(&dyn Db, Asset, &Path, &mut Vec<Diagnostic>, &[StageRun]) -> AssetOutputs;
+/// [`Kind::provided_surface_stage`].
+type ProvidedSurfaceFn = fn(&dyn Db, Asset, &SurfaceId) -> Result<Option<Read>, Diagnostic>;
 
 impl KindQuestions {
     /// Kind `K`'s answers.

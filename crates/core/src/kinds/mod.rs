@@ -1,8 +1,9 @@
-//! The asset kinds: the questions the driver asks each of them (`Kind`), their dispatch over the
-//! one list of kinds (`kind_list.rs`), and what the answers are made of: jobs to run on workers,
-//! stage instances (the build summary, the graph dump and the event-log labels all come from
-//! them) and outputs. Adding a kind: a folder with a `Kind` implementation and its settings (its
-//! `pipeline.ron` entry, `config::KindEntry`), and one line in the list (see ARCHITECTURE.md).
+//! The asset kinds as the machinery sees them: the questions the driver asks each of them
+//! (`Kind`), the table of a kind's answers its `AssetKind` holds (`KindQuestions`), and what the
+//! answers are made of: jobs to run on workers, stage instances (the build summary, the graph dump
+//! and the event-log labels all come from them) and outputs. Adding a kind: a crate under `kinds/`
+//! with a `Kind` implementation, its `KIND` and its settings (its `pipeline.ron` entry,
+//! `config::KindEntry`), and one line in the application's list (see ARCHITECTURE.md).
 
 use std::path::{Path, PathBuf};
 use std::sync::Arc;

@@ -11,7 +11,9 @@
 //! against a shared cache on a local SeaweedFS server (`shared-cache`), and the oak's full bake
 //! as a process beside another build's binary, alternating (`oak-bake`), and a synthetic level
 //! of 100, 1,000 and 10,000 assets: cold, no-op, one-texture edit, `graph`, `check`, peak
-//! memory and the daemon's ready time and edit-to-batch latency (`scale`). Prints figures.
+//! memory and the daemon's ready time and edit-to-batch latency (`scale`), and levels of 16, 64
+//! and 256 materials with 1024² maps: the peak and idle memory of a cold build and a cold daemon
+//! (`level-memory`). Prints figures.
 
 use std::path::Path;
 use std::time::Instant;
@@ -102,6 +104,9 @@ fn main() {
     if wanted("memory") {
         bench_memory();
     }
+    if wanted("level-memory") {
+        bench_level_memory();
+    }
 }
 
 /// Peak memory of `cirrus build` over 1 and 4 materials with a 2048² albedo each (a PNG of
@@ -135,6 +140,52 @@ fn bench_memory() {
     println!("  each more texture: {per_texture:.0} MiB ({per_texel:.1} bytes per texel)");
 }
 
+/// Memory over a level's worth of texels: levels of `Material` assets with 1024² albedo and
+/// normal maps, one in four with a roughness map too (`CIRRUS_BENCH_LEVEL_MEMORY`: the asset
+/// counts, 16, 64 and 256 unless set). `cirrus build` cold (wall, peak RSS and its bytes per
+/// source texel), then `cirrus watch` on the same level unbaked (no output, no cache) until its
+/// first batch (wall, peak RSS, and RSS when idle 2 s after it).
+fn bench_level_memory() {
+    const SIDE: u32 = 1024;
+    let sizes: Vec<usize> = std::env::var("CIRRUS_BENCH_LEVEL_MEMORY")
+        .ok()
+        .map(|sizes| sizes.split(',').filter_map(|size| size.trim().parse().ok()).collect())
+        .unwrap_or_else(|| vec![16, 64, 256]);
+    println!(
+        "level-memory: Material assets with {SIDE}² albedo and normal maps (one in four a roughness map); CPU ISA {}, \
+         {} threads",
+        cirrus::isa::detected_isa().name(),
+        rayon::current_num_threads()
+    );
+    for assets in sizes {
+        let dir = tempfile::tempdir().expect("temporary folder");
+        let folder = dir.path();
+        let settings = make_level::LevelSettings { assets, material_side: Some(SIDE) };
+        make_level::write_level(folder, &settings).expect("level written");
+        let maps = 2 * assets + assets.div_ceil(4);
+        let texels = maps as f64 * f64::from(SIDE * SIDE);
+        let per_texel = |mib: f64| mib * 1024.0 * 1024.0 / texels;
+        let (build, build_peak) = timed_process(folder, &["build"]);
+        std::fs::remove_dir_all(folder.join("baked")).expect("output removed");
+        let start = Instant::now();
+        let mut daemon = WatchedDaemon::start(folder);
+        daemon.batch();
+        let first_batch = start.elapsed().as_secs_f64();
+        let status_file = format!("/proc/{}/status", daemon.child.id());
+        let daemon_peak = peak_memory_kib(&status_file) as f64 / 1024.0;
+        std::thread::sleep(std::time::Duration::from_secs(2));
+        let idle = status_kib(&status_file, "VmRSS:") as f64 / 1024.0;
+        drop(daemon);
+        println!(
+            "  {assets} assets ({:.0} M texels): build {build:.1} s, peak {build_peak:.0} MiB ({:.1} B/texel); \
+             watch, unbaked: first batch {first_batch:.1} s, peak {daemon_peak:.0} MiB ({:.1} B/texel), idle {idle:.0} MiB",
+            texels / 1e6,
+            per_texel(build_peak),
+            per_texel(daemon_peak),
+        );
+    }
+}
+
 /// A process's wall seconds and peak resident memory (MiB), its stdout discarded.
 fn timed_process(folder: &Path, arguments: &[&str]) -> (f64, f64) {
     let start = Instant::now();
@@ -160,8 +211,13 @@ fn timed_process(folder: &Path, arguments: &[&str]) -> (f64, f64) {
 
 /// `VmHWM` of a `/proc/<pid>/status` file, in KiB (0 once the process is gone).
 fn peak_memory_kib(status_file: &str) -> u64 {
+    status_kib(status_file, "VmHWM:")
+}
+
+/// A field of a `/proc/<pid>/status` file in KiB (`VmHWM:`, `VmRSS:`; 0 once the process is gone).
+fn status_kib(status_file: &str, field: &str) -> u64 {
     let Ok(status) = std::fs::read_to_string(status_file) else { return 0 };
-    let line = status.lines().find(|line| line.starts_with("VmHWM:"));
+    let line = status.lines().find(|line| line.starts_with(field));
     line.and_then(|line| line.split_whitespace().nth(1)?.parse().ok()).unwrap_or(0)
 }
 
@@ -213,7 +269,8 @@ fn bench_scale() {
     for assets in sizes {
         let dir = tempfile::tempdir().expect("temporary folder");
         let start = Instant::now();
-        let level = make_level::write_level(dir.path(), &make_level::LevelSettings { assets }).expect("level written");
+        let level = make_level::write_level(dir.path(), &make_level::LevelSettings { assets, ..Default::default() })
+            .expect("level written");
         let written = start.elapsed().as_secs_f64();
         let folder = dir.path();
         let (cold, cold_peak_mib) = timed_process(folder, &["build"]);

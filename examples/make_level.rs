@@ -5,6 +5,9 @@
 //!     cargo run --release --example make_level -- target/level --assets 1000
 //!     cargo run --release -- build --pipeline target/level/pipeline.ron
 //!
+//! With `--material-side N`, every asset is a `Material` whose albedo and normal maps (and
+//! roughness, one in four) are N² (the `level-memory` bench: a level's worth of texels).
+//!
 //! Of every 100 assets, 90 are `Material`s (`materials/gNNN/mNNNNN.mymaterial`: an albedo and a
 //! normal map, 64², one material in ten at 256² and one in four with a roughness map too, one in
 //! five sharing a grime detail map with 49 others), 7 are `AmbientOcclusion` bakes of a rock
@@ -18,10 +21,12 @@ use std::io;
 use std::path::{Path, PathBuf};
 
 /// How large a level to write.
-#[derive(Clone, Debug)]
+#[derive(Clone, Debug, Default)]
 pub struct LevelSettings {
     /// How many assets (rounded to whole kinds: 90 % materials, 7 % rocks, 3 % plants).
     pub assets: usize,
+    /// Every asset a `Material` with maps of this side (none: the mix above, 64² and 256² maps).
+    pub material_side: Option<u32>,
 }
 
 /// What was written: the files a bench or test edits.
@@ -44,7 +49,10 @@ pub fn level_counts(assets: usize) -> [usize; 3] {
 
 /// Writes the level into `folder` (created; files already there are overwritten).
 pub fn write_level(folder: &Path, settings: &LevelSettings) -> io::Result<Level> {
-    let counts = level_counts(settings.assets);
+    let counts = match settings.material_side {
+        Some(_) => [settings.assets, 0, 0],
+        None => level_counts(settings.assets),
+    };
     let source = folder.join("assets");
     std::fs::create_dir_all(&source)?;
     std::fs::write(folder.join("pipeline.ron"), PIPELINE)?;
@@ -56,7 +64,7 @@ pub fn write_level(folder: &Path, settings: &LevelSettings) -> io::Result<Level>
         )?;
     }
     for index in 0..counts[0] {
-        level.albedo_maps.push(write_material(&source, index)?);
+        level.albedo_maps.push(write_material(&source, index, settings.material_side)?);
     }
     for index in 0..counts[1] {
         write_rock(&source, index)?;
@@ -91,10 +99,11 @@ fn grouped(prefix: &str, index: usize) -> (String, String) {
     (format!("g{:03}", index / 100), format!("{prefix}{index:05}"))
 }
 
-/// One material file and its maps; returns its albedo map's path (relative to the level).
-fn write_material(source: &Path, index: usize) -> io::Result<PathBuf> {
+/// One material file and its maps (`side`² where given); returns its albedo map's path (relative
+/// to the level).
+fn write_material(source: &Path, index: usize, side: Option<u32>) -> io::Result<PathBuf> {
     let (group, stem) = grouped("m", index);
-    let size = if index % 10 == 9 { 256 } else { 64 };
+    let size = side.unwrap_or(if index % 10 == 9 { 256 } else { 64 });
     let seed = index as u64 * 16;
     let textures = format!("textures/{group}");
     let albedo = format!("{textures}/{stem}_albedo.png");
@@ -333,15 +342,18 @@ fn encode_png(width: u32, height: u32, pixels: &[u8], colour: image::ExtendedCol
 fn main() {
     let mut arguments = std::env::args().skip(1);
     let mut folder = None;
-    let mut assets = 1000;
+    let mut settings = LevelSettings { assets: 1000, material_side: None };
     while let Some(argument) = arguments.next() {
         match argument.as_str() {
-            "--assets" => assets = arguments.next().and_then(|n| n.parse().ok()).expect("--assets N"),
+            "--assets" => settings.assets = arguments.next().and_then(|n| n.parse().ok()).expect("--assets N"),
+            "--material-side" => {
+                settings.material_side = Some(arguments.next().and_then(|n| n.parse().ok()).expect("--material-side N"))
+            }
             _ => folder = Some(PathBuf::from(argument)),
         }
     }
-    let folder = folder.expect("usage: make_level FOLDER [--assets N]");
-    let level = write_level(&folder, &LevelSettings { assets }).expect("writing the level");
+    let folder = folder.expect("usage: make_level FOLDER [--assets N] [--material-side N]");
+    let level = write_level(&folder, &settings).expect("writing the level");
     let [materials, rocks, plants] = level.counts;
     println!(
         "{}: {materials} materials, {rocks} rocks, {plants} plants; build it with \

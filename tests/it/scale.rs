@@ -37,7 +37,7 @@ fn ran(summary: &serde_json::Value) -> Vec<String> {
 #[test]
 fn a_one_texture_edit_in_a_level_of_a_thousand_assets_runs_only_that_assets_stages() {
     let dir = tempfile::tempdir().unwrap();
-    let level = write_level(dir.path(), &LevelSettings { assets: 1000 }).unwrap();
+    let level = write_level(dir.path(), &LevelSettings { assets: 1000, ..Default::default() }).unwrap();
     assert_eq!(level.counts, [900, 70, 30]);
     let config = cirrus::pipeline::load_pipeline(&level.pipeline).unwrap();
     let mut project = cirrus::project::Project::open(config.clone(), Default::default());
@@ -185,7 +185,7 @@ fn a_stamp_recorded_within_the_racy_window_is_never_trusted() {
 #[test]
 fn the_record_survives_a_killed_build_and_is_rebuilt_when_damaged() {
     let dir = tempfile::tempdir().unwrap();
-    write_level(dir.path(), &LevelSettings { assets: 60 }).unwrap();
+    write_level(dir.path(), &LevelSettings { assets: 60, ..Default::default() }).unwrap();
     // Killed mid-build, at a few moments.
     for delay_ms in [150, 400] {
         let mut child = std::process::Command::new(env!("CARGO_BIN_EXE_cirrus"))
@@ -257,7 +257,7 @@ fn the_record_survives_a_killed_build_and_is_rebuilt_when_damaged() {
 #[test]
 fn the_daemon_starts_on_a_baked_level_without_reading_its_sources_and_an_edit_reads_only_its_assets_files() {
     let dir = tempfile::tempdir().unwrap();
-    let level = write_level(dir.path(), &LevelSettings { assets: 60 }).unwrap();
+    let level = write_level(dir.path(), &LevelSettings { assets: 60, ..Default::default() }).unwrap();
     build_process(dir.path(), &[]);
     // Out of the racy window, so that the record trusts every file's metadata.
     std::thread::sleep(Duration::from_millis(2100));

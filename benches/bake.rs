@@ -147,10 +147,7 @@ fn bench_memory() {
 /// first batch (wall, peak RSS, and RSS when idle 2 s after it).
 fn bench_level_memory() {
     const SIDE: u32 = 1024;
-    let sizes: Vec<usize> = std::env::var("CIRRUS_BENCH_LEVEL_MEMORY")
-        .ok()
-        .map(|sizes| sizes.split(',').filter_map(|size| size.trim().parse().ok()).collect())
-        .unwrap_or_else(|| vec![16, 64, 256]);
+    let sizes = level_sizes("CIRRUS_BENCH_LEVEL_MEMORY", &[16, 64, 256]);
     println!(
         "level-memory: Material assets with {SIDE}² albedo and normal maps (one in four a roughness map); CPU ISA {}, \
          {} threads",
@@ -178,12 +175,22 @@ fn bench_level_memory() {
         drop(daemon);
         println!(
             "  {assets} assets ({:.0} M texels): build {build:.1} s, peak {build_peak:.0} MiB ({:.1} B/texel); \
-             watch, unbaked: first batch {first_batch:.1} s, peak {daemon_peak:.0} MiB ({:.1} B/texel), idle {idle:.0} MiB",
+             watch, unbaked: first batch {first_batch:.1} s, peak {daemon_peak:.0} MiB ({:.1} B/texel), \
+             idle {idle:.0} MiB",
             texels / 1e6,
             per_texel(build_peak),
             per_texel(daemon_peak),
         );
     }
+}
+
+/// The level sizes (asset counts) the environment variable `variable` lists (`16,64`), else
+/// `default`.
+fn level_sizes(variable: &str, default: &[usize]) -> Vec<usize> {
+    std::env::var(variable)
+        .ok()
+        .map(|sizes| sizes.split(',').filter_map(|size| size.trim().parse().ok()).collect())
+        .unwrap_or_else(|| default.to_vec())
 }
 
 /// A process's wall seconds and peak resident memory (MiB), its stdout discarded.
@@ -252,10 +259,7 @@ struct ScaleFigures {
 /// on the baked level (ready) and the latency from writing a 64² albedo to the batch event,
 /// median and worst of 20 edits.
 fn bench_scale() {
-    let sizes: Vec<usize> = std::env::var("CIRRUS_BENCH_SCALE")
-        .ok()
-        .map(|sizes| sizes.split(',').filter_map(|size| size.trim().parse().ok()).collect())
-        .unwrap_or_else(|| vec![100, 1_000, 10_000]);
+    let sizes = level_sizes("CIRRUS_BENCH_SCALE", &[100, 1_000, 10_000]);
     println!(
         "scale: synthetic levels (90 % materials with 64² maps, one in ten 256², 7 % AO rocks, 3 % billboard plants); \
          CPU ISA {}{}, {} threads",

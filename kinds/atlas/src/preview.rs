@@ -60,10 +60,10 @@ pub(super) fn preview(
             (ALPHA_CUTOFF, crate::kinds::MapFiles::AsNamed),
         )
         .map_err(PreviewError::Artifact)?;
-        let (center, radius) = render::preview::bounding_sphere(&source);
+        let (center, radius) = cirrus_core::preview::bounding_sphere(&source);
         let remapped = crate::gpu::LevelView::Mesh(remapped);
         let mut compared =
-            render::preview::preview_chain(gpu, &source, &[&remapped], center, radius, options.settings)?;
+            cirrus_core::preview::preview_chain(gpu, &source, &[&remapped], center, radius, options.settings)?;
         let compared = compared.levels.remove(0);
         let folder = options.out.join(relative.with_extension(""));
         crate::kinds::write_preview(&config.root.join(&folder), &compared)?;

@@ -135,10 +135,16 @@ pub struct PipelineConfig {
     pub remote_cache: Option<crate::cache::remote::RemoteCacheSettings>,
 }
 
+/// The memory budgets `limits: (memory_mib: …)` and `--memory-mib` admit, in MiB.
+pub const MEMORY_MIB_RANGE: std::ops::RangeInclusive<u64> = 64..=1 << 24;
+
 /// Pipeline-wide resource limits.
 #[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
 pub struct Limits {
     pub texture: crate::texture::TextureLimits,
+    /// The process's memory budget in bytes (`limits: (memory_mib: …)`); `None`: the default,
+    /// half the machine's memory (see `memory::process_budget`).
+    pub memory: Option<u64>,
 }
 
 impl PipelineConfig {
@@ -524,6 +530,12 @@ impl Validation<'_> {
                 self.error_at_key("texture_memory_mib", 0, "texture_memory_mib must be between 16 and 16777216 (MiB)");
             }
             self.limits.texture.working_set = mib << 20;
+        }
+        if let Some(mib) = raw.limits.memory_mib {
+            if !(MEMORY_MIB_RANGE).contains(&mib) {
+                self.error_at_key("memory_mib", 0, "memory_mib must be between 64 and 16777216 (MiB)");
+            }
+            self.limits.memory = Some(mib << 20);
         }
         let remote_cache =
             raw.cache.remote.as_ref().and_then(|url| match crate::cache::remote::parse_remote_url(url) {

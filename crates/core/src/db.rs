@@ -17,16 +17,76 @@ use crate::diagnostic::{display_path, Diagnostic};
 use crate::texture::{decode_texture, Texture};
 
 /// The bytes of a source file and their blake3 hash. Equality is by hash.
+///
+/// The bytes may be let go (`release`) once no stage in memory needs them, and are read back from
+/// the file when a stage asks again ([`FileContents::bytes`]): the hash, which is what salsa
+/// compares, stays. Clones share the bytes.
 #[derive(Clone)]
 pub struct FileContents {
-    pub bytes: Arc<[u8]>,
     pub hash: blake3::Hash,
+    /// How many bytes the file holds.
+    pub len: u64,
+    bytes: Arc<Mutex<Option<Arc<[u8]>>>>,
+    /// The file to read the bytes back from (none: they cannot be let go).
+    origin: Option<PathBuf>,
 }
 
 impl FileContents {
     pub fn new(bytes: Vec<u8>) -> FileContents {
         let hash = blake3::hash(&bytes);
-        FileContents { bytes: bytes.into(), hash }
+        let len = bytes.len() as u64;
+        FileContents { hash, len, bytes: Arc::new(Mutex::new(Some(bytes.into()))), origin: None }
+    }
+
+    /// The bytes read from `origin` (an absolute path), which may be let go and read back.
+    pub fn from_file(bytes: Vec<u8>, origin: PathBuf) -> FileContents {
+        FileContents { origin: Some(origin), ..FileContents::new(bytes) }
+    }
+
+    /// The bytes: those kept, else read back from the file. The driver reads back every file of
+    /// the assets it bakes before their stages run ([`FileContents::read_back`]), so a stage
+    /// reads from disk only where a query reaches past them; a file that changed meanwhile fails
+    /// the stage that asked (the watcher's event, or the next build, bakes it again).
+    pub fn bytes(&self) -> Arc<[u8]> {
+        match self.read_back() {
+            Ok(bytes) => bytes,
+            Err(why) => panic!("{why}"),
+        }
+    }
+
+    /// The bytes, read back from the file when they were let go; an error saying why when the
+    /// file cannot be read or its bytes are not the ones hashed.
+    pub fn read_back(&self) -> Result<Arc<[u8]>, String> {
+        let mut kept = self.bytes.lock().unwrap_or_else(|poisoned| poisoned.into_inner());
+        if let Some(bytes) = &*kept {
+            return Ok(bytes.clone());
+        }
+        let origin = self.origin.as_ref().expect("bytes without a file are never let go");
+        let shown = display_path(origin);
+        let read = crate::files::read_regular_file_with_metadata(origin, crate::files::MAX_SOURCE_BYTES)
+            .map_err(|why| format!("{shown}: cannot read it again: {why}"))?
+            .0;
+        if blake3::hash(&read) != self.hash {
+            return Err(format!("{shown} changed while it was being baked; the next build bakes it again"));
+        }
+        let bytes: Arc<[u8]> = read.into();
+        *kept = Some(bytes.clone());
+        Ok(bytes)
+    }
+
+    /// Lets go of the bytes (when they came from a file): the next [`FileContents::bytes`] reads
+    /// them back. Returns how many bytes were let go.
+    pub fn release(&self) -> u64 {
+        if self.origin.is_none() {
+            return 0;
+        }
+        let mut kept = self.bytes.lock().unwrap_or_else(|poisoned| poisoned.into_inner());
+        kept.take().map_or(0, |bytes| bytes.len() as u64)
+    }
+
+    /// Whether the bytes are in memory now.
+    pub fn is_kept(&self) -> bool {
+        self.bytes.lock().unwrap_or_else(|poisoned| poisoned.into_inner()).is_some()
     }
 }
 
@@ -40,7 +100,7 @@ impl Eq for FileContents {}
 
 impl fmt::Debug for FileContents {
     fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
-        write!(f, "FileContents({} bytes, {})", self.bytes.len(), &self.hash.to_hex()[..12])
+        write!(f, "FileContents({} bytes, {})", self.len, &self.hash.to_hex()[..12])
     }
 }
 
@@ -251,8 +311,8 @@ pub trait Db: salsa::Database {
     fn remember(&self, name: &str, value: Arc<dyn Any + Send + Sync>);
     /// Drops what [`Db::remember`] kept under `name`.
     fn forget(&self, name: &str);
-    /// What the process keeps of a build beyond its outputs.
-    fn retention(&self) -> Retention;
+    /// What the process keeps of `asset`'s build beyond its outputs.
+    fn retention(&self, asset: Asset) -> Retention;
 }
 
 /// What a process keeps in memory of a build beyond its outputs.
@@ -278,6 +338,9 @@ pub struct Database {
     logs: Arc<Logs>,
     memos: Arc<Mutex<HashMap<String, Arc<dyn Any + Send + Sync>>>>,
     retention: Retention,
+    /// With `KeepForNextBuild`: the assets whose intermediates are kept (all when `None`); the
+    /// others are baked as `OutputsOnly` bakes them (the driver's memory policy).
+    kept: Arc<std::sync::RwLock<Option<std::collections::HashSet<Asset>>>>,
 }
 
 impl Database {
@@ -286,7 +349,28 @@ impl Database {
     }
 
     pub fn with_retention(cache: Option<DiskCache>, retention: Retention) -> Database {
-        Database { storage: salsa::Storage::default(), cache, logs: Arc::default(), memos: Arc::default(), retention }
+        Database {
+            storage: salsa::Storage::default(),
+            cache,
+            logs: Arc::default(),
+            memos: Arc::default(),
+            retention,
+            kept: Arc::default(),
+        }
+    }
+
+    /// Keeps the intermediates of `assets` only (of every asset when `None`) from now on, where
+    /// the database keeps any; forgets the memos (see [`remember`]) of the assets not kept, whose
+    /// names `label_of` gives. Salsa's memos of those assets go as their functions' LRU evicts
+    /// them.
+    pub fn keep_only(&self, assets: Option<std::collections::HashSet<Asset>>, dropped: &[String]) {
+        *self.kept.write().unwrap_or_else(|poisoned| poisoned.into_inner()) = assets;
+        let mut memos = self.memos.lock().expect("memo lock");
+        // A memo's name is `kind:identity`, and a surface's identity starts with its asset's name.
+        memos.retain(|name, _| {
+            let identity = name.split_once(':').map_or(name.as_str(), |(_, identity)| identity);
+            !dropped.iter().any(|asset| identity == asset || identity.starts_with(&format!("{asset}/")))
+        });
     }
 
     /// Uses another persistent cache from now on (the pipeline's output or shared cache changed).
@@ -332,8 +416,17 @@ impl Db for Database {
         self.memos.lock().expect("memo lock").remove(name);
     }
 
-    fn retention(&self) -> Retention {
-        self.retention
+    fn retention(&self, asset: Asset) -> Retention {
+        match self.retention {
+            Retention::OutputsOnly => Retention::OutputsOnly,
+            Retention::KeepForNextBuild => {
+                let kept = self.kept.read().unwrap_or_else(|poisoned| poisoned.into_inner());
+                match &*kept {
+                    Some(kept) if !kept.contains(&asset) => Retention::OutputsOnly,
+                    _ => Retention::KeepForNextBuild,
+                }
+            }
+        }
     }
 }
 
@@ -443,8 +536,14 @@ pub fn record_cache_hit(db: &dyn Db, stage: Stage, label: &str) {
     });
 }
 
+/// Bounds the decoded textures kept to the `files` used last (see `tail_queries::keep_memos`).
+pub fn keep_decoded(db: &mut dyn Db, files: usize) {
+    decoded_texture::set_lru_capacity(db, files);
+    opacity_texture::set_lru_capacity(db, files);
+}
+
 /// A source texture decoded to RGBA8 (the decode stage, labelled by the file's path).
-#[salsa::tracked(returns(clone))]
+#[salsa::tracked(returns(clone), lru = 0)]
 pub fn decoded_texture(db: &dyn Db, file: SourceFile) -> Result<Arc<Texture>, Diagnostic> {
     decode_source(db, file)
 }
@@ -452,8 +551,8 @@ pub fn decoded_texture(db: &dyn Db, file: SourceFile) -> Result<Arc<Texture>, Di
 /// A source texture decoded for a surface that is made from it: memoized where the process
 /// builds again, else decoded for this use and dropped once the surface is made (a file that
 /// feeds several surfaces is then decoded by each: see [`Retention::OutputsOnly`]).
-pub fn decoded_for_surface(db: &dyn Db, file: SourceFile) -> Result<Arc<Texture>, Diagnostic> {
-    match db.retention() {
+pub fn decoded_for_surface(db: &dyn Db, asset: Asset, file: SourceFile) -> Result<Arc<Texture>, Diagnostic> {
+    match db.retention(asset) {
         Retention::KeepForNextBuild => decoded_texture(db, file),
         Retention::OutputsOnly => decode_source(db, file),
     }
@@ -463,11 +562,11 @@ fn decode_source(db: &dyn Db, file: SourceFile) -> Result<Arc<Texture>, Diagnost
     let contents = read_contents(db, file)?;
     let limits = texture_limits(db);
     let path = file.path(db);
-    timed(db, DECODE, &display_path(path), || decode_texture(path, &contents.bytes, limits).map(Arc::new))
+    timed(db, DECODE, &display_path(path), || decode_texture(path, &contents.bytes(), limits).map(Arc::new))
 }
 
 /// A source texture as an opacity map (alpha if it has transparency, else red), decoded once.
-#[salsa::tracked(returns(clone))]
+#[salsa::tracked(returns(clone), lru = 0)]
 pub fn opacity_texture(db: &dyn Db, file: SourceFile) -> Result<Arc<Texture>, Diagnostic> {
     let texture = decoded_texture(db, file)?;
     Ok(Arc::new(crate::texture::opacity_channel(&texture)))

@@ -42,3 +42,29 @@ pub fn release_freed_memory() {
         libc::malloc_trim(0);
     }
 }
+
+/// The process's memory budget when neither `--memory-mib` nor `limits: (memory_mib: …)` sets
+/// one: half the machine's memory (`MemTotal`), or 8 GiB where it cannot be read.
+pub fn default_budget() -> u64 {
+    machine_memory().map_or(8 << 30, |total| total / 2)
+}
+
+/// The machine's memory in bytes (Linux: `/proc/meminfo`'s `MemTotal`).
+pub fn machine_memory() -> Option<u64> {
+    let meminfo = std::fs::read_to_string("/proc/meminfo").ok()?;
+    let line = meminfo.lines().find(|line| line.starts_with("MemTotal:"))?;
+    let kib: u64 = line.split_whitespace().nth(1)?.parse().ok()?;
+    Some(kib << 10)
+}
+
+/// The process's resident memory now, in bytes (Linux: `/proc/self/statm`; `None` elsewhere).
+pub fn resident_bytes() -> Option<u64> {
+    let statm = std::fs::read_to_string("/proc/self/statm").ok()?;
+    let pages: u64 = statm.split_whitespace().nth(1)?.parse().ok()?;
+    // SAFETY: sysconf only reads a system constant.
+    #[cfg(unix)]
+    let page = unsafe { libc::sysconf(libc::_SC_PAGESIZE) }.max(1) as u64;
+    #[cfg(not(unix))]
+    let page = 4096;
+    Some(pages * page)
+}

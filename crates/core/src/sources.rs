@@ -28,8 +28,12 @@ pub fn read_source_stamped(
     if !root.join(source).is_dir() {
         return Err(ReadError::NoSourceFolder(source.to_path_buf()));
     }
-    read_regular_file_with_metadata(&root.join(relative), MAX_SOURCE_BYTES)
-        .map(|(bytes, metadata)| (FileContents::new(bytes), crate::record::FileStamp::of(&metadata)))
+    let absolute = root.join(relative);
+    read_regular_file_with_metadata(&absolute, MAX_SOURCE_BYTES)
+        .map(|(bytes, metadata)| {
+            let absolute = std::path::absolute(&absolute).unwrap_or(absolute);
+            (FileContents::from_file(bytes, absolute), crate::record::FileStamp::of(&metadata))
+        })
         .map_err(|why| match why {
             ReadError::NotFound { .. } => ReadError::NotFound { hint: similar_file_hint(root, source, relative) },
             why => why,

@@ -185,7 +185,8 @@ pub(crate) fn mesh_uv_reach(db: &dyn Db, asset: Asset) -> Arc<std::collections::
             .finish();
         let found: Result<Vec<(PathBuf, UvReach)>, Diagnostic> = cached_json(db, REACH, &label, key, || {
             Ok(timed(db, REACH, &label, || {
-                let Ok((loaded, _)) = crate::mesh::load_mesh(mesh, &contents.bytes, &libraries, asset.source_root(db))
+                let Ok((loaded, _)) =
+                    crate::mesh::load_mesh(mesh, &contents.bytes(), &libraries, asset.source_root(db))
                 else {
                     return Vec::new();
                 };
@@ -723,7 +724,7 @@ pub(crate) fn remapped_mesh(
         let library_bytes = crate::kinds::mesh_queries::library_bytes(db, asset, &mesh);
         timed(db, REMAP, &label, || {
             let (loaded, warnings) =
-                crate::mesh::load_mesh(&mesh, &contents.bytes, &library_bytes, asset.source_root(db))?;
+                crate::mesh::load_mesh(&mesh, &contents.bytes(), &library_bytes, asset.source_root(db))?;
             let targets = super::remap::remap_targets(&atlas_table_entries(&layout));
             let by_path: HashMap<PathBuf, usize> = targets
                 .iter()
@@ -753,7 +754,7 @@ pub(crate) fn remapped_mesh(
                 super::remap::remap_mesh(&loaded, &targets, &chosen, library, &header).map_err(remap_error)?;
             let remap_warnings =
                 remapped.warnings.iter().map(|warning| Diagnostic::new(&mesh, warning.message.clone()));
-            let not_kept = statements_not_kept(&mesh, &contents.bytes, &library_bytes, &remapped.materials);
+            let not_kept = statements_not_kept(&mesh, &contents.bytes(), &library_bytes, &remapped.materials);
             Ok(super::remap::RemappedMesh {
                 warnings: warnings.into_iter().chain(remap_warnings).chain(not_kept).collect(),
                 ..remapped

@@ -62,6 +62,10 @@ impl crate::kinds::KindStep for Step {
 }
 
 impl Kind for Material {
+    fn keep_memos(db: &mut dyn Db, surfaces: usize) {
+        queries::keep_memos(db, surfaces);
+    }
+
     fn files_to_read(db: &dyn Db, asset: Asset) -> Vec<PathBuf> {
         let mut files = vec![asset.main_file(db).clone()];
         if let Ok(parsed) = material_file(db, asset) {
@@ -243,7 +247,7 @@ impl Kind for Material {
             Ok(contents) => contents,
             Err(error) => return vec![Diagnostic::new(main_file, error)],
         };
-        let parsed = match definition::parse_material_file(main_file, &contents.bytes, &config.source) {
+        let parsed = match definition::parse_material_file(main_file, &contents.bytes(), &config.source) {
             Ok(parsed) => parsed,
             Err(diagnostic) => return vec![diagnostic],
         };

@@ -41,7 +41,7 @@ pub(crate) fn material_file(db: &dyn Db, asset: Asset) -> Result<Arc<MaterialFil
     let key = stage_key(PARSE).part(&contents.hash).part(&crate::db::source_relative(db, path)).finish();
     let label = display_path(path);
     cached_json(db, PARSE, &label, key, || {
-        timed(db, PARSE, &label, || parse_material_file(path, &contents.bytes, source_root))
+        timed(db, PARSE, &label, || parse_material_file(path, &contents.bytes(), source_root))
     })
     .map(Arc::new)
 }
@@ -130,8 +130,13 @@ pub(crate) fn surface_recipe(db: &dyn Db, asset: Asset, surface: SurfaceId) -> R
     Ok(Arc::new(SurfaceRecipe { sources, constants: material.constants.clone() }))
 }
 
+/// Bounds the packed surfaces kept to the `surfaces` used last (see `Kind::keep_memos`).
+pub(crate) fn keep_memos(db: &mut dyn Db, surfaces: usize) {
+    packed_surface::set_lru_capacity(db, surfaces);
+}
+
 /// The surface packed from its source maps (stage `pack`).
-#[salsa::tracked(returns(clone))]
+#[salsa::tracked(returns(clone), lru = 0)]
 pub(crate) fn packed_surface(db: &dyn Db, asset: Asset, surface: SurfaceId) -> Result<Arc<Texture>, Diagnostic> {
     pack(db, asset, &surface)
 }
@@ -139,7 +144,7 @@ pub(crate) fn packed_surface(db: &dyn Db, asset: Asset, surface: SurfaceId) -> R
 /// The surface packed from its source maps, for a tail that keeps it (through
 /// [`packed_surface`]) or uses it once (see `db::Retention`).
 pub(crate) fn surface_for_tail(db: &dyn Db, asset: Asset, surface: &SurfaceId) -> Result<Arc<Texture>, Diagnostic> {
-    match db.retention() {
+    match db.retention(asset) {
         crate::db::Retention::KeepForNextBuild => packed_surface(db, asset, surface.clone()),
         crate::db::Retention::OutputsOnly => pack(db, asset, surface),
     }
@@ -157,7 +162,7 @@ fn pack(db: &dyn Db, asset: Asset, surface: &SurfaceId) -> Result<Arc<Texture>, 
             // A file in several slots (an ORM map) is decoded once.
             Some(MapSource::File(file)) => match earlier_slot_of(file) {
                 Some(earlier) => decoded[earlier].clone(),
-                None => Some(decoded_for_surface(db, *file)?),
+                None => Some(decoded_for_surface(db, asset, *file)?),
             },
             Some(MapSource::Asset { asset: source, name, surface, .. }) => {
                 let plan = crate::kinds::tail_queries::surface_plan(db, *source, surface.clone());

@@ -43,6 +43,8 @@ pub struct Cache {
 pub struct Limits {
     /// MiB one texture's working set may take.
     pub texture_memory_mib: Option<u64>,
+    /// MiB the whole process may keep resident (`--memory-mib` wins).
+    pub memory_mib: Option<u64>,
 }
 
 /// `defaults:` as the shared part reads it: the `encode` section, and the names of the others

@@ -10,7 +10,7 @@ use crate::diagnostic::{display_path, Diagnostic};
 /// Reads a texture's header for `check`: readable, decodable, within the texture limits.
 pub fn check_texture_file(config: &PipelineConfig, path: &Path) -> Result<(), String> {
     let contents = crate::sources::read_source(&config.root, &config.source, path)?;
-    crate::texture::probe_texture(path, &contents.bytes, config.limits.texture)
+    crate::texture::probe_texture(path, &contents.bytes(), config.limits.texture)
         .map(|_| ())
         .map_err(|diagnostic| diagnostic.message)
 }
@@ -25,7 +25,7 @@ fn check_mesh_libraries(
     let mut libraries = std::collections::BTreeMap::new();
     for library in crate::mesh::material_libraries(mesh_file, obj, &config.source) {
         let bytes = match crate::sources::read_source(&config.root, &config.source, &library) {
-            Ok(contents) => Some(contents.bytes.to_vec()),
+            Ok(contents) => Some(contents.bytes().to_vec()),
             Err(error) if error.is_not_found() => None,
             Err(error) => return Err(Diagnostic::new(&library, error)),
         };
@@ -45,14 +45,14 @@ pub fn check_copied_maps(
 ) -> Vec<Diagnostic> {
     let read = |path: &Path| crate::sources::read_source(&config.root, &config.source, path);
     let Ok(contents) = read(mesh_file) else { return Vec::new() };
-    let libraries = check_mesh_libraries(config, mesh_file, &contents.bytes).unwrap_or_default();
+    let libraries = check_mesh_libraries(config, mesh_file, &contents.bytes()).unwrap_or_default();
     let (_, used) = super::source_copies::used_materials(&mesh.materials, &mesh.triangle_materials);
     let mut problems = Vec::new();
     for super::source_copies::OutputMaterial { material, .. } in used {
         for (&slot, path) in material.maps.iter().filter(|(_, path)| copied(path)) {
             // A map that cannot be read is the build's warning, not a copy's problem.
             let Ok(contents) = read(path) else { continue };
-            let Err(problem) = crate::texture::check_image_file(path, &contents.bytes, config.limits.texture) else {
+            let Err(problem) = crate::texture::check_image_file(path, &contents.bytes(), config.limits.texture) else {
                 continue;
             };
             let message = format!(
@@ -76,7 +76,7 @@ pub fn check_mesh_file(
 ) -> Result<(crate::mesh::Mesh, Vec<Diagnostic>), Diagnostic> {
     let contents = crate::sources::read_source(&config.root, &config.source, mesh_file)
         .map_err(|error| Diagnostic::new(mesh_file, error))?;
-    let libraries = check_mesh_libraries(config, mesh_file, &contents.bytes)?;
-    let (mesh, warnings) = crate::mesh::load_mesh(mesh_file, &contents.bytes, &libraries, &config.source)?;
+    let libraries = check_mesh_libraries(config, mesh_file, &contents.bytes())?;
+    let (mesh, warnings) = crate::mesh::load_mesh(mesh_file, &contents.bytes(), &libraries, &config.source)?;
     Ok((mesh, warnings.iter().map(Diagnostic::as_warning).collect()))
 }

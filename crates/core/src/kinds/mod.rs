@@ -79,6 +79,12 @@ pub trait Kind {
     ) -> Result<PreviewReport, PreviewError> {
         Err(PreviewError::NotPreviewable { name: asset.name(db).clone(), kind: asset.kind(db).name() })
     }
+
+    /// Bounds the kind's own memos of large values (images it makes for the tail) to the
+    /// `surfaces` surfaces used last, as `tail_queries::keep_memos` bounds the tail's (0:
+    /// unbounded). The driver sets it from its memory budget; a kind whose memos are small keeps
+    /// the default, which bounds nothing.
+    fn keep_memos(_db: &mut dyn Db, _surfaces: usize) {}
 }
 
 /// What `cirrus preview` renders, and where.
@@ -307,6 +313,7 @@ pub struct KindQuestions {
     surface_plan: fn(&dyn Db, Asset, &SurfaceId) -> Result<SurfacePlan, Diagnostic>,
     provided_surface_stage: ProvidedSurfaceFn,
     preview: fn(&dyn Db, Asset, &PipelineConfig, &PreviewOptions) -> Result<PreviewReport, PreviewError>,
+    keep_memos: fn(&mut dyn Db, usize),
 }
 
 /// [`Kind::outputs`].
@@ -326,6 +333,7 @@ impl KindQuestions {
             surface_plan: K::surface_plan,
             provided_surface_stage: K::provided_surface_stage,
             preview: K::preview,
+            keep_memos: K::keep_memos,
         }
     }
 }
@@ -381,6 +389,10 @@ impl AssetKind {
         options: &PreviewOptions,
     ) -> Result<PreviewReport, PreviewError> {
         (self.answers().preview)(db, asset, config, options)
+    }
+
+    pub fn keep_memos(self, db: &mut dyn Db, surfaces: usize) {
+        (self.answers().keep_memos)(db, surfaces)
     }
 
     pub fn provided_surface_stage(

@@ -41,6 +41,22 @@ const SURFACE_ENTRY_VERSION: u32 = 6;
 /// The entry under a surface's recipe key: the content key of its files.
 const SURFACE_RECIPE_ENTRY: &str = "surface-recipe";
 
+/// Bounds what the tail's memos hold (images, mips, blocks, finished files) to the `surfaces`
+/// surfaces used last (salsa's LRU, applied at each new revision and by
+/// `trigger_lru_eviction`): an evicted memo keeps its dependencies, and its surface is made
+/// again (the persistent cache gives back its files) only when asked for. 0: unbounded.
+pub fn keep_memos(db: &mut dyn Db, surfaces: usize) {
+    surface_image::set_lru_capacity(db, surfaces);
+    tail_image::set_lru_capacity(db, surfaces);
+    hidden_blocks::set_lru_capacity(db, surfaces);
+    surface_mips::set_lru_capacity(db, surfaces);
+    surface_blocks::set_lru_capacity(db, surfaces);
+    surface_format_comparison::set_lru_capacity(db, surfaces);
+    surface_files::set_lru_capacity(db, surfaces);
+    surface_artifacts::set_lru_capacity(db, surfaces);
+    crate::db::keep_decoded(db, surfaces);
+}
+
 /// The kind's plan of a surface: the tail's one question to the kind about it.
 #[salsa::tracked(returns(clone))]
 pub fn surface_plan(db: &dyn Db, asset: Asset, surface: SurfaceId) -> Result<SurfacePlan, Diagnostic> {
@@ -76,14 +92,14 @@ fn write_step_settings(
 }
 
 /// The surface's image, made by its kind.
-#[salsa::tracked(returns(clone))]
+#[salsa::tracked(returns(clone), lru = 0)]
 pub fn surface_image(db: &dyn Db, asset: Asset, surface: SurfaceId) -> Result<Arc<Texture>, Diagnostic> {
     (surface_plan(db, asset, surface.clone())?.image)(db, asset, &surface)
 }
 
 /// The image the tail filters and encodes: the kind's, in the channel order of the asset's
 /// `packing` (kinds make packed surfaces in `Mra`).
-#[salsa::tracked(returns(clone))]
+#[salsa::tracked(returns(clone), lru = 0)]
 fn tail_image(db: &dyn Db, asset: Asset, surface: SurfaceId) -> Result<Arc<Texture>, Diagnostic> {
     let image = surface_image(db, asset, surface.clone())?;
     in_tail_order(db, asset, &surface, image)
@@ -105,7 +121,7 @@ fn in_tail_order(
 /// The tail's image of a surface for its files: memoized where the process builds again, else
 /// made by the kind for this use and dropped with it (see [`Retention`]).
 fn files_image(db: &dyn Db, asset: Asset, surface: &SurfaceId) -> Result<Arc<Texture>, Diagnostic> {
-    match db.retention() {
+    match db.retention(asset) {
         Retention::KeepForNextBuild => tail_image(db, asset, surface.clone()),
         Retention::OutputsOnly => {
             let image = (surface_plan(db, asset, surface.clone())?.image)(db, asset, surface)?;
@@ -117,7 +133,7 @@ fn files_image(db: &dyn Db, asset: Asset, surface: &SurfaceId) -> Result<Arc<Tex
 /// The blocks of the surface that its asset's alpha test hides (see [`HiddenBlocks`]): from the
 /// alpha of the albedo that cuts it out, when that albedo is alpha-tested. Equal masks compare
 /// equal, so an edit of the albedo's colours alone re-encodes nothing here.
-#[salsa::tracked(returns(clone))]
+#[salsa::tracked(returns(clone), lru = 0)]
 fn hidden_blocks(db: &dyn Db, asset: Asset, surface: SurfaceId) -> Result<Option<Arc<HiddenBlocks>>, Diagnostic> {
     hidden_blocks_of(db, asset, &surface, &*tail_image(db, asset, surface.clone())?)
 }
@@ -157,7 +173,7 @@ fn texture_memory(db: &dyn Db, width: u32, height: u32) -> crate::schedule::Memo
 }
 
 /// The mip chain (stage `mips`), re-filtering only the tiles that changed since the last run.
-#[salsa::tracked(returns(clone))]
+#[salsa::tracked(returns(clone), lru = 0)]
 pub fn surface_mips(db: &dyn Db, asset: Asset, surface: SurfaceId) -> Result<Arc<MipLevels>, Diagnostic> {
     make_mips(db, asset, &surface, &*tail_image(db, asset, surface.clone())?).map(Arc::new)
 }
@@ -171,7 +187,7 @@ fn make_mips(db: &dyn Db, asset: Asset, surface: &SurfaceId, image: &Texture) ->
 }
 
 /// The blocks and their PSNR (stage `encode`), re-encoding only the blocks that changed.
-#[salsa::tracked(returns(clone))]
+#[salsa::tracked(returns(clone), lru = 0)]
 pub fn surface_blocks(db: &dyn Db, asset: Asset, surface: SurfaceId) -> Result<Arc<EncodedSurface>, Diagnostic> {
     let mips = surface_mips(db, asset, surface.clone())?;
     let hidden = hidden_blocks(db, asset, surface.clone())?;
@@ -202,7 +218,7 @@ fn make_blocks(
         let memo = remembered.clone();
         store_cached_in_background(db, ENCODING_MEMO, encoding_memo_key(&label), move || encoding_entry(&memo));
     }
-    match db.retention() {
+    match db.retention(asset) {
         Retention::KeepForNextBuild => remember(db, &encoding_memo_name(&label), remembered),
         Retention::OutputsOnly => forget(db, &encoding_memo_name(&label)),
     }
@@ -212,7 +228,7 @@ fn make_blocks(
 /// The surface in the other formats its kind allows, when the asset's report asks
 /// (`report: (compare_formats: true)`): level 0 encoded and measured again in each (not a
 /// stage of the build: only the report reads it).
-#[salsa::tracked(returns(clone))]
+#[salsa::tracked(returns(clone), lru = 0)]
 pub fn surface_format_comparison(
     db: &dyn Db,
     asset: Asset,
@@ -232,7 +248,7 @@ pub fn surface_format_comparison(
 /// the persistent cache when a surface with the same texels and settings was baked before. Where
 /// the process builds again, the image, mips and blocks are memoized; else they are made here
 /// and dropped with the files (see [`Retention`]).
-#[salsa::tracked(returns(clone))]
+#[salsa::tracked(returns(clone), lru = 0)]
 pub fn surface_files(
     db: &dyn Db,
     asset: Asset,
@@ -240,7 +256,7 @@ pub fn surface_files(
 ) -> Result<(Arc<SurfaceArtifacts>, CacheKey), Diagnostic> {
     let settings = tail_settings(db, asset, surface.clone())?;
     let label = surface.label(asset.name(db));
-    let keeping = db.retention() == Retention::KeepForNextBuild;
+    let keeping = db.retention(asset) == Retention::KeepForNextBuild;
     let image = files_image(db, asset, &surface)?;
     let hidden = match keeping {
         true => hidden_blocks(db, asset, surface.clone())?,
@@ -269,7 +285,7 @@ pub fn surface_files(
 /// A surface's finished files: from the persistent cache by its recipe when the kind can name
 /// one (then no image is made), else by its parts (then the image is not put together), else
 /// through the tail.
-#[salsa::tracked(returns(clone))]
+#[salsa::tracked(returns(clone), lru = 0)]
 pub fn surface_artifacts(db: &dyn Db, asset: Asset, surface: SurfaceId) -> Result<Arc<SurfaceArtifacts>, Diagnostic> {
     let plan = surface_plan(db, asset, surface.clone())?;
     let settings = &plan.settings;

@@ -37,6 +37,8 @@ pub struct WatchSettings {
     pub max_builds: Option<u64>,
     /// The command line's word on the shared cache.
     pub remote_cache: crate::cache::remote::RemoteCacheOverride,
+    /// The command line's memory budget in bytes (`--memory-mib`).
+    pub memory_budget: Option<u64>,
 }
 
 #[derive(Debug, thiserror::Error)]
@@ -261,6 +263,7 @@ fn start(settings: &WatchSettings) -> Result<(Daemon<'_>, std::sync::mpsc::Recei
             remote_cache: settings.remote_cache.clone(),
             verify: false,
             retention: crate::db::Retention::KeepForNextBuild,
+            memory_budget: settings.memory_budget,
         },
     );
 

@@ -59,6 +59,10 @@ pub enum Command {
         /// modification and change times, file id) as the build record holds it.
         #[arg(long)]
         verify: bool,
+        /// The memory the process may keep resident, in MiB (over `limits: (memory_mib: …)`;
+        /// default: half the machine's memory).
+        #[arg(long, value_name = "MIB", value_parser = memory_mib_parser())]
+        memory_mib: Option<u64>,
     },
     /// Render a baked mesh beside its source from many directions (a billboard cloud's LODs, an
     /// atlas's remapped meshes): contact sheets and metrics.
@@ -109,6 +113,10 @@ pub enum Command {
         /// Events closer together than this many milliseconds become one batch.
         #[arg(long, default_value_t = 50, value_name = "MS")]
         debounce_ms: u64,
+        /// The memory the process may keep resident, in MiB (over `limits: (memory_mib: …)`;
+        /// default: half the machine's memory).
+        #[arg(long, value_name = "MIB", value_parser = memory_mib_parser())]
+        memory_mib: Option<u64>,
     },
     /// Print the dependency graph: source files, stage instances and artifacts, with timings.
     Graph {
@@ -269,6 +277,12 @@ fn configure_threads() {
     let _ = rayon::ThreadPoolBuilder::new().num_threads(threads).build_global();
 }
 
+/// `--memory-mib`: a budget within `limits: (memory_mib: …)`'s range.
+fn memory_mib_parser() -> clap::builder::RangedU64ValueParser<u64> {
+    let range = crate::config::MEMORY_MIB_RANGE;
+    clap::value_parser!(u64).range(*range.start()..=*range.end())
+}
+
 fn run_command(cli: Cli) -> ExitCode {
     ignore_file_size_signal();
     crate::memory::configure_allocator();
@@ -283,14 +297,15 @@ fn run_command(cli: Cli) -> ExitCode {
     };
     let options = ProjectOptions { remote_cache: remote_cache.clone(), ..Default::default() };
     match cli.command {
-        Command::Build { pipeline, assets, summary, verify } => {
+        Command::Build { pipeline, assets, summary, verify, memory_mib } => {
             // The process ends with the build: it keeps no intermediate for a next one.
             let retention = crate::db::Retention::OutputsOnly;
-            build(pipeline, assets, summary, ProjectOptions { verify, retention, ..options })
+            let memory_budget = memory_mib.map(|mib| mib << 20);
+            build(pipeline, assets, summary, ProjectOptions { verify, retention, memory_budget, ..options })
         }
         Command::Check { pipeline, assets, json } => check(pipeline, &assets, json),
         Command::Cache { command } => cache::run(command, options),
-        Command::Watch { pipeline, listen, allow_origin, debounce_ms } => {
+        Command::Watch { pipeline, listen, allow_origin, debounce_ms, memory_mib } => {
             let debounce = std::time::Duration::from_millis(debounce_ms);
             let settings = crate::watch::WatchSettings {
                 pipeline,
@@ -299,6 +314,7 @@ fn run_command(cli: Cli) -> ExitCode {
                 debounce,
                 max_builds: None,
                 remote_cache,
+                memory_budget: memory_mib.map(|mib| mib << 20),
             };
             match crate::watch::watch(&settings) {
                 Ok(()) => ExitCode::SUCCESS,

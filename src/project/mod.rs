@@ -23,8 +23,12 @@ pub use crate::schedule::{CancelFlag, Progress};
 
 mod asset_list;
 pub mod batch;
+mod baking;
+mod budget;
 mod clean;
 mod graph;
+mod groups;
+use baking::{Baking, GroupsBaked};
 mod publish;
 mod publish_state;
 mod skip_record;
@@ -34,11 +38,12 @@ mod unchanged;
 
 // The project's parts, each a type of its own (public so that the tests read each alone).
 pub use asset_list::{list_assets, AssetList, AssetLists};
+pub use budget::{AssetCost, MemoryPolicy};
 pub use clean::CleanAssets;
 pub use publish_state::PublishState;
 use publish_state::{BakedAsset, BuildNews};
 pub use skip_record::SkipRecord;
-use summaries::{runs_by_asset, RunIndex};
+use summaries::runs_by_asset;
 
 /// How a project is opened.
 #[derive(Clone, Debug)]
@@ -54,6 +59,8 @@ pub struct ProjectOptions {
     pub verify: bool,
     /// What the process keeps of a build beyond its outputs.
     pub retention: crate::db::Retention,
+    /// The command line's memory budget in bytes (`--memory-mib`), over `pipeline.ron`'s.
+    pub memory_budget: Option<u64>,
 }
 
 impl Default for ProjectOptions {
@@ -64,6 +71,7 @@ impl Default for ProjectOptions {
             remote_cache: Default::default(),
             verify: false,
             retention: Default::default(),
+            memory_budget: None,
         }
     }
 }
@@ -93,6 +101,9 @@ pub struct BuildOptions {
     /// whose batches report what changed, so that a batch costs what its edit costs).
     pub omit_unchanged: bool,
 }
+
+/// Per asset: its errors and the labels of its jobs that failed.
+type JobFailures = HashMap<Asset, (Vec<Diagnostic>, HashSet<String>)>;
 
 /// `Err(UnknownAsset)`, with the closest known name, for the first of `names` that names none
 /// of `assets`.
@@ -162,6 +173,18 @@ pub struct Project {
     /// What `file_hash` read of files without an input, for `source_file` to take instead of
     /// reading them again (emptied when a build ends).
     unclaimed: HashMap<PathBuf, crate::db::FileRead>,
+    /// The memory budget, and the assets baked last (whose intermediates the daemon keeps).
+    memory: MemoryPolicy,
+    /// The assets whose intermediates are kept now (see `MemoryPolicy::kept_with`).
+    kept: HashSet<String>,
+    /// How many groups the last build baked (see `groups`).
+    last_groups: usize,
+}
+
+/// The memory budget in force: the command line's, else `pipeline.ron`'s, else half the
+/// machine's memory.
+fn memory_budget(config: &PipelineConfig, options: &ProjectOptions) -> u64 {
+    options.memory_budget.or(config.limits.memory).unwrap_or_else(crate::memory::default_budget)
 }
 
 /// Bump when what enters an asset's fingerprint changes.
@@ -209,6 +232,7 @@ impl Project {
             }
         }
         let across_builds = options.source_reading == SourceReading::WhenInvalidated;
+        let memory = MemoryPolicy::new(memory_budget(&config, &options));
         let mut project = Project {
             config,
             db: Database::with_retention(cache, options.retention),
@@ -232,8 +256,13 @@ impl Project {
             clean: CleanAssets::new(across_builds),
             files_read: 0,
             unclaimed: HashMap::new(),
+            memory,
+            kept: HashSet::new(),
+            last_groups: 0,
         };
         project.sync_limits();
+        // Memos record their uses from the first build on, so that the budget can evict them.
+        project.set_memo_capacity(budget::UNBOUNDED_MEMOS);
         project
     }
 
@@ -269,6 +298,25 @@ impl Project {
             return Err(BuildError::Failed { name: name.to_string(), errors });
         }
         Ok(self.asset_input(name).expect("a built asset has an input"))
+    }
+
+    /// How many groups of assets the last build baked and published one after another (1 when
+    /// its assets fit the memory budget together).
+    pub fn groups_baked(&self) -> usize {
+        self.last_groups
+    }
+
+    /// The assets whose intermediates the process keeps now, sorted.
+    pub fn kept_assets(&self) -> Vec<String> {
+        let mut kept: Vec<String> = self.kept.iter().cloned().collect();
+        kept.sort();
+        kept
+    }
+
+    /// The bytes of source files held in memory now (the others are read back when needed).
+    pub fn source_bytes_in_memory(&self) -> u64 {
+        let kept = self.files.values().filter_map(|file| file.contents(&self.db).as_ref().ok());
+        kept.filter(|contents| contents.is_kept()).map(|contents| contents.len).sum()
     }
 
     /// How many times an asset's input was synced since the project opened: each costs the
@@ -357,6 +405,7 @@ impl Project {
             }
             self.db.replace_disk_cache(open_disk_cache(&config, &self.options));
         }
+        self.memory.set_budget(memory_budget(&config, &self.options));
         self.config = config;
         self.asset_lists.forget();
         self.built_instances.clear();
@@ -524,7 +573,7 @@ impl Project {
         let mut manifest = self.take_manifest();
         // Assets whose fingerprint and artifacts are as the record has them are passed over:
         // no input, no stage, no file read.
-        let mut assets = Vec::new();
+        let mut dirty = Vec::new();
         let mut unchanged = Vec::new();
         for config in selected {
             if cancel.is_raised() {
@@ -536,35 +585,21 @@ impl Project {
                 unchanged.push(config);
                 continue;
             }
-            let asset = self.sync_asset(config);
-            assets.push((config.clone(), asset));
+            dirty.push(config);
         }
-        self.sync_registry(all_assets, &assets);
-        let Some((runs, failures)) = self.run_asset_jobs(&assets, progress, &cancel) else {
-            self.keep_manifest(manifest);
-            return Err(BuildError::Cancelled);
-        };
-
-        let run_index = RunIndex::new(&runs);
         let next_revision = manifest.revision.max(self.revision) + 1;
-        // Every asset's files are put together before any is written: an edit meanwhile (a
-        // folder of sources deleted) still cancels the build, and nothing of it is published.
-        let Some(all_outputs) = self.asset_outputs(&assets, &runs, failures, &cancel) else {
+        let mut news = BuildNews { changed: options.always_new_revision, ..Default::default() };
+        let baking = Baking { all_assets, next_revision, progress, cancel: &cancel };
+        let GroupsBaked { built, runs, groups, cancelled } =
+            self.bake_in_groups(dirty, &baking, &mut manifest, &mut news);
+        self.last_groups = groups;
+        if cancelled && groups == 0 {
+            self.db.take_runs();
             self.keep_manifest(manifest);
             return Err(BuildError::Cancelled);
-        };
-        // Each baked asset's fingerprint, of the files its input read.
-        let built: HashMap<String, Asset> =
-            assets.iter().map(|(config, asset)| (config.name.clone(), *asset)).collect();
-        let fingerprints: Vec<Option<blake3::Hash>> =
-            assets.iter().map(|(config, _)| self.current_fingerprint(config, all_assets, &built, 0)).collect();
-        let writing = !assets.is_empty();
-        if writing {
-            crate::record::begin_writing(&output_dir);
         }
-        let mut news = BuildNews { changed: options.always_new_revision, ..Default::default() };
-        for ((config, asset), (baked, fingerprint)) in assets.iter().zip(all_outputs.into_iter().zip(fingerprints)) {
-            self.publish_asset(config, *asset, baked, fingerprint, &run_index, &mut manifest, next_revision, &mut news);
+        if cancelled {
+            tracing::info!("the build was cancelled after {groups} group(s) of assets were published");
         }
         let BuildNews { mut changed, mut changed_artifacts, mut removed_artifacts, mut summaries, statuses } = news;
         for config in unchanged.iter().filter(|_| !options.omit_unchanged) {
@@ -576,7 +611,7 @@ impl Project {
                 all_assets.iter().enumerate().map(|(index, config)| (config.name.as_str(), index)).collect();
             summaries.sort_by_key(|summary| order.get(summary.name.as_str()).copied());
         }
-        if options.only_assets.is_empty() {
+        if options.only_assets.is_empty() && !cancelled {
             removed_artifacts.extend(self.remove_departed(&listed, &mut manifest));
         }
         // A failure is news too: its batch gets a revision of its own, so that a client that
@@ -588,7 +623,7 @@ impl Project {
         }
         self.revision = manifest.revision;
         self.sources_changed_since_build = false;
-        let (passed, looked, read) = (unchanged.len(), assets.len(), std::mem::take(&mut self.files_read));
+        let (passed, looked, read) = (unchanged.len(), built.len(), std::mem::take(&mut self.files_read));
         tracing::info!("{passed} asset(s) passed over, {looked} looked into; {read} source file(s) read");
         self.unclaimed.clear();
         // The daemon saves the record when it is idle (`save_record`): a record older than the
@@ -600,7 +635,7 @@ impl Project {
             }
             self.save_record();
         }
-        if writing {
+        if groups > 0 {
             crate::record::end_writing(&output_dir);
         }
         self.write_last_build(&summaries, &unchanged, manifest.revision);
@@ -621,7 +656,7 @@ impl Project {
         assets: &[(AssetConfig, Asset)],
         progress: &(dyn Fn(Progress) + Sync),
         cancel: &CancelFlag,
-    ) -> Option<(Vec<StageRun>, HashMap<Asset, (Vec<Diagnostic>, HashSet<String>)>)> {
+    ) -> Option<(Vec<StageRun>, JobFailures, HashMap<Asset, usize>)> {
         if let Some(cache) = self.db.disk_cache() {
             // This build's hits and misses start here.
             cache.take_counts();
@@ -637,8 +672,12 @@ impl Project {
             cache.flush();
         }
         let finished = finished.filter(|_| !cancel.is_raised())?;
-        let mut failures: HashMap<Asset, (Vec<Diagnostic>, HashSet<String>)> = HashMap::new();
+        let mut failures: JobFailures = HashMap::new();
+        let mut surfaces: HashMap<Asset, usize> = HashMap::new();
         for (job, result) in finished {
+            if matches!(job.task, crate::kinds::Task::Surface(_)) {
+                *surfaces.entry(job.asset).or_default() += 1;
+            }
             if let Err(diagnostic) = result {
                 let (errors, labels) = failures.entry(job.asset).or_default();
                 if !errors.contains(&diagnostic) {
@@ -647,7 +686,7 @@ impl Project {
                 labels.insert(job.label);
             }
         }
-        Some((runs, failures))
+        Some((runs, failures, surfaces))
     }
 
     /// Each asset's outputs as its kind makes them from the finished stages, with its errors;
@@ -657,7 +696,7 @@ impl Project {
         &self,
         assets: &[(AssetConfig, Asset)],
         runs: &[StageRun],
-        mut failures: HashMap<Asset, (Vec<Diagnostic>, HashSet<String>)>,
+        mut failures: JobFailures,
         cancel: &CancelFlag,
     ) -> Option<Vec<BakedAsset>> {
         let mut all_outputs = Vec::with_capacity(assets.len());

@@ -4,6 +4,7 @@
 mod support;
 
 mod material;
+mod memory;
 mod billboard_cloud;
 mod atlas;
 mod ambient_occlusion;

@@ -1,0 +1,215 @@
+//! Baking in groups that fit the memory budget: the next group read from the assets to bake,
+//! what is kept of each before it bakes (the daemon's kept assets, the memos' capacities), and
+//! what is let go once it published (source bytes, evicted memos, freed heap pages).
+
+use std::collections::{HashMap, HashSet};
+
+use super::baking::{Baking, GroupsBaked};
+use super::budget::{AssetCost, UNBOUNDED_MEMOS};
+use super::publish_state::BuildNews;
+use super::summaries::RunIndex;
+use super::{Project, SourceReading};
+use crate::artifacts::Manifest;
+use crate::config::AssetConfig;
+use crate::db::{Asset, Retention};
+
+/// A group of assets to bake together: each with its input and its estimate.
+pub(super) type Group = Vec<(AssetConfig, Asset, AssetCost)>;
+
+impl Project {
+    /// Bakes `dirty` in groups that fit the memory budget, each published (and its memory let go)
+    /// before the next is read; `cirrus build` writes the manifest and the record after each, so
+    /// that a build killed between groups leaves every published asset whole and listed. A cancel
+    /// stops it between groups or within one (whose assets are then not published).
+    pub(super) fn bake_in_groups(
+        &mut self,
+        dirty: Vec<&AssetConfig>,
+        baking: &Baking<'_>,
+        manifest: &mut Manifest,
+        news: &mut BuildNews,
+    ) -> GroupsBaked {
+        let mut baked = GroupsBaked { built: HashMap::new(), runs: Vec::new(), groups: 0, cancelled: false };
+        let mut pending = dirty.into_iter().peekable();
+        let mut carried = None;
+        while carried.is_some() || pending.peek().is_some() {
+            let group = self.next_group(&mut pending, &mut carried);
+            if baking.cancel.is_raised() {
+                baked.cancelled = true;
+                break;
+            }
+            self.prepare_memory(&group);
+            let assets: Vec<(AssetConfig, Asset)> =
+                group.iter().map(|(config, asset, _)| (config.clone(), *asset)).collect();
+            self.sync_registry(baking.all_assets, &assets);
+            let Some((runs, failures, surfaces)) = self.run_asset_jobs(&assets, baking.progress, baking.cancel) else {
+                baked.cancelled = true;
+                break;
+            };
+            let run_index = RunIndex::new(&runs);
+            // Every asset's files of the group are put together before any is written: an edit
+            // meanwhile (a folder of sources deleted) still cancels the group, and nothing of it
+            // is published.
+            let Some(all_outputs) = self.asset_outputs(&assets, &runs, failures, baking.cancel) else {
+                baked.cancelled = true;
+                break;
+            };
+            baked.built.extend(assets.iter().map(|(config, asset)| (config.name.clone(), *asset)));
+            // Each baked asset's fingerprint, of the files its input read.
+            let fingerprints: Vec<Option<blake3::Hash>> = assets
+                .iter()
+                .map(|(config, _)| self.current_fingerprint(config, baking.all_assets, &baked.built, 0))
+                .collect();
+            if baked.groups == 0 {
+                crate::record::begin_writing(&self.config.output_dir());
+            }
+            baked.groups += 1;
+            let revision = baking.next_revision;
+            for ((config, asset), (outputs, fingerprint)) in
+                assets.iter().zip(all_outputs.into_iter().zip(fingerprints))
+            {
+                self.publish_asset(config, *asset, outputs, fingerprint, &run_index, manifest, revision, news);
+            }
+            baked.runs.extend(runs);
+            let more = carried.is_some() || pending.peek().is_some();
+            if more && self.source_reading == SourceReading::EveryBuild {
+                // What a build killed now leaves: each published asset whole and listed, the
+                // record passing over it next time.
+                self.save_build_manifest(manifest, revision, &mut []);
+                self.save_record();
+            }
+            self.release_memory(&group, &surfaces);
+        }
+        baked
+    }
+
+    /// The next group of `pending` (and of the asset `carried` over from the last call, which
+    /// did not fit it): assets are read (synced) one by one until what they hold while baking
+    /// would pass the group's share of the budget. An asset that alone needs more still bakes,
+    /// alone, with a warning that names it.
+    pub(super) fn next_group<'a>(
+        &mut self,
+        pending: &mut std::iter::Peekable<impl Iterator<Item = &'a AssetConfig>>,
+        carried: &mut Option<(AssetConfig, Asset, AssetCost)>,
+    ) -> Group {
+        let share = self.memory.group_share();
+        let mut group: Group = carried.take().into_iter().collect();
+        let mut held: u64 = group.iter().map(|(_, _, cost)| cost.held).sum();
+        while group.len() == 1 || held < share {
+            if group.len() == 1 && held > share {
+                let (config, _, cost) = &group[0];
+                tracing::warn!(
+                    "asset `{}` needs about {} MiB while it bakes, more than half the memory budget of {} MiB: \
+                     it bakes alone (raise `limits: (memory_mib: …)` or `--memory-mib`)",
+                    config.name,
+                    cost.held >> 20,
+                    self.memory.budget() >> 20
+                );
+                break;
+            }
+            let Some(config) = pending.next() else { break };
+            let asset = self.sync_asset(config);
+            let cost = self.asset_cost(asset);
+            if !group.is_empty() && held + cost.held > share {
+                *carried = Some((config.clone(), asset, cost));
+                break;
+            }
+            held += cost.held;
+            group.push((config.clone(), asset, cost));
+        }
+        group
+    }
+
+    /// The estimate of an asset from its source files: the texels of those that are images (from
+    /// their headers), and their bytes.
+    fn asset_cost(&self, asset: Asset) -> AssetCost {
+        let limits = self.config.limits.texture;
+        let (mut texels, mut images, mut bytes) = (0u64, 0usize, 0u64);
+        for (path, file) in asset.files(&self.db).iter() {
+            let Ok(contents) = file.contents(&self.db) else { continue };
+            bytes += contents.len;
+            let Ok(kept) = contents.read_back() else { continue };
+            if let Ok((width, height)) = crate::texture::probe_texture(path, &kept, limits) {
+                texels += u64::from(width) * u64::from(height);
+                images += 1;
+            }
+        }
+        AssetCost::of_sources(texels, images, bytes)
+    }
+
+    /// Bounds the memos of large values (the tail's and every kind's) to `capacity` each.
+    pub(super) fn set_memo_capacity(&mut self, capacity: usize) {
+        crate::kinds::tail_queries::keep_memos(&mut self.db, capacity);
+        for kind in crate::kinds::entries::ALL {
+            kind.keep_memos(&mut self.db, capacity);
+        }
+    }
+
+    /// Before `group` bakes: where the process keeps intermediates, which assets keep them (the
+    /// group's and those baked last, as far as the budget's share for them goes).
+    pub(super) fn prepare_memory(&mut self, group: &Group) {
+        let costs: Vec<(String, AssetCost)> =
+            group.iter().map(|(config, _, cost)| (config.name.clone(), *cost)).collect();
+        let kept = match self.options.retention {
+            Retention::KeepForNextBuild => self.memory.kept_with(&costs),
+            Retention::OutputsOnly => HashSet::new(),
+        };
+        let dropped: Vec<String> = self.kept.difference(&kept).cloned().collect();
+        let kept_inputs = kept.iter().filter_map(|name| self.assets.get(name).copied()).collect();
+        self.db.keep_only(Some(kept_inputs), &dropped);
+        // The sources of the assets no longer kept are let go too.
+        for name in &dropped {
+            if let Some(&asset) = self.assets.get(name) {
+                self.release_sources(asset);
+            }
+        }
+        self.kept = kept;
+    }
+
+    /// Lets go of the bytes of `asset`'s source files (read back when a stage needs them).
+    fn release_sources(&self, asset: Asset) {
+        for file in asset.files(&self.db).values() {
+            if let Ok(contents) = file.contents(&self.db) {
+                contents.release();
+            }
+        }
+    }
+
+    /// After `group` published (its assets' surface jobs counted in `surfaces`): the source bytes
+    /// of its assets that keep no intermediates are let go (read back when a stage needs them
+    /// again), salsa evicts the memos past the kept assets' (all of them while every asset is
+    /// kept), and the heaps hand freed pages back.
+    pub(super) fn release_memory(&mut self, group: &Group, surfaces: &HashMap<Asset, usize>) {
+        let costs: Vec<(String, AssetCost)> = group
+            .iter()
+            .map(|(config, asset, cost)| {
+                let surfaces = surfaces.get(asset).copied().unwrap_or(cost.surfaces);
+                (config.name.clone(), AssetCost { surfaces, ..*cost })
+            })
+            .collect();
+        self.memory.baked(&costs);
+        for (config, asset, _) in group {
+            if !self.kept.contains(&config.name) {
+                self.release_sources(*asset);
+            }
+        }
+        // Salsa's LRU counts memos, not bytes: per kept asset, one per surface and one per image
+        // it decodes, twice over (a surface's tail and its kind's image share an entry each);
+        // every memo while the process keeps every asset.
+        let every_asset_kept = self.assets.keys().all(|name| self.kept.contains(name));
+        let capacity = match every_asset_kept {
+            true => UNBOUNDED_MEMOS,
+            false => (2 * self.memory.kept_memos(&self.kept)).max(1),
+        };
+        self.set_memo_capacity(capacity);
+        salsa::Database::trigger_lru_eviction(&mut self.db);
+        crate::memory::release_freed_memory();
+        tracing::debug!(
+            "group of {} asset(s) published: {} kept, memo capacity {capacity}, {} MiB of source bytes in memory, \
+             {} MiB resident",
+            group.len(),
+            self.kept.len(),
+            self.source_bytes_in_memory() >> 20,
+            crate::memory::resident_bytes().unwrap_or(0) >> 20
+        );
+    }
+}

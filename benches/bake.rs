@@ -142,15 +142,24 @@ fn bench_memory() {
 
 /// Memory over a level's worth of texels: levels of `Material` assets with 1024² albedo and
 /// normal maps, one in four with a roughness map too (`CIRRUS_BENCH_LEVEL_MEMORY`: the asset
-/// counts, 16, 64 and 256 unless set). `cirrus build` cold (wall, peak RSS and its bytes per
-/// source texel), then `cirrus watch` on the same level unbaked (no output, no cache) until its
-/// first batch (wall, peak RSS, and RSS when idle 2 s after it).
+/// counts, 16, 64 and 256 unless set), under a memory budget (`CIRRUS_BENCH_MEMORY_MIB`, 1024
+/// unless set; `0`: none given, the default of half the machine's memory). `cirrus build` cold
+/// (wall, peak RSS and its bytes per source texel), then `cirrus watch` on the same level
+/// unbaked (no output, no cache) until its first batch (wall, peak RSS, and RSS when idle 2 s
+/// after it), then a one-texture edit in that daemon: the first asset's albedo (baked first, so
+/// evicted longest ago where the level does not fit), written anew, to its batch.
 fn bench_level_memory() {
     const SIDE: u32 = 1024;
     let sizes = level_sizes("CIRRUS_BENCH_LEVEL_MEMORY", &[16, 64, 256]);
+    let budget: u64 = std::env::var("CIRRUS_BENCH_MEMORY_MIB").ok().and_then(|mib| mib.parse().ok()).unwrap_or(1024);
+    let budget_arguments = match budget {
+        0 => Vec::new(),
+        mib => vec!["--memory-mib".to_string(), mib.to_string()],
+    };
     println!(
-        "level-memory: Material assets with {SIDE}² albedo and normal maps (one in four a roughness map); CPU ISA {}, \
-         {} threads",
+        "level-memory: Material assets with {SIDE}² albedo and normal maps (one in four a roughness map), budget {}; \
+         CPU ISA {}, {} threads",
+        if budget == 0 { "the default".to_string() } else { format!("{budget} MiB") },
         cirrus::isa::detected_isa().name(),
         rayon::current_num_threads()
     );
@@ -158,25 +167,33 @@ fn bench_level_memory() {
         let dir = tempfile::tempdir().expect("temporary folder");
         let folder = dir.path();
         let settings = make_level::LevelSettings { assets, material_side: Some(SIDE) };
-        make_level::write_level(folder, &settings).expect("level written");
+        let level = make_level::write_level(folder, &settings).expect("level written");
         let maps = 2 * assets + assets.div_ceil(4);
         let texels = maps as f64 * f64::from(SIDE * SIDE);
         let per_texel = |mib: f64| mib * 1024.0 * 1024.0 / texels;
-        let (build, build_peak) = timed_process(folder, &["build"]);
+        let build_arguments: Vec<&str> =
+            std::iter::once("build").chain(budget_arguments.iter().map(String::as_str)).collect();
+        let (build, build_peak) = timed_process(folder, &build_arguments);
         std::fs::remove_dir_all(folder.join("baked")).expect("output removed");
         let start = Instant::now();
-        let mut daemon = WatchedDaemon::start(folder);
+        let mut daemon = WatchedDaemon::start_with(folder, &budget_arguments);
         daemon.batch();
         let first_batch = start.elapsed().as_secs_f64();
         let status_file = format!("/proc/{}/status", daemon.child.id());
         let daemon_peak = peak_memory_kib(&status_file) as f64 / 1024.0;
         std::thread::sleep(std::time::Duration::from_secs(2));
         let idle = status_kib(&status_file, "VmRSS:") as f64 / 1024.0;
+        let albedo = folder.join(&level.albedo_maps[0]);
+        let edited = make_level::noise_png(SIDE, SIDE, 3, 7_777);
+        let start = Instant::now();
+        std::fs::write(&albedo, edited).expect("albedo written");
+        daemon.batch();
+        let edit = start.elapsed().as_secs_f64();
         drop(daemon);
         println!(
             "  {assets} assets ({:.0} M texels): build {build:.1} s, peak {build_peak:.0} MiB ({:.1} B/texel); \
              watch, unbaked: first batch {first_batch:.1} s, peak {daemon_peak:.0} MiB ({:.1} B/texel), \
-             idle {idle:.0} MiB",
+             idle {idle:.0} MiB; one-texture edit {edit:.2} s",
             texels / 1e6,
             per_texel(build_peak),
             per_texel(daemon_peak),
@@ -453,9 +470,15 @@ impl WatchedDaemon {
     const DEBOUNCE_MS: u64 = 50;
 
     fn start(folder: &Path) -> WatchedDaemon {
+        WatchedDaemon::start_with(folder, &[])
+    }
+
+    /// A daemon with more arguments (`--memory-mib 1024`).
+    fn start_with(folder: &Path, more: &[String]) -> WatchedDaemon {
         use std::io::{BufRead, Write};
         let mut child = std::process::Command::new(env!("CARGO_BIN_EXE_cirrus"))
             .args(["watch", "--listen", "127.0.0.1:0", "--debounce-ms", &WatchedDaemon::DEBOUNCE_MS.to_string()])
+            .args(more)
             .current_dir(folder)
             .stdout(std::process::Stdio::null())
             .stderr(std::process::Stdio::piped())

@@ -104,11 +104,11 @@ impl MemoryPolicy {
         kept
     }
 
-    /// The memos `kept` (names of assets baked) hold at most: a surface's and a decoded image's
-    /// each.
-    pub fn kept_memos(&self, kept: &HashSet<String>) -> usize {
+    /// The surfaces and the source images of the assets `kept` (names of assets baked): what
+    /// each function's memos of surfaces, and of decoded images, are bounded to.
+    pub fn kept_memos(&self, kept: &HashSet<String>) -> (usize, usize) {
         let counted = self.recent.iter().filter(|(name, _)| kept.contains(name));
-        counted.map(|(_, cost)| cost.surfaces + cost.images).sum()
+        counted.fold((0, 0), |(surfaces, images), (_, cost)| (surfaces + cost.surfaces, images + cost.images))
     }
 
     /// Notes that `group` was baked (its assets are now the last baked).

@@ -136,11 +136,13 @@ impl Project {
         AssetCost::of_sources(texels, images, bytes)
     }
 
-    /// Bounds the memos of large values (the tail's and every kind's) to `capacity` each.
-    pub(super) fn set_memo_capacity(&mut self, capacity: usize) {
-        crate::kinds::tail_queries::keep_memos(&mut self.db, capacity);
+    /// Bounds each function's memos of large values to `surfaces` (the tail's and every kind's
+    /// per surface) and `images` (the decoded source images).
+    pub(super) fn set_memo_capacity(&mut self, surfaces: usize, images: usize) {
+        crate::kinds::tail_queries::keep_memos(&mut self.db, surfaces);
+        crate::db::keep_decoded(&mut self.db, images);
         for kind in crate::kinds::entries::ALL {
-            kind.keep_memos(&mut self.db, capacity);
+            kind.keep_memos(&mut self.db, surfaces);
         }
     }
 
@@ -192,19 +194,20 @@ impl Project {
                 self.release_sources(*asset);
             }
         }
-        // Salsa's LRU counts memos, not bytes: per kept asset, one per surface and one per image
-        // it decodes, twice over (a surface's tail and its kind's image share an entry each);
-        // every memo while the process keeps every asset.
+        // Salsa's LRU counts memos, not bytes, and each function its own: those of surfaces are
+        // bounded to the kept assets' surfaces, the decoded images to their images; every memo
+        // stays while the process keeps every asset.
         let every_asset_kept = self.assets.keys().all(|name| self.kept.contains(name));
-        let capacity = match every_asset_kept {
-            true => UNBOUNDED_MEMOS,
-            false => (2 * self.memory.kept_memos(&self.kept)).max(1),
+        let (surfaces, images) = match every_asset_kept {
+            true => (UNBOUNDED_MEMOS, UNBOUNDED_MEMOS),
+            false => self.memory.kept_memos(&self.kept),
         };
-        self.set_memo_capacity(capacity);
+        self.set_memo_capacity(surfaces.max(1), images.max(1));
         salsa::Database::trigger_lru_eviction(&mut self.db);
         crate::memory::release_freed_memory();
         tracing::debug!(
-            "group of {} asset(s) published: {} kept, memo capacity {capacity}, {} MiB of source bytes in memory, \
+            "group of {} asset(s) published: {} kept, memos of {surfaces} surfaces and {images} images, {} MiB of \
+             source bytes in memory, \
              {} MiB resident",
             group.len(),
             self.kept.len(),

@@ -262,7 +262,7 @@ impl Project {
         };
         project.sync_limits();
         // Memos record their uses from the first build on, so that the budget can evict them.
-        project.set_memo_capacity(budget::UNBOUNDED_MEMOS);
+        project.set_memo_capacity(budget::UNBOUNDED_MEMOS, budget::UNBOUNDED_MEMOS);
         project
     }
 

@@ -209,7 +209,7 @@ fn the_policy_keeps_the_last_baked_as_far_as_its_share_goes() {
     policy.baked(&named(&["a"], 40));
     let kept = policy.kept_with(&[]);
     assert_eq!(sorted(kept.clone()), ["a", "d"]);
-    assert_eq!(policy.kept_memos(&kept), 8);
+    assert_eq!(policy.kept_memos(&kept), (4, 4));
     // One larger than the share is not kept.
     assert!(MemoryPolicy::new(100 << 20).kept_with(&named(&["big"], 30)).is_empty());
 }

@@ -54,7 +54,6 @@ pub fn keep_memos(db: &mut dyn Db, surfaces: usize) {
     surface_format_comparison::set_lru_capacity(db, surfaces);
     surface_files::set_lru_capacity(db, surfaces);
     surface_artifacts::set_lru_capacity(db, surfaces);
-    crate::db::keep_decoded(db, surfaces);
 }
 
 /// The kind's plan of a surface: the tail's one question to the kind about it.

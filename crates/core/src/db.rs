@@ -75,13 +75,11 @@ impl FileContents {
     }
 
     /// Lets go of the bytes (when they came from a file): the next [`FileContents::bytes`] reads
-    /// them back. Returns how many bytes were let go.
-    pub fn release(&self) -> u64 {
-        if self.origin.is_none() {
-            return 0;
+    /// them back.
+    pub fn release(&self) {
+        if self.origin.is_some() {
+            *self.bytes.lock().unwrap_or_else(|poisoned| poisoned.into_inner()) = None;
         }
-        let mut kept = self.bytes.lock().unwrap_or_else(|poisoned| poisoned.into_inner());
-        kept.take().map_or(0, |bytes| bytes.len() as u64)
     }
 
     /// Whether the bytes are in memory now.
@@ -360,16 +358,17 @@ impl Database {
     }
 
     /// Keeps the intermediates of `assets` only (of every asset when `None`) from now on, where
-    /// the database keeps any; forgets the memos (see [`remember`]) of the assets not kept, whose
-    /// names `label_of` gives. Salsa's memos of those assets go as their functions' LRU evicts
-    /// them.
+    /// the database keeps any, and forgets the memos (see [`remember`]) of the assets named in
+    /// `dropped`. Salsa's memos of those assets go as their functions' LRU evicts them.
     pub fn keep_only(&self, assets: Option<std::collections::HashSet<Asset>>, dropped: &[String]) {
         *self.kept.write().unwrap_or_else(|poisoned| poisoned.into_inner()) = assets;
         let mut memos = self.memos.lock().expect("memo lock");
         // A memo's name is `kind:identity`, and a surface's identity starts with its asset's name.
+        let folders: Vec<String> = dropped.iter().map(|asset| format!("{asset}/")).collect();
         memos.retain(|name, _| {
             let identity = name.split_once(':').map_or(name.as_str(), |(_, identity)| identity);
-            !dropped.iter().any(|asset| identity == asset || identity.starts_with(&format!("{asset}/")))
+            let of_dropped = |(asset, folder): (&String, &String)| identity == asset || identity.starts_with(folder);
+            !dropped.iter().zip(&folders).any(of_dropped)
         });
     }
 

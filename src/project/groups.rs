@@ -164,6 +164,15 @@ impl Project {
                 self.release_sources(asset);
             }
         }
+        if !dropped.is_empty() {
+            // Their intermediates go before the group makes its own: otherwise the last group's
+            // kept assets and this group's would be held together until it publishes (a daemon's
+            // first batch held twice the kept share at its peak).
+            let staying: HashSet<String> = self.kept.intersection(&kept).cloned().collect();
+            let (surfaces, images) = self.memory.kept_memos(&staying);
+            self.set_memo_capacity(surfaces.max(1), images.max(1));
+            salsa::Database::trigger_lru_eviction(&mut self.db);
+        }
         self.kept = kept;
     }
 

@@ -16,6 +16,10 @@ const HELD_BYTES_PER_TEXEL: u64 = 6;
 /// to 15.3 B on `make_level`'s Materials.
 const KEPT_BYTES_PER_TEXEL: u64 = 16;
 
+/// What an asset holds per texel its kind makes itself (`Kind::made_texels`: a billboard
+/// cloud's renders and atlases, counted once per render and per encoded surface).
+const MADE_BYTES_PER_TEXEL: u64 = 2;
+
 /// The least an asset is counted for, whatever its sources (kinds that render their own
 /// textures, a billboard cloud's atlases, an AO bake's map, are not seen from their sources).
 const LEAST_ASSET_BYTES: u64 = 8 << 20;
@@ -40,10 +44,11 @@ pub struct AssetCost {
 impl AssetCost {
     /// The estimate for an asset whose source files hold `texels` texels in `images` images and
     /// `bytes` bytes in all.
-    pub fn of_sources(texels: u64, images: usize, bytes: u64) -> AssetCost {
+    pub fn of_sources(texels: u64, images: usize, bytes: u64, made_texels: u64) -> AssetCost {
+        let made = made_texels * MADE_BYTES_PER_TEXEL;
         AssetCost {
-            held: (texels * HELD_BYTES_PER_TEXEL + bytes).max(LEAST_ASSET_BYTES),
-            kept: (texels * KEPT_BYTES_PER_TEXEL + bytes).max(LEAST_ASSET_BYTES),
+            held: (texels * HELD_BYTES_PER_TEXEL + bytes + made).max(LEAST_ASSET_BYTES),
+            kept: (texels * KEPT_BYTES_PER_TEXEL + bytes + made).max(LEAST_ASSET_BYTES),
             surfaces: images.max(1),
             images,
         }

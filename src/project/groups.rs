@@ -133,7 +133,9 @@ impl Project {
                 images += 1;
             }
         }
-        AssetCost::of_sources(texels, images, bytes)
+        let made = asset.kind(&self.db).made_texels(&self.db, asset);
+        tracing::debug!("asset `{}`: {texels} source texels, {made} made", asset.name(&self.db));
+        AssetCost::of_sources(texels, images, bytes, made)
     }
 
     /// Bounds each function's memos of large values to `surfaces` (the tail's and every kind's

@@ -118,6 +118,17 @@ impl crate::kinds::KindStep for Step {
 }
 
 impl Kind for BillboardCloud {
+    fn keep_memos(db: &mut dyn Db, surfaces: usize) {
+        queries::keep_memos(db, surfaces);
+        reduced_queries::keep_memos(db, surfaces);
+    }
+
+    /// Every level's renders and atlases (`levels::estimated_texels`, `cirrus check`'s measure).
+    fn made_texels(db: &dyn Db, asset: Asset) -> u64 {
+        let settings = asset.settings(db);
+        (0..levels::slot_count(settings)).map(|slot| levels::estimated_texels(settings, slot)).sum()
+    }
+
     fn files_to_read(db: &dyn Db, asset: Asset) -> Vec<PathBuf> {
         let mut files = crate::kinds::mesh_queries::mesh_files(db, asset);
         files.extend(mesh_textures(db, asset).iter().cloned());

@@ -71,6 +71,22 @@ pub(crate) const MAPS: Stage = Stage { name: "maps", version: 1 };
 /// The cache keys of surfaces stored smaller than they are made (`levels::SurfaceHalvings`).
 pub(crate) const SURFACE_HALVINGS: Stage = Stage { name: "surface-halvings", version: 1 };
 
+/// Bounds the kind's memos of images (material textures' mips, renders, atlas coverage and
+/// surfaces, impostor frames, reduced meshes; `reduced_queries::keep_memos` their maps) to the
+/// `surfaces` used last (see `Kind::keep_memos`): a level makes fewer of each than it has atlas
+/// surfaces.
+pub(crate) fn keep_memos(db: &mut dyn Db, surfaces: usize) {
+    material_texture_mips::set_lru_capacity(db, surfaces);
+    plane_images::set_lru_capacity(db, surfaces);
+    rendered_batch::set_lru_capacity(db, surfaces);
+    atlas_coverage::set_lru_capacity(db, surfaces);
+    atlas_texel_sources::set_lru_capacity(db, surfaces);
+    atlas_surface::set_lru_capacity(db, surfaces);
+    stored_renders::set_lru_capacity(db, surfaces);
+    impostor_frames::set_lru_capacity(db, surfaces);
+    reduced_level::set_lru_capacity(db, surfaces);
+}
+
 /// What a level is asked for (one level without a chain).
 #[salsa::tracked(returns(copy))]
 pub(crate) fn level_settings(db: &dyn Db, asset: Asset, level: u32) -> super::levels::LevelSettings {
@@ -269,7 +285,7 @@ fn material_map(
 /// The mip chain the renders sample for a material's texture in `slot` (level 0 is the decoded
 /// texture), kept in the persistent cache under the file's content: after a restart, textures
 /// that did not change are neither decoded nor filtered again (on the oak, about 50 ms each).
-#[salsa::tracked(returns(clone))]
+#[salsa::tracked(returns(clone), lru = 0)]
 pub(crate) fn material_texture_mips(
     db: &dyn Db,
     asset: Asset,
@@ -330,7 +346,7 @@ fn mip_levels_from_entry(entry: CacheEntry) -> Option<Vec<Texture>> {
 /// The images of one render group of a level (four per rectangle, in rectangle order): one
 /// plane's rectangles that show the same materials (stage `render`), from the render memo when
 /// it holds them, else from its batch's render; reads only the textures of those materials.
-#[salsa::tracked(returns(clone))]
+#[salsa::tracked(returns(clone), lru = 0)]
 pub(crate) fn plane_images(
     db: &dyn Db,
     asset: Asset,
@@ -392,7 +408,7 @@ pub(crate) type BatchImages = Vec<(u32, Arc<Vec<PlaneImages>>)>;
 /// go (few GPU submissions for many small groups); each group's run is recorded under its own
 /// label with its share of the time, by texels. Every group of a batch shows the same
 /// materials, so the batch reads what each of its groups reads.
-#[salsa::tracked(returns(clone))]
+#[salsa::tracked(returns(clone), lru = 0)]
 pub(crate) fn rendered_batch(
     db: &dyn Db,
     asset: Asset,
@@ -519,7 +535,7 @@ fn images_by_rectangle<'a>(layout: &BillboardLayout, images: &'a [Arc<Vec<PlaneI
 
 /// The atlas texels that faces cover (part of the atlas stage): unchanged by colour-only
 /// edits, which therefore skip the fill search below.
-#[salsa::tracked(returns(clone))]
+#[salsa::tracked(returns(clone), lru = 0)]
 pub(crate) fn atlas_coverage(
     db: &dyn Db,
     asset: Asset,
@@ -536,7 +552,7 @@ pub(crate) fn atlas_coverage(
 /// Where each atlas texel takes its values from, uncovered ones by the fill search (part of the
 /// atlas stage). Kept in the persistent cache under the coverage's content hash: a colour-only
 /// edit in a new process loads it (about 15 ms on the oak) instead of searching (about 90 ms).
-#[salsa::tracked(returns(clone))]
+#[salsa::tracked(returns(clone), lru = 0)]
 pub(crate) fn atlas_texel_sources(
     db: &dyn Db,
     asset: Asset,
@@ -567,7 +583,7 @@ const ATLAS_FILL: Stage = Stage { name: "atlas-fill", version: 1 };
 
 /// One composited, filled atlas surface of a level (stage `atlas`), shared with the tail, not
 /// copied.
-#[salsa::tracked(returns(clone))]
+#[salsa::tracked(returns(clone), lru = 0)]
 pub(crate) fn atlas_surface(
     db: &dyn Db,
     asset: Asset,
@@ -697,7 +713,7 @@ fn groups_by_material_set(layout: &BillboardLayout) -> BTreeMap<&[u32], Vec<u32>
 }
 
 /// The render groups' images the memo on disk holds, by group key (read once per layout).
-#[salsa::tracked(returns(clone))]
+#[salsa::tracked(returns(clone), lru = 0)]
 pub(crate) fn stored_renders(db: &dyn Db, asset: Asset, level: u32) -> Arc<HashMap<CacheKey, Arc<Vec<PlaneImages>>>> {
     let Ok(layout) = billboard_layout(db, asset, level) else { return Arc::default() };
     let mut renders = HashMap::new();
@@ -773,7 +789,7 @@ pub(crate) fn impostor_hull(db: &dyn Db, asset: Asset) -> Result<[[f32; 2]; 8], 
 }
 
 /// A reduced level (stage `reduce`): the mesh under the level's triangle budget.
-#[salsa::tracked(returns(clone))]
+#[salsa::tracked(returns(clone), lru = 0)]
 pub(crate) fn reduced_level(
     db: &dyn Db,
     asset: Asset,
@@ -809,7 +825,7 @@ pub(crate) fn reduced_level(
 /// every direction of the level's grid around the mesh's bounding sphere. Not kept in the
 /// persistent cache itself: its surfaces are, under [`impostor_recipe_key`], and a level whose
 /// surfaces are all there never asks for it.
-#[salsa::tracked(returns(clone))]
+#[salsa::tracked(returns(clone), lru = 0)]
 pub(crate) fn impostor_frames(
     db: &dyn Db,
     asset: Asset,

@@ -14,7 +14,13 @@ use crate::texture::{SurfaceKind, Texture};
 /// The materials a reduced level draws and the sizes of their maps (`reduced::allot_maps`): each
 /// at most the level's largest side, an `Auto` candidate's as large as its bytes allow beside
 /// its mesh. Read from the maps' headers, not their texels.
-#[salsa::tracked(returns(clone))]
+/// Bounds the reduced levels' map memos to the `surfaces` used last (see `queries::keep_memos`).
+pub(crate) fn keep_memos(db: &mut dyn Db, surfaces: usize) {
+    reduced_maps::set_lru_capacity(db, surfaces);
+    packed_map_levels::set_lru_capacity(db, surfaces);
+}
+
+#[salsa::tracked(returns(clone), lru = 0)]
 pub(crate) fn reduced_maps(
     db: &dyn Db,
     asset: Asset,
@@ -151,7 +157,7 @@ pub(crate) fn reduced_map_image(
 /// stores the map smaller than its sources (the bundled bush's four-level chain packed each of
 /// its four maps three times). Level 0 is not kept: the levels below it hold a third of its
 /// texels.
-#[salsa::tracked(returns(clone))]
+#[salsa::tracked(returns(clone), lru = 0)]
 pub(crate) fn packed_map_levels(
     db: &dyn Db,
     asset: Asset,

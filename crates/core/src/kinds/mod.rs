@@ -85,6 +85,14 @@ pub trait Kind {
     /// unbounded). The driver sets it from its memory budget; a kind whose memos are small keeps
     /// the default, which bounds nothing.
     fn keep_memos(_db: &mut dyn Db, _surfaces: usize) {}
+
+    /// The texels the asset's bake renders and encodes beyond its source images (a billboard
+    /// cloud's renders and atlases), estimated from its settings alone: what the driver's memory
+    /// budget counts for the asset besides its sources. A kind that makes no images of its own,
+    /// or only small ones, keeps the default, none.
+    fn made_texels(_db: &dyn Db, _asset: Asset) -> u64 {
+        0
+    }
 }
 
 /// What `cirrus preview` renders, and where.
@@ -314,6 +322,7 @@ pub struct KindQuestions {
     provided_surface_stage: ProvidedSurfaceFn,
     preview: fn(&dyn Db, Asset, &PipelineConfig, &PreviewOptions) -> Result<PreviewReport, PreviewError>,
     keep_memos: fn(&mut dyn Db, usize),
+    made_texels: fn(&dyn Db, Asset) -> u64,
 }
 
 /// [`Kind::outputs`].
@@ -334,6 +343,7 @@ impl KindQuestions {
             provided_surface_stage: K::provided_surface_stage,
             preview: K::preview,
             keep_memos: K::keep_memos,
+            made_texels: K::made_texels,
         }
     }
 }
@@ -393,6 +403,10 @@ impl AssetKind {
 
     pub fn keep_memos(self, db: &mut dyn Db, surfaces: usize) {
         (self.answers().keep_memos)(db, surfaces)
+    }
+
+    pub fn made_texels(self, db: &dyn Db, asset: Asset) -> u64 {
+        (self.answers().made_texels)(db, asset)
     }
 
     pub fn provided_surface_stage(

@@ -20,8 +20,8 @@ const KEPT_BYTES_PER_TEXEL: u64 = 16;
 /// cloud's renders and atlases, counted once per render and per encoded surface).
 const MADE_BYTES_PER_TEXEL: u64 = 2;
 
-/// The least an asset is counted for, whatever its sources (kinds that render their own
-/// textures, a billboard cloud's atlases, an AO bake's map, are not seen from their sources).
+/// The least an asset is counted for, whatever its sources and what its kind says it makes (an
+/// AO or height bake's map is counted by neither).
 const LEAST_ASSET_BYTES: u64 = 8 << 20;
 
 /// The LRU capacity that bounds nothing but still records every use (salsa's 0 records none, so
@@ -43,7 +43,7 @@ pub struct AssetCost {
 
 impl AssetCost {
     /// The estimate for an asset whose source files hold `texels` texels in `images` images and
-    /// `bytes` bytes in all.
+    /// `bytes` bytes in all, and whose kind makes `made_texels` texels of its own.
     pub fn of_sources(texels: u64, images: usize, bytes: u64, made_texels: u64) -> AssetCost {
         let made = made_texels * MADE_BYTES_PER_TEXEL;
         AssetCost {

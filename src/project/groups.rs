@@ -148,6 +148,13 @@ impl Project {
         }
     }
 
+    /// Bounds the memos to `surfaces` and `images` (at least one each: salsa's 0 would stop
+    /// recording uses) and evicts those past the bound now.
+    fn evict_memos_past(&mut self, surfaces: usize, images: usize) {
+        self.set_memo_capacity(surfaces.max(1), images.max(1));
+        salsa::Database::trigger_lru_eviction(&mut self.db);
+    }
+
     /// Before `group` bakes: where the process keeps intermediates, which assets keep them (the
     /// group's and those baked last, as far as the budget's share for them goes).
     pub(super) fn prepare_memory(&mut self, group: &Group) {
@@ -172,8 +179,7 @@ impl Project {
             // first batch held twice the kept share at its peak).
             let staying: HashSet<String> = self.kept.intersection(&kept).cloned().collect();
             let (surfaces, images) = self.memory.kept_memos(&staying);
-            self.set_memo_capacity(surfaces.max(1), images.max(1));
-            salsa::Database::trigger_lru_eviction(&mut self.db);
+            self.evict_memos_past(surfaces, images);
         }
         self.kept = kept;
     }
@@ -213,8 +219,7 @@ impl Project {
             true => (UNBOUNDED_MEMOS, UNBOUNDED_MEMOS),
             false => self.memory.kept_memos(&self.kept),
         };
-        self.set_memo_capacity(surfaces.max(1), images.max(1));
-        salsa::Database::trigger_lru_eviction(&mut self.db);
+        self.evict_memos_past(surfaces, images);
         crate::memory::release_freed_memory();
         tracing::debug!(
             "group of {} asset(s) published: {} kept, memos of {surfaces} surfaces and {images} images, {} MiB of \

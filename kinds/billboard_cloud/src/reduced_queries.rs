@@ -11,15 +11,15 @@ use crate::diagnostic::Diagnostic;
 use crate::kinds::mesh_queries::loaded_mesh;
 use crate::texture::{SurfaceKind, Texture};
 
-/// The materials a reduced level draws and the sizes of their maps (`reduced::allot_maps`): each
-/// at most the level's largest side, an `Auto` candidate's as large as its bytes allow beside
-/// its mesh. Read from the maps' headers, not their texels.
 /// Bounds the reduced levels' map memos to the `surfaces` used last (see `queries::keep_memos`).
 pub(crate) fn keep_memos(db: &mut dyn Db, surfaces: usize) {
     reduced_maps::set_lru_capacity(db, surfaces);
     packed_map_levels::set_lru_capacity(db, surfaces);
 }
 
+/// The materials a reduced level draws and the sizes of their maps (`reduced::allot_maps`): each
+/// at most the level's largest side, an `Auto` candidate's as large as its bytes allow beside
+/// its mesh. Read from the maps' headers, not their texels.
 #[salsa::tracked(returns(clone), lru = 0)]
 pub(crate) fn reduced_maps(
     db: &dyn Db,

@@ -11,7 +11,7 @@ use super::summaries::RunIndex;
 use super::{Project, SourceReading};
 use crate::artifacts::Manifest;
 use crate::config::AssetConfig;
-use crate::db::{Asset, Retention};
+use crate::db::{Asset, Retention, SourceFile};
 
 /// A group of assets to bake together: each with its input and its estimate.
 pub(super) type Group = Vec<(AssetConfig, Asset, AssetCost)>;
@@ -127,7 +127,7 @@ impl Project {
         for (path, file) in asset.files(&self.db).iter() {
             let Ok(contents) = file.contents(&self.db) else { continue };
             bytes += contents.len;
-            let Ok(kept) = contents.read_back() else { continue };
+            let Ok(kept) = contents.bytes() else { continue };
             if let Ok((width, height)) = crate::texture::probe_texture(path, &kept, limits) {
                 texels += u64::from(width) * u64::from(height);
                 images += 1;
@@ -167,12 +167,14 @@ impl Project {
         let dropped: Vec<String> = self.kept.difference(&kept).cloned().collect();
         let kept_inputs = kept.iter().filter_map(|name| self.assets.get(name).copied()).collect();
         self.db.keep_only(Some(kept_inputs), &dropped);
-        // The sources of the assets no longer kept are let go too.
-        for name in &dropped {
-            if let Some(&asset) = self.assets.get(name) {
-                self.release_sources(asset);
-            }
-        }
+        // The sources of the assets no longer kept are let go too, but for those that a kept
+        // asset or one of the group reads as well.
+        let dropped_assets: Vec<Asset> = dropped.iter().filter_map(|name| self.assets.get(name).copied()).collect();
+        let group_assets = group.iter().map(|(_, asset, _)| *asset);
+        self.release_sources(
+            &dropped_assets,
+            kept.iter().filter_map(|name| self.assets.get(name).copied()).chain(group_assets),
+        );
         if !dropped.is_empty() {
             // Their intermediates go before the group makes its own: otherwise the last group's
             // kept assets and this group's would be held together until it publishes (a daemon's
@@ -184,11 +186,20 @@ impl Project {
         self.kept = kept;
     }
 
-    /// Lets go of the bytes of `asset`'s source files (read back when a stage needs them).
-    fn release_sources(&self, asset: Asset) {
-        for file in asset.files(&self.db).values() {
-            if let Ok(contents) = file.contents(&self.db) {
-                contents.release();
+    /// Lets go of the bytes of the source files of `assets` (read back when a stage needs them),
+    /// but for those that one of `staying` reads too (a texture two materials share): a stage of
+    /// a kept asset never reads its sources back from disk.
+    fn release_sources(&self, assets: &[Asset], staying: impl Iterator<Item = Asset>) {
+        if assets.is_empty() {
+            return;
+        }
+        let held: HashSet<SourceFile> =
+            staying.flat_map(|asset| asset.files(&self.db).values().copied().collect::<Vec<_>>()).collect();
+        for asset in assets {
+            for file in asset.files(&self.db).values().filter(|file| !held.contains(file)) {
+                if let Ok(contents) = file.contents(&self.db) {
+                    contents.release();
+                }
             }
         }
     }
@@ -206,11 +217,12 @@ impl Project {
             })
             .collect();
         self.memory.baked(&costs);
-        for (config, asset, _) in group {
-            if !self.kept.contains(&config.name) {
-                self.release_sources(*asset);
-            }
-        }
+        let let_go: Vec<Asset> = group
+            .iter()
+            .filter(|(config, _, _)| !self.kept.contains(&config.name))
+            .map(|(_, asset, _)| *asset)
+            .collect();
+        self.release_sources(&let_go, self.kept.iter().filter_map(|name| self.assets.get(name).copied()));
         // Salsa's LRU counts memos, not bytes, and each function its own: those of surfaces are
         // bounded to the kept assets' surfaces, the decoded images to their images; every memo
         // stays while the process keeps every asset.

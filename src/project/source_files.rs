@@ -6,7 +6,7 @@ use std::path::Path;
 use salsa::Setter;
 
 use super::{file_node_id, Project};
-use crate::db::SourceFile;
+use crate::db::{FileContents, SourceFile};
 use crate::record::FileStamp;
 use crate::sources::read_source_stamped;
 
@@ -84,7 +84,10 @@ impl Project {
             if let Some(&file) = self.files.get(path) {
                 // Bytes let go after an earlier group are read back for the stages about to run;
                 // a file that changed meanwhile is read again as a new one.
-                let readable = file.contents(&self.db).as_ref().map_or(true, |contents| contents.read_back().is_ok());
+                let readable = file
+                    .contents(&self.db)
+                    .as_ref()
+                    .map_or(true, |contents| contents.bytes().is_ok() && !contents.read_back_failed());
                 if readable {
                     return file;
                 }
@@ -105,7 +108,10 @@ impl Project {
         self.fresh.insert(path.to_path_buf());
         match self.files.get(path) {
             Some(&file) => {
-                if file.contents(&self.db) != &contents {
+                // Equal bytes are set again where reading the last ones back failed: a stage that
+                // asked meanwhile failed, and its memoized error must not outlive the file's return.
+                let failed = file.contents(&self.db).as_ref().is_ok_and(FileContents::read_back_failed);
+                if file.contents(&self.db) != &contents || failed {
                     let _previous = file.set_contents(&mut self.db).to(contents);
                     self.history.insert(file_node_id(path), (self.next_revision(), 0.0));
                     self.sources_changed_since_build = true;

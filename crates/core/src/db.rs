@@ -29,13 +29,17 @@ pub struct FileContents {
     bytes: Arc<Mutex<Option<Arc<[u8]>>>>,
     /// The file to read the bytes back from (none: they cannot be let go).
     origin: Option<PathBuf>,
+    /// Whether reading them back failed once (a stage that asked then failed, and its error is
+    /// memoized: the driver sets the file's input anew, even to equal bytes, so that it runs again).
+    read_back_failed: Arc<std::sync::atomic::AtomicBool>,
 }
 
 impl FileContents {
     pub fn new(bytes: Vec<u8>) -> FileContents {
         let hash = blake3::hash(&bytes);
         let len = bytes.len() as u64;
-        FileContents { hash, len, bytes: Arc::new(Mutex::new(Some(bytes.into()))), origin: None }
+        let bytes = Arc::new(Mutex::new(Some(bytes.into())));
+        FileContents { hash, len, bytes, origin: None, read_back_failed: Arc::default() }
     }
 
     /// The bytes read from `origin` (an absolute path), which may be let go and read back.
@@ -44,30 +48,24 @@ impl FileContents {
     }
 
     /// The bytes: those kept, else read back from the file. The driver reads back every file of
-    /// the assets it bakes before their stages run ([`FileContents::read_back`]), so a stage
-    /// reads from disk only where a query reaches past them; a file that changed meanwhile fails
-    /// the stage that asked (the watcher's event, or the next build, bakes it again).
-    pub fn bytes(&self) -> Arc<[u8]> {
-        match self.read_back() {
-            Ok(bytes) => bytes,
-            Err(why) => panic!("{why}"),
-        }
-    }
-
-    /// The bytes, read back from the file when they were let go; an error saying why when the
-    /// file cannot be read or its bytes are not the ones hashed.
-    pub fn read_back(&self) -> Result<Arc<[u8]>, String> {
+    /// the assets it bakes before their stages run, so a stage reads from disk only where a
+    /// query reaches past them; a file gone or changed meanwhile fails the stage that asked,
+    /// with a diagnostic naming it (the watcher's event, or the next build, bakes it again).
+    pub fn bytes(&self) -> Result<Arc<[u8]>, Diagnostic> {
         let mut kept = self.bytes.lock().unwrap_or_else(|poisoned| poisoned.into_inner());
         if let Some(bytes) = &*kept {
             return Ok(bytes.clone());
         }
         let origin = self.origin.as_ref().expect("bytes without a file are never let go");
-        let shown = display_path(origin);
+        let failed = |message: String| {
+            self.read_back_failed.store(true, std::sync::atomic::Ordering::Relaxed);
+            Diagnostic::new(origin, message)
+        };
         let read = crate::files::read_regular_file_with_metadata(origin, crate::files::MAX_SOURCE_BYTES)
-            .map_err(|why| format!("{shown}: cannot read it again: {why}"))?
+            .map_err(|why| failed(format!("cannot read it again: {why}")))?
             .0;
         if blake3::hash(&read) != self.hash {
-            return Err(format!("{shown} changed while it was being baked; the next build bakes it again"));
+            return Err(failed("changed while it was being baked; the next build bakes it again".to_string()));
         }
         let bytes: Arc<[u8]> = read.into();
         *kept = Some(bytes.clone());
@@ -80,6 +78,11 @@ impl FileContents {
         if self.origin.is_some() {
             *self.bytes.lock().unwrap_or_else(|poisoned| poisoned.into_inner()) = None;
         }
+    }
+
+    /// Whether reading the bytes back ever failed (see `read_back_failed`).
+    pub fn read_back_failed(&self) -> bool {
+        self.read_back_failed.load(std::sync::atomic::Ordering::Relaxed)
     }
 
     /// Whether the bytes are in memory now.
@@ -561,7 +564,7 @@ fn decode_source(db: &dyn Db, file: SourceFile) -> Result<Arc<Texture>, Diagnost
     let contents = read_contents(db, file)?;
     let limits = texture_limits(db);
     let path = file.path(db);
-    timed(db, DECODE, &display_path(path), || decode_texture(path, &contents.bytes(), limits).map(Arc::new))
+    timed(db, DECODE, &display_path(path), || decode_texture(path, &contents.bytes()?, limits).map(Arc::new))
 }
 
 /// A source texture as an opacity map (alpha if it has transparency, else red), decoded once.

@@ -314,7 +314,8 @@ fn uvs_beyond_trim(
     let mut warnings = Vec::new();
     for (texture, reach) in remap::material_uv_reach(mesh, |path| files.iter().any(|file| file == path)) {
         let Ok(contents) = crate::sources::read_source(&config.root, &config.source, &texture) else { continue };
-        let Ok(decoded) = crate::texture::decode_texture(&texture, &contents.bytes(), config.limits.texture) else {
+        let Ok(bytes) = contents.bytes() else { continue };
+        let Ok(decoded) = crate::texture::decode_texture(&texture, &bytes, config.limits.texture) else {
             continue;
         };
         let trimmed = page::opaque_bounds(&decoded);

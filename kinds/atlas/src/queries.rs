@@ -184,10 +184,9 @@ pub(crate) fn mesh_uv_reach(db: &dyn Db, asset: Asset) -> Arc<std::collections::
         let key = key_with_files(db, stage_key(REACH).part(&atlased[..]), std::iter::once(file).chain(library_files))
             .finish();
         let found: Result<Vec<(PathBuf, UvReach)>, Diagnostic> = cached_json(db, REACH, &label, key, || {
+            let obj = contents.bytes()?;
             Ok(timed(db, REACH, &label, || {
-                let Ok((loaded, _)) =
-                    crate::mesh::load_mesh(mesh, &contents.bytes(), &libraries, asset.source_root(db))
-                else {
+                let Ok((loaded, _)) = crate::mesh::load_mesh(mesh, &obj, &libraries, asset.source_root(db)) else {
                     return Vec::new();
                 };
                 super::remap::material_uv_reach(&loaded, |path| textures.contains(&path.to_path_buf()))
@@ -720,11 +719,10 @@ pub(crate) fn remapped_mesh(
     let key =
         key_with_files(db, key, std::iter::once(file).chain(libraries.iter().filter_map(|(_, file)| *file))).finish();
     cached_json(db, REMAP, &label, key, || {
-        let contents = crate::db::read_contents(db, file)?;
+        let obj = crate::db::read_contents(db, file)?.bytes()?;
         let library_bytes = crate::kinds::mesh_queries::library_bytes(db, asset, &mesh);
         timed(db, REMAP, &label, || {
-            let (loaded, warnings) =
-                crate::mesh::load_mesh(&mesh, &contents.bytes(), &library_bytes, asset.source_root(db))?;
+            let (loaded, warnings) = crate::mesh::load_mesh(&mesh, &obj, &library_bytes, asset.source_root(db))?;
             let targets = super::remap::remap_targets(&atlas_table_entries(&layout));
             let by_path: HashMap<PathBuf, usize> = targets
                 .iter()
@@ -754,7 +752,7 @@ pub(crate) fn remapped_mesh(
                 super::remap::remap_mesh(&loaded, &targets, &chosen, library, &header).map_err(remap_error)?;
             let remap_warnings =
                 remapped.warnings.iter().map(|warning| Diagnostic::new(&mesh, warning.message.clone()));
-            let not_kept = statements_not_kept(&mesh, &contents.bytes(), &library_bytes, &remapped.materials);
+            let not_kept = statements_not_kept(&mesh, &obj, &library_bytes, &remapped.materials);
             Ok(super::remap::RemappedMesh {
                 warnings: warnings.into_iter().chain(remap_warnings).chain(not_kept).collect(),
                 ..remapped

@@ -46,7 +46,7 @@ pub(crate) fn reduced_maps(
             for path in surface_sources(material, surface).into_iter().flatten() {
                 let Some(file) = asset_file(db, asset, path.clone()) else { continue };
                 let contents = crate::db::read_contents(db, file)?;
-                let (w, h) = crate::texture::probe_texture(path, &contents.bytes(), limits)?;
+                let (w, h) = crate::texture::probe_texture(path, &contents.bytes()?, limits)?;
                 (width, height) = (width.max(w), height.max(h));
             }
             if width > 0 {

@@ -247,10 +247,12 @@ impl Kind for Material {
             Ok(contents) => contents,
             Err(error) => return vec![Diagnostic::new(main_file, error)],
         };
-        let parsed = match definition::parse_material_file(main_file, &contents.bytes(), &config.source) {
-            Ok(parsed) => parsed,
-            Err(diagnostic) => return vec![diagnostic],
-        };
+        let parsed =
+            match contents.bytes().and_then(|bytes| definition::parse_material_file(main_file, &bytes, &config.source))
+            {
+                Ok(parsed) => parsed,
+                Err(diagnostic) => return vec![diagnostic],
+            };
         let mut problems: Vec<Diagnostic> = parsed.warnings.iter().map(Diagnostic::as_warning).collect();
         for reference in parsed.materials.iter().flat_map(|material| material.textures.values()) {
             if let Err(message) = check_texture_file(config, &reference.path) {

@@ -41,7 +41,7 @@ pub(crate) fn material_file(db: &dyn Db, asset: Asset) -> Result<Arc<MaterialFil
     let key = stage_key(PARSE).part(&contents.hash).part(&crate::db::source_relative(db, path)).finish();
     let label = display_path(path);
     cached_json(db, PARSE, &label, key, || {
-        timed(db, PARSE, &label, || parse_material_file(path, &contents.bytes(), source_root))
+        timed(db, PARSE, &label, || parse_material_file(path, &contents.bytes()?, source_root))
     })
     .map(Arc::new)
 }

@@ -10,9 +10,13 @@ use crate::diagnostic::{display_path, Diagnostic};
 /// Reads a texture's header for `check`: readable, decodable, within the texture limits.
 pub fn check_texture_file(config: &PipelineConfig, path: &Path) -> Result<(), String> {
     let contents = crate::sources::read_source(&config.root, &config.source, path)?;
-    crate::texture::probe_texture(path, &contents.bytes(), config.limits.texture)
-        .map(|_| ())
-        .map_err(|diagnostic| diagnostic.message)
+    crate::texture::probe_texture(
+        path,
+        &contents.bytes().map_err(|diagnostic| diagnostic.message)?,
+        config.limits.texture,
+    )
+    .map(|_| ())
+    .map_err(|diagnostic| diagnostic.message)
 }
 
 /// The MTL files of the OBJ `mesh_file` (whose bytes are `obj`) for `cirrus check`, as a build
@@ -25,7 +29,7 @@ fn check_mesh_libraries(
     let mut libraries = std::collections::BTreeMap::new();
     for library in crate::mesh::material_libraries(mesh_file, obj, &config.source) {
         let bytes = match crate::sources::read_source(&config.root, &config.source, &library) {
-            Ok(contents) => Some(contents.bytes().to_vec()),
+            Ok(contents) => Some(contents.bytes()?.to_vec()),
             Err(error) if error.is_not_found() => None,
             Err(error) => return Err(Diagnostic::new(&library, error)),
         };
@@ -44,15 +48,19 @@ pub fn check_copied_maps(
     copied: impl Fn(&Path) -> bool,
 ) -> Vec<Diagnostic> {
     let read = |path: &Path| crate::sources::read_source(&config.root, &config.source, path);
-    let Ok(contents) = read(mesh_file) else { return Vec::new() };
-    let libraries = check_mesh_libraries(config, mesh_file, &contents.bytes()).unwrap_or_default();
+    let Ok(obj) = read(mesh_file).map_err(|_| ()).and_then(|contents| contents.bytes().map_err(|_| ())) else {
+        return Vec::new();
+    };
+    let libraries = check_mesh_libraries(config, mesh_file, &obj).unwrap_or_default();
     let (_, used) = super::source_copies::used_materials(&mesh.materials, &mesh.triangle_materials);
     let mut problems = Vec::new();
     for super::source_copies::OutputMaterial { material, .. } in used {
         for (&slot, path) in material.maps.iter().filter(|(_, path)| copied(path)) {
             // A map that cannot be read is the build's warning, not a copy's problem.
-            let Ok(contents) = read(path) else { continue };
-            let Err(problem) = crate::texture::check_image_file(path, &contents.bytes(), config.limits.texture) else {
+            let Ok(bytes) = read(path).map_err(|_| ()).and_then(|contents| contents.bytes().map_err(|_| ())) else {
+                continue;
+            };
+            let Err(problem) = crate::texture::check_image_file(path, &bytes, config.limits.texture) else {
                 continue;
             };
             let message = format!(
@@ -76,7 +84,8 @@ pub fn check_mesh_file(
 ) -> Result<(crate::mesh::Mesh, Vec<Diagnostic>), Diagnostic> {
     let contents = crate::sources::read_source(&config.root, &config.source, mesh_file)
         .map_err(|error| Diagnostic::new(mesh_file, error))?;
-    let libraries = check_mesh_libraries(config, mesh_file, &contents.bytes())?;
-    let (mesh, warnings) = crate::mesh::load_mesh(mesh_file, &contents.bytes(), &libraries, &config.source)?;
+    let obj = contents.bytes()?;
+    let libraries = check_mesh_libraries(config, mesh_file, &obj)?;
+    let (mesh, warnings) = crate::mesh::load_mesh(mesh_file, &obj, &libraries, &config.source)?;
     Ok((mesh, warnings.iter().map(Diagnostic::as_warning).collect()))
 }

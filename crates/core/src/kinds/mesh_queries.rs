@@ -28,8 +28,11 @@ fn mesh_source(db: &dyn Db, asset: Asset, obj: &Path) -> Result<SourceFile, Diag
 #[salsa::tracked(returns(clone))]
 pub fn mesh_library_paths_of(db: &dyn Db, asset: Asset, obj: PathBuf) -> Arc<Vec<PathBuf>> {
     let Ok(file) = mesh_source(db, asset, &obj) else { return Arc::default() };
-    let Ok(contents) = file.contents(db) else { return Arc::default() };
-    Arc::new(crate::mesh::material_libraries(&obj, &contents.bytes(), asset.source_root(db)))
+    let Ok(bytes) = file.contents(db).as_ref().map_err(|_| ()).and_then(|contents| contents.bytes().map_err(|_| ()))
+    else {
+        return Arc::default();
+    };
+    Arc::new(crate::mesh::material_libraries(&obj, &bytes, asset.source_root(db)))
 }
 
 /// An OBJ and the MTL files it names: what its mesh stage reads.
@@ -56,7 +59,12 @@ pub fn mesh_libraries_of(db: &dyn Db, asset: Asset, obj: PathBuf) -> Arc<BTreeMa
 pub fn library_bytes(db: &dyn Db, asset: Asset, obj: &Path) -> BTreeMap<PathBuf, Option<Vec<u8>>> {
     mesh_libraries_of(db, asset, obj.to_path_buf())
         .iter()
-        .map(|(path, file)| (path.clone(), file.contents(db).as_ref().ok().map(|contents| contents.bytes().to_vec())))
+        .map(|(path, file)| {
+            (
+                path.clone(),
+                file.contents(db).as_ref().ok().and_then(|contents| contents.bytes().ok()).map(|bytes| bytes.to_vec()),
+            )
+        })
         .collect()
 }
 
@@ -172,7 +180,7 @@ pub fn loaded_mesh_of(db: &dyn Db, asset: Asset, obj: PathBuf) -> Result<Arc<Loa
     let libraries = library_bytes(db, asset, &obj);
     let loaded = timed(db, MESH, name, || {
         let (mesh, warnings) =
-            crate::mesh::load_mesh(file.path(db), &contents.bytes(), &libraries, asset.source_root(db))?;
+            crate::mesh::load_mesh(file.path(db), &contents.bytes()?, &libraries, asset.source_root(db))?;
         let tangents = match &mesh.uvs {
             Some(uvs) => crate::mesh::vertex_tangents(&mesh.positions, &mesh.normals, uvs, &mesh.triangles),
             None => Vec::new(),

@@ -70,10 +70,11 @@ fn copy_source(
     let (copy, contents) = source_copy(db, asset, output_folder, path).ok_or(NotCopied::Unreadable)?;
     if !outputs.files.iter().any(|(written, _, _)| *written == copy) {
         let relative = crate::db::source_relative(db, path);
-        crate::texture::check_image_file(&relative, &contents.bytes(), crate::db::texture_limits(db))
+        let bytes = contents.bytes().map_err(|_| NotCopied::Unreadable)?;
+        crate::texture::check_image_file(&relative, &bytes, crate::db::texture_limits(db))
             .map_err(NotCopied::NotAnImage)?;
-        let plain_png = crate::texture::preview::png_without_colour_chunks(&contents.bytes());
-        outputs.add(copy.clone(), ArtifactRole::Image, plain_png.map_or_else(|| contents.bytes().clone(), Into::into));
+        let plain_png = crate::texture::preview::png_without_colour_chunks(&bytes);
+        outputs.add(copy.clone(), ArtifactRole::Image, plain_png.map_or_else(|| bytes.clone(), Into::into));
     }
     Ok(copy)
 }

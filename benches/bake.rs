@@ -12,8 +12,8 @@
 //! as a process beside another build's binary, alternating (`oak-bake`), and a synthetic level
 //! of 100, 1,000 and 10,000 assets: cold, no-op, one-texture edit, `graph`, `check`, peak
 //! memory and the daemon's ready time and edit-to-batch latency (`scale`), and levels of 16, 64
-//! and 256 materials with 1024² maps: the peak and idle memory of a cold build and a cold daemon
-//! (`level-memory`). Prints figures.
+//! and 256 materials with 1024² maps and of 8 corpus trees as Auto chains: the peak and idle
+//! memory of a cold build and a cold daemon (`level-memory`). Prints figures.
 
 use std::path::Path;
 use std::time::Instant;
@@ -105,7 +105,7 @@ fn main() {
         bench_memory();
     }
     if wanted("level-memory") {
-        bench_level_memory();
+        bench_level_memory(&corpus);
     }
 }
 
@@ -142,13 +142,15 @@ fn bench_memory() {
 
 /// Memory over a level's worth of texels: levels of `Material` assets with 1024² albedo and
 /// normal maps, one in four with a roughness map too (`CIRRUS_BENCH_LEVEL_MEMORY`: the asset
-/// counts, 16, 64 and 256 unless set), under a memory budget (`CIRRUS_BENCH_MEMORY_MIB`, 1024
-/// unless set; `0`: none given, the default of half the machine's memory). `cirrus build` cold
-/// (wall, peak RSS and its bytes per source texel), then `cirrus watch` on the same level
+/// counts, 16, 64 and 256 unless set), then 8 corpus trees as `BillboardCloud` Auto chains
+/// (where the corpus is there), under a memory budget (`CIRRUS_BENCH_MEMORY_MIB`, 1024 unless
+/// set; `0`: none given, the default of half the machine's memory). Each level: `cirrus build`
+/// cold (wall, peak RSS and its bytes per source texel), then `cirrus watch` on the same level
 /// unbaked (no output, no cache) until its first batch (wall, peak RSS, and RSS when idle 2 s
-/// after it), then a one-texture edit in that daemon: the first asset's albedo (baked first, so
-/// evicted longest ago where the level does not fit), written anew, to its batch.
-fn bench_level_memory() {
+/// after it), then, for the Materials, a one-texture edit in that daemon: the first asset's
+/// albedo (baked first, so evicted longest ago where the level does not fit), written anew, to
+/// its batch.
+fn bench_level_memory(corpus: &Path) {
     const SIDE: u32 = 1024;
     let sizes = level_sizes("CIRRUS_BENCH_LEVEL_MEMORY", &[16, 64, 256]);
     let budget: u64 = std::env::var("CIRRUS_BENCH_MEMORY_MIB").ok().and_then(|mib| mib.parse().ok()).unwrap_or(1024);
@@ -170,35 +172,128 @@ fn bench_level_memory() {
         let level = make_level::write_level(folder, &settings).expect("level written");
         let maps = 2 * assets + assets.div_ceil(4);
         let texels = maps as f64 * f64::from(SIDE * SIDE);
-        let per_texel = |mib: f64| mib * 1024.0 * 1024.0 / texels;
-        let build_arguments: Vec<&str> =
-            std::iter::once("build").chain(budget_arguments.iter().map(String::as_str)).collect();
-        let (build, build_peak) = timed_process(folder, &build_arguments);
-        std::fs::remove_dir_all(folder.join("baked")).expect("output removed");
-        let start = Instant::now();
-        let mut daemon = WatchedDaemon::start_with(folder, &budget_arguments);
-        daemon.batch();
-        let first_batch = start.elapsed().as_secs_f64();
-        let status_file = format!("/proc/{}/status", daemon.child.id());
-        let daemon_peak = peak_memory_kib(&status_file) as f64 / 1024.0;
-        std::thread::sleep(std::time::Duration::from_secs(2));
-        let idle = status_kib(&status_file, "VmRSS:") as f64 / 1024.0;
-        let albedo = folder.join(&level.albedo_maps[0]);
-        let edited = make_level::noise_png(SIDE, SIDE, 3, 7_777);
-        let start = Instant::now();
-        std::fs::write(&albedo, edited).expect("albedo written");
-        daemon.batch();
-        let edit = start.elapsed().as_secs_f64();
-        drop(daemon);
+        let edit = (folder.join(&level.albedo_maps[0]), make_level::noise_png(SIDE, SIDE, 3, 7_777));
+        let figures = level_memory(folder, &budget_arguments, Some(edit));
+        println!("  {assets} assets ({:.0} M source texels): {}", texels / 1e6, figures.to_text(texels));
+    }
+    if corpus.join("trees").is_dir() {
+        let (dir, texels) = tree_level(corpus, 8);
+        let figures = level_memory(dir.path(), &budget_arguments, None);
         println!(
-            "  {assets} assets ({:.0} M texels): build {build:.1} s, peak {build_peak:.0} MiB ({:.1} B/texel); \
-             watch, unbaked: first batch {first_batch:.1} s, peak {daemon_peak:.0} MiB ({:.1} B/texel), \
-             idle {idle:.0} MiB; one-texture edit {edit:.2} s",
+            "  8 trees (oak, ash, bush, each a 3-level Auto chain; {:.1} M source texels): {}",
             texels / 1e6,
-            per_texel(build_peak),
-            per_texel(daemon_peak),
+            figures.to_text(texels)
         );
     }
+}
+
+/// What `level_memory` measured of a level.
+struct LevelMemory {
+    build: f64,
+    build_peak: f64,
+    first_batch: f64,
+    daemon_peak: f64,
+    idle: f64,
+    edit: Option<f64>,
+}
+
+impl LevelMemory {
+    /// One line of figures, with the peaks per source texel of a level of `texels`.
+    fn to_text(&self, texels: f64) -> String {
+        let per_texel = |mib: f64| mib * 1024.0 * 1024.0 / texels;
+        let edit = self.edit.map(|edit| format!("; one-texture edit {edit:.2} s")).unwrap_or_default();
+        format!(
+            "build {:.1} s, peak {:.0} MiB ({:.1} B/texel); watch, unbaked: first batch {:.1} s, peak {:.0} MiB \
+             ({:.1} B/texel), idle {:.0} MiB{edit}",
+            self.build,
+            self.build_peak,
+            per_texel(self.build_peak),
+            self.first_batch,
+            self.daemon_peak,
+            per_texel(self.daemon_peak),
+            self.idle,
+        )
+    }
+}
+
+/// A cold `cirrus build` of the project in `folder`, then, its output removed, a cold `cirrus
+/// watch` until its first batch, idle 2 s, and (where `edit` names a file and its new bytes)
+/// that file written anew, to the edit's batch.
+fn level_memory(
+    folder: &Path,
+    budget_arguments: &[String],
+    edit: Option<(std::path::PathBuf, Vec<u8>)>,
+) -> LevelMemory {
+    let build_arguments: Vec<&str> =
+        std::iter::once("build").chain(budget_arguments.iter().map(String::as_str)).collect();
+    let (build, build_peak) = timed_process(folder, &build_arguments);
+    std::fs::remove_dir_all(folder.join("baked")).expect("output removed");
+    let start = Instant::now();
+    let mut daemon = WatchedDaemon::start_with(folder, budget_arguments);
+    daemon.batch();
+    let first_batch = start.elapsed().as_secs_f64();
+    let status_file = format!("/proc/{}/status", daemon.child.id());
+    let daemon_peak = peak_memory_kib(&status_file) as f64 / 1024.0;
+    std::thread::sleep(std::time::Duration::from_secs(2));
+    let idle = status_kib(&status_file, "VmRSS:") as f64 / 1024.0;
+    let edit = edit.map(|(path, bytes)| {
+        let start = Instant::now();
+        std::fs::write(&path, bytes).expect("edited file written");
+        daemon.batch();
+        start.elapsed().as_secs_f64()
+    });
+    LevelMemory { build, build_peak, first_batch, daemon_peak, idle, edit }
+}
+
+/// A project of `trees` corpus trees (oak, ash and bush in turn) as `BillboardCloud` Auto chains
+/// of three levels (2 MiB, 512 KiB, 128 KiB), each tree's OBJ scaled by 1 + 0.05·i so that no tree
+/// is a cache hit of another, and the texels of the source images its trees read.
+fn tree_level(corpus: &Path, trees: usize) -> (tempfile::TempDir, f64) {
+    const MODELS: [&str; 3] = ["oak_medium", "ash_small", "bush_2"];
+    let mut assets = String::new();
+    let mut scaled = Vec::new();
+    for index in 0..trees {
+        let model = MODELS[index % MODELS.len()];
+        scaled.push((format!("trees/{model}_{index}.obj"), model, 1.0 + 0.05 * index as f32));
+        assets.push_str(&format!(
+            "BillboardCloud(name: \"{model}_{index}\", mesh: \"trees/{model}_{index}.obj\", billboard: (lods: \
+             [Auto(max_bytes: 2097152), Auto(max_bytes: 524288), Auto(max_bytes: 131072)])),\n"
+        ));
+    }
+    let dir = tree_project(corpus, &assets);
+    for (path, model, scale) in scaled {
+        let source = std::fs::read_to_string(corpus.join(format!("trees/{model}.obj"))).expect("tree OBJ");
+        std::fs::write(dir.path().join("assets").join(path), scaled_obj(&source, scale)).expect("scaled OBJ");
+    }
+    // Each tree reads its bark's 1k maps (colour, normal, roughness, AO) and its leaf card.
+    let mut texels = 0.0;
+    for index in 0..trees {
+        let leaf = ["oak_color.png", "ash_color.png", "aspen_color.png"][index % MODELS.len()];
+        let leaf = image::image_dimensions(corpus.join("trees/textures").join(leaf)).expect("leaf card");
+        texels += 4.0 * 1024.0 * 1024.0 + f64::from(leaf.0 * leaf.1);
+    }
+    (dir, texels)
+}
+
+/// An OBJ's text with every vertex position (`v x y z`) multiplied by `scale`.
+fn scaled_obj(source: &str, scale: f32) -> String {
+    let mut scaled = String::with_capacity(source.len());
+    for line in source.lines() {
+        match line.strip_prefix("v ") {
+            Some(position) => {
+                let coordinates: Vec<String> = position
+                    .split_whitespace()
+                    .map(|value| {
+                        value.parse::<f32>().map(|value| (value * scale).to_string()).unwrap_or(value.to_string())
+                    })
+                    .collect();
+                scaled.push_str(&format!("v {}", coordinates.join(" ")));
+            }
+            None => scaled.push_str(line),
+        }
+        scaled.push('\n');
+    }
+    scaled
 }
 
 /// The level sizes (asset counts) the environment variable `variable` lists (`16,64`), else

@@ -85,6 +85,12 @@ impl MemoryPolicy {
         self.budget / 2
     }
 
+    /// What the work in flight may take at once: the textures being filtered and encoded (the
+    /// ceiling of the process's texture memory, whatever `texture_memory_mib` allows).
+    pub fn in_flight_share(&self) -> u64 {
+        self.budget / 4
+    }
+
     /// What the kept intermediates may take.
     pub fn kept_share(&self) -> u64 {
         self.budget / 4

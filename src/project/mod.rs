@@ -233,6 +233,7 @@ impl Project {
         }
         let across_builds = options.source_reading == SourceReading::WhenInvalidated;
         let memory = MemoryPolicy::new(memory_budget(&config, &options));
+        crate::schedule::TEXTURE_MEMORY.set_ceiling(memory.in_flight_share());
         let mut project = Project {
             config,
             db: Database::with_retention(cache, options.retention),
@@ -406,6 +407,7 @@ impl Project {
             self.db.replace_disk_cache(open_disk_cache(&config, &self.options));
         }
         self.memory.set_budget(memory_budget(&config, &self.options));
+        crate::schedule::TEXTURE_MEMORY.set_ceiling(self.memory.in_flight_share());
         self.config = config;
         self.asset_lists.forget();
         self.built_instances.clear();

@@ -196,6 +196,30 @@ fn sorted(kept: std::collections::HashSet<String>) -> Vec<String> {
 }
 
 #[test]
+fn a_source_let_go_and_gone_from_disk_is_a_diagnostic_naming_it_never_a_panic() {
+    let dir = tempfile::tempdir().unwrap();
+    let path = dir.path().join("albedo.png");
+    let bytes = noise_png(16, 16, 3, 1);
+    std::fs::write(&path, &bytes).unwrap();
+    let contents = cirrus::db::FileContents::from_file(bytes.clone(), path.clone());
+    contents.release();
+    assert!(!contents.is_kept());
+    std::fs::remove_file(&path).unwrap();
+    let gone = contents.bytes().expect_err("the file is gone");
+    assert!(gone.to_string().contains("albedo.png: cannot read it again"), "{gone}");
+    std::fs::write(&path, noise_png(16, 16, 3, 2)).unwrap();
+    let changed = contents.bytes().expect_err("the file changed");
+    assert!(
+        changed.to_string().ends_with("albedo.png: changed while it was being baked; the next build bakes it again"),
+        "{changed}"
+    );
+    // The driver sets such a file's input again, even to the same bytes (see `source_file`).
+    assert!(contents.read_back_failed());
+    std::fs::write(&path, &bytes).unwrap();
+    assert_eq!(&*contents.bytes().expect("the same bytes again"), &bytes[..]);
+}
+
+#[test]
 fn the_policy_keeps_the_last_baked_as_far_as_its_share_goes() {
     // A budget of 400 MiB keeps 100 MiB: two assets of 40.
     let mut policy = MemoryPolicy::new(400 << 20);
@@ -212,4 +236,68 @@ fn the_policy_keeps_the_last_baked_as_far_as_its_share_goes() {
     assert_eq!(policy.kept_memos(&kept), (4, 4));
     // One larger than the share is not kept.
     assert!(MemoryPolicy::new(100 << 20).kept_with(&named(&["big"], 30)).is_empty());
+}
+
+#[test]
+fn a_billboard_clouds_renders_count_in_its_estimate_so_two_bushes_bake_in_two_groups() {
+    // A bush's sources (four 1k bark maps and its leaf card) come to about 27 MiB held, so two
+    // would fit the 64 MiB that a 128 MiB budget gives a group; what each renders and packs
+    // (its planes' atlases, about 25 MiB more at 1024²) does not, and each bakes alone.
+    let pipeline = |budget: &str| {
+        format!(
+            r#"Pipeline(source: "assets", output: "baked", limits: ({budget}), assets: [
+                BillboardCloud(name: "bush_a", mesh: "trees/bush_a.obj", atlas: (max_size: 1024)),
+                BillboardCloud(name: "bush_b", mesh: "trees/bush_b.obj", atlas: (max_size: 1024)),
+            ])"#
+        )
+    };
+    let bushes = |budget: &str| {
+        let project = crate::support::TempProject::new(&pipeline(budget));
+        let trees = Path::new(env!("CARGO_MANIFEST_DIR")).join("examples/assets/trees");
+        project.copy_folder(&trees, "assets/trees");
+        let bush = std::fs::read(trees.join("bush_2.obj")).expect("bundled bush");
+        project.write("assets/trees/bush_a.obj", &bush);
+        project.write("assets/trees/bush_b.obj", &bush);
+        project
+    };
+    let (small, roomy) = (bushes("memory_mib: 128"), bushes("memory_mib: 4096"));
+    let open = |project: &crate::support::TempProject| {
+        let config = cirrus::pipeline::load_pipeline(&project.path("pipeline.ron")).expect("valid pipeline");
+        Project::open(config, one_shot(None))
+    };
+    let mut alone = open(&small);
+    let summary = build(&mut alone);
+    assert!(summary.all_ok(), "{}", summary.to_text());
+    assert_eq!(alone.groups_baked(), 2);
+    let mut together = open(&roomy);
+    assert!(build(&mut together).all_ok());
+    assert_eq!(together.groups_baked(), 1);
+    let (grouped, whole) = (artifacts(small.root()), artifacts(roomy.root()));
+    assert!(grouped.keys().any(|path| path.starts_with("bush_b")), "{:?}", grouped.keys().collect::<Vec<_>>());
+    assert_eq!(grouped.keys().collect::<Vec<_>>(), whole.keys().collect::<Vec<_>>());
+    for (path, bytes) in &grouped {
+        assert!(whole[path] == *bytes, "{} differs", path.display());
+    }
+}
+
+#[test]
+fn the_budgets_share_for_work_in_flight_bounds_what_a_texture_limit_allows_and_work_alone_proceeds() {
+    let memory = cirrus::schedule::MemoryBudget::new();
+    memory.set_ceiling(10);
+    let first = memory.reserve(6, 100);
+    let (sent, received) = std::sync::mpsc::channel();
+    std::thread::scope(|scope| {
+        scope.spawn(|| {
+            let _second = memory.reserve(6, 100);
+            sent.send(memory.reserved()).expect("sent");
+        });
+        // 6 + 6 passes the ceiling of 10, though not the limit of 100: the second waits.
+        assert!(received.recv_timeout(std::time::Duration::from_millis(200)).is_err());
+        drop(first);
+        assert_eq!(received.recv_timeout(std::time::Duration::from_secs(10)), Ok(6));
+    });
+    // Alone, a reservation larger than the ceiling still proceeds.
+    let alone = memory.reserve(50, 100);
+    assert_eq!(memory.reserved(), 50);
+    drop(alone);
 }

@@ -273,6 +273,9 @@ pub fn run_parallel<T: Sync, R: Send>(
 pub struct MemoryBudget {
     reserved: Mutex<u64>,
     released: std::sync::Condvar,
+    /// The most any reservation's `limit` may allow (the process's memory budget's share for
+    /// work in flight, set by the driver; `u64::MAX` until then).
+    ceiling: std::sync::atomic::AtomicU64,
 }
 
 /// The process's texture memory budget: every texture's mips and encode reserve from it, so
@@ -288,12 +291,27 @@ pub struct MemoryReservation<'a> {
 
 impl MemoryBudget {
     pub const fn new() -> MemoryBudget {
-        MemoryBudget { reserved: Mutex::new(0), released: std::sync::Condvar::new() }
+        MemoryBudget {
+            reserved: Mutex::new(0),
+            released: std::sync::Condvar::new(),
+            ceiling: std::sync::atomic::AtomicU64::new(u64::MAX),
+        }
     }
 
-    /// Reserves `bytes` of `limit`, waiting while others hold so much that both would not fit.
-    /// Hold it over pure work only (no query inside), so that no job waits on another's query.
+    /// Bounds every later reservation's limit to `bytes` (the process's memory budget's share
+    /// for work in flight), whatever limit the caller names: a texture limit of 4 GiB does not
+    /// let the jobs of many cores pass a 1 GiB process budget. Only how many jobs run at once
+    /// depends on it, never what they make; work alone still always proceeds.
+    pub fn set_ceiling(&self, bytes: u64) {
+        self.ceiling.store(bytes, std::sync::atomic::Ordering::Relaxed);
+        self.released.notify_all();
+    }
+
+    /// Reserves `bytes` of `limit` (or of the ceiling, where lower), waiting while others hold
+    /// so much that both would not fit. Hold it over pure work only (no query inside), so that
+    /// no job waits on another's query.
     pub fn reserve(&self, bytes: u64, limit: u64) -> MemoryReservation<'_> {
+        let limit = limit.min(self.ceiling.load(std::sync::atomic::Ordering::Relaxed));
         let mut in_use = self.reserved.lock().unwrap_or_else(|poisoned| poisoned.into_inner());
         while *in_use > 0 && in_use.saturating_add(bytes) > limit {
             in_use = self.released.wait(in_use).unwrap_or_else(|poisoned| poisoned.into_inner());

@@ -147,9 +147,9 @@ fn bench_memory() {
 /// set; `0`: none given, the default of half the machine's memory). Each level: `cirrus build`
 /// cold (wall, peak RSS and its bytes per source texel), then `cirrus watch` on the same level
 /// unbaked (no output, no cache) until its first batch (wall, peak RSS, and RSS when idle 2 s
-/// after it), then, for the Materials, a one-texture edit in that daemon: the first asset's
-/// albedo (baked first, so evicted longest ago where the level does not fit), written anew, to
-/// its batch.
+/// after it), then, for the Materials, one-texture edits in that daemon: the first three assets'
+/// albedos in turn (baked first, so evicted longest ago where the level does not fit), each
+/// written anew, to its batch (median and worst).
 fn bench_level_memory(corpus: &Path) {
     const SIDE: u32 = 1024;
     let sizes = level_sizes("CIRRUS_BENCH_LEVEL_MEMORY", &[16, 64, 256]);
@@ -172,13 +172,17 @@ fn bench_level_memory(corpus: &Path) {
         let level = make_level::write_level(folder, &settings).expect("level written");
         let maps = 2 * assets + assets.div_ceil(4);
         let texels = maps as f64 * f64::from(SIDE * SIDE);
-        let edit = (folder.join(&level.albedo_maps[0]), make_level::noise_png(SIDE, SIDE, 3, 7_777));
-        let figures = level_memory(folder, &budget_arguments, Some(edit));
+        let edits = (0..3)
+            .map(|index| {
+                (folder.join(&level.albedo_maps[index]), make_level::noise_png(SIDE, SIDE, 3, 7_777 + index as u64))
+            })
+            .collect();
+        let figures = level_memory(folder, &budget_arguments, edits);
         println!("  {assets} assets ({:.0} M source texels): {}", texels / 1e6, figures.to_text(texels));
     }
     if corpus.join("trees").is_dir() {
         let (dir, texels) = tree_level(corpus, 8);
-        let figures = level_memory(dir.path(), &budget_arguments, None);
+        let figures = level_memory(dir.path(), &budget_arguments, Vec::new());
         println!(
             "  8 trees (oak, ash, bush, each a 3-level Auto chain; {:.1} M source texels): {}",
             texels / 1e6,
@@ -194,14 +198,18 @@ struct LevelMemory {
     first_batch: f64,
     daemon_peak: f64,
     idle: f64,
-    edit: Option<f64>,
+    /// The one-texture edits' median and worst seconds (none: no edit).
+    edit: Option<(f64, f64)>,
 }
 
 impl LevelMemory {
     /// One line of figures, with the peaks per source texel of a level of `texels`.
     fn to_text(&self, texels: f64) -> String {
         let per_texel = |mib: f64| mib * 1024.0 * 1024.0 / texels;
-        let edit = self.edit.map(|edit| format!("; one-texture edit {edit:.2} s")).unwrap_or_default();
+        let edit = self
+            .edit
+            .map(|(median, worst)| format!("; one-texture edit {median:.2} s (worst {worst:.2})"))
+            .unwrap_or_default();
         format!(
             "build {:.1} s, peak {:.0} MiB ({:.1} B/texel); watch, unbaked: first batch {:.1} s, peak {:.0} MiB \
              ({:.1} B/texel), idle {:.0} MiB{edit}",
@@ -217,13 +225,9 @@ impl LevelMemory {
 }
 
 /// A cold `cirrus build` of the project in `folder`, then, its output removed, a cold `cirrus
-/// watch` until its first batch, idle 2 s, and (where `edit` names a file and its new bytes)
-/// that file written anew, to the edit's batch.
-fn level_memory(
-    folder: &Path,
-    budget_arguments: &[String],
-    edit: Option<(std::path::PathBuf, Vec<u8>)>,
-) -> LevelMemory {
+/// watch` until its first batch, idle 2 s, and each of `edits` (a file and its new bytes)
+/// written in turn, each to its batch.
+fn level_memory(folder: &Path, budget_arguments: &[String], edits: Vec<(std::path::PathBuf, Vec<u8>)>) -> LevelMemory {
     let build_arguments: Vec<&str> =
         std::iter::once("build").chain(budget_arguments.iter().map(String::as_str)).collect();
     let (build, build_peak) = timed_process(folder, &build_arguments);
@@ -236,12 +240,16 @@ fn level_memory(
     let daemon_peak = peak_memory_kib(&status_file) as f64 / 1024.0;
     std::thread::sleep(std::time::Duration::from_secs(2));
     let idle = status_kib(&status_file, "VmRSS:") as f64 / 1024.0;
-    let edit = edit.map(|(path, bytes)| {
-        let start = Instant::now();
-        std::fs::write(&path, bytes).expect("edited file written");
-        daemon.batch();
-        start.elapsed().as_secs_f64()
-    });
+    let edit_times: Vec<f64> = edits
+        .into_iter()
+        .map(|(path, bytes)| {
+            let start = Instant::now();
+            std::fs::write(&path, bytes).expect("edited file written");
+            daemon.batch();
+            start.elapsed().as_secs_f64()
+        })
+        .collect();
+    let edit = (!edit_times.is_empty()).then(|| median_and_worst(edit_times));
     LevelMemory { build, build_peak, first_batch, daemon_peak, idle, edit }
 }
 

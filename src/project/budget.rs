@@ -16,12 +16,7 @@ const HELD_BYTES_PER_TEXEL: u64 = 6;
 /// to 15.3 B on `make_level`'s Materials.
 const KEPT_BYTES_PER_TEXEL: u64 = 16;
 
-/// What an asset holds per texel its kind makes itself (`Kind::made_texels`: a billboard
-/// cloud's renders and atlases, counted once per render and per encoded surface).
-const MADE_BYTES_PER_TEXEL: u64 = 2;
-
-/// The least an asset is counted for, whatever its sources and what its kind says it makes (an
-/// AO or height bake's map is counted by neither).
+/// The least an asset is counted for, whatever its sources and what its kind says it makes.
 const LEAST_ASSET_BYTES: u64 = 8 << 20;
 
 /// The LRU capacity that bounds nothing but still records every use (salsa's 0 records none, so
@@ -43,9 +38,9 @@ pub struct AssetCost {
 
 impl AssetCost {
     /// The estimate for an asset whose source files hold `texels` texels in `images` images and
-    /// `bytes` bytes in all, and whose kind makes `made_texels` texels of its own.
-    pub fn of_sources(texels: u64, images: usize, bytes: u64, made_texels: u64) -> AssetCost {
-        let made = made_texels * MADE_BYTES_PER_TEXEL;
+    /// `bytes` bytes in all, and whose kind holds `made` bytes for the images it makes itself
+    /// (`Kind::made_bytes`).
+    pub fn of_sources(texels: u64, images: usize, bytes: u64, made: u64) -> AssetCost {
         AssetCost {
             held: (texels * HELD_BYTES_PER_TEXEL + bytes + made).max(LEAST_ASSET_BYTES),
             kept: (texels * KEPT_BYTES_PER_TEXEL + bytes + made).max(LEAST_ASSET_BYTES),

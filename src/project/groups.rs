@@ -133,8 +133,8 @@ impl Project {
                 images += 1;
             }
         }
-        let made = asset.kind(&self.db).made_texels(&self.db, asset);
-        tracing::debug!("asset `{}`: {texels} source texels, {made} made", asset.name(&self.db));
+        let made = asset.kind(&self.db).made_bytes(&self.db, asset);
+        tracing::debug!("asset `{}`: {texels} source texels, {} MiB made", asset.name(&self.db), made >> 20);
         AssetCost::of_sources(texels, images, bytes, made)
     }
 

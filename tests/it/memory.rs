@@ -301,3 +301,43 @@ fn the_budgets_share_for_work_in_flight_bounds_what_a_texture_limit_allows_and_w
     assert_eq!(memory.reserved(), 50);
     drop(alone);
 }
+
+#[test]
+fn an_ao_and_a_height_bake_count_their_maps_so_that_two_large_ones_bake_in_two_groups() {
+    // At 2048² an AO map is held to need 68 MiB and a height map 208 MiB (17 and 52 B a texel,
+    // measured): together more than the 256 MiB a 512 MiB budget gives a group, though their
+    // meshes alone would fit it many times over.
+    let pipeline = |budget: &str| {
+        format!(
+            r#"Pipeline(source: "assets", output: "baked", limits: ({budget}), assets: [
+                AmbientOcclusion(name: "spot_ao", mesh: "meshes/spot/spot_triangulated_with_mtl.obj", ao: (size: 2048, rays: 16)),
+                Height(name: "spot_height", high: "meshes/spot_height/spot_high.obj", low: "meshes/spot_height/spot_low.obj",
+                       height: (size: 2048)),
+            ])"#
+        )
+    };
+    let project = |budget: &str| {
+        let project = crate::support::TempProject::new(&pipeline(budget));
+        let meshes = Path::new(env!("CARGO_MANIFEST_DIR")).join("examples/assets/meshes");
+        project.copy_folder(&meshes, "assets/meshes");
+        project
+    };
+    let (small, roomy) = (project("memory_mib: 512"), project("memory_mib: 4096"));
+    let open = |project: &crate::support::TempProject| {
+        let config = cirrus::pipeline::load_pipeline(&project.path("pipeline.ron")).expect("valid pipeline");
+        Project::open(config, one_shot(None))
+    };
+    let mut apart = open(&small);
+    let summary = build(&mut apart);
+    assert!(summary.all_ok(), "{}", summary.to_text());
+    assert_eq!(apart.groups_baked(), 2);
+    let mut together = open(&roomy);
+    assert!(build(&mut together).all_ok());
+    assert_eq!(together.groups_baked(), 1);
+    let (grouped, whole) = (artifacts(small.root()), artifacts(roomy.root()));
+    assert!(grouped.keys().any(|path| path.starts_with("spot_height")), "{:?}", grouped.keys().collect::<Vec<_>>());
+    assert_eq!(grouped.keys().collect::<Vec<_>>(), whole.keys().collect::<Vec<_>>());
+    for (path, bytes) in &grouped {
+        assert!(whole[path] == *bytes, "{} differs", path.display());
+    }
+}

@@ -79,9 +79,24 @@ impl crate::kinds::KindStep for Step {
     }
 }
 
+/// What an AO bake holds per texel of its map at its peak, beyond the mesh: its rays' results,
+/// the filled map and what the tail makes of it. Measured on the bundled cow: `cirrus build`
+/// peaks at 22 MiB at `size: 512` and 86 MiB at 2048, 17 B a texel more.
+const HELD_BYTES_PER_MAP_TEXEL: u64 = 17;
+
 impl Kind for AmbientOcclusion {
     fn files_to_read(db: &dyn Db, asset: Asset) -> Vec<PathBuf> {
         crate::kinds::mesh_queries::mesh_files(db, asset)
+    }
+
+    /// One map of `size`² (a mesh of several materials bakes one each: the estimate does not
+    /// read the mesh); none in `Vertices` mode.
+    fn made_bytes(db: &dyn Db, asset: Asset) -> u64 {
+        let settings = ao_settings(db, asset);
+        match settings.mode {
+            AoMode::Vertices => 0,
+            _ => u64::from(settings.size).pow(2) * HELD_BYTES_PER_MAP_TEXEL,
+        }
     }
 
     fn first_jobs(db: &dyn Db, asset: Asset) -> Vec<Job> {

@@ -88,7 +88,18 @@ impl crate::kinds::KindStep for Step {
     }
 }
 
+/// What a height bake holds per texel of its map at its peak, beyond its meshes: each texel's
+/// surface point, ray and distance, the map and what the tail makes of it. Measured on the
+/// bundled cow pair: `cirrus build` peaks at 70 MiB at `size: 512` and 264 MiB at 2048, 52 B a
+/// texel more.
+const HELD_BYTES_PER_MAP_TEXEL: u64 = 52;
+
 impl Kind for Height {
+    /// Its map of `size`².
+    fn made_bytes(db: &dyn Db, asset: Asset) -> u64 {
+        u64::from(queries::height_settings(db, asset).size).pow(2) * HELD_BYTES_PER_MAP_TEXEL
+    }
+
     fn files_to_read(db: &dyn Db, asset: Asset) -> Vec<PathBuf> {
         let mut files = mesh_files_of(db, asset, asset.main_file(db));
         files.extend(mesh_files_of(db, asset, &high_path(db, asset)));

@@ -86,11 +86,12 @@ pub trait Kind {
     /// the default, which bounds nothing.
     fn keep_memos(_db: &mut dyn Db, _surfaces: usize) {}
 
-    /// The texels the asset's bake renders and encodes beyond its source images (a billboard
-    /// cloud's renders and atlases), estimated from its settings alone: what the driver's memory
-    /// budget counts for the asset besides its sources. A kind that makes no images of its own,
-    /// or only small ones, keeps the default, none.
-    fn made_texels(_db: &dyn Db, _asset: Asset) -> u64 {
+    /// The bytes the asset's bake holds for the images it makes itself, beyond its source images
+    /// (a billboard cloud's renders and atlases, an AO or height map and what baking it takes),
+    /// estimated from its settings alone: what the driver's memory budget counts for the asset
+    /// besides its sources. A kind that makes no images of its own, or only small ones, keeps
+    /// the default, none.
+    fn made_bytes(_db: &dyn Db, _asset: Asset) -> u64 {
         0
     }
 }
@@ -322,7 +323,7 @@ pub struct KindQuestions {
     provided_surface_stage: ProvidedSurfaceFn,
     preview: fn(&dyn Db, Asset, &PipelineConfig, &PreviewOptions) -> Result<PreviewReport, PreviewError>,
     keep_memos: fn(&mut dyn Db, usize),
-    made_texels: fn(&dyn Db, Asset) -> u64,
+    made_bytes: fn(&dyn Db, Asset) -> u64,
 }
 
 /// [`Kind::outputs`].
@@ -343,7 +344,7 @@ impl KindQuestions {
             provided_surface_stage: K::provided_surface_stage,
             preview: K::preview,
             keep_memos: K::keep_memos,
-            made_texels: K::made_texels,
+            made_bytes: K::made_bytes,
         }
     }
 }
@@ -405,8 +406,8 @@ impl AssetKind {
         (self.answers().keep_memos)(db, surfaces)
     }
 
-    pub fn made_texels(self, db: &dyn Db, asset: Asset) -> u64 {
-        (self.answers().made_texels)(db, asset)
+    pub fn made_bytes(self, db: &dyn Db, asset: Asset) -> u64 {
+        (self.answers().made_bytes)(db, asset)
     }
 
     pub fn provided_surface_stage(

@@ -10,7 +10,7 @@ use cirrus::db::Retention;
 use cirrus::project::{AssetCost, MemoryPolicy, Project, ProjectOptions, SourceReading};
 
 use crate::make_level::{noise_png, write_level, Level, LevelSettings};
-use crate::support::{build, files_under};
+use crate::support::{build, files_under, TempProject};
 
 /// The smallest budget there is: a group holds 32 MiB, and every asset counts for at least 8.
 const SMALL_BUDGET: u64 = 64 << 20;
@@ -252,7 +252,7 @@ fn a_billboard_clouds_renders_count_in_its_estimate_so_two_bushes_bake_in_two_gr
         )
     };
     let bushes = |budget: &str| {
-        let project = crate::support::TempProject::new(&pipeline(budget));
+        let project = TempProject::new(&pipeline(budget));
         let trees = Path::new(env!("CARGO_MANIFEST_DIR")).join("examples/assets/trees");
         project.copy_folder(&trees, "assets/trees");
         let bush = std::fs::read(trees.join("bush_2.obj")).expect("bundled bush");
@@ -260,20 +260,25 @@ fn a_billboard_clouds_renders_count_in_its_estimate_so_two_bushes_bake_in_two_gr
         project.write("assets/trees/bush_b.obj", &bush);
         project
     };
-    let (small, roomy) = (bushes("memory_mib: 128"), bushes("memory_mib: 4096"));
-    let open = |project: &crate::support::TempProject| {
+    bakes_in_two_groups_as_one_would(&bushes("memory_mib: 128"), &bushes("memory_mib: 4096"), "bush_b");
+}
+
+/// Builds `small` (two assets that its budget bakes in two groups) and `roomy` (the same in one
+/// group), and asserts both write the same artifacts, `witness`'s among them.
+fn bakes_in_two_groups_as_one_would(small: &TempProject, roomy: &TempProject, witness: &str) {
+    let open = |project: &TempProject| {
         let config = cirrus::pipeline::load_pipeline(&project.path("pipeline.ron")).expect("valid pipeline");
         Project::open(config, one_shot(None))
     };
-    let mut alone = open(&small);
-    let summary = build(&mut alone);
+    let mut apart = open(small);
+    let summary = build(&mut apart);
     assert!(summary.all_ok(), "{}", summary.to_text());
-    assert_eq!(alone.groups_baked(), 2);
-    let mut together = open(&roomy);
+    assert_eq!(apart.groups_baked(), 2);
+    let mut together = open(roomy);
     assert!(build(&mut together).all_ok());
     assert_eq!(together.groups_baked(), 1);
     let (grouped, whole) = (artifacts(small.root()), artifacts(roomy.root()));
-    assert!(grouped.keys().any(|path| path.starts_with("bush_b")), "{:?}", grouped.keys().collect::<Vec<_>>());
+    assert!(grouped.keys().any(|path| path.starts_with(witness)), "{:?}", grouped.keys().collect::<Vec<_>>());
     assert_eq!(grouped.keys().collect::<Vec<_>>(), whole.keys().collect::<Vec<_>>());
     for (path, bytes) in &grouped {
         assert!(whole[path] == *bytes, "{} differs", path.display());
@@ -317,27 +322,10 @@ fn an_ao_and_a_height_bake_count_their_maps_so_that_two_large_ones_bake_in_two_g
         )
     };
     let project = |budget: &str| {
-        let project = crate::support::TempProject::new(&pipeline(budget));
+        let project = TempProject::new(&pipeline(budget));
         let meshes = Path::new(env!("CARGO_MANIFEST_DIR")).join("examples/assets/meshes");
         project.copy_folder(&meshes, "assets/meshes");
         project
     };
-    let (small, roomy) = (project("memory_mib: 512"), project("memory_mib: 4096"));
-    let open = |project: &crate::support::TempProject| {
-        let config = cirrus::pipeline::load_pipeline(&project.path("pipeline.ron")).expect("valid pipeline");
-        Project::open(config, one_shot(None))
-    };
-    let mut apart = open(&small);
-    let summary = build(&mut apart);
-    assert!(summary.all_ok(), "{}", summary.to_text());
-    assert_eq!(apart.groups_baked(), 2);
-    let mut together = open(&roomy);
-    assert!(build(&mut together).all_ok());
-    assert_eq!(together.groups_baked(), 1);
-    let (grouped, whole) = (artifacts(small.root()), artifacts(roomy.root()));
-    assert!(grouped.keys().any(|path| path.starts_with("spot_height")), "{:?}", grouped.keys().collect::<Vec<_>>());
-    assert_eq!(grouped.keys().collect::<Vec<_>>(), whole.keys().collect::<Vec<_>>());
-    for (path, bytes) in &grouped {
-        assert!(whole[path] == *bytes, "{} differs", path.display());
-    }
+    bakes_in_two_groups_as_one_would(&project("memory_mib: 512"), &project("memory_mib: 4096"), "spot_height");
 }

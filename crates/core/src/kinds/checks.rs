@@ -47,19 +47,16 @@ pub fn check_copied_maps(
     mesh: &crate::mesh::Mesh,
     copied: impl Fn(&Path) -> bool,
 ) -> Vec<Diagnostic> {
-    let read = |path: &Path| crate::sources::read_source(&config.root, &config.source, path);
-    let Ok(obj) = read(mesh_file).map_err(|_| ()).and_then(|contents| contents.bytes().map_err(|_| ())) else {
-        return Vec::new();
-    };
+    // The bytes of a source, none where it cannot be read (the build's warning, not check's).
+    let read = |path: &Path| crate::sources::read_source(&config.root, &config.source, path).ok()?.bytes().ok();
+    let Some(obj) = read(mesh_file) else { return Vec::new() };
     let libraries = check_mesh_libraries(config, mesh_file, &obj).unwrap_or_default();
     let (_, used) = super::source_copies::used_materials(&mesh.materials, &mesh.triangle_materials);
     let mut problems = Vec::new();
     for super::source_copies::OutputMaterial { material, .. } in used {
         for (&slot, path) in material.maps.iter().filter(|(_, path)| copied(path)) {
             // A map that cannot be read is the build's warning, not a copy's problem.
-            let Ok(bytes) = read(path).map_err(|_| ()).and_then(|contents| contents.bytes().map_err(|_| ())) else {
-                continue;
-            };
+            let Some(bytes) = read(path) else { continue };
             let Err(problem) = crate::texture::check_image_file(path, &bytes, config.limits.texture) else {
                 continue;
             };

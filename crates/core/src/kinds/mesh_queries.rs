@@ -28,8 +28,7 @@ fn mesh_source(db: &dyn Db, asset: Asset, obj: &Path) -> Result<SourceFile, Diag
 #[salsa::tracked(returns(clone))]
 pub fn mesh_library_paths_of(db: &dyn Db, asset: Asset, obj: PathBuf) -> Arc<Vec<PathBuf>> {
     let Ok(file) = mesh_source(db, asset, &obj) else { return Arc::default() };
-    let Ok(bytes) = file.contents(db).as_ref().map_err(|_| ()).and_then(|contents| contents.bytes().map_err(|_| ()))
-    else {
+    let Some(bytes) = file.contents(db).as_ref().ok().and_then(|contents| contents.bytes().ok()) else {
         return Arc::default();
     };
     Arc::new(crate::mesh::material_libraries(&obj, &bytes, asset.source_root(db)))
